@@ -1,0 +1,29 @@
+#!/usr/bin/env bash
+# Sets up a fresh machine for wenv: Debian packages for the C core, a virtual environment in .venv
+# with the Python packages, and the compiled extension (in place).  Safe to run again: it only
+# installs what is missing and rebuilds what changed.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+need_apt=()
+for pkg in libopenexr-dev zlib1g-dev libcubature-dev pkg-config gcc; do
+    dpkg -s "$pkg" >/dev/null 2>&1 || need_apt+=("$pkg")
+done
+if [ ${#need_apt[@]} -gt 0 ]; then
+    echo "wenv setup: installing Debian packages: ${need_apt[*]}"
+    SUDO=""; [ "$(id -u)" -eq 0 ] || SUDO="sudo"
+    $SUDO apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${need_apt[@]}" >/dev/null
+fi
+
+PY=${PYTHON:-python3}
+if [ ! -x .venv/bin/python ]; then
+    echo "wenv setup: creating .venv"
+    "$PY" -m venv .venv
+fi
+if ! .venv/bin/python -c "import numpy, pytest, matplotlib, bpy" >/dev/null 2>&1; then
+    echo "wenv setup: installing Python packages (numpy, pytest, matplotlib, bpy)"
+    .venv/bin/python -m pip install -q --upgrade pip >/dev/null
+    .venv/bin/python -m pip install -q -r requirements.txt
+fi
+.venv/bin/python setup.py -q build_ext --inplace >/dev/null

@@ -1,0 +1,49 @@
+"""Build the `wenv` C extension (sources in csrc/).
+
+System libraries (Debian names): libopenexr-dev (OpenEXRCore), zlib1g-dev, libcubature-dev.
+scripts/setup.sh installs them.  Flags stay portable: no -march=native; hot loops dispatch on
+CPU features at run time instead.
+"""
+import glob
+import os
+import shlex
+import subprocess
+
+from setuptools import Extension, setup
+
+
+def pkg_config(*args):
+    try:
+        out = subprocess.run(["pkg-config", *args], check=True, capture_output=True, text=True).stdout
+    except (OSError, subprocess.CalledProcessError):
+        return []
+    return shlex.split(out)
+
+
+exr_cflags = pkg_config("--cflags", "OpenEXR") or ["-I/usr/include/OpenEXR"]
+include_dirs = [f[2:] for f in exr_cflags if f.startswith("-I")]
+# Only the C library (OpenEXRCore) is used; the C++ libraries OpenEXR's .pc lists are not needed.
+exr_libs = [f[2:] for f in pkg_config("--libs", "OpenEXR") if f.startswith("-lOpenEXRCore")] or ["OpenEXRCore"]
+
+debug = os.environ.get("WENV_DEBUG") == "1"
+extra_compile_args = ["-std=c11", "-Wall", "-Wextra", "-fopenmp", "-fno-math-errno"]
+extra_compile_args += ["-O0", "-g", "-fsanitize=address,undefined"] if debug else ["-O3"]
+extra_link_args = ["-fopenmp"] + (["-fsanitize=address,undefined"] if debug else [])
+
+setup(
+    name="wenv",
+    version="0.1.0",
+    description="Wavelet-rotation environment shading and a virtual glossmeter",
+    ext_modules=[
+        Extension(
+            "wenv",
+            sources=sorted(glob.glob("csrc/*.c")),
+            include_dirs=["csrc"] + include_dirs,
+            libraries=exr_libs + ["cubature", "z", "m"],
+            extra_compile_args=extra_compile_args,
+            extra_link_args=extra_link_args,
+        )
+    ],
+    python_requires=">=3.11",
+    install_requires=["numpy"],
+)
