@@ -26,7 +26,7 @@ include_dirs = [f[2:] for f in exr_cflags if f.startswith("-I")]
 exr_libs = [f[2:] for f in pkg_config("--libs", "OpenEXR") if f.startswith("-lOpenEXRCore")] or ["OpenEXRCore"]
 
 debug = os.environ.get("WENV_DEBUG") == "1"
-extra_compile_args = ["-std=c11", "-Wall", "-Wextra", "-fopenmp", "-fno-math-errno"]
+extra_compile_args = ["-std=c11", "-D_DEFAULT_SOURCE", "-Wall", "-Wextra", "-fopenmp", "-fno-math-errno"]
 extra_compile_args += ["-O0", "-g", "-fsanitize=address,undefined"] if debug else ["-O3"]
 extra_link_args = ["-fopenmp"] + (["-fsanitize=address,undefined"] if debug else [])
 

@@ -58,4 +58,9 @@ void wenv_material_eval_cos(const wenv_material *mat, const double wi[3], const 
 void wenv_material_specular_cos(const wenv_material *mat, const double wi[3], const double wo[3],
                                 double rgb[3]);
 
+/* Specular part times the incident cosine for many incident directions wi (n x 3 floats, local
+ * frame) and one view wo: rgb_out is n x 3.  Per-view terms are computed once. */
+void wenv_material_specular_cos_batch(const wenv_material *mat, const double wo[3], const float *wi, size_t n,
+                                      float *rgb_out);
+
 #endif

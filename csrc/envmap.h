@@ -51,11 +51,12 @@ const float *wenv_envmap_pixels(const wenv_envmap *env);
 void wenv_envmap_lookup(const wenv_envmap *env, const double dir[3], float rgb[3]);
 
 /* Every pixel that covers part of the sphere, as a point sample: world direction of its centre
- * (rotation applied) and flux = radiance * strength * exact solid angle of the pixel.  `dirs` and
- * `flux` hold room for 3 * width * height floats each; pixels outside the projection's domain
- * (outside the mirror-ball disk, the empty cells of a cube cross) and black pixels are skipped.
- * Returns the number written.  The solid angles of all pixels sum to 4 pi. */
-size_t wenv_envmap_samples(const wenv_envmap *env, float *dirs, float *flux);
+ * (rotation applied), flux = radiance * strength * exact solid angle of the pixel, and (if omega
+ * is not NULL) that solid angle.  `dirs` and `flux` hold room for 3 * width * height floats each,
+ * `omega` for width * height; pixels outside the projection's domain (outside the mirror-ball
+ * disk, the empty cells of a cube cross) are skipped, black pixels are not.  Returns the number
+ * written.  The solid angles of all pixels sum to 4 pi. */
+size_t wenv_envmap_samples(const wenv_envmap *env, float *dirs, float *flux, float *omega);
 
 /* Exact solid angle of pixel (row, col) (0 outside the domain). */
 double wenv_envmap_pixel_solid_angle(const wenv_envmap *env, size_t row, size_t col);

@@ -1,0 +1,704 @@
+#include "shade.h"
+
+#include <math.h>
+#include <omp.h>
+#include <stdatomic.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "haar.h"
+#include "maps.h"
+#include "rotation.h"
+#include "sparse.h"
+
+struct wenv_shader {
+    wenv_quality q;
+    wenv_method method;
+    size_t ng, nl, ns, nv;
+    wenv_rotation *rot;      /* rotation method only */
+    wenv_resampler *resampler; /* slicing method only */
+    float *frames;           /* ns x 9 */
+    wenv_shader_stats stats;
+
+    /* lighting */
+    int have_env;
+    uint32_t *light_idx;     /* kept global Haar coefficients */
+    float *light_rgb;
+    size_t light_count;
+    float *global_texels;    /* slicing: the kept lighting back in the pixel domain */
+    float **slices;          /* ns pointers to nl x 3 Haar coefficients, NULL until needed */
+    float *irradiance;       /* ns x 3 */
+    unsigned char *slice_ready, *slice_need;
+
+    /* local quadrature: sub-samples of the local map with their tent taps */
+    size_t quad_k, quad_count;
+    float *quad_dirs;        /* quad_count x 3 */
+    uint32_t *quad_taps;     /* quad_count x 4 */
+    float *quad_w;           /* quad_count x 4: tent weight x solid angle x normalisation */
+    float *cosine_haar;      /* nl: Haar transform of the cosine weights (sum pi) */
+
+    /* material */
+    int have_mat;
+    float diffuse_over_pi[3];
+    size_t *brdf_start;      /* nv + 1 */
+    uint32_t *brdf_idx;
+    float *brdf_rgb;
+
+    /* (normal sample, view sample) radiance table */
+    float *table;            /* ns x nv x 3 */
+    unsigned char *pair_ready, *pair_need;
+};
+
+static double now_seconds(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+wenv_status wenv_quality_check(const wenv_quality *q, wenv_error *err)
+{
+    if (!wenv_is_power_of_two(q->global_n) || q->global_n < 4 || q->global_n > 512)
+        return wenv_error_set(err, WENV_ERR_VALUE, "quality['global'] must be a power of two in [4, 512], got %zu", q->global_n);
+    if (!wenv_is_power_of_two(q->local_n) || q->local_n < 4 || q->local_n > 256)
+        return wenv_error_set(err, WENV_ERR_VALUE, "quality['local'] must be a power of two in [4, 256], got %zu", q->local_n);
+    if (q->normal_n < 2 || q->normal_n > 512 || q->normal_n % 2)
+        return wenv_error_set(err, WENV_ERR_VALUE, "quality['normals'] must be an even number in [2, 512], got %zu", q->normal_n);
+    if (q->view_n < 2 || q->view_n > 256 || q->view_n % 2)
+        return wenv_error_set(err, WENV_ERR_VALUE, "quality['views'] must be an even number in [2, 256], got %zu", q->view_n);
+    if (q->coefficients > q->local_n * q->local_n)
+        return wenv_error_set(err, WENV_ERR_VALUE, "quality['coefficients'] must be at most local**2 = %zu, got %zu",
+                              q->local_n * q->local_n, q->coefficients);
+    if (q->light_coefficients > q->global_n * q->global_n)
+        return wenv_error_set(err, WENV_ERR_VALUE, "quality['light_coefficients'] must be at most global**2 = %zu, got %zu",
+                              q->global_n * q->global_n, q->light_coefficients);
+    if (!(q->matrix_epsilon >= 0.0 && q->matrix_epsilon < 1.0))
+        return wenv_error_set(err, WENV_ERR_VALUE, "quality['matrix_epsilon'] must be in [0, 1), got %g", q->matrix_epsilon);
+    size_t table = q->normal_n * q->normal_n * q->view_n * q->view_n;
+    if (table > ((size_t)1 << 26))
+        return wenv_error_set(err, WENV_ERR_VALUE, "quality: normals**2 * views**2 = %zu exceeds 2**26 table entries", table);
+    return WENV_OK;
+}
+
+static void free_material(wenv_shader *sh)
+{
+    free(sh->brdf_start);
+    free(sh->brdf_idx);
+    free(sh->brdf_rgb);
+    sh->brdf_start = NULL;
+    sh->brdf_idx = NULL;
+    sh->brdf_rgb = NULL;
+    sh->have_mat = 0;
+}
+
+static void free_quadrature(wenv_shader *sh)
+{
+    free(sh->quad_dirs);
+    free(sh->quad_taps);
+    free(sh->quad_w);
+    free(sh->cosine_haar);
+    sh->quad_dirs = NULL;
+    sh->quad_taps = NULL;
+    sh->quad_w = NULL;
+    sh->cosine_haar = NULL;
+    sh->quad_k = 0;
+}
+
+void wenv_shader_free(wenv_shader *sh)
+{
+    if (!sh)
+        return;
+    wenv_rotation_free(sh->rot);
+    wenv_resampler_free(sh->resampler);
+    free(sh->frames);
+    free(sh->light_idx);
+    free(sh->light_rgb);
+    free(sh->global_texels);
+    if (sh->slices)
+        for (size_t s = 0; s < sh->ns; s++)
+            free(sh->slices[s]);
+    free(sh->slices);
+    free(sh->irradiance);
+    free(sh->slice_ready);
+    free(sh->slice_need);
+    free_quadrature(sh);
+    free_material(sh);
+    free(sh->table);
+    free(sh->pair_ready);
+    free(sh->pair_need);
+    free(sh);
+}
+
+/* Sub-samples of every local texel (k x k per texel, each carrying the texel's exact solid angle
+ * over k^2) with their tent taps, scaled so the cosine weights sum to exactly pi: then a constant
+ * environment gives exactly albedo x radiance. */
+static wenv_status build_quadrature(wenv_shader *sh, size_t k, wenv_error *err)
+{
+    if (sh->quad_k == k)
+        return WENV_OK;
+    free_quadrature(sh);
+    size_t L = sh->q.local_n, nl = sh->nl, count = nl * k * k;
+    sh->quad_dirs = malloc(count * 3 * sizeof(float));
+    sh->quad_taps = malloc(count * 4 * sizeof(uint32_t));
+    sh->quad_w = malloc(count * 4 * sizeof(float));
+    double *cosw = calloc(nl, sizeof(double));
+    float *cos_f = malloc(nl * sizeof(float));
+    float *scratch = malloc(L * sizeof(float));
+    if (!sh->quad_dirs || !sh->quad_taps || !sh->quad_w || !cosw || !cos_f || !scratch) {
+        free(cosw);
+        free(cos_f);
+        free(scratch);
+        free_quadrature(sh);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the local quadrature");
+    }
+    double h = 2.0 / (double)L, total = 0.0;
+    for (size_t t = 0; t < nl; t++) {
+        size_t i = t % L, j = t / L;
+        double omega = wenv_hemi_texel_solid_angle(L, i, j) / (double)(k * k);
+        for (size_t q = 0; q < k * k; q++) {
+            size_t e = t * k * k + q;
+            double u = -1.0 + h * ((double)i + ((double)(q % k) + 0.5) / (double)k);
+            double v = -1.0 + h * ((double)j + ((double)(q / k) + 0.5) / (double)k);
+            double d[3], w[4];
+            size_t idx[4];
+            wenv_hemi_decode(u, v, d);
+            wenv_hemi_bilinear(L, u, v, idx, w);
+            for (int c = 0; c < 3; c++)
+                sh->quad_dirs[3 * e + c] = (float)d[c];
+            for (int c = 0; c < 4; c++) {
+                sh->quad_taps[4 * e + c] = (uint32_t)idx[c];
+                sh->quad_w[4 * e + c] = (float)(w[c] * omega);
+                cosw[idx[c]] += w[c] * omega * d[2];
+                total += w[c] * omega * d[2];
+            }
+        }
+    }
+    double scale = M_PI / total;
+    for (size_t e = 0; e < count * 4; e++)
+        sh->quad_w[e] = (float)(sh->quad_w[e] * scale);
+    for (size_t t = 0; t < nl; t++)
+        cos_f[t] = (float)(cosw[t] * scale);
+    wenv_haar2d_forward(cos_f, L, 1, scratch);
+    free(cosw);
+    free(scratch);
+    sh->cosine_haar = cos_f;
+    sh->quad_count = count;
+    sh->quad_k = k;
+    return WENV_OK;
+}
+
+wenv_status wenv_shader_create(wenv_shader **out, const wenv_quality *q, wenv_method method,
+                               const char *cache_dir, const wenv_progress *progress, wenv_error *err)
+{
+    *out = NULL;
+    if (wenv_quality_check(q, err))
+        return err->status;
+    wenv_shader *sh = calloc(1, sizeof *sh);
+    if (!sh)
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the shader");
+    sh->q = *q;
+    sh->method = method;
+    sh->ng = q->global_n * q->global_n;
+    sh->nl = q->local_n * q->local_n;
+    sh->ns = q->normal_n * q->normal_n;
+    sh->nv = q->view_n * q->view_n;
+    sh->frames = malloc(sh->ns * 9 * sizeof(float));
+    sh->slices = calloc(sh->ns, sizeof(float *));
+    sh->irradiance = calloc(sh->ns * 3, sizeof(float));
+    sh->slice_ready = calloc(sh->ns, 1);
+    sh->slice_need = calloc(sh->ns, 1);
+    sh->table = malloc(sh->ns * sh->nv * 3 * sizeof(float));
+    sh->pair_ready = calloc(sh->ns * sh->nv, 1);
+    sh->pair_need = calloc(sh->ns * sh->nv, 1);
+    if (!sh->frames || !sh->slices || !sh->irradiance || !sh->slice_ready || !sh->slice_need || !sh->table ||
+        !sh->pair_ready || !sh->pair_need) {
+        wenv_shader_free(sh);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the shader tables");
+    }
+    for (size_t s = 0; s < sh->ns; s++) {
+        double n[3], f[9];
+        wenv_normal_sample(q->normal_n, s, n);
+        wenv_frame(n, f);
+        for (int c = 0; c < 9; c++)
+            sh->frames[9 * s + c] = (float)f[c];
+    }
+    if (build_quadrature(sh, 2, err)) {
+        wenv_shader_free(sh);
+        return err->status;
+    }
+    double t0 = now_seconds();
+    if (method == WENV_METHOD_ROTATION) {
+        char path[4096];
+        path[0] = '\0';
+        if (cache_dir) {
+            snprintf(path, sizeof path, "%s/wenv-rot-v1-g%zu-l%zu-n%zu-e%.3g.bin", cache_dir, q->global_n,
+                     q->local_n, q->normal_n, q->matrix_epsilon);
+            wenv_error ignored = {0};
+            if (wenv_rotation_load(&sh->rot, path, q->global_n, q->local_n, q->normal_n, q->matrix_epsilon,
+                                   &ignored) == WENV_OK)
+                sh->stats.cache = 1;
+        }
+        if (!sh->rot) {
+            if (wenv_rotation_build(&sh->rot, q->global_n, q->local_n, q->normal_n, q->matrix_epsilon, progress, err)) {
+                wenv_shader_free(sh);
+                return err->status;
+            }
+            if (path[0]) {
+                wenv_error save_err = {0};
+                sh->stats.cache = wenv_rotation_save(sh->rot, path, &save_err) == WENV_OK ? 2 : 3;
+            }
+        }
+        sh->stats.rotation_nnz = wenv_rotation_nnz(sh->rot);
+        sh->stats.rotation_bytes = sh->stats.rotation_nnz * (sizeof(uint32_t) + sizeof(float)) +
+                                   sh->ns * (sh->ng + 1) * sizeof(size_t);
+    } else if (wenv_resampler_create(&sh->resampler, q->global_n, q->local_n, err)) {
+        wenv_shader_free(sh);
+        return err->status;
+    }
+    sh->stats.rotation_seconds = now_seconds() - t0;
+    *out = sh;
+    return WENV_OK;
+}
+
+static void invalidate_pairs(wenv_shader *sh) { memset(sh->pair_ready, 0, sh->ns * sh->nv); }
+
+/* The environment tent-filtered onto the global octahedral texels: each pixel's flux is split
+ * between the four nearest texel centres, and each texel is divided by the solid angle it
+ * received, so a constant environment stays exactly constant and a sun keeps its centroid.
+ * Environments with fewer pixels than texels are point-sampled instead. */
+static wenv_status global_texels_from_env(const wenv_shader *sh, const wenv_envmap *env, float *texels,
+                                          wenv_error *err)
+{
+    size_t G = sh->q.global_n, ng = sh->ng;
+    size_t npix = wenv_envmap_width(env) * wenv_envmap_height(env);
+    if (npix < 8 * ng) {
+        size_t k = 4;
+        double h = 2.0 / (double)G;
+        for (size_t u = 0; u < ng; u++) {
+            double acc[3] = {0, 0, 0};
+            for (size_t q = 0; q < k * k; q++) {
+                double d[3];
+                float rgb[3];
+                wenv_oct_decode(-1.0 + h * ((double)(u % G) + ((double)(q % k) + 0.5) / (double)k),
+                                -1.0 + h * ((double)(u / G) + ((double)(q / k) + 0.5) / (double)k), d);
+                wenv_envmap_lookup(env, d, rgb);
+                for (int c = 0; c < 3; c++)
+                    acc[c] += rgb[c];
+            }
+            for (int c = 0; c < 3; c++)
+                texels[3 * u + c] = (float)(acc[c] / (double)(k * k));
+        }
+        return WENV_OK;
+    }
+    float *dirs = malloc(npix * 3 * sizeof(float));
+    float *flux = malloc(npix * 3 * sizeof(float));
+    float *omega = malloc(npix * sizeof(float));
+    double *acc = calloc(ng * 4, sizeof(double));
+    if (!dirs || !flux || !omega || !acc) {
+        free(dirs);
+        free(flux);
+        free(omega);
+        free(acc);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory filtering the environment");
+    }
+    size_t count = wenv_envmap_samples(env, dirs, flux, omega);
+    for (size_t p = 0; p < count; p++) {
+        double d[3] = {dirs[3 * p], dirs[3 * p + 1], dirs[3 * p + 2]}, u, v, w[4];
+        size_t idx[4];
+        wenv_oct_encode(d, &u, &v);
+        wenv_oct_bilinear(G, u, v, idx, w);
+        for (int c = 0; c < 4; c++) {
+            double *a = acc + 4 * idx[c];
+            a[0] += w[c] * flux[3 * p];
+            a[1] += w[c] * flux[3 * p + 1];
+            a[2] += w[c] * flux[3 * p + 2];
+            a[3] += w[c] * omega[p];
+        }
+    }
+    for (size_t u = 0; u < ng; u++) {
+        double inv = acc[4 * u + 3] > 0.0 ? 1.0 / acc[4 * u + 3] : 0.0;
+        for (int c = 0; c < 3; c++)
+            texels[3 * u + c] = (float)(acc[4 * u + c] * inv);
+    }
+    free(dirs);
+    free(flux);
+    free(omega);
+    free(acc);
+    return WENV_OK;
+}
+
+wenv_status wenv_shader_set_environment(wenv_shader *sh, const wenv_envmap *env, wenv_error *err)
+{
+    size_t G = sh->q.global_n, ng = sh->ng;
+    float *texels = malloc(ng * 3 * sizeof(float));
+    float *scratch = malloc(G * 3 * sizeof(float));
+    float *mag = malloc(ng * sizeof(float));
+    float *work = malloc(ng * sizeof(float));
+    uint32_t *idx = malloc(ng * sizeof(uint32_t));
+    float *rgb = NULL;
+    wenv_status st = WENV_OK;
+    if (!texels || !scratch || !mag || !work || !idx) {
+        st = wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the environment");
+        goto done;
+    }
+    if ((st = global_texels_from_env(sh, env, texels, err)))
+        goto done;
+    wenv_haar2d_forward(texels, G, 3, scratch);
+    for (size_t u = 0; u < ng; u++)
+        mag[u] = texels[3 * u] * texels[3 * u] + texels[3 * u + 1] * texels[3 * u + 1] + texels[3 * u + 2] * texels[3 * u + 2];
+    size_t keep = sh->q.light_coefficients ? sh->q.light_coefficients : ng;
+    size_t count = wenv_select_largest(mag, ng, keep, idx, work);
+    rgb = malloc((count ? count : 1) * 3 * sizeof(float));
+    if (!rgb) {
+        st = wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the environment");
+        goto done;
+    }
+    for (size_t e = 0; e < count; e++)
+        memcpy(rgb + 3 * e, texels + 3 * (size_t)idx[e], 3 * sizeof(float));
+    if (sh->method == WENV_METHOD_SLICING) {
+        /* slicing reads the kept lighting back in the pixel domain */
+        memset(texels, 0, ng * 3 * sizeof(float));
+        for (size_t e = 0; e < count; e++)
+            memcpy(texels + 3 * (size_t)idx[e], rgb + 3 * e, 3 * sizeof(float));
+        wenv_haar2d_inverse(texels, G, 3, scratch);
+        free(sh->global_texels);
+        sh->global_texels = texels;
+        texels = NULL;
+    }
+    free(sh->light_idx);
+    free(sh->light_rgb);
+    sh->light_idx = idx;
+    sh->light_rgb = rgb;
+    sh->light_count = count;
+    idx = NULL;
+    rgb = NULL;
+    memset(sh->slice_ready, 0, sh->ns);
+    invalidate_pairs(sh);
+    sh->have_env = 1;
+done:
+    free(texels);
+    free(scratch);
+    free(mag);
+    free(work);
+    free(idx);
+    free(rgb);
+    return st;
+}
+
+/* Sub-samples per local texel side: enough to resolve the narrowest lobe (its reflected width is
+ * about 1.4 m radians) with a couple of samples. */
+static size_t quadrature_k(const wenv_shader *sh, const wenv_material *mat)
+{
+    double m = 1.0;
+    for (size_t l = 0; l < mat->n_lobes; l++)
+        if (mat->lobes[l].roughness < m)
+            m = mat->lobes[l].roughness;
+    double spacing = 2.5 / (double)sh->q.local_n;
+    size_t k = (size_t)ceil(2.0 * spacing / (1.41 * m));
+    return k < 2 ? 2 : (k > 16 ? 16 : k);
+}
+
+wenv_status wenv_shader_set_material(wenv_shader *sh, const wenv_material *mat, wenv_error *err)
+{
+    size_t nv = sh->nv, nl = sh->nl, L = sh->q.local_n, V = sh->q.view_n;
+    size_t keep = sh->q.coefficients ? sh->q.coefficients : nl;
+    if (mat->n_lobes && build_quadrature(sh, quadrature_k(sh, mat), err))
+        return err->status;
+    free_material(sh);
+    sh->brdf_start = calloc(nv + 1, sizeof(size_t));
+    size_t *counts = calloc(nv, sizeof(size_t));
+    uint32_t *all_idx = malloc(nv * keep * sizeof(uint32_t));
+    float *all_rgb = malloc(nv * keep * 3 * sizeof(float));
+    if (!sh->brdf_start || !counts || !all_idx || !all_rgb) {
+        free(counts);
+        free(all_idx);
+        free(all_rgb);
+        free_material(sh);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for BRDF slices");
+    }
+    atomic_int failed = 0;
+    if (mat->n_lobes) {
+#pragma omp parallel
+        {
+            float *slice = malloc(nl * 3 * sizeof(float));
+            float *scratch = malloc(L * 3 * sizeof(float));
+            float *mag = malloc(nl * sizeof(float));
+            float *work = malloc(nl * sizeof(float));
+            float *fcos = malloc(sh->quad_count * 3 * sizeof(float));
+            if (!slice || !scratch || !mag || !work || !fcos)
+                atomic_store(&failed, 1);
+#pragma omp for schedule(dynamic, 1)
+            for (size_t j = 0; j < nv; j++) {
+                if (atomic_load(&failed))
+                    continue;
+                double wo[3];
+                wenv_hemi_decode(wenv_map_texel_center(V, j % V), wenv_map_texel_center(V, j / V), wo);
+                wenv_material_specular_cos_batch(mat, wo, sh->quad_dirs, sh->quad_count, fcos);
+                memset(slice, 0, nl * 3 * sizeof(float));
+                for (size_t e = 0; e < sh->quad_count; e++) {
+                    const float *g = fcos + 3 * e;
+                    for (int c = 0; c < 4; c++) {
+                        float w = sh->quad_w[4 * e + c];
+                        float *o = slice + 3 * (size_t)sh->quad_taps[4 * e + c];
+                        o[0] += w * g[0];
+                        o[1] += w * g[1];
+                        o[2] += w * g[2];
+                    }
+                }
+                wenv_haar2d_forward(slice, L, 3, scratch);
+                for (size_t t = 0; t < nl; t++)
+                    mag[t] = slice[3 * t] * slice[3 * t] + slice[3 * t + 1] * slice[3 * t + 1] + slice[3 * t + 2] * slice[3 * t + 2];
+                uint32_t *idx = all_idx + j * keep;
+                size_t count = wenv_select_largest(mag, nl, keep, idx, work);
+                for (size_t e = 0; e < count; e++)
+                    memcpy(all_rgb + (j * keep + e) * 3, slice + 3 * (size_t)idx[e], 3 * sizeof(float));
+                counts[j] = count;
+            }
+            free(slice);
+            free(scratch);
+            free(mag);
+            free(work);
+            free(fcos);
+        }
+    }
+    if (failed) {
+        free(counts);
+        free(all_idx);
+        free(all_rgb);
+        free_material(sh);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for BRDF slices");
+    }
+    for (size_t j = 0; j < nv; j++)
+        sh->brdf_start[j + 1] = sh->brdf_start[j] + counts[j];
+    size_t total = sh->brdf_start[nv];
+    sh->brdf_idx = malloc((total ? total : 1) * sizeof(uint32_t));
+    sh->brdf_rgb = malloc((total ? total : 1) * 3 * sizeof(float));
+    if (!sh->brdf_idx || !sh->brdf_rgb) {
+        free(counts);
+        free(all_idx);
+        free(all_rgb);
+        free_material(sh);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for BRDF slices");
+    }
+    for (size_t j = 0; j < nv; j++) {
+        memcpy(sh->brdf_idx + sh->brdf_start[j], all_idx + j * keep, counts[j] * sizeof(uint32_t));
+        memcpy(sh->brdf_rgb + 3 * sh->brdf_start[j], all_rgb + j * keep * 3, counts[j] * 3 * sizeof(float));
+    }
+    free(counts);
+    free(all_idx);
+    free(all_rgb);
+    for (int c = 0; c < 3; c++)
+        sh->diffuse_over_pi[c] = (float)(mat->diffuse[c] / M_PI);
+    sh->stats.brdf_terms_total = total;
+    invalidate_pairs(sh);
+    sh->have_mat = 1;
+    return WENV_OK;
+}
+
+/* ---- per vertex -------------------------------------------------------------------------------- */
+
+typedef struct {
+    uint32_t sample[4];
+    float sample_w[4];
+    uint32_t pair[16];
+    float pair_w[16];
+} vertex_taps;
+
+/* Returns 0 when the view is below the surface (the vertex is black). */
+static int compute_taps(const wenv_shader *sh, const float *nrm, const float *view, vertex_taps *tp)
+{
+    double n[3] = {nrm[0], nrm[1], nrm[2]}, v[3] = {view[0], view[1], view[2]};
+    double ln = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]), lv = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+    for (int c = 0; c < 3; c++) {
+        n[c] /= ln;
+        v[c] /= lv;
+    }
+    double nv = n[0] * v[0] + n[1] * v[1] + n[2] * v[2];
+    if (!(nv > 0.0))
+        return 0;
+    double r[3] = {2.0 * nv * n[0] - v[0], 2.0 * nv * n[1] - v[1], 2.0 * nv * n[2] - v[2]};
+    double u, w, sw[4];
+    size_t sidx[4];
+    wenv_oct_encode(n, &u, &w);
+    wenv_oct_bilinear(sh->q.normal_n, u, w, sidx, sw);
+    for (int k = 0; k < 4; k++) {
+        const float *f = sh->frames + 9 * sidx[k];
+        /* mirror of r about the sample normal, in the sample's frame: (-r.t, -r.b, r.n) */
+        double lview[3] = {-(f[0] * r[0] + f[1] * r[1] + f[2] * r[2]), -(f[3] * r[0] + f[4] * r[1] + f[5] * r[2]),
+                           f[6] * r[0] + f[7] * r[1] + f[8] * r[2]};
+        double vu, vv, vw[4];
+        size_t vidx[4];
+        wenv_hemi_encode(lview, &vu, &vv);
+        wenv_hemi_bilinear(sh->q.view_n, vu, vv, vidx, vw);
+        tp->sample[k] = (uint32_t)sidx[k];
+        tp->sample_w[k] = (float)sw[k];
+        for (int j = 0; j < 4; j++) {
+            tp->pair[4 * k + j] = (uint32_t)(sidx[k] * sh->nv + vidx[j]);
+            tp->pair_w[4 * k + j] = (float)(sw[k] * vw[j]);
+        }
+    }
+    return 1;
+}
+
+static int compute_slice(wenv_shader *sh, size_t s, float *pixel_work, double *rowsum, float *scratch)
+{
+    if (!sh->slices[s]) {
+        sh->slices[s] = malloc(sh->nl * 3 * sizeof(float));
+        if (!sh->slices[s])
+            return -1;
+    }
+    float *slice = sh->slices[s];
+    if (sh->method == WENV_METHOD_ROTATION) {
+        wenv_rotation_apply(sh->rot, s, sh->light_idx, sh->light_rgb, sh->light_count, slice);
+    } else {
+        double f[9];
+        for (int c = 0; c < 9; c++)
+            f[c] = sh->frames[9 * s + c];
+        wenv_resample_slice(sh->resampler, f, sh->global_texels, pixel_work, rowsum);
+        wenv_haar2d_forward(pixel_work, sh->q.local_n, 3, scratch);
+        memcpy(slice, pixel_work, sh->nl * 3 * sizeof(float));
+    }
+    double e[3] = {0, 0, 0};
+    for (size_t t = 0; t < sh->nl; t++) {
+        float c = sh->cosine_haar[t];
+        e[0] += c * slice[3 * t];
+        e[1] += c * slice[3 * t + 1];
+        e[2] += c * slice[3 * t + 2];
+    }
+    for (int c = 0; c < 3; c++)
+        sh->irradiance[3 * s + c] = (float)e[c];
+    return 0;
+}
+
+wenv_status wenv_shader_shade(wenv_shader *sh, const float *normals, const float *views, size_t n,
+                              float *out, wenv_error *err)
+{
+    if (!sh->have_env || !sh->have_mat)
+        return wenv_error_set(err, WENV_ERR_VALUE, "the shader needs an environment and a material");
+    long long nn = (long long)n;
+    /* pass 1: which slices and table entries the vertices need */
+#pragma omp parallel for schedule(static)
+    for (long long i = 0; i < nn; i++) {
+        vertex_taps tp;
+        if (!compute_taps(sh, normals + 3 * i, views + 3 * i, &tp))
+            continue;
+        for (int k = 0; k < 4; k++)
+            if (tp.sample_w[k] > 0.0f) {
+#pragma omp atomic write
+                sh->slice_need[tp.sample[k]] = 1;
+            }
+        for (int k = 0; k < 16; k++)
+            if (tp.pair_w[k] > 0.0f) {
+#pragma omp atomic write
+                sh->pair_need[tp.pair[k]] = 1;
+            }
+    }
+    /* slices */
+    size_t *todo = malloc((sh->ns > sh->ns * sh->nv ? sh->ns : sh->ns * sh->nv) * sizeof(size_t));
+    if (!todo)
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory shading");
+    size_t ntodo = 0;
+    for (size_t s = 0; s < sh->ns; s++) {
+        if (sh->slice_need[s] && !sh->slice_ready[s])
+            todo[ntodo++] = s;
+        sh->slice_need[s] = 0;
+    }
+    atomic_int failed = 0;
+#pragma omp parallel
+    {
+        float *pixel_work = malloc(sh->nl * 3 * sizeof(float));
+        double *rowsum = malloc(sh->nl * sizeof(double));
+        float *scratch = malloc(sh->q.local_n * 3 * sizeof(float));
+        if (!pixel_work || !rowsum || !scratch)
+            atomic_store(&failed, 1);
+#pragma omp for schedule(dynamic, 4)
+        for (size_t e = 0; e < ntodo; e++) {
+            if (atomic_load(&failed))
+                continue;
+            if (compute_slice(sh, todo[e], pixel_work, rowsum, scratch) < 0)
+                atomic_store(&failed, 1);
+            else
+                sh->slice_ready[todo[e]] = 1;
+        }
+        free(pixel_work);
+        free(rowsum);
+        free(scratch);
+    }
+    if (failed) {
+        free(todo);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory computing lighting slices");
+    }
+    /* table entries: sparse BRDF slice . dense lighting slice, per RGB channel */
+    ntodo = 0;
+    size_t npairs = sh->ns * sh->nv;
+    for (size_t p = 0; p < npairs; p++) {
+        if (sh->pair_need[p] && !sh->pair_ready[p])
+            todo[ntodo++] = p;
+        sh->pair_need[p] = 0;
+    }
+#pragma omp parallel for schedule(dynamic, 64)
+    for (size_t e = 0; e < ntodo; e++) {
+        size_t p = todo[e], s = p / sh->nv, j = p % sh->nv;
+        const float *slice = sh->slices[s];
+        float acc[3] = {0, 0, 0};
+        for (size_t q = sh->brdf_start[j]; q < sh->brdf_start[j + 1]; q++) {
+            const float *l = slice + 3 * (size_t)sh->brdf_idx[q], *b = sh->brdf_rgb + 3 * q;
+            acc[0] += l[0] * b[0];
+            acc[1] += l[1] * b[1];
+            acc[2] += l[2] * b[2];
+        }
+        memcpy(sh->table + 3 * p, acc, sizeof acc);
+        sh->pair_ready[p] = 1;
+    }
+    free(todo);
+    /* pass 2: interpolate */
+#pragma omp parallel for schedule(static)
+    for (long long i = 0; i < nn; i++) {
+        vertex_taps tp;
+        float *o = out + 3 * i;
+        if (!compute_taps(sh, normals + 3 * i, views + 3 * i, &tp)) {
+            o[0] = o[1] = o[2] = 0.0f;
+            continue;
+        }
+        float e[3] = {0, 0, 0}, s[3] = {0, 0, 0};
+        for (int k = 0; k < 4; k++) {
+            const float *ir = sh->irradiance + 3 * tp.sample[k];
+            e[0] += tp.sample_w[k] * ir[0];
+            e[1] += tp.sample_w[k] * ir[1];
+            e[2] += tp.sample_w[k] * ir[2];
+        }
+        for (int k = 0; k < 16; k++) {
+            const float *t = sh->table + 3 * (size_t)tp.pair[k];
+            float w = tp.pair_w[k];
+            if (w > 0.0f) {
+                s[0] += w * t[0];
+                s[1] += w * t[1];
+                s[2] += w * t[2];
+            }
+        }
+        for (int c = 0; c < 3; c++) {
+            float val = sh->diffuse_over_pi[c] * e[c] + s[c];
+            o[c] = val > 0.0f ? val : 0.0f;
+        }
+    }
+    return WENV_OK;
+}
+
+void wenv_shader_get_stats(const wenv_shader *sh, wenv_shader_stats *stats)
+{
+    *stats = sh->stats;
+    size_t slices = 0, pairs = 0;
+    for (size_t s = 0; s < sh->ns; s++)
+        slices += sh->slices[s] != NULL;
+    for (size_t p = 0; p < sh->ns * sh->nv; p++)
+        pairs += sh->pair_ready[p];
+    stats->slices_ready = slices;
+    stats->pairs_ready = pairs;
+    stats->light_terms = sh->light_count;
+    stats->slice_bytes = slices * sh->nl * 3 * sizeof(float);
+    stats->table_bytes = sh->ns * sh->nv * (3 * sizeof(float) + 2);
+    stats->brdf_bytes = sh->stats.brdf_terms_total * 4 * sizeof(float);
+}

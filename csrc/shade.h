@@ -1,0 +1,70 @@
+/* Environment shading by wavelet rotation (Wang et al. 2006, as the 2007 thesis built it).
+ *
+ * Lighting: the environment is tent-filtered onto a global octahedral map, Haar transformed and
+ * cut to its largest coefficients.  For each normal sample the local lighting slice (a
+ * hemi-octahedral map in the sample's frame, Haar domain) comes from the rotation matrix
+ * ("rotation") or from resampling the global map directly ("slicing"); the two agree exactly when
+ * nothing is truncated.  Slices are made only for normal samples that some vertex needs.
+ *
+ * Material: for each view sample (a hemi-octahedral grid of local view directions) the BRDF
+ * slice f(w, v) cos(w) is integrated against each local texel's tent, Haar transformed and cut to
+ * its largest coefficients (RGB share their indices).  The diffuse part is view-independent: it
+ * uses the irradiance of each normal sample, computed once per slice.
+ *
+ * Per vertex: the normal is interpolated bilinearly between the 4 nearest normal samples.  Each
+ * sample is shaded with the view that has the same mirror direction about the sample's normal as
+ * the vertex view has about the vertex normal, so a highlight stays where it belongs instead of
+ * moving with the sample spacing; that view is interpolated bilinearly between the 4 nearest
+ * view samples.  The 16 (normal sample, view sample) radiances are sparse dot products computed
+ * once per lighting and material and kept in a table, so a new view costs 16 table reads per
+ * vertex plus the dot products of pairs not seen before. */
+#ifndef WENV_SHADE_H
+#define WENV_SHADE_H
+
+#include <stddef.h>
+
+#include "brdf.h"
+#include "envmap.h"
+#include "error.h"
+
+typedef enum { WENV_METHOD_ROTATION = 0, WENV_METHOD_SLICING = 1 } wenv_method;
+
+typedef struct {
+    size_t global_n;           /* octahedral lighting map side (power of two) */
+    size_t local_n;            /* hemi-octahedral slice side (power of two) */
+    size_t normal_n;           /* octahedral normal-sample grid side (even) */
+    size_t view_n;             /* hemi-octahedral view-sample grid side */
+    size_t coefficients;       /* Haar terms kept per BRDF slice (0: all) */
+    size_t light_coefficients; /* Haar terms kept of the global lighting (0: all) */
+    double matrix_epsilon;     /* rotation-matrix entries dropped below this (relative) */
+} wenv_quality;
+
+typedef struct {
+    size_t rotation_nnz, rotation_bytes;
+    int cache; /* 0 no cache used, 1 loaded, 2 built and saved, 3 built, save failed */
+    size_t slices_ready, pairs_ready, light_terms, brdf_terms_total;
+    size_t slice_bytes, table_bytes, brdf_bytes;
+    double rotation_seconds;
+} wenv_shader_stats;
+
+typedef struct wenv_shader wenv_shader;
+
+wenv_status wenv_quality_check(const wenv_quality *q, wenv_error *err);
+
+/* cache_dir may be NULL (no disk cache).  Builds or loads the rotation matrices for
+ * WENV_METHOD_ROTATION, reporting progress. */
+wenv_status wenv_shader_create(wenv_shader **out, const wenv_quality *q, wenv_method method,
+                               const char *cache_dir, const wenv_progress *progress, wenv_error *err);
+void wenv_shader_free(wenv_shader *sh);
+
+wenv_status wenv_shader_set_environment(wenv_shader *sh, const wenv_envmap *env, wenv_error *err);
+wenv_status wenv_shader_set_material(wenv_shader *sh, const wenv_material *mat, wenv_error *err);
+
+/* normals and views (surface towards eye) are n x 3; need not be unit length but must be
+ * non-zero and finite (the bindings check).  out is n x 3 linear RGB radiance. */
+wenv_status wenv_shader_shade(wenv_shader *sh, const float *normals, const float *views, size_t n,
+                              float *out, wenv_error *err);
+
+void wenv_shader_get_stats(const wenv_shader *sh, wenv_shader_stats *stats);
+
+#endif
