@@ -45,4 +45,7 @@ typedef struct {
 
 wenv_progress wenv_py_progress(wenv_py_progress_bridge *bridge);
 
+struct wenv_material;
+const struct wenv_material *wenv_py_material(PyObject *obj, const char *name); /* NULL + TypeError naming `name` if obj is not a wenv.Material */
+
 #endif
