@@ -30,6 +30,10 @@ double wenv_hemi_texel_solid_angle(size_t n, size_t i, size_t j);
 void wenv_oct_bilinear(size_t n, double u, double v, size_t idx[4], double w[4]);
 void wenv_hemi_bilinear(size_t n, double u, double v, size_t idx[4], double w[4]);
 
+/* The same for samples on the (n + 1) x (n + 1) texel corners (index j * (n + 1) + i at
+ * u = -1 + 2 i / n): the outermost samples lie on the horizon, so nothing is extrapolated. */
+void wenv_hemi_bilinear_corners(size_t n, double u, double v, size_t idx[4], double w[4]);
+
 /* Solid angle of the spherical triangle with unit-vector corners a, b, c. */
 double wenv_spherical_triangle(const double a[3], const double b[3], const double c[3]);
 

@@ -52,6 +52,9 @@ struct wenv_shader {
     unsigned char *pair_ready, *pair_need;
 };
 
+/* cos(89.9 deg): the lowest view a BRDF slice is made for */
+#define GRAZING_Z 0.0017453283658983088
+
 static double now_seconds(void)
 {
     struct timespec ts;
@@ -77,9 +80,9 @@ wenv_status wenv_quality_check(const wenv_quality *q, wenv_error *err)
                               q->global_n * q->global_n, q->light_coefficients);
     if (!(q->matrix_epsilon >= 0.0 && q->matrix_epsilon < 1.0))
         return wenv_error_set(err, WENV_ERR_VALUE, "quality['matrix_epsilon'] must be in [0, 1), got %g", q->matrix_epsilon);
-    size_t table = q->normal_n * q->normal_n * q->view_n * q->view_n;
+    size_t table = q->normal_n * q->normal_n * (q->view_n + 1) * (q->view_n + 1);
     if (table > ((size_t)1 << 26))
-        return wenv_error_set(err, WENV_ERR_VALUE, "quality: normals**2 * views**2 = %zu exceeds 2**26 table entries", table);
+        return wenv_error_set(err, WENV_ERR_VALUE, "quality: normals**2 * (views + 1)**2 = %zu exceeds 2**26 table entries", table);
     return WENV_OK;
 }
 
@@ -204,7 +207,7 @@ wenv_status wenv_shader_create(wenv_shader **out, const wenv_quality *q, wenv_me
     sh->ng = q->global_n * q->global_n;
     sh->nl = q->local_n * q->local_n;
     sh->ns = q->normal_n * q->normal_n;
-    sh->nv = q->view_n * q->view_n;
+    sh->nv = (q->view_n + 1) * (q->view_n + 1); /* samples on texel corners, horizon included */
     sh->frames = malloc(sh->ns * 9 * sizeof(float));
     sh->slices = calloc(sh->ns, sizeof(float *));
     sh->irradiance = calloc(sh->ns * 3, sizeof(float));
@@ -435,7 +438,15 @@ wenv_status wenv_shader_set_material(wenv_shader *sh, const wenv_material *mat, 
                 if (atomic_load(&failed))
                     continue;
                 double wo[3];
-                wenv_hemi_decode(wenv_map_texel_center(V, j % V), wenv_map_texel_center(V, j / V), wo);
+                wenv_hemi_decode(-1.0 + 2.0 * (double)(j % (V + 1)) / (double)V,
+                                 -1.0 + 2.0 * (double)(j / (V + 1)) / (double)V, wo);
+                /* a view exactly on the horizon sees nothing; its limit is what interpolation needs */
+                if (wo[2] < GRAZING_Z) {
+                    double s = sqrt((1.0 - GRAZING_Z * GRAZING_Z) / (wo[0] * wo[0] + wo[1] * wo[1]));
+                    wo[0] *= s;
+                    wo[1] *= s;
+                    wo[2] = GRAZING_Z;
+                }
                 wenv_material_specular_cos_batch(mat, wo, sh->quad_dirs, sh->quad_count, fcos);
                 memset(slice, 0, nl * 3 * sizeof(float));
                 for (size_t e = 0; e < sh->quad_count; e++) {
@@ -532,7 +543,7 @@ static int compute_taps(const wenv_shader *sh, const float *nrm, const float *vi
         double vu, vv, vw[4];
         size_t vidx[4];
         wenv_hemi_encode(lview, &vu, &vv);
-        wenv_hemi_bilinear(sh->q.view_n, vu, vv, vidx, vw);
+        wenv_hemi_bilinear_corners(sh->q.view_n, vu, vv, vidx, vw);
         tp->sample[k] = (uint32_t)sidx[k];
         tp->sample_w[k] = (float)sw[k];
         for (int j = 0; j < 4; j++) {
