@@ -565,9 +565,11 @@ static int compute_slice(wenv_shader *sh, size_t s, float *pixel_work, double *r
     if (sh->method == WENV_METHOD_ROTATION) {
         wenv_rotation_apply(sh->rot, s, sh->light_idx, sh->light_rgb, sh->light_count, slice);
     } else {
-        double f[9];
-        for (int c = 0; c < 9; c++)
-            f[c] = sh->frames[9 * s + c];
+        /* the double-precision frame the rotation matrices were built with, so that directions on
+         * a frame's horizon fall on the same side in both methods */
+        double n[3], f[9];
+        wenv_normal_sample(sh->q.normal_n, s, n);
+        wenv_frame(n, f);
         wenv_resample_slice(sh->resampler, f, sh->global_texels, pixel_work, rowsum);
         wenv_haar2d_forward(pixel_work, sh->q.local_n, 3, scratch);
         memcpy(slice, pixel_work, sh->nl * 3 * sizeof(float));

@@ -1,0 +1,90 @@
+"""Maps of directions and the nonstandard Haar transform (REFERENCE.md §3, §4)."""
+import math
+
+import numpy as np
+import pytest
+
+import wenv
+
+
+def random_dirs(n, seed=0, upper=False):
+    rng = np.random.default_rng(seed)
+    d = rng.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    if upper:
+        d[:, 2] = np.abs(d[:, 2])
+    return d
+
+
+def edge_dirs():
+    """Seams and poles: axes, octant diagonals, the equator, points just off them."""
+    pts = [(1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1),
+           (1, 1, 0), (1, -1, 0), (-1, 1, 0), (-1, -1, 0), (1, 1, 1), (1, 1, -1), (-1, -1, -1),
+           (1e-9, 0, -1), (0, 1e-9, -1), (1e-7, 1e-7, -1)]
+    d = np.array(pts, dtype=np.float64)
+    return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+@pytest.mark.parametrize("kind", ["oct", "hemi"])
+def test_round_trip_directions(kind):
+    hemi = kind == "hemi"
+    d = np.vstack([random_dirs(20000, 1, upper=hemi), edge_dirs() if not hemi else np.abs(edge_dirs())])
+    enc = getattr(wenv, f"_{kind}_encode")
+    dec = getattr(wenv, f"_{kind}_decode")
+    uv = enc(d).astype(np.float64)
+    assert np.all(np.abs(uv) <= 1.0 + 1e-6)
+    back = dec(uv).astype(np.float64)
+    assert np.all(np.isfinite(back))
+    assert np.max(np.linalg.norm(back - d, axis=1)) < 1e-6
+
+
+@pytest.mark.parametrize("n", [2, 4, 16, 64, 256])
+def test_texel_solid_angles_sum(n):
+    oct_ = np.array(wenv._texel_solid_angles(n, False))
+    hemi = np.array(wenv._texel_solid_angles(n, True))
+    assert np.all(oct_ > 0) and np.all(hemi > 0)
+    assert abs(oct_.sum() - 4 * math.pi) < 1e-9 * 4 * math.pi
+    assert abs(hemi.sum() - 2 * math.pi) < 1e-9 * 2 * math.pi
+    if n >= 16:  # not equal-area: the spread REFERENCE.md §3 speaks of
+        assert 3.0 < oct_.max() / oct_.min() < 8.0
+
+
+def test_texel_solid_angle_matches_monte_carlo():
+    n = 8
+    exact = np.array(wenv._texel_solid_angles(n, False)).reshape(n, n)
+    d = random_dirs(400000, 5)
+    uv = wenv._oct_encode(d).astype(np.float64)
+    ij = np.clip(((uv + 1) * 0.5 * n).astype(int), 0, n - 1)
+    counts = np.zeros((n, n))
+    np.add.at(counts, (ij[:, 1], ij[:, 0]), 1)
+    mc = counts / len(d) * 4 * math.pi
+    assert np.max(np.abs(mc - exact) / exact) < 0.05
+
+
+@pytest.mark.parametrize("n,ch", [(2, 1), (8, 3), (32, 3), (64, 5)])
+def test_haar_round_trip_and_parseval(n, ch):
+    rng = np.random.default_rng(n)
+    a = rng.normal(size=(n, n, ch)).astype(np.float32)
+    b = rng.normal(size=(n, n, ch)).astype(np.float32)
+    ha, hb = wenv._haar2d(a), wenv._haar2d(b)
+    assert np.allclose(wenv._haar2d(ha, inverse=True), a, atol=1e-5)
+    # orthonormal: energy and dot products are preserved per channel
+    assert np.allclose((ha * hb).sum(axis=(0, 1)), (a * b).sum(axis=(0, 1)), rtol=1e-4, atol=1e-3)
+    assert np.allclose((ha ** 2).sum(), (a ** 2).sum(), rtol=1e-5)
+
+
+def test_haar_constant_has_one_coefficient():
+    n = 16
+    h = wenv._haar2d(np.full((n, n, 1), 2.0, np.float32))
+    assert math.isclose(h[0, 0, 0], 2.0 * n, rel_tol=1e-6)
+    h[0, 0, 0] = 0
+    assert np.abs(h).max() < 1e-5
+
+
+def test_haar_is_nonstandard():
+    """One level of rows then one of columns: a single-pixel impulse has 3 log2 n + 1 coefficients."""
+    n = 16
+    img = np.zeros((n, n, 1), np.float32)
+    img[5, 11, 0] = 1.0
+    h = wenv._haar2d(img)
+    assert np.count_nonzero(np.abs(h) > 1e-7) == 3 * 4 + 1

@@ -1,0 +1,239 @@
+"""The shading engine: exactness where the method is exact, agreement of its two variants,
+finite output everywhere, caching, progress and bad input."""
+import math
+import os
+
+import numpy as np
+import pytest
+
+import wenv
+
+SMALL = {"global": 16, "local": 8, "normals": 8, "views": 4, "coefficients": 0}
+
+
+def unit(a):
+    a = np.asarray(a, dtype=np.float64)
+    return (a / np.linalg.norm(a, axis=-1, keepdims=True)).astype(np.float32)
+
+
+def random_pairs(n, seed=0):
+    rng = np.random.default_rng(seed)
+    nrm = unit(rng.normal(size=(n, 3)))
+    v = unit(rng.normal(size=(n, 3)))
+    flip = np.sum(nrm * v, axis=1) < 0
+    v[flip] *= -1
+    return nrm, v
+
+
+def gradient_env(h=32, w=64):
+    """A smooth, coloured environment with a bright spot, so every direction differs."""
+    rows, cols = np.mgrid[0:h, 0:w]
+    img = np.empty((h, w, 3), np.float32)
+    img[..., 0] = 0.5 + 0.5 * np.cos(2 * np.pi * cols / w)
+    img[..., 1] = rows / h
+    img[..., 2] = 0.2
+    img[h // 4, w // 3] = (40.0, 30.0, 20.0)
+    return wenv.Environment(img)
+
+
+@pytest.fixture(scope="module")
+def cook():
+    return wenv.CookTorrance(diffuse=(0.3, 0.2, 0.1),
+                             lobes=[{"specular": (1, 1, 1), "roughness": 0.3, "ior": 1.5},
+                                    {"specular": (0.5, 0.6, 0.7), "roughness": 0.08, "ior": 2.0}])
+
+
+@pytest.mark.parametrize("method", ["rotation", "slicing"])
+@pytest.mark.parametrize("quality", ["draft", SMALL])
+def test_constant_environment_lambert_is_exact(method, quality):
+    env = wenv.Environment(np.full((16, 32, 3), 1.7, np.float32))
+    albedo = (0.8, 0.5, 0.25)
+    sh = wenv.Shader(env, wenv.Lambert(albedo), quality=quality, method=method, cache_dir=False)
+    nrm, v = random_pairs(3000)
+    out = sh.shade(nrm, v)
+    assert np.allclose(out, 1.7 * np.array(albedo, np.float32), rtol=2e-6, atol=0)
+
+
+def test_rotation_equals_slicing_without_truncation(cook):
+    env = gradient_env()
+    q = dict(SMALL, matrix_epsilon=0.0)
+    a = wenv.Shader(env, cook, quality=q, method="rotation", cache_dir=False)
+    b = wenv.Shader(env, cook, quality=q, method="slicing", cache_dir=False)
+    nrm, v = random_pairs(2000, 3)
+    ra, rb = a.shade(nrm, v), b.shade(nrm, v)
+    assert np.max(np.abs(ra - rb)) <= 1e-4 * np.max(np.abs(rb))
+
+
+def test_truncation_changes_little_and_keeps_fewer_terms(cook):
+    env = gradient_env()
+    full = wenv.Shader(env, cook, quality=dict(SMALL, matrix_epsilon=0.0), cache_dir=False)
+    cut = wenv.Shader(env, cook, quality=dict(SMALL, matrix_epsilon=1e-3, light_coefficients=64,
+                                              coefficients=32), cache_dir=False)
+    assert cut.stats["rotation_nnz"] < full.stats["rotation_nnz"]
+    nrm, v = random_pairs(500, 4)
+    a, b = full.shade(nrm, v), cut.shade(nrm, v)
+    assert np.sqrt(np.mean((a - b) ** 2)) < 0.1 * np.sqrt(np.mean(a ** 2))
+
+
+def test_no_nan_at_seams_poles_and_grazing(cook):
+    env = gradient_env()
+    sh = wenv.Shader(env, cook, quality="draft", cache_dir=False)
+    special = [(0, 0, 1), (0, 0, -1), (1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (1, 1, 0), (-1, 1, 0),
+               (1, -1, 0), (-1, -1, 0), (1, 1, 1), (1, 1, -1), (-1, -1, -1), (1e-7, 0, -1), (0, 1e-7, -1)]
+    nrm = unit(special)
+    rows_n, rows_v = [], []
+    for n in nrm.astype(np.float64):
+        t = np.cross(n, [0.3, 0.5, 0.8])
+        t /= np.linalg.norm(t)
+        for angle in (0.0, 45.0, 80.0, 89.9):
+            a = math.radians(angle)
+            rows_n.append(n)
+            rows_v.append(math.cos(a) * n + math.sin(a) * t)
+    out = sh.shade(unit(rows_n), unit(rows_v))
+    assert np.all(np.isfinite(out)) and np.all(out >= 0)
+    assert np.all(out.sum(axis=1) > 0)  # every one of them sees light
+    # a view below the surface sees nothing
+    assert np.all(sh.shade(nrm, -nrm) == 0)
+
+
+def test_shade_is_continuous_across_normal_samples(cook):
+    env = gradient_env()
+    sh = wenv.Shader(env, cook, quality="draft", cache_dir=False)
+    t = np.linspace(0, 2 * np.pi, 2001)
+    nrm = unit(np.stack([np.cos(t), np.sin(t), 0.3 * np.ones_like(t)], axis=1))
+    v = unit(nrm + np.array([0.0, 0.0, 0.5], np.float32))
+    out = sh.shade(nrm, v)
+    jumps = np.abs(np.diff(out, axis=0)).max(axis=0)
+    assert np.all(jumps < 0.05 * out.max(axis=0))
+
+
+def test_shade_mesh_matches_shade(cook):
+    env = gradient_env()
+    sh = wenv.Shader(env, cook, quality="draft", cache_dir=False)
+    rng = np.random.default_rng(2)
+    pos = rng.normal(size=(100, 3)).astype(np.float32)
+    nrm = unit(rng.normal(size=(100, 3)))
+    eye = (3.0, -4.0, 2.0)
+    assert np.allclose(sh.shade_mesh(pos, nrm, eye), sh.shade(nrm, unit(np.array(eye, np.float32) - pos)))
+    one = sh.shade(nrm, np.array([0, 0, 1], np.float32))  # one view for all
+    assert one.shape == (100, 3)
+
+
+def test_set_environment_and_material_keep_matrices(cook, tmp_path):
+    env = gradient_env()
+    sh = wenv.Shader(env, wenv.Lambert(0.5), quality="draft", cache_dir=str(tmp_path))
+    nnz = sh.stats["rotation_nnz"]
+    nrm, v = random_pairs(300, 8)
+    sh.set_material(cook)
+    sh.set_environment(wenv.Environment(np.full((8, 16, 3), 2.0, np.float32)))
+    fresh = wenv.Shader(sh.environment, cook, quality="draft", cache_dir=str(tmp_path))
+    assert fresh.stats["cache"] == "loaded" and sh.stats["rotation_nnz"] == nnz
+    assert np.array_equal(sh.shade(nrm, v), fresh.shade(nrm, v))
+
+
+def test_cache_survives_corruption(tmp_path):
+    env = gradient_env()
+    lam = wenv.Lambert(0.5)
+    first = wenv.Shader(env, lam, quality=SMALL, cache_dir=str(tmp_path))
+    assert first.stats["cache"] == "built"
+    (path,) = [p for p in tmp_path.iterdir()]
+    nrm, v = random_pairs(200, 9)
+    expected = first.shade(nrm, v)
+    data = path.read_bytes()
+    bad_versions = {
+        "truncated": data[: len(data) // 2],
+        "empty": b"",
+        "flipped": data[:200] + bytes([data[200] ^ 0xFF]) + data[201:],
+        "version": data[:8] + b"\x63" + data[9:],
+        "tail": data + b"junk",
+    }
+    for what, blob in bad_versions.items():
+        path.write_bytes(blob)
+        again = wenv.Shader(env, lam, quality=SMALL, cache_dir=str(tmp_path))
+        assert again.stats["cache"] == "built", what
+        assert np.array_equal(again.shade(nrm, v), expected), what
+    assert wenv.Shader(env, lam, quality=SMALL, cache_dir=str(tmp_path)).stats["cache"] == "loaded"
+    assert not [p for p in tmp_path.iterdir() if ".tmp" in p.name]
+
+
+def test_progress_reports_and_cancels():
+    env = gradient_env()
+    seen = []
+    wenv.Shader(env, wenv.Lambert(0.5), quality=dict(SMALL, normals=16), cache_dir=False, progress=seen.append)
+    assert seen and seen[-1] == pytest.approx(1.0) and seen == sorted(seen)
+    with pytest.raises(wenv.CancelledError):
+        wenv.Shader(env, wenv.Lambert(0.5), quality=dict(SMALL, normals=16), cache_dir=False,
+                    progress=lambda f: True)
+
+    def boom(f):
+        raise RuntimeError("stop here")
+
+    with pytest.raises(RuntimeError, match="stop here"):
+        wenv.Shader(env, wenv.Lambert(0.5), quality=dict(SMALL, normals=16), cache_dir=False, progress=boom)
+
+
+def test_set_num_threads_is_honoured(cook):
+    env = gradient_env()
+    nrm, v = random_pairs(1000, 11)
+    old = wenv.get_num_threads()
+    try:
+        wenv.set_num_threads(1)
+        assert wenv.get_num_threads() == 1
+        a = wenv.Shader(env, cook, quality="draft", cache_dir=False).shade(nrm, v)
+        wenv.set_num_threads(2)
+        b = wenv.Shader(env, cook, quality="draft", cache_dir=False).shade(nrm, v)
+    finally:
+        wenv.set_num_threads(old)
+    assert np.allclose(a, b, rtol=1e-5, atol=1e-6)
+    with pytest.raises(ValueError):
+        wenv.set_num_threads(0)
+
+
+def test_reference_constant_environment():
+    env = wenv.Environment(np.full((64, 128, 3), 1.0, np.float32))
+    nrm, v = random_pairs(50, 12)
+    out = wenv.reference(env, wenv.Lambert((0.5, 0.25, 1.0)), nrm, v)
+    assert np.allclose(out, [0.5, 0.25, 1.0], rtol=2e-3)
+
+
+@pytest.mark.parametrize("quality, message", [
+    ({"global": 48}, "global"), ({"global": -64}, "global"), ({"local": 3}, "local"),
+    ({"local": 1 << 20}, "local"), ({"normals": 7}, "normals"), ({"views": 0}, "views"),
+    ({"coefficients": 10**9}, "coefficients"), ({"matrix_epsilon": float("nan")}, "matrix_epsilon"),
+    ({"bogus": 1}, "bogus"), ("ultra", "quality"),
+])
+def test_bad_quality(quality, message):
+    env = gradient_env()
+    with pytest.raises((ValueError, TypeError), match=message):
+        wenv.Shader(env, wenv.Lambert(0.5), quality=quality, cache_dir=False)
+
+
+def test_bad_arguments(cook):
+    env = gradient_env()
+    sh = wenv.Shader(env, cook, quality="draft", cache_dir=False)
+    good = unit([[0, 0, 1]] * 4)
+    with pytest.raises(TypeError, match="normals"):
+        sh.shade(good.astype(np.float64), good)
+    with pytest.raises(ValueError, match="view_dirs"):
+        sh.shade(good, good[:3])
+    with pytest.raises(ValueError, match="normals"):
+        sh.shade(np.zeros((4, 3), np.float32), good)
+    with pytest.raises(ValueError, match="view_dirs"):
+        sh.shade(good, np.full((4, 3), np.nan, np.float32))
+    with pytest.raises(ValueError, match="normals"):
+        sh.shade(np.ones((4, 2), np.float32), good)
+    with pytest.raises(TypeError, match="normals"):
+        sh.shade("not an array", good)
+    with pytest.raises(TypeError, match="env"):
+        wenv.Shader("env", cook)
+    with pytest.raises(TypeError, match="material"):
+        wenv.Shader(env, "material")
+    with pytest.raises(ValueError, match="method"):
+        wenv.Shader(env, cook, method="magic")
+    with pytest.raises(OSError, match="cache_dir"):
+        wenv.Shader(env, cook, quality="draft", cache_dir="/nonexistent/folder")
+    with pytest.raises(ValueError, match="eye"):
+        sh.shade_mesh(np.zeros((1, 3), np.float32), good[:1], (0.0, 0.0, 0.0))
+    with pytest.raises(ValueError, match="view_dirs"):
+        wenv.reference(env, cook, good[:2], good[:3])
+    assert sh.shade(np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32)).shape == (0, 3)
