@@ -45,4 +45,8 @@ typedef struct {
 
 wenv_progress wenv_py_progress(wenv_py_progress_bridge *bridge);
 
+/* The core environment of a wenv.Environment (borrowed: valid while obj lives), or NULL with a
+ * TypeError naming `name` if obj is not one (defined in bind_envmap.c). */
+const struct wenv_envmap *wenv_py_envmap(PyObject *obj, const char *name);
+
 #endif
