@@ -5,7 +5,28 @@
  * u = 0.5 - atan2(y, x) / (2 pi), v = 0.5 + asin(z) / pi with v = 0 the bottom row.  `rotation` r
  * turns the environment about +Z as a Z rotation of Blender's World Mapping node does: world
  * direction d reads the image where R_z(r) d reads the unrotated image.  `strength` multiplies the
- * radiance.  Pixel rows are stored top row first. */
+ * radiance.  Pixel rows are stored top row first.
+ *
+ * Mirror ball: Cycles' Mirror Ball projection.  The disk inscribed in the image holds a mirrored
+ * sphere photographed from -Y looking along +Y: the disk centre sees -Y (back at the camera), the
+ * rim sees +Y, the top of the disk +Z and its right-hand side +X.  It is equal-area (solid angle =
+ * 4 x area in disk coordinates [-1, 1]^2); rim pixels count the exact part inside the disk.
+ *
+ * Cube cross: the cube unfolded as seen from inside, in the usual cross layout, with the horizontal
+ * strip a continuous, unmirrored panorama that agrees with the equirect convention (+Y, +X, -Y, -X
+ * from left to right, like u = 0.125 .. 1.125 of an equirect image), +Z above and -Z below +X:
+ *
+ *     horizontal (4:3)          vertical (3:4)
+ *         [+Z]                      [+Z]
+ *     [+Y][+X][-Y][-X]          [+Y][+X][-Y]
+ *         [-Z]                      [-Z]
+ *                                   [-X]   (upside down: it continues the column past -Z)
+ *
+ * In each face the image's right and down directions (R, D) are, with face centre C:
+ *   +X: R = -Y, D = -Z    +Y: R = +X, D = -Z    -Y: R = -X, D = -Z    -X: R = +Y, D = -Z
+ *   +Z: R = -Y, D = +X    -Z: R = -Y, D = -X    -X of the vertical cross: R = -Y, D = +Z
+ * so face coordinates (s, t) in [-1, 1]^2 (s right, t down) look along C + s R + t D.  Empty cells
+ * of the cross are outside the domain. */
 #ifndef WENV_ENVMAP_H
 #define WENV_ENVMAP_H
 
@@ -29,7 +50,12 @@ wenv_status wenv_envmap_create(wenv_envmap **out, const float *pixels, size_t he
                                double strength, wenv_error *err);
 
 /* Reads an OpenEXR or Radiance .hdr file (format from its magic bytes); WENV_ERR_IO naming the
- * file when it is missing, unreadable or corrupt. */
+ * file when it is missing, unreadable or corrupt (WENV_ERR_VALUE for non-finite pixels or a cube
+ * cross of the wrong aspect).  OpenEXR: first part, scanline or tiled (level 0), half or float
+ * R, G, B (or Y) channels, decoded by OpenEXRCore; DWAA/DWAB, which OpenEXRCore 3.1 cannot
+ * decompress, go through OpenEXR's C interface to its C++ library (ImfCRgbaFile.h, loaded with
+ * dlopen).  Radiance: FORMAT=32-bit_rle_rgbe, '-Y H +X W', flat, old-style or new-style RLE
+ * scanlines, decoded as mantissa * 2^(e - 136) like Blender; EXPOSURE is ignored, as Blender does. */
 wenv_status wenv_envmap_load(wenv_envmap **out, const char *path, wenv_projection projection,
                              double rotation, double strength, wenv_error *err);
 
@@ -47,7 +73,10 @@ double wenv_envmap_strength(const wenv_envmap *env);
 /* The stored image, H x W x 3 floats, row 0 the top, before strength. */
 const float *wenv_envmap_pixels(const wenv_envmap *env);
 
-/* Radiance (strength applied) seen in world direction `dir` (unit), bilinear in the image. */
+/* Radiance (strength applied) seen in world direction `dir` (unit; normalised here anyway, a zero
+ * vector reads +Z), bilinear in the image.  Equirect wraps horizontally and clamps at the poles; a
+ * cube cross reads across face edges from the neighbouring face; a mirror ball ignores pixels
+ * outside the disk. */
 void wenv_envmap_lookup(const wenv_envmap *env, const double dir[3], float rgb[3]);
 
 /* Every pixel that covers part of the sphere, as a point sample: world direction of its centre
@@ -60,5 +89,15 @@ size_t wenv_envmap_samples(const wenv_envmap *env, float *dirs, float *flux, flo
 
 /* Exact solid angle of pixel (row, col) (0 outside the domain). */
 double wenv_envmap_pixel_solid_angle(const wenv_envmap *env, size_t row, size_t col);
+
+/* Added: wenv_envmap_lookup for n directions (n x 3 floats, need not be unit; zero vectors read
+ * +Z) into n x 3 floats, in parallel (OpenMP) for large n.  Thread-safe: `env` is only read. */
+void wenv_envmap_lookup_many(const wenv_envmap *env, const float *dirs, size_t n, float *rgb);
+
+/* Added: parses a projection name ("equirect", "mirror_ball", "cube_cross"); 0 on success, -1 if
+ * unknown.  wenv_envmap_projection_name returns the name ("?" for an invalid value). */
+int wenv_envmap_parse_projection(const char *name, wenv_projection *out);
+const char *wenv_envmap_projection_name(wenv_projection projection);
+#define WENV_ENVMAP_PROJECTION_NAMES "'equirect', 'mirror_ball', 'cube_cross'"
 
 #endif
