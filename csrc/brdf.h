@@ -92,9 +92,10 @@ void wenv_material_specular_cos(const wenv_material *mat, const double wi[3], co
 
 /* Batch form of wenv_material_specular_cos for one view and n incident unit directions (float xyz
  * triples): rgb_out[3k..3k+2] = specular_cos(wi[k], wo).  Terms that depend on the view only (Smith
- * Lambda(wo) per lobe) are computed once per block of directions; sums are formed in double in the
- * same order as the scalar path, so results agree with it to float rounding.  Reentrant, no
- * allocation. */
+ * Lambda(wo) per lobe, via K(wo)) are computed once per block of directions; the per-pair code and
+ * the order of the double sums are the scalar path's, so for the same (float) directions the results
+ * are identical to wenv_material_specular_cos rounded to float.  wo at or below the horizon gives 0.
+ * Reentrant, no allocation. */
 void wenv_material_specular_cos_batch(const wenv_material *mat, const double wo[3], const float *wi,
                                       size_t n, float *rgb_out);
 
