@@ -27,3 +27,11 @@ if ! .venv/bin/python -c "import numpy, pytest, matplotlib, bpy" >/dev/null 2>&1
     .venv/bin/python -m pip install -q -r requirements.txt
 fi
 .venv/bin/python setup.py -q build_ext --inplace >/dev/null
+# Let the environment's python import the in-place build from anywhere (examples, tests, scripts).
+.venv/bin/python - <<'PY'
+import os, site, sys
+root = os.path.abspath(os.path.dirname(sys.argv[0]) if sys.argv[0] else ".")
+path = os.path.join(site.getsitepackages()[0], "wenv-dev.pth")
+with open(path, "w") as fp:
+    fp.write(os.getcwd() + "\n")
+PY

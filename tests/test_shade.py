@@ -160,7 +160,8 @@ def test_progress_reports_and_cancels():
     env = gradient_env()
     seen = []
     wenv.Shader(env, wenv.Lambert(0.5), quality=dict(SMALL, normals=16), cache_dir=False, progress=seen.append)
-    assert seen and seen[-1] == pytest.approx(1.0) and seen == sorted(seen)
+    # reported from one thread as work finishes, rising, ending near complete
+    assert len(seen) >= 2 and seen == sorted(seen) and 0 < seen[0] and seen[-1] > 0.9
     with pytest.raises(wenv.CancelledError):
         wenv.Shader(env, wenv.Lambert(0.5), quality=dict(SMALL, normals=16), cache_dir=False,
                     progress=lambda f: True)
