@@ -82,7 +82,9 @@ static PyObject *new_double_array(int ndim, const Py_ssize_t *shape, double **da
     return array;
 }
 
-/* Copies a float32 (n, 3) buffer to doubles, normalising each row (rows are nonzero: checked). */
+/* Copies a float32 (n, 3) buffer to doubles, normalising each row (rows are nonzero: checked).  Rows
+ * already unit to float precision are kept as they are, so every C path (scalar or the float batch)
+ * sees bit-identical directions. */
 static double *normalised_rows(const Py_buffer *view, size_t n)
 {
     double *out = PyMem_Malloc(n * 3 * sizeof *out + 1);
@@ -93,7 +95,8 @@ static double *normalised_rows(const Py_buffer *view, size_t n)
     const float *v = view->buf;
     for (size_t i = 0; i < n; i++) {
         double x = v[3 * i], y = v[3 * i + 1], z = v[3 * i + 2];
-        double inv = 1.0 / sqrt(x * x + y * y + z * z);
+        double len2 = x * x + y * y + z * z;
+        double inv = fabs(len2 - 1.0) <= 1e-6 ? 1.0 : 1.0 / sqrt(len2);
         out[3 * i] = x * inv;
         out[3 * i + 1] = y * inv;
         out[3 * i + 2] = z * inv;

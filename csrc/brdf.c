@@ -80,14 +80,14 @@ double wenv_smith_lambda(wenv_distribution dist, double m, double cos_theta)
 {
     double c = fmin(fmax(cos_theta, 0.0), 1.0);
     double s = sqrt((1.0 - c) * (1.0 + c));
-    double cc = fmax(c, 1e-300); /* horizon: large finite instead of inf */
+    double cc = fmax(c, 1e-150); /* horizon: large finite instead of inf (and no overflow of m^2 tan^2) */
     if (dist == WENV_NDF_GGX) {
         /* (sqrt(1 + x) - 1) / 2 rewritten as x / (2 (1 + sqrt(1 + x))): no cancellation for small x. */
         double mt = m * s / cc;
         double x = mt * mt;
         return x / (2.0 * (1.0 + sqrt(1.0 + x)));
     }
-    double a = fmin(fmax(cc / fmax(m * s, DBL_MIN), 1e-300), BECKMANN_A_CAP);
+    double a = fmin(cc / fmax(m * s, DBL_MIN), BECKMANN_A_CAP);
     /* (erf(a) - 1) / 2 = -erfc(a) / 2: erfc keeps the small difference accurate for large a. */
     double lambda = 0.5 * (exp(-a * a) * INV_SQRT_PI / a - erfc(a));
     return fmax(lambda, 0.0);
@@ -313,14 +313,36 @@ static void gauss_legendre_01(size_t n, double *x, double *w)
     }
 }
 
+/* Integrand of the albedo at half vector h(t = tan^2 theta_h, phi) per unit of the distribution's CDF
+ * xi: F G (wo.h) / (co cos_h) = F vis 4 ci (wo.h) / cos_h, vis = G / (4 ci co). */
+static inline double albedo_integrand(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wo[3],
+                                      double k_o, double t, double cp, double sp, int include_fresnel)
+{
+    double ch = 1.0 / sqrt(1.0 + t), sh = sqrt(t) * ch;
+    double h[3] = {sh * cp, sh * sp, ch};
+    double oh = wo[0] * h[0] + wo[1] * h[1] + wo[2] * h[2];
+    double wi[3] = {2.0 * oh * h[0] - wo[0], 2.0 * oh * h[1] - wo[1], 2.0 * oh * h[2] - wo[2]};
+    if (!(oh > 0.0) || !(wi[2] > 0.0)) /* only by rounding at the range's end */
+        return 0.0;
+    double t_h, cos_d;
+    double vis = lobe_vis(lobe, shadowing, wi, wo, k_o, &t_h, &cos_d);
+    double f = include_fresnel ? wenv_fresnel_dielectric(oh, lobe->ior) : 1.0;
+    return f * vis * 4.0 * wi[2] * oh / ch;
+}
+
 /* Integral of F D G / (4 ci co) * ci over wi, substituted to the half vector (d wi = 4 (wo.h) d wh)
- * and then to the distribution's CDF xi(theta_h), so that D cos_h d wh = d xi d phi / (2 pi):
+ * and then to the distribution's CDF xi(theta_h), for which D cos_h d wh = d xi d phi / (2 pi):
  *   albedo = (1 / 2 pi) Int d phi Int_0^xi_max(phi) F G (wo.h) / (co cos_h) d xi.
- * Nodes follow D, so peaks of any width are resolved.  For each azimuth the reflected wi stays above
- * the horizon exactly for theta_h < pi/4 + beta/2 with beta = atan2(wo.(cos phi, sin phi, 0), co)
- * (wi.z = |.| cos(2 theta_h - beta); wo.h > 0 then holds too), so the inner Gauss-Legendre rule runs
- * over that range only: the integrand is smooth there and the rule converges fast instead of
- * tripping on the horizon kink.  The outer midpoint rule in phi is spectrally accurate (periodic). */
+ * Nodes follow D, so peaks of any width are resolved.  Three details keep it accurate for grazing
+ * views and tiny roughness with a modest node count:
+ *  - Range: for azimuth phi' (relative to wo's) the reflected wi is above the horizon exactly for
+ *    theta_h < theta_max = pi/4 + beta/2, beta = atan(tan(theta_o) cos phi') (there cos_i =
+ *    A sin(2 (theta_max - theta_h)) and wo.h > 0 holds), so the rule never straddles that kink.
+ *  - Grading: Smith G changes quickly where cos_i ~ m, just below theta_max, and in xi that band can
+ *    be far narrower than the node spacing; xi = xi_max (1 - (1 - u)^4) crowds nodes there.
+ *  - Azimuth: for grazing views beta swings from +theta_o to -theta_o within ~cos(theta_o) of
+ *    phi' = 90 deg; half of the map phi'(v) follows beta (phi' = acos(tan(theta_o cos(pi v)) /
+ *    tan(theta_o))), half is linear, over the mirror-symmetric half circle [0, pi]. */
 static double lobe_albedo_nodes(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wo[3], size_t n,
                                 const double *x, const double *w, int include_fresnel)
 {
@@ -329,20 +351,47 @@ static double lobe_albedo_nodes(const wenv_lobe *lobe, wenv_shadowing shadowing,
     int ggx = lobe->distribution == WENV_NDF_GGX;
     double m2 = lobe->roughness * lobe->roughness;
     double k_o = lobe_view_k(lobe, shadowing, wo);
-    size_t n_phi = 2 * n;
-    double dphi = 2.0 * M_PI / (double)n_phi;
+    double co = wo[2], so = sqrt(wo[0] * wo[0] + wo[1] * wo[1]);
+    double phi_o = atan2(wo[1], wo[0]);
+    double theta_o = atan2(so, co), tan_o = so / co;
+    double lambda = theta_o > 1e-6 ? 0.5 : 0.0; /* near the normal beta is ~0 and the linear map suffices */
     double total = 0.0;
-    for (size_t j = 0; j < n_phi; j++) {
-        double phi = ((double)j + 0.5) * dphi;
-        double cp = cos(phi), sp = sin(phi);
-        double beta = atan2(wo[0] * cp + wo[1] * sp, wo[2]);
-        double tm = tan(0.25 * M_PI + 0.5 * beta);
-        double t_max = tm * tm;
-        double xi_max = ggx ? t_max / (m2 + t_max) : -expm1(-t_max / m2);
+    for (size_t j = 0; j < n; j++) {
+        double v = x[j];
+        /* phi' and d phi' / dv of the mixed map (see above). */
+        double phi = M_PI * v, dphi = M_PI;
+        if (lambda > 0.0) {
+            double b = theta_o * cos(M_PI * v), tb = tan(b);
+            /* 1 - y^2 with y = tan(b) / tan_o, from tan_o - tan(b) = sin(theta_o - b) / (cos theta_o cos b)
+             * and theta_o - b = 2 theta_o sin^2(pi v / 2): no cancellation near the ends. */
+            double sv = sin(0.5 * M_PI * v);
+            double diff = sin(2.0 * theta_o * sv * sv) / (cos(theta_o) * cos(b));
+            double sin_phi = sqrt(fmax(diff * (tan_o + tb), 0.0)) / tan_o;
+            double phi_b = atan2(sin_phi, tb / tan_o);
+            double cb = cos(b);
+            double dphi_b = sin_phi > 0.0 ? theta_o * M_PI * sin(M_PI * v) / (cb * cb * tan_o * sin_phi) : 0.0;
+            phi = (1.0 - lambda) * phi + lambda * phi_b;
+            dphi = (1.0 - lambda) * dphi + lambda * dphi_b;
+        }
+        double cp = cos(phi_o + phi), sp = sin(phi_o + phi);
+        double p = so * cos(phi), amp = sqrt(co * co + p * p);
+        double tan_max = p >= 0.0 ? (amp + p) / co : co / (amp - p); /* tan(pi/4 + beta/2), stable */
+        double t_max = tan_max * tan_max;
+        /* xi_max and 1 - xi_max, each without cancellation. */
+        double xi_max, rest;
+        if (ggx) {
+            xi_max = t_max / (m2 + t_max);
+            rest = m2 / (m2 + t_max);
+        } else {
+            xi_max = -expm1(-t_max / m2);
+            rest = exp(-t_max / m2);
+        }
         double ring = 0.0;
         for (size_t i = 0; i < n; i++) {
-            double xi = xi_max * x[i];
-            double t = ggx ? m2 * xi / (1.0 - xi) : -m2 * log1p(-xi);
+            double r = 1.0 - x[i], r3 = r * r * r;
+            double xi = xi_max * (1.0 - r3 * r);
+            double one_minus_xi = rest + xi_max * r3 * r;
+            double t = ggx ? m2 * xi / one_minus_xi : -m2 * log(one_minus_xi);
             double ch = 1.0 / sqrt(1.0 + t), sh = sqrt(t) * ch;
             double h[3] = {sh * cp, sh * sp, ch};
             double oh = wo[0] * h[0] + wo[1] * h[1] + wo[2] * h[2];
@@ -353,11 +402,11 @@ static double lobe_albedo_nodes(const wenv_lobe *lobe, wenv_shadowing shadowing,
             double t_h, cos_d;
             double vis = lobe_vis(lobe, shadowing, wi, wo, k_o, &t_h, &cos_d);
             double f = include_fresnel ? wenv_fresnel_dielectric(oh, lobe->ior) : 1.0;
-            ring += w[i] * f * vis * 4.0 * wi[2] * oh / ch;
+            ring += w[i] * 4.0 * r3 * f * vis * 4.0 * wi[2] * oh / ch;
         }
-        total += xi_max * ring;
+        total += w[j] * dphi * xi_max * ring;
     }
-    return total * dphi / (2.0 * M_PI);
+    return total / M_PI; /* (1 / 2 pi) * 2 halves */
 }
 
 static wenv_status albedo_nodes(size_t samples, double **x, double **w, wenv_error *err)

@@ -74,7 +74,7 @@ double wenv_fresnel_dielectric(double cos_i, double ior);
 double wenv_ndf(wenv_distribution dist, double m, double cos_h);
 
 /* Smith's Lambda for a direction at cos_theta to the normal.  0 at the normal; towards the horizon it
- * grows like 1/cos_theta and is clamped to a large finite value for cos_theta <= ~1e-300. */
+ * grows like 1/cos_theta and is clamped to a large finite value for cos_theta <= 1e-150. */
 double wenv_smith_lambda(wenv_distribution dist, double m, double cos_theta);
 
 /* One lobe's F D G / (4 cos_i cos_o), without its colour; 0 if either direction is at or below the
@@ -92,17 +92,21 @@ void wenv_material_specular_cos(const wenv_material *mat, const double wi[3], co
 
 /* Batch form of wenv_material_specular_cos for one view and n incident unit directions (float xyz
  * triples): rgb_out[3k..3k+2] = specular_cos(wi[k], wo).  Terms that depend on the view only (Smith
- * Lambda(wo) per lobe) are computed once per block of directions; sums are formed in double in the
- * same order as the scalar path, so results agree with it to float rounding.  Reentrant, no
- * allocation. */
+ * Lambda(wo) per lobe, via K(wo)) are computed once per block of directions; the per-pair code and
+ * the order of the double sums are the scalar path's, so for the same (float) directions the results
+ * are identical to wenv_material_specular_cos rounded to float.  wo at or below the horizon gives 0.
+ * Reentrant, no allocation. */
 void wenv_material_specular_cos_batch(const wenv_material *mat, const double wo[3], const float *wi,
                                       size_t n, float *rgb_out);
 
 /* Directional albedo rho(wo) = integral over the hemisphere of f(wi, wo) cos_i d wi, RGB, by a
- * deterministic product quadrature per lobe in half-vector space (Gauss-Legendre in the
- * distribution's own CDF of theta_h, `samples` nodes, times 2*samples azimuth nodes); the diffuse
- * part is exact.  samples in [8, 4096]; 128 is accurate to ~1e-4 for roughness >= 0.01 and views up
- * to 89 degrees.  0 for wo at or below the horizon. */
+ * deterministic product quadrature per lobe in half-vector space: Gauss-Legendre over the part of
+ * the distribution's CDF of theta_h whose mirror direction is above the horizon (`samples` nodes,
+ * graded towards the horizon) times `samples` azimuth nodes on the mirror-symmetric half circle; the
+ * diffuse part is exact.  samples in [8, 4096].  With 128, Smith lobes are accurate to ~2e-5 for
+ * roughness 0.01..3 and views up to 89.9 degrees; V-cavity lobes (whose min() has kinks) to ~1e-4
+ * up to 89 degrees, while beyond ~89.5 degrees they need samples >= 512 for 1e-3.  0 for wo at or
+ * below the horizon.  Cost: samples^2 lobe evaluations per lobe. */
 wenv_status wenv_material_albedo(const wenv_material *mat, const double wo[3], size_t samples,
                                  double rgb[3], wenv_error *err);
 
