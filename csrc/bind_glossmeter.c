@@ -494,24 +494,25 @@ static PyGetSetDef glossmeter_getset[] = {
 
 static PyMethodDef glossmeter_methods[] = {
     {"measure", (PyCFunction)(void (*)(void))glossmeter_measure, METH_VARARGS | METH_KEYWORDS,
-     "measure(material, *, tol=0.05, smooth=False, return_error=False, max_evals=4000000)\n--\n\n"
+     "measure($self, material, *, tol=0.05, smooth=False, return_error=False, max_evals=4000000)\n--\n\n"
      "Specular gloss of `material` in gloss units: 100 x its flux / the standard's flux.  The integrals are\n"
      "adaptive (hcubature) with an estimated error of at most `tol` GU; return_error=True returns\n"
      "(gloss, error_estimate).  smooth=True reads every lobe as its smooth limit (a Fresnel mirror of the\n"
      "lobe's colour; the diffuse part stays).  RuntimeError if max_evals is reached before tol."},
     {"reading", (PyCFunction)(void (*)(void))glossmeter_reading, METH_VARARGS | METH_KEYWORDS,
-     "reading(material, *, tol=0.05, smooth=False, max_evals=4000000, method='auto')\n--\n\n"
+     "reading($self, material, *, tol=0.05, smooth=False, max_evals=4000000, method='auto')\n--\n\n"
      "Like measure(), as a dict: gloss, error, flux, flux_standard, evaluations, converged (no exception\n"
      "when the cap is hit).  method forces the lobes' formulation for validation: 'aperture' (4-D over\n"
      "source x receptor) or 'half_vector' (slopes outside, clipped source inside); 'auto' picks per lobe."},
     {"haze", (PyCFunction)(void (*)(void))glossmeter_haze, METH_VARARGS | METH_KEYWORDS,
-     "haze(material, *, offsets=(-1.9, 1.9), aperture=(0.4, 3.6), tol=0.05, smooth=False, return_error=False,\n"
-     "     max_evals=4000000)\n--\n\n"
+     "haze($self, material, *, offsets=(-1.9, 1.9), aperture=(0.4, 3.6), tol=0.05, smooth=False, "
+     "return_error=False, max_evals=4000000)\n--\n\n"
      "Haze (ASTM E430 method B style) in haze units: 100 x the flux into two receptors of size `aperture`\n"
      "whose centres are turned in the plane of incidence by `offsets` (degrees) from the mirror direction,\n"
      "summed, over this glossmeter's standard flux."},
     {"fit_roughness", (PyCFunction)(void (*)(void))glossmeter_fit, METH_VARARGS | METH_KEYWORDS,
-     "fit_roughness(target_gu, *, bracket=(1e-4, 2.0), tol=0.05, max_evals=4000000, **material_params)\n--\n\n"
+     "fit_roughness($self, target_gu, /, **material_params)\n--\n\n"
+     "Keyword options: bracket=(1e-4, 2.0), tol=0.05, max_evals=4000000.\n"
      "Roughness of a one-lobe wenv.CookTorrance(**material_params) that this glossmeter reads as target_gu;\n"
      "see wenv.fit_roughness."},
     {NULL, NULL, 0, NULL},
@@ -523,8 +524,8 @@ static PyTypeObject GlossmeterType = {
     .tp_basicsize = sizeof(GlossmeterObject),
     .tp_flags = Py_TPFLAGS_DEFAULT,
     .tp_doc =
-        "Glossmeter(angle=60, source=(0.75, 2.5), receptor=(4.4, 11.7), standard_ior=1.567, normal=(0, 0, 1),\n"
-        "           receptor_offset=(0, 0))\n--\n\n"
+        "Glossmeter(angle=60, source=None, receptor=None, standard_ior=1.567, normal=(0, 0, 1), "
+        "receptor_offset=(0, 0))\n--\n\n"
         "A virtual ISO 2813 / ASTM D523 specular glossmeter.  angle: specular angle in (0, 90) degrees.\n"
         "source, receptor: full angular sizes (in plane of incidence, perpendicular) in degrees of the source\n"
         "image and the receptor field; when omitted they are the ISO ones of angle 20, 60 or 85 (the 60 degree\n"
@@ -663,15 +664,15 @@ static PyMethodDef glossmeter_functions[] = {
      "or 85 degrees; a sequence of geometries gives a tuple.  Coloured materials are read on luminance\n"
      "Y = 0.2126 R + 0.7152 G + 0.0722 B.  See wenv.Glossmeter.measure for the options."},
     {"haze", (PyCFunction)(void (*)(void))module_haze, METH_VARARGS | METH_KEYWORDS,
-     "haze(material, *, offsets=(-1.9, 1.9), aperture=(0.4, 3.6), tol=0.05, smooth=False, return_error=False,\n"
-     "     max_evals=4000000)\n--\n\n"
+     "haze(material, *, offsets=(-1.9, 1.9), aperture=(0.4, 3.6), tol=0.05, smooth=False, return_error=False, "
+     "max_evals=4000000)\n--\n\n"
      "Reflection haze after ASTM E430 method B with the 20 degree glossmeter: flux into two receptors at\n"
      "18.1 and 21.9 degrees (offsets from the 20 degree mirror direction), summed, as 100 x / the\n"
      "standard's 20 degree flux (haze units).  aperture: each haze receptor's size (in plane,\n"
      "perpendicular), degrees."},
     {"fit_roughness", (PyCFunction)(void (*)(void))module_fit, METH_VARARGS | METH_KEYWORDS,
-     "fit_roughness(target_gu, geometry=60, *, bracket=(1e-4, 2.0), tol=0.05, max_evals=4000000,\n"
-     "              **material_params)\n--\n\n"
+     "fit_roughness(target_gu, geometry=60, /, **material_params)\n--\n\n"
+     "Keyword options: bracket=(1e-4, 2.0), tol=0.05, max_evals=4000000 (geometry may also be a keyword).\n"
      "Roughness m of wenv.CookTorrance(diffuse=..., lobes=[dict(roughness=m, specular=..., ior=...)],\n"
      "distribution=..., shadowing=...) (material_params: diffuse, specular, ior, distribution, shadowing;\n"
      "defaults as in CookTorrance) that reads target_gu at the geometry.  The reading falls monotonically\n"

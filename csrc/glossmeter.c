@@ -4,21 +4,18 @@
  * image of each source point; the receptor is 30-200 times wider than that for m = 1e-4.  Sampled
  * on plain aperture coordinates, hcubature's first rules would straddle the peak and report a
  * confident wrong answer, then oscillate as m changes.  We therefore change variables per lobe and
- * per source point: in the receptor's gnomonic coordinates (X, Y) we substitute
- *
- *     X = X0 + a_x tan(phi_x),  phi_x = atan((Xlo - X0)/a_x) + t_x [atan((Xhi - X0)/a_x) - atan(...)]
- *
- * (and likewise Y), where (X0, Y0) is the mirror image of the source point and a_x, a_y are the
- * lobe's widths there (2 m in plane and 2 m cos(theta_i) across, scaled for the distribution).  That
- * is the inverse CDF of a Cauchy density of the lobe's width restricted to the receptor, so the new
- * integrand is lobe / Cauchy: bounded and smooth for every m, because Beckmann and GGX lobes fall at
- * least as fast as a product of Cauchy densities (for GGX the ratio is the bounded rational
- * (1+x^2)(1+y^2)/(1+x^2+y^2)^2).  As m -> 0 the ratio tends to F(theta_i) times the area fraction of
- * the lobe inside the receptor, so the reading converges to the smooth value without oscillation;
- * a rough lobe gets a width larger than the receptor and the substitution becomes nearly linear.
- * The domain stays a rectangle, so no corner or boundary of the receptor cuts through a rule.
- * (Integrating in half-vector space would resolve the peak only together with such a warp, and its
- * image of the receptor rectangle is curved.)
+ * per source point: in the receptor's gnomonic coordinates (X, Y) we substitute X = X0 + a_x z(t_x)
+ * (likewise Y), with (X0, Y0) the mirror image of the source point, a_x, a_y the lobe's widths
+ * there, and z(t) the inverse CDF of a warp density restricted to the receptor (t in [0, 1]).  With
+ * the warp matched to the lobe (Gaussian for Beckmann, Cauchy and conditional Cauchy for GGX, see
+ * lobe_warp()) the new integrand lobe / warp is nearly constant for every m: as m -> 0 it tends to
+ * F(theta_i) times the fraction of the lobe inside the receptor, so the reading converges to the
+ * smooth value without oscillation; a rough lobe gets a width larger than the receptor and the
+ * substitution becomes nearly linear.  The domain stays a rectangle, so no corner or edge of the
+ * receptor cuts through a rule.  (Plain half-vector coordinates would not help by themselves: the
+ * peak is as narrow there, and the receptor's image is curved.)  Where the mirror image of the
+ * source straddles a receptor edge, a narrow lobe puts a step of its own width on the source
+ * coordinates; those lobes use the half-vector form further down.
  *
  * The smooth limit is a 2-D integral over the source region whose mirror image lies in the
  * receptor: the receptor's four edge planes pulled back by the mirror map are straight lines in the
