@@ -47,38 +47,11 @@ static int parse_choice(PyObject *obj, const char *name, const char *const *name
 
 static PyObject *rgb_tuple(const double rgb[3]) { return Py_BuildValue("(ddd)", rgb[0], rgb[1], rgb[2]); }
 
-/* numpy.empty(shape, float64); *data points at its storage (kept alive by the array). */
 static PyObject *new_double_array(int ndim, const Py_ssize_t *shape, double **data)
 {
-    PyObject *numpy = PyImport_ImportModule("numpy");
-    if (!numpy)
-        return NULL;
-    PyObject *shape_tuple = PyTuple_New(ndim);
-    if (!shape_tuple) {
-        Py_DECREF(numpy);
-        return NULL;
-    }
-    for (int i = 0; i < ndim; i++) {
-        PyObject *dim = PyLong_FromSsize_t(shape[i]);
-        if (!dim) {
-            Py_DECREF(shape_tuple);
-            Py_DECREF(numpy);
-            return NULL;
-        }
-        PyTuple_SET_ITEM(shape_tuple, i, dim);
-    }
-    PyObject *array = PyObject_CallMethod(numpy, "empty", "Os", shape_tuple, "float64");
-    Py_DECREF(shape_tuple);
-    Py_DECREF(numpy);
-    if (!array)
-        return NULL;
-    Py_buffer view;
-    if (PyObject_GetBuffer(array, &view, PyBUF_C_CONTIGUOUS | PyBUF_WRITABLE) < 0) {
-        Py_DECREF(array);
-        return NULL;
-    }
-    *data = view.buf;
-    PyBuffer_Release(&view);
+    void *d = NULL;
+    PyObject *array = wenv_py_new_array(ndim, shape, "float64", &d);
+    *data = d;
     return array;
 }
 

@@ -241,25 +241,17 @@ static PyObject *environment_solid_angles(PyObject *self, PyObject *unused)
     (void)unused;
     const wenv_envmap *env = ((EnvironmentObject *)self)->env;
     size_t h = wenv_envmap_height(env), w = wenv_envmap_width(env);
-    PyObject *numpy = PyImport_ImportModule("numpy");
-    if (!numpy)
-        return NULL;
-    PyObject *array = PyObject_CallMethod(numpy, "empty", "((nn)s)", (Py_ssize_t)h, (Py_ssize_t)w, "float64");
-    Py_DECREF(numpy);
+    Py_ssize_t shape[2] = {(Py_ssize_t)h, (Py_ssize_t)w};
+    void *storage = NULL;
+    PyObject *array = wenv_py_new_array(2, shape, "float64", &storage);
     if (!array)
         return NULL;
-    Py_buffer view;
-    if (PyObject_GetBuffer(array, &view, PyBUF_C_CONTIGUOUS | PyBUF_WRITABLE) < 0) {
-        Py_DECREF(array);
-        return NULL;
-    }
-    double *data = view.buf;
+    double *data = storage;
     Py_BEGIN_ALLOW_THREADS
     for (size_t r = 0; r < h; r++)
         for (size_t c = 0; c < w; c++)
             data[r * w + c] = wenv_envmap_pixel_solid_angle(env, r, c);
     Py_END_ALLOW_THREADS
-    PyBuffer_Release(&view);
     return array;
 }
 
@@ -320,7 +312,7 @@ static PyMethodDef environment_methods[] = {
      "Sums to 4 pi."},
     {"samples", environment_samples, METH_NOARGS,
      "samples()\n--\n\n(dirs, flux): float32 (m, 3) world directions of the pixel centres (rotation applied) and "
-     "radiance * strength * solid angle, for every non-black pixel of the domain."},
+     "radiance * strength * solid angle, for every pixel of the projection's domain."},
     {NULL, NULL, 0, NULL},
 };
 

@@ -118,7 +118,7 @@ int wenv_py_get_rgb(PyObject *obj, const char *name, double rgb[3])
     return 0;
 }
 
-PyObject *wenv_py_new_float_array(int ndim, const Py_ssize_t *shape, float **data)
+PyObject *wenv_py_new_array(int ndim, const Py_ssize_t *shape, const char *dtype, void **data)
 {
     PyObject *numpy = PyImport_ImportModule("numpy");
     if (!numpy)
@@ -128,9 +128,16 @@ PyObject *wenv_py_new_float_array(int ndim, const Py_ssize_t *shape, float **dat
         Py_DECREF(numpy);
         return NULL;
     }
-    for (int i = 0; i < ndim; i++)
-        PyTuple_SET_ITEM(shape_tuple, i, PyLong_FromSsize_t(shape[i]));
-    PyObject *array = PyObject_CallMethod(numpy, "empty", "Os", shape_tuple, "float32");
+    for (int i = 0; i < ndim; i++) {
+        PyObject *dim = PyLong_FromSsize_t(shape[i]);
+        if (!dim) {
+            Py_DECREF(shape_tuple);
+            Py_DECREF(numpy);
+            return NULL;
+        }
+        PyTuple_SET_ITEM(shape_tuple, i, dim);
+    }
+    PyObject *array = PyObject_CallMethod(numpy, "empty", "Os", shape_tuple, dtype);
     Py_DECREF(shape_tuple);
     Py_DECREF(numpy);
     if (!array)
@@ -142,6 +149,14 @@ PyObject *wenv_py_new_float_array(int ndim, const Py_ssize_t *shape, float **dat
     }
     *data = view.buf; /* numpy keeps the storage alive as long as the array lives */
     PyBuffer_Release(&view);
+    return array;
+}
+
+PyObject *wenv_py_new_float_array(int ndim, const Py_ssize_t *shape, float **data)
+{
+    void *d = NULL;
+    PyObject *array = wenv_py_new_array(ndim, shape, "float32", &d);
+    *data = d;
     return array;
 }
 

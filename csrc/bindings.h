@@ -33,6 +33,9 @@ int wenv_py_get_rgb(PyObject *obj, const char *name, double rgb[3]);
 /* Reads a finite float; ValueError naming `name` otherwise. */
 int wenv_py_get_finite(PyObject *obj, const char *name, double *out);
 
+/* New numpy array of the given shape and dtype ("float32", "float64"); *data points at its storage. */
+PyObject *wenv_py_new_array(int ndim, const Py_ssize_t *shape, const char *dtype, void **data);
+
 /* New numpy float32 array of the given shape (numpy.empty); *data points at its storage. */
 PyObject *wenv_py_new_float_array(int ndim, const Py_ssize_t *shape, float **data);
 
