@@ -518,37 +518,93 @@ typedef struct {
     float pair_w[16];
 } vertex_taps;
 
+/* Bilinear taps on the normal samples' octahedral grid and on a slice's view-sample corners, in
+ * float with truncating casts: this runs 5 times per vertex per frame, and libm's floor() (a call
+ * on baseline x86-64) and double divisions dominated it.  Same conventions as maps.c. */
+static inline void oct_taps_f(long n, float u, float v, uint32_t idx[4], float w[4])
+{
+    float x = (u + 1.0f) * 0.5f * (float)n - 0.5f, y = (v + 1.0f) * 0.5f * (float)n - 0.5f;
+    long ix = (long)(x + 1.0f) - 1, iy = (long)(y + 1.0f) - 1; /* floor for x >= -1 */
+    float fx = x - (float)ix, fy = y - (float)iy;
+    for (int k = 0; k < 4; k++) {
+        long i = ix + (k & 1), j = iy + (k >> 1);
+        /* crossing an edge of the octahedral square lands on the same edge, mirrored */
+        if (i < 0 || i >= n) {
+            i = i < 0 ? 0 : n - 1;
+            j = n - 1 - j;
+        }
+        if (j < 0 || j >= n) {
+            j = j < 0 ? 0 : n - 1;
+            i = n - 1 - i;
+        }
+        idx[k] = (uint32_t)(j * n + i);
+    }
+    w[0] = (1.0f - fx) * (1.0f - fy);
+    w[1] = fx * (1.0f - fy);
+    w[2] = (1.0f - fx) * fy;
+    w[3] = fx * fy;
+}
+
+static inline void corner_taps_f(long n, float u, float v, uint32_t idx[4], float w[4])
+{
+    float hi = (float)n, x = (u + 1.0f) * 0.5f * hi, y = (v + 1.0f) * 0.5f * hi;
+    x = x < 0.0f ? 0.0f : (x > hi ? hi : x);
+    y = y < 0.0f ? 0.0f : (y > hi ? hi : y);
+    long i = (long)x, j = (long)y;
+    if (i > n - 1)
+        i = n - 1;
+    if (j > n - 1)
+        j = n - 1;
+    float fx = x - (float)i, fy = y - (float)j;
+    long row = n + 1;
+    idx[0] = (uint32_t)(j * row + i);
+    idx[1] = idx[0] + 1;
+    idx[2] = idx[0] + (uint32_t)row;
+    idx[3] = idx[2] + 1;
+    w[0] = (1.0f - fx) * (1.0f - fy);
+    w[1] = fx * (1.0f - fy);
+    w[2] = (1.0f - fx) * fy;
+    w[3] = fx * fy;
+}
+
 /* Returns 0 when the view is below the surface (the vertex is black). */
 static int compute_taps(const wenv_shader *sh, const float *nrm, const float *view, vertex_taps *tp)
 {
-    double n[3] = {nrm[0], nrm[1], nrm[2]}, v[3] = {view[0], view[1], view[2]};
-    double ln = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]), lv = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+    float n[3] = {nrm[0], nrm[1], nrm[2]}, v[3] = {view[0], view[1], view[2]};
+    float in = 1.0f / sqrtf(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    float iv = 1.0f / sqrtf(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
     for (int c = 0; c < 3; c++) {
-        n[c] /= ln;
-        v[c] /= lv;
+        n[c] *= in;
+        v[c] *= iv;
     }
-    double nv = n[0] * v[0] + n[1] * v[1] + n[2] * v[2];
-    if (!(nv > 0.0))
+    float nv = n[0] * v[0] + n[1] * v[1] + n[2] * v[2];
+    if (!(nv > 0.0f))
         return 0;
-    double r[3] = {2.0 * nv * n[0] - v[0], 2.0 * nv * n[1] - v[1], 2.0 * nv * n[2] - v[2]};
-    double u, w, sw[4];
-    size_t sidx[4];
-    wenv_oct_encode(n, &u, &w);
-    wenv_oct_bilinear(sh->q.normal_n, u, w, sidx, sw);
+    float r[3] = {2.0f * nv * n[0] - v[0], 2.0f * nv * n[1] - v[1], 2.0f * nv * n[2] - v[2]};
+    /* octahedral encoding of the normal */
+    float l1 = 1.0f / (fabsf(n[0]) + fabsf(n[1]) + fabsf(n[2]));
+    float ou = n[0] * l1, ov = n[1] * l1;
+    if (n[2] < 0.0f) {
+        float qu = copysignf(1.0f - fabsf(ov), ou), qv = copysignf(1.0f - fabsf(ou), ov);
+        ou = qu;
+        ov = qv;
+    }
+    oct_taps_f((long)sh->q.normal_n, ou, ov, tp->sample, tp->sample_w);
     for (int k = 0; k < 4; k++) {
-        const float *f = sh->frames + 9 * sidx[k];
+        const float *f = sh->frames + 9 * (size_t)tp->sample[k];
         /* mirror of r about the sample normal, in the sample's frame: (-r.t, -r.b, r.n) */
-        double lview[3] = {-(f[0] * r[0] + f[1] * r[1] + f[2] * r[2]), -(f[3] * r[0] + f[4] * r[1] + f[5] * r[2]),
-                           f[6] * r[0] + f[7] * r[1] + f[8] * r[2]};
-        double vu, vv, vw[4];
-        size_t vidx[4];
-        wenv_hemi_encode(lview, &vu, &vv);
-        wenv_hemi_bilinear_corners(sh->q.view_n, vu, vv, vidx, vw);
-        tp->sample[k] = (uint32_t)sidx[k];
-        tp->sample_w[k] = (float)sw[k];
+        float lx = -(f[0] * r[0] + f[1] * r[1] + f[2] * r[2]), ly = -(f[3] * r[0] + f[4] * r[1] + f[5] * r[2]);
+        float lz = f[6] * r[0] + f[7] * r[1] + f[8] * r[2];
+        /* hemi-octahedral encoding; views below the sample's horizon are read on it */
+        float hl = fabsf(lx) + fabsf(ly) + (lz > 0.0f ? lz : 0.0f);
+        float px = hl > 0.0f ? lx / hl : 0.0f, py = hl > 0.0f ? ly / hl : 0.0f;
+        uint32_t vidx[4];
+        float vw[4];
+        corner_taps_f((long)sh->q.view_n, px + py, px - py, vidx, vw);
+        uint32_t base = tp->sample[k] * (uint32_t)sh->nv;
         for (int j = 0; j < 4; j++) {
-            tp->pair[4 * k + j] = (uint32_t)(sidx[k] * sh->nv + vidx[j]);
-            tp->pair_w[4 * k + j] = (float)(sw[k] * vw[j]);
+            tp->pair[4 * k + j] = base + vidx[j];
+            tp->pair_w[4 * k + j] = tp->sample_w[k] * vw[j];
         }
     }
     return 1;
@@ -586,31 +642,47 @@ static int compute_slice(wenv_shader *sh, size_t s, float *pixel_work, double *r
     return 0;
 }
 
-wenv_status wenv_shader_shade(wenv_shader *sh, const float *normals, const float *views, size_t n,
-                              float *out, wenv_error *err)
+static void shade_vertex(const wenv_shader *sh, const vertex_taps *tp, float *o)
 {
-    if (!sh->have_env || !sh->have_mat)
-        return wenv_error_set(err, WENV_ERR_VALUE, "the shader needs an environment and a material");
-    long long nn = (long long)n;
-    /* pass 1: which slices and table entries the vertices need */
-#pragma omp parallel for schedule(static)
-    for (long long i = 0; i < nn; i++) {
-        vertex_taps tp;
-        if (!compute_taps(sh, normals + 3 * i, views + 3 * i, &tp))
-            continue;
-        for (int k = 0; k < 4; k++)
-            if (tp.sample_w[k] > 0.0f) {
-#pragma omp atomic write
-                sh->slice_need[tp.sample[k]] = 1;
-            }
-        for (int k = 0; k < 16; k++)
-            if (tp.pair_w[k] > 0.0f) {
-#pragma omp atomic write
-                sh->pair_need[tp.pair[k]] = 1;
-            }
+    float e[3] = {0, 0, 0}, s[3] = {0, 0, 0};
+    for (int k = 0; k < 4; k++) {
+        const float *ir = sh->irradiance + 3 * (size_t)tp->sample[k];
+        e[0] += tp->sample_w[k] * ir[0];
+        e[1] += tp->sample_w[k] * ir[1];
+        e[2] += tp->sample_w[k] * ir[2];
     }
-    /* slices */
-    size_t *todo = malloc((sh->ns > sh->ns * sh->nv ? sh->ns : sh->ns * sh->nv) * sizeof(size_t));
+    for (int k = 0; k < 16; k++) {
+        const float *t = sh->table + 3 * (size_t)tp->pair[k];
+        float w = tp->pair_w[k];
+        if (w > 0.0f) {
+            s[0] += w * t[0];
+            s[1] += w * t[1];
+            s[2] += w * t[2];
+        }
+    }
+    for (int c = 0; c < 3; c++) {
+        float val = sh->diffuse_over_pi[c] * e[c] + s[c];
+        o[c] = val > 0.0f ? val : 0.0f;
+    }
+}
+
+/* Whether every slice and table entry the vertex reads is ready. */
+static int taps_ready(const wenv_shader *sh, const vertex_taps *tp)
+{
+    for (int k = 0; k < 4; k++)
+        if (tp->sample_w[k] > 0.0f && !sh->slice_ready[tp->sample[k]])
+            return 0;
+    for (int k = 0; k < 16; k++)
+        if (tp->pair_w[k] > 0.0f && !sh->pair_ready[tp->pair[k]])
+            return 0;
+    return 1;
+}
+
+/* Makes the lighting slices and table entries flagged in slice_need / pair_need. */
+static wenv_status fill_needed(wenv_shader *sh, wenv_error *err)
+{
+    size_t npairs = sh->ns * sh->nv;
+    size_t *todo = malloc((sh->ns > npairs ? sh->ns : npairs) * sizeof(size_t));
     if (!todo)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory shading");
     size_t ntodo = 0;
@@ -620,7 +692,7 @@ wenv_status wenv_shader_shade(wenv_shader *sh, const float *normals, const float
         sh->slice_need[s] = 0;
     }
     atomic_int failed = 0;
-#pragma omp parallel
+#pragma omp parallel if (ntodo > 1)
     {
         float *pixel_work = malloc(sh->nl * 3 * sizeof(float));
         double *rowsum = malloc(sh->nl * sizeof(double));
@@ -646,13 +718,12 @@ wenv_status wenv_shader_shade(wenv_shader *sh, const float *normals, const float
     }
     /* table entries: sparse BRDF slice . dense lighting slice, per RGB channel */
     ntodo = 0;
-    size_t npairs = sh->ns * sh->nv;
     for (size_t p = 0; p < npairs; p++) {
         if (sh->pair_need[p] && !sh->pair_ready[p])
             todo[ntodo++] = p;
         sh->pair_need[p] = 0;
     }
-#pragma omp parallel for schedule(dynamic, 64)
+#pragma omp parallel for schedule(dynamic, 64) if (ntodo > 256)
     for (size_t e = 0; e < ntodo; e++) {
         size_t p = todo[e], s = p / sh->nv, j = p % sh->nv;
         const float *slice = sh->slices[s];
@@ -667,7 +738,21 @@ wenv_status wenv_shader_shade(wenv_shader *sh, const float *normals, const float
         sh->pair_ready[p] = 1;
     }
     free(todo);
-    /* pass 2: interpolate */
+    return WENV_OK;
+}
+
+wenv_status wenv_shader_shade(wenv_shader *sh, const float *normals, const float *views, size_t n,
+                              float *out, wenv_error *err)
+{
+    if (!sh->have_env || !sh->have_mat)
+        return wenv_error_set(err, WENV_ERR_VALUE, "the shader needs an environment and a material");
+    /* One pass shades every vertex whose table entries exist (all of them for a view seen before)
+     * and flags what the others need; those are shaded after the missing entries are made. */
+    size_t *pending = malloc((n ? n : 1) * sizeof(size_t));
+    if (!pending)
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory shading");
+    atomic_size_t npending = 0;
+    long long nn = (long long)n;
 #pragma omp parallel for schedule(static)
     for (long long i = 0; i < nn; i++) {
         vertex_taps tp;
@@ -676,27 +761,37 @@ wenv_status wenv_shader_shade(wenv_shader *sh, const float *normals, const float
             o[0] = o[1] = o[2] = 0.0f;
             continue;
         }
-        float e[3] = {0, 0, 0}, s[3] = {0, 0, 0};
-        for (int k = 0; k < 4; k++) {
-            const float *ir = sh->irradiance + 3 * tp.sample[k];
-            e[0] += tp.sample_w[k] * ir[0];
-            e[1] += tp.sample_w[k] * ir[1];
-            e[2] += tp.sample_w[k] * ir[2];
+        if (taps_ready(sh, &tp)) {
+            shade_vertex(sh, &tp, o);
+            continue;
         }
-        for (int k = 0; k < 16; k++) {
-            const float *t = sh->table + 3 * (size_t)tp.pair[k];
-            float w = tp.pair_w[k];
-            if (w > 0.0f) {
-                s[0] += w * t[0];
-                s[1] += w * t[1];
-                s[2] += w * t[2];
+        for (int k = 0; k < 4; k++)
+            if (tp.sample_w[k] > 0.0f) {
+#pragma omp atomic write
+                sh->slice_need[tp.sample[k]] = 1;
             }
+        for (int k = 0; k < 16; k++)
+            if (tp.pair_w[k] > 0.0f) {
+#pragma omp atomic write
+                sh->pair_need[tp.pair[k]] = 1;
+            }
+        pending[atomic_fetch_add(&npending, 1)] = (size_t)i;
+    }
+    size_t np = atomic_load(&npending);
+    if (np) {
+        if (fill_needed(sh, err)) {
+            free(pending);
+            return err->status;
         }
-        for (int c = 0; c < 3; c++) {
-            float val = sh->diffuse_over_pi[c] * e[c] + s[c];
-            o[c] = val > 0.0f ? val : 0.0f;
+#pragma omp parallel for schedule(static)
+        for (size_t e = 0; e < np; e++) {
+            vertex_taps tp;
+            size_t i = pending[e];
+            compute_taps(sh, normals + 3 * i, views + 3 * i, &tp);
+            shade_vertex(sh, &tp, out + 3 * i);
         }
     }
+    free(pending);
     return WENV_OK;
 }
 
