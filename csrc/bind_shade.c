@@ -17,8 +17,8 @@ typedef struct {
 } preset;
 
 static const preset PRESETS[] = {
-    {"draft", {32, 16, 16, 8, 32, 0, 1e-3}},
-    {"default", {64, 32, 32, 16, 128, 0, 1e-3}},
+    {"draft", {32, 16, 16, 8, 32, 256, 1e-3}},
+    {"default", {64, 32, 32, 16, 128, 1024, 1e-3}},
     {"high", {128, 64, 64, 32, 512, 0, 1e-4}},
 };
 #define N_PRESETS (sizeof PRESETS / sizeof PRESETS[0])

@@ -365,16 +365,19 @@ static int pixel_direction(const wenv_envmap *env, size_t row, size_t col, doubl
     return 0;
 }
 
-size_t wenv_envmap_samples(const wenv_envmap *env, float *dirs, float *flux, float *omega_out)
+/* One row's valid pixels written from position m on; returns how many. */
+static size_t row_samples(const wenv_envmap *env, size_t row, size_t m, float *dirs, float *flux, float *omega_out)
 {
-    size_t m = 0;
+    if (!dirs && env->projection == WENV_PROJ_EQUIRECT)
+        return env->width; /* every equirect pixel has a direction and a positive solid angle */
     double c = env->cos_r, s = env->sin_r;
-    for (size_t row = 0; row < env->height; row++) {
-        for (size_t col = 0; col < env->width; col++) {
-            const float *p = pixel_at(env, row, col);
-            double omega = wenv_envmap_pixel_solid_angle(env, row, col), d[3];
-            if (!(omega > 0.0) || !pixel_direction(env, row, col, d))
-                continue;
+    size_t m0 = m;
+    for (size_t col = 0; col < env->width; col++) {
+        const float *p = pixel_at(env, row, col);
+        double omega = wenv_envmap_pixel_solid_angle(env, row, col), d[3];
+        if (!(omega > 0.0) || !pixel_direction(env, row, col, d))
+            continue;
+        if (dirs) {
             /* world direction w with R_z(r) w = d, i.e. w = R_z(-r) d */
             dirs[3 * m] = (float)(c * d[0] + s * d[1]);
             dirs[3 * m + 1] = (float)(-s * d[0] + c * d[1]);
@@ -384,9 +387,76 @@ size_t wenv_envmap_samples(const wenv_envmap *env, float *dirs, float *flux, flo
                 flux[3 * m + ch] = (float)(p[ch] * k);
             if (omega_out)
                 omega_out[m] = (float)omega;
-            m++;
+        }
+        m++;
+    }
+    return m - m0;
+}
+
+/* Equirect rows from per-column azimuth tables: the same directions and solid angles as
+ * pixel_direction / wenv_envmap_pixel_solid_angle, without a sincos per pixel. */
+static size_t equirect_samples(const wenv_envmap *env, float *dirs, float *flux, float *omega_out)
+{
+    size_t w = env->width, h = env->height;
+    double *cs = malloc(2 * w * sizeof(double));
+    if (!cs)
+        return (size_t)-1;
+    double c = env->cos_r, s = env->sin_r;
+    for (size_t col = 0; col < w; col++) {
+        double phi = PI * (1.0 - 2.0 * (((double)col + 0.5) / (double)w));
+        /* world direction w = R_z(-r) d */
+        double x = cos(phi), y = sin(phi);
+        cs[2 * col] = c * x + s * y;
+        cs[2 * col + 1] = -s * x + c * y;
+    }
+#pragma omp parallel for schedule(static)
+    for (size_t row = 0; row < h; row++) {
+        double lat = PI * ((1.0 - ((double)row + 0.5) / (double)h) - 0.5), cl = cos(lat), sl = sin(lat);
+        double omega = wenv_envmap_pixel_solid_angle(env, row, 0), k = omega * env->strength;
+        for (size_t col = 0; col < w; col++) {
+            size_t m = row * w + col;
+            const float *p = pixel_at(env, row, col);
+            dirs[3 * m] = (float)(cl * cs[2 * col]);
+            dirs[3 * m + 1] = (float)(cl * cs[2 * col + 1]);
+            dirs[3 * m + 2] = (float)sl;
+            for (int ch = 0; ch < 3; ch++)
+                flux[3 * m + ch] = (float)(p[ch] * k);
+            if (omega_out)
+                omega_out[m] = (float)omega;
         }
     }
+    free(cs);
+    return w * h;
+}
+
+size_t wenv_envmap_samples(const wenv_envmap *env, float *dirs, float *flux, float *omega_out)
+{
+    if (env->projection == WENV_PROJ_EQUIRECT) {
+        size_t m = equirect_samples(env, dirs, flux, omega_out);
+        if (m != (size_t)-1)
+            return m;
+    }
+    /* Rows in parallel (a lighting change runs this on every pixel): count each row's valid pixels,
+     * then fill from the prefix sums, so the order is the serial one. */
+    size_t h = env->height;
+    size_t *start = malloc((h + 1) * sizeof(size_t));
+    if (!start) {
+        size_t m = 0;
+        for (size_t row = 0; row < h; row++)
+            m += row_samples(env, row, m, dirs, flux, omega_out);
+        return m;
+    }
+    start[0] = 0;
+#pragma omp parallel for schedule(dynamic, 8)
+    for (size_t row = 0; row < h; row++)
+        start[row + 1] = row_samples(env, row, 0, NULL, NULL, NULL);
+    for (size_t row = 0; row < h; row++)
+        start[row + 1] += start[row];
+#pragma omp parallel for schedule(dynamic, 8)
+    for (size_t row = 0; row < h; row++)
+        row_samples(env, row, start[row], dirs, flux, omega_out);
+    size_t m = start[h];
+    free(start);
     return m;
 }
 

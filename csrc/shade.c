@@ -75,9 +75,9 @@ wenv_status wenv_quality_check(const wenv_quality *q, wenv_error *err)
     if (q->coefficients > q->local_n * q->local_n)
         return wenv_error_set(err, WENV_ERR_VALUE, "quality['coefficients'] must be at most local**2 = %zu, got %zu",
                               q->local_n * q->local_n, q->coefficients);
-    if (q->light_coefficients > q->global_n * q->global_n)
-        return wenv_error_set(err, WENV_ERR_VALUE, "quality['light_coefficients'] must be at most global**2 = %zu, got %zu",
-                              q->global_n * q->global_n, q->light_coefficients);
+    if (q->light_coefficients > ((size_t)1 << 20))
+        return wenv_error_set(err, WENV_ERR_VALUE, "quality['light_coefficients'] must be at most 2**20, got %zu",
+                              q->light_coefficients);
     if (!(q->matrix_epsilon >= 0.0 && q->matrix_epsilon < 1.0))
         return wenv_error_set(err, WENV_ERR_VALUE, "quality['matrix_epsilon'] must be in [0, 1), got %g", q->matrix_epsilon);
     size_t table = q->normal_n * q->normal_n * (q->view_n + 1) * (q->view_n + 1);
@@ -266,7 +266,75 @@ wenv_status wenv_shader_create(wenv_shader **out, const wenv_quality *q, wenv_me
     return WENV_OK;
 }
 
-static void invalidate_pairs(wenv_shader *sh) { memset(sh->pair_ready, 0, sh->ns * sh->nv); }
+/* Bilinear taps on the normal samples' octahedral grid and on a slice's view-sample corners, in
+ * float with truncating casts: this runs 5 times per vertex per frame, and libm's floor() (a call
+ * on baseline x86-64) and double divisions dominated it.  Same conventions as maps.c. */
+static inline void oct_taps_f(long n, float u, float v, uint32_t idx[4], float w[4])
+{
+    float x = (u + 1.0f) * 0.5f * (float)n - 0.5f, y = (v + 1.0f) * 0.5f * (float)n - 0.5f;
+    long ix = (long)(x + 1.0f) - 1, iy = (long)(y + 1.0f) - 1; /* floor for x >= -1 */
+    float fx = x - (float)ix, fy = y - (float)iy;
+    for (int k = 0; k < 4; k++) {
+        long i = ix + (k & 1), j = iy + (k >> 1);
+        /* crossing an edge of the octahedral square lands on the same edge, mirrored */
+        if (i < 0 || i >= n) {
+            i = i < 0 ? 0 : n - 1;
+            j = n - 1 - j;
+        }
+        if (j < 0 || j >= n) {
+            j = j < 0 ? 0 : n - 1;
+            i = n - 1 - i;
+        }
+        idx[k] = (uint32_t)(j * n + i);
+    }
+    w[0] = (1.0f - fx) * (1.0f - fy);
+    w[1] = fx * (1.0f - fy);
+    w[2] = (1.0f - fx) * fy;
+    w[3] = fx * fy;
+}
+
+static inline void corner_taps_f(long n, float u, float v, uint32_t idx[4], float w[4])
+{
+    float hi = (float)n, x = (u + 1.0f) * 0.5f * hi, y = (v + 1.0f) * 0.5f * hi;
+    x = x < 0.0f ? 0.0f : (x > hi ? hi : x);
+    y = y < 0.0f ? 0.0f : (y > hi ? hi : y);
+    long i = (long)x, j = (long)y;
+    if (i > n - 1)
+        i = n - 1;
+    if (j > n - 1)
+        j = n - 1;
+    float fx = x - (float)i, fy = y - (float)j;
+    long row = n + 1;
+    idx[0] = (uint32_t)(j * row + i);
+    idx[1] = idx[0] + 1;
+    idx[2] = idx[0] + (uint32_t)row;
+    idx[3] = idx[2] + 1;
+    w[0] = (1.0f - fx) * (1.0f - fy);
+    w[1] = fx * (1.0f - fy);
+    w[2] = (1.0f - fx) * fy;
+    w[3] = fx * fy;
+}
+
+static wenv_status fill_needed(wenv_shader *sh, wenv_error *err);
+
+/* A new lighting (slices too) or material remakes at once what the mesh read so far -- the slices
+ * and table entries that were ready -- so that shading the same view again is a single pass over
+ * the vertices; entries never read are left to be made when a vertex needs them. */
+static wenv_status remake_ready(wenv_shader *sh, int slices, wenv_error *err)
+{
+    size_t npairs = sh->ns * sh->nv;
+    if (slices) {
+        for (size_t s = 0; s < sh->ns; s++)
+            sh->slice_need[s] |= sh->slice_ready[s];
+        memset(sh->slice_ready, 0, sh->ns);
+    }
+    for (size_t p = 0; p < npairs; p++)
+        sh->pair_need[p] |= sh->pair_ready[p];
+    memset(sh->pair_ready, 0, npairs);
+    if (!sh->have_env || !sh->have_mat)
+        return WENV_OK;
+    return fill_needed(sh, err);
+}
 
 /* The environment tent-filtered onto the global octahedral texels: each pixel's flux is split
  * between the four nearest texel centres, and each texel is divided by the solid angle it
@@ -296,10 +364,12 @@ static wenv_status global_texels_from_env(const wenv_shader *sh, const wenv_envm
         }
         return WENV_OK;
     }
+    int threads = omp_get_max_threads();
     float *dirs = malloc(npix * 3 * sizeof(float));
     float *flux = malloc(npix * 3 * sizeof(float));
     float *omega = malloc(npix * sizeof(float));
-    double *acc = calloc(ng * 4, sizeof(double));
+    /* one accumulator per thread: the splat runs over every pixel at each lighting change */
+    double *acc = calloc((size_t)threads * ng * 4, sizeof(double));
     if (!dirs || !flux || !omega || !acc) {
         free(dirs);
         free(flux);
@@ -308,19 +378,34 @@ static wenv_status global_texels_from_env(const wenv_shader *sh, const wenv_envm
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory filtering the environment");
     }
     size_t count = wenv_envmap_samples(env, dirs, flux, omega);
-    for (size_t p = 0; p < count; p++) {
-        double d[3] = {dirs[3 * p], dirs[3 * p + 1], dirs[3 * p + 2]}, u, v, w[4];
-        size_t idx[4];
-        wenv_oct_encode(d, &u, &v);
-        wenv_oct_bilinear(G, u, v, idx, w);
-        for (int c = 0; c < 4; c++) {
-            double *a = acc + 4 * idx[c];
-            a[0] += w[c] * flux[3 * p];
-            a[1] += w[c] * flux[3 * p + 1];
-            a[2] += w[c] * flux[3 * p + 2];
-            a[3] += w[c] * omega[p];
+#pragma omp parallel num_threads(threads)
+    {
+        double *mine = acc + (size_t)omp_get_thread_num() * ng * 4;
+#pragma omp for schedule(static)
+        for (size_t p = 0; p < count; p++) {
+            const float *d = dirs + 3 * p;
+            float l1 = 1.0f / (fabsf(d[0]) + fabsf(d[1]) + fabsf(d[2]));
+            float u = d[0] * l1, v = d[1] * l1;
+            if (d[2] < 0.0f) {
+                float qu = copysignf(1.0f - fabsf(v), u), qv = copysignf(1.0f - fabsf(u), v);
+                u = qu;
+                v = qv;
+            }
+            uint32_t idx[4];
+            float w[4];
+            oct_taps_f((long)G, u, v, idx, w);
+            for (int c = 0; c < 4; c++) {
+                double *a = mine + 4 * (size_t)idx[c];
+                a[0] += (double)w[c] * flux[3 * p];
+                a[1] += (double)w[c] * flux[3 * p + 1];
+                a[2] += (double)w[c] * flux[3 * p + 2];
+                a[3] += (double)w[c] * omega[p];
+            }
         }
     }
+    for (int t = 1; t < threads; t++)
+        for (size_t e = 0; e < ng * 4; e++)
+            acc[e] += acc[(size_t)t * ng * 4 + e];
     for (size_t u = 0; u < ng; u++) {
         double inv = acc[4 * u + 3] > 0.0 ? 1.0 / acc[4 * u + 3] : 0.0;
         for (int c = 0; c < 3; c++)
@@ -352,7 +437,8 @@ wenv_status wenv_shader_set_environment(wenv_shader *sh, const wenv_envmap *env,
     wenv_haar2d_forward(texels, G, 3, scratch);
     for (size_t u = 0; u < ng; u++)
         mag[u] = texels[3 * u] * texels[3 * u] + texels[3 * u + 1] * texels[3 * u + 1] + texels[3 * u + 2] * texels[3 * u + 2];
-    size_t keep = sh->q.light_coefficients ? sh->q.light_coefficients : ng;
+    /* more terms asked for than the map has keeps them all */
+    size_t keep = sh->q.light_coefficients && sh->q.light_coefficients < ng ? sh->q.light_coefficients : ng;
     size_t count = wenv_select_largest(mag, ng, keep, idx, work);
     rgb = malloc((count ? count : 1) * 3 * sizeof(float));
     if (!rgb) {
@@ -378,9 +464,8 @@ wenv_status wenv_shader_set_environment(wenv_shader *sh, const wenv_envmap *env,
     sh->light_count = count;
     idx = NULL;
     rgb = NULL;
-    memset(sh->slice_ready, 0, sh->ns);
-    invalidate_pairs(sh);
     sh->have_env = 1;
+    st = remake_ready(sh, 1, err);
 done:
     free(texels);
     free(scratch);
@@ -504,9 +589,8 @@ wenv_status wenv_shader_set_material(wenv_shader *sh, const wenv_material *mat, 
     for (int c = 0; c < 3; c++)
         sh->diffuse_over_pi[c] = (float)(mat->diffuse[c] / M_PI);
     sh->stats.brdf_terms_total = total;
-    invalidate_pairs(sh);
     sh->have_mat = 1;
-    return WENV_OK;
+    return remake_ready(sh, 0, err);
 }
 
 /* ---- per vertex -------------------------------------------------------------------------------- */
@@ -517,55 +601,6 @@ typedef struct {
     uint32_t pair[16];
     float pair_w[16];
 } vertex_taps;
-
-/* Bilinear taps on the normal samples' octahedral grid and on a slice's view-sample corners, in
- * float with truncating casts: this runs 5 times per vertex per frame, and libm's floor() (a call
- * on baseline x86-64) and double divisions dominated it.  Same conventions as maps.c. */
-static inline void oct_taps_f(long n, float u, float v, uint32_t idx[4], float w[4])
-{
-    float x = (u + 1.0f) * 0.5f * (float)n - 0.5f, y = (v + 1.0f) * 0.5f * (float)n - 0.5f;
-    long ix = (long)(x + 1.0f) - 1, iy = (long)(y + 1.0f) - 1; /* floor for x >= -1 */
-    float fx = x - (float)ix, fy = y - (float)iy;
-    for (int k = 0; k < 4; k++) {
-        long i = ix + (k & 1), j = iy + (k >> 1);
-        /* crossing an edge of the octahedral square lands on the same edge, mirrored */
-        if (i < 0 || i >= n) {
-            i = i < 0 ? 0 : n - 1;
-            j = n - 1 - j;
-        }
-        if (j < 0 || j >= n) {
-            j = j < 0 ? 0 : n - 1;
-            i = n - 1 - i;
-        }
-        idx[k] = (uint32_t)(j * n + i);
-    }
-    w[0] = (1.0f - fx) * (1.0f - fy);
-    w[1] = fx * (1.0f - fy);
-    w[2] = (1.0f - fx) * fy;
-    w[3] = fx * fy;
-}
-
-static inline void corner_taps_f(long n, float u, float v, uint32_t idx[4], float w[4])
-{
-    float hi = (float)n, x = (u + 1.0f) * 0.5f * hi, y = (v + 1.0f) * 0.5f * hi;
-    x = x < 0.0f ? 0.0f : (x > hi ? hi : x);
-    y = y < 0.0f ? 0.0f : (y > hi ? hi : y);
-    long i = (long)x, j = (long)y;
-    if (i > n - 1)
-        i = n - 1;
-    if (j > n - 1)
-        j = n - 1;
-    float fx = x - (float)i, fy = y - (float)j;
-    long row = n + 1;
-    idx[0] = (uint32_t)(j * row + i);
-    idx[1] = idx[0] + 1;
-    idx[2] = idx[0] + (uint32_t)row;
-    idx[3] = idx[2] + 1;
-    w[0] = (1.0f - fx) * (1.0f - fy);
-    w[1] = fx * (1.0f - fy);
-    w[2] = (1.0f - fx) * fy;
-    w[3] = fx * fy;
-}
 
 /* Returns 0 when the view is below the surface (the vertex is black). */
 static int compute_taps(const wenv_shader *sh, const float *nrm, const float *view, vertex_taps *tp)
