@@ -143,11 +143,12 @@ typedef struct {
     wenv_method method;
     PyObject *environment, *material;
     int busy;
+    wenv_py_peer *peer; /* set for the peer methods ("split_sum", "sh"), which bind_peers.c runs */
 } ShaderObject;
 
 static int claim(ShaderObject *self)
 {
-    if (!self->shader) {
+    if (!self->shader && !self->peer) {
         PyErr_SetString(PyExc_RuntimeError, "Shader is not initialised");
         return -1;
     }
@@ -164,6 +165,13 @@ static int do_set_environment(ShaderObject *self, PyObject *env_obj)
     const struct wenv_envmap *env = wenv_py_envmap(env_obj, "env");
     if (!env)
         return -1;
+    if (self->peer) {
+        if (wenv_py_peer_set_environment(self->peer, env) < 0)
+            return -1;
+        Py_INCREF(env_obj);
+        Py_XSETREF(self->environment, env_obj);
+        return 0;
+    }
     wenv_error err = {0};
     wenv_status st;
     Py_BEGIN_ALLOW_THREADS
@@ -183,6 +191,13 @@ static int do_set_material(ShaderObject *self, PyObject *mat_obj)
     const struct wenv_material *mat = wenv_py_material(mat_obj, "material");
     if (!mat)
         return -1;
+    if (self->peer) {
+        if (wenv_py_peer_set_material(self->peer, mat) < 0)
+            return -1;
+        Py_INCREF(mat_obj);
+        Py_XSETREF(self->material, mat_obj);
+        return 0;
+    }
     wenv_error err = {0};
     wenv_status st;
     Py_BEGIN_ALLOW_THREADS
@@ -205,25 +220,34 @@ static int Shader_init(ShaderObject *self, PyObject *args, PyObject *kwargs)
     if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|OsOO:Shader", kwlist, &env_obj, &mat_obj, &quality_obj,
                                      &method, &cache_obj, &progress_obj))
         return -1;
-    if (self->shader) {
+    if (self->shader || self->peer) {
         PyErr_SetString(PyExc_RuntimeError, "Shader is already initialised");
         return -1;
     }
     if (!wenv_py_envmap(env_obj, "env") || !wenv_py_material(mat_obj, "material"))
         return -1;
-    if (strcmp(method, "rotation") == 0)
+    int peer = wenv_py_is_peer_method(method);
+    if (peer)
+        ;
+    else if (strcmp(method, "rotation") == 0)
         self->method = WENV_METHOD_ROTATION;
     else if (strcmp(method, "slicing") == 0)
         self->method = WENV_METHOD_SLICING;
     else {
-        PyErr_Format(PyExc_ValueError, "method must be 'rotation' or 'slicing', got '%s'", method);
+        PyErr_Format(PyExc_ValueError, "method must be 'rotation', 'slicing', 'split_sum' or 'sh', got '%s'", method);
         return -1;
     }
-    if (parse_quality(quality_obj ? quality_obj : PyUnicode_FromString("default"), &self->quality) < 0)
+    if (!peer && parse_quality(quality_obj ? quality_obj : PyUnicode_FromString("default"), &self->quality) < 0)
         return -1;
     if (progress_obj != Py_None && !PyCallable_Check(progress_obj)) {
         PyErr_SetString(PyExc_TypeError, "progress must be callable or None");
         return -1;
+    }
+    if (peer) {
+        /* no matrices, so no cache: the precomputation is the lighting's and the material's */
+        if (!(self->peer = wenv_py_peer_create(method, quality_obj, progress_obj)))
+            return -1;
+        return do_set_environment(self, env_obj) < 0 || do_set_material(self, mat_obj) < 0 ? -1 : 0;
     }
     char dir[4096];
     const char *cache_dir = NULL;
@@ -268,6 +292,7 @@ static int Shader_init(ShaderObject *self, PyObject *args, PyObject *kwargs)
 static void Shader_dealloc(ShaderObject *self)
 {
     wenv_shader_free(self->shader);
+    wenv_py_peer_free(self->peer);
     Py_XDECREF(self->environment);
     Py_XDECREF(self->material);
     Py_TYPE(self)->tp_free((PyObject *)self);
@@ -282,6 +307,11 @@ static PyObject *shade_arrays(ShaderObject *self, const float *normals, const fl
         return NULL;
     if (n == 0)
         return result;
+    if (self->peer) {
+        if (wenv_py_peer_shade(self->peer, normals, views, n, out) < 0)
+            Py_CLEAR(result);
+        return result;
+    }
     wenv_error err = {0};
     wenv_status st;
     Py_BEGIN_ALLOW_THREADS
@@ -423,12 +453,16 @@ static PyObject *Shader_set_material(ShaderObject *self, PyObject *mat)
 static PyObject *Shader_get_quality(ShaderObject *self, void *closure)
 {
     (void)closure;
+    if (self->peer)
+        return wenv_py_peer_quality(self->peer);
     return quality_to_dict(&self->quality);
 }
 
 static PyObject *Shader_get_method(ShaderObject *self, void *closure)
 {
     (void)closure;
+    if (self->peer)
+        return PyUnicode_FromString(wenv_py_peer_method(self->peer));
     return PyUnicode_FromString(self->method == WENV_METHOD_ROTATION ? "rotation" : "slicing");
 }
 
@@ -447,6 +481,8 @@ static PyObject *Shader_get_material(ShaderObject *self, void *closure)
 static PyObject *Shader_get_stats(ShaderObject *self, void *closure)
 {
     (void)closure;
+    if (self->peer)
+        return wenv_py_peer_stats(self->peer);
     if (!self->shader)
         Py_RETURN_NONE;
     wenv_shader_stats s;
@@ -475,7 +511,7 @@ static PyMethodDef Shader_methods[] = {
 
 static PyGetSetDef Shader_getset[] = {
     {"quality", (getter)Shader_get_quality, NULL, "resolutions in use (dict)", NULL},
-    {"method", (getter)Shader_get_method, NULL, "'rotation' or 'slicing'", NULL},
+    {"method", (getter)Shader_get_method, NULL, "'rotation', 'slicing', 'split_sum' or 'sh'", NULL},
     {"environment", (getter)Shader_get_environment, NULL, "the current wenv.Environment", NULL},
     {"material", (getter)Shader_get_material, NULL, "the current material", NULL},
     {"stats", (getter)Shader_get_stats, NULL, "sizes, cache use and timings (dict)", NULL},
@@ -491,7 +527,11 @@ static PyTypeObject ShaderType = {
               "global, local, normals, views, coefficients, light_coefficients, matrix_epsilon.  method: "
               "'rotation' (precomputed sparse matrices, cached on disk in cache_dir; None: WENV_CACHE_DIR or "
               "~/.cache/wenv; False: no cache) or 'slicing' (no matrices).  progress(fraction) is called "
-              "during precomputation; returning True cancels it (wenv.CancelledError).",
+              "during precomputation; returning True cancels it (wenv.CancelledError).\n\n"
+              "Peer methods for comparison: 'split_sum' (prefiltered environment maps and an environment-BRDF "
+              "table, Karis 2013; quality keys prefilter, samples, lut) and 'sh' (spherical harmonics, Kautz, "
+              "Sloan and Snyder 2002; quality keys order, views); presets in wenv.PEER_QUALITY_PRESETS.  Their "
+              "precomputation runs in set_environment and set_material, which then also report to progress.",
     .tp_new = PyType_GenericNew,
     .tp_init = (initproc)Shader_init,
     .tp_dealloc = (destructor)Shader_dealloc,

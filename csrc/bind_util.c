@@ -65,6 +65,26 @@ int wenv_py_get_vec3_array(PyObject *obj, const char *name, int require_nonzero,
     return 0;
 }
 
+int wenv_py_get_size(PyObject *obj, const char *name, size_t *out)
+{
+    if (!PyLong_Check(obj) || PyBool_Check(obj)) {
+        PyErr_Format(PyExc_TypeError, "%s must be an int, got %.100s", name, Py_TYPE(obj)->tp_name);
+        return -1;
+    }
+    long long x = PyLong_AsLongLong(obj);
+    if (x == -1 && PyErr_Occurred()) {
+        PyErr_Clear();
+        PyErr_Format(PyExc_ValueError, "%s is out of range", name);
+        return -1;
+    }
+    if (x < 0) {
+        PyErr_Format(PyExc_ValueError, "%s must not be negative, got %lld", name, x);
+        return -1;
+    }
+    *out = (size_t)x;
+    return 0;
+}
+
 int wenv_py_get_finite(PyObject *obj, const char *name, double *out)
 {
     if (!PyNumber_Check(obj) || PyBool_Check(obj)) {

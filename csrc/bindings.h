@@ -12,6 +12,7 @@ int wenv_register_envmap(PyObject *module);
 int wenv_register_brdf(PyObject *module);
 int wenv_register_shade(PyObject *module);
 int wenv_register_glossmeter(PyObject *module);
+int wenv_register_peers(PyObject *module);
 
 /* Raises the Python exception that matches err->status (ValueError, TypeError, OSError,
  * MemoryError, wenv.CancelledError).  Always returns NULL for convenient `return`. */
@@ -29,6 +30,9 @@ int wenv_py_get_vec3_array(PyObject *obj, const char *name, int require_nonzero,
 
 /* Reads an RGB triple from a number (grey) or a length-3 sequence of finite numbers >= 0. */
 int wenv_py_get_rgb(PyObject *obj, const char *name, double rgb[3]);
+
+/* Reads a non-negative int into a size_t; TypeError / ValueError naming `name` otherwise. */
+int wenv_py_get_size(PyObject *obj, const char *name, size_t *out);
 
 /* Reads a finite float; ValueError naming `name` otherwise. */
 int wenv_py_get_finite(PyObject *obj, const char *name, double *out);
@@ -52,5 +56,19 @@ struct wenv_envmap;
 const struct wenv_envmap *wenv_py_envmap(PyObject *obj, const char *name); /* NULL + TypeError naming `name` if obj is not a wenv.Environment */
 struct wenv_material;
 const struct wenv_material *wenv_py_material(PyObject *obj, const char *name); /* NULL + TypeError naming `name` if obj is not a wenv.Material */
+
+/* The peer shading methods behind wenv.Shader ("split_sum", "sh"; bind_peers.c).  Every function
+ * that can fail returns NULL / -1 with a Python exception set; long work runs without the GIL and
+ * reports to the progress callback given at creation. */
+typedef struct wenv_py_peer wenv_py_peer;
+int wenv_py_is_peer_method(const char *method);
+wenv_py_peer *wenv_py_peer_create(const char *method, PyObject *quality, PyObject *progress);
+void wenv_py_peer_free(wenv_py_peer *peer);
+const char *wenv_py_peer_method(const wenv_py_peer *peer);
+int wenv_py_peer_set_environment(wenv_py_peer *peer, const struct wenv_envmap *env);
+int wenv_py_peer_set_material(wenv_py_peer *peer, const struct wenv_material *mat);
+int wenv_py_peer_shade(wenv_py_peer *peer, const float *normals, const float *views, size_t n, float *out);
+PyObject *wenv_py_peer_quality(wenv_py_peer *peer);
+PyObject *wenv_py_peer_stats(const wenv_py_peer *peer);
 
 #endif

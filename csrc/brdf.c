@@ -19,6 +19,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "quadrature.h"
+
 #ifndef M_PI
 #define M_PI 3.14159265358979323846
 #endif
@@ -286,33 +288,6 @@ void wenv_material_free(wenv_material *mat)
 
 /* ---------------------------------------------------------------- albedo quadrature */
 
-/* Gauss-Legendre nodes and weights on (0, 1) by Newton on P_n (Abramowitz & Stegun 25.4.29 start). */
-static void gauss_legendre_01(size_t n, double *x, double *w)
-{
-    for (size_t i = 0; i < (n + 1) / 2; i++) {
-        double z = cos(M_PI * ((double)i + 0.75) / ((double)n + 0.5));
-        double dp = 1.0;
-        for (int it = 0; it < 100; it++) {
-            double p0 = 1.0, p1 = 0.0;
-            for (size_t j = 1; j <= n; j++) {
-                double p2 = p1;
-                p1 = p0;
-                p0 = ((2.0 * (double)j - 1.0) * z * p1 - ((double)j - 1.0) * p2) / (double)j;
-            }
-            dp = (double)n * (z * p0 - p1) / (z * z - 1.0);
-            double dz = p0 / dp;
-            z -= dz;
-            if (fabs(dz) < 1e-15)
-                break;
-        }
-        double wt = 2.0 / ((1.0 - z * z) * dp * dp);
-        /* map [-1, 1] -> [0, 1] */
-        x[i] = 0.5 * (1.0 - z);
-        x[n - 1 - i] = 0.5 * (1.0 + z);
-        w[i] = w[n - 1 - i] = 0.5 * wt;
-    }
-}
-
 /* Integrand of the albedo at half vector h(t = tan^2 theta_h, phi) per unit of the distribution's CDF
  * xi: F G (wo.h) / (co cos_h) = F vis 4 ci (wo.h) / cos_h, vis = G / (4 ci co). */
 static inline double albedo_integrand(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wo[3],
@@ -344,8 +319,12 @@ static inline double albedo_integrand(const wenv_lobe *lobe, wenv_shadowing shad
  *    phi' = 90 deg; half of the map phi'(v) follows beta (phi' = acos(tan(theta_o cos(pi v)) /
  *    tan(theta_o))), half is linear, over the mirror-symmetric half circle [0, pi]. */
 static double lobe_albedo_nodes(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wo[3], size_t n,
-                                const double *x, const double *w, int include_fresnel)
+                                const double *x, const double *w, int include_fresnel, double *node_wi,
+                                double *node_weight, size_t *node_count)
 {
+    size_t recorded = 0;
+    if (node_count)
+        *node_count = 0;
     if (!(wo[2] > 0.0))
         return 0.0;
     int ggx = lobe->distribution == WENV_NDF_GGX;
@@ -402,9 +381,30 @@ static double lobe_albedo_nodes(const wenv_lobe *lobe, wenv_shadowing shadowing,
             double t_h, cos_d;
             double vis = lobe_vis(lobe, shadowing, wi, wo, k_o, &t_h, &cos_d);
             double f = include_fresnel ? wenv_fresnel_dielectric(oh, lobe->ior) : 1.0;
-            ring += w[i] * 4.0 * r3 * f * vis * 4.0 * wi[2] * oh / ch;
+            double term = w[i] * 4.0 * r3 * f * vis * 4.0 * wi[2] * oh / ch;
+            ring += term;
+            if (node_wi) {
+                memcpy(node_wi + 3 * recorded, wi, sizeof wi);
+                node_weight[recorded++] = term;
+            }
         }
         total += w[j] * dphi * xi_max * ring;
+        if (node_wi) {
+            /* this ring's nodes and their mirror images about the plane of wo and the normal (the
+             * rule covers one half circle), each with half the weight */
+            double scale = w[j] * dphi * xi_max / (2.0 * M_PI), px = -sin(phi_o), py = cos(phi_o);
+            size_t first = *node_count, len = recorded - first;
+            for (size_t k = first; k < recorded; k++) {
+                node_weight[k] *= scale;
+                double *a = node_wi + 3 * k, *b = node_wi + 3 * (k + len), dp = a[0] * px + a[1] * py;
+                b[0] = a[0] - 2.0 * dp * px;
+                b[1] = a[1] - 2.0 * dp * py;
+                b[2] = a[2];
+                node_weight[k + len] = node_weight[k];
+            }
+            recorded += len;
+            *node_count = recorded;
+        }
     }
     return total / M_PI; /* (1 / 2 pi) * 2 halves */
 }
@@ -419,7 +419,7 @@ static wenv_status albedo_nodes(size_t samples, double **x, double **w, wenv_err
     if (!*x)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for %zu quadrature nodes", samples);
     *w = *x + samples;
-    gauss_legendre_01(samples, *x, *w);
+    wenv_gauss_legendre_01(samples, *x, *w);
     return WENV_OK;
 }
 
@@ -431,7 +431,7 @@ wenv_status wenv_lobe_albedo(const wenv_lobe *lobe, wenv_shadowing shadowing, co
     wenv_status st = albedo_nodes(samples, &x, &w, err);
     if (st != WENV_OK)
         return st;
-    *albedo = lobe_albedo_nodes(lobe, shadowing, wo, samples, x, w, include_fresnel);
+    *albedo = lobe_albedo_nodes(lobe, shadowing, wo, samples, x, w, include_fresnel, NULL, NULL, NULL);
     free(x);
     return WENV_OK;
 }
@@ -448,11 +448,24 @@ wenv_status wenv_material_albedo(const wenv_material *mat, const double wo[3], s
         for (int c = 0; c < 3; c++)
             rgb[c] = mat->diffuse[c]; /* Int diffuse / pi cos_i d wi = diffuse exactly */
         for (size_t l = 0; l < mat->n_lobes; l++) {
-            double a = lobe_albedo_nodes(&mat->lobes[l], mat->shadowing, wo, samples, x, w, 1);
+            double a = lobe_albedo_nodes(&mat->lobes[l], mat->shadowing, wo, samples, x, w, 1, NULL, NULL, NULL);
             for (int c = 0; c < 3; c++)
                 rgb[c] += mat->lobes[l].specular[c] * a;
         }
     }
+    free(x);
+    return WENV_OK;
+}
+
+wenv_status wenv_lobe_nodes(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wo[3], size_t samples,
+                            double *wi, double *weight, size_t *count, wenv_error *err)
+{
+    *count = 0;
+    double *x, *w;
+    wenv_status st = albedo_nodes(samples, &x, &w, err);
+    if (st != WENV_OK)
+        return st;
+    lobe_albedo_nodes(lobe, shadowing, wo, samples, x, w, 1, wi, weight, count);
     free(x);
     return WENV_OK;
 }

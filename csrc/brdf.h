@@ -115,4 +115,12 @@ wenv_status wenv_material_albedo(const wenv_material *mat, const double wo[3], s
 wenv_status wenv_lobe_albedo(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wo[3],
                              size_t samples, int include_fresnel, double *albedo, wenv_error *err);
 
+/* The nodes of that rule for one lobe (with Fresnel, without colour), for integrals of other
+ * functions against the lobe: directions wi (unit, above the horizon) and weights with
+ * sum_k weight[k] g(wi[k]) ~ Int g(wi) f(wi, wo) cos_i d wi for smooth g; the weights sum to the
+ * albedo.  The half-circle rule is mirrored about the plane of wo and the normal, so wi and weight
+ * need room for 2 samples^2 nodes (3 doubles per direction); *count gets the number written. */
+wenv_status wenv_lobe_nodes(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wo[3], size_t samples,
+                            double *wi, double *weight, size_t *count, wenv_error *err);
+
 #endif

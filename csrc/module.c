@@ -61,7 +61,8 @@ PyMODINIT_FUNC PyInit_wenv(void)
         goto fail;
     }
     if (PyModule_AddStringConstant(m, "__version__", "0.1.0") < 0 || wenv_register_envmap(m) < 0 ||
-        wenv_register_brdf(m) < 0 || wenv_register_shade(m) < 0 || wenv_register_glossmeter(m) < 0)
+        wenv_register_brdf(m) < 0 || wenv_register_shade(m) < 0 || wenv_register_glossmeter(m) < 0 ||
+        wenv_register_peers(m) < 0)
         goto fail;
     return m;
 fail:

@@ -1,0 +1,72 @@
+#include "octfilter.h"
+
+#include <stdlib.h>
+
+#include "maps.h"
+
+static void supersample_texel(const wenv_envmap *env, size_t side, size_t t, float *rgb)
+{
+    const size_t k = 4;
+    double h = 2.0 / (double)side, acc[3] = {0, 0, 0};
+    for (size_t q = 0; q < k * k; q++) {
+        double d[3];
+        float c[3];
+        wenv_oct_decode(-1.0 + h * ((double)(t % side) + ((double)(q % k) + 0.5) / (double)k),
+                        -1.0 + h * ((double)(t / side) + ((double)(q / k) + 0.5) / (double)k), d);
+        wenv_envmap_lookup(env, d, c);
+        for (int i = 0; i < 3; i++)
+            acc[i] += c[i];
+    }
+    for (int i = 0; i < 3; i++)
+        rgb[i] = (float)(acc[i] / (double)(k * k));
+}
+
+wenv_status wenv_oct_from_envmap(const wenv_envmap *env, size_t side, float *texels, wenv_error *err)
+{
+    size_t nt = side * side, npix = wenv_envmap_width(env) * wenv_envmap_height(env);
+    if (npix < 2 * nt) {
+#pragma omp parallel for schedule(dynamic, 64)
+        for (size_t t = 0; t < nt; t++)
+            supersample_texel(env, side, t, texels + 3 * t);
+        return WENV_OK;
+    }
+    float *dirs = malloc(npix * 3 * sizeof(float));
+    float *flux = malloc(npix * 3 * sizeof(float));
+    float *omega = malloc(npix * sizeof(float));
+    double *acc = calloc(nt * 4, sizeof(double));
+    if (!dirs || !flux || !omega || !acc) {
+        free(dirs);
+        free(flux);
+        free(omega);
+        free(acc);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory filtering the environment");
+    }
+    size_t count = wenv_envmap_samples(env, dirs, flux, omega);
+    for (size_t p = 0; p < count; p++) {
+        double d[3] = {dirs[3 * p], dirs[3 * p + 1], dirs[3 * p + 2]}, u, v, w[4];
+        size_t idx[4];
+        wenv_oct_encode(d, &u, &v);
+        wenv_oct_bilinear(side, u, v, idx, w);
+        for (int c = 0; c < 4; c++) {
+            double *a = acc + 4 * idx[c];
+            a[0] += w[c] * flux[3 * p];
+            a[1] += w[c] * flux[3 * p + 1];
+            a[2] += w[c] * flux[3 * p + 2];
+            a[3] += w[c] * omega[p];
+        }
+    }
+#pragma omp parallel for schedule(dynamic, 64)
+    for (size_t t = 0; t < nt; t++) {
+        if (acc[4 * t + 3] > 0.0) {
+            for (int c = 0; c < 3; c++)
+                texels[3 * t + c] = (float)(acc[4 * t + c] / acc[4 * t + 3]);
+        } else {
+            supersample_texel(env, side, t, texels + 3 * t);
+        }
+    }
+    free(dirs);
+    free(flux);
+    free(omega);
+    free(acc);
+    return WENV_OK;
+}

@@ -1,0 +1,17 @@
+/* An environment resampled onto octahedral texels (maps.h layout), as the average radiance over
+ * each texel's neighbourhood.  With enough pixels (at least two per texel) each pixel's flux is
+ * split between the four nearest texel centres and every texel divided by the solid angle it
+ * received: a constant environment stays exactly constant and a sun keeps its centroid.  Coarser
+ * environments are read by 4 x 4 bilinear lookups per texel, as is any texel no pixel reached. */
+#ifndef WENV_OCTFILTER_H
+#define WENV_OCTFILTER_H
+
+#include <stddef.h>
+
+#include "envmap.h"
+#include "error.h"
+
+/* texels: side x side x 3 floats (side even).  Radiance includes the environment's strength. */
+wenv_status wenv_oct_from_envmap(const wenv_envmap *env, size_t side, float *texels, wenv_error *err);
+
+#endif

@@ -1,0 +1,52 @@
+/* Spherical-harmonic environment shading (Kautz, Sloan and Snyder 2002, "Fast, arbitrary BRDF
+ * shading for low-frequency lighting using spherical harmonics"), a peer of the wavelet method for
+ * comparison.
+ *
+ * Lighting: the environment projected onto real SH up to band `order` (sh.h), every pixel a point of
+ * its exact solid angle.  Material: the specular lobes' f(w, v) cos(w), projected onto SH in the
+ * surface's local frame for `views` view elevations theta_v from 0 to 89.9 degrees with the view
+ * in the local xz plane (isotropic BRDFs need no view azimuth: it is absorbed by the frame), each by
+ * the lobe's own quadrature (wenv_lobe_nodes), so narrow lobes are projected without aliasing.
+ * Per vertex: the frame whose z is the normal and whose x points along the view's tangential part;
+ * the lighting rotated into it exactly (zyz Euler angles, sh.h); the radiance is the dot product with
+ * the slice interpolated linearly in theta_v.  Diffuse: irradiance sum_l A_l L_l0 sqrt((2l+1)/4pi)
+ * from the same rotated lighting, bands 0..order (at order 2, Ramamoorthi and Hanrahan's 9
+ * coefficients).  Cost per vertex: O(order^3) for the rotation. */
+#ifndef WENV_SHRENDER_H
+#define WENV_SHRENDER_H
+
+#include <stddef.h>
+
+#include "brdf.h"
+#include "envmap.h"
+#include "error.h"
+
+typedef struct {
+    size_t order; /* highest SH band, [2, WENV_SH_ORDER_MAX]: (order + 1)^2 coefficients */
+    size_t views; /* view elevations with a BRDF slice, [2, 1024] */
+} wenv_shrender_quality;
+
+typedef struct {
+    size_t coefficients, slice_bytes, quadrature_nodes;
+    double projection_seconds, slice_seconds;
+} wenv_shrender_stats;
+
+typedef struct wenv_shrender wenv_shrender;
+
+wenv_status wenv_shrender_quality_check(const wenv_shrender_quality *q, wenv_error *err);
+wenv_status wenv_shrender_create(wenv_shrender **out, const wenv_shrender_quality *q, wenv_error *err);
+void wenv_shrender_free(wenv_shrender *sr);
+
+/* Both keep the shader unchanged when they fail or are cancelled; both report progress. */
+wenv_status wenv_shrender_set_environment(wenv_shrender *sr, const wenv_envmap *env, const wenv_progress *progress,
+                                          wenv_error *err);
+wenv_status wenv_shrender_set_material(wenv_shrender *sr, const wenv_material *mat, const wenv_progress *progress,
+                                       wenv_error *err);
+
+/* As wenv_shader_shade. */
+wenv_status wenv_shrender_shade(const wenv_shrender *sr, const float *normals, const float *views, size_t n,
+                                float *out, wenv_error *err);
+
+void wenv_shrender_get_stats(const wenv_shrender *sr, wenv_shrender_stats *stats);
+
+#endif
