@@ -33,22 +33,9 @@ static PyObject *quality_to_dict(const wenv_quality *q)
 
 static int get_size(PyObject *v, const char *key, size_t *out)
 {
-    if (!PyLong_Check(v) || PyBool_Check(v)) {
-        PyErr_Format(PyExc_TypeError, "quality['%s'] must be an int, got %.100s", key, Py_TYPE(v)->tp_name);
-        return -1;
-    }
-    long long x = PyLong_AsLongLong(v);
-    if (x == -1 && PyErr_Occurred()) {
-        PyErr_Clear();
-        PyErr_Format(PyExc_ValueError, "quality['%s'] is out of range", key);
-        return -1;
-    }
-    if (x < 0) {
-        PyErr_Format(PyExc_ValueError, "quality['%s'] must not be negative, got %lld", key, x);
-        return -1;
-    }
-    *out = (size_t)x;
-    return 0;
+    char name[64];
+    snprintf(name, sizeof name, "quality['%s']", key);
+    return wenv_py_get_size(v, name, out);
 }
 
 static int parse_quality(PyObject *obj, wenv_quality *q)

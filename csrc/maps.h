@@ -9,7 +9,9 @@
 #ifndef WENV_MAPS_H
 #define WENV_MAPS_H
 
+#include <math.h>
 #include <stddef.h>
+#include <stdint.h>
 
 void wenv_oct_encode(const double d[3], double *u, double *v);
 void wenv_oct_decode(double u, double v, double d[3]);
@@ -36,5 +38,44 @@ void wenv_hemi_bilinear_corners(size_t n, double u, double v, size_t idx[4], dou
 
 /* Solid angle of the spherical triangle with unit-vector corners a, b, c. */
 double wenv_spherical_triangle(const double a[3], const double b[3], const double c[3]);
+
+/* Float forms of wenv_oct_encode and wenv_oct_bilinear for loops over every vertex or pixel: no
+ * double divisions, and truncating casts instead of floor() (a libm call on baseline x86-64). */
+static inline void wenv_oct_encode_f(const float d[3], float *u, float *v)
+{
+    float l1 = 1.0f / (fabsf(d[0]) + fabsf(d[1]) + fabsf(d[2]));
+    float pu = d[0] * l1, pv = d[1] * l1;
+    if (d[2] < 0.0f) {
+        float qu = copysignf(1.0f - fabsf(pv), pu), qv = copysignf(1.0f - fabsf(pu), pv);
+        pu = qu;
+        pv = qv;
+    }
+    *u = pu;
+    *v = pv;
+}
+
+static inline void wenv_oct_bilinear_f(long n, float u, float v, uint32_t idx[4], float w[4])
+{
+    float x = (u + 1.0f) * 0.5f * (float)n - 0.5f, y = (v + 1.0f) * 0.5f * (float)n - 0.5f;
+    long ix = (long)(x + 1.0f) - 1, iy = (long)(y + 1.0f) - 1; /* floor for x >= -1 */
+    float fx = x - (float)ix, fy = y - (float)iy;
+    for (int k = 0; k < 4; k++) {
+        long i = ix + (k & 1), j = iy + (k >> 1);
+        /* crossing an edge of the octahedral square lands on the same edge, mirrored */
+        if (i < 0 || i >= n) {
+            i = i < 0 ? 0 : n - 1;
+            j = n - 1 - j;
+        }
+        if (j < 0 || j >= n) {
+            j = j < 0 ? 0 : n - 1;
+            i = n - 1 - i;
+        }
+        idx[k] = (uint32_t)(j * n + i);
+    }
+    w[0] = (1.0f - fx) * (1.0f - fy);
+    w[1] = fx * (1.0f - fy);
+    w[2] = (1.0f - fx) * fy;
+    w[3] = fx * fy;
+}
 
 #endif

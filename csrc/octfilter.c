@@ -1,5 +1,7 @@
 #include "octfilter.h"
 
+#include <omp.h>
+#include <stdint.h>
 #include <stdlib.h>
 
 #include "maps.h"
@@ -30,10 +32,12 @@ wenv_status wenv_oct_from_envmap(const wenv_envmap *env, size_t side, float *tex
             supersample_texel(env, side, t, texels + 3 * t);
         return WENV_OK;
     }
+    int threads = omp_get_max_threads();
     float *dirs = malloc(npix * 3 * sizeof(float));
     float *flux = malloc(npix * 3 * sizeof(float));
     float *omega = malloc(npix * sizeof(float));
-    double *acc = calloc(nt * 4, sizeof(double));
+    /* one accumulator per thread: this runs over every pixel at each lighting change */
+    double *acc = calloc((size_t)threads * nt * 4, sizeof(double));
     if (!dirs || !flux || !omega || !acc) {
         free(dirs);
         free(flux);
@@ -42,19 +46,27 @@ wenv_status wenv_oct_from_envmap(const wenv_envmap *env, size_t side, float *tex
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory filtering the environment");
     }
     size_t count = wenv_envmap_samples(env, dirs, flux, omega);
-    for (size_t p = 0; p < count; p++) {
-        double d[3] = {dirs[3 * p], dirs[3 * p + 1], dirs[3 * p + 2]}, u, v, w[4];
-        size_t idx[4];
-        wenv_oct_encode(d, &u, &v);
-        wenv_oct_bilinear(side, u, v, idx, w);
-        for (int c = 0; c < 4; c++) {
-            double *a = acc + 4 * idx[c];
-            a[0] += w[c] * flux[3 * p];
-            a[1] += w[c] * flux[3 * p + 1];
-            a[2] += w[c] * flux[3 * p + 2];
-            a[3] += w[c] * omega[p];
+#pragma omp parallel num_threads(threads)
+    {
+        double *mine = acc + (size_t)omp_get_thread_num() * nt * 4;
+#pragma omp for schedule(static)
+        for (size_t p = 0; p < count; p++) {
+            float u, v, w[4];
+            uint32_t idx[4];
+            wenv_oct_encode_f(dirs + 3 * p, &u, &v);
+            wenv_oct_bilinear_f((long)side, u, v, idx, w);
+            for (int c = 0; c < 4; c++) {
+                double *a = mine + 4 * (size_t)idx[c];
+                a[0] += (double)w[c] * flux[3 * p];
+                a[1] += (double)w[c] * flux[3 * p + 1];
+                a[2] += (double)w[c] * flux[3 * p + 2];
+                a[3] += (double)w[c] * omega[p];
+            }
         }
     }
+    for (int t = 1; t < threads; t++)
+        for (size_t e = 0; e < nt * 4; e++)
+            acc[e] += acc[(size_t)t * nt * 4 + e];
 #pragma omp parallel for schedule(dynamic, 64)
     for (size_t t = 0; t < nt; t++) {
         if (acc[4 * t + 3] > 0.0) {

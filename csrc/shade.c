@@ -11,6 +11,7 @@
 
 #include "haar.h"
 #include "maps.h"
+#include "octfilter.h"
 #include "rotation.h"
 #include "sparse.h"
 
@@ -269,30 +270,6 @@ wenv_status wenv_shader_create(wenv_shader **out, const wenv_quality *q, wenv_me
 /* Bilinear taps on the normal samples' octahedral grid and on a slice's view-sample corners, in
  * float with truncating casts: this runs 5 times per vertex per frame, and libm's floor() (a call
  * on baseline x86-64) and double divisions dominated it.  Same conventions as maps.c. */
-static inline void oct_taps_f(long n, float u, float v, uint32_t idx[4], float w[4])
-{
-    float x = (u + 1.0f) * 0.5f * (float)n - 0.5f, y = (v + 1.0f) * 0.5f * (float)n - 0.5f;
-    long ix = (long)(x + 1.0f) - 1, iy = (long)(y + 1.0f) - 1; /* floor for x >= -1 */
-    float fx = x - (float)ix, fy = y - (float)iy;
-    for (int k = 0; k < 4; k++) {
-        long i = ix + (k & 1), j = iy + (k >> 1);
-        /* crossing an edge of the octahedral square lands on the same edge, mirrored */
-        if (i < 0 || i >= n) {
-            i = i < 0 ? 0 : n - 1;
-            j = n - 1 - j;
-        }
-        if (j < 0 || j >= n) {
-            j = j < 0 ? 0 : n - 1;
-            i = n - 1 - i;
-        }
-        idx[k] = (uint32_t)(j * n + i);
-    }
-    w[0] = (1.0f - fx) * (1.0f - fy);
-    w[1] = fx * (1.0f - fy);
-    w[2] = (1.0f - fx) * fy;
-    w[3] = fx * fy;
-}
-
 static inline void corner_taps_f(long n, float u, float v, uint32_t idx[4], float w[4])
 {
     float hi = (float)n, x = (u + 1.0f) * 0.5f * hi, y = (v + 1.0f) * 0.5f * hi;
@@ -336,88 +313,6 @@ static wenv_status remake_ready(wenv_shader *sh, int slices, wenv_error *err)
     return fill_needed(sh, err);
 }
 
-/* The environment tent-filtered onto the global octahedral texels: each pixel's flux is split
- * between the four nearest texel centres, and each texel is divided by the solid angle it
- * received, so a constant environment stays exactly constant and a sun keeps its centroid.
- * Environments with fewer pixels than texels are point-sampled instead. */
-static wenv_status global_texels_from_env(const wenv_shader *sh, const wenv_envmap *env, float *texels,
-                                          wenv_error *err)
-{
-    size_t G = sh->q.global_n, ng = sh->ng;
-    size_t npix = wenv_envmap_width(env) * wenv_envmap_height(env);
-    if (npix < 8 * ng) {
-        size_t k = 4;
-        double h = 2.0 / (double)G;
-        for (size_t u = 0; u < ng; u++) {
-            double acc[3] = {0, 0, 0};
-            for (size_t q = 0; q < k * k; q++) {
-                double d[3];
-                float rgb[3];
-                wenv_oct_decode(-1.0 + h * ((double)(u % G) + ((double)(q % k) + 0.5) / (double)k),
-                                -1.0 + h * ((double)(u / G) + ((double)(q / k) + 0.5) / (double)k), d);
-                wenv_envmap_lookup(env, d, rgb);
-                for (int c = 0; c < 3; c++)
-                    acc[c] += rgb[c];
-            }
-            for (int c = 0; c < 3; c++)
-                texels[3 * u + c] = (float)(acc[c] / (double)(k * k));
-        }
-        return WENV_OK;
-    }
-    int threads = omp_get_max_threads();
-    float *dirs = malloc(npix * 3 * sizeof(float));
-    float *flux = malloc(npix * 3 * sizeof(float));
-    float *omega = malloc(npix * sizeof(float));
-    /* one accumulator per thread: the splat runs over every pixel at each lighting change */
-    double *acc = calloc((size_t)threads * ng * 4, sizeof(double));
-    if (!dirs || !flux || !omega || !acc) {
-        free(dirs);
-        free(flux);
-        free(omega);
-        free(acc);
-        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory filtering the environment");
-    }
-    size_t count = wenv_envmap_samples(env, dirs, flux, omega);
-#pragma omp parallel num_threads(threads)
-    {
-        double *mine = acc + (size_t)omp_get_thread_num() * ng * 4;
-#pragma omp for schedule(static)
-        for (size_t p = 0; p < count; p++) {
-            const float *d = dirs + 3 * p;
-            float l1 = 1.0f / (fabsf(d[0]) + fabsf(d[1]) + fabsf(d[2]));
-            float u = d[0] * l1, v = d[1] * l1;
-            if (d[2] < 0.0f) {
-                float qu = copysignf(1.0f - fabsf(v), u), qv = copysignf(1.0f - fabsf(u), v);
-                u = qu;
-                v = qv;
-            }
-            uint32_t idx[4];
-            float w[4];
-            oct_taps_f((long)G, u, v, idx, w);
-            for (int c = 0; c < 4; c++) {
-                double *a = mine + 4 * (size_t)idx[c];
-                a[0] += (double)w[c] * flux[3 * p];
-                a[1] += (double)w[c] * flux[3 * p + 1];
-                a[2] += (double)w[c] * flux[3 * p + 2];
-                a[3] += (double)w[c] * omega[p];
-            }
-        }
-    }
-    for (int t = 1; t < threads; t++)
-        for (size_t e = 0; e < ng * 4; e++)
-            acc[e] += acc[(size_t)t * ng * 4 + e];
-    for (size_t u = 0; u < ng; u++) {
-        double inv = acc[4 * u + 3] > 0.0 ? 1.0 / acc[4 * u + 3] : 0.0;
-        for (int c = 0; c < 3; c++)
-            texels[3 * u + c] = (float)(acc[4 * u + c] * inv);
-    }
-    free(dirs);
-    free(flux);
-    free(omega);
-    free(acc);
-    return WENV_OK;
-}
-
 wenv_status wenv_shader_set_environment(wenv_shader *sh, const wenv_envmap *env, wenv_error *err)
 {
     size_t G = sh->q.global_n, ng = sh->ng;
@@ -432,7 +327,7 @@ wenv_status wenv_shader_set_environment(wenv_shader *sh, const wenv_envmap *env,
         st = wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the environment");
         goto done;
     }
-    if ((st = global_texels_from_env(sh, env, texels, err)))
+    if ((st = wenv_oct_from_envmap(env, G, texels, err)))
         goto done;
     wenv_haar2d_forward(texels, G, 3, scratch);
     for (size_t u = 0; u < ng; u++)
@@ -617,14 +512,9 @@ static int compute_taps(const wenv_shader *sh, const float *nrm, const float *vi
         return 0;
     float r[3] = {2.0f * nv * n[0] - v[0], 2.0f * nv * n[1] - v[1], 2.0f * nv * n[2] - v[2]};
     /* octahedral encoding of the normal */
-    float l1 = 1.0f / (fabsf(n[0]) + fabsf(n[1]) + fabsf(n[2]));
-    float ou = n[0] * l1, ov = n[1] * l1;
-    if (n[2] < 0.0f) {
-        float qu = copysignf(1.0f - fabsf(ov), ou), qv = copysignf(1.0f - fabsf(ou), ov);
-        ou = qu;
-        ov = qv;
-    }
-    oct_taps_f((long)sh->q.normal_n, ou, ov, tp->sample, tp->sample_w);
+    float ou, ov;
+    wenv_oct_encode_f(n, &ou, &ov);
+    wenv_oct_bilinear_f((long)sh->q.normal_n, ou, ov, tp->sample, tp->sample_w);
     for (int k = 0; k < 4; k++) {
         const float *f = sh->frames + 9 * (size_t)tp->sample[k];
         /* mirror of r about the sample normal, in the sample's frame: (-r.t, -r.b, r.n) */
