@@ -78,4 +78,40 @@ static inline void wenv_oct_bilinear_f(long n, float u, float v, uint32_t idx[4]
     w[3] = fx * fy;
 }
 
+/* Float forms of wenv_hemi_encode and wenv_hemi_bilinear, for the resampling loops. */
+static inline void wenv_hemi_encode_f(const float d[3], float *u, float *v)
+{
+    float z = d[2] > 0.0f ? d[2] : 0.0f;
+    float l1 = fabsf(d[0]) + fabsf(d[1]) + z;
+    if (l1 <= 0.0f) {
+        *u = *v = 0.0f;
+        return;
+    }
+    float px = d[0] / l1, py = d[1] / l1;
+    *u = px + py;
+    *v = px - py;
+}
+
+static inline void wenv_hemi_bilinear_f(long n, float u, float v, uint32_t idx[4], float w[4])
+{
+    float hi = (float)(n - 1);
+    float x = (u + 1.0f) * 0.5f * (float)n - 0.5f, y = (v + 1.0f) * 0.5f * (float)n - 0.5f;
+    x = x < 0.0f ? 0.0f : (x > hi ? hi : x);
+    y = y < 0.0f ? 0.0f : (y > hi ? hi : y);
+    long i = (long)x, j = (long)y; /* x, y >= 0: truncation is floor */
+    if (i > n - 2)
+        i = n - 2;
+    if (j > n - 2)
+        j = n - 2;
+    float fx = x - (float)i, fy = y - (float)j;
+    idx[0] = (uint32_t)(j * n + i);
+    idx[1] = idx[0] + 1;
+    idx[2] = idx[0] + (uint32_t)n;
+    idx[3] = idx[2] + 1;
+    w[0] = (1.0f - fx) * (1.0f - fy);
+    w[1] = fx * (1.0f - fy);
+    w[2] = (1.0f - fx) * fy;
+    w[3] = fx * fy;
+}
+
 #endif

@@ -97,20 +97,23 @@ static size_t splat_texel(const wenv_resampler *rs, const double f[9], size_t u,
 {
     size_t kk = rs->k * rs->k, count = 0;
     const float *d = rs->sub_dirs + u * kk * 3;
+    float ff[9];
+    for (int c = 0; c < 9; c++)
+        ff[c] = (float)f[c];
     for (size_t q = 0; q < kk; q++, d += 3) {
-        double z = f[6] * d[0] + f[7] * d[1] + f[8] * d[2];
-        if (z < 0.0)
+        float loc[3] = {ff[0] * d[0] + ff[1] * d[1] + ff[2] * d[2], ff[3] * d[0] + ff[4] * d[1] + ff[5] * d[2],
+                        ff[6] * d[0] + ff[7] * d[1] + ff[8] * d[2]};
+        if (loc[2] < 0.0f)
             continue;
-        double loc[3] = {f[0] * d[0] + f[1] * d[1] + f[2] * d[2], f[3] * d[0] + f[4] * d[1] + f[5] * d[2], z};
-        double lu, lv, w[4];
-        size_t idx[4];
-        wenv_hemi_encode(loc, &lu, &lv);
-        wenv_hemi_bilinear(rs->local_n, lu, lv, idx, w);
+        float lu, lv, w[4];
+        uint32_t idx[4];
+        wenv_hemi_encode_f(loc, &lu, &lv);
+        wenv_hemi_bilinear_f((long)rs->local_n, lu, lv, idx, w);
         for (int c = 0; c < 4; c++) {
-            if (w[c] <= 0.0)
+            if (w[c] <= 0.0f)
                 continue;
-            tap_t[count] = (uint32_t)idx[c];
-            tap_w[count++] = w[c] * rs->sub_omega[u];
+            tap_t[count] = idx[c];
+            tap_w[count++] = (double)w[c] * rs->sub_omega[u];
         }
     }
     return count;
