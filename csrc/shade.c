@@ -222,6 +222,8 @@ wenv_status wenv_shader_create(wenv_shader **out, const wenv_quality *q, wenv_me
         wenv_shader_free(sh);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the shader tables");
     }
+    /* touch the table now rather than page by page during the first views */
+    memset(sh->table, 0, sh->ns * sh->nv * 3 * sizeof(float));
     for (size_t s = 0; s < sh->ns; s++) {
         double n[3], f[9];
         wenv_normal_sample(q->normal_n, s, n);
@@ -522,7 +524,7 @@ static int compute_taps(const wenv_shader *sh, const float *nrm, const float *vi
         float lz = f[6] * r[0] + f[7] * r[1] + f[8] * r[2];
         /* hemi-octahedral encoding; views below the sample's horizon are read on it */
         float hl = fabsf(lx) + fabsf(ly) + (lz > 0.0f ? lz : 0.0f);
-        float px = hl > 0.0f ? lx / hl : 0.0f, py = hl > 0.0f ? ly / hl : 0.0f;
+        float ih = hl > 0.0f ? 1.0f / hl : 0.0f, px = lx * ih, py = ly * ih;
         uint32_t vidx[4];
         float vw[4];
         corner_taps_f((long)sh->q.view_n, px + py, px - py, vidx, vw);
