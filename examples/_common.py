@@ -44,3 +44,15 @@ def tone_map(rgb, l_max):
 
 def relative_rmse(a, b):
     return float(np.sqrt(np.mean((a - b) ** 2)) / np.sqrt(np.mean(b ** 2)))
+
+
+def random_pairs(n, seed):
+    """n (normal, view) pairs: normals uniform on the sphere, views uniform on the hemisphere
+    around each normal (grazing views included), float32."""
+    rng = np.random.default_rng(seed)
+    nrm = rng.normal(size=(n, 3))
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    v = rng.normal(size=(n, 3))
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    v[np.sum(nrm * v, axis=1) < 0] *= -1
+    return nrm.astype(np.float32), v.astype(np.float32)

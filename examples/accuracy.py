@@ -17,7 +17,7 @@ import time
 import numpy as np
 
 import wenv
-from _common import OUT, ROOT, bundled_hdri
+from _common import OUT, ROOT, bundled_hdri, random_pairs
 
 DATA = os.path.join(ROOT, "tests", "data", "accuracy_reference.npz")
 HDRIS = ["city", "courtyard", "forest", "interior", "night", "studio", "sunrise", "sunset"]
@@ -32,14 +32,7 @@ SEED = 2006
 
 
 def make_pairs(n=PAIRS, seed=SEED):
-    """Normals uniform on the sphere; views uniform on the hemisphere around each normal."""
-    rng = np.random.default_rng(seed)
-    nrm = rng.normal(size=(n, 3))
-    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
-    v = rng.normal(size=(n, 3))
-    v /= np.linalg.norm(v, axis=1, keepdims=True)
-    v[np.sum(nrm * v, axis=1) < 0] *= -1
-    return nrm.astype(np.float32), v.astype(np.float32)
+    return random_pairs(n, seed)
 
 
 def material(spec):

@@ -17,7 +17,7 @@ import time
 import numpy as np
 
 import wenv
-from _common import OUT, bundled_hdri, relative_rmse
+from _common import OUT, bundled_hdri, random_pairs, relative_rmse
 from bench_shade import orbit_eye, suzanne
 
 CONFIGS = [
@@ -25,16 +25,6 @@ CONFIGS = [
     ("split_sum", "draft"), ("split_sum", "default"), ("split_sum", "high"),
     ("sh", {"order": 2}), ("sh", "draft"), ("sh", "default"), ("sh", "high"),
 ]
-
-
-def random_pairs(n, seed):
-    rng = np.random.default_rng(seed)
-    nrm = rng.normal(size=(n, 3))
-    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
-    v = rng.normal(size=(n, 3))
-    v /= np.linalg.norm(v, axis=1, keepdims=True)
-    v[np.sum(nrm * v, axis=1) < 0] *= -1
-    return nrm.astype(np.float32), v.astype(np.float32)
 
 
 def label(method, quality):
