@@ -103,11 +103,9 @@ static void free_quadrature(wenv_shader *sh)
     free(sh->quad_dirs);
     free(sh->quad_taps);
     free(sh->quad_w);
-    free(sh->cosine_haar);
     sh->quad_dirs = NULL;
     sh->quad_taps = NULL;
     sh->quad_w = NULL;
-    sh->cosine_haar = NULL;
     sh->quad_k = 0;
 }
 
@@ -129,6 +127,7 @@ void wenv_shader_free(wenv_shader *sh)
     free(sh->slice_ready);
     free(sh->slice_need);
     free_quadrature(sh);
+    free(sh->cosine_haar);
     free_material(sh);
     free(sh->table);
     free(sh->pair_ready);
@@ -188,7 +187,12 @@ static wenv_status build_quadrature(wenv_shader *sh, size_t k, wenv_error *err)
     wenv_haar2d_forward(cos_f, L, 1, scratch);
     free(cosw);
     free(scratch);
-    sh->cosine_haar = cos_f;
+    /* The irradiance weights stay those of the first quadrature: the lighting slices (and their
+     * irradiance) outlive materials, so a slice must not depend on which material was current. */
+    if (sh->cosine_haar)
+        free(cos_f);
+    else
+        sh->cosine_haar = cos_f;
     sh->quad_count = count;
     sh->quad_k = k;
     return WENV_OK;

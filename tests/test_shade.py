@@ -238,3 +238,19 @@ def test_bad_arguments(cook):
     with pytest.raises(ValueError, match="view_dirs"):
         wenv.reference(env, cook, good[:2], good[:3])
     assert sh.shade(np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32)).shape == (0, 3)
+
+
+@pytest.mark.parametrize("method", ["rotation", "slicing"])
+def test_results_do_not_depend_on_earlier_materials_or_lighting(method, cook):
+    """A shader that shaded with other settings before gives what a fresh one gives."""
+    sharp = wenv.CookTorrance(diffuse=(0.1, 0.2, 0.3), lobes=[{"specular": (1, 1, 1), "roughness": 0.05, "ior": 1.6}])
+    lambert = wenv.Lambert((0.5, 0.4, 0.3))
+    env_a, env_b = gradient_env(), gradient_env().with_transform(rotation=1.0, strength=2.0)
+    nrm, v = random_pairs(1500, 9)
+    sh = wenv.Shader(env_a, sharp, quality=SMALL, method=method, cache_dir=False)
+    for env, mat in [(env_a, cook), (env_b, lambert), (env_b, cook), (env_a, sharp)]:
+        sh.shade(nrm, v)
+        sh.set_environment(env)
+        sh.set_material(mat)
+        fresh = wenv.Shader(env, mat, quality=SMALL, method=method, cache_dir=False).shade(nrm, v)
+        assert np.array_equal(sh.shade(nrm, v), fresh)

