@@ -415,8 +415,16 @@ def camera_view(scene):
     return View.from_camera_matrix(np.array(cam.matrix_world), perspective)
 
 
-def region_view(region_3d):
-    return View.from_view_matrix(np.array(region_3d.view_matrix), region_3d.is_perspective)
+def region_view(region_3d, scene):
+    """The view of a 3D viewport.  Built from its rotation, pivot and distance rather than
+    view_matrix, which Blender refreshes only when the viewport redraws."""
+    if region_3d.view_perspective == "CAMERA":
+        return camera_view(scene)
+    rot = np.array(region_3d.view_rotation.to_matrix(), np.float64)  # view -> world
+    m = np.eye(4)
+    m[:3, :3] = rot
+    m[:3, 3] = np.array(region_3d.view_location, np.float64) + rot[:, 2] * region_3d.view_distance
+    return View.from_camera_matrix(m, region_3d.view_perspective == "PERSP")
 
 
 def find_region_3d(context):
@@ -471,6 +479,9 @@ def read_mesh(obj, depsgraph):
         mesh = base
         note = f"'{obj.name}': modifiers change the topology; shaded the base mesh (its colours are interpolated)"
     nv, nl, npoly = len(mesh.vertices), len(mesh.loops), len(mesh.polygons)
+    if nv == 0:
+        return MeshData("POINT", np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32),
+                        np.zeros(0, np.int32), note)
     # Positions live in the "position" attribute; foreach_get on it is one memcpy-like pass.
     pos = _read(mesh.attributes["position"].data, "vector", nv, 3)
     slots_face = _read(mesh.polygons, "material_index", npoly, 1, np.int32) if npoly else np.zeros(0, np.int32)

@@ -78,7 +78,7 @@ class LiveSession:
         rv3d = core.find_region_3d(context)
         if rv3d is None:
             raise core.SetupError("No 3D viewport to take the view from")
-        return core.region_view(rv3d)
+        return core.region_view(rv3d, context.scene)
 
     def signature(self, context, view):
         scene = context.scene
@@ -96,6 +96,7 @@ class LiveSession:
     def tick(self, context):
         """Re-shades if anything changed; returns True if it shaded.  Set-up errors are kept in
         `last_error` (shown in the panel) rather than raised, so the session keeps running."""
+        depsgraph = context.evaluated_depsgraph_get()  # brings matrix_world etc. up to date
         try:
             view = self.view(context)
         except core.SetupError as exc:
@@ -107,7 +108,7 @@ class LiveSession:
         self.last_signature = sig
         scene = context.scene
         try:
-            core.shade_objects(scene, context.evaluated_depsgraph_get(), self.objects(scene), view,
+            core.shade_objects(scene, depsgraph, self.objects(scene), view,
                                context.blend_data.images)
         except core.SetupError as exc:
             self.last_error = str(exc)

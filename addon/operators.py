@@ -94,7 +94,7 @@ def resolve_view(context, source, view_matrix, perspective):
     rv3d = core.find_region_3d(context)
     if rv3d is None:
         raise core.SetupError("No 3D viewport to take the view from: use the scene camera")
-    return core.region_view(rv3d)
+    return core.region_view(rv3d, context.scene)
 
 
 class WENV_OT_shade(_Precomputing, bpy.types.Operator):
