@@ -482,33 +482,44 @@ def read_mesh(obj, depsgraph):
     if nv == 0:
         return MeshData("POINT", np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32),
                         np.zeros(0, np.int32), note)
-    # Positions live in the "position" attribute; foreach_get on it is one memcpy-like pass.
+    # Generic attributes copy in one memcpy-like pass; the older per-element collections
+    # (mesh.loops, mesh.polygons) go through RNA item by item, 10-500x slower on large meshes.
     pos = _read(mesh.attributes["position"].data, "vector", nv, 3)
-    slots_face = _read(mesh.polygons, "material_index", npoly, 1, np.int32) if npoly else np.zeros(0, np.int32)
+    mat_attr = mesh.attributes.get("material_index")
+    if mat_attr is not None and mat_attr.domain == "FACE" and npoly:
+        slots_face = _read(mat_attr.data, "value", npoly, 1, np.int32)
+    else:
+        slots_face = np.zeros(npoly, np.int32)
     multi = npoly > 0 and len(obj.material_slots) > 1 and slots_face.min() != slots_face.max()
     if mesh.normals_domain == "POINT" and not multi:
         nrm = _read(mesh.vertex_normals, "vector", nv, 3)
         domain = "POINT"
-        slots = np.zeros(nv, np.int32) if not npoly else np.full(nv, slots_face[0], np.int32)
+        slots = np.full(nv, slots_face[0] if npoly else 0, np.int32)
     else:
         # Flat or split normals (or several materials): one value per face corner.
-        corner_vert = _read(mesh.loops, "vertex_index", nl, 1, np.int32)
+        corner_attr = mesh.attributes.get(".corner_vert")
+        if corner_attr is not None:
+            corner_vert = _read(corner_attr.data, "value", nl, 1, np.int32)
+        else:
+            corner_vert = _read(mesh.loops, "vertex_index", nl, 1, np.int32)
         nrm = _read(mesh.corner_normals, "vector", nl, 3)
         pos = pos[corner_vert]
-        totals = _read(mesh.polygons, "loop_total", npoly, 1, np.int32)
-        slots = np.repeat(slots_face, totals)
+        if multi:
+            starts = _read(mesh.polygons, "loop_start", npoly, 1, np.int32)
+            slots = np.repeat(slots_face, np.diff(starts, append=nl))
+        else:
+            slots = np.full(nl, slots_face[0] if npoly else 0, np.int32)
         domain = "CORNER"
-    m = np.array(ob_eval.matrix_world, np.float32)
-    pos = pos @ m[:3, :3].T + m[:3, 3]
-    nmat = np.linalg.inv(m[:3, :3].astype(np.float64)).T.astype(np.float32)
-    nrm = nrm @ nmat.T
-    length = np.linalg.norm(nrm, axis=1)
-    bad = ~(length > 1e-20)
-    length[bad] = 1.0
-    nrm /= length[:, None]
-    nrm[bad] = (0.0, 0.0, 1.0)  # degenerate faces: any direction, they have no area to show
-    return MeshData(domain, np.ascontiguousarray(pos, np.float32), np.ascontiguousarray(nrm, np.float32),
-                    slots, note)
+    m = np.array(ob_eval.matrix_world, np.float64)
+    world_pos = np.matmul(pos, m[:3, :3].T.astype(np.float32))
+    world_pos += m[:3, 3].astype(np.float32)
+    # Normals by the inverse transpose; the core normalises them, so no unit length is needed here.
+    # It does refuse zero ones, which degenerate faces have: any direction will do for those.
+    world_nrm = np.matmul(nrm, np.linalg.inv(m[:3, :3]).astype(np.float32))
+    zero = np.einsum("ij,ij->i", world_nrm, world_nrm) < 1e-30
+    if zero.any():
+        world_nrm[zero] = (0.0, 0.0, 1.0)
+    return MeshData(domain, world_pos, world_nrm, slots, note)
 
 
 def write_colors(mesh, domain, rgb):
