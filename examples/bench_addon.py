@@ -111,6 +111,7 @@ def main():
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--levels", type=int, nargs="+", default=[3, 4],
                     help="Subdivision levels of Suzanne (3: 31.5k vertices, 4: 126k)")
+    ap.add_argument("--json", default=os.path.join(OUT, "bench_addon.json"))
     args = ap.parse_args()
     wenv.set_num_threads(args.threads)
     addon.register()
@@ -121,8 +122,8 @@ def main():
         m = r["median_ms"]
         print(f"{r['vertices']:>9} {m['read']:7.2f} {m['shade']:7.2f} {m['write']:7.2f} {m['total']:7.2f} "
               f"{m['operator']:9.2f}")
-    os.makedirs(OUT, exist_ok=True)
-    path = os.path.join(OUT, "bench_addon.json")
+    path = args.json
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     with open(path, "w") as fp:
         json.dump({"quality": args.quality, "threads": args.threads, "repeats": args.repeats, "results": rows},
                   fp, indent=2)
