@@ -432,6 +432,9 @@ def find_region_3d(context):
     rv3d = getattr(context, "region_data", None)
     if rv3d is not None and hasattr(rv3d, "view_matrix"):
         return rv3d
+    space = getattr(context, "space_data", None)  # the sidebar's region has no region_data
+    if space is not None and space.type == "VIEW_3D" and space.region_3d is not None:
+        return space.region_3d
     screens = [context.screen] if getattr(context, "screen", None) else []
     screens += [w.screen for w in context.window_manager.windows]
     for screen in screens:
@@ -692,13 +695,17 @@ def shade_objects(scene, depsgraph, objects, view, images, progress=None):
     st = scene.wenv
     spec = world_spec(scene.world)
     quality = quality_value(st.quality)
-    meshes = [o for o in objects if o.type == "MESH"]
     notes = []
+    editing = [o.name for o in objects if o.type == "MESH" and o.mode == "EDIT"]
+    if editing:
+        notes.append("skipped meshes in Edit Mode (leave it to shade them): " + ", ".join(editing))
+    meshes = [o for o in objects if o.type == "MESH" and o.mode != "EDIT"]
     skipped = [o.name for o in objects if o.type != "MESH"]
     if skipped:
         notes.append("skipped objects that are not meshes: " + ", ".join(skipped))
     if not meshes:
-        raise SetupError("No mesh objects to shade: select at least one mesh")
+        raise SetupError("Leave Edit Mode to shade" if editing else
+                         "No mesh objects to shade: select at least one mesh")
     shaders.prepare(quality, spec, images, progress)
     done = []
     for obj in meshes:

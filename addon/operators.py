@@ -189,7 +189,8 @@ class WENV_OT_live(_Precomputing, bpy.types.Operator):
         return {"RUNNING_MODAL"}
 
     def execute(self, context):
-        self.report({"ERROR"}, "Live mode runs in the 3D viewport (invoke it); scripts call wenv.shade")
+        self.report({"ERROR"}, "Live mode is interactive: invoke it (bpy.ops.wenv.live('INVOKE_DEFAULT') in a "
+                                "Blender session); scripts call wenv.shade")
         return {"CANCELLED"}
 
     def _stop(self, context):

@@ -689,3 +689,88 @@ def test_save_reload_reshade(scene, tmp_path):
     obj.data.color_attributes.remove(obj.data.color_attributes[ATTR])
     assert shade_op() == {"FINISHED"}
     np.testing.assert_allclose(attribute(obj)[1], before, rtol=1e-5, atol=1e-6)
+
+
+# ---------------------------------------------------------------------------------------------
+# Panels: drawn into a recording layout (headless Blender draws no UI)
+
+
+class RecordingLayout:
+    """Stands in for bpy.types.UILayout: records labels, props and operators, checks that every
+    property and operator drawn exists."""
+
+    def __init__(self, log):
+        self.log = log
+
+    def _child(self, *args, **kwargs):
+        return RecordingLayout(self.log)
+
+    row = column = box = split = _child
+
+    def label(self, text="", icon="NONE"):
+        self.log.append(("label", text, icon))
+
+    def prop(self, data, name, **kwargs):
+        assert name in data.bl_rna.properties, name
+        self.log.append(("prop", name))
+
+    def operator(self, idname, **kwargs):
+        group, name = idname.split(".")
+        assert hasattr(getattr(bpy.ops, group), name), idname
+        self.log.append(("operator", idname))
+
+    def template_list(self, list_type, list_id, data, propname, active_data, active_propname, **kwargs):
+        assert hasattr(bpy.types, list_type) and propname in data.bl_rna.properties
+        self.log.append(("list", propname))
+
+    def separator(self, **kwargs):
+        pass
+
+
+def draw_panel(panel_cls):
+    log = []
+
+    class Host:  # stands in for the panel instance: draw() only uses self.layout
+        layout = RecordingLayout(log)
+    assert panel_cls.poll(bpy.context) if hasattr(panel_cls, "poll") else True
+    panel_cls.draw(Host(), bpy.context)
+    return log
+
+
+def test_panels_draw(scene):
+    from addon import ui
+    cube = bpy.data.objects["Cube"]
+    select_only(cube)
+    mat = set_material(cube, lobes=((0.002, 1.5, "BECKMANN"),))
+    cube.active_material = mat
+    shading = draw_panel(ui.WENV_PT_shading)
+    assert ("operator", "wenv.shade") in shading and ("operator", "wenv.live") in shading
+    world = [l for l in shading if l[0] == "label" and l[1].startswith("World: ")]
+    assert world and "constant" in world[0][1]
+
+    assert ("list", "lobes") in draw_panel(ui.WENV_PT_material)
+
+    gloss = draw_panel(ui.WENV_PT_gloss)
+    readings = [l[1] for l in gloss if l[0] == "label" and l[1].endswith(" GU")]
+    assert readings == [f"{mat.wenv.gloss_20:.2f} GU", f"{mat.wenv.gloss_60:.2f} GU", f"{mat.wenv.gloss_85:.2f} GU"]
+    marks = [l for l in gloss if l[0] == "label" and l[2] == "CHECKMARK"]
+    assert mat.wenv.gloss_60 > 70 and len(marks) == 1  # a high-gloss material: the 20 degree reading
+    assert gloss.index(marks[0]) == gloss.index(("label", readings[0], "NONE")) + 1
+    assert ("operator", "wenv.fit_roughness") in gloss
+
+    scene.world = None
+    errors = [l for l in draw_panel(ui.WENV_PT_shading) if l[0] == "label" and l[2] == "ERROR"]
+    assert errors and "no World" in errors[0][1]
+
+
+def test_edit_mode_is_refused(scene):
+    cube = bpy.data.objects["Cube"]
+    select_only(cube)
+    bpy.ops.object.mode_set(mode="EDIT")
+    try:
+        with pytest.raises(RuntimeError, match="Leave Edit Mode"):
+            shade_op(view="CAMERA")
+    finally:
+        bpy.ops.object.mode_set(mode="OBJECT")
+    assert ATTR not in cube.data.color_attributes
+    assert shade_op(view="CAMERA") == {"FINISHED"}
