@@ -632,11 +632,11 @@ class ShaderCache:
             self._env_base[spec.key] = base
         return base.with_transform(rotation=spec.rotation, strength=spec.strength)
 
-    def prepare(self, quality, spec, images, progress=None):
-        shader = self.get(quality, progress)
-        if self._env_sig.get(quality) != spec.signature:
-            shader.set_environment(self.environment(spec, images))
-            self._env_sig[quality] = spec.signature
+    def use_environment(self, quality, signature, env):
+        shader = self._shaders[quality]
+        if self._env_sig.get(quality) != signature:
+            shader.set_environment(env)
+            self._env_sig[quality] = signature
         return shader
 
     def use_material(self, quality, key):
@@ -656,42 +656,71 @@ def shade_arrays(shader, data, view):
     return shader.shade(data.normals, view.direction)
 
 
-def shade_object(obj, depsgraph, view, quality, slot_keys, tone=None, l_max=1.0):
-    """Shades one mesh object; returns (count, note).  `slot_keys[i]` is the material_key of slot i."""
-    data = read_mesh(obj, depsgraph)
-    if data.count == 0:
-        return 0, f"'{obj.name}' has no vertices"
-    rgb = np.empty((data.count, 3), np.float32)
-    keys = slot_keys or [("default",)]
-    slots = np.clip(data.slots, 0, len(keys) - 1)
-    for s in np.unique(slots):
-        key = keys[s]
-        shader = shaders.use_material(quality, key)
-        sel = slots == s
-        if sel.all():
-            rgb[:] = shade_arrays(shader, data, view)
-        else:
-            part = MeshData(data.domain, np.ascontiguousarray(data.positions[sel]),
-                            np.ascontiguousarray(data.normals[sel]), None)
-            rgb[sel] = shade_arrays(shader, part, view)
-    if tone == "LOG":
-        rgb = tone_map(rgb, l_max)
-    write_colors(obj.data, data.domain, rgb)
-    return data.count, data.note
-
-
 def slot_material_keys(obj):
     keys = []
     for slot in obj.material_slots:
         mat = slot.material
         ensure_material_settings(mat)
         keys.append(material_key(mat.wenv if mat is not None else None))
-    return keys
+    return keys or [("default",)]
 
 
-def shade_objects(scene, depsgraph, objects, view, images, progress=None):
-    """Shades every mesh in `objects` for `view` with the scene's wenv settings.  Returns
-    (shaded names, notes).  Raises SetupError for a set-up that cannot be shaded."""
+class ShadingPlan:
+    """One shading pass.  `plan_shading` fills it from Blender data on the main thread (World
+    pixels, meshes as world-space arrays, material values); `compute` touches no Blender data, so
+    it may run on a worker thread (the live mode does, the core releases the GIL); `apply` writes
+    the colours back on the main thread, by object name."""
+
+    def __init__(self, quality, world, environment, view, tone, l_max):
+        self.quality = quality
+        self.world = world
+        self.environment = environment
+        self.view = view
+        self.tone = tone
+        self.l_max = l_max
+        self.items = []  # (object name, MeshData, material keys per slot)
+        self.notes = []
+        self.results = None
+
+    def compute(self):
+        results = []
+        with shaders.lock:
+            shaders.use_environment(self.quality, self.world.signature, self.environment)
+            for name, data, keys in self.items:
+                rgb = np.empty((data.count, 3), np.float32)
+                slots = np.clip(data.slots, 0, len(keys) - 1)
+                for s in np.unique(slots):
+                    shader = shaders.use_material(self.quality, keys[s])
+                    sel = slots == s
+                    if sel.all():
+                        rgb[:] = shade_arrays(shader, data, self.view)
+                    else:
+                        part = MeshData(data.domain, np.ascontiguousarray(data.positions[sel]),
+                                        np.ascontiguousarray(data.normals[sel]), None)
+                        rgb[sel] = shade_arrays(shader, part, self.view)
+                if self.tone == "LOG":
+                    rgb = tone_map(rgb, self.l_max)
+                results.append((name, data.domain, rgb))
+        self.results = results
+
+    def apply(self, objects):
+        """Writes the results into the meshes of `objects` (bpy.data.objects); an object deleted or
+        edited since plan_shading is skipped.  Returns the names written."""
+        done = []
+        for name, domain, rgb in self.results:
+            obj = objects.get(name)
+            if obj is None or obj.type != "MESH":
+                continue
+            size = len(obj.data.vertices) if domain == "POINT" else len(obj.data.loops)
+            if size == len(rgb):
+                write_colors(obj.data, domain, rgb)
+                done.append(name)
+        return done
+
+
+def plan_shading(scene, depsgraph, objects, view, images, progress=None):
+    """Reads everything a pass over `objects` needs (main thread); builds the scene quality's
+    shader first if it is missing.  Raises SetupError for a set-up that cannot be shaded."""
     st = scene.wenv
     spec = world_spec(scene.world)
     quality = quality_value(st.quality)
@@ -706,16 +735,26 @@ def shade_objects(scene, depsgraph, objects, view, images, progress=None):
     if not meshes:
         raise SetupError("Leave Edit Mode to shade" if editing else
                          "No mesh objects to shade: select at least one mesh")
-    shaders.prepare(quality, spec, images, progress)
-    done = []
+    plan = ShadingPlan(quality, spec, shaders.environment(spec, images), view, st.tone_mapping, st.max_luminance)
+    plan.notes = notes
     for obj in meshes:
-        n, note = shade_object(obj, depsgraph, view, quality, slot_material_keys(obj),
-                               tone=st.tone_mapping, l_max=st.max_luminance)
-        if note:
-            notes.append(note)
-        if n:
-            done.append(obj.name)
-    return done, notes
+        data = read_mesh(obj, depsgraph)
+        if data.note:
+            notes.append(data.note)
+        if data.count == 0:
+            notes.append(f"'{obj.name}' has no vertices")
+            continue
+        plan.items.append((obj.name, data, slot_material_keys(obj)))
+    shaders.get(quality, progress)
+    return plan
+
+
+def shade_objects(scene, depsgraph, objects, view, blend_data, progress=None):
+    """Shades every mesh in `objects` for `view` with the scene's wenv settings, synchronously.
+    Returns (shaded names, notes)."""
+    plan = plan_shading(scene, depsgraph, objects, view, blend_data.images, progress)
+    plan.compute()
+    return plan.apply(blend_data.objects), plan.notes
 
 
 def shaded_objects(scene):

@@ -17,8 +17,7 @@ def frame_change_post(scene, depsgraph=None):
         return
     try:
         view = core.camera_view(scene)
-        core.shade_objects(scene, depsgraph or bpy.context.evaluated_depsgraph_get(), objects, view,
-                           bpy.data.images)
+        core.shade_objects(scene, depsgraph or bpy.context.evaluated_depsgraph_get(), objects, view, bpy.data)
         _last_error["message"] = None
     except core.SetupError as exc:
         # Printed once per distinct problem: a frame handler has no operator to report through.

@@ -60,13 +60,18 @@ def _matrix_tuple(m):
 
 class LiveSession:
     """Re-shades a fixed set of objects (by name) whenever the view, their transforms, the World or
-    their materials change.  `tick()` is cheap when nothing changed: it compares a signature."""
+    their materials change.  `tick()` is cheap when nothing changed (it compares a signature);
+    when something did, it reads the meshes and hands the shading to a worker thread, and a later
+    tick writes the colours back, so the UI keeps running while the core shades."""
 
     def __init__(self, object_names):
         self.object_names = list(object_names)
         self.last_signature = None
         self.last_error = None
         self.shades = 0
+        self._plan = None
+        self._worker = None
+        self._error = None
 
     def objects(self, scene):
         return [scene.objects[n] for n in self.object_names if n in scene.objects]
@@ -78,7 +83,7 @@ class LiveSession:
         rv3d = core.find_region_3d(context)
         if rv3d is None:
             raise core.SetupError("No 3D viewport to take the view from")
-        return core.region_view(rv3d, context.scene)
+        return core.region_view(rv3d, scene)
 
     def signature(self, context, view):
         scene = context.scene
@@ -93,9 +98,37 @@ class LiveSession:
             objs.append((obj.name, _matrix_tuple(obj.matrix_world), len(obj.data.vertices), mats))
         return (view.signature, world, tuple(objs), st.quality, st.tone_mapping, st.max_luminance)
 
+    @property
+    def busy(self):
+        return self._worker is not None and self._worker.is_alive()
+
+    def wait(self, timeout=None):
+        if self._worker is not None:
+            self._worker.join(timeout)
+        return not self.busy
+
+    def _compute(self):
+        try:
+            self._plan.compute()
+        except Exception as exc:  # reported on the main thread by the next tick
+            self._error = exc
+
     def tick(self, context):
-        """Re-shades if anything changed; returns True if it shaded.  Set-up errors are kept in
-        `last_error` (shown in the panel) rather than raised, so the session keeps running."""
+        """Main thread, every timer event.  Returns True when it wrote new colours.  Set-up errors
+        are kept in `last_error` (shown in the panel) rather than raised, so the session keeps
+        running and picks up again once the set-up is fixed."""
+        if self._worker is not None:
+            if self._worker.is_alive():
+                return False
+            plan, error = self._plan, self._error
+            self._plan = self._worker = self._error = None
+            if error is not None:
+                self.last_error = str(error)
+                return False
+            written = plan.apply(context.blend_data.objects)
+            self.last_error = None
+            self.shades += bool(written)
+            return bool(written)
         depsgraph = context.evaluated_depsgraph_get()  # brings matrix_world etc. up to date
         try:
             view = self.view(context)
@@ -108,14 +141,13 @@ class LiveSession:
         self.last_signature = sig
         scene = context.scene
         try:
-            core.shade_objects(scene, depsgraph, self.objects(scene), view,
-                               context.blend_data.images)
+            self._plan = core.plan_shading(scene, depsgraph, self.objects(scene), view, context.blend_data.images)
         except core.SetupError as exc:
             self.last_error = str(exc)
             return False
-        self.last_error = None
-        self.shades += 1
-        return True
+        self._worker = threading.Thread(target=self._compute, name="wenv-live", daemon=True)
+        self._worker.start()
+        return False
 
 
 class LiveState:
@@ -133,6 +165,8 @@ class LiveState:
     def reset(cls):
         if cls.job is not None:
             cls.job.cancel()
+        if cls.session is not None:
+            cls.session.wait()  # its worker holds the shader
         cls.session = None
         cls.job = None
         cls.stop_requested = False

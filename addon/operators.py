@@ -127,7 +127,7 @@ class WENV_OT_shade(_Precomputing, bpy.types.Operator):
         try:
             view = resolve_view(context, self.view, self.view_matrix, self.perspective)
             done, notes = core.shade_objects(scene, context.evaluated_depsgraph_get(), objects, view,
-                                             context.blend_data.images, progress)
+                                             context.blend_data, progress)
         except core.SetupError as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}

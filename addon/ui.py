@@ -13,6 +13,14 @@ class _SidebarPanel:
     bl_category = "wenv"
 
 
+def _property_column(layout):
+    """A column with labels left of the fields, as Blender's own property panels."""
+    col = layout.column()
+    col.use_property_split = True
+    col.use_property_decorate = False
+    return col
+
+
 def _active_material(context):
     obj = context.object
     return obj.active_material if obj is not None else None
@@ -24,9 +32,7 @@ class WENV_PT_shading(_SidebarPanel, bpy.types.Panel):
     def draw(self, context):
         layout = self.layout
         st = context.scene.wenv
-        col = layout.column()
-        col.use_property_split = True
-        col.use_property_decorate = False
+        col = _property_column(layout)
         col.prop(st, "quality")
         col.prop(st, "view_source")
         col.prop(st, "tone_mapping")
@@ -79,9 +85,7 @@ class WENV_PT_material(_SidebarPanel, bpy.types.Panel):
         st = mat.wenv
         layout.label(text=mat.name, icon="MATERIAL")
         layout.operator("wenv.from_principled", icon="NODE_MATERIAL")
-        col = layout.column()
-        col.use_property_split = True
-        col.use_property_decorate = False
+        col = _property_column(layout)
         col.prop(st, "model")
         col.prop(st, "diffuse")
         if st.model != "COOK_TORRANCE":
@@ -94,9 +98,7 @@ class WENV_PT_material(_SidebarPanel, bpy.types.Panel):
         ops.operator("wenv.lobe_remove", icon="REMOVE", text="")
         if 0 <= st.active_lobe < len(st.lobes):
             lobe = st.lobes[st.active_lobe]
-            col = layout.column()
-            col.use_property_split = True
-            col.use_property_decorate = False
+            col = _property_column(layout)
             col.prop(lobe, "specular")
             col.prop(lobe, "roughness")
             col.prop(lobe, "ior")
@@ -128,9 +130,7 @@ class WENV_PT_gloss(_SidebarPanel, bpy.types.Panel):
             # below -> 85°) is marked.
             row.label(text="instrument" if geometry == used else "", icon="CHECKMARK" if geometry == used else "BLANK1")
         layout.separator()
-        col = layout.column()
-        col.use_property_split = True
-        col.use_property_decorate = False
+        col = _property_column(layout)
         col.prop(st, "target_gloss")
         col.prop(st, "target_geometry")
         col.operator("wenv.fit_roughness", icon="DRIVER_DISTANCE")

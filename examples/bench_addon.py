@@ -71,10 +71,9 @@ def bench(levels, quality, repeats):
     scene, obj = build_scene(levels, quality)
     n = len(obj.data.vertices)
     dg = bpy.context.evaluated_depsgraph_get()
-    images = bpy.data.images
     t = time.perf_counter()
     view0 = core.View.from_view_matrix(np.array(orbit_view(0)), True)
-    core.shade_objects(scene, dg, [obj], view0, images)  # precompute/load matrices, lighting, material
+    core.shade_objects(scene, dg, [obj], view0, bpy.data)  # precompute/load matrices, lighting, material
     first = time.perf_counter() - t
     q = core.quality_value(scene.wenv.quality)
     keys = core.slot_material_keys(obj)

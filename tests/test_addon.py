@@ -560,14 +560,21 @@ def test_live_session_reshades_on_changes_only(scene):
     scene.wenv.view_source = "CAMERA"
     session = live.LiveSession([obj.name])
     ctx = bpy.context
-    assert session.tick(ctx) and ATTR in obj.data.color_attributes
-    assert not session.tick(ctx)  # nothing changed: no work
+
+    def settle():
+        """What the modal timer does over a few ticks: start the worker, then write its result."""
+        started = session.tick(ctx)
+        session.wait(60)
+        return (started, session.tick(ctx))
+
+    assert settle() == (False, True) and ATTR in obj.data.color_attributes
+    assert settle() == (False, False)  # nothing changed: no work
     first = attribute(obj)[1].copy()
 
     def changed(step):
         nonlocal first
         step()
-        shaded = session.tick(ctx)
+        shaded = settle() == (False, True)
         now = attribute(obj)[1].copy()
         moved = not np.allclose(now, first)
         first = now
@@ -578,14 +585,14 @@ def test_live_session_reshades_on_changes_only(scene):
     mapping_env = scene.world.node_tree.nodes["Background"].inputs["Strength"]
     assert changed(lambda: setattr(mapping_env, "default_value", 3.0))
     assert changed(lambda: setattr(scene.camera, "location", (5.0, -5.0, 3.0)))
-    assert not session.tick(ctx)
+    assert settle() == (False, False)
     assert session.shades == 5
     # A broken World is recorded, not raised; the session keeps going once it is fixed.
     env_node = scene.world.node_tree.nodes["Environment Texture"]
     image, env_node.image = env_node.image, None
-    assert not session.tick(ctx) and "has no image" in session.last_error
+    assert settle() == (False, False) and "has no image" in session.last_error
     env_node.image = image
-    assert session.tick(ctx), session.last_error
+    assert settle() == (False, True), session.last_error
     assert session.last_error is None
 
 
@@ -774,3 +781,16 @@ def test_edit_mode_is_refused(scene):
         bpy.ops.object.mode_set(mode="OBJECT")
     assert ATTR not in cube.data.color_attributes
     assert shade_op(view="CAMERA") == {"FINISHED"}
+
+
+def test_live_session_result_for_a_deleted_object_is_dropped(scene):
+    obj = add_monkey()
+    other = bpy.data.objects["Cube"]
+    scene.wenv.view_source = "CAMERA"
+    session = live.LiveSession([obj.name, other.name])
+    assert not session.tick(bpy.context)  # reads the meshes, starts the worker
+    bpy.data.objects.remove(obj)  # meanwhile the user deletes one of them
+    assert session.wait(60)
+    assert session.tick(bpy.context)
+    assert ATTR in other.data.color_attributes
+    assert "Suzanne" not in bpy.data.objects and session.last_error is None
