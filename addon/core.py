@@ -513,12 +513,14 @@ def read_mesh(obj, depsgraph):
         else:
             slots = np.full(nl, slots_face[0] if npoly else 0, np.int32)
         domain = "CORNER"
-    m = np.array(ob_eval.matrix_world, np.float64)
-    world_pos = np.matmul(pos, m[:3, :3].T.astype(np.float32))
-    world_pos += m[:3, 3].astype(np.float32)
+    mw = ob_eval.matrix_world
+    m = np.array(mw, np.float32)
+    world_pos = np.matmul(pos, m[:3, :3].T)
+    world_pos += m[:3, 3]
     # Normals by the inverse transpose; the core normalises them, so no unit length is needed here.
     # It does refuse zero ones, which degenerate faces have: any direction will do for those.
-    world_nrm = np.matmul(nrm, np.linalg.inv(m[:3, :3]).astype(np.float32))
+    # (mathutils inverts in place; numpy.linalg would wake BLAS threads that compete with OpenMP's.)
+    world_nrm = np.matmul(nrm, np.array(mw.to_3x3().inverted_safe(), np.float32))
     zero = np.einsum("ij,ij->i", world_nrm, world_nrm) < 1e-30
     if zero.any():
         world_nrm[zero] = (0.0, 0.0, 1.0)
@@ -538,7 +540,7 @@ def write_colors(mesh, domain, rgb):
     rgba[:, :3] = rgb
     attr.data.foreach_set("color", rgba.ravel())
     mesh.color_attributes.active_color = attr
-    mesh.update()
+    mesh.update_tag()  # redraw; unlike update(), keeps the cached normals
     return attr
 
 

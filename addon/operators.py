@@ -162,6 +162,13 @@ class WENV_OT_clear(bpy.types.Operator):
         return {"FINISHED"}
 
 
+def _redraw_viewports(context):
+    for window in context.window_manager.windows:
+        for area in window.screen.areas:
+            if area.type == "VIEW_3D":
+                area.tag_redraw()
+
+
 class WENV_OT_live(_Precomputing, bpy.types.Operator):
     """Re-shade the selected meshes whenever the view, their transforms, the World or the materials change (Esc or click again to stop)"""
     bl_idname = "wenv.live"
@@ -199,8 +206,7 @@ class WENV_OT_live(_Precomputing, bpy.types.Operator):
         if LiveState.job is not None:
             wm.progress_end()
         LiveState.reset()
-        for area in context.screen.areas if context.screen else ():
-            area.tag_redraw()
+        _redraw_viewports(context)
         return {"FINISHED"}
 
     def modal(self, context, event):
@@ -218,8 +224,10 @@ class WENV_OT_live(_Precomputing, bpy.types.Operator):
             if not job.install():
                 self.report({"WARNING"}, "Precomputation cancelled" if job.cancelled else f"Precomputation failed: {job.error}")
                 return self._stop(context)
-        if LiveState.session.tick(context) and context.scene.wenv.show_in_viewport:
-            core.show_attribute_colors(context.window_manager)
+        if LiveState.session.tick(context):
+            if context.scene.wenv.show_in_viewport:
+                core.show_attribute_colors(context.window_manager)
+            _redraw_viewports(context)
         return {"PASS_THROUGH"}
 
 

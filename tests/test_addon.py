@@ -217,6 +217,14 @@ def test_view_matrix_viewport_and_orthographic_camera(scene, perspective):
     obj.data.color_attributes.remove(obj.data.color_attributes[ATTR])
     assert shade_op(view="VIEWPORT") == {"FINISHED"}
     np.testing.assert_allclose(attribute(obj)[1], rgb, rtol=1e-5, atol=1e-6)
+    # What the viewport draws, the evaluated mesh, follows each new shading.
+    assert shade_op(view="MATRIX", view_matrix=view, perspective=not perspective) == {"FINISHED"}
+    evaluated = obj.evaluated_get(bpy.context.evaluated_depsgraph_get())
+    shown = evaluated.data.color_attributes[ATTR]
+    buf = np.empty(len(shown.data) * 4, np.float32)
+    shown.data.foreach_get("color", buf)
+    np.testing.assert_array_equal(buf.reshape(-1, 4)[:, :3], attribute(obj)[1])
+    assert not np.allclose(attribute(obj)[1], rgb)
 
     # An orthographic scene camera: one view direction, the camera's +Z.
     if not perspective:
