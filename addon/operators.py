@@ -44,8 +44,9 @@ class _Precomputing:
     def modal(self, context, event):
         if event.type == "ESC":
             self._job.cancel()
-        if event.type != "TIMER":
             return {"RUNNING_MODAL"}
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}  # the rest of Blender stays usable meanwhile
         context.window_manager.progress_update(self._job.fraction)
         if not self._job.done:
             return {"RUNNING_MODAL"}
@@ -169,7 +170,7 @@ def _redraw_viewports(context):
                 area.tag_redraw()
 
 
-class WENV_OT_live(_Precomputing, bpy.types.Operator):
+class WENV_OT_live(bpy.types.Operator):
     """Re-shade the selected meshes whenever the view, their transforms, the World or the materials change (Esc or click again to stop)"""
     bl_idname = "wenv.live"
     bl_label = "Live"

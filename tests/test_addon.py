@@ -644,7 +644,11 @@ def test_precompute_job_progress_and_cancel(tmp_path, monkeypatch):
     assert len(seen) >= 3 and 0 < seen[0] <= seen[-1] < 1
     done = live.PrecomputeJob("draft").start()
     assert done.wait(60) and done.error is None and done.result is not None
-    assert done.fraction == pytest.approx(1.0, abs=0.05)
+    assert done.fraction == pytest.approx(1.0, abs=0.05) and done.result.stats["cache"] == "built"
+    # The operator's synchronous path (scripts; the UI runs the job above in a modal timer).
+    core.shaders.clear()
+    bpy.context.scene.wenv.quality = "DRAFT"
+    assert bpy.ops.wenv.precompute() == {"FINISHED"} and core.shaders.has("draft")
 
 
 # ---------------------------------------------------------------------------------------------
