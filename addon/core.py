@@ -146,30 +146,23 @@ def _srgb_to_linear(x):
 
 def image_pixels(image):
     """RGBA float32 (H, W, 4), row 0 the top, linear: one bulk copy out of Blender."""
-    w, h = image.size
-    if w == 0 or h == 0 or not image.has_data and not _try_load(image):
+    w, h = image.size  # reading the size loads the image
+    if w == 0 or h == 0:
         where = image.filepath_raw or "(no file)"
         raise SetupError(f"World image '{image.name}' could not be loaded: {where}")
-    w, h = image.size
-    buf = np.empty(w * h * image.channels, np.float32)
+    channels = image.channels
+    buf = np.empty(w * h * channels, np.float32)
     image.pixels.foreach_get(buf)
-    px = buf.reshape(h, w, image.channels)[::-1]  # Blender stores the bottom row first
-    if image.channels != 4:
-        px = np.concatenate([px[..., :3], np.ones((h, w, 1), np.float32)], axis=2) if image.channels >= 3 \
-            else np.repeat(px[..., :1], 4, axis=2)
-    px = np.ascontiguousarray(px, np.float32)
-    # Byte images hand out their stored (display-encoded) values; the core wants linear radiance.
+    px = buf.reshape(h, w, channels)[::-1]  # Blender stores the bottom row first
+    rgba = np.ones((h, w, 4), np.float32)
+    if channels >= 3:
+        rgba[..., :3] = px[..., :3]
+    else:
+        rgba[..., :3] = px[..., :1]
+    # Float images come linear; byte images hand out their stored, display-encoded values.
     if not image.is_float and image.colorspace_settings.name in {"sRGB", "sRGB EOTF"}:
-        px[..., :3] = _srgb_to_linear(px[..., :3])
-    return px
-
-
-def _try_load(image):
-    try:
-        image.reload()
-    except RuntimeError:
-        return False
-    return image.has_data and image.size[0] > 0
+        rgba[..., :3] = _srgb_to_linear(rgba[..., :3])
+    return rgba
 
 
 def environment_from_spec(spec, images):

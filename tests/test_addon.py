@@ -806,3 +806,27 @@ def test_live_session_result_for_a_deleted_object_is_dropped(scene):
     assert session.tick(bpy.context)
     assert ATTR in other.data.color_attributes
     assert "Suzanne" not in bpy.data.objects and session.last_error is None
+
+
+def test_byte_image_is_linearised(scene, tmp_path):
+    _, top_first = pattern_image(w=32, h=16)
+    img = bpy.data.images.new("bytes", 32, 16, alpha=True, float_buffer=False)
+    img.pixels.foreach_set(np.clip(top_first[::-1], 0, 1).ravel())
+    path = str(tmp_path / "sky.png")
+    img.filepath_raw = path
+    img.file_format = "PNG"
+    img.save()
+    png = bpy.data.images.load(path)
+    assert not png.is_float and png.colorspace_settings.name == "sRGB"
+    env_world(scene, image=png)
+    obj = add_monkey()
+    mat = set_material(obj)
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    stored = np.empty(32 * 16 * 4, np.float32)
+    png.pixels.foreach_get(stored)
+    enc = stored.reshape(16, 32, 4)[::-1, :, :3]
+    lin = np.where(enc <= 0.04045, enc / 12.92, ((enc + 0.055) / 1.055) ** 2.4).astype(np.float32)
+    p, n = world_arrays(obj, corner=False)
+    want = core_shader(wenv.Environment(np.ascontiguousarray(lin)), wenv_material(mat)).shade_mesh(
+        p, n, tuple(scene.camera.matrix_world.translation))
+    np.testing.assert_allclose(attribute(obj)[1], want, rtol=1e-4, atol=1e-5)
