@@ -583,6 +583,7 @@ class ShaderCache:
         self._env_base = {}  # image key -> untransformed wenv.Environment (pixels read once)
         self._mat_key = {}
         self.lock = threading.Lock()
+        self.cache_dir = None  # None: wenv's default ($WENV_CACHE_DIR or ~/.cache/wenv)
 
     def clear(self):
         self._shaders.clear()
@@ -608,7 +609,8 @@ class ShaderCache:
         """Builds (or loads from the matrix cache) the shader for `quality`; `progress(fraction)`
         may return True to cancel (wenv.CancelledError)."""
         placeholder = wenv.Environment(np.ones((4, 8, 4), np.float32))
-        return wenv.Shader(placeholder, wenv.Lambert(DEFAULT_GREY), quality=quality, progress=progress)
+        return wenv.Shader(placeholder, wenv.Lambert(DEFAULT_GREY), quality=quality, progress=progress,
+                           cache_dir=self.cache_dir)
 
     def get(self, quality, progress=None):
         if quality not in self._shaders:

@@ -49,6 +49,7 @@ core = sys.modules[out["enabled"][0] + ".core"]
 out["gloss_core"] = list(wenv.gloss(core.material_from_key(core.material_key(mat.wenv)), (20, 60, 85)))
 out["lobes"] = [[l.roughness, l.ior, l.distribution] for l in mat.wenv.lobes]
 out["panels"] = sorted(n for n in dir(bpy.types) if n.startswith("WENV_PT_"))
+out["matrix_cache"] = sorted(os.listdir(bpy.utils.extension_path_user(out["enabled"][0], path="matrices")))
 
 module = out["enabled"][0]
 bpy.ops.preferences.addon_disable(module=module)
@@ -87,9 +88,8 @@ def test_extension_zip_layout(extension_zip):
 
 
 def test_install_enable_use_disable(extension_zip, tmp_path):
-    env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "blender"),
-               WENV_CACHE_DIR=str(tmp_path / "cache"), PYTHONNOUSERSITE="1")
-    (tmp_path / "cache").mkdir()
+    env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "blender"), PYTHONNOUSERSITE="1")
+    env.pop("WENV_CACHE_DIR", None)
     proc = subprocess.run([sys.executable, "-c", SCRIPT, ROOT, extension_zip], cwd=str(tmp_path),
                           capture_output=True, text=True, timeout=300, env=env)
     lines = [l for l in proc.stdout.splitlines() if l.startswith("RESULT ")]
@@ -114,4 +114,6 @@ def test_install_enable_use_disable(extension_zip, tmp_path):
     assert out["gloss"] == pytest.approx(out["gloss_core"], abs=1e-3)
     assert all(0 < g < 100 for g in out["gloss"])
     assert out["panels"] == ["WENV_PT_gloss", "WENV_PT_material", "WENV_PT_shading"]
+    # Precomputed matrices go to the extension's own user folder.
+    assert len(out["matrix_cache"]) == 1 and out["matrix_cache"][0].startswith("wenv-rot-")
     assert out["after_disable"] == {"types": [], "scene_prop": False, "material_prop": False, "handlers": []}
