@@ -830,3 +830,17 @@ def test_byte_image_is_linearised(scene, tmp_path):
     want = core_shader(wenv.Environment(np.ascontiguousarray(lin)), wenv_material(mat)).shade_mesh(
         p, n, tuple(scene.camera.matrix_world.translation))
     np.testing.assert_allclose(attribute(obj)[1], want, rtol=1e-4, atol=1e-5)
+
+
+def test_viewport_looking_through_the_camera_uses_the_camera(scene):
+    obj = add_monkey()
+    set_material(obj)
+    rv3d = next(a for a in bpy.context.screen.areas if a.type == "VIEW_3D").spaces.active.region_3d
+    rv3d.view_perspective = "CAMERA"
+    assert shade_op(view="VIEWPORT") == {"FINISHED"}
+    through_viewport = attribute(obj)[1].copy()
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    np.testing.assert_array_equal(attribute(obj)[1], through_viewport)
+    rv3d.view_perspective = "PERSP"
+    assert shade_op(view="VIEWPORT") == {"FINISHED"}
+    assert not np.allclose(attribute(obj)[1], through_viewport)
