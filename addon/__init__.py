@@ -1,0 +1,34 @@
+"""wenv for Blender: shade meshes under the World's HDR environment with view-dependent BRDFs
+(wavelet rotation) and read a material's gloss as an ISO 2813 glossmeter would.
+
+The numerical core is the `wenv` module (a wheel bundled with this extension)."""
+import os
+
+import bpy
+
+from . import core, handlers, operators, properties, ui
+
+_modules = (properties, operators, ui, handlers)
+
+
+def _matrix_cache_dir():
+    """Installed as an extension, precomputed matrices go to its user folder (Blender's rule for
+    files an extension writes); $WENV_CACHE_DIR wins, and a development copy uses wenv's default."""
+    if os.environ.get("WENV_CACHE_DIR"):
+        return None
+    try:
+        return bpy.utils.extension_path_user(__package__, path="matrices", create=True)
+    except ValueError:  # not loaded as an extension
+        return None
+
+
+def register():
+    for module in _modules:
+        module.register()
+    core.shaders.cache_dir = _matrix_cache_dir()
+
+
+def unregister():
+    for module in reversed(_modules):
+        module.unregister()
+    core.shaders.clear()

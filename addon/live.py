@@ -1,0 +1,173 @@
+"""Background precomputation and the live mode's change detection (no operators here: operators.py
+drives these from modal timers, tests drive them directly)."""
+import threading
+
+import wenv
+
+from . import core
+
+
+class PrecomputeJob:
+    """Builds a wenv.Shader on a worker thread (the core releases the GIL), reporting a fraction
+    and stopping when `cancel()` is called.  The main thread polls `done` and takes `result`."""
+
+    def __init__(self, quality):
+        self.quality = quality
+        self.fraction = 0.0
+        self.result = None
+        self.error = None
+        self.cancelled = False
+        self._cancel = threading.Event()
+        self._thread = threading.Thread(target=self._run, name=f"wenv-precompute-{quality}", daemon=True)
+
+    def start(self):
+        self._thread.start()
+        return self
+
+    def _progress(self, fraction):
+        self.fraction = fraction
+        return self._cancel.is_set()
+
+    def _run(self):
+        try:
+            self.result = core.shaders.build(self.quality, self._progress)
+        except wenv.CancelledError:
+            self.cancelled = True
+        except Exception as exc:  # reported on the main thread
+            self.error = exc
+
+    def cancel(self):
+        self._cancel.set()
+
+    @property
+    def done(self):
+        return not self._thread.is_alive()
+
+    def wait(self, timeout=None):
+        self._thread.join(timeout)
+        return self.done
+
+    def install(self):
+        """Main thread: puts the finished shader into the cache.  True if there was one."""
+        if self.result is not None and not core.shaders.has(self.quality):
+            core.shaders.add(self.quality, self.result)
+        return self.result is not None
+
+
+def _matrix_tuple(m):
+    return tuple(round(v, 7) for row in m for v in row)
+
+
+class LiveSession:
+    """Re-shades a fixed set of objects (by name) whenever the view, their transforms, the World or
+    their materials change.  `tick()` is cheap when nothing changed (it compares a signature);
+    when something did, it reads the meshes and hands the shading to a worker thread, and a later
+    tick writes the colours back, so the UI keeps running while the core shades."""
+
+    def __init__(self, object_names):
+        self.object_names = list(object_names)
+        self.last_signature = None
+        self.last_error = None
+        self.shades = 0
+        self._plan = None
+        self._worker = None
+        self._error = None
+
+    def objects(self, scene):
+        return [scene.objects[n] for n in self.object_names if n in scene.objects]
+
+    def view(self, context):
+        scene = context.scene
+        if scene.wenv.view_source == "CAMERA":
+            return core.camera_view(scene)
+        rv3d = core.find_region_3d(context)
+        if rv3d is None:
+            raise core.SetupError("No 3D viewport to take the view from")
+        return core.region_view(rv3d, scene)
+
+    def signature(self, context, view):
+        scene = context.scene
+        st = scene.wenv
+        try:
+            world = core.world_spec(scene.world).signature
+        except core.SetupError as exc:
+            world = ("error", str(exc))
+        objs = []
+        for obj in self.objects(scene):
+            mats = tuple(core.material_key(s.material.wenv if s.material else None) for s in obj.material_slots)
+            objs.append((obj.name, _matrix_tuple(obj.matrix_world), len(obj.data.vertices), mats))
+        return (view.signature, world, tuple(objs), st.quality, st.tone_mapping, st.max_luminance)
+
+    @property
+    def busy(self):
+        return self._worker is not None and self._worker.is_alive()
+
+    def wait(self, timeout=None):
+        if self._worker is not None:
+            self._worker.join(timeout)
+        return not self.busy
+
+    def _compute(self):
+        try:
+            self._plan.compute()
+        except Exception as exc:  # reported on the main thread by the next tick
+            self._error = exc
+
+    def tick(self, context):
+        """Main thread, every timer event.  Returns True when it wrote new colours.  Set-up errors
+        are kept in `last_error` (shown in the panel) rather than raised, so the session keeps
+        running and picks up again once the set-up is fixed."""
+        if self._worker is not None:
+            if self._worker.is_alive():
+                return False
+            plan, error = self._plan, self._error
+            self._plan = self._worker = self._error = None
+            if error is not None:
+                self.last_error = str(error)
+                return False
+            written = plan.apply(context.blend_data.objects)
+            self.last_error = None
+            self.shades += bool(written)
+            return bool(written)
+        depsgraph = context.evaluated_depsgraph_get()  # brings matrix_world etc. up to date
+        try:
+            view = self.view(context)
+        except core.SetupError as exc:
+            self.last_error = str(exc)
+            return False
+        sig = self.signature(context, view)
+        if sig == self.last_signature:
+            return False
+        self.last_signature = sig
+        scene = context.scene
+        try:
+            self._plan = core.plan_shading(scene, depsgraph, self.objects(scene), view, context.blend_data.images)
+        except core.SetupError as exc:
+            self.last_error = str(exc)
+            return False
+        self._worker = threading.Thread(target=self._compute, name="wenv-live", daemon=True)
+        self._worker.start()
+        return False
+
+
+class LiveState:
+    """The one live session of this Blender process (module-level: never stored in the .blend)."""
+
+    session = None
+    job = None
+    stop_requested = False
+
+    @classmethod
+    def running(cls):
+        return cls.session is not None
+
+    @classmethod
+    def reset(cls):
+        if cls.job is not None:
+            cls.job.cancel()
+        if cls.session is not None:
+            cls.session.wait()  # its worker holds the shader
+        cls.session = None
+        cls.job = None
+        cls.stop_requested = False
+

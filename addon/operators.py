@@ -1,0 +1,330 @@
+"""Operators: shade, precompute, live mode, material settings and the glossmeter's inverse."""
+import bpy
+import wenv
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty
+
+from . import core
+from .live import LiveSession, LiveState, PrecomputeJob
+
+IDENTITY = ((1.0, 0.0, 0.0, 0.0), (0.0, 1.0, 0.0, 0.0), (0.0, 0.0, 1.0, 0.0), (0.0, 0.0, 0.0, 1.0))
+
+
+def _quality(context):
+    return core.quality_value(context.scene.wenv.quality)
+
+
+class _Precomputing:
+    """Mixin: in invoke, build a missing shader on a worker thread while a modal timer shows the
+    progress in Blender's progress indicator; Esc cancels."""
+
+    _job = None
+    _timer = None
+
+    def start_precompute(self, context):
+        wm = context.window_manager
+        self._job = PrecomputeJob(_quality(context)).start()
+        self._timer = wm.event_timer_add(0.1, window=context.window)
+        wm.progress_begin(0.0, 1.0)
+        wm.modal_handler_add(self)
+        return {"RUNNING_MODAL"}
+
+    def finish_precompute(self, context):
+        wm = context.window_manager
+        wm.event_timer_remove(self._timer)
+        wm.progress_end()
+        job, self._job = self._job, None
+        if job.error is not None:
+            self.report({"ERROR"}, f"Precomputation failed: {job.error}")
+            return False
+        if job.cancelled or not job.install():
+            self.report({"WARNING"}, "Precomputation cancelled")
+            return False
+        return True
+
+    def modal(self, context, event):
+        if event.type == "ESC":
+            self._job.cancel()
+            return {"RUNNING_MODAL"}
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}  # the rest of Blender stays usable meanwhile
+        context.window_manager.progress_update(self._job.fraction)
+        if not self._job.done:
+            return {"RUNNING_MODAL"}
+        if not self.finish_precompute(context):
+            return {"CANCELLED"}
+        return self.execute(context)
+
+
+def _progress_reporter(wm):
+    wm.progress_begin(0.0, 1.0)
+
+    def report(fraction):
+        wm.progress_update(fraction)
+        return False
+    return report
+
+
+class WENV_OT_precompute(_Precomputing, bpy.types.Operator):
+    """Precompute the rotation matrices of the scene's quality (loaded from the cache if built before)"""
+    bl_idname = "wenv.precompute"
+    bl_label = "Precompute"
+
+    def execute(self, context):
+        quality = _quality(context)
+        if not core.shaders.has(quality):
+            wm = context.window_manager
+            try:
+                core.shaders.get(quality, _progress_reporter(wm))
+            finally:
+                wm.progress_end()
+        return {"FINISHED"}
+
+    def invoke(self, context, event):
+        if core.shaders.has(_quality(context)):
+            return {"FINISHED"}
+        return self.start_precompute(context)
+
+
+def resolve_view(context, source, view_matrix, perspective):
+    if source == "SCENE":
+        source = context.scene.wenv.view_source
+    if source == "CAMERA":
+        return core.camera_view(context.scene)
+    if source == "MATRIX":
+        return core.View.from_view_matrix([list(r) for r in view_matrix], perspective)
+    rv3d = core.find_region_3d(context)
+    if rv3d is None:
+        raise core.SetupError("No 3D viewport to take the view from: use the scene camera")
+    return core.region_view(rv3d, context.scene)
+
+
+class WENV_OT_shade(_Precomputing, bpy.types.Operator):
+    """Shade the selected meshes under the World for the current view into the 'wenv_radiance' colour attribute"""
+    bl_idname = "wenv.shade"
+    bl_label = "Shade"
+    bl_options = {"REGISTER", "UNDO"}
+
+    view: EnumProperty(name="View", default="SCENE", items=[
+        ("SCENE", "Scene Setting", "As the scene's wenv View setting"),
+        ("VIEWPORT", "Viewport", "The active 3D viewport"),
+        ("CAMERA", "Camera", "The scene camera"),
+        ("MATRIX", "Matrix", "The View Matrix and Perspective given here")])
+    view_matrix: FloatVectorProperty(name="View Matrix", size=(4, 4), subtype="MATRIX", default=IDENTITY,
+                                     description="World to view matrix (as RegionView3D.view_matrix)")
+    perspective: BoolProperty(name="Perspective", default=True)
+    target: EnumProperty(name="Objects", default="SELECTED", items=[
+        ("SELECTED", "Selected", "The selected objects"),
+        ("SHADED", "Shaded", "Every mesh in the scene that was shaded before")])
+
+    @classmethod
+    def poll(cls, context):
+        return context.scene is not None
+
+    def execute(self, context):
+        scene = context.scene
+        objects = list(context.selected_objects) if self.target == "SELECTED" else core.shaded_objects(scene)
+        wm = context.window_manager
+        progress = None if core.shaders.has(_quality(context)) else _progress_reporter(wm)
+        try:
+            view = resolve_view(context, self.view, self.view_matrix, self.perspective)
+            done, notes = core.shade_objects(scene, context.evaluated_depsgraph_get(), objects, view,
+                                             context.blend_data, progress)
+        except core.SetupError as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        except wenv.CancelledError:
+            self.report({"WARNING"}, "Precomputation cancelled")
+            return {"CANCELLED"}
+        finally:
+            if progress is not None:
+                wm.progress_end()
+        for note in notes:
+            self.report({"WARNING"}, note)
+        if scene.wenv.show_in_viewport:
+            core.show_attribute_colors(wm)
+        self.report({"INFO"}, f"Shaded {len(done)} object(s)")
+        return {"FINISHED"}
+
+    def invoke(self, context, event):
+        if core.shaders.has(_quality(context)):
+            return self.execute(context)
+        return self.start_precompute(context)
+
+
+class WENV_OT_clear(bpy.types.Operator):
+    """Remove the add-on's colour attribute from the selected meshes"""
+    bl_idname = "wenv.clear"
+    bl_label = "Clear Shading"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def execute(self, context):
+        n = sum(core.remove_colors(o.data) for o in context.selected_objects if o.type == "MESH")
+        self.report({"INFO"}, f"Removed shading from {n} mesh(es)")
+        return {"FINISHED"}
+
+
+def _redraw_viewports(context):
+    for window in context.window_manager.windows:
+        for area in window.screen.areas:
+            if area.type == "VIEW_3D":
+                area.tag_redraw()
+
+
+class WENV_OT_live(bpy.types.Operator):
+    """Re-shade the selected meshes whenever the view, their transforms, the World or the materials change (Esc or click again to stop)"""
+    bl_idname = "wenv.live"
+    bl_label = "Live"
+
+    interval: FloatProperty(name="Interval", default=0.05, min=0.01, max=2.0,
+                            description="Seconds between checks for changes")
+
+    def invoke(self, context, event):
+        if LiveState.running():
+            LiveState.stop_requested = True  # the running modal sees it on its next tick
+            return {"FINISHED"}
+        names = [o.name for o in context.selected_objects if o.type == "MESH"]
+        if not names:
+            self.report({"ERROR"}, "Select at least one mesh for live shading")
+            return {"CANCELLED"}
+        LiveState.reset()
+        LiveState.session = LiveSession(names)
+        wm = context.window_manager
+        if not core.shaders.has(_quality(context)):
+            LiveState.job = PrecomputeJob(_quality(context)).start()
+            wm.progress_begin(0.0, 1.0)
+        self._timer = wm.event_timer_add(self.interval, window=context.window)
+        wm.modal_handler_add(self)
+        return {"RUNNING_MODAL"}
+
+    def execute(self, context):
+        self.report({"ERROR"}, "Live mode is interactive: invoke it (bpy.ops.wenv.live('INVOKE_DEFAULT') in a "
+                                "Blender session); scripts call wenv.shade")
+        return {"CANCELLED"}
+
+    def _stop(self, context):
+        wm = context.window_manager
+        wm.event_timer_remove(self._timer)
+        if LiveState.job is not None:
+            wm.progress_end()
+        LiveState.reset()
+        _redraw_viewports(context)
+        return {"FINISHED"}
+
+    def modal(self, context, event):
+        if event.type == "ESC" or LiveState.stop_requested or LiveState.session is None:
+            return self._stop(context)
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}
+        job = LiveState.job
+        if job is not None:
+            context.window_manager.progress_update(job.fraction)
+            if not job.done:
+                return {"PASS_THROUGH"}
+            context.window_manager.progress_end()
+            LiveState.job = None
+            if not job.install():
+                self.report({"WARNING"}, "Precomputation cancelled" if job.cancelled else f"Precomputation failed: {job.error}")
+                return self._stop(context)
+        if LiveState.session.tick(context):
+            if context.scene.wenv.show_in_viewport:
+                core.show_attribute_colors(context.window_manager)
+            _redraw_viewports(context)
+        return {"PASS_THROUGH"}
+
+
+def _active_material(context):
+    obj = context.object
+    return obj.active_material if obj is not None else None
+
+
+class _MaterialOperator:
+    @classmethod
+    def poll(cls, context):
+        return _active_material(context) is not None
+
+
+class WENV_OT_from_principled(_MaterialOperator, bpy.types.Operator):
+    """Fill the active material's wenv settings from its Principled BSDF"""
+    bl_idname = "wenv.from_principled"
+    bl_label = "From Principled BSDF"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def execute(self, context):
+        for w in core.fill_from_principled(_active_material(context)):
+            self.report({"WARNING"}, w)
+        return {"FINISHED"}
+
+
+class WENV_OT_lobe_add(_MaterialOperator, bpy.types.Operator):
+    """Add a Cook-Torrance lobe to the active material"""
+    bl_idname = "wenv.lobe_add"
+    bl_label = "Add Lobe"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def execute(self, context):
+        st = _active_material(context).wenv
+        st.lobes.add()
+        st.active_lobe = len(st.lobes) - 1
+        st.initialized = True
+        return {"FINISHED"}
+
+
+class WENV_OT_lobe_remove(_MaterialOperator, bpy.types.Operator):
+    """Remove the active lobe"""
+    bl_idname = "wenv.lobe_remove"
+    bl_label = "Remove Lobe"
+    bl_options = {"REGISTER", "UNDO"}
+
+    index: IntProperty(name="Index", default=-1, description="Lobe to remove (-1: the active one)")
+
+    def execute(self, context):
+        st = _active_material(context).wenv
+        i = st.active_lobe if self.index < 0 else self.index
+        if not 0 <= i < len(st.lobes):
+            self.report({"ERROR"}, f"No lobe {i}")
+            return {"CANCELLED"}
+        st.lobes.remove(i)
+        st.active_lobe = max(0, min(st.active_lobe, len(st.lobes) - 1))
+        st.initialized = True
+        return {"FINISHED"}
+
+
+class WENV_OT_fit_roughness(_MaterialOperator, bpy.types.Operator):
+    """Set the lobe roughness so the material reads the target gloss (one-lobe Cook-Torrance)"""
+    bl_idname = "wenv.fit_roughness"
+    bl_label = "Set Roughness for Target Gloss"
+    bl_options = {"REGISTER", "UNDO"}
+
+    target: FloatProperty(name="Target", default=-1.0, description="Gloss in GU (-1: the material's Target Gloss)")
+    geometry: EnumProperty(name="Geometry", default="MATERIAL", items=[
+        ("MATERIAL", "Material Setting", "The material's target geometry"),
+        ("20", "20°", ""), ("60", "60°", ""), ("85", "85°", "")])
+
+    def execute(self, context):
+        st = _active_material(context).wenv
+        target = st.target_gloss if self.target < 0 else self.target
+        geometry = int(st.target_geometry if self.geometry == "MATERIAL" else self.geometry)
+        try:
+            m = core.fit_roughness(st, target, geometry)
+        except core.SetupError as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        st.lobes[0].roughness = m
+        st.initialized = True
+        self.report({"INFO"}, f"Roughness {m:.5g} reads {target:g} GU at {geometry} degrees")
+        return {"FINISHED"}
+
+
+classes = (WENV_OT_precompute, WENV_OT_shade, WENV_OT_clear, WENV_OT_live, WENV_OT_from_principled,
+           WENV_OT_lobe_add, WENV_OT_lobe_remove, WENV_OT_fit_roughness)
+
+
+def register():
+    for cls in classes:
+        bpy.utils.register_class(cls)
+
+
+def unregister():
+    LiveState.reset()
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

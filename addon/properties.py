@@ -1,0 +1,94 @@
+"""Settings stored in the .blend: Scene.wenv (shading) and Material.wenv (reflectance model)."""
+import math
+
+import bpy
+from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProperty, FloatVectorProperty,
+                       IntProperty, PointerProperty)
+
+from . import core
+
+DISTRIBUTIONS = [("GGX", "GGX", "Trowbridge-Reitz / GGX, roughness = alpha (Blender's roughness squared)"),
+                 ("BECKMANN", "Beckmann", "Beckmann, roughness = RMS microfacet slope")]
+
+
+class WENV_LobeSettings(bpy.types.PropertyGroup):
+    specular: FloatVectorProperty(name="Specular", subtype="COLOR", size=3, min=0.0, soft_max=1.0,
+                                  default=(1.0, 1.0, 1.0), description="Colour scale of the lobe (times Fresnel)")
+    roughness: FloatProperty(name="Roughness", min=1e-6, max=10.0, soft_max=1.0, default=0.2, precision=4,
+                             description="Beckmann RMS slope or GGX alpha (alpha = Principled roughness squared)")
+    ior: FloatProperty(name="IOR", min=1.0001, max=10.0, soft_max=3.0, default=1.5, precision=3,
+                       description="Index of refraction of the lobe's Fresnel term")
+    distribution: EnumProperty(name="Distribution", items=DISTRIBUTIONS, default="GGX")
+
+
+def _gloss_getter(geometry):
+    def get(self):
+        r = core.gloss_readings(core.material_key(self))
+        return r[geometry] if isinstance(r, dict) else math.nan
+    return get
+
+
+class WENV_MaterialSettings(bpy.types.PropertyGroup):
+    model: EnumProperty(name="Model", default="COOK_TORRANCE", items=[
+        ("LAMBERT", "Lambert", "Ideal diffuse reflector"),
+        ("COOK_TORRANCE", "Cook-Torrance", "Diffuse plus microfacet lobes")])
+    diffuse: FloatVectorProperty(name="Diffuse", subtype="COLOR", size=3, min=0.0, max=1.0,
+                                 default=core.DEFAULT_GREY, description="Lambertian albedo")
+    lobes: CollectionProperty(type=WENV_LobeSettings, name="Lobes")
+    active_lobe: IntProperty(name="Active Lobe", default=0, min=0)
+    shadowing: EnumProperty(name="Shadowing", default="SMITH", items=[
+        ("SMITH", "Smith", "Height-correlated Smith shadowing-masking"),
+        ("VCAVITY", "V-cavity", "Cook and Torrance's original V-cavity term")])
+    initialized: BoolProperty(name="Initialized", default=False,
+                              description="Settings were set (otherwise the first shading fills them from "
+                                          "the Principled BSDF)")
+    # Read-only readings, computed from the settings above when read (memoised), so always current.
+    gloss_20: FloatProperty(name="Gloss 20", get=_gloss_getter(20), precision=2,
+                            description="Specular gloss at 20 degrees, GU (ISO 2813)")
+    gloss_60: FloatProperty(name="Gloss 60", get=_gloss_getter(60), precision=2,
+                            description="Specular gloss at 60 degrees, GU (ISO 2813)")
+    gloss_85: FloatProperty(name="Gloss 85", get=_gloss_getter(85), precision=2,
+                            description="Specular gloss at 85 degrees, GU (ISO 2813)")
+    target_gloss: FloatProperty(name="Target Gloss", default=50.0, min=0.0, soft_max=200.0, precision=2,
+                                description="Gloss, GU, that 'Set Roughness' aims for")
+    target_geometry: EnumProperty(name="Geometry", default="60", items=[
+        ("20", "20°", "High-gloss geometry"), ("60", "60°", "Universal geometry"),
+        ("85", "85°", "Low-gloss (sheen) geometry")])
+
+
+class WENV_SceneSettings(bpy.types.PropertyGroup):
+    quality: EnumProperty(name="Quality", default="DEFAULT", items=[
+        ("DRAFT", "Draft", "32x32 lighting map, 16x16 slices: fast to precompute"),
+        ("DEFAULT", "Default", "64x64 lighting map, 32x32 slices"),
+        ("HIGH", "High", "128x128 lighting map, 64x64 slices: slow to precompute, much memory")])
+    view_source: EnumProperty(name="View", default="VIEWPORT", items=[
+        ("VIEWPORT", "Viewport", "The active 3D viewport's view (perspective or orthographic)"),
+        ("CAMERA", "Camera", "The scene camera")])
+    tone_mapping: EnumProperty(name="Tone Mapping", default="NONE", items=[
+        ("NONE", "None", "Write linear radiance"),
+        ("LOG", "Logarithmic", "The thesis's global operator log(1 + L) / log(1 + Lmax), values in [0, 1]")])
+    max_luminance: FloatProperty(name="Max Luminance", default=10.0, min=1e-3, soft_max=1000.0,
+                                 description="Luminance that maps to white in logarithmic tone mapping")
+    show_in_viewport: BoolProperty(name="Show in Viewport", default=True,
+                                   description="Switch 3D viewports to flat solid shading with attribute colours "
+                                               "after shading")
+    shade_on_frame_change: BoolProperty(name="Shade on Frame Change", default=False,
+                                        description="Re-shade the shaded objects from the scene camera on every "
+                                                    "frame change (animation playback and rendering)")
+
+
+classes = (WENV_LobeSettings, WENV_MaterialSettings, WENV_SceneSettings)
+
+
+def register():
+    for cls in classes:
+        bpy.utils.register_class(cls)
+    bpy.types.Scene.wenv = PointerProperty(type=WENV_SceneSettings)
+    bpy.types.Material.wenv = PointerProperty(type=WENV_MaterialSettings)
+
+
+def unregister():
+    del bpy.types.Material.wenv
+    del bpy.types.Scene.wenv
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

@@ -1,0 +1,151 @@
+"""Sidebar panels in the 3D viewport (N panel, tab "wenv")."""
+import math
+
+import bpy
+
+from . import core, handlers
+from .live import LiveState
+
+
+class _SidebarPanel:
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "wenv"
+
+
+def _property_column(layout):
+    """A column with labels left of the fields, as Blender's own property panels."""
+    col = layout.column()
+    col.use_property_split = True
+    col.use_property_decorate = False
+    return col
+
+
+def _active_material(context):
+    obj = context.object
+    return obj.active_material if obj is not None else None
+
+
+class WENV_PT_shading(_SidebarPanel, bpy.types.Panel):
+    bl_label = "Environment Shading"
+
+    def draw(self, context):
+        layout = self.layout
+        st = context.scene.wenv
+        col = _property_column(layout)
+        col.prop(st, "quality")
+        col.prop(st, "view_source")
+        col.prop(st, "tone_mapping")
+        sub = col.column()
+        sub.active = st.tone_mapping == "LOG"
+        sub.prop(st, "max_luminance")
+        col.prop(st, "show_in_viewport")
+        col.prop(st, "shade_on_frame_change")
+
+        row = layout.row(align=True)
+        row.scale_y = 1.3
+        row.operator("wenv.shade", icon="SHADING_RENDERED")
+        live = LiveState.running()
+        row.operator("wenv.live", text="Stop Live" if live else "Live", icon="PAUSE" if live else "PLAY",
+                     depress=live)
+        layout.operator("wenv.clear", icon="X")
+
+        box = layout.box()
+        try:
+            box.label(text="World: " + core.world_spec(context.scene.world).describe(), icon="WORLD")
+        except core.SetupError as exc:
+            box.alert = True
+            box.label(text=str(exc), icon="ERROR")
+        problems = [p for p in ((LiveState.session.last_error if live else None), handlers.last_error()) if p]
+        for problem in problems:
+            row = layout.row()
+            row.alert = True
+            row.label(text=problem, icon="ERROR")
+        if not core.shaders.has(core.quality_value(st.quality)):
+            layout.label(text="Matrices are precomputed on first use", icon="INFO")
+
+
+class WENV_UL_lobes(bpy.types.UIList):
+    def draw_item(self, context, layout, data, item, icon, active_data, active_propname, index):
+        row = layout.row(align=True)
+        row.label(text=f"Lobe {index + 1}")
+        row.label(text=f"{item.distribution.title()} {item.roughness:.4g}, IOR {item.ior:.3g}")
+
+
+class WENV_PT_material(_SidebarPanel, bpy.types.Panel):
+    bl_label = "Material"
+
+    @classmethod
+    def poll(cls, context):
+        return _active_material(context) is not None
+
+    def draw(self, context):
+        layout = self.layout
+        mat = _active_material(context)
+        st = mat.wenv
+        layout.label(text=mat.name, icon="MATERIAL")
+        layout.operator("wenv.from_principled", icon="NODE_MATERIAL")
+        col = _property_column(layout)
+        col.prop(st, "model")
+        col.prop(st, "diffuse")
+        if st.model != "COOK_TORRANCE":
+            return
+        col.prop(st, "shadowing")
+        row = layout.row()
+        row.template_list("WENV_UL_lobes", "", st, "lobes", st, "active_lobe", rows=2)
+        ops = row.column(align=True)
+        ops.operator("wenv.lobe_add", icon="ADD", text="")
+        ops.operator("wenv.lobe_remove", icon="REMOVE", text="")
+        if 0 <= st.active_lobe < len(st.lobes):
+            lobe = st.lobes[st.active_lobe]
+            col = _property_column(layout)
+            col.prop(lobe, "specular")
+            col.prop(lobe, "roughness")
+            col.prop(lobe, "ior")
+            col.prop(lobe, "distribution")
+
+
+class WENV_PT_gloss(_SidebarPanel, bpy.types.Panel):
+    bl_label = "Glossmeter"
+
+    @classmethod
+    def poll(cls, context):
+        return _active_material(context) is not None
+
+    def draw(self, context):
+        layout = self.layout
+        st = _active_material(context).wenv
+        readings = core.gloss_readings(core.material_key(st))
+        if isinstance(readings, str):
+            layout.alert = True
+            layout.label(text=readings, icon="ERROR")
+            return
+        used = core.instrument_geometry(readings[60])
+        col = layout.column(align=True)
+        for geometry in core.GEOMETRIES:
+            row = col.row()
+            row.label(text=f"{geometry}°")
+            row.label(text=f"{readings[geometry]:.2f} GU")
+            # The instrument's own choice for this material (60° reading: 10-70 GU -> 60°, above -> 20°,
+            # below -> 85°) is marked.
+            row.label(text="instrument" if geometry == used else "", icon="CHECKMARK" if geometry == used else "BLANK1")
+        layout.separator()
+        col = _property_column(layout)
+        col.prop(st, "target_gloss")
+        col.prop(st, "target_geometry")
+        col.operator("wenv.fit_roughness", icon="DRIVER_DISTANCE")
+        if math.isnan(st.gloss_60):
+            layout.label(text="No reading", icon="ERROR")
+
+
+classes = (WENV_PT_shading, WENV_UL_lobes, WENV_PT_material, WENV_PT_gloss)
+
+
+def register():
+    for cls in classes:
+        bpy.utils.register_class(cls)
+
+
+def unregister():
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

@@ -1,0 +1,846 @@
+"""The Blender add-on in the headless bpy module: registration, World set-ups, materials, meshes,
+views, the shading operator against the core, live mode, frame changes, undo, save and reload.
+
+Expected values are computed here independently (mathutils transforms, the core loading the HDRI
+from its file, fresh wenv.Shader objects) and compared with what the operator wrote."""
+import math
+import os
+
+import numpy as np
+import pytest
+
+import wenv
+
+bpy = pytest.importorskip("bpy", reason="the bpy module is installed by scripts/setup.sh")
+import mathutils  # noqa: E402  (ships with bpy)
+
+import addon  # noqa: E402
+from addon import core, live  # noqa: E402
+
+from conftest import hdri_path  # noqa: E402
+
+ATTR = core.ATTRIBUTE
+
+
+@pytest.fixture(scope="module", autouse=True)
+def registered(tmp_path_factory):
+    old = os.environ.get("WENV_CACHE_DIR")
+    os.environ["WENV_CACHE_DIR"] = str(tmp_path_factory.mktemp("wenv-cache"))
+    addon.register()
+    yield
+    addon.unregister()
+    if old is None:
+        os.environ.pop("WENV_CACHE_DIR", None)
+    else:
+        os.environ["WENV_CACHE_DIR"] = old
+
+
+@pytest.fixture
+def scene():
+    """Blender's factory start-up scene (cube, camera, light, grey World), draft quality."""
+    bpy.ops.wm.read_homefile(use_factory_startup=True)
+    sc = bpy.context.scene
+    sc.wenv.quality = "DRAFT"
+    return sc
+
+
+def select_only(*objs):
+    for o in bpy.context.view_layer.objects:
+        o.select_set(False)
+    for o in objs:
+        o.select_set(True)
+    bpy.context.view_layer.objects.active = objs[0] if objs else None
+
+
+def add_monkey(subdivisions=0, smooth=True, name="Suzanne"):
+    bpy.ops.mesh.primitive_monkey_add()
+    obj = bpy.context.object
+    obj.name = name
+    if subdivisions:
+        mod = obj.modifiers.new("sub", "SUBSURF")
+        mod.levels = subdivisions
+        with bpy.context.temp_override(object=obj):
+            bpy.ops.object.modifier_apply(modifier="sub")
+    if smooth:
+        obj.data.shade_smooth()
+    else:
+        obj.data.shade_flat()
+    select_only(obj)
+    return obj
+
+
+def env_world(scene, name="sunset", rotation=0.0, strength=1.0, projection="EQUIRECTANGULAR", image=None):
+    tree = scene.world.node_tree
+    bg = tree.nodes["Background"]
+    env = tree.nodes.new("ShaderNodeTexEnvironment")
+    env.image = image if image is not None else bpy.data.images.load(hdri_path(name))
+    env.projection = projection
+    tree.links.new(env.outputs["Color"], bg.inputs["Color"])
+    bg.inputs["Strength"].default_value = strength
+    if rotation:
+        mapping = tree.nodes.new("ShaderNodeMapping")
+        coords = tree.nodes.new("ShaderNodeTexCoord")
+        tree.links.new(coords.outputs["Generated"], mapping.inputs["Vector"])
+        tree.links.new(mapping.outputs["Vector"], env.inputs["Vector"])
+        mapping.inputs["Rotation"].default_value[2] = rotation
+    return env
+
+
+def set_material(obj, model="COOK_TORRANCE", diffuse=(0.3, 0.2, 0.1), lobes=((0.2, 1.5, "GGX"),), name=None):
+    mat = bpy.data.materials.new(name or f"M{len(bpy.data.materials)}")
+    st = mat.wenv
+    st.model = model
+    st.diffuse = diffuse
+    for roughness, ior, dist in lobes:
+        lobe = st.lobes.add()
+        lobe.roughness, lobe.ior, lobe.distribution = roughness, ior, dist
+    st.initialized = True
+    obj.data.materials.append(mat)
+    return mat
+
+
+def wenv_material(mat):
+    st = mat.wenv
+    if st.model == "LAMBERT":
+        return wenv.Lambert(tuple(st.diffuse))
+    return wenv.CookTorrance(diffuse=tuple(st.diffuse), lobes=[
+        {"specular": tuple(l.specular), "roughness": l.roughness, "ior": l.ior,
+         "distribution": l.distribution.lower()} for l in st.lobes], shadowing=st.shadowing.lower())
+
+
+def world_arrays(obj, corner):
+    """World-space positions and normals, computed with mathutils (independent of core.read_mesh)."""
+    dg = bpy.context.evaluated_depsgraph_get()
+    ob = obj.evaluated_get(dg)
+    me = ob.data
+    m = ob.matrix_world
+    nm = m.to_3x3().inverted().transposed()
+    if corner:
+        pts = [me.vertices[l.vertex_index].co for l in me.loops]
+        nrm = [c.vector for c in me.corner_normals]
+    else:
+        pts = [v.co for v in me.vertices]
+        nrm = [v.vector for v in me.vertex_normals]
+    p = np.array([tuple(m @ c) for c in pts], np.float32)
+    n = np.array([tuple((nm @ v).normalized()) for v in nrm], np.float32)
+    return p, n
+
+
+def attribute(obj):
+    attr = obj.data.color_attributes[ATTR]
+    buf = np.empty(len(attr.data) * 4, np.float32)
+    attr.data.foreach_get("color", buf)
+    return attr.domain, buf.reshape(-1, 4)[:, :3]
+
+
+def core_shader(env, mat):
+    return wenv.Shader(env, mat, quality="draft")
+
+
+def shade_op(**kw):
+    return bpy.ops.wenv.shade(**kw)
+
+
+# ---------------------------------------------------------------------------------------------
+
+
+def test_register_unregister_leaves_nothing():
+    assert bpy.ops.wenv.shade.poll() and hasattr(bpy.types, "WENV_PT_gloss")
+    names = [n for n in dir(bpy.types) if n.startswith("WENV_")]
+    assert {"WENV_PT_shading", "WENV_PT_material", "WENV_PT_gloss", "WENV_OT_shade",
+            "WENV_OT_live", "WENV_OT_fit_roughness"} <= set(names)
+    assert bpy.types.Scene.bl_rna.properties["wenv"].fixed_type.identifier == "WENV_SceneSettings"
+    assert bpy.types.Material.bl_rna.properties["wenv"].fixed_type.identifier == "WENV_MaterialSettings"
+    addon.unregister()
+    try:
+        assert not [n for n in dir(bpy.types) if n.startswith("WENV_")]
+        assert "wenv" not in bpy.types.Scene.bl_rna.properties
+        assert "wenv" not in bpy.types.Material.bl_rna.properties
+        assert not [h for h in bpy.app.handlers.frame_change_post if h.__module__.startswith("addon")]
+        assert not [h for h in bpy.app.handlers.load_post if h.__module__.startswith("addon")]
+        assert not core.shaders.has("draft")
+    finally:
+        addon.register()
+    assert bpy.types.Scene.bl_rna.properties["wenv"]
+
+
+def test_operator_equals_core_shade(scene):
+    """Sunset HDRI (file), rotated Mapping node, strength 2; rotated, non-uniformly scaled smooth
+    Suzanne; perspective scene camera."""
+    env_world(scene, "sunset", rotation=0.7, strength=2.0)
+    obj = add_monkey()
+    obj.rotation_euler = (0.3, -0.2, 1.1)
+    obj.scale = (1.0, 1.5, 0.8)
+    obj.location = (0.2, 0.1, -0.3)
+    mat = set_material(obj, lobes=((0.15, 1.5, "GGX"), (0.4, 1.8, "BECKMANN")))
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    domain, rgb = attribute(obj)
+    assert domain == "POINT"
+    assert obj.data.color_attributes.active_color_name == ATTR
+
+    p, n = world_arrays(obj, corner=False)
+    env = wenv.load_environment(hdri_path("sunset"), rotation=0.7, strength=2.0)
+    eye = tuple(scene.camera.matrix_world.translation)
+    want = core_shader(env, wenv_material(mat)).shade_mesh(p, n, eye)
+    assert rgb.max() > 0.05
+    np.testing.assert_allclose(rgb, want, rtol=1e-4, atol=1e-5)
+
+
+@pytest.mark.parametrize("perspective", [True, False])
+def test_view_matrix_viewport_and_orthographic_camera(scene, perspective):
+    env_world(scene, "forest")
+    obj = add_monkey()
+    mat = set_material(obj)
+    # A viewport view: pivot, rotation, distance; its world -> view matrix as Blender builds it
+    # (view3d_viewmatrix_set: viewmat = Tz(-dist) R(viewquat) T(-pivot); view_rotation = viewquat^-1).
+    rv3d = next(a for a in bpy.context.screen.areas if a.type == "VIEW_3D").spaces.active.region_3d
+    rv3d.view_location = (0.2, -0.1, 0.3)
+    rv3d.view_rotation = mathutils.Euler((1.1, 0.0, 0.5)).to_quaternion()
+    rv3d.view_distance = 6.0
+    rv3d.view_perspective = "PERSP" if perspective else "ORTHO"
+    rot = rv3d.view_rotation.to_matrix().to_4x4()
+    eye = mathutils.Vector(rv3d.view_location) + rv3d.view_rotation @ mathutils.Vector((0, 0, 6.0))
+    view = (mathutils.Matrix.Translation(eye) @ rot).inverted()
+
+    assert shade_op(view="MATRIX", view_matrix=view, perspective=perspective) == {"FINISHED"}
+    _, rgb = attribute(obj)
+    p, n = world_arrays(obj, corner=False)
+    sh = core_shader(wenv.load_environment(hdri_path("forest")), wenv_material(mat))
+    inv = view.inverted()
+    if perspective:
+        want = sh.shade_mesh(p, n, tuple(inv.translation))
+    else:
+        want = sh.shade(n, np.array(inv.col[2][:3], np.float32))
+    np.testing.assert_allclose(rgb, want, rtol=1e-4, atol=1e-5)
+
+    # The 3D viewport itself gives the same colours.
+    obj.data.color_attributes.remove(obj.data.color_attributes[ATTR])
+    assert shade_op(view="VIEWPORT") == {"FINISHED"}
+    np.testing.assert_allclose(attribute(obj)[1], rgb, rtol=1e-5, atol=1e-6)
+    # What the viewport draws, the evaluated mesh, follows each new shading.
+    assert shade_op(view="MATRIX", view_matrix=view, perspective=not perspective) == {"FINISHED"}
+    evaluated = obj.evaluated_get(bpy.context.evaluated_depsgraph_get())
+    shown = evaluated.data.color_attributes[ATTR]
+    buf = np.empty(len(shown.data) * 4, np.float32)
+    shown.data.foreach_get("color", buf)
+    np.testing.assert_array_equal(buf.reshape(-1, 4)[:, :3], attribute(obj)[1])
+    assert not np.allclose(attribute(obj)[1], rgb)
+
+    # An orthographic scene camera: one view direction, the camera's +Z.
+    if not perspective:
+        scene.camera.data.type = "ORTHO"
+        assert shade_op(view="CAMERA") == {"FINISHED"}
+        d = np.array(scene.camera.matrix_world.col[2][:3], np.float32)
+        np.testing.assert_allclose(attribute(obj)[1], sh.shade(n, d), rtol=1e-4, atol=1e-5)
+
+
+def test_viewport_switches_to_attribute_colours(scene):
+    obj = add_monkey()
+    area = next(a for a in bpy.context.screen.areas if a.type == "VIEW_3D")
+    area.spaces.active.shading.type = "MATERIAL"
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    shading = area.spaces.active.shading
+    assert (shading.type, shading.light, shading.color_type) == ("SOLID", "FLAT", "VERTEX")
+    assert ATTR in obj.data.color_attributes
+
+
+def test_plain_colour_world_is_constant(scene):
+    bg = scene.world.node_tree.nodes["Background"]
+    bg.inputs["Color"].default_value = (0.2, 0.3, 0.4, 1.0)
+    bg.inputs["Strength"].default_value = 1.5
+    obj = add_monkey()
+    set_material(obj, model="LAMBERT", diffuse=(0.8, 0.5, 0.25))
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    _, rgb = attribute(obj)
+    p, n = world_arrays(obj, corner=False)
+    v = np.array(scene.camera.matrix_world.translation, np.float32) - p
+    front = np.sum(n * v, axis=1) > 0.05 * np.linalg.norm(v, axis=1)
+    want = 1.5 * np.array([0.2 * 0.8, 0.3 * 0.5, 0.4 * 0.25], np.float32)
+    assert front.sum() > 100
+    np.testing.assert_allclose(rgb[front], np.broadcast_to(want, rgb[front].shape), rtol=1e-4)
+
+
+def pattern_image(name="pattern", w=64, h=32):
+    """A float image with a distinct colour per pixel (row 0 of the array is the top)."""
+    rows, cols = np.mgrid[0:h, 0:w]
+    top_first = np.empty((h, w, 4), np.float32)
+    top_first[..., 0] = 0.5 + 0.5 * np.cos(2 * np.pi * cols / w)
+    top_first[..., 1] = 1.0 - rows / h
+    top_first[..., 2] = 0.1 + 0.05 * (cols % 7)
+    top_first[..., 3] = 1.0
+    top_first[3, 10, :3] = (30.0, 20.0, 10.0)
+    img = bpy.data.images.new(name, w, h, alpha=True, float_buffer=True)
+    img.pixels.foreach_set(top_first[::-1].ravel())  # Blender: bottom row first
+    return img, top_first
+
+
+@pytest.mark.parametrize("projection", ["EQUIRECTANGULAR", "MIRROR_BALL"])
+def test_packed_image_and_mirror_ball(scene, tmp_path, projection):
+    img, top_first = pattern_image()
+    path = str(tmp_path / "pattern.exr")
+    img.filepath_raw = path
+    img.file_format = "OPEN_EXR"
+    img.save()
+    img.pack()
+    os.remove(path)  # only the packed copy is left
+    assert img.packed_file is not None
+    env_world(scene, image=img, projection=projection, rotation=0.4, strength=0.5)
+    obj = add_monkey()
+    mat = set_material(obj)
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    _, rgb = attribute(obj)
+    proj = "mirror_ball" if projection == "MIRROR_BALL" else "equirect"
+    env = wenv.Environment(top_first, projection=proj, rotation=0.4, strength=0.5)
+    p, n = world_arrays(obj, corner=False)
+    want = core_shader(env, wenv_material(mat)).shade_mesh(p, n, tuple(scene.camera.matrix_world.translation))
+    np.testing.assert_allclose(rgb, want, rtol=1e-3, atol=1e-5)  # EXR half-float round trip
+
+
+def _break(scene, how):
+    tree = scene.world.node_tree
+    bg = tree.nodes["Background"]
+    if how == "no world":
+        scene.world = None
+        return "no World"
+    if how == "no nodes":
+        tree.nodes.clear()
+        return "no World Output"
+    if how == "nothing connected":
+        tree.links.remove(tree.nodes["World Output"].inputs["Surface"].links[0])
+        return "nothing is connected"
+    if how == "no image":
+        env = env_world(scene, "sunset")
+        env.image = None
+        return "has no image"
+    if how == "missing file":
+        env = env_world(scene, "sunset")
+        env.image.filepath = "/nonexistent/sky.exr"
+        env.image.reload()
+        return "could not be loaded"
+    if how == "sky texture":
+        sky = tree.nodes.new("ShaderNodeTexSky")
+        tree.links.new(sky.outputs["Color"], bg.inputs["Color"])
+        return "only an Environment Texture"
+    if how == "x rotation":
+        env_world(scene, "sunset", rotation=0.3)
+        tree.nodes["Mapping"].inputs["Rotation"].default_value[0] = 0.5
+        return "only Z rotation"
+    if how == "linked strength":
+        value = tree.nodes.new("ShaderNodeValue")
+        tree.links.new(value.outputs[0], bg.inputs["Strength"])
+        return "Background strength"
+    raise AssertionError(how)
+
+
+@pytest.mark.parametrize("how", ["no world", "no nodes", "nothing connected", "no image", "missing file",
+                                 "sky texture", "x rotation", "linked strength"])
+def test_broken_world_is_reported_and_cancelled(scene, how):
+    expect = _break(scene, how)
+    obj = add_monkey()
+    with pytest.raises(RuntimeError, match=expect):
+        shade_op(view="CAMERA")
+    assert ATTR not in obj.data.color_attributes
+
+
+@pytest.mark.parametrize("kind", ["flat", "split"])
+def test_flat_and_split_normals_use_corners(scene, kind):
+    env_world(scene, "courtyard")
+    obj = add_monkey(smooth=(kind == "split"))
+    if kind == "split":
+        obj.data.set_sharp_from_angle(angle=math.radians(40))
+    assert obj.data.normals_domain == ("FACE" if kind == "flat" else "CORNER")
+    mat = set_material(obj)
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    domain, rgb = attribute(obj)
+    assert domain == "CORNER" and len(rgb) == len(obj.data.loops)
+    p, n = world_arrays(obj, corner=True)
+    want = core_shader(wenv.load_environment(hdri_path("courtyard")), wenv_material(mat)).shade_mesh(
+        p, n, tuple(scene.camera.matrix_world.translation))
+    np.testing.assert_allclose(rgb, want, rtol=1e-4, atol=1e-5)
+    # Smoothing every edge later replaces the corner attribute with a point one.
+    obj.data.shade_smooth()
+    obj.data.set_sharp_from_angle(angle=math.pi)
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    assert attribute(obj)[0] == "POINT"
+
+
+def test_deform_modifier_uses_evaluated_mesh(scene):
+    env_world(scene, "city")
+    obj = add_monkey()
+    mod = obj.modifiers.new("twist", "SIMPLE_DEFORM")
+    mod.deform_method = "TWIST"
+    mod.angle = 1.0
+    mat = set_material(obj)
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    _, rgb = attribute(obj)
+    p, n = world_arrays(obj, corner=False)  # evaluated (twisted) mesh
+    base = np.array([tuple(obj.matrix_world @ v.co) for v in obj.data.vertices], np.float32)
+    assert np.abs(p - base).max() > 0.1  # the modifier does move the vertices
+    want = core_shader(wenv.load_environment(hdri_path("city")), wenv_material(mat)).shade_mesh(
+        p, n, tuple(scene.camera.matrix_world.translation))
+    np.testing.assert_allclose(rgb, want, rtol=1e-4, atol=1e-5)
+
+
+def test_topology_changing_modifier_shades_base_mesh(scene):
+    obj = add_monkey()
+    obj.modifiers.new("sub", "SUBSURF").levels = 1
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    domain, rgb = attribute(obj)
+    assert domain == "POINT" and len(rgb) == len(obj.data.vertices)
+    assert np.isfinite(rgb).all() and rgb.max() > 0
+    assert "topology" in core.read_mesh(obj, bpy.context.evaluated_depsgraph_get()).note
+
+
+def test_non_mesh_and_empty_objects(scene):
+    light = bpy.data.objects["Light"]
+    cam = scene.camera
+    select_only(light, cam)
+    with pytest.raises(RuntimeError, match="No mesh objects"):
+        shade_op(view="CAMERA")
+    empty = bpy.data.objects.new("Empty mesh", bpy.data.meshes.new("empty"))
+    scene.collection.objects.link(empty)
+    cube = bpy.data.objects["Cube"]
+    select_only(empty, light, cube)
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    assert ATTR in cube.data.color_attributes
+    assert ATTR not in empty.data.color_attributes
+
+
+def test_several_materials_per_object(scene):
+    env_world(scene, "studio")
+    obj = add_monkey()
+    glossy = set_material(obj, lobes=((0.05, 1.5, "GGX"),), name="glossy")
+    # (Two Cook-Torrance materials: see README on the core's Lambert irradiance after a switch.)
+    matte = set_material(obj, diffuse=(0.2, 0.6, 0.2), lobes=((0.5, 1.4, "BECKMANN"),), name="matte")
+    idx = np.zeros(len(obj.data.polygons), np.int32)
+    idx[::2] = 1
+    obj.data.polygons.foreach_set("material_index", idx)
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    domain, rgb = attribute(obj)
+    assert domain == "CORNER"
+    p, n = world_arrays(obj, corner=True)
+    slot = np.repeat(idx, [poly.loop_total for poly in obj.data.polygons])
+    env = wenv.load_environment(hdri_path("studio"))
+    eye = tuple(scene.camera.matrix_world.translation)
+    # The same calls the add-on makes, in its order: the core's diffuse term after set_material
+    # depends on the material that was current when a normal sample's lighting was first needed.
+    sh = core_shader(env, wenv_material(glossy))
+    for s, mat in enumerate((glossy, matte)):
+        sel = slot == s
+        sh.set_material(wenv_material(mat))
+        want = sh.shade_mesh(p[sel], n[sel], eye)
+        np.testing.assert_allclose(rgb[sel], want, rtol=1e-4, atol=1e-5)
+
+
+def test_logarithmic_tone_mapping(scene):
+    env_world(scene, "sunset")
+    obj = add_monkey()
+    set_material(obj)
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    linear = attribute(obj)[1]
+    scene.wenv.tone_mapping = "LOG"
+    scene.wenv.max_luminance = 5.0
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    mapped = attribute(obj)[1]
+    lw = linear @ np.array([0.2126, 0.7152, 0.0722], np.float32)
+    ld = np.log10(1 + lw) / np.log10(1 + 5.0)
+    want = np.clip(linear * np.where(lw > 0, ld / np.maximum(lw, 1e-12), 0)[:, None], 0, 1)
+    np.testing.assert_allclose(mapped, want, rtol=1e-5, atol=1e-6)
+    assert mapped.max() <= 1.0 and mapped.max() > 0.2
+
+
+# ---------------------------------------------------------------------------------------------
+# Materials and the glossmeter
+
+
+def principled_material(name, base=(0.8, 0.2, 0.1), metallic=0.0, roughness=0.4, ior=1.45, coat=0.0):
+    mat = bpy.data.materials.new(name)
+    node = mat.node_tree.nodes["Principled BSDF"]
+    node.inputs["Base Color"].default_value = (*base, 1.0)
+    node.inputs["Metallic"].default_value = metallic
+    node.inputs["Roughness"].default_value = roughness
+    node.inputs["IOR"].default_value = ior
+    node.inputs["Coat Weight"].default_value = coat
+    return mat
+
+
+def test_from_principled_dielectric_metal_and_coat(scene):
+    cube = bpy.data.objects["Cube"]
+    select_only(cube)
+    plastic = principled_material("plastic", roughness=0.4, ior=1.45)
+    cube.active_material = plastic
+    assert bpy.ops.wenv.from_principled() == {"FINISHED"}
+    st = plastic.wenv
+    assert st.model == "COOK_TORRANCE" and st.initialized
+    assert tuple(round(c, 5) for c in st.diffuse) == (0.8, 0.2, 0.1)
+    assert len(st.lobes) == 1
+    lobe = st.lobes[0]
+    assert lobe.roughness == pytest.approx(0.16) and lobe.ior == pytest.approx(1.45)
+    assert lobe.distribution == "GGX" and tuple(lobe.specular) == pytest.approx((1, 1, 1))
+
+    gold = principled_material("gold", base=(1.0, 0.78, 0.34), metallic=1.0, roughness=0.2)
+    cube.active_material = gold
+    bpy.ops.wenv.from_principled()
+    st = gold.wenv
+    assert tuple(st.diffuse) == pytest.approx((0, 0, 0))
+    assert len(st.lobes) == 1
+    m = wenv_material(gold)
+    # Head-on, the metal lobe reflects its base colour: specular x Fresnel(ior, normal) = base.
+    n = st.lobes[0].ior
+    f0 = ((n - 1) / (n + 1)) ** 2
+    assert np.array(st.lobes[0].specular) * f0 == pytest.approx((1.0, 0.78, 0.34), rel=1e-5)
+    assert st.lobes[0].roughness == pytest.approx(0.04)
+    assert isinstance(m, wenv.CookTorrance)
+
+    coated = principled_material("coated", roughness=0.5, coat=1.0)
+    coated.node_tree.nodes["Principled BSDF"].inputs["Coat Roughness"].default_value = 0.1
+    cube.active_material = coated
+    bpy.ops.wenv.from_principled()
+    assert [round(l.roughness, 6) for l in coated.wenv.lobes] == [0.25, 0.01]
+
+
+def test_from_principled_warns_about_links_and_missing_node(scene):
+    cube = bpy.data.objects["Cube"]
+    select_only(cube)
+    mat = principled_material("textured")
+    tex = mat.node_tree.nodes.new("ShaderNodeTexNoise")
+    mat.node_tree.links.new(tex.outputs["Color"], mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"])
+    cube.active_material = mat
+    warnings = core.fill_from_principled(mat)
+    assert any("Base Color" in w for w in warnings)
+    plain = bpy.data.materials.new("plain")
+    plain.node_tree.nodes.clear()
+    plain.diffuse_color = (0.1, 0.2, 0.3, 1)
+    assert any("no Principled BSDF" in w for w in core.fill_from_principled(plain))
+    assert plain.wenv.model == "LAMBERT" and tuple(plain.wenv.diffuse) == pytest.approx((0.1, 0.2, 0.3))
+
+
+def test_first_shading_fills_settings_from_principled(scene):
+    obj = add_monkey()
+    mat = principled_material("fresh", roughness=0.3)
+    obj.data.materials.append(mat)
+    assert not mat.wenv.initialized
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    assert mat.wenv.initialized and mat.wenv.lobes[0].roughness == pytest.approx(0.09)
+
+
+def test_gloss_readings_follow_settings(scene):
+    cube = bpy.data.objects["Cube"]
+    mat = set_material(cube, diffuse=(0.3, 0.3, 0.3), lobes=((0.05, 1.5, "BECKMANN"),))
+    want = wenv.gloss(wenv_material(mat), (20, 60, 85))
+    assert (mat.wenv.gloss_20, mat.wenv.gloss_60, mat.wenv.gloss_85) == pytest.approx(want, abs=1e-3)
+    before = mat.wenv.gloss_60
+    mat.wenv.lobes[0].roughness = 0.2
+    assert mat.wenv.gloss_60 < before - 5
+    assert mat.wenv.gloss_60 == pytest.approx(wenv.gloss(wenv_material(mat), 60), abs=1e-3)
+    assert core.instrument_geometry(mat.wenv.gloss_60) == (60 if 10 <= mat.wenv.gloss_60 <= 70 else
+                                                          20 if mat.wenv.gloss_60 > 70 else 85)
+    assert [core.instrument_geometry(g) for g in (95, 70, 40, 10, 3)] == [20, 60, 60, 60, 85]
+
+
+def test_fit_roughness_operator(scene):
+    cube = bpy.data.objects["Cube"]
+    select_only(cube)
+    mat = set_material(cube, diffuse=(0.2, 0.2, 0.2), lobes=((0.3, 1.5, "GGX"),))
+    cube.active_material = mat
+    mat.wenv.target_gloss = 50.0
+    mat.wenv.target_geometry = "60"
+    assert bpy.ops.wenv.fit_roughness() == {"FINISHED"}
+    assert mat.wenv.gloss_60 == pytest.approx(50.0, abs=0.05)
+    assert bpy.ops.wenv.fit_roughness(target=80.0, geometry="20") == {"FINISHED"}
+    assert mat.wenv.gloss_20 == pytest.approx(80.0, abs=0.05)
+    with pytest.raises(RuntimeError, match="out of reach"):
+        bpy.ops.wenv.fit_roughness(target=500.0, geometry="60")
+    bpy.ops.wenv.lobe_add()
+    with pytest.raises(RuntimeError, match="exactly one lobe"):
+        bpy.ops.wenv.fit_roughness()
+    assert bpy.ops.wenv.lobe_remove() == {"FINISHED"} and len(mat.wenv.lobes) == 1
+
+
+# ---------------------------------------------------------------------------------------------
+# Live mode, frame changes, precomputation
+
+
+def test_live_session_reshades_on_changes_only(scene):
+    env_world(scene, "sunset")
+    obj = add_monkey()
+    mat = set_material(obj)
+    scene.wenv.view_source = "CAMERA"
+    session = live.LiveSession([obj.name])
+    ctx = bpy.context
+
+    def settle():
+        """What the modal timer does over a few ticks: start the worker, then write its result."""
+        started = session.tick(ctx)
+        session.wait(60)
+        return (started, session.tick(ctx))
+
+    assert settle() == (False, True) and ATTR in obj.data.color_attributes
+    assert settle() == (False, False)  # nothing changed: no work
+    first = attribute(obj)[1].copy()
+
+    def changed(step):
+        nonlocal first
+        step()
+        shaded = settle() == (False, True)
+        now = attribute(obj)[1].copy()
+        moved = not np.allclose(now, first)
+        first = now
+        return (shaded, moved) == (True, True)
+
+    assert changed(lambda: setattr(obj, "location", (0.3, 0.0, 0.0)))
+    assert changed(lambda: setattr(mat.wenv.lobes[0], "roughness", 0.5))
+    mapping_env = scene.world.node_tree.nodes["Background"].inputs["Strength"]
+    assert changed(lambda: setattr(mapping_env, "default_value", 3.0))
+    assert changed(lambda: setattr(scene.camera, "location", (5.0, -5.0, 3.0)))
+    assert settle() == (False, False)
+    assert session.shades == 5
+    # A broken World is recorded, not raised; the session keeps going once it is fixed.
+    env_node = scene.world.node_tree.nodes["Environment Texture"]
+    image, env_node.image = env_node.image, None
+    assert settle() == (False, False) and "has no image" in session.last_error
+    env_node.image = image
+    assert settle() == (False, True), session.last_error
+    assert session.last_error is None
+
+
+def test_frame_change_shades_from_animated_camera(scene):
+    env_world(scene, "sunrise")
+    obj = add_monkey()
+    mat = set_material(obj, lobes=((0.1, 1.5, "GGX"),))
+    cam = scene.camera
+    cam.location = (7.0, -7.0, 5.0)
+    cam.keyframe_insert("location", frame=1)
+    cam.location = (-7.0, -7.0, 2.0)
+    cam.keyframe_insert("location", frame=10)
+    scene.wenv.shade_on_frame_change = True
+    scene.frame_set(1)
+    assert ATTR not in obj.data.color_attributes  # only objects shaded before follow the camera
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    scene.frame_set(10)
+    _, rgb = attribute(obj)
+    p, n = world_arrays(obj, corner=False)
+    want = core_shader(wenv.load_environment(hdri_path("sunrise")), wenv_material(mat)).shade_mesh(
+        p, n, tuple(cam.matrix_world.translation))
+    assert tuple(cam.matrix_world.translation) == pytest.approx((-7.0, -7.0, 2.0))
+    np.testing.assert_allclose(rgb, want, rtol=1e-4, atol=1e-5)
+
+
+def test_precompute_job_progress_and_cancel(tmp_path, monkeypatch):
+    monkeypatch.setenv("WENV_CACHE_DIR", str(tmp_path))
+    job = live.PrecomputeJob("default")
+    seen = []
+    orig = job._progress
+
+    def progress(fraction):
+        seen.append(fraction)
+        if len(seen) == 3:
+            job.cancel()
+        return orig(fraction)
+    job._progress = progress
+    job.start()
+    assert job.wait(60)
+    assert job.cancelled and job.result is None and not job.install()
+    assert len(seen) >= 3 and 0 < seen[0] <= seen[-1] < 1
+    done = live.PrecomputeJob("draft").start()
+    assert done.wait(60) and done.error is None and done.result is not None
+    assert done.fraction == pytest.approx(1.0, abs=0.05) and done.result.stats["cache"] == "built"
+    # The operator's synchronous path (scripts; the UI runs the job above in a modal timer).
+    core.shaders.clear()
+    bpy.context.scene.wenv.quality = "DRAFT"
+    assert bpy.ops.wenv.precompute() == {"FINISHED"} and core.shaders.has("draft")
+
+
+# ---------------------------------------------------------------------------------------------
+# Undo, save and reload
+
+
+def test_undo_restores_the_mesh(scene):
+    env_world(scene, "sunset")
+    obj = add_monkey()
+    name = obj.name
+    co = np.empty(len(obj.data.vertices) * 3, np.float32)
+    obj.data.vertices.foreach_get("co", co)
+    # Operators called from Python in background mode push no undo steps: push them as the UI does
+    # around an operator with the UNDO option.
+    bpy.ops.ed.undo_push(message="before shading")
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    bpy.ops.ed.undo_push(message="Shade")
+    assert ATTR in bpy.data.objects[name].data.color_attributes
+    bpy.ops.ed.undo()
+    me = bpy.data.objects[name].data
+    assert ATTR not in me.color_attributes
+    after = np.empty_like(co)
+    me.vertices.foreach_get("co", after)
+    np.testing.assert_array_equal(after, co)
+    # The add-on holds no stale data after undo: shading again works.
+    select_only(bpy.data.objects[name])
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    assert ATTR in bpy.data.objects[name].data.color_attributes
+
+
+def test_save_reload_reshade(scene, tmp_path):
+    env_world(scene, "night", rotation=1.2, strength=4.0)
+    obj = add_monkey()
+    mat = set_material(obj, lobes=((0.07, 1.6, "BECKMANN"), (0.3, 1.4, "GGX")))
+    mat.wenv.target_gloss = 42.0
+    mat_name = mat.name
+    scene.wenv.tone_mapping = "LOG"
+    scene.wenv.max_luminance = 3.0
+    scene.wenv.view_source = "CAMERA"
+    assert shade_op() == {"FINISHED"}
+    before = attribute(obj)[1].copy()
+    path = str(tmp_path / "scene.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.read_homefile(use_factory_startup=True)
+    assert "Suzanne" not in bpy.data.objects
+    bpy.ops.wm.open_mainfile(filepath=path)
+    sc = bpy.context.scene
+    assert (sc.wenv.quality, sc.wenv.tone_mapping, sc.wenv.max_luminance, sc.wenv.view_source) == \
+        ("DRAFT", "LOG", pytest.approx(3.0), "CAMERA")
+    st = bpy.data.materials[mat_name].wenv
+    assert [(l.roughness, l.distribution) for l in st.lobes] == [(pytest.approx(0.07), "BECKMANN"),
+                                                                (pytest.approx(0.3), "GGX")]
+    assert st.target_gloss == pytest.approx(42.0)
+    obj = bpy.data.objects["Suzanne"]
+    np.testing.assert_array_equal(attribute(obj)[1], before)
+    select_only(obj)
+    obj.data.color_attributes.remove(obj.data.color_attributes[ATTR])
+    assert shade_op() == {"FINISHED"}
+    np.testing.assert_allclose(attribute(obj)[1], before, rtol=1e-5, atol=1e-6)
+
+
+# ---------------------------------------------------------------------------------------------
+# Panels: drawn into a recording layout (headless Blender draws no UI)
+
+
+class RecordingLayout:
+    """Stands in for bpy.types.UILayout: records labels, props and operators, checks that every
+    property and operator drawn exists."""
+
+    def __init__(self, log):
+        self.log = log
+
+    def _child(self, *args, **kwargs):
+        return RecordingLayout(self.log)
+
+    row = column = box = split = _child
+
+    def label(self, text="", icon="NONE"):
+        self.log.append(("label", text, icon))
+
+    def prop(self, data, name, **kwargs):
+        assert name in data.bl_rna.properties, name
+        self.log.append(("prop", name))
+
+    def operator(self, idname, **kwargs):
+        group, name = idname.split(".")
+        assert hasattr(getattr(bpy.ops, group), name), idname
+        self.log.append(("operator", idname))
+
+    def template_list(self, list_type, list_id, data, propname, active_data, active_propname, **kwargs):
+        assert hasattr(bpy.types, list_type) and propname in data.bl_rna.properties
+        self.log.append(("list", propname))
+
+    def separator(self, **kwargs):
+        pass
+
+
+def draw_panel(panel_cls):
+    log = []
+
+    class Host:  # stands in for the panel instance: draw() only uses self.layout
+        layout = RecordingLayout(log)
+    assert panel_cls.poll(bpy.context) if hasattr(panel_cls, "poll") else True
+    panel_cls.draw(Host(), bpy.context)
+    return log
+
+
+def test_panels_draw(scene):
+    from addon import ui
+    cube = bpy.data.objects["Cube"]
+    select_only(cube)
+    mat = set_material(cube, lobes=((0.002, 1.5, "BECKMANN"),))
+    cube.active_material = mat
+    shading = draw_panel(ui.WENV_PT_shading)
+    assert ("operator", "wenv.shade") in shading and ("operator", "wenv.live") in shading
+    world = [l for l in shading if l[0] == "label" and l[1].startswith("World: ")]
+    assert world and "constant" in world[0][1]
+
+    assert ("list", "lobes") in draw_panel(ui.WENV_PT_material)
+
+    gloss = draw_panel(ui.WENV_PT_gloss)
+    readings = [l[1] for l in gloss if l[0] == "label" and l[1].endswith(" GU")]
+    assert readings == [f"{mat.wenv.gloss_20:.2f} GU", f"{mat.wenv.gloss_60:.2f} GU", f"{mat.wenv.gloss_85:.2f} GU"]
+    marks = [l for l in gloss if l[0] == "label" and l[2] == "CHECKMARK"]
+    assert mat.wenv.gloss_60 > 70 and len(marks) == 1  # a high-gloss material: the 20 degree reading
+    assert gloss.index(marks[0]) == gloss.index(("label", readings[0], "NONE")) + 1
+    assert ("operator", "wenv.fit_roughness") in gloss
+
+    scene.world = None
+    errors = [l for l in draw_panel(ui.WENV_PT_shading) if l[0] == "label" and l[2] == "ERROR"]
+    assert errors and "no World" in errors[0][1]
+
+
+def test_edit_mode_is_refused(scene):
+    cube = bpy.data.objects["Cube"]
+    select_only(cube)
+    bpy.ops.object.mode_set(mode="EDIT")
+    try:
+        with pytest.raises(RuntimeError, match="Leave Edit Mode"):
+            shade_op(view="CAMERA")
+    finally:
+        bpy.ops.object.mode_set(mode="OBJECT")
+    assert ATTR not in cube.data.color_attributes
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+
+
+def test_live_session_result_for_a_deleted_object_is_dropped(scene):
+    obj = add_monkey()
+    other = bpy.data.objects["Cube"]
+    scene.wenv.view_source = "CAMERA"
+    session = live.LiveSession([obj.name, other.name])
+    assert not session.tick(bpy.context)  # reads the meshes, starts the worker
+    bpy.data.objects.remove(obj)  # meanwhile the user deletes one of them
+    assert session.wait(60)
+    assert session.tick(bpy.context)
+    assert ATTR in other.data.color_attributes
+    assert "Suzanne" not in bpy.data.objects and session.last_error is None
+
+
+def test_byte_image_is_linearised(scene, tmp_path):
+    _, top_first = pattern_image(w=32, h=16)
+    img = bpy.data.images.new("bytes", 32, 16, alpha=True, float_buffer=False)
+    img.pixels.foreach_set(np.clip(top_first[::-1], 0, 1).ravel())
+    path = str(tmp_path / "sky.png")
+    img.filepath_raw = path
+    img.file_format = "PNG"
+    img.save()
+    png = bpy.data.images.load(path)
+    assert not png.is_float and png.colorspace_settings.name == "sRGB"
+    env_world(scene, image=png)
+    obj = add_monkey()
+    mat = set_material(obj)
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    stored = np.empty(32 * 16 * 4, np.float32)
+    png.pixels.foreach_get(stored)
+    enc = stored.reshape(16, 32, 4)[::-1, :, :3]
+    lin = np.where(enc <= 0.04045, enc / 12.92, ((enc + 0.055) / 1.055) ** 2.4).astype(np.float32)
+    p, n = world_arrays(obj, corner=False)
+    want = core_shader(wenv.Environment(np.ascontiguousarray(lin)), wenv_material(mat)).shade_mesh(
+        p, n, tuple(scene.camera.matrix_world.translation))
+    np.testing.assert_allclose(attribute(obj)[1], want, rtol=1e-4, atol=1e-5)
+
+
+def test_viewport_looking_through_the_camera_uses_the_camera(scene):
+    obj = add_monkey()
+    set_material(obj)
+    rv3d = next(a for a in bpy.context.screen.areas if a.type == "VIEW_3D").spaces.active.region_3d
+    rv3d.view_perspective = "CAMERA"
+    assert shade_op(view="VIEWPORT") == {"FINISHED"}
+    through_viewport = attribute(obj)[1].copy()
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    np.testing.assert_array_equal(attribute(obj)[1], through_viewport)
+    rv3d.view_perspective = "PERSP"
+    assert shade_op(view="VIEWPORT") == {"FINISHED"}
+    assert not np.allclose(attribute(obj)[1], through_viewport)
