@@ -436,7 +436,7 @@ void wenv_rotation_apply(const wenv_rotation *rot, size_t s, const uint32_t *idx
 /* ---- cache file -------------------------------------------------------------------------------- */
 
 #define CACHE_MAGIC "WENVROT"
-#define CACHE_VERSION 1u
+#define CACHE_VERSION 2u /* 2: float resampling splat */
 
 typedef struct {
     char magic[8];

@@ -244,7 +244,7 @@ wenv_status wenv_shader_create(wenv_shader **out, const wenv_quality *q, wenv_me
         char path[4096];
         path[0] = '\0';
         if (cache_dir) {
-            snprintf(path, sizeof path, "%s/wenv-rot-v1-g%zu-l%zu-n%zu-e%.3g.bin", cache_dir, q->global_n,
+            snprintf(path, sizeof path, "%s/wenv-rot-v2-g%zu-l%zu-n%zu-e%.3g.bin", cache_dir, q->global_n,
                      q->local_n, q->normal_n, q->matrix_epsilon);
             wenv_error ignored = {0};
             if (wenv_rotation_load(&sh->rot, path, q->global_n, q->local_n, q->normal_n, q->matrix_epsilon,
