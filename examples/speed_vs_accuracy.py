@@ -36,7 +36,8 @@ CONFIGS = [
     ("rotation", {"normals": 64, "views": 32, "coefficients": 512, "light_coefficients": 0}),
     ("slicing", {"coefficients": 512, "light_coefficients": 0}),
     ("slicing", "high"),
-    ("slicing", {"global": 128, "local": 64, "normals": 64, "views": 32, "coefficients": 2048, "light_coefficients": 0}),
+    ("slicing", {"global": 128, "local": 64, "normals": 64, "views": 32, "coefficients": 2048,
+                 "light_coefficients": 0}),
     ("split_sum", {"prefilter": 32, "samples": 16, "lut": 16}),
     ("split_sum", "draft"),
     ("split_sum", "default"),
@@ -141,10 +142,11 @@ def chart(results, path):
             ax.grid(True, which="both", alpha=0.25)
             ax.set_title(f"{h}, Cook-Torrance m = {name[1:]}", fontsize=10)
             if r == len(hdris) - 1:
-                ax.set_xlabel(f"time per view change, ms ({results['vertices']} vertices, {results['threads']} threads)")
+                ax.set_xlabel(f"time per view change, ms ({results['vertices']} vertices, "
+                              f"{results['threads']} threads)")
             if c == 0:
                 ax.set_ylabel(f"relative RMSE vs reference ({results['pairs']} pairs)")
-    axes[0][0].legend(fontsize=7, loc="lower left")
+    axes[0][min(1, len(ROUGHNESS) - 1)].legend(fontsize=7, loc="upper right")  # an empty corner there
     fig.suptitle("Speed against accuracy, specular-only Cook-Torrance (Beckmann, index 1.5): lines are each "
                  "method's Pareto front, labelled (rotation/slicing: global/local/normals map sides, v view grid, "
                  "c BRDF terms kept, lc lighting terms kept;\nsplit-sum: p prefilter side, s samples, t table "

@@ -132,7 +132,8 @@ def test_finite_and_bounded_everywhere(method, envs):
     mat = specular(0.01, 0.2, 1.0)
     for env in envs.values():
         peak = env.pixels[..., :3].max(axis=(0, 1))
-        for quality, allowed in ((LADDERS[method][0], OVERSHOOT[method]), (LADDERS[method][1], OVERSHOOT_SECOND[method])):
+        for quality, allowed in ((LADDERS[method][0], OVERSHOOT[method]),
+                                 (LADDERS[method][1], OVERSHOOT_SECOND[method])):
             out = shader(env, mat, method, quality).shade(f32(nn), views)
             assert np.all(np.isfinite(out)) and np.all(out >= 0)
             assert np.all(out <= peak * allowed), (quality, (out / peak).max())
@@ -155,7 +156,9 @@ def test_error_inside_envelope(method, envs, pairs, references):
 def test_error_falls_as_quality_rises(method, envs, pairs):
     """Every step up the ladder lowers the error under both environments at m = 0.2.  Split-sum
     converges to its own n = v = r approximation, not to the reference, so it is measured where that
-    holds (views along the normal); elsewhere its error stays whatever the quality."""
+    holds (views along the normal); elsewhere its error stays whatever the quality.  Measured, sunset |
+    city: rotation 39 -> 17 % | 60 -> 28 %; slicing 39 -> 17 -> 11 % | 60 -> 28 -> 12 %; split-sum
+    19 -> 4.7 -> 2.0 % | 30 -> 8.4 -> 3.8 %; SH 52 -> 35 -> 18 % | 83 -> 72 -> 54 %."""
     nrm, v, _ = pairs
     if method == "split_sum":
         v = nrm
