@@ -39,6 +39,7 @@ struct wenv_envmap {
     size_t face_size;    /* cube cross: face edge in pixels */
     cube_face faces[6];  /* cube cross: +X, -X, +Y, -Y, +Z, -Z */
     float *pixels;       /* height x width x 3, row 0 the top */
+    double *column_xy;   /* equirect: world (x, y) of each column's azimuth, rotation applied */
 };
 
 /* Face frames as documented in envmap.h (order +X, -X, +Y, -Y, +Z, -Z). */
@@ -151,6 +152,22 @@ static wenv_status envmap_adopt(wenv_envmap **out, float *rgb, size_t height, si
     env->cos_r = cos(rotation);
     env->sin_r = sin(rotation);
     env->pixels = rgb;
+    if (projection == WENV_PROJ_EQUIRECT) {
+        /* per-column azimuths, so that sampling every pixel at a lighting change needs no sincos */
+        env->column_xy = malloc(2 * width * sizeof(double));
+        if (!env->column_xy) {
+            free(rgb);
+            free(env);
+            return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for an environment");
+        }
+        for (size_t col = 0; col < width; col++) {
+            double phi = PI * (1.0 - 2.0 * (((double)col + 0.5) / (double)width));
+            double x = cos(phi), y = sin(phi);
+            /* world direction w = R_z(-r) d */
+            env->column_xy[2 * col] = env->cos_r * x + env->sin_r * y;
+            env->column_xy[2 * col + 1] = -env->sin_r * x + env->cos_r * y;
+        }
+    }
     if (projection == WENV_PROJ_CUBE_CROSS) {
         int vertical = width * 4 == height * 3;
         env->face_size = vertical ? width / 3 : width / 4;
@@ -193,6 +210,7 @@ void wenv_envmap_free(wenv_envmap *env)
 {
     if (env) {
         free(env->pixels);
+        free(env->column_xy);
         free(env);
     }
 }
@@ -366,12 +384,33 @@ static int pixel_direction(const wenv_envmap *env, size_t row, size_t col, doubl
 }
 
 /* One row's valid pixels written from position m on; returns how many. */
-static size_t row_samples(const wenv_envmap *env, size_t row, size_t m, float *dirs, float *flux, float *omega_out)
+/* Equirect rows read the per-column azimuth table: the same directions and solid angles as
+ * pixel_direction / wenv_envmap_pixel_solid_angle, without a sincos per pixel. */
+static size_t equirect_row_samples(const wenv_envmap *env, size_t row, float *dirs, float *flux, float *omega_out)
 {
-    if (!dirs && env->projection == WENV_PROJ_EQUIRECT)
-        return env->width; /* every equirect pixel has a direction and a positive solid angle */
+    size_t w = env->width, h = env->height;
+    double lat = PI * ((1.0 - ((double)row + 0.5) / (double)h) - 0.5), cl = cos(lat), sl = sin(lat);
+    double omega = wenv_envmap_pixel_solid_angle(env, row, 0), k = omega * env->strength;
+    const double *xy = env->column_xy;
+    const float *p = pixel_at(env, row, 0);
+    for (size_t col = 0; col < w; col++) {
+        dirs[3 * col] = (float)(cl * xy[2 * col]);
+        dirs[3 * col + 1] = (float)(cl * xy[2 * col + 1]);
+        dirs[3 * col + 2] = (float)sl;
+        for (int ch = 0; ch < 3; ch++)
+            flux[3 * col + ch] = (float)(p[3 * col + ch] * k);
+        if (omega_out)
+            omega_out[col] = (float)omega;
+    }
+    return w;
+}
+
+size_t wenv_envmap_row_samples(const wenv_envmap *env, size_t row, float *dirs, float *flux, float *omega_out)
+{
+    if (env->projection == WENV_PROJ_EQUIRECT)
+        return dirs ? equirect_row_samples(env, row, dirs, flux, omega_out) : env->width;
     double c = env->cos_r, s = env->sin_r;
-    size_t m0 = m;
+    size_t m = 0;
     for (size_t col = 0; col < env->width; col++) {
         const float *p = pixel_at(env, row, col);
         double omega = wenv_envmap_pixel_solid_angle(env, row, col), d[3];
@@ -390,71 +429,32 @@ static size_t row_samples(const wenv_envmap *env, size_t row, size_t m, float *d
         }
         m++;
     }
-    return m - m0;
-}
-
-/* Equirect rows from per-column azimuth tables: the same directions and solid angles as
- * pixel_direction / wenv_envmap_pixel_solid_angle, without a sincos per pixel. */
-static size_t equirect_samples(const wenv_envmap *env, float *dirs, float *flux, float *omega_out)
-{
-    size_t w = env->width, h = env->height;
-    double *cs = malloc(2 * w * sizeof(double));
-    if (!cs)
-        return (size_t)-1;
-    double c = env->cos_r, s = env->sin_r;
-    for (size_t col = 0; col < w; col++) {
-        double phi = PI * (1.0 - 2.0 * (((double)col + 0.5) / (double)w));
-        /* world direction w = R_z(-r) d */
-        double x = cos(phi), y = sin(phi);
-        cs[2 * col] = c * x + s * y;
-        cs[2 * col + 1] = -s * x + c * y;
-    }
-#pragma omp parallel for schedule(static)
-    for (size_t row = 0; row < h; row++) {
-        double lat = PI * ((1.0 - ((double)row + 0.5) / (double)h) - 0.5), cl = cos(lat), sl = sin(lat);
-        double omega = wenv_envmap_pixel_solid_angle(env, row, 0), k = omega * env->strength;
-        for (size_t col = 0; col < w; col++) {
-            size_t m = row * w + col;
-            const float *p = pixel_at(env, row, col);
-            dirs[3 * m] = (float)(cl * cs[2 * col]);
-            dirs[3 * m + 1] = (float)(cl * cs[2 * col + 1]);
-            dirs[3 * m + 2] = (float)sl;
-            for (int ch = 0; ch < 3; ch++)
-                flux[3 * m + ch] = (float)(p[ch] * k);
-            if (omega_out)
-                omega_out[m] = (float)omega;
-        }
-    }
-    free(cs);
-    return w * h;
+    return m;
 }
 
 size_t wenv_envmap_samples(const wenv_envmap *env, float *dirs, float *flux, float *omega_out)
 {
-    if (env->projection == WENV_PROJ_EQUIRECT) {
-        size_t m = equirect_samples(env, dirs, flux, omega_out);
-        if (m != (size_t)-1)
-            return m;
-    }
-    /* Rows in parallel (a lighting change runs this on every pixel): count each row's valid pixels,
-     * then fill from the prefix sums, so the order is the serial one. */
+    /* Rows in parallel: count each row's valid pixels, then fill from the prefix sums, so the
+     * order is the serial one. */
     size_t h = env->height;
     size_t *start = malloc((h + 1) * sizeof(size_t));
     if (!start) {
         size_t m = 0;
         for (size_t row = 0; row < h; row++)
-            m += row_samples(env, row, m, dirs, flux, omega_out);
+            m += wenv_envmap_row_samples(env, row, dirs + 3 * m, flux + 3 * m, omega_out ? omega_out + m : NULL);
         return m;
     }
     start[0] = 0;
 #pragma omp parallel for schedule(dynamic, 8)
     for (size_t row = 0; row < h; row++)
-        start[row + 1] = row_samples(env, row, 0, NULL, NULL, NULL);
+        start[row + 1] = wenv_envmap_row_samples(env, row, NULL, NULL, NULL);
     for (size_t row = 0; row < h; row++)
         start[row + 1] += start[row];
 #pragma omp parallel for schedule(dynamic, 8)
-    for (size_t row = 0; row < h; row++)
-        row_samples(env, row, start[row], dirs, flux, omega_out);
+    for (size_t row = 0; row < h; row++) {
+        size_t m = start[row];
+        wenv_envmap_row_samples(env, row, dirs + 3 * m, flux + 3 * m, omega_out ? omega_out + m : NULL);
+    }
     size_t m = start[h];
     free(start);
     return m;

@@ -87,6 +87,11 @@ void wenv_envmap_lookup(const wenv_envmap *env, const double dir[3], float rgb[3
  * written.  The solid angles of all pixels sum to 4 pi. */
 size_t wenv_envmap_samples(const wenv_envmap *env, float *dirs, float *flux, float *omega);
 
+/* wenv_envmap_samples for one image row, into room for `width` samples (dirs and flux 3 floats
+ * each, omega one, may be NULL); with dirs NULL, only counts.  Thread-safe.  Returns the number of
+ * samples of the row. */
+size_t wenv_envmap_row_samples(const wenv_envmap *env, size_t row, float *dirs, float *flux, float *omega);
+
 /* Exact solid angle of pixel (row, col) (0 outside the domain). */
 double wenv_envmap_pixel_solid_angle(const wenv_envmap *env, size_t row, size_t col);
 

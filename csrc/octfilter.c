@@ -33,36 +33,43 @@ wenv_status wenv_oct_from_envmap(const wenv_envmap *env, size_t side, float *tex
         return WENV_OK;
     }
     int threads = omp_get_max_threads();
-    float *dirs = malloc(npix * 3 * sizeof(float));
-    float *flux = malloc(npix * 3 * sizeof(float));
-    float *omega = malloc(npix * sizeof(float));
-    /* one accumulator per thread: this runs over every pixel at each lighting change */
+    size_t w = wenv_envmap_width(env), h = wenv_envmap_height(env);
+    /* One accumulator per thread, and each image row sampled into a small per-thread buffer and
+     * splatted at once: this runs over every pixel at each lighting change, and materialising
+     * every pixel's sample would stream tens of megabytes through memory. */
     double *acc = calloc((size_t)threads * nt * 4, sizeof(double));
-    if (!dirs || !flux || !omega || !acc) {
-        free(dirs);
-        free(flux);
-        free(omega);
-        free(acc);
+    if (!acc)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory filtering the environment");
-    }
-    size_t count = wenv_envmap_samples(env, dirs, flux, omega);
-#pragma omp parallel num_threads(threads)
+    int failed = 0;
+#pragma omp parallel num_threads(threads) reduction(| : failed)
     {
         double *mine = acc + (size_t)omp_get_thread_num() * nt * 4;
+        float *dirs = malloc(w * 7 * sizeof(float)), *flux = dirs + 3 * w, *omega = dirs + 6 * w;
+        failed = dirs == NULL;
 #pragma omp for schedule(static)
-        for (size_t p = 0; p < count; p++) {
-            float u, v, w[4];
-            uint32_t idx[4];
-            wenv_oct_encode_f(dirs + 3 * p, &u, &v);
-            wenv_oct_bilinear_f((long)side, u, v, idx, w);
-            for (int c = 0; c < 4; c++) {
-                double *a = mine + 4 * (size_t)idx[c];
-                a[0] += (double)w[c] * flux[3 * p];
-                a[1] += (double)w[c] * flux[3 * p + 1];
-                a[2] += (double)w[c] * flux[3 * p + 2];
-                a[3] += (double)w[c] * omega[p];
+        for (size_t row = 0; row < h; row++) {
+            if (!dirs)
+                continue;
+            size_t count = wenv_envmap_row_samples(env, row, dirs, flux, omega);
+            for (size_t p = 0; p < count; p++) {
+                float u, v, wt[4];
+                uint32_t idx[4];
+                wenv_oct_encode_f(dirs + 3 * p, &u, &v);
+                wenv_oct_bilinear_f((long)side, u, v, idx, wt);
+                for (int c = 0; c < 4; c++) {
+                    double *a = mine + 4 * (size_t)idx[c];
+                    a[0] += (double)wt[c] * flux[3 * p];
+                    a[1] += (double)wt[c] * flux[3 * p + 1];
+                    a[2] += (double)wt[c] * flux[3 * p + 2];
+                    a[3] += (double)wt[c] * omega[p];
+                }
             }
         }
+        free(dirs);
+    }
+    if (failed) {
+        free(acc);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory filtering the environment");
     }
     for (int t = 1; t < threads; t++)
         for (size_t e = 0; e < nt * 4; e++)
@@ -76,9 +83,6 @@ wenv_status wenv_oct_from_envmap(const wenv_envmap *env, size_t side, float *tex
             supersample_texel(env, side, t, texels + 3 * t);
         }
     }
-    free(dirs);
-    free(flux);
-    free(omega);
     free(acc);
     return WENV_OK;
 }

@@ -32,7 +32,7 @@ struct wenv_shader {
     float *global_texels;    /* slicing: the kept lighting back in the pixel domain */
     float **slices;          /* ns pointers to nl x 3 Haar coefficients, NULL until needed */
     float *irradiance;       /* ns x 3 */
-    unsigned char *slice_ready, *slice_need;
+    unsigned char *slice_ready, *slice_need, *slice_used;
 
     /* local quadrature: sub-samples of the local map with their tent taps */
     size_t quad_k, quad_count;
@@ -50,7 +50,7 @@ struct wenv_shader {
 
     /* (normal sample, view sample) radiance table */
     float *table;            /* ns x nv x 3 */
-    unsigned char *pair_ready, *pair_need;
+    unsigned char *pair_ready, *pair_need, *pair_used; /* used: read by the latest shade call */
 };
 
 /* cos(89.9 deg): the lowest view a BRDF slice is made for */
@@ -126,12 +126,14 @@ void wenv_shader_free(wenv_shader *sh)
     free(sh->irradiance);
     free(sh->slice_ready);
     free(sh->slice_need);
+    free(sh->slice_used);
     free_quadrature(sh);
     free(sh->cosine_haar);
     free_material(sh);
     free(sh->table);
     free(sh->pair_ready);
     free(sh->pair_need);
+    free(sh->pair_used);
     free(sh);
 }
 
@@ -218,11 +220,13 @@ wenv_status wenv_shader_create(wenv_shader **out, const wenv_quality *q, wenv_me
     sh->irradiance = calloc(sh->ns * 3, sizeof(float));
     sh->slice_ready = calloc(sh->ns, 1);
     sh->slice_need = calloc(sh->ns, 1);
+    sh->slice_used = calloc(sh->ns, 1);
     sh->table = malloc(sh->ns * sh->nv * 3 * sizeof(float));
     sh->pair_ready = calloc(sh->ns * sh->nv, 1);
     sh->pair_need = calloc(sh->ns * sh->nv, 1);
-    if (!sh->frames || !sh->slices || !sh->irradiance || !sh->slice_ready || !sh->slice_need || !sh->table ||
-        !sh->pair_ready || !sh->pair_need) {
+    sh->pair_used = calloc(sh->ns * sh->nv, 1);
+    if (!sh->frames || !sh->slices || !sh->irradiance || !sh->slice_ready || !sh->slice_need || !sh->slice_used ||
+        !sh->table || !sh->pair_ready || !sh->pair_need || !sh->pair_used) {
         wenv_shader_free(sh);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the shader tables");
     }
@@ -300,19 +304,19 @@ static inline void corner_taps_f(long n, float u, float v, uint32_t idx[4], floa
 
 static wenv_status fill_needed(wenv_shader *sh, wenv_error *err);
 
-/* A new lighting (slices too) or material remakes at once what the mesh read so far -- the slices
- * and table entries that were ready -- so that shading the same view again is a single pass over
- * the vertices; entries never read are left to be made when a vertex needs them. */
+/* A new lighting (slices too) or material remakes at once what the latest shade call read -- so
+ * that shading the same view again, the usual case while lighting or material is edited, is a single
+ * pass over the vertices -- and marks everything else stale, to be made when a vertex needs it. */
 static wenv_status remake_ready(wenv_shader *sh, int slices, wenv_error *err)
 {
     size_t npairs = sh->ns * sh->nv;
     if (slices) {
         for (size_t s = 0; s < sh->ns; s++)
-            sh->slice_need[s] |= sh->slice_ready[s];
+            sh->slice_need[s] |= sh->slice_ready[s] & sh->slice_used[s];
         memset(sh->slice_ready, 0, sh->ns);
     }
     for (size_t p = 0; p < npairs; p++)
-        sh->pair_need[p] |= sh->pair_ready[p];
+        sh->pair_need[p] |= sh->pair_ready[p] & sh->pair_used[p];
     memset(sh->pair_ready, 0, npairs);
     if (!sh->have_env || !sh->have_mat)
         return WENV_OK;
@@ -609,6 +613,30 @@ static int taps_ready(const wenv_shader *sh, const vertex_taps *tp)
     return 1;
 }
 
+/* Flags in `flags` (slice_used or pair_used, or the need flags) what the vertex reads.  Checked
+ * before written so that cache lines shared between threads stay clean; every writer stores 1. */
+static inline void flag_taps(const vertex_taps *tp, unsigned char *slice_flags, unsigned char *pair_flags)
+{
+    for (int k = 0; k < 4; k++) {
+        unsigned char f;
+#pragma omp atomic read
+        f = slice_flags[tp->sample[k]];
+        if (tp->sample_w[k] > 0.0f && !f) {
+#pragma omp atomic write
+            slice_flags[tp->sample[k]] = 1;
+        }
+    }
+    for (int k = 0; k < 16; k++) {
+        unsigned char f;
+#pragma omp atomic read
+        f = pair_flags[tp->pair[k]];
+        if (tp->pair_w[k] > 0.0f && !f) {
+#pragma omp atomic write
+            pair_flags[tp->pair[k]] = 1;
+        }
+    }
+}
+
 /* Makes the lighting slices and table entries flagged in slice_need / pair_need. */
 static wenv_status fill_needed(wenv_shader *sh, wenv_error *err)
 {
@@ -682,6 +710,8 @@ wenv_status wenv_shader_shade(wenv_shader *sh, const float *normals, const float
     size_t *pending = malloc((n ? n : 1) * sizeof(size_t));
     if (!pending)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory shading");
+    memset(sh->slice_used, 0, sh->ns);
+    memset(sh->pair_used, 0, sh->ns * sh->nv);
     atomic_size_t npending = 0;
     long long nn = (long long)n;
 #pragma omp parallel for schedule(static)
@@ -692,20 +722,12 @@ wenv_status wenv_shader_shade(wenv_shader *sh, const float *normals, const float
             o[0] = o[1] = o[2] = 0.0f;
             continue;
         }
+        flag_taps(&tp, sh->slice_used, sh->pair_used);
         if (taps_ready(sh, &tp)) {
             shade_vertex(sh, &tp, o);
             continue;
         }
-        for (int k = 0; k < 4; k++)
-            if (tp.sample_w[k] > 0.0f) {
-#pragma omp atomic write
-                sh->slice_need[tp.sample[k]] = 1;
-            }
-        for (int k = 0; k < 16; k++)
-            if (tp.pair_w[k] > 0.0f) {
-#pragma omp atomic write
-                sh->pair_need[tp.pair[k]] = 1;
-            }
+        flag_taps(&tp, sh->slice_need, sh->pair_need);
         pending[atomic_fetch_add(&npending, 1)] = (size_t)i;
     }
     size_t np = atomic_load(&npending);
