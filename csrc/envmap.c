@@ -8,6 +8,7 @@
 #include <errno.h>
 #include <fcntl.h>
 #include <math.h>
+#include <omp.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -386,7 +387,8 @@ static int pixel_direction(const wenv_envmap *env, size_t row, size_t col, doubl
 /* One row's valid pixels written from position m on; returns how many. */
 /* Equirect rows read the per-column azimuth table: the same directions and solid angles as
  * pixel_direction / wenv_envmap_pixel_solid_angle, without a sincos per pixel. */
-static size_t equirect_row_samples(const wenv_envmap *env, size_t row, float *dirs, float *flux, float *omega_out)
+static size_t equirect_row_samples(const wenv_envmap *env, size_t row, float *dirs, float *flux, float *omega_out,
+                                   uint32_t *cols)
 {
     size_t w = env->width, h = env->height;
     double lat = PI * ((1.0 - ((double)row + 0.5) / (double)h) - 0.5), cl = cos(lat), sl = sin(lat);
@@ -401,14 +403,17 @@ static size_t equirect_row_samples(const wenv_envmap *env, size_t row, float *di
             flux[3 * col + ch] = (float)(p[3 * col + ch] * k);
         if (omega_out)
             omega_out[col] = (float)omega;
+        if (cols)
+            cols[col] = (uint32_t)col;
     }
     return w;
 }
 
-size_t wenv_envmap_row_samples(const wenv_envmap *env, size_t row, float *dirs, float *flux, float *omega_out)
+size_t wenv_envmap_row_samples(const wenv_envmap *env, size_t row, float *dirs, float *flux, float *omega_out,
+                               uint32_t *cols)
 {
     if (env->projection == WENV_PROJ_EQUIRECT)
-        return dirs ? equirect_row_samples(env, row, dirs, flux, omega_out) : env->width;
+        return dirs ? equirect_row_samples(env, row, dirs, flux, omega_out, cols) : env->width;
     double c = env->cos_r, s = env->sin_r;
     size_t m = 0;
     for (size_t col = 0; col < env->width; col++) {
@@ -426,6 +431,8 @@ size_t wenv_envmap_row_samples(const wenv_envmap *env, size_t row, float *dirs, 
                 flux[3 * m + ch] = (float)(p[ch] * k);
             if (omega_out)
                 omega_out[m] = (float)omega;
+            if (cols)
+                cols[m] = (uint32_t)col;
         }
         m++;
     }
@@ -441,23 +448,110 @@ size_t wenv_envmap_samples(const wenv_envmap *env, float *dirs, float *flux, flo
     if (!start) {
         size_t m = 0;
         for (size_t row = 0; row < h; row++)
-            m += wenv_envmap_row_samples(env, row, dirs + 3 * m, flux + 3 * m, omega_out ? omega_out + m : NULL);
+            m += wenv_envmap_row_samples(env, row, dirs + 3 * m, flux + 3 * m, omega_out ? omega_out + m : NULL, NULL);
         return m;
     }
     start[0] = 0;
 #pragma omp parallel for schedule(dynamic, 8)
     for (size_t row = 0; row < h; row++)
-        start[row + 1] = wenv_envmap_row_samples(env, row, NULL, NULL, NULL);
+        start[row + 1] = wenv_envmap_row_samples(env, row, NULL, NULL, NULL, NULL);
     for (size_t row = 0; row < h; row++)
         start[row + 1] += start[row];
 #pragma omp parallel for schedule(dynamic, 8)
     for (size_t row = 0; row < h; row++) {
         size_t m = start[row];
-        wenv_envmap_row_samples(env, row, dirs + 3 * m, flux + 3 * m, omega_out ? omega_out + m : NULL);
+        wenv_envmap_row_samples(env, row, dirs + 3 * m, flux + 3 * m, omega_out ? omega_out + m : NULL, NULL);
     }
     size_t m = start[h];
     free(start);
     return m;
+}
+
+/* Whether a ranks before b: brighter, then earlier in the image (a total order, so the result does
+ * not depend on how rows were split between threads). */
+static int brighter(const wenv_bright_pixel *a, const wenv_bright_pixel *b)
+{
+    return a->radiance > b->radiance || (a->radiance == b->radiance && a->pixel < b->pixel);
+}
+
+/* Inserts p into the sorted list top[0..*n) of capacity k. */
+static void keep_brightest(wenv_bright_pixel *top, size_t *n, size_t k, const wenv_bright_pixel *p)
+{
+    if (*n == k && !brighter(p, &top[k - 1]))
+        return;
+    size_t i = *n < k ? (*n)++ : k - 1;
+    while (i > 0 && brighter(p, &top[i - 1])) {
+        top[i] = top[i - 1];
+        i--;
+    }
+    top[i] = *p;
+}
+
+size_t wenv_envmap_brightest(const wenv_envmap *env, size_t k, double relative, wenv_bright_pixel *out)
+{
+    size_t w = env->width, h = env->height;
+    if (!k || !w || !h)
+        return 0;
+    int threads = omp_get_max_threads();
+    wenv_bright_pixel *top = malloc((size_t)threads * k * sizeof *top);
+    size_t *count = calloc((size_t)threads, sizeof *count);
+    double *flux = calloc((size_t)threads, sizeof *flux);
+    if (!top || !count || !flux) {
+        free(top);
+        free(count);
+        free(flux);
+        return 0;
+    }
+    /* each thread keeps its own k brightest and its share of the total flux */
+#pragma omp parallel num_threads(threads)
+    {
+        int t = omp_get_thread_num();
+        wenv_bright_pixel *mine = top + (size_t)t * k;
+#pragma omp for schedule(static)
+        for (size_t row = 0; row < h; row++) {
+            for (size_t col = 0; col < w; col++) {
+                double omega = wenv_envmap_pixel_solid_angle(env, row, col);
+                if (!(omega > 0.0))
+                    continue;
+                const float *p = pixel_at(env, row, col);
+                flux[t] += omega * ((double)p[0] + p[1] + p[2]) / 3.0;
+                wenv_bright_pixel b = {.pixel = row * w + col};
+                b.radiance = (float)(fmax(p[0], fmax(p[1], p[2])) * env->strength);
+                if (count[t] < k || brighter(&b, &mine[k - 1]))
+                    keep_brightest(mine, &count[t], k, &b);
+            }
+        }
+    }
+    double total = 0.0;
+    for (int t = 0; t < threads; t++)
+        total += flux[t];
+    double threshold = relative * env->strength * total / (4.0 * PI);
+    size_t n = 0;
+    for (int t = 0; t < threads; t++)
+        for (size_t i = 0; i < count[t]; i++)
+            if (top[(size_t)t * k + i].radiance > threshold)
+                keep_brightest(out, &n, k, &top[(size_t)t * k + i]);
+    /* direction and flux exactly as wenv_envmap_samples gives them, so that whoever takes these
+     * pixels out of a sum of samples takes out precisely what was put in */
+    float *dirs = n ? malloc(w * 7 * sizeof(float)) : NULL;
+    uint32_t *cols = n ? malloc(w * sizeof(uint32_t)) : NULL;
+    if (n && (!dirs || !cols))
+        n = 0;
+    for (size_t i = 0; i < n; i++) {
+        size_t row = out[i].pixel / w, col = out[i].pixel % w;
+        size_t m = wenv_envmap_row_samples(env, row, dirs, dirs + 3 * w, dirs + 6 * w, cols);
+        for (size_t e = 0; e < m; e++)
+            if (cols[e] == col) {
+                memcpy(out[i].dir, dirs + 3 * e, sizeof out[i].dir);
+                memcpy(out[i].flux, dirs + 3 * w + 3 * e, sizeof out[i].flux);
+            }
+    }
+    free(dirs);
+    free(cols);
+    free(top);
+    free(count);
+    free(flux);
+    return n;
 }
 
 /* ---------------------------------------------------------------------------------------------

@@ -31,6 +31,7 @@
 #define WENV_ENVMAP_H
 
 #include <stddef.h>
+#include <stdint.h>
 
 #include "error.h"
 
@@ -88,9 +89,24 @@ void wenv_envmap_lookup(const wenv_envmap *env, const double dir[3], float rgb[3
 size_t wenv_envmap_samples(const wenv_envmap *env, float *dirs, float *flux, float *omega);
 
 /* wenv_envmap_samples for one image row, into room for `width` samples (dirs and flux 3 floats
- * each, omega one, may be NULL); with dirs NULL, only counts.  Thread-safe.  Returns the number of
- * samples of the row. */
-size_t wenv_envmap_row_samples(const wenv_envmap *env, size_t row, float *dirs, float *flux, float *omega);
+ * each; omega one and cols, each sample's column, may be NULL); with dirs NULL, only counts.
+ * Thread-safe.  Returns the number of samples of the row. */
+size_t wenv_envmap_row_samples(const wenv_envmap *env, size_t row, float *dirs, float *flux, float *omega,
+                               uint32_t *cols);
+
+/* A pixel taken out of the environment to be shaded as an exact directional light. */
+typedef struct {
+    size_t pixel;   /* row * width + col */
+    float dir[3];   /* world direction of its centre, rotation applied */
+    float flux[3];  /* radiance * strength * solid angle */
+    float radiance; /* its largest channel, strength applied */
+} wenv_bright_pixel;
+
+/* The up to k brightest pixels (by largest channel) whose radiance exceeds `relative` times the
+ * environment's mean radiance (total flux / 4 pi, channels averaged), brightest first, ties by
+ * pixel order.  `out` holds room for k.  Returns the number written; 0 on allocation failure (then
+ * nothing is taken out, which is always a valid answer). */
+size_t wenv_envmap_brightest(const wenv_envmap *env, size_t k, double relative, wenv_bright_pixel *out);
 
 /* Exact solid angle of pixel (row, col) (0 outside the domain). */
 double wenv_envmap_pixel_solid_angle(const wenv_envmap *env, size_t row, size_t col);

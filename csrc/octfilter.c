@@ -3,6 +3,7 @@
 #include <omp.h>
 #include <stdint.h>
 #include <stdlib.h>
+#include <string.h>
 
 #include "maps.h"
 
@@ -23,13 +24,52 @@ static void supersample_texel(const wenv_envmap *env, size_t side, size_t t, flo
         rgb[i] = (float)(acc[i] / (double)(k * k));
 }
 
-wenv_status wenv_oct_from_envmap(const wenv_envmap *env, size_t side, float *texels, wenv_error *err)
+static int splats(const wenv_envmap *env, size_t side)
 {
-    size_t nt = side * side, npix = wenv_envmap_width(env) * wenv_envmap_height(env);
-    if (npix < 2 * nt) {
+    return wenv_envmap_width(env) * wenv_envmap_height(env) >= 2 * side * side;
+}
+
+/* First index in the ascending list a[0..n) whose value is at least x. */
+static size_t lower_bound(const size_t *a, size_t n, size_t x)
+{
+    size_t lo = 0, hi = n;
+    while (lo < hi) {
+        size_t mid = lo + (hi - lo) / 2;
+        if (a[mid] < x)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    return lo;
+}
+
+wenv_status wenv_oct_from_envmap(const wenv_envmap *env, size_t side, float *texels, const size_t *excluded,
+                                 size_t n_excluded, wenv_error *err)
+{
+    size_t nt = side * side;
+    if (!splats(env, side)) {
+        /* a coarse image is looked up, so excluded pixels are blacked out in a copy */
+        wenv_envmap *residual = NULL;
+        if (n_excluded) {
+            size_t npix = wenv_envmap_width(env) * wenv_envmap_height(env);
+            float *px = malloc(npix * 3 * sizeof(float));
+            if (!px)
+                return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory filtering the environment");
+            memcpy(px, wenv_envmap_pixels(env), npix * 3 * sizeof(float));
+            for (size_t e = 0; e < n_excluded; e++)
+                px[3 * excluded[e]] = px[3 * excluded[e] + 1] = px[3 * excluded[e] + 2] = 0.0f;
+            wenv_status st = wenv_envmap_create(&residual, px, wenv_envmap_height(env), wenv_envmap_width(env), 3,
+                                                wenv_envmap_projection(env), wenv_envmap_rotation(env),
+                                                wenv_envmap_strength(env), err);
+            free(px);
+            if (st)
+                return st;
+        }
+        const wenv_envmap *src = residual ? residual : env;
 #pragma omp parallel for schedule(dynamic, 64)
         for (size_t t = 0; t < nt; t++)
-            supersample_texel(env, side, t, texels + 3 * t);
+            supersample_texel(src, side, t, texels + 3 * t);
+        wenv_envmap_free(residual);
         return WENV_OK;
     }
     int threads = omp_get_max_threads();
@@ -45,12 +85,18 @@ wenv_status wenv_oct_from_envmap(const wenv_envmap *env, size_t side, float *tex
     {
         double *mine = acc + (size_t)omp_get_thread_num() * nt * 4;
         float *dirs = malloc(w * 7 * sizeof(float)), *flux = dirs + 3 * w, *omega = dirs + 6 * w;
-        failed = dirs == NULL;
+        uint32_t *cols = malloc(w * sizeof(uint32_t));
+        failed = !dirs || !cols;
 #pragma omp for schedule(static)
         for (size_t row = 0; row < h; row++) {
-            if (!dirs)
+            if (!dirs || !cols)
                 continue;
-            size_t count = wenv_envmap_row_samples(env, row, dirs, flux, omega);
+            size_t count = wenv_envmap_row_samples(env, row, dirs, flux, omega, cols);
+            size_t lo = lower_bound(excluded, n_excluded, row * w), hi = lower_bound(excluded, n_excluded, (row + 1) * w);
+            for (size_t e = lo; e < hi; e++) /* black, solid angle kept */
+                for (size_t p = 0; p < count; p++)
+                    if (row * w + cols[p] == excluded[e])
+                        flux[3 * p] = flux[3 * p + 1] = flux[3 * p + 2] = 0.0f;
             for (size_t p = 0; p < count; p++) {
                 float u, v, wt[4];
                 uint32_t idx[4];
@@ -66,6 +112,7 @@ wenv_status wenv_oct_from_envmap(const wenv_envmap *env, size_t side, float *tex
             }
         }
         free(dirs);
+        free(cols);
     }
     if (failed) {
         free(acc);

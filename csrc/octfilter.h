@@ -11,7 +11,11 @@
 #include "envmap.h"
 #include "error.h"
 
-/* texels: side x side x 3 floats (side even).  Radiance includes the environment's strength. */
-wenv_status wenv_oct_from_envmap(const wenv_envmap *env, size_t side, float *texels, wenv_error *err);
+/* texels: side x side x 3 floats (side even).  Radiance includes the environment's strength.
+ * `excluded` (ascending pixel indices row * width + col, n_excluded of them, may be NULL) are pixels
+ * shaded elsewhere: they count as black, their solid angle kept. */
+wenv_status wenv_oct_from_envmap(const wenv_envmap *env, size_t side, float *texels, const size_t *excluded,
+                                 size_t n_excluded, wenv_error *err);
+
 
 #endif

@@ -32,6 +32,9 @@ struct wenv_shader {
     float *global_texels;    /* slicing: the kept lighting back in the pixel domain */
     float **slices;          /* ns pointers to nl x 3 Haar coefficients, NULL until needed */
     float *irradiance;       /* ns x 3 */
+    size_t direct_count;     /* pixels taken out as exact directional lights */
+    float *direct_dir;       /* direct_count x 3, world */
+    float *direct_flux;      /* direct_count x 3: radiance x solid angle */
     unsigned char *slice_ready, *slice_need, *slice_used;
 
     /* local quadrature: sub-samples of the local map with their tent taps */
@@ -43,6 +46,10 @@ struct wenv_shader {
 
     /* material */
     int have_mat;
+    wenv_material *mat;      /* for the direct lights */
+    float *lobe_cos_h_min;   /* per lobe: below this n.h its D is negligible (< 1e-7 of its peak) */
+    float *albedo;           /* ALBEDO_N x 3: specular albedo at cos(view) = GRAZING_Z .. 1 */
+    float *view_inv_albedo;  /* nv x 3: 1 / albedo of each view sample (0 where the albedo is 0) */
     float diffuse_over_pi[3];
     size_t *brdf_start;      /* nv + 1 */
     uint32_t *brdf_idx;
@@ -55,6 +62,10 @@ struct wenv_shader {
 
 /* cos(89.9 deg): the lowest view a BRDF slice is made for */
 #define GRAZING_Z 0.0017453283658983088
+/* Entries of the specular albedo table, uniform in cos(view): 1/256 apart is 0.22 degrees at the
+ * horizon, where the albedo changes fastest. */
+#define ALBEDO_N 257
+#define ALBEDO_SAMPLES 32
 
 static double now_seconds(void)
 {
@@ -79,6 +90,11 @@ wenv_status wenv_quality_check(const wenv_quality *q, wenv_error *err)
     if (q->light_coefficients > ((size_t)1 << 20))
         return wenv_error_set(err, WENV_ERR_VALUE, "quality['light_coefficients'] must be at most 2**20, got %zu",
                               q->light_coefficients);
+    if (q->lights > 4096)
+        return wenv_error_set(err, WENV_ERR_VALUE, "quality['lights'] must be at most 4096, got %zu", q->lights);
+    if (!(q->light_threshold >= 1.0 && q->light_threshold <= 1e12))
+        return wenv_error_set(err, WENV_ERR_VALUE, "quality['light_threshold'] must be in [1, 1e12], got %g",
+                              q->light_threshold);
     if (!(q->matrix_epsilon >= 0.0 && q->matrix_epsilon < 1.0))
         return wenv_error_set(err, WENV_ERR_VALUE, "quality['matrix_epsilon'] must be in [0, 1), got %g", q->matrix_epsilon);
     size_t table = q->normal_n * q->normal_n * (q->view_n + 1) * (q->view_n + 1);
@@ -89,6 +105,14 @@ wenv_status wenv_quality_check(const wenv_quality *q, wenv_error *err)
 
 static void free_material(wenv_shader *sh)
 {
+    wenv_material_free(sh->mat);
+    free(sh->lobe_cos_h_min);
+    free(sh->albedo);
+    free(sh->view_inv_albedo);
+    sh->mat = NULL;
+    sh->lobe_cos_h_min = NULL;
+    sh->albedo = NULL;
+    sh->view_inv_albedo = NULL;
     free(sh->brdf_start);
     free(sh->brdf_idx);
     free(sh->brdf_rgb);
@@ -124,6 +148,8 @@ void wenv_shader_free(wenv_shader *sh)
             free(sh->slices[s]);
     free(sh->slices);
     free(sh->irradiance);
+    free(sh->direct_dir);
+    free(sh->direct_flux);
     free(sh->slice_ready);
     free(sh->slice_need);
     free(sh->slice_used);
@@ -323,6 +349,12 @@ static wenv_status remake_ready(wenv_shader *sh, int slices, wenv_error *err)
     return fill_needed(sh, err);
 }
 
+static int compare_size(const void *a, const void *b)
+{
+    size_t x = *(const size_t *)a, y = *(const size_t *)b;
+    return (x > y) - (x < y);
+}
+
 wenv_status wenv_shader_set_environment(wenv_shader *sh, const wenv_envmap *env, wenv_error *err)
 {
     size_t G = sh->q.global_n, ng = sh->ng;
@@ -333,11 +365,23 @@ wenv_status wenv_shader_set_environment(wenv_shader *sh, const wenv_envmap *env,
     uint32_t *idx = malloc(ng * sizeof(uint32_t));
     float *rgb = NULL;
     wenv_status st = WENV_OK;
-    if (!texels || !scratch || !mag || !work || !idx) {
+    size_t nlights = sh->q.lights;
+    wenv_bright_pixel *bright = malloc((nlights ? nlights : 1) * sizeof *bright);
+    size_t *excluded = malloc((nlights ? nlights : 1) * sizeof *excluded);
+    float *ddir = malloc((nlights ? nlights : 1) * 3 * sizeof(float));
+    float *dflux = malloc((nlights ? nlights : 1) * 3 * sizeof(float));
+    if (!texels || !scratch || !mag || !work || !idx || !bright || !excluded || !ddir || !dflux) {
         st = wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the environment");
         goto done;
     }
-    if ((st = wenv_oct_from_envmap(env, G, texels, err)))
+    nlights = wenv_envmap_brightest(env, nlights, sh->q.light_threshold, bright);
+    for (size_t i = 0; i < nlights; i++) {
+        excluded[i] = bright[i].pixel;
+        memcpy(ddir + 3 * i, bright[i].dir, sizeof bright[i].dir);
+        memcpy(dflux + 3 * i, bright[i].flux, sizeof bright[i].flux);
+    }
+    qsort(excluded, nlights, sizeof *excluded, compare_size);
+    if ((st = wenv_oct_from_envmap(env, G, texels, excluded, nlights, err)))
         goto done;
     wenv_haar2d_forward(texels, G, 3, scratch);
     for (size_t u = 0; u < ng; u++)
@@ -369,6 +413,12 @@ wenv_status wenv_shader_set_environment(wenv_shader *sh, const wenv_envmap *env,
     sh->light_count = count;
     idx = NULL;
     rgb = NULL;
+    free(sh->direct_dir);
+    free(sh->direct_flux);
+    sh->direct_dir = ddir;
+    sh->direct_flux = dflux;
+    sh->direct_count = nlights;
+    ddir = dflux = NULL;
     sh->have_env = 1;
     st = remake_ready(sh, 1, err);
 done:
@@ -378,6 +428,10 @@ done:
     free(work);
     free(idx);
     free(rgb);
+    free(bright);
+    free(excluded);
+    free(ddir);
+    free(dflux);
     return st;
 }
 
@@ -392,6 +446,86 @@ static size_t quadrature_k(const wenv_shader *sh, const wenv_material *mat)
     double spacing = 2.5 / (double)sh->q.local_n;
     size_t k = (size_t)ceil(2.0 * spacing / (1.41 * m));
     return k < 2 ? 2 : (k > 16 ? 16 : k);
+}
+
+/* Per lobe, the n.h below which its distribution stays under 1e-7 of its largest value (a scan over
+ * theta_h from the horizon in, stopping one step past the first value above the cut): a direct
+ * light there adds nothing visible, and skipping it keeps the lights cheap per vertex. */
+static wenv_status lobe_cutoffs(wenv_shader *sh, const wenv_material *mat, wenv_error *err)
+{
+    enum { STEPS = 4096 };
+    sh->lobe_cos_h_min = malloc((mat->n_lobes ? mat->n_lobes : 1) * sizeof(float));
+    if (!sh->lobe_cos_h_min)
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the material");
+    for (size_t k = 0; k < mat->n_lobes; k++) {
+        const wenv_lobe *lobe = &mat->lobes[k];
+        double peak = 0.0;
+        for (int i = 0; i <= STEPS; i++)
+            peak = fmax(peak, wenv_ndf(lobe->distribution, lobe->roughness, cos(0.5 * M_PI * i / STEPS)));
+        int i = STEPS;
+        while (i > 0 && wenv_ndf(lobe->distribution, lobe->roughness, cos(0.5 * M_PI * i / STEPS)) < 1e-7 * peak)
+            i--;
+        i = i < STEPS ? i + 1 : STEPS;
+        sh->lobe_cos_h_min[k] = i >= STEPS ? -1.0f : (float)cos(0.5 * M_PI * i / STEPS);
+    }
+    return WENV_OK;
+}
+
+/* Specular albedo at cos(view) = c, linear in the table. */
+static inline void albedo_at(const float *table, float c, float a[3])
+{
+    float x = (c - (float)GRAZING_Z) * (float)(ALBEDO_N - 1) / (1.0f - (float)GRAZING_Z);
+    x = x < 0.0f ? 0.0f : (x > (float)(ALBEDO_N - 1) ? (float)(ALBEDO_N - 1) : x);
+    long i = (long)x;
+    if (i > ALBEDO_N - 2)
+        i = ALBEDO_N - 2;
+    float f = x - (float)i;
+    for (int k = 0; k < 3; k++)
+        a[k] = (1.0f - f) * table[3 * i + k] + f * table[3 * (i + 1) + k];
+}
+
+/* The specular lobes' directional albedo over cos(view), and its inverse at each view sample.
+ *
+ * Why: a table entry is the lighting seen through one view sample's BRDF slice, and near grazing
+ * the slice's overall size (Fresnel, masking, 1/cos of the view) changes faster than bilinear
+ * interpolation between view samples follows.  Entries are therefore kept divided by their view's
+ * albedo -- a weighted mean radiance, which varies slowly -- and a vertex multiplies the
+ * interpolated mean by the albedo at its own view.  A constant environment stays exact. */
+static wenv_status albedo_tables(wenv_shader *sh, const wenv_material *mat, wenv_error *err)
+{
+    size_t V = sh->q.view_n;
+    sh->albedo = calloc(ALBEDO_N * 3, sizeof(float));
+    sh->view_inv_albedo = calloc(sh->nv * 3, sizeof(float));
+    if (!sh->albedo || !sh->view_inv_albedo)
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the material");
+    atomic_int failed = 0;
+#pragma omp parallel for schedule(dynamic, 4)
+    for (size_t i = 0; i < ALBEDO_N; i++) {
+        double c = GRAZING_Z + (1.0 - GRAZING_Z) * (double)i / (double)(ALBEDO_N - 1);
+        double wo[3] = {sqrt(fmax(0.0, 1.0 - c * c)), 0.0, c};
+        for (size_t l = 0; l < mat->n_lobes; l++) {
+            double a;
+            wenv_error lobe_err = {0};
+            if (wenv_lobe_albedo(&mat->lobes[l], mat->shadowing, wo, ALBEDO_SAMPLES, 1, &a, &lobe_err)) {
+                atomic_store(&failed, 1);
+                continue;
+            }
+            for (int k = 0; k < 3; k++)
+                sh->albedo[3 * i + k] += (float)(a * mat->lobes[l].specular[k]);
+        }
+    }
+    if (failed)
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the material's albedo");
+    for (size_t j = 0; j < sh->nv; j++) {
+        double wo[3];
+        wenv_hemi_decode(-1.0 + 2.0 * (double)(j % (V + 1)) / (double)V, -1.0 + 2.0 * (double)(j / (V + 1)) / (double)V,
+                         wo);
+        float a[3];
+        albedo_at(sh->albedo, (float)wo[2], a);
+        for (int k = 0; k < 3; k++)
+            sh->view_inv_albedo[3 * j + k] = a[k] > 1e-30f ? 1.0f / a[k] : 0.0f;
+    }
+    return WENV_OK;
 }
 
 wenv_status wenv_shader_set_material(wenv_shader *sh, const wenv_material *mat, wenv_error *err)
@@ -491,6 +625,10 @@ wenv_status wenv_shader_set_material(wenv_shader *sh, const wenv_material *mat, 
     free(counts);
     free(all_idx);
     free(all_rgb);
+    if (wenv_material_copy(&sh->mat, mat, err) || lobe_cutoffs(sh, mat, err) || albedo_tables(sh, mat, err)) {
+        free_material(sh);
+        return err->status;
+    }
     for (int c = 0; c < 3; c++)
         sh->diffuse_over_pi[c] = (float)(mat->diffuse[c] / M_PI);
     sh->stats.brdf_terms_total = total;
@@ -505,6 +643,7 @@ typedef struct {
     float sample_w[4];
     uint32_t pair[16];
     float pair_w[16];
+    float n[3], v[3]; /* unit vertex normal and view, for the direct lights */
 } vertex_taps;
 
 /* Returns 0 when the view is below the surface (the vertex is black). */
@@ -520,6 +659,8 @@ static int compute_taps(const wenv_shader *sh, const float *nrm, const float *vi
     float nv = n[0] * v[0] + n[1] * v[1] + n[2] * v[2];
     if (!(nv > 0.0f))
         return 0;
+    memcpy(tp->n, n, sizeof n);
+    memcpy(tp->v, v, sizeof v);
     float r[3] = {2.0f * nv * n[0] - v[0], 2.0f * nv * n[1] - v[1], 2.0f * nv * n[2] - v[2]};
     /* octahedral encoding of the normal */
     float ou, ov;
@@ -577,23 +718,69 @@ static int compute_slice(wenv_shader *sh, size_t s, float *pixel_work, double *r
     return 0;
 }
 
+/* The direct lights at one vertex: irradiance into e (the diffuse term scales it) and the specular
+ * lobes' reflected radiance into s.  A light off every lobe (n.h below the lobe's cut) costs a
+ * few dot products; one inside is evaluated exactly, in double, like the reference. */
+static void shade_direct(const wenv_shader *sh, const float n[3], const float v[3], float e[3], float s[3])
+{
+    const wenv_material *mat = sh->mat;
+    float co = n[0] * v[0] + n[1] * v[1] + n[2] * v[2];
+    for (size_t i = 0; i < sh->direct_count; i++) {
+        const float *l = sh->direct_dir + 3 * i, *flux = sh->direct_flux + 3 * i;
+        float ci = n[0] * l[0] + n[1] * l[1] + n[2] * l[2];
+        if (!(ci > 0.0f))
+            continue;
+        e[0] += ci * flux[0];
+        e[1] += ci * flux[1];
+        e[2] += ci * flux[2];
+        if (!mat->n_lobes)
+            continue;
+        float lv = l[0] * v[0] + l[1] * v[1] + l[2] * v[2], h2 = 2.0f + 2.0f * lv;
+        if (!(h2 > 1e-12f))
+            continue;
+        float ch = (ci + co) / sqrtf(h2);
+        int near = 0;
+        for (size_t k = 0; k < mat->n_lobes; k++)
+            near |= ch >= sh->lobe_cos_h_min[k];
+        if (!near)
+            continue;
+        /* any frame with +Z the normal will do: the lobes are isotropic */
+        double cid = ci, cod = co, si = sqrt(fmax(0.0, 1.0 - cid * cid)), so = sqrt(fmax(0.0, 1.0 - cod * cod));
+        double cphi = si * so > 1e-12 ? ((double)lv - cid * cod) / (si * so) : 1.0;
+        cphi = fmin(1.0, fmax(-1.0, cphi));
+        double wi[3] = {si * cphi, si * sqrt(1.0 - cphi * cphi), cid}, wo[3] = {so, 0.0, cod}, rgb[3];
+        wenv_material_specular_cos(mat, wi, wo, rgb);
+        for (int c = 0; c < 3; c++)
+            s[c] += (float)(rgb[c] * flux[c]);
+    }
+}
+
 static void shade_vertex(const wenv_shader *sh, const vertex_taps *tp, float *o)
 {
-    float e[3] = {0, 0, 0}, s[3] = {0, 0, 0};
+    float e[3] = {0, 0, 0}, m[3] = {0, 0, 0}, s[3] = {0, 0, 0};
+    if (sh->direct_count)
+        shade_direct(sh, tp->n, tp->v, e, s);
     for (int k = 0; k < 4; k++) {
         const float *ir = sh->irradiance + 3 * (size_t)tp->sample[k];
         e[0] += tp->sample_w[k] * ir[0];
         e[1] += tp->sample_w[k] * ir[1];
         e[2] += tp->sample_w[k] * ir[2];
     }
+    /* table entries are mean radiances under the lobe (see albedo_tables) */
     for (int k = 0; k < 16; k++) {
         const float *t = sh->table + 3 * (size_t)tp->pair[k];
         float w = tp->pair_w[k];
         if (w > 0.0f) {
-            s[0] += w * t[0];
-            s[1] += w * t[1];
-            s[2] += w * t[2];
+            m[0] += w * t[0];
+            m[1] += w * t[1];
+            m[2] += w * t[2];
         }
+    }
+    if (sh->albedo) {
+        float a[3];
+        albedo_at(sh->albedo, tp->n[0] * tp->v[0] + tp->n[1] * tp->v[1] + tp->n[2] * tp->v[2], a);
+        for (int c = 0; c < 3; c++)
+            s[c] += a[c] * m[c];
     }
     for (int c = 0; c < 3; c++) {
         float val = sh->diffuse_over_pi[c] * e[c] + s[c];
@@ -693,7 +880,9 @@ static wenv_status fill_needed(wenv_shader *sh, wenv_error *err)
             acc[1] += l[1] * b[1];
             acc[2] += l[2] * b[2];
         }
-        memcpy(sh->table + 3 * p, acc, sizeof acc);
+        const float *inv = sh->view_inv_albedo + 3 * j;
+        for (int c = 0; c < 3; c++)
+            sh->table[3 * p + c] = acc[c] * inv[c];
         sh->pair_ready[p] = 1;
     }
     free(todo);
@@ -759,6 +948,7 @@ void wenv_shader_get_stats(const wenv_shader *sh, wenv_shader_stats *stats)
     stats->slices_ready = slices;
     stats->pairs_ready = pairs;
     stats->light_terms = sh->light_count;
+    stats->direct_lights = sh->direct_count;
     stats->slice_bytes = slices * sh->nl * 3 * sizeof(float);
     stats->table_bytes = sh->ns * sh->nv * (3 * sizeof(float) + 2);
     stats->brdf_bytes = sh->stats.brdf_terms_total * 4 * sizeof(float);

@@ -17,7 +17,13 @@
  * moving with the sample spacing; that view is interpolated bilinearly between the 4 nearest
  * view samples.  The 16 (normal sample, view sample) radiances are sparse dot products computed
  * once per lighting and material and kept in a table, so a new view costs 16 table reads per
- * vertex plus the dot products of pairs not seen before. */
+ * vertex plus the dot products of pairs not seen before.
+ *
+ * Lights: a sun or a lamp holds most of a scene's flux in a few pixels, and wavelet truncation and
+ * interpolation between samples spread its highlight over neighbouring views and normals.  The
+ * brightest pixels (at most quality.lights of them, each brighter than light_threshold times the
+ * mean radiance) are therefore taken out of the lighting before the transform and shaded per vertex
+ * as exact directional lights with the material's own BRDF. */
 #ifndef WENV_SHADE_H
 #define WENV_SHADE_H
 
@@ -37,12 +43,14 @@ typedef struct {
     size_t coefficients;       /* Haar terms kept per BRDF slice (0: all) */
     size_t light_coefficients; /* Haar terms kept of the global lighting (0: all) */
     double matrix_epsilon;     /* rotation-matrix entries dropped below this (relative) */
+    size_t lights;             /* brightest pixels shaded as exact directional lights (0: none) */
+    double light_threshold;    /* ... when brighter than this many times the mean radiance */
 } wenv_quality;
 
 typedef struct {
     size_t rotation_nnz, rotation_bytes;
     int cache; /* 0 no cache used, 1 loaded, 2 built and saved, 3 built, save failed */
-    size_t slices_ready, pairs_ready, light_terms, brdf_terms_total;
+    size_t slices_ready, pairs_ready, light_terms, brdf_terms_total, direct_lights;
     size_t slice_bytes, table_bytes, brdf_bytes;
     double rotation_seconds;
 } wenv_shader_stats;

@@ -103,7 +103,7 @@ static wenv_status pyramid_build(pyramid *p, const wenv_envmap *env, wenv_error 
         }
         p->levels++;
     }
-    if (wenv_oct_from_envmap(env, base, p->texels[0], err)) {
+    if (wenv_oct_from_envmap(env, base, p->texels[0], NULL, 0, err)) {
         pyramid_free(p);
         return err->status;
     }
