@@ -215,9 +215,9 @@ PyObject *wenv_py_peer_stats(const wenv_py_peer *peer)
     if (peer->kind == PEER_SPLIT_SUM) {
         wenv_splitsum_stats s;
         wenv_splitsum_get_stats(peer->split_sum, &s);
-        return Py_BuildValue("{s:n,s:n,s:n,s:n,s:n,s:d,s:d,s:d}", "lobes", (Py_ssize_t)s.lobes, "source_side",
+        return Py_BuildValue("{s:n,s:n,s:n,s:n,s:n,s:n,s:d,s:d,s:d}", "lobes", (Py_ssize_t)s.lobes, "source_side",
                              (Py_ssize_t)s.source_side, "source_levels", (Py_ssize_t)s.source_levels,
-                             "prefilter_bytes", (Py_ssize_t)s.prefilter_bytes, "lut_bytes", (Py_ssize_t)s.lut_bytes,
+                             "source_bytes", (Py_ssize_t)s.source_bytes, "prefilter_bytes", (Py_ssize_t)s.prefilter_bytes, "lut_bytes", (Py_ssize_t)s.lut_bytes,
                              "environment_seconds", s.environment_seconds, "prefilter_seconds", s.prefilter_seconds,
                              "lut_seconds", s.lut_seconds);
     }

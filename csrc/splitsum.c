@@ -271,6 +271,10 @@ static void update_bytes(wenv_splitsum *ss)
     ss->stats.lobes = ss->n_lobes;
     ss->stats.prefilter_bytes = ss->prefilter ? ss->n_lobes * P * P * 3 * sizeof(float) : 0;
     ss->stats.lut_bytes = ss->n_lobes * ss->q.lut * sizeof(float);
+    size_t source = 0; /* kept to prefilter again when the material changes */
+    for (size_t k = 0; k < ss->src.levels; k++)
+        source += ss->src.side[k] * ss->src.side[k] * 3 * sizeof(float);
+    ss->stats.source_bytes = source;
 }
 
 wenv_status wenv_splitsum_set_environment(wenv_splitsum *ss, const wenv_envmap *env, const wenv_progress *progress,

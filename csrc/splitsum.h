@@ -33,7 +33,7 @@ typedef struct {
 } wenv_splitsum_quality;
 
 typedef struct {
-    size_t lobes, source_side, source_levels, prefilter_bytes, lut_bytes;
+    size_t lobes, source_side, source_levels, source_bytes, prefilter_bytes, lut_bytes;
     double environment_seconds, prefilter_seconds, lut_seconds;
 } wenv_splitsum_stats;
 

@@ -3,9 +3,15 @@ inputs: time per view change (shade_mesh on Suzanne subdivided to ~126k vertices
 of interleaved runs) against relative RMSE versus wenv.reference on the fixed (normal, view) pairs of
 examples/accuracy.py, for specular-only Cook-Torrance m = 0.05, 0.2 and 0.5 under two bundled HDRIs.
 Writes docs/speed_vs_accuracy.{json,csv,png}: a log-log chart with each method's Pareto front.
+Each setting's peak memory is measured too, in a fresh process (examples/_memory.py: the growth of
+peak resident memory while the shader is built and shades one view, under the first HDRI at m = 0.2,
+rotation matrices loaded from the cache the timing run filled), and drawn against the time per view
+change in docs/memory_vs_time.png.
 
     .venv/bin/python examples/speed_vs_accuracy.py [--hdris sunset,city] [--repeats 5] [--pairs 2000]
-    .venv/bin/python examples/speed_vs_accuracy.py --replot     # the chart again from the JSON
+                     [--configs rotation,split_sum:default,3] [--no-memory] [--out DIR]
+    .venv/bin/python examples/speed_vs_accuracy.py --replot       # the charts again from the JSON
+    .venv/bin/python examples/speed_vs_accuracy.py --memory-only  # memory of the JSON's settings, added to it
 
 Reference values come from tests/data/accuracy_reference.npz (--reference); keys missing there are
 computed (wenv.reference, ~20-40 ms per pair) and cached in out/.  `slicing` is wavelet rotation with
@@ -14,6 +20,7 @@ is truncated), which is how resolutions whose matrices would not fit in memory a
 import argparse
 import csv
 import json
+import math
 import os
 import statistics
 import time
@@ -22,6 +29,7 @@ import numpy as np
 
 import wenv
 from _common import OUT, ROOT, bundled_hdri, relative_rmse
+from _memory import peak_memory
 from accuracy import DATA, MATERIALS, make_pairs, material
 from bench_shade import orbit_eye, suzanne
 
@@ -62,13 +70,35 @@ def short_label(method, q):
     return f"L{q['order']} v{q['views']}"
 
 
-def rss_mb():
-    """Resident memory of this process (Linux), MB: the growth when a shader is built is its size."""
-    with open("/proc/self/status") as fp:
-        for line in fp:
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) / 1024
-    return float("nan")
+def select_configs(spec):
+    """CONFIGS picked by a comma-separated list of method names (all their settings), method:preset
+    names or indices into CONFIGS; all of them for an empty spec."""
+    if not spec:
+        return list(CONFIGS)
+    picked = []
+    for token in spec.split(","):
+        hits = [k for k, (method, q) in enumerate(CONFIGS)
+                if token in (method, str(k)) or (isinstance(q, str) and token == f"{method}:{q}")]
+        if not hits:
+            raise SystemExit(f"--configs: {token!r} is no method, method:preset or index 0-{len(CONFIGS) - 1}")
+        picked += [k for k in hits if k not in picked]
+    return [CONFIGS[k] for k in sorted(picked)]
+
+
+MEMORY_MATERIAL = "m0.2"
+
+
+def measure_memory(rows, hdri, pos, mesh_nrm):
+    """Each row's peak memory in a fresh process (see _memory.py), stored as row["memory"]."""
+    for row in rows:
+        mem = peak_memory(row["method"], row["quality"], pos, mesh_nrm, hdri=hdri,
+                          material_key=MEMORY_MATERIAL, eye=orbit_eye(100))
+        row["memory"] = {k: mem[k] for k in ("increment_mb", "peak_mb", "baseline_mb", "held_mb", "model_mb",
+                                             "cache", "exact")}
+        row.pop("memory_mb", None)  # an older, in-process estimate
+        print(f"memory {row['method']:9s} {row['short']:28s} +{mem['increment_mb']:7.1f} MB "
+              f"(peak {mem['peak_mb']:.0f} MB, shader's own count {mem['model_mb']:.1f} MB, matrices "
+              f"{mem['cache']})", flush=True)
 
 
 def load_references(path, hdris, pairs):
@@ -157,19 +187,115 @@ def chart(results, path):
     plt.close(fig)
 
 
+def near_groups(xs, ys, labels, apart=0.06):
+    """Points of a log-log chart grouped while each is within `apart` decades of the group's first
+    in both directions, so that settings which cost the same get one stacked label."""
+    groups = []
+    for x, y, label in sorted(zip(xs, ys, labels)):
+        if groups:
+            (x0, y0), members = groups[-1]
+            if abs(math.log10(x / x0)) < apart and abs(math.log10(y / y0)) < apart:
+                members.append(label)
+                continue
+        groups.append(((x, y), [label]))
+    return groups
+
+
+def memory_chart(results, path):
+    """Time per view change (at the roughness memory was measured at) against the peak memory
+    increment, one marker per setting; hollow markers are the shader's own count of its arrays."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = [row for row in results["rows"] if "memory" in row]
+    fig, ax = plt.subplots(figsize=(10, 5.6))
+    for method in COLOURS:
+        mine = [row for row in rows if row["method"] == method]
+        if not mine:
+            continue
+        t = [row["shade_ms"][MEMORY_MATERIAL] for row in mine]
+        mb = [max(row["memory"]["increment_mb"], 0.1) for row in mine]  # the log axis needs > 0
+        ax.scatter(t, mb, c=COLOURS[method], marker=MARKERS[method], s=34, zorder=3, label=method)
+        ax.scatter(t, [max(row["memory"]["model_mb"], 0.1) for row in mine], facecolors="none",
+                   edgecolors=COLOURS[method], marker=MARKERS[method], s=34, lw=0.8, zorder=2)
+        for (x, y), labels in near_groups(t, mb, [row["short"] for row in mine]):
+            below = len(labels) > 1  # a stack of labels hangs down, clear of the points above
+            ax.annotate("\n".join(labels), (x, y), fontsize=6, xytext=(5, -3 if below else 3),
+                        textcoords="offset points", color=COLOURS[method], va="top" if below else "bottom")
+    ax.scatter([], [], facecolors="none", edgecolors="grey", marker="o",
+               label="hollow: the shader's\nown count (stats)")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.grid(True, which="both", alpha=0.25)
+    ax.set_xlabel(f"time per view change, ms ({results['vertices']} vertices, {results['threads']} threads, "
+                  f"m = {MEMORY_MATERIAL[1:]})")
+    ax.set_ylabel("peak memory over the process's baseline, MB")
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1))  # outside: no point is hidden
+    matrices = ", ".join(sorted({row["memory"]["cache"] for row in rows if row["method"] == "rotation"}))
+    ax.set_title(f"Memory against speed: peak resident growth while the shader is built and shades one view "
+                 f"(fresh process,\n{results.get('memory_hdri', results['hdris'][0])}, Cook-Torrance m = "
+                 f"{MEMORY_MATERIAL[1:]}, rotation matrices {matrices or '-'}; floor 0.1 MB)", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+
+
+def write_outputs(results, out):
+    os.makedirs(out, exist_ok=True)
+    hdris = results["hdris"]
+    with open(os.path.join(out, "speed_vs_accuracy.json"), "w") as fp:
+        json.dump(results, fp, indent=1)
+    with open(os.path.join(out, "speed_vs_accuracy.csv"), "w", newline="") as fp:
+        w = csv.writer(fp)
+        w.writerow(["method", "settings", "roughness", "shade_ms_median"] + [f"rel_rmse_{h}" for h in hdris]
+                   + ["setup_s", "memory_increment_mb", "memory_peak_mb", "memory_held_mb", "memory_model_mb"])
+        for row in results["rows"]:
+            mem = row.get("memory")
+            mem = [f"{mem[k]:.1f}" for k in ("increment_mb", "peak_mb", "held_mb", "model_mb")] if mem else [""] * 4
+            for name in ROUGHNESS:
+                w.writerow([row["method"], row["short"], name[1:], f"{row['shade_ms'][name]:.2f}"]
+                           + [f"{row['rel_rmse'][f'{h}/{name}']:.5f}" for h in hdris]
+                           + [f"{row['setup_s'][name]:.2f}"] + mem)
+    charts(results, out)
+    print("wrote", os.path.join(out, "speed_vs_accuracy.{json,csv,png}"))
+
+
+def charts(results, out):
+    chart(results, os.path.join(out, "speed_vs_accuracy.png"))
+    if any("memory" in row for row in results["rows"]):
+        memory_chart(results, os.path.join(out, "memory_vs_time.png"))
+        print("wrote", os.path.join(out, "memory_vs_time.png"))
+    else:
+        print("no memory figures in the JSON: memory_vs_time.png not drawn")
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--hdris", default="sunset,city")
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--pairs", type=int, default=2000)
+    ap.add_argument("--configs", default="", help="comma-separated methods, method:preset names or CONFIGS indices")
+    ap.add_argument("--no-memory", action="store_true", help="skip the peak-memory measurements")
     ap.add_argument("--reference", default=DATA)
     ap.add_argument("--out", default=DOCS)
-    ap.add_argument("--replot", action="store_true", help="redraw the chart from the JSON of an earlier run")
+    ap.add_argument("--replot", action="store_true", help="redraw the charts from the JSON of an earlier run")
+    ap.add_argument("--memory-only", action="store_true",
+                    help="measure the memory of the settings in the JSON of an earlier run and add it there")
     args = ap.parse_args()
-    if args.replot:
+    if args.replot or args.memory_only:
         with open(os.path.join(args.out, "speed_vs_accuracy.json")) as fp:
-            chart(json.load(fp), os.path.join(args.out, "speed_vs_accuracy.png"))
+            results = json.load(fp)
+        if args.replot:
+            charts(results, args.out)
+            return
+        pos, mesh_nrm = suzanne(4)
+        assert len(pos) == results["vertices"], "the JSON was measured on another mesh"
+        results["memory_hdri"] = results["hdris"][0]
+        measure_memory(results["rows"], results["memory_hdri"], pos, mesh_nrm)
+        write_outputs(results, args.out)
         return
+    configs = select_configs(args.configs)
     hdris = args.hdris.split(",")
     wenv.set_num_threads(2)
     nrm, v, refs = load_references(args.reference, hdris, args.pairs)
@@ -181,27 +307,23 @@ def main():
 
     results["rows"] = [{"method": method, "preset": quality if isinstance(quality, str) else None,
                         "rel_rmse": {}, "shade_ms": {}, "shade_ms_all": {}, "setup_s": {}}
-                       for method, quality in CONFIGS]
+                       for method, quality in configs]
     for name in ROUGHNESS:
         # Fresh shaders per material, so every method's view changes start from the same state: the
         # first view (which fills rotation's tables) is not timed, the next ones are each a view not
         # seen before, timed in turn across all shaders so the machine's load falls on all alike.
         mat = material(MATERIALS[name])
         shaders = []
-        for (method, quality), row in zip(CONFIGS, results["rows"]):
-            before = rss_mb()
+        for (method, quality), row in zip(configs, results["rows"]):
             t0 = time.perf_counter()
             sh = wenv.Shader(envs[hdris[0]], mat, quality=quality, method=method)
             row["setup_s"][name] = time.perf_counter() - t0
             sh.shade_mesh(pos, mesh_nrm, orbit_eye(100))
-            if "memory_mb" not in row:  # the first round runs on fresh memory
-                row["memory_mb"] = rss_mb() - before
             row["quality"], row["short"] = sh.quality, short_label(method, sh.quality)
             if method == "rotation":
                 row["rotation_nnz"] = sh.stats.get("rotation_nnz")
             shaders.append(sh)
-            print(f"{name}: built {method} {row['short']} in {row['setup_s'][name]:.1f} s, "
-                  f"+{row['memory_mb']:.0f} MB", flush=True)
+            print(f"{name}: built {method} {row['short']} in {row['setup_s'][name]:.1f} s", flush=True)
         times = [[] for _ in shaders]
         for i in range(args.repeats):
             for k, sh in enumerate(shaders):
@@ -219,20 +341,10 @@ def main():
                   flush=True)
         del shaders, sh
 
-    os.makedirs(args.out, exist_ok=True)
-    with open(os.path.join(args.out, "speed_vs_accuracy.json"), "w") as fp:
-        json.dump(results, fp, indent=1)
-    with open(os.path.join(args.out, "speed_vs_accuracy.csv"), "w", newline="") as fp:
-        w = csv.writer(fp)
-        w.writerow(["method", "settings", "roughness", "shade_ms_median"] + [f"rel_rmse_{h}" for h in hdris]
-                   + ["setup_s", "memory_mb"])
-        for row in results["rows"]:
-            for name in ROUGHNESS:
-                w.writerow([row["method"], row["short"], name[1:], f"{row['shade_ms'][name]:.2f}"]
-                           + [f"{row['rel_rmse'][f'{h}/{name}']:.5f}" for h in hdris]
-                           + [f"{row['setup_s'][name]:.2f}", f"{row['memory_mb']:.0f}"])
-    chart(results, os.path.join(args.out, "speed_vs_accuracy.png"))
-    print("wrote", os.path.join(args.out, "speed_vs_accuracy.{json,csv,png}"))
+    if not args.no_memory:  # after the timing, so rotation's matrices are in the cache
+        results["memory_hdri"] = hdris[0]
+        measure_memory(results["rows"], hdris[0], pos, mesh_nrm)
+    write_outputs(results, args.out)
 
 
 if __name__ == "__main__":
