@@ -19,7 +19,7 @@ typedef struct {
 static const preset PRESETS[] = {
     {"draft", {32, 16, 16, 8, 32, 256, 1e-3, 8, 256}},
     {"default", {64, 32, 32, 16, 128, 1024, 1e-3, 16, 256}},
-    {"high", {128, 64, 64, 32, 512, 0, 1e-4, 64, 256}},
+    {"high", {128, 64, 64, 32, 512, 0, 1e-4, 128, 256}},
 };
 #define N_PRESETS (sizeof PRESETS / sizeof PRESETS[0])
 

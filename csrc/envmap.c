@@ -509,8 +509,10 @@ size_t wenv_envmap_brightest(const wenv_envmap *env, size_t k, double relative, 
         wenv_bright_pixel *mine = top + (size_t)t * k;
 #pragma omp for schedule(static)
         for (size_t row = 0; row < h; row++) {
+            /* equirect pixels of a row share their solid angle */
+            double row_omega = env->projection == WENV_PROJ_EQUIRECT ? wenv_envmap_pixel_solid_angle(env, row, 0) : -1.0;
             for (size_t col = 0; col < w; col++) {
-                double omega = wenv_envmap_pixel_solid_angle(env, row, col);
+                double omega = row_omega >= 0.0 ? row_omega : wenv_envmap_pixel_solid_angle(env, row, col);
                 if (!(omega > 0.0))
                     continue;
                 const float *p = pixel_at(env, row, col);

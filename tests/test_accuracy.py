@@ -25,9 +25,9 @@ DATA = os.path.join(os.path.dirname(__file__), "data", "accuracy_reference.npz")
 # exact lights, so what remains in the glossy figures is mostly a few pairs at views past 80 degrees
 # (studio, forest, courtyard); README.md, "Status and measured figures", has the analysis.
 BOUNDS = {
-    "draft": {"lambert": 0.0507, "m0.05": 0.924, "m0.1": 0.851, "m0.2": 0.72, "m0.5": 0.306},
-    "default": {"lambert": 0.0157, "m0.05": 0.652, "m0.1": 0.528, "m0.2": 0.378, "m0.5": 0.129},
-    "high": {"lambert": 0.00376, "m0.05": 0.471, "m0.1": 0.275, "m0.2": 0.142, "m0.5": 0.0448},
+    "draft": {"lambert": 0.0478, "m0.05": 0.912, "m0.1": 0.837, "m0.2": 0.703, "m0.5": 0.295},
+    "default": {"lambert": 0.0137, "m0.05": 0.635, "m0.1": 0.512, "m0.2": 0.356, "m0.5": 0.121},
+    "high": {"lambert": 0.00248, "m0.05": 0.295, "m0.1": 0.162, "m0.2": 0.0641, "m0.5": 0.0187},
 }
 METHOD = {"draft": "rotation", "default": "rotation", "high": "slicing"}
 
