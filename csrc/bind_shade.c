@@ -6,6 +6,7 @@
 #include <string.h>
 #include <sys/stat.h>
 
+#include "autoquality.h"
 #include "haar.h"
 #include "maps.h"
 #include "reference.h"
@@ -51,7 +52,7 @@ static int parse_quality(PyObject *obj, wenv_quality *q)
                 *q = PRESETS[i].q;
                 return 0;
             }
-        PyErr_Format(PyExc_ValueError, "quality must be 'draft', 'default', 'high' or a dict, got '%s'", name);
+        PyErr_Format(PyExc_ValueError, "quality must be 'draft', 'default', 'high', 'auto' or a dict, got '%s'", name);
         return -1;
     }
     if (!PyDict_Check(obj)) {
@@ -136,6 +137,9 @@ typedef struct {
     PyObject *environment, *material;
     int busy;
     wenv_py_peer *peer; /* set for the peer methods ("split_sum", "sh"), which bind_peers.c runs */
+    int is_auto;
+    wenv_auto_choice auto_choice;
+    double target_error, memory_budget_mb;
 } ShaderObject;
 
 static int claim(ShaderObject *self)
@@ -204,13 +208,46 @@ static int do_set_material(ShaderObject *self, PyObject *mat_obj)
     return 0;
 }
 
+/* quality="auto": the cheapest ladder level predicted to meet target_error (autoquality.h). */
+static int choose_auto(ShaderObject *self, PyObject *env_obj, PyObject *mat_obj)
+{
+    if (!(self->target_error > 0.0 && self->target_error <= 1.0)) {
+        PyErr_Format(PyExc_ValueError, "target_error must be in (0, 1], got %g", self->target_error);
+        return -1;
+    }
+    if (!(self->memory_budget_mb > 0.0 && self->memory_budget_mb < 1e9)) {
+        PyErr_Format(PyExc_ValueError, "memory_budget_mb must be positive, got %g", self->memory_budget_mb);
+        return -1;
+    }
+    const struct wenv_envmap *env = wenv_py_envmap(env_obj, "env");
+    const struct wenv_material *mat = wenv_py_material(mat_obj, "material");
+    wenv_error err = {0};
+    wenv_status st;
+    size_t budget = (size_t)(self->memory_budget_mb * 1048576.0);
+    Py_BEGIN_ALLOW_THREADS
+    st = wenv_auto_choose(env, mat, self->target_error, budget, &self->auto_choice, &err);
+    Py_END_ALLOW_THREADS
+    if (st) {
+        wenv_py_raise(&err);
+        return -1;
+    }
+    self->is_auto = 1;
+    self->quality = self->auto_choice.quality;
+    self->method = WENV_METHOD_SLICING;
+    return 0;
+}
+
 static int Shader_init(ShaderObject *self, PyObject *args, PyObject *kwargs)
 {
-    static char *kwlist[] = {"env", "material", "quality", "method", "cache_dir", "progress", NULL};
+    static char *kwlist[] = {"env", "material", "quality", "method", "cache_dir", "progress", "target_error",
+                             "memory_budget_mb", NULL};
     PyObject *env_obj, *mat_obj, *quality_obj = NULL, *cache_obj = Py_None, *progress_obj = Py_None;
-    const char *method = "rotation";
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|OsOO:Shader", kwlist, &env_obj, &mat_obj, &quality_obj,
-                                     &method, &cache_obj, &progress_obj))
+    const char *method = NULL;
+    self->target_error = 0.01;
+    self->memory_budget_mb = 1024.0;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|OzOOdd:Shader", kwlist, &env_obj, &mat_obj, &quality_obj,
+                                     &method, &cache_obj, &progress_obj, &self->target_error,
+                                     &self->memory_budget_mb))
         return -1;
     if (self->shader || self->peer) {
         PyErr_SetString(PyExc_RuntimeError, "Shader is already initialised");
@@ -218,6 +255,13 @@ static int Shader_init(ShaderObject *self, PyObject *args, PyObject *kwargs)
     }
     if (!wenv_py_envmap(env_obj, "env") || !wenv_py_material(mat_obj, "material"))
         return -1;
+    int is_auto = quality_obj && PyUnicode_Check(quality_obj) && PyUnicode_CompareWithASCIIString(quality_obj, "auto") == 0;
+    if (is_auto && method && strcmp(method, "slicing") != 0) {
+        PyErr_Format(PyExc_ValueError, "quality='auto' chooses the method itself; leave method unset (got '%s')", method);
+        return -1;
+    }
+    if (!method)
+        method = is_auto ? "slicing" : "rotation";
     int peer = wenv_py_is_peer_method(method);
     if (peer)
         ;
@@ -229,8 +273,16 @@ static int Shader_init(ShaderObject *self, PyObject *args, PyObject *kwargs)
         PyErr_Format(PyExc_ValueError, "method must be 'rotation', 'slicing', 'split_sum' or 'sh', got '%s'", method);
         return -1;
     }
-    if (!peer && parse_quality(quality_obj ? quality_obj : PyUnicode_FromString("default"), &self->quality) < 0)
-        return -1;
+    if (is_auto) {
+        if (choose_auto(self, env_obj, mat_obj) < 0)
+            return -1;
+    } else if (!peer) {
+        PyObject *q = quality_obj ? Py_NewRef(quality_obj) : PyUnicode_FromString("default");
+        int r = q ? parse_quality(q, &self->quality) : -1;
+        Py_XDECREF(q);
+        if (r < 0)
+            return -1;
+    }
     if (progress_obj != Py_None && !PyCallable_Check(progress_obj)) {
         PyErr_SetString(PyExc_TypeError, "progress must be callable or None");
         return -1;
@@ -480,13 +532,25 @@ static PyObject *Shader_get_stats(ShaderObject *self, void *closure)
     wenv_shader_stats s;
     wenv_shader_get_stats(self->shader, &s);
     static const char *cache_names[] = {"none", "loaded", "built", "built (save failed)"};
-    return Py_BuildValue("{s:n,s:n,s:s,s:d,s:n,s:n,s:n,s:n,s:n,s:n,s:n,s:n}", "rotation_nnz", (Py_ssize_t)s.rotation_nnz,
+    PyObject *d = Py_BuildValue("{s:n,s:n,s:s,s:d,s:n,s:n,s:n,s:n,s:n,s:n,s:n,s:n}", "rotation_nnz", (Py_ssize_t)s.rotation_nnz,
                          "rotation_bytes", (Py_ssize_t)s.rotation_bytes, "cache", cache_names[s.cache],
                          "rotation_seconds", s.rotation_seconds, "slices_ready", (Py_ssize_t)s.slices_ready,
                          "pairs_ready", (Py_ssize_t)s.pairs_ready, "light_terms", (Py_ssize_t)s.light_terms,
                          "brdf_terms", (Py_ssize_t)s.brdf_terms_total, "slice_bytes", (Py_ssize_t)s.slice_bytes,
                          "table_bytes", (Py_ssize_t)s.table_bytes, "brdf_bytes", (Py_ssize_t)s.brdf_bytes,
                          "direct_lights", (Py_ssize_t)s.direct_lights);
+    if (d && self->is_auto) {
+        const wenv_auto_choice *a = &self->auto_choice;
+        PyObject *info = Py_BuildValue("{s:n,s:s,s:d,s:d,s:d,s:d,s:O,s:d,s:d}", "level", (Py_ssize_t)a->level, "method",
+                                       "slicing", "predicted_error", a->predicted_error, "target_error",
+                                       self->target_error, "contrast", a->contrast, "env_factor", a->env_factor,
+                                       "met", a->met ? Py_True : Py_False, "memory_budget_mb", self->memory_budget_mb,
+                                       "level_mb", (double)wenv_auto_level_bytes(a->level) / 1048576.0);
+        if (!info || PyDict_SetItemString(d, "auto", info) < 0)
+            Py_CLEAR(d);
+        Py_XDECREF(info);
+    }
+    return d;
 }
 
 static PyMethodDef Shader_methods[] = {
@@ -515,8 +579,9 @@ static PyTypeObject ShaderType = {
     PyVarObject_HEAD_INIT(NULL, 0).tp_name = "wenv.Shader",
     .tp_basicsize = sizeof(ShaderObject),
     .tp_flags = Py_TPFLAGS_DEFAULT,
-    .tp_doc = "Shader(env, material, quality='default', method='rotation', cache_dir=None, progress=None)\n--\n\n"
-              "Environment shading by wavelet rotation.  quality: 'draft', 'default', 'high' or a dict of "
+    .tp_doc = "Shader(env, material, quality='default', method='rotation', cache_dir=None, progress=None, "
+              "target_error=0.01, memory_budget_mb=1024)\n--\n\n"
+              "Environment shading by wavelet rotation.  quality: 'draft', 'default', 'high', 'auto' or a dict of "
               "global, local, normals, views, coefficients, light_coefficients, matrix_epsilon, lights, light_threshold.  method: "
               "'rotation' (precomputed sparse matrices, cached on disk in cache_dir; None: WENV_CACHE_DIR or "
               "~/.cache/wenv; False: no cache) or 'slicing' (no matrices).  progress(fraction) is called "
@@ -524,7 +589,11 @@ static PyTypeObject ShaderType = {
               "Peer methods for comparison: 'split_sum' (prefiltered environment maps and an environment-BRDF "
               "table, Karis 2013; quality keys prefilter, samples, lut) and 'sh' (spherical harmonics, Kautz, "
               "Sloan and Snyder 2002; quality keys order, views); presets in wenv.PEER_QUALITY_PRESETS.  Their "
-              "precomputation runs in set_environment and set_material, which then also report to progress.",
+              "precomputation runs in set_environment and set_material, which then also report to progress.\n\n"
+              "quality='auto' picks the cheapest setting of wenv.AUTO_LADDER (method 'slicing') whose error is "
+              "predicted, from the narrowest lobe's roughness and the environment's wavelet compaction, to be at "
+              "most target_error (relative RMSE) within memory_budget_mb; stats['auto'] tells what it chose and "
+              "why.  The choice is made once, for the environment and material given here.",
     .tp_new = PyType_GenericNew,
     .tp_init = (initproc)Shader_init,
     .tp_dealloc = (destructor)Shader_dealloc,
@@ -722,5 +791,20 @@ int wenv_register_shade(PyObject *module)
         }
         Py_DECREF(d);
     }
-    return PyModule_AddObject(module, "QUALITY_PRESETS", presets);
+    if (PyModule_AddObject(module, "QUALITY_PRESETS", presets) < 0) {
+        Py_DECREF(presets);
+        return -1;
+    }
+    PyObject *ladder = PyList_New(WENV_AUTO_LEVELS);
+    if (!ladder)
+        return -1;
+    for (size_t i = 0; i < WENV_AUTO_LEVELS; i++) {
+        PyObject *d = quality_to_dict(wenv_auto_level(i));
+        if (!d) {
+            Py_DECREF(ladder);
+            return -1;
+        }
+        PyList_SET_ITEM(ladder, (Py_ssize_t)i, d);
+    }
+    return PyModule_AddObject(module, "AUTO_LADDER", ladder);
 }

@@ -1,0 +1,130 @@
+#include "autoquality.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+
+/* global, local, normals, views, coefficients, light_coefficients (0: all, slicing keeps every
+ * term anyway), matrix_epsilon (unused by slicing), lights, light_threshold */
+static const wenv_quality LADDER[WENV_AUTO_LEVELS] = {
+    {32, 16, 16, 8, 64, 0, 1e-3, 8, 256},
+    {64, 32, 32, 16, 128, 0, 1e-3, 16, 256},
+    {128, 64, 32, 16, 256, 0, 1e-4, 64, 256},
+    {128, 64, 64, 32, 512, 0, 1e-4, 128, 256},
+};
+
+/* Median relative RMSE over the bundled HDRIs per level (rows) at roughness 0.05, 0.1, 0.2, 0.5
+ * and for Lambert (last column), from examples/auto_quality.py --calibrate. */
+static const double ROUGHNESS[4] = {0.05, 0.1, 0.2, 0.5};
+static const double MEDIAN_ERROR[WENV_AUTO_LEVELS][5] = {
+    {0.33261, 0.17655, 0.11943, 0.07144, 0.01686},
+    {0.15948, 0.08371, 0.04078, 0.02345, 0.00470},
+    {0.12508, 0.04692, 0.02797, 0.01540, 0.00339},
+    {0.07568, 0.02614, 0.01426, 0.00728, 0.00136},
+};
+/* The contrast (see contrast()) at which an environment is as hard as the median bundled HDRI. */
+#define CONTRAST_REF 0.25
+
+const wenv_quality *wenv_auto_level(size_t i)
+{
+    return i < WENV_AUTO_LEVELS ? &LADDER[i] : NULL;
+}
+
+size_t wenv_auto_level_bytes(size_t i)
+{
+    const wenv_quality *q = &LADDER[i];
+    size_t ns = q->normal_n * q->normal_n, nv = (q->view_n + 1) * (q->view_n + 1), nl = q->local_n * q->local_n;
+    size_t ng = q->global_n * q->global_n;
+    size_t table = ns * nv * (3 * sizeof(float) + 3);         /* radiance and three flags per pair */
+    size_t slices = ns * (nl * 3 * sizeof(float) + 3 * sizeof(float) + 12 * sizeof(float));
+    size_t brdf = nv * q->coefficients * 4 * sizeof(float);  /* index and RGB per kept term */
+    return table + slices + brdf + ng * 3 * sizeof(float);
+}
+
+/* Fraction of the environment's flux held by pixels brighter than CONTRAST_FACTOR times its mean
+ * radiance, once the brightest pixels (those a shader takes out as exact lights) are out: the
+ * bright, extended, hard-edged features -- softboxes, sunlit walls, windows -- that neither the
+ * lights nor a coarse wavelet map resolve.  Measured on the bundled HDRIs, the error at a fixed
+ * setting grows with it (studio, courtyard and forest: 0.66 - 0.83 and 2 - 5 times the median
+ * error; sunrise, night, sunset: 0.11 - 0.19 and 0.26 - 1 times). */
+#define CONTRAST_FACTOR 4.0
+static wenv_status contrast(const wenv_envmap *env, double *out, wenv_error *err)
+{
+    const size_t k = 8 * 16;
+    size_t w = wenv_envmap_width(env), h = wenv_envmap_height(env);
+    wenv_bright_pixel *bright = malloc(k * sizeof *bright);
+    if (!bright)
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory estimating the environment");
+    size_t nb = wenv_envmap_brightest(env, k, LADDER[1].light_threshold, bright);
+    const float *px = wenv_envmap_pixels(env);
+    double total = 0.0, mean;
+    for (size_t row = 0; row < h; row++)
+        for (size_t col = 0; col < w; col++) {
+            const float *p = px + 3 * (row * w + col);
+            total += wenv_envmap_pixel_solid_angle(env, row, col) * ((double)p[0] + p[1] + p[2]) / 3.0;
+        }
+    mean = total / (4.0 * M_PI);
+    double bright_flux = 0.0;
+    for (size_t row = 0; row < h; row++)
+        for (size_t col = 0; col < w; col++) {
+            const float *p = px + 3 * (row * w + col);
+            if (fmax(p[0], fmax(p[1], p[2])) > CONTRAST_FACTOR * mean)
+                bright_flux += wenv_envmap_pixel_solid_angle(env, row, col) * ((double)p[0] + p[1] + p[2]) / 3.0;
+        }
+    for (size_t i = 0; i < nb; i++) { /* the lights are shaded exactly */
+        size_t row = bright[i].pixel / w, col = bright[i].pixel % w;
+        const float *p = px + 3 * bright[i].pixel;
+        bright_flux -= wenv_envmap_pixel_solid_angle(env, row, col) * ((double)p[0] + p[1] + p[2]) / 3.0;
+    }
+    free(bright);
+    *out = total > 0.0 ? fmin(1.0, fmax(0.0, bright_flux / total)) : 0.0;
+    return WENV_OK;
+}
+
+/* Measured error of a level for a material: Lambert's column without lobes, else the narrowest
+ * lobe's roughness, interpolated linearly in log roughness and clamped to the measured range. */
+static double level_error(size_t level, const wenv_material *mat)
+{
+    const double *e = MEDIAN_ERROR[level];
+    if (!mat->n_lobes)
+        return e[4];
+    double m = mat->lobes[0].roughness;
+    for (size_t l = 1; l < mat->n_lobes; l++)
+        m = fmin(m, mat->lobes[l].roughness);
+    if (m <= ROUGHNESS[0])
+        return e[0];
+    if (m >= ROUGHNESS[3])
+        return e[3];
+    size_t i = 0;
+    while (m > ROUGHNESS[i + 1])
+        i++;
+    double t = log(m / ROUGHNESS[i]) / log(ROUGHNESS[i + 1] / ROUGHNESS[i]);
+    return exp((1.0 - t) * log(e[i]) + t * log(e[i + 1]));
+}
+
+wenv_status wenv_auto_choose(const wenv_envmap *env, const wenv_material *mat, double target, size_t memory_budget,
+                             wenv_auto_choice *out, wenv_error *err)
+{
+    memset(out, 0, sizeof *out);
+    if (!(target > 0.0 && target <= 1.0))
+        return wenv_error_set(err, WENV_ERR_VALUE, "target_error must be in (0, 1], got %g", target);
+    if (wenv_auto_level_bytes(0) > memory_budget)
+        return wenv_error_set(err, WENV_ERR_VALUE, "memory_budget of %zu bytes is below the cheapest setting's %zu",
+                              memory_budget, wenv_auto_level_bytes(0));
+    if (contrast(env, &out->contrast, err))
+        return err->status;
+    out->env_factor = fmin(4.0, fmax(0.4, out->contrast / CONTRAST_REF));
+    size_t best = 0;
+    for (size_t i = 0; i < WENV_AUTO_LEVELS && wenv_auto_level_bytes(i) <= memory_budget; i++) {
+        best = i;
+        if (level_error(i, mat) * out->env_factor <= target) {
+            out->met = 1;
+            break;
+        }
+    }
+    out->level = best;
+    out->quality = LADDER[best];
+    out->predicted_error = level_error(best, mat) * out->env_factor;
+    return WENV_OK;
+}

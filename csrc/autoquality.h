@@ -1,0 +1,54 @@
+/* quality="auto": the cheapest shading setting whose error is predicted to meet a target.
+ *
+ * Settings form a ladder, cheapest first (each level costs more time per view and more memory than
+ * the one below).  The error of each level was measured (examples/auto_quality.py --calibrate) on
+ * Blender's eight bundled HDRIs against the brute-force reference: a Lambertian material and
+ * specular lobes of roughness 0.05, 0.1, 0.2 and 0.5, over random (normal, view) pairs with views
+ * uniform on the hemisphere.  The prediction for a material and an environment is cheap:
+ *
+ *   - the lobe width: the measured error of the level, interpolated in log roughness at the
+ *     narrowest lobe (clamped to the measured range; a material without lobes reads the Lambert
+ *     column);
+ *   - the environment: the share of its flux in bright extended features (pixels above four times
+ *     the mean radiance, once the pixels shaded as exact lights are out) -- what a wavelet map of
+ *     given size compacts worst -- relative to the median bundled HDRI scales the prediction.
+ *
+ * The chosen method is always "slicing": at equal resolutions it shades a view exactly as fast as
+ * "rotation" (both read the same table), it has no matrices to build or hold, and it makes lighting
+ * slices only for the normal samples the mesh's vertices fall near. */
+#ifndef WENV_AUTOQUALITY_H
+#define WENV_AUTOQUALITY_H
+
+#include <stddef.h>
+
+#include "brdf.h"
+#include "envmap.h"
+#include "error.h"
+#include "shade.h"
+
+#define WENV_AUTO_LEVELS 4
+
+/* Level `i` of the ladder (0 <= i < WENV_AUTO_LEVELS). */
+const wenv_quality *wenv_auto_level(size_t i);
+
+/* Memory a level holds at most for shading (tables, slices for every normal sample, BRDF slices),
+ * in bytes. */
+size_t wenv_auto_level_bytes(size_t i);
+
+typedef struct {
+    size_t level;           /* chosen ladder level */
+    wenv_quality quality;
+    double predicted_error; /* relative RMSE predicted at that level */
+    double contrast;        /* flux share of bright extended features (autoquality.c) */
+    double env_factor;      /* contrast relative to the calibration set's median (clamped) */
+    int met;                /* whether some level within the budget is predicted to meet the target */
+} wenv_auto_choice;
+
+/* The cheapest level whose predicted error is at most `target` and whose memory is at most
+ * `memory_budget` bytes; when none is predicted to meet the target, the most accurate level within
+ * the budget (met = 0).  target in (0, 1]; WENV_ERR_VALUE when even the cheapest level exceeds the
+ * budget. */
+wenv_status wenv_auto_choose(const wenv_envmap *env, const wenv_material *mat, double target, size_t memory_budget,
+                             wenv_auto_choice *out, wenv_error *err);
+
+#endif

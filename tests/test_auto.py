@@ -1,0 +1,75 @@
+"""quality="auto": picks the cheapest ladder level predicted to meet target_error, never builds
+rotation matrices, keeps within its memory budget, and meets its target (examples/auto_quality.py
+shows it on every bundled HDRI; here on a reduced one)."""
+import numpy as np
+import pytest
+
+import wenv
+from conftest import hdri_path
+
+
+def unit(a):
+    a = np.asarray(a, np.float64)
+    return (a / np.linalg.norm(a, axis=-1, keepdims=True)).astype(np.float32)
+
+
+@pytest.fixture(scope="module")
+def sunset():
+    px = wenv.load_environment(hdri_path("sunset")).pixels[..., :3]
+    f = px.shape[0] // 64
+    return wenv.Environment(np.ascontiguousarray(px.reshape(64, f, 128, f, 3).mean(axis=(1, 3)), np.float32))
+
+
+def glossy(m):
+    return wenv.CookTorrance(diffuse=0.1, lobes=[{"specular": 1, "roughness": m, "ior": 1.5}])
+
+
+def test_lambert_builds_no_matrices(sunset):
+    sh = wenv.Shader(sunset, wenv.Lambert(0.7), quality="auto")
+    assert sh.method == "slicing" and sh.stats["rotation_nnz"] == 0
+    info = sh.stats["auto"]
+    assert info["met"] and info["predicted_error"] <= 0.01
+    assert sh.quality == wenv.AUTO_LADDER[info["level"]]
+
+
+def test_tighter_targets_never_pick_cheaper_levels(sunset):
+    for mat in (wenv.Lambert(0.7), glossy(0.05), glossy(0.2), glossy(0.5)):
+        levels = [wenv.Shader(sunset, mat, quality="auto", target_error=t).stats["auto"]["level"]
+                  for t in (0.3, 0.1, 0.03, 0.01)]
+        assert levels == sorted(levels), levels
+    # narrower lobes need more at the same target
+    assert (wenv.Shader(sunset, glossy(0.1), quality="auto", target_error=0.05).stats["auto"]["level"]
+            > wenv.Shader(sunset, glossy(0.5), quality="auto", target_error=0.05).stats["auto"]["level"])
+
+
+def test_memory_budget_is_kept(sunset):
+    tight = wenv.Shader(sunset, glossy(0.05), quality="auto", target_error=0.001, memory_budget_mb=64)
+    info = tight.stats["auto"]
+    assert not info["met"] and info["level_mb"] <= 64
+    big = wenv.Shader(sunset, glossy(0.05), quality="auto", target_error=0.001, memory_budget_mb=4096)
+    assert big.stats["auto"]["level"] > info["level"]
+
+
+@pytest.mark.parametrize("m, target", [(None, 0.01), (0.5, 0.03), (0.2, 0.08)])
+def test_meets_its_target(sunset, m, target):
+    rng = np.random.default_rng(7)
+    nrm = unit(rng.normal(size=(400, 3)))
+    v = unit(rng.normal(size=(400, 3)))
+    v[np.sum(nrm * v, axis=1) < 0] *= -1
+    mat = wenv.Lambert(0.7) if m is None else glossy(m)
+    sh = wenv.Shader(sunset, mat, quality="auto", target_error=target)
+    ref = wenv.reference(sunset, mat, nrm, v)
+    err = float(np.sqrt(np.mean((sh.shade(nrm, v) - ref) ** 2) / np.mean(ref ** 2)))
+    assert err <= target, (err, sh.stats["auto"])
+
+
+def test_bad_arguments(sunset):
+    for t in (0.0, -0.1, 1.5, float("nan")):
+        with pytest.raises(ValueError, match="target_error"):
+            wenv.Shader(sunset, wenv.Lambert(0.5), quality="auto", target_error=t)
+    with pytest.raises(ValueError, match="memory_budget"):
+        wenv.Shader(sunset, wenv.Lambert(0.5), quality="auto", memory_budget_mb=0.01)
+    with pytest.raises(ValueError, match="auto"):
+        wenv.Shader(sunset, wenv.Lambert(0.5), quality="auto", method="rotation")
+    with pytest.raises(TypeError):
+        wenv.Shader(sunset, wenv.Lambert(0.5), quality="auto", target_error="1%")
