@@ -23,8 +23,12 @@ static const double MEDIAN_ERROR[WENV_AUTO_LEVELS][5] = {
     {0.12508, 0.04692, 0.02797, 0.01540, 0.00339},
     {0.07568, 0.02614, 0.01426, 0.00728, 0.00136},
 };
-/* The contrast (see contrast()) at which an environment is as hard as the median bundled HDRI. */
-#define CONTRAST_REF 0.25
+/* Error factor of an environment: MARGIN ((1 - l) + SLOPE c) with l the share of its flux shaded
+ * as exact lights (no error of their own, so the relative error of the rest shrinks by 1 - l) and c
+ * its contrast; fitted to the eight bundled HDRIs' errors relative to their median
+ * (examples/auto_quality.py), MARGIN so that few are underestimated. */
+#define CONTRAST_SLOPE 4.0
+#define CONTRAST_MARGIN 1.2
 
 const wenv_quality *wenv_auto_level(size_t i)
 {
@@ -43,13 +47,13 @@ size_t wenv_auto_level_bytes(size_t i)
 }
 
 /* Fraction of the environment's flux held by pixels brighter than CONTRAST_FACTOR times its mean
- * radiance, once the brightest pixels (those a shader takes out as exact lights) are out: the
- * bright, extended, hard-edged features -- softboxes, sunlit walls, windows -- that neither the
- * lights nor a coarse wavelet map resolve.  Measured on the bundled HDRIs, the error at a fixed
- * setting grows with it (studio, courtyard and forest: 0.66 - 0.83 and 2 - 5 times the median
- * error; sunrise, night, sunset: 0.11 - 0.19 and 0.26 - 1 times). */
-#define CONTRAST_FACTOR 4.0
-static wenv_status contrast(const wenv_envmap *env, double *out, wenv_error *err)
+ * radiance, once the brightest pixels (those a shader takes out as exact lights) are out: bright,
+ * extended, hard-edged features -- softboxes, sunlit walls, sky through leaves -- that neither the
+ * lights nor a wavelet map of a few degrees per texel resolve.  On the bundled HDRIs: studio 0.70,
+ * courtyard 0.33, forest 0.16 (2 - 5 times the median error at every level), interior 0.09, night,
+ * sunrise, city and sunset 0.002 - 0.03 (0.3 - 1 times). */
+#define CONTRAST_FACTOR 16.0
+static wenv_status contrast(const wenv_envmap *env, double *out, double *lights_share, wenv_error *err)
 {
     const size_t k = 8 * 16;
     size_t w = wenv_envmap_width(env), h = wenv_envmap_height(env);
@@ -72,13 +76,15 @@ static wenv_status contrast(const wenv_envmap *env, double *out, wenv_error *err
             if (fmax(p[0], fmax(p[1], p[2])) > CONTRAST_FACTOR * mean)
                 bright_flux += wenv_envmap_pixel_solid_angle(env, row, col) * ((double)p[0] + p[1] + p[2]) / 3.0;
         }
+    double light_flux = 0.0;
     for (size_t i = 0; i < nb; i++) { /* the lights are shaded exactly */
         size_t row = bright[i].pixel / w, col = bright[i].pixel % w;
         const float *p = px + 3 * bright[i].pixel;
-        bright_flux -= wenv_envmap_pixel_solid_angle(env, row, col) * ((double)p[0] + p[1] + p[2]) / 3.0;
+        light_flux += wenv_envmap_pixel_solid_angle(env, row, col) * ((double)p[0] + p[1] + p[2]) / 3.0;
     }
     free(bright);
-    *out = total > 0.0 ? fmin(1.0, fmax(0.0, bright_flux / total)) : 0.0;
+    *out = total > 0.0 ? fmin(1.0, fmax(0.0, (bright_flux - light_flux) / total)) : 0.0;
+    *lights_share = total > 0.0 ? fmin(1.0, fmax(0.0, light_flux / total)) : 0.0;
     return WENV_OK;
 }
 
@@ -112,9 +118,9 @@ wenv_status wenv_auto_choose(const wenv_envmap *env, const wenv_material *mat, d
     if (wenv_auto_level_bytes(0) > memory_budget)
         return wenv_error_set(err, WENV_ERR_VALUE, "memory_budget of %zu bytes is below the cheapest setting's %zu",
                               memory_budget, wenv_auto_level_bytes(0));
-    if (contrast(env, &out->contrast, err))
+    if (contrast(env, &out->contrast, &out->lights_share, err))
         return err->status;
-    out->env_factor = fmin(4.0, fmax(0.4, out->contrast / CONTRAST_REF));
+    out->env_factor = fmin(8.0, CONTRAST_MARGIN * ((1.0 - out->lights_share) + CONTRAST_SLOPE * out->contrast));
     size_t best = 0;
     for (size_t i = 0; i < WENV_AUTO_LEVELS && wenv_auto_level_bytes(i) <= memory_budget; i++) {
         best = i;

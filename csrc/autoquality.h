@@ -9,9 +9,10 @@
  *   - the lobe width: the measured error of the level, interpolated in log roughness at the
  *     narrowest lobe (clamped to the measured range; a material without lobes reads the Lambert
  *     column);
- *   - the environment: the share of its flux in bright extended features (pixels above four times
- *     the mean radiance, once the pixels shaded as exact lights are out) -- what a wavelet map of
- *     given size compacts worst -- relative to the median bundled HDRI scales the prediction.
+ *   - the environment: the share of its flux shaded as exact lights (which carry no error, so the
+ *     relative error shrinks) and the share in bright extended features (pixels above 16 times the
+ *     mean radiance that are not lights), which a wavelet map of a few degrees per texel resolves
+ *     worst, scale the prediction.
  *
  * The chosen method is always "slicing": at equal resolutions it shades a view exactly as fast as
  * "rotation" (both read the same table), it has no matrices to build or hold, and it makes lighting
@@ -40,6 +41,7 @@ typedef struct {
     wenv_quality quality;
     double predicted_error; /* relative RMSE predicted at that level */
     double contrast;        /* flux share of bright extended features (autoquality.c) */
+    double lights_share;    /* flux share of the pixels shaded as exact lights */
     double env_factor;      /* contrast relative to the calibration set's median (clamped) */
     int met;                /* whether some level within the budget is predicted to meet the target */
 } wenv_auto_choice;

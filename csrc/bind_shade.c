@@ -541,9 +541,10 @@ static PyObject *Shader_get_stats(ShaderObject *self, void *closure)
                          "direct_lights", (Py_ssize_t)s.direct_lights);
     if (d && self->is_auto) {
         const wenv_auto_choice *a = &self->auto_choice;
-        PyObject *info = Py_BuildValue("{s:n,s:s,s:d,s:d,s:d,s:d,s:O,s:d,s:d}", "level", (Py_ssize_t)a->level, "method",
-                                       "slicing", "predicted_error", a->predicted_error, "target_error",
-                                       self->target_error, "contrast", a->contrast, "env_factor", a->env_factor,
+        PyObject *info = Py_BuildValue("{s:n,s:s,s:d,s:d,s:d,s:d,s:d,s:O,s:d,s:d}", "level", (Py_ssize_t)a->level,
+                                       "method", "slicing", "predicted_error", a->predicted_error, "target_error",
+                                       self->target_error, "contrast", a->contrast, "lights_share", a->lights_share,
+                                       "env_factor", a->env_factor,
                                        "met", a->met ? Py_True : Py_False, "memory_budget_mb", self->memory_budget_mb,
                                        "level_mb", (double)wenv_auto_level_bytes(a->level) / 1048576.0);
         if (!info || PyDict_SetItemString(d, "auto", info) < 0)

@@ -37,6 +37,19 @@ def first_view_ms(env, mat, quality, pos, nrm, repeats):
     return statistics.median(times)
 
 
+def new_view_ms(env, mat, quality, pos, nrm, repeats):
+    """Median time of a view change to a view not seen before (after an untimed first view), as
+    examples/speed_vs_accuracy.py times it."""
+    sh = wenv.Shader(env, mat, quality=quality, method="slicing")
+    sh.shade_mesh(pos, nrm, orbit_eye(-1))
+    times = []
+    for i in range(repeats):
+        t0 = time.perf_counter()
+        sh.shade_mesh(pos, nrm, orbit_eye(0.5 + 3 * i))
+        times.append(1e3 * (time.perf_counter() - t0))
+    return statistics.median(times)
+
+
 def args_ref(data, h, name, n):
     return data[f"{h}/{name}"][:n]
 
@@ -57,7 +70,7 @@ def main():
     ladder = wenv.AUTO_LADDER
     pos, mesh_nrm = suzanne(4)
 
-    errors, times, chosen = {}, {}, {}
+    errors, times, view_times, chosen = {}, {}, {}, {}
     for level, q in enumerate(ladder):
         # one shader per level: new lighting and materials through set_environment / set_material
         sh = None
@@ -78,7 +91,10 @@ def main():
     for name in names:
         for level, q in enumerate(ladder):
             times[name, level] = first_view_ms(sunset, material(MATERIALS[name]), q, pos, mesh_nrm, args.repeats)
-        print(name, "ms to the first shaded view by level:", [round(times[name, lv], 1) for lv in range(len(ladder))], flush=True)
+            view_times[name, level] = new_view_ms(sunset, material(MATERIALS[name]), q, pos, mesh_nrm,
+                                                  2 * args.repeats + 1)
+        print(name, "ms to the first shaded view by level:", [round(times[name, lv], 1) for lv in range(len(ladder))],
+              "; per new view:", [round(view_times[name, lv], 1) for lv in range(len(ladder))], flush=True)
     for h in HDRIS:
         env = wenv.load_environment(bundled_hdri(h))
         for name in names:
@@ -105,7 +121,10 @@ def main():
                              "auto_error": errors[h, name, level], "met": errors[h, name, level] <= t,
                              "auto_ms": times[name, level], "cheapest_level": cheapest,
                              "cheapest_ms": times[name, cheapest] if cheapest is not None else None,
-                             "ratio": times[name, level] / times[name, cheapest] if cheapest is not None else None})
+                             "ratio": times[name, level] / times[name, cheapest] if cheapest is not None else None,
+                             "auto_view_ms": view_times[name, level],
+                             "view_ratio": (view_times[name, level] / min(view_times[name, lv] for lv in met)
+                                            if met else None)})
     print(f"{'target':>7} {'material':>8} {'hdri':>10} {'auto':>5} {'error %':>8} {'met':>4} "
           f"{'ms':>6} {'cheapest':>8} {'ms':>6} {'ratio':>6}")
     for r in rows:
@@ -114,11 +133,20 @@ def main():
         ratio = "-" if r["ratio"] is None else f"{r['ratio']:.2f}"
         print(f"{100 * r['target']:>6.0f}% {r['material']:>8} {r['hdri']:>10} {r['auto_level']:>5} "
               f"{100 * r['auto_error']:>8.2f} {'yes' if r['met'] else 'no':>4} {r['auto_ms']:>6.1f} {ch:>8} {cms:>6} {ratio:>6}")
+    print("summary: target, cases, reachable by some level, auto met (where reachable), "
+          "within 1.25x of the cheapest that met it: first view | per new view")
+    for t in targets:
+        r = [x for x in rows if x["target"] == t]
+        reach = [x for x in r if x["cheapest_level"] is not None]
+        print(f"{100 * t:.0f}%  {len(r)}  {len(reach)}  {sum(x['met'] for x in r)} ({sum(x['met'] for x in reach)})  "
+              f"{sum(1 for x in reach if x['met'] and x['ratio'] <= 1.25)} | "
+              f"{sum(1 for x in reach if x['met'] and x['view_ratio'] <= 1.25)}")
     os.makedirs(OUT, exist_ok=True)
     with open(os.path.join(OUT, "auto_quality.json"), "w") as fp:
         json.dump({"ladder": ladder, "rows": rows,
                    "errors": {f"{h}/{n}/{lv}": e for (h, n, lv), e in errors.items()},
-                   "times_ms": {f"{n}/{lv}": t for (n, lv), t in times.items()}}, fp, indent=1)
+                   "times_ms": {f"{n}/{lv}": t for (n, lv), t in times.items()},
+                   "view_times_ms": {f"{n}/{lv}": t for (n, lv), t in view_times.items()}}, fp, indent=1)
     print("wrote out/auto_quality.json")
 
 
