@@ -199,6 +199,81 @@ void wenv_material_specular_cos_batch(const wenv_material *mat, const double wo[
     }
 }
 
+/* Plain comparisons: fminf/fmaxf are library calls on x86-64 (their NaN rules have no single
+ * instruction), and these run per vertex and light. */
+static inline float min_f(float a, float b) { return a < b ? a : b; }
+static inline float max_f(float a, float b) { return a > b ? a : b; }
+
+/* ---------------------------------------------------------------- float path */
+
+/* The same formulation in float, for the per-vertex direct lights of shading (millions of calls per
+ * frame, where double exp/erf dominated).  Caps as above, at float's range. */
+#define TAN2_CAP_F 1e30f
+#define BECKMANN_A_CAP_F 10.0f /* erff(10) = 1, expf(-100) ~ 4e-44: Lambda is 0 in float */
+
+static inline float fresnel_f(float c, float ior)
+{
+    c = min_f(max_f(c, 0.0f), 1.0f);
+    float g = sqrtf(ior * ior - 1.0f + c * c);
+    float a = (g - c) / (g + c);
+    float b = (c * (g + c) - 1.0f) / (c * (g - c) + 1.0f);
+    return 0.5f * a * a * (1.0f + b * b);
+}
+
+static inline float ndf_tan2_f(wenv_distribution dist, float m, float t)
+{
+    float m2 = m * m;
+    t = min_f(t, TAN2_CAP_F);
+    if (dist == WENV_NDF_GGX) {
+        float r = (1.0f + t) / (m2 + t);
+        return m2 * r * r * (float)INV_PI;
+    }
+    float q = 1.0f + t;
+    return expf(-t / m2) * q * q * (float)INV_PI / m2;
+}
+
+static inline float smith_k_f(wenv_distribution dist, float m, float c, float s)
+{
+    float ms = m * s;
+    if (dist == WENV_NDF_GGX)
+        return sqrtf(c * c + ms * ms);
+    float a = min_f(c / max_f(ms, FLT_MIN), BECKMANN_A_CAP_F);
+    return c * erff(a) + ms * expf(-a * a) * (float)INV_SQRT_PI;
+}
+
+void wenv_material_view_k_f(const wenv_material *mat, const float wo[3], float *k_o)
+{
+    float s = sqrtf(wo[0] * wo[0] + wo[1] * wo[1]);
+    for (size_t l = 0; l < mat->n_lobes; l++)
+        k_o[l] = mat->shadowing == WENV_SHADOW_SMITH
+                     ? smith_k_f(mat->lobes[l].distribution, (float)mat->lobes[l].roughness, wo[2], s)
+                     : 0.0f;
+}
+
+void wenv_material_specular_cos_f(const wenv_material *mat, const float wi[3], const float wo[3], const float *k_o,
+                                  float rgb[3])
+{
+    rgb[0] = rgb[1] = rgb[2] = 0.0f;
+    float ci = wi[2], co = wo[2];
+    if (!(ci > 0.0f) || !(co > 0.0f))
+        return;
+    float sx = wi[0] + wo[0], sy = wi[1] + wo[1], sz = ci + co;
+    float sxy2 = sx * sx + sy * sy, sz2 = max_f(sz * sz, FLT_MIN), len2 = sxy2 + sz2;
+    float t = sxy2 / sz2, cos_d = min_f(0.5f * sqrtf(len2), 1.0f);
+    float si = sqrtf(wi[0] * wi[0] + wi[1] * wi[1]);
+    for (size_t l = 0; l < mat->n_lobes; l++) {
+        const wenv_lobe *lobe = &mat->lobes[l];
+        float m = (float)lobe->roughness, vis;
+        if (mat->shadowing == WENV_SHADOW_SMITH)
+            vis = 0.5f / max_f(co * smith_k_f(lobe->distribution, m, ci, si) + ci * k_o[l], FLT_MIN);
+        else
+            vis = min_f(0.25f / (ci * co), sz / (len2 * max_f(ci, co)));
+        float v = fresnel_f(cos_d, (float)lobe->ior) * ndf_tan2_f(lobe->distribution, m, t) * vis * ci;
+        for (int c = 0; c < 3; c++)
+            rgb[c] += (float)lobe->specular[c] * v;
+    }
+}
+
 /* ---------------------------------------------------------------- materials */
 
 static wenv_status check_lobe(const wenv_lobe *lobe, size_t i, wenv_error *err)

@@ -99,6 +99,14 @@ void wenv_material_specular_cos(const wenv_material *mat, const double wi[3], co
 void wenv_material_specular_cos_batch(const wenv_material *mat, const double wo[3], const float *wi,
                                       size_t n, float *rgb_out);
 
+/* Float forms of wenv_material_specular_cos for hot per-vertex loops (the shading's direct lights):
+ * same formulation, float precision (relative error ~1e-5 against the double path where the value
+ * is not negligible).  wenv_material_view_k_f fills k_o[n_lobes] with the terms that depend on the
+ * view only; pass them to every wenv_material_specular_cos_f call with that view. */
+void wenv_material_view_k_f(const wenv_material *mat, const float wo[3], float *k_o);
+void wenv_material_specular_cos_f(const wenv_material *mat, const float wi[3], const float wo[3], const float *k_o,
+                                  float rgb[3]);
+
 /* Directional albedo rho(wo) = integral over the hemisphere of f(wi, wo) cos_i d wi, RGB, by a
  * deterministic product quadrature per lobe in half-vector space: Gauss-Legendre over the part of
  * the distribution's CDF of theta_h whose mirror direction is above the horizon (`samples` nodes,

@@ -32,6 +32,7 @@ struct wenv_shader {
     float *global_texels;    /* slicing: the kept lighting back in the pixel domain */
     float **slices;          /* ns pointers to nl x 3 Haar coefficients, NULL until needed */
     float *irradiance;       /* ns x 3 */
+    float radiance_max[3];   /* brightest texel of the lighting the slices see (lights out) */
     size_t direct_count;     /* pixels taken out as exact directional lights */
     float *direct_dir;       /* direct_count x 3, world */
     float *direct_flux;      /* direct_count x 3: radiance x solid angle */
@@ -435,6 +436,10 @@ wenv_status wenv_shader_set_environment(wenv_shader *sh, const wenv_envmap *env,
     qsort(excluded, nexcluded, sizeof *excluded, compare_size);
     if ((st = wenv_oct_from_envmap(env, G, texels, excluded, nexcluded, err)))
         goto done;
+    float peak[3] = {0.0f, 0.0f, 0.0f};
+    for (size_t u = 0; u < ng; u++)
+        for (int c = 0; c < 3; c++)
+            peak[c] = texels[3 * u + c] > peak[c] ? texels[3 * u + c] : peak[c];
     wenv_haar2d_forward(texels, G, 3, scratch);
     for (size_t u = 0; u < ng; u++)
         mag[u] = texels[3 * u] * texels[3 * u] + texels[3 * u + 1] * texels[3 * u + 1] + texels[3 * u + 2] * texels[3 * u + 2];
@@ -463,6 +468,7 @@ wenv_status wenv_shader_set_environment(wenv_shader *sh, const wenv_envmap *env,
     sh->light_idx = idx;
     sh->light_rgb = rgb;
     sh->light_count = count;
+    memcpy(sh->radiance_max, peak, sizeof peak);
     idx = NULL;
     rgb = NULL;
     free(sh->direct_dir);
@@ -770,59 +776,62 @@ static int compute_slice(wenv_shader *sh, size_t s, float *pixel_work, double *r
     return 0;
 }
 
+/* Plain comparisons: fminf/fmaxf are library calls on x86-64 (their NaN rules have no single
+ * instruction), and these run per vertex and light. */
+static inline float min_f(float a, float b) { return a < b ? a : b; }
+static inline float max_f(float a, float b) { return a > b ? a : b; }
+
 /* The direct lights at one vertex: irradiance into e (the diffuse term scales it) and the specular
  * lobes' reflected radiance into s.  A light off every lobe (n.h below the lobe's cut) costs a
- * few dot products; those inside are evaluated exactly, like the reference, in one batch per vertex
- * so that the view's own terms are computed once. */
-#define DIRECT_BATCH 32
+ * few dot products; one inside is evaluated exactly in float (wenv_material_specular_cos_f), with
+ * the view's own terms computed once per vertex. */
+#define MAX_DIRECT_LOBES 16
 static void shade_direct(const wenv_shader *sh, const float n[3], const float v[3], float e[3], float s[3])
 {
     const wenv_material *mat = sh->mat;
     float co = n[0] * v[0] + n[1] * v[1] + n[2] * v[2];
     /* any frame with +Z the normal will do: the lobes are isotropic */
-    double so = sqrt(fmax(0.0, 1.0 - (double)co * co)), wo[3] = {so, 0.0, co};
-    float wi[3 * DIRECT_BATCH], fcos[3 * DIRECT_BATCH];
-    size_t which[DIRECT_BATCH], fill = 0;
-    for (size_t i = 0; i <= sh->direct_count; i++) {
-        if (i < sh->direct_count) {
-            const float *l = sh->direct_dir + 3 * i, *flux = sh->direct_flux + 3 * i;
-            float ci = n[0] * l[0] + n[1] * l[1] + n[2] * l[2];
-            if (!(ci > 0.0f))
-                continue;
-            e[0] += ci * flux[0];
-            e[1] += ci * flux[1];
-            e[2] += ci * flux[2];
-            if (!mat->n_lobes)
-                continue;
-            float lv = l[0] * v[0] + l[1] * v[1] + l[2] * v[2], h2 = 2.0f + 2.0f * lv;
-            if (!(h2 > 1e-12f))
-                continue;
-            float ch = (ci + co) / sqrtf(h2);
-            int near = 0;
-            for (size_t k = 0; k < mat->n_lobes; k++)
-                near |= ch >= sh->lobe_cos_h_min[k];
-            if (!near)
-                continue;
-            float si = sqrtf(fmaxf(0.0f, 1.0f - ci * ci));
-            float cphi = si * (float)so > 1e-6f ? (lv - ci * co) / (si * (float)so) : 1.0f;
-            cphi = fminf(1.0f, fmaxf(-1.0f, cphi));
-            float *w = wi + 3 * fill;
-            w[0] = si * cphi;
-            w[1] = si * sqrtf(1.0f - cphi * cphi);
-            w[2] = ci;
-            which[fill] = i;
-            if (++fill < DIRECT_BATCH)
-                continue;
-        }
-        if (!fill)
+    float so = sqrtf(max_f(0.0f, 1.0f - co * co)), wo[3] = {so, 0.0f, co};
+    float k_o[MAX_DIRECT_LOBES];
+    int have_k = 0;
+    for (size_t i = 0; i < sh->direct_count; i++) {
+        const float *l = sh->direct_dir + 3 * i, *flux = sh->direct_flux + 3 * i;
+        float ci = n[0] * l[0] + n[1] * l[1] + n[2] * l[2];
+        if (!(ci > 0.0f))
             continue;
-        wenv_material_specular_cos_batch(mat, wo, wi, fill, fcos);
-        for (size_t k = 0; k < fill; k++) {
-            const float *flux = sh->direct_flux + 3 * which[k];
+        e[0] += ci * flux[0];
+        e[1] += ci * flux[1];
+        e[2] += ci * flux[2];
+        if (!mat->n_lobes)
+            continue;
+        float lv = l[0] * v[0] + l[1] * v[1] + l[2] * v[2], h2 = 2.0f + 2.0f * lv;
+        if (!(h2 > 1e-12f))
+            continue;
+        float ch = (ci + co) / sqrtf(h2);
+        int near = 0;
+        for (size_t k = 0; k < mat->n_lobes; k++)
+            near |= ch >= sh->lobe_cos_h_min[k];
+        if (!near)
+            continue;
+        float si = sqrtf(max_f(0.0f, 1.0f - ci * ci));
+        float cphi = si * so > 1e-6f ? (lv - ci * co) / (si * so) : 1.0f;
+        cphi = min_f(1.0f, max_f(-1.0f, cphi));
+        float wi[3] = {si * cphi, si * sqrtf(1.0f - cphi * cphi), ci}, rgb[3];
+        if (mat->n_lobes > MAX_DIRECT_LOBES) { /* rare: no room for the view terms, use the double path */
+            double wid[3] = {wi[0], wi[1], wi[2]}, wod[3] = {wo[0], wo[1], wo[2]}, rgbd[3];
+            wenv_material_specular_cos(mat, wid, wod, rgbd);
             for (int c = 0; c < 3; c++)
-                s[c] += fcos[3 * k + c] * flux[c];
+                rgb[c] = (float)rgbd[c];
+        } else {
+            if (!have_k) {
+                wenv_material_view_k_f(mat, wo, k_o);
+                have_k = 1;
+            }
+            wenv_material_specular_cos_f(mat, wi, wo, k_o, rgb);
         }
-        fill = 0;
+        s[0] += rgb[0] * flux[0];
+        s[1] += rgb[1] * flux[1];
+        s[2] += rgb[2] * flux[2];
     }
 }
 
@@ -848,10 +857,15 @@ static void shade_vertex(const wenv_shader *sh, const vertex_taps *tp, float *o)
         }
     }
     if (sh->albedo) {
+        /* A mean radiance under the lobe lies between the lighting's darkest and brightest
+         * texels; wavelet truncation and interpolation can ring past either, most at narrow
+         * lobes near grazing, where they overshot the brightest pixel several-fold. */
         float a[3];
         albedo_at(sh->albedo, tp->n[0] * tp->v[0] + tp->n[1] * tp->v[1] + tp->n[2] * tp->v[2], a);
-        for (int c = 0; c < 3; c++)
-            s[c] += a[c] * m[c];
+        for (int c = 0; c < 3; c++) {
+            float mc = m[c] < 0.0f ? 0.0f : (m[c] > sh->radiance_max[c] ? sh->radiance_max[c] : m[c]);
+            s[c] += a[c] * mc;
+        }
     }
     for (int c = 0; c < 3; c++) {
         float val = sh->diffuse_over_pi[c] * e[c] + s[c];
