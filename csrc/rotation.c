@@ -302,7 +302,7 @@ static int build_matrix(const wenv_resampler *rs, const double f[9], double thre
     m->rows = nl;
     m->cols = ng;
     m->colptr = calloc(ng + 1, sizeof(size_t));
-    m->rowidx = malloc((nnz ? nnz : 1) * sizeof(uint32_t));
+    m->rowidx = malloc((nnz ? nnz : 1) * sizeof(uint16_t));
     m->val = malloc((nnz ? nnz : 1) * sizeof(float));
     if (!m->colptr || !m->rowidx || !m->val)
         return -1;
@@ -314,7 +314,7 @@ static int build_matrix(const wenv_resampler *rs, const double f[9], double thre
     memcpy(fill, m->colptr, (ng + 1) * sizeof(size_t));
     for (size_t e = 0; e < nnz; e++) {
         size_t pos = fill[ws->out.u[e]]++;
-        m->rowidx[pos] = ws->out.j[e];
+        m->rowidx[pos] = (uint16_t)ws->out.j[e];
         m->val[pos] = ws->out.v[e];
     }
     return 0;
@@ -468,7 +468,7 @@ static void pack(const wenv_csc *m, unsigned char *buf)
         buf += 4;
     }
     for (size_t e = 0; e < nnz; e++) {
-        uint16_t r = (uint16_t)m->rowidx[e];
+        uint16_t r = m->rowidx[e];
         memcpy(buf, &r, 2);
         buf += 2;
     }
@@ -487,7 +487,7 @@ static int unpack(const unsigned char *buf, size_t size, size_t rows, size_t col
     m->rows = rows;
     m->cols = cols;
     m->colptr = malloc((cols + 1) * sizeof(size_t));
-    m->rowidx = malloc((nnz ? nnz : 1) * sizeof(uint32_t));
+    m->rowidx = malloc((nnz ? nnz : 1) * sizeof(uint16_t));
     m->val = malloc((nnz ? nnz : 1) * sizeof(float));
     if (!m->colptr || !m->rowidx || !m->val)
         return -1;

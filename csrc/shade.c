@@ -293,7 +293,7 @@ wenv_status wenv_shader_create(wenv_shader **out, const wenv_quality *q, wenv_me
             }
         }
         sh->stats.rotation_nnz = wenv_rotation_nnz(sh->rot);
-        sh->stats.rotation_bytes = sh->stats.rotation_nnz * (sizeof(uint32_t) + sizeof(float)) +
+        sh->stats.rotation_bytes = sh->stats.rotation_nnz * (sizeof(uint16_t) + sizeof(float)) +
                                    sh->ns * (sh->ng + 1) * sizeof(size_t);
     } else if (wenv_resampler_create(&sh->resampler, q->global_n, q->local_n, err)) {
         wenv_shader_free(sh);
