@@ -36,7 +36,7 @@ struct wenv_shader {
     size_t direct_count;     /* pixels taken out as exact directional lights */
     float *direct_dir;       /* direct_count x 3, world */
     float *direct_flux;      /* direct_count x 3: radiance x solid angle */
-    unsigned char *slice_ready, *slice_need, *slice_used;
+    unsigned char *slice_ready, *slice_need; /* ready: 0 stale, READY, or USED (see READY) */
 
     /* local quadrature: sub-samples of the local map with their tent taps */
     size_t quad_k, quad_count;
@@ -58,8 +58,14 @@ struct wenv_shader {
 
     /* (normal sample, view sample) radiance table */
     float *table;            /* ns x nv x 3 */
-    unsigned char *pair_ready, *pair_need, *pair_used; /* used: read by the latest shade call */
+    unsigned char *pair_ready, *pair_need;
 };
+
+/* States of a lighting slice or table entry: made (READY), and made and read by the latest shade
+ * call (USED), which a new lighting or material remakes at once.  Marking use on the read that
+ * checks readiness costs nothing extra per vertex. */
+#define READY 1
+#define USED 2
 
 /* cos(89.9 deg): the lowest view a BRDF slice is made for */
 #define GRAZING_Z 0.0017453283658983088
@@ -153,14 +159,12 @@ void wenv_shader_free(wenv_shader *sh)
     free(sh->direct_flux);
     free(sh->slice_ready);
     free(sh->slice_need);
-    free(sh->slice_used);
     free_quadrature(sh);
     free(sh->cosine_haar);
     free_material(sh);
     free(sh->table);
     free(sh->pair_ready);
     free(sh->pair_need);
-    free(sh->pair_used);
     free(sh);
 }
 
@@ -247,13 +251,11 @@ wenv_status wenv_shader_create(wenv_shader **out, const wenv_quality *q, wenv_me
     sh->irradiance = calloc(sh->ns * 3, sizeof(float));
     sh->slice_ready = calloc(sh->ns, 1);
     sh->slice_need = calloc(sh->ns, 1);
-    sh->slice_used = calloc(sh->ns, 1);
     sh->table = malloc(sh->ns * sh->nv * 3 * sizeof(float));
     sh->pair_ready = calloc(sh->ns * sh->nv, 1);
     sh->pair_need = calloc(sh->ns * sh->nv, 1);
-    sh->pair_used = calloc(sh->ns * sh->nv, 1);
-    if (!sh->frames || !sh->slices || !sh->irradiance || !sh->slice_ready || !sh->slice_need || !sh->slice_used ||
-        !sh->table || !sh->pair_ready || !sh->pair_need || !sh->pair_used) {
+    if (!sh->frames || !sh->slices || !sh->irradiance || !sh->slice_ready || !sh->slice_need || !sh->table ||
+        !sh->pair_ready || !sh->pair_need) {
         wenv_shader_free(sh);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the shader tables");
     }
@@ -339,11 +341,11 @@ static wenv_status remake_ready(wenv_shader *sh, int slices, wenv_error *err)
     size_t npairs = sh->ns * sh->nv;
     if (slices) {
         for (size_t s = 0; s < sh->ns; s++)
-            sh->slice_need[s] |= sh->slice_ready[s] & sh->slice_used[s];
+            sh->slice_need[s] |= sh->slice_ready[s] == USED;
         memset(sh->slice_ready, 0, sh->ns);
     }
     for (size_t p = 0; p < npairs; p++)
-        sh->pair_need[p] |= sh->pair_ready[p] & sh->pair_used[p];
+        sh->pair_need[p] |= sh->pair_ready[p] == USED;
     memset(sh->pair_ready, 0, npairs);
     if (!sh->have_env || !sh->have_mat)
         return WENV_OK;
@@ -873,20 +875,41 @@ static void shade_vertex(const wenv_shader *sh, const vertex_taps *tp, float *o)
     }
 }
 
-/* Whether every slice and table entry the vertex reads is ready. */
-static int taps_ready(const wenv_shader *sh, const vertex_taps *tp)
+/* Whether every slice and table entry the vertex reads is ready; marks those ready as USED. */
+static int read_taps(const wenv_shader *sh, const vertex_taps *tp)
 {
-    for (int k = 0; k < 4; k++)
-        if (tp->sample_w[k] > 0.0f && !sh->slice_ready[tp->sample[k]])
-            return 0;
-    for (int k = 0; k < 16; k++)
-        if (tp->pair_w[k] > 0.0f && !sh->pair_ready[tp->pair[k]])
-            return 0;
-    return 1;
+    int all = 1;
+    for (int k = 0; k < 4; k++) {
+        unsigned char f;
+#pragma omp atomic read
+        f = sh->slice_ready[tp->sample[k]];
+        if (tp->sample_w[k] > 0.0f) {
+            if (!f)
+                all = 0;
+            else if (f == READY) {
+#pragma omp atomic write
+                sh->slice_ready[tp->sample[k]] = USED;
+            }
+        }
+    }
+    for (int k = 0; k < 16; k++) {
+        unsigned char f;
+#pragma omp atomic read
+        f = sh->pair_ready[tp->pair[k]];
+        if (tp->pair_w[k] > 0.0f) {
+            if (!f)
+                all = 0;
+            else if (f == READY) {
+#pragma omp atomic write
+                sh->pair_ready[tp->pair[k]] = USED;
+            }
+        }
+    }
+    return all;
 }
 
-/* Flags in `flags` (slice_used or pair_used, or the need flags) what the vertex reads.  Checked
- * before written so that cache lines shared between threads stay clean; every writer stores 1. */
+/* Flags in the need flags what the vertex reads.  Checked before written so that cache lines
+ * shared between threads stay clean; every writer stores 1. */
 static inline void flag_taps(const vertex_taps *tp, unsigned char *slice_flags, unsigned char *pair_flags)
 {
     for (int k = 0; k < 4; k++) {
@@ -937,7 +960,7 @@ static wenv_status fill_needed(wenv_shader *sh, wenv_error *err)
             if (compute_slice(sh, todo[e], pixel_work, rowsum, scratch) < 0)
                 atomic_store(&failed, 1);
             else
-                sh->slice_ready[todo[e]] = 1;
+                sh->slice_ready[todo[e]] = USED; /* made for the latest shade call */
         }
         free(pixel_work);
         free(rowsum);
@@ -968,7 +991,7 @@ static wenv_status fill_needed(wenv_shader *sh, wenv_error *err)
         const float *inv = sh->view_inv_albedo + 3 * j;
         for (int c = 0; c < 3; c++)
             sh->table[3 * p + c] = acc[c] * inv[c];
-        sh->pair_ready[p] = 1;
+        sh->pair_ready[p] = USED;
     }
     free(todo);
     return WENV_OK;
@@ -984,8 +1007,11 @@ wenv_status wenv_shader_shade(wenv_shader *sh, const float *normals, const float
     size_t *pending = malloc((n ? n : 1) * sizeof(size_t));
     if (!pending)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory shading");
-    memset(sh->slice_used, 0, sh->ns);
-    memset(sh->pair_used, 0, sh->ns * sh->nv);
+    /* what the previous call read is no longer the latest */
+    for (size_t q = 0; q < sh->ns; q++)
+        sh->slice_ready[q] = sh->slice_ready[q] != 0;
+    for (size_t q = 0; q < sh->ns * sh->nv; q++)
+        sh->pair_ready[q] = sh->pair_ready[q] != 0;
     atomic_size_t npending = 0;
     long long nn = (long long)n;
 #pragma omp parallel for schedule(static)
@@ -996,8 +1022,7 @@ wenv_status wenv_shader_shade(wenv_shader *sh, const float *normals, const float
             o[0] = o[1] = o[2] = 0.0f;
             continue;
         }
-        flag_taps(&tp, sh->slice_used, sh->pair_used);
-        if (taps_ready(sh, &tp)) {
+        if (read_taps(sh, &tp)) {
             shade_vertex(sh, &tp, o);
             continue;
         }
@@ -1029,7 +1054,7 @@ void wenv_shader_get_stats(const wenv_shader *sh, wenv_shader_stats *stats)
     for (size_t s = 0; s < sh->ns; s++)
         slices += sh->slices[s] != NULL;
     for (size_t p = 0; p < sh->ns * sh->nv; p++)
-        pairs += sh->pair_ready[p];
+        pairs += sh->pair_ready[p] != 0;
     stats->slices_ready = slices;
     stats->pairs_ready = pairs;
     stats->light_terms = sh->light_count;
