@@ -518,7 +518,9 @@ size_t wenv_envmap_brightest(const wenv_envmap *env, size_t k, double relative, 
                 const float *p = pixel_at(env, row, col);
                 flux[t] += omega * ((double)p[0] + p[1] + p[2]) / 3.0;
                 wenv_bright_pixel b = {.pixel = row * w + col};
-                b.radiance = (float)(fmax(p[0], fmax(p[1], p[2])) * env->strength);
+                /* comparisons, not fmax: that is a library call on x86-64, here once per pixel */
+                float big = p[0] > p[1] ? p[0] : p[1];
+                b.radiance = (big > p[2] ? big : p[2]) * (float)env->strength;
                 if (count[t] < k || brighter(&b, &mine[k - 1]))
                     keep_brightest(mine, &count[t], k, &b);
             }
