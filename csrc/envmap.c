@@ -119,16 +119,18 @@ static wenv_status check_shape(size_t height, size_t width, wenv_projection proj
 }
 
 /* Takes ownership of `rgb` (height x width x 3): validates it, clamps negatives, and wraps it. */
-static wenv_status envmap_adopt(wenv_envmap **out, float *rgb, size_t height, size_t width,
-                                wenv_projection projection, double rotation, double strength, const char *what,
-                                wenv_error *err)
+/* Takes ownership of rgb (height x width x 3).  `checked`: the pixels come from another environment,
+ * already finite and non-negative. */
+static wenv_status envmap_adopt_checked(wenv_envmap **out, float *rgb, size_t height, size_t width,
+                                        wenv_projection projection, double rotation, double strength,
+                                        const char *what, int checked, wenv_error *err)
 {
     *out = NULL;
     if (check_transform(rotation, strength, err) || check_shape(height, width, projection, what, err)) {
         free(rgb);
         return err->status;
     }
-    size_t count = height * width * 3;
+    size_t count = checked ? 0 : height * width * 3;
     for (size_t i = 0; i < count; i++) {
         if (!isfinite(rgb[i])) {
             size_t px = i / 3;
@@ -180,6 +182,13 @@ static wenv_status envmap_adopt(wenv_envmap **out, float *rgb, size_t height, si
     return WENV_OK;
 }
 
+static wenv_status envmap_adopt(wenv_envmap **out, float *rgb, size_t height, size_t width,
+                                wenv_projection projection, double rotation, double strength, const char *what,
+                                wenv_error *err)
+{
+    return envmap_adopt_checked(out, rgb, height, width, projection, rotation, strength, what, 0, err);
+}
+
 wenv_status wenv_envmap_create(wenv_envmap **out, const float *pixels, size_t height, size_t width,
                                size_t channels, wenv_projection projection, double rotation, double strength,
                                wenv_error *err)
@@ -203,8 +212,15 @@ wenv_status wenv_envmap_create(wenv_envmap **out, const float *pixels, size_t he
 wenv_status wenv_envmap_with_transform(wenv_envmap **out, const wenv_envmap *env, double rotation,
                                        double strength, wenv_error *err)
 {
-    return wenv_envmap_create(out, env->pixels, env->height, env->width, 3, env->projection, rotation, strength,
-                              err);
+    /* a plain copy: the pixels were checked when the original was made (a lighting change) */
+    size_t bytes = env->height * env->width * 3 * sizeof(float);
+    float *rgb = malloc(bytes ? bytes : 1);
+    if (!rgb)
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for a %zu x %zu environment", env->width,
+                              env->height);
+    memcpy(rgb, env->pixels, bytes);
+    return envmap_adopt_checked(out, rgb, env->height, env->width, env->projection, rotation, strength, "pixels", 1,
+                                err);
 }
 
 void wenv_envmap_free(wenv_envmap *env)
@@ -502,29 +518,48 @@ size_t wenv_envmap_brightest(const wenv_envmap *env, size_t k, double relative, 
         free(flux);
         return 0;
     }
-    /* each thread keeps its own k brightest and its share of the total flux */
+    /* each thread keeps its own k brightest and its share of the total flux, in locals: per-pixel
+     * writes to neighbouring slots of a shared array would bounce one cache line between cores */
 #pragma omp parallel num_threads(threads)
     {
         int t = omp_get_thread_num();
         wenv_bright_pixel *mine = top + (size_t)t * k;
+        size_t kept = 0;
+        double my_flux = 0.0;
+        float floor_radiance = -1.0f; /* the k-th brightest so far, once k are kept */
+        float strength = (float)env->strength;
 #pragma omp for schedule(static)
         for (size_t row = 0; row < h; row++) {
-            /* equirect pixels of a row share their solid angle */
-            double row_omega = env->projection == WENV_PROJ_EQUIRECT ? wenv_envmap_pixel_solid_angle(env, row, 0) : -1.0;
-            for (size_t col = 0; col < w; col++) {
-                double omega = row_omega >= 0.0 ? row_omega : wenv_envmap_pixel_solid_angle(env, row, col);
-                if (!(omega > 0.0))
-                    continue;
-                const float *p = pixel_at(env, row, col);
-                flux[t] += omega * ((double)p[0] + p[1] + p[2]) / 3.0;
-                wenv_bright_pixel b = {.pixel = row * w + col};
+            const float *p = pixel_at(env, row, 0);
+            if (env->projection == WENV_PROJ_EQUIRECT) {
+                /* equirect pixels of a row share their solid angle */
+                double row_sum = 0.0;
+                for (size_t col = 0; col < 3 * w; col++)
+                    row_sum += p[col];
+                my_flux += wenv_envmap_pixel_solid_angle(env, row, 0) * row_sum / 3.0;
+            }
+            for (size_t col = 0; col < w; col++, p += 3) {
+                if (env->projection != WENV_PROJ_EQUIRECT) {
+                    double omega = wenv_envmap_pixel_solid_angle(env, row, col);
+                    if (!(omega > 0.0))
+                        continue;
+                    my_flux += omega * ((double)p[0] + p[1] + p[2]) / 3.0;
+                }
                 /* comparisons, not fmax: that is a library call on x86-64, here once per pixel */
                 float big = p[0] > p[1] ? p[0] : p[1];
-                b.radiance = (big > p[2] ? big : p[2]) * (float)env->strength;
-                if (count[t] < k || brighter(&b, &mine[k - 1]))
-                    keep_brightest(mine, &count[t], k, &b);
+                big = (big > p[2] ? big : p[2]) * strength;
+                if (big < floor_radiance)
+                    continue;
+                wenv_bright_pixel b = {.pixel = row * w + col, .radiance = big};
+                if (kept < k || brighter(&b, &mine[k - 1])) {
+                    keep_brightest(mine, &kept, k, &b);
+                    if (kept == k)
+                        floor_radiance = mine[k - 1].radiance;
+                }
             }
         }
+        count[t] = kept;
+        flux[t] = my_flux;
     }
     double total = 0.0;
     for (int t = 0; t < threads; t++)
