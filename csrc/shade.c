@@ -875,37 +875,32 @@ static void shade_vertex(const wenv_shader *sh, const vertex_taps *tp, float *o)
     }
 }
 
-/* Whether every slice and table entry the vertex reads is ready; marks those ready as USED. */
-static int read_taps(const wenv_shader *sh, const vertex_taps *tp)
+/* Whether the n states state[idx[k]] read with weight w[k] > 0 are all made; marks those made as
+ * USED. */
+static inline int read_states(unsigned char *state, const uint32_t *idx, const float *w, int n)
 {
     int all = 1;
-    for (int k = 0; k < 4; k++) {
+    for (int k = 0; k < n; k++) {
         unsigned char f;
 #pragma omp atomic read
-        f = sh->slice_ready[tp->sample[k]];
-        if (tp->sample_w[k] > 0.0f) {
+        f = state[idx[k]];
+        if (w[k] > 0.0f) {
             if (!f)
                 all = 0;
             else if (f == READY) {
 #pragma omp atomic write
-                sh->slice_ready[tp->sample[k]] = USED;
-            }
-        }
-    }
-    for (int k = 0; k < 16; k++) {
-        unsigned char f;
-#pragma omp atomic read
-        f = sh->pair_ready[tp->pair[k]];
-        if (tp->pair_w[k] > 0.0f) {
-            if (!f)
-                all = 0;
-            else if (f == READY) {
-#pragma omp atomic write
-                sh->pair_ready[tp->pair[k]] = USED;
+                state[idx[k]] = USED;
             }
         }
     }
     return all;
+}
+
+/* Whether every slice and table entry the vertex reads is ready; marks those ready as USED. */
+static int read_taps(const wenv_shader *sh, const vertex_taps *tp)
+{
+    int slices = read_states(sh->slice_ready, tp->sample, tp->sample_w, 4);
+    return read_states(sh->pair_ready, tp->pair, tp->pair_w, 16) && slices;
 }
 
 /* Flags in the need flags what the vertex reads.  Checked before written so that cache lines
