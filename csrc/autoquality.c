@@ -1,8 +1,11 @@
 #include "autoquality.h"
 
 #include <math.h>
+#include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+
+#include "maps.h"
 
 
 /* global, local, normals, views, coefficients, light_coefficients (0: all, slicing keeps every
@@ -35,13 +38,13 @@ const wenv_quality *wenv_auto_level(size_t i)
     return i < WENV_AUTO_LEVELS ? &LADDER[i] : NULL;
 }
 
-size_t wenv_auto_level_bytes(size_t i)
+size_t wenv_auto_level_bytes(size_t i, size_t used_normals)
 {
     const wenv_quality *q = &LADDER[i];
     size_t ns = q->normal_n * q->normal_n, nv = (q->view_n + 1) * (q->view_n + 1), nl = q->local_n * q->local_n;
-    size_t ng = q->global_n * q->global_n;
-    size_t table = ns * nv * (3 * sizeof(float) + 3);         /* radiance and three flags per pair */
-    size_t slices = ns * (nl * 3 * sizeof(float) + 3 * sizeof(float) + 12 * sizeof(float));
+    size_t ng = q->global_n * q->global_n, made = used_normals < ns ? used_normals : ns;
+    size_t table = ns * nv * (3 * sizeof(float) + 2);         /* radiance and two flags per pair */
+    size_t slices = made * nl * 3 * sizeof(float) + ns * (3 + 12) * sizeof(float); /* + irradiance, frames */
     size_t brdf = nv * q->coefficients * 4 * sizeof(float);  /* index and RGB per kept term */
     return table + slices + brdf + ng * 3 * sizeof(float);
 }
@@ -109,20 +112,52 @@ static double level_error(size_t level, const wenv_material *mat)
     return exp((1.0 - t) * log(e[i]) + t * log(e[i + 1]));
 }
 
+/* Normal samples of an n_side grid that the normals' bilinear taps reach ((size_t)-1 without
+ * normals or memory to count them). */
+static size_t used_normal_samples(size_t n_side, const float *normals, size_t n)
+{
+    if (!normals)
+        return (size_t)-1;
+    unsigned char *hit = calloc(n_side * n_side, 1);
+    if (!hit)
+        return (size_t)-1;
+    size_t used = 0;
+    for (size_t i = 0; i < n; i++) {
+        const float *d = normals + 3 * i;
+        float len = sqrtf(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]), u, v, w[4];
+        if (!(len > 0.0f))
+            continue;
+        float unit[3] = {d[0] / len, d[1] / len, d[2] / len};
+        uint32_t idx[4];
+        wenv_oct_encode_f(unit, &u, &v);
+        wenv_oct_bilinear_f((long)n_side, u, v, idx, w);
+        for (int k = 0; k < 4; k++)
+            if (w[k] > 0.0f && !hit[idx[k]]) {
+                hit[idx[k]] = 1;
+                used++;
+            }
+    }
+    free(hit);
+    return used;
+}
+
 wenv_status wenv_auto_choose(const wenv_envmap *env, const wenv_material *mat, double target, size_t memory_budget,
-                             wenv_auto_choice *out, wenv_error *err)
+                             const float *normals, size_t n, wenv_auto_choice *out, wenv_error *err)
 {
     memset(out, 0, sizeof *out);
     if (!(target > 0.0 && target <= 1.0))
         return wenv_error_set(err, WENV_ERR_VALUE, "target_error must be in (0, 1], got %g", target);
-    if (wenv_auto_level_bytes(0) > memory_budget)
+    size_t used[WENV_AUTO_LEVELS];
+    for (size_t i = 0; i < WENV_AUTO_LEVELS; i++)
+        used[i] = used_normal_samples(LADDER[i].normal_n, normals, n);
+    if (wenv_auto_level_bytes(0, used[0]) > memory_budget)
         return wenv_error_set(err, WENV_ERR_VALUE, "memory_budget of %zu bytes is below the cheapest setting's %zu",
-                              memory_budget, wenv_auto_level_bytes(0));
+                              memory_budget, wenv_auto_level_bytes(0, used[0]));
     if (contrast(env, &out->contrast, &out->lights_share, err))
         return err->status;
     out->env_factor = fmin(8.0, CONTRAST_MARGIN * ((1.0 - out->lights_share) + CONTRAST_SLOPE * out->contrast));
     size_t best = 0;
-    for (size_t i = 0; i < WENV_AUTO_LEVELS && wenv_auto_level_bytes(i) <= memory_budget; i++) {
+    for (size_t i = 0; i < WENV_AUTO_LEVELS && wenv_auto_level_bytes(i, used[i]) <= memory_budget; i++) {
         best = i;
         if (level_error(i, mat) * out->env_factor <= target) {
             out->met = 1;
@@ -131,6 +166,8 @@ wenv_status wenv_auto_choose(const wenv_envmap *env, const wenv_material *mat, d
     }
     out->level = best;
     out->quality = LADDER[best];
+    out->used_normals = used[best];
+    out->level_bytes = wenv_auto_level_bytes(best, used[best]);
     out->predicted_error = level_error(best, mat) * out->env_factor;
     return WENV_OK;
 }

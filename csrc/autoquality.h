@@ -32,9 +32,9 @@
 /* Level `i` of the ladder (0 <= i < WENV_AUTO_LEVELS). */
 const wenv_quality *wenv_auto_level(size_t i);
 
-/* Memory a level holds at most for shading (tables, slices for every normal sample, BRDF slices),
- * in bytes. */
-size_t wenv_auto_level_bytes(size_t i);
+/* Memory a level holds at most for shading (tables, BRDF slices, and lighting slices for
+ * `used_normals` normal samples, or for all of them when used_normals is (size_t)-1), in bytes. */
+size_t wenv_auto_level_bytes(size_t i, size_t used_normals);
 
 typedef struct {
     size_t level;           /* chosen ladder level */
@@ -44,13 +44,17 @@ typedef struct {
     double lights_share;    /* flux share of the pixels shaded as exact lights */
     double env_factor;      /* contrast relative to the calibration set's median (clamped) */
     int met;                /* whether some level within the budget is predicted to meet the target */
+    size_t level_bytes;     /* the chosen level's memory, as counted against the budget */
+    size_t used_normals;    /* its normal samples the mesh's normals fall near ((size_t)-1: all) */
 } wenv_auto_choice;
 
 /* The cheapest level whose predicted error is at most `target` and whose memory is at most
  * `memory_budget` bytes; when none is predicted to meet the target, the most accurate level within
- * the budget (met = 0).  target in (0, 1]; WENV_ERR_VALUE when even the cheapest level exceeds the
- * budget. */
+ * the budget (met = 0).  `normals` (n x 3 floats, may be NULL) are the mesh's: a level's lighting
+ * slices are then counted only for the normal samples they fall near, as shading makes only those
+ * (a flat floor needs a handful, a sphere all).  target in (0, 1]; WENV_ERR_VALUE when even the
+ * cheapest level exceeds the budget. */
 wenv_status wenv_auto_choose(const wenv_envmap *env, const wenv_material *mat, double target, size_t memory_budget,
-                             wenv_auto_choice *out, wenv_error *err);
+                             const float *normals, size_t n, wenv_auto_choice *out, wenv_error *err);
 
 #endif

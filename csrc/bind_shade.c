@@ -209,7 +209,7 @@ static int do_set_material(ShaderObject *self, PyObject *mat_obj)
 }
 
 /* quality="auto": the cheapest ladder level predicted to meet target_error (autoquality.h). */
-static int choose_auto(ShaderObject *self, PyObject *env_obj, PyObject *mat_obj)
+static int choose_auto(ShaderObject *self, PyObject *env_obj, PyObject *mat_obj, PyObject *normals_obj)
 {
     if (!(self->target_error > 0.0 && self->target_error <= 1.0)) {
         PyErr_Format(PyExc_ValueError, "target_error must be in (0, 1], got %g", self->target_error);
@@ -221,12 +221,22 @@ static int choose_auto(ShaderObject *self, PyObject *env_obj, PyObject *mat_obj)
     }
     const struct wenv_envmap *env = wenv_py_envmap(env_obj, "env");
     const struct wenv_material *mat = wenv_py_material(mat_obj, "material");
+    Py_buffer nb = {0};
+    size_t n = 0;
+    const float *normals = NULL;
+    if (normals_obj != Py_None) {
+        if (wenv_py_get_vec3_array(normals_obj, "normals", 1, &nb, &n, NULL) < 0)
+            return -1;
+        normals = nb.buf;
+    }
     wenv_error err = {0};
     wenv_status st;
     size_t budget = (size_t)(self->memory_budget_mb * 1048576.0);
     Py_BEGIN_ALLOW_THREADS
-    st = wenv_auto_choose(env, mat, self->target_error, budget, &self->auto_choice, &err);
+    st = wenv_auto_choose(env, mat, self->target_error, budget, normals, n, &self->auto_choice, &err);
     Py_END_ALLOW_THREADS
+    if (normals)
+        PyBuffer_Release(&nb);
     if (st) {
         wenv_py_raise(&err);
         return -1;
@@ -240,14 +250,15 @@ static int choose_auto(ShaderObject *self, PyObject *env_obj, PyObject *mat_obj)
 static int Shader_init(ShaderObject *self, PyObject *args, PyObject *kwargs)
 {
     static char *kwlist[] = {"env", "material", "quality", "method", "cache_dir", "progress", "target_error",
-                             "memory_budget_mb", NULL};
+                             "memory_budget_mb", "normals", NULL};
     PyObject *env_obj, *mat_obj, *quality_obj = NULL, *cache_obj = Py_None, *progress_obj = Py_None;
+    PyObject *normals_obj = Py_None;
     const char *method = NULL;
     self->target_error = 0.01;
     self->memory_budget_mb = 1024.0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|OzOOdd:Shader", kwlist, &env_obj, &mat_obj, &quality_obj,
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|OzOOddO:Shader", kwlist, &env_obj, &mat_obj, &quality_obj,
                                      &method, &cache_obj, &progress_obj, &self->target_error,
-                                     &self->memory_budget_mb))
+                                     &self->memory_budget_mb, &normals_obj))
         return -1;
     if (self->shader || self->peer) {
         PyErr_SetString(PyExc_RuntimeError, "Shader is already initialised");
@@ -258,6 +269,11 @@ static int Shader_init(ShaderObject *self, PyObject *args, PyObject *kwargs)
     int is_auto = quality_obj && PyUnicode_Check(quality_obj) && PyUnicode_CompareWithASCIIString(quality_obj, "auto") == 0;
     if (is_auto && method && strcmp(method, "slicing") != 0) {
         PyErr_Format(PyExc_ValueError, "quality='auto' chooses the method itself; leave method unset (got '%s')", method);
+        return -1;
+    }
+    if (normals_obj != Py_None && !is_auto) {
+        PyErr_SetString(PyExc_ValueError, "normals are only used by quality='auto' (to count the normal samples a "
+                                          "mesh needs)");
         return -1;
     }
     if (!method)
@@ -274,7 +290,7 @@ static int Shader_init(ShaderObject *self, PyObject *args, PyObject *kwargs)
         return -1;
     }
     if (is_auto) {
-        if (choose_auto(self, env_obj, mat_obj) < 0)
+        if (choose_auto(self, env_obj, mat_obj, normals_obj) < 0)
             return -1;
     } else if (!peer) {
         PyObject *q = quality_obj ? Py_NewRef(quality_obj) : PyUnicode_FromString("default");
@@ -541,12 +557,14 @@ static PyObject *Shader_get_stats(ShaderObject *self, void *closure)
                          "direct_lights", (Py_ssize_t)s.direct_lights);
     if (d && self->is_auto) {
         const wenv_auto_choice *a = &self->auto_choice;
-        PyObject *info = Py_BuildValue("{s:n,s:s,s:d,s:d,s:d,s:d,s:d,s:O,s:d,s:d}", "level", (Py_ssize_t)a->level,
+        PyObject *used = a->used_normals == (size_t)-1 ? Py_NewRef(Py_None) : PyLong_FromSize_t(a->used_normals);
+        PyObject *info = !used ? NULL : Py_BuildValue("{s:n,s:s,s:d,s:d,s:d,s:d,s:d,s:O,s:d,s:d,s:O}", "level", (Py_ssize_t)a->level,
                                        "method", "slicing", "predicted_error", a->predicted_error, "target_error",
                                        self->target_error, "contrast", a->contrast, "lights_share", a->lights_share,
                                        "env_factor", a->env_factor,
                                        "met", a->met ? Py_True : Py_False, "memory_budget_mb", self->memory_budget_mb,
-                                       "level_mb", (double)wenv_auto_level_bytes(a->level) / 1048576.0);
+                                       "level_mb", (double)a->level_bytes / 1048576.0, "used_normal_samples", used);
+        Py_XDECREF(used);
         if (!info || PyDict_SetItemString(d, "auto", info) < 0)
             Py_CLEAR(d);
         Py_XDECREF(info);
@@ -581,7 +599,7 @@ static PyTypeObject ShaderType = {
     .tp_basicsize = sizeof(ShaderObject),
     .tp_flags = Py_TPFLAGS_DEFAULT,
     .tp_doc = "Shader(env, material, quality='default', method='rotation', cache_dir=None, progress=None, "
-              "target_error=0.01, memory_budget_mb=1024)\n--\n\n"
+              "target_error=0.01, memory_budget_mb=1024, normals=None)\n--\n\n"
               "Environment shading by wavelet rotation.  quality: 'draft', 'default', 'high', 'auto' or a dict of "
               "global, local, normals, views, coefficients, light_coefficients, matrix_epsilon, lights, light_threshold.  method: "
               "'rotation' (precomputed sparse matrices, cached on disk in cache_dir; None: WENV_CACHE_DIR or "
@@ -593,7 +611,8 @@ static PyTypeObject ShaderType = {
               "precomputation runs in set_environment and set_material, which then also report to progress.\n\n"
               "quality='auto' picks the cheapest setting of wenv.AUTO_LADDER (method 'slicing') whose error is "
               "predicted, from the narrowest lobe's roughness and the environment's wavelet compaction, to be at "
-              "most target_error (relative RMSE) within memory_budget_mb; stats['auto'] tells what it chose and "
+              "most target_error (relative RMSE) within memory_budget_mb, counting lighting slices only for the "
+              "normal samples the mesh's normals (if given) fall near; stats['auto'] tells what it chose and "
               "why.  The choice is made once, for the environment and material given here.",
     .tp_new = PyType_GenericNew,
     .tp_init = (initproc)Shader_init,

@@ -73,3 +73,21 @@ def test_bad_arguments(sunset):
         wenv.Shader(sunset, wenv.Lambert(0.5), quality="auto", method="rotation")
     with pytest.raises(TypeError):
         wenv.Shader(sunset, wenv.Lambert(0.5), quality="auto", target_error="1%")
+
+
+def test_mesh_normals_count_only_the_slices_they_need(sunset):
+    """A flat floor reads a handful of normal samples, a sphere all of them: within the same budget
+    the floor affords a finer setting."""
+    mat = glossy(0.05)
+    floor = np.tile(np.float32([[0.0, 0.0, 1.0]]), (1000, 1))
+    sphere = unit(np.random.default_rng(0).normal(size=(5000, 3)))
+    a_floor = wenv.Shader(sunset, mat, quality="auto", target_error=0.001, memory_budget_mb=100,
+                          normals=floor).stats["auto"]
+    a_sphere = wenv.Shader(sunset, mat, quality="auto", target_error=0.001, memory_budget_mb=100,
+                           normals=sphere).stats["auto"]
+    assert a_floor["used_normal_samples"] <= 4 and a_sphere["used_normal_samples"] > 500
+    assert a_floor["level"] > a_sphere["level"] and a_floor["level_mb"] <= 100 and a_sphere["level_mb"] <= 100
+    with pytest.raises(ValueError, match="normals"):
+        wenv.Shader(sunset, mat, quality="default", normals=floor)
+    with pytest.raises(ValueError, match="normals"):
+        wenv.Shader(sunset, mat, quality="auto", normals=np.zeros((3, 3), np.float32))
