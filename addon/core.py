@@ -573,6 +573,10 @@ def quality_value(name):
     return name.lower()
 
 
+AUTO = "auto"  # quality_value("AUTO"): one slicing shader per World and material, nothing to precompute
+AUTO_CACHE_SIZE = 16
+
+
 class ShaderCache:
     """Module-level store of wenv.Shader objects keyed by quality.  Tracks which environment and
     material each shader holds so unchanged ones are not set again."""
@@ -582,10 +586,12 @@ class ShaderCache:
         self._env_sig = {}
         self._env_base = {}  # image key -> untransformed wenv.Environment (pixels read once)
         self._mat_key = {}
+        self._auto = {}  # (World signature, material key, target, budget) -> wenv.Shader
         self.lock = threading.Lock()
         self.cache_dir = None  # None: wenv's default ($WENV_CACHE_DIR or ~/.cache/wenv)
 
     def clear(self):
+        self._auto.clear()
         self._shaders.clear()
         self._env_sig.clear()
         self._env_base.clear()
@@ -596,9 +602,11 @@ class ShaderCache:
         self._env_sig = dict.fromkeys(self._env_sig)
         self._mat_key = dict.fromkeys(self._mat_key)
         self._env_base.clear()
+        self._auto.clear()
 
     def has(self, quality):
-        return quality in self._shaders
+        """Whether shading at `quality` is ready without precomputation (always for Auto)."""
+        return quality == AUTO or quality in self._shaders
 
     def add(self, quality, shader, spec=None, mat_key=None):
         self._shaders[quality] = shader
@@ -636,6 +644,19 @@ class ShaderCache:
             self._env_sig[quality] = signature
         return shader
 
+    def auto(self, signature, env, key, target_error, memory_budget_mb, normals):
+        """The Auto shader for this World and material: wenv picks its setting from the lobes, the
+        environment and the mesh's normals (those of the first mesh shaded with them)."""
+        cache_key = (signature, key, target_error, memory_budget_mb)
+        shader = self._auto.get(cache_key)
+        if shader is None:
+            if len(self._auto) >= AUTO_CACHE_SIZE:
+                self._auto.clear()
+            shader = wenv.Shader(env, material_from_key(key), quality="auto", target_error=target_error,
+                                 memory_budget_mb=memory_budget_mb, normals=normals)
+            self._auto[cache_key] = shader
+        return shader
+
     def use_material(self, quality, key):
         shader = self._shaders[quality]
         if self._mat_key.get(quality) != key:
@@ -668,8 +689,10 @@ class ShadingPlan:
     it may run on a worker thread (the live mode does, the core releases the GIL); `apply` writes
     the colours back on the main thread, by object name."""
 
-    def __init__(self, quality, world, environment, view, tone, l_max):
+    def __init__(self, quality, world, environment, view, tone, l_max, target_error=0.01, memory_budget_mb=1024):
         self.quality = quality
+        self.target_error = target_error
+        self.memory_budget_mb = memory_budget_mb
         self.world = world
         self.environment = environment
         self.view = view
@@ -678,17 +701,24 @@ class ShadingPlan:
         self.items = []  # (object name, MeshData, material keys per slot)
         self.notes = []
         self.results = None
+        self.auto_choices = {}  # (object name, material key) -> stats["auto"] of the shader used
 
     def compute(self):
         results = []
         with shaders.lock:
-            shaders.use_environment(self.quality, self.world.signature, self.environment)
+            if self.quality != AUTO:
+                shaders.use_environment(self.quality, self.world.signature, self.environment)
             for name, data, keys in self.items:
                 rgb = np.empty((data.count, 3), np.float32)
                 slots = np.clip(data.slots, 0, len(keys) - 1)
                 for s in np.unique(slots):
-                    shader = shaders.use_material(self.quality, keys[s])
                     sel = slots == s
+                    if self.quality == AUTO:
+                        shader = shaders.auto(self.world.signature, self.environment, keys[s], self.target_error,
+                                              self.memory_budget_mb, data.normals[sel])
+                        self.auto_choices[(name, keys[s])] = shader.stats["auto"]
+                    else:
+                        shader = shaders.use_material(self.quality, keys[s])
                     if sel.all():
                         rgb[:] = shade_arrays(shader, data, self.view)
                     else:
@@ -732,7 +762,8 @@ def plan_shading(scene, depsgraph, objects, view, images, progress=None):
     if not meshes:
         raise SetupError("Leave Edit Mode to shade" if editing else
                          "No mesh objects to shade: select at least one mesh")
-    plan = ShadingPlan(quality, spec, shaders.environment(spec, images), view, st.tone_mapping, st.max_luminance)
+    plan = ShadingPlan(quality, spec, shaders.environment(spec, images), view, st.tone_mapping, st.max_luminance,
+                       st.target_error / 100.0, st.memory_budget)
     plan.notes = notes
     for obj in meshes:
         data = read_mesh(obj, depsgraph)
@@ -742,7 +773,8 @@ def plan_shading(scene, depsgraph, objects, view, images, progress=None):
             notes.append(f"'{obj.name}' has no vertices")
             continue
         plan.items.append((obj.name, data, slot_material_keys(obj)))
-    shaders.get(quality, progress)
+    if quality != AUTO:
+        shaders.get(quality, progress)
     return plan
 
 
@@ -751,6 +783,11 @@ def shade_objects(scene, depsgraph, objects, view, blend_data, progress=None):
     Returns (shaded names, notes)."""
     plan = plan_shading(scene, depsgraph, objects, view, blend_data.images, progress)
     plan.compute()
+    for (name, _key), choice in plan.auto_choices.items():
+        q = wenv.AUTO_LADDER[choice["level"]]
+        plan.notes.append(f"'{name}': Auto chose {q['global']}/{q['local']}/{q['normals']}, views {q['views']} "
+                          f"(predicted error {100 * choice['predicted_error']:.2g} %"
+                          + ("" if choice["met"] else f", above the {100 * choice['target_error']:.2g} % target") + ")")
     return plan.apply(blend_data.objects), plan.notes
 
 

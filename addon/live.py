@@ -96,7 +96,8 @@ class LiveSession:
         for obj in self.objects(scene):
             mats = tuple(core.material_key(s.material.wenv if s.material else None) for s in obj.material_slots)
             objs.append((obj.name, _matrix_tuple(obj.matrix_world), len(obj.data.vertices), mats))
-        return (view.signature, world, tuple(objs), st.quality, st.tone_mapping, st.max_luminance)
+        return (view.signature, world, tuple(objs), st.quality, st.tone_mapping, st.max_luminance, st.target_error,
+                st.memory_budget)
 
     @property
     def busy(self):

@@ -60,7 +60,13 @@ class WENV_SceneSettings(bpy.types.PropertyGroup):
     quality: EnumProperty(name="Quality", default="DEFAULT", items=[
         ("DRAFT", "Draft", "32x32 lighting map, 16x16 slices: fast to precompute"),
         ("DEFAULT", "Default", "64x64 lighting map, 32x32 slices"),
-        ("HIGH", "High", "128x128 lighting map, 64x64 slices: slow to precompute, much memory")])
+        ("HIGH", "High", "128x128 lighting map, 64x64 slices: slow to precompute, much memory"),
+        ("AUTO", "Auto", "The cheapest setting predicted to meet the target error for this World, material "
+                         "and mesh (no matrices to precompute)")])
+    target_error: FloatProperty(name="Target Error", default=1.0, min=0.1, max=50.0, subtype="PERCENTAGE",
+                                description="Relative RMSE against the brute-force reference that Auto aims for")
+    memory_budget: IntProperty(name="Memory Budget", default=1024, min=16, max=65536,
+                               description="Largest memory, in MB, Auto may give one material's shader")
     view_source: EnumProperty(name="View", default="VIEWPORT", items=[
         ("VIEWPORT", "Viewport", "The active 3D viewport's view (perspective or orthographic)"),
         ("CAMERA", "Camera", "The scene camera")])

@@ -34,6 +34,9 @@ class WENV_PT_shading(_SidebarPanel, bpy.types.Panel):
         st = context.scene.wenv
         col = _property_column(layout)
         col.prop(st, "quality")
+        if st.quality == "AUTO":
+            col.prop(st, "target_error")
+            col.prop(st, "memory_budget")
         col.prop(st, "view_source")
         col.prop(st, "tone_mapping")
         sub = col.column()

@@ -849,3 +849,31 @@ def test_viewport_looking_through_the_camera_uses_the_camera(scene):
     rv3d.view_perspective = "PERSP"
     assert shade_op(view="VIEWPORT") == {"FINISHED"}
     assert not np.allclose(attribute(obj)[1], through_viewport)
+
+
+def test_auto_quality_matches_core_and_builds_no_matrices(scene):
+    """Quality Auto: each material gets the shader wenv's auto picks for this World, material and
+    mesh; the colours equal the core's, no rotation matrices are built or cached, and the choice is
+    reported."""
+    env_world(scene, "sunset", rotation=0.4)
+    obj = add_monkey(subdivisions=1)
+    mat = set_material(obj, lobes=((0.3, 1.5, "BECKMANN"),))
+    scene.wenv.quality = "AUTO"
+    scene.wenv.target_error = 3.0
+    cache = os.environ["WENV_CACHE_DIR"]
+    before = set(os.listdir(cache))
+    core.shaders.clear()
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    assert set(os.listdir(cache)) == before
+    _, rgb = attribute(obj)
+    p, n = world_arrays(obj, corner=False)
+    env = wenv.load_environment(hdri_path("sunset"), rotation=0.4)
+    want = wenv.Shader(env, wenv_material(mat), quality="auto", target_error=0.03, normals=n)
+    assert want.stats["auto"]["met"] and want.stats["rotation_nnz"] == 0
+    eye = tuple(scene.camera.matrix_world.translation)
+    np.testing.assert_allclose(rgb, want.shade_mesh(p, n, eye), rtol=1e-4, atol=1e-5)
+    # a tighter target picks a finer setting
+    scene.wenv.target_error = 0.5
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    levels = sorted(c["level"] for c in [s.stats["auto"] for s in core.shaders._auto.values()])
+    assert levels[-1] > levels[0]
