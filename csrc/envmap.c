@@ -41,6 +41,8 @@ struct wenv_envmap {
     cube_face faces[6];  /* cube cross: +X, -X, +Y, -Y, +Z, -Z */
     float *pixels;       /* height x width x 3, row 0 the top */
     double *column_xy;   /* equirect: world (x, y) of each column's azimuth, rotation applied */
+    double *row_flux;    /* per row: sum of solid angle x channel mean over its pixels (no strength) */
+    float *row_peak;     /* per row: its brightest channel value (no strength) */
 };
 
 /* Face frames as documented in envmap.h (order +X, -X, +Y, -Y, +Z, -Z). */
@@ -119,6 +121,8 @@ static wenv_status check_shape(size_t height, size_t width, wenv_projection proj
 }
 
 /* Takes ownership of `rgb` (height x width x 3): validates it, clamps negatives, and wraps it. */
+static int row_stats(wenv_envmap *env);
+
 /* Takes ownership of rgb (height x width x 3).  `checked`: the pixels come from another environment,
  * already finite and non-negative. */
 static wenv_status envmap_adopt_checked(wenv_envmap **out, float *rgb, size_t height, size_t width,
@@ -178,6 +182,10 @@ static wenv_status envmap_adopt_checked(wenv_envmap **out, float *rgb, size_t he
         if (vertical)
             env->faces[1] = vertical_cross_minus_x;
     }
+    if (!checked && row_stats(env) < 0) {
+        wenv_envmap_free(env);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for an environment");
+    }
     *out = env;
     return WENV_OK;
 }
@@ -219,8 +227,21 @@ wenv_status wenv_envmap_with_transform(wenv_envmap **out, const wenv_envmap *env
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for a %zu x %zu environment", env->width,
                               env->height);
     memcpy(rgb, env->pixels, bytes);
-    return envmap_adopt_checked(out, rgb, env->height, env->width, env->projection, rotation, strength, "pixels", 1,
-                                err);
+    wenv_status st = envmap_adopt_checked(out, rgb, env->height, env->width, env->projection, rotation, strength,
+                                          "pixels", 1, err);
+    if (st)
+        return st;
+    /* the rows' statistics do not depend on rotation or strength */
+    (*out)->row_flux = malloc((env->height ? env->height : 1) * sizeof(double));
+    (*out)->row_peak = malloc((env->height ? env->height : 1) * sizeof(float));
+    if (!(*out)->row_flux || !(*out)->row_peak) {
+        wenv_envmap_free(*out);
+        *out = NULL;
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for an environment");
+    }
+    memcpy((*out)->row_flux, env->row_flux, env->height * sizeof(double));
+    memcpy((*out)->row_peak, env->row_peak, env->height * sizeof(float));
+    return WENV_OK;
 }
 
 void wenv_envmap_free(wenv_envmap *env)
@@ -228,6 +249,8 @@ void wenv_envmap_free(wenv_envmap *env)
     if (env) {
         free(env->pixels);
         free(env->column_xy);
+        free(env->row_flux);
+        free(env->row_peak);
         free(env);
     }
 }
@@ -503,73 +526,64 @@ static void keep_brightest(wenv_bright_pixel *top, size_t *n, size_t k, const we
     top[i] = *p;
 }
 
+/* Per-row flux and peak, once per image (they do not change with rotation or strength): the search
+ * for the brightest pixels at each lighting change then reads only rows that can hold one. */
+static int row_stats(wenv_envmap *env)
+{
+    size_t w = env->width, h = env->height;
+    env->row_flux = malloc((h ? h : 1) * sizeof(double));
+    env->row_peak = malloc((h ? h : 1) * sizeof(float));
+    if (!env->row_flux || !env->row_peak)
+        return -1;
+#pragma omp parallel for schedule(static)
+    for (size_t row = 0; row < h; row++) {
+        const float *p = pixel_at(env, row, 0);
+        double flux = 0.0, row_omega = env->projection == WENV_PROJ_EQUIRECT ? wenv_envmap_pixel_solid_angle(env, row, 0)
+                                                                               : -1.0;
+        float peak = 0.0f;
+        for (size_t col = 0; col < w; col++, p += 3) {
+            double omega = row_omega >= 0.0 ? row_omega : wenv_envmap_pixel_solid_angle(env, row, col);
+            if (!(omega > 0.0))
+                continue;
+            flux += omega * ((double)p[0] + p[1] + p[2]) / 3.0;
+            float big = p[0] > p[1] ? p[0] : p[1];
+            big = big > p[2] ? big : p[2];
+            peak = big > peak ? big : peak;
+        }
+        env->row_flux[row] = flux;
+        env->row_peak[row] = peak;
+    }
+    return 0;
+}
+
 size_t wenv_envmap_brightest(const wenv_envmap *env, size_t k, double relative, wenv_bright_pixel *out)
 {
     size_t w = env->width, h = env->height;
     if (!k || !w || !h)
         return 0;
-    int threads = omp_get_max_threads();
-    wenv_bright_pixel *top = malloc((size_t)threads * k * sizeof *top);
-    size_t *count = calloc((size_t)threads, sizeof *count);
-    double *flux = calloc((size_t)threads, sizeof *flux);
-    if (!top || !count || !flux) {
-        free(top);
-        free(count);
-        free(flux);
-        return 0;
-    }
-    /* each thread keeps its own k brightest and its share of the total flux, in locals: per-pixel
-     * writes to neighbouring slots of a shared array would bounce one cache line between cores */
-#pragma omp parallel num_threads(threads)
-    {
-        int t = omp_get_thread_num();
-        wenv_bright_pixel *mine = top + (size_t)t * k;
-        size_t kept = 0;
-        double my_flux = 0.0;
-        float floor_radiance = -1.0f; /* the k-th brightest so far, once k are kept */
-        float strength = (float)env->strength;
-#pragma omp for schedule(static)
-        for (size_t row = 0; row < h; row++) {
-            const float *p = pixel_at(env, row, 0);
-            if (env->projection == WENV_PROJ_EQUIRECT) {
-                /* equirect pixels of a row share their solid angle */
-                double row_sum = 0.0;
-                for (size_t col = 0; col < 3 * w; col++)
-                    row_sum += p[col];
-                my_flux += wenv_envmap_pixel_solid_angle(env, row, 0) * row_sum / 3.0;
-            }
-            for (size_t col = 0; col < w; col++, p += 3) {
-                if (env->projection != WENV_PROJ_EQUIRECT) {
-                    double omega = wenv_envmap_pixel_solid_angle(env, row, col);
-                    if (!(omega > 0.0))
-                        continue;
-                    my_flux += omega * ((double)p[0] + p[1] + p[2]) / 3.0;
-                }
-                /* comparisons, not fmax: that is a library call on x86-64, here once per pixel */
-                float big = p[0] > p[1] ? p[0] : p[1];
-                big = (big > p[2] ? big : p[2]) * strength;
-                if (big < floor_radiance)
-                    continue;
-                wenv_bright_pixel b = {.pixel = row * w + col, .radiance = big};
-                if (kept < k || brighter(&b, &mine[k - 1])) {
-                    keep_brightest(mine, &kept, k, &b);
-                    if (kept == k)
-                        floor_radiance = mine[k - 1].radiance;
-                }
-            }
-        }
-        count[t] = kept;
-        flux[t] = my_flux;
-    }
     double total = 0.0;
-    for (int t = 0; t < threads; t++)
-        total += flux[t];
+    for (size_t row = 0; row < h; row++)
+        total += env->row_flux[row];
     double threshold = relative * env->strength * total / (4.0 * PI);
     size_t n = 0;
-    for (int t = 0; t < threads; t++)
-        for (size_t i = 0; i < count[t]; i++)
-            if (top[(size_t)t * k + i].radiance > threshold)
-                keep_brightest(out, &n, k, &top[(size_t)t * k + i]);
+    float strength = (float)env->strength;
+    /* only rows whose peak passes the threshold can hold a light: a sun touches a handful */
+    for (size_t row = 0; row < h; row++) {
+        if (!((double)env->row_peak[row] * env->strength > threshold))
+            continue;
+        const float *p = pixel_at(env, row, 0);
+        for (size_t col = 0; col < w; col++, p += 3) {
+            float big = p[0] > p[1] ? p[0] : p[1];
+            big = (big > p[2] ? big : p[2]) * strength;
+            if (!((double)big > threshold) || (n == k && big < out[k - 1].radiance))
+                continue;
+            if (env->projection != WENV_PROJ_EQUIRECT && !(wenv_envmap_pixel_solid_angle(env, row, col) > 0.0))
+                continue;
+            wenv_bright_pixel b = {.pixel = row * w + col, .radiance = big};
+            if (n < k || brighter(&b, &out[k - 1]))
+                keep_brightest(out, &n, k, &b);
+        }
+    }
     /* direction and flux exactly as wenv_envmap_samples gives them, so that whoever takes these
      * pixels out of a sum of samples takes out precisely what was put in */
     float *dirs = n ? malloc(w * 7 * sizeof(float)) : NULL;
@@ -587,9 +601,6 @@ size_t wenv_envmap_brightest(const wenv_envmap *env, size_t k, double relative, 
     }
     free(dirs);
     free(cols);
-    free(top);
-    free(count);
-    free(flux);
     return n;
 }
 
