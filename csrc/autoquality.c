@@ -64,27 +64,26 @@ static wenv_status contrast(const wenv_envmap *env, double *out, double *lights_
     if (!bright)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory estimating the environment");
     size_t nb = wenv_envmap_brightest(env, k, LADDER[1].light_threshold, bright);
+    /* flux with strength applied throughout, as the lights' own fluxes are */
+    double total = wenv_envmap_flux(env), strength = wenv_envmap_strength(env);
+    if (!(total > 0.0)) { /* black (or zero strength): nothing is hard */
+        free(bright);
+        *out = *lights_share = 0.0;
+        return WENV_OK;
+    }
+    double cut = CONTRAST_FACTOR * total / (4.0 * M_PI) / strength;
     const float *px = wenv_envmap_pixels(env);
-    double total = 0.0, mean;
-    for (size_t row = 0; row < h; row++)
-        for (size_t col = 0; col < w; col++) {
-            const float *p = px + 3 * (row * w + col);
-            total += wenv_envmap_pixel_solid_angle(env, row, col) * ((double)p[0] + p[1] + p[2]) / 3.0;
-        }
-    mean = total / (4.0 * M_PI);
     double bright_flux = 0.0;
     for (size_t row = 0; row < h; row++)
         for (size_t col = 0; col < w; col++) {
             const float *p = px + 3 * (row * w + col);
-            if (fmax(p[0], fmax(p[1], p[2])) > CONTRAST_FACTOR * mean)
+            if (p[0] > cut || p[1] > cut || p[2] > cut)
                 bright_flux += wenv_envmap_pixel_solid_angle(env, row, col) * ((double)p[0] + p[1] + p[2]) / 3.0;
         }
-    double light_flux = 0.0;
-    for (size_t i = 0; i < nb; i++) { /* the lights are shaded exactly */
-        size_t row = bright[i].pixel / w, col = bright[i].pixel % w;
-        const float *p = px + 3 * bright[i].pixel;
-        light_flux += wenv_envmap_pixel_solid_angle(env, row, col) * ((double)p[0] + p[1] + p[2]) / 3.0;
-    }
+    bright_flux *= strength;
+    double light_flux = 0.0; /* the lights are shaded exactly */
+    for (size_t i = 0; i < nb; i++)
+        light_flux += ((double)bright[i].flux[0] + bright[i].flux[1] + bright[i].flux[2]) / 3.0;
     free(bright);
     *out = total > 0.0 ? fmin(1.0, fmax(0.0, (bright_flux - light_flux) / total)) : 0.0;
     *lights_share = total > 0.0 ? fmin(1.0, fmax(0.0, light_flux / total)) : 0.0;

@@ -556,15 +556,20 @@ static int row_stats(wenv_envmap *env)
     return 0;
 }
 
+double wenv_envmap_flux(const wenv_envmap *env)
+{
+    double total = 0.0;
+    for (size_t row = 0; row < env->height; row++)
+        total += env->row_flux[row];
+    return total * env->strength;
+}
+
 size_t wenv_envmap_brightest(const wenv_envmap *env, size_t k, double relative, wenv_bright_pixel *out)
 {
     size_t w = env->width, h = env->height;
     if (!k || !w || !h)
         return 0;
-    double total = 0.0;
-    for (size_t row = 0; row < h; row++)
-        total += env->row_flux[row];
-    double threshold = relative * env->strength * total / (4.0 * PI);
+    double threshold = relative * wenv_envmap_flux(env) / (4.0 * PI);
     size_t n = 0;
     float strength = (float)env->strength;
     /* only rows whose peak passes the threshold can hold a light: a sun touches a handful */

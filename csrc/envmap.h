@@ -108,6 +108,10 @@ typedef struct {
  * nothing is taken out, which is always a valid answer). */
 size_t wenv_envmap_brightest(const wenv_envmap *env, size_t k, double relative, wenv_bright_pixel *out);
 
+/* Total flux: the sum over pixels of solid angle x radiance (channels averaged, strength applied);
+ * kept per row with the image, so this costs one pass over the rows. */
+double wenv_envmap_flux(const wenv_envmap *env);
+
 /* Exact solid angle of pixel (row, col) (0 outside the domain). */
 double wenv_envmap_pixel_solid_angle(const wenv_envmap *env, size_t row, size_t col);
 

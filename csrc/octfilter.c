@@ -84,9 +84,13 @@ wenv_status wenv_oct_from_envmap(const wenv_envmap *env, size_t side, float *tex
 #pragma omp parallel num_threads(threads) reduction(| : failed)
     {
         double *mine = acc + (size_t)omp_get_thread_num() * nt * 4;
-        float *dirs = malloc(w * 7 * sizeof(float)), *flux = dirs + 3 * w, *omega = dirs + 6 * w;
+        float *dirs = malloc(w * 7 * sizeof(float)), *flux = NULL, *omega = NULL;
         uint32_t *cols = malloc(w * sizeof(uint32_t));
         failed = !dirs || !cols;
+        if (dirs) {
+            flux = dirs + 3 * w;
+            omega = dirs + 6 * w;
+        }
 #pragma omp for schedule(static)
         for (size_t row = 0; row < h; row++) {
             if (!dirs || !cols)

@@ -704,6 +704,7 @@ typedef struct {
     uint32_t pair[16];
     float pair_w[16];
     float n[3], v[3]; /* unit vertex normal and view, for the direct lights */
+    float cos_v;      /* n . v, > 0 */
 } vertex_taps;
 
 /* Returns 0 when the view is below the surface (the vertex is black). */
@@ -721,6 +722,7 @@ static int compute_taps(const wenv_shader *sh, const float *nrm, const float *vi
         return 0;
     memcpy(tp->n, n, sizeof n);
     memcpy(tp->v, v, sizeof v);
+    tp->cos_v = nv;
     float r[3] = {2.0f * nv * n[0] - v[0], 2.0f * nv * n[1] - v[1], 2.0f * nv * n[2] - v[2]};
     /* octahedral encoding of the normal */
     float ou, ov;
@@ -788,10 +790,10 @@ static inline float max_f(float a, float b) { return a > b ? a : b; }
  * few dot products; one inside is evaluated exactly in float (wenv_material_specular_cos_f), with
  * the view's own terms computed once per vertex. */
 #define MAX_DIRECT_LOBES 16
-static void shade_direct(const wenv_shader *sh, const float n[3], const float v[3], float e[3], float s[3])
+static void shade_direct(const wenv_shader *sh, const float n[3], const float v[3], float co, float e[3],
+                         float s[3])
 {
     const wenv_material *mat = sh->mat;
-    float co = n[0] * v[0] + n[1] * v[1] + n[2] * v[2];
     /* any frame with +Z the normal will do: the lobes are isotropic */
     float so = sqrtf(max_f(0.0f, 1.0f - co * co)), wo[3] = {so, 0.0f, co};
     float k_o[MAX_DIRECT_LOBES];
@@ -841,7 +843,7 @@ static void shade_vertex(const wenv_shader *sh, const vertex_taps *tp, float *o)
 {
     float e[3] = {0, 0, 0}, m[3] = {0, 0, 0}, s[3] = {0, 0, 0};
     if (sh->direct_count)
-        shade_direct(sh, tp->n, tp->v, e, s);
+        shade_direct(sh, tp->n, tp->v, tp->cos_v, e, s);
     for (int k = 0; k < 4; k++) {
         const float *ir = sh->irradiance + 3 * (size_t)tp->sample[k];
         e[0] += tp->sample_w[k] * ir[0];
@@ -863,7 +865,7 @@ static void shade_vertex(const wenv_shader *sh, const vertex_taps *tp, float *o)
          * texels; wavelet truncation and interpolation can ring past either, most at narrow
          * lobes near grazing, where they overshot the brightest pixel several-fold. */
         float a[3];
-        albedo_at(sh->albedo, tp->n[0] * tp->v[0] + tp->n[1] * tp->v[1] + tp->n[2] * tp->v[2], a);
+        albedo_at(sh->albedo, tp->cos_v, a);
         for (int c = 0; c < 3; c++) {
             float mc = m[c] < 0.0f ? 0.0f : (m[c] > sh->radiance_max[c] ? sh->radiance_max[c] : m[c]);
             s[c] += a[c] * mc;
