@@ -6,6 +6,7 @@
 #include <string.h>
 
 #include "maps.h"
+#include "sh.h"
 
 
 /* global, local, normals, views, coefficients, light_coefficients (0: all, slicing keeps every
@@ -111,6 +112,12 @@ static double level_error(size_t level, const wenv_material *mat)
     return exp((1.0 - t) * log(e[i]) + t * log(e[i + 1]));
 }
 
+/* Memory of method "sh" for a material without lobes: lighting coefficients and the irradiance table. */
+static size_t sh_bytes(size_t order)
+{
+    return wenv_sh_count(order) * 3 * sizeof(double) + 128 * 128 * 3 * sizeof(float);
+}
+
 /* Normal samples of an n_side grid that the normals' bilinear taps reach ((size_t)-1 without
  * normals or memory to count them). */
 static size_t used_normal_samples(size_t n_side, const float *normals, size_t n)
@@ -140,12 +147,82 @@ static size_t used_normal_samples(size_t n_side, const float *normals, size_t n)
     return used;
 }
 
+const size_t WENV_AUTO_SH_ORDERS[WENV_AUTO_SH_ORDER_COUNT] = {2, 4, 6, 8, 10, 12, 14, 16};
+
+/* Band of the spectrum estimate; beyond it the power A_l^2 P_l is taken to fall as l^-4, as a lone
+ * sun's does (A_l^2 ~ l^-5, P_l ~ 2l + 1), which bounds every non-negative lighting. */
+#define SH_ESTIMATE_ORDER 20
+/* Measured errors on the bundled HDRIs (examples/auto_quality.py) are 0.75 - 0.95 times the
+ * estimate down to 0.3 %; below, a floor of a few 0.01 % (the irradiance table, the reference's own
+ * pixel sums) shows. */
+#define SH_ERROR_MARGIN 1.0
+#define SH_ERROR_FLOOR 5e-4
+
+static int sh_band_power(const wenv_envmap *env, const double albedo[3], double *power)
+{
+    size_t count = wenv_sh_count(SH_ESTIMATE_ORDER);
+    double *c = malloc(count * 3 * sizeof(double));
+    if (!c)
+        return -1;
+    wenv_error err = {0};
+    /* a coarse projection: the estimate needs each band's power, not its coefficients exactly */
+    if (wenv_sh_project_envmap_blocks(env, SH_ESTIMATE_ORDER, wenv_sh_projection_block(env, SH_ESTIMATE_ORDER / 2),
+                                      c, NULL, &err)) {
+        free(c);
+        return -1;
+    }
+    for (size_t l = 0; l <= SH_ESTIMATE_ORDER; l++) {
+        double a = wenv_sh_lambert_factor(l), p = 0.0;
+        for (size_t i = l * l; i < (l + 1) * (l + 1); i++)
+            for (int ch = 0; ch < 3; ch++)
+                p += albedo[ch] * albedo[ch] * c[3 * i + ch] * c[3 * i + ch];
+        power[l] = a * a * p;
+    }
+    free(c);
+    return 0;
+}
+
+static double sh_error_from_power(const double *power, size_t order)
+{
+    double total = 0.0, tail = 2.9 * power[SH_ESTIMATE_ORDER]; /* sum over even l > 20 of (20 / l)^4 */
+    for (size_t l = 0; l <= SH_ESTIMATE_ORDER; l++) {
+        total += power[l];
+        if (l > order)
+            tail += power[l];
+    }
+    total += 2.9 * power[SH_ESTIMATE_ORDER];
+    return total > 0.0 ? SH_ERROR_MARGIN * sqrt(tail / total) + SH_ERROR_FLOOR : 0.0;
+}
+
+double wenv_auto_sh_error(const wenv_envmap *env, const double albedo[3], size_t order)
+{
+    double power[SH_ESTIMATE_ORDER + 1];
+    if (order < 1 || order > SH_ESTIMATE_ORDER || sh_band_power(env, albedo, power) < 0)
+        return -1.0;
+    return sh_error_from_power(power, order);
+}
+
 wenv_status wenv_auto_choose(const wenv_envmap *env, const wenv_material *mat, double target, size_t memory_budget,
                              const float *normals, size_t n, wenv_auto_choice *out, wenv_error *err)
 {
     memset(out, 0, sizeof *out);
     if (!(target > 0.0 && target <= 1.0))
         return wenv_error_set(err, WENV_ERR_VALUE, "target_error must be in (0, 1], got %g", target);
+    if (!mat->n_lobes) {
+        double power[SH_ESTIMATE_ORDER + 1];
+        if (sh_band_power(env, mat->diffuse, power) < 0)
+            return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory estimating the environment");
+        for (size_t i = 0; i < WENV_AUTO_SH_ORDER_COUNT; i++) {
+            double e = sh_error_from_power(power, WENV_AUTO_SH_ORDERS[i]);
+            if (e <= target && sh_bytes(WENV_AUTO_SH_ORDERS[i]) <= memory_budget) {
+                out->sh_order = WENV_AUTO_SH_ORDERS[i];
+                out->predicted_error = e;
+                out->met = 1;
+                out->level_bytes = sh_bytes(out->sh_order);
+                return WENV_OK;
+            }
+        }
+    }
     size_t used[WENV_AUTO_LEVELS];
     for (size_t i = 0; i < WENV_AUTO_LEVELS; i++)
         used[i] = used_normal_samples(LADDER[i].normal_n, normals, n);

@@ -14,9 +14,17 @@
  *     mean radiance that are not lights), which a wavelet map of a few degrees per texel resolves
  *     worst, scale the prediction.
  *
- * The chosen method is always "slicing": at equal resolutions it shades a view exactly as fast as
- * "rotation" (both read the same table), it has no matrices to build or hold, and it makes lighting
- * slices only for the normal samples the mesh's vertices fall near. */
+ * For glossy materials the chosen method is "slicing": at equal resolutions it shades a view
+ * exactly as fast as "rotation" (both read the same table), it has no matrices to build or hold,
+ * and it makes lighting slices only for the normal samples the mesh's vertices fall near.
+ *
+ * A material without lobes reflects the irradiance alone, which spherical harmonics of order L
+ * give with an error known in advance: over normals uniform on the sphere, the relative RMSE is
+ * sqrt(sum_{l > L} A_l^2 P_l / sum_l A_l^2 P_l), with A_l Lambert's clamped-cosine factors and P_l
+ * the lighting's power in band l (Parseval).  One coarse projection of the lighting to band 20
+ * gives every P_l; auto takes the lowest order in WENV_AUTO_SH_ORDERS meeting the target (method
+ * "sh", whose lobe-less path reads a tabulated irradiance), and the slicing ladder only when even
+ * the highest order cannot. */
 #ifndef WENV_AUTOQUALITY_H
 #define WENV_AUTOQUALITY_H
 
@@ -36,8 +44,17 @@ const wenv_quality *wenv_auto_level(size_t i);
  * `used_normals` normal samples, or for all of them when used_normals is (size_t)-1), in bytes. */
 size_t wenv_auto_level_bytes(size_t i, size_t used_normals);
 
+/* SH orders auto may choose for a material without lobes (odd bands above 1 carry no irradiance). */
+#define WENV_AUTO_SH_ORDER_COUNT 8
+extern const size_t WENV_AUTO_SH_ORDERS[WENV_AUTO_SH_ORDER_COUNT];
+
+/* Predicted relative RMSE of SH irradiance at `order` (0 < order <= 20) for a white Lambertian
+ * under env, per albedo channel weights (see above); -1 on running out of memory. */
+double wenv_auto_sh_error(const wenv_envmap *env, const double albedo[3], size_t order);
+
 typedef struct {
-    size_t level;           /* chosen ladder level */
+    size_t sh_order;        /* > 0: method "sh" at this order (a material without lobes) */
+    size_t level;           /* else the chosen ladder level (method "slicing") */
     wenv_quality quality;
     double predicted_error; /* relative RMSE predicted at that level */
     double contrast;        /* flux share of bright extended features (autoquality.c) */

@@ -289,9 +289,20 @@ static int Shader_init(ShaderObject *self, PyObject *args, PyObject *kwargs)
         PyErr_Format(PyExc_ValueError, "method must be 'rotation', 'slicing', 'split_sum' or 'sh', got '%s'", method);
         return -1;
     }
+    PyObject *auto_sh_quality = NULL; /* quality="auto" chose method "sh" (a material without lobes) */
     if (is_auto) {
         if (choose_auto(self, env_obj, mat_obj, normals_obj) < 0)
             return -1;
+        if (self->auto_choice.sh_order) {
+            /* views: the lobe-less path has no BRDF slices to sample */
+            auto_sh_quality = Py_BuildValue("{s:n,s:n}", "order", (Py_ssize_t)self->auto_choice.sh_order, "views",
+                                            (Py_ssize_t)2);
+            if (!auto_sh_quality)
+                return -1;
+            quality_obj = auto_sh_quality;
+            method = "sh";
+            peer = 1;
+        }
     } else if (!peer) {
         PyObject *q = quality_obj ? Py_NewRef(quality_obj) : PyUnicode_FromString("default");
         int r = q ? parse_quality(q, &self->quality) : -1;
@@ -301,11 +312,14 @@ static int Shader_init(ShaderObject *self, PyObject *args, PyObject *kwargs)
     }
     if (progress_obj != Py_None && !PyCallable_Check(progress_obj)) {
         PyErr_SetString(PyExc_TypeError, "progress must be callable or None");
+        Py_XDECREF(auto_sh_quality);
         return -1;
     }
     if (peer) {
         /* no matrices, so no cache: the precomputation is the lighting's and the material's */
-        if (!(self->peer = wenv_py_peer_create(method, quality_obj, progress_obj)))
+        self->peer = wenv_py_peer_create(method, quality_obj, progress_obj);
+        Py_XDECREF(auto_sh_quality);
+        if (!self->peer)
             return -1;
         return do_set_environment(self, env_obj) < 0 || do_set_material(self, mat_obj) < 0 ? -1 : 0;
     }
@@ -541,30 +555,37 @@ static PyObject *Shader_get_material(ShaderObject *self, void *closure)
 static PyObject *Shader_get_stats(ShaderObject *self, void *closure)
 {
     (void)closure;
-    if (self->peer)
-        return wenv_py_peer_stats(self->peer);
-    if (!self->shader)
-        Py_RETURN_NONE;
-    wenv_shader_stats s;
-    wenv_shader_get_stats(self->shader, &s);
-    static const char *cache_names[] = {"none", "loaded", "built", "built (save failed)"};
-    PyObject *d = Py_BuildValue("{s:n,s:n,s:s,s:d,s:n,s:n,s:n,s:n,s:n,s:n,s:n,s:n}", "rotation_nnz", (Py_ssize_t)s.rotation_nnz,
+    PyObject *d;
+    if (self->peer) {
+        d = wenv_py_peer_stats(self->peer);
+    } else {
+        if (!self->shader)
+            Py_RETURN_NONE;
+        wenv_shader_stats s;
+        wenv_shader_get_stats(self->shader, &s);
+        static const char *cache_names[] = {"none", "loaded", "built", "built (save failed)"};
+        d = Py_BuildValue("{s:n,s:n,s:s,s:d,s:n,s:n,s:n,s:n,s:n,s:n,s:n,s:n}", "rotation_nnz", (Py_ssize_t)s.rotation_nnz,
                          "rotation_bytes", (Py_ssize_t)s.rotation_bytes, "cache", cache_names[s.cache],
                          "rotation_seconds", s.rotation_seconds, "slices_ready", (Py_ssize_t)s.slices_ready,
                          "pairs_ready", (Py_ssize_t)s.pairs_ready, "light_terms", (Py_ssize_t)s.light_terms,
                          "brdf_terms", (Py_ssize_t)s.brdf_terms_total, "slice_bytes", (Py_ssize_t)s.slice_bytes,
                          "table_bytes", (Py_ssize_t)s.table_bytes, "brdf_bytes", (Py_ssize_t)s.brdf_bytes,
                          "direct_lights", (Py_ssize_t)s.direct_lights);
+    }
     if (d && self->is_auto) {
         const wenv_auto_choice *a = &self->auto_choice;
-        PyObject *used = a->used_normals == (size_t)-1 ? Py_NewRef(Py_None) : PyLong_FromSize_t(a->used_normals);
-        PyObject *info = !used ? NULL : Py_BuildValue("{s:n,s:s,s:d,s:d,s:d,s:d,s:d,s:O,s:d,s:d,s:O}", "level", (Py_ssize_t)a->level,
-                                       "method", "slicing", "predicted_error", a->predicted_error, "target_error",
+        PyObject *used = a->used_normals == (size_t)-1 || a->sh_order ? Py_NewRef(Py_None) : PyLong_FromSize_t(a->used_normals);
+        PyObject *level = a->sh_order ? Py_NewRef(Py_None) : PyLong_FromSize_t(a->level);
+        PyObject *order = a->sh_order ? PyLong_FromSize_t(a->sh_order) : Py_NewRef(Py_None);
+        PyObject *info = !used || !level || !order ? NULL : Py_BuildValue("{s:O,s:O,s:s,s:d,s:d,s:d,s:d,s:d,s:O,s:d,s:d,s:O}", "level", level, "sh_order", order,
+                                       "method", a->sh_order ? "sh" : "slicing", "predicted_error", a->predicted_error, "target_error",
                                        self->target_error, "contrast", a->contrast, "lights_share", a->lights_share,
                                        "env_factor", a->env_factor,
                                        "met", a->met ? Py_True : Py_False, "memory_budget_mb", self->memory_budget_mb,
                                        "level_mb", (double)a->level_bytes / 1048576.0, "used_normal_samples", used);
         Py_XDECREF(used);
+        Py_XDECREF(level);
+        Py_XDECREF(order);
         if (!info || PyDict_SetItemString(d, "auto", info) < 0)
             Py_CLEAR(d);
         Py_XDECREF(info);
@@ -612,8 +633,10 @@ static PyTypeObject ShaderType = {
               "quality='auto' picks the cheapest setting of wenv.AUTO_LADDER (method 'slicing') whose error is "
               "predicted, from the narrowest lobe's roughness and the environment's wavelet compaction, to be at "
               "most target_error (relative RMSE) within memory_budget_mb, counting lighting slices only for the "
-              "normal samples the mesh's normals (if given) fall near; stats['auto'] tells what it chose and "
-              "why.  The choice is made once, for the environment and material given here.",
+              "normal samples the mesh's normals (if given) fall near.  A material without lobes gets method "
+              "'sh' at the lowest order of wenv.AUTO_SH_ORDERS whose irradiance error, known from the lighting's "
+              "SH power spectrum, meets the target.  stats['auto'] tells what it chose and why.  The choice is "
+              "made once, for the environment and material given here: make a new Shader to choose again.",
     .tp_new = PyType_GenericNew,
     .tp_init = (initproc)Shader_init,
     .tp_dealloc = (destructor)Shader_dealloc,
@@ -826,5 +849,24 @@ int wenv_register_shade(PyObject *module)
         }
         PyList_SET_ITEM(ladder, (Py_ssize_t)i, d);
     }
-    return PyModule_AddObject(module, "AUTO_LADDER", ladder);
+    if (PyModule_AddObject(module, "AUTO_LADDER", ladder) < 0) {
+        Py_DECREF(ladder);
+        return -1;
+    }
+    PyObject *orders = PyTuple_New(WENV_AUTO_SH_ORDER_COUNT);
+    if (!orders)
+        return -1;
+    for (size_t i = 0; i < WENV_AUTO_SH_ORDER_COUNT; i++) {
+        PyObject *o = PyLong_FromSize_t(WENV_AUTO_SH_ORDERS[i]);
+        if (!o) {
+            Py_DECREF(orders);
+            return -1;
+        }
+        PyTuple_SET_ITEM(orders, (Py_ssize_t)i, o);
+    }
+    if (PyModule_AddObject(module, "AUTO_SH_ORDERS", orders) < 0) {
+        Py_DECREF(orders);
+        return -1;
+    }
+    return 0;
 }

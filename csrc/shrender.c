@@ -7,6 +7,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "maps.h"
 #include "sh.h"
 
 /* cos(89.9 deg): the lowest view a BRDF slice is made for, as in the wavelet method */
@@ -22,7 +23,17 @@ struct wenv_shrender {
     double *slices;  /* views x count x 3, local frame, view in the xz plane */
     double diffuse_over_pi[3];
     size_t n_lobes;
+    /* Without lobes the radiance depends on the normal alone and needs no rotation: bands 0 - 2 of
+     * the irradiance (nearly all of it) are evaluated per vertex in closed form, bands 3 - order,
+     * small and smooth, read bilinearly from an octahedral grid of IRR_SIDE^2 normals. */
+    int lambert;          /* a lighting and a lobe-less material are set */
+    float low[9 * 3];     /* A_l L_lm for l <= 2, RGB */
+    float *irr_map;       /* IRR_SIDE^2 x 3 (bands 3 - order), NULL at order 2 */
 };
+
+/* 128^2 texels are 1.6 degrees or less apart: bilinear reads err by under 0.3 % of band 4's share,
+ * itself under a sixth of band 2's (A_4 / A_2 = 1 / 6). */
+#define IRR_SIDE 128
 
 static double now_seconds(void)
 {
@@ -50,6 +61,7 @@ void wenv_shrender_free(wenv_shrender *sr)
     wenv_sh_rotation_free(sr->rot);
     free(sr->light);
     free(sr->slices);
+    free(sr->irr_map);
     free(sr);
 }
 
@@ -64,11 +76,43 @@ wenv_status wenv_shrender_create(wenv_shrender **out, const wenv_shrender_qualit
     sr->q = *q;
     sr->count = wenv_sh_count(q->order);
     sr->stats.coefficients = sr->count;
-    if (wenv_sh_rotation_create(&sr->rot, q->order, err)) {
-        wenv_shrender_free(sr);
-        return err->status;
-    }
     *out = sr;
+    return WENV_OK;
+}
+
+/* Makes (or drops) the lobe-less path's irradiance: when the lighting is set and the material has no
+ * lobes. */
+static wenv_status update_irradiance_map(wenv_shrender *sr, wenv_error *err)
+{
+    sr->lambert = sr->have_env && sr->have_mat && !sr->n_lobes;
+    if (!sr->lambert || sr->q.order <= 2) {
+        free(sr->irr_map);
+        sr->irr_map = NULL;
+    }
+    if (!sr->lambert)
+        return WENV_OK;
+    for (size_t l = 0; l <= 2; l++)
+        for (size_t i = l * l; i < (l + 1) * (l + 1); i++)
+            for (int c = 0; c < 3; c++)
+                sr->low[3 * i + c] = (float)(wenv_sh_lambert_factor(l) * sr->light[3 * i + c]);
+    if (sr->q.order <= 2)
+        return WENV_OK;
+    size_t n = IRR_SIDE;
+    if (!sr->irr_map && !(sr->irr_map = malloc(n * n * 3 * sizeof(float))))
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the irradiance map");
+    float *map = sr->irr_map;
+    const double *light = sr->light;
+    size_t order = sr->q.order;
+    long long total = (long long)(n * n);
+#pragma omp parallel for schedule(static)
+    for (long long t = 0; t < total; t++) {
+        double d[3], all[3], low[3];
+        wenv_oct_decode(wenv_map_texel_center(n, (size_t)t % n), wenv_map_texel_center(n, (size_t)t / n), d);
+        wenv_sh_irradiance(order, light, d, all);
+        wenv_sh_irradiance(2, light, d, low);
+        for (int c = 0; c < 3; c++)
+            map[3 * t + c] = (float)(all[c] - low[c]);
+    }
     return WENV_OK;
 }
 
@@ -87,7 +131,7 @@ wenv_status wenv_shrender_set_environment(wenv_shrender *sr, const wenv_envmap *
     sr->light = light;
     sr->have_env = 1;
     sr->stats.projection_seconds = now_seconds() - t0;
-    return WENV_OK;
+    return update_irradiance_map(sr, err);
 }
 
 /* Nodes per dimension of each lobe's rule: enough for the lobe (the rule follows it) and for the
@@ -109,6 +153,10 @@ wenv_status wenv_shrender_set_material(wenv_shrender *sr, const wenv_material *m
     atomic_int failed = 0, cancelled = 0;
     atomic_size_t done = 0;
     size_t nodes_total = 0;
+    if (mat->n_lobes && !sr->rot && wenv_sh_rotation_create(&sr->rot, sr->q.order, err)) {
+        free(slices);
+        return err->status;
+    }
     if (mat->n_lobes) {
 #pragma omp parallel reduction(+ : nodes_total)
         {
@@ -169,6 +217,47 @@ wenv_status wenv_shrender_set_material(wenv_shrender *sr, const wenv_material *m
     sr->stats.slice_seconds = now_seconds() - t0;
     sr->stats.slice_bytes = V * count * 3 * sizeof(double);
     sr->stats.quadrature_nodes = nodes_total;
+    return update_irradiance_map(sr, err);
+}
+
+/* A material without lobes: irradiance times albedo / pi. */
+static wenv_status shade_lambert(const wenv_shrender *sr, const float *normals, const float *views, size_t n,
+                                 float *out)
+{
+    float k[3] = {(float)sr->diffuse_over_pi[0], (float)sr->diffuse_over_pi[1], (float)sr->diffuse_over_pi[2]};
+    const float *low = sr->low, *map = sr->irr_map;
+    long long nn = (long long)n;
+#pragma omp parallel for schedule(static)
+    for (long long i = 0; i < nn; i++) {
+        const float *nr = normals + 3 * i, *v = views + 3 * i;
+        float *o = out + 3 * i;
+        float len = sqrtf(nr[0] * nr[0] + nr[1] * nr[1] + nr[2] * nr[2]);
+        float d[3] = {nr[0] / len, nr[1] / len, nr[2] / len};
+        if (!(d[0] * v[0] + d[1] * v[1] + d[2] * v[2] > 0.0f)) {
+            o[0] = o[1] = o[2] = 0.0f;
+            continue;
+        }
+        float x = d[0], y = d[1], z = d[2];
+        /* the real SH of bands 0 - 2 as wenv_sh_eval makes them (Condon-Shortley phase) */
+        const float yb[9] = {0.28209479f, -0.48860251f * y, 0.48860251f * z, -0.48860251f * x, 1.09254843f * x * y,
+                             -1.09254843f * y * z, 0.31539157f * (3.0f * z * z - 1.0f), -1.09254843f * x * z,
+                             0.54627422f * (x * x - y * y)};
+        float e[3] = {0.0f, 0.0f, 0.0f};
+        for (int b = 0; b < 9; b++)
+            for (int c = 0; c < 3; c++)
+                e[c] += low[3 * b + c] * yb[b];
+        if (map) {
+            uint32_t idx[4];
+            float u, w, wt[4];
+            wenv_oct_encode_f(d, &u, &w);
+            wenv_oct_bilinear_f(IRR_SIDE, u, w, idx, wt);
+            for (int c = 0; c < 3; c++)
+                e[c] += wt[0] * map[3 * idx[0] + c] + wt[1] * map[3 * idx[1] + c] + wt[2] * map[3 * idx[2] + c] +
+                        wt[3] * map[3 * idx[3] + c];
+        }
+        for (int c = 0; c < 3; c++)
+            o[c] = e[c] > 0.0f ? k[c] * e[c] : 0.0f;
+    }
     return WENV_OK;
 }
 
@@ -177,6 +266,8 @@ wenv_status wenv_shrender_shade(const wenv_shrender *sr, const float *normals, c
 {
     if (!sr->have_env || !sr->have_mat)
         return wenv_error_set(err, WENV_ERR_VALUE, "the shader needs an environment and a material");
+    if (sr->lambert)
+        return shade_lambert(sr, normals, views, n, out);
     size_t L = sr->q.order, count = sr->count, V = sr->q.views;
     double view_scale = (double)(V - 1) / max_view_theta();
     atomic_int failed = 0;

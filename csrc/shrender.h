@@ -2,8 +2,8 @@
  * shading for low-frequency lighting using spherical harmonics"), a peer of the wavelet method for
  * comparison.
  *
- * Lighting: the environment projected onto real SH up to band `order` (sh.h), every pixel a point of
- * its exact solid angle.  Material: the specular lobes' f(w, v) cos(w), projected onto SH in the
+ * Lighting: the environment projected onto real SH up to band `order` (sh.h, in pixel blocks as coarse
+ * as the order allows).  Material: the specular lobes' f(w, v) cos(w), projected onto SH in the
  * surface's local frame for `views` view elevations theta_v from 0 to 89.9 degrees with the view
  * in the local xz plane (isotropic BRDFs need no view azimuth: it is absorbed by the frame), each by
  * the lobe's own quadrature (wenv_lobe_nodes), so narrow lobes are projected without aliasing.
@@ -11,7 +11,9 @@
  * the lighting rotated into it exactly (zyz Euler angles, sh.h); the radiance is the dot product with
  * the slice interpolated linearly in theta_v.  Diffuse: irradiance sum_l A_l L_l0 sqrt((2l+1)/4pi)
  * from the same rotated lighting, bands 0..order (at order 2, Ramamoorthi and Hanrahan's 9
- * coefficients).  Cost per vertex: O(order^3) for the rotation. */
+ * coefficients).  Cost per vertex: O(order^3) for the rotation.  A material without lobes needs no
+ * rotation: bands 0 - 2 of its irradiance are evaluated per vertex in closed form and bands 3 - order
+ * read from a table over an octahedral grid of normals (a few ns per vertex at any order). */
 #ifndef WENV_SHRENDER_H
 #define WENV_SHRENDER_H
 

@@ -1,5 +1,5 @@
-"""quality="auto": picks the cheapest ladder level predicted to meet target_error, never builds
-rotation matrices, keeps within its memory budget, and meets its target (examples/auto_quality.py
+"""quality="auto": picks the cheapest ladder level (or, without lobes, SH order) predicted to meet
+target_error, never builds rotation matrices, keeps within its memory budget, and meets its target (examples/auto_quality.py
 shows it on every bundled HDRI; here on a reduced one)."""
 import numpy as np
 import pytest
@@ -25,21 +25,49 @@ def glossy(m):
 
 
 def test_lambert_builds_no_matrices(sunset):
+    """Without lobes auto takes spherical harmonics (no matrices, no slices); a target beyond the
+    highest SH order falls back to the slicing ladder, which builds none either."""
     sh = wenv.Shader(sunset, wenv.Lambert(0.7), quality="auto")
-    assert sh.method == "slicing" and sh.stats["rotation_nnz"] == 0
     info = sh.stats["auto"]
+    assert sh.method == "sh" and info["method"] == "sh" and info["level"] is None
+    assert info["sh_order"] in wenv.AUTO_SH_ORDERS and sh.quality["order"] == info["sh_order"]
     assert info["met"] and info["predicted_error"] <= 0.01
-    assert sh.quality == wenv.AUTO_LADDER[info["level"]]
+    fine = wenv.Shader(sunset, wenv.Lambert(0.7), quality="auto", target_error=1e-4)
+    assert fine.method == "slicing" and fine.stats["rotation_nnz"] == 0
+    assert fine.quality == wenv.AUTO_LADDER[fine.stats["auto"]["level"]]
+
+
+def cost_rank(info):
+    """SH orders are cheaper than every ladder level."""
+    return (0, info["sh_order"]) if info["method"] == "sh" else (1, info["level"])
 
 
 def test_tighter_targets_never_pick_cheaper_levels(sunset):
     for mat in (wenv.Lambert(0.7), glossy(0.05), glossy(0.2), glossy(0.5)):
-        levels = [wenv.Shader(sunset, mat, quality="auto", target_error=t).stats["auto"]["level"]
-                  for t in (0.3, 0.1, 0.03, 0.01)]
-        assert levels == sorted(levels), levels
+        ranks = [cost_rank(wenv.Shader(sunset, mat, quality="auto", target_error=t).stats["auto"])
+                 for t in (0.3, 0.1, 0.03, 0.01, 0.003, 1e-4)]
+        assert ranks == sorted(ranks), ranks
     # narrower lobes need more at the same target
     assert (wenv.Shader(sunset, glossy(0.1), quality="auto", target_error=0.05).stats["auto"]["level"]
             > wenv.Shader(sunset, glossy(0.5), quality="auto", target_error=0.05).stats["auto"]["level"])
+
+
+def test_lambert_error_is_predicted_from_the_lighting_spectrum(sunset):
+    """The SH irradiance error auto predicts is the measured one, not just a bound: within 0.6 - 1.05
+    times it at every order (uniform normals, as the prediction assumes)."""
+    nrm = unit(np.random.default_rng(3).normal(size=(3000, 3)))
+    mat = wenv.Lambert((0.8, 0.6, 0.3))
+    ref = wenv.reference(sunset, mat, nrm, nrm)
+    ratios = []
+    for target in (0.05, 0.02, 0.01, 0.005, 0.003):
+        sh = wenv.Shader(sunset, mat, quality="auto", target_error=target)
+        info = sh.stats["auto"]
+        if info["method"] != "sh":
+            continue
+        err = float(np.sqrt(np.mean((sh.shade(nrm, nrm) - ref) ** 2) / np.mean(ref ** 2)))
+        ratios.append(err / info["predicted_error"])
+        assert err <= target
+    assert len(ratios) >= 3 and 0.6 <= min(ratios) and max(ratios) <= 1.05, ratios
 
 
 def test_memory_budget_is_kept(sunset):
