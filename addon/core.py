@@ -784,8 +784,12 @@ def shade_objects(scene, depsgraph, objects, view, blend_data, progress=None):
     plan = plan_shading(scene, depsgraph, objects, view, blend_data.images, progress)
     plan.compute()
     for (name, _key), choice in plan.auto_choices.items():
-        q = wenv.AUTO_LADDER[choice["level"]]
-        plan.notes.append(f"'{name}': Auto chose {q['global']}/{q['local']}/{q['normals']}, views {q['views']} "
+        if choice["method"] == "sh":  # a material without lobes: SH irradiance
+            chose = f"spherical harmonics of order {choice['sh_order']}"
+        else:
+            q = wenv.AUTO_LADDER[choice["level"]]
+            chose = f"{q['global']}/{q['local']}/{q['normals']}, views {q['views']}"
+        plan.notes.append(f"'{name}': Auto chose {chose} "
                           f"(predicted error {100 * choice['predicted_error']:.2g} %"
                           + ("" if choice["met"] else f", above the {100 * choice['target_error']:.2g} % target") + ")")
     return plan.apply(blend_data.objects), plan.notes

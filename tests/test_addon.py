@@ -877,3 +877,13 @@ def test_auto_quality_matches_core_and_builds_no_matrices(scene):
     assert shade_op(view="CAMERA") == {"FINISHED"}
     levels = sorted(c["level"] for c in [s.stats["auto"] for s in core.shaders._auto.values()])
     assert levels[-1] > levels[0]
+    # a material without lobes gets SH irradiance, reported by its order
+    obj.data.materials.clear()
+    lam = set_material(obj, lobes=())
+    core.shaders.clear()
+    view = core.camera_view(scene)
+    notes = core.shade_objects(scene, bpy.context.evaluated_depsgraph_get(), [obj], view, bpy.data)[1]
+    assert any("spherical harmonics of order" in note for note in notes), notes
+    want = wenv.Shader(env, wenv_material(lam), quality="auto", target_error=0.005, normals=n)
+    assert want.method == "sh"
+    np.testing.assert_allclose(attribute(obj)[1], want.shade_mesh(p, n, eye), rtol=1e-4, atol=1e-5)
