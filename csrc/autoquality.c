@@ -152,6 +152,7 @@ const size_t WENV_AUTO_SH_ORDERS[WENV_AUTO_SH_ORDER_COUNT] = {2, 4, 6, 8, 10, 12
 /* Band of the spectrum estimate; beyond it the power A_l^2 P_l is taken to fall as l^-4, as a lone
  * sun's does (A_l^2 ~ l^-5, P_l ~ 2l + 1), which bounds every non-negative lighting. */
 #define SH_ESTIMATE_ORDER 20
+#define SH_TAIL_FACTOR 2.9 /* sum over even l > 20 of (20 / l)^4 */
 /* Measured errors on the bundled HDRIs (examples/auto_quality.py) are 0.75 - 0.95 times the
  * estimate down to 0.3 %; below, a floor of a few 0.01 % (the irradiance table, the reference's own
  * pixel sums) shows. */
@@ -184,22 +185,13 @@ static int sh_band_power(const wenv_envmap *env, const double albedo[3], double 
 
 static double sh_error_from_power(const double *power, size_t order)
 {
-    double total = 0.0, tail = 2.9 * power[SH_ESTIMATE_ORDER]; /* sum over even l > 20 of (20 / l)^4 */
+    double beyond = SH_TAIL_FACTOR * power[SH_ESTIMATE_ORDER], total = beyond, tail = beyond;
     for (size_t l = 0; l <= SH_ESTIMATE_ORDER; l++) {
         total += power[l];
         if (l > order)
             tail += power[l];
     }
-    total += 2.9 * power[SH_ESTIMATE_ORDER];
     return total > 0.0 ? SH_ERROR_MARGIN * sqrt(tail / total) + SH_ERROR_FLOOR : 0.0;
-}
-
-double wenv_auto_sh_error(const wenv_envmap *env, const double albedo[3], size_t order)
-{
-    double power[SH_ESTIMATE_ORDER + 1];
-    if (order < 1 || order > SH_ESTIMATE_ORDER || sh_band_power(env, albedo, power) < 0)
-        return -1.0;
-    return sh_error_from_power(power, order);
 }
 
 wenv_status wenv_auto_choose(const wenv_envmap *env, const wenv_material *mat, double target, size_t memory_budget,

@@ -48,10 +48,6 @@ size_t wenv_auto_level_bytes(size_t i, size_t used_normals);
 #define WENV_AUTO_SH_ORDER_COUNT 8
 extern const size_t WENV_AUTO_SH_ORDERS[WENV_AUTO_SH_ORDER_COUNT];
 
-/* Predicted relative RMSE of SH irradiance at `order` (0 < order <= 20) for a white Lambertian
- * under env, per albedo channel weights (see above); -1 on running out of memory. */
-double wenv_auto_sh_error(const wenv_envmap *env, const double albedo[3], size_t order);
-
 typedef struct {
     size_t sh_order;        /* > 0: method "sh" at this order (a material without lobes) */
     size_t level;           /* else the chosen ladder level (method "slicing") */
