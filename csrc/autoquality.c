@@ -10,12 +10,12 @@
 
 
 /* global, local, normals, views, coefficients, light_coefficients (0: all, slicing keeps every
- * term anyway), matrix_epsilon (unused by slicing), lights, light_threshold */
+ * term anyway), matrix_epsilon (unused by slicing), lights, light_threshold, grazing */
 static const wenv_quality LADDER[WENV_AUTO_LEVELS] = {
-    {32, 16, 16, 8, 64, 0, 1e-3, 8, 256},
-    {64, 32, 32, 16, 128, 0, 1e-3, 16, 256},
-    {128, 64, 32, 16, 256, 0, 1e-4, 64, 256},
-    {128, 64, 64, 32, 512, 0, 1e-4, 128, 256},
+    {32, 16, 16, 8, 64, 0, 1e-3, 8, 256, 0},
+    {64, 32, 32, 16, 128, 0, 1e-3, 16, 256, 0},
+    {128, 64, 32, 16, 256, 0, 1e-4, 64, 256, 0},
+    {128, 64, 64, 32, 512, 0, 1e-4, 128, 256, 0},
 };
 
 /* Median relative RMSE over the bundled HDRIs per level (rows) at roughness 0.05, 0.1, 0.2, 0.5

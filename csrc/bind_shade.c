@@ -18,19 +18,19 @@ typedef struct {
 } preset;
 
 static const preset PRESETS[] = {
-    {"draft", {32, 16, 16, 8, 32, 256, 1e-3, 8, 256}},
-    {"default", {64, 32, 32, 16, 128, 1024, 1e-3, 16, 256}},
-    {"high", {128, 64, 64, 32, 512, 0, 1e-4, 128, 256}},
+    {"draft", {32, 16, 16, 8, 32, 256, 1e-3, 8, 256, 0}},
+    {"default", {64, 32, 32, 16, 128, 1024, 1e-3, 16, 256, 0}},
+    {"high", {128, 64, 64, 32, 512, 0, 1e-4, 128, 256, 0}},
 };
 #define N_PRESETS (sizeof PRESETS / sizeof PRESETS[0])
 
 static PyObject *quality_to_dict(const wenv_quality *q)
 {
-    return Py_BuildValue("{s:n,s:n,s:n,s:n,s:n,s:n,s:d,s:n,s:d}", "global", (Py_ssize_t)q->global_n, "local",
+    return Py_BuildValue("{s:n,s:n,s:n,s:n,s:n,s:n,s:d,s:n,s:d,s:d}", "global", (Py_ssize_t)q->global_n, "local",
                          (Py_ssize_t)q->local_n, "normals", (Py_ssize_t)q->normal_n, "views", (Py_ssize_t)q->view_n,
                          "coefficients", (Py_ssize_t)q->coefficients, "light_coefficients",
                          (Py_ssize_t)q->light_coefficients, "matrix_epsilon", q->matrix_epsilon, "lights",
-                         (Py_ssize_t)q->lights, "light_threshold", q->light_threshold);
+                         (Py_ssize_t)q->lights, "light_threshold", q->light_threshold, "grazing", q->grazing);
 }
 
 static int get_size(PyObject *v, const char *key, size_t *out)
@@ -87,10 +87,12 @@ static int parse_quality(PyObject *obj, wenv_quality *q)
             r = get_size(value, k, &q->lights);
         else if (strcmp(k, "light_threshold") == 0)
             r = wenv_py_get_finite(value, "quality['light_threshold']", &q->light_threshold);
+        else if (strcmp(k, "grazing") == 0)
+            r = wenv_py_get_finite(value, "quality['grazing']", &q->grazing);
         else {
             PyErr_Format(PyExc_ValueError,
                          "unknown quality key '%s' (use global, local, normals, views, coefficients, "
-                         "light_coefficients, matrix_epsilon, lights, light_threshold)", k);
+                         "light_coefficients, matrix_epsilon, lights, light_threshold, grazing)", k);
             return -1;
         }
         if (r < 0)
@@ -564,13 +566,13 @@ static PyObject *Shader_get_stats(ShaderObject *self, void *closure)
         wenv_shader_stats s;
         wenv_shader_get_stats(self->shader, &s);
         static const char *cache_names[] = {"none", "loaded", "built", "built (save failed)"};
-        d = Py_BuildValue("{s:n,s:n,s:s,s:d,s:n,s:n,s:n,s:n,s:n,s:n,s:n,s:n}", "rotation_nnz", (Py_ssize_t)s.rotation_nnz,
+        d = Py_BuildValue("{s:n,s:n,s:s,s:d,s:n,s:n,s:n,s:n,s:n,s:n,s:n,s:n,s:n}", "rotation_nnz", (Py_ssize_t)s.rotation_nnz,
                          "rotation_bytes", (Py_ssize_t)s.rotation_bytes, "cache", cache_names[s.cache],
                          "rotation_seconds", s.rotation_seconds, "slices_ready", (Py_ssize_t)s.slices_ready,
                          "pairs_ready", (Py_ssize_t)s.pairs_ready, "light_terms", (Py_ssize_t)s.light_terms,
                          "brdf_terms", (Py_ssize_t)s.brdf_terms_total, "slice_bytes", (Py_ssize_t)s.slice_bytes,
                          "table_bytes", (Py_ssize_t)s.table_bytes, "brdf_bytes", (Py_ssize_t)s.brdf_bytes,
-                         "direct_lights", (Py_ssize_t)s.direct_lights);
+                         "direct_lights", (Py_ssize_t)s.direct_lights, "grazing_bytes", (Py_ssize_t)s.grazing_bytes);
     }
     if (d && self->is_auto) {
         const wenv_auto_choice *a = &self->auto_choice;
@@ -622,7 +624,7 @@ static PyTypeObject ShaderType = {
     .tp_doc = "Shader(env, material, quality='default', method='rotation', cache_dir=None, progress=None, "
               "target_error=0.01, memory_budget_mb=1024, normals=None)\n--\n\n"
               "Environment shading by wavelet rotation.  quality: 'draft', 'default', 'high', 'auto' or a dict of "
-              "global, local, normals, views, coefficients, light_coefficients, matrix_epsilon, lights, light_threshold.  method: "
+              "global, local, normals, views, coefficients, light_coefficients, matrix_epsilon, lights, light_threshold, grazing.  method: "
               "'rotation' (precomputed sparse matrices, cached on disk in cache_dir; None: WENV_CACHE_DIR or "
               "~/.cache/wenv; False: no cache) or 'slicing' (no matrices).  progress(fraction) is called "
               "during precomputation; returning True cancels it (wenv.CancelledError).\n\n"

@@ -393,9 +393,17 @@ static inline double albedo_integrand(const wenv_lobe *lobe, wenv_shadowing shad
  *  - Azimuth: for grazing views beta swings from +theta_o to -theta_o within ~cos(theta_o) of
  *    phi' = 90 deg; half of the map phi'(v) follows beta (phi' = acos(tan(theta_o cos(pi v)) /
  *    tan(theta_o))), half is linear, over the mirror-symmetric half circle [0, pi]. */
-static double lobe_albedo_nodes(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wo[3], size_t n,
-                                const double *x, const double *w, int include_fresnel, double *node_wi,
-                                double *node_weight, size_t *node_count)
+typedef struct {
+    size_t n;            /* nodes on [0, 1] */
+    const double *x, *w; /* positions and weights */
+} unit_rule;
+
+/* The rule's nodes are recorded when node_wi is not NULL (node_weight too; node_omega, the solid
+ * angle in wi each node stands for, may be NULL).  Every (theta, phi) node is recorded, with weight
+ * 0 where rounding puts wi below the horizon, so the count is always 2 nt np. */
+static double lobe_rule_nodes(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wo[3], unit_rule rt,
+                              unit_rule rp, int include_fresnel, double *node_wi, double *node_weight,
+                              double *node_omega, size_t *node_count)
 {
     size_t recorded = 0;
     if (node_count)
@@ -410,8 +418,8 @@ static double lobe_albedo_nodes(const wenv_lobe *lobe, wenv_shadowing shadowing,
     double theta_o = atan2(so, co), tan_o = so / co;
     double lambda = theta_o > 1e-6 ? 0.5 : 0.0; /* near the normal beta is ~0 and the linear map suffices */
     double total = 0.0;
-    for (size_t j = 0; j < n; j++) {
-        double v = x[j];
+    for (size_t j = 0; j < rp.n; j++) {
+        double v = rp.x[j];
         /* phi' and d phi' / dv of the mixed map (see above). */
         double phi = M_PI * v, dphi = M_PI;
         if (lambda > 0.0) {
@@ -441,8 +449,8 @@ static double lobe_albedo_nodes(const wenv_lobe *lobe, wenv_shadowing shadowing,
             rest = exp(-t_max / m2);
         }
         double ring = 0.0;
-        for (size_t i = 0; i < n; i++) {
-            double r = 1.0 - x[i], r3 = r * r * r;
+        for (size_t i = 0; i < rt.n; i++) {
+            double r = 1.0 - rt.x[i], r3 = r * r * r;
             double xi = xi_max * (1.0 - r3 * r);
             double one_minus_xi = rest + xi_max * r3 * r;
             double t = ggx ? m2 * xi / one_minus_xi : -m2 * log(one_minus_xi);
@@ -450,27 +458,38 @@ static double lobe_albedo_nodes(const wenv_lobe *lobe, wenv_shadowing shadowing,
             double h[3] = {sh * cp, sh * sp, ch};
             double oh = wo[0] * h[0] + wo[1] * h[1] + wo[2] * h[2];
             double wi[3] = {2.0 * oh * h[0] - wo[0], 2.0 * oh * h[1] - wo[1], 2.0 * oh * h[2] - wo[2]};
-            if (!(oh > 0.0) || !(wi[2] > 0.0)) /* only by rounding at the range's end */
-                continue;
-            /* vis = G / (4 ci co); the integrand F G (wo.h) / (co ch) = F vis 4 ci (wo.h) / ch. */
-            double t_h, cos_d;
-            double vis = lobe_vis(lobe, shadowing, wi, wo, k_o, &t_h, &cos_d);
-            double f = include_fresnel ? wenv_fresnel_dielectric(oh, lobe->ior) : 1.0;
-            double term = w[i] * 4.0 * r3 * f * vis * 4.0 * wi[2] * oh / ch;
+            double term = 0.0;
+            if (oh > 0.0 && wi[2] > 0.0) { /* fails only by rounding at the range's end */
+                /* vis = G / (4 ci co); the integrand F G (wo.h) / (co ch) = F vis 4 ci (wo.h) / ch. */
+                double t_h, cos_d;
+                double vis = lobe_vis(lobe, shadowing, wi, wo, k_o, &t_h, &cos_d);
+                double f = include_fresnel ? wenv_fresnel_dielectric(oh, lobe->ior) : 1.0;
+                term = rt.w[i] * 4.0 * r3 * f * vis * 4.0 * wi[2] * oh / ch;
+            }
             ring += term;
             if (node_wi) {
                 memcpy(node_wi + 3 * recorded, wi, sizeof wi);
+                if (node_omega) {
+                    /* d wi = 4 (wo.h) d wh and D cos_h d wh = d xi d phi / (2 pi), per unit of the
+                     * rule's variables (the ring's factors follow below) */
+                    double d = wenv_ndf(lobe->distribution, lobe->roughness, ch);
+                    node_omega[recorded] = d > 0.0 ? rt.w[i] * 4.0 * r3 * 4.0 * fabs(oh) / (d * ch) : 0.0;
+                }
                 node_weight[recorded++] = term;
             }
         }
-        total += w[j] * dphi * xi_max * ring;
+        total += rp.w[j] * dphi * xi_max * ring;
         if (node_wi) {
             /* this ring's nodes and their mirror images about the plane of wo and the normal (the
              * rule covers one half circle), each with half the weight */
-            double scale = w[j] * dphi * xi_max / (2.0 * M_PI), px = -sin(phi_o), py = cos(phi_o);
+            double scale = rp.w[j] * dphi * xi_max / (2.0 * M_PI), px = -sin(phi_o), py = cos(phi_o);
             size_t first = *node_count, len = recorded - first;
             for (size_t k = first; k < recorded; k++) {
                 node_weight[k] *= scale;
+                if (node_omega) {
+                    node_omega[k] *= scale;
+                    node_omega[k + len] = node_omega[k];
+                }
                 double *a = node_wi + 3 * k, *b = node_wi + 3 * (k + len), dp = a[0] * px + a[1] * py;
                 b[0] = a[0] - 2.0 * dp * px;
                 b[1] = a[1] - 2.0 * dp * py;
@@ -506,7 +525,8 @@ wenv_status wenv_lobe_albedo(const wenv_lobe *lobe, wenv_shadowing shadowing, co
     wenv_status st = albedo_nodes(samples, &x, &w, err);
     if (st != WENV_OK)
         return st;
-    *albedo = lobe_albedo_nodes(lobe, shadowing, wo, samples, x, w, include_fresnel, NULL, NULL, NULL);
+    unit_rule r = {samples, x, w};
+    *albedo = lobe_rule_nodes(lobe, shadowing, wo, r, r, include_fresnel, NULL, NULL, NULL, NULL);
     free(x);
     return WENV_OK;
 }
@@ -523,7 +543,8 @@ wenv_status wenv_material_albedo(const wenv_material *mat, const double wo[3], s
         for (int c = 0; c < 3; c++)
             rgb[c] = mat->diffuse[c]; /* Int diffuse / pi cos_i d wi = diffuse exactly */
         for (size_t l = 0; l < mat->n_lobes; l++) {
-            double a = lobe_albedo_nodes(&mat->lobes[l], mat->shadowing, wo, samples, x, w, 1, NULL, NULL, NULL);
+            unit_rule r = {samples, x, w};
+            double a = lobe_rule_nodes(&mat->lobes[l], mat->shadowing, wo, r, r, 1, NULL, NULL, NULL, NULL);
             for (int c = 0; c < 3; c++)
                 rgb[c] += mat->lobes[l].specular[c] * a;
         }
@@ -540,7 +561,42 @@ wenv_status wenv_lobe_nodes(const wenv_lobe *lobe, wenv_shadowing shadowing, con
     wenv_status st = albedo_nodes(samples, &x, &w, err);
     if (st != WENV_OK)
         return st;
-    lobe_albedo_nodes(lobe, shadowing, wo, samples, x, w, 1, wi, weight, count);
+    unit_rule r = {samples, x, w};
+    lobe_rule_nodes(lobe, shadowing, wo, r, r, 1, wi, weight, NULL, count);
+    free(x);
+    return WENV_OK;
+}
+
+wenv_status wenv_lobe_cells(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wo[3], size_t n_theta,
+                            size_t n_phi, double *wi, double *weight, double *solid_angle, size_t *count,
+                            wenv_error *err)
+{
+    *count = 0;
+    if (n_theta < 1 || n_phi < 1 || n_theta > ALBEDO_SAMPLES_MAX || n_phi > ALBEDO_SAMPLES_MAX)
+        return wenv_error_set(err, WENV_ERR_VALUE, "cell counts must be in [1, %d], got %zu x %zu",
+                              ALBEDO_SAMPLES_MAX, n_theta, n_phi);
+    double *x = malloc(2 * (n_theta + n_phi) * sizeof *x);
+    if (!x)
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for %zu x %zu cells", n_theta, n_phi);
+    double *w = x + n_theta, *xp = w + n_theta, *wp = xp + n_phi;
+    for (size_t i = 0; i < n_theta; i++) {
+        x[i] = ((double)i + 0.5) / (double)n_theta;
+        w[i] = 1.0 / (double)n_theta;
+    }
+    wenv_gauss_legendre_01(n_phi, xp, wp);
+    unit_rule rt = {n_theta, x, w}, rp = {n_phi, xp, wp};
+    if (!(wo[2] > 0.0)) {
+        /* nothing is reflected; the cells still exist, with weight 0 */
+        size_t n = 2 * n_theta * n_phi;
+        for (size_t k = 0; k < n; k++) {
+            wi[3 * k] = wi[3 * k + 1] = 0.0;
+            wi[3 * k + 2] = 1.0;
+            weight[k] = solid_angle[k] = 0.0;
+        }
+        *count = n;
+    } else {
+        lobe_rule_nodes(lobe, shadowing, wo, rt, rp, 1, wi, weight, solid_angle, count);
+    }
     free(x);
     return WENV_OK;
 }

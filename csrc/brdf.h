@@ -131,4 +131,15 @@ wenv_status wenv_lobe_albedo(const wenv_lobe *lobe, wenv_shadowing shadowing, co
 wenv_status wenv_lobe_nodes(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wo[3], size_t samples,
                             double *wi, double *weight, size_t *count, wenv_error *err);
 
+/* The same rule as midpoints of equal cells -- n_theta in the distribution's graded CDF times n_phi
+ * in the azimuth map over the half circle, mirrored -- for integrands that are not smooth, such as
+ * an environment's radiance: with each node also the solid angle in wi its cell covers
+ * (solid_angle), the radiance can be read pre-filtered over that footprint.  Always writes
+ * 2 n_theta n_phi nodes (wi 3 doubles each), in the same order for every wo, so that rules for
+ * neighbouring views can be interpolated node by node; nodes that rounding puts below the horizon,
+ * and all nodes of a view at or below it, have weight 0.  n_theta, n_phi in [1, 4096]. */
+wenv_status wenv_lobe_cells(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wo[3], size_t n_theta,
+                            size_t n_phi, double *wi, double *weight, double *solid_angle, size_t *count,
+                            wenv_error *err);
+
 #endif

@@ -9,6 +9,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "grazing.h"
 #include "haar.h"
 #include "maps.h"
 #include "octfilter.h"
@@ -37,6 +38,7 @@ struct wenv_shader {
     float *direct_dir;       /* direct_count x 3, world */
     float *direct_flux;      /* direct_count x 3: radiance x solid angle */
     unsigned char *slice_ready, *slice_need; /* ready: 0 stale, READY, or USED (see READY) */
+    wenv_grazing_light *grazing_light; /* quality.grazing > 0 only */
 
     /* local quadrature: sub-samples of the local map with their tent taps */
     size_t quad_k, quad_count;
@@ -52,6 +54,7 @@ struct wenv_shader {
     float *albedo;           /* ALBEDO_N x 3: specular albedo at cos(view) = GRAZING_Z .. 1 */
     float *view_inv_albedo;  /* nv x 3: 1 / albedo of each view sample (0 where the albedo is 0) */
     float diffuse_over_pi[3];
+    wenv_grazing_rule *grazing_rule; /* NULL: no lobe is integrated per vertex */
     size_t *brdf_start;      /* nv + 1 */
     uint32_t *brdf_idx;
     float *brdf_rgb;
@@ -102,6 +105,8 @@ wenv_status wenv_quality_check(const wenv_quality *q, wenv_error *err)
     if (!(q->light_threshold >= 1.0 && q->light_threshold <= 1e12))
         return wenv_error_set(err, WENV_ERR_VALUE, "quality['light_threshold'] must be in [1, 1e12], got %g",
                               q->light_threshold);
+    if (!(q->grazing >= 0.0 && q->grazing <= 64.0))
+        return wenv_error_set(err, WENV_ERR_VALUE, "quality['grazing'] must be in [0, 64], got %g", q->grazing);
     if (!(q->matrix_epsilon >= 0.0 && q->matrix_epsilon < 1.0))
         return wenv_error_set(err, WENV_ERR_VALUE, "quality['matrix_epsilon'] must be in [0, 1), got %g", q->matrix_epsilon);
     size_t table = q->normal_n * q->normal_n * (q->view_n + 1) * (q->view_n + 1);
@@ -120,6 +125,8 @@ static void free_material(wenv_shader *sh)
     sh->lobe_cos_h_min = NULL;
     sh->albedo = NULL;
     sh->view_inv_albedo = NULL;
+    wenv_grazing_rule_free(sh->grazing_rule);
+    sh->grazing_rule = NULL;
     free(sh->brdf_start);
     free(sh->brdf_idx);
     free(sh->brdf_rgb);
@@ -157,6 +164,7 @@ void wenv_shader_free(wenv_shader *sh)
     free(sh->irradiance);
     free(sh->direct_dir);
     free(sh->direct_flux);
+    wenv_grazing_light_free(sh->grazing_light);
     free(sh->slice_ready);
     free(sh->slice_need);
     free_quadrature(sh);
@@ -438,6 +446,13 @@ wenv_status wenv_shader_set_environment(wenv_shader *sh, const wenv_envmap *env,
     qsort(excluded, nexcluded, sizeof *excluded, compare_size);
     if ((st = wenv_oct_from_envmap(env, G, texels, excluded, nexcluded, err)))
         goto done;
+    if (sh->q.grazing > 0.0) {
+        wenv_grazing_light *gl;
+        if ((st = wenv_grazing_light_create(&gl, env, excluded, nexcluded, err)))
+            goto done;
+        wenv_grazing_light_free(sh->grazing_light);
+        sh->grazing_light = gl;
+    }
     float peak[3] = {0.0f, 0.0f, 0.0f};
     for (size_t u = 0; u < ng; u++)
         for (int c = 0; c < 3; c++)
@@ -685,7 +700,8 @@ wenv_status wenv_shader_set_material(wenv_shader *sh, const wenv_material *mat, 
     free(counts);
     free(all_idx);
     free(all_rgb);
-    if (wenv_material_copy(&sh->mat, mat, err) || lobe_cutoffs(sh, mat, err) || albedo_tables(sh, mat, err)) {
+    if (wenv_material_copy(&sh->mat, mat, err) || lobe_cutoffs(sh, mat, err) || albedo_tables(sh, mat, err) ||
+        wenv_grazing_rule_create(&sh->grazing_rule, mat, sh->q.local_n, sh->q.grazing, err)) {
         free_material(sh);
         return err->status;
     }
@@ -860,7 +876,8 @@ static void shade_vertex(const wenv_shader *sh, const vertex_taps *tp, float *o)
             m[2] += w * t[2];
         }
     }
-    if (sh->albedo) {
+    float blend = wenv_grazing_blend(sh->grazing_rule, tp->cos_v);
+    if (sh->albedo && blend < 1.0f) {
         /* A mean radiance under the lobe lies between the lighting's darkest and brightest
          * texels; wavelet truncation and interpolation can ring past either, most at narrow
          * lobes near grazing, where they overshot the brightest pixel several-fold. */
@@ -868,8 +885,14 @@ static void shade_vertex(const wenv_shader *sh, const vertex_taps *tp, float *o)
         albedo_at(sh->albedo, tp->cos_v, a);
         for (int c = 0; c < 3; c++) {
             float mc = m[c] < 0.0f ? 0.0f : (m[c] > sh->radiance_max[c] ? sh->radiance_max[c] : m[c]);
-            s[c] += a[c] * mc;
+            s[c] += (1.0f - blend) * a[c] * mc;
         }
+    }
+    if (blend > 0.0f) {
+        float g[3];
+        wenv_grazing_shade(sh->grazing_rule, sh->grazing_light, tp->n, tp->v, tp->cos_v, g);
+        for (int c = 0; c < 3; c++)
+            s[c] += blend * g[c];
     }
     for (int c = 0; c < 3; c++) {
         float val = sh->diffuse_over_pi[c] * e[c] + s[c];
@@ -1059,4 +1082,5 @@ void wenv_shader_get_stats(const wenv_shader *sh, wenv_shader_stats *stats)
     stats->slice_bytes = slices * sh->nl * 3 * sizeof(float);
     stats->table_bytes = sh->ns * sh->nv * (3 * sizeof(float) + 2);
     stats->brdf_bytes = sh->stats.brdf_terms_total * 4 * sizeof(float);
+    stats->grazing_bytes = wenv_grazing_light_bytes(sh->grazing_light) + wenv_grazing_rule_bytes(sh->grazing_rule);
 }

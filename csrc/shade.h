@@ -23,7 +23,11 @@
  * interpolation between samples spread its highlight over neighbouring views and normals.  The
  * brightest pixels (at most quality.lights of them, each brighter than light_threshold times the
  * mean radiance) are therefore taken out of the lighting before the transform and shaded per vertex
- * as exact directional lights with the material's own BRDF. */
+ * as exact directional lights with the material's own BRDF.
+ *
+ * Grazing: near grazing a narrow lobe is squeezed below the local map's resolution; with
+ * quality.grazing > 0 such lobes are integrated per vertex over a mip pyramid of the same lighting
+ * (grazing.h) and blended with the wavelet result. */
 #ifndef WENV_SHADE_H
 #define WENV_SHADE_H
 
@@ -45,13 +49,15 @@ typedef struct {
     double matrix_epsilon;     /* rotation-matrix entries dropped below this (relative) */
     size_t lights;             /* brightest pixels shaded as exact directional lights (0: none) */
     double light_threshold;    /* ... when brighter than this many times the mean radiance */
+    double grazing;            /* lobes narrower than this many local texels are integrated per vertex
+                                * (grazing.h; 0: never) */
 } wenv_quality;
 
 typedef struct {
     size_t rotation_nnz, rotation_bytes;
     int cache; /* 0 no cache used, 1 loaded, 2 built and saved, 3 built, save failed */
     size_t slices_ready, pairs_ready, light_terms, brdf_terms_total, direct_lights;
-    size_t slice_bytes, table_bytes, brdf_bytes;
+    size_t slice_bytes, table_bytes, brdf_bytes, grazing_bytes;
     double rotation_seconds;
 } wenv_shader_stats;
 

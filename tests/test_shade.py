@@ -203,6 +203,8 @@ def test_reference_constant_environment():
     ({"coefficients": 10**9}, "coefficients"), ({"matrix_epsilon": float("nan")}, "matrix_epsilon"),
     ({"bogus": 1}, "bogus"), ("ultra", "quality"), ({"lights": 5000}, "lights"), ({"lights": -1}, "lights"),
     ({"light_threshold": 0.5}, "light_threshold"), ({"light_threshold": float("inf")}, "light_threshold"),
+    ({"grazing": -1.0}, "grazing"), ({"grazing": float("nan")}, "grazing"), ({"grazing": 1e3}, "grazing"),
+    ({"grazing": "yes"}, "grazing"),
 ])
 def test_bad_quality(quality, message):
     env = gradient_env()

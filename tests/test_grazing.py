@@ -1,0 +1,126 @@
+"""Narrow lobes integrated per vertex at grazing views (quality key `grazing`, csrc/grazing.h):
+exact in the white furnace, no change where the local map resolves the lobe, continuous in the
+view, finite everywhere, and far closer to the reference than the wavelet result alone at grazing
+views on Blender's bundled HDRIs."""
+import json
+import math
+import os
+
+import numpy as np
+import pytest
+
+import wenv
+from conftest import HDRI_NAMES, hdri_path
+
+DATA = os.path.join(os.path.dirname(__file__), "data", "accuracy_reference.npz")
+HIGH = wenv.QUALITY_PRESETS["high"]
+SMALL = {"global": 32, "local": 16, "normals": 16, "views": 8, "coefficients": 0, "lights": 0}
+
+
+def lobe(m):
+    return wenv.CookTorrance(diffuse=0.0, lobes=[{"specular": 1.0, "roughness": m, "ior": 1.5}])
+
+
+def views_at(degrees):
+    th = np.radians(np.asarray(degrees, np.float64))
+    v = np.stack([np.sin(th), np.zeros_like(th), np.cos(th)], axis=1).astype(np.float32)
+    return np.tile(np.float32([0, 0, 1]), (len(th), 1)), v
+
+
+def test_constant_environment_gives_the_albedo():
+    """Every view's rule, turned into the vertex frame and read through the mip pyramid, sums to
+    the lobe's directional albedo under a constant environment, up to the view past 89.9 deg."""
+    env = wenv.Environment(np.ones((64, 128, 3), np.float32))
+    mat = lobe(0.1)
+    deg = [10, 40, 60, 75, 80, 85, 88, 89, 89.5, 89.8]
+    n, v = views_at(deg)
+    out = wenv.Shader(env, mat, quality={**SMALL, "grazing": 64.0}, method="slicing").shade(n, v)[:, 0]
+    albedo = mat.albedo(v, samples=256)[:, 0]
+    assert np.allclose(out, albedo, rtol=0.01), np.c_[deg, out, albedo]
+    assert np.allclose(out[:6], albedo[:6], rtol=0.002)
+
+
+def test_no_change_where_the_map_resolves_the_lobe():
+    """Off (0), and for a wide lobe (m = 0.5 at local 64 is at least 20 texels wide at any view),
+    the result is the wavelet one, bit for bit."""
+    env = wenv.load_environment(hdri_path("sunset"))
+    rng = np.random.default_rng(3)
+    n = rng.normal(size=(300, 3)).astype(np.float32)
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    v = rng.normal(size=(300, 3)).astype(np.float32)
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    v[np.sum(n * v, axis=1) < 0] *= -1
+    q = {**SMALL, "local": 64}
+    base = wenv.Shader(env, lobe(0.5), quality=q, method="slicing")
+    on = wenv.Shader(env, lobe(0.5), quality={**q, "grazing": 4.0}, method="slicing")
+    assert np.array_equal(base.shade(n, v), on.shade(n, v))
+    assert on.stats["grazing_bytes"] > 0 and base.stats["grazing_bytes"] == 0
+
+
+def test_continuous_in_the_view_and_finite():
+    """A fine sweep of the view from the normal to 89.95 deg crosses the blend (rho from 2 down to 1:
+    28 to 67 deg here) and every tabulated rule without a jump: neighbouring views 0.02 deg apart
+    differ by under 1 % of the curve's peak (measured 0.6 %, at 89.86 deg where the curve is
+    steepest; the wavelet result alone has 0.3 % there)."""
+    env = wenv.load_environment(hdri_path("courtyard"))
+    sh = wenv.Shader(env, lobe(0.1), quality={**SMALL, "grazing": 1.0}, method="slicing")
+    deg = np.linspace(0.0, 89.95, 4000)
+    axis = np.float64([0.3, -0.2, 0.93])
+    axis /= np.linalg.norm(axis)
+    t = np.cross(axis, [1.0, 0.0, 0.0])
+    t /= np.linalg.norm(t)
+    th = np.radians(deg)[:, None]
+    v = (np.cos(th) * axis + np.sin(th) * t).astype(np.float32)
+    n = np.tile(axis.astype(np.float32), (len(deg), 1))
+    out = sh.shade(n, v)
+    assert np.all(np.isfinite(out)) and np.all(out >= 0)
+    lum = out.mean(axis=1)
+    step = np.abs(np.diff(lum))
+    assert step.max() < 0.01 * lum.max(), step.max() / lum.max()
+
+
+def test_finite_at_seams_poles_and_grazing():
+    env = wenv.load_environment(hdri_path("studio"))
+    sh = wenv.Shader(env, lobe(0.05), quality={**SMALL, "grazing": 8.0}, method="slicing")
+    special = np.float64([(0, 0, 1), (0, 0, -1), (1, 0, 0), (-1, 0, 0), (0, 1, 0), (1, 1, 0), (1, 1, -1),
+                          (-1, -1, -1), (1e-7, 0, -1)])
+    rows_n, rows_v = [], []
+    for s in special:
+        s = s / np.linalg.norm(s)
+        t = np.cross(s, [0.3, 0.5, 0.8])
+        t /= np.linalg.norm(t)
+        for a in (0.0, 60.0, 85.0, 89.9, 89.999):
+            rows_n.append(s)
+            rows_v.append(math.cos(math.radians(a)) * s + math.sin(math.radians(a)) * t)
+    out = sh.shade(np.float32(rows_n), np.float32(rows_v))
+    assert np.all(np.isfinite(out)) and np.all(out >= 0) and np.all(out.sum(axis=1) > 0)
+
+
+# Worst relative RMSE over the eight HDRIs with `high` + grazing 4, measured (examples/accuracy.py
+# --presets high,high+grazing) with 10 % headroom; and the share of `high`'s own worst error it must
+# stay under (measured: m = 0.05 27 -> 4.7 %, m = 0.1 15 -> 2.6 %, m = 0.2 5.8 -> 2.2 %).
+GRAZING_BOUNDS = {"m0.05": 0.0514, "m0.1": 0.0287, "m0.2": 0.0245, "m0.5": 0.0187}
+
+
+def test_high_with_grazing_against_the_reference():
+    data = np.load(DATA)
+    specs = json.loads(str(data["materials"]))
+    nrm, v = data["normals"], data["views"]
+    shaders = {}
+    worst = {k: 0.0 for k in GRAZING_BOUNDS}
+    for h in HDRI_NAMES:
+        env = wenv.load_environment(hdri_path(h))
+        for name in GRAZING_BOUNDS:
+            mat = wenv.CookTorrance(diffuse=tuple(specs[name]["diffuse"]), lobes=specs[name]["lobes"])
+            if name not in shaders:
+                shaders[name] = wenv.Shader(env, mat, quality={**HIGH, "grazing": 4.0}, method="slicing")
+            else:
+                shaders[name].set_environment(env)
+            out = shaders[name].shade(nrm, v)
+            ref = data[f"{h}/{name}"]
+            err = float(np.sqrt(np.mean((out - ref) ** 2)) / np.sqrt(np.mean(ref ** 2)))
+            worst[name] = max(worst[name], err)
+    over = {k: round(100 * e, 2) for k, e in worst.items() if e > GRAZING_BOUNDS[k]}
+    assert not over, f"relative RMSE (%) above the bounds: {over}"
+    # high alone (tests/test_accuracy.py bounds its worst at 16.2 and 6.4 %) is far worse
+    assert worst["m0.05"] < 0.25 * 0.269 and worst["m0.1"] < 0.25 * 0.147 and worst["m0.2"] < 0.5 * 0.058
