@@ -10,73 +10,37 @@
 
 /* ---- the lighting as an octahedral mip pyramid ------------------------------------------------ */
 
-#define MAX_LEVELS 12
-#define BASE_MIN 32
-#define BASE_MAX 1024
-#define TOP_SIDE 4 /* coarsest level: 4 x 4 texels, each about an octant's quarter */
-
 struct wenv_grazing_light {
-    size_t levels;
-    size_t side[MAX_LEVELS];
-    float *texels[MAX_LEVELS]; /* side^2 x 3 */
-    float lod_offset;          /* level = half log2 of a cell's solid angle + this */
+    wenv_oct_pyramid pyramid;
+    float lod_offset; /* level = half log2 of a cell's solid angle + this */
 };
 
 void wenv_grazing_light_free(wenv_grazing_light *light)
 {
     if (!light)
         return;
-    for (size_t l = 0; l < light->levels; l++)
-        free(light->texels[l]);
+    wenv_oct_pyramid_free(&light->pyramid);
     free(light);
 }
 
 size_t wenv_grazing_light_bytes(const wenv_grazing_light *light)
 {
-    size_t b = 0;
-    for (size_t l = 0; light && l < light->levels; l++)
-        b += light->side[l] * light->side[l] * 3 * sizeof(float);
-    return b;
+    return light ? wenv_oct_pyramid_bytes(&light->pyramid) : 0;
 }
 
 wenv_status wenv_grazing_light_create(wenv_grazing_light **out, const wenv_envmap *env, const size_t *excluded,
                                       size_t n_excluded, wenv_error *err)
 {
     *out = NULL;
-    double pixels = (double)wenv_envmap_width(env) * (double)wenv_envmap_height(env);
-    size_t base = BASE_MIN;
-    while (base < BASE_MAX && 2.0 * (double)(2 * base) * (double)(2 * base) <= pixels)
-        base *= 2;
     wenv_grazing_light *light = calloc(1, sizeof *light);
     if (!light)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the grazing lighting");
-    for (size_t side = base; side >= TOP_SIDE && light->levels < MAX_LEVELS; side /= 2) {
-        light->side[light->levels] = side;
-        light->texels[light->levels] = malloc(side * side * 3 * sizeof(float));
-        if (!light->texels[light->levels]) {
-            wenv_grazing_light_free(light);
-            return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the grazing lighting");
-        }
-        light->levels++;
-    }
-    if (wenv_oct_from_envmap(env, base, light->texels[0], excluded, n_excluded, err)) {
-        wenv_grazing_light_free(light);
+    if (wenv_oct_pyramid_build(&light->pyramid, env, excluded, n_excluded, err)) {
+        free(light);
         return err->status;
     }
-    /* each coarser texel the mean of its four children (the octahedral square nests) */
-    for (size_t l = 1; l < light->levels; l++) {
-        size_t n = light->side[l], m = light->side[l - 1];
-        const float *src = light->texels[l - 1];
-        float *dst = light->texels[l];
-        for (size_t j = 0; j < n; j++)
-            for (size_t i = 0; i < n; i++)
-                for (int c = 0; c < 3; c++)
-                    dst[3 * (j * n + i) + c] =
-                        0.25f * (src[3 * ((2 * j) * m + 2 * i) + c] + src[3 * ((2 * j) * m + 2 * i + 1) + c] +
-                                 src[3 * ((2 * j + 1) * m + 2 * i) + c] + src[3 * ((2 * j + 1) * m + 2 * i + 1) + c]);
-    }
     /* a base texel covers about 4 pi / base^2 */
-    light->lod_offset = (float)(log2((double)base) - 0.5 * log2(4.0 * M_PI));
+    light->lod_offset = (float)(log2((double)light->pyramid.side[0]) - 0.5 * log2(4.0 * M_PI));
     *out = light;
     return WENV_OK;
 }
@@ -86,8 +50,8 @@ static inline void level_bilinear(const wenv_grazing_light *light, size_t l, flo
 {
     uint32_t idx[4];
     float w[4];
-    wenv_oct_bilinear_f((long)light->side[l], u, v, idx, w);
-    const float *t = light->texels[l];
+    wenv_oct_bilinear_f((long)light->pyramid.side[l], u, v, idx, w);
+    const float *t = light->pyramid.texels[l];
     for (int k = 0; k < 4; k++) {
         const float *p = t + 3 * (size_t)idx[k];
         float s = w_level * w[k];
@@ -243,7 +207,7 @@ void wenv_grazing_shade(const wenv_grazing_rule *rule, const wenv_grazing_light 
         e = ENTRIES - 2;
     float f = pos - (float)e, g = 1.0f - f;
     const float *a = rule->nodes + e * rule->n_nodes * NODE_FLOATS, *b = a + rule->n_nodes * NODE_FLOATS;
-    float top = (float)(light->levels - 1), acc[3] = {0.0f, 0.0f, 0.0f};
+    float top = (float)(light->pyramid.levels - 1), acc[3] = {0.0f, 0.0f, 0.0f};
     for (size_t k = 0; k < rule->n_nodes; k++, a += NODE_FLOATS, b += NODE_FLOATS) {
         float w[3] = {g * a[3] + f * b[3], g * a[4] + f * b[4], g * a[5] + f * b[5]};
         if (!(w[0] + w[1] + w[2] > 0.0f))

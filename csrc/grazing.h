@@ -27,8 +27,7 @@
 /* The lighting as an octahedral mip pyramid (radiance, strength applied). */
 typedef struct wenv_grazing_light wenv_grazing_light;
 
-/* The base level's side is the largest power of two with at least two of the environment's pixels
- * per texel (32 .. 1024); `excluded` as for wenv_oct_from_envmap. */
+/* The pyramid of wenv_oct_pyramid_build; `excluded` as for wenv_oct_from_envmap. */
 wenv_status wenv_grazing_light_create(wenv_grazing_light **out, const wenv_envmap *env, const size_t *excluded,
                                       size_t n_excluded, wenv_error *err);
 void wenv_grazing_light_free(wenv_grazing_light *light);

@@ -1,5 +1,6 @@
 #include "octfilter.h"
 
+#include <math.h>
 #include <omp.h>
 #include <stdint.h>
 #include <stdlib.h>
@@ -135,5 +136,64 @@ wenv_status wenv_oct_from_envmap(const wenv_envmap *env, size_t side, float *tex
         }
     }
     free(acc);
+    return WENV_OK;
+}
+
+void wenv_oct_pyramid_free(wenv_oct_pyramid *p)
+{
+    for (size_t k = 0; k < p->levels; k++)
+        free(p->texels[k]);
+    memset(p, 0, sizeof *p);
+}
+
+size_t wenv_oct_pyramid_bytes(const wenv_oct_pyramid *p)
+{
+    size_t b = 0;
+    for (size_t k = 0; k < p->levels; k++)
+        b += p->side[k] * p->side[k] * 3 * sizeof(float);
+    return b;
+}
+
+wenv_status wenv_oct_pyramid_build(wenv_oct_pyramid *p, const wenv_envmap *env, const size_t *excluded, size_t n_excluded,
+                                   wenv_error *err)
+{
+    memset(p, 0, sizeof *p);
+    double npix = (double)(wenv_envmap_width(env) * wenv_envmap_height(env));
+    size_t base = 64;
+    while (base < 512 && (double)(base * base) < npix)
+        base *= 2;
+    for (size_t s = base; s >= 2; s /= 2) {
+        p->side[p->levels] = s;
+        p->texels[p->levels] = malloc(s * s * 3 * sizeof(float));
+        if (!p->texels[p->levels]) {
+            wenv_oct_pyramid_free(p);
+            return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the environment pyramid");
+        }
+        p->levels++;
+    }
+    if (wenv_oct_from_envmap(env, base, p->texels[0], excluded, n_excluded, err)) {
+        wenv_oct_pyramid_free(p);
+        return err->status;
+    }
+    for (size_t k = 1; k < p->levels; k++) {
+        size_t s = p->side[k], fs = p->side[k - 1];
+        const float *fine = p->texels[k - 1];
+        float *coarse = p->texels[k];
+#pragma omp parallel for schedule(dynamic, 16)
+        for (size_t t = 0; t < s * s; t++) {
+            size_t i = t % s, j = t / s;
+            double acc[3] = {0, 0, 0}, wsum = 0.0;
+            for (size_t c = 0; c < 4; c++) {
+                size_t fi = 2 * i + (c & 1), fj = 2 * j + (c >> 1);
+                double w = wenv_oct_texel_solid_angle(fs, fi, fj);
+                const float *f = fine + 3 * (fj * fs + fi);
+                for (int ch = 0; ch < 3; ch++)
+                    acc[ch] += w * f[ch];
+                wsum += w;
+            }
+            for (int ch = 0; ch < 3; ch++)
+                coarse[3 * t + ch] = (float)(acc[ch] / wsum);
+        }
+    }
     return WENV_OK;
 }

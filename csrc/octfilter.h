@@ -18,4 +18,19 @@ wenv_status wenv_oct_from_envmap(const wenv_envmap *env, size_t side, float *tex
                                  size_t n_excluded, wenv_error *err);
 
 
+/* Mip pyramid of the environment on octahedral maps, level k of side base >> k down to 2: level 0
+ * as fine as the environment (a power of two in [64, 512] with about a pixel per texel, made by
+ * wenv_oct_from_envmap with `excluded` black), each coarser texel the solid-angle-weighted mean of
+ * its four children (the octahedral square nests). */
+typedef struct {
+    size_t levels;
+    size_t side[16];
+    float *texels[16];
+} wenv_oct_pyramid;
+
+wenv_status wenv_oct_pyramid_build(wenv_oct_pyramid *p, const wenv_envmap *env, const size_t *excluded, size_t n_excluded,
+                                   wenv_error *err);
+void wenv_oct_pyramid_free(wenv_oct_pyramid *p);
+size_t wenv_oct_pyramid_bytes(const wenv_oct_pyramid *p);
+
 #endif

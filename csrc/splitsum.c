@@ -13,12 +13,7 @@
 #include "rotation.h"
 #include "sh.h"
 
-/* Mip pyramid of the environment on octahedral maps, level k of side base >> k (down to 2). */
-typedef struct {
-    size_t levels;
-    size_t side[16];
-    float *texels[16];
-} pyramid;
+typedef wenv_oct_pyramid pyramid;
 
 struct wenv_splitsum {
     wenv_splitsum_quality q;
@@ -54,18 +49,12 @@ wenv_status wenv_splitsum_quality_check(const wenv_splitsum_quality *q, wenv_err
     return WENV_OK;
 }
 
-static void pyramid_free(pyramid *p)
-{
-    for (size_t k = 0; k < p->levels; k++)
-        free(p->texels[k]);
-    memset(p, 0, sizeof *p);
-}
 
 void wenv_splitsum_free(wenv_splitsum *ss)
 {
     if (!ss)
         return;
-    pyramid_free(&ss->src);
+    wenv_oct_pyramid_free(&ss->src);
     free(ss->lobes);
     free(ss->lut);
     free(ss->prefilter);
@@ -85,50 +74,6 @@ wenv_status wenv_splitsum_create(wenv_splitsum **out, const wenv_splitsum_qualit
     return WENV_OK;
 }
 
-/* Level 0 about as fine as the environment (a power of two in [64, 512]); each coarser texel the
- * solid-angle-weighted mean of its four children. */
-static wenv_status pyramid_build(pyramid *p, const wenv_envmap *env, wenv_error *err)
-{
-    memset(p, 0, sizeof *p);
-    double npix = (double)(wenv_envmap_width(env) * wenv_envmap_height(env));
-    size_t base = 64;
-    while (base < 512 && (double)(base * base) < npix)
-        base *= 2;
-    for (size_t s = base; s >= 2; s /= 2) {
-        p->side[p->levels] = s;
-        p->texels[p->levels] = malloc(s * s * 3 * sizeof(float));
-        if (!p->texels[p->levels]) {
-            pyramid_free(p);
-            return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the environment pyramid");
-        }
-        p->levels++;
-    }
-    if (wenv_oct_from_envmap(env, base, p->texels[0], NULL, 0, err)) {
-        pyramid_free(p);
-        return err->status;
-    }
-    for (size_t k = 1; k < p->levels; k++) {
-        size_t s = p->side[k], fs = p->side[k - 1];
-        const float *fine = p->texels[k - 1];
-        float *coarse = p->texels[k];
-#pragma omp parallel for schedule(dynamic, 16)
-        for (size_t t = 0; t < s * s; t++) {
-            size_t i = t % s, j = t / s;
-            double acc[3] = {0, 0, 0}, wsum = 0.0;
-            for (size_t c = 0; c < 4; c++) {
-                size_t fi = 2 * i + (c & 1), fj = 2 * j + (c >> 1);
-                double w = wenv_oct_texel_solid_angle(fs, fi, fj);
-                const float *f = fine + 3 * (fj * fs + fi);
-                for (int ch = 0; ch < 3; ch++)
-                    acc[ch] += w * f[ch];
-                wsum += w;
-            }
-            for (int ch = 0; ch < 3; ch++)
-                coarse[3 * t + ch] = (float)(acc[ch] / wsum);
-        }
-    }
-    return WENV_OK;
-}
 
 static void bilinear_fetch(const float *texels, size_t side, double u, double v, double rgb[3])
 {
@@ -283,10 +228,10 @@ wenv_status wenv_splitsum_set_environment(wenv_splitsum *ss, const wenv_envmap *
     double t0 = now_seconds();
     pyramid src;
     double sh9[9 * 3];
-    if (pyramid_build(&src, env, err))
+    if (wenv_oct_pyramid_build(&src, env, NULL, 0, err))
         return err->status;
     if (wenv_sh_project_envmap(env, 2, sh9, NULL, err)) {
-        pyramid_free(&src);
+        wenv_oct_pyramid_free(&src);
         return err->status;
     }
     double t1 = now_seconds();
@@ -295,19 +240,19 @@ wenv_status wenv_splitsum_set_environment(wenv_splitsum *ss, const wenv_envmap *
         size_t P = ss->q.prefilter;
         pre = malloc(ss->n_lobes * P * P * 3 * sizeof(float));
         if (!pre) {
-            pyramid_free(&src);
+            wenv_oct_pyramid_free(&src);
             return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for prefiltered maps");
         }
         if (prefilter_all(ss, &src, ss->lobes, ss->n_lobes, pre, progress, err)) {
             free(pre);
-            pyramid_free(&src);
+            wenv_oct_pyramid_free(&src);
             return err->status;
         }
         free(ss->prefilter);
         ss->prefilter = pre;
         ss->stats.prefilter_seconds = now_seconds() - t1;
     }
-    pyramid_free(&ss->src);
+    wenv_oct_pyramid_free(&ss->src);
     ss->src = src;
     memcpy(ss->irradiance_sh, sh9, sizeof sh9);
     ss->stats.environment_seconds = t1 - t0;
