@@ -43,6 +43,9 @@ typedef struct {
 #define WENV_ROUGHNESS_MAX 10.0
 #define WENV_IOR_MAX 10.0
 
+/* cos(89.9 deg): the lowest view that shading tabulates a lobe for; views beyond read its limit. */
+#define WENV_GRAZING_Z 0.0017453283658983088
+
 /* The struct tag lets bindings.h forward-declare `struct wenv_material` without including this file. */
 typedef struct wenv_material {
     double diffuse[3]; /* Lambertian albedo: f_d = diffuse / pi */

@@ -71,8 +71,6 @@ static inline void level_bilinear(const wenv_grazing_light *light, size_t l, flo
  * reaches: near the horizon the rule's azimuth map follows tan(theta), which changes by its own size
  * within a step of cos(theta). */
 #define ENTRIES 128
-/* cos(89.9 deg): views beyond read the last entry, as the shader's BRDF slices do */
-#define GRAZING_Z 0.0017453283658983088
 
 struct wenv_grazing_rule {
     size_t n_nodes;
@@ -93,8 +91,6 @@ size_t wenv_grazing_rule_bytes(const wenv_grazing_rule *rule)
 {
     return rule ? ENTRIES * rule->n_nodes * NODE_FLOATS * sizeof(float) : 0;
 }
-
-size_t wenv_grazing_rule_nodes(const wenv_grazing_rule *rule) { return rule ? rule->n_nodes : 0; }
 
 static int lobe_is_black(const wenv_lobe *lobe)
 {
@@ -129,12 +125,12 @@ wenv_status wenv_grazing_rule_create(wenv_grazing_rule **out, const wenv_materia
     rule->threshold = (float)threshold;
     /* the blend is 0 from rho = 2 threshold up */
     double c_hi = 2.0 * threshold / (double)rule->rho_scale - m_min;
-    if (!(c_hi > GRAZING_Z)) { /* the local map resolves this material's lobes at every view */
+    if (!(c_hi > WENV_GRAZING_Z)) { /* the local map resolves this material's lobes at every view */
         free(wi);
         wenv_grazing_rule_free(rule);
         return WENV_OK;
     }
-    double log_hi = log(fmin(c_hi, 1.0)), log_lo = log(GRAZING_Z);
+    double log_hi = log(fmin(c_hi, 1.0)), log_lo = log(WENV_GRAZING_Z);
     rule->log_c_hi = (float)log_hi;
     rule->dlog_c = (float)((log_hi - log_lo) / (ENTRIES - 1));
     rule->nodes = malloc(ENTRIES * rule->n_nodes * NODE_FLOATS * sizeof(float));

@@ -42,8 +42,6 @@ wenv_status wenv_grazing_rule_create(wenv_grazing_rule **out, const wenv_materia
                                      double threshold, wenv_error *err);
 void wenv_grazing_rule_free(wenv_grazing_rule *rule);
 size_t wenv_grazing_rule_bytes(const wenv_grazing_rule *rule);
-/* Nodes per vertex (all lobes). */
-size_t wenv_grazing_rule_nodes(const wenv_grazing_rule *rule);
 
 /* Share of the per-vertex result at cos(view) cos_v: 1 for narrow lobes near grazing, 0 where the
  * local map resolves every lobe. */

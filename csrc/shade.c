@@ -51,7 +51,7 @@ struct wenv_shader {
     int have_mat;
     wenv_material *mat;      /* for the direct lights */
     float *lobe_cos_h_min;   /* per lobe: below this n.h its D is negligible (< 1e-7 of its peak) */
-    float *albedo;           /* ALBEDO_N x 3: specular albedo at cos(view) = GRAZING_Z .. 1 */
+    float *albedo;           /* ALBEDO_N x 3: specular albedo at cos(view) = WENV_GRAZING_Z .. 1 */
     float *view_inv_albedo;  /* nv x 3: 1 / albedo of each view sample (0 where the albedo is 0) */
     float diffuse_over_pi[3];
     wenv_grazing_rule *grazing_rule; /* NULL: no lobe is integrated per vertex */
@@ -70,8 +70,6 @@ struct wenv_shader {
 #define READY 1
 #define USED 2
 
-/* cos(89.9 deg): the lowest view a BRDF slice is made for */
-#define GRAZING_Z 0.0017453283658983088
 /* Entries of the specular albedo table, uniform in cos(view): 1/256 apart is 0.22 degrees at the
  * horizon, where the albedo changes fastest. */
 #define ALBEDO_N 257
@@ -549,7 +547,7 @@ static wenv_status lobe_cutoffs(wenv_shader *sh, const wenv_material *mat, wenv_
 /* Specular albedo at cos(view) = c, linear in the table. */
 static inline void albedo_at(const float *table, float c, float a[3])
 {
-    float x = (c - (float)GRAZING_Z) * (float)(ALBEDO_N - 1) / (1.0f - (float)GRAZING_Z);
+    float x = (c - (float)WENV_GRAZING_Z) * (float)(ALBEDO_N - 1) / (1.0f - (float)WENV_GRAZING_Z);
     x = x < 0.0f ? 0.0f : (x > (float)(ALBEDO_N - 1) ? (float)(ALBEDO_N - 1) : x);
     long i = (long)x;
     if (i > ALBEDO_N - 2)
@@ -576,7 +574,7 @@ static wenv_status albedo_tables(wenv_shader *sh, const wenv_material *mat, wenv
     atomic_int failed = 0;
 #pragma omp parallel for schedule(dynamic, 4)
     for (size_t i = 0; i < ALBEDO_N; i++) {
-        double c = GRAZING_Z + (1.0 - GRAZING_Z) * (double)i / (double)(ALBEDO_N - 1);
+        double c = WENV_GRAZING_Z + (1.0 - WENV_GRAZING_Z) * (double)i / (double)(ALBEDO_N - 1);
         double wo[3] = {sqrt(fmax(0.0, 1.0 - c * c)), 0.0, c};
         for (size_t l = 0; l < mat->n_lobes; l++) {
             double a;
@@ -640,11 +638,11 @@ wenv_status wenv_shader_set_material(wenv_shader *sh, const wenv_material *mat, 
                 wenv_hemi_decode(-1.0 + 2.0 * (double)(j % (V + 1)) / (double)V,
                                  -1.0 + 2.0 * (double)(j / (V + 1)) / (double)V, wo);
                 /* a view exactly on the horizon sees nothing; its limit is what interpolation needs */
-                if (wo[2] < GRAZING_Z) {
-                    double s = sqrt((1.0 - GRAZING_Z * GRAZING_Z) / (wo[0] * wo[0] + wo[1] * wo[1]));
+                if (wo[2] < WENV_GRAZING_Z) {
+                    double s = sqrt((1.0 - WENV_GRAZING_Z * WENV_GRAZING_Z) / (wo[0] * wo[0] + wo[1] * wo[1]));
                     wo[0] *= s;
                     wo[1] *= s;
-                    wo[2] = GRAZING_Z;
+                    wo[2] = WENV_GRAZING_Z;
                 }
                 wenv_material_specular_cos_batch(mat, wo, sh->quad_dirs, sh->quad_count, fcos);
                 memset(slice, 0, nl * 3 * sizeof(float));

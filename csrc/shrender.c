@@ -10,8 +10,6 @@
 #include "maps.h"
 #include "sh.h"
 
-/* cos(89.9 deg): the lowest view a BRDF slice is made for, as in the wavelet method */
-#define GRAZING_Z 0.0017453283658983088
 
 struct wenv_shrender {
     wenv_shrender_quality q;
@@ -42,7 +40,7 @@ static double now_seconds(void)
     return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
-static double max_view_theta(void) { return acos(GRAZING_Z); }
+static double max_view_theta(void) { return acos(WENV_GRAZING_Z); }
 
 wenv_status wenv_shrender_quality_check(const wenv_shrender_quality *q, wenv_error *err)
 {
