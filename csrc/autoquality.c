@@ -12,10 +12,10 @@
 /* global, local, normals, views, coefficients, light_coefficients (0: all, slicing keeps every
  * term anyway), matrix_epsilon (unused by slicing), lights, light_threshold, grazing */
 static const wenv_quality LADDER[WENV_AUTO_LEVELS] = {
-    {32, 16, 16, 8, 64, 0, 1e-3, 8, 256, 0},
-    {64, 32, 32, 16, 128, 0, 1e-3, 16, 256, 0},
-    {128, 64, 32, 16, 256, 0, 1e-4, 64, 256, 0},
-    {128, 64, 64, 32, 512, 0, 1e-4, 128, 256, 0},
+    {32, 16, 16, 8, 64, 0, 1e-3, 64, 256, 0},
+    {64, 32, 32, 16, 128, 0, 1e-3, 128, 256, 0},
+    {128, 64, 32, 16, 256, 0, 1e-4, 512, 256, 0},
+    {128, 64, 64, 32, 512, 0, 1e-4, 1024, 256, 0},
 };
 
 /* Median relative RMSE over the bundled HDRIs per level (rows) at roughness 0.05, 0.1, 0.2, 0.5
@@ -59,7 +59,7 @@ size_t wenv_auto_level_bytes(size_t i, size_t used_normals)
 #define CONTRAST_FACTOR 16.0
 static wenv_status contrast(const wenv_envmap *env, double *out, double *lights_share, wenv_error *err)
 {
-    const size_t k = 8 * 16;
+    const size_t k = LADDER[1].lights;
     size_t w = wenv_envmap_width(env), h = wenv_envmap_height(env);
     wenv_bright_pixel *bright = malloc(k * sizeof *bright);
     if (!bright)

@@ -18,9 +18,11 @@ typedef struct {
 } preset;
 
 static const preset PRESETS[] = {
-    {"draft", {32, 16, 16, 8, 32, 256, 1e-3, 8, 256, 0}},
-    {"default", {64, 32, 32, 16, 128, 1024, 1e-3, 16, 256, 0}},
-    {"high", {128, 64, 64, 32, 512, 0, 1e-4, 128, 256, 0}},
+    {"draft", {32, 16, 16, 8, 32, 256, 1e-3, 64, 256, 0}},
+    {"default", {64, 32, 32, 16, 128, 1024, 1e-3, 128, 256, 0}},
+    /* high: every pixel above 8x the mean radiance (up to 4096) exact, and narrow lobes at grazing
+     * per vertex -- what brings m >= 0.1 within 1 % on the bundled HDRIs (README, accuracy) */
+    {"high", {128, 64, 64, 32, 512, 0, 1e-4, 4096, 8, 6}},
 };
 #define N_PRESETS (sizeof PRESETS / sizeof PRESETS[0])
 

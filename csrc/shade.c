@@ -11,6 +11,7 @@
 
 #include "grazing.h"
 #include "haar.h"
+#include "lights.h"
 #include "maps.h"
 #include "octfilter.h"
 #include "rotation.h"
@@ -34,9 +35,7 @@ struct wenv_shader {
     float **slices;          /* ns pointers to nl x 3 Haar coefficients, NULL until needed */
     float *irradiance;       /* ns x 3 */
     float radiance_max[3];   /* brightest texel of the lighting the slices see (lights out) */
-    size_t direct_count;     /* pixels taken out as exact directional lights */
-    float *direct_dir;       /* direct_count x 3, world */
-    float *direct_flux;      /* direct_count x 3: radiance x solid angle */
+    wenv_lights *lights;     /* pixels taken out as exact directional lights (lights.h) */
     unsigned char *slice_ready, *slice_need; /* ready: 0 stale, READY, or USED (see READY) */
     wenv_grazing_light *grazing_light; /* quality.grazing > 0 only */
 
@@ -51,6 +50,8 @@ struct wenv_shader {
     int have_mat;
     wenv_material *mat;      /* for the direct lights */
     float *lobe_cos_h_min;   /* per lobe: below this n.h its D is negligible (< 1e-7 of its peak) */
+    double light_cone_cos;   /* lights farther than this from the mirror direction miss every lobe */
+    double lobe_m_min;       /* the narrowest lobe's roughness (picks the lights' cluster level) */
     float *albedo;           /* ALBEDO_N x 3: specular albedo at cos(view) = WENV_GRAZING_Z .. 1 */
     float *view_inv_albedo;  /* nv x 3: 1 / albedo of each view sample (0 where the albedo is 0) */
     float diffuse_over_pi[3];
@@ -160,8 +161,7 @@ void wenv_shader_free(wenv_shader *sh)
             free(sh->slices[s]);
     free(sh->slices);
     free(sh->irradiance);
-    free(sh->direct_dir);
-    free(sh->direct_flux);
+    wenv_lights_free(sh->lights);
     wenv_grazing_light_free(sh->grazing_light);
     free(sh->slice_ready);
     free(sh->slice_need);
@@ -358,62 +358,6 @@ static wenv_status remake_ready(wenv_shader *sh, int slices, wenv_error *err)
     return fill_needed(sh, err);
 }
 
-/* Bright pixels considered per light, and the radius of a light: neighbouring pixels of one sun
- * within it become one light at their flux-weighted centre.  A source of radius r seen through a
- * lobe of width w (about 2 m radians) is off by about (r / w)^2 / 2 as a point: 0.2 % at m = 0.1. */
-#define PIXELS_PER_LIGHT 8
-#define LIGHT_RADIUS_COS 0.99997563 /* cos(0.4 deg) */
-
-/* Greedy clustering of the bright pixels (brightest first): each joins the first light whose
- * brightest pixel is within LIGHT_RADIUS of it, or starts a new one while fewer than max_lights
- * exist; pixels left over stay in the environment.  Writes the lights' unit directions and fluxes
- * and the pixels taken out; returns the number of lights. */
-static size_t cluster_lights(const wenv_bright_pixel *px, size_t n, size_t max_lights, float *dir, float *flux,
-                             size_t *excluded, size_t *n_excluded)
-{
-    *n_excluded = 0;
-    size_t *seed = malloc((max_lights ? max_lights : 1) * sizeof *seed);
-    double *acc = calloc((max_lights ? max_lights : 1) * 6, sizeof *acc); /* weighted direction, flux */
-    if (!seed || !acc) { /* no lights is always a valid answer */
-        free(seed);
-        free(acc);
-        return 0;
-    }
-    size_t nl = 0;
-    for (size_t i = 0; i < n; i++) {
-        const float *d = px[i].dir;
-        size_t c = 0;
-        while (c < nl) {
-            const float *o = px[seed[c]].dir;
-            if ((double)d[0] * o[0] + (double)d[1] * o[1] + (double)d[2] * o[2] >= LIGHT_RADIUS_COS)
-                break;
-            c++;
-        }
-        if (c == nl) {
-            if (nl == max_lights)
-                continue;
-            seed[nl++] = i;
-        }
-        double w = ((double)px[i].flux[0] + px[i].flux[1] + px[i].flux[2]) / 3.0;
-        for (int k = 0; k < 3; k++) {
-            acc[6 * c + k] += w * d[k];
-            acc[6 * c + 3 + k] += px[i].flux[k];
-        }
-        excluded[(*n_excluded)++] = px[i].pixel;
-    }
-    for (size_t c = 0; c < nl; c++) {
-        double *a = acc + 6 * c, len = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
-        for (int k = 0; k < 3; k++) {
-            /* a black cluster (all weights 0) keeps its seed's direction */
-            dir[3 * c + k] = len > 0.0 ? (float)(a[k] / len) : px[seed[c]].dir[k];
-            flux[3 * c + k] = (float)a[3 + k];
-        }
-    }
-    free(seed);
-    free(acc);
-    return nl;
-}
-
 static int compare_size(const void *a, const void *b)
 {
     size_t x = *(const size_t *)a, y = *(const size_t *)b;
@@ -430,23 +374,25 @@ wenv_status wenv_shader_set_environment(wenv_shader *sh, const wenv_envmap *env,
     uint32_t *idx = malloc(ng * sizeof(uint32_t));
     float *rgb = NULL;
     wenv_status st = WENV_OK;
-    size_t nlights = sh->q.lights, npixels = PIXELS_PER_LIGHT * nlights, nexcluded = 0;
+    size_t npixels = sh->q.lights;
     wenv_bright_pixel *bright = malloc((npixels ? npixels : 1) * sizeof *bright);
     size_t *excluded = malloc((npixels ? npixels : 1) * sizeof *excluded);
-    float *ddir = malloc((nlights ? nlights : 1) * 3 * sizeof(float));
-    float *dflux = malloc((nlights ? nlights : 1) * 3 * sizeof(float));
-    if (!texels || !scratch || !mag || !work || !idx || !bright || !excluded || !ddir || !dflux) {
+    wenv_lights *lights = NULL;
+    if (!texels || !scratch || !mag || !work || !idx || !bright || !excluded) {
         st = wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the environment");
         goto done;
     }
     npixels = wenv_envmap_brightest(env, npixels, sh->q.light_threshold, bright);
-    nlights = cluster_lights(bright, npixels, nlights, ddir, dflux, excluded, &nexcluded);
-    qsort(excluded, nexcluded, sizeof *excluded, compare_size);
-    if ((st = wenv_oct_from_envmap(env, G, texels, excluded, nexcluded, err)))
+    if ((st = wenv_lights_create(&lights, bright, npixels, err)))
+        goto done;
+    for (size_t i = 0; i < npixels; i++)
+        excluded[i] = bright[i].pixel;
+    qsort(excluded, npixels, sizeof *excluded, compare_size);
+    if ((st = wenv_oct_from_envmap(env, G, texels, excluded, npixels, err)))
         goto done;
     if (sh->q.grazing > 0.0) {
         wenv_grazing_light *gl;
-        if ((st = wenv_grazing_light_create(&gl, env, excluded, nexcluded, err)))
+        if ((st = wenv_grazing_light_create(&gl, env, excluded, npixels, err)))
             goto done;
         wenv_grazing_light_free(sh->grazing_light);
         sh->grazing_light = gl;
@@ -486,12 +432,9 @@ wenv_status wenv_shader_set_environment(wenv_shader *sh, const wenv_envmap *env,
     memcpy(sh->radiance_max, peak, sizeof peak);
     idx = NULL;
     rgb = NULL;
-    free(sh->direct_dir);
-    free(sh->direct_flux);
-    sh->direct_dir = ddir;
-    sh->direct_flux = dflux;
-    sh->direct_count = nlights;
-    ddir = dflux = NULL;
+    wenv_lights_free(sh->lights);
+    sh->lights = lights;
+    lights = NULL;
     sh->have_env = 1;
     st = remake_ready(sh, 1, err);
 done:
@@ -503,8 +446,7 @@ done:
     free(rgb);
     free(bright);
     free(excluded);
-    free(ddir);
-    free(dflux);
+    wenv_lights_free(lights);
     return st;
 }
 
@@ -541,6 +483,14 @@ static wenv_status lobe_cutoffs(wenv_shader *sh, const wenv_material *mat, wenv_
         i = i < STEPS ? i + 1 : STEPS;
         sh->lobe_cos_h_min[k] = i >= STEPS ? -1.0f : (float)cos(0.5 * M_PI * i / STEPS);
     }
+    /* A half-vector theta_h from the normal turns the mirror direction by at most 2 theta_h. */
+    double theta_h = 0.0;
+    sh->lobe_m_min = 1.0;
+    for (size_t k = 0; k < mat->n_lobes; k++) {
+        theta_h = fmax(theta_h, acos(fmax(-1.0, fmin(1.0, (double)sh->lobe_cos_h_min[k]))));
+        sh->lobe_m_min = fmin(sh->lobe_m_min, mat->lobes[k].roughness);
+    }
+    sh->light_cone_cos = 2.0 * theta_h >= M_PI ? -1.0 : cos(2.0 * theta_h);
     return WENV_OK;
 }
 
@@ -794,69 +744,25 @@ static int compute_slice(wenv_shader *sh, size_t s, float *pixel_work, double *r
     return 0;
 }
 
-/* Plain comparisons: fminf/fmaxf are library calls on x86-64 (their NaN rules have no single
- * instruction), and these run per vertex and light. */
-static inline float min_f(float a, float b) { return a < b ? a : b; }
-static inline float max_f(float a, float b) { return a > b ? a : b; }
 
-/* The direct lights at one vertex: irradiance into e (the diffuse term scales it) and the specular
- * lobes' reflected radiance into s.  A light off every lobe (n.h below the lobe's cut) costs a
- * few dot products; one inside is evaluated exactly in float (wenv_material_specular_cos_f), with
- * the view's own terms computed once per vertex. */
-#define MAX_DIRECT_LOBES 16
+/* The exact lights at one vertex: irradiance into e (the diffuse term scales it) and the specular
+ * lobes' reflected radiance into s, each from the coarsest cluster level its lobe allows.  Towards
+ * grazing a lobe narrows to about 2 m cos(theta_v) in azimuth, so there the pixels are read. */
 static void shade_direct(const wenv_shader *sh, const float n[3], const float v[3], float co, float e[3],
                          float s[3])
 {
     const wenv_material *mat = sh->mat;
-    /* any frame with +Z the normal will do: the lobes are isotropic */
-    float so = sqrtf(max_f(0.0f, 1.0f - co * co)), wo[3] = {so, 0.0f, co};
-    float k_o[MAX_DIRECT_LOBES];
-    int have_k = 0;
-    for (size_t i = 0; i < sh->direct_count; i++) {
-        const float *l = sh->direct_dir + 3 * i, *flux = sh->direct_flux + 3 * i;
-        float ci = n[0] * l[0] + n[1] * l[1] + n[2] * l[2];
-        if (!(ci > 0.0f))
-            continue;
-        e[0] += ci * flux[0];
-        e[1] += ci * flux[1];
-        e[2] += ci * flux[2];
-        if (!mat->n_lobes)
-            continue;
-        float lv = l[0] * v[0] + l[1] * v[1] + l[2] * v[2], h2 = 2.0f + 2.0f * lv;
-        if (!(h2 > 1e-12f))
-            continue;
-        float ch = (ci + co) / sqrtf(h2);
-        int near = 0;
-        for (size_t k = 0; k < mat->n_lobes; k++)
-            near |= ch >= sh->lobe_cos_h_min[k];
-        if (!near)
-            continue;
-        float si = sqrtf(max_f(0.0f, 1.0f - ci * ci));
-        float cphi = si * so > 1e-6f ? (lv - ci * co) / (si * so) : 1.0f;
-        cphi = min_f(1.0f, max_f(-1.0f, cphi));
-        float wi[3] = {si * cphi, si * sqrtf(1.0f - cphi * cphi), ci}, rgb[3];
-        if (mat->n_lobes > MAX_DIRECT_LOBES) { /* rare: no room for the view terms, use the double path */
-            double wid[3] = {wi[0], wi[1], wi[2]}, wod[3] = {wo[0], wo[1], wo[2]}, rgbd[3];
-            wenv_material_specular_cos(mat, wid, wod, rgbd);
-            for (int c = 0; c < 3; c++)
-                rgb[c] = (float)rgbd[c];
-        } else {
-            if (!have_k) {
-                wenv_material_view_k_f(mat, wo, k_o);
-                have_k = 1;
-            }
-            wenv_material_specular_cos_f(mat, wi, wo, k_o, rgb);
-        }
-        s[0] += rgb[0] * flux[0];
-        s[1] += rgb[1] * flux[1];
-        s[2] += rgb[2] * flux[2];
-    }
+    if (mat->diffuse[0] != 0.0 || mat->diffuse[1] != 0.0 || mat->diffuse[2] != 0.0)
+        wenv_lights_irradiance(sh->lights, wenv_lights_level(WENV_LIGHT_IRRADIANCE_WIDTH), n, e);
+    if (mat->n_lobes)
+        wenv_lights_specular(sh->lights, wenv_lights_level(2.0 * sh->lobe_m_min * co), mat, sh->lobe_cos_h_min,
+                             sh->light_cone_cos, n, v, co, s);
 }
 
 static void shade_vertex(const wenv_shader *sh, const vertex_taps *tp, float *o)
 {
     float e[3] = {0, 0, 0}, m[3] = {0, 0, 0}, s[3] = {0, 0, 0};
-    if (sh->direct_count)
+    if (wenv_lights_count(sh->lights, 0))
         shade_direct(sh, tp->n, tp->v, tp->cos_v, e, s);
     for (int k = 0; k < 4; k++) {
         const float *ir = sh->irradiance + 3 * (size_t)tp->sample[k];
@@ -1076,7 +982,7 @@ void wenv_shader_get_stats(const wenv_shader *sh, wenv_shader_stats *stats)
     stats->slices_ready = slices;
     stats->pairs_ready = pairs;
     stats->light_terms = sh->light_count;
-    stats->direct_lights = sh->direct_count;
+    stats->direct_lights = wenv_lights_count(sh->lights, 0);
     stats->slice_bytes = slices * sh->nl * 3 * sizeof(float);
     stats->table_bytes = sh->ns * sh->nv * (3 * sizeof(float) + 2);
     stats->brdf_bytes = sh->stats.brdf_terms_total * 4 * sizeof(float);

@@ -23,7 +23,8 @@
  * interpolation between samples spread its highlight over neighbouring views and normals.  The
  * brightest pixels (at most quality.lights of them, each brighter than light_threshold times the
  * mean radiance) are therefore taken out of the lighting before the transform and shaded per vertex
- * as exact directional lights with the material's own BRDF.
+ * as exact directional lights with the material's own BRDF, in clusters as coarse as the lobe
+ * allows (lights.h).
  *
  * Grazing: near grazing a narrow lobe is squeezed below the local map's resolution; with
  * quality.grazing > 0 such lobes are integrated per vertex over a mip pyramid of the same lighting

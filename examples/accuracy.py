@@ -3,7 +3,7 @@ HDRIs, for Lambert and Cook-Torrance m = 0.05, 0.1, 0.2, 0.5, over a fixed set o
 (normal, view) pairs.
 
     .venv/bin/python examples/accuracy.py                 # error table per preset, out/accuracy.json
-    .venv/bin/python examples/accuracy.py --presets high,high+grazing
+    .venv/bin/python examples/accuracy.py --presets high,high-grazing,high-lights
     .venv/bin/python examples/accuracy.py --make-reference   # recompute tests/data/accuracy_reference.npz
 
 The reference values (wenv.reference: every pixel, its exact solid angle) take about 20 ms per pair
@@ -30,9 +30,12 @@ MATERIALS = {
 }
 PAIRS = 2000
 SEED = 2006
-# Settings beyond the presets: `high` with narrow lobes integrated per vertex at grazing views
-# (quality key `grazing`, csrc/grazing.h).
-SETTINGS = {"high+grazing": {**wenv.QUALITY_PRESETS["high"], "grazing": 4.0}}
+# What each of `high`'s two per-vertex parts buys: `high` without the grazing path, and `high` with
+# only the sun-sized share of exact lights the lower presets take (pixels above 256x the mean).
+SETTINGS = {
+    "high-grazing": {**wenv.QUALITY_PRESETS["high"], "grazing": 0.0},
+    "high-lights": {**wenv.QUALITY_PRESETS["high"], "lights": 1024, "light_threshold": 256.0},
+}
 
 
 def make_pairs(n=PAIRS, seed=SEED):
@@ -96,7 +99,7 @@ def evaluate(presets, method=None):
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--make-reference", action="store_true")
-    ap.add_argument("--presets", default="draft,default,high,high+grazing",
+    ap.add_argument("--presets", default="draft,default,high,high-grazing,high-lights",
                     help="comma-separated presets, or " + ", ".join(SETTINGS))
     ap.add_argument("--method", default=None,
                     help="default: rotation, except slicing for high (its matrices take far longer to build)")

@@ -64,7 +64,10 @@ def short_label(method, q):
     """The settings that matter for each method, compactly."""
     if method in ("rotation", "slicing"):
         s = f"{q['global']}/{q['local']}/{q['normals']} v{q['views']} c{q['coefficients']}"
-        return s + (f" lc{q['light_coefficients']}" if q["light_coefficients"] else "")
+        s += f" lc{q['light_coefficients']}" if q["light_coefficients"] else ""
+        # lights beyond the suns (threshold under 256x the mean) and the grazing path, as in `high`
+        s += f" L{q['lights']}@{q['light_threshold']:g}" if q["light_threshold"] < 256 else ""
+        return s + (f" g{q['grazing']:g}" if q.get("grazing") else "")
     if method == "split_sum":
         return f"p{q['prefilter']} s{q['samples']} t{q['lut']}"
     return f"L{q['order']} v{q['views']}"
