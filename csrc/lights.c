@@ -50,14 +50,6 @@ size_t wenv_lights_count(const wenv_lights *lights, int level)
     return lights && level >= 0 && level < WENV_LIGHT_LEVELS ? lights->level[level].count : 0;
 }
 
-size_t wenv_lights_bytes(const wenv_lights *lights)
-{
-    size_t b = 0;
-    for (int k = 0; lights && k < WENV_LIGHT_LEVELS; k++)
-        b += sizeof(light_level) + lights->level[k].count * 7 * sizeof(float);
-    return b;
-}
-
 int wenv_lights_level(double width)
 {
     for (int k = WENV_LIGHT_LEVELS - 1; k > 0; k--)

@@ -38,7 +38,6 @@ wenv_status wenv_lights_create(wenv_lights **out, const wenv_bright_pixel *px, s
 void wenv_lights_free(wenv_lights *lights);
 /* Lights at a level (level 0: the pixels). */
 size_t wenv_lights_count(const wenv_lights *lights, int level);
-size_t wenv_lights_bytes(const wenv_lights *lights);
 
 /* The coarsest level whose cluster radius is at most WENV_LIGHT_WIDTH_FRACTION of a lobe
  * `width` radians wide. */
