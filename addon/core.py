@@ -788,7 +788,8 @@ def shade_objects(scene, depsgraph, objects, view, blend_data, progress=None):
             chose = f"spherical harmonics of order {choice['sh_order']}"
         else:
             q = wenv.AUTO_LADDER[choice["level"]]
-            chose = f"{q['global']}/{q['local']}/{q['normals']}, views {q['views']}"
+            chose = ("the High preset" if q == wenv.QUALITY_PRESETS["high"]
+                     else f"{q['global']}/{q['local']}/{q['normals']}, views {q['views']}")
         plan.notes.append(f"'{name}': Auto chose {chose} "
                           f"(predicted error {100 * choice['predicted_error']:.2g} %"
                           + ("" if choice["met"] else f", above the {100 * choice['target_error']:.2g} % target") + ")")

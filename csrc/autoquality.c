@@ -1,38 +1,49 @@
 #include "autoquality.h"
 
 #include <math.h>
+#include <omp.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 
+#include "lights.h"
 #include "maps.h"
+#include "octfilter.h"
 #include "sh.h"
 
 
 /* global, local, normals, views, coefficients, light_coefficients (0: all, slicing keeps every
- * term anyway), matrix_epsilon (unused by slicing), lights, light_threshold, grazing */
+ * term anyway), matrix_epsilon (unused by slicing), lights, light_threshold, grazing.  The last
+ * level is the "high" preset: bright extended features as exact lights and the grazing path. */
 static const wenv_quality LADDER[WENV_AUTO_LEVELS] = {
     {32, 16, 16, 8, 64, 0, 1e-3, 64, 256, 0},
     {64, 32, 32, 16, 128, 0, 1e-3, 128, 256, 0},
     {128, 64, 32, 16, 256, 0, 1e-4, 512, 256, 0},
     {128, 64, 64, 32, 512, 0, 1e-4, 1024, 256, 0},
+    {128, 64, 64, 32, 512, 0, 1e-4, 4096, 8, 6},
 };
 
 /* Median relative RMSE over the bundled HDRIs per level (rows) at roughness 0.05, 0.1, 0.2, 0.5
  * and for Lambert (last column), from examples/auto_quality.py --calibrate. */
 static const double ROUGHNESS[4] = {0.05, 0.1, 0.2, 0.5};
 static const double MEDIAN_ERROR[WENV_AUTO_LEVELS][5] = {
-    {0.33261, 0.17655, 0.11943, 0.07144, 0.01686},
-    {0.15948, 0.08371, 0.04078, 0.02345, 0.00470},
-    {0.12508, 0.04692, 0.02797, 0.01540, 0.00339},
-    {0.07568, 0.02614, 0.01426, 0.00728, 0.00136},
+    {0.32900, 0.17647, 0.11939, 0.06811, 0.01686},
+    {0.16130, 0.08381, 0.04074, 0.02249, 0.00470},
+    {0.11329, 0.04728, 0.02807, 0.01541, 0.00292},
+    {0.07523, 0.02680, 0.01422, 0.00729, 0.00125},
+    {0.00612, 0.00190, 0.00355, 0.00417, 0.00102},
 };
-/* Error factor of an environment: MARGIN ((1 - l) + SLOPE c) with l the share of its flux shaded
- * as exact lights (no error of their own, so the relative error of the rest shrinks by 1 - l) and c
- * its contrast; fitted to the eight bundled HDRIs' errors relative to their median
- * (examples/auto_quality.py), MARGIN so that few are underestimated. */
-#define CONTRAST_SLOPE 4.0
-#define CONTRAST_MARGIN 1.2
+/* A level's error under an environment is its median error times
+ *     SCALE ((1 - l) + CONTRAST_SLOPE c) / (1 + d)^DOMINANCE_POWER
+ * with l the share of the flux its lights take (exact: the rest carries the error), c the share in
+ * bright extended features it leaves in the lighting, and d its lights' dominance of the reflected
+ * signal under the narrowest lobe (estimate_levels).  The constants are fitted on the bundled
+ * HDRIs (examples/auto_quality.py --fit): the target met wherever some level meets it, and as few
+ * levels picked too high as that allows. */
+#define ERROR_SCALE 1.65
+#define CONTRAST_SLOPE 10.0
+#define DOMINANCE_POWER 0.25
+#define ENV_FACTOR_MAX 8.0
 
 const wenv_quality *wenv_auto_level(size_t i)
 {
@@ -47,32 +58,140 @@ size_t wenv_auto_level_bytes(size_t i, size_t used_normals)
     size_t table = ns * nv * (3 * sizeof(float) + 2);         /* radiance and two flags per pair */
     size_t slices = made * nl * 3 * sizeof(float) + ns * (3 + 12) * sizeof(float); /* + irradiance, frames */
     size_t brdf = nv * q->coefficients * 4 * sizeof(float);  /* index and RGB per kept term */
-    return table + slices + brdf + ng * 3 * sizeof(float);
+    size_t lights = q->lights * WENV_LIGHT_LEVELS * 7 * sizeof(float); /* direction, flux, span per cluster level */
+    size_t grazing = q->grazing > 0.0 ? 512 * 512 * 3 * sizeof(float) * 4 / 3 : 0; /* its pyramid, at most */
+    return table + slices + brdf + ng * 3 * sizeof(float) + lights + grazing;
 }
 
-/* Fraction of the environment's flux held by pixels brighter than CONTRAST_FACTOR times its mean
- * radiance, once the brightest pixels (those a shader takes out as exact lights) are out: bright,
- * extended, hard-edged features -- softboxes, sunlit walls, sky through leaves -- that neither the
- * lights nor a wavelet map of a few degrees per texel resolve.  On the bundled HDRIs: studio 0.70,
- * courtyard 0.33, forest 0.16 (2 - 5 times the median error at every level), interior 0.09, night,
- * sunrise, city and sunset 0.002 - 0.03 (0.3 - 1 times). */
+/* Pixels brighter than CONTRAST_FACTOR times the mean radiance that a level does not take out as
+ * lights: bright, extended, hard-edged features -- softboxes, sunlit walls, sky through leaves --
+ * that a wavelet map of a few degrees per texel resolves worst. */
 #define CONTRAST_FACTOR 16.0
-static wenv_status contrast(const wenv_envmap *env, double *out, double *lights_share, wenv_error *err)
+
+/* Exact lights leave no error of their own, and under a narrow lobe a light's reflection is a
+ * bright spot that dominates the signal's mean square (which relative RMSE divides by) far beyond
+ * its share of the flux: a lamp or a sun reflected at m = 0.1 is hundreds of times the mean.  The
+ * lights' weight is the ratio of mean squares, lights alone against the rest, of the lighting
+ * averaged over octahedral texels about as wide as the reflected lobe: DOMINANCE_TEXELS / m
+ * texels on a side (texels of about 1.8 m radians). */
+#define DOMINANCE_TEXELS 2.0
+#define DOMINANCE_MAX 1e6
+#define DOMINANCE_GRID_MAX 64 /* texels on a side: DOMINANCE_TEXELS / m for m >= 0.05, with room */
+
+/* One pyramid level of the lighting with every candidate light out (black), with each texel's
+ * solid angle, the texel each candidate falls in, and room to gather lights per texel. */
+typedef struct {
+    size_t side;
+    const float *texels;
+    double *solid_angle, *lit, *other;
+    size_t *texel_of; /* per candidate light */
+} dominance_grid;
+
+static void grid_free(dominance_grid *g)
 {
-    const size_t k = LADDER[1].lights;
-    size_t w = wenv_envmap_width(env), h = wenv_envmap_height(env);
-    wenv_bright_pixel *bright = malloc(k * sizeof *bright);
-    if (!bright)
-        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory estimating the environment");
-    size_t nb = wenv_envmap_brightest(env, k, LADDER[1].light_threshold, bright);
-    /* flux with strength applied throughout, as the lights' own fluxes are */
-    double total = wenv_envmap_flux(env), strength = wenv_envmap_strength(env);
-    if (!(total > 0.0)) { /* black (or zero strength): nothing is hard */
-        free(bright);
-        *out = *lights_share = 0.0;
-        return WENV_OK;
+    free(g->solid_angle);
+    free(g->lit);
+    free(g->other);
+    free(g->texel_of);
+}
+
+static int grid_init(dominance_grid *g, const wenv_oct_pyramid *p, size_t level, const wenv_bright_pixel *bright,
+                     size_t nb)
+{
+    size_t n = p->side[level];
+    g->side = n;
+    g->texels = p->texels[level];
+    g->solid_angle = malloc(n * n * sizeof(double));
+    g->lit = malloc(n * n * sizeof(double));
+    g->other = malloc(n * n * sizeof(double));
+    g->texel_of = malloc((nb ? nb : 1) * sizeof(size_t));
+    if (!g->solid_angle || !g->lit || !g->other || !g->texel_of)
+        return -1;
+    for (size_t t = 0; t < n * n; t++)
+        g->solid_angle[t] = wenv_oct_texel_solid_angle(n, t % n, t / n);
+    for (size_t k = 0; k < nb; k++) {
+        double d[3] = {bright[k].dir[0], bright[k].dir[1], bright[k].dir[2]}, u, v;
+        wenv_oct_encode(d, &u, &v);
+        size_t i = (size_t)fmin((double)(n - 1), fmax(0.0, floor((u + 1.0) * 0.5 * (double)n)));
+        size_t j = (size_t)fmin((double)(n - 1), fmax(0.0, floor((v + 1.0) * 0.5 * (double)n)));
+        g->texel_of[k] = j * n + i;
     }
-    double cut = CONTRAST_FACTOR * total / (4.0 * M_PI) / strength;
+    return 0;
+}
+
+/* Mean square of a level's lights (the first nl candidates) over that of the rest of the lighting
+ * (the other candidates back in), on a grid: every candidate's flux spread over its texel. */
+static double light_dominance_at(dominance_grid *g, const wenv_bright_pixel *bright, size_t nl, size_t nb)
+{
+    size_t nt = g->side * g->side;
+    memset(g->lit, 0, nt * sizeof(double));
+    memset(g->other, 0, nt * sizeof(double));
+    for (size_t k = 0; k < nb; k++) {
+        double flux = ((double)bright[k].flux[0] + bright[k].flux[1] + bright[k].flux[2]) / 3.0;
+        (k < nl ? g->lit : g->other)[g->texel_of[k]] += flux;
+    }
+    double rest = 0.0, lit = 0.0;
+    for (size_t t = 0; t < nt; t++) {
+        const float *x = g->texels + 3 * t;
+        double sa = g->solid_angle[t], r = ((double)x[0] + x[1] + x[2]) / 3.0 + g->other[t] / sa;
+        rest += r * r * sa;
+        lit += g->lit[t] * g->lit[t] / sa;
+    }
+    if (!(rest > 0.0))
+        return lit > 0.0 ? DOMINANCE_MAX : 0.0;
+    return fmin(DOMINANCE_MAX, lit / rest);
+}
+
+static int by_pixel(const void *a, const void *b)
+{
+    size_t x = *(const size_t *)a, y = *(const size_t *)b;
+    return (x > y) - (x < y);
+}
+
+/* Per level: the flux share of its lights, the share of the bright extended features it leaves in
+ * the lighting, and (for a material with lobes, of narrowest roughness m > 0) its lights'
+ * dominance.  One search for the brightest pixels serves every level, as each level's lights are
+ * the brightest pixels above its threshold, up to its budget: a prefix of that list. */
+static wenv_status estimate_levels(const wenv_envmap *env, double m, wenv_auto_level_estimate *est, wenv_error *err)
+{
+    size_t k = 0;
+    double relative = INFINITY;
+    for (size_t i = 0; i < WENV_AUTO_LEVELS; i++) {
+        k = LADDER[i].lights > k ? LADDER[i].lights : k;
+        relative = fmin(relative, LADDER[i].light_threshold);
+    }
+    double total = wenv_envmap_flux(env), strength = wenv_envmap_strength(env);
+    if (!(total > 0.0)) /* black (or zero strength): nothing to resolve */
+        return WENV_OK;
+    wenv_bright_pixel *bright = malloc((k ? k : 1) * sizeof *bright);
+    size_t *excluded = malloc((k ? k : 1) * sizeof *excluded);
+    wenv_oct_pyramid pyramid = {0};
+    dominance_grid grid[2] = {{0}, {0}};
+    double blend = 0.0; /* between grid[0] and grid[1], in log side */
+    wenv_status st = WENV_OK;
+    if (!bright || !excluded) {
+        st = wenv_error_set(err, WENV_ERR_NOMEM, "out of memory estimating the environment");
+        goto done;
+    }
+    size_t nb = wenv_envmap_brightest(env, k, relative, bright);
+    if (m > 0.0) {
+        /* the lighting without any candidate light, at the two pyramid levels about
+         * DOMINANCE_TEXELS / m texels on a side */
+        for (size_t i = 0; i < nb; i++)
+            excluded[i] = bright[i].pixel;
+        qsort(excluded, nb, sizeof *excluded, by_pixel);
+        if ((st = wenv_oct_pyramid_build(&pyramid, env, excluded, nb, DOMINANCE_GRID_MAX, err)))
+            goto done;
+        double x = fmin(fmax(log2((double)pyramid.side[0] * m / DOMINANCE_TEXELS), 0.0), (double)(pyramid.levels - 1));
+        size_t lo = (size_t)floor(x), hi = lo + 1 < pyramid.levels ? lo + 1 : lo;
+        blend = x - (double)lo;
+        if (grid_init(&grid[0], &pyramid, lo, bright, nb) || grid_init(&grid[1], &pyramid, hi, bright, nb)) {
+            st = wenv_error_set(err, WENV_ERR_NOMEM, "out of memory estimating the environment");
+            goto done;
+        }
+    }
+    double mean = total / (4.0 * M_PI), cut = CONTRAST_FACTOR * mean / strength;
+    size_t w = wenv_envmap_width(env), h = wenv_envmap_height(env);
     const float *px = wenv_envmap_pixels(env);
     double bright_flux = 0.0;
     for (size_t row = 0; row < h; row++)
@@ -82,25 +201,49 @@ static wenv_status contrast(const wenv_envmap *env, double *out, double *lights_
                 bright_flux += wenv_envmap_pixel_solid_angle(env, row, col) * ((double)p[0] + p[1] + p[2]) / 3.0;
         }
     bright_flux *= strength;
-    double light_flux = 0.0; /* the lights are shaded exactly */
-    for (size_t i = 0; i < nb; i++)
-        light_flux += ((double)bright[i].flux[0] + bright[i].flux[1] + bright[i].flux[2]) / 3.0;
+    for (size_t i = 0; i < WENV_AUTO_LEVELS; i++) {
+        size_t nl = 0;
+        double light_flux = 0.0, bright_lights = 0.0;
+        while (nl < nb && nl < LADDER[i].lights && (double)bright[nl].radiance > LADDER[i].light_threshold * mean) {
+            double f = ((double)bright[nl].flux[0] + bright[nl].flux[1] + bright[nl].flux[2]) / 3.0;
+            light_flux += f;
+            if ((double)bright[nl].radiance > CONTRAST_FACTOR * mean)
+                bright_lights += f;
+            nl++;
+        }
+        est[i].lights_share = fmin(1.0, light_flux / total);
+        est[i].contrast = fmin(1.0, fmax(0.0, (bright_flux - bright_lights) / total));
+        if (m > 0.0 && nl) {
+            double a = log1p(light_dominance_at(&grid[0], bright, nl, nb));
+            double b = log1p(light_dominance_at(&grid[1], bright, nl, nb));
+            est[i].light_dominance = expm1(a + blend * (b - a));
+        }
+    }
+done:
+    grid_free(&grid[0]);
+    grid_free(&grid[1]);
+    wenv_oct_pyramid_free(&pyramid);
+    free(excluded);
     free(bright);
-    *out = total > 0.0 ? fmin(1.0, fmax(0.0, (bright_flux - light_flux) / total)) : 0.0;
-    *lights_share = total > 0.0 ? fmin(1.0, fmax(0.0, light_flux / total)) : 0.0;
-    return WENV_OK;
+    return st;
 }
 
-/* Measured error of a level for a material: Lambert's column without lobes, else the narrowest
- * lobe's roughness, interpolated linearly in log roughness and clamped to the measured range. */
-static double level_error(size_t level, const wenv_material *mat)
+/* The narrowest lobe's roughness (0 for a material without lobes). */
+static double narrowest_roughness(const wenv_material *mat)
+{
+    double m = 0.0;
+    for (size_t l = 0; l < mat->n_lobes; l++)
+        m = l ? fmin(m, mat->lobes[l].roughness) : mat->lobes[l].roughness;
+    return m;
+}
+
+/* Median error of a level at roughness m (0: Lambert's column), interpolated linearly in log
+ * roughness and clamped to the measured range. */
+static double level_error(size_t level, double m)
 {
     const double *e = MEDIAN_ERROR[level];
-    if (!mat->n_lobes)
+    if (!(m > 0.0))
         return e[4];
-    double m = mat->lobes[0].roughness;
-    for (size_t l = 1; l < mat->n_lobes; l++)
-        m = fmin(m, mat->lobes[l].roughness);
     if (m <= ROUGHNESS[0])
         return e[0];
     if (m >= ROUGHNESS[3])
@@ -198,6 +341,7 @@ wenv_status wenv_auto_choose(const wenv_envmap *env, const wenv_material *mat, d
                              const float *normals, size_t n, wenv_auto_choice *out, wenv_error *err)
 {
     memset(out, 0, sizeof *out);
+    double start = omp_get_wtime();
     if (!(target > 0.0 && target <= 1.0))
         return wenv_error_set(err, WENV_ERR_VALUE, "target_error must be in (0, 1], got %g", target);
     if (!mat->n_lobes) {
@@ -211,6 +355,7 @@ wenv_status wenv_auto_choose(const wenv_envmap *env, const wenv_material *mat, d
                 out->predicted_error = e;
                 out->met = 1;
                 out->level_bytes = sh_bytes(out->sh_order);
+                out->seconds = omp_get_wtime() - start;
                 return WENV_OK;
             }
         }
@@ -221,13 +366,20 @@ wenv_status wenv_auto_choose(const wenv_envmap *env, const wenv_material *mat, d
     if (wenv_auto_level_bytes(0, used[0]) > memory_budget)
         return wenv_error_set(err, WENV_ERR_VALUE, "memory_budget of %zu bytes is below the cheapest setting's %zu",
                               memory_budget, wenv_auto_level_bytes(0, used[0]));
-    if (contrast(env, &out->contrast, &out->lights_share, err))
+    double m = narrowest_roughness(mat);
+    /* the lobe's width within the calibrated range decides which texels the dominance averages */
+    if (estimate_levels(env, m > 0.0 ? fmin(fmax(m, ROUGHNESS[0]), ROUGHNESS[3]) : 0.0, out->levels, err))
         return err->status;
-    out->env_factor = fmin(8.0, CONTRAST_MARGIN * ((1.0 - out->lights_share) + CONTRAST_SLOPE * out->contrast));
+    for (size_t i = 0; i < WENV_AUTO_LEVELS; i++) {
+        wenv_auto_level_estimate *e = &out->levels[i];
+        e->env_factor = fmin(ENV_FACTOR_MAX, ERROR_SCALE * ((1.0 - e->lights_share) + CONTRAST_SLOPE * e->contrast) /
+                                                 pow(1.0 + e->light_dominance, DOMINANCE_POWER));
+        e->predicted_error = level_error(i, m) * e->env_factor;
+    }
     size_t best = 0;
     for (size_t i = 0; i < WENV_AUTO_LEVELS && wenv_auto_level_bytes(i, used[i]) <= memory_budget; i++) {
         best = i;
-        if (level_error(i, mat) * out->env_factor <= target) {
+        if (out->levels[i].predicted_error <= target) {
             out->met = 1;
             break;
         }
@@ -236,6 +388,7 @@ wenv_status wenv_auto_choose(const wenv_envmap *env, const wenv_material *mat, d
     out->quality = LADDER[best];
     out->used_normals = used[best];
     out->level_bytes = wenv_auto_level_bytes(best, used[best]);
-    out->predicted_error = level_error(best, mat) * out->env_factor;
+    out->predicted_error = out->levels[best].predicted_error;
+    out->seconds = omp_get_wtime() - start;
     return WENV_OK;
 }

@@ -9,10 +9,14 @@
  *   - the lobe width: the measured error of the level, interpolated in log roughness at the
  *     narrowest lobe (clamped to the measured range; a material without lobes reads the Lambert
  *     column);
- *   - the environment: the share of its flux shaded as exact lights (which carry no error, so the
- *     relative error shrinks) and the share in bright extended features (pixels above 16 times the
- *     mean radiance that are not lights), which a wavelet map of a few degrees per texel resolves
- *     worst, scale the prediction.
+ *   - the environment, per level: the share of its flux the level's lights take (exact, so the
+ *     relative error of the rest shrinks), the share in bright extended features the level leaves
+ *     in the lighting (pixels above 16 times the mean radiance that are not its lights), which a
+ *     wavelet map of a few degrees per texel resolves worst, and how far its lights' reflections
+ *     dominate the reflected signal under the narrowest lobe (mean squares of the lights and of
+ *     the rest over octahedral texels as wide as the lobe), which is what relative RMSE divides by.
+ *
+ * The last level is the "high" preset, so auto reaches its accuracy where the scene needs it.
  *
  * For glossy materials the chosen method is "slicing": at equal resolutions it shades a view
  * exactly as fast as "rotation" (both read the same table), it has no matrices to build or hold,
@@ -35,7 +39,7 @@
 #include "error.h"
 #include "shade.h"
 
-#define WENV_AUTO_LEVELS 4
+#define WENV_AUTO_LEVELS 5
 
 /* Level `i` of the ladder (0 <= i < WENV_AUTO_LEVELS). */
 const wenv_quality *wenv_auto_level(size_t i);
@@ -48,17 +52,25 @@ size_t wenv_auto_level_bytes(size_t i, size_t used_normals);
 #define WENV_AUTO_SH_ORDER_COUNT 8
 extern const size_t WENV_AUTO_SH_ORDERS[WENV_AUTO_SH_ORDER_COUNT];
 
+/* How a level is predicted to fare under the environment and material (autoquality.c). */
+typedef struct {
+    double lights_share;    /* flux share of the pixels it shades as exact lights */
+    double contrast;        /* flux share of the bright extended features it leaves in the lighting */
+    double light_dominance; /* its lights' mean square over the rest's, under the narrowest lobe */
+    double env_factor;      /* its error relative to its median over the bundled HDRIs */
+    double predicted_error; /* relative RMSE */
+} wenv_auto_level_estimate;
+
 typedef struct {
     size_t sh_order;        /* > 0: method "sh" at this order (a material without lobes) */
     size_t level;           /* else the chosen ladder level (method "slicing") */
     wenv_quality quality;
     double predicted_error; /* relative RMSE predicted at that level */
-    double contrast;        /* flux share of bright extended features (autoquality.c) */
-    double lights_share;    /* flux share of the pixels shaded as exact lights */
-    double env_factor;      /* contrast relative to the calibration set's median (clamped) */
+    wenv_auto_level_estimate levels[WENV_AUTO_LEVELS]; /* every level's (not filled for "sh") */
     int met;                /* whether some level within the budget is predicted to meet the target */
     size_t level_bytes;     /* the chosen level's memory, as counted against the budget */
     size_t used_normals;    /* its normal samples the mesh's normals fall near ((size_t)-1: all) */
+    double seconds;         /* what choosing took */
 } wenv_auto_choice;
 
 /* The cheapest level whose predicted error is at most `target` and whose memory is at most

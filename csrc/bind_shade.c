@@ -581,12 +581,26 @@ static PyObject *Shader_get_stats(ShaderObject *self, void *closure)
         PyObject *used = a->used_normals == (size_t)-1 || a->sh_order ? Py_NewRef(Py_None) : PyLong_FromSize_t(a->used_normals);
         PyObject *level = a->sh_order ? Py_NewRef(Py_None) : PyLong_FromSize_t(a->level);
         PyObject *order = a->sh_order ? PyLong_FromSize_t(a->sh_order) : Py_NewRef(Py_None);
-        PyObject *info = !used || !level || !order ? NULL : Py_BuildValue("{s:O,s:O,s:s,s:d,s:d,s:d,s:d,s:d,s:O,s:d,s:d,s:O}", "level", level, "sh_order", order,
+        const wenv_auto_level_estimate *chosen = &a->levels[a->level];
+        PyObject *levels = a->sh_order ? Py_NewRef(Py_None) : PyList_New(WENV_AUTO_LEVELS);
+        for (size_t i = 0; levels && !a->sh_order && i < WENV_AUTO_LEVELS; i++) {
+            const wenv_auto_level_estimate *e = &a->levels[i];
+            PyObject *li = Py_BuildValue("{s:d,s:d,s:d,s:d,s:d}", "predicted_error", e->predicted_error, "lights_share",
+                                         e->lights_share, "contrast", e->contrast, "light_dominance", e->light_dominance,
+                                         "env_factor", e->env_factor);
+            if (!li)
+                Py_CLEAR(levels);
+            else
+                PyList_SET_ITEM(levels, (Py_ssize_t)i, li);
+        }
+        PyObject *info = !used || !level || !order || !levels ? NULL : Py_BuildValue("{s:O,s:O,s:s,s:d,s:d,s:d,s:d,s:d,s:d,s:O,s:d,s:d,s:O,s:O,s:d}", "level", level, "sh_order", order,
                                        "method", a->sh_order ? "sh" : "slicing", "predicted_error", a->predicted_error, "target_error",
-                                       self->target_error, "contrast", a->contrast, "lights_share", a->lights_share,
-                                       "env_factor", a->env_factor,
+                                       self->target_error, "contrast", chosen->contrast, "lights_share", chosen->lights_share,
+                                       "light_dominance", chosen->light_dominance, "env_factor", chosen->env_factor,
                                        "met", a->met ? Py_True : Py_False, "memory_budget_mb", self->memory_budget_mb,
-                                       "level_mb", (double)a->level_bytes / 1048576.0, "used_normal_samples", used);
+                                       "level_mb", (double)a->level_bytes / 1048576.0, "used_normal_samples", used,
+                                       "levels", levels, "seconds", a->seconds);
+        Py_XDECREF(levels);
         Py_XDECREF(used);
         Py_XDECREF(level);
         Py_XDECREF(order);
@@ -634,8 +648,9 @@ static PyTypeObject ShaderType = {
               "table, Karis 2013; quality keys prefilter, samples, lut) and 'sh' (spherical harmonics, Kautz, "
               "Sloan and Snyder 2002; quality keys order, views); presets in wenv.PEER_QUALITY_PRESETS.  Their "
               "precomputation runs in set_environment and set_material, which then also report to progress.\n\n"
-              "quality='auto' picks the cheapest setting of wenv.AUTO_LADDER (method 'slicing') whose error is "
-              "predicted, from the narrowest lobe's roughness and the environment's wavelet compaction, to be at "
+              "quality='auto' picks the cheapest setting of wenv.AUTO_LADDER (method 'slicing'; its last level is "
+              "'high') whose error is predicted, from the narrowest lobe's roughness, the share of the flux the "
+              "level's exact lights take, the bright features they leave and how far their reflections dominate, to be at "
               "most target_error (relative RMSE) within memory_budget_mb, counting lighting slices only for the "
               "normal samples the mesh's normals (if given) fall near.  A material without lobes gets method "
               "'sh' at the lowest order of wenv.AUTO_SH_ORDERS whose irradiance error, known from the lighting's "

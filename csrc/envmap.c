@@ -513,17 +513,52 @@ static int brighter(const wenv_bright_pixel *a, const wenv_bright_pixel *b)
     return a->radiance > b->radiance || (a->radiance == b->radiance && a->pixel < b->pixel);
 }
 
-/* Inserts p into the sorted list top[0..*n) of capacity k. */
-static void keep_brightest(wenv_bright_pixel *top, size_t *n, size_t k, const wenv_bright_pixel *p)
+/* The k brightest seen so far as a heap whose root is the dimmest of them (n of capacity k):
+ * O(log k) per candidate, where a sorted list costs O(k) and a sun-lit scene has tens of
+ * thousands of candidates. */
+static void sift_down(wenv_bright_pixel *heap, size_t n, size_t i)
 {
-    if (*n == k && !brighter(p, &top[k - 1]))
-        return;
-    size_t i = *n < k ? (*n)++ : k - 1;
-    while (i > 0 && brighter(p, &top[i - 1])) {
-        top[i] = top[i - 1];
-        i--;
+    for (;;) {
+        size_t l = 2 * i + 1, r = l + 1, dim = i;
+        if (l < n && brighter(&heap[dim], &heap[l]))
+            dim = l;
+        if (r < n && brighter(&heap[dim], &heap[r]))
+            dim = r;
+        if (dim == i)
+            return;
+        wenv_bright_pixel t = heap[i];
+        heap[i] = heap[dim];
+        heap[dim] = t;
+        i = dim;
     }
-    top[i] = *p;
+}
+
+static void keep_brightest(wenv_bright_pixel *heap, size_t *n, size_t k, const wenv_bright_pixel *p)
+{
+    if (*n < k) {
+        size_t i = (*n)++;
+        heap[i] = *p;
+        while (i > 0 && brighter(&heap[(i - 1) / 2], &heap[i])) {
+            wenv_bright_pixel t = heap[i];
+            heap[i] = heap[(i - 1) / 2];
+            heap[(i - 1) / 2] = t;
+            i = (i - 1) / 2;
+        }
+    } else if (brighter(p, &heap[0])) {
+        heap[0] = *p;
+        sift_down(heap, k, 0);
+    }
+}
+
+static int cmp_brighter(const void *a, const void *b)
+{
+    return brighter(a, b) ? -1 : brighter(b, a) ? 1 : 0;
+}
+
+static int cmp_pixel(const void *a, const void *b)
+{
+    size_t x = ((const wenv_bright_pixel *)a)->pixel, y = ((const wenv_bright_pixel *)b)->pixel;
+    return (x > y) - (x < y);
 }
 
 /* Per-row flux and peak, once per image (they do not change with rotation or strength): the search
@@ -580,30 +615,38 @@ size_t wenv_envmap_brightest(const wenv_envmap *env, size_t k, double relative, 
         for (size_t col = 0; col < w; col++, p += 3) {
             float big = p[0] > p[1] ? p[0] : p[1];
             big = (big > p[2] ? big : p[2]) * strength;
-            if (!((double)big > threshold) || (n == k && big < out[k - 1].radiance))
+            if (!((double)big > threshold) || (n == k && big < out[0].radiance))
                 continue;
             if (env->projection != WENV_PROJ_EQUIRECT && !(wenv_envmap_pixel_solid_angle(env, row, col) > 0.0))
                 continue;
             wenv_bright_pixel b = {.pixel = row * w + col, .radiance = big};
-            if (n < k || brighter(&b, &out[k - 1]))
-                keep_brightest(out, &n, k, &b);
+            keep_brightest(out, &n, k, &b);
         }
     }
     /* direction and flux exactly as wenv_envmap_samples gives them, so that whoever takes these
-     * pixels out of a sum of samples takes out precisely what was put in */
+     * pixels out of a sum of samples takes out precisely what was put in; one pass per row */
     float *dirs = n ? malloc(w * 7 * sizeof(float)) : NULL;
     uint32_t *cols = n ? malloc(w * sizeof(uint32_t)) : NULL;
     if (n && (!dirs || !cols))
         n = 0;
-    for (size_t i = 0; i < n; i++) {
-        size_t row = out[i].pixel / w, col = out[i].pixel % w;
+    qsort(out, n, sizeof *out, cmp_pixel);
+    for (size_t i = 0; i < n;) {
+        size_t row = out[i].pixel / w, end = i;
+        while (end < n && out[end].pixel / w == row)
+            end++;
         size_t m = wenv_envmap_row_samples(env, row, dirs, dirs + 3 * w, dirs + 6 * w, cols);
-        for (size_t e = 0; e < m; e++)
-            if (cols[e] == col) {
-                memcpy(out[i].dir, dirs + 3 * e, sizeof out[i].dir);
-                memcpy(out[i].flux, dirs + 3 * w + 3 * e, sizeof out[i].flux);
+        for (size_t e = 0, j = i; e < m && j < end; e++) { /* both ascending in column */
+            while (j < end && out[j].pixel % w < cols[e])
+                j++; /* not a sample (cannot happen: checked above); its flux stays 0 */
+            if (j < end && out[j].pixel % w == cols[e]) {
+                memcpy(out[j].dir, dirs + 3 * e, sizeof out[j].dir);
+                memcpy(out[j].flux, dirs + 3 * w + 3 * e, sizeof out[j].flux);
+                j++;
             }
+        }
+        i = end;
     }
+    qsort(out, n, sizeof *out, cmp_brighter);
     free(dirs);
     free(cols);
     return n;

@@ -35,7 +35,7 @@ wenv_status wenv_grazing_light_create(wenv_grazing_light **out, const wenv_envma
     wenv_grazing_light *light = calloc(1, sizeof *light);
     if (!light)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the grazing lighting");
-    if (wenv_oct_pyramid_build(&light->pyramid, env, excluded, n_excluded, err)) {
+    if (wenv_oct_pyramid_build(&light->pyramid, env, excluded, n_excluded, 512, err)) {
         free(light);
         return err->status;
     }

@@ -155,13 +155,15 @@ size_t wenv_oct_pyramid_bytes(const wenv_oct_pyramid *p)
 }
 
 wenv_status wenv_oct_pyramid_build(wenv_oct_pyramid *p, const wenv_envmap *env, const size_t *excluded, size_t n_excluded,
-                                   wenv_error *err)
+                                   size_t max_side, wenv_error *err)
 {
     memset(p, 0, sizeof *p);
     double npix = (double)(wenv_envmap_width(env) * wenv_envmap_height(env));
     size_t base = 64;
-    while (base < 512 && (double)(base * base) < npix)
+    while (base < max_side && (double)(base * base) < npix)
         base *= 2;
+    while (base > 2 && base > max_side)
+        base /= 2;
     for (size_t s = base; s >= 2; s /= 2) {
         p->side[p->levels] = s;
         p->texels[p->levels] = malloc(s * s * 3 * sizeof(float));

@@ -19,9 +19,10 @@ wenv_status wenv_oct_from_envmap(const wenv_envmap *env, size_t side, float *tex
 
 
 /* Mip pyramid of the environment on octahedral maps, level k of side base >> k down to 2: level 0
- * as fine as the environment (a power of two in [64, 512] with about a pixel per texel, made by
- * wenv_oct_from_envmap with `excluded` black), each coarser texel the solid-angle-weighted mean of
- * its four children (the octahedral square nests). */
+ * as fine as the environment up to max_side (a power of two in [64, max_side] with about a pixel
+ * per texel, or max_side itself when that is below 64; made by wenv_oct_from_envmap with `excluded`
+ * black), each coarser texel the solid-angle-weighted mean of its four children (the octahedral
+ * square nests). */
 typedef struct {
     size_t levels;
     size_t side[16];
@@ -29,7 +30,7 @@ typedef struct {
 } wenv_oct_pyramid;
 
 wenv_status wenv_oct_pyramid_build(wenv_oct_pyramid *p, const wenv_envmap *env, const size_t *excluded, size_t n_excluded,
-                                   wenv_error *err);
+                                   size_t max_side, wenv_error *err);
 void wenv_oct_pyramid_free(wenv_oct_pyramid *p);
 size_t wenv_oct_pyramid_bytes(const wenv_oct_pyramid *p);
 

@@ -228,7 +228,7 @@ wenv_status wenv_splitsum_set_environment(wenv_splitsum *ss, const wenv_envmap *
     double t0 = now_seconds();
     pyramid src;
     double sh9[9 * 3];
-    if (wenv_oct_pyramid_build(&src, env, NULL, 0, err))
+    if (wenv_oct_pyramid_build(&src, env, NULL, 0, 512, err))
         return err->status;
     if (wenv_sh_project_envmap(env, 2, sh9, NULL, err)) {
         wenv_oct_pyramid_free(&src);

@@ -11,12 +11,15 @@ and writes out/auto_quality.json.
 
     .venv/bin/python examples/auto_quality.py [--pairs 2000] [--targets 0.01,0.02,0.05] [--repeats 5]
     .venv/bin/python examples/auto_quality.py --calibrate   # the error table auto's model is built on
+    .venv/bin/python examples/auto_quality.py --fit         # the environment factor's constants, from the JSON
 """
 import argparse
 import json
 import os
 import statistics
 import time
+
+import itertools
 
 import numpy as np
 
@@ -62,7 +65,11 @@ def main():
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--materials", default="lambert,m0.1,m0.2,m0.5")
     ap.add_argument("--calibrate", action="store_true", help="print the per-level error table (medians)")
+    ap.add_argument("--fit", action="store_true", help="fit the environment factor's constants to out/auto_quality.json")
+    ap.add_argument("--max-misses", type=int, default=0, help="--fit: cases auto may miss its target in")
     args = ap.parse_args()
+    if args.fit:
+        return fit(args.max_misses)
     wenv.set_num_threads(2)
     data = np.load(DATA)
     nrm, vw = data["normals"][:args.pairs], data["views"][:args.pairs]
@@ -111,12 +118,20 @@ def main():
                                                 2 * args.repeats + 1, method)
         print(name, "ms to the first shaded view by setting:", {sid: round(times[name, sid], 1) for sid in settings(name)},
               "; per new view:", {sid: round(view_times[name, sid], 1) for sid in settings(name)}, flush=True)
+    features = {}
     for h in HDRIS:
         env = wenv.load_environment(bundled_hdri(h))
         for name in names:
             for t in targets:
                 chosen[h, name, t] = wenv.Shader(env, material(MATERIALS[name]), quality="auto",
                                                  target_error=t).stats["auto"]
+            if MATERIALS[name]["lobes"]:  # every level's estimate (the same at every target)
+                features[f"{h}/{name}"] = chosen[h, name, targets[0]]["levels"]
+    # what choosing itself costs (stats["auto"]["seconds"]: the estimates, before any shading setting is built)
+    choose_ms = {f"{h}/{n}/{t}": 1e3 * a["seconds"] for (h, n, t), a in chosen.items()}
+    for kind in ("lambert", "lobes"):
+        v = [ms for k, ms in choose_ms.items() if (k.split("/")[1] == "lambert") == (kind == "lambert")]
+        print(f"ms auto spends choosing, {kind}: median {statistics.median(v):.1f}, max {max(v):.1f}", flush=True)
 
     if args.calibrate:
         print("median relative RMSE (%) over the HDRIs, per ladder level:")
@@ -159,11 +174,63 @@ def main():
               f"{sum(1 for x in reach if x['met'] and x['view_ratio'] <= 1.25)}")
     os.makedirs(OUT, exist_ok=True)
     with open(os.path.join(OUT, "auto_quality.json"), "w") as fp:
-        json.dump({"ladder": ladder, "rows": rows,
+        json.dump({"ladder": ladder, "rows": rows, "features": features, "choose_ms": choose_ms, "targets": targets,
                    "errors": {f"{h}/{n}/{lv}": e for (h, n, lv), e in errors.items()},
                    "times_ms": {f"{n}/{lv}": t for (n, lv), t in times.items()},
                    "view_times_ms": {f"{n}/{lv}": t for (n, lv), t in view_times.items()}}, fp, indent=1)
     print("wrote out/auto_quality.json")
+
+
+def fit(max_misses):
+    """Grid-fit auto's environment factor, SCALE ((1 - l) + SLOPE c) / (1 + d)^POWER (csrc/autoquality.c),
+    to the measured errors and every level's estimates in out/auto_quality.json: among the constants
+    that miss the target in at most `max_misses` reachable cases, those within 1.25x of the cheapest
+    sufficient level in the most.  Then the same fit leaving each HDRI out, scored on that HDRI."""
+    with open(os.path.join(OUT, "auto_quality.json")) as fp:
+        d = json.load(fp)
+    errors, times, feats = d["errors"], d["times_ms"], d["features"]
+    levels = range(len(d["ladder"]))
+    cases = sorted({tuple(k.split("/")) for k in feats})
+    hdris = sorted({h for h, _ in cases})
+    median = {(n, lv): statistics.median(errors[f"{h}/{n}/{lv}"] for h in hdris) for _, n in cases for lv in levels}
+
+    def score(scale, slope, power, only):
+        met = within = reach = 0
+        for (h, n), t in itertools.product(cases, d["targets"]):
+            if h not in only:
+                continue
+            f = feats[f"{h}/{n}"]
+            pred = [median[n, lv] * min(8.0, scale * ((1 - f[lv]["lights_share"]) + slope * f[lv]["contrast"])
+                                        / (1 + f[lv]["light_dominance"]) ** power) for lv in levels]
+            pick = next((lv for lv in levels if pred[lv] <= t), levels[-1])
+            ok = [lv for lv in levels if errors[f"{h}/{n}/{lv}"] <= t]
+            if not ok:
+                continue
+            reach += 1
+            cheapest = min(ok, key=lambda lv: times[f"{n}/{lv}"])
+            if errors[f"{h}/{n}/{pick}"] <= t:
+                met += 1
+                within += times[f"{n}/{pick}"] <= 1.25 * times[f"{n}/{cheapest}"]
+        return reach, met, within
+
+    grid = [(round(k, 2), s, p) for k in np.arange(0.5, 2.51, 0.05) for s in (2, 3, 4, 5, 6, 8, 10, 12, 15, 20)
+            for p in (0, 0.0625, 0.125, 0.1875, 0.25, 0.375, 0.5)]
+
+    def best(only):
+        scored = [(score(*g, only), g) for g in grid]
+        ok = [(r, g) for r, g in scored if r[0] - r[1] <= max_misses] or scored
+        return max(ok, key=lambda x: (x[0][2], x[0][1], -abs(x[1][0] - 1)))
+
+    (reach, met, within), g = best(hdris)
+    print(f"ERROR_SCALE {g[0]}  CONTRAST_SLOPE {g[1]}  DOMINANCE_POWER {g[2]}: of {reach} reachable cases "
+          f"met {met}, within 1.25x {within}")
+    tot = np.zeros(3, int)
+    for h in hdris:
+        _, g = best([x for x in hdris if x != h])
+        r = score(*g, [h])
+        tot += r
+        print(f"  fitted without {h}: {g} -> on {h}: reachable {r[0]}, met {r[1]}, within {r[2]}")
+    print(f"leave one HDRI out: reachable {tot[0]}, met {tot[1]}, within 1.25x {tot[2]}")
 
 
 if __name__ == "__main__":

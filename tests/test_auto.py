@@ -91,6 +91,25 @@ def test_meets_its_target(sunset, m, target):
     assert err <= target, (err, sh.stats["auto"])
 
 
+def test_every_level_is_estimated():
+    """Each level's estimate: lights take their share of the flux, and under a narrow lobe a sun's
+    reflection dominates the signal (so the relative error of the rest shrinks) more than under a
+    wide one.  The ladder ends at the high preset."""
+    sky = np.full((64, 128, 3), 0.5, np.float32)
+    sun = sky.copy()
+    sun[12, 40] = 2e5
+    info = {(name, m): wenv.Shader(wenv.Environment(env), glossy(m), quality="auto").stats["auto"]
+            for name, env in (("sky", sky), ("sun", sun)) for m in (0.1, 0.5)}
+    for a in info.values():
+        assert len(a["levels"]) == len(wenv.AUTO_LADDER)
+    narrow, wide = info["sun", 0.1]["levels"], info["sun", 0.5]["levels"]
+    for lv in range(len(wenv.AUTO_LADDER)):
+        assert 0.5 < narrow[lv]["lights_share"] < 1 and narrow[lv]["light_dominance"] > 2 * wide[lv]["light_dominance"] > 0
+        assert info["sky", 0.1]["levels"][lv]["lights_share"] == 0 == info["sky", 0.1]["levels"][lv]["light_dominance"]
+        assert narrow[lv]["predicted_error"] < info["sky", 0.1]["levels"][lv]["predicted_error"]
+    assert wenv.AUTO_LADDER[-1] == wenv.QUALITY_PRESETS["high"]
+
+
 def test_bad_arguments(sunset):
     for t in (0.0, -0.1, 1.5, float("nan")):
         with pytest.raises(ValueError, match="target_error"):
