@@ -110,6 +110,23 @@ def test_every_level_is_estimated():
     assert wenv.AUTO_LADDER[-1] == wenv.QUALITY_PRESETS["high"]
 
 
+def test_each_level_takes_its_brightest_pixels():
+    """Each level's lights are the brightest pixels above its threshold, up to its budget: with 300
+    candidates of distinct radiance in random order, the flux share of levels 0 and 1 is that of
+    the 64 and 128 brightest, and levels 2 - 4 take all 300."""
+    rng = np.random.default_rng(11)
+    img = np.full((256, 512, 3), 0.01, np.float32)
+    where = rng.choice(img.shape[0] * img.shape[1], 300, replace=False)
+    radiance = 1000.0 + rng.permutation(300) * 3.0
+    img.reshape(-1, 3)[where] = radiance[:, None]
+    env = wenv.Environment(img)
+    flux = img.mean(axis=2).ravel() * np.asarray(env.solid_angles(), np.float64).ravel()
+    brightest = where[np.argsort(-radiance)]
+    levels = wenv.Shader(env, glossy(0.2), quality="auto").stats["auto"]["levels"]
+    for level, count in zip(levels, (64, 128, 300, 300, 300)):
+        assert level["lights_share"] == pytest.approx(flux[brightest[:count]].sum() / flux.sum(), rel=1e-4)
+
+
 def test_bad_arguments(sunset):
     for t in (0.0, -0.1, 1.5, float("nan")):
         with pytest.raises(ValueError, match="target_error"):
