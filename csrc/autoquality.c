@@ -109,13 +109,8 @@ static int grid_init(dominance_grid *g, const wenv_oct_pyramid *p, size_t level,
         return -1;
     for (size_t t = 0; t < n * n; t++)
         g->solid_angle[t] = wenv_oct_texel_solid_angle(n, t % n, t / n);
-    for (size_t k = 0; k < nb; k++) {
-        double d[3] = {bright[k].dir[0], bright[k].dir[1], bright[k].dir[2]}, u, v;
-        wenv_oct_encode(d, &u, &v);
-        size_t i = (size_t)fmin((double)(n - 1), fmax(0.0, floor((u + 1.0) * 0.5 * (double)n)));
-        size_t j = (size_t)fmin((double)(n - 1), fmax(0.0, floor((v + 1.0) * 0.5 * (double)n)));
-        g->texel_of[k] = j * n + i;
-    }
+    for (size_t k = 0; k < nb; k++)
+        g->texel_of[k] = wenv_oct_texel_f(bright[k].dir, n);
     return 0;
 }
 

@@ -60,12 +60,7 @@ int wenv_lights_level(double width)
 
 static size_t bin_of(const float d[3])
 {
-    float u, v;
-    wenv_oct_encode_f(d, &u, &v);
-    long x = (long)((u + 1.0f) * 0.5f * BIN_SIDE), y = (long)((v + 1.0f) * 0.5f * BIN_SIDE);
-    x = x < 0 ? 0 : (x >= BIN_SIDE ? BIN_SIDE - 1 : x);
-    y = y < 0 ? 0 : (y >= BIN_SIDE ? BIN_SIDE - 1 : y);
-    return (size_t)(y * BIN_SIDE + x);
+    return wenv_oct_texel_f(d, BIN_SIDE);
 }
 
 /* Fills a level from n lights (directions and fluxes), sorting them into bins. */

@@ -54,6 +54,17 @@ static inline void wenv_oct_encode_f(const float d[3], float *u, float *v)
     *v = pv;
 }
 
+/* Index of the texel of an n x n octahedral map that unit direction d falls in. */
+static inline size_t wenv_oct_texel_f(const float d[3], size_t n)
+{
+    float u, v;
+    wenv_oct_encode_f(d, &u, &v);
+    long x = (long)((u + 1.0f) * 0.5f * (float)n), y = (long)((v + 1.0f) * 0.5f * (float)n), hi = (long)n - 1;
+    x = x < 0 ? 0 : (x > hi ? hi : x);
+    y = y < 0 ? 0 : (y > hi ? hi : y);
+    return (size_t)y * n + (size_t)x;
+}
+
 static inline void wenv_oct_bilinear_f(long n, float u, float v, uint32_t idx[4], float w[4])
 {
     float x = (u + 1.0f) * 0.5f * (float)n - 0.5f, y = (v + 1.0f) * 0.5f * (float)n - 0.5f;
