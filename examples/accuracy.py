@@ -21,6 +21,13 @@ import wenv
 from _common import OUT, ROOT, bundled_hdri, random_pairs
 
 DATA = os.path.join(ROOT, "tests", "data", "accuracy_reference.npz")
+# 6000 further pairs (another seed) for examples/auto_quality.py.  Over 2000 pairs a few grazing
+# views and reflections of the sun or a lamp hold most of a glossy error, and the error over one
+# run of 2000 and over another differ by 1.9x rms: a target met or missed would be decided by that,
+# so auto is judged on 8000.
+EXTRA_DATA = os.path.join(ROOT, "tests", "data", "accuracy_reference_extra.npz")
+EXTRA_PAIRS = 6000
+EXTRA_SEED = 2007
 HDRIS = ["city", "courtyard", "forest", "interior", "night", "studio", "sunrise", "sunset"]
 # Specular-only Cook-Torrance (no diffuse to hide the glossy error behind), a white Lambert.
 MATERIALS = {
@@ -52,18 +59,37 @@ def relative_rmse(a, b):
     return float(np.sqrt(np.mean((a - b) ** 2)) / np.sqrt(np.mean(b ** 2)))
 
 
-def make_reference():
-    nrm, v = make_pairs()
+def make_reference(path=DATA, n=PAIRS, seed=SEED):
+    """Reference values on n pairs drawn with seed, written to path.  Each HDRI/material is kept in
+    out/reference_parts/ as it is done, so a long run that stops can go on where it was."""
+    nrm, v = make_pairs(n, seed)
+    parts = os.path.join(OUT, "reference_parts", f"{n}_{seed}")
+    os.makedirs(parts, exist_ok=True)
     ref = {}
     for h in HDRIS:
         env = wenv.load_environment(bundled_hdri(h))
         for name, spec in MATERIALS.items():
-            t0 = time.perf_counter()
-            ref[f"{h}/{name}"] = wenv.reference(env, material(spec), nrm, v)
-            print(f"{h}/{name}: {time.perf_counter() - t0:.0f} s", flush=True)
-    os.makedirs(os.path.dirname(DATA), exist_ok=True)
-    np.savez_compressed(DATA, normals=nrm, views=v, materials=json.dumps(MATERIALS), hdris=json.dumps(HDRIS), **ref)
-    print("wrote", DATA)
+            part = os.path.join(parts, f"{h}_{name}.npy")
+            if not os.path.exists(part):
+                t0 = time.perf_counter()
+                np.save(part, wenv.reference(env, material(spec), nrm, v))
+                print(f"{h}/{name}: {time.perf_counter() - t0:.0f} s", flush=True)
+            ref[f"{h}/{name}"] = np.load(part)
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    np.savez_compressed(path, normals=nrm, views=v, materials=json.dumps(MATERIALS), hdris=json.dumps(HDRIS), **ref)
+    print("wrote", path)
+
+
+def load_reference(n=PAIRS):
+    """The first n pairs and their reference values: the 2000 of DATA, then those of EXTRA_DATA."""
+    data = [np.load(DATA)]
+    if n > PAIRS:
+        data.append(np.load(EXTRA_DATA))
+    keys = [k for k in data[0].files if k not in ("materials", "hdris")]
+    out = {k: np.concatenate([d[k] for d in data])[:n] for k in keys}
+    if len(out["normals"]) < n:
+        raise SystemExit(f"only {len(out['normals'])} reference pairs stored, asked for {n}")
+    return out
 
 
 def evaluate(presets, method=None):
@@ -99,6 +125,8 @@ def evaluate(presets, method=None):
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--make-reference", action="store_true")
+    ap.add_argument("--make-extra-reference", action="store_true",
+                    help=f"the {EXTRA_PAIRS} further pairs examples/auto_quality.py judges auto on (about 35 min)")
     ap.add_argument("--presets", default="draft,default,high,high-grazing,high-lights",
                     help="comma-separated presets, or " + ", ".join(SETTINGS))
     ap.add_argument("--method", default=None,
@@ -106,6 +134,9 @@ def main():
     args = ap.parse_args()
     if args.make_reference:
         make_reference()
+        return
+    if args.make_extra_reference:
+        make_reference(EXTRA_DATA, EXTRA_PAIRS, EXTRA_SEED)
         return
     results = evaluate(args.presets.split(","), args.method)
     os.makedirs(OUT, exist_ok=True)

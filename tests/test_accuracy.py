@@ -19,6 +19,8 @@ import wenv
 from conftest import hdri_path
 
 DATA = os.path.join(os.path.dirname(__file__), "data", "accuracy_reference.npz")
+# 6000 further pairs (another seed) that examples/auto_quality.py judges auto on.
+EXTRA_DATA = os.path.join(os.path.dirname(__file__), "data", "accuracy_reference_extra.npz")
 
 # Worst relative RMSE over the eight HDRIs, per preset and material: the measured worst case
 # (examples/accuracy.py prints the full table) with 10% headroom.  Suns and lamps are shaded as
@@ -81,6 +83,18 @@ def test_stored_reference_is_current(data):
         env = wenv.load_environment(hdri_path(h))
         fresh = wenv.reference(env, material(specs[name]), data["normals"][pick], data["views"][pick])
         assert np.allclose(fresh, data[f"{h}/{name}"][pick], rtol=1e-5, atol=1e-7)
+
+
+def test_extra_reference_is_current_and_new_pairs(data):
+    extra = np.load(EXTRA_DATA)
+    specs = json.loads(str(extra["materials"]))
+    assert extra["normals"].shape == (6000, 3) and specs == json.loads(str(data["materials"]))
+    assert not np.isin(extra["normals"][:, 0], data["normals"][:, 0]).any()  # drawn afresh
+    pick = np.arange(7, 6000, 397)
+    for h, name in [("sunrise", "m0.1"), ("interior", "m0.5")]:
+        env = wenv.load_environment(hdri_path(h))
+        fresh = wenv.reference(env, material(specs[name]), extra["normals"][pick], extra["views"][pick])
+        assert np.allclose(fresh, extra[f"{h}/{name}"][pick], rtol=1e-5, atol=1e-7)
 
 
 def test_pairs_cover_grazing_views(data):
