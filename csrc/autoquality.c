@@ -44,6 +44,10 @@ static const double MEDIAN_ERROR[WENV_AUTO_LEVELS][5] = {
 #define CONTRAST_SLOPE 15.0
 #define DOMINANCE_POWER 0.125
 #define ENV_FACTOR_MAX 8.0
+/* Lights that take nearly all the flux drive the formula toward 0 (studio's 4096 at level 4: 0.03),
+ * but what they leave -- grazing views, the clusters' spread -- still errs: the smallest factor
+ * measured on the bundled HDRIs is 0.21.  Below this floor auto would claim targets no level meets. */
+#define ENV_FACTOR_MIN 0.15
 
 const wenv_quality *wenv_auto_level(size_t i)
 {
@@ -367,8 +371,9 @@ wenv_status wenv_auto_choose(const wenv_envmap *env, const wenv_material *mat, d
         return err->status;
     for (size_t i = 0; i < WENV_AUTO_LEVELS; i++) {
         wenv_auto_level_estimate *e = &out->levels[i];
-        e->env_factor = fmin(ENV_FACTOR_MAX, ERROR_SCALE * ((1.0 - e->lights_share) + CONTRAST_SLOPE * e->contrast) /
-                                                 pow(1.0 + e->light_dominance, DOMINANCE_POWER));
+        e->env_factor = ERROR_SCALE * ((1.0 - e->lights_share) + CONTRAST_SLOPE * e->contrast) /
+                        pow(1.0 + e->light_dominance, DOMINANCE_POWER);
+        e->env_factor = fmin(ENV_FACTOR_MAX, fmax(ENV_FACTOR_MIN, e->env_factor));
         e->predicted_error = level_error(i, m) * e->env_factor;
     }
     size_t best = 0;

@@ -231,7 +231,8 @@ def fit(max_misses):
     def model(scale, slope, power):
         def env_factor(h, n, lv):
             f = feats[f"{h}/{n}"][lv]
-            return min(8.0, scale * ((1 - f["lights_share"]) + slope * f["contrast"]) / (1 + f["light_dominance"]) ** power)
+            factor = scale * ((1 - f["lights_share"]) + slope * f["contrast"]) / (1 + f["light_dominance"]) ** power
+            return min(8.0, max(0.15, factor))  # ENV_FACTOR_MAX, ENV_FACTOR_MIN
         return env_factor
 
     grid = [(round(k, 2), s, p) for k in np.arange(0.5, 2.51, 0.05) for s in (2, 3, 4, 5, 6, 8, 10, 12, 15, 20)
