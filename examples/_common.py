@@ -46,14 +46,18 @@ def relative_rmse(a, b):
     return float(np.sqrt(np.mean((a - b) ** 2)) / np.sqrt(np.mean(b ** 2)))
 
 
+def random_directions(rng, n):
+    """n directions uniform on the sphere, float64 (n, 3)."""
+    d = rng.normal(size=(n, 3))
+    return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
 def random_pairs(n, seed):
     """n (normal, view) pairs: normals uniform on the sphere, views uniform on the hemisphere
     around each normal (grazing views included), float32."""
     rng = np.random.default_rng(seed)
-    nrm = rng.normal(size=(n, 3))
-    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
-    v = rng.normal(size=(n, 3))
-    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    nrm = random_directions(rng, n)
+    v = random_directions(rng, n)
     v[np.sum(nrm * v, axis=1) < 0] *= -1
     return nrm.astype(np.float32), v.astype(np.float32)
 
@@ -79,8 +83,7 @@ def mirror_weighted_pairs(env, roughness, n, seed, share=0.5, components=512):
     pick_weight = f[top] ** 2
     pick_weight /= pick_weight.sum()
     kappa = 1.0 / (2.0 * roughness) ** 2
-    r = rng.normal(size=(n, 3))
-    r /= np.linalg.norm(r, axis=1, keepdims=True)
+    r = random_directions(rng, n)
     near = rng.random(n) < share
     k = int(near.sum())
     centre = mu[rng.choice(len(mu), size=k, p=pick_weight)]
@@ -98,8 +101,7 @@ def mirror_weighted_pairs(env, roughness, n, seed, share=0.5, components=512):
     for i in range(0, n, 4096):  # the mixture's density at every r, in blocks to bound memory
         density[i:i + 4096] = (vmf_norm * np.exp(kappa * (r[i:i + 4096] @ mu.T - 1.0))) @ pick_weight
     weight = (1.0 / (4.0 * np.pi)) / ((1.0 - share) / (4.0 * np.pi) + share * density)
-    nrm = rng.normal(size=(n, 3))
-    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    nrm = random_directions(rng, n)
     nrm[np.sum(nrm * r, axis=1) < 0] *= -1
     v = 2.0 * np.sum(nrm * r, axis=1, keepdims=True) * nrm - r
     v /= np.linalg.norm(v, axis=1, keepdims=True)

@@ -230,7 +230,7 @@ def main():
         if logs:
             noise.setdefault(kind, {})["estimate_halves_rms_ratio"] = float(np.exp(np.sqrt(np.mean(np.square(logs)))))
             noise[kind]["estimate_halves_max_ratio"] = float(np.exp(np.max(np.abs(logs))))
-            print(f"{kind}: the estimate from one half of the {len(many[HDRIS[0], names[0]][2])} weighted pairs against "
+            print(f"{kind}: the estimate from one half of the {args.control_pairs} weighted pairs against "
                   f"the other: rms ratio {noise[kind]['estimate_halves_rms_ratio']:.3f}x, at most "
                   f"{noise[kind]['estimate_halves_max_ratio']:.2f}x", flush=True)
     logs = [math.log(plain_errors[k] / errors[k]) for k in errors if k[2] != control and k[1] != "lambert"]
