@@ -34,7 +34,7 @@ static const double MEDIAN_ERROR[WENV_AUTO_LEVELS][5] = {
     {0.05031, 0.02939, 0.01881, 0.00754, 0.00125},
     {0.00407, 0.00204, 0.00338, 0.00459, 0.00102},
 };
-/* A level's error under an environment is its median error times
+/* A level's error under an environment (every level but the last, below) is its median error times
  *     SCALE ((1 - l) + CONTRAST_SLOPE c) / (1 + d)^DOMINANCE_POWER
  * with l the share of the flux its lights take (exact: the rest carries the error), c the share in
  * bright extended features it leaves in the lighting, and d its lights' dominance of the reflected
@@ -45,10 +45,18 @@ static const double MEDIAN_ERROR[WENV_AUTO_LEVELS][5] = {
 #define CONTRAST_SLOPE 10.0
 #define DOMINANCE_POWER 0.0625
 #define ENV_FACTOR_MAX 8.0
-/* Lights that take nearly all the flux drive the formula toward 0 (studio's 4096 at level 4: 0.03),
- * but what they leave -- grazing views, the clusters' spread -- still errs: studio measures 0.15-0.16
- * there.  Below this floor auto would claim targets no level meets. */
+/* Lights that take nearly all the flux drive the formula toward 0, but what they leave -- grazing
+ * views, the clusters' spread -- still errs (studio's level 4 measures 0.15-0.4 times its median). */
 #define ENV_FACTOR_MIN 0.15
+/* The last level (high) takes the bright extended features out as clustered lights and integrates
+ * narrow lobes at grazing views per vertex, so it errs where those features were: its factor is
+ *     HIGH_SCALE ((1 - l) + CONTRAST_SLOPE c')^HIGH_CONTRAST_POWER / (1 + d)^HIGH_DOMINANCE_POWER
+ * with l and d its own and c' the bright extended share the level before it leaves in the lighting.
+ * A least-squares fit on the bundled HDRIs (examples/auto_quality.py --fit); the first formula
+ * there put courtyard's error at a quarter of what it measures and claimed 1 % reachable. */
+#define HIGH_SCALE 1.4
+#define HIGH_CONTRAST_POWER 0.75
+#define HIGH_DOMINANCE_POWER 0.25
 
 const wenv_quality *wenv_auto_level(size_t i)
 {
@@ -372,8 +380,14 @@ wenv_status wenv_auto_choose(const wenv_envmap *env, const wenv_material *mat, d
         return err->status;
     for (size_t i = 0; i < WENV_AUTO_LEVELS; i++) {
         wenv_auto_level_estimate *e = &out->levels[i];
-        e->env_factor = ERROR_SCALE * ((1.0 - e->lights_share) + CONTRAST_SLOPE * e->contrast) /
-                        pow(1.0 + e->light_dominance, DOMINANCE_POWER);
+        if (i + 1 < WENV_AUTO_LEVELS)
+            e->env_factor = ERROR_SCALE * ((1.0 - e->lights_share) + CONTRAST_SLOPE * e->contrast) /
+                            pow(1.0 + e->light_dominance, DOMINANCE_POWER);
+        else
+            e->env_factor = HIGH_SCALE *
+                            pow((1.0 - e->lights_share) + CONTRAST_SLOPE * out->levels[i - 1].contrast,
+                                HIGH_CONTRAST_POWER) /
+                            pow(1.0 + e->light_dominance, HIGH_DOMINANCE_POWER);
         e->env_factor = fmin(ENV_FACTOR_MAX, fmax(ENV_FACTOR_MIN, e->env_factor));
         e->predicted_error = level_error(i, m) * e->env_factor;
     }

@@ -1,6 +1,7 @@
 """Helpers shared by the example scripts: bundled HDRIs, test geometry, tone mapping."""
 import glob
 import importlib.util
+import math
 import os
 
 import numpy as np
@@ -106,3 +107,14 @@ def mirror_weighted_pairs(env, roughness, n, seed, share=0.5, components=512):
     v = 2.0 * np.sum(nrm * r, axis=1, keepdims=True) * nrm - r
     v /= np.linalg.norm(v, axis=1, keepdims=True)
     return nrm.astype(np.float32), v.astype(np.float32), weight
+
+
+def estimated_error(out, ref, control, out_many, control_many, weight):
+    """Relative RMSE against the reference, with the control's difference from `out` read off the
+    many weighted pairs and the reference's own difference from the control off the stored ones:
+    E[(o - r)^2] = E_w[(o - c)^2] + E[(o - r)^2 - (o - c)^2], and E[r^2] = E_w[c^2] + E[r^2 - c^2]."""
+    def per_pair(x):
+        return np.mean(np.square(x, dtype=np.float64), axis=1)
+    mse = np.mean(weight * per_pair(out_many - control_many)) + np.mean(per_pair(out - ref) - per_pair(out - control))
+    ms = np.mean(weight * per_pair(control_many)) + np.mean(per_pair(ref) - per_pair(control))
+    return math.sqrt(max(mse, 0.0) / ms)

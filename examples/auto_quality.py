@@ -31,7 +31,7 @@ import itertools
 import numpy as np
 
 import wenv
-from _common import OUT, bundled_hdri, mirror_weighted_pairs, relative_rmse
+from _common import OUT, bundled_hdri, estimated_error, mirror_weighted_pairs, relative_rmse
 from accuracy import HDRIS, MATERIALS, load_reference, material
 from bench_shade import orbit_eye, suzanne
 
@@ -68,17 +68,6 @@ def errors_of(out, ref):
     """Relative RMSE over all the pairs, and over each run of SUBSET of them."""
     parts = [relative_rmse(out[i:i + SUBSET], ref[i:i + SUBSET]) for i in range(0, len(ref) - SUBSET + 1, SUBSET)]
     return relative_rmse(out, ref), parts
-
-
-def estimated_error(out, ref, control, out_many, control_many, weight):
-    """Relative RMSE against the reference, with the control's difference from `out` read off the
-    many weighted pairs and the reference's own difference from the control off the stored ones:
-    E[(o - r)^2] = E_w[(o - c)^2] + E[(o - r)^2 - (o - c)^2], and E[r^2] = E_w[c^2] + E[r^2 - c^2]."""
-    def per_pair(x):
-        return np.mean(np.square(x, dtype=np.float64), axis=1)
-    mse = np.mean(weight * per_pair(out_many - control_many)) + np.mean(per_pair(out - ref) - per_pair(out - control))
-    ms = np.mean(weight * per_pair(control_many)) + np.mean(per_pair(ref) - per_pair(control))
-    return math.sqrt(max(mse, 0.0) / ms)
 
 
 def main():
@@ -292,10 +281,16 @@ def fit(max_misses):
                 within += times[f"{n}/{pick}"] <= 1.25 * times[f"{n}/{cheapest}"]
         return reach, met, within
 
+    top = levels[-1]
+    high = fit_high(errors, feats, cases, median, top)
+
     def model(scale, slope, power):
         def env_factor(h, n, lv):
             f = feats[f"{h}/{n}"][lv]
-            factor = scale * ((1 - f["lights_share"]) + slope * f["contrast"]) / (1 + f["light_dominance"]) ** power
+            if lv == top:
+                factor = high(f, feats[f"{h}/{n}"][lv - 1])
+            else:
+                factor = scale * ((1 - f["lights_share"]) + slope * f["contrast"]) / (1 + f["light_dominance"]) ** power
             return min(8.0, max(0.15, factor))  # ENV_FACTOR_MAX, ENV_FACTOR_MIN
         return env_factor
 
@@ -310,6 +305,24 @@ def fit(max_misses):
     (reach, met, within), g = best(hdris)
     print(f"ERROR_SCALE {g[0]}  CONTRAST_SLOPE {g[1]}  DOMINANCE_POWER {g[2]}: of {reach} reachable cases "
           f"met {met}, within 1.25x {within}")
+    # auto's `met` flag: does the picked level's prediction say the target is met where it is?
+    right = wrong_yes = wrong_no = 0
+    for (h, n), t in itertools.product(cases, d["targets"]):
+        pred = [median[n, lv] * model(*g)(h, n, lv) for lv in levels]
+        pick = next((lv for lv in levels if pred[lv] <= t), top)
+        claim, true = pred[pick] <= t, errors[f"{h}/{n}/{pick}"] <= t
+        right += claim == true
+        wrong_yes += claim and not true
+        wrong_no += true and not claim
+    print(f"auto's met flag: right in {right} of {right + wrong_yes + wrong_no} cases; says met where the "
+          f"target is missed in {wrong_yes}, not met where it is met in {wrong_no}")
+    # What an exact measure of the environment would give if it were one number per HDRI and roughness
+    # (its true factor at level 0, carried to the other levels by the medians' shape): the levels'
+    # shape varies between environments, which a factor the same for every level cannot follow.
+    oracle = max((score(lambda h, n, lv, k=k: k * errors[f"{h}/{n}/0"] / median[n, 0], hdris)[1:], k)
+                 for k in np.arange(1.0, 3.0, 0.01))
+    print(f"with each HDRI and roughness's exact level-0 factor at every level (times {oracle[1]:.2f}): met "
+          f"{oracle[0][0]}, within 1.25x {oracle[0][1]}")
     tot = np.zeros(3, int)
     for h in hdris:
         _, g = best([x for x in hdris if x != h])
@@ -317,6 +330,26 @@ def fit(max_misses):
         tot += r
         print(f"  fitted without {h}: {g} -> on {h}: reachable {r[0]}, met {r[1]}, within {r[2]}")
     print(f"leave one HDRI out: reachable {tot[0]}, met {tot[1]}, within 1.25x {tot[2]}")
+
+
+def fit_high(errors, feats, cases, median, top):
+    """The last level's factor, HIGH_SCALE ((1 - l) + 10 c')^HIGH_CONTRAST_POWER / (1 + d)^HIGH_DOMINANCE_POWER
+    (csrc/autoquality.c; c' the level before's contrast): least squares in the logs over the cases;
+    prints the constants and returns the factor with them rounded as the C source has them."""
+    x, y = [], []
+    for h, n in cases:
+        f, before = feats[f"{h}/{n}"][top], feats[f"{h}/{n}"][top - 1]
+        x.append([1.0, math.log((1 - f["lights_share"]) + 10 * before["contrast"]), -math.log1p(f["light_dominance"])])
+        y.append(math.log(errors[f"{h}/{n}/{top}"] / median[n, top]))
+    (a, p, q), *_ = np.linalg.lstsq(np.array(x), np.array(y), rcond=None)
+    res = np.array(y) - np.array(x) @ np.array([a, p, q])
+    scale, p, q = round(math.exp(a), 1), round(4 * p) / 4, round(8 * q) / 8
+    print(f"level {top}: HIGH_SCALE {scale}  HIGH_CONTRAST_POWER {p}  HIGH_DOMINANCE_POWER {q} "
+          f"(log residuals: rms {np.sqrt(np.mean(res ** 2)):.2f}, from {res.min():.2f} to {res.max():.2f})")
+
+    def factor(f, before):
+        return scale * ((1 - f["lights_share"]) + 10 * before["contrast"]) ** p / (1 + f["light_dominance"]) ** q
+    return factor
 
 
 if __name__ == "__main__":

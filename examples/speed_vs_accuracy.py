@@ -1,20 +1,24 @@
 """Speed against accuracy of every shading method over its quality settings, in one run on the same
 inputs: time per view change (shade_mesh on Suzanne subdivided to ~126k vertices, 2 threads, median
-of interleaved runs) against relative RMSE versus wenv.reference on the fixed (normal, view) pairs of
-examples/accuracy.py, for specular-only Cook-Torrance m = 0.05, 0.2 and 0.5 under two bundled HDRIs.
+of interleaved runs) against relative RMSE versus wenv.reference, for specular-only Cook-Torrance
+m = 0.05, 0.2 and 0.5 under two bundled HDRIs.  The error is over normals uniform on the sphere and
+views uniform on their hemisphere, estimated as examples/auto_quality.py does: `high` as a control
+variate, its difference from each setting read on 50000 pairs drawn about the lighting's bright
+reflections (weighted back to the uniform law), the reference's correction on the 8000 stored pairs
+of examples/accuracy.py.  Over the stored pairs alone a narrow lobe under a sun is a lottery.
 Writes docs/speed_vs_accuracy.{json,csv,png}: a log-log chart with each method's Pareto front.
 Each setting's peak memory is measured too, in a fresh process (examples/_memory.py: the growth of
 peak resident memory while the shader is built and shades one view, under the first HDRI at m = 0.2,
 rotation matrices loaded from the cache the timing run filled), and drawn against the time per view
 change in docs/memory_vs_time.png.
 
-    .venv/bin/python examples/speed_vs_accuracy.py [--hdris sunset,city] [--repeats 5] [--pairs 2000]
-                     [--configs rotation,split_sum:default,3] [--no-memory] [--out DIR]
+    .venv/bin/python examples/speed_vs_accuracy.py [--hdris sunset,city] [--repeats 5] [--pairs 8000]
+                     [--control-pairs 50000] [--configs rotation,split_sum:default,3] [--no-memory] [--out DIR]
     .venv/bin/python examples/speed_vs_accuracy.py --replot       # the charts again from the JSON
     .venv/bin/python examples/speed_vs_accuracy.py --memory-only  # memory of the JSON's settings, added to it
 
-Reference values come from tests/data/accuracy_reference.npz (--reference); keys missing there are
-computed (wenv.reference, ~20-40 ms per pair) and cached in out/.  `slicing` is wavelet rotation with
+Reference values come from tests/data/ (examples/accuracy.py); keys missing there (an HDRI that is
+not bundled) are computed (wenv.reference, ~20-40 ms per pair) and cached in out/.  `slicing` is wavelet rotation with
 the resampling applied directly instead of through truncated matrices (the same result when nothing
 is truncated), which is how resolutions whose matrices would not fit in memory are shown."""
 import argparse
@@ -28,9 +32,9 @@ import time
 import numpy as np
 
 import wenv
-from _common import OUT, ROOT, bundled_hdri, relative_rmse
+from _common import OUT, ROOT, bundled_hdri, estimated_error, mirror_weighted_pairs, relative_rmse
 from _memory import peak_memory
-from accuracy import DATA, MATERIALS, make_pairs, material
+from accuracy import MATERIALS, load_reference, material
 from bench_shade import orbit_eye, suzanne
 
 DOCS = os.path.join(ROOT, "docs")
@@ -104,19 +108,16 @@ def measure_memory(rows, hdri, pos, mesh_nrm):
               f"{mem['cache']})", flush=True)
 
 
-def load_references(path, hdris, pairs):
-    nrm, v = make_pairs()
-    stored = np.load(path) if os.path.exists(path) else None
-    if stored is not None:
-        assert np.array_equal(stored["normals"], nrm) and np.array_equal(stored["views"], v), "pairs differ"
-    nrm, v = nrm[:pairs], v[:pairs]
+def load_references(hdris, pairs):
+    stored = load_reference(pairs)
+    nrm, v = stored["normals"], stored["views"]
     refs = {}
     for h in hdris:
         env = None
         for name in ROUGHNESS:
             key = f"{h}/{name}"
-            if stored is not None and key in stored.files:
-                refs[key] = stored[key][:pairs]
+            if key in stored:
+                refs[key] = stored[key]
                 continue
             cache = os.path.join(OUT, "reference_cache", f"{h}_{name}_{pairs}.npy")
             if os.path.exists(cache):
@@ -178,7 +179,8 @@ def chart(results, path):
                 ax.set_xlabel(f"time per view change, ms ({results['vertices']} vertices, "
                               f"{results['threads']} threads)")
             if c == 0:
-                ax.set_ylabel(f"relative RMSE vs reference ({results['pairs']} pairs)")
+                ax.set_ylabel(f"relative RMSE vs reference (estimate, {results['control_pairs']} + "
+                              f"{results['pairs']} pairs)")
     axes[0][min(1, len(ROUGHNESS) - 1)].legend(fontsize=7, loc="upper right")  # an empty corner there
     fig.suptitle("Speed against accuracy, specular-only Cook-Torrance (Beckmann, index 1.5): lines are each "
                  "method's Pareto front, labelled (rotation/slicing: global/local/normals map sides, v view grid, "
@@ -277,10 +279,10 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--hdris", default="sunset,city")
     ap.add_argument("--repeats", type=int, default=5)
-    ap.add_argument("--pairs", type=int, default=2000)
+    ap.add_argument("--pairs", type=int, default=8000, help="stored reference pairs")
+    ap.add_argument("--control-pairs", type=int, default=50000, help="weighted pairs the control is read on")
     ap.add_argument("--configs", default="", help="comma-separated methods, method:preset names or CONFIGS indices")
     ap.add_argument("--no-memory", action="store_true", help="skip the peak-memory measurements")
-    ap.add_argument("--reference", default=DATA)
     ap.add_argument("--out", default=DOCS)
     ap.add_argument("--replot", action="store_true", help="redraw the charts from the JSON of an earlier run")
     ap.add_argument("--memory-only", action="store_true",
@@ -301,21 +303,31 @@ def main():
     configs = select_configs(args.configs)
     hdris = args.hdris.split(",")
     wenv.set_num_threads(2)
-    nrm, v, refs = load_references(args.reference, hdris, args.pairs)
+    nrm, v, refs = load_references(hdris, args.pairs)
     envs = {h: wenv.load_environment(bundled_hdri(h)) for h in hdris}
     pos, mesh_nrm = suzanne(4)
-    results = {"hdris": hdris, "pairs": len(nrm), "vertices": len(pos), "threads": wenv.get_num_threads(),
+    results = {"hdris": hdris, "pairs": len(nrm), "control_pairs": args.control_pairs, "vertices": len(pos),
+               "threads": wenv.get_num_threads(),
                "repeats": args.repeats, "timing_hdri": hdris[0], "rows": []}
     print(f"{len(nrm)} pairs, Suzanne {len(pos)} vertices, {results['threads']} threads", flush=True)
 
     results["rows"] = [{"method": method, "preset": quality if isinstance(quality, str) else None,
-                        "rel_rmse": {}, "shade_ms": {}, "shade_ms_all": {}, "setup_s": {}}
+                        "rel_rmse": {}, "rel_rmse_stored_pairs": {}, "shade_ms": {}, "shade_ms_all": {},
+                        "setup_s": {}}
                        for method, quality in configs]
     for name in ROUGHNESS:
         # Fresh shaders per material, so every method's view changes start from the same state: the
         # first view (which fills rotation's tables) is not timed, the next ones are each a view not
         # seen before, timed in turn across all shaders so the machine's load falls on all alike.
         mat = material(MATERIALS[name])
+        # the control (`high`) on the stored pairs and on pairs weighted toward the bright reflections
+        many, control, control_many = {}, {}, {}
+        for i, h in enumerate(hdris):
+            many[h] = mirror_weighted_pairs(envs[h], MATERIALS[name]["lobes"][0]["roughness"], args.control_pairs,
+                                            3000 + 100 * i + ROUGHNESS.index(name))
+            high = wenv.Shader(envs[h], mat, quality="high", method="slicing")
+            control[h], control_many[h] = high.shade(nrm, v), high.shade(*many[h][:2])
+        del high
         shaders = []
         for (method, quality), row in zip(configs, results["rows"]):
             t0 = time.perf_counter()
@@ -338,7 +350,10 @@ def main():
             row["shade_ms_all"][name] = t
             for h in hdris:
                 sh.set_environment(envs[h])
-                row["rel_rmse"][f"{h}/{name}"] = relative_rmse(sh.shade(nrm, v), refs[f"{h}/{name}"])
+                out, ref = sh.shade(nrm, v), refs[f"{h}/{name}"]
+                row["rel_rmse"][f"{h}/{name}"] = estimated_error(out, ref, control[h], sh.shade(*many[h][:2]),
+                                                                  control_many[h], many[h][2])
+                row["rel_rmse_stored_pairs"][f"{h}/{name}"] = relative_rmse(out, ref)
             errs = "  ".join(f"{h} {100 * row['rel_rmse'][f'{h}/{name}']:6.2f}%" for h in hdris)
             print(f"{name:6s} {row['method']:9s} {row['short']:28s} {row['shade_ms'][name]:8.1f} ms  {errs}",
                   flush=True)
