@@ -18,9 +18,10 @@ change in docs/memory_vs_time.png.
     .venv/bin/python examples/speed_vs_accuracy.py --memory-only  # memory of the JSON's settings, added to it
 
 Reference values come from tests/data/ (examples/accuracy.py); keys missing there (an HDRI that is
-not bundled) are computed (wenv.reference, ~20-40 ms per pair) and cached in out/.  `slicing` is wavelet rotation with
-the resampling applied directly instead of through truncated matrices (the same result when nothing
-is truncated), which is how resolutions whose matrices would not fit in memory are shown."""
+not bundled) are computed (wenv.reference, ~20-40 ms per pair) and cached in out/.  `slicing` is
+wavelet rotation with the resampling applied directly instead of through truncated matrices (the same
+result when nothing is truncated), which is how resolutions whose matrices would not fit in memory
+are shown."""
 import argparse
 import csv
 import json

@@ -1,6 +1,8 @@
-"""examples/_common.mirror_weighted_pairs, which examples/auto_quality.py judges auto with: its
-weighted pairs give the means of random_pairs' law (normals uniform on the sphere, views uniform on
-their hemisphere), and far steadier ones where a narrow lobe reflects a small bright source."""
+"""examples/_common.mirror_weighted_pairs and estimated_error, which examples/auto_quality.py judges
+auto with and examples/speed_vs_accuracy.py charts the methods with: the weighted pairs give the
+means of random_pairs' law (normals uniform on the sphere, views uniform on their hemisphere), and
+far steadier ones where a narrow lobe reflects a small bright source; the control-variate estimate
+is the relative RMSE itself where nothing is sampled apart."""
 import os
 import sys
 
@@ -10,7 +12,7 @@ import pytest
 import wenv
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "examples"))
-from _common import mirror_weighted_pairs, random_pairs  # noqa: E402
+from _common import estimated_error, mirror_weighted_pairs, random_pairs, relative_rmse  # noqa: E402
 
 SUN = np.array([0.3, 0.4, 0.5]) / np.linalg.norm([0.3, 0.4, 0.5])
 
@@ -55,3 +57,19 @@ def test_sun_hit_mean_square_is_steadier_than_uniform(sun_sky):
     exact = -np.expm1(-2 * k) / (2 * k)  # the mean of exp(k (cos - 1)) over r uniform on the sphere
     assert np.std(weighted) / np.mean(weighted) < 0.3 * np.std(uniform) / np.mean(uniform)
     assert abs(np.mean(weighted) / exact - 1) < 0.05
+
+
+def test_estimate_is_the_error_when_read_on_the_same_pairs():
+    """With the many pairs the stored ones, unweighted, the control's terms cancel: the estimate is
+    the plain relative RMSE whatever the control; with the reference as control, it is the error
+    read on the weighted pairs alone."""
+    rng = np.random.default_rng(5)
+    ref = rng.random((500, 3)) + 0.1
+    out = ref * (1 + 0.2 * rng.standard_normal((500, 3)))
+    for control in (ref + 0.05 * rng.standard_normal((500, 3)), np.zeros_like(ref), out):
+        assert estimated_error(out, ref, control, out, control, np.ones(500)) == pytest.approx(relative_rmse(out, ref), rel=1e-9)
+    w = rng.random(500) + 0.5
+    many_ref = rng.random((500, 3)) + 0.1
+    many_out = many_ref * 1.1
+    want = np.sqrt(np.mean(w * np.mean((many_out - many_ref) ** 2, axis=1)) / np.mean(w * np.mean(many_ref ** 2, axis=1)))
+    assert estimated_error(out, ref, ref, many_out, many_ref, w) == pytest.approx(want, rel=1e-9)
