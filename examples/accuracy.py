@@ -18,7 +18,7 @@ import time
 import numpy as np
 
 import wenv
-from _common import OUT, ROOT, bundled_hdri, random_pairs
+from _common import OUT, ROOT, bundled_hdri, random_pairs, relative_rmse
 
 DATA = os.path.join(ROOT, "tests", "data", "accuracy_reference.npz")
 # 6000 further pairs (another seed) for examples/auto_quality.py.  Over 2000 pairs a few grazing
@@ -53,10 +53,6 @@ def material(spec):
     if not spec["lobes"]:
         return wenv.Lambert(tuple(spec["diffuse"]))
     return wenv.CookTorrance(diffuse=tuple(spec["diffuse"]), lobes=spec["lobes"])
-
-
-def relative_rmse(a, b):
-    return float(np.sqrt(np.mean((a - b) ** 2)) / np.sqrt(np.mean(b ** 2)))
 
 
 def make_reference(path=DATA, n=PAIRS, seed=SEED):
