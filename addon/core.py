@@ -585,6 +585,9 @@ class ShaderCache:
         self._shaders = {}
         self._env_sig = {}
         self._env_base = {}  # image key -> untransformed wenv.Environment (pixels read once)
+        # the last transformed Environment, kept so Auto's analysis of it (made on its first Auto
+        # shader) serves later passes and materials under the same World
+        self._env_current = (None, None)
         self._mat_key = {}
         self._auto = {}  # (World signature, material key, target, budget) -> wenv.Shader
         self.lock = threading.Lock()
@@ -595,6 +598,7 @@ class ShaderCache:
         self._shaders.clear()
         self._env_sig.clear()
         self._env_base.clear()
+        self._env_current = (None, None)
         self._mat_key.clear()
 
     def forget_data(self):
@@ -602,6 +606,7 @@ class ShaderCache:
         self._env_sig = dict.fromkeys(self._env_sig)
         self._mat_key = dict.fromkeys(self._mat_key)
         self._env_base.clear()
+        self._env_current = (None, None)
         self._auto.clear()
 
     def has(self, quality):
@@ -635,7 +640,9 @@ class ShaderCache:
             base = environment_from_spec(WorldSpec("image", spec.image_name, spec.projection, 0.0, 1.0, key=spec.key),
                                          images)
             self._env_base[spec.key] = base
-        return base.with_transform(rotation=spec.rotation, strength=spec.strength)
+        if self._env_current[0] != spec.signature:
+            self._env_current = (spec.signature, base.with_transform(rotation=spec.rotation, strength=spec.strength))
+        return self._env_current[1]
 
     def use_environment(self, quality, signature, env):
         shader = self._shaders[quality]

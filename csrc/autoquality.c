@@ -156,59 +156,136 @@ static int by_pixel(const void *a, const void *b)
     return (x > y) - (x < y);
 }
 
-/* Per level: the flux share of its lights, the share of the bright extended features it leaves in
- * the lighting, and (for a material with lobes, of narrowest roughness m > 0) its lights'
- * dominance.  One search for the brightest pixels serves every level, as each level's lights are
- * the brightest pixels above its threshold, up to its budget: a prefix of that list. */
-static wenv_status estimate_levels(const wenv_envmap *env, double m, wenv_auto_level_estimate *est, wenv_error *err)
+/* Band of the spectrum estimate; beyond it the power A_l^2 P_l is taken to fall as l^-4, as a lone
+ * sun's does (A_l^2 ~ l^-5, P_l ~ 2l + 1), which bounds every non-negative lighting. */
+#define SH_ESTIMATE_ORDER 20
+#define SH_TAIL_FACTOR 2.9 /* sum over even l > 20 of (20 / l)^4 */
+
+/* What auto reads of an environment whatever the material, made once per environment: the
+ * brightest pixels (each level's lights are a prefix of them: the brightest above its threshold, up
+ * to its budget), the lighting without any of them as an octahedral pyramid, the flux in bright
+ * extended features, and the lighting's power per SH band. */
+struct wenv_auto_analysis {
+    double total, mean, strength; /* flux, mean radiance (flux / 4 pi), the environment's strength */
+    double bright_flux;           /* flux of pixels above CONTRAST_FACTOR times the mean */
+    size_t nb;
+    wenv_bright_pixel *bright;
+    wenv_oct_pyramid pyramid; /* without the nb candidates */
+    double band_power[SH_ESTIMATE_ORDER + 1][3]; /* sum over m of the squared coefficients, per channel */
+    double seconds;
+};
+
+void wenv_auto_analysis_free(wenv_auto_analysis *an)
 {
+    if (!an)
+        return;
+    wenv_oct_pyramid_free(&an->pyramid);
+    free(an->bright);
+    free(an);
+}
+
+double wenv_auto_analysis_seconds(const wenv_auto_analysis *an) { return an->seconds; }
+
+static int sh_band_power(const wenv_envmap *env, double power[][3])
+{
+    size_t count = wenv_sh_count(SH_ESTIMATE_ORDER);
+    double *c = malloc(count * 3 * sizeof(double));
+    if (!c)
+        return -1;
+    wenv_error err = {0};
+    /* a coarse projection: the estimate needs each band's power, not its coefficients exactly */
+    if (wenv_sh_project_envmap_blocks(env, SH_ESTIMATE_ORDER, wenv_sh_projection_block(env, SH_ESTIMATE_ORDER / 2),
+                                      c, NULL, &err)) {
+        free(c);
+        return -1;
+    }
+    for (size_t l = 0; l <= SH_ESTIMATE_ORDER; l++)
+        for (int ch = 0; ch < 3; ch++) {
+            double p = 0.0;
+            for (size_t i = l * l; i < (l + 1) * (l + 1); i++)
+                p += c[3 * i + ch] * c[3 * i + ch];
+            power[l][ch] = p;
+        }
+    free(c);
+    return 0;
+}
+
+wenv_status wenv_auto_analysis_create(wenv_auto_analysis **out, const wenv_envmap *env, wenv_error *err)
+{
+    double start = omp_get_wtime();
+    *out = NULL;
     size_t k = 0;
     double relative = INFINITY;
     for (size_t i = 0; i < WENV_AUTO_LEVELS; i++) {
         k = LADDER[i].lights > k ? LADDER[i].lights : k;
         relative = fmin(relative, LADDER[i].light_threshold);
     }
-    double total = wenv_envmap_flux(env), strength = wenv_envmap_strength(env);
-    if (!(total > 0.0)) /* black (or zero strength): nothing to resolve */
-        return WENV_OK;
-    wenv_bright_pixel *bright = malloc((k ? k : 1) * sizeof *bright);
+    wenv_auto_analysis *an = calloc(1, sizeof *an);
     size_t *excluded = malloc((k ? k : 1) * sizeof *excluded);
-    wenv_oct_pyramid pyramid = {0};
+    if (an)
+        an->bright = malloc((k ? k : 1) * sizeof *an->bright);
+    if (!an || !an->bright || !excluded) {
+        free(excluded);
+        wenv_auto_analysis_free(an);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory analysing the environment");
+    }
+    an->total = wenv_envmap_flux(env);
+    an->strength = wenv_envmap_strength(env);
+    an->mean = an->total / (4.0 * M_PI);
+    if (an->total > 0.0) { /* else black (or zero strength): nothing to resolve */
+        an->nb = wenv_envmap_brightest(env, k, relative, an->bright);
+        for (size_t i = 0; i < an->nb; i++)
+            excluded[i] = an->bright[i].pixel;
+        qsort(excluded, an->nb, sizeof *excluded, by_pixel);
+        if (wenv_oct_pyramid_build(&an->pyramid, env, excluded, an->nb, DOMINANCE_GRID_MAX, err) ||
+            sh_band_power(env, an->band_power) < 0) {
+            if (!err->status)
+                wenv_error_set(err, WENV_ERR_NOMEM, "out of memory analysing the environment");
+            free(excluded);
+            wenv_auto_analysis_free(an);
+            return err->status;
+        }
+        double cut = CONTRAST_FACTOR * an->mean / an->strength, bright_flux = 0.0;
+        size_t w = wenv_envmap_width(env), h = wenv_envmap_height(env);
+        const float *px = wenv_envmap_pixels(env);
+        for (size_t row = 0; row < h; row++)
+            for (size_t col = 0; col < w; col++) {
+                const float *p = px + 3 * (row * w + col);
+                if (p[0] > cut || p[1] > cut || p[2] > cut)
+                    bright_flux += wenv_envmap_pixel_solid_angle(env, row, col) * ((double)p[0] + p[1] + p[2]) / 3.0;
+            }
+        an->bright_flux = bright_flux * an->strength;
+    }
+    free(excluded);
+    an->seconds = omp_get_wtime() - start;
+    *out = an;
+    return WENV_OK;
+}
+
+/* Per level: the flux share of its lights, the share of the bright extended features it leaves in
+ * the lighting, and (for a material with lobes, of narrowest roughness m > 0) its lights'
+ * dominance, averaged over texels about DOMINANCE_TEXELS / m on a side. */
+static wenv_status estimate_levels(const wenv_auto_analysis *an, double m, wenv_auto_level_estimate *est,
+                                   wenv_error *err)
+{
+    if (!(an->total > 0.0))
+        return WENV_OK;
+    const wenv_bright_pixel *bright = an->bright;
+    size_t nb = an->nb;
+    const wenv_oct_pyramid *pyramid = &an->pyramid;
     dominance_grid grid[2] = {{0}, {0}};
     double blend = 0.0; /* between grid[0] and grid[1], in log side */
     wenv_status st = WENV_OK;
-    if (!bright || !excluded) {
-        st = wenv_error_set(err, WENV_ERR_NOMEM, "out of memory estimating the environment");
-        goto done;
-    }
-    size_t nb = wenv_envmap_brightest(env, k, relative, bright);
     if (m > 0.0) {
-        /* the lighting without any candidate light, at the two pyramid levels about
-         * DOMINANCE_TEXELS / m texels on a side */
-        for (size_t i = 0; i < nb; i++)
-            excluded[i] = bright[i].pixel;
-        qsort(excluded, nb, sizeof *excluded, by_pixel);
-        if ((st = wenv_oct_pyramid_build(&pyramid, env, excluded, nb, DOMINANCE_GRID_MAX, err)))
-            goto done;
-        double x = fmin(fmax(log2((double)pyramid.side[0] * m / DOMINANCE_TEXELS), 0.0), (double)(pyramid.levels - 1));
-        size_t lo = (size_t)floor(x), hi = lo + 1 < pyramid.levels ? lo + 1 : lo;
+        double x = fmin(fmax(log2((double)pyramid->side[0] * m / DOMINANCE_TEXELS), 0.0), (double)(pyramid->levels - 1));
+        size_t lo = (size_t)floor(x), hi = lo + 1 < pyramid->levels ? lo + 1 : lo;
         blend = x - (double)lo;
-        if (grid_init(&grid[0], &pyramid, lo, bright, nb) || grid_init(&grid[1], &pyramid, hi, bright, nb)) {
+        if (grid_init(&grid[0], pyramid, lo, bright, nb) || grid_init(&grid[1], pyramid, hi, bright, nb)) {
             st = wenv_error_set(err, WENV_ERR_NOMEM, "out of memory estimating the environment");
             goto done;
         }
     }
-    double mean = total / (4.0 * M_PI), cut = CONTRAST_FACTOR * mean / strength;
-    size_t w = wenv_envmap_width(env), h = wenv_envmap_height(env);
-    const float *px = wenv_envmap_pixels(env);
-    double bright_flux = 0.0;
-    for (size_t row = 0; row < h; row++)
-        for (size_t col = 0; col < w; col++) {
-            const float *p = px + 3 * (row * w + col);
-            if (p[0] > cut || p[1] > cut || p[2] > cut)
-                bright_flux += wenv_envmap_pixel_solid_angle(env, row, col) * ((double)p[0] + p[1] + p[2]) / 3.0;
-        }
-    bright_flux *= strength;
+    double mean = an->mean;
     for (size_t i = 0; i < WENV_AUTO_LEVELS; i++) {
         size_t nl = 0;
         double light_flux = 0.0, bright_lights = 0.0;
@@ -219,8 +296,8 @@ static wenv_status estimate_levels(const wenv_envmap *env, double m, wenv_auto_l
                 bright_lights += f;
             nl++;
         }
-        est[i].lights_share = fmin(1.0, light_flux / total);
-        est[i].contrast = fmin(1.0, fmax(0.0, (bright_flux - bright_lights) / total));
+        est[i].lights_share = fmin(1.0, light_flux / an->total);
+        est[i].contrast = fmin(1.0, fmax(0.0, (an->bright_flux - bright_lights) / an->total));
         if (m > 0.0 && nl) {
             double a = log1p(light_dominance_at(&grid[0], bright, nl, nb));
             double b = log1p(light_dominance_at(&grid[1], bright, nl, nb));
@@ -230,9 +307,6 @@ static wenv_status estimate_levels(const wenv_envmap *env, double m, wenv_auto_l
 done:
     grid_free(&grid[0]);
     grid_free(&grid[1]);
-    wenv_oct_pyramid_free(&pyramid);
-    free(excluded);
-    free(bright);
     return st;
 }
 
@@ -278,7 +352,8 @@ static size_t used_normal_samples(size_t n_side, const float *normals, size_t n)
     unsigned char *hit = calloc(n_side * n_side, 1);
     if (!hit)
         return (size_t)-1;
-    size_t used = 0;
+    /* a mesh's worth of normals in parallel: every writer stores the same 1, so counting after */
+#pragma omp parallel for schedule(static)
     for (size_t i = 0; i < n; i++) {
         const float *d = normals + 3 * i;
         float len = sqrtf(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]), u, v, w[4];
@@ -289,50 +364,25 @@ static size_t used_normal_samples(size_t n_side, const float *normals, size_t n)
         wenv_oct_encode_f(unit, &u, &v);
         wenv_oct_bilinear_f((long)n_side, u, v, idx, w);
         for (int k = 0; k < 4; k++)
-            if (w[k] > 0.0f && !hit[idx[k]]) {
+            if (w[k] > 0.0f) {
+#pragma omp atomic write
                 hit[idx[k]] = 1;
-                used++;
             }
     }
+    size_t used = 0;
+    for (size_t t = 0; t < n_side * n_side; t++)
+        used += hit[t];
     free(hit);
     return used;
 }
 
 const size_t WENV_AUTO_SH_ORDERS[WENV_AUTO_SH_ORDER_COUNT] = {2, 4, 6, 8, 10, 12, 14, 16};
 
-/* Band of the spectrum estimate; beyond it the power A_l^2 P_l is taken to fall as l^-4, as a lone
- * sun's does (A_l^2 ~ l^-5, P_l ~ 2l + 1), which bounds every non-negative lighting. */
-#define SH_ESTIMATE_ORDER 20
-#define SH_TAIL_FACTOR 2.9 /* sum over even l > 20 of (20 / l)^4 */
 /* Measured errors on the bundled HDRIs (examples/auto_quality.py) are 0.75 - 0.95 times the
  * estimate down to 0.3 %; below, a floor of a few 0.01 % (the irradiance table, the reference's own
  * pixel sums) shows. */
 #define SH_ERROR_MARGIN 1.0
 #define SH_ERROR_FLOOR 5e-4
-
-static int sh_band_power(const wenv_envmap *env, const double albedo[3], double *power)
-{
-    size_t count = wenv_sh_count(SH_ESTIMATE_ORDER);
-    double *c = malloc(count * 3 * sizeof(double));
-    if (!c)
-        return -1;
-    wenv_error err = {0};
-    /* a coarse projection: the estimate needs each band's power, not its coefficients exactly */
-    if (wenv_sh_project_envmap_blocks(env, SH_ESTIMATE_ORDER, wenv_sh_projection_block(env, SH_ESTIMATE_ORDER / 2),
-                                      c, NULL, &err)) {
-        free(c);
-        return -1;
-    }
-    for (size_t l = 0; l <= SH_ESTIMATE_ORDER; l++) {
-        double a = wenv_sh_lambert_factor(l), p = 0.0;
-        for (size_t i = l * l; i < (l + 1) * (l + 1); i++)
-            for (int ch = 0; ch < 3; ch++)
-                p += albedo[ch] * albedo[ch] * c[3 * i + ch] * c[3 * i + ch];
-        power[l] = a * a * p;
-    }
-    free(c);
-    return 0;
-}
 
 static double sh_error_from_power(const double *power, size_t order)
 {
@@ -345,17 +395,39 @@ static double sh_error_from_power(const double *power, size_t order)
     return total > 0.0 ? SH_ERROR_MARGIN * sqrt(tail / total) + SH_ERROR_FLOOR : 0.0;
 }
 
-wenv_status wenv_auto_choose(const wenv_envmap *env, const wenv_material *mat, double target, size_t memory_budget,
-                             const float *normals, size_t n, wenv_auto_choice *out, wenv_error *err)
+/* Normal samples of a level's grid the mesh's normals reach, counted once per grid side. */
+static size_t used_at(size_t level, const float *normals, size_t n, size_t *by_side)
+{
+    size_t side = LADDER[level].normal_n, slot = side <= 16 ? 0 : side <= 32 ? 1 : 2;
+    if (by_side[slot] == 0)
+        by_side[slot] = used_normal_samples(side, normals, n);
+    return by_side[slot];
+}
+
+wenv_status wenv_auto_choose(const wenv_envmap *env, const wenv_auto_analysis *analysis, const wenv_material *mat,
+                             double target, size_t memory_budget, const float *normals, size_t n,
+                             wenv_auto_choice *out, wenv_error *err)
 {
     memset(out, 0, sizeof *out);
     double start = omp_get_wtime();
     if (!(target > 0.0 && target <= 1.0))
         return wenv_error_set(err, WENV_ERR_VALUE, "target_error must be in (0, 1], got %g", target);
+    wenv_auto_analysis *made = NULL;
+    if (!analysis) {
+        if (wenv_auto_analysis_create(&made, env, err))
+            return err->status;
+        analysis = made;
+        out->analysis_seconds = made->seconds;
+    }
+    wenv_status st = WENV_OK;
     if (!mat->n_lobes) {
         double power[SH_ESTIMATE_ORDER + 1];
-        if (sh_band_power(env, mat->diffuse, power) < 0)
-            return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory estimating the environment");
+        for (size_t l = 0; l <= SH_ESTIMATE_ORDER; l++) {
+            double a = wenv_sh_lambert_factor(l);
+            power[l] = 0.0;
+            for (int ch = 0; ch < 3; ch++)
+                power[l] += a * a * mat->diffuse[ch] * mat->diffuse[ch] * analysis->band_power[l][ch];
+        }
         for (size_t i = 0; i < WENV_AUTO_SH_ORDER_COUNT; i++) {
             double e = sh_error_from_power(power, WENV_AUTO_SH_ORDERS[i]);
             if (e <= target && sh_bytes(WENV_AUTO_SH_ORDERS[i]) <= memory_budget) {
@@ -363,21 +435,23 @@ wenv_status wenv_auto_choose(const wenv_envmap *env, const wenv_material *mat, d
                 out->predicted_error = e;
                 out->met = 1;
                 out->level_bytes = sh_bytes(out->sh_order);
-                out->seconds = omp_get_wtime() - start;
-                return WENV_OK;
+                goto done;
             }
         }
     }
-    size_t used[WENV_AUTO_LEVELS];
-    for (size_t i = 0; i < WENV_AUTO_LEVELS; i++)
-        used[i] = used_normal_samples(LADDER[i].normal_n, normals, n);
-    if (wenv_auto_level_bytes(0, used[0]) > memory_budget)
-        return wenv_error_set(err, WENV_ERR_VALUE, "memory_budget of %zu bytes is below the cheapest setting's %zu",
-                              memory_budget, wenv_auto_level_bytes(0, used[0]));
+    /* per grid side (16, 32, 64): normal samples the mesh uses, counted when a budget check or
+     * the answer needs them; 0 not yet counted */
+    size_t by_side[3] = {0, 0, 0};
+    if (wenv_auto_level_bytes(0, (size_t)-1) > memory_budget &&
+        wenv_auto_level_bytes(0, used_at(0, normals, n, by_side)) > memory_budget) {
+        st = wenv_error_set(err, WENV_ERR_VALUE, "memory_budget of %zu bytes is below the cheapest setting's %zu",
+                            memory_budget, wenv_auto_level_bytes(0, used_at(0, normals, n, by_side)));
+        goto done;
+    }
     double m = narrowest_roughness(mat);
     /* the lobe's width within the calibrated range decides which texels the dominance averages */
-    if (estimate_levels(env, m > 0.0 ? fmin(fmax(m, ROUGHNESS[0]), ROUGHNESS[3]) : 0.0, out->levels, err))
-        return err->status;
+    if ((st = estimate_levels(analysis, m > 0.0 ? fmin(fmax(m, ROUGHNESS[0]), ROUGHNESS[3]) : 0.0, out->levels, err)))
+        goto done;
     for (size_t i = 0; i < WENV_AUTO_LEVELS; i++) {
         wenv_auto_level_estimate *e = &out->levels[i];
         if (i + 1 < WENV_AUTO_LEVELS)
@@ -392,7 +466,11 @@ wenv_status wenv_auto_choose(const wenv_envmap *env, const wenv_material *mat, d
         e->predicted_error = level_error(i, m) * e->env_factor;
     }
     size_t best = 0;
-    for (size_t i = 0; i < WENV_AUTO_LEVELS && wenv_auto_level_bytes(i, used[i]) <= memory_budget; i++) {
+    for (size_t i = 0; i < WENV_AUTO_LEVELS; i++) {
+        /* every slice fits, or those the mesh uses do */
+        if (wenv_auto_level_bytes(i, (size_t)-1) > memory_budget &&
+            wenv_auto_level_bytes(i, used_at(i, normals, n, by_side)) > memory_budget)
+            break;
         best = i;
         if (out->levels[i].predicted_error <= target) {
             out->met = 1;
@@ -401,9 +479,11 @@ wenv_status wenv_auto_choose(const wenv_envmap *env, const wenv_material *mat, d
     }
     out->level = best;
     out->quality = LADDER[best];
-    out->used_normals = used[best];
-    out->level_bytes = wenv_auto_level_bytes(best, used[best]);
+    out->used_normals = used_at(best, normals, n, by_side);
+    out->level_bytes = wenv_auto_level_bytes(best, out->used_normals);
     out->predicted_error = out->levels[best].predicted_error;
+done:
+    wenv_auto_analysis_free(made);
     out->seconds = omp_get_wtime() - start;
-    return WENV_OK;
+    return st;
 }

@@ -3,6 +3,7 @@
 
 #include <string.h>
 
+#include "autoquality.h"
 #include "envmap.h"
 
 /* Above this many directions a lookup releases the GIL (below it the switch costs more). */
@@ -11,6 +12,7 @@
 typedef struct {
     PyObject_HEAD
     wenv_envmap *env; /* owned, never NULL once constructed; immutable */
+    wenv_auto_analysis *auto_analysis; /* owned; made on quality="auto"'s first use, then immutable */
 } EnvironmentObject;
 
 static PyTypeObject EnvironmentType;
@@ -23,6 +25,30 @@ const struct wenv_envmap *wenv_py_envmap(PyObject *obj, const char *name)
         return NULL;
     }
     return ((EnvironmentObject *)obj)->env;
+}
+
+const struct wenv_auto_analysis *wenv_py_envmap_auto_analysis(PyObject *obj, double *made_seconds)
+{
+    EnvironmentObject *self = (EnvironmentObject *)obj;
+    *made_seconds = 0.0;
+    if (self->auto_analysis)
+        return self->auto_analysis;
+    wenv_auto_analysis *an = NULL;
+    wenv_error err = {0};
+    wenv_status st;
+    Py_BEGIN_ALLOW_THREADS
+    st = wenv_auto_analysis_create(&an, self->env, &err);
+    Py_END_ALLOW_THREADS
+    if (st) {
+        wenv_py_raise(&err);
+        return NULL;
+    }
+    *made_seconds = wenv_auto_analysis_seconds(an);
+    if (self->auto_analysis) /* another thread made one meanwhile: keep the first */
+        wenv_auto_analysis_free(an);
+    else
+        self->auto_analysis = an;
+    return self->auto_analysis;
 }
 
 /* Wraps `env` (ownership passes to the new object, or it is freed on failure). */
@@ -131,6 +157,7 @@ static PyObject *environment_new(PyTypeObject *type, PyObject *args, PyObject *k
 
 static void environment_dealloc(PyObject *self)
 {
+    wenv_auto_analysis_free(((EnvironmentObject *)self)->auto_analysis);
     wenv_envmap_free(((EnvironmentObject *)self)->env);
     Py_TYPE(self)->tp_free(self);
 }

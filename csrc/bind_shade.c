@@ -5,6 +5,7 @@
 #include <errno.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <time.h>
 
 #include "autoquality.h"
 #include "haar.h"
@@ -212,6 +213,13 @@ static int do_set_material(ShaderObject *self, PyObject *mat_obj)
     return 0;
 }
 
+static double now_seconds(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
 /* quality="auto": the cheapest ladder level predicted to meet target_error (autoquality.h). */
 static int choose_auto(ShaderObject *self, PyObject *env_obj, PyObject *mat_obj, PyObject *normals_obj)
 {
@@ -225,6 +233,13 @@ static int choose_auto(ShaderObject *self, PyObject *env_obj, PyObject *mat_obj,
     }
     const struct wenv_envmap *env = wenv_py_envmap(env_obj, "env");
     const struct wenv_material *mat = wenv_py_material(mat_obj, "material");
+    if (!env || !mat)
+        return -1;
+    double t0 = now_seconds();
+    double analysis_seconds;
+    const struct wenv_auto_analysis *analysis = wenv_py_envmap_auto_analysis(env_obj, &analysis_seconds);
+    if (!analysis)
+        return -1;
     Py_buffer nb = {0};
     size_t n = 0;
     const float *normals = NULL;
@@ -237,8 +252,10 @@ static int choose_auto(ShaderObject *self, PyObject *env_obj, PyObject *mat_obj,
     wenv_status st;
     size_t budget = (size_t)(self->memory_budget_mb * 1048576.0);
     Py_BEGIN_ALLOW_THREADS
-    st = wenv_auto_choose(env, mat, self->target_error, budget, normals, n, &self->auto_choice, &err);
+    st = wenv_auto_choose(env, analysis, mat, self->target_error, budget, normals, n, &self->auto_choice, &err);
     Py_END_ALLOW_THREADS
+    self->auto_choice.analysis_seconds = analysis_seconds;
+    self->auto_choice.seconds = now_seconds() - t0;
     if (normals)
         PyBuffer_Release(&nb);
     if (st) {
@@ -593,13 +610,14 @@ static PyObject *Shader_get_stats(ShaderObject *self, void *closure)
             else
                 PyList_SET_ITEM(levels, (Py_ssize_t)i, li);
         }
-        PyObject *info = !used || !level || !order || !levels ? NULL : Py_BuildValue("{s:O,s:O,s:s,s:d,s:d,s:d,s:d,s:d,s:d,s:O,s:d,s:d,s:O,s:O,s:d}", "level", level, "sh_order", order,
+        PyObject *info = !used || !level || !order || !levels ? NULL : Py_BuildValue("{s:O,s:O,s:s,s:d,s:d,s:d,s:d,s:d,s:d,s:O,s:d,s:d,s:O,s:O,s:d,s:d}", "level", level, "sh_order", order,
                                        "method", a->sh_order ? "sh" : "slicing", "predicted_error", a->predicted_error, "target_error",
                                        self->target_error, "contrast", chosen->contrast, "lights_share", chosen->lights_share,
                                        "light_dominance", chosen->light_dominance, "env_factor", chosen->env_factor,
                                        "met", a->met ? Py_True : Py_False, "memory_budget_mb", self->memory_budget_mb,
                                        "level_mb", (double)a->level_bytes / 1048576.0, "used_normal_samples", used,
-                                       "levels", levels, "seconds", a->seconds);
+                                       "levels", levels, "seconds", a->seconds,
+                                       "analysis_seconds", a->analysis_seconds);
         Py_XDECREF(levels);
         Py_XDECREF(used);
         Py_XDECREF(level);

@@ -875,8 +875,11 @@ def test_auto_quality_matches_core_and_builds_no_matrices(scene):
     # a tighter target picks a finer setting
     scene.wenv.target_error = 0.5
     assert shade_op(view="CAMERA") == {"FINISHED"}
-    levels = sorted(c["level"] for c in [s.stats["auto"] for s in core.shaders._auto.values()])
+    choices = [s.stats["auto"] for s in core.shaders._auto.values()]
+    levels = sorted(c["level"] for c in choices)
     assert levels[-1] > levels[0]
+    # the World is analysed once: the second pass's choice reads the first's analysis
+    assert sorted(c["analysis_seconds"] > 0 for c in choices) == [False, True]
     # a material without lobes gets SH irradiance, reported by its order
     obj.data.materials.clear()
     lam = set_material(obj, lobes=())

@@ -13,11 +13,16 @@ def unit(a):
     return (a / np.linalg.norm(a, axis=-1, keepdims=True)).astype(np.float32)
 
 
-@pytest.fixture(scope="module")
-def sunset():
+def small_sunset():
+    """Sunset box-filtered to 64 x 128 pixels."""
     px = wenv.load_environment(hdri_path("sunset")).pixels[..., :3]
     f = px.shape[0] // 64
     return wenv.Environment(np.ascontiguousarray(px.reshape(64, f, 128, f, 3).mean(axis=(1, 3)), np.float32))
+
+
+@pytest.fixture(scope="module")
+def sunset():
+    return small_sunset()
 
 
 def glossy(m):
@@ -182,3 +187,28 @@ def test_mesh_normals_count_only_the_slices_they_need(sunset):
         wenv.Shader(sunset, mat, quality="default", normals=floor)
     with pytest.raises(ValueError, match="normals"):
         wenv.Shader(sunset, mat, quality="auto", normals=np.zeros((3, 3), np.float32))
+
+
+def test_the_environment_is_analysed_once():
+    """The analysis auto reads (brightest pixels, the lighting without them, its SH band powers) is
+    made on an environment's first auto shader and kept with it: later choices for other materials
+    and targets read it and choose exactly as a first choice would.  A transformed copy is a new
+    environment with its own."""
+    env = small_sunset()  # not the shared fixture: other tests have analysed that one
+    first = wenv.Shader(env, glossy(0.1), quality="auto", target_error=0.03).stats["auto"]
+    assert first["analysis_seconds"] > 0 and first["seconds"] >= first["analysis_seconds"]
+    for mat in (glossy(0.1), glossy(0.5), wenv.Lambert(0.7)):
+        for t in (0.1, 0.01):
+            again = wenv.Shader(env, mat, quality="auto", target_error=t).stats["auto"]
+            assert again["analysis_seconds"] == 0
+            copy = env.with_transform(rotation=env.rotation, strength=env.strength)
+            fresh = wenv.Shader(copy, mat, quality="auto", target_error=t).stats["auto"]
+            assert fresh["analysis_seconds"] > 0
+            keys = ("level", "sh_order", "method", "met")
+            assert {k: again[k] for k in keys} == {k: fresh[k] for k in keys}
+            # equal but for the order threads add the SH projection's blocks in
+            assert again["predicted_error"] == pytest.approx(fresh["predicted_error"], rel=1e-9)
+            assert again["levels"] == fresh["levels"]
+    # a rotated copy is analysed anew: its lights' directions, hence the dominance grids, move
+    turned = wenv.Shader(env.with_transform(rotation=1.0), glossy(0.1), quality="auto", target_error=0.03).stats["auto"]
+    assert turned["analysis_seconds"] > 0
