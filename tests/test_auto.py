@@ -58,13 +58,15 @@ def test_tighter_targets_never_pick_cheaper_levels(sunset):
 
 
 def test_lambert_error_is_predicted_from_the_lighting_spectrum(sunset):
-    """The SH irradiance error auto predicts is the measured one, not just a bound: within 0.6 - 1.05
-    times it at every order (uniform normals, as the prediction assumes)."""
+    """The SH irradiance error auto predicts is the measured one, not just a bound: the measured
+    error is 0.9 - 1.0 times it at every order auto picks here (uniform normals, as the prediction
+    assumes; 0.95 - 0.985 when written).  A floor added linearly instead of in quadrature put it at
+    0.8 - 0.95 and made auto pick an order too high on the bundled HDRIs."""
     nrm = unit(np.random.default_rng(3).normal(size=(3000, 3)))
     mat = wenv.Lambert((0.8, 0.6, 0.3))
     ref = wenv.reference(sunset, mat, nrm, nrm)
     ratios = []
-    for target in (0.05, 0.02, 0.01, 0.005, 0.003):
+    for target in (0.05, 0.02, 0.01, 0.005, 0.003, 0.002):
         sh = wenv.Shader(sunset, mat, quality="auto", target_error=target)
         info = sh.stats["auto"]
         if info["method"] != "sh":
@@ -72,7 +74,7 @@ def test_lambert_error_is_predicted_from_the_lighting_spectrum(sunset):
         err = float(np.sqrt(np.mean((sh.shade(nrm, nrm) - ref) ** 2) / np.mean(ref ** 2)))
         ratios.append(err / info["predicted_error"])
         assert err <= target
-    assert len(ratios) >= 3 and 0.6 <= min(ratios) and max(ratios) <= 1.05, ratios
+    assert len(ratios) >= 5 and 0.9 <= min(ratios) and max(ratios) <= 1.0, ratios
 
 
 def test_memory_budget_is_kept(sunset):
