@@ -161,30 +161,48 @@ static int by_pixel(const void *a, const void *b)
 #define SH_ESTIMATE_ORDER 20
 #define SH_TAIL_FACTOR 2.9 /* sum over even l > 20 of (20 / l)^4 */
 
-/* What auto reads of an environment whatever the material, made once per environment: the
- * brightest pixels (each level's lights are a prefix of them: the brightest above its threshold, up
- * to its budget), the lighting without any of them as an octahedral pyramid, the flux in bright
- * extended features, and the lighting's power per SH band. */
+/* What auto reads of an environment whatever the material, in two parts each made on first need
+ * and then kept: for the slicing ladder the brightest pixels (each level's lights are a prefix of
+ * them: the brightest above its threshold, up to its budget), the lighting without any of them as
+ * an octahedral pyramid and the flux in bright extended features (7-10 ms on Blender's HDRIs); for
+ * SH irradiance the lighting's power per band (12 ms).  A material without lobes needs only the
+ * second, one with lobes only the first.  The lock makes a part once however many threads choose. */
 struct wenv_auto_analysis {
+    const wenv_envmap *env;
+    omp_lock_t lock;
     double total, mean, strength; /* flux, mean radiance (flux / 4 pi), the environment's strength */
-    double bright_flux;           /* flux of pixels above CONTRAST_FACTOR times the mean */
+    int lights_made, spectrum_made;
+    /* the ladder's part */
+    double bright_flux; /* flux of pixels above CONTRAST_FACTOR times the mean */
     size_t nb;
     wenv_bright_pixel *bright;
     wenv_oct_pyramid pyramid; /* without the nb candidates */
-    double band_power[SH_ESTIMATE_ORDER + 1][3]; /* sum over m of the squared coefficients, per channel */
-    double seconds;
+    /* the SH part: sum over m of the squared coefficients, per band and channel */
+    double band_power[SH_ESTIMATE_ORDER + 1][3];
 };
+
+wenv_status wenv_auto_analysis_create(wenv_auto_analysis **out, const wenv_envmap *env, wenv_error *err)
+{
+    wenv_auto_analysis *an = calloc(1, sizeof *an);
+    if (!(*out = an))
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory analysing the environment");
+    an->env = env;
+    an->total = wenv_envmap_flux(env);
+    an->strength = wenv_envmap_strength(env);
+    an->mean = an->total / (4.0 * M_PI);
+    omp_init_lock(&an->lock);
+    return WENV_OK;
+}
 
 void wenv_auto_analysis_free(wenv_auto_analysis *an)
 {
     if (!an)
         return;
+    omp_destroy_lock(&an->lock);
     wenv_oct_pyramid_free(&an->pyramid);
     free(an->bright);
     free(an);
 }
-
-double wenv_auto_analysis_seconds(const wenv_auto_analysis *an) { return an->seconds; }
 
 static int sh_band_power(const wenv_envmap *env, double power[][3])
 {
@@ -210,56 +228,65 @@ static int sh_band_power(const wenv_envmap *env, double power[][3])
     return 0;
 }
 
-wenv_status wenv_auto_analysis_create(wenv_auto_analysis **out, const wenv_envmap *env, wenv_error *err)
+static wenv_status make_spectrum(wenv_auto_analysis *an, wenv_error *err)
 {
-    double start = omp_get_wtime();
-    *out = NULL;
+    if (an->total > 0.0 && sh_band_power(an->env, an->band_power) < 0) /* black: no power anywhere */
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory analysing the environment");
+    return WENV_OK;
+}
+
+static wenv_status make_lights(wenv_auto_analysis *an, wenv_error *err)
+{
+    const wenv_envmap *env = an->env;
+    if (!(an->total > 0.0)) /* black (or zero strength): nothing to resolve */
+        return WENV_OK;
     size_t k = 0;
     double relative = INFINITY;
     for (size_t i = 0; i < WENV_AUTO_LEVELS; i++) {
         k = LADDER[i].lights > k ? LADDER[i].lights : k;
         relative = fmin(relative, LADDER[i].light_threshold);
     }
-    wenv_auto_analysis *an = calloc(1, sizeof *an);
     size_t *excluded = malloc((k ? k : 1) * sizeof *excluded);
-    if (an)
-        an->bright = malloc((k ? k : 1) * sizeof *an->bright);
-    if (!an || !an->bright || !excluded) {
+    an->bright = malloc((k ? k : 1) * sizeof *an->bright);
+    if (!an->bright || !excluded) {
         free(excluded);
-        wenv_auto_analysis_free(an);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory analysing the environment");
     }
-    an->total = wenv_envmap_flux(env);
-    an->strength = wenv_envmap_strength(env);
-    an->mean = an->total / (4.0 * M_PI);
-    if (an->total > 0.0) { /* else black (or zero strength): nothing to resolve */
-        an->nb = wenv_envmap_brightest(env, k, relative, an->bright);
-        for (size_t i = 0; i < an->nb; i++)
-            excluded[i] = an->bright[i].pixel;
-        qsort(excluded, an->nb, sizeof *excluded, by_pixel);
-        if (wenv_oct_pyramid_build(&an->pyramid, env, excluded, an->nb, DOMINANCE_GRID_MAX, err) ||
-            sh_band_power(env, an->band_power) < 0) {
-            if (!err->status)
-                wenv_error_set(err, WENV_ERR_NOMEM, "out of memory analysing the environment");
-            free(excluded);
-            wenv_auto_analysis_free(an);
-            return err->status;
-        }
-        double cut = CONTRAST_FACTOR * an->mean / an->strength, bright_flux = 0.0;
-        size_t w = wenv_envmap_width(env), h = wenv_envmap_height(env);
-        const float *px = wenv_envmap_pixels(env);
-        for (size_t row = 0; row < h; row++)
-            for (size_t col = 0; col < w; col++) {
-                const float *p = px + 3 * (row * w + col);
-                if (p[0] > cut || p[1] > cut || p[2] > cut)
-                    bright_flux += wenv_envmap_pixel_solid_angle(env, row, col) * ((double)p[0] + p[1] + p[2]) / 3.0;
-            }
-        an->bright_flux = bright_flux * an->strength;
-    }
+    an->nb = wenv_envmap_brightest(env, k, relative, an->bright);
+    for (size_t i = 0; i < an->nb; i++)
+        excluded[i] = an->bright[i].pixel;
+    qsort(excluded, an->nb, sizeof *excluded, by_pixel);
+    wenv_status st = wenv_oct_pyramid_build(&an->pyramid, env, excluded, an->nb, DOMINANCE_GRID_MAX, err);
     free(excluded);
-    an->seconds = omp_get_wtime() - start;
-    *out = an;
+    if (st)
+        return st;
+    double cut = CONTRAST_FACTOR * an->mean / an->strength, bright_flux = 0.0;
+    size_t w = wenv_envmap_width(env), h = wenv_envmap_height(env);
+    const float *px = wenv_envmap_pixels(env);
+    for (size_t row = 0; row < h; row++)
+        for (size_t col = 0; col < w; col++) {
+            const float *p = px + 3 * (row * w + col);
+            if (p[0] > cut || p[1] > cut || p[2] > cut)
+                bright_flux += wenv_envmap_pixel_solid_angle(env, row, col) * ((double)p[0] + p[1] + p[2]) / 3.0;
+        }
+    an->bright_flux = bright_flux * an->strength;
     return WENV_OK;
+}
+
+/* Makes the part `made` flags with `make` unless made before; adds the time to *seconds. */
+static wenv_status need_part(wenv_auto_analysis *an, int *made, wenv_status (*make)(wenv_auto_analysis *, wenv_error *),
+                             double *seconds, wenv_error *err)
+{
+    wenv_status st = WENV_OK;
+    omp_set_lock(&an->lock);
+    if (!*made) {
+        double start = omp_get_wtime();
+        st = make(an, err);
+        *made = st == WENV_OK;
+        *seconds += omp_get_wtime() - start;
+    }
+    omp_unset_lock(&an->lock);
+    return st;
 }
 
 /* Per level: the flux share of its lights, the share of the bright extended features it leaves in
@@ -413,7 +440,7 @@ static size_t used_at(size_t level, const float *normals, size_t n, size_t *by_s
     return by_side[slot];
 }
 
-wenv_status wenv_auto_choose(const wenv_envmap *env, const wenv_auto_analysis *analysis, const wenv_material *mat,
+wenv_status wenv_auto_choose(const wenv_envmap *env, wenv_auto_analysis *analysis, const wenv_material *mat,
                              double target, size_t memory_budget, const float *normals, size_t n,
                              wenv_auto_choice *out, wenv_error *err)
 {
@@ -421,15 +448,18 @@ wenv_status wenv_auto_choose(const wenv_envmap *env, const wenv_auto_analysis *a
     double start = omp_get_wtime();
     if (!(target > 0.0 && target <= 1.0))
         return wenv_error_set(err, WENV_ERR_VALUE, "target_error must be in (0, 1], got %g", target);
+    if (analysis && analysis->env != env)
+        return wenv_error_set(err, WENV_ERR_VALUE, "the analysis given is of another environment");
     wenv_auto_analysis *made = NULL;
     if (!analysis) {
         if (wenv_auto_analysis_create(&made, env, err))
             return err->status;
         analysis = made;
-        out->analysis_seconds = made->seconds;
     }
     wenv_status st = WENV_OK;
     if (!mat->n_lobes) {
+        if ((st = need_part(analysis, &analysis->spectrum_made, make_spectrum, &out->analysis_seconds, err)))
+            goto done;
         double power[SH_ESTIMATE_ORDER + 1];
         for (size_t l = 0; l <= SH_ESTIMATE_ORDER; l++) {
             double a = wenv_sh_lambert_factor(l);
@@ -457,6 +487,8 @@ wenv_status wenv_auto_choose(const wenv_envmap *env, const wenv_auto_analysis *a
                             memory_budget, wenv_auto_level_bytes(0, used_at(0, normals, n, by_side)));
         goto done;
     }
+    if ((st = need_part(analysis, &analysis->lights_made, make_lights, &out->analysis_seconds, err)))
+        goto done;
     double m = narrowest_roughness(mat);
     /* the lobe's width within the calibrated range decides which texels the dominance averages */
     if ((st = estimate_levels(analysis, m > 0.0 ? fmin(fmax(m, ROUGHNESS[0]), ROUGHNESS[3]) : 0.0, out->levels, err)))

@@ -30,10 +30,11 @@
  * "sh", whose lobe-less path reads a tabulated irradiance), and the slicing ladder only when even
  * the highest order cannot.
  *
- * Everything auto reads of the environment alone is made once per environment
- * (wenv_auto_analysis, 20-35 ms for Blender's 1024 x 512 HDRIs); a choice then costs well under a
- * millisecond, plus a pass over the mesh's normals when given.  SH order 2 makes a first view in a
- * few milliseconds, so choosing must cost far less for auto to match it. */
+ * Everything auto reads of the environment alone is made once per environment and kept
+ * (wenv_auto_analysis: 7-10 ms for the slicing ladder, 12 ms for SH, on Blender's 1024 x 512
+ * HDRIs); a choice then costs a fraction of a millisecond plus a pass over the mesh's normals when
+ * given.  SH order 2 makes a first view in a few milliseconds, so choosing must cost far less for
+ * auto to match it. */
 #ifndef WENV_AUTOQUALITY_H
 #define WENV_AUTOQUALITY_H
 
@@ -75,27 +76,28 @@ typedef struct {
     int met;                /* whether some level within the budget is predicted to meet the target */
     size_t level_bytes;     /* the chosen level's memory, as counted against the budget */
     size_t used_normals;    /* its normal samples the mesh's normals fall near ((size_t)-1: all) */
-    double seconds;         /* what choosing took (with the analysis, when made for this choice) */
-    double analysis_seconds; /* what analysing the environment took in this choice (0: given one) */
+    double seconds;         /* what choosing took (with analysing the environment, when it did) */
+    double analysis_seconds; /* what analysing the environment took in this choice (0: all it needed was made) */
 } wenv_auto_choice;
 
 /* What auto reads of an environment whatever the material (its brightest pixels, the lighting
- * without them as a small octahedral pyramid, its bright extended features, its power per SH band):
- * made once per environment and read by every choice on it, so that choosing again for another
- * material or target costs well under a millisecond.  Immutable once made. */
+ * without them as a small octahedral pyramid, its bright extended features, its power per SH band),
+ * made part by part as choices on it first need them and kept, so that choosing again for another
+ * material or target costs well under a millisecond.  Safe to share between threads choosing on
+ * the same environment, which must outlive it. */
 typedef struct wenv_auto_analysis wenv_auto_analysis;
 
 wenv_status wenv_auto_analysis_create(wenv_auto_analysis **out, const wenv_envmap *env, wenv_error *err);
 void wenv_auto_analysis_free(wenv_auto_analysis *an);
-double wenv_auto_analysis_seconds(const wenv_auto_analysis *an); /* what making it took */
 
 /* The cheapest level whose predicted error is at most `target` and whose memory is at most
  * `memory_budget` bytes; when none is predicted to meet the target, the most accurate level within
  * the budget (met = 0).  `normals` (n x 3 floats, may be NULL) are the mesh's: a level's lighting
  * slices are then counted only for the normal samples they fall near, as shading makes only those
  * (a flat floor needs a handful, a sphere all).  target in (0, 1]; WENV_ERR_VALUE when even the
- * cheapest level exceeds the budget.  `analysis` is `env`'s (NULL: made and freed here). */
-wenv_status wenv_auto_choose(const wenv_envmap *env, const wenv_auto_analysis *analysis, const wenv_material *mat,
+ * cheapest level exceeds the budget.  `analysis` is `env`'s, its parts made here as needed (NULL: a
+ * new one, freed here). */
+wenv_status wenv_auto_choose(const wenv_envmap *env, wenv_auto_analysis *analysis, const wenv_material *mat,
                              double target, size_t memory_budget, const float *normals, size_t n,
                              wenv_auto_choice *out, wenv_error *err);
 

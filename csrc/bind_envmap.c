@@ -12,7 +12,7 @@
 typedef struct {
     PyObject_HEAD
     wenv_envmap *env; /* owned, never NULL once constructed; immutable */
-    wenv_auto_analysis *auto_analysis; /* owned; made on quality="auto"'s first use, then immutable */
+    wenv_auto_analysis *auto_analysis; /* owned; made on quality="auto"'s first use, filled as choices need */
 } EnvironmentObject;
 
 static PyTypeObject EnvironmentType;
@@ -27,27 +27,16 @@ const struct wenv_envmap *wenv_py_envmap(PyObject *obj, const char *name)
     return ((EnvironmentObject *)obj)->env;
 }
 
-const struct wenv_auto_analysis *wenv_py_envmap_auto_analysis(PyObject *obj, double *made_seconds)
+struct wenv_auto_analysis *wenv_py_envmap_auto_analysis(PyObject *obj)
 {
     EnvironmentObject *self = (EnvironmentObject *)obj;
-    *made_seconds = 0.0;
-    if (self->auto_analysis)
-        return self->auto_analysis;
-    wenv_auto_analysis *an = NULL;
-    wenv_error err = {0};
-    wenv_status st;
-    Py_BEGIN_ALLOW_THREADS
-    st = wenv_auto_analysis_create(&an, self->env, &err);
-    Py_END_ALLOW_THREADS
-    if (st) {
-        wenv_py_raise(&err);
-        return NULL;
+    if (!self->auto_analysis) {
+        wenv_error err = {0};
+        if (wenv_auto_analysis_create(&self->auto_analysis, self->env, &err)) {
+            wenv_py_raise(&err);
+            return NULL;
+        }
     }
-    *made_seconds = wenv_auto_analysis_seconds(an);
-    if (self->auto_analysis) /* another thread made one meanwhile: keep the first */
-        wenv_auto_analysis_free(an);
-    else
-        self->auto_analysis = an;
     return self->auto_analysis;
 }
 

@@ -5,7 +5,6 @@
 #include <errno.h>
 #include <string.h>
 #include <sys/stat.h>
-#include <time.h>
 
 #include "autoquality.h"
 #include "haar.h"
@@ -213,13 +212,6 @@ static int do_set_material(ShaderObject *self, PyObject *mat_obj)
     return 0;
 }
 
-static double now_seconds(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
-
 /* quality="auto": the cheapest ladder level predicted to meet target_error (autoquality.h). */
 static int choose_auto(ShaderObject *self, PyObject *env_obj, PyObject *mat_obj, PyObject *normals_obj)
 {
@@ -235,9 +227,7 @@ static int choose_auto(ShaderObject *self, PyObject *env_obj, PyObject *mat_obj,
     const struct wenv_material *mat = wenv_py_material(mat_obj, "material");
     if (!env || !mat)
         return -1;
-    double t0 = now_seconds();
-    double analysis_seconds;
-    const struct wenv_auto_analysis *analysis = wenv_py_envmap_auto_analysis(env_obj, &analysis_seconds);
+    struct wenv_auto_analysis *analysis = wenv_py_envmap_auto_analysis(env_obj);
     if (!analysis)
         return -1;
     Py_buffer nb = {0};
@@ -254,8 +244,6 @@ static int choose_auto(ShaderObject *self, PyObject *env_obj, PyObject *mat_obj,
     Py_BEGIN_ALLOW_THREADS
     st = wenv_auto_choose(env, analysis, mat, self->target_error, budget, normals, n, &self->auto_choice, &err);
     Py_END_ALLOW_THREADS
-    self->auto_choice.analysis_seconds = analysis_seconds;
-    self->auto_choice.seconds = now_seconds() - t0;
     if (normals)
         PyBuffer_Release(&nb);
     if (st) {

@@ -55,10 +55,10 @@ wenv_progress wenv_py_progress(wenv_py_progress_bridge *bridge);
 struct wenv_envmap;
 const struct wenv_envmap *wenv_py_envmap(PyObject *obj, const char *name); /* NULL + TypeError naming `name` if obj is not a wenv.Environment */
 struct wenv_auto_analysis;
-/* quality="auto"'s analysis of an environment (a wenv.Environment, checked by the caller), made
- * without the GIL on first use and kept with the environment; NULL + exception on failure.
- * *made_seconds: what making it took now (0 when it was already there). */
-const struct wenv_auto_analysis *wenv_py_envmap_auto_analysis(PyObject *obj, double *made_seconds);
+/* quality="auto"'s analysis of an environment (a wenv.Environment, checked by the caller), kept
+ * with it: empty when new, its parts made by the choices that need them (wenv_auto_choose, without
+ * the GIL); NULL + exception on failure. */
+struct wenv_auto_analysis *wenv_py_envmap_auto_analysis(PyObject *obj);
 struct wenv_material;
 const struct wenv_material *wenv_py_material(PyObject *obj, const char *name); /* NULL + TypeError naming `name` if obj is not a wenv.Material */
 

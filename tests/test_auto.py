@@ -1,6 +1,8 @@
 """quality="auto": picks the cheapest ladder level (or, without lobes, SH order) predicted to meet
 target_error, never builds rotation matrices, keeps within its memory budget, and meets its target (examples/auto_quality.py
 shows it on every bundled HDRI; here on a reduced one)."""
+import threading
+
 import numpy as np
 import pytest
 
@@ -192,15 +194,20 @@ def test_mesh_normals_count_only_the_slices_they_need(sunset):
 
 
 def test_the_environment_is_analysed_once():
-    """The analysis auto reads (brightest pixels, the lighting without them, its SH band powers) is
-    made on an environment's first auto shader and kept with it: later choices for other materials
-    and targets read it and choose exactly as a first choice would.  A transformed copy is a new
-    environment with its own."""
+    """What auto reads of an environment is made on first need and kept with it, in two parts: the
+    lights and the pyramid for materials with lobes, the SH spectrum for those without.  Later
+    choices for other materials and targets read it and choose exactly as a first choice would.  A
+    transformed copy is a new environment with its own."""
     env = small_sunset()  # not the shared fixture: other tests have analysed that one
     first = wenv.Shader(env, glossy(0.1), quality="auto", target_error=0.03).stats["auto"]
     assert first["analysis_seconds"] > 0 and first["seconds"] >= first["analysis_seconds"]
+    # the first lobe-less choice makes the spectrum, the later ones read it
+    lambert = [wenv.Shader(env, wenv.Lambert(0.7), quality="auto", target_error=t).stats["auto"]
+               for t in (0.1, 0.01)]
+    assert [a["method"] for a in lambert] == ["sh", "sh"]
+    assert lambert[0]["analysis_seconds"] > 0 and lambert[1]["analysis_seconds"] == 0
     for mat in (glossy(0.1), glossy(0.5), wenv.Lambert(0.7)):
-        for t in (0.1, 0.01):
+        for t in (0.1, 0.01, 1e-4):  # 1e-4: no SH order meets it, so Lambert goes to the ladder too
             again = wenv.Shader(env, mat, quality="auto", target_error=t).stats["auto"]
             assert again["analysis_seconds"] == 0
             copy = env.with_transform(rotation=env.rotation, strength=env.strength)
@@ -214,3 +221,25 @@ def test_the_environment_is_analysed_once():
     # a rotated copy is analysed anew: its lights' directions, hence the dominance grids, move
     turned = wenv.Shader(env.with_transform(rotation=1.0), glossy(0.1), quality="auto", target_error=0.03).stats["auto"]
     assert turned["analysis_seconds"] > 0
+
+
+def test_threads_choosing_on_one_environment_make_its_analysis_once():
+    """Choices run without the GIL: threads choosing at once on a new environment make each part of
+    its analysis once between them and choose alike."""
+    env = small_sunset()
+    out = {}
+
+    def choose(i):
+        mat = glossy(0.2) if i % 2 else wenv.Lambert(0.7)
+        out[i] = wenv.Shader(env, mat, quality="auto", target_error=0.02).stats["auto"]
+
+    threads = [threading.Thread(target=choose, args=(i,)) for i in range(8)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    for kind in (0, 1):
+        same = [out[i] for i in range(8) if i % 2 == kind]
+        assert sum(a["analysis_seconds"] > 0 for a in same) == 1
+        assert all({k: a[k] for k in ("level", "sh_order", "predicted_error")}
+                   == {k: same[0][k] for k in ("level", "sh_order", "predicted_error")} for a in same)
