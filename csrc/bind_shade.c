@@ -661,7 +661,10 @@ static PyTypeObject ShaderType = {
               "normal samples the mesh's normals (if given) fall near.  A material without lobes gets method "
               "'sh' at the lowest order of wenv.AUTO_SH_ORDERS whose irradiance error, known from the lighting's "
               "SH power spectrum, meets the target.  stats['auto'] tells what it chose and why.  The choice is "
-              "made once, for the environment and material given here: make a new Shader to choose again.",
+              "made once, for the environment and material given here: make a new Shader to choose again.  What "
+              "it reads of the environment alone is made on first need and kept with the wenv.Environment, so "
+              "later choices on it cost a fraction of a millisecond, plus about 2 ms for 126k normals "
+              "(stats['auto']['analysis_seconds']: what this choice spent analysing).",
     .tp_new = PyType_GenericNew,
     .tp_init = (initproc)Shader_init,
     .tp_dealloc = (destructor)Shader_dealloc,
