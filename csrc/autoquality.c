@@ -164,8 +164,8 @@ static int by_pixel(const void *a, const void *b)
 /* What auto reads of an environment whatever the material, in two parts each made on first need
  * and then kept: for the slicing ladder the brightest pixels (each level's lights are a prefix of
  * them: the brightest above its threshold, up to its budget), the lighting without any of them as
- * an octahedral pyramid and the flux in bright extended features (7-10 ms on Blender's HDRIs); for
- * SH irradiance the lighting's power per band (12 ms).  A material without lobes needs only the
+ * an octahedral pyramid and the flux in bright extended features (8-20 ms on Blender's HDRIs); for
+ * SH irradiance the lighting's power per band (13-16 ms).  A material without lobes needs only the
  * second, one with lobes only the first.  The lock makes a part once however many threads choose. */
 struct wenv_auto_analysis {
     const wenv_envmap *env;
@@ -246,6 +246,7 @@ static wenv_status make_lights(wenv_auto_analysis *an, wenv_error *err)
         k = LADDER[i].lights > k ? LADDER[i].lights : k;
         relative = fmin(relative, LADDER[i].light_threshold);
     }
+    free(an->bright); /* from an attempt that failed, if any */
     size_t *excluded = malloc((k ? k : 1) * sizeof *excluded);
     an->bright = malloc((k ? k : 1) * sizeof *an->bright);
     if (!an->bright || !excluded) {

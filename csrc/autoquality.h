@@ -31,7 +31,7 @@
  * the highest order cannot.
  *
  * Everything auto reads of the environment alone is made once per environment and kept
- * (wenv_auto_analysis: 7-10 ms for the slicing ladder, 12 ms for SH, on Blender's 1024 x 512
+ * (wenv_auto_analysis: 8-20 ms for the slicing ladder, 13-16 ms for SH, on Blender's 1024 x 512
  * HDRIs); a choice then costs a fraction of a millisecond plus a pass over the mesh's normals when
  * given.  SH order 2 makes a first view in a few milliseconds, so choosing must cost far less for
  * auto to match it. */
