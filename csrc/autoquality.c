@@ -441,6 +441,13 @@ static size_t used_at(size_t level, const float *normals, size_t n, size_t *by_s
     return by_side[slot];
 }
 
+/* Whether a level fits the budget: every slice, or those the mesh uses. */
+static int level_fits(size_t level, size_t budget, const float *normals, size_t n, size_t *by_side)
+{
+    return wenv_auto_level_bytes(level, (size_t)-1) <= budget ||
+           wenv_auto_level_bytes(level, used_at(level, normals, n, by_side)) <= budget;
+}
+
 wenv_status wenv_auto_choose(const wenv_envmap *env, wenv_auto_analysis *analysis, const wenv_material *mat,
                              double target, size_t memory_budget, const float *normals, size_t n,
                              wenv_auto_choice *out, wenv_error *err)
@@ -482,8 +489,7 @@ wenv_status wenv_auto_choose(const wenv_envmap *env, wenv_auto_analysis *analysi
     /* per grid side (16, 32, 64): normal samples the mesh uses, counted when a budget check or
      * the answer needs them; 0 not yet counted */
     size_t by_side[3] = {0, 0, 0};
-    if (wenv_auto_level_bytes(0, (size_t)-1) > memory_budget &&
-        wenv_auto_level_bytes(0, used_at(0, normals, n, by_side)) > memory_budget) {
+    if (!level_fits(0, memory_budget, normals, n, by_side)) {
         st = wenv_error_set(err, WENV_ERR_VALUE, "memory_budget of %zu bytes is below the cheapest setting's %zu",
                             memory_budget, wenv_auto_level_bytes(0, used_at(0, normals, n, by_side)));
         goto done;
@@ -509,9 +515,7 @@ wenv_status wenv_auto_choose(const wenv_envmap *env, wenv_auto_analysis *analysi
     }
     size_t best = 0;
     for (size_t i = 0; i < WENV_AUTO_LEVELS; i++) {
-        /* every slice fits, or those the mesh uses do */
-        if (wenv_auto_level_bytes(i, (size_t)-1) > memory_budget &&
-            wenv_auto_level_bytes(i, used_at(i, normals, n, by_side)) > memory_budget)
+        if (!level_fits(i, memory_budget, normals, n, by_side))
             break;
         best = i;
         if (out->levels[i].predicted_error <= target) {

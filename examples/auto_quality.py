@@ -61,6 +61,11 @@ def new_view_ms(env, mat, quality, pos, nrm, repeats, method="slicing"):
     return statistics.median(times)
 
 
+def setting_of(choice):
+    """The key of the setting auto chose (stats["auto"]): its ladder level, or "sh<order>"."""
+    return f"sh{choice['sh_order']}" if choice["method"] == "sh" else choice["level"]
+
+
 SUBSET = 2000  # pairs in examples/accuracy.py's table: the metric's noise is read off subsets this size
 
 
@@ -194,12 +199,12 @@ def main():
                 t0 = time.perf_counter()
                 wenv.Shader(sunset, mat, quality="auto", target_error=t, normals=mesh_nrm).shade_mesh(pos, mesh_nrm, orbit_eye(i))
                 warm.append(1e3 * (time.perf_counter() - t0))
-                new_env = sunset.with_transform(rotation=sunset.rotation, strength=sunset.strength)
+                new_env = sunset.with_transform()  # a copy: not analysed yet
                 t0 = time.perf_counter()
                 wenv.Shader(new_env, mat, quality="auto", target_error=t, normals=mesh_nrm).shade_mesh(pos, mesh_nrm, orbit_eye(i))
                 fresh.append(1e3 * (time.perf_counter() - t0))
             a = chosen["sunset", name, t]
-            sid = f"sh{a['sh_order']}" if a["method"] == "sh" else a["level"]
+            sid = setting_of(a)
             end_to_end[f"{name}/{t}"] = {"setting": sid, "auto_ms": statistics.median(warm),
                                          "auto_fresh_ms": statistics.median(fresh),
                                          "setting_plus_choosing_ms": times[name, sid] + choose_ms[f"sunset/{name}/{t}"]}
@@ -213,7 +218,7 @@ def main():
         for name in names:
             for h in HDRIS:
                 a = chosen[h, name, t]
-                sid = f"sh{a['sh_order']}" if a["method"] == "sh" else a["level"]
+                sid = setting_of(a)
                 met = [k for k in settings(name) if errors[h, name, k] <= t]
                 cheapest = min(met, key=lambda k: times[name, k]) if met else None
                 # auto's time: its setting's, plus choosing (on an analysed environment), plus for a
