@@ -1,4 +1,4 @@
-"""Build the `wenv` C extension (sources in csrc/).
+"""Build the `wenv` C extension (sources in csrc/, one folder per layer: docs/ARCHITECTURE.md).
 
 System libraries (Debian names): libopenexr-dev (OpenEXRCore), zlib1g-dev, libcubature-dev.
 scripts/setup.sh installs them.  Flags stay portable: no -march=native; hot loops dispatch on
@@ -37,7 +37,7 @@ setup(
     ext_modules=[
         Extension(
             "wenv",
-            sources=sorted(glob.glob("csrc/*.c")),
+            sources=sorted(glob.glob("csrc/**/*.c", recursive=True)),
             include_dirs=["csrc"] + include_dirs,
             libraries=exr_libs + ["cubature", "z", "m"],
             extra_compile_args=extra_compile_args,

@@ -1,12 +1,15 @@
 """wenv for Blender: shade meshes under the World's HDR environment with view-dependent BRDFs
 (wavelet rotation) and read a material's gloss as an ISO 2813 glossmeter would.
 
-The numerical core is the `wenv` module (a wheel bundled with this extension)."""
+The numerical core is the `wenv` module (a wheel bundled with this extension).  Laid out by role,
+as Cycles' add-on: properties, operators, ui and handlers are registered here; world, materials,
+gloss, views, meshes and shading turn Blender data into plain values and colours back; live runs
+them in the background; engine is the only module that imports `wenv`."""
 import os
 
 import bpy
 
-from . import core, handlers, operators, properties, ui
+from . import engine, handlers, operators, properties, ui
 
 _modules = (properties, operators, ui, handlers)
 
@@ -25,10 +28,10 @@ def _matrix_cache_dir():
 def register():
     for module in _modules:
         module.register()
-    core.shaders.cache_dir = _matrix_cache_dir()
+    engine.shaders.cache_dir = _matrix_cache_dir()
 
 
 def unregister():
     for module in reversed(_modules):
         module.unregister()
-    core.shaders.clear()
+    engine.shaders.clear()

@@ -2,7 +2,7 @@
 import bpy
 from bpy.app.handlers import persistent
 
-from . import core
+from . import engine, meshes, shading, views
 from .live import LiveState
 
 _last_error = {"message": None}
@@ -12,14 +12,14 @@ _last_error = {"message": None}
 def frame_change_post(scene, depsgraph=None):
     if not scene.wenv.shade_on_frame_change:
         return
-    objects = core.shaded_objects(scene)
+    objects = meshes.shaded_objects(scene)
     if not objects:
         return
     try:
-        view = core.camera_view(scene)
-        core.shade_objects(scene, depsgraph or bpy.context.evaluated_depsgraph_get(), objects, view, bpy.data)
+        view = views.camera_view(scene)
+        shading.shade_objects(scene, depsgraph or bpy.context.evaluated_depsgraph_get(), objects, view, bpy.data)
         _last_error["message"] = None
-    except core.SetupError as exc:
+    except engine.SetupError as exc:
         # Printed once per distinct problem: a frame handler has no operator to report through.
         if _last_error["message"] != str(exc):
             print(f"wenv: frame {scene.frame_current}: {exc}")
@@ -31,7 +31,7 @@ def load_post(*_args):
     # Data of the previous file is gone: stop the live session, drop cached environments (images
     # of the new file may reuse names).  The shaders' rotation matrices stay (they are data-free).
     LiveState.reset()
-    core.shaders.forget_data()
+    engine.shaders.forget_data()
 
 
 def last_error():

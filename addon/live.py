@@ -2,9 +2,7 @@
 drives these from modal timers, tests drive them directly)."""
 import threading
 
-import wenv
-
-from . import core
+from . import engine, materials, shading, views, world
 
 
 class PrecomputeJob:
@@ -30,8 +28,8 @@ class PrecomputeJob:
 
     def _run(self):
         try:
-            self.result = core.shaders.build(self.quality, self._progress)
-        except wenv.CancelledError:
+            self.result = engine.shaders.build(self.quality, self._progress)
+        except engine.CancelledError:
             self.cancelled = True
         except Exception as exc:  # reported on the main thread
             self.error = exc
@@ -49,8 +47,8 @@ class PrecomputeJob:
 
     def install(self):
         """Main thread: puts the finished shader into the cache.  True if there was one."""
-        if self.result is not None and not core.shaders.has(self.quality):
-            core.shaders.add(self.quality, self.result)
+        if self.result is not None and not engine.shaders.has(self.quality):
+            engine.shaders.add(self.quality, self.result)
         return self.result is not None
 
 
@@ -79,24 +77,24 @@ class LiveSession:
     def view(self, context):
         scene = context.scene
         if scene.wenv.view_source == "CAMERA":
-            return core.camera_view(scene)
-        rv3d = core.find_region_3d(context)
+            return views.camera_view(scene)
+        rv3d = views.find_region_3d(context)
         if rv3d is None:
-            raise core.SetupError("No 3D viewport to take the view from")
-        return core.region_view(rv3d, scene)
+            raise engine.SetupError("No 3D viewport to take the view from")
+        return views.region_view(rv3d, scene)
 
     def signature(self, context, view):
         scene = context.scene
         st = scene.wenv
         try:
-            world = core.world_spec(scene.world).signature
-        except core.SetupError as exc:
-            world = ("error", str(exc))
+            world_sig = world.world_spec(scene.world).signature
+        except engine.SetupError as exc:
+            world_sig = ("error", str(exc))
         objs = []
         for obj in self.objects(scene):
-            mats = tuple(core.material_key(s.material.wenv if s.material else None) for s in obj.material_slots)
+            mats = tuple(materials.material_key(s.material.wenv if s.material else None) for s in obj.material_slots)
             objs.append((obj.name, _matrix_tuple(obj.matrix_world), len(obj.data.vertices), mats))
-        return (view.signature, world, tuple(objs), st.quality, st.tone_mapping, st.max_luminance, st.target_error,
+        return (view.signature, world_sig, tuple(objs), st.quality, st.tone_mapping, st.max_luminance, st.target_error,
                 st.memory_budget)
 
     @property
@@ -133,7 +131,7 @@ class LiveSession:
         depsgraph = context.evaluated_depsgraph_get()  # brings matrix_world etc. up to date
         try:
             view = self.view(context)
-        except core.SetupError as exc:
+        except engine.SetupError as exc:
             self.last_error = str(exc)
             return False
         sig = self.signature(context, view)
@@ -142,8 +140,8 @@ class LiveSession:
         self.last_signature = sig
         scene = context.scene
         try:
-            self._plan = core.plan_shading(scene, depsgraph, self.objects(scene), view, context.blend_data.images)
-        except core.SetupError as exc:
+            self._plan = shading.plan_shading(scene, depsgraph, self.objects(scene), view, context.blend_data.images)
+        except engine.SetupError as exc:
             self.last_error = str(exc)
             return False
         self._worker = threading.Thread(target=self._compute, name="wenv-live", daemon=True)

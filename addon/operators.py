@@ -1,16 +1,15 @@
 """Operators: shade, precompute, live mode, material settings and the glossmeter's inverse."""
 import bpy
-import wenv
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty
 
-from . import core
+from . import engine, gloss, materials, meshes, shading, views
 from .live import LiveSession, LiveState, PrecomputeJob
 
 IDENTITY = ((1.0, 0.0, 0.0, 0.0), (0.0, 1.0, 0.0, 0.0), (0.0, 0.0, 1.0, 0.0), (0.0, 0.0, 0.0, 1.0))
 
 
 def _quality(context):
-    return core.quality_value(context.scene.wenv.quality)
+    return engine.quality_value(context.scene.wenv.quality)
 
 
 class _Precomputing:
@@ -71,16 +70,16 @@ class WENV_OT_precompute(_Precomputing, bpy.types.Operator):
 
     def execute(self, context):
         quality = _quality(context)
-        if not core.shaders.has(quality):
+        if not engine.shaders.has(quality):
             wm = context.window_manager
             try:
-                core.shaders.get(quality, _progress_reporter(wm))
+                engine.shaders.get(quality, _progress_reporter(wm))
             finally:
                 wm.progress_end()
         return {"FINISHED"}
 
     def invoke(self, context, event):
-        if core.shaders.has(_quality(context)):
+        if engine.shaders.has(_quality(context)):
             return {"FINISHED"}
         return self.start_precompute(context)
 
@@ -89,13 +88,13 @@ def resolve_view(context, source, view_matrix, perspective):
     if source == "SCENE":
         source = context.scene.wenv.view_source
     if source == "CAMERA":
-        return core.camera_view(context.scene)
+        return views.camera_view(context.scene)
     if source == "MATRIX":
-        return core.View.from_view_matrix([list(r) for r in view_matrix], perspective)
-    rv3d = core.find_region_3d(context)
+        return views.View.from_view_matrix([list(r) for r in view_matrix], perspective)
+    rv3d = views.find_region_3d(context)
     if rv3d is None:
-        raise core.SetupError("No 3D viewport to take the view from: use the scene camera")
-    return core.region_view(rv3d, context.scene)
+        raise engine.SetupError("No 3D viewport to take the view from: use the scene camera")
+    return views.region_view(rv3d, context.scene)
 
 
 class WENV_OT_shade(_Precomputing, bpy.types.Operator):
@@ -122,17 +121,17 @@ class WENV_OT_shade(_Precomputing, bpy.types.Operator):
 
     def execute(self, context):
         scene = context.scene
-        objects = list(context.selected_objects) if self.target == "SELECTED" else core.shaded_objects(scene)
+        objects = list(context.selected_objects) if self.target == "SELECTED" else meshes.shaded_objects(scene)
         wm = context.window_manager
-        progress = None if core.shaders.has(_quality(context)) else _progress_reporter(wm)
+        progress = None if engine.shaders.has(_quality(context)) else _progress_reporter(wm)
         try:
             view = resolve_view(context, self.view, self.view_matrix, self.perspective)
-            done, notes = core.shade_objects(scene, context.evaluated_depsgraph_get(), objects, view,
-                                             context.blend_data, progress)
-        except core.SetupError as exc:
+            done, notes = shading.shade_objects(scene, context.evaluated_depsgraph_get(), objects, view,
+                                                context.blend_data, progress)
+        except engine.SetupError as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
-        except wenv.CancelledError:
+        except engine.CancelledError:
             self.report({"WARNING"}, "Precomputation cancelled")
             return {"CANCELLED"}
         finally:
@@ -141,12 +140,12 @@ class WENV_OT_shade(_Precomputing, bpy.types.Operator):
         for note in notes:
             self.report({"WARNING"}, note)
         if scene.wenv.show_in_viewport:
-            core.show_attribute_colors(wm)
+            views.show_attribute_colors(wm)
         self.report({"INFO"}, f"Shaded {len(done)} object(s)")
         return {"FINISHED"}
 
     def invoke(self, context, event):
-        if core.shaders.has(_quality(context)):
+        if engine.shaders.has(_quality(context)):
             return self.execute(context)
         return self.start_precompute(context)
 
@@ -158,7 +157,7 @@ class WENV_OT_clear(bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     def execute(self, context):
-        n = sum(core.remove_colors(o.data) for o in context.selected_objects if o.type == "MESH")
+        n = sum(meshes.remove_colors(o.data) for o in context.selected_objects if o.type == "MESH")
         self.report({"INFO"}, f"Removed shading from {n} mesh(es)")
         return {"FINISHED"}
 
@@ -189,7 +188,7 @@ class WENV_OT_live(bpy.types.Operator):
         LiveState.reset()
         LiveState.session = LiveSession(names)
         wm = context.window_manager
-        if not core.shaders.has(_quality(context)):
+        if not engine.shaders.has(_quality(context)):
             LiveState.job = PrecomputeJob(_quality(context)).start()
             wm.progress_begin(0.0, 1.0)
         self._timer = wm.event_timer_add(self.interval, window=context.window)
@@ -227,7 +226,7 @@ class WENV_OT_live(bpy.types.Operator):
                 return self._stop(context)
         if LiveState.session.tick(context):
             if context.scene.wenv.show_in_viewport:
-                core.show_attribute_colors(context.window_manager)
+                views.show_attribute_colors(context.window_manager)
             _redraw_viewports(context)
         return {"PASS_THROUGH"}
 
@@ -250,7 +249,7 @@ class WENV_OT_from_principled(_MaterialOperator, bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     def execute(self, context):
-        for w in core.fill_from_principled(_active_material(context)):
+        for w in materials.fill_from_principled(_active_material(context)):
             self.report({"WARNING"}, w)
         return {"FINISHED"}
 
@@ -305,8 +304,8 @@ class WENV_OT_fit_roughness(_MaterialOperator, bpy.types.Operator):
         target = st.target_gloss if self.target < 0 else self.target
         geometry = int(st.target_geometry if self.geometry == "MATERIAL" else self.geometry)
         try:
-            m = core.fit_roughness(st, target, geometry)
-        except core.SetupError as exc:
+            m = gloss.fit_roughness(st, target, geometry)
+        except engine.SetupError as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
         st.lobes[0].roughness = m

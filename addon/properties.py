@@ -5,7 +5,7 @@ import bpy
 from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProperty, FloatVectorProperty,
                        IntProperty, PointerProperty)
 
-from . import core
+from . import engine, gloss, materials
 
 DISTRIBUTIONS = [("GGX", "GGX", "Trowbridge-Reitz / GGX, roughness = alpha (Blender's roughness squared)"),
                  ("BECKMANN", "Beckmann", "Beckmann, roughness = RMS microfacet slope")]
@@ -14,16 +14,17 @@ DISTRIBUTIONS = [("GGX", "GGX", "Trowbridge-Reitz / GGX, roughness = alpha (Blen
 class WENV_LobeSettings(bpy.types.PropertyGroup):
     specular: FloatVectorProperty(name="Specular", subtype="COLOR", size=3, min=0.0, soft_max=1.0,
                                   default=(1.0, 1.0, 1.0), description="Colour scale of the lobe (times Fresnel)")
-    roughness: FloatProperty(name="Roughness", min=1e-6, max=10.0, soft_max=1.0, default=0.2, precision=4,
+    roughness: FloatProperty(name="Roughness", min=engine.ROUGHNESS_RANGE[0], max=engine.ROUGHNESS_RANGE[1],
+                             soft_max=1.0, default=0.2, precision=4,
                              description="Beckmann RMS slope or GGX alpha (alpha = Principled roughness squared)")
-    ior: FloatProperty(name="IOR", min=1.0001, max=10.0, soft_max=3.0, default=1.5, precision=3,
+    ior: FloatProperty(name="IOR", min=engine.IOR_MIN, max=engine.IOR_RANGE[1], soft_max=3.0, default=1.5, precision=3,
                        description="Index of refraction of the lobe's Fresnel term")
     distribution: EnumProperty(name="Distribution", items=DISTRIBUTIONS, default="GGX")
 
 
 def _gloss_getter(geometry):
     def get(self):
-        r = core.gloss_readings(core.material_key(self))
+        r = gloss.gloss_readings(materials.material_key(self))
         return r[geometry] if isinstance(r, dict) else math.nan
     return get
 
@@ -33,7 +34,7 @@ class WENV_MaterialSettings(bpy.types.PropertyGroup):
         ("LAMBERT", "Lambert", "Ideal diffuse reflector"),
         ("COOK_TORRANCE", "Cook-Torrance", "Diffuse plus microfacet lobes")])
     diffuse: FloatVectorProperty(name="Diffuse", subtype="COLOR", size=3, min=0.0, max=1.0,
-                                 default=core.DEFAULT_GREY, description="Lambertian albedo")
+                                 default=engine.DEFAULT_GREY, description="Lambertian albedo")
     lobes: CollectionProperty(type=WENV_LobeSettings, name="Lobes")
     active_lobe: IntProperty(name="Active Lobe", default=0, min=0)
     shadowing: EnumProperty(name="Shadowing", default="SMITH", items=[
@@ -56,13 +57,24 @@ class WENV_MaterialSettings(bpy.types.PropertyGroup):
         ("85", "85°", "Low-gloss (sheen) geometry")])
 
 
+def _quality_items():
+    """The core's presets (engine.QUALITIES, cheapest first) as enum items, then Auto; identifiers
+    are the names upper-cased (engine.quality_value turns them back)."""
+    items = []
+    last = len(engine.QUALITIES) - 1
+    for i, name in enumerate(engine.QUALITIES):
+        q = engine.QUALITY_PRESETS[name]
+        text = f"{q['global']}x{q['global']} lighting map, {q['local']}x{q['local']} slices"
+        text += ": fast to precompute" if i == 0 else ": slow to precompute, much memory" if i == last else ""
+        items.append((name.upper(), name.title(), text))
+    items.append((engine.AUTO.upper(), engine.AUTO.title(),
+                  "The cheapest setting predicted to meet the target error for this World, material "
+                  "and mesh (no matrices to precompute)"))
+    return items
+
+
 class WENV_SceneSettings(bpy.types.PropertyGroup):
-    quality: EnumProperty(name="Quality", default="DEFAULT", items=[
-        ("DRAFT", "Draft", "32x32 lighting map, 16x16 slices: fast to precompute"),
-        ("DEFAULT", "Default", "64x64 lighting map, 32x32 slices"),
-        ("HIGH", "High", "128x128 lighting map, 64x64 slices: slow to precompute, much memory"),
-        ("AUTO", "Auto", "The cheapest setting predicted to meet the target error for this World, material "
-                         "and mesh (no matrices to precompute)")])
+    quality: EnumProperty(name="Quality", default="DEFAULT", items=_quality_items())
     target_error: FloatProperty(name="Target Error", default=1.0, min=0.1, max=50.0, subtype="PERCENTAGE",
                                 description="Relative RMSE against the brute-force reference that Auto aims for")
     memory_budget: IntProperty(name="Memory Budget", default=1024, min=16, max=65536,

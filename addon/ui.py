@@ -3,7 +3,7 @@ import math
 
 import bpy
 
-from . import core, handlers
+from . import engine, gloss, handlers, materials, world
 from .live import LiveState
 
 
@@ -55,8 +55,8 @@ class WENV_PT_shading(_SidebarPanel, bpy.types.Panel):
 
         box = layout.box()
         try:
-            box.label(text="World: " + core.world_spec(context.scene.world).describe(), icon="WORLD")
-        except core.SetupError as exc:
+            box.label(text="World: " + world.world_spec(context.scene.world).describe(), icon="WORLD")
+        except engine.SetupError as exc:
             box.alert = True
             box.label(text=str(exc), icon="ERROR")
         problems = [p for p in ((LiveState.session.last_error if live else None), handlers.last_error()) if p]
@@ -64,7 +64,7 @@ class WENV_PT_shading(_SidebarPanel, bpy.types.Panel):
             row = layout.row()
             row.alert = True
             row.label(text=problem, icon="ERROR")
-        if not core.shaders.has(core.quality_value(st.quality)):
+        if not engine.shaders.has(engine.quality_value(st.quality)):
             layout.label(text="Matrices are precomputed on first use", icon="INFO")
 
 
@@ -118,14 +118,14 @@ class WENV_PT_gloss(_SidebarPanel, bpy.types.Panel):
     def draw(self, context):
         layout = self.layout
         st = _active_material(context).wenv
-        readings = core.gloss_readings(core.material_key(st))
+        readings = gloss.gloss_readings(materials.material_key(st))
         if isinstance(readings, str):
             layout.alert = True
             layout.label(text=readings, icon="ERROR")
             return
-        used = core.instrument_geometry(readings[60])
+        used = gloss.instrument_geometry(readings[60])
         col = layout.column(align=True)
-        for geometry in core.GEOMETRIES:
+        for geometry in gloss.GEOMETRIES:
             row = col.row()
             row.label(text=f"{geometry}°")
             row.label(text=f"{readings[geometry]:.2f} GU")

@@ -2,7 +2,7 @@
 degree readings, the geometry an instrument would report, written to CSV.
 
     python examples/addon_gloss_sweep.py scene.blend [--from-principled] [--out out/gloss.csv]
-    python examples/addon_gloss_sweep.py              # builds and saves a demo .blend first
+    python examples/addon_gloss_sweep.py              # builds and saves a demo .blend first, next to --out
 
 Materials whose wenv settings were never set take them from their Principled BSDF (as the add-on
 does on first use); --from-principled refills every material that way.
@@ -17,8 +17,9 @@ sys.path.insert(0, ROOT)
 import bpy  # noqa: E402
 
 import addon  # noqa: E402
-from addon import core  # noqa: E402
-from _common import OUT  # noqa: E402
+from addon import gloss, materials  # noqa: E402
+
+OUT = os.path.join(ROOT, "out")
 
 
 def demo_blend(path):
@@ -42,28 +43,28 @@ def demo_blend(path):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("blend", nargs="?", help=".blend file (default: a demo file written to out/)")
+    ap.add_argument("blend", nargs="?", help=".blend file (default: a demo file written next to --out)")
     ap.add_argument("--from-principled", action="store_true", help="refill every material from its Principled BSDF")
     ap.add_argument("--out", default=os.path.join(OUT, "addon_gloss.csv"))
     args = ap.parse_args()
     addon.register()
     os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
-    path = args.blend or demo_blend(os.path.join(OUT, "gloss_materials.blend"))
+    path = args.blend or demo_blend(os.path.join(os.path.dirname(os.path.abspath(args.out)), "gloss_materials.blend"))
     bpy.ops.wm.open_mainfile(filepath=path)
 
     rows = []
     for mat in bpy.data.materials:
         if mat.is_grease_pencil:
             continue
-        notes = core.fill_from_principled(mat) if args.from_principled else core.ensure_material_settings(mat)
+        notes = materials.fill_from_principled(mat) if args.from_principled else materials.ensure_material_settings(mat)
         st = mat.wenv
         g = (st.gloss_20, st.gloss_60, st.gloss_85)
         rows.append({"material": mat.name, "model": st.model, "lobes": len(st.lobes),
                      "roughness": ";".join(f"{l.roughness:.4g}" for l in st.lobes),
                      "gloss_20": f"{g[0]:.2f}", "gloss_60": f"{g[1]:.2f}", "gloss_85": f"{g[2]:.2f}",
-                     "instrument_geometry": core.instrument_geometry(g[1]), "notes": " / ".join(notes)})
+                     "instrument_geometry": gloss.instrument_geometry(g[1]), "notes": " / ".join(notes)})
         print(f"{mat.name:>16}: {g[0]:7.2f} {g[1]:7.2f} {g[2]:7.2f} GU  (instrument: "
-              f"{core.instrument_geometry(g[1])} deg)")
+              f"{gloss.instrument_geometry(g[1])} deg)")
     with open(args.out, "w", newline="") as fp:
         w = csv.DictWriter(fp, fieldnames=list(rows[0]))
         w.writeheader()

@@ -24,8 +24,15 @@ sys.path.insert(0, ROOT)
 import bpy  # noqa: E402
 
 import addon  # noqa: E402
-from addon import core  # noqa: E402
-from _common import OUT, bundled_hdri  # noqa: E402
+from addon import engine, materials, meshes, shading  # noqa: E402
+
+OUT = os.path.join(ROOT, "out")
+
+
+def bundled_hdri(name):
+    """One of the studio HDRIs that ship with Blender (city, courtyard, forest, interior, night,
+    studio, sunrise, sunset)."""
+    return os.path.join(bpy.utils.system_resource("DATAFILES", path="studiolights/world"), name + ".exr")
 
 
 def demo_scene():
@@ -69,7 +76,7 @@ def main():
     ap.add_argument("--object", default="Suzanne")
     ap.add_argument("--roughness", type=float, nargs="+", default=[0.01, 0.05, 0.2, 0.5])
     ap.add_argument("--rotation", type=float, nargs="+", default=[0, 90, 180, 270], help="degrees")
-    ap.add_argument("--quality", default="draft", choices=core.QUALITIES)
+    ap.add_argument("--quality", default="draft", choices=engine.QUALITIES)
     ap.add_argument("--max-luminance", type=float, default=4.0, help="logarithmic tone mapping")
     ap.add_argument("--images", action="store_true", help="render each result with Workbench")
     ap.add_argument("--size", type=int, default=320, help="image size in pixels")
@@ -88,7 +95,7 @@ def main():
     st.max_luminance = args.max_luminance
     st.show_in_viewport = False
     mat = obj.active_material
-    core.ensure_material_settings(mat)
+    materials.ensure_material_settings(mat)
     mapping = mapping_node(scene.world)
     for o in bpy.context.view_layer.objects:
         o.select_set(o == obj)
@@ -109,11 +116,11 @@ def main():
             t = time.perf_counter()
             bpy.ops.wenv.shade(view="CAMERA")
             ms = (time.perf_counter() - t) * 1e3
-            attr = obj.data.color_attributes[core.ATTRIBUTE]
+            attr = obj.data.color_attributes[meshes.ATTRIBUTE]
             rgb = np.empty(len(attr.data) * 4, np.float32)
             attr.data.foreach_get("color", rgb)
             rgb = rgb.reshape(-1, 4)[:, :3]
-            lum = rgb @ core.LUMINANCE
+            lum = rgb @ shading.LUMINANCE
             rows.append({"roughness": r, "rotation_deg": deg, "mean_r": rgb[:, 0].mean(), "mean_g": rgb[:, 1].mean(),
                          "mean_b": rgb[:, 2].mean(), "max_display_luminance": lum.max(), "shade_ms": ms})
             if args.images:

@@ -5,13 +5,51 @@ shaded by wavelet rotation and by the brute-force reference; writes out/demo.png
     .venv/bin/python examples/demo.py [--hdri sunset] [--quality default] [--size 64]
 """
 import argparse
+import glob
+import importlib.util
 import os
 import time
 
 import numpy as np
 
 import wenv
-from _common import OUT, bundled_hdri, relative_rmse, sphere_image, tone_map
+
+OUT = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "out")
+
+
+def bundled_hdri(name):
+    """One of the eight studio HDRIs that ship with Blender, here with the bpy wheel that
+    scripts/setup.sh installs (city, courtyard, forest, interior, night, studio, sunrise, sunset)."""
+    spec = importlib.util.find_spec("bpy")
+    for root in spec.submodule_search_locations if spec else []:
+        hits = sorted(glob.glob(os.path.join(root, "*", "datafiles", "studiolights", "world", name + ".exr")))
+        if hits:
+            return hits[-1]
+    raise SystemExit(f"bundled HDRI {name!r} not found: run scripts/setup.sh first (it installs bpy)")
+
+
+def sphere_image(size):
+    """Normals of a unit sphere seen orthographically from -Y (looking along +Y), one per pixel
+    inside the disk; returns (mask, normals, view) with the view pointing back at the camera."""
+    t = (np.arange(size) + 0.5) / size * 2 - 1
+    x, z = np.meshgrid(t, -t)
+    r2 = x * x + z * z
+    mask = r2 < 1
+    n = np.stack([x[mask], -np.sqrt(1 - r2[mask]), z[mask]], axis=1).astype(np.float32)
+    view = np.array([0.0, -1.0, 0.0], np.float32)
+    return mask, n, view
+
+
+def tone_map(rgb, l_max):
+    """The thesis's global logarithmic operator: Ld = log10(1 + Lw) / log10(1 + Lmax)."""
+    lw = rgb @ np.array([0.2126, 0.7152, 0.0722], np.float32)
+    ld = np.log10(1 + lw) / np.log10(1 + l_max)
+    scale = np.where(lw > 0, ld / np.maximum(lw, 1e-12), 0)
+    return np.clip(rgb * scale[..., None], 0, 1)
+
+
+def relative_rmse(a, b):
+    return float(np.sqrt(np.mean((a - b) ** 2)) / np.sqrt(np.mean(b ** 2)))
 
 
 def main():

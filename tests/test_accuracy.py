@@ -4,7 +4,7 @@ m = 0.05, 0.1, 0.2, 0.5, over a fixed set of 2000 random (normal, view) pairs wi
 the hemisphere (grazing views included).
 
 The reference values (wenv.reference over every pixel) are stored in data/accuracy_reference.npz
-by examples/accuracy.py --make-reference; test_stored_reference_is_current recomputes a sample of
+by benchmarks/accuracy.py --make-reference; test_stored_reference_is_current recomputes a sample of
 them so the stored values cannot drift from what wenv.reference computes.  `high` runs with
 method="slicing", which is the rotation method without the matrices (equal to it up to the
 matrices' truncation, tested in test_shade.py): the matrices at that size take far longer to build
@@ -19,11 +19,11 @@ import wenv
 from conftest import hdri_path
 
 DATA = os.path.join(os.path.dirname(__file__), "data", "accuracy_reference.npz")
-# 6000 further pairs (another seed) that examples/auto_quality.py judges auto on.
+# 6000 further pairs (another seed) that benchmarks/auto_quality.py judges auto on.
 EXTRA_DATA = os.path.join(os.path.dirname(__file__), "data", "accuracy_reference_extra.npz")
 
 # Worst relative RMSE over the eight HDRIs, per preset and material: the measured worst case
-# (examples/accuracy.py prints the full table) with 10% headroom.  Suns and lamps are shaded as
+# (benchmarks/accuracy.py prints the full table) with 10% headroom.  Suns and lamps are shaded as
 # exact lights; what remains in draft's and default's glossy figures is mostly bright extended
 # features (studio's softboxes, courtyard's sunlit walls, forest's sky through leaves) and views
 # past 80 degrees, which `high` takes per vertex (every pixel above 8x the mean radiance as a light,

@@ -15,11 +15,11 @@ bpy = pytest.importorskip("bpy", reason="the bpy module is installed by scripts/
 import mathutils  # noqa: E402  (ships with bpy)
 
 import addon  # noqa: E402
-from addon import core, live  # noqa: E402
+from addon import engine, gloss, live, materials, meshes, shading, views  # noqa: E402
 
 from conftest import hdri_path  # noqa: E402
 
-ATTR = core.ATTRIBUTE
+ATTR = meshes.ATTRIBUTE
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -109,7 +109,7 @@ def wenv_material(mat):
 
 
 def world_arrays(obj, corner):
-    """World-space positions and normals, computed with mathutils (independent of core.read_mesh)."""
+    """World-space positions and normals, computed with mathutils (independent of meshes.read_mesh)."""
     dg = bpy.context.evaluated_depsgraph_get()
     ob = obj.evaluated_get(dg)
     me = ob.data
@@ -158,10 +158,33 @@ def test_register_unregister_leaves_nothing():
         assert "wenv" not in bpy.types.Material.bl_rna.properties
         assert not [h for h in bpy.app.handlers.frame_change_post if h.__module__.startswith("addon")]
         assert not [h for h in bpy.app.handlers.load_post if h.__module__.startswith("addon")]
-        assert not core.shaders.has("draft")
+        assert not engine.shaders.has("draft")
     finally:
         addon.register()
     assert bpy.types.Scene.bl_rna.properties["wenv"]
+
+
+def test_only_engine_touches_the_core():
+    """engine.py is the one add-on module importing wenv, and what the core accepts (quality
+    presets, roughness and IOR ranges) is read from it rather than repeated."""
+    import glob
+    import re
+    folder = os.path.dirname(addon.__file__)
+    importers = [os.path.basename(p) for p in sorted(glob.glob(os.path.join(folder, "*.py")))
+                 if re.search(r"^\s*(import wenv\b|from wenv\b)", open(p).read(), re.M)]
+    assert importers == ["engine.py"]
+    quality = bpy.types.Scene.bl_rna.properties["wenv"].fixed_type.properties["quality"]
+    assert [i.identifier for i in quality.enum_items] == [q.upper() for q in wenv.QUALITY_PRESETS] + ["AUTO"]
+    lobe = bpy.types.Material.bl_rna.properties["wenv"].fixed_type.properties["lobes"].fixed_type.properties
+    assert (lobe["roughness"].hard_min, lobe["roughness"].hard_max) == pytest.approx(wenv.ROUGHNESS_RANGE)
+    assert wenv.IOR_RANGE[0] < lobe["ior"].hard_min < 1.001 and lobe["ior"].hard_max == pytest.approx(wenv.IOR_RANGE[1])
+    # Principled values past the core's limits come out clamped into them, mirrors floored at 1e-4 alpha.
+    assert engine.ggx_alpha(0.3) == pytest.approx(0.09) and engine.ggx_alpha(0.0) == 1e-4
+    _, lobes = materials.principled_lobes((0.5, 0.5, 0.5), 0.5, 0.0, 50.0, coat=1.0, coat_roughness=0.0, coat_ior=1.0)
+    assert [l["roughness"] for l in lobes] == [1e-4] * 3
+    assert all(wenv.IOR_RANGE[0] < l["ior"] <= wenv.IOR_RANGE[1] for l in lobes)
+    assert lobes[0]["ior"] == wenv.IOR_RANGE[1] and lobes[2]["ior"] > wenv.IOR_RANGE[0]
+    wenv.CookTorrance(diffuse=(0.5, 0.5, 0.5), lobes=[dict(l, distribution="ggx") for l in lobes])  # accepted
 
 
 def test_operator_equals_core_shade(scene):
@@ -393,7 +416,7 @@ def test_topology_changing_modifier_shades_base_mesh(scene):
     domain, rgb = attribute(obj)
     assert domain == "POINT" and len(rgb) == len(obj.data.vertices)
     assert np.isfinite(rgb).all() and rgb.max() > 0
-    assert "topology" in core.read_mesh(obj, bpy.context.evaluated_depsgraph_get()).note
+    assert "topology" in meshes.read_mesh(obj, bpy.context.evaluated_depsgraph_get()).note
 
 
 def test_non_mesh_and_empty_objects(scene):
@@ -511,12 +534,12 @@ def test_from_principled_warns_about_links_and_missing_node(scene):
     tex = mat.node_tree.nodes.new("ShaderNodeTexNoise")
     mat.node_tree.links.new(tex.outputs["Color"], mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"])
     cube.active_material = mat
-    warnings = core.fill_from_principled(mat)
+    warnings = materials.fill_from_principled(mat)
     assert any("Base Color" in w for w in warnings)
     plain = bpy.data.materials.new("plain")
     plain.node_tree.nodes.clear()
     plain.diffuse_color = (0.1, 0.2, 0.3, 1)
-    assert any("no Principled BSDF" in w for w in core.fill_from_principled(plain))
+    assert any("no Principled BSDF" in w for w in materials.fill_from_principled(plain))
     assert plain.wenv.model == "LAMBERT" and tuple(plain.wenv.diffuse) == pytest.approx((0.1, 0.2, 0.3))
 
 
@@ -538,9 +561,9 @@ def test_gloss_readings_follow_settings(scene):
     mat.wenv.lobes[0].roughness = 0.2
     assert mat.wenv.gloss_60 < before - 5
     assert mat.wenv.gloss_60 == pytest.approx(wenv.gloss(wenv_material(mat), 60), abs=1e-3)
-    assert core.instrument_geometry(mat.wenv.gloss_60) == (60 if 10 <= mat.wenv.gloss_60 <= 70 else
+    assert gloss.instrument_geometry(mat.wenv.gloss_60) == (60 if 10 <= mat.wenv.gloss_60 <= 70 else
                                                           20 if mat.wenv.gloss_60 > 70 else 85)
-    assert [core.instrument_geometry(g) for g in (95, 70, 40, 10, 3)] == [20, 60, 60, 60, 85]
+    assert [gloss.instrument_geometry(g) for g in (95, 70, 40, 10, 3)] == [20, 60, 60, 60, 85]
 
 
 def test_fit_roughness_operator(scene):
@@ -651,9 +674,9 @@ def test_precompute_job_progress_and_cancel(tmp_path, monkeypatch):
     assert done.wait(60) and done.error is None and done.result is not None
     assert done.fraction == pytest.approx(1.0, abs=0.05) and done.result.stats["cache"] == "built"
     # The operator's synchronous path (scripts; the UI runs the job above in a modal timer).
-    core.shaders.clear()
+    engine.shaders.clear()
     bpy.context.scene.wenv.quality = "DRAFT"
-    assert bpy.ops.wenv.precompute() == {"FINISHED"} and core.shaders.has("draft")
+    assert bpy.ops.wenv.precompute() == {"FINISHED"} and engine.shaders.has("draft")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -774,13 +797,13 @@ def test_panels_draw(scene):
 
     assert ("list", "lobes") in draw_panel(ui.WENV_PT_material)
 
-    gloss = draw_panel(ui.WENV_PT_gloss)
-    readings = [l[1] for l in gloss if l[0] == "label" and l[1].endswith(" GU")]
+    gloss_panel = draw_panel(ui.WENV_PT_gloss)
+    readings = [l[1] for l in gloss_panel if l[0] == "label" and l[1].endswith(" GU")]
     assert readings == [f"{mat.wenv.gloss_20:.2f} GU", f"{mat.wenv.gloss_60:.2f} GU", f"{mat.wenv.gloss_85:.2f} GU"]
-    marks = [l for l in gloss if l[0] == "label" and l[2] == "CHECKMARK"]
+    marks = [l for l in gloss_panel if l[0] == "label" and l[2] == "CHECKMARK"]
     assert mat.wenv.gloss_60 > 70 and len(marks) == 1  # a high-gloss material: the 20 degree reading
-    assert gloss.index(marks[0]) == gloss.index(("label", readings[0], "NONE")) + 1
-    assert ("operator", "wenv.fit_roughness") in gloss
+    assert gloss_panel.index(marks[0]) == gloss_panel.index(("label", readings[0], "NONE")) + 1
+    assert ("operator", "wenv.fit_roughness") in gloss_panel
 
     scene.world = None
     errors = [l for l in draw_panel(ui.WENV_PT_shading) if l[0] == "label" and l[2] == "ERROR"]
@@ -862,7 +885,7 @@ def test_auto_quality_matches_core_and_builds_no_matrices(scene):
     scene.wenv.target_error = 3.0
     cache = os.environ["WENV_CACHE_DIR"]
     before = set(os.listdir(cache))
-    core.shaders.clear()
+    engine.shaders.clear()
     assert shade_op(view="CAMERA") == {"FINISHED"}
     assert set(os.listdir(cache)) == before
     _, rgb = attribute(obj)
@@ -875,7 +898,7 @@ def test_auto_quality_matches_core_and_builds_no_matrices(scene):
     # a tighter target picks a finer setting
     scene.wenv.target_error = 0.5
     assert shade_op(view="CAMERA") == {"FINISHED"}
-    choices = [s.stats["auto"] for s in core.shaders._auto.values()]
+    choices = [s.stats["auto"] for s in engine.shaders._auto.values()]
     levels = sorted(c["level"] for c in choices)
     assert levels[-1] > levels[0]
     # the World is analysed once: the second pass's choice reads the first's analysis
@@ -883,9 +906,9 @@ def test_auto_quality_matches_core_and_builds_no_matrices(scene):
     # a material without lobes gets SH irradiance, reported by its order
     obj.data.materials.clear()
     lam = set_material(obj, lobes=())
-    core.shaders.clear()
-    view = core.camera_view(scene)
-    notes = core.shade_objects(scene, bpy.context.evaluated_depsgraph_get(), [obj], view, bpy.data)[1]
+    engine.shaders.clear()
+    view = views.camera_view(scene)
+    notes = shading.shade_objects(scene, bpy.context.evaluated_depsgraph_get(), [obj], view, bpy.data)[1]
     assert any("spherical harmonics of order" in note for note in notes), notes
     want = wenv.Shader(env, wenv_material(lam), quality="auto", target_error=0.005, normals=n)
     assert want.method == "sh"

@@ -1,4 +1,5 @@
-"""The add-on's headless example scripts run and write what they promise (small settings)."""
+"""The add-on's headless example scripts (examples/) and its benchmark (benchmarks/bench_addon.py)
+run and write what they promise (small settings).  They are run as scripts, never imported."""
 import csv
 import json
 import os
@@ -28,9 +29,9 @@ def test_shade_sweep_writes_csv(tmp_path):
 
 def test_gloss_sweep_reads_every_material(tmp_path):
     out = tmp_path / "gloss.csv"
-    blend = tmp_path / "materials.blend"
-    run(tmp_path, "-c", "import sys; sys.argv[0] = 'x'; sys.path.insert(0, 'examples');"
-        "import addon_gloss_sweep as g, bpy; g.demo_blend(sys.argv[1])", str(blend))
+    blend = tmp_path / "gloss_materials.blend"  # without a .blend the script builds one next to --out
+    run(tmp_path, "examples/addon_gloss_sweep.py", "--out", str(tmp_path / "demo_gloss.csv"))
+    assert blend.exists()
     run(tmp_path, "examples/addon_gloss_sweep.py", str(blend), "--out", str(out))
     rows = {r["material"]: r for r in csv.DictReader(open(out))}
     assert {"matte", "satin", "gloss", "high gloss", "car paint", "brushed steel"} <= set(rows)
@@ -41,7 +42,7 @@ def test_gloss_sweep_reads_every_material(tmp_path):
 
 def test_bench_runs(tmp_path):
     path = tmp_path / "bench.json"
-    run(tmp_path, "examples/bench_addon.py", "--quality", "draft", "--levels", "1", "--repeats", "2",
+    run(tmp_path, "benchmarks/bench_addon.py", "--quality", "draft", "--levels", "1", "--repeats", "2",
         "--json", str(path))
     result = json.load(open(path))["results"][0]
     assert result["vertices"] == 2012  # Suzanne subdivided once

@@ -45,8 +45,9 @@ out["shade"] = sorted(bpy.ops.wenv.shade())
 attr = obj.data.color_attributes.get("wenv_radiance")
 out["attribute"] = None if attr is None else [attr.domain, len(attr.data), max(max(d.color[:3]) for d in attr.data)]
 out["gloss"] = [mat.wenv.gloss_20, mat.wenv.gloss_60, mat.wenv.gloss_85]
-core = sys.modules[out["enabled"][0] + ".core"]
-out["gloss_core"] = list(wenv.gloss(core.material_from_key(core.material_key(mat.wenv)), (20, 60, 85)))
+engine = sys.modules[out["enabled"][0] + ".engine"]
+materials = sys.modules[out["enabled"][0] + ".materials"]
+out["gloss_core"] = list(wenv.gloss(engine.material_from_key(materials.material_key(mat.wenv)), (20, 60, 85)))
 out["lobes"] = [[l.roughness, l.ior, l.distribution] for l in mat.wenv.lobes]
 out["panels"] = sorted(n for n in dir(bpy.types) if n.startswith("WENV_PT_"))
 out["matrix_cache"] = sorted(os.listdir(bpy.utils.extension_path_user(out["enabled"][0], path="matrices")))
@@ -83,7 +84,9 @@ def test_extension_zip_layout(extension_zip):
     wheels = [n for n in names if n.startswith("wheels/") and n.endswith(".whl")]
     assert len(wheels) == 1 and "cp311-cp311-manylinux" in wheels[0] and wheels[0].endswith("_x86_64.whl")
     assert f'wheels = ["./{wheels[0]}"]' in manifest
-    assert {"__init__.py", "core.py", "operators.py", "properties.py", "ui.py", "handlers.py", "live.py"} <= set(names)
+    assert {"__init__.py", "engine.py", "world.py", "materials.py", "gloss.py", "views.py", "meshes.py", "shading.py",
+            "operators.py", "properties.py", "ui.py", "handlers.py", "live.py"} <= set(names)
+    assert "core.py" not in names  # split by role into the modules above
     assert 'blender_version_min = "4.2.0"' in manifest and 'platforms = ["linux-x64"]' in manifest
 
 

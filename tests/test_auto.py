@@ -1,5 +1,5 @@
 """quality="auto": picks the cheapest ladder level (or, without lobes, SH order) predicted to meet
-target_error, never builds rotation matrices, keeps within its memory budget, and meets its target (examples/auto_quality.py
+target_error, never builds rotation matrices, keeps within its memory budget, and meets its target (benchmarks/auto_quality.py
 shows it on every bundled HDRI; here on a reduced one)."""
 import threading
 
@@ -118,7 +118,7 @@ def test_does_not_claim_a_target_no_level_meets():
 
 def test_high_is_not_claimed_where_bright_features_remain():
     """`high` takes courtyard's sunlit walls out as clustered lights, which still err where the walls
-    were: examples/auto_quality.py measures high at 2.2 % (m = 0.05) and 1.0 % (m = 0.5) there, so
+    were: benchmarks/auto_quality.py measures high at 2.2 % (m = 0.05) and 1.0 % (m = 0.5) there, so
     auto must not claim 1 %.  Under sunset, a smooth sky, high measures 0.3 % at m = 0.1: claimed."""
     courtyard, sunset = (wenv.load_environment(hdri_path(h)) for h in ("courtyard", "sunset"))
     for m in (0.05, 0.5):

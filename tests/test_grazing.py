@@ -99,7 +99,7 @@ def test_finite_at_seams_poles_and_grazing():
 def test_high_owes_its_narrow_lobes_to_the_grazing_path():
     """`high` (grazing 6) against itself with the path off, where narrow lobes need it most: at
     m = 0.05 and 0.1 under courtyard, forest and sunset the error falls to a tenth or so
-    (examples/accuracy.py --presets high,high-grazing: courtyard m = 0.05 11.8 -> 1.09 %, forest
+    (benchmarks/accuracy.py --presets high,high-grazing: courtyard m = 0.05 11.8 -> 1.09 %, forest
     m = 0.1 4.1 -> 0.53 %)."""
     data = np.load(DATA)
     specs = json.loads(str(data["materials"]))

@@ -1,4 +1,4 @@
-"""examples/_memory.py measures a setting's peak memory in a fresh process: positive, growing with
+"""benchmarks/memory.py measures a setting's peak memory in a fresh process: positive, growing with
 the setting, and what the shader holds afterwards matches its own count of its arrays (shader.stats).
 Rotation's matrices are built here without a cache and the mesh is a small sphere, so it runs in
 about two seconds."""
@@ -7,8 +7,8 @@ import sys
 
 import pytest
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "examples"))
-from _memory import peak_memory, sphere_mesh  # noqa: E402
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from benchmarks.memory import peak_memory, sphere_mesh  # noqa: E402
 
 SMALL = {"global": 16, "local": 8, "normals": 8, "views": 4, "coefficients": 32}
 LARGER = {"global": 32, "local": 16, "normals": 16, "views": 8, "coefficients": 128}

@@ -6,7 +6,7 @@ Environments are Blender's bundled sunset and city HDRIs box-filtered (flux kept
 brute-force reference costs milliseconds: city keeps its sun in one pixel at ~400 times the mean
 radiance, about a fifth of all the light.  Materials are specular-only Cook-Torrance (Beckmann,
 index 1.5), so no diffuse term hides the glossy error.  The envelopes are the measured errors with a
-margin of about a quarter; examples/stability.py draws the same sweeps at full scale."""
+margin of about a quarter; benchmarks/stability.py draws the same sweeps at full scale."""
 import numpy as np
 import pytest
 

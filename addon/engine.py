@@ -1,0 +1,199 @@
+"""The only add-on module that touches the compiled `wenv` core: its limits, calls and shaders.
+
+Every other module reaches the core through this one (as Cycles' add-on does through engine.py),
+so what the core accepts is read here once, never repeated.  It imports no other add-on module,
+so any of them may import it without a cycle.
+"""
+import threading
+
+import numpy as np
+import wenv
+
+# ---------------------------------------------------------------------------------------------
+# What the core accepts, read from it so properties and clamps follow a rebuilt core
+
+QUALITY_PRESETS = wenv.QUALITY_PRESETS
+QUALITIES = tuple(QUALITY_PRESETS)  # preset names, cheapest first
+AUTO = "auto"  # quality_value("AUTO"): one slicing shader per World and material, nothing to precompute
+AUTO_CACHE_SIZE = 16
+ROUGHNESS_RANGE = wenv.ROUGHNESS_RANGE  # (min, max) lobe roughness, both ends accepted
+IOR_RANGE = wenv.IOR_RANGE  # (min, max): an index must be > min and <= max
+IOR_MIN = IOR_RANGE[0] + 1e-4  # the lowest index offered, since the core refuses IOR_RANGE[0] itself
+GGX_ALPHA_FLOOR = 1e-4  # a perfect mirror has no lobe width to shade
+
+DEFAULT_GREY = (0.8, 0.8, 0.8)  # Blender's default material: what a mesh without one is shaded with
+
+CancelledError = wenv.CancelledError  # raised when a progress callback asks to stop
+
+
+class SetupError(Exception):
+    """A scene set-up the add-on cannot shade; the message is shown to the user as it is.  Defined
+    here, at the bottom of the add-on's imports, so every module can raise it."""
+
+
+def quality_value(name):
+    """The core's quality name for a Scene.wenv.quality enum identifier."""
+    return name.lower()
+
+
+def ggx_alpha(roughness):
+    """GGX alpha for a Principled-style roughness: r^2, as Cycles, floored at GGX_ALPHA_FLOOR."""
+    return max(float(roughness) ** 2, GGX_ALPHA_FLOOR)
+
+
+def clamp_ior(ior):
+    """`ior` moved into the range the core accepts (IOR_MIN..IOR_RANGE[1])."""
+    return min(max(float(ior), IOR_MIN), IOR_RANGE[1])
+
+
+# ---------------------------------------------------------------------------------------------
+# Core objects from plain values
+
+
+def environment(pixels, projection="equirect", rotation=0.0, strength=1.0):
+    """wenv.Environment of RGBA float32 pixels (H, W, 4), row 0 the top; ValueError if refused."""
+    return wenv.Environment(pixels, projection=projection, rotation=rotation, strength=strength)
+
+
+def material_from_key(key):
+    """wenv material for a materials.material_key(); a missing material is Blender's default
+    grey, Lambertian."""
+    if key[0] == "default":
+        return wenv.Lambert(DEFAULT_GREY)
+    model, diffuse, shadowing, lobes = key
+    if model == "LAMBERT":
+        return wenv.Lambert(diffuse)
+    return wenv.CookTorrance(
+        diffuse=diffuse,
+        lobes=[{"specular": s, "roughness": r, "ior": n, "distribution": d.lower()} for s, r, n, d in lobes],
+        shadowing=shadowing.lower())
+
+
+def gloss(key, geometries):
+    """Glossmeter readings (GU) of a material_key at each geometry; ValueError or RuntimeError if
+    the core cannot read it."""
+    return wenv.gloss(material_from_key(key), geometries)
+
+
+def fit_roughness(target, **options):
+    """wenv.fit_roughness: the roughness reading `target` GU (ValueError if none can)."""
+    return wenv.fit_roughness(target, **options)
+
+
+def describe_auto_choice(choice):
+    """Words for what an Auto shader chose (its stats["auto"]), for the notes shown to the user."""
+    if choice["method"] == "sh":  # a material without lobes: SH irradiance
+        return f"spherical harmonics of order {choice['sh_order']}"
+    q = wenv.AUTO_LADDER[choice["level"]]
+    preset = next((name for name, p in QUALITY_PRESETS.items() if p == q), None)
+    return (f"the {preset.title()} preset" if preset is not None
+            else f"{q['global']}/{q['local']}/{q['normals']}, views {q['views']}")
+
+
+# ---------------------------------------------------------------------------------------------
+# Shaders: one per quality, kept for the session (the rotation matrices are the expensive part)
+
+
+class ShaderCache:
+    """Module-level store of wenv.Shader objects keyed by quality.  Tracks which environment and
+    material each shader holds so unchanged ones are not set again."""
+
+    def __init__(self):
+        self._shaders = {}
+        self._env_sig = {}
+        self._env_base = {}  # image key -> untransformed wenv.Environment (pixels read once)
+        # the last transformed Environment, kept so Auto's analysis of it (made on its first Auto
+        # shader) serves later passes and materials under the same World
+        self._env_current = (None, None)
+        self._mat_key = {}
+        self._auto = {}  # (World signature, material key, target, budget) -> wenv.Shader
+        self.lock = threading.Lock()
+        self.cache_dir = None  # None: wenv's default ($WENV_CACHE_DIR or ~/.cache/wenv)
+
+    def clear(self):
+        self._auto.clear()
+        self._shaders.clear()
+        self._env_sig.clear()
+        self._env_base.clear()
+        self._env_current = (None, None)
+        self._mat_key.clear()
+
+    def forget_data(self):
+        """Drops everything derived from Blender data (environments, materials), keeps matrices."""
+        self._env_sig = dict.fromkeys(self._env_sig)
+        self._mat_key = dict.fromkeys(self._mat_key)
+        self._env_base.clear()
+        self._env_current = (None, None)
+        self._auto.clear()
+
+    def has(self, quality):
+        """Whether shading at `quality` is ready without precomputation (always for Auto)."""
+        return quality == AUTO or quality in self._shaders
+
+    def add(self, quality, shader, spec=None, mat_key=None):
+        self._shaders[quality] = shader
+        self._env_sig[quality] = spec.signature if spec is not None else None
+        self._mat_key[quality] = mat_key
+
+    def build(self, quality, progress=None):
+        """Builds (or loads from the matrix cache) the shader for `quality`; `progress(fraction)`
+        may return True to cancel (CancelledError)."""
+        placeholder = wenv.Environment(np.ones((4, 8, 4), np.float32))
+        return wenv.Shader(placeholder, wenv.Lambert(DEFAULT_GREY), quality=quality, progress=progress,
+                           cache_dir=self.cache_dir)
+
+    def get(self, quality, progress=None):
+        if quality not in self._shaders:
+            self.add(quality, self.build(quality, progress))
+        return self._shaders[quality]
+
+    def environment(self, image_key, signature, rotation, strength, load_base):
+        """The image `image_key`'s Environment turned and scaled as the World asks.  The
+        untransformed one is kept per image, so `load_base()` (which reads the pixels out of
+        Blender: world.py) runs once per image; `signature` names the transformed one."""
+        base = self._env_base.get(image_key)
+        if base is None:
+            if len(self._env_base) > 4:
+                self._env_base.clear()
+            base = load_base()
+            self._env_base[image_key] = base
+        if self._env_current[0] != signature:
+            self._env_current = (signature, base.with_transform(rotation=rotation, strength=strength))
+        return self._env_current[1]
+
+    def use_environment(self, quality, signature, env):
+        shader = self._shaders[quality]
+        if self._env_sig.get(quality) != signature:
+            shader.set_environment(env)
+            self._env_sig[quality] = signature
+        return shader
+
+    def auto(self, signature, env, key, target_error, memory_budget_mb, normals):
+        """The Auto shader for this World and material: wenv picks its setting from the lobes, the
+        environment and the mesh's normals (those of the first mesh shaded with them)."""
+        cache_key = (signature, key, target_error, memory_budget_mb)
+        shader = self._auto.get(cache_key)
+        if shader is None:
+            if len(self._auto) >= AUTO_CACHE_SIZE:
+                self._auto.clear()
+            shader = wenv.Shader(env, material_from_key(key), quality=AUTO, target_error=target_error,
+                                 memory_budget_mb=memory_budget_mb, normals=normals)
+            self._auto[cache_key] = shader
+        return shader
+
+    def use_material(self, quality, key):
+        shader = self._shaders[quality]
+        if self._mat_key.get(quality) != key:
+            shader.set_material(material_from_key(key))
+            self._mat_key[quality] = key
+        return shader
+
+
+shaders = ShaderCache()
+
+
+def shade_arrays(shader, data, view):
+    """Radiance (n, 3) for world-space `data` (meshes.MeshData) seen from `view` (views.View)."""
+    if view.perspective:
+        return shader.shade_mesh(data.positions, data.normals, view.eye)
+    return shader.shade(data.normals, view.direction)

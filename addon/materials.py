@@ -1,0 +1,134 @@
+"""Materials: the key a core material is built from, and Principled BSDF values -> wenv lobes."""
+import math
+
+from . import engine, world
+
+
+def material_key(settings):
+    """Plain tuple of every value the wenv material depends on (for caches and the live mode);
+    engine.material_from_key turns it into a core material."""
+    if settings is None:
+        return ("default",)
+    lobes = tuple((tuple(l.specular), l.roughness, l.ior, l.distribution) for l in settings.lobes)
+    return (settings.model, tuple(settings.diffuse), settings.shadowing, lobes)
+
+
+def _input_value(node, name, warnings):
+    sock = node.inputs.get(name)
+    if sock is None:
+        return None
+    if sock.is_linked:
+        warnings.append(f"'{name}' is linked; its unlinked value was used")
+    return sock.default_value
+
+
+def _ior_for_reflectance(f0):
+    """Dielectric index whose normal-incidence Fresnel reflectance is f0 (capped at the core's max)."""
+    s = math.sqrt(min(max(f0, 1e-4), 0.99))
+    return min((1 + s) / (1 - s), engine.IOR_RANGE[1])
+
+
+def _fresnel0(n):
+    return ((n - 1) / (n + 1)) ** 2
+
+
+def principled_lobes(base, metallic, roughness, ior, spec_level=0.5, spec_tint=(1, 1, 1),
+                     coat=0.0, coat_roughness=0.03, coat_ior=1.5):
+    """wenv settings (diffuse, lobes) for Principled BSDF values.  See README "From Principled BSDF".
+
+    - roughness r -> GGX alpha r^2 (as Cycles), floored (engine.ggx_alpha);
+    - dielectric part (weight 1 - metallic): diffuse = base colour, one GGX lobe of index IOR,
+      scaled by Specular Tint and 2 x Specular IOR Level (0.5 keeps Fresnel unchanged);
+    - metallic part: a GGX lobe coloured base / F0(n_m) with n_m the index whose normal-incidence
+      reflectance is the brightest base channel, so it reflects the base colour head-on and rises
+      towards grazing like a conductor;
+    - Coat Weight > 0 adds a clear lobe (Coat Roughness^2, Coat IOR) on top.
+    """
+    base = [min(max(float(c), 0.0), 1.0) for c in base[:3]]
+    t = min(max(float(metallic), 0.0), 1.0)
+    alpha = engine.ggx_alpha(roughness)
+    ior = engine.clamp_ior(ior)
+    diffuse = tuple(c * (1 - t) for c in base)
+    lobes = []
+    if t < 1:
+        scale = (1 - t) * 2 * float(spec_level)
+        if scale > 0:
+            lobes.append({"specular": tuple(scale * float(c) for c in spec_tint[:3]), "roughness": alpha,
+                          "ior": ior, "distribution": "GGX"})
+    if t > 0:
+        n_m = _ior_for_reflectance(max(base))
+        f0 = _fresnel0(n_m)
+        lobes.append({"specular": tuple(t * c / f0 for c in base), "roughness": alpha, "ior": n_m,
+                      "distribution": "GGX"})
+    if coat > 0:
+        lobes.append({"specular": (float(coat),) * 3, "roughness": engine.ggx_alpha(coat_roughness),
+                      "ior": engine.clamp_ior(coat_ior), "distribution": "GGX"})
+    return diffuse, lobes
+
+
+def principled_node(material):
+    tree = material.node_tree
+    if tree is None:
+        return None
+    out = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
+    out = [n for n in out if n.is_active_output] or out
+    if out:
+        node = world.source_node(out[0].inputs["Surface"])
+        if node is not None and node.bl_idname == "ShaderNodeBsdfPrincipled":
+            return node
+    return next((n for n in tree.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled"), None)
+
+
+def fill_from_principled(material):
+    """Sets material.wenv from its Principled BSDF (or, without one, from the viewport colour,
+    Lambertian).  Returns a list of warnings for the user."""
+    warnings = []
+    st = material.wenv
+    node = principled_node(material)
+    if node is None:
+        st.model = "LAMBERT"
+        st.diffuse = tuple(material.diffuse_color[:3])
+        st.lobes.clear()
+        warnings.append(f"'{material.name}' has no Principled BSDF: Lambertian with its viewport colour")
+        st.initialized = True
+        return warnings
+    v = {name: _input_value(node, name, warnings) for name in
+         ("Base Color", "Metallic", "Roughness", "IOR", "Specular IOR Level", "Specular Tint",
+          "Coat Weight", "Coat Roughness", "Coat IOR")}
+    diffuse, lobes = principled_lobes(
+        v["Base Color"], v["Metallic"], v["Roughness"], v["IOR"],
+        spec_level=v["Specular IOR Level"] if v["Specular IOR Level"] is not None else 0.5,
+        spec_tint=v["Specular Tint"] if v["Specular Tint"] is not None else (1, 1, 1),
+        coat=v["Coat Weight"] or 0.0,
+        coat_roughness=v["Coat Roughness"] if v["Coat Roughness"] is not None else 0.03,
+        coat_ior=v["Coat IOR"] if v["Coat IOR"] is not None else 1.5)
+    st.model = "COOK_TORRANCE"
+    st.shadowing = "SMITH"
+    st.diffuse = diffuse
+    st.lobes.clear()
+    for lobe in lobes:
+        item = st.lobes.add()
+        item.specular = lobe["specular"]
+        item.roughness = lobe["roughness"]
+        item.ior = lobe["ior"]
+        item.distribution = lobe["distribution"]
+    st.active_lobe = 0
+    st.initialized = True
+    return warnings
+
+
+def ensure_material_settings(material):
+    """A material shaded for the first time takes its settings from its Principled BSDF."""
+    if material is not None and not material.wenv.initialized:
+        return fill_from_principled(material)
+    return []
+
+
+def slot_material_keys(obj):
+    """material_key of each of obj's material slots (filled from the Principled BSDF on first use)."""
+    keys = []
+    for slot in obj.material_slots:
+        mat = slot.material
+        ensure_material_settings(mat)
+        keys.append(material_key(mat.wenv if mat is not None else None))
+    return keys or [("default",)]

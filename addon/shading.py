@@ -1,0 +1,123 @@
+"""Shading passes: Blender data read into a plan, shaded by the engine, colours written back."""
+import numpy as np
+
+from . import engine, materials, meshes, world
+from .engine import SetupError
+
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722], np.float32)
+
+
+def tone_map(rgb, l_max):
+    """The thesis's global logarithmic operator: Ld = log10(1 + Lw) / log10(1 + Lmax), applied to
+    the luminance, colour kept."""
+    lw = rgb @ LUMINANCE
+    ld = np.log10(1 + np.maximum(lw, 0)) / np.log10(1 + l_max)
+    scale = np.where(lw > 0, ld / np.maximum(lw, 1e-12), 0).astype(np.float32)
+    return np.clip(rgb * scale[:, None], 0, 1).astype(np.float32)
+
+
+class ShadingPlan:
+    """One shading pass.  `plan_shading` fills it from Blender data on the main thread (World
+    pixels, meshes as world-space arrays, material values); `compute` touches no Blender data, so
+    it may run on a worker thread (the live mode does, the core releases the GIL); `apply` writes
+    the colours back on the main thread, by object name."""
+
+    def __init__(self, quality, spec, environment, view, tone, l_max, target_error=0.01, memory_budget_mb=1024):
+        self.quality = quality
+        self.target_error = target_error
+        self.memory_budget_mb = memory_budget_mb
+        self.world = spec  # world.WorldSpec
+        self.environment = environment
+        self.view = view
+        self.tone = tone
+        self.l_max = l_max
+        self.items = []  # (object name, MeshData, material keys per slot)
+        self.notes = []
+        self.results = None
+        self.auto_choices = {}  # (object name, material key) -> stats["auto"] of the shader used
+
+    def compute(self):
+        results = []
+        with engine.shaders.lock:
+            if self.quality != engine.AUTO:
+                engine.shaders.use_environment(self.quality, self.world.signature, self.environment)
+            for name, data, keys in self.items:
+                rgb = np.empty((data.count, 3), np.float32)
+                slots = np.clip(data.slots, 0, len(keys) - 1)
+                for s in np.unique(slots):
+                    sel = slots == s
+                    if self.quality == engine.AUTO:
+                        shader = engine.shaders.auto(self.world.signature, self.environment, keys[s],
+                                                     self.target_error, self.memory_budget_mb, data.normals[sel])
+                        self.auto_choices[(name, keys[s])] = shader.stats["auto"]
+                    else:
+                        shader = engine.shaders.use_material(self.quality, keys[s])
+                    if sel.all():
+                        rgb[:] = engine.shade_arrays(shader, data, self.view)
+                    else:
+                        part = meshes.MeshData(data.domain, np.ascontiguousarray(data.positions[sel]),
+                                               np.ascontiguousarray(data.normals[sel]), None)
+                        rgb[sel] = engine.shade_arrays(shader, part, self.view)
+                if self.tone == "LOG":
+                    rgb = tone_map(rgb, self.l_max)
+                results.append((name, data.domain, rgb))
+        self.results = results
+
+    def apply(self, objects):
+        """Writes the results into the meshes of `objects` (bpy.data.objects); an object deleted or
+        edited since plan_shading is skipped.  Returns the names written."""
+        done = []
+        for name, domain, rgb in self.results:
+            obj = objects.get(name)
+            if obj is None or obj.type != "MESH":
+                continue
+            size = len(obj.data.vertices) if domain == "POINT" else len(obj.data.loops)
+            if size == len(rgb):
+                meshes.write_colors(obj.data, domain, rgb)
+                done.append(name)
+        return done
+
+
+def plan_shading(scene, depsgraph, objects, view, images, progress=None):
+    """Reads everything a pass over `objects` needs (main thread); builds the scene quality's
+    shader first if it is missing.  Raises SetupError for a set-up that cannot be shaded."""
+    st = scene.wenv
+    spec = world.world_spec(scene.world)
+    quality = engine.quality_value(st.quality)
+    notes = []
+    editing = [o.name for o in objects if o.type == "MESH" and o.mode == "EDIT"]
+    if editing:
+        notes.append("skipped meshes in Edit Mode (leave it to shade them): " + ", ".join(editing))
+    mesh_objects = [o for o in objects if o.type == "MESH" and o.mode != "EDIT"]
+    skipped = [o.name for o in objects if o.type != "MESH"]
+    if skipped:
+        notes.append("skipped objects that are not meshes: " + ", ".join(skipped))
+    if not mesh_objects:
+        raise SetupError("Leave Edit Mode to shade" if editing else
+                         "No mesh objects to shade: select at least one mesh")
+    plan = ShadingPlan(quality, spec, world.environment(spec, images), view, st.tone_mapping, st.max_luminance,
+                       st.target_error / 100.0, st.memory_budget)
+    plan.notes = notes
+    for obj in mesh_objects:
+        data = meshes.read_mesh(obj, depsgraph)
+        if data.note:
+            notes.append(data.note)
+        if data.count == 0:
+            notes.append(f"'{obj.name}' has no vertices")
+            continue
+        plan.items.append((obj.name, data, materials.slot_material_keys(obj)))
+    if quality != engine.AUTO:
+        engine.shaders.get(quality, progress)
+    return plan
+
+
+def shade_objects(scene, depsgraph, objects, view, blend_data, progress=None):
+    """Shades every mesh in `objects` for `view` with the scene's wenv settings, synchronously.
+    Returns (shaded names, notes)."""
+    plan = plan_shading(scene, depsgraph, objects, view, blend_data.images, progress)
+    plan.compute()
+    for (name, _key), choice in plan.auto_choices.items():
+        plan.notes.append(f"'{name}': Auto chose {engine.describe_auto_choice(choice)} "
+                          f"(predicted error {100 * choice['predicted_error']:.2g} %"
+                          + ("" if choice["met"] else f", above the {100 * choice['target_error']:.2g} % target") + ")")
+    return plan.apply(blend_data.objects), plan.notes

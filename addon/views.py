@@ -1,0 +1,84 @@
+"""3D views: the View a pass is shaded for (camera, viewport or matrix); viewports set to show colours."""
+import numpy as np
+
+from .engine import SetupError
+
+
+class View:
+    """Perspective (eye position) or orthographic (one direction towards the viewer)."""
+
+    __slots__ = ("perspective", "eye", "direction")
+
+    def __init__(self, perspective, eye=None, direction=None):
+        self.perspective = perspective
+        self.eye = None if eye is None else tuple(float(x) for x in eye)
+        self.direction = None if direction is None else np.asarray(direction, np.float32)
+
+    @classmethod
+    def from_view_matrix(cls, view_matrix, perspective):
+        """From a world -> view matrix (RegionView3D.view_matrix convention, camera looks along -Z)."""
+        inv = np.linalg.inv(np.asarray(view_matrix, np.float64).reshape(4, 4))
+        return cls.from_camera_matrix(inv, perspective)
+
+    @classmethod
+    def from_camera_matrix(cls, camera_to_world, perspective):
+        m = np.asarray(camera_to_world, np.float64).reshape(4, 4)
+        if perspective:
+            return cls(True, eye=m[:3, 3])
+        z = m[:3, 2]
+        norm = np.linalg.norm(z)
+        if not norm > 0:
+            raise SetupError("The view matrix is degenerate")
+        return cls(False, direction=z / norm)
+
+    @property
+    def signature(self):
+        return (self.perspective, self.eye, None if self.direction is None else tuple(self.direction.tolist()))
+
+
+def camera_view(scene):
+    cam = scene.camera
+    if cam is None:
+        raise SetupError("The scene has no camera")
+    perspective = getattr(cam.data, "type", "PERSP") != "ORTHO"
+    return View.from_camera_matrix(np.array(cam.matrix_world), perspective)
+
+
+def region_view(region_3d, scene):
+    """The view of a 3D viewport.  Built from its rotation, pivot and distance rather than
+    view_matrix, which Blender refreshes only when the viewport redraws."""
+    if region_3d.view_perspective == "CAMERA":
+        return camera_view(scene)
+    rot = np.array(region_3d.view_rotation.to_matrix(), np.float64)  # view -> world
+    m = np.eye(4)
+    m[:3, :3] = rot
+    m[:3, 3] = np.array(region_3d.view_location, np.float64) + rot[:, 2] * region_3d.view_distance
+    return View.from_camera_matrix(m, region_3d.view_perspective == "PERSP")
+
+
+def find_region_3d(context):
+    """The active 3D viewport's RegionView3D, or the first one in the window."""
+    rv3d = getattr(context, "region_data", None)
+    if rv3d is not None and hasattr(rv3d, "view_matrix"):
+        return rv3d
+    space = getattr(context, "space_data", None)  # the sidebar's region has no region_data
+    if space is not None and space.type == "VIEW_3D" and space.region_3d is not None:
+        return space.region_3d
+    screens = [context.screen] if getattr(context, "screen", None) else []
+    screens += [w.screen for w in context.window_manager.windows]
+    for screen in screens:
+        for area in screen.areas:
+            if area.type == "VIEW_3D":
+                return area.spaces.active.region_3d
+    return None
+
+
+def show_attribute_colors(window_manager):
+    """Every 3D viewport in solid mode, flat lighting, colours from the active colour attribute."""
+    for window in window_manager.windows:
+        for area in window.screen.areas:
+            if area.type == "VIEW_3D":
+                shading = area.spaces.active.shading
+                shading.type = "SOLID"
+                shading.light = "FLAT"
+                shading.color_type = "VERTEX"

@@ -1,0 +1,5 @@
+"""Benchmarks and the generators of the README's figures and tables (see README.md here).
+
+The scripts are run as scripts (`.venv/bin/python benchmarks/X.py`) and import their siblings by
+plain name (`from measure import ...`); the tests import the two library modules as
+`benchmarks.measure` and `benchmarks.memory`."""

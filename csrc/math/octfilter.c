@@ -1,0 +1,201 @@
+#include "math/octfilter.h"
+
+#include <math.h>
+#include <omp.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "math/maps.h"
+
+static void supersample_texel(const wenv_envmap *env, size_t side, size_t t, float *rgb)
+{
+    const size_t k = 4;
+    double h = 2.0 / (double)side, acc[3] = {0, 0, 0};
+    for (size_t q = 0; q < k * k; q++) {
+        double d[3];
+        float c[3];
+        wenv_oct_decode(-1.0 + h * ((double)(t % side) + ((double)(q % k) + 0.5) / (double)k),
+                        -1.0 + h * ((double)(t / side) + ((double)(q / k) + 0.5) / (double)k), d);
+        wenv_envmap_lookup(env, d, c);
+        for (int i = 0; i < 3; i++)
+            acc[i] += c[i];
+    }
+    for (int i = 0; i < 3; i++)
+        rgb[i] = (float)(acc[i] / (double)(k * k));
+}
+
+static int splats(const wenv_envmap *env, size_t side)
+{
+    return wenv_envmap_width(env) * wenv_envmap_height(env) >= 2 * side * side;
+}
+
+/* First index in the ascending list a[0..n) whose value is at least x. */
+static size_t lower_bound(const size_t *a, size_t n, size_t x)
+{
+    size_t lo = 0, hi = n;
+    while (lo < hi) {
+        size_t mid = lo + (hi - lo) / 2;
+        if (a[mid] < x)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    return lo;
+}
+
+wenv_status wenv_oct_from_envmap(const wenv_envmap *env, size_t side, float *texels, const size_t *excluded,
+                                 size_t n_excluded, wenv_error *err)
+{
+    size_t nt = side * side;
+    if (!splats(env, side)) {
+        /* a coarse image is looked up, so excluded pixels are blacked out in a copy */
+        wenv_envmap *residual = NULL;
+        if (n_excluded) {
+            size_t npix = wenv_envmap_width(env) * wenv_envmap_height(env);
+            float *px = malloc(npix * 3 * sizeof(float));
+            if (!px)
+                return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory filtering the environment");
+            memcpy(px, wenv_envmap_pixels(env), npix * 3 * sizeof(float));
+            for (size_t e = 0; e < n_excluded; e++)
+                px[3 * excluded[e]] = px[3 * excluded[e] + 1] = px[3 * excluded[e] + 2] = 0.0f;
+            wenv_status st = wenv_envmap_create(&residual, px, wenv_envmap_height(env), wenv_envmap_width(env), 3,
+                                                wenv_envmap_projection(env), wenv_envmap_rotation(env),
+                                                wenv_envmap_strength(env), err);
+            free(px);
+            if (st)
+                return st;
+        }
+        const wenv_envmap *src = residual ? residual : env;
+#pragma omp parallel for schedule(dynamic, 64)
+        for (size_t t = 0; t < nt; t++)
+            supersample_texel(src, side, t, texels + 3 * t);
+        wenv_envmap_free(residual);
+        return WENV_OK;
+    }
+    int threads = omp_get_max_threads();
+    size_t w = wenv_envmap_width(env), h = wenv_envmap_height(env);
+    /* One accumulator per thread, and each image row sampled into a small per-thread buffer and
+     * splatted at once: this runs over every pixel at each lighting change, and materialising
+     * every pixel's sample would stream tens of megabytes through memory. */
+    double *acc = calloc((size_t)threads * nt * 4, sizeof(double));
+    if (!acc)
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory filtering the environment");
+    int failed = 0;
+#pragma omp parallel num_threads(threads) reduction(| : failed)
+    {
+        double *mine = acc + (size_t)omp_get_thread_num() * nt * 4;
+        float *dirs = malloc(w * 7 * sizeof(float)), *flux = NULL, *omega = NULL;
+        uint32_t *cols = malloc(w * sizeof(uint32_t));
+        failed = !dirs || !cols;
+        if (dirs) {
+            flux = dirs + 3 * w;
+            omega = dirs + 6 * w;
+        }
+#pragma omp for schedule(static)
+        for (size_t row = 0; row < h; row++) {
+            if (!dirs || !cols)
+                continue;
+            size_t count = wenv_envmap_row_samples(env, row, dirs, flux, omega, cols);
+            size_t lo = lower_bound(excluded, n_excluded, row * w), hi = lower_bound(excluded, n_excluded, (row + 1) * w);
+            for (size_t e = lo; e < hi; e++) /* black, solid angle kept */
+                for (size_t p = 0; p < count; p++)
+                    if (row * w + cols[p] == excluded[e])
+                        flux[3 * p] = flux[3 * p + 1] = flux[3 * p + 2] = 0.0f;
+            for (size_t p = 0; p < count; p++) {
+                float u, v, wt[4];
+                uint32_t idx[4];
+                wenv_oct_encode_f(dirs + 3 * p, &u, &v);
+                wenv_oct_bilinear_f((long)side, u, v, idx, wt);
+                for (int c = 0; c < 4; c++) {
+                    double *a = mine + 4 * (size_t)idx[c];
+                    a[0] += (double)wt[c] * flux[3 * p];
+                    a[1] += (double)wt[c] * flux[3 * p + 1];
+                    a[2] += (double)wt[c] * flux[3 * p + 2];
+                    a[3] += (double)wt[c] * omega[p];
+                }
+            }
+        }
+        free(dirs);
+        free(cols);
+    }
+    if (failed) {
+        free(acc);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory filtering the environment");
+    }
+    for (int t = 1; t < threads; t++)
+        for (size_t e = 0; e < nt * 4; e++)
+            acc[e] += acc[(size_t)t * nt * 4 + e];
+#pragma omp parallel for schedule(dynamic, 64)
+    for (size_t t = 0; t < nt; t++) {
+        if (acc[4 * t + 3] > 0.0) {
+            for (int c = 0; c < 3; c++)
+                texels[3 * t + c] = (float)(acc[4 * t + c] / acc[4 * t + 3]);
+        } else {
+            supersample_texel(env, side, t, texels + 3 * t);
+        }
+    }
+    free(acc);
+    return WENV_OK;
+}
+
+void wenv_oct_pyramid_free(wenv_oct_pyramid *p)
+{
+    for (size_t k = 0; k < p->levels; k++)
+        free(p->texels[k]);
+    memset(p, 0, sizeof *p);
+}
+
+size_t wenv_oct_pyramid_bytes(const wenv_oct_pyramid *p)
+{
+    size_t b = 0;
+    for (size_t k = 0; k < p->levels; k++)
+        b += p->side[k] * p->side[k] * 3 * sizeof(float);
+    return b;
+}
+
+wenv_status wenv_oct_pyramid_build(wenv_oct_pyramid *p, const wenv_envmap *env, const size_t *excluded, size_t n_excluded,
+                                   size_t max_side, wenv_error *err)
+{
+    memset(p, 0, sizeof *p);
+    double npix = (double)(wenv_envmap_width(env) * wenv_envmap_height(env));
+    size_t base = 64;
+    while (base < max_side && (double)(base * base) < npix)
+        base *= 2;
+    while (base > 2 && base > max_side)
+        base /= 2;
+    for (size_t s = base; s >= 2; s /= 2) {
+        p->side[p->levels] = s;
+        p->texels[p->levels] = malloc(s * s * 3 * sizeof(float));
+        if (!p->texels[p->levels]) {
+            wenv_oct_pyramid_free(p);
+            return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the environment pyramid");
+        }
+        p->levels++;
+    }
+    if (wenv_oct_from_envmap(env, base, p->texels[0], excluded, n_excluded, err)) {
+        wenv_oct_pyramid_free(p);
+        return err->status;
+    }
+    for (size_t k = 1; k < p->levels; k++) {
+        size_t s = p->side[k], fs = p->side[k - 1];
+        const float *fine = p->texels[k - 1];
+        float *coarse = p->texels[k];
+#pragma omp parallel for schedule(dynamic, 16)
+        for (size_t t = 0; t < s * s; t++) {
+            size_t i = t % s, j = t / s;
+            double acc[3] = {0, 0, 0}, wsum = 0.0;
+            for (size_t c = 0; c < 4; c++) {
+                size_t fi = 2 * i + (c & 1), fj = 2 * j + (c >> 1);
+                double w = wenv_oct_texel_solid_angle(fs, fi, fj);
+                const float *f = fine + 3 * (fj * fs + fi);
+                for (int ch = 0; ch < 3; ch++)
+                    acc[ch] += w * f[ch];
+                wsum += w;
+            }
+            for (int ch = 0; ch < 3; ch++)
+                coarse[3 * t + ch] = (float)(acc[ch] / wsum);
+        }
+    }
+    return WENV_OK;
+}

@@ -1,0 +1,108 @@
+/* The shading-method interface: what every way of shading a mesh under an environment provides.
+ *
+ * A method shades (normal, view) pairs with one material under one environment.  It is made with
+ * its own quality settings (a plain struct described by `params`, so that callers can read and
+ * write it by key without knowing the method), then given an environment and a material, each of
+ * which may be replaced later without remaking the rest.  wenv.Shader (python/bind_shader.c) holds
+ * one method through this table and never names a method itself.
+ *
+ * Adding a method: a folder under csrc/methods/ with its numerical code and one `const wenv_method`
+ * describing it (as methods/wavelet/wavelet_method.c does), its presets in methods/presets.c, and
+ * one entry in methods/methods.c.  See docs/ARCHITECTURE.md. */
+#ifndef WENV_METHOD_H
+#define WENV_METHOD_H
+
+#include <stddef.h>
+
+#include "base/error.h"
+#include "scene/envmap.h"
+#include "scene/material.h"
+
+/* One quality key: its name, its type and where it sits in the method's quality struct. */
+typedef enum { WENV_PARAM_SIZE, WENV_PARAM_REAL } wenv_param_type;
+typedef struct {
+    const char *key;
+    wenv_param_type type; /* size_t or double at `offset` */
+    size_t offset;
+} wenv_param;
+
+/* One statistic a method reports (sizes, timings, what its cache did). */
+typedef enum { WENV_STAT_COUNT, WENV_STAT_REAL, WENV_STAT_TEXT } wenv_stat_type;
+typedef struct {
+    const char *key;
+    wenv_stat_type type;
+    size_t count;
+    double real;
+    const char *text; /* static storage */
+} wenv_stat;
+#define WENV_STATS_MAX 24
+
+/* The named presets every method has, from cheapest to most accurate. */
+#define WENV_PRESET_COUNT 3
+typedef enum { WENV_PRESET_DRAFT = 0, WENV_PRESET_DEFAULT = 1, WENV_PRESET_HIGH = 2 } wenv_preset;
+extern const char *const WENV_PRESET_NAMES[WENV_PRESET_COUNT];
+
+/* Where a method that keeps precomputed data on disk (the rotation matrices) keeps it. */
+typedef enum {
+    WENV_CACHE_DEFAULT = 0, /* $WENV_CACHE_DIR, else $XDG_CACHE_HOME/wenv, else ~/.cache/wenv (made if missing) */
+    WENV_CACHE_NONE,        /* no disk cache */
+    WENV_CACHE_FOLDER       /* cache_dir, which must be an existing folder */
+} wenv_cache_mode;
+
+typedef struct {
+    wenv_cache_mode cache;
+    const char *cache_dir;      /* WENV_CACHE_FOLDER only */
+    const wenv_progress *progress; /* for work done while creating (may be NULL) */
+} wenv_method_setup;
+
+typedef struct wenv_method {
+    const char *name;    /* as passed to wenv.Shader(method=...) */
+    const char *summary; /* one line: what it is and after whom */
+    size_t quality_size; /* bytes of its quality struct */
+    const wenv_param *params;
+    size_t n_params;
+    const void *presets[WENV_PRESET_COUNT]; /* quality structs, WENV_PRESET_NAMES order */
+
+    /* WENV_ERR_VALUE naming the key ("quality['order'] ...") unless the settings are usable. */
+    wenv_status (*check_quality)(const void *quality, wenv_error *err);
+    /* Makes the method's state for `quality` (checked); nothing is shaded until an environment and a
+     * material are set.  May build or load precomputed data, reporting to setup->progress. */
+    wenv_status (*create)(void **state, const void *quality, const wenv_method_setup *setup, wenv_error *err);
+    void (*destroy)(void *state);
+    /* Both leave the state as it was when they fail or are cancelled.  `progress` may be NULL. */
+    wenv_status (*set_environment)(void *state, const wenv_envmap *env, const wenv_progress *progress,
+                                   wenv_error *err);
+    wenv_status (*set_material)(void *state, const wenv_material *mat, const wenv_progress *progress,
+                                wenv_error *err);
+    /* normals and views (surface towards eye): n x 3 floats, non-zero and finite, not necessarily
+     * unit; out: n x 3 linear RGB radiance.  Needs an environment and a material set. */
+    wenv_status (*shade)(void *state, const float *normals, const float *views, size_t n, float *out,
+                         wenv_error *err);
+    /* Fills at most WENV_STATS_MAX entries; returns how many. */
+    size_t (*stats)(const void *state, wenv_stat *out);
+} wenv_method;
+
+/* The registry (methods.c): every method, in the order they are documented. */
+extern const wenv_method WENV_METHOD_ROTATION, WENV_METHOD_SLICING, WENV_METHOD_SPLIT_SUM, WENV_METHOD_SH;
+size_t wenv_method_count(void);
+const wenv_method *wenv_method_at(size_t i);
+const wenv_method *wenv_method_named(const char *name); /* NULL if there is none */
+
+/* A method's preset by name (NULL if `name` is not a preset). */
+const void *wenv_method_preset(const wenv_method *method, const char *name);
+
+/* Statistic helpers for the methods' `stats` functions. */
+static inline wenv_stat wenv_stat_count(const char *key, size_t value)
+{
+    return (wenv_stat){.key = key, .type = WENV_STAT_COUNT, .count = value};
+}
+static inline wenv_stat wenv_stat_real(const char *key, double value)
+{
+    return (wenv_stat){.key = key, .type = WENV_STAT_REAL, .real = value};
+}
+static inline wenv_stat wenv_stat_text(const char *key, const char *value)
+{
+    return (wenv_stat){.key = key, .type = WENV_STAT_TEXT, .text = value};
+}
+
+#endif

@@ -1,0 +1,49 @@
+#include "methods/presets.h"
+
+const char *const WENV_PRESET_NAMES[WENV_PRESET_COUNT] = {"draft", "default", "high"};
+
+/* draft and default take out suns and lamps (pixels above 256x the mean radiance) and are built for
+ * interactive rates; high also takes out every bright extended feature (above 8x the mean, up to
+ * 4096) and integrates narrow lobes at grazing views per vertex -- what brings m >= 0.1 within 1 %
+ * on the bundled HDRIs (README, "Speed against accuracy"). */
+const wenv_wavelet_quality WENV_WAVELET_PRESETS[WENV_PRESET_COUNT] = {
+    [WENV_PRESET_DRAFT] = {.global_n = 32, .local_n = 16, .normal_n = 16, .view_n = 8, .coefficients = 32,
+                           .light_coefficients = 256, .matrix_epsilon = 1e-3, .lights = 64,
+                           .light_threshold = 256, .grazing = 0},
+    [WENV_PRESET_DEFAULT] = {.global_n = 64, .local_n = 32, .normal_n = 32, .view_n = 16, .coefficients = 128,
+                             .light_coefficients = 1024, .matrix_epsilon = 1e-3, .lights = 128,
+                             .light_threshold = 256, .grazing = 0},
+    [WENV_PRESET_HIGH] = {.global_n = 128, .local_n = 64, .normal_n = 64, .view_n = 32, .coefficients = 512,
+                          .light_coefficients = 0, .matrix_epsilon = 1e-4, .lights = 4096,
+                          .light_threshold = 8, .grazing = 6},
+};
+
+const wenv_splitsum_quality WENV_SPLIT_SUM_PRESETS[WENV_PRESET_COUNT] = {
+    [WENV_PRESET_DRAFT] = {.prefilter = 64, .samples = 64, .lut = 32},
+    [WENV_PRESET_DEFAULT] = {.prefilter = 128, .samples = 256, .lut = 64},
+    [WENV_PRESET_HIGH] = {.prefilter = 256, .samples = 512, .lut = 128},
+};
+
+const wenv_sh_shading_quality WENV_SH_PRESETS[WENV_PRESET_COUNT] = {
+    [WENV_PRESET_DRAFT] = {.order = 4, .views = 16},
+    [WENV_PRESET_DEFAULT] = {.order = 8, .views = 32},
+    [WENV_PRESET_HIGH] = {.order = 16, .views = 64},
+};
+
+/* light_coefficients 0 (slicing keeps every term anyway); matrix_epsilon unused by slicing.  The
+ * errors auto predicts for these levels are calibrated on exactly these settings
+ * (auto/autoquality.c): change one and recalibrate.  The last level is the "high" preset. */
+const wenv_wavelet_quality WENV_AUTO_LADDER[WENV_AUTO_LEVELS] = {
+    {.global_n = 32, .local_n = 16, .normal_n = 16, .view_n = 8, .coefficients = 64, .light_coefficients = 0,
+     .matrix_epsilon = 1e-3, .lights = 64, .light_threshold = 256, .grazing = 0},
+    {.global_n = 64, .local_n = 32, .normal_n = 32, .view_n = 16, .coefficients = 128, .light_coefficients = 0,
+     .matrix_epsilon = 1e-3, .lights = 128, .light_threshold = 256, .grazing = 0},
+    {.global_n = 128, .local_n = 64, .normal_n = 32, .view_n = 16, .coefficients = 256, .light_coefficients = 0,
+     .matrix_epsilon = 1e-4, .lights = 512, .light_threshold = 256, .grazing = 0},
+    {.global_n = 128, .local_n = 64, .normal_n = 64, .view_n = 32, .coefficients = 512, .light_coefficients = 0,
+     .matrix_epsilon = 1e-4, .lights = 1024, .light_threshold = 256, .grazing = 0},
+    {.global_n = 128, .local_n = 64, .normal_n = 64, .view_n = 32, .coefficients = 512, .light_coefficients = 0,
+     .matrix_epsilon = 1e-4, .lights = 4096, .light_threshold = 8, .grazing = 6},
+};
+
+const size_t WENV_AUTO_SH_ORDERS[WENV_AUTO_SH_ORDER_COUNT] = {2, 4, 6, 8, 10, 12, 14, 16};

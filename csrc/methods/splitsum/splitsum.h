@@ -1,0 +1,59 @@
+/* Split-sum image-based lighting (Karis 2013, "Real Shading in Unreal Engine 4"; as Filament and
+ * EEVEE do it), a peer of the wavelet method for comparison.
+ *
+ * Specular, per lobe: L_spec(n, v) ~ prefiltered(r) x E(n.v) x specular, r the mirror direction.
+ *  - prefiltered: the environment convolved with the lobe's distribution under the n = v = r
+ *    assumption, on an octahedral map (maps.h) of side `prefilter`, one map per lobe at the lobe's
+ *    own roughness (the lobes are known when the material is set, so there is no interpolation
+ *    between roughness levels).  Each texel is an importance-sampled estimate with `samples`
+ *    Hammersley half vectors drawn from the lobe's distribution (Beckmann or GGX), weighted by n.l
+ *    (Karis's estimator), each sample read from a solid-angle-matched level of a mip pyramid of the
+ *    environment (filtered importance sampling, Colbert and Krivanek 2007, as Filament's cmgen).
+ *  - E(n.v): the lobe's directional albedo with its exact distribution, shadowing and dielectric
+ *    Fresnel at its own index (wenv_lobe_albedo): the environment-BRDF table of the 2D LUT
+ *    (n.v, roughness) taken at the lobe's roughness and index, so no Schlick approximation and no
+ *    roughness interpolation; `lut` entries at n.v = (i + 0.5) / lut, linear in between.
+ * Diffuse: irradiance from the 9-coefficient SH projection of the environment (Ramamoorthi and
+ * Hanrahan 2001), clamped at zero, times diffuse / pi.
+ * What the method cannot do (by design): the n = v = r assumption loses the stretching of
+ * highlights at grazing views and the dependence of the lobe's shape on the view. */
+#ifndef WENV_SPLITSUM_H
+#define WENV_SPLITSUM_H
+
+#include <stddef.h>
+
+#include "scene/material.h"
+#include "scene/envmap.h"
+#include "base/error.h"
+
+typedef struct {
+    size_t prefilter; /* side of each lobe's octahedral prefiltered map, even, [8, 1024] */
+    size_t samples;   /* importance samples per prefiltered texel, [1, 65536] */
+    size_t lut;       /* environment-BRDF entries over n.v per lobe, [2, 4096] */
+} wenv_splitsum_quality;
+
+typedef struct {
+    size_t lobes, source_side, source_levels, source_bytes, prefilter_bytes, lut_bytes;
+    double environment_seconds, prefilter_seconds, lut_seconds;
+} wenv_splitsum_stats;
+
+typedef struct wenv_splitsum wenv_splitsum;
+
+wenv_status wenv_splitsum_quality_check(const wenv_splitsum_quality *q, wenv_error *err);
+wenv_status wenv_splitsum_create(wenv_splitsum **out, const wenv_splitsum_quality *q, wenv_error *err);
+void wenv_splitsum_free(wenv_splitsum *ss);
+
+/* Both keep the shader unchanged when they fail or are cancelled.  Prefiltering (for each lobe of the
+ * current material under the current environment) reports progress. */
+wenv_status wenv_splitsum_set_environment(wenv_splitsum *ss, const wenv_envmap *env, const wenv_progress *progress,
+                                          wenv_error *err);
+wenv_status wenv_splitsum_set_material(wenv_splitsum *ss, const wenv_material *mat, const wenv_progress *progress,
+                                       wenv_error *err);
+
+/* As wenv_wavelet_shade: n x 3 normals and views (surface towards eye, non-zero, finite), n x 3 RGB. */
+wenv_status wenv_splitsum_shade(const wenv_splitsum *ss, const float *normals, const float *views, size_t n,
+                                float *out, wenv_error *err);
+
+void wenv_splitsum_get_stats(const wenv_splitsum *ss, wenv_splitsum_stats *stats);
+
+#endif

@@ -1,0 +1,258 @@
+/* The rotation matrices' cache file: a header (magic, version, sizes, epsilon, its CRC) and one
+ * zlib block per normal sample with its own CRC-32, written to a temporary file and renamed. */
+#include "methods/wavelet/rotation.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdatomic.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+#include <zlib.h>
+
+#define CACHE_MAGIC "WENVROT"
+#define CACHE_VERSION 2u /* 2: float resampling splat */
+
+typedef struct {
+    char magic[8];
+    uint32_t version, header_crc;
+    uint64_t global_n, local_n, normal_n;
+    double epsilon;
+} cache_header;
+
+typedef struct {
+    uint64_t comp_size, raw_size;
+    uint32_t crc, pad;
+} cache_entry;
+
+/* Raw block of one matrix: nnz (u64), colptr as u32 (cols + 1), rows as u16, values as f32. */
+static size_t raw_size_of(const wenv_csc *m)
+{
+    size_t nnz = wenv_csc_nnz(m);
+    return 8 + (m->cols + 1) * 4 + nnz * 2 + nnz * 4;
+}
+
+static void pack(const wenv_csc *m, unsigned char *buf)
+{
+    uint64_t nnz = wenv_csc_nnz(m);
+    memcpy(buf, &nnz, 8);
+    buf += 8;
+    for (size_t c = 0; c <= m->cols; c++) {
+        uint32_t v = (uint32_t)m->colptr[c];
+        memcpy(buf, &v, 4);
+        buf += 4;
+    }
+    for (size_t e = 0; e < nnz; e++) {
+        uint16_t r = m->rowidx[e];
+        memcpy(buf, &r, 2);
+        buf += 2;
+    }
+    memcpy(buf, m->val, nnz * 4);
+}
+
+static int unpack(const unsigned char *buf, size_t size, size_t rows, size_t cols, wenv_csc *m)
+{
+    uint64_t nnz;
+    if (size < 8)
+        return -1;
+    memcpy(&nnz, buf, 8);
+    if (nnz > rows * cols || size != 8 + (cols + 1) * 4 + nnz * 6)
+        return -1;
+    buf += 8;
+    m->rows = rows;
+    m->cols = cols;
+    m->colptr = malloc((cols + 1) * sizeof(size_t));
+    m->rowidx = malloc((nnz ? nnz : 1) * sizeof(uint16_t));
+    m->val = malloc((nnz ? nnz : 1) * sizeof(float));
+    if (!m->colptr || !m->rowidx || !m->val)
+        return -1;
+    for (size_t c = 0; c <= cols; c++) {
+        uint32_t v;
+        memcpy(&v, buf, 4);
+        buf += 4;
+        m->colptr[c] = v;
+        if (v > nnz || (c > 0 && m->colptr[c] < m->colptr[c - 1]) || (c == 0 && v != 0))
+            return -1;
+    }
+    if (m->colptr[cols] != nnz)
+        return -1;
+    for (size_t e = 0; e < nnz; e++) {
+        uint16_t r;
+        memcpy(&r, buf, 2);
+        buf += 2;
+        if (r >= rows)
+            return -1;
+        m->rowidx[e] = r;
+    }
+    memcpy(m->val, buf, nnz * 4);
+    for (size_t e = 0; e < nnz; e++)
+        if (!isfinite(m->val[e]))
+            return -1;
+    return 0;
+}
+
+static uint32_t header_crc(const cache_header *h, const cache_entry *entries, size_t ns)
+{
+    cache_header copy = *h;
+    copy.header_crc = 0;
+    uLong crc = crc32(0L, (const Bytef *)&copy, sizeof copy);
+    return (uint32_t)crc32(crc, (const Bytef *)entries, (uInt)(ns * sizeof *entries));
+}
+
+wenv_status wenv_rotation_save(const wenv_rotation *rot, const char *path, wenv_error *err)
+{
+    size_t ns = rot->normal_n * rot->normal_n;
+    cache_entry *entries = calloc(ns, sizeof *entries);
+    unsigned char **blobs = calloc(ns, sizeof *blobs);
+    if (!entries || !blobs) {
+        free(entries);
+        free(blobs);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory writing %s", path);
+    }
+    atomic_int failed = 0;
+#pragma omp parallel for schedule(dynamic, 4)
+    for (size_t s = 0; s < ns; s++) {
+        size_t raw = raw_size_of(&rot->matrices[s]);
+        unsigned char *rawbuf = malloc(raw);
+        uLongf comp = compressBound((uLong)raw);
+        blobs[s] = malloc(comp);
+        if (!rawbuf || !blobs[s]) {
+            free(rawbuf);
+            atomic_store(&failed, 1);
+            continue;
+        }
+        pack(&rot->matrices[s], rawbuf);
+        if (compress2(blobs[s], &comp, rawbuf, (uLong)raw, 1) != Z_OK)
+            atomic_store(&failed, 1);
+        entries[s].comp_size = comp;
+        entries[s].raw_size = raw;
+        entries[s].crc = (uint32_t)crc32(0L, rawbuf, (uInt)raw);
+        free(rawbuf);
+    }
+    wenv_status st = WENV_OK;
+    char *tmp = NULL;
+    FILE *fp = NULL;
+    if (failed) {
+        st = wenv_error_set(err, WENV_ERR_NOMEM, "out of memory compressing rotation matrices for %s", path);
+        goto done;
+    }
+    cache_header h;
+    memset(&h, 0, sizeof h);
+    memcpy(h.magic, CACHE_MAGIC, sizeof CACHE_MAGIC);
+    h.version = CACHE_VERSION;
+    h.global_n = rot->global_n;
+    h.local_n = rot->local_n;
+    h.normal_n = rot->normal_n;
+    h.epsilon = rot->epsilon;
+    h.header_crc = header_crc(&h, entries, ns);
+    size_t plen = strlen(path) + 64;
+    tmp = malloc(plen);
+    if (!tmp) {
+        st = wenv_error_set(err, WENV_ERR_NOMEM, "out of memory writing %s", path);
+        goto done;
+    }
+    snprintf(tmp, plen, "%s.tmp.%ld", path, (long)getpid());
+    fp = fopen(tmp, "wb");
+    if (!fp) {
+        st = wenv_error_set(err, WENV_ERR_IO, "cannot write %s: %s", tmp, strerror(errno));
+        goto done;
+    }
+    int ok = fwrite(&h, sizeof h, 1, fp) == 1 && fwrite(entries, sizeof *entries, ns, fp) == ns;
+    for (size_t s = 0; ok && s < ns; s++)
+        ok = fwrite(blobs[s], 1, entries[s].comp_size, fp) == entries[s].comp_size;
+    ok = ok && fflush(fp) == 0 && fsync(fileno(fp)) == 0;
+    ok = (fclose(fp) == 0) && ok;
+    fp = NULL;
+    if (!ok || rename(tmp, path) != 0) {
+        st = wenv_error_set(err, WENV_ERR_IO, "cannot write %s: %s", path, strerror(errno));
+        remove(tmp);
+    }
+done:
+    for (size_t s = 0; s < ns; s++)
+        free(blobs[s]);
+    free(blobs);
+    free(entries);
+    free(tmp);
+    return st;
+}
+
+wenv_status wenv_rotation_load(wenv_rotation **out, const char *path, size_t global_n, size_t local_n,
+                               size_t normal_n, double epsilon, wenv_error *err)
+{
+    *out = NULL;
+    if (wenv_rotation_check_sizes(global_n, local_n, normal_n, err))
+        return err->status;
+    FILE *fp = fopen(path, "rb");
+    if (!fp)
+        return wenv_error_set(err, WENV_ERR_IO, "cannot open %s: %s", path, strerror(errno));
+    size_t ns = normal_n * normal_n, nl = local_n * local_n, ng = global_n * global_n;
+    cache_header h;
+    cache_entry *entries = NULL;
+    wenv_rotation *rot = NULL;
+    wenv_status st = WENV_OK;
+    if (fread(&h, sizeof h, 1, fp) != 1 || memcmp(h.magic, CACHE_MAGIC, sizeof CACHE_MAGIC) != 0 ||
+        h.version != CACHE_VERSION || h.global_n != global_n || h.local_n != local_n ||
+        h.normal_n != normal_n || h.epsilon != epsilon) {
+        st = wenv_error_set(err, WENV_ERR_IO, "%s is not a wenv rotation cache for these sizes", path);
+        goto fail;
+    }
+    entries = malloc(ns * sizeof *entries);
+    if (!entries) {
+        st = wenv_error_set(err, WENV_ERR_NOMEM, "out of memory reading %s", path);
+        goto fail;
+    }
+    if (fread(entries, sizeof *entries, ns, fp) != ns || header_crc(&h, entries, ns) != h.header_crc) {
+        st = wenv_error_set(err, WENV_ERR_IO, "%s: truncated or corrupt header", path);
+        goto fail;
+    }
+    rot = calloc(1, sizeof *rot);
+    if (rot)
+        rot->matrices = calloc(ns, sizeof *rot->matrices);
+    if (!rot || !rot->matrices) {
+        st = wenv_error_set(err, WENV_ERR_NOMEM, "out of memory reading %s", path);
+        goto fail;
+    }
+    rot->global_n = global_n;
+    rot->local_n = local_n;
+    rot->normal_n = normal_n;
+    rot->epsilon = epsilon;
+    size_t max_raw = 8 + (ng + 1) * 4 + nl * ng * 6;
+    for (size_t s = 0; s < ns; s++) {
+        cache_entry *e = &entries[s];
+        if (e->raw_size > max_raw || e->comp_size > compressBound((uLong)e->raw_size)) {
+            st = wenv_error_set(err, WENV_ERR_IO, "%s: corrupt block table", path);
+            goto fail;
+        }
+        unsigned char *comp = malloc(e->comp_size ? e->comp_size : 1);
+        unsigned char *raw = malloc(e->raw_size ? e->raw_size : 1);
+        int ok = comp && raw && fread(comp, 1, e->comp_size, fp) == e->comp_size;
+        uLongf rawlen = (uLongf)e->raw_size;
+        ok = ok && uncompress(raw, &rawlen, comp, (uLong)e->comp_size) == Z_OK && rawlen == e->raw_size;
+        ok = ok && (uint32_t)crc32(0L, raw, (uInt)rawlen) == e->crc;
+        ok = ok && unpack(raw, rawlen, nl, ng, &rot->matrices[s]) == 0;
+        free(comp);
+        free(raw);
+        if (!ok) {
+            st = wenv_error_set(err, WENV_ERR_IO, "%s: truncated or corrupt block %zu", path, s);
+            goto fail;
+        }
+    }
+    if (fgetc(fp) != EOF) {
+        st = wenv_error_set(err, WENV_ERR_IO, "%s: trailing data", path);
+        goto fail;
+    }
+    rot->normal_n = normal_n;
+    fclose(fp);
+    free(entries);
+    *out = rot;
+    return WENV_OK;
+fail:
+    fclose(fp);
+    free(entries);
+    if (rot)
+        rot->normal_n = rot->matrices ? normal_n : 0;
+    wenv_rotation_free(rot);
+    return st;
+}

@@ -1,0 +1,411 @@
+#include "methods/wavelet/rotation.h"
+
+#include <math.h>
+#include <omp.h>
+#include <stdatomic.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+
+#include "math/haar.h"
+#include "math/maps.h"
+
+void wenv_normal_sample(size_t normal_n, size_t s, double n[3])
+{
+    wenv_oct_decode(wenv_map_texel_center(normal_n, s % normal_n), wenv_map_texel_center(normal_n, s / normal_n), n);
+}
+
+struct wenv_resampler {
+    size_t global_n, local_n, k;
+    float *sub_dirs;    /* N_global * k * k * 3 */
+    double *sub_omega;  /* N_global: solid angle of one sub-sample of each texel */
+};
+
+wenv_status wenv_resampler_create(wenv_resampler **out, size_t global_n, size_t local_n, wenv_error *err)
+{
+    *out = NULL;
+    wenv_resampler *rs = calloc(1, sizeof *rs);
+    if (!rs)
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the resampler");
+    /* Sub-samples no farther apart than half a local texel, so every local tent sees many. */
+    double ratio = 2.83 * (double)local_n / (double)global_n;
+    size_t k = (size_t)ceil(ratio);
+    rs->k = k < 2 ? 2 : k;
+    rs->global_n = global_n;
+    rs->local_n = local_n;
+    size_t ng = global_n * global_n, kk = rs->k * rs->k;
+    rs->sub_dirs = malloc(ng * kk * 3 * sizeof(float));
+    rs->sub_omega = malloc(ng * sizeof(double));
+    if (!rs->sub_dirs || !rs->sub_omega) {
+        wenv_resampler_free(rs);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the resampler");
+    }
+    double h = 2.0 / (double)global_n;
+    for (size_t u = 0; u < ng; u++) {
+        size_t i = u % global_n, j = u / global_n;
+        rs->sub_omega[u] = wenv_oct_texel_solid_angle(global_n, i, j) / (double)kk;
+        for (size_t q = 0; q < kk; q++) {
+            double su = -1.0 + h * ((double)i + ((double)(q % rs->k) + 0.5) / (double)rs->k);
+            double sv = -1.0 + h * ((double)j + ((double)(q / rs->k) + 0.5) / (double)rs->k);
+            double d[3];
+            wenv_oct_decode(su, sv, d);
+            float *o = rs->sub_dirs + (u * kk + q) * 3;
+            o[0] = (float)d[0];
+            o[1] = (float)d[1];
+            o[2] = (float)d[2];
+        }
+    }
+    *out = rs;
+    return WENV_OK;
+}
+
+void wenv_resampler_free(wenv_resampler *rs)
+{
+    if (!rs)
+        return;
+    free(rs->sub_dirs);
+    free(rs->sub_omega);
+    free(rs);
+}
+
+/* Tent taps of global texel u's sub-samples in the local map of `frame`: up to 4 k^2 pairs. */
+static size_t splat_texel(const wenv_resampler *rs, const double f[9], size_t u, uint32_t *tap_t, double *tap_w)
+{
+    size_t kk = rs->k * rs->k, count = 0;
+    const float *d = rs->sub_dirs + u * kk * 3;
+    float ff[9];
+    for (int c = 0; c < 9; c++)
+        ff[c] = (float)f[c];
+    for (size_t q = 0; q < kk; q++, d += 3) {
+        float loc[3] = {ff[0] * d[0] + ff[1] * d[1] + ff[2] * d[2], ff[3] * d[0] + ff[4] * d[1] + ff[5] * d[2],
+                        ff[6] * d[0] + ff[7] * d[1] + ff[8] * d[2]};
+        if (loc[2] < 0.0f)
+            continue;
+        float lu, lv, w[4];
+        uint32_t idx[4];
+        wenv_hemi_encode_f(loc, &lu, &lv);
+        wenv_hemi_bilinear_f((long)rs->local_n, lu, lv, idx, w);
+        for (int c = 0; c < 4; c++) {
+            if (w[c] <= 0.0f)
+                continue;
+            tap_t[count] = idx[c];
+            tap_w[count++] = (double)w[c] * rs->sub_omega[u];
+        }
+    }
+    return count;
+}
+
+void wenv_resample_slice(const wenv_resampler *rs, const double frame[9], const float *global_texels,
+                         float *local_texels, double *rowsum)
+{
+    size_t nl = rs->local_n * rs->local_n, ng = rs->global_n * rs->global_n;
+    uint32_t tap_t[4 * 64];
+    double tap_w[4 * 64];
+    double acc[3];
+    memset(rowsum, 0, nl * sizeof(double));
+    memset(local_texels, 0, nl * 3 * sizeof(float));
+    for (size_t u = 0; u < ng; u++) {
+        const float *g = global_texels + 3 * u;
+        size_t count = splat_texel(rs, frame, u, tap_t, tap_w);
+        for (size_t c = 0; c < count; c++) {
+            float *l = local_texels + 3 * (size_t)tap_t[c];
+            acc[0] = tap_w[c] * g[0];
+            acc[1] = tap_w[c] * g[1];
+            acc[2] = tap_w[c] * g[2];
+            l[0] += (float)acc[0];
+            l[1] += (float)acc[1];
+            l[2] += (float)acc[2];
+            rowsum[tap_t[c]] += tap_w[c];
+        }
+    }
+    for (size_t t = 0; t < nl; t++) {
+        float inv = rowsum[t] > 0.0 ? (float)(1.0 / rowsum[t]) : 0.0f;
+        local_texels[3 * t] *= inv;
+        local_texels[3 * t + 1] *= inv;
+        local_texels[3 * t + 2] *= inv;
+    }
+}
+
+/* ---- building R_s ---------------------------------------------------------------------------- */
+
+typedef struct {
+    uint32_t *u, *j;
+    float *v;
+    size_t count, cap;
+} triplets;
+
+static int triplets_push(triplets *tr, uint32_t u, uint32_t j, float v)
+{
+    if (tr->count == tr->cap) {
+        size_t cap = tr->cap ? 2 * tr->cap : 4096;
+        uint32_t *nu = realloc(tr->u, cap * sizeof *nu);
+        if (nu)
+            tr->u = nu;
+        uint32_t *nj = realloc(tr->j, cap * sizeof *nj);
+        if (nj)
+            tr->j = nj;
+        float *nv = realloc(tr->v, cap * sizeof *nv);
+        if (nv)
+            tr->v = nv;
+        if (!nu || !nj || !nv)
+            return -1;
+        tr->cap = cap;
+    }
+    tr->u[tr->count] = u;
+    tr->j[tr->count] = j;
+    tr->v[tr->count++] = v;
+    return 0;
+}
+
+static void triplets_free(triplets *tr)
+{
+    free(tr->u);
+    free(tr->j);
+    free(tr->v);
+    memset(tr, 0, sizeof *tr);
+}
+
+typedef struct {
+    double *rowsum;     /* N_local */
+    uint32_t *tap_t;    /* N_global * 4k^2 */
+    double *tap_w;
+    size_t *tap_start;  /* N_global + 1 */
+    float *acc;         /* N_local */
+    uint32_t *touched;  /* N_local */
+    unsigned char *mark;/* N_local */
+    triplets p, out;
+    float *block;       /* N_global * chunk */
+    float *scratch;     /* global_n * chunk */
+    size_t *imp_idx;    /* 3 log2(L) + 1 */
+    float *imp_val;
+} build_ws;
+
+static void ws_free(build_ws *ws)
+{
+    free(ws->rowsum);
+    free(ws->tap_t);
+    free(ws->tap_w);
+    free(ws->tap_start);
+    free(ws->acc);
+    free(ws->touched);
+    free(ws->mark);
+    triplets_free(&ws->p);
+    triplets_free(&ws->out);
+    free(ws->block);
+    free(ws->scratch);
+    free(ws->imp_idx);
+    free(ws->imp_val);
+}
+
+static int ws_alloc(build_ws *ws, const wenv_resampler *rs, size_t chunk)
+{
+    size_t nl = rs->local_n * rs->local_n, ng = rs->global_n * rs->global_n, kk4 = 4 * rs->k * rs->k;
+    memset(ws, 0, sizeof *ws);
+    ws->rowsum = malloc(nl * sizeof(double));
+    ws->tap_t = malloc(ng * kk4 * sizeof(uint32_t));
+    ws->tap_w = malloc(ng * kk4 * sizeof(double));
+    ws->tap_start = malloc((ng + 1) * sizeof(size_t));
+    ws->acc = calloc(nl, sizeof(float));
+    ws->touched = malloc(nl * sizeof(uint32_t));
+    ws->mark = calloc(nl, 1);
+    ws->block = malloc(ng * chunk * sizeof(float));
+    ws->scratch = malloc(rs->global_n * chunk * sizeof(float));
+    ws->imp_idx = malloc(64 * sizeof(size_t));
+    ws->imp_val = malloc(64 * sizeof(float));
+    return ws->rowsum && ws->tap_t && ws->tap_w && ws->tap_start && ws->acc && ws->touched && ws->mark &&
+                   ws->block && ws->scratch && ws->imp_idx && ws->imp_val
+               ? 0
+               : -1;
+}
+
+/* R_s = H_local S_s H_global^T, computed as (H_local S_s) first (sparse: each global texel touches
+ * a few local texels, whose Haar transforms are impulse responses), then the global transform on
+ * blocks of `chunk` local coefficients at a time so the dense work buffer stays small. */
+static int build_matrix(const wenv_resampler *rs, const double f[9], double threshold, size_t chunk,
+                        build_ws *ws, wenv_csc *m)
+{
+    size_t L = rs->local_n, G = rs->global_n, nl = L * L, ng = G * G;
+    size_t kk4 = 4 * rs->k * rs->k;
+    memset(ws->rowsum, 0, nl * sizeof(double));
+    for (size_t u = 0; u < ng; u++) {
+        size_t c = splat_texel(rs, f, u, ws->tap_t + u * kk4, ws->tap_w + u * kk4);
+        ws->tap_start[u] = c; /* count for now */
+        for (size_t q = 0; q < c; q++)
+            ws->rowsum[ws->tap_t[u * kk4 + q]] += ws->tap_w[u * kk4 + q];
+    }
+    ws->p.count = 0;
+    for (size_t u = 0; u < ng; u++) {
+        size_t ntouched = 0;
+        for (size_t q = 0; q < ws->tap_start[u]; q++) {
+            uint32_t t = ws->tap_t[u * kk4 + q];
+            float w = (float)(ws->tap_w[u * kk4 + q] / ws->rowsum[t]);
+            size_t n = wenv_haar2d_impulse(L, t % L, t / L, ws->imp_idx, ws->imp_val);
+            for (size_t e = 0; e < n; e++) {
+                size_t jj = ws->imp_idx[e];
+                if (!ws->mark[jj]) {
+                    ws->mark[jj] = 1;
+                    ws->touched[ntouched++] = (uint32_t)jj;
+                }
+                ws->acc[jj] += w * ws->imp_val[e];
+            }
+        }
+        for (size_t e = 0; e < ntouched; e++) {
+            uint32_t jj = ws->touched[e];
+            if (triplets_push(&ws->p, (uint32_t)u, jj, ws->acc[jj]) < 0)
+                return -1;
+            ws->acc[jj] = 0.0f;
+            ws->mark[jj] = 0;
+        }
+    }
+    ws->out.count = 0;
+    for (size_t j0 = 0; j0 < nl; j0 += chunk) {
+        memset(ws->block, 0, ng * chunk * sizeof(float));
+        for (size_t e = 0; e < ws->p.count; e++) {
+            uint32_t jj = ws->p.j[e];
+            if (jj >= j0 && jj < j0 + chunk)
+                ws->block[(size_t)ws->p.u[e] * chunk + (jj - j0)] += ws->p.v[e];
+        }
+        wenv_haar2d_forward(ws->block, G, chunk, ws->scratch);
+        for (size_t u = 0; u < ng; u++) {
+            const float *b = ws->block + u * chunk;
+            for (size_t c = 0; c < chunk; c++)
+                if (fabsf(b[c]) > threshold && triplets_push(&ws->out, (uint32_t)u, (uint32_t)(j0 + c), b[c]) < 0)
+                    return -1;
+        }
+    }
+    /* counting sort by global coefficient: within a column, rows stay ascending */
+    size_t nnz = ws->out.count;
+    m->rows = nl;
+    m->cols = ng;
+    m->colptr = calloc(ng + 1, sizeof(size_t));
+    m->rowidx = malloc((nnz ? nnz : 1) * sizeof(uint16_t));
+    m->val = malloc((nnz ? nnz : 1) * sizeof(float));
+    if (!m->colptr || !m->rowidx || !m->val)
+        return -1;
+    for (size_t e = 0; e < nnz; e++)
+        m->colptr[ws->out.u[e] + 1]++;
+    for (size_t u = 0; u < ng; u++)
+        m->colptr[u + 1] += m->colptr[u];
+    size_t *fill = ws->tap_start; /* reuse: N_global + 1 entries */
+    memcpy(fill, m->colptr, (ng + 1) * sizeof(size_t));
+    for (size_t e = 0; e < nnz; e++) {
+        size_t pos = fill[ws->out.u[e]]++;
+        m->rowidx[pos] = (uint16_t)ws->out.j[e];
+        m->val[pos] = ws->out.v[e];
+    }
+    return 0;
+}
+
+wenv_status wenv_rotation_check_sizes(size_t global_n, size_t local_n, size_t normal_n, wenv_error *err)
+{
+    if (!wenv_is_power_of_two(global_n) || global_n < 4 || global_n > 512)
+        return wenv_error_set(err, WENV_ERR_VALUE, "global map size must be a power of two in [4, 512], got %zu", global_n);
+    if (!wenv_is_power_of_two(local_n) || local_n < 4 || local_n > 256)
+        return wenv_error_set(err, WENV_ERR_VALUE, "local map size must be a power of two in [4, 256], got %zu", local_n);
+    if (normal_n < 2 || normal_n > 512 || normal_n % 2)
+        return wenv_error_set(err, WENV_ERR_VALUE, "normal sample grid must be even in [2, 512], got %zu", normal_n);
+    return WENV_OK;
+}
+
+wenv_status wenv_rotation_build(wenv_rotation **out, size_t global_n, size_t local_n, size_t normal_n,
+                                double epsilon, const wenv_progress *progress, wenv_error *err)
+{
+    *out = NULL;
+    if (wenv_rotation_check_sizes(global_n, local_n, normal_n, err))
+        return err->status;
+    if (!(epsilon >= 0.0 && epsilon < 1.0))
+        return wenv_error_set(err, WENV_ERR_VALUE, "matrix epsilon must be in [0, 1), got %g", epsilon);
+    wenv_resampler *rs = NULL;
+    if (wenv_resampler_create(&rs, global_n, local_n, err))
+        return err->status;
+    size_t ns = normal_n * normal_n, nl = local_n * local_n, ng = global_n * global_n;
+    wenv_rotation *rot = calloc(1, sizeof *rot);
+    wenv_csc *mats = rot ? calloc(ns, sizeof *mats) : NULL;
+    if (!rot || !mats) {
+        free(rot);
+        wenv_resampler_free(rs);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for %zu rotation matrices", ns);
+    }
+    rot->global_n = global_n;
+    rot->local_n = local_n;
+    rot->normal_n = normal_n;
+    rot->epsilon = epsilon;
+    rot->matrices = mats;
+    size_t chunk = nl;
+    while (chunk > 1 && ng * chunk * sizeof(float) > ((size_t)4 << 20))
+        chunk /= 2;
+    double threshold = epsilon * sqrt((double)nl / (double)ng);
+
+    atomic_int failed = 0, cancelled = 0;
+    atomic_size_t done = 0;
+#pragma omp parallel
+    {
+        build_ws ws;
+        if (ws_alloc(&ws, rs, chunk) < 0)
+            atomic_store(&failed, 1);
+#pragma omp for schedule(dynamic, 1)
+        for (size_t s = 0; s < ns; s++) {
+            if (atomic_load(&failed) || atomic_load(&cancelled))
+                continue;
+            double n[3], f[9];
+            wenv_normal_sample(normal_n, s, n);
+            wenv_frame(n, f);
+            if (build_matrix(rs, f, threshold, chunk, &ws, &mats[s]) < 0)
+                atomic_store(&failed, 1);
+            size_t d = atomic_fetch_add(&done, 1) + 1;
+            if (omp_get_thread_num() == 0 && progress && progress->report &&
+                progress->report(progress->ctx, (double)d / (double)ns))
+                atomic_store(&cancelled, 1);
+        }
+        ws_free(&ws);
+    }
+    wenv_resampler_free(rs);
+    if (failed || cancelled) {
+        wenv_rotation_free(rot);
+        if (cancelled)
+            return wenv_error_set(err, WENV_ERR_CANCELLED, "rotation matrix precomputation cancelled");
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory building rotation matrices");
+    }
+    *out = rot;
+    return WENV_OK;
+}
+
+void wenv_rotation_free(wenv_rotation *rot)
+{
+    if (!rot)
+        return;
+    if (rot->matrices) {
+        size_t ns = rot->normal_n * rot->normal_n;
+        for (size_t s = 0; s < ns; s++)
+            wenv_csc_free(&rot->matrices[s]);
+        free(rot->matrices);
+    }
+    free(rot);
+}
+
+size_t wenv_rotation_nnz(const wenv_rotation *rot)
+{
+    size_t total = 0, ns = rot->normal_n * rot->normal_n;
+    for (size_t s = 0; s < ns; s++)
+        total += wenv_csc_nnz(&rot->matrices[s]);
+    return total;
+}
+
+void wenv_rotation_apply(const wenv_rotation *rot, size_t s, const uint32_t *idx, const float *rgb,
+                         size_t count, float *local)
+{
+    const wenv_csc *m = &rot->matrices[s];
+    memset(local, 0, m->rows * 3 * sizeof(float));
+    for (size_t e = 0; e < count; e++) {
+        size_t col = idx[e];
+        float r = rgb[3 * e], g = rgb[3 * e + 1], b = rgb[3 * e + 2];
+        for (size_t p = m->colptr[col]; p < m->colptr[col + 1]; p++) {
+            float v = m->val[p];
+            float *l = local + 3 * (size_t)m->rowidx[p];
+            l[0] += v * r;
+            l[1] += v * g;
+            l[2] += v * b;
+        }
+    }
+}

@@ -1,0 +1,65 @@
+/* Normal samples, their frames, and the wavelet rotation matrices (REFERENCE.md §4).
+ *
+ * Normal samples sit at the texel centres of a normal_n x normal_n octahedral map.  Each has the
+ * orthonormal frame of Duff et al. 2017 / Frisvad 2012 without the sign flip, so frames vary
+ * continuously over the sphere except at n = (0, 0, -1) (REFERENCE.md §2).
+ *
+ * The resampling operator S_s takes the global octahedral lighting texels to the local
+ * hemi-octahedral texels of sample s: every global texel is split into k x k sub-samples whose
+ * flux is splatted with bilinear (tent) weights onto the local texel centres, and each local row
+ * is normalised to sum to one.  Tent weights keep the centroid of a small bright source (a sun)
+ * where it is, so a source smaller than a texel moves no highlight; normalising keeps a constant
+ * environment exactly constant.  The rotation matrix is R_s = H_local S_s H_global^T, stored by
+ * columns with entries below epsilon * sqrt(N_local / N_global) dropped (that scale is the size of
+ * the constant term, the largest entry). */
+#ifndef WENV_ROTATION_H
+#define WENV_ROTATION_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "base/error.h"
+#include "math/frame.h"
+#include "math/sparse.h"
+
+/* The unit normal of sample s (an octahedral texel centre); its frame is wenv_frame(n). */
+void wenv_normal_sample(size_t normal_n, size_t s, double n[3]);
+
+typedef struct {
+    size_t global_n, local_n, normal_n;
+    double epsilon;
+    wenv_csc *matrices; /* normal_n^2 of them */
+} wenv_rotation;
+
+/* What S_s needs for every frame: the world directions of the sub-samples of each global texel
+ * and their solid angles. */
+typedef struct wenv_resampler wenv_resampler;
+wenv_status wenv_resampler_create(wenv_resampler **out, size_t global_n, size_t local_n, wenv_error *err);
+void wenv_resampler_free(wenv_resampler *rs);
+
+/* Local texels (pixel domain, N_local x 3) of the lighting given as global texels (N_global x 3)
+ * resampled into `frame`: S_s applied directly ("slicing").  `rowsum` holds N_local doubles. */
+void wenv_resample_slice(const wenv_resampler *rs, const double frame[9], const float *global_texels,
+                         float *local_texels, double *rowsum);
+
+/* WENV_ERR_VALUE unless the sizes are ones the matrices can be built for. */
+wenv_status wenv_rotation_check_sizes(size_t global_n, size_t local_n, size_t normal_n, wenv_error *err);
+
+wenv_status wenv_rotation_build(wenv_rotation **out, size_t global_n, size_t local_n, size_t normal_n,
+                                double epsilon, const wenv_progress *progress, wenv_error *err);
+void wenv_rotation_free(wenv_rotation *rot);
+size_t wenv_rotation_nnz(const wenv_rotation *rot);
+
+/* local (N_local x 3, Haar domain) = R_s applied to the sparse global lighting: `count` Haar
+ * coefficients with indices idx (ascending) and RGB values rgb (count x 3). */
+void wenv_rotation_apply(const wenv_rotation *rot, size_t s, const uint32_t *idx, const float *rgb,
+                         size_t count, float *local);
+
+/* Cache file with a header (magic, version, sizes, epsilon) and per-sample zlib blocks each with
+ * its CRC-32.  Save writes a temporary file and renames it, so readers never see a partial file.
+ * Load returns WENV_ERR_IO for a missing, truncated, corrupt or mismatched file. */
+wenv_status wenv_rotation_save(const wenv_rotation *rot, const char *path, wenv_error *err);
+wenv_status wenv_rotation_load(wenv_rotation **out, const char *path, size_t global_n, size_t local_n,
+                               size_t normal_n, double epsilon, wenv_error *err);
+
+#endif

@@ -1,0 +1,85 @@
+/* Environment shading by wavelet rotation (Wang et al. 2006, as the 2007 thesis built it).
+ *
+ * Lighting: the environment is tent-filtered onto a global octahedral map, Haar transformed and
+ * cut to its largest coefficients.  For each normal sample the local lighting slice (a
+ * hemi-octahedral map in the sample's frame, Haar domain) comes from the rotation matrix
+ * ("rotation") or from resampling the global map directly ("slicing"); the two agree exactly when
+ * nothing is truncated.  Slices are made only for normal samples that some vertex needs.
+ *
+ * Material: for each view sample (a hemi-octahedral grid of local view directions) the BRDF
+ * slice f(w, v) cos(w) is integrated against each local texel's tent, Haar transformed and cut to
+ * its largest coefficients (RGB share their indices).  The diffuse part is view-independent: it
+ * uses the irradiance of each normal sample, computed once per slice.
+ *
+ * Per vertex: the normal is interpolated bilinearly between the 4 nearest normal samples.  Each
+ * sample is shaded with the view that has the same mirror direction about the sample's normal as
+ * the vertex view has about the vertex normal, so a highlight stays where it belongs instead of
+ * moving with the sample spacing; that view is interpolated bilinearly between the 4 nearest
+ * view samples.  The 16 (normal sample, view sample) radiances are sparse dot products computed
+ * once per lighting and material and kept in a table, so a new view costs 16 table reads per
+ * vertex plus the dot products of pairs not seen before.
+ *
+ * Lights: a sun or a lamp holds most of a scene's flux in a few pixels, and wavelet truncation and
+ * interpolation between samples spread its highlight over neighbouring views and normals.  The
+ * brightest pixels (at most quality.lights of them, each brighter than light_threshold times the
+ * mean radiance) are therefore taken out of the lighting before the transform and shaded per vertex
+ * as exact directional lights with the material's own BRDF, in clusters as coarse as the lobe
+ * allows (lights.h).
+ *
+ * Grazing: near grazing a narrow lobe is squeezed below the local map's resolution; with
+ * quality.grazing > 0 such lobes are integrated per vertex over a mip pyramid of the same lighting
+ * (grazing.h) and blended with the wavelet result. */
+#ifndef WENV_WAVELET_H
+#define WENV_WAVELET_H
+
+#include <stddef.h>
+
+#include "scene/material.h"
+#include "scene/envmap.h"
+#include "base/error.h"
+
+typedef enum { WENV_WAVELET_ROTATION = 0, WENV_WAVELET_SLICING = 1 } wenv_wavelet_variant;
+
+typedef struct {
+    size_t global_n;           /* octahedral lighting map side (power of two) */
+    size_t local_n;            /* hemi-octahedral slice side (power of two) */
+    size_t normal_n;           /* octahedral normal-sample grid side (even) */
+    size_t view_n;             /* hemi-octahedral view-sample grid side */
+    size_t coefficients;       /* Haar terms kept per BRDF slice (0: all) */
+    size_t light_coefficients; /* Haar terms kept of the global lighting (0: all) */
+    double matrix_epsilon;     /* rotation-matrix entries dropped below this (relative) */
+    size_t lights;             /* brightest pixels shaded as exact directional lights (0: none) */
+    double light_threshold;    /* ... when brighter than this many times the mean radiance */
+    double grazing;            /* lobes narrower than this many local texels are integrated per vertex
+                                * (grazing.h; 0: never) */
+} wenv_wavelet_quality;
+
+typedef struct {
+    size_t rotation_nnz, rotation_bytes;
+    int cache; /* 0 no cache used, 1 loaded, 2 built and saved, 3 built, save failed */
+    size_t slices_ready, pairs_ready, light_terms, brdf_terms_total, direct_lights;
+    size_t slice_bytes, table_bytes, brdf_bytes, grazing_bytes;
+    double rotation_seconds;
+} wenv_wavelet_stats;
+
+typedef struct wenv_wavelet wenv_wavelet;
+
+wenv_status wenv_wavelet_quality_check(const wenv_wavelet_quality *q, wenv_error *err);
+
+/* cache_dir may be NULL (no disk cache).  Builds or loads the rotation matrices for
+ * WENV_WAVELET_ROTATION, reporting progress. */
+wenv_status wenv_wavelet_create(wenv_wavelet **out, const wenv_wavelet_quality *q, wenv_wavelet_variant method,
+                               const char *cache_dir, const wenv_progress *progress, wenv_error *err);
+void wenv_wavelet_free(wenv_wavelet *sh);
+
+wenv_status wenv_wavelet_set_environment(wenv_wavelet *sh, const wenv_envmap *env, wenv_error *err);
+wenv_status wenv_wavelet_set_material(wenv_wavelet *sh, const wenv_material *mat, wenv_error *err);
+
+/* normals and views (surface towards eye) are n x 3; need not be unit length but must be
+ * non-zero and finite (the bindings check).  out is n x 3 linear RGB radiance. */
+wenv_status wenv_wavelet_shade(wenv_wavelet *sh, const float *normals, const float *views, size_t n,
+                              float *out, wenv_error *err);
+
+void wenv_wavelet_get_stats(const wenv_wavelet *sh, wenv_wavelet_stats *stats);
+
+#endif

@@ -1,0 +1,216 @@
+/* Private hooks (wenv._name) that let the tests reach the numerical building blocks directly: the
+ * octahedral maps, the Haar transform and the spherical harmonics.  Not part of the API. */
+#include "python/module.h"
+
+#include <string.h>
+
+#include "math/haar.h"
+#include "math/maps.h"
+#include "math/spherical_harmonics.h"
+
+
+static PyObject *map_convert(PyObject *args, int hemi, int encode)
+{
+    PyObject *obj;
+    if (!PyArg_ParseTuple(args, "O", &obj))
+        return NULL;
+    Py_buffer b;
+    if (PyObject_GetBuffer(obj, &b, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
+        return NULL;
+    size_t in_dim = encode ? 3 : 2, out_dim = encode ? 2 : 3;
+    if (b.itemsize != 8 || b.ndim != 2 || (size_t)b.shape[1] != in_dim) {
+        PyBuffer_Release(&b);
+        PyErr_Format(PyExc_ValueError, "expected float64 (n, %zu)", in_dim);
+        return NULL;
+    }
+    size_t n = (size_t)b.shape[0];
+    Py_ssize_t shape[2] = {(Py_ssize_t)n, (Py_ssize_t)out_dim};
+    float *out;
+    PyObject *result = wenv_py_new_float_array(2, shape, &out);
+    const double *in = b.buf;
+    for (size_t i = 0; result && i < n; i++) {
+        double r[3];
+        if (encode) {
+            if (hemi)
+                wenv_hemi_encode(in + 3 * i, &r[0], &r[1]);
+            else
+                wenv_oct_encode(in + 3 * i, &r[0], &r[1]);
+        } else if (hemi)
+            wenv_hemi_decode(in[2 * i], in[2 * i + 1], r);
+        else
+            wenv_oct_decode(in[2 * i], in[2 * i + 1], r);
+        for (size_t c = 0; c < out_dim; c++)
+            out[out_dim * i + c] = (float)r[c];
+    }
+    PyBuffer_Release(&b);
+    return result;
+}
+
+static PyObject *py_oct_encode(PyObject *s, PyObject *a) { (void)s; return map_convert(a, 0, 1); }
+static PyObject *py_oct_decode(PyObject *s, PyObject *a) { (void)s; return map_convert(a, 0, 0); }
+static PyObject *py_hemi_encode(PyObject *s, PyObject *a) { (void)s; return map_convert(a, 1, 1); }
+static PyObject *py_hemi_decode(PyObject *s, PyObject *a) { (void)s; return map_convert(a, 1, 0); }
+
+static PyObject *py_texel_solid_angles(PyObject *self, PyObject *args)
+{
+    (void)self;
+    Py_ssize_t n;
+    int hemi;
+    if (!PyArg_ParseTuple(args, "np", &n, &hemi))
+        return NULL;
+    if (n < 2 || n > 4096 || n % 2) {
+        PyErr_SetString(PyExc_ValueError, "n must be even in [2, 4096]");
+        return NULL;
+    }
+    PyObject *list = PyList_New(n * n);
+    for (Py_ssize_t t = 0; list && t < n * n; t++) {
+        double w = hemi ? wenv_hemi_texel_solid_angle((size_t)n, (size_t)(t % n), (size_t)(t / n))
+                        : wenv_oct_texel_solid_angle((size_t)n, (size_t)(t % n), (size_t)(t / n));
+        PyList_SET_ITEM(list, t, PyFloat_FromDouble(w));
+    }
+    return list;
+}
+
+static PyObject *py_haar2d(PyObject *self, PyObject *args, PyObject *kwargs)
+{
+    (void)self;
+    static char *kwlist[] = {"image", "inverse", NULL};
+    PyObject *obj;
+    int inverse = 0;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "O|p", kwlist, &obj, &inverse))
+        return NULL;
+    Py_buffer b;
+    if (PyObject_GetBuffer(obj, &b, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
+        return NULL;
+    if (b.itemsize != 4 || b.ndim != 3 || b.shape[0] != b.shape[1] || !wenv_is_power_of_two((size_t)b.shape[0])) {
+        PyBuffer_Release(&b);
+        PyErr_SetString(PyExc_ValueError, "image must be float32 (n, n, channels) with n a power of two");
+        return NULL;
+    }
+    size_t n = (size_t)b.shape[0], ch = (size_t)b.shape[2];
+    Py_ssize_t shape[3] = {b.shape[0], b.shape[1], b.shape[2]};
+    float *out;
+    PyObject *result = wenv_py_new_float_array(3, shape, &out);
+    float *scratch = PyMem_Malloc(n * ch * sizeof(float) + 1);
+    if (result && scratch) {
+        memcpy(out, b.buf, n * n * ch * sizeof(float));
+        if (inverse)
+            wenv_haar2d_inverse(out, n, ch, scratch);
+        else
+            wenv_haar2d_forward(out, n, ch, scratch);
+    } else if (!scratch) {
+        Py_CLEAR(result);
+        PyErr_NoMemory();
+    }
+    PyMem_Free(scratch);
+    PyBuffer_Release(&b);
+    return result;
+}
+
+
+static int get_doubles(PyObject *obj, const char *name, Py_buffer *b)
+{
+    if (PyObject_GetBuffer(obj, b, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
+        return -1;
+    if (b->itemsize != 8 || !b->format || strchr(b->format, 'd') == NULL) {
+        PyBuffer_Release(b);
+        PyErr_Format(PyExc_TypeError, "%s must be a C-contiguous float64 array", name);
+        return -1;
+    }
+    return 0;
+}
+
+static int get_order(Py_ssize_t order)
+{
+    if (order < 0 || order > WENV_SH_ORDER_MAX) {
+        PyErr_Format(PyExc_ValueError, "order must be in [0, %d]", WENV_SH_ORDER_MAX);
+        return -1;
+    }
+    return 0;
+}
+
+/* _sh_basis(dirs float64 (n, 3) unit, order) -> float64 (n, (order + 1)^2) */
+static PyObject *py_sh_basis(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *obj;
+    Py_ssize_t order;
+    if (!PyArg_ParseTuple(args, "On", &obj, &order) || get_order(order) < 0)
+        return NULL;
+    Py_buffer b;
+    if (get_doubles(obj, "dirs", &b) < 0)
+        return NULL;
+    if (b.ndim != 2 || b.shape[1] != 3) {
+        PyBuffer_Release(&b);
+        PyErr_SetString(PyExc_ValueError, "dirs must have shape (n, 3)");
+        return NULL;
+    }
+    size_t n = (size_t)b.shape[0], count = wenv_sh_count((size_t)order);
+    Py_ssize_t shape[2] = {(Py_ssize_t)n, (Py_ssize_t)count};
+    void *data;
+    PyObject *result = wenv_py_new_array(2, shape, "float64", &data);
+    for (size_t i = 0; result && i < n; i++)
+        wenv_sh_eval((size_t)order, (const double *)b.buf + 3 * i, (double *)data + i * count);
+    PyBuffer_Release(&b);
+    return result;
+}
+
+/* _sh_rotate(coeffs float64 ((order + 1)^2,), frame float64 (3, 3) rows t, b, n) -> coefficients of
+ * the function seen in the frame, f(F^T w) */
+static PyObject *py_sh_rotate(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *cobj, *fobj;
+    if (!PyArg_ParseTuple(args, "OO", &cobj, &fobj))
+        return NULL;
+    Py_buffer cb, fb;
+    if (get_doubles(cobj, "coeffs", &cb) < 0)
+        return NULL;
+    if (get_doubles(fobj, "frame", &fb) < 0) {
+        PyBuffer_Release(&cb);
+        return NULL;
+    }
+    PyObject *result = NULL;
+    size_t count = (size_t)(cb.len / 8), order = 0;
+    while (wenv_sh_count(order) < count)
+        order++;
+    if (wenv_sh_count(order) != count || order > WENV_SH_ORDER_MAX || fb.len != 9 * 8) {
+        PyErr_SetString(PyExc_ValueError, "coeffs must hold (order + 1)**2 values and frame 3 x 3");
+        goto done;
+    }
+    wenv_sh_rotation *rot = NULL;
+    wenv_error err = {0};
+    if (wenv_sh_rotation_create(&rot, order, &err)) {
+        wenv_py_raise(&err);
+        goto done;
+    }
+    double *work = PyMem_Malloc(count * sizeof(double));
+    Py_ssize_t shape[1] = {(Py_ssize_t)count};
+    void *data;
+    result = work ? wenv_py_new_array(1, shape, "float64", &data) : PyErr_NoMemory();
+    if (result) {
+        double a, b, g;
+        wenv_sh_frame_angles(fb.buf, &a, &b, &g);
+        wenv_sh_rotate_zyz(rot, a, b, g, cb.buf, data, 1, work);
+    }
+    PyMem_Free(work);
+    wenv_sh_rotation_free(rot);
+done:
+    PyBuffer_Release(&cb);
+    PyBuffer_Release(&fb);
+    return result;
+}
+
+static PyMethodDef internal_functions[] = {
+    {"_oct_encode", py_oct_encode, METH_VARARGS, NULL},
+    {"_oct_decode", py_oct_decode, METH_VARARGS, NULL},
+    {"_hemi_encode", py_hemi_encode, METH_VARARGS, NULL},
+    {"_hemi_decode", py_hemi_decode, METH_VARARGS, NULL},
+    {"_texel_solid_angles", py_texel_solid_angles, METH_VARARGS, NULL},
+    {"_haar2d", (PyCFunction)(void (*)(void))py_haar2d, METH_VARARGS | METH_KEYWORDS, NULL},
+    {"_sh_basis", py_sh_basis, METH_VARARGS, NULL},
+    {"_sh_rotate", py_sh_rotate, METH_VARARGS, NULL},
+    {NULL, NULL, 0, NULL},
+};
+
+int wenv_register_internals(PyObject *module) { return PyModule_AddFunctions(module, internal_functions); }

@@ -1,0 +1,841 @@
+/* Python types wenv.Material (abstract base), wenv.Lambert and wenv.CookTorrance, plus private
+ * helpers (_fresnel, _ndf, _smith_lambda, _lobe_albedo) that the tests use to check the core terms. */
+#include "python/bind_material.h"
+#include "python/module.h"
+
+#include <math.h>
+#include <string.h>
+
+#include "scene/material.h"
+
+#define ALBEDO_DEFAULT_SAMPLES 128
+#define PARALLEL_MIN_ROWS 16384 /* below this, thread start-up costs more than it saves */
+
+typedef struct {
+    PyObject_HEAD
+    wenv_material *mat;              /* owned, immutable after construction */
+    wenv_distribution distribution;  /* CookTorrance's material-level default, kept for .distribution */
+} MaterialObject;
+
+static PyTypeObject MaterialType;
+static PyTypeObject LambertType;
+static PyTypeObject CookTorranceType;
+
+static const char *const distribution_names[] = {"beckmann", "ggx"};
+static const char *const shadowing_names[] = {"smith", "vcavity"};
+
+/* ---------------------------------------------------------------- small helpers */
+
+/* Reads one of `names` (exact, lower case) from a str; TypeError / ValueError naming `name`. */
+static int parse_choice(PyObject *obj, const char *name, const char *const *names, int count, int *out)
+{
+    if (!PyUnicode_Check(obj)) {
+        PyErr_Format(PyExc_TypeError, "%s must be a str, got %.100s", name, Py_TYPE(obj)->tp_name);
+        return -1;
+    }
+    const char *s = PyUnicode_AsUTF8(obj);
+    if (!s)
+        return -1;
+    for (int i = 0; i < count; i++) {
+        if (strcmp(s, names[i]) == 0) {
+            *out = i;
+            return 0;
+        }
+    }
+    PyErr_Format(PyExc_ValueError, "%s must be '%s' or '%s', got %R", name, names[0], names[1], obj);
+    return -1;
+}
+
+static PyObject *rgb_tuple(const double rgb[3]) { return Py_BuildValue("(ddd)", rgb[0], rgb[1], rgb[2]); }
+
+static PyObject *new_double_array(int ndim, const Py_ssize_t *shape, double **data)
+{
+    void *d = NULL;
+    PyObject *array = wenv_py_new_array(ndim, shape, "float64", &d);
+    *data = d;
+    return array;
+}
+
+/* Copies a float32 (n, 3) buffer to doubles, normalising each row (rows are nonzero: checked).  Rows
+ * already unit to float precision are kept as they are, so every C path (scalar or the float batch)
+ * sees bit-identical directions. */
+static double *normalised_rows(const Py_buffer *view, size_t n)
+{
+    double *out = PyMem_Malloc(n * 3 * sizeof *out + 1);
+    if (!out) {
+        PyErr_NoMemory();
+        return NULL;
+    }
+    const float *v = view->buf;
+    for (size_t i = 0; i < n; i++) {
+        double x = v[3 * i], y = v[3 * i + 1], z = v[3 * i + 2];
+        double len2 = x * x + y * y + z * z;
+        double inv = fabs(len2 - 1.0) <= 1e-6 ? 1.0 : 1.0 / sqrt(len2);
+        out[3 * i] = x * inv;
+        out[3 * i + 1] = y * inv;
+        out[3 * i + 2] = z * inv;
+    }
+    return out;
+}
+
+/* ---------------------------------------------------------------- C access for other bindings */
+
+const struct wenv_material *wenv_py_material(PyObject *obj, const char *name)
+{
+    if (!PyObject_TypeCheck(obj, &MaterialType) || !((MaterialObject *)obj)->mat) {
+        PyErr_Format(PyExc_TypeError, "%s must be a wenv.Material (wenv.Lambert or wenv.CookTorrance), got %.100s",
+                     name, Py_TYPE(obj)->tp_name);
+        return NULL;
+    }
+    return ((MaterialObject *)obj)->mat;
+}
+
+/* ---------------------------------------------------------------- wenv.Material (base) */
+
+static void material_dealloc(PyObject *self)
+{
+    wenv_material_free(((MaterialObject *)self)->mat);
+    Py_TYPE(self)->tp_free(self);
+}
+
+static PyObject *wrap_material(PyTypeObject *type, wenv_material *mat, wenv_distribution distribution)
+{
+    MaterialObject *obj = (MaterialObject *)type->tp_alloc(type, 0);
+    if (!obj) {
+        wenv_material_free(mat);
+        return NULL;
+    }
+    obj->mat = mat;
+    obj->distribution = distribution;
+    return (PyObject *)obj;
+}
+
+typedef enum { EVAL_FULL, EVAL_SPECULAR, EVAL_SPECULAR_BATCH } eval_mode;
+
+static PyObject *material_eval_impl(PyObject *self, PyObject *args, PyObject *kwds, eval_mode mode)
+{
+    static char *kwlist[] = {"wi", "wo", NULL};
+    PyObject *wi_obj, *wo_obj;
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "OO", kwlist, &wi_obj, &wo_obj))
+        return NULL;
+    const wenv_material *mat = wenv_py_material(self, "self");
+    if (!mat)
+        return NULL;
+    Py_buffer wi_view, wo_view;
+    size_t ni, no;
+    int wi_single, wo_single;
+    if (wenv_py_get_vec3_array(wi_obj, "wi", 1, &wi_view, &ni, &wi_single) < 0)
+        return NULL;
+    if (wenv_py_get_vec3_array(wo_obj, "wo", 1, &wo_view, &no, &wo_single) < 0) {
+        PyBuffer_Release(&wi_view);
+        return NULL;
+    }
+    PyObject *result = NULL;
+    double *wi = NULL, *wo = NULL;
+    float *fwi = NULL;
+    if (mode == EVAL_SPECULAR_BATCH && no != 1) {
+        PyErr_SetString(PyExc_ValueError, "wo must be a single direction for the batch path");
+        goto done;
+    }
+    if (ni != no && ni != 1 && no != 1) {
+        PyErr_Format(PyExc_ValueError,
+                     "wi and wo must have the same number of rows (or one of them a single direction), got %zu and %zu",
+                     ni, no);
+        goto done;
+    }
+    size_t n = ni > no ? ni : no;
+    if (ni == 0 || no == 0)
+        n = 0;
+    wi = normalised_rows(&wi_view, ni);
+    wo = normalised_rows(&wo_view, no);
+    if (!wi || !wo)
+        goto done;
+    float *out;
+    Py_ssize_t shape[2] = {(Py_ssize_t)n, 3};
+    int single = wi_single && wo_single;
+    result = single ? wenv_py_new_float_array(1, shape + 1, &out) : wenv_py_new_float_array(2, shape, &out);
+    if (!result)
+        goto done;
+    if (mode == EVAL_SPECULAR_BATCH) {
+        fwi = PyMem_Malloc(ni * 3 * sizeof *fwi + 1);
+        if (!fwi) {
+            Py_CLEAR(result);
+            PyErr_NoMemory();
+            goto done;
+        }
+        for (size_t k = 0; k < 3 * ni; k++)
+            fwi[k] = (float)wi[k];
+        Py_BEGIN_ALLOW_THREADS
+        wenv_material_specular_cos_batch(mat, wo, fwi, n, out);
+        Py_END_ALLOW_THREADS
+        goto done;
+    }
+    size_t si = ni == 1 ? 0 : 3, so = no == 1 ? 0 : 3; /* stride 0 broadcasts a single direction */
+    Py_BEGIN_ALLOW_THREADS
+    ptrdiff_t count = (ptrdiff_t)n;
+#pragma omp parallel for schedule(static) if (count > PARALLEL_MIN_ROWS)
+    for (ptrdiff_t k = 0; k < count; k++) {
+        double rgb[3];
+        const double *a = wi + (size_t)k * si, *b = wo + (size_t)k * so;
+        if (mode == EVAL_FULL)
+            wenv_material_eval_cos(mat, a, b, rgb);
+        else
+            wenv_material_specular_cos(mat, a, b, rgb);
+        out[3 * k] = (float)rgb[0];
+        out[3 * k + 1] = (float)rgb[1];
+        out[3 * k + 2] = (float)rgb[2];
+    }
+    Py_END_ALLOW_THREADS
+done:
+    PyMem_Free(fwi);
+    PyMem_Free(wi);
+    PyMem_Free(wo);
+    PyBuffer_Release(&wi_view);
+    PyBuffer_Release(&wo_view);
+    return result;
+}
+
+static PyObject *material_eval(PyObject *self, PyObject *args, PyObject *kwds)
+{
+    return material_eval_impl(self, args, kwds, EVAL_FULL);
+}
+
+static PyObject *material_specular(PyObject *self, PyObject *args, PyObject *kwds)
+{
+    return material_eval_impl(self, args, kwds, EVAL_SPECULAR);
+}
+
+static PyObject *material_specular_batch(PyObject *self, PyObject *args, PyObject *kwds)
+{
+    return material_eval_impl(self, args, kwds, EVAL_SPECULAR_BATCH);
+}
+
+static int parse_samples(PyObject *obj, size_t *out)
+{
+    if (!obj) {
+        *out = ALBEDO_DEFAULT_SAMPLES;
+        return 0;
+    }
+    if (!PyLong_Check(obj) || PyBool_Check(obj)) {
+        PyErr_Format(PyExc_TypeError, "samples must be an int, got %.100s", Py_TYPE(obj)->tp_name);
+        return -1;
+    }
+    int overflow = 0;
+    long long v = PyLong_AsLongLongAndOverflow(obj, &overflow);
+    if (v == -1 && PyErr_Occurred())
+        return -1;
+    if (overflow || v < 8 || v > 4096) {
+        PyErr_Format(PyExc_ValueError, "samples must be in [8, 4096], got %R", obj);
+        return -1;
+    }
+    *out = (size_t)v;
+    return 0;
+}
+
+static PyObject *material_albedo(PyObject *self, PyObject *args, PyObject *kwds)
+{
+    static char *kwlist[] = {"wo", "samples", NULL};
+    PyObject *wo_obj, *samples_obj = NULL;
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O|O", kwlist, &wo_obj, &samples_obj))
+        return NULL;
+    const wenv_material *mat = wenv_py_material(self, "self");
+    size_t samples;
+    if (!mat || parse_samples(samples_obj, &samples) < 0)
+        return NULL;
+    Py_buffer view;
+    size_t n;
+    int single;
+    if (wenv_py_get_vec3_array(wo_obj, "wo", 1, &view, &n, &single) < 0)
+        return NULL;
+    PyObject *result = NULL;
+    double *wo = normalised_rows(&view, n);
+    if (!wo)
+        goto done;
+    double *out;
+    Py_ssize_t shape[2] = {(Py_ssize_t)n, 3};
+    result = single ? new_double_array(1, shape + 1, &out) : new_double_array(2, shape, &out);
+    if (!result)
+        goto done;
+    wenv_error err = {0};
+    Py_BEGIN_ALLOW_THREADS
+    for (size_t k = 0; k < n && err.status == WENV_OK; k++)
+        wenv_material_albedo(mat, wo + 3 * k, samples, out + 3 * k, &err);
+    Py_END_ALLOW_THREADS
+    if (err.status != WENV_OK) {
+        Py_CLEAR(result);
+        wenv_py_raise(&err);
+    }
+done:
+    PyMem_Free(wo);
+    PyBuffer_Release(&view);
+    return result;
+}
+
+static PyObject *material_richcompare(PyObject *a, PyObject *b, int op)
+{
+    if ((op != Py_EQ && op != Py_NE) || Py_TYPE(a) != Py_TYPE(b))
+        Py_RETURN_NOTIMPLEMENTED;
+    const MaterialObject *x = (const MaterialObject *)a, *y = (const MaterialObject *)b;
+    int equal = x->mat && y->mat && x->distribution == y->distribution &&
+                x->mat->shadowing == y->mat->shadowing && x->mat->n_lobes == y->mat->n_lobes &&
+                memcmp(x->mat->diffuse, y->mat->diffuse, sizeof x->mat->diffuse) == 0;
+    for (size_t i = 0; equal && i < x->mat->n_lobes; i++) {
+        const wenv_lobe *p = &x->mat->lobes[i], *q = &y->mat->lobes[i];
+        equal = p->roughness == q->roughness && p->ior == q->ior && p->distribution == q->distribution &&
+                p->specular[0] == q->specular[0] && p->specular[1] == q->specular[1] &&
+                p->specular[2] == q->specular[2];
+    }
+    if (op == Py_NE)
+        equal = !equal;
+    return PyBool_FromLong(equal);
+}
+
+static Py_hash_t material_hash(PyObject *self)
+{
+    /* Immutable, so hashing the (exact, round-tripping) repr is consistent with __eq__. */
+    PyObject *r = PyObject_Repr(self);
+    if (!r)
+        return -1;
+    Py_hash_t h = PyObject_Hash(r);
+    Py_DECREF(r);
+    return h;
+}
+
+static PyMethodDef material_methods[] = {
+    {"eval", (PyCFunction)(void (*)(void))material_eval, METH_VARARGS | METH_KEYWORDS,
+     "eval(wi, wo)\n--\n\nf(wi, wo) * cos_i as float32 RGB for local-frame directions (normal = +Z): wi, wo "
+     "float32 arrays of shape (n, 3) or (3,), normalised here; a single direction broadcasts against n. "
+     "Returns shape (n, 3), or (3,) when both are single.  0 when either direction is at or below the "
+     "horizon."},
+    {"albedo", (PyCFunction)(void (*)(void))material_albedo, METH_VARARGS | METH_KEYWORDS,
+     "albedo(wo, samples=128)\n--\n\nDirectional albedo, integral of f(wi, wo) cos_i over wi, as float64 RGB "
+     "for view(s) wo (float32 (n, 3) or (3,)).  Deterministic quadrature following the microfacet "
+     "distribution (samples x 2*samples nodes per lobe, samples in [8, 4096]); the diffuse part is exact."},
+    {"_specular", (PyCFunction)(void (*)(void))material_specular, METH_VARARGS | METH_KEYWORDS,
+     "_specular(wi, wo)\n--\n\nSpecular lobes only, times cos_i (scalar C path; for tests)."},
+    {"_specular_batch", (PyCFunction)(void (*)(void))material_specular_batch, METH_VARARGS | METH_KEYWORDS,
+     "_specular_batch(wi, wo)\n--\n\nAs _specular through the one-view batch C path; wo must be single."},
+    {NULL, NULL, 0, NULL},
+};
+
+static PyTypeObject MaterialType = {
+    PyVarObject_HEAD_INIT(NULL, 0)
+    .tp_name = "wenv.Material",
+    .tp_basicsize = sizeof(MaterialObject),
+    .tp_dealloc = material_dealloc,
+    .tp_flags = Py_TPFLAGS_DEFAULT,
+    .tp_doc = "Base type of reflectance models (wenv.Lambert, wenv.CookTorrance); not instantiable.",
+    .tp_methods = material_methods,
+    .tp_richcompare = material_richcompare,
+    .tp_hash = material_hash,
+};
+
+/* ---------------------------------------------------------------- wenv.Lambert */
+
+static PyObject *lambert_new(PyTypeObject *type, PyObject *args, PyObject *kwds)
+{
+    static char *kwlist[] = {"color", NULL};
+    PyObject *color_obj;
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O:Lambert", kwlist, &color_obj))
+        return NULL;
+    double color[3];
+    if (wenv_py_get_rgb(color_obj, "color", color) < 0)
+        return NULL;
+    for (int c = 0; c < 3; c++) {
+        if (color[c] > 1.0) {
+            PyErr_Format(PyExc_ValueError, "color must be <= 1 in every channel (energy conservation), got %R",
+                         color_obj);
+            return NULL;
+        }
+    }
+    wenv_material *mat;
+    wenv_error err = {0};
+    if (wenv_material_create(&mat, color, NULL, 0, WENV_SHADOW_SMITH, &err) != WENV_OK)
+        return wenv_py_raise(&err);
+    return wrap_material(type, mat, WENV_NDF_BECKMANN);
+}
+
+static PyObject *lambert_color(PyObject *self, void *closure)
+{
+    (void)closure;
+    return rgb_tuple(((MaterialObject *)self)->mat->diffuse);
+}
+
+static PyObject *lambert_repr(PyObject *self)
+{
+    PyObject *color = lambert_color(self, NULL);
+    if (!color)
+        return NULL;
+    PyObject *r = PyUnicode_FromFormat("wenv.Lambert(color=%R)", color);
+    Py_DECREF(color);
+    return r;
+}
+
+static PyObject *lambert_reduce(PyObject *self, PyObject *unused)
+{
+    (void)unused;
+    PyObject *color = lambert_color(self, NULL);
+    if (!color)
+        return NULL;
+    PyObject *r = Py_BuildValue("(O(N))", (PyObject *)Py_TYPE(self), color);
+    return r;
+}
+
+static PyGetSetDef lambert_getset[] = {
+    {"color", lambert_color, NULL, "Albedo (r, g, b), each in [0, 1]; f = color / pi.", NULL},
+    {NULL, NULL, NULL, NULL, NULL},
+};
+
+static PyMethodDef lambert_methods[] = {
+    {"__reduce__", lambert_reduce, METH_NOARGS, NULL},
+    {NULL, NULL, 0, NULL},
+};
+
+static PyTypeObject LambertType = {
+    PyVarObject_HEAD_INIT(NULL, 0)
+    .tp_name = "wenv.Lambert",
+    .tp_basicsize = sizeof(MaterialObject),
+    .tp_flags = Py_TPFLAGS_DEFAULT,
+    .tp_doc = "Lambert(color)\n--\n\nIdeal diffuse reflector, f = color / pi.  color is a grey number or (r, g, b), "
+              "each in [0, 1].  Immutable.",
+    .tp_base = &MaterialType,
+    .tp_new = lambert_new,
+    .tp_repr = lambert_repr,
+    .tp_getset = lambert_getset,
+    .tp_methods = lambert_methods,
+};
+
+/* ---------------------------------------------------------------- wenv.CookTorrance */
+
+static const char *const lobe_keys[] = {"specular", "roughness", "ior", "distribution"};
+#define N_LOBE_KEYS 4
+#define LOBE_DEFAULT_IOR 1.5
+
+/* Fills *lobe from dict `d` (lobes[index]); default distribution `dist`. */
+static int parse_lobe(PyObject *d, Py_ssize_t index, wenv_distribution dist, wenv_lobe *lobe)
+{
+    char name[64];
+    if (!PyDict_Check(d)) {
+        PyErr_Format(PyExc_TypeError, "lobes[%zd] must be a dict, got %.100s", index, Py_TYPE(d)->tp_name);
+        return -1;
+    }
+    Py_ssize_t pos = 0;
+    PyObject *key, *value;
+    while (PyDict_Next(d, &pos, &key, &value)) {
+        int known = 0;
+        const char *k = PyUnicode_Check(key) ? PyUnicode_AsUTF8(key) : NULL;
+        if (PyUnicode_Check(key) && !k)
+            return -1;
+        for (int i = 0; k && i < N_LOBE_KEYS; i++)
+            known |= strcmp(k, lobe_keys[i]) == 0;
+        if (!known) {
+            PyErr_Format(PyExc_ValueError,
+                         "lobes[%zd] has unknown key %R (known: 'specular', 'roughness', 'ior', 'distribution')",
+                         index, key);
+            return -1;
+        }
+    }
+
+    PyObject *v;
+    snprintf(name, sizeof name, "lobes[%zd].specular", index);
+    lobe->specular[0] = lobe->specular[1] = lobe->specular[2] = 1.0;
+    if ((v = PyDict_GetItemString(d, "specular")) && wenv_py_get_rgb(v, name, lobe->specular) < 0)
+        return -1;
+
+    snprintf(name, sizeof name, "lobes[%zd].roughness", index);
+    if (!(v = PyDict_GetItemString(d, "roughness"))) {
+        PyErr_Format(PyExc_ValueError, "%s is required", name);
+        return -1;
+    }
+    if (wenv_py_get_finite(v, name, &lobe->roughness) < 0)
+        return -1;
+
+    snprintf(name, sizeof name, "lobes[%zd].ior", index);
+    lobe->ior = LOBE_DEFAULT_IOR;
+    if ((v = PyDict_GetItemString(d, "ior")) && wenv_py_get_finite(v, name, &lobe->ior) < 0)
+        return -1;
+
+    snprintf(name, sizeof name, "lobes[%zd].distribution", index);
+    int choice = (int)dist;
+    if ((v = PyDict_GetItemString(d, "distribution")) && parse_choice(v, name, distribution_names, 2, &choice) < 0)
+        return -1;
+    lobe->distribution = (wenv_distribution)choice;
+    return 0;
+}
+
+static PyObject *cook_torrance_new(PyTypeObject *type, PyObject *args, PyObject *kwds)
+{
+    static char *kwlist[] = {"diffuse", "lobes", "distribution", "shadowing", NULL};
+    PyObject *diffuse_obj = NULL, *lobes_obj = NULL, *dist_obj = NULL, *shadow_obj = NULL;
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "|OOOO:CookTorrance", kwlist, &diffuse_obj, &lobes_obj, &dist_obj,
+                                     &shadow_obj))
+        return NULL;
+    double diffuse[3] = {0.0, 0.0, 0.0};
+    if (diffuse_obj && wenv_py_get_rgb(diffuse_obj, "diffuse", diffuse) < 0)
+        return NULL;
+    int dist = WENV_NDF_BECKMANN, shadowing = WENV_SHADOW_SMITH;
+    if (dist_obj && parse_choice(dist_obj, "distribution", distribution_names, 2, &dist) < 0)
+        return NULL;
+    if (shadow_obj && parse_choice(shadow_obj, "shadowing", shadowing_names, 2, &shadowing) < 0)
+        return NULL;
+
+    PyObject *seq = NULL;
+    Py_ssize_t n = 0;
+    if (lobes_obj) {
+        if (PyDict_Check(lobes_obj) || PyUnicode_Check(lobes_obj)) {
+            PyErr_Format(PyExc_TypeError, "lobes must be a list of dicts, got a %.100s (wrap one lobe in a list)",
+                         Py_TYPE(lobes_obj)->tp_name);
+            return NULL;
+        }
+        seq = PySequence_Fast(lobes_obj, "lobes must be a list of dicts");
+        if (!seq) {
+            PyErr_Clear();
+            PyErr_Format(PyExc_TypeError, "lobes must be a list of dicts, got %.100s", Py_TYPE(lobes_obj)->tp_name);
+            return NULL;
+        }
+        n = PySequence_Fast_GET_SIZE(seq);
+    }
+    wenv_lobe *lobes = NULL;
+    if (n > 0) {
+        lobes = PyMem_Calloc((size_t)n, sizeof *lobes);
+        if (!lobes) {
+            Py_DECREF(seq);
+            return PyErr_NoMemory();
+        }
+    }
+    for (Py_ssize_t i = 0; i < n; i++) {
+        if (parse_lobe(PySequence_Fast_GET_ITEM(seq, i), i, (wenv_distribution)dist, &lobes[i]) < 0) {
+            PyMem_Free(lobes);
+            Py_DECREF(seq);
+            return NULL;
+        }
+    }
+    Py_XDECREF(seq);
+    wenv_material *mat;
+    wenv_error err = {0};
+    wenv_status st = wenv_material_create(&mat, diffuse, lobes, (size_t)n, (wenv_shadowing)shadowing, &err);
+    PyMem_Free(lobes);
+    if (st != WENV_OK)
+        return wenv_py_raise(&err);
+    return wrap_material(type, mat, (wenv_distribution)dist);
+}
+
+static PyObject *ct_diffuse(PyObject *self, void *closure)
+{
+    (void)closure;
+    return rgb_tuple(((MaterialObject *)self)->mat->diffuse);
+}
+
+static PyObject *ct_lobes(PyObject *self, void *closure)
+{
+    (void)closure;
+    const wenv_material *mat = ((MaterialObject *)self)->mat;
+    PyObject *list = PyList_New((Py_ssize_t)mat->n_lobes);
+    if (!list)
+        return NULL;
+    for (size_t i = 0; i < mat->n_lobes; i++) {
+        const wenv_lobe *l = &mat->lobes[i];
+        PyObject *d = Py_BuildValue("{s:(ddd),s:d,s:d,s:s}", "specular", l->specular[0], l->specular[1],
+                                    l->specular[2], "roughness", l->roughness, "ior", l->ior, "distribution",
+                                    distribution_names[l->distribution]);
+        if (!d) {
+            Py_DECREF(list);
+            return NULL;
+        }
+        PyList_SET_ITEM(list, (Py_ssize_t)i, d);
+    }
+    return list;
+}
+
+static PyObject *ct_distribution(PyObject *self, void *closure)
+{
+    (void)closure;
+    return PyUnicode_FromString(distribution_names[((MaterialObject *)self)->distribution]);
+}
+
+static PyObject *ct_shadowing(PyObject *self, void *closure)
+{
+    (void)closure;
+    return PyUnicode_FromString(shadowing_names[((MaterialObject *)self)->mat->shadowing]);
+}
+
+/* (diffuse, lobes, distribution, shadowing): the constructor's arguments, for repr and pickling. */
+static PyObject *ct_args(PyObject *self)
+{
+    return Py_BuildValue("(NNNN)", ct_diffuse(self, NULL), ct_lobes(self, NULL), ct_distribution(self, NULL),
+                         ct_shadowing(self, NULL));
+}
+
+static PyObject *ct_repr(PyObject *self)
+{
+    PyObject *a = ct_args(self);
+    if (!a)
+        return NULL;
+    PyObject *r = PyUnicode_FromFormat("wenv.CookTorrance(diffuse=%R, lobes=%R, distribution=%R, shadowing=%R)",
+                                       PyTuple_GET_ITEM(a, 0), PyTuple_GET_ITEM(a, 1), PyTuple_GET_ITEM(a, 2),
+                                       PyTuple_GET_ITEM(a, 3));
+    Py_DECREF(a);
+    return r;
+}
+
+static PyObject *ct_reduce(PyObject *self, PyObject *unused)
+{
+    (void)unused;
+    PyObject *a = ct_args(self);
+    if (!a)
+        return NULL;
+    return Py_BuildValue("(ON)", (PyObject *)Py_TYPE(self), a);
+}
+
+static PyObject *ct_with_roughness(PyObject *self, PyObject *arg)
+{
+    double m;
+    if (wenv_py_get_finite(arg, "roughness", &m) < 0)
+        return NULL;
+    const MaterialObject *obj = (const MaterialObject *)self;
+    wenv_material *mat;
+    wenv_error err = {0};
+    if (wenv_material_with_roughness(&mat, obj->mat, m, &err) != WENV_OK)
+        return wenv_py_raise(&err);
+    return wrap_material(Py_TYPE(self), mat, obj->distribution);
+}
+
+static PyGetSetDef ct_getset[] = {
+    {"diffuse", ct_diffuse, NULL, "Lambertian albedo (r, g, b).", NULL},
+    {"lobes", ct_lobes, NULL,
+     "Specular lobes: a new list of dicts with every key filled in (specular, roughness, ior, distribution).", NULL},
+    {"distribution", ct_distribution, NULL, "Default microfacet distribution of the lobes: 'beckmann' or 'ggx'.",
+     NULL},
+    {"shadowing", ct_shadowing, NULL, "Shadowing-masking term: 'smith' (height-correlated) or 'vcavity'.", NULL},
+    {NULL, NULL, NULL, NULL, NULL},
+};
+
+static PyMethodDef ct_methods[] = {
+    {"__reduce__", ct_reduce, METH_NOARGS, NULL},
+    {"with_roughness", ct_with_roughness, METH_O,
+     "with_roughness(m)\n--\n\nA new CookTorrance equal to this one with every lobe's roughness set to m."},
+    {NULL, NULL, 0, NULL},
+};
+
+static PyTypeObject CookTorranceType = {
+    PyVarObject_HEAD_INIT(NULL, 0)
+    .tp_name = "wenv.CookTorrance",
+    .tp_basicsize = sizeof(MaterialObject),
+    .tp_flags = Py_TPFLAGS_DEFAULT,
+    .tp_doc =
+        "CookTorrance(diffuse=0.0, lobes=(), distribution='beckmann', shadowing='smith')\n--\n\n"
+        "Lambertian diffuse plus specular microfacet lobes, f = diffuse/pi + sum specular F D G / (4 cos_i cos_o).\n"
+        "diffuse: grey or (r, g, b) in [0, 1].  lobes: list of dicts with keys 'roughness' (required, "
+        "in [1e-6, 10]: Beckmann RMS slope or GGX alpha), 'specular' (grey or RGB >= 0, default 1), "
+        "'ior' (in (1, 10], default 1.5) and 'distribution' (default: the material's).  distribution: "
+        "'beckmann' or 'ggx'.  shadowing: 'smith' (exact Lambda, height-correlated) or 'vcavity'.  Immutable.",
+    .tp_base = &MaterialType,
+    .tp_new = cook_torrance_new,
+    .tp_repr = ct_repr,
+    .tp_getset = ct_getset,
+    .tp_methods = ct_methods,
+};
+
+/* ---------------------------------------------------------------- private test helpers */
+
+typedef double (*unary_fn)(double x, const void *ctx);
+
+/* Applies fn to a number (returns float) or to anything numpy turns into a float64 array (returns
+ * an array of the same shape). */
+static PyObject *map_unary(PyObject *obj, const char *name, unary_fn fn, const void *ctx)
+{
+    if (PyFloat_Check(obj) || PyLong_Check(obj)) {
+        double x;
+        if (wenv_py_get_finite(obj, name, &x) < 0)
+            return NULL;
+        return PyFloat_FromDouble(fn(x, ctx));
+    }
+    PyObject *numpy = PyImport_ImportModule("numpy");
+    if (!numpy)
+        return NULL;
+    PyObject *arr = PyObject_CallMethod(numpy, "ascontiguousarray", "Os", obj, "float64");
+    Py_DECREF(numpy);
+    if (!arr)
+        return NULL;
+    Py_buffer in;
+    if (PyObject_GetBuffer(arr, &in, PyBUF_C_CONTIGUOUS | PyBUF_ND) < 0) {
+        Py_DECREF(arr);
+        return NULL;
+    }
+    double *out;
+    PyObject *result = new_double_array(in.ndim, in.shape ? in.shape : (Py_ssize_t[]){1}, &out);
+    if (result) {
+        const double *x = in.buf;
+        size_t count = (size_t)(in.len / (Py_ssize_t)sizeof(double));
+        for (size_t i = 0; i < count; i++) {
+            if (!isfinite(x[i])) {
+                Py_CLEAR(result);
+                PyErr_Format(PyExc_ValueError, "%s must be finite", name);
+                break;
+            }
+            out[i] = fn(x[i], ctx);
+        }
+    }
+    PyBuffer_Release(&in);
+    Py_DECREF(arr);
+    return result;
+}
+
+typedef struct {
+    wenv_distribution dist;
+    double param; /* roughness or ior */
+} unary_ctx;
+
+static double fresnel_fn(double x, const void *ctx) { return wenv_fresnel_dielectric(x, ((const unary_ctx *)ctx)->param); }
+
+static double ndf_fn(double x, const void *ctx)
+{
+    const unary_ctx *c = ctx;
+    return wenv_ndf(c->dist, c->param, x);
+}
+
+static double lambda_fn(double x, const void *ctx)
+{
+    const unary_ctx *c = ctx;
+    return wenv_smith_lambda(c->dist, c->param, x);
+}
+
+static int check_range(double v, const char *name, double lo, int lo_open, double hi)
+{
+    if ((lo_open ? !(v > lo) : !(v >= lo)) || v > hi) {
+        char msg[160]; /* PyErr_Format has no %g */
+        snprintf(msg, sizeof msg, "%s must be in %s%g, %g], got %g", name, lo_open ? "(" : "[", lo, hi, v);
+        PyErr_SetString(PyExc_ValueError, msg);
+        return -1;
+    }
+    return 0;
+}
+
+static PyObject *py_fresnel(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *x, *ior_obj;
+    unary_ctx c = {WENV_NDF_BECKMANN, 0.0};
+    if (!PyArg_ParseTuple(args, "OO:_fresnel", &x, &ior_obj) || wenv_py_get_finite(ior_obj, "ior", &c.param) < 0 ||
+        check_range(c.param, "ior", 1.0, 1, WENV_IOR_MAX) < 0)
+        return NULL;
+    return map_unary(x, "cos_i", fresnel_fn, &c);
+}
+
+static PyObject *dist_helper(PyObject *args, const char *fmt, const char *xname, unary_fn fn)
+{
+    PyObject *dist_obj, *m_obj, *x;
+    if (!PyArg_ParseTuple(args, fmt, &dist_obj, &m_obj, &x))
+        return NULL;
+    int dist;
+    unary_ctx c;
+    if (parse_choice(dist_obj, "distribution", distribution_names, 2, &dist) < 0 ||
+        wenv_py_get_finite(m_obj, "roughness", &c.param) < 0 ||
+        check_range(c.param, "roughness", WENV_ROUGHNESS_MIN, 0, WENV_ROUGHNESS_MAX) < 0)
+        return NULL;
+    c.dist = (wenv_distribution)dist;
+    return map_unary(x, xname, fn, &c);
+}
+
+static PyObject *py_ndf(PyObject *self, PyObject *args)
+{
+    (void)self;
+    return dist_helper(args, "OOO:_ndf", "cos_h", ndf_fn);
+}
+
+static PyObject *py_smith_lambda(PyObject *self, PyObject *args)
+{
+    (void)self;
+    return dist_helper(args, "OOO:_smith_lambda", "cos_theta", lambda_fn);
+}
+
+static PyObject *py_lobe_albedo(PyObject *self, PyObject *args, PyObject *kwds)
+{
+    (void)self;
+    static char *kwlist[] = {"wo", "roughness", "distribution", "shadowing", "ior", "fresnel", "samples", NULL};
+    PyObject *wo_obj, *m_obj, *dist_obj = NULL, *shadow_obj = NULL, *ior_obj = NULL, *samples_obj = NULL;
+    int fresnel = 0;
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "OO|OOOpO:_lobe_albedo", kwlist, &wo_obj, &m_obj, &dist_obj,
+                                     &shadow_obj, &ior_obj, &fresnel, &samples_obj))
+        return NULL;
+    wenv_lobe lobe = {{1.0, 1.0, 1.0}, 0.0, 1.5, WENV_NDF_BECKMANN};
+    int dist = WENV_NDF_BECKMANN, shadowing = WENV_SHADOW_SMITH;
+    size_t samples;
+    if (wenv_py_get_finite(m_obj, "roughness", &lobe.roughness) < 0 ||
+        (dist_obj && parse_choice(dist_obj, "distribution", distribution_names, 2, &dist) < 0) ||
+        (shadow_obj && parse_choice(shadow_obj, "shadowing", shadowing_names, 2, &shadowing) < 0) ||
+        (ior_obj && wenv_py_get_finite(ior_obj, "ior", &lobe.ior) < 0) || parse_samples(samples_obj, &samples) < 0)
+        return NULL;
+    lobe.distribution = (wenv_distribution)dist;
+    /* Validate the lobe through the core's own rules. */
+    wenv_material *probe;
+    wenv_error err = {0};
+    double zero[3] = {0.0, 0.0, 0.0};
+    if (wenv_material_create(&probe, zero, &lobe, 1, (wenv_shadowing)shadowing, &err) != WENV_OK)
+        return wenv_py_raise(&err);
+    wenv_material_free(probe);
+    Py_buffer view;
+    size_t n;
+    if (wenv_py_get_vec3_array(wo_obj, "wo", 1, &view, &n, NULL) < 0)
+        return NULL;
+    if (n != 1) {
+        PyBuffer_Release(&view);
+        PyErr_SetString(PyExc_ValueError, "wo must be a single direction");
+        return NULL;
+    }
+    double *wo = normalised_rows(&view, 1);
+    PyBuffer_Release(&view);
+    if (!wo)
+        return NULL;
+    double albedo = 0.0;
+    wenv_status st;
+    Py_BEGIN_ALLOW_THREADS
+    st = wenv_lobe_albedo(&lobe, (wenv_shadowing)shadowing, wo, samples, fresnel, &albedo, &err);
+    Py_END_ALLOW_THREADS
+    PyMem_Free(wo);
+    if (st != WENV_OK)
+        return wenv_py_raise(&err);
+    return PyFloat_FromDouble(albedo);
+}
+
+static PyMethodDef brdf_functions[] = {
+    {"_fresnel", py_fresnel, METH_VARARGS, "_fresnel(cos_i, ior)\n--\n\nUnpolarised dielectric Fresnel (tests)."},
+    {"_ndf", py_ndf, METH_VARARGS, "_ndf(distribution, roughness, cos_h)\n--\n\nMicrofacet distribution D (tests)."},
+    {"_smith_lambda", py_smith_lambda, METH_VARARGS,
+     "_smith_lambda(distribution, roughness, cos_theta)\n--\n\nSmith Lambda (tests)."},
+    {"_lobe_albedo", (PyCFunction)(void (*)(void))py_lobe_albedo, METH_VARARGS | METH_KEYWORDS,
+     "_lobe_albedo(wo, roughness, distribution='beckmann', shadowing='smith', ior=1.5, fresnel=False, "
+     "samples=128)\n--\n\nAlbedo of one white lobe; fresnel=False sets F = 1 (white-furnace test)."},
+    {NULL, NULL, 0, NULL},
+};
+
+/* ---------------------------------------------------------------- registration */
+
+int wenv_register_material(PyObject *module)
+{
+    if (PyType_Ready(&MaterialType) < 0 || PyType_Ready(&LambertType) < 0 || PyType_Ready(&CookTorranceType) < 0)
+        return -1;
+    PyTypeObject *types[] = {&MaterialType, &LambertType, &CookTorranceType};
+    const char *names[] = {"Material", "Lambert", "CookTorrance"};
+    for (int i = 0; i < 3; i++) {
+        Py_INCREF(types[i]);
+        if (PyModule_AddObject(module, names[i], (PyObject *)types[i]) < 0) {
+            Py_DECREF(types[i]);
+            return -1;
+        }
+    }
+    if (PyModule_AddFunctions(module, brdf_functions) < 0)
+        return -1;
+    /* The accepted ranges, for callers that offer them to a user (the add-on's properties). */
+    PyObject *roughness = Py_BuildValue("(dd)", WENV_ROUGHNESS_MIN, WENV_ROUGHNESS_MAX);
+    if (PyModule_AddObject(module, "ROUGHNESS_RANGE", roughness) < 0) {
+        Py_XDECREF(roughness);
+        return -1;
+    }
+    PyObject *ior = Py_BuildValue("(dd)", 1.0, WENV_IOR_MAX);
+    if (PyModule_AddObject(module, "IOR_RANGE", ior) < 0) {
+        Py_XDECREF(ior);
+        return -1;
+    }
+    return 0;
+}

@@ -1,0 +1,69 @@
+/* wenv.reference: the brute-force ground truth. */
+#include "python/module.h"
+
+#include "python/bind_envmap.h"
+#include "python/bind_material.h"
+#include "reference/reference.h"
+
+static PyObject *py_reference(PyObject *self, PyObject *args, PyObject *kwargs)
+{
+    (void)self;
+    static char *kwlist[] = {"env", "material", "normals", "view_dirs", "progress", NULL};
+    PyObject *env_obj, *mat_obj, *nobj, *vobj, *progress_obj = Py_None;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOO|O:reference", kwlist, &env_obj, &mat_obj, &nobj, &vobj,
+                                     &progress_obj))
+        return NULL;
+    const struct wenv_envmap *env = wenv_py_envmap(env_obj, "env");
+    if (!env)
+        return NULL;
+    const struct wenv_material *mat = wenv_py_material(mat_obj, "material");
+    if (!mat)
+        return NULL;
+    if (progress_obj != Py_None && !PyCallable_Check(progress_obj)) {
+        PyErr_SetString(PyExc_TypeError, "progress must be callable or None");
+        return NULL;
+    }
+    Py_buffer nb, vb;
+    size_t n, nv;
+    if (wenv_py_get_vec3_array(nobj, "normals", 1, &nb, &n, NULL) < 0)
+        return NULL;
+    if (wenv_py_get_vec3_array(vobj, "view_dirs", 1, &vb, &nv, NULL) < 0) {
+        PyBuffer_Release(&nb);
+        return NULL;
+    }
+    PyObject *result = NULL;
+    if (nv != n) {
+        PyErr_Format(PyExc_ValueError, "view_dirs has %zu rows but normals has %zu", nv, n);
+        goto done;
+    }
+    Py_ssize_t shape[2] = {(Py_ssize_t)n, 3};
+    float *out;
+    result = wenv_py_new_float_array(2, shape, &out);
+    if (!result || n == 0)
+        goto done;
+    wenv_py_progress_bridge bridge = {progress_obj, 0};
+    wenv_progress progress = wenv_py_progress(&bridge);
+    wenv_error err = {0};
+    wenv_status st;
+    Py_BEGIN_ALLOW_THREADS
+    st = wenv_reference(env, mat, nb.buf, vb.buf, n, out, &progress, &err);
+    Py_END_ALLOW_THREADS
+    if (st) {
+        Py_CLEAR(result);
+        if (!(bridge.raised && PyErr_Occurred()))
+            wenv_py_raise(&err);
+    }
+done:
+    PyBuffer_Release(&nb);
+    PyBuffer_Release(&vb);
+    return result;
+}
+
+static PyMethodDef reference_functions[] = {
+    {"reference", (PyCFunction)(void (*)(void))py_reference, METH_VARARGS | METH_KEYWORDS,
+     "reference(env, material, normals, view_dirs, progress=None)\n--\n\nGround truth: the reflection "
+     "equation summed over every environment pixel (exact solid angles), in the units of Shader.shade."},
+    {NULL, NULL, 0, NULL},
+};
+
+int wenv_register_reference(PyObject *module) { return PyModule_AddFunctions(module, reference_functions); }

@@ -1,0 +1,671 @@
+/* wenv.Shader: one shading method (methods/method.h) held through the method interface, with its
+ * environment and material.  This file checks arguments, converts arrays and dicts, and releases
+ * the GIL around the work; which method, its presets, its cache and quality="auto"'s choice are the
+ * core's. */
+#include "python/module.h"
+
+#include <string.h>
+
+#include "auto/autoquality.h"
+#include "methods/method.h"
+#include "methods/presets.h"
+#include "python/bind_envmap.h"
+#include "python/bind_material.h"
+
+typedef struct {
+    PyObject_HEAD
+    const wenv_method *method;
+    void *state;   /* the method's, once made */
+    void *quality; /* method->quality_size bytes */
+    PyObject *environment, *material;
+    PyObject *progress; /* owned, or NULL: reported to by precomputation, here and in set_* */
+    int busy;
+    int is_auto;
+    wenv_auto_choice auto_choice;
+    double target_error, memory_budget_mb;
+} ShaderObject;
+
+/* ---- quality dicts, read and written through the method's parameter table ---- */
+
+static PyObject *quality_to_dict(const wenv_method *method, const void *quality)
+{
+    PyObject *d = PyDict_New();
+    for (size_t k = 0; d && k < method->n_params; k++) {
+        const wenv_param *p = &method->params[k];
+        const char *field = (const char *)quality + p->offset;
+        PyObject *v = p->type == WENV_PARAM_SIZE ? PyLong_FromSize_t(*(const size_t *)field)
+                                                 : PyFloat_FromDouble(*(const double *)field);
+        if (!v || PyDict_SetItemString(d, p->key, v) < 0)
+            Py_CLEAR(d);
+        Py_XDECREF(v);
+    }
+    return d;
+}
+
+static int preset_names_text(char *buf, size_t size, int with_auto)
+{
+    size_t used = 0;
+    for (size_t i = 0; i < WENV_PRESET_COUNT && used < size; i++)
+        used += (size_t)snprintf(buf + used, size - used, "'%s', ", WENV_PRESET_NAMES[i]);
+    if (used < size)
+        snprintf(buf + used, size - used, "%sor a dict", with_auto ? "'auto' " : "");
+    return 0;
+}
+
+/* quality: a preset name, a dict of the method's keys (missing keys from "default") or NULL. */
+static int parse_quality(const wenv_method *method, PyObject *obj, void *quality)
+{
+    memcpy(quality, method->presets[WENV_PRESET_DEFAULT], method->quality_size);
+    if (obj && PyUnicode_Check(obj)) {
+        const char *name = PyUnicode_AsUTF8(obj);
+        if (!name)
+            return -1;
+        const void *preset = wenv_method_preset(method, name);
+        if (!preset) {
+            char names[128];
+            preset_names_text(names, sizeof names, 1);
+            PyErr_Format(PyExc_ValueError, "quality must be %s, got '%s'", names, name);
+            return -1;
+        }
+        memcpy(quality, preset, method->quality_size);
+    } else if (obj && !PyDict_Check(obj)) {
+        PyErr_Format(PyExc_TypeError, "quality must be a preset name or a dict, got %.100s", Py_TYPE(obj)->tp_name);
+        return -1;
+    }
+    PyObject *key, *value;
+    Py_ssize_t pos = 0;
+    while (obj && PyDict_Check(obj) && PyDict_Next(obj, &pos, &key, &value)) {
+        const char *k = PyUnicode_Check(key) ? PyUnicode_AsUTF8(key) : NULL;
+        if (!k) {
+            PyErr_Clear();
+            PyErr_SetString(PyExc_TypeError, "quality keys must be strings");
+            return -1;
+        }
+        const wenv_param *p = NULL;
+        for (size_t e = 0; !p && e < method->n_params; e++)
+            if (strcmp(k, method->params[e].key) == 0)
+                p = &method->params[e];
+        if (!p) {
+            char keys[256];
+            size_t used = 0;
+            for (size_t e = 0; e < method->n_params && used < sizeof keys; e++)
+                used += (size_t)snprintf(keys + used, sizeof keys - used, "%s%s", e ? ", " : "", method->params[e].key);
+            PyErr_Format(PyExc_ValueError, "quality key '%s' does not apply to method '%s' (use %s)", k, method->name,
+                         keys);
+            return -1;
+        }
+        char name[64];
+        snprintf(name, sizeof name, "quality['%s']", k);
+        char *field = (char *)quality + p->offset;
+        int r = p->type == WENV_PARAM_SIZE ? wenv_py_get_size(value, name, (size_t *)field)
+                                           : wenv_py_get_finite(value, name, (double *)field);
+        if (r < 0)
+            return -1;
+    }
+    wenv_error err = {0};
+    if (method->check_quality(quality, &err)) {
+        wenv_py_raise(&err);
+        return -1;
+    }
+    return 0;
+}
+
+static const wenv_method *parse_method(const char *name)
+{
+    const wenv_method *method = wenv_method_named(name);
+    if (!method) {
+        char names[256];
+        size_t used = 0, count = wenv_method_count();
+        for (size_t i = 0; i < count && used < sizeof names; i++)
+            used += (size_t)snprintf(names + used, sizeof names - used, "%s'%s'",
+                                     i == 0 ? "" : i + 1 == count ? " or " : ", ", wenv_method_at(i)->name);
+        PyErr_Format(PyExc_ValueError, "method must be %s, got '%s'", names, name);
+    }
+    return method;
+}
+
+/* cache_dir: None (the default folder), False (no cache) or a path. */
+static int parse_cache(PyObject *obj, wenv_method_setup *setup, PyObject **bytes)
+{
+    *bytes = NULL;
+    if (obj == Py_None) {
+        setup->cache = WENV_CACHE_DEFAULT;
+        return 0;
+    }
+    if (obj == Py_False) {
+        setup->cache = WENV_CACHE_NONE;
+        return 0;
+    }
+    if (!PyUnicode_FSConverter(obj, bytes))
+        return -1;
+    setup->cache = WENV_CACHE_FOLDER;
+    setup->cache_dir = PyBytes_AS_STRING(*bytes);
+    return 0;
+}
+
+/* ---- the shader ---- */
+
+static int claim(ShaderObject *self)
+{
+    if (!self->state) {
+        PyErr_SetString(PyExc_RuntimeError, "Shader is not initialised");
+        return -1;
+    }
+    if (self->busy) {
+        PyErr_SetString(PyExc_RuntimeError, "Shader is busy in another thread");
+        return -1;
+    }
+    self->busy = 1;
+    return 0;
+}
+
+/* set_environment (material = 0) or set_material (material = 1), GIL released, progress reported. */
+static int do_set(ShaderObject *self, PyObject *obj, int material)
+{
+    const void *arg = material ? (const void *)wenv_py_material(obj, "material") : (const void *)wenv_py_envmap(obj, "env");
+    if (!arg)
+        return -1;
+    wenv_py_progress_bridge bridge = {self->progress, 0};
+    wenv_progress progress = wenv_py_progress(&bridge);
+    wenv_error err = {0};
+    wenv_status st;
+    Py_BEGIN_ALLOW_THREADS
+    st = material ? self->method->set_material(self->state, arg, &progress, &err)
+                  : self->method->set_environment(self->state, arg, &progress, &err);
+    Py_END_ALLOW_THREADS
+    if (st) {
+        if (!(bridge.raised && PyErr_Occurred()))
+            wenv_py_raise(&err);
+        return -1;
+    }
+    Py_INCREF(obj);
+    if (material)
+        Py_XSETREF(self->material, obj);
+    else
+        Py_XSETREF(self->environment, obj);
+    return 0;
+}
+
+/* quality="auto": the core chooses the method and its quality (auto/autoquality.h). */
+static int choose_auto(ShaderObject *self, PyObject *env_obj, PyObject *mat_obj, PyObject *normals_obj)
+{
+    if (!(self->target_error > 0.0 && self->target_error <= 1.0)) {
+        PyErr_Format(PyExc_ValueError, "target_error must be in (0, 1], got %g", self->target_error);
+        return -1;
+    }
+    if (!(self->memory_budget_mb > 0.0 && self->memory_budget_mb < 1e9)) {
+        PyErr_Format(PyExc_ValueError, "memory_budget_mb must be positive, got %g", self->memory_budget_mb);
+        return -1;
+    }
+    const struct wenv_envmap *env = wenv_py_envmap(env_obj, "env");
+    const struct wenv_material *mat = wenv_py_material(mat_obj, "material");
+    if (!env || !mat)
+        return -1;
+    struct wenv_auto_analysis *analysis = wenv_py_envmap_auto_analysis(env_obj);
+    if (!analysis)
+        return -1;
+    Py_buffer nb = {0};
+    size_t n = 0;
+    const float *normals = NULL;
+    if (normals_obj != Py_None) {
+        if (wenv_py_get_vec3_array(normals_obj, "normals", 1, &nb, &n, NULL) < 0)
+            return -1;
+        normals = nb.buf;
+    }
+    wenv_error err = {0};
+    wenv_status st;
+    size_t budget = (size_t)(self->memory_budget_mb * 1048576.0);
+    Py_BEGIN_ALLOW_THREADS
+    st = wenv_auto_choose(env, analysis, mat, self->target_error, budget, normals, n, &self->auto_choice, &err);
+    Py_END_ALLOW_THREADS
+    if (normals)
+        PyBuffer_Release(&nb);
+    if (st) {
+        wenv_py_raise(&err);
+        return -1;
+    }
+    self->is_auto = 1;
+    return 0;
+}
+
+static int Shader_init(ShaderObject *self, PyObject *args, PyObject *kwargs)
+{
+    static char *kwlist[] = {"env", "material", "quality", "method", "cache_dir", "progress", "target_error",
+                             "memory_budget_mb", "normals", NULL};
+    PyObject *env_obj, *mat_obj, *quality_obj = NULL, *cache_obj = Py_None, *progress_obj = Py_None;
+    PyObject *normals_obj = Py_None;
+    const char *method_name = NULL;
+    self->target_error = 0.01;
+    self->memory_budget_mb = 1024.0;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|OzOOddO:Shader", kwlist, &env_obj, &mat_obj, &quality_obj,
+                                     &method_name, &cache_obj, &progress_obj, &self->target_error,
+                                     &self->memory_budget_mb, &normals_obj))
+        return -1;
+    if (self->state) {
+        PyErr_SetString(PyExc_RuntimeError, "Shader is already initialised");
+        return -1;
+    }
+    if (!wenv_py_envmap(env_obj, "env") || !wenv_py_material(mat_obj, "material"))
+        return -1;
+    int is_auto = quality_obj && PyUnicode_Check(quality_obj) && PyUnicode_CompareWithASCIIString(quality_obj, "auto") == 0;
+    if (is_auto && method_name && strcmp(method_name, WENV_METHOD_SLICING.name) != 0) {
+        PyErr_Format(PyExc_ValueError, "quality='auto' chooses the method itself; leave method unset (got '%s')",
+                     method_name);
+        return -1;
+    }
+    if (normals_obj != Py_None && !is_auto) {
+        PyErr_SetString(PyExc_ValueError, "normals are only used by quality='auto' (to count the normal samples a "
+                                          "mesh needs)");
+        return -1;
+    }
+    const wenv_method *method = method_name ? parse_method(method_name) : &WENV_METHOD_ROTATION;
+    if (!method)
+        return -1;
+    if (is_auto) {
+        if (choose_auto(self, env_obj, mat_obj, normals_obj) < 0)
+            return -1;
+        method = self->auto_choice.method;
+    }
+    PyMem_Free(self->quality);
+    self->quality = PyMem_Malloc(method->quality_size);
+    if (!self->quality) {
+        PyErr_NoMemory();
+        return -1;
+    }
+    self->method = method;
+    if (is_auto)
+        memcpy(self->quality, wenv_auto_choice_quality(&self->auto_choice), method->quality_size);
+    else if (parse_quality(method, quality_obj, self->quality) < 0)
+        return -1;
+    if (progress_obj != Py_None && !PyCallable_Check(progress_obj)) {
+        PyErr_SetString(PyExc_TypeError, "progress must be callable or None");
+        return -1;
+    }
+    Py_XSETREF(self->progress, progress_obj == Py_None ? NULL : Py_NewRef(progress_obj));
+    wenv_method_setup setup = {0};
+    PyObject *cache_bytes;
+    if (parse_cache(cache_obj, &setup, &cache_bytes) < 0)
+        return -1;
+    wenv_py_progress_bridge bridge = {self->progress, 0};
+    wenv_progress progress = wenv_py_progress(&bridge);
+    setup.progress = &progress;
+    wenv_error err = {0};
+    wenv_status st;
+    void *state = NULL;
+    Py_BEGIN_ALLOW_THREADS
+    st = method->create(&state, self->quality, &setup, &err);
+    Py_END_ALLOW_THREADS
+    Py_XDECREF(cache_bytes);
+    if (st) {
+        if (!(bridge.raised && PyErr_Occurred()))
+            wenv_py_raise(&err);
+        return -1;
+    }
+    self->state = state;
+    return do_set(self, env_obj, 0) < 0 || do_set(self, mat_obj, 1) < 0 ? -1 : 0;
+}
+
+static void Shader_dealloc(ShaderObject *self)
+{
+    if (self->state)
+        self->method->destroy(self->state);
+    PyMem_Free(self->quality);
+    Py_XDECREF(self->environment);
+    Py_XDECREF(self->material);
+    Py_XDECREF(self->progress);
+    Py_TYPE(self)->tp_free((PyObject *)self);
+}
+
+static PyObject *shade_arrays(ShaderObject *self, const float *normals, const float *views, size_t n)
+{
+    Py_ssize_t shape[2] = {(Py_ssize_t)n, 3};
+    float *out;
+    PyObject *result = wenv_py_new_float_array(2, shape, &out);
+    if (!result || n == 0)
+        return result;
+    wenv_error err = {0};
+    wenv_status st;
+    Py_BEGIN_ALLOW_THREADS
+    st = self->method->shade(self->state, normals, views, n, out, &err);
+    Py_END_ALLOW_THREADS
+    if (st) {
+        Py_DECREF(result);
+        return wenv_py_raise(&err);
+    }
+    return result;
+}
+
+static PyObject *Shader_shade(ShaderObject *self, PyObject *args, PyObject *kwargs)
+{
+    static char *kwlist[] = {"normals", "view_dirs", NULL};
+    PyObject *nobj, *vobj;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO:shade", kwlist, &nobj, &vobj))
+        return NULL;
+    Py_buffer nb, vb;
+    size_t n, nvw;
+    int single_n, single_v;
+    if (wenv_py_get_vec3_array(nobj, "normals", 1, &nb, &n, &single_n) < 0)
+        return NULL;
+    if (wenv_py_get_vec3_array(vobj, "view_dirs", 1, &vb, &nvw, &single_v) < 0) {
+        PyBuffer_Release(&nb);
+        return NULL;
+    }
+    PyObject *result = NULL;
+    float *expanded = NULL;
+    const float *views = vb.buf;
+    if (single_v && !single_n) {
+        /* one view direction for all (orthographic camera) */
+        expanded = PyMem_Malloc((n ? n : 1) * 3 * sizeof(float));
+        if (!expanded) {
+            PyErr_NoMemory();
+            goto done;
+        }
+        for (size_t i = 0; i < n; i++)
+            memcpy(expanded + 3 * i, vb.buf, 3 * sizeof(float));
+        views = expanded;
+    } else if (nvw != n) {
+        PyErr_Format(PyExc_ValueError, "view_dirs has %zu rows but normals has %zu", nvw, n);
+        goto done;
+    }
+    if (claim(self) < 0)
+        goto done;
+    result = shade_arrays(self, nb.buf, views, n);
+    self->busy = 0;
+done:
+    PyMem_Free(expanded);
+    PyBuffer_Release(&nb);
+    PyBuffer_Release(&vb);
+    return result;
+}
+
+static PyObject *Shader_shade_mesh(ShaderObject *self, PyObject *args, PyObject *kwargs)
+{
+    static char *kwlist[] = {"positions", "normals", "eye", NULL};
+    PyObject *pobj, *nobj, *eobj;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO:shade_mesh", kwlist, &pobj, &nobj, &eobj))
+        return NULL;
+    double eye[3];
+    PyObject *seq = PySequence_Fast(eobj, "eye must be a sequence of 3 numbers");
+    if (!seq)
+        return NULL;
+    if (PySequence_Fast_GET_SIZE(seq) != 3) {
+        Py_DECREF(seq);
+        PyErr_SetString(PyExc_ValueError, "eye must have 3 components");
+        return NULL;
+    }
+    for (int c = 0; c < 3; c++)
+        if (wenv_py_get_finite(PySequence_Fast_GET_ITEM(seq, c), "eye", &eye[c]) < 0) {
+            Py_DECREF(seq);
+            return NULL;
+        }
+    Py_DECREF(seq);
+    Py_buffer pb, nb;
+    size_t np, nn;
+    if (wenv_py_get_vec3_array(pobj, "positions", 0, &pb, &np, NULL) < 0)
+        return NULL;
+    if (wenv_py_get_vec3_array(nobj, "normals", 1, &nb, &nn, NULL) < 0) {
+        PyBuffer_Release(&pb);
+        return NULL;
+    }
+    PyObject *result = NULL;
+    float *views = NULL;
+    if (np != nn) {
+        PyErr_Format(PyExc_ValueError, "positions has %zu rows but normals has %zu", np, nn);
+        goto done;
+    }
+    views = PyMem_Malloc((np ? np : 1) * 3 * sizeof(float));
+    if (!views) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    const float *p = pb.buf;
+    for (size_t i = 0; i < np; i++) {
+        double d[3] = {eye[0] - p[3 * i], eye[1] - p[3 * i + 1], eye[2] - p[3 * i + 2]};
+        if (d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < 1e-24) {
+            PyErr_Format(PyExc_ValueError, "eye coincides with positions[%zu]", i);
+            goto done;
+        }
+        for (int c = 0; c < 3; c++)
+            views[3 * i + c] = (float)d[c];
+    }
+    if (claim(self) < 0)
+        goto done;
+    result = shade_arrays(self, nb.buf, views, np);
+    self->busy = 0;
+done:
+    PyMem_Free(views);
+    PyBuffer_Release(&pb);
+    PyBuffer_Release(&nb);
+    return result;
+}
+
+static PyObject *Shader_set_environment(ShaderObject *self, PyObject *env)
+{
+    if (claim(self) < 0)
+        return NULL;
+    int r = do_set(self, env, 0);
+    self->busy = 0;
+    if (r < 0)
+        return NULL;
+    Py_RETURN_NONE;
+}
+
+static PyObject *Shader_set_material(ShaderObject *self, PyObject *mat)
+{
+    if (claim(self) < 0)
+        return NULL;
+    int r = do_set(self, mat, 1);
+    self->busy = 0;
+    if (r < 0)
+        return NULL;
+    Py_RETURN_NONE;
+}
+
+static PyObject *Shader_get_quality(ShaderObject *self, void *closure)
+{
+    (void)closure;
+    if (!self->quality)
+        Py_RETURN_NONE;
+    return quality_to_dict(self->method, self->quality);
+}
+
+static PyObject *Shader_get_method(ShaderObject *self, void *closure)
+{
+    (void)closure;
+    if (!self->method)
+        Py_RETURN_NONE;
+    return PyUnicode_FromString(self->method->name);
+}
+
+static PyObject *Shader_get_environment(ShaderObject *self, void *closure)
+{
+    (void)closure;
+    return Py_NewRef(self->environment ? self->environment : Py_None);
+}
+
+static PyObject *Shader_get_material(ShaderObject *self, void *closure)
+{
+    (void)closure;
+    return Py_NewRef(self->material ? self->material : Py_None);
+}
+
+static PyObject *Shader_get_stats(ShaderObject *self, void *closure)
+{
+    (void)closure;
+    if (!self->state)
+        Py_RETURN_NONE;
+    wenv_stat stats[WENV_STATS_MAX];
+    size_t count = self->method->stats(self->state, stats);
+    PyObject *d = PyDict_New();
+    for (size_t k = 0; d && k < count; k++) {
+        const wenv_stat *s = &stats[k];
+        PyObject *v = s->type == WENV_STAT_COUNT ? PyLong_FromSize_t(s->count)
+                      : s->type == WENV_STAT_REAL ? PyFloat_FromDouble(s->real)
+                                                  : PyUnicode_FromString(s->text);
+        if (!v || PyDict_SetItemString(d, s->key, v) < 0)
+            Py_CLEAR(d);
+        Py_XDECREF(v);
+    }
+    if (d && self->is_auto) {
+        const wenv_auto_choice *a = &self->auto_choice;
+        PyObject *used = a->used_normals == (size_t)-1 || a->sh_order ? Py_NewRef(Py_None) : PyLong_FromSize_t(a->used_normals);
+        PyObject *level = a->sh_order ? Py_NewRef(Py_None) : PyLong_FromSize_t(a->level);
+        PyObject *order = a->sh_order ? PyLong_FromSize_t(a->sh_order) : Py_NewRef(Py_None);
+        const wenv_auto_level_estimate *chosen = &a->levels[a->level];
+        PyObject *levels = a->sh_order ? Py_NewRef(Py_None) : PyList_New(WENV_AUTO_LEVELS);
+        for (size_t i = 0; levels && !a->sh_order && i < WENV_AUTO_LEVELS; i++) {
+            const wenv_auto_level_estimate *e = &a->levels[i];
+            PyObject *li = Py_BuildValue("{s:d,s:d,s:d,s:d,s:d}", "predicted_error", e->predicted_error, "lights_share",
+                                         e->lights_share, "contrast", e->contrast, "light_dominance", e->light_dominance,
+                                         "env_factor", e->env_factor);
+            if (!li)
+                Py_CLEAR(levels);
+            else
+                PyList_SET_ITEM(levels, (Py_ssize_t)i, li);
+        }
+        PyObject *info = !used || !level || !order || !levels ? NULL : Py_BuildValue("{s:O,s:O,s:s,s:d,s:d,s:d,s:d,s:d,s:d,s:O,s:d,s:d,s:O,s:O,s:d,s:d}", "level", level, "sh_order", order,
+                                       "method", a->method->name, "predicted_error", a->predicted_error, "target_error",
+                                       self->target_error, "contrast", chosen->contrast, "lights_share", chosen->lights_share,
+                                       "light_dominance", chosen->light_dominance, "env_factor", chosen->env_factor,
+                                       "met", a->met ? Py_True : Py_False, "memory_budget_mb", self->memory_budget_mb,
+                                       "level_mb", (double)a->level_bytes / 1048576.0, "used_normal_samples", used,
+                                       "levels", levels, "seconds", a->seconds,
+                                       "analysis_seconds", a->analysis_seconds);
+        Py_XDECREF(levels);
+        Py_XDECREF(used);
+        Py_XDECREF(level);
+        Py_XDECREF(order);
+        if (!info || PyDict_SetItemString(d, "auto", info) < 0)
+            Py_CLEAR(d);
+        Py_XDECREF(info);
+    }
+    return d;
+}
+
+static PyMethodDef Shader_methods[] = {
+    {"shade", (PyCFunction)(void (*)(void))Shader_shade, METH_VARARGS | METH_KEYWORDS,
+     "shade(normals, view_dirs)\n--\n\nLinear RGB radiance (float32, n x 3) for world-space normals and "
+     "view directions (surface towards eye), float32 (n, 3); view_dirs may be one (3,) vector for all."},
+    {"shade_mesh", (PyCFunction)(void (*)(void))Shader_shade_mesh, METH_VARARGS | METH_KEYWORDS,
+     "shade_mesh(positions, normals, eye)\n--\n\nShade vertices seen from a perspective eye position."},
+    {"set_environment", (PyCFunction)Shader_set_environment, METH_O,
+     "set_environment(env)\n--\n\nNew lighting; rotation matrices are kept."},
+    {"set_material", (PyCFunction)Shader_set_material, METH_O,
+     "set_material(material)\n--\n\nNew BRDF; rotation matrices and lighting slices are kept."},
+    {NULL, NULL, 0, NULL},
+};
+
+static PyGetSetDef Shader_getset[] = {
+    {"quality", (getter)Shader_get_quality, NULL, "resolutions in use (dict)", NULL},
+    {"method", (getter)Shader_get_method, NULL, "'rotation', 'slicing', 'split_sum' or 'sh'", NULL},
+    {"environment", (getter)Shader_get_environment, NULL, "the current wenv.Environment", NULL},
+    {"material", (getter)Shader_get_material, NULL, "the current material", NULL},
+    {"stats", (getter)Shader_get_stats, NULL, "sizes, cache use and timings (dict)", NULL},
+    {NULL, NULL, NULL, NULL, NULL},
+};
+
+static PyTypeObject ShaderType = {
+    PyVarObject_HEAD_INIT(NULL, 0).tp_name = "wenv.Shader",
+    .tp_basicsize = sizeof(ShaderObject),
+    .tp_flags = Py_TPFLAGS_DEFAULT,
+    .tp_doc = "Shader(env, material, quality='default', method='rotation', cache_dir=None, progress=None, "
+              "target_error=0.01, memory_budget_mb=1024, normals=None)\n--\n\n"
+              "Environment shading by wavelet rotation.  quality: 'draft', 'default', 'high', 'auto' or a dict of "
+              "global, local, normals, views, coefficients, light_coefficients, matrix_epsilon, lights, light_threshold, grazing.  method: "
+              "'rotation' (precomputed sparse matrices, cached on disk in cache_dir; None: WENV_CACHE_DIR or "
+              "~/.cache/wenv; False: no cache) or 'slicing' (no matrices).  progress(fraction) is called "
+              "during precomputation; returning True cancels it (wenv.CancelledError).\n\n"
+              "Peer methods for comparison: 'split_sum' (prefiltered environment maps and an environment-BRDF "
+              "table, Karis 2013; quality keys prefilter, samples, lut) and 'sh' (spherical harmonics, Kautz, "
+              "Sloan and Snyder 2002; quality keys order, views); presets in wenv.PEER_QUALITY_PRESETS.  Their "
+              "precomputation runs in set_environment and set_material, which then also report to progress.\n\n"
+              "quality='auto' picks the cheapest setting of wenv.AUTO_LADDER (method 'slicing'; its last level is "
+              "'high') whose error is predicted, from the narrowest lobe's roughness, the share of the flux the "
+              "level's exact lights take, the bright features they leave and how far their reflections dominate, to be at "
+              "most target_error (relative RMSE) within memory_budget_mb, counting lighting slices only for the "
+              "normal samples the mesh's normals (if given) fall near.  A material without lobes gets method "
+              "'sh' at the lowest order of wenv.AUTO_SH_ORDERS whose irradiance error, known from the lighting's "
+              "SH power spectrum, meets the target.  stats['auto'] tells what it chose and why.  The choice is "
+              "made once, for the environment and material given here: make a new Shader to choose again.  What "
+              "it reads of the environment alone is made on first need and kept with the wenv.Environment, so "
+              "later choices on it cost a fraction of a millisecond, plus about 2 ms for 126k normals "
+              "(stats['auto']['analysis_seconds']: what this choice spent analysing).",
+    .tp_new = PyType_GenericNew,
+    .tp_init = (initproc)Shader_init,
+    .tp_dealloc = (destructor)Shader_dealloc,
+    .tp_methods = Shader_methods,
+    .tp_getset = Shader_getset,
+};
+
+
+/* wenv.METHODS, wenv.QUALITY_PRESETS (the wavelet methods'), wenv.PEER_QUALITY_PRESETS (the others',
+ * by method), wenv.AUTO_LADDER and wenv.AUTO_SH_ORDERS, all read from the core's tables. */
+static PyObject *presets_of(const wenv_method *method)
+{
+    PyObject *d = PyDict_New();
+    for (size_t p = 0; d && p < WENV_PRESET_COUNT; p++) {
+        PyObject *q = quality_to_dict(method, method->presets[p]);
+        if (!q || PyDict_SetItemString(d, WENV_PRESET_NAMES[p], q) < 0)
+            Py_CLEAR(d);
+        Py_XDECREF(q);
+    }
+    return d;
+}
+
+static int add_object(PyObject *module, const char *name, PyObject *value)
+{
+    if (!value || PyModule_AddObject(module, name, value) < 0) {
+        Py_XDECREF(value);
+        return -1;
+    }
+    return 0;
+}
+
+int wenv_register_shader(PyObject *module)
+{
+    if (PyType_Ready(&ShaderType) < 0)
+        return -1;
+    Py_INCREF(&ShaderType);
+    if (add_object(module, "Shader", (PyObject *)&ShaderType) < 0)
+        return -1;
+    size_t count = wenv_method_count();
+    PyObject *names = PyTuple_New((Py_ssize_t)count), *peers = PyDict_New();
+    for (size_t i = 0; names && i < count; i++) {
+        PyObject *name = PyUnicode_FromString(wenv_method_at(i)->name);
+        if (!name)
+            Py_CLEAR(names);
+        else
+            PyTuple_SET_ITEM(names, (Py_ssize_t)i, name);
+    }
+    /* the wavelet methods share QUALITY_PRESETS; each other method's are under its name */
+    for (size_t i = 0; peers && i < count; i++) {
+        const wenv_method *m = wenv_method_at(i);
+        if (m->presets[0] == WENV_METHOD_ROTATION.presets[0])
+            continue;
+        PyObject *p = presets_of(m);
+        if (!p || PyDict_SetItemString(peers, m->name, p) < 0)
+            Py_CLEAR(peers);
+        Py_XDECREF(p);
+    }
+    PyObject *ladder = PyList_New(WENV_AUTO_LEVELS);
+    for (size_t i = 0; ladder && i < WENV_AUTO_LEVELS; i++) {
+        PyObject *d = quality_to_dict(&WENV_METHOD_SLICING, &WENV_AUTO_LADDER[i]);
+        if (!d)
+            Py_CLEAR(ladder);
+        else
+            PyList_SET_ITEM(ladder, (Py_ssize_t)i, d);
+    }
+    PyObject *orders = PyTuple_New(WENV_AUTO_SH_ORDER_COUNT);
+    for (size_t i = 0; orders && i < WENV_AUTO_SH_ORDER_COUNT; i++) {
+        PyObject *o = PyLong_FromSize_t(WENV_AUTO_SH_ORDERS[i]);
+        if (!o)
+            Py_CLEAR(orders);
+        else
+            PyTuple_SET_ITEM(orders, (Py_ssize_t)i, o);
+    }
+    if (add_object(module, "METHODS", names) < 0 || add_object(module, "QUALITY_PRESETS", presets_of(&WENV_METHOD_ROTATION)) < 0 ||
+        add_object(module, "PEER_QUALITY_PRESETS", peers) < 0 || add_object(module, "AUTO_LADDER", ladder) < 0 ||
+        add_object(module, "AUTO_SH_ORDERS", orders) < 0)
+        return -1;
+    return 0;
+}

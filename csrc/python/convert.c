@@ -1,0 +1,212 @@
+/* Argument checking and conversions shared by the binding files. */
+#include "python/convert.h"
+
+#include <math.h>
+
+PyObject *wenv_py_raise(const wenv_error *err)
+{
+    if (PyErr_Occurred())
+        return NULL;
+    PyObject *type = PyExc_RuntimeError;
+    switch (err->status) {
+    case WENV_ERR_VALUE: type = PyExc_ValueError; break;
+    case WENV_ERR_TYPE: type = PyExc_TypeError; break;
+    case WENV_ERR_IO: type = PyExc_OSError; break;
+    case WENV_ERR_NOMEM: type = PyExc_MemoryError; break;
+    case WENV_ERR_CANCELLED: type = wenv_py_cancelled_error(); break;
+    case WENV_OK: break;
+    }
+    PyErr_SetString(type, err->message[0] ? err->message : "wenv: unknown error");
+    return NULL;
+}
+
+int wenv_py_get_vec3_array(PyObject *obj, const char *name, int require_nonzero, Py_buffer *view,
+                           size_t *n, int *single)
+{
+    if (PyObject_GetBuffer(obj, view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0) {
+        PyErr_Clear();
+        PyErr_Format(PyExc_TypeError, "%s must be a C-contiguous float32 array of shape (n, 3), got %.100s",
+                     name, Py_TYPE(obj)->tp_name);
+        return -1;
+    }
+    const char *fmt = view->format ? view->format : "B";
+    if ((fmt[0] == '<' || fmt[0] == '=' || fmt[0] == '@') && fmt[1])
+        fmt++;
+    if (view->itemsize != 4 || fmt[0] != 'f' || fmt[1] != '\0') {
+        PyErr_Format(PyExc_TypeError, "%s must have dtype float32, got format '%s'", name,
+                     view->format ? view->format : "B");
+        PyBuffer_Release(view);
+        return -1;
+    }
+    int is_single = view->ndim == 1 && view->shape[0] == 3;
+    if (!is_single && !(view->ndim == 2 && view->shape[1] == 3)) {
+        PyErr_Format(PyExc_ValueError, "%s must have shape (n, 3)", name);
+        PyBuffer_Release(view);
+        return -1;
+    }
+    size_t count = is_single ? 1 : (size_t)view->shape[0];
+    const float *v = view->buf;
+    for (size_t i = 0; i < count; i++) {
+        float x = v[3 * i], y = v[3 * i + 1], z = v[3 * i + 2];
+        if (!isfinite(x) || !isfinite(y) || !isfinite(z)) {
+            PyErr_Format(PyExc_ValueError, "%s[%zu] is not finite", name, i);
+            PyBuffer_Release(view);
+            return -1;
+        }
+        if (require_nonzero && x * x + y * y + z * z < 1e-24f) {
+            PyErr_Format(PyExc_ValueError, "%s[%zu] has zero length", name, i);
+            PyBuffer_Release(view);
+            return -1;
+        }
+    }
+    *n = count;
+    if (single)
+        *single = is_single;
+    return 0;
+}
+
+int wenv_py_get_size(PyObject *obj, const char *name, size_t *out)
+{
+    if (!PyLong_Check(obj) || PyBool_Check(obj)) {
+        PyErr_Format(PyExc_TypeError, "%s must be an int, got %.100s", name, Py_TYPE(obj)->tp_name);
+        return -1;
+    }
+    long long x = PyLong_AsLongLong(obj);
+    if (x == -1 && PyErr_Occurred()) {
+        PyErr_Clear();
+        PyErr_Format(PyExc_ValueError, "%s is out of range", name);
+        return -1;
+    }
+    if (x < 0) {
+        PyErr_Format(PyExc_ValueError, "%s must not be negative, got %lld", name, x);
+        return -1;
+    }
+    *out = (size_t)x;
+    return 0;
+}
+
+int wenv_py_get_finite(PyObject *obj, const char *name, double *out)
+{
+    if (!PyNumber_Check(obj) || PyBool_Check(obj)) {
+        PyErr_Format(PyExc_TypeError, "%s must be a number, got %.100s", name, Py_TYPE(obj)->tp_name);
+        return -1;
+    }
+    double v = PyFloat_AsDouble(obj);
+    if (v == -1.0 && PyErr_Occurred())
+        return -1;
+    if (!isfinite(v)) {
+        PyErr_Format(PyExc_ValueError, "%s must be finite", name);
+        return -1;
+    }
+    *out = v;
+    return 0;
+}
+
+int wenv_py_get_rgb(PyObject *obj, const char *name, double rgb[3])
+{
+    if (PyNumber_Check(obj) && !PySequence_Check(obj)) {
+        double g;
+        if (wenv_py_get_finite(obj, name, &g) < 0)
+            return -1;
+        rgb[0] = rgb[1] = rgb[2] = g;
+    } else {
+        PyObject *seq = PySequence_Fast(obj, "");
+        if (!seq) {
+            PyErr_Clear();
+            PyErr_Format(PyExc_TypeError, "%s must be a number or an (r, g, b) sequence", name);
+            return -1;
+        }
+        if (PySequence_Fast_GET_SIZE(seq) != 3) {
+            Py_DECREF(seq);
+            PyErr_Format(PyExc_ValueError, "%s must have 3 components (r, g, b)", name);
+            return -1;
+        }
+        for (int c = 0; c < 3; c++) {
+            if (wenv_py_get_finite(PySequence_Fast_GET_ITEM(seq, c), name, &rgb[c]) < 0) {
+                Py_DECREF(seq);
+                return -1;
+            }
+        }
+        Py_DECREF(seq);
+    }
+    for (int c = 0; c < 3; c++) {
+        if (rgb[c] < 0.0) {
+            PyErr_Format(PyExc_ValueError, "%s must be >= 0 in every channel", name);
+            return -1;
+        }
+    }
+    return 0;
+}
+
+PyObject *wenv_py_new_array(int ndim, const Py_ssize_t *shape, const char *dtype, void **data)
+{
+    PyObject *numpy = PyImport_ImportModule("numpy");
+    if (!numpy)
+        return NULL;
+    PyObject *shape_tuple = PyTuple_New(ndim);
+    if (!shape_tuple) {
+        Py_DECREF(numpy);
+        return NULL;
+    }
+    for (int i = 0; i < ndim; i++) {
+        PyObject *dim = PyLong_FromSsize_t(shape[i]);
+        if (!dim) {
+            Py_DECREF(shape_tuple);
+            Py_DECREF(numpy);
+            return NULL;
+        }
+        PyTuple_SET_ITEM(shape_tuple, i, dim);
+    }
+    PyObject *array = PyObject_CallMethod(numpy, "empty", "Os", shape_tuple, dtype);
+    Py_DECREF(shape_tuple);
+    Py_DECREF(numpy);
+    if (!array)
+        return NULL;
+    Py_buffer view;
+    if (PyObject_GetBuffer(array, &view, PyBUF_C_CONTIGUOUS | PyBUF_WRITABLE) < 0) {
+        Py_DECREF(array);
+        return NULL;
+    }
+    *data = view.buf; /* numpy keeps the storage alive as long as the array lives */
+    PyBuffer_Release(&view);
+    return array;
+}
+
+PyObject *wenv_py_new_float_array(int ndim, const Py_ssize_t *shape, float **data)
+{
+    void *d = NULL;
+    PyObject *array = wenv_py_new_array(ndim, shape, "float32", &d);
+    *data = d;
+    return array;
+}
+
+static int progress_trampoline(void *ctx, double fraction)
+{
+    wenv_py_progress_bridge *bridge = ctx;
+    if (!bridge->callback || bridge->callback == Py_None)
+        return 0;
+    if (bridge->raised)
+        return 1;
+    PyGILState_STATE gil = PyGILState_Ensure();
+    int stop = 0;
+    PyObject *result = PyObject_CallFunction(bridge->callback, "d", fraction);
+    if (!result) {
+        bridge->raised = 1;
+        stop = 1;
+    } else {
+        stop = PyObject_IsTrue(result) == 1;
+        Py_DECREF(result);
+    }
+    PyGILState_Release(gil);
+    return stop;
+}
+
+wenv_progress wenv_py_progress(wenv_py_progress_bridge *bridge)
+{
+    wenv_progress p = {NULL, NULL};
+    if (bridge->callback && bridge->callback != Py_None) {
+        p.report = progress_trampoline;
+        p.ctx = bridge;
+    }
+    return p;
+}

@@ -1,0 +1,49 @@
+/* Argument checks and conversions shared by the binding files (bind_*.c): errors to exceptions,
+ * arrays, numbers, progress callbacks.  Numerical code never includes this. */
+#ifndef WENV_CONVERT_H
+#define WENV_CONVERT_H
+
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+
+#include "base/error.h"
+
+/* Raises the Python exception that matches err->status (ValueError, TypeError, OSError,
+ * MemoryError, wenv.CancelledError).  Always returns NULL for convenient `return`. */
+PyObject *wenv_py_raise(const wenv_error *err);
+
+/* wenv.CancelledError (set up by module.c). */
+PyObject *wenv_py_cancelled_error(void);
+
+/* Gets a read-only float32, C-contiguous buffer of shape (n, 3) from `obj`; `name` is used in the
+ * exception.  Also accepts a single 3-vector (shape (3,)), reported as n = 1 with *single = 1.
+ * Rejects non-finite entries and (if require_nonzero) zero-length rows.  On success the caller
+ * must PyBuffer_Release(view). */
+int wenv_py_get_vec3_array(PyObject *obj, const char *name, int require_nonzero, Py_buffer *view,
+                           size_t *n, int *single);
+
+/* Reads an RGB triple from a number (grey) or a length-3 sequence of finite numbers >= 0. */
+int wenv_py_get_rgb(PyObject *obj, const char *name, double rgb[3]);
+
+/* Reads a non-negative int into a size_t; TypeError / ValueError naming `name` otherwise. */
+int wenv_py_get_size(PyObject *obj, const char *name, size_t *out);
+
+/* Reads a finite float; ValueError naming `name` otherwise. */
+int wenv_py_get_finite(PyObject *obj, const char *name, double *out);
+
+/* New numpy array of the given shape and dtype ("float32", "float64"); *data points at its storage. */
+PyObject *wenv_py_new_array(int ndim, const Py_ssize_t *shape, const char *dtype, void **data);
+
+/* New numpy float32 array of the given shape (numpy.empty); *data points at its storage. */
+PyObject *wenv_py_new_float_array(int ndim, const Py_ssize_t *shape, float **data);
+
+/* Bridges a Python progress callback to wenv_progress.  The callback is called as
+ * callback(fraction) with the GIL held; a true return value (or an exception) stops the work. */
+typedef struct {
+    PyObject *callback; /* borrowed; may be NULL or None */
+    int raised;         /* set when the callback raised: the exception is pending */
+} wenv_py_progress_bridge;
+
+wenv_progress wenv_py_progress(wenv_py_progress_bridge *bridge);
+
+#endif

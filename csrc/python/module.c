@@ -1,0 +1,71 @@
+/* The `wenv` extension module: module object, thread control and registration of the bindings. */
+#include "python/module.h"
+
+#include <omp.h>
+
+
+static PyObject *cancelled_error_type; /* set once at import; read-only afterwards */
+
+PyObject *wenv_py_cancelled_error(void) { return cancelled_error_type ? cancelled_error_type : PyExc_RuntimeError; }
+
+static PyObject *set_num_threads(PyObject *self, PyObject *arg)
+{
+    (void)self;
+    long n = PyLong_AsLong(arg);
+    if (n == -1 && PyErr_Occurred())
+        return NULL;
+    if (n < 1 || n > 4096) {
+        PyErr_SetString(PyExc_ValueError, "n must be between 1 and 4096 threads");
+        return NULL;
+    }
+    omp_set_num_threads((int)n);
+    Py_RETURN_NONE;
+}
+
+static PyObject *get_num_threads(PyObject *self, PyObject *unused)
+{
+    (void)self;
+    (void)unused;
+    return PyLong_FromLong(omp_get_max_threads());
+}
+
+static PyMethodDef module_methods[] = {
+    {"set_num_threads", set_num_threads, METH_O,
+     "set_num_threads(n)\n--\n\nUse n OpenMP threads for shading and precomputation "
+     "(the default comes from OMP_NUM_THREADS or the number of cores)."},
+    {"get_num_threads", get_num_threads, METH_NOARGS,
+     "get_num_threads()\n--\n\nNumber of OpenMP threads wenv uses."},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef wenv_module = {
+    PyModuleDef_HEAD_INIT, "wenv",
+    "Wavelet-rotation environment shading with view-dependent BRDFs, and a virtual glossmeter.",
+    -1, module_methods, NULL, NULL, NULL, NULL,
+};
+
+PyMODINIT_FUNC PyInit_wenv(void)
+{
+    PyObject *m = PyModule_Create(&wenv_module);
+    if (!m)
+        return NULL;
+    if (!cancelled_error_type) {
+        cancelled_error_type = PyErr_NewExceptionWithDoc(
+            "wenv.CancelledError", "Long work was stopped by its progress callback.", PyExc_Exception, NULL);
+        if (!cancelled_error_type)
+            goto fail;
+    }
+    Py_INCREF(cancelled_error_type);
+    if (PyModule_AddObject(m, "CancelledError", cancelled_error_type) < 0) {
+        Py_DECREF(cancelled_error_type);
+        goto fail;
+    }
+    if (PyModule_AddStringConstant(m, "__version__", "0.1.0") < 0 || wenv_register_envmap(m) < 0 ||
+        wenv_register_material(m) < 0 || wenv_register_shader(m) < 0 || wenv_register_reference(m) < 0 ||
+        wenv_register_glossmeter(m) < 0 || wenv_register_internals(m) < 0)
+        goto fail;
+    return m;
+fail:
+    Py_DECREF(m);
+    return NULL;
+}

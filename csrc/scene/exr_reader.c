@@ -1,0 +1,384 @@
+/* OpenEXR files through OpenEXRCore (and OpenEXR's C++ library, loaded at run time, for the
+ * compressions OpenEXRCore lacks).  Returns linear RGB pixels, row 0 the top. */
+#define _POSIX_C_SOURCE 200809L /* pread */
+
+#include "scene/image_readers.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <dlfcn.h>
+#include <omp.h>
+#include <unistd.h>
+
+#include <ImfCRgbaFile.h>
+#include <OpenEXRConfig.h>
+#include <openexr.h>
+
+typedef struct {
+    int fd;
+    int64_t size;
+    char message[200]; /* first detailed message from OpenEXRCore */
+} exr_stream;
+
+static int64_t exr_read_cb(exr_const_context_t ctxt, void *user, void *buffer, uint64_t sz, uint64_t offset,
+                           exr_stream_error_func_ptr_t error_cb)
+{
+    exr_stream *s = user;
+    uint8_t *dst = buffer;
+    uint64_t done = 0;
+    if (offset > (uint64_t)s->size)
+        return 0; /* past the end: OpenEXRCore reports the short read */
+    while (done < sz) {
+        size_t want = sz - done > ((size_t)1 << 30) ? ((size_t)1 << 30) : (size_t)(sz - done);
+        ssize_t got = pread(s->fd, dst + done, want, (off_t)(offset + done));
+        if (got < 0) {
+            if (errno == EINTR)
+                continue;
+            if (error_cb)
+                error_cb(ctxt, EXR_ERR_READ_IO, "read error at offset %llu", (unsigned long long)(offset + done));
+            return -1;
+        }
+        if (got == 0)
+            break;
+        done += (uint64_t)got;
+    }
+    return (int64_t)done;
+}
+
+static int64_t exr_size_cb(exr_const_context_t ctxt, void *user)
+{
+    (void)ctxt;
+    return ((exr_stream *)user)->size;
+}
+
+static void exr_error_cb(exr_const_context_t ctxt, exr_result_t code, const char *msg)
+{
+    void *user = NULL;
+    /* silence OpenEXRCore's default printing to stderr; keep the first message for the exception */
+    if (ctxt && exr_get_user_data(ctxt, &user) == EXR_ERR_SUCCESS && user) {
+        exr_stream *s = user;
+        if (!s->message[0])
+            snprintf(s->message, sizeof s->message, "%s", msg ? msg : exr_get_error_code_as_string(code));
+    }
+}
+
+static wenv_status exr_fail(wenv_error *err, const char *path, const exr_stream *s, exr_result_t rv)
+{
+    return wenv_error_set(err, WENV_ERR_IO, "cannot read OpenEXR file '%s': %s", path,
+                          s->message[0] ? s->message : exr_get_error_code_as_string(rv));
+}
+
+/* Colour slot of an EXR channel: 0..2 for R, G, B; 3 for Y (grey); -1 otherwise. */
+static int exr_channel_slot(const char *name)
+{
+    if (!name)
+        return -1;
+    if (strcmp(name, "R") == 0)
+        return 0;
+    if (strcmp(name, "G") == 0)
+        return 1;
+    if (strcmp(name, "B") == 0)
+        return 2;
+    if (strcmp(name, "Y") == 0)
+        return 3;
+    return -1;
+}
+
+/* Decodes one chunk whose top-left pixel is (x_off, y_off) in the data window into rgb. */
+static exr_result_t exr_decode_chunk(exr_context_t ctx, const exr_chunk_info_t *cinfo, exr_decode_pipeline_t *dec,
+                                     int *initialised, float *rgb, size_t width, size_t height, int64_t x_off,
+                                     int64_t y_off, int grey)
+{
+    if (x_off < 0 || y_off < 0 || cinfo->width <= 0 || cinfo->height <= 0 ||
+        (uint64_t)x_off + (uint64_t)cinfo->width > width || (uint64_t)y_off + (uint64_t)cinfo->height > height)
+        return EXR_ERR_BAD_CHUNK_LEADER; /* a chunk outside the data window: corrupt file */
+    exr_result_t rv = *initialised ? exr_decoding_update(ctx, 0, cinfo, dec)
+                                   : exr_decoding_initialize(ctx, 0, cinfo, dec);
+    if (rv != EXR_ERR_SUCCESS)
+        return rv;
+    *initialised = 1;
+    for (int16_t c = 0; c < dec->channel_count; c++) {
+        exr_coding_channel_info_t *ch = &dec->channels[c];
+        int slot = exr_channel_slot(ch->channel_name);
+        if (grey ? slot != 3 : (slot < 0 || slot > 2)) {
+            ch->decode_to_ptr = NULL; /* not wanted: the pipeline skips it */
+            continue;
+        }
+        ch->decode_to_ptr = (uint8_t *)(rgb + ((size_t)y_off * width + (size_t)x_off) * 3 + (grey ? 0 : slot));
+        ch->user_bytes_per_element = 4;
+        ch->user_data_type = EXR_PIXEL_FLOAT;
+        ch->user_pixel_stride = 3 * (int32_t)sizeof(float);
+        ch->user_line_stride = (int32_t)(3 * sizeof(float) * width);
+    }
+    rv = exr_decoding_choose_default_routines(ctx, 0, dec);
+    if (rv != EXR_ERR_SUCCESS)
+        return rv;
+    return exr_decoding_run(ctx, 0, dec);
+}
+
+/* OpenEXRCore 3.1 cannot decompress DWAA/DWAB ("not yet implemented in C"), and Blender's bundled
+ * HDRIs are DWAB.  For those files only, wenv falls back to OpenEXR's own C interface to its C++
+ * library (ImfCRgbaFile.h, shipped in the same Debian package as OpenEXRCore).  It is loaded with
+ * dlopen on demand so the build keeps linking OpenEXRCore alone; the handle is never closed, as a
+ * linked library would never be unloaded either. */
+typedef struct {
+    ImfInputFile *(*open)(const char name[]);
+    int (*close)(ImfInputFile *in);
+    int (*set_frame_buffer)(ImfInputFile *in, ImfRgba *base, size_t x_stride, size_t y_stride);
+    int (*read_pixels)(ImfInputFile *in, int scan_line1, int scan_line2);
+    const ImfHeader *(*header)(const ImfInputFile *in);
+    int (*channels)(const ImfInputFile *in);
+    void (*data_window)(const ImfHeader *hdr, int *x_min, int *y_min, int *x_max, int *y_max);
+    void (*half_to_float)(int n, const ImfHalf h[], float f[]);
+    const char *(*error_message)(void);
+} imf_api;
+
+#define STR_(x) #x
+#define STR(x) STR_(x)
+
+static int imf_api_load(imf_api *api, char *why, size_t why_size)
+{
+    /* the soname of the C++ library that ships with the OpenEXRCore we were built against */
+    char soname[64];
+    const char *lib_version = OPENEXR_LIB_VERSION_STRING;
+    size_t major_len = strcspn(lib_version, ".");
+    snprintf(soname, sizeof soname, "libOpenEXR-%d_%d.so.%.*s", OPENEXR_VERSION_MAJOR, OPENEXR_VERSION_MINOR,
+             (int)major_len, lib_version);
+    const char *candidates[] = {soname, "libOpenEXR-" STR(OPENEXR_VERSION_MAJOR) "_" STR(OPENEXR_VERSION_MINOR) ".so",
+                                "libOpenEXR.so"};
+    void *lib = NULL;
+    for (size_t i = 0; i < sizeof candidates / sizeof *candidates && !lib; i++)
+        lib = dlopen(candidates[i], RTLD_NOW | RTLD_LOCAL);
+    if (!lib) {
+        const char *e = dlerror();
+        snprintf(why, why_size, "%s", e ? e : soname);
+        return -1;
+    }
+    struct {
+        void **slot;
+        const char *name;
+    } symbols[] = {
+        {(void **)&api->open, "ImfOpenInputFile"},
+        {(void **)&api->close, "ImfCloseInputFile"},
+        {(void **)&api->set_frame_buffer, "ImfInputSetFrameBuffer"},
+        {(void **)&api->read_pixels, "ImfInputReadPixels"},
+        {(void **)&api->header, "ImfInputHeader"},
+        {(void **)&api->channels, "ImfInputChannels"},
+        {(void **)&api->data_window, "ImfHeaderDataWindow"},
+        {(void **)&api->half_to_float, "ImfHalfToFloatArray"},
+        {(void **)&api->error_message, "ImfErrorMessage"},
+    };
+    for (size_t i = 0; i < sizeof symbols / sizeof *symbols; i++) {
+        /* POSIX's way to store a function address obtained from dlsym */
+        *symbols[i].slot = dlsym(lib, symbols[i].name);
+        if (!*symbols[i].slot) {
+            snprintf(why, why_size, "symbol %s missing from %s", symbols[i].name, soname);
+            return -1;
+        }
+    }
+    return 0;
+}
+
+static wenv_status load_exr_rgba(const char *path, float **out, size_t *out_h, size_t *out_w, wenv_error *err)
+{
+    imf_api api;
+    char why[256];
+    if (imf_api_load(&api, why, sizeof why) < 0)
+        return wenv_error_set(err, WENV_ERR_IO,
+                              "cannot read OpenEXR file '%s': its compression (DWAA/DWAB) needs OpenEXR's library "
+                              "libOpenEXR, which could not be loaded (%s)",
+                              path, why);
+    ImfInputFile *in = api.open(path);
+    if (!in) {
+        const char *m = api.error_message();
+        return wenv_error_set(err, WENV_ERR_IO, "cannot read OpenEXR file '%s': %s", path, m ? m : "unknown error");
+    }
+    float *rgb = NULL, *row_f = NULL;
+    ImfRgba *buf = NULL;
+    int x_min, y_min, x_max, y_max;
+    api.data_window(api.header(in), &x_min, &y_min, &x_max, &y_max);
+    int64_t w64 = (int64_t)x_max - x_min + 1, h64 = (int64_t)y_max - y_min + 1;
+    if (!(api.channels(in) & (IMF_WRITE_RGB | IMF_WRITE_Y))) {
+        wenv_error_set(err, WENV_ERR_IO, "cannot read OpenEXR file '%s': it has no R, G, B (or Y) channels", path);
+        goto done;
+    }
+    if (w64 <= 0 || h64 <= 0 || (uint64_t)w64 > WENV_IMAGE_MAX_SIDE || (uint64_t)h64 > WENV_IMAGE_MAX_SIDE ||
+        (uint64_t)w64 * (uint64_t)h64 > WENV_IMAGE_MAX_PIXELS) {
+        wenv_error_set(err, WENV_ERR_IO, "cannot read OpenEXR file '%s': unusable data window %lld x %lld", path,
+                       (long long)w64, (long long)h64);
+        goto done;
+    }
+    size_t width = (size_t)w64, height = (size_t)h64;
+    buf = malloc(width * height * sizeof *buf);
+    rgb = malloc(width * height * 3 * sizeof *rgb);
+    row_f = malloc(width * 4 * sizeof *row_f);
+    if (!buf || !rgb || !row_f) {
+        wenv_error_set(err, WENV_ERR_NOMEM, "out of memory reading '%s' (%zu x %zu)", path, width, height);
+        goto done;
+    }
+    /* the RGBA interface addresses pixels by absolute (x, y): shift the base by the window's corner */
+    uintptr_t base = (uintptr_t)buf - ((uintptr_t)(intptr_t)x_min + (uintptr_t)(intptr_t)y_min * width) * sizeof *buf;
+    if (!api.set_frame_buffer(in, (ImfRgba *)base, 1, width) || !api.read_pixels(in, y_min, y_max)) {
+        const char *m = api.error_message();
+        wenv_error_set(err, WENV_ERR_IO, "cannot read OpenEXR file '%s': %s", path, m ? m : "unknown error");
+        goto done;
+    }
+    for (size_t r = 0; r < height; r++) {
+        api.half_to_float((int)(4 * width), &buf[r * width].r, row_f);
+        for (size_t x = 0; x < width; x++)
+            for (size_t c = 0; c < 3; c++)
+                rgb[(r * width + x) * 3 + c] = row_f[4 * x + c];
+    }
+    *out = rgb;
+    *out_h = height;
+    *out_w = width;
+    rgb = NULL;
+done:
+    api.close(in);
+    free(buf);
+    free(rgb);
+    free(row_f);
+    return err->status;
+}
+
+wenv_status wenv_read_exr(int fd, int64_t size, const char *path, float **out, size_t *out_h, size_t *out_w,
+                            wenv_error *err)
+{
+    exr_stream stream = {fd, size, ""};
+    exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
+    init.error_handler_fn = exr_error_cb;
+    init.user_data = &stream;
+    init.read_fn = exr_read_cb;
+    init.size_fn = exr_size_cb;
+    exr_context_t ctx = NULL;
+    exr_result_t rv = exr_start_read(&ctx, path, &init);
+    if (rv != EXR_ERR_SUCCESS) {
+        exr_fail(err, path, &stream, rv);
+        exr_finish(&ctx);
+        return err->status;
+    }
+    float *rgb = NULL;
+    exr_decode_pipeline_t dec = EXR_DECODE_PIPELINE_INITIALIZER;
+    int initialised = 0, use_rgba = 0;
+    exr_storage_t storage;
+    exr_attr_box2i_t dw;
+    const exr_attr_chlist_t *chl = NULL;
+    if ((rv = exr_get_storage(ctx, 0, &storage)) != EXR_ERR_SUCCESS ||
+        (rv = exr_get_data_window(ctx, 0, &dw)) != EXR_ERR_SUCCESS ||
+        (rv = exr_get_channels(ctx, 0, &chl)) != EXR_ERR_SUCCESS || !chl) {
+        exr_fail(err, path, &stream, rv);
+        goto done;
+    }
+    if (storage != EXR_STORAGE_SCANLINE && storage != EXR_STORAGE_TILED) {
+        wenv_error_set(err, WENV_ERR_IO, "cannot read OpenEXR file '%s': deep images are not supported", path);
+        goto done;
+    }
+    int64_t w64 = (int64_t)dw.max.x - dw.min.x + 1, h64 = (int64_t)dw.max.y - dw.min.y + 1;
+    if (w64 <= 0 || h64 <= 0 || (uint64_t)w64 > WENV_IMAGE_MAX_SIDE || (uint64_t)h64 > WENV_IMAGE_MAX_SIDE ||
+        (uint64_t)w64 * (uint64_t)h64 > WENV_IMAGE_MAX_PIXELS) {
+        wenv_error_set(err, WENV_ERR_IO, "cannot read OpenEXR file '%s': unusable data window %lld x %lld", path,
+                       (long long)w64, (long long)h64);
+        goto done;
+    }
+    size_t width = (size_t)w64, height = (size_t)h64;
+    int have[4] = {0, 0, 0, 0};
+    for (int i = 0; i < chl->num_channels; i++) {
+        const exr_attr_chlist_entry_t *e = &chl->entries[i];
+        int slot = exr_channel_slot(e->name.str);
+        if (slot < 0)
+            continue;
+        if (e->pixel_type != EXR_PIXEL_HALF && e->pixel_type != EXR_PIXEL_FLOAT) {
+            wenv_error_set(err, WENV_ERR_IO, "cannot read OpenEXR file '%s': channel %s is not half or float", path,
+                           e->name.str);
+            goto done;
+        }
+        if (e->x_sampling != 1 || e->y_sampling != 1) {
+            wenv_error_set(err, WENV_ERR_IO, "cannot read OpenEXR file '%s': channel %s is subsampled", path,
+                           e->name.str);
+            goto done;
+        }
+        have[slot] = 1;
+    }
+    int grey = !(have[0] && have[1] && have[2]);
+    if (grey && !have[3]) {
+        char names[160] = "";
+        size_t len = 0;
+        for (int i = 0; i < chl->num_channels && len + 1 < sizeof names; i++)
+            len += (size_t)snprintf(names + len, sizeof names - len, "%s%s", i ? ", " : "",
+                                    chl->entries[i].name.str ? chl->entries[i].name.str : "?");
+        wenv_error_set(err, WENV_ERR_IO,
+                       "cannot read OpenEXR file '%s': it needs R, G and B (or Y) channels, found: %s", path,
+                       names[0] ? names : "none");
+        goto done;
+    }
+    rgb = calloc(width * height * 3, sizeof *rgb);
+    if (!rgb) {
+        wenv_error_set(err, WENV_ERR_NOMEM, "out of memory reading '%s' (%zu x %zu)", path, width, height);
+        goto done;
+    }
+    exr_chunk_info_t cinfo;
+    if (storage == EXR_STORAGE_SCANLINE) {
+        int32_t lines = 0;
+        if ((rv = exr_get_scanlines_per_chunk(ctx, 0, &lines)) != EXR_ERR_SUCCESS || lines <= 0) {
+            exr_fail(err, path, &stream, rv != EXR_ERR_SUCCESS ? rv : EXR_ERR_INVALID_ATTR);
+            goto done;
+        }
+        for (int64_t y = dw.min.y; y <= dw.max.y; y += lines) {
+            rv = exr_read_scanline_chunk_info(ctx, 0, (int)y, &cinfo);
+            if (rv == EXR_ERR_SUCCESS)
+                rv = exr_decode_chunk(ctx, &cinfo, &dec, &initialised, rgb, width, height,
+                                      (int64_t)cinfo.start_x - dw.min.x, (int64_t)cinfo.start_y - dw.min.y, grey);
+            if (rv == EXR_ERR_FEATURE_NOT_IMPLEMENTED) {
+                use_rgba = 1;
+                goto done;
+            }
+            if (rv != EXR_ERR_SUCCESS) {
+                exr_fail(err, path, &stream, rv);
+                goto done;
+            }
+        }
+    } else {
+        int32_t tw = 0, th = 0;
+        if ((rv = exr_get_tile_sizes(ctx, 0, 0, 0, &tw, &th)) != EXR_ERR_SUCCESS || tw <= 0 || th <= 0) {
+            exr_fail(err, path, &stream, rv != EXR_ERR_SUCCESS ? rv : EXR_ERR_INVALID_ATTR);
+            goto done;
+        }
+        size_t ntx = (width + (size_t)tw - 1) / (size_t)tw, nty = (height + (size_t)th - 1) / (size_t)th;
+        for (size_t ty = 0; ty < nty; ty++) {
+            for (size_t tx = 0; tx < ntx; tx++) {
+                /* tile positions count from the data window's corner */
+                rv = exr_read_tile_chunk_info(ctx, 0, (int)tx, (int)ty, 0, 0, &cinfo);
+                if (rv == EXR_ERR_SUCCESS)
+                    rv = exr_decode_chunk(ctx, &cinfo, &dec, &initialised, rgb, width, height,
+                                          (int64_t)(tx * (size_t)tw), (int64_t)(ty * (size_t)th), grey);
+                if (rv == EXR_ERR_FEATURE_NOT_IMPLEMENTED) {
+                    use_rgba = 1;
+                    goto done;
+                }
+                if (rv != EXR_ERR_SUCCESS) {
+                    exr_fail(err, path, &stream, rv);
+                    goto done;
+                }
+            }
+        }
+    }
+    if (grey)
+        for (size_t i = 0; i < width * height; i++)
+            rgb[3 * i + 1] = rgb[3 * i + 2] = rgb[3 * i];
+    *out = rgb;
+    *out_h = height;
+    *out_w = width;
+    rgb = NULL;
+done:
+    if (initialised)
+        exr_decoding_destroy(ctx, &dec);
+    exr_finish(&ctx);
+    free(rgb);
+    if (use_rgba) /* OpenEXRCore lacks this compression: OpenEXR's C++ library decodes the file */
+        return load_exr_rgba(path, out, out_h, out_w, err);
+    return err->status;
+}
