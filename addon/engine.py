@@ -19,7 +19,6 @@ AUTO_CACHE_SIZE = 16
 ROUGHNESS_RANGE = wenv.ROUGHNESS_RANGE  # (min, max) lobe roughness, both ends accepted
 IOR_RANGE = wenv.IOR_RANGE  # (min, max): an index must be > min and <= max
 IOR_MIN = IOR_RANGE[0] + 1e-4  # the lowest index offered, since the core refuses IOR_RANGE[0] itself
-GGX_ALPHA_FLOOR = 1e-4  # a perfect mirror has no lobe width to shade
 
 DEFAULT_GREY = (0.8, 0.8, 0.8)  # Blender's default material: what a mesh without one is shaded with
 
@@ -37,8 +36,8 @@ def quality_value(name):
 
 
 def ggx_alpha(roughness):
-    """GGX alpha for a Principled-style roughness: r^2, as Cycles, floored at GGX_ALPHA_FLOOR."""
-    return max(float(roughness) ** 2, GGX_ALPHA_FLOOR)
+    """GGX alpha for a Principled-style roughness: the core's one conversion (r^2, as Cycles, floored)."""
+    return wenv.alpha_from_roughness(float(roughness))
 
 
 def clamp_ior(ior):

@@ -28,7 +28,7 @@ def checkerboard(h=512, w=1024, squares=(22, 45)):
 
 
 def frame(n):
-    """The shading frames (tangent, bitangent) of unit normals (csrc/rotation.c, wenv_frame)."""
+    """The shading frames (tangent, bitangent) of unit normals (csrc/math/frame.c, wenv_frame)."""
     a = 1.0 / (1.0 + n[:, 2])
     b = -n[:, 0] * n[:, 1] * a
     t = np.stack([1 - n[:, 0] ** 2 * a, b, -n[:, 0]], 1)

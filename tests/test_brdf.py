@@ -1,4 +1,4 @@
-"""Reflectance models: Lambert and multi-lobe Cook-Torrance (brdf.c, bind_brdf.c)."""
+"""Reflectance models: Lambert and multi-lobe Cook-Torrance (csrc/scene/, python/bind_material.c)."""
 import math
 import pickle
 
@@ -74,7 +74,7 @@ def lobe_ref(dist, shadow, m, ior, wi, wo):
 # ------------------------------------------------------------------ Fresnel
 
 def test_fresnel_reference_values_of_black_glass():
-    # REFERENCE.md section 2 (the thesis's 0.998 at 60 degrees is a typo).
+    # docs/ARCHITECTURE.md §3.7 (the thesis's 0.998 at 60 degrees is a typo).
     for deg, want in ((0, 0.04879), (20, 0.04908), (60, 0.10006), (85, 0.61915)):
         assert wenv._fresnel(math.cos(math.radians(deg)), 1.567) == pytest.approx(want, abs=5e-6)
 
@@ -472,3 +472,23 @@ def test_bad_eval_and_albedo_arguments():
         with pytest.raises(exc) as info:
             fn()
         assert text in str(info.value)
+
+
+def test_one_roughness_range_and_conversion():
+    """The accepted range and Blender's roughness conversion come from the core, once."""
+    lo, hi = wenv.ROUGHNESS_RANGE
+    wenv.CookTorrance(lobes=[{"roughness": lo}, {"roughness": hi}])
+    for bad in (lo * 0.999, hi * 1.001):
+        with pytest.raises(ValueError, match="roughness"):
+            wenv.CookTorrance(lobes=[{"roughness": bad}])
+    ior_lo, ior_hi = wenv.IOR_RANGE
+    wenv.CookTorrance(lobes=[{"roughness": 0.1, "ior": ior_hi}])
+    with pytest.raises(ValueError, match="ior"):
+        wenv.CookTorrance(lobes=[{"roughness": 0.1, "ior": ior_lo}])
+    assert wenv.alpha_from_roughness(0.5) == 0.25
+    assert wenv.alpha_from_roughness(0.0) == 1e-4          # a mirror keeps a lobe
+    assert lo <= wenv.alpha_from_roughness(0.0) and wenv.alpha_from_roughness(1.0) <= hi
+    with pytest.raises(ValueError, match="roughness"):
+        wenv.alpha_from_roughness(float("nan"))
+    with pytest.raises(ValueError, match="roughness"):
+        wenv.alpha_from_roughness(-0.1)

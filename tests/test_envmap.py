@@ -42,7 +42,7 @@ def smooth_field(d):
 
 
 def equirect_centres(h, w):
-    """World directions of the pixel centres of an equirect image (REFERENCE.md §5)."""
+    """World directions of the pixel centres of an equirect image (docs/ARCHITECTURE.md §3.4)."""
     u = (np.arange(w) + 0.5) / w
     v = 1.0 - (np.arange(h) + 0.5) / h
     phi = np.pi * (1.0 - 2.0 * u)[None, :]

@@ -9,7 +9,7 @@ import pytest
 import wenv
 
 GEOMETRIES = (20, 60, 85)
-# REFERENCE.md §6: (source in plane x perpendicular, receptor in plane x perpendicular), degrees.
+# docs/ARCHITECTURE.md §3.7: (source in plane x perpendicular, receptor in plane x perpendicular), degrees.
 APERTURES = {20: ((0.75, 2.5), (1.80, 3.6)), 60: ((0.75, 2.5), (4.4, 11.7)), 85: ((0.75, 2.5), (4.0, 6.0))}
 
 
@@ -99,7 +99,7 @@ def test_standard_reflectance(angle, expected):
 
 @pytest.mark.parametrize("angle,mirror", [(20, 2037.6), (60, 999.4), (85, 161.5)])
 def test_perfect_mirror_reading(angle, mirror):
-    """A reflectance-1 mirror reads 100 / F_1.567 (REFERENCE.md §2); averaged over the source
+    """A reflectance-1 mirror reads 100 / F_1.567 (docs/ARCHITECTURE.md §3.1); averaged over the source
     aperture the reading moves by about 0.1 GU."""
     gm = wenv.Glossmeter(angle=angle)
     assert 100.0 / gm.standard_reflectance == pytest.approx(mirror, abs=0.05)
@@ -205,7 +205,7 @@ def test_roughness_sweep_monotone_and_converging(angle, dist):
 
 @pytest.mark.parametrize("dist", ["beckmann", "ggx"])
 def test_vanishing_roughness_converges(dist):
-    """m from 1e-6 (the floor of brdf.h) to 1e-3: smooth, no jump at any roughness."""
+    """m from 1e-6 (the floor of scene/microfacet.h) to 1e-3: smooth, no jump at any roughness."""
     gm = wenv.Glossmeter(angle=20)
     smooth = gm.measure(one_lobe(1e-6, dist), smooth=True)
     for m in (1e-6, 3e-6, 1e-5, 1e-4):

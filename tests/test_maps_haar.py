@@ -1,4 +1,4 @@
-"""Maps of directions and the nonstandard Haar transform (REFERENCE.md §3, §4)."""
+"""Maps of directions and the nonstandard Haar transform (docs/ARCHITECTURE.md §3.2, §3.3)."""
 import math
 
 import numpy as np
@@ -45,7 +45,7 @@ def test_texel_solid_angles_sum(n):
     assert np.all(oct_ > 0) and np.all(hemi > 0)
     assert abs(oct_.sum() - 4 * math.pi) < 1e-9 * 4 * math.pi
     assert abs(hemi.sum() - 2 * math.pi) < 1e-9 * 2 * math.pi
-    if n >= 16:  # not equal-area: the spread REFERENCE.md §3 speaks of
+    if n >= 16:  # not equal-area: the spread docs/ARCHITECTURE.md §3.2 speaks of
         assert 3.0 < oct_.max() / oct_.min() < 8.0
 
 

@@ -13,7 +13,7 @@
 
 
 /* Median relative RMSE over the bundled HDRIs per level (rows) at roughness 0.05, 0.1, 0.2, 0.5
- * and for Lambert (last column), as examples/auto_quality.py estimates it (high as a control variate
+ * and for Lambert (last column), as benchmarks/auto_quality.py estimates it (high as a control variate
  * on 50000 pairs weighted toward the bright reflections, the reference on 8000), --calibrate. */
 static const double ROUGHNESS[4] = {0.05, 0.1, 0.2, 0.5};
 static const double MEDIAN_ERROR[WENV_AUTO_LEVELS][5] = {
@@ -28,7 +28,7 @@ static const double MEDIAN_ERROR[WENV_AUTO_LEVELS][5] = {
  * with l the share of the flux its lights take (exact: the rest carries the error), c the share in
  * bright extended features it leaves in the lighting, and d its lights' dominance of the reflected
  * signal under the narrowest lobe (estimate_levels).  The constants are fitted on the bundled
- * HDRIs (examples/auto_quality.py --fit): the target met wherever some level meets it, and as few
+ * HDRIs (benchmarks/auto_quality.py --fit): the target met wherever some level meets it, and as few
  * levels picked too high as that allows. */
 #define ERROR_SCALE 0.85
 #define CONTRAST_SLOPE 10.0
@@ -41,7 +41,7 @@ static const double MEDIAN_ERROR[WENV_AUTO_LEVELS][5] = {
  * narrow lobes at grazing views per vertex, so it errs where those features were: its factor is
  *     HIGH_SCALE ((1 - l) + CONTRAST_SLOPE c')^HIGH_CONTRAST_POWER / (1 + d)^HIGH_DOMINANCE_POWER
  * with l and d its own and c' the bright extended share the level before it leaves in the lighting.
- * A least-squares fit on the bundled HDRIs (examples/auto_quality.py --fit); the first formula
+ * A least-squares fit on the bundled HDRIs (benchmarks/auto_quality.py --fit); the first formula
  * there put courtyard's error at a quarter of what it measures and claimed 1 % reachable. */
 #define HIGH_SCALE 1.4
 #define HIGH_CONTRAST_POWER 0.75
@@ -327,15 +327,6 @@ done:
     return st;
 }
 
-/* The narrowest lobe's roughness (0 for a material without lobes). */
-static double narrowest_roughness(const wenv_material *mat)
-{
-    double m = 0.0;
-    for (size_t l = 0; l < mat->n_lobes; l++)
-        m = l ? fmin(m, mat->lobes[l].roughness) : mat->lobes[l].roughness;
-    return m;
-}
-
 /* Median error of a level at roughness m (0: Lambert's column), interpolated linearly in log
  * roughness and clamped to the measured range. */
 static double level_error(size_t level, double m)
@@ -401,7 +392,7 @@ static size_t used_normal_samples(size_t n_side, const float *normals, size_t n)
  * reference's own pixel sums leave a few 0.01 % (SH_ERROR_FLOOR), independent of the truncation, so
  * added in quadrature.  On the bundled HDRIs the measured error is 0.91 - 0.999 times the
  * prediction down to 0.2 %, and 0.54 times it at 0.04 %, where the floor dominates
- * (examples/auto_quality.py). */
+ * (benchmarks/auto_quality.py). */
 #define SH_BLOCK_RULE_ERROR 0.013
 #define SH_ERROR_FLOOR 5e-4
 
@@ -453,15 +444,16 @@ wenv_status wenv_auto_choose(const wenv_envmap *env, wenv_auto_analysis *analysi
         analysis = made;
     }
     wenv_status st = WENV_OK;
-    if (!mat->n_lobes) {
+    if (!wenv_material_lobe_count(mat)) {
         if ((st = need_part(analysis, &analysis->spectrum_made, make_spectrum, &out->analysis_seconds, err)))
             goto done;
+        const double *diffuse = wenv_material_diffuse(mat);
         double power[SH_ESTIMATE_ORDER + 1];
         for (size_t l = 0; l <= SH_ESTIMATE_ORDER; l++) {
             double a = wenv_sh_lambert_factor(l);
             power[l] = 0.0;
             for (int ch = 0; ch < 3; ch++)
-                power[l] += a * a * mat->diffuse[ch] * mat->diffuse[ch] * analysis->band_power[l][ch];
+                power[l] += a * a * diffuse[ch] * diffuse[ch] * analysis->band_power[l][ch];
         }
         for (size_t i = 0; i < WENV_AUTO_SH_ORDER_COUNT; i++) {
             double e = sh_error_from_power(power, WENV_AUTO_SH_ORDERS[i]);
@@ -486,7 +478,9 @@ wenv_status wenv_auto_choose(const wenv_envmap *env, wenv_auto_analysis *analysi
     }
     if ((st = need_part(analysis, &analysis->lights_made, make_lights, &out->analysis_seconds, err)))
         goto done;
-    double m = narrowest_roughness(mat);
+    /* the narrowest lobe's width (Lambert's column, m = 0, when no lobe reflects) */
+    double m = wenv_material_lobe_width(mat);
+    m = isfinite(m) ? m : 0.0;
     /* the lobe's width within the calibrated range decides which texels the dominance averages */
     if ((st = estimate_levels(analysis, m > 0.0 ? fmin(fmax(m, ROUGHNESS[0]), ROUGHNESS[3]) : 0.0, out->levels, err)))
         goto done;

@@ -1,7 +1,7 @@
 /* quality="auto": the cheapest shading setting whose error is predicted to meet a target.
  *
  * Settings form a ladder, cheapest first (each level costs more time per view and more memory than
- * the one below).  The error of each level was measured (examples/auto_quality.py --calibrate) on
+ * the one below).  The error of each level was measured (benchmarks/auto_quality.py --calibrate) on
  * Blender's eight bundled HDRIs against the brute-force reference: a Lambertian material and
  * specular lobes of roughness 0.05, 0.1, 0.2 and 0.5, over random (normal, view) pairs with views
  * uniform on the hemisphere.  The prediction for a material and an environment is cheap:

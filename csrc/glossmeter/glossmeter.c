@@ -41,7 +41,7 @@
 #define MAX_POLY 16 /* rectangle clipped by four half-planes: at most 8 vertices */
 #define MAX_KINKS 32
 
-/* Luminance weights (Rec. 709 / sRGB primaries), REFERENCE.md §6. */
+/* Luminance weights (Rec. 709 / sRGB primaries), docs/ARCHITECTURE.md §3.7. */
 static const double LUMA[3] = {0.2126, 0.7152, 0.0722};
 
 typedef struct {
@@ -96,8 +96,8 @@ static double aperture_dir(const double c[3], const double u[3], const double v[
     return inv * inv * inv;
 }
 
-/* Orthonormal frame around unit n, continuous except at n.z = -1 (Duff et al. 2017, as REFERENCE.md
- * §2 asks).  Any frame serves isotropic lobes; this one is deterministic. */
+/* Orthonormal frame around unit n (Duff et al. 2017, docs/ARCHITECTURE.md §3.1).  Any frame serves
+ * isotropic lobes; this one is deterministic. */
 static void tangent_frame(const double n[3], double t1[3], double t2[3])
 {
     double sign = copysign(1.0, n[2]);
@@ -123,7 +123,7 @@ static void to_local(const wenv_glossmeter *gm, const double w[3], double out[3]
 wenv_status wenv_glossmeter_standard_config(wenv_glossmeter_config *cfg, double geometry, wenv_error *err)
 {
     static const double table[3][5] = {
-        /* angle, source in plane x perpendicular, receptor in plane x perpendicular (REFERENCE §6) */
+        /* angle, source in plane x perpendicular, receptor in plane x perpendicular (docs/ARCHITECTURE.md §3.7) */
         {20.0, 0.75, 2.5, 1.80, 3.6},
         {60.0, 0.75, 2.5, 4.4, 11.7},
         {85.0, 0.75, 2.5, 4.0, 6.0},
@@ -793,7 +793,7 @@ static const double GL5_X[5] = {0.04691007703066800, 0.23076534494715845, 0.5, 0
 static const double GL5_W[5] = {0.11846344252809454, 0.23931433524968324, 0.28444444444444444,
                                 0.23931433524968324, 0.11846344252809454};
 
-/* Shadowing-masking G of a lobe for unit s, d about n (brdf.h: Smith height-correlated from the
+/* Shadowing-masking G of a lobe for unit s, d about n (scene/microfacet.h: Smith height-correlated from the
  * exported Lambda, or the V-cavity term), and cos_h = h . n. */
 static double lobe_shadowing(const wenv_lobe *lobe, wenv_shadowing shadowing, double cos_s, double cos_d,
                              double cos_h, double sh)
@@ -870,7 +870,7 @@ static double half_inner(half_ctx *ctx, const wenv_lobe *lobe, const double h[3]
     return sum;
 }
 
-/* Slope density of the lobe (brdf.h's D written on slopes: D cos(theta_h) d omega_h = P dp dq). */
+/* Slope density of the lobe (scene/microfacet.h's D written on slopes: D cos(theta_h) d omega_h = P dp dq). */
 static double slope_density(const wenv_lobe *lobe, double p, double q)
 {
     double m2 = lobe->roughness * lobe->roughness, r2 = (p * p + q * q) / m2;
@@ -1009,14 +1009,16 @@ static wenv_status material_flux(const wenv_glossmeter *gm, const wenv_material 
     *flux = *flux_err = 0.0;
     *evals = 0;
     *converged = 1;
-    if (mat->n_lobes > 64)
+    size_t n_lobes = wenv_material_lobe_count(mat);
+    wenv_shadowing shadowing = wenv_material_shadowing(mat);
+    if (n_lobes > 64)
         return wenv_error_set(err, WENV_ERR_VALUE, "material has %zu lobes; the glossmeter handles at most 64",
-                              mat->n_lobes);
+                              n_lobes);
     active_lobe rough[64], narrow[64];
     double mirror_ior[64], mirror_w[64];
     size_t n_rough = 0, n_narrow = 0, n_mirror = 0;
-    for (size_t k = 0; k < mat->n_lobes; k++) {
-        const wenv_lobe *L = mat->lobes + k;
+    for (size_t k = 0; k < n_lobes; k++) {
+        const wenv_lobe *L = wenv_material_lobe(mat, k);
         double w = luminance(L->specular);
         if (w <= 0.0)
             continue;
@@ -1035,7 +1037,7 @@ static wenv_status material_flux(const wenv_glossmeter *gm, const wenv_material 
 
     /* Diffuse: f = albedo/pi is constant, so the 4-D integral is the product of the apertures'
      * projected solid angles (precomputed). */
-    double albedo = luminance(mat->diffuse);
+    double albedo = luminance(wenv_material_diffuse(mat));
     *flux += albedo / M_PI * gm->proj_source * gm->proj_receptor;
     *flux_err += WENV_GLOSS_SAFETY * albedo / M_PI * gm->proj_error;
 
@@ -1055,7 +1057,7 @@ static wenv_status material_flux(const wenv_glossmeter *gm, const wenv_material 
     double req = tol_flux / WENV_GLOSS_SAFETY / ((n_rough > 0) + (n_narrow > 0) > 1 ? 2.0 : 1.0);
     for (size_t k = 0; k < n_narrow; k++) {
         double v, e;
-        wenv_status st = half_vector_flux(gm, mat->shadowing, &narrow[k], req / (double)n_narrow, max_evals, &v, &e,
+        wenv_status st = half_vector_flux(gm, shadowing, &narrow[k], req / (double)n_narrow, max_evals, &v, &e,
                                           evals, converged, err);
         if (st)
             return st;
@@ -1063,7 +1065,7 @@ static wenv_status material_flux(const wenv_glossmeter *gm, const wenv_material 
         *flux_err += WENV_GLOSS_SAFETY * e;
     }
     if (n_rough > 0) {
-        lobe_ctx ctx = {.gm = gm, .shadowing = mat->shadowing, .lobes = rough, .n_lobes = n_rough};
+        lobe_ctx ctx = {.gm = gm, .shadowing = shadowing, .lobes = rough, .n_lobes = n_rough};
         const double lo[4] = {-gm->hs[0], -gm->hs[1], 0.0, 0.0}, hi[4] = {gm->hs[0], gm->hs[1], 1.0, 1.0};
         double v, e;
         if (hcubature_v(1, lobe_integrand, &ctx, 4, lo, hi, max_evals, req, 0.0, ERROR_INDIVIDUAL, &v, &e) != 0)
@@ -1206,7 +1208,7 @@ wenv_status wenv_glossmeter_fit_roughness(const wenv_glossmeter *gm, const wenv_
     if (!(m_lo >= WENV_ROUGHNESS_MIN) || !(m_hi > m_lo) || !(m_hi <= WENV_ROUGHNESS_MAX))
         return wenv_error_set(err, WENV_ERR_VALUE, "bracket must satisfy %g <= lo < hi <= %g, got (%g, %g)",
                               WENV_ROUGHNESS_MIN, WENV_ROUGHNESS_MAX, m_lo, m_hi);
-    if (tmpl->n_lobes < 1)
+    if (wenv_material_lobe_count(tmpl) < 1)
         return wenv_error_set(err, WENV_ERR_VALUE, "fit_roughness needs a material with a specular lobe");
     wenv_gloss_options o = *opt;
     o.smooth = 0;

@@ -1,5 +1,5 @@
 /* Virtual glossmeter: specular gloss of a wenv material as an ISO 2813 / ASTM D523 instrument reads
- * it (REFERENCE.md §2, §6; thesis §1.5.1, §2.5 after Westlund & Meyer 2001), and ASTM E430 method B
+ * it (docs/ARCHITECTURE.md §3.6, §3.7; thesis §1.5.1, §2.5 after Westlund & Meyer 2001), and ASTM E430 method B
  * haze.
  *
  * Instrument frame.  The instrument's axis is +Z (the nominal specimen normal) and the plane of
@@ -61,7 +61,7 @@
  * integral is asked for tol / WENV_GLOSS_SAFETY and the reported error is WENV_GLOSS_SAFETY times the
  * estimates, so a converged reading reports error <= tol.  Against references computed with
  * tol = 1e-4 GU, the true error at the default tol = 0.05 GU was at most 0.011 GU over 96 cases
- * (20/60/85 degrees, Beckmann and GGX, roughness 1e-5..2; examples/validate_gloss.py), above the
+ * (20/60/85 degrees, Beckmann and GGX, roughness 1e-5..2; benchmarks/validate_gloss.py), above the
  * stated error in 2 of them; tests/test_glossmeter.py keeps a small version of that check.
  * Results are deterministic: no sampling, and threads only ever split whole measurements. */
 #ifndef WENV_GLOSSMETER_H
@@ -88,7 +88,7 @@ typedef struct {
     double normal[3];          /* specimen normal in the instrument frame (need not be unit) */
 } wenv_glossmeter_config;
 
-/* Fills cfg with the ISO 2813 / ASTM D523 instrument for geometry 20, 60 or 85 (REFERENCE.md §6),
+/* Fills cfg with the ISO 2813 / ASTM D523 instrument for geometry 20, 60 or 85 (docs/ARCHITECTURE.md §3.7),
  * standard index 1.567, normal +Z.  WENV_ERR_VALUE naming "geometry" otherwise. */
 wenv_status wenv_glossmeter_standard_config(wenv_glossmeter_config *cfg, double geometry,
                                             wenv_error *err);

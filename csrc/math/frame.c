@@ -1,4 +1,4 @@
-/* Tangent frames of normals (docs/ARCHITECTURE.md, "Frames"). */
+/* Tangent frames of normals (docs/ARCHITECTURE.md §3.1). */
 #include "math/frame.h"
 
 #include <string.h>

@@ -1,6 +1,6 @@
 /* Tangent frames of normals: the frame of Duff et al. 2017 / Frisvad 2012 without the sign flip, so
  * frames vary continuously over the sphere except at n = (0, 0, -1), where the formula's limit
- * along -X is taken (docs/ARCHITECTURE.md, "Frames"). */
+ * along -X is taken (docs/ARCHITECTURE.md §3.1). */
 #ifndef WENV_FRAME_H
 #define WENV_FRAME_H
 

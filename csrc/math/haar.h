@@ -1,4 +1,4 @@
-/* Nonstandard 2D Haar transform (REFERENCE.md §4), orthonormal (1/sqrt 2 per step), so the
+/* Nonstandard 2D Haar transform (docs/ARCHITECTURE.md §3.3), orthonormal (1/sqrt 2 per step), so the
  * inverse is the transpose and dot products are preserved (Parseval).
  *
  * The image is n x n "pixels" (n a power of two), each a vector of `channels` floats stored

@@ -153,26 +153,3 @@ void wenv_hemi_bilinear(size_t n, double u, double v, size_t idx[4], double w[4]
     w[2] = (1.0 - fx) * fy;
     w[3] = fx * fy;
 }
-
-void wenv_hemi_bilinear_corners(size_t n, double u, double v, size_t idx[4], double w[4])
-{
-    double hi = (double)n;
-    double x = (u + 1.0) * 0.5 * hi, y = (v + 1.0) * 0.5 * hi;
-    x = x < 0.0 ? 0.0 : (x > hi ? hi : x);
-    y = y < 0.0 ? 0.0 : (y > hi ? hi : y);
-    double fx0 = floor(x), fy0 = floor(y);
-    if (fx0 > hi - 1.0)
-        fx0 = hi - 1.0;
-    if (fy0 > hi - 1.0)
-        fy0 = hi - 1.0;
-    double fx = x - fx0, fy = y - fy0;
-    size_t i = (size_t)fx0, j = (size_t)fy0, row = n + 1;
-    idx[0] = j * row + i;
-    idx[1] = j * row + i + 1;
-    idx[2] = (j + 1) * row + i;
-    idx[3] = (j + 1) * row + i + 1;
-    w[0] = (1.0 - fx) * (1.0 - fy);
-    w[1] = fx * (1.0 - fy);
-    w[2] = (1.0 - fx) * fy;
-    w[3] = fx * fy;
-}

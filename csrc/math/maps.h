@@ -1,4 +1,4 @@
-/* Square maps of directions (REFERENCE.md §3).
+/* Square maps of directions (docs/ARCHITECTURE.md §3.2).
  *
  * Octahedral map: the whole sphere on [-1,1]^2.  Hemi-octahedral ("pyramidal") map: the upper
  * hemisphere z >= 0 on [-1,1]^2, the square's edges being the horizon.  An n x n texel grid covers
@@ -31,10 +31,6 @@ double wenv_hemi_texel_solid_angle(size_t n, size_t i, size_t j);
  * map clamps at the horizon. */
 void wenv_oct_bilinear(size_t n, double u, double v, size_t idx[4], double w[4]);
 void wenv_hemi_bilinear(size_t n, double u, double v, size_t idx[4], double w[4]);
-
-/* The same for samples on the (n + 1) x (n + 1) texel corners (index j * (n + 1) + i at
- * u = -1 + 2 i / n): the outermost samples lie on the horizon, so nothing is extrapolated. */
-void wenv_hemi_bilinear_corners(size_t n, double u, double v, size_t idx[4], double w[4]);
 
 /* Solid angle of the spherical triangle with unit-vector corners a, b, c. */
 double wenv_spherical_triangle(const double a[3], const double b[3], const double c[3]);

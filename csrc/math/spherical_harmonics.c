@@ -190,7 +190,6 @@ struct wenv_sh_rotation {
 
 static size_t band_offset(size_t l) { return l * (2 * l - 1) * (2 * l + 1) / 3; } /* sum_{k<l} (2k+1)^2 */
 
-size_t wenv_sh_rotation_order(const wenv_sh_rotation *rot) { return rot->order; }
 
 void wenv_sh_rotation_free(wenv_sh_rotation *rot)
 {

@@ -51,7 +51,6 @@ typedef struct wenv_sh_rotation wenv_sh_rotation;
 
 wenv_status wenv_sh_rotation_create(wenv_sh_rotation **out, size_t order, wenv_error *err);
 void wenv_sh_rotation_free(wenv_sh_rotation *rot);
-size_t wenv_sh_rotation_order(const wenv_sh_rotation *rot);
 
 /* out = coefficients of f o (Rz(alpha) Ry(beta) Rz(gamma)) for f given by `in`; both count x
  * channels, interleaved.  `in` and `out` must not overlap; `work` holds count x channels doubles. */

@@ -197,69 +197,6 @@ static wenv_glossmeter *standard_meter(double geometry)
 
 /* ---------------------------------------------------------------- fit_roughness */
 
-/* Builds the single-lobe CookTorrance template from **material_params (popped from a copy of
- * kwds): diffuse, distribution, shadowing go to the material, specular and ior to its lobe. */
-static PyObject *fit_template(PyObject *module_like, PyObject *params)
-{
-    static const char *const material_keys[] = {"diffuse", "distribution", "shadowing"};
-    static const char *const lobe_keys[] = {"specular", "ior"};
-    PyObject *key, *value;
-    Py_ssize_t pos = 0;
-    while (params && PyDict_Next(params, &pos, &key, &value)) {
-        const char *k = PyUnicode_AsUTF8(key);
-        if (!k)
-            return NULL;
-        int known = 0;
-        for (int i = 0; i < 3; i++)
-            known |= strcmp(k, material_keys[i]) == 0;
-        for (int i = 0; i < 2; i++)
-            known |= strcmp(k, lobe_keys[i]) == 0;
-        if (strcmp(k, "roughness") == 0) {
-            PyErr_SetString(PyExc_TypeError, "fit_roughness() solves for roughness: do not pass it");
-            return NULL;
-        }
-        if (!known) {
-            PyErr_Format(PyExc_TypeError,
-                         "fit_roughness() got an unexpected keyword argument '%s' (material parameters: diffuse, "
-                         "specular, ior, distribution, shadowing)",
-                         k);
-            return NULL;
-        }
-    }
-    PyObject *ct = PyObject_GetAttrString(module_like, "CookTorrance");
-    if (!ct)
-        return NULL;
-    PyObject *lobe = Py_BuildValue("{s:d}", "roughness", 0.1);
-    PyObject *kw = PyDict_New();
-    PyObject *lobes = NULL, *result = NULL;
-    if (!lobe || !kw)
-        goto done;
-    for (int i = 0; i < 2; i++) {
-        PyObject *v = params ? PyDict_GetItemString(params, lobe_keys[i]) : NULL;
-        if (v && PyDict_SetItemString(lobe, lobe_keys[i], v) < 0)
-            goto done;
-    }
-    for (int i = 0; i < 3; i++) {
-        PyObject *v = params ? PyDict_GetItemString(params, material_keys[i]) : NULL;
-        if (v && PyDict_SetItemString(kw, material_keys[i], v) < 0)
-            goto done;
-    }
-    lobes = Py_BuildValue("[O]", lobe);
-    if (!lobes || PyDict_SetItemString(kw, "lobes", lobes) < 0)
-        goto done;
-    PyObject *empty = PyTuple_New(0);
-    if (empty) {
-        result = PyObject_Call(ct, empty, kw);
-        Py_DECREF(empty);
-    }
-done:
-    Py_DECREF(ct);
-    Py_XDECREF(lobe);
-    Py_XDECREF(kw);
-    Py_XDECREF(lobes);
-    return result;
-}
-
 /* Pops the fit's own keyword options from a copy of kwds, leaving the material parameters. */
 static PyObject *pop_kw(PyObject *kw, const char *name)
 {
@@ -273,24 +210,23 @@ static PyObject *pop_kw(PyObject *kw, const char *name)
     return v;
 }
 
-static PyObject *do_fit(const wenv_glossmeter *gm, PyObject *module_like, PyObject *target_obj, PyObject *params)
+static PyObject *do_fit(const wenv_glossmeter *gm, PyObject *target_obj, PyObject *params)
 {
     double target;
     if (wenv_py_get_finite(target_obj, "target_gu", &target) < 0)
         return NULL;
     PyObject *bracket_obj = pop_kw(params, "bracket"), *tol_obj = pop_kw(params, "tol"),
              *evals_obj = pop_kw(params, "max_evals");
-    PyObject *result = NULL, *tmpl = NULL;
+    PyObject *result = NULL;
+    wenv_material *tmpl = NULL;
     double bracket[2] = {FIT_M_LO, FIT_M_HI};
     wenv_gloss_options opt;
     if (get_opt_vec(bracket_obj, "bracket", bracket, 2) < 0 || get_options(tol_obj, evals_obj, NULL, &opt) < 0)
         goto done;
-    tmpl = fit_template(module_like, params);
+    tmpl = wenv_py_one_lobe_material(params, "fit_roughness()");
     if (!tmpl)
         goto done;
-    const wenv_material *mat = wenv_py_material(tmpl, "material");
-    if (!mat)
-        goto done;
+    const wenv_material *mat = tmpl;
     double m = NAN;
     wenv_gloss_result r = {0};
     wenv_error err = {0};
@@ -308,7 +244,7 @@ done:
     Py_XDECREF(bracket_obj);
     Py_XDECREF(tol_obj);
     Py_XDECREF(evals_obj);
-    Py_XDECREF(tmpl);
+    wenv_material_free(tmpl);
     return result;
 }
 
@@ -432,9 +368,7 @@ static PyObject *glossmeter_fit(PyObject *self, PyObject *args, PyObject *kwds)
     PyObject *params = kwds ? PyDict_Copy(kwds) : PyDict_New();
     if (!params)
         return NULL;
-    PyObject *wenv = PyImport_ImportModule("wenv");
-    PyObject *r = wenv ? do_fit(meter_of(self), wenv, target, params) : NULL;
-    Py_XDECREF(wenv);
+    PyObject *r = do_fit(meter_of(self), target, params);
     Py_DECREF(params);
     return r;
 }
@@ -635,6 +569,7 @@ static PyObject *module_haze(PyObject *module, PyObject *args, PyObject *kwds)
 
 static PyObject *module_fit(PyObject *module, PyObject *args, PyObject *kwds)
 {
+    (void)module;
     PyObject *target, *geometry = NULL;
     if (!PyArg_ParseTuple(args, "O|O:fit_roughness", &target, &geometry))
         return NULL;
@@ -649,7 +584,7 @@ static PyObject *module_fit(PyObject *module, PyObject *args, PyObject *kwds)
     } else if (!(geometry || geom_kw) || wenv_py_get_finite(geometry ? geometry : geom_kw, "geometry", &g) == 0) {
         wenv_glossmeter *gm = PyErr_Occurred() ? NULL : standard_meter(g);
         if (gm) {
-            result = do_fit(gm, module, target, params);
+            result = do_fit(gm, target, params);
             wenv_glossmeter_free(gm);
         }
     }

@@ -21,6 +21,10 @@ static PyTypeObject MaterialType;
 static PyTypeObject LambertType;
 static PyTypeObject CookTorranceType;
 
+/* A macro's value as a string literal, for docstrings that state the core's ranges. */
+#define WENV_STR_(x) #x
+#define WENV_STR(x) WENV_STR_(x)
+
 static const char *const distribution_names[] = {"beckmann", "ggx"};
 static const char *const shadowing_names[] = {"smith", "vcavity"};
 
@@ -277,10 +281,11 @@ static PyObject *material_richcompare(PyObject *a, PyObject *b, int op)
         Py_RETURN_NOTIMPLEMENTED;
     const MaterialObject *x = (const MaterialObject *)a, *y = (const MaterialObject *)b;
     int equal = x->mat && y->mat && x->distribution == y->distribution &&
-                x->mat->shadowing == y->mat->shadowing && x->mat->n_lobes == y->mat->n_lobes &&
-                memcmp(x->mat->diffuse, y->mat->diffuse, sizeof x->mat->diffuse) == 0;
-    for (size_t i = 0; equal && i < x->mat->n_lobes; i++) {
-        const wenv_lobe *p = &x->mat->lobes[i], *q = &y->mat->lobes[i];
+                wenv_material_shadowing(x->mat) == wenv_material_shadowing(y->mat) &&
+                wenv_material_lobe_count(x->mat) == wenv_material_lobe_count(y->mat) &&
+                memcmp(wenv_material_diffuse(x->mat), wenv_material_diffuse(y->mat), 3 * sizeof(double)) == 0;
+    for (size_t i = 0; equal && i < wenv_material_lobe_count(x->mat); i++) {
+        const wenv_lobe *p = wenv_material_lobe(x->mat, i), *q = wenv_material_lobe(y->mat, i);
         equal = p->roughness == q->roughness && p->ior == q->ior && p->distribution == q->distribution &&
                 p->specular[0] == q->specular[0] && p->specular[1] == q->specular[1] &&
                 p->specular[2] == q->specular[2];
@@ -350,7 +355,7 @@ static PyObject *lambert_new(PyTypeObject *type, PyObject *args, PyObject *kwds)
     }
     wenv_material *mat;
     wenv_error err = {0};
-    if (wenv_material_create(&mat, color, NULL, 0, WENV_SHADOW_SMITH, &err) != WENV_OK)
+    if (wenv_lambert_create(&mat, color, &err) != WENV_OK)
         return wenv_py_raise(&err);
     return wrap_material(type, mat, WENV_NDF_BECKMANN);
 }
@@ -358,7 +363,7 @@ static PyObject *lambert_new(PyTypeObject *type, PyObject *args, PyObject *kwds)
 static PyObject *lambert_color(PyObject *self, void *closure)
 {
     (void)closure;
-    return rgb_tuple(((MaterialObject *)self)->mat->diffuse);
+    return rgb_tuple(wenv_material_diffuse(((MaterialObject *)self)->mat));
 }
 
 static PyObject *lambert_repr(PyObject *self)
@@ -463,6 +468,59 @@ static int parse_lobe(PyObject *d, Py_ssize_t index, wenv_distribution dist, wen
     return 0;
 }
 
+wenv_material *wenv_py_one_lobe_material(PyObject *params, const char *caller)
+{
+    static const char *const keys[] = {"diffuse", "distribution", "shadowing", "specular", "ior"};
+    PyObject *key, *value;
+    Py_ssize_t pos = 0;
+    while (params && PyDict_Next(params, &pos, &key, &value)) {
+        const char *k = PyUnicode_Check(key) ? PyUnicode_AsUTF8(key) : NULL;
+        if (!k) {
+            PyErr_Clear();
+            PyErr_Format(PyExc_TypeError, "%s keyword names must be strings", caller);
+            return NULL;
+        }
+        if (strcmp(k, "roughness") == 0) {
+            PyErr_Format(PyExc_TypeError, "%s solves for roughness: do not pass it", caller);
+            return NULL;
+        }
+        int known = 0;
+        for (size_t i = 0; i < sizeof keys / sizeof keys[0]; i++)
+            known |= strcmp(k, keys[i]) == 0;
+        if (!known) {
+            PyErr_Format(PyExc_TypeError,
+                         "%s got an unexpected keyword argument '%s' (material parameters: diffuse, specular, ior, "
+                         "distribution, shadowing)",
+                         caller, k);
+            return NULL;
+        }
+    }
+    PyObject *v;
+    double diffuse[3] = {0.0, 0.0, 0.0};
+    int dist = WENV_NDF_BECKMANN, shadowing = WENV_SHADOW_SMITH;
+    if (params && (v = PyDict_GetItemString(params, "diffuse")) && wenv_py_get_rgb(v, "diffuse", diffuse) < 0)
+        return NULL;
+    if (params && (v = PyDict_GetItemString(params, "distribution")) &&
+        parse_choice(v, "distribution", distribution_names, 2, &dist) < 0)
+        return NULL;
+    if (params && (v = PyDict_GetItemString(params, "shadowing")) &&
+        parse_choice(v, "shadowing", shadowing_names, 2, &shadowing) < 0)
+        return NULL;
+    wenv_lobe lobe = {.specular = {1.0, 1.0, 1.0}, .roughness = 0.1, .ior = LOBE_DEFAULT_IOR,
+                      .distribution = (wenv_distribution)dist};
+    if (params && (v = PyDict_GetItemString(params, "specular")) && wenv_py_get_rgb(v, "specular", lobe.specular) < 0)
+        return NULL;
+    if (params && (v = PyDict_GetItemString(params, "ior")) && wenv_py_get_finite(v, "ior", &lobe.ior) < 0)
+        return NULL;
+    wenv_material *mat = NULL;
+    wenv_error err = {0};
+    if (wenv_cook_torrance_create(&mat, diffuse, &lobe, 1, (wenv_shadowing)shadowing, &err) != WENV_OK) {
+        wenv_py_raise(&err);
+        return NULL;
+    }
+    return mat;
+}
+
 static PyObject *cook_torrance_new(PyTypeObject *type, PyObject *args, PyObject *kwds)
 {
     static char *kwlist[] = {"diffuse", "lobes", "distribution", "shadowing", NULL};
@@ -513,7 +571,7 @@ static PyObject *cook_torrance_new(PyTypeObject *type, PyObject *args, PyObject 
     Py_XDECREF(seq);
     wenv_material *mat;
     wenv_error err = {0};
-    wenv_status st = wenv_material_create(&mat, diffuse, lobes, (size_t)n, (wenv_shadowing)shadowing, &err);
+    wenv_status st = wenv_cook_torrance_create(&mat, diffuse, lobes, (size_t)n, (wenv_shadowing)shadowing, &err);
     PyMem_Free(lobes);
     if (st != WENV_OK)
         return wenv_py_raise(&err);
@@ -523,18 +581,18 @@ static PyObject *cook_torrance_new(PyTypeObject *type, PyObject *args, PyObject 
 static PyObject *ct_diffuse(PyObject *self, void *closure)
 {
     (void)closure;
-    return rgb_tuple(((MaterialObject *)self)->mat->diffuse);
+    return rgb_tuple(wenv_material_diffuse(((MaterialObject *)self)->mat));
 }
 
 static PyObject *ct_lobes(PyObject *self, void *closure)
 {
     (void)closure;
     const wenv_material *mat = ((MaterialObject *)self)->mat;
-    PyObject *list = PyList_New((Py_ssize_t)mat->n_lobes);
+    PyObject *list = PyList_New((Py_ssize_t)wenv_material_lobe_count(mat));
     if (!list)
         return NULL;
-    for (size_t i = 0; i < mat->n_lobes; i++) {
-        const wenv_lobe *l = &mat->lobes[i];
+    for (size_t i = 0; i < wenv_material_lobe_count(mat); i++) {
+        const wenv_lobe *l = wenv_material_lobe(mat, i);
         PyObject *d = Py_BuildValue("{s:(ddd),s:d,s:d,s:s}", "specular", l->specular[0], l->specular[1],
                                     l->specular[2], "roughness", l->roughness, "ior", l->ior, "distribution",
                                     distribution_names[l->distribution]);
@@ -556,7 +614,7 @@ static PyObject *ct_distribution(PyObject *self, void *closure)
 static PyObject *ct_shadowing(PyObject *self, void *closure)
 {
     (void)closure;
-    return PyUnicode_FromString(shadowing_names[((MaterialObject *)self)->mat->shadowing]);
+    return PyUnicode_FromString(shadowing_names[wenv_material_shadowing(((MaterialObject *)self)->mat)]);
 }
 
 /* (diffuse, lobes, distribution, shadowing): the constructor's arguments, for repr and pickling. */
@@ -626,7 +684,7 @@ static PyTypeObject CookTorranceType = {
         "CookTorrance(diffuse=0.0, lobes=(), distribution='beckmann', shadowing='smith')\n--\n\n"
         "Lambertian diffuse plus specular microfacet lobes, f = diffuse/pi + sum specular F D G / (4 cos_i cos_o).\n"
         "diffuse: grey or (r, g, b) in [0, 1].  lobes: list of dicts with keys 'roughness' (required, "
-        "in [1e-6, 10]: Beckmann RMS slope or GGX alpha), 'specular' (grey or RGB >= 0, default 1), "
+        "in [" WENV_STR(WENV_ROUGHNESS_MIN) ", " WENV_STR(WENV_ROUGHNESS_MAX) "]: Beckmann RMS slope or GGX alpha), 'specular' (grey or RGB >= 0, default 1), "
         "'ior' (in (1, 10], default 1.5) and 'distribution' (default: the material's).  distribution: "
         "'beckmann' or 'ggx'.  shadowing: 'smith' (exact Lambda, height-correlated) or 'vcavity'.  Immutable.",
     .tp_base = &MaterialType,
@@ -771,7 +829,7 @@ static PyObject *py_lobe_albedo(PyObject *self, PyObject *args, PyObject *kwds)
     wenv_material *probe;
     wenv_error err = {0};
     double zero[3] = {0.0, 0.0, 0.0};
-    if (wenv_material_create(&probe, zero, &lobe, 1, (wenv_shadowing)shadowing, &err) != WENV_OK)
+    if (wenv_cook_torrance_create(&probe, zero, &lobe, 1, (wenv_shadowing)shadowing, &err) != WENV_OK)
         return wenv_py_raise(&err);
     wenv_material_free(probe);
     Py_buffer view;
@@ -798,7 +856,24 @@ static PyObject *py_lobe_albedo(PyObject *self, PyObject *args, PyObject *kwds)
     return PyFloat_FromDouble(albedo);
 }
 
-static PyMethodDef brdf_functions[] = {
+static PyObject *py_alpha_from_roughness(PyObject *self, PyObject *arg)
+{
+    (void)self;
+    double r;
+    if (wenv_py_get_finite(arg, "roughness", &r) < 0)
+        return NULL;
+    if (r < 0.0) {
+        PyErr_Format(PyExc_ValueError, "roughness must be >= 0, got %g", r);
+        return NULL;
+    }
+    return PyFloat_FromDouble(wenv_alpha_from_roughness(r));
+}
+
+static PyMethodDef material_functions[] = {
+    {"alpha_from_roughness", py_alpha_from_roughness, METH_O,
+     "alpha_from_roughness(roughness)\n--\n\nThe distribution's alpha (CookTorrance lobe 'roughness') for Blender's "
+     "perceptual roughness, as Cycles converts it: roughness**2, floored at " WENV_STR(WENV_ALPHA_FROM_ROUGHNESS_MIN)
+     " (a perfect mirror has no lobe width to shade)."},
     {"_fresnel", py_fresnel, METH_VARARGS, "_fresnel(cos_i, ior)\n--\n\nUnpolarised dielectric Fresnel (tests)."},
     {"_ndf", py_ndf, METH_VARARGS, "_ndf(distribution, roughness, cos_h)\n--\n\nMicrofacet distribution D (tests)."},
     {"_smith_lambda", py_smith_lambda, METH_VARARGS,
@@ -824,7 +899,7 @@ int wenv_register_material(PyObject *module)
             return -1;
         }
     }
-    if (PyModule_AddFunctions(module, brdf_functions) < 0)
+    if (PyModule_AddFunctions(module, material_functions) < 0)
         return -1;
     /* The accepted ranges, for callers that offer them to a user (the add-on's properties). */
     PyObject *roughness = Py_BuildValue("(dd)", WENV_ROUGHNESS_MIN, WENV_ROUGHNESS_MAX);

@@ -14,6 +14,8 @@ wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, con
                            const float *views, size_t n, float *out, const wenv_progress *progress,
                            wenv_error *err)
 {
+    const double *diffuse = wenv_material_diffuse(mat);
+    int has_lobes = wenv_material_lobe_count(mat) > 0;
     size_t npix = wenv_envmap_width(env) * wenv_envmap_height(env);
     float *dirs = malloc(npix * 3 * sizeof(float));
     float *flux = malloc(npix * 3 * sizeof(float));
@@ -68,7 +70,7 @@ wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, con
                         if (++fill < BLOCK)
                             continue;
                     }
-                    if (fill && mat->n_lobes) {
+                    if (fill && has_lobes) {
                         wenv_material_specular_cos_batch(mat, wo, wi, fill, fcos);
                         for (size_t q = 0; q < fill; q++)
                             for (int c = 0; c < 3; c++)
@@ -78,7 +80,7 @@ wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, con
                 }
             }
             for (int c = 0; c < 3; c++)
-                out[3 * i + c] = (float)(spec[c] + irr[c] * mat->diffuse[c] / M_PI);
+                out[3 * i + c] = (float)(spec[c] + irr[c] * diffuse[c] / M_PI);
             size_t d = atomic_fetch_add(&done, 1) + 1;
             if (omp_get_thread_num() == 0 && progress && progress->report &&
                 progress->report(progress->ctx, (double)d / (double)n))

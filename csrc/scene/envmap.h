@@ -1,7 +1,7 @@
 /* Distant HDR environments: images in equirect, mirror-ball or cube-cross projection, read from
  * OpenEXR (OpenEXRCore) or Radiance RGBE files, looked up by world direction.
  *
- * Conventions (REFERENCE.md §5): world is right-handed, Z up.  Equirect: direction (x, y, z) maps to
+ * Conventions (docs/ARCHITECTURE.md §3.4): world is right-handed, Z up.  Equirect: direction (x, y, z) maps to
  * u = 0.5 - atan2(y, x) / (2 pi), v = 0.5 + asin(z) / pi with v = 0 the bottom row.  `rotation` r
  * turns the environment about +Z as a Z rotation of Blender's World Mapping node does: world
  * direction d reads the image where R_z(r) d reads the unrotated image.  `strength` multiplies the

@@ -1,301 +1,16 @@
-/* Lambert and multi-lobe Cook-Torrance (modern microfacet form), see brdf.h.
- *
- * Formulation chosen for speed and robustness in the hot path (~1e9 calls):
- *  - Half vector not normalised: s = wi + wo, tan^2(theta_h) = (sx^2 + sy^2) / sz^2 straight from
- *    components (no cancellation near the normal), and for unit vectors wi.h = |s| / 2 exactly,
- *    which stays accurate where 1 + wi.wo would cancel.
- *  - D written in tan^2 only: Beckmann exp(-t/m^2) (1 + t)^2 / (pi m^2), GGX m^2 r^2 / pi with
- *    r = (1 + t) / (m^2 + t); both finite for t -> inf once t is capped (the capped value is already
- *    exactly 0 for Beckmann and the limit m^2/pi for GGX).
- *  - Smith height-correlated G2 / (4 cos_i cos_o) = 1 / (2 (cos_o K_i + cos_i K_o)) with
- *    K = cos (1 + 2 Lambda): Beckmann K = c erf(a) + m sin exp(-a^2) / sqrt(pi) (a = c / (m sin)),
- *    GGX K = sqrt(c^2 + m^2 sin^2).  No division by a cosine, no cancellation, finite at the horizon.
- *  - V-cavity G / (4 cos_i cos_o) = min(1 / (4 cos_i cos_o), sz / (|s|^2 max(cos_i, cos_o))). */
-#include "scene/material.h"
+/* The material interface (material.h): the parts every model shares, and dispatch to its kind. */
+#include "scene/material_kind.h"
 
-#include <float.h>
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 
-#include "math/quadrature.h"
-
-#ifndef M_PI
-#define M_PI 3.14159265358979323846
-#endif
-
-#define INV_PI (1.0 / M_PI)
-#define INV_SQRT_PI 0.56418958354775628695
-#define TAN2_CAP 1e150 /* tan^2 beyond this: Beckmann D is exactly 0, GGX D its limit, in double */
-#define BECKMANN_A_CAP 30.0 /* erf(30) = 1 and exp(-900) = 0 in double: Lambda is exactly 0 */
 #define ALBEDO_SAMPLES_MIN 8
 #define ALBEDO_SAMPLES_MAX 4096
 
-/* ---------------------------------------------------------------- scalar terms */
-
-double wenv_fresnel_dielectric(double cos_i, double ior)
-{
-    /* Exact unpolarised dielectric Fresnel, (Rs + Rp) / 2, in Cook & Torrance's closed form with
-     * g = n cos_t; g > c for ior > 1, so no denominator vanishes and there is no total reflection. */
-    double c = fmin(fmax(cos_i, 0.0), 1.0);
-    double g = sqrt(ior * ior - 1.0 + c * c);
-    double a = (g - c) / (g + c);
-    double b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0);
-    return 0.5 * a * a * (1.0 + b * b);
-}
-
-/* D from tan^2(theta_h); t >= 0. */
-static inline double ndf_tan2(wenv_distribution dist, double m, double t)
-{
-    double m2 = m * m;
-    t = fmin(t, TAN2_CAP);
-    if (dist == WENV_NDF_GGX) {
-        double r = (1.0 + t) / (m2 + t);
-        return m2 * r * r * INV_PI;
-    }
-    double q = 1.0 + t; /* 1 / cos^2 */
-    return exp(-t / m2) * q * q * INV_PI / m2;
-}
-
-double wenv_ndf(wenv_distribution dist, double m, double cos_h)
-{
-    if (!(cos_h > 0.0))
-        return 0.0;
-    double c = fmin(cos_h, 1.0);
-    double s2 = (1.0 - c) * (1.0 + c); /* sin^2 without cancellation near c = 1 */
-    return ndf_tan2(dist, m, s2 / fmax(c * c, DBL_MIN));
-}
-
-/* K = cos (1 + 2 Lambda) for a direction with cosine c >= 0 and sine s >= 0 (see the top comment). */
-static inline double smith_k(wenv_distribution dist, double m, double c, double s)
-{
-    double ms = m * s;
-    if (dist == WENV_NDF_GGX)
-        return sqrt(c * c + ms * ms);
-    /* a = 1 / (m tan) = c / (m s), capped where Lambda is exactly 0 so no inf enters. */
-    double a = fmin(c / fmax(ms, DBL_MIN), BECKMANN_A_CAP);
-    return c * erf(a) + ms * exp(-a * a) * INV_SQRT_PI;
-}
-
-double wenv_smith_lambda(wenv_distribution dist, double m, double cos_theta)
-{
-    double c = fmin(fmax(cos_theta, 0.0), 1.0);
-    double s = sqrt((1.0 - c) * (1.0 + c));
-    double cc = fmax(c, 1e-150); /* horizon: large finite instead of inf (and no overflow of m^2 tan^2) */
-    if (dist == WENV_NDF_GGX) {
-        /* (sqrt(1 + x) - 1) / 2 rewritten as x / (2 (1 + sqrt(1 + x))): no cancellation for small x. */
-        double mt = m * s / cc;
-        double x = mt * mt;
-        return x / (2.0 * (1.0 + sqrt(1.0 + x)));
-    }
-    double a = fmin(cc / fmax(m * s, DBL_MIN), BECKMANN_A_CAP);
-    /* (erf(a) - 1) / 2 = -erfc(a) / 2: erfc keeps the small difference accurate for large a. */
-    double lambda = 0.5 * (exp(-a * a) * INV_SQRT_PI / a - erfc(a));
-    return fmax(lambda, 0.0);
-}
-
-/* Per-lobe term that depends on the view only: K(wo) for Smith (unused by V-cavity). */
-static inline double lobe_view_k(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wo[3])
-{
-    if (shadowing != WENV_SHADOW_SMITH)
-        return 0.0;
-    double s = sqrt(wo[0] * wo[0] + wo[1] * wo[1]);
-    return smith_k(lobe->distribution, lobe->roughness, wo[2], s);
-}
-
-/* G / (4 cos_i cos_o) for cos_i, cos_o > 0 (the caller checks), with k_o = lobe_view_k(wo); also
- * returns tan^2(theta_h) and wi.h, which D and F need. */
-static inline double lobe_vis(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wi[3],
-                              const double wo[3], double k_o, double *tan2_h, double *cos_d)
-{
-    double ci = wi[2], co = wo[2];
-    double sx = wi[0] + wo[0], sy = wi[1] + wo[1], sz = ci + co;
-    double sxy2 = sx * sx + sy * sy;
-    double sz2 = fmax(sz * sz, DBL_MIN);
-    double len2 = sxy2 + sz2;
-    *tan2_h = sxy2 / sz2;
-    *cos_d = fmin(0.5 * sqrt(len2), 1.0); /* wi.h = wo.h = |wi + wo| / 2 for unit vectors */
-    if (shadowing == WENV_SHADOW_SMITH) {
-        double si = sqrt(wi[0] * wi[0] + wi[1] * wi[1]);
-        double k_i = smith_k(lobe->distribution, lobe->roughness, ci, si);
-        return 0.5 / fmax(co * k_i + ci * k_o, DBL_MIN);
-    }
-    return fmin(0.25 / (ci * co), sz / (len2 * fmax(ci, co)));
-}
-
-/* F D G / (4 cos_i cos_o) under the same conditions. */
-static inline double lobe_value(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wi[3],
-                                const double wo[3], double k_o)
-{
-    double t, cos_d;
-    double v = lobe_vis(lobe, shadowing, wi, wo, k_o, &t, &cos_d);
-    return wenv_fresnel_dielectric(cos_d, lobe->ior) * ndf_tan2(lobe->distribution, lobe->roughness, t) * v;
-}
-
-double wenv_lobe_eval(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wi[3], const double wo[3])
-{
-    if (!(wi[2] > 0.0) || !(wo[2] > 0.0))
-        return 0.0;
-    return lobe_value(lobe, shadowing, wi, wo, lobe_view_k(lobe, shadowing, wo));
-}
-
-void wenv_material_specular_cos(const wenv_material *mat, const double wi[3], const double wo[3], double rgb[3])
-{
-    rgb[0] = rgb[1] = rgb[2] = 0.0;
-    if (!(wi[2] > 0.0) || !(wo[2] > 0.0))
-        return;
-    for (size_t l = 0; l < mat->n_lobes; l++) {
-        const wenv_lobe *lobe = &mat->lobes[l];
-        double v = lobe_value(lobe, mat->shadowing, wi, wo, lobe_view_k(lobe, mat->shadowing, wo)) * wi[2];
-        for (int c = 0; c < 3; c++)
-            rgb[c] += lobe->specular[c] * v;
-    }
-}
-
-void wenv_material_eval_cos(const wenv_material *mat, const double wi[3], const double wo[3], double rgb[3])
-{
-    wenv_material_specular_cos(mat, wi, wo, rgb);
-    if (!(wi[2] > 0.0) || !(wo[2] > 0.0))
-        return;
-    double k = wi[2] * INV_PI;
-    for (int c = 0; c < 3; c++)
-        rgb[c] += mat->diffuse[c] * k;
-}
-
-/* Block size of the batch path: the view term is recomputed once per block and lobe (< 1% of the
- * work at 128), which keeps the function allocation-free for any number of lobes. */
-#define BATCH_BLOCK 128
-
-void wenv_material_specular_cos_batch(const wenv_material *mat, const double wo[3], const float *wi, size_t n,
-                                      float *rgb_out)
-{
-    if (!(wo[2] > 0.0) || mat->n_lobes == 0) {
-        memset(rgb_out, 0, n * 3 * sizeof *rgb_out);
-        return;
-    }
-    double acc[BATCH_BLOCK * 3];
-    for (size_t start = 0; start < n; start += BATCH_BLOCK) {
-        size_t count = n - start < BATCH_BLOCK ? n - start : BATCH_BLOCK;
-        const float *w = wi + 3 * start;
-        memset(acc, 0, count * 3 * sizeof acc[0]);
-        for (size_t l = 0; l < mat->n_lobes; l++) {
-            const wenv_lobe *lobe = &mat->lobes[l];
-            double k_o = lobe_view_k(lobe, mat->shadowing, wo);
-            double s0 = lobe->specular[0], s1 = lobe->specular[1], s2 = lobe->specular[2];
-            for (size_t k = 0; k < count; k++) {
-                double d[3] = {w[3 * k], w[3 * k + 1], w[3 * k + 2]};
-                if (!(d[2] > 0.0))
-                    continue;
-                double v = lobe_value(lobe, mat->shadowing, d, wo, k_o) * d[2];
-                acc[3 * k] += s0 * v;
-                acc[3 * k + 1] += s1 * v;
-                acc[3 * k + 2] += s2 * v;
-            }
-        }
-        float *out = rgb_out + 3 * start;
-        for (size_t k = 0; k < 3 * count; k++)
-            out[k] = (float)acc[k];
-    }
-}
-
-/* Plain comparisons: fminf/fmaxf are library calls on x86-64 (their NaN rules have no single
- * instruction), and these run per vertex and light. */
-static inline float min_f(float a, float b) { return a < b ? a : b; }
-static inline float max_f(float a, float b) { return a > b ? a : b; }
-
-/* ---------------------------------------------------------------- float path */
-
-/* The same formulation in float, for the per-vertex direct lights of shading (millions of calls per
- * frame, where double exp/erf dominated).  Caps as above, at float's range. */
-#define TAN2_CAP_F 1e30f
-#define BECKMANN_A_CAP_F 10.0f /* erff(10) = 1, expf(-100) ~ 4e-44: Lambda is 0 in float */
-
-static inline float fresnel_f(float c, float ior)
-{
-    c = min_f(max_f(c, 0.0f), 1.0f);
-    float g = sqrtf(ior * ior - 1.0f + c * c);
-    float a = (g - c) / (g + c);
-    float b = (c * (g + c) - 1.0f) / (c * (g - c) + 1.0f);
-    return 0.5f * a * a * (1.0f + b * b);
-}
-
-static inline float ndf_tan2_f(wenv_distribution dist, float m, float t)
-{
-    float m2 = m * m;
-    t = min_f(t, TAN2_CAP_F);
-    if (dist == WENV_NDF_GGX) {
-        float r = (1.0f + t) / (m2 + t);
-        return m2 * r * r * (float)INV_PI;
-    }
-    float q = 1.0f + t;
-    return expf(-t / m2) * q * q * (float)INV_PI / m2;
-}
-
-static inline float smith_k_f(wenv_distribution dist, float m, float c, float s)
-{
-    float ms = m * s;
-    if (dist == WENV_NDF_GGX)
-        return sqrtf(c * c + ms * ms);
-    float a = min_f(c / max_f(ms, FLT_MIN), BECKMANN_A_CAP_F);
-    return c * erff(a) + ms * expf(-a * a) * (float)INV_SQRT_PI;
-}
-
-void wenv_material_view_k_f(const wenv_material *mat, const float wo[3], float *k_o)
-{
-    float s = sqrtf(wo[0] * wo[0] + wo[1] * wo[1]);
-    for (size_t l = 0; l < mat->n_lobes; l++)
-        k_o[l] = mat->shadowing == WENV_SHADOW_SMITH
-                     ? smith_k_f(mat->lobes[l].distribution, (float)mat->lobes[l].roughness, wo[2], s)
-                     : 0.0f;
-}
-
-void wenv_material_specular_cos_f(const wenv_material *mat, const float wi[3], const float wo[3], const float *k_o,
-                                  float rgb[3])
-{
-    rgb[0] = rgb[1] = rgb[2] = 0.0f;
-    float ci = wi[2], co = wo[2];
-    if (!(ci > 0.0f) || !(co > 0.0f))
-        return;
-    float sx = wi[0] + wo[0], sy = wi[1] + wo[1], sz = ci + co;
-    float sxy2 = sx * sx + sy * sy, sz2 = max_f(sz * sz, FLT_MIN), len2 = sxy2 + sz2;
-    float t = sxy2 / sz2, cos_d = min_f(0.5f * sqrtf(len2), 1.0f);
-    float si = sqrtf(wi[0] * wi[0] + wi[1] * wi[1]);
-    for (size_t l = 0; l < mat->n_lobes; l++) {
-        const wenv_lobe *lobe = &mat->lobes[l];
-        float m = (float)lobe->roughness, vis;
-        if (mat->shadowing == WENV_SHADOW_SMITH)
-            vis = 0.5f / max_f(co * smith_k_f(lobe->distribution, m, ci, si) + ci * k_o[l], FLT_MIN);
-        else
-            vis = min_f(0.25f / (ci * co), sz / (len2 * max_f(ci, co)));
-        float v = fresnel_f(cos_d, (float)lobe->ior) * ndf_tan2_f(lobe->distribution, m, t) * vis * ci;
-        for (int c = 0; c < 3; c++)
-            rgb[c] += (float)lobe->specular[c] * v;
-    }
-}
-
-/* ---------------------------------------------------------------- materials */
-
-static wenv_status check_lobe(const wenv_lobe *lobe, size_t i, wenv_error *err)
-{
-    for (int c = 0; c < 3; c++) {
-        if (!isfinite(lobe->specular[c]) || lobe->specular[c] < 0.0)
-            return wenv_error_set(err, WENV_ERR_VALUE, "lobes[%zu].specular must be finite and >= 0, got %g", i,
-                                  lobe->specular[c]);
-    }
-    if (!isfinite(lobe->roughness) || lobe->roughness < WENV_ROUGHNESS_MIN || lobe->roughness > WENV_ROUGHNESS_MAX)
-        return wenv_error_set(err, WENV_ERR_VALUE, "lobes[%zu].roughness must be finite in [%g, %g], got %g", i,
-                              WENV_ROUGHNESS_MIN, WENV_ROUGHNESS_MAX, lobe->roughness);
-    if (!isfinite(lobe->ior) || !(lobe->ior > 1.0) || lobe->ior > WENV_IOR_MAX)
-        return wenv_error_set(err, WENV_ERR_VALUE, "lobes[%zu].ior must be finite in (1, %g], got %g", i, WENV_IOR_MAX,
-                              lobe->ior);
-    if (lobe->distribution != WENV_NDF_BECKMANN && lobe->distribution != WENV_NDF_GGX)
-        return wenv_error_set(err, WENV_ERR_VALUE, "lobes[%zu].distribution must be beckmann or ggx", i);
-    return WENV_OK;
-}
-
-wenv_status wenv_material_create(wenv_material **out, const double diffuse[3], const wenv_lobe *lobes, size_t n_lobes,
-                                 wenv_shadowing shadowing, wenv_error *err)
+wenv_status wenv_material_alloc(wenv_material **out, const wenv_material_kind *kind, const double diffuse[3],
+                                const wenv_lobe *lobes, size_t n_lobes, wenv_shadowing shadowing, wenv_error *err)
 {
     *out = NULL;
     for (int c = 0; c < 3; c++) {
@@ -311,10 +26,9 @@ wenv_status wenv_material_create(wenv_material **out, const double diffuse[3], c
     if (n_lobes > SIZE_MAX / sizeof(wenv_lobe))
         return wenv_error_set(err, WENV_ERR_VALUE, "too many lobes (%zu)", n_lobes);
     for (size_t i = 0; i < n_lobes; i++) {
-        if (check_lobe(&lobes[i], i, err) != WENV_OK)
+        if (wenv_lobe_check(&lobes[i], i, err) != WENV_OK)
             return err ? err->status : WENV_ERR_VALUE;
     }
-
     wenv_material *mat = calloc(1, sizeof *mat);
     if (!mat)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory allocating a material");
@@ -326,6 +40,7 @@ wenv_status wenv_material_create(wenv_material **out, const double diffuse[3], c
         }
         memcpy(mat->lobes, lobes, n_lobes * sizeof *mat->lobes);
     }
+    mat->kind = kind;
     memcpy(mat->diffuse, diffuse, sizeof mat->diffuse);
     mat->n_lobes = n_lobes;
     mat->shadowing = shadowing;
@@ -335,22 +50,7 @@ wenv_status wenv_material_create(wenv_material **out, const double diffuse[3], c
 
 wenv_status wenv_material_copy(wenv_material **out, const wenv_material *src, wenv_error *err)
 {
-    return wenv_material_create(out, src->diffuse, src->lobes, src->n_lobes, src->shadowing, err);
-}
-
-wenv_status wenv_material_with_roughness(wenv_material **out, const wenv_material *src, double roughness,
-                                         wenv_error *err)
-{
-    *out = NULL;
-    if (!isfinite(roughness) || roughness < WENV_ROUGHNESS_MIN || roughness > WENV_ROUGHNESS_MAX)
-        return wenv_error_set(err, WENV_ERR_VALUE, "roughness must be finite in [%g, %g], got %g", WENV_ROUGHNESS_MIN,
-                              WENV_ROUGHNESS_MAX, roughness);
-    wenv_status st = wenv_material_copy(out, src, err);
-    if (st != WENV_OK)
-        return st;
-    for (size_t i = 0; i < (*out)->n_lobes; i++)
-        (*out)->lobes[i].roughness = roughness;
-    return WENV_OK;
+    return wenv_material_alloc(out, src->kind, src->diffuse, src->lobes, src->n_lobes, src->shadowing, err);
 }
 
 void wenv_material_free(wenv_material *mat)
@@ -361,242 +61,121 @@ void wenv_material_free(wenv_material *mat)
     free(mat);
 }
 
-/* ---------------------------------------------------------------- albedo quadrature */
-
-/* Integrand of the albedo at half vector h(t = tan^2 theta_h, phi) per unit of the distribution's CDF
- * xi: F G (wo.h) / (co cos_h) = F vis 4 ci (wo.h) / cos_h, vis = G / (4 ci co). */
-static inline double albedo_integrand(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wo[3],
-                                      double k_o, double t, double cp, double sp, int include_fresnel)
+wenv_status wenv_material_with_roughness(wenv_material **out, const wenv_material *src, double roughness,
+                                         wenv_error *err)
 {
-    double ch = 1.0 / sqrt(1.0 + t), sh = sqrt(t) * ch;
-    double h[3] = {sh * cp, sh * sp, ch};
-    double oh = wo[0] * h[0] + wo[1] * h[1] + wo[2] * h[2];
-    double wi[3] = {2.0 * oh * h[0] - wo[0], 2.0 * oh * h[1] - wo[1], 2.0 * oh * h[2] - wo[2]};
-    if (!(oh > 0.0) || !(wi[2] > 0.0)) /* only by rounding at the range's end */
-        return 0.0;
-    double t_h, cos_d;
-    double vis = lobe_vis(lobe, shadowing, wi, wo, k_o, &t_h, &cos_d);
-    double f = include_fresnel ? wenv_fresnel_dielectric(oh, lobe->ior) : 1.0;
-    return f * vis * 4.0 * wi[2] * oh / ch;
+    *out = NULL;
+    if (!isfinite(roughness) || roughness < WENV_ROUGHNESS_MIN || roughness > WENV_ROUGHNESS_MAX)
+        return wenv_error_set(err, WENV_ERR_VALUE, "roughness must be finite in [%g, %g], got %g", WENV_ROUGHNESS_MIN,
+                              WENV_ROUGHNESS_MAX, roughness);
+    if (!src->kind->with_roughness)
+        return wenv_error_set(err, WENV_ERR_VALUE, "a %s material has no roughness to set", src->kind->name);
+    return src->kind->with_roughness(out, src, roughness, err);
 }
 
-/* Integral of F D G / (4 ci co) * ci over wi, substituted to the half vector (d wi = 4 (wo.h) d wh)
- * and then to the distribution's CDF xi(theta_h), for which D cos_h d wh = d xi d phi / (2 pi):
- *   albedo = (1 / 2 pi) Int d phi Int_0^xi_max(phi) F G (wo.h) / (co cos_h) d xi.
- * Nodes follow D, so peaks of any width are resolved.  Three details keep it accurate for grazing
- * views and tiny roughness with a modest node count:
- *  - Range: for azimuth phi' (relative to wo's) the reflected wi is above the horizon exactly for
- *    theta_h < theta_max = pi/4 + beta/2, beta = atan(tan(theta_o) cos phi') (there cos_i =
- *    A sin(2 (theta_max - theta_h)) and wo.h > 0 holds), so the rule never straddles that kink.
- *  - Grading: Smith G changes quickly where cos_i ~ m, just below theta_max, and in xi that band can
- *    be far narrower than the node spacing; xi = xi_max (1 - (1 - u)^4) crowds nodes there.
- *  - Azimuth: for grazing views beta swings from +theta_o to -theta_o within ~cos(theta_o) of
- *    phi' = 90 deg; half of the map phi'(v) follows beta (phi' = acos(tan(theta_o cos(pi v)) /
- *    tan(theta_o))), half is linear, over the mirror-symmetric half circle [0, pi]. */
-typedef struct {
-    size_t n;            /* nodes on [0, 1] */
-    const double *x, *w; /* positions and weights */
-} unit_rule;
+const char *wenv_material_kind_name(const wenv_material *mat) { return mat->kind->name; }
+const double *wenv_material_diffuse(const wenv_material *mat) { return mat->diffuse; }
+size_t wenv_material_lobe_count(const wenv_material *mat) { return mat->n_lobes; }
+const wenv_lobe *wenv_material_lobe(const wenv_material *mat, size_t i) { return i < mat->n_lobes ? &mat->lobes[i] : NULL; }
+wenv_shadowing wenv_material_shadowing(const wenv_material *mat) { return mat->shadowing; }
 
-/* The rule's nodes are recorded when node_wi is not NULL (node_weight too; node_omega, the solid
- * angle in wi each node stands for, may be NULL).  Every (theta, phi) node is recorded, with weight
- * 0 where rounding puts wi below the horizon, so the count is always 2 nt np. */
-static double lobe_rule_nodes(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wo[3], unit_rule rt,
-                              unit_rule rp, int include_fresnel, double *node_wi, double *node_weight,
-                              double *node_omega, size_t *node_count)
+double wenv_material_lobe_width(const wenv_material *mat)
 {
-    size_t recorded = 0;
-    if (node_count)
-        *node_count = 0;
-    if (!(wo[2] > 0.0))
-        return 0.0;
-    int ggx = lobe->distribution == WENV_NDF_GGX;
-    double m2 = lobe->roughness * lobe->roughness;
-    double k_o = lobe_view_k(lobe, shadowing, wo);
-    double co = wo[2], so = sqrt(wo[0] * wo[0] + wo[1] * wo[1]);
-    double phi_o = atan2(wo[1], wo[0]);
-    double theta_o = atan2(so, co), tan_o = so / co;
-    double lambda = theta_o > 1e-6 ? 0.5 : 0.0; /* near the normal beta is ~0 and the linear map suffices */
-    double total = 0.0;
-    for (size_t j = 0; j < rp.n; j++) {
-        double v = rp.x[j];
-        /* phi' and d phi' / dv of the mixed map (see above). */
-        double phi = M_PI * v, dphi = M_PI;
-        if (lambda > 0.0) {
-            double b = theta_o * cos(M_PI * v), tb = tan(b);
-            /* 1 - y^2 with y = tan(b) / tan_o, from tan_o - tan(b) = sin(theta_o - b) / (cos theta_o cos b)
-             * and theta_o - b = 2 theta_o sin^2(pi v / 2): no cancellation near the ends. */
-            double sv = sin(0.5 * M_PI * v);
-            double diff = sin(2.0 * theta_o * sv * sv) / (cos(theta_o) * cos(b));
-            double sin_phi = sqrt(fmax(diff * (tan_o + tb), 0.0)) / tan_o;
-            double phi_b = atan2(sin_phi, tb / tan_o);
-            double cb = cos(b);
-            double dphi_b = sin_phi > 0.0 ? theta_o * M_PI * sin(M_PI * v) / (cb * cb * tan_o * sin_phi) : 0.0;
-            phi = (1.0 - lambda) * phi + lambda * phi_b;
-            dphi = (1.0 - lambda) * dphi + lambda * dphi_b;
-        }
-        double cp = cos(phi_o + phi), sp = sin(phi_o + phi);
-        double p = so * cos(phi), amp = sqrt(co * co + p * p);
-        double tan_max = p >= 0.0 ? (amp + p) / co : co / (amp - p); /* tan(pi/4 + beta/2), stable */
-        double t_max = tan_max * tan_max;
-        /* xi_max and 1 - xi_max, each without cancellation. */
-        double xi_max, rest;
-        if (ggx) {
-            xi_max = t_max / (m2 + t_max);
-            rest = m2 / (m2 + t_max);
-        } else {
-            xi_max = -expm1(-t_max / m2);
-            rest = exp(-t_max / m2);
-        }
-        double ring = 0.0;
-        for (size_t i = 0; i < rt.n; i++) {
-            double r = 1.0 - rt.x[i], r3 = r * r * r;
-            double xi = xi_max * (1.0 - r3 * r);
-            double one_minus_xi = rest + xi_max * r3 * r;
-            double t = ggx ? m2 * xi / one_minus_xi : -m2 * log(one_minus_xi);
-            double ch = 1.0 / sqrt(1.0 + t), sh = sqrt(t) * ch;
-            double h[3] = {sh * cp, sh * sp, ch};
-            double oh = wo[0] * h[0] + wo[1] * h[1] + wo[2] * h[2];
-            double wi[3] = {2.0 * oh * h[0] - wo[0], 2.0 * oh * h[1] - wo[1], 2.0 * oh * h[2] - wo[2]};
-            double term = 0.0;
-            if (oh > 0.0 && wi[2] > 0.0) { /* fails only by rounding at the range's end */
-                /* vis = G / (4 ci co); the integrand F G (wo.h) / (co ch) = F vis 4 ci (wo.h) / ch. */
-                double t_h, cos_d;
-                double vis = lobe_vis(lobe, shadowing, wi, wo, k_o, &t_h, &cos_d);
-                double f = include_fresnel ? wenv_fresnel_dielectric(oh, lobe->ior) : 1.0;
-                term = rt.w[i] * 4.0 * r3 * f * vis * 4.0 * wi[2] * oh / ch;
-            }
-            ring += term;
-            if (node_wi) {
-                memcpy(node_wi + 3 * recorded, wi, sizeof wi);
-                if (node_omega) {
-                    /* d wi = 4 (wo.h) d wh and D cos_h d wh = d xi d phi / (2 pi), per unit of the
-                     * rule's variables (the ring's factors follow below) */
-                    double d = wenv_ndf(lobe->distribution, lobe->roughness, ch);
-                    node_omega[recorded] = d > 0.0 ? rt.w[i] * 4.0 * r3 * 4.0 * fabs(oh) / (d * ch) : 0.0;
-                }
-                node_weight[recorded++] = term;
-            }
-        }
-        total += rp.w[j] * dphi * xi_max * ring;
-        if (node_wi) {
-            /* this ring's nodes and their mirror images about the plane of wo and the normal (the
-             * rule covers one half circle), each with half the weight */
-            double scale = rp.w[j] * dphi * xi_max / (2.0 * M_PI), px = -sin(phi_o), py = cos(phi_o);
-            size_t first = *node_count, len = recorded - first;
-            for (size_t k = first; k < recorded; k++) {
-                node_weight[k] *= scale;
-                if (node_omega) {
-                    node_omega[k] *= scale;
-                    node_omega[k + len] = node_omega[k];
-                }
-                double *a = node_wi + 3 * k, *b = node_wi + 3 * (k + len), dp = a[0] * px + a[1] * py;
-                b[0] = a[0] - 2.0 * dp * px;
-                b[1] = a[1] - 2.0 * dp * py;
-                b[2] = a[2];
-                node_weight[k + len] = node_weight[k];
-            }
-            recorded += len;
-            *node_count = recorded;
-        }
+    double width = INFINITY;
+    for (size_t k = 0; k < mat->n_lobes; k++) {
+        const wenv_lobe *lobe = &mat->lobes[k];
+        if (lobe->specular[0] > 0.0 || lobe->specular[1] > 0.0 || lobe->specular[2] > 0.0)
+            width = fmin(width, lobe->roughness);
     }
-    return total / M_PI; /* (1 / 2 pi) * 2 halves */
+    return width;
 }
 
-static wenv_status albedo_nodes(size_t samples, double **x, double **w, wenv_error *err)
+void wenv_material_specular_cos(const wenv_material *mat, const double wi[3], const double wo[3], double rgb[3])
 {
-    *x = *w = NULL;
-    if (samples < ALBEDO_SAMPLES_MIN || samples > ALBEDO_SAMPLES_MAX)
-        return wenv_error_set(err, WENV_ERR_VALUE, "samples must be in [%d, %d], got %zu", ALBEDO_SAMPLES_MIN,
-                              ALBEDO_SAMPLES_MAX, samples);
-    *x = malloc(2 * samples * sizeof **x);
-    if (!*x)
-        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for %zu quadrature nodes", samples);
-    *w = *x + samples;
-    wenv_gauss_legendre_01(samples, *x, *w);
+    mat->kind->specular_cos(mat, wi, wo, rgb);
+}
+
+void wenv_material_eval_cos(const wenv_material *mat, const double wi[3], const double wo[3], double rgb[3])
+{
+    mat->kind->specular_cos(mat, wi, wo, rgb);
+    if (!(wi[2] > 0.0) || !(wo[2] > 0.0))
+        return;
+    double k = wi[2] * WENV_INV_PI;
+    for (int c = 0; c < 3; c++)
+        rgb[c] += mat->diffuse[c] * k;
+}
+
+void wenv_material_specular_cos_batch(const wenv_material *mat, const double wo[3], const float *wi, size_t n,
+                                      float *rgb_out)
+{
+    mat->kind->specular_cos_batch(mat, wo, wi, n, rgb_out);
+}
+
+size_t wenv_material_view_terms(const wenv_material *mat) { return mat->kind->view_terms(mat); }
+
+void wenv_material_prepare_view_f(const wenv_material *mat, const float wo[3], float *terms)
+{
+    mat->kind->prepare_view_f(mat, wo, terms);
+}
+
+void wenv_material_specular_cos_f(const wenv_material *mat, const float wi[3], const float wo[3], const float *terms,
+                                  float rgb[3])
+{
+    mat->kind->specular_cos_f(mat, wi, wo, terms, rgb);
+}
+
+static wenv_status check_lobe_index(const wenv_material *mat, size_t i, wenv_error *err)
+{
+    if (i >= mat->n_lobes)
+        return wenv_error_set(err, WENV_ERR_VALUE, "lobe %zu of a material with %zu lobes", i, mat->n_lobes);
     return WENV_OK;
 }
 
-wenv_status wenv_lobe_albedo(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wo[3], size_t samples,
-                             int include_fresnel, double *albedo, wenv_error *err)
+wenv_status wenv_material_lobe_albedo(const wenv_material *mat, size_t i, const double wo[3], size_t samples,
+                                      double rgb[3], wenv_error *err)
 {
-    *albedo = 0.0;
-    double *x, *w;
-    wenv_status st = albedo_nodes(samples, &x, &w, err);
-    if (st != WENV_OK)
-        return st;
-    unit_rule r = {samples, x, w};
-    *albedo = lobe_rule_nodes(lobe, shadowing, wo, r, r, include_fresnel, NULL, NULL, NULL, NULL);
-    free(x);
-    return WENV_OK;
+    rgb[0] = rgb[1] = rgb[2] = 0.0;
+    if (check_lobe_index(mat, i, err))
+        return err->status;
+    return mat->kind->lobe_albedo(mat, i, wo, samples, rgb, err);
+}
+
+wenv_status wenv_material_lobe_nodes(const wenv_material *mat, size_t i, const double wo[3], size_t samples,
+                                     double *wi, double *weight, size_t *count, wenv_error *err)
+{
+    *count = 0;
+    if (check_lobe_index(mat, i, err))
+        return err->status;
+    return mat->kind->lobe_nodes(mat, i, wo, samples, wi, weight, count, err);
+}
+
+wenv_status wenv_material_lobe_cells(const wenv_material *mat, size_t i, const double wo[3], size_t n_theta,
+                                     size_t n_phi, double *wi, double *weight, double *solid_angle, size_t *count,
+                                     wenv_error *err)
+{
+    *count = 0;
+    if (check_lobe_index(mat, i, err))
+        return err->status;
+    return mat->kind->lobe_cells(mat, i, wo, n_theta, n_phi, wi, weight, solid_angle, count, err);
 }
 
 wenv_status wenv_material_albedo(const wenv_material *mat, const double wo[3], size_t samples, double rgb[3],
                                  wenv_error *err)
 {
     rgb[0] = rgb[1] = rgb[2] = 0.0;
-    double *x, *w;
-    wenv_status st = albedo_nodes(samples, &x, &w, err);
-    if (st != WENV_OK)
-        return st;
-    if (wo[2] > 0.0) {
+    if (samples < ALBEDO_SAMPLES_MIN || samples > ALBEDO_SAMPLES_MAX)
+        return wenv_error_set(err, WENV_ERR_VALUE, "samples must be in [%d, %d], got %zu", ALBEDO_SAMPLES_MIN,
+                              ALBEDO_SAMPLES_MAX, samples);
+    if (!(wo[2] > 0.0))
+        return WENV_OK;
+    for (int c = 0; c < 3; c++)
+        rgb[c] = mat->diffuse[c]; /* Int diffuse / pi cos_i d wi = diffuse exactly */
+    for (size_t l = 0; l < mat->n_lobes; l++) {
+        double a[3];
+        if (mat->kind->lobe_albedo(mat, l, wo, samples, a, err))
+            return err->status;
         for (int c = 0; c < 3; c++)
-            rgb[c] = mat->diffuse[c]; /* Int diffuse / pi cos_i d wi = diffuse exactly */
-        for (size_t l = 0; l < mat->n_lobes; l++) {
-            unit_rule r = {samples, x, w};
-            double a = lobe_rule_nodes(&mat->lobes[l], mat->shadowing, wo, r, r, 1, NULL, NULL, NULL, NULL);
-            for (int c = 0; c < 3; c++)
-                rgb[c] += mat->lobes[l].specular[c] * a;
-        }
+            rgb[c] += a[c];
     }
-    free(x);
-    return WENV_OK;
-}
-
-wenv_status wenv_lobe_nodes(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wo[3], size_t samples,
-                            double *wi, double *weight, size_t *count, wenv_error *err)
-{
-    *count = 0;
-    double *x, *w;
-    wenv_status st = albedo_nodes(samples, &x, &w, err);
-    if (st != WENV_OK)
-        return st;
-    unit_rule r = {samples, x, w};
-    lobe_rule_nodes(lobe, shadowing, wo, r, r, 1, wi, weight, NULL, count);
-    free(x);
-    return WENV_OK;
-}
-
-wenv_status wenv_lobe_cells(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wo[3], size_t n_theta,
-                            size_t n_phi, double *wi, double *weight, double *solid_angle, size_t *count,
-                            wenv_error *err)
-{
-    *count = 0;
-    if (n_theta < 1 || n_phi < 1 || n_theta > ALBEDO_SAMPLES_MAX || n_phi > ALBEDO_SAMPLES_MAX)
-        return wenv_error_set(err, WENV_ERR_VALUE, "cell counts must be in [1, %d], got %zu x %zu",
-                              ALBEDO_SAMPLES_MAX, n_theta, n_phi);
-    double *x = malloc(2 * (n_theta + n_phi) * sizeof *x);
-    if (!x)
-        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for %zu x %zu cells", n_theta, n_phi);
-    double *w = x + n_theta, *xp = w + n_theta, *wp = xp + n_phi;
-    for (size_t i = 0; i < n_theta; i++) {
-        x[i] = ((double)i + 0.5) / (double)n_theta;
-        w[i] = 1.0 / (double)n_theta;
-    }
-    wenv_gauss_legendre_01(n_phi, xp, wp);
-    unit_rule rt = {n_theta, x, w}, rp = {n_phi, xp, wp};
-    if (!(wo[2] > 0.0)) {
-        /* nothing is reflected; the cells still exist, with weight 0 */
-        size_t n = 2 * n_theta * n_phi;
-        for (size_t k = 0; k < n; k++) {
-            wi[3 * k] = wi[3 * k + 1] = 0.0;
-            wi[3 * k + 2] = 1.0;
-            weight[k] = solid_angle[k] = 0.0;
-        }
-        *count = n;
-    } else {
-        lobe_rule_nodes(lobe, shadowing, wo, rt, rp, 1, wi, weight, solid_angle, count);
-    }
-    free(x);
     return WENV_OK;
 }

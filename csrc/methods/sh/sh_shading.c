@@ -145,21 +145,22 @@ wenv_status wenv_sh_shading_set_material(wenv_sh_shading *sr, const wenv_materia
 {
     double t0 = now_seconds();
     size_t V = sr->q.views, count = sr->count, S = lobe_samples(sr->q.order), nodes_max = 2 * S * S;
+    size_t n_lobes = wenv_material_lobe_count(mat);
     double *slices = calloc(V * count * 3, sizeof(double));
     if (!slices)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for SH BRDF slices");
     atomic_int failed = 0, cancelled = 0;
     atomic_size_t done = 0;
     size_t nodes_total = 0;
-    if (mat->n_lobes && !sr->rot && wenv_sh_rotation_create(&sr->rot, sr->q.order, err)) {
+    if (n_lobes && !sr->rot && wenv_sh_rotation_create(&sr->rot, sr->q.order, err)) {
         free(slices);
         return err->status;
     }
-    if (mat->n_lobes) {
+    if (n_lobes) {
 #pragma omp parallel reduction(+ : nodes_total)
         {
             double *wi = malloc(nodes_max * 3 * sizeof(double));
-            double *weight = malloc(nodes_max * sizeof(double));
+            double *weight = malloc(nodes_max * 3 * sizeof(double));
             double *y = malloc(count * sizeof(double));
             if (!wi || !weight || !y)
                 atomic_store(&failed, 1);
@@ -170,11 +171,10 @@ wenv_status wenv_sh_shading_set_material(wenv_sh_shading *sr, const wenv_materia
                 double th = max_view_theta() * (double)j / (double)(V - 1);
                 double wo[3] = {sin(th), 0.0, cos(th)};
                 double *slice = slices + j * count * 3;
-                for (size_t l = 0; l < mat->n_lobes; l++) {
-                    const wenv_lobe *lobe = &mat->lobes[l];
+                for (size_t l = 0; l < n_lobes; l++) {
                     size_t nodes = 0;
                     wenv_error e = {0};
-                    if (wenv_lobe_nodes(lobe, mat->shadowing, wo, S, wi, weight, &nodes, &e)) {
+                    if (wenv_material_lobe_nodes(mat, l, wo, S, wi, weight, &nodes, &e)) {
                         atomic_store(&failed, 1);
                         break;
                     }
@@ -182,10 +182,9 @@ wenv_status wenv_sh_shading_set_material(wenv_sh_shading *sr, const wenv_materia
                     for (size_t k = 0; k < nodes; k++) {
                         wenv_sh_eval(sr->q.order, wi + 3 * k, y);
                         for (size_t i = 0; i < count; i++) {
-                            double a = weight[k] * y[i];
-                            slice[3 * i] += a * lobe->specular[0];
-                            slice[3 * i + 1] += a * lobe->specular[1];
-                            slice[3 * i + 2] += a * lobe->specular[2];
+                            slice[3 * i] += weight[3 * k] * y[i];
+                            slice[3 * i + 1] += weight[3 * k + 1] * y[i];
+                            slice[3 * i + 2] += weight[3 * k + 2] * y[i];
                         }
                     }
                 }
@@ -208,9 +207,9 @@ wenv_status wenv_sh_shading_set_material(wenv_sh_shading *sr, const wenv_materia
     }
     free(sr->slices);
     sr->slices = slices;
-    sr->n_lobes = mat->n_lobes;
+    sr->n_lobes = n_lobes;
     for (int c = 0; c < 3; c++)
-        sr->diffuse_over_pi[c] = mat->diffuse[c] / M_PI;
+        sr->diffuse_over_pi[c] = wenv_material_diffuse(mat)[c] / M_PI;
     sr->have_mat = 1;
     sr->stats.slice_seconds = now_seconds() - t0;
     sr->stats.slice_bytes = V * count * 3 * sizeof(double);

@@ -2,13 +2,13 @@
  * shading for low-frequency lighting using spherical harmonics"), a peer of the wavelet method for
  * comparison.
  *
- * Lighting: the environment projected onto real SH up to band `order` (sh.h, in pixel blocks as coarse
+ * Lighting: the environment projected onto real SH up to band `order` (math/spherical_harmonics.h, in pixel blocks as coarse
  * as the order allows).  Material: the specular lobes' f(w, v) cos(w), projected onto SH in the
  * surface's local frame for `views` view elevations theta_v from 0 to 89.9 degrees with the view
  * in the local xz plane (isotropic BRDFs need no view azimuth: it is absorbed by the frame), each by
  * the lobe's own quadrature (wenv_lobe_nodes), so narrow lobes are projected without aliasing.
  * Per vertex: the frame whose z is the normal and whose x points along the view's tangential part;
- * the lighting rotated into it exactly (zyz Euler angles, sh.h); the radiance is the dot product with
+ * the lighting rotated into it exactly (zyz Euler angles, math/spherical_harmonics.h); the radiance is the dot product with
  * the slice interpolated linearly in theta_v.  Diffuse: irradiance sum_l A_l L_l0 sqrt((2l+1)/4pi)
  * from the same rotated lighting, bands 0..order (at order 2, Ramamoorthi and Hanrahan's 9
  * coefficients).  Cost per vertex: O(order^3) for the rotation.  A material without lobes needs no

@@ -23,10 +23,9 @@ struct wenv_splitsum {
     double irradiance_sh[9 * 3];
     /* material */
     size_t n_lobes;
-    wenv_lobe *lobes;
-    wenv_shadowing shadowing;
+    wenv_lobe *lobes;  /* their shapes: what the prefilter assumes */
     float diffuse_over_pi[3];
-    float *lut;        /* n_lobes x q.lut */
+    float *lut;        /* n_lobes x q.lut x 3: each lobe's albedo, its colour included */
     float *prefilter;  /* n_lobes x prefilter^2 x 3, once both are set */
 };
 
@@ -215,7 +214,7 @@ static void update_bytes(wenv_splitsum *ss)
     size_t P = ss->q.prefilter;
     ss->stats.lobes = ss->n_lobes;
     ss->stats.prefilter_bytes = ss->prefilter ? ss->n_lobes * P * P * 3 * sizeof(float) : 0;
-    ss->stats.lut_bytes = ss->n_lobes * ss->q.lut * sizeof(float);
+    ss->stats.lut_bytes = ss->n_lobes * ss->q.lut * 3 * sizeof(float);
     size_t source = 0; /* kept to prefilter again when the material changes */
     for (size_t k = 0; k < ss->src.levels; k++)
         source += ss->src.side[k] * ss->src.side[k] * 3 * sizeof(float);
@@ -268,31 +267,32 @@ wenv_status wenv_splitsum_set_environment(wenv_splitsum *ss, const wenv_envmap *
 wenv_status wenv_splitsum_set_material(wenv_splitsum *ss, const wenv_material *mat, const wenv_progress *progress,
                                        wenv_error *err)
 {
-    size_t nl = mat->n_lobes, N = ss->q.lut, P = ss->q.prefilter;
+    size_t nl = wenv_material_lobe_count(mat), N = ss->q.lut, P = ss->q.prefilter;
     wenv_lobe *lobes = malloc((nl ? nl : 1) * sizeof *lobes);
-    float *lut = malloc((nl ? nl : 1) * N * sizeof(float));
+    float *lut = malloc((nl ? nl : 1) * N * 3 * sizeof(float));
     float *pre = NULL;
     if (!lobes || !lut) {
         free(lobes);
         free(lut);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the environment-BRDF table");
     }
-    if (nl)
-        memcpy(lobes, mat->lobes, nl * sizeof *lobes);
+    for (size_t l = 0; l < nl; l++)
+        lobes[l] = *wenv_material_lobe(mat, l);
     double t0 = now_seconds();
     atomic_int failed = 0;
     wenv_error lut_err = {0};
 #pragma omp parallel for schedule(dynamic, 1) collapse(2)
     for (size_t l = 0; l < nl; l++)
         for (size_t i = 0; i < N; i++) {
-            double mu = ((double)i + 0.5) / (double)N, wo[3] = {sqrt(1.0 - mu * mu), 0.0, mu}, a = 0.0;
+            double mu = ((double)i + 0.5) / (double)N, wo[3] = {sqrt(1.0 - mu * mu), 0.0, mu}, a[3] = {0.0, 0.0, 0.0};
             wenv_error e = {0};
-            if (wenv_lobe_albedo(&lobes[l], mat->shadowing, wo, LUT_ALBEDO_SAMPLES, 1, &a, &e) != WENV_OK) {
+            if (wenv_material_lobe_albedo(mat, l, wo, LUT_ALBEDO_SAMPLES, a, &e) != WENV_OK) {
 #pragma omp critical(wenv_splitsum_lut)
                 wenv_error_set(&lut_err, e.status, "%s", e.message);
                 atomic_store(&failed, 1);
             }
-            lut[l * N + i] = (float)a;
+            for (int c = 0; c < 3; c++)
+                lut[(l * N + i) * 3 + (size_t)c] = (float)a[c];
         }
     if (failed) {
         free(lobes);
@@ -322,25 +322,24 @@ wenv_status wenv_splitsum_set_material(wenv_splitsum *ss, const wenv_material *m
     ss->lut = lut;
     ss->prefilter = pre;
     ss->n_lobes = nl;
-    ss->shadowing = mat->shadowing;
     for (int c = 0; c < 3; c++)
-        ss->diffuse_over_pi[c] = (float)(mat->diffuse[c] / M_PI);
+        ss->diffuse_over_pi[c] = (float)(wenv_material_diffuse(mat)[c] / M_PI);
     ss->stats.lut_seconds = t1 - t0;
     ss->have_mat = 1;
     update_bytes(ss);
     return WENV_OK;
 }
 
-static double lut_lookup(const float *table, size_t N, double mu)
+/* RGB entries at n.v = (i + 0.5) / N, linear in between. */
+static void lut_lookup(const float *table, size_t N, double mu, double rgb[3])
 {
     double x = mu * (double)N - 0.5;
-    if (!(x > 0.0))
-        return table[0];
-    if (x >= (double)(N - 1))
-        return table[N - 1];
-    size_t i = (size_t)x;
-    double f = x - (double)i;
-    return table[i] + f * (table[i + 1] - table[i]);
+    size_t i = !(x > 0.0) ? 0 : x >= (double)(N - 1) ? N - 1 : (size_t)x;
+    double f = !(x > 0.0) || x >= (double)(N - 1) ? 0.0 : x - (double)i;
+    for (int c = 0; c < 3; c++) {
+        const float *t = table + 3 * i + (size_t)c;
+        rgb[c] = f > 0.0 ? t[0] + f * (t[3] - t[0]) : t[0];
+    }
 }
 
 wenv_status wenv_splitsum_shade(const wenv_splitsum *ss, const float *normals, const float *views, size_t n,
@@ -376,9 +375,10 @@ wenv_status wenv_splitsum_shade(const wenv_splitsum *ss, const float *normals, c
             for (size_t l = 0; l < ss->n_lobes; l++) {
                 double pre[3];
                 bilinear_fetch(ss->prefilter + l * P * P * 3, P, u, w, pre);
-                double e = lut_lookup(ss->lut + l * N, N, mu);
+                double e[3];
+                lut_lookup(ss->lut + l * N * 3, N, mu, e);
                 for (int c = 0; c < 3; c++)
-                    rgb[c] += ss->lobes[l].specular[c] * e * pre[c];
+                    rgb[c] += e[c] * pre[c];
             }
         }
         for (int c = 0; c < 3; c++)

@@ -101,24 +101,21 @@ wenv_status wenv_grazing_rule_create(wenv_grazing_rule **out, const wenv_materia
                                      double threshold, wenv_error *err)
 {
     *out = NULL;
-    double m_min = INFINITY;
-    size_t lobes = 0;
-    for (size_t k = 0; k < mat->n_lobes; k++)
-        if (!lobe_is_black(&mat->lobes[k])) {
-            lobes++;
-            m_min = fmin(m_min, mat->lobes[k].roughness);
-        }
+    double m_min = wenv_material_lobe_width(mat);
+    size_t lobes = 0, n_lobes = wenv_material_lobe_count(mat);
+    for (size_t k = 0; k < n_lobes; k++)
+        lobes += !lobe_is_black(wenv_material_lobe(mat, k));
     if (!lobes || !(threshold > 0.0))
         return WENV_OK;
     size_t per_lobe = 2 * N_THETA * N_PHI;
     wenv_grazing_rule *rule = calloc(1, sizeof *rule);
-    double *wi = malloc(per_lobe * 5 * sizeof(double));
+    double *wi = malloc(per_lobe * 7 * sizeof(double));
     if (!rule || !wi) {
         free(rule);
         free(wi);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the grazing rules");
     }
-    double *weight = wi + 3 * per_lobe, *omega = weight + per_lobe;
+    double *weight = wi + 3 * per_lobe, *omega = weight + 3 * per_lobe;
     rule->n_nodes = lobes * per_lobe;
     rule->rho_scale = (float)(4.0 * (double)local_n * m_min / M_PI);
     rule->m_min = (float)m_min;
@@ -143,12 +140,11 @@ wenv_status wenv_grazing_rule_create(wenv_grazing_rule **out, const wenv_materia
         double c = exp(log_hi - (log_hi - log_lo) * (double)e / (ENTRIES - 1));
         double wo[3] = {sqrt(fmax(0.0, 1.0 - c * c)), 0.0, c};
         float *node = rule->nodes + e * rule->n_nodes * NODE_FLOATS;
-        for (size_t k = 0; k < mat->n_lobes; k++) {
-            const wenv_lobe *lobe = &mat->lobes[k];
-            if (lobe_is_black(lobe))
+        for (size_t k = 0; k < n_lobes; k++) {
+            if (lobe_is_black(wenv_material_lobe(mat, k)))
                 continue;
             size_t count;
-            if (wenv_lobe_cells(lobe, mat->shadowing, wo, N_THETA, N_PHI, wi, weight, omega, &count, err)) {
+            if (wenv_material_lobe_cells(mat, k, wo, N_THETA, N_PHI, wi, weight, omega, &count, err)) {
                 free(wi);
                 wenv_grazing_rule_free(rule);
                 return err->status;
@@ -156,7 +152,7 @@ wenv_status wenv_grazing_rule_create(wenv_grazing_rule **out, const wenv_materia
             for (size_t i = 0; i < count; i++, node += NODE_FLOATS) {
                 for (int c = 0; c < 3; c++) {
                     node[c] = (float)wi[3 * i + c];
-                    node[3 + c] = (float)(weight[i] * lobe->specular[c]);
+                    node[3 + c] = (float)weight[3 * i + c];
                 }
                 node[6] = omega[i] > 0.0 ? (float)(0.5 * log2(omega[i])) : -64.0f;
             }

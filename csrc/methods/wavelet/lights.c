@@ -11,7 +11,7 @@
 #define BINS (BIN_SIDE * BIN_SIDE)
 /* Levels with fewer lights than this skip the bin tests: testing every light is as cheap. */
 #define FEW_LIGHTS 32
-#define MAX_LOBES 16
+#define MAX_VIEW_TERMS 16
 
 typedef struct {
     size_t count;
@@ -245,10 +245,11 @@ void wenv_lights_irradiance(const wenv_lights *lights, int level, const float n[
 /* The view's terms, computed once per vertex (and only if a light is near a lobe). */
 typedef struct {
     const wenv_material *mat;
+    size_t n_lobes;
     const float *cos_h_min;
     float n[3], v[3], wo[3], co, so;
-    float k_o[MAX_LOBES];
-    int have_k;
+    float terms[MAX_VIEW_TERMS]; /* the material's, for this view */
+    int have_terms;
 } specular_view;
 
 /* A light off every lobe (n.h below the lobe's cut) costs a few dot products; one inside is
@@ -268,7 +269,7 @@ static inline void specular_range(const light_level *lv, size_t begin, size_t en
             continue;
         float ch = (ci + co) / sqrtf(h2);
         int near = 0;
-        for (size_t k = 0; k < mat->n_lobes; k++)
+        for (size_t k = 0; k < sv->n_lobes; k++)
             near |= ch >= sv->cos_h_min[k];
         if (!near)
             continue;
@@ -276,17 +277,17 @@ static inline void specular_range(const light_level *lv, size_t begin, size_t en
         float cphi = si * so > 1e-6f ? (lv_dot - ci * co) / (si * so) : 1.0f;
         cphi = min_f(1.0f, max_f(-1.0f, cphi));
         float wi[3] = {si * cphi, si * sqrtf(1.0f - cphi * cphi), ci}, rgb[3];
-        if (mat->n_lobes > MAX_LOBES) { /* rare: no room for the view terms, use the double path */
+        if (wenv_material_view_terms(mat) > MAX_VIEW_TERMS) { /* rare: no room for them, use the double path */
             double wid[3] = {wi[0], wi[1], wi[2]}, wod[3] = {sv->wo[0], sv->wo[1], sv->wo[2]}, rgbd[3];
             wenv_material_specular_cos(mat, wid, wod, rgbd);
             for (int c = 0; c < 3; c++)
                 rgb[c] = (float)rgbd[c];
         } else {
-            if (!sv->have_k) {
-                wenv_material_view_k_f(mat, sv->wo, sv->k_o);
-                sv->have_k = 1;
+            if (!sv->have_terms) {
+                wenv_material_prepare_view_f(mat, sv->wo, sv->terms);
+                sv->have_terms = 1;
             }
-            wenv_material_specular_cos_f(mat, wi, sv->wo, sv->k_o, rgb);
+            wenv_material_specular_cos_f(mat, wi, sv->wo, sv->terms, rgb);
         }
         s[0] += rgb[0] * flux[0];
         s[1] += rgb[1] * flux[1];
@@ -298,7 +299,7 @@ void wenv_lights_specular(const wenv_lights *lights, int level, const wenv_mater
                           double cone_cos, const float n[3], const float v[3], float cos_v, float s[3])
 {
     const light_level *lv = &lights->level[level];
-    specular_view sv = {.mat = mat, .cos_h_min = cos_h_min, .co = cos_v, .have_k = 0};
+    specular_view sv = {.mat = mat, .n_lobes = wenv_material_lobe_count(mat), .cos_h_min = cos_h_min, .co = cos_v, .have_terms = 0};
     memcpy(sv.n, n, sizeof sv.n);
     memcpy(sv.v, v, sizeof sv.v);
     /* any frame with +Z the normal will do: the lobes are isotropic */

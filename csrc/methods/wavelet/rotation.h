@@ -1,8 +1,8 @@
-/* Normal samples, their frames, and the wavelet rotation matrices (REFERENCE.md §4).
+/* Normal samples, their frames, and the wavelet rotation matrices (docs/ARCHITECTURE.md §3.3).
  *
  * Normal samples sit at the texel centres of a normal_n x normal_n octahedral map.  Each has the
  * orthonormal frame of Duff et al. 2017 / Frisvad 2012 without the sign flip, so frames vary
- * continuously over the sphere except at n = (0, 0, -1) (REFERENCE.md §2).
+ * continuously over the sphere except at n = (0, 0, -1) (docs/ARCHITECTURE.md §3.1).
  *
  * The resampling operator S_s takes the global octahedral lighting texels to the local
  * hemi-octahedral texels of sample s: every global texel is split into k x k sub-samples whose

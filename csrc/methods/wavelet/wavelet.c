@@ -454,10 +454,7 @@ done:
  * about 1.4 m radians) with a couple of samples. */
 static size_t quadrature_k(const wenv_wavelet *wavelet, const wenv_material *mat)
 {
-    double m = 1.0;
-    for (size_t l = 0; l < mat->n_lobes; l++)
-        if (mat->lobes[l].roughness < m)
-            m = mat->lobes[l].roughness;
+    double m = fmin(1.0, wenv_material_lobe_width(mat));
     double spacing = 2.5 / (double)wavelet->q.local_n;
     size_t k = (size_t)ceil(2.0 * spacing / (1.41 * m));
     return k < 2 ? 2 : (k > 16 ? 16 : k);
@@ -469,11 +466,12 @@ static size_t quadrature_k(const wenv_wavelet *wavelet, const wenv_material *mat
 static wenv_status lobe_cutoffs(wenv_wavelet *wavelet, const wenv_material *mat, wenv_error *err)
 {
     enum { STEPS = 4096 };
-    wavelet->lobe_cos_h_min = malloc((mat->n_lobes ? mat->n_lobes : 1) * sizeof(float));
+    size_t n_lobes = wenv_material_lobe_count(mat);
+    wavelet->lobe_cos_h_min = malloc((n_lobes ? n_lobes : 1) * sizeof(float));
     if (!wavelet->lobe_cos_h_min)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the material");
-    for (size_t k = 0; k < mat->n_lobes; k++) {
-        const wenv_lobe *lobe = &mat->lobes[k];
+    for (size_t k = 0; k < n_lobes; k++) {
+        const wenv_lobe *lobe = wenv_material_lobe(mat, k);
         double peak = 0.0;
         for (int i = 0; i <= STEPS; i++)
             peak = fmax(peak, wenv_ndf(lobe->distribution, lobe->roughness, cos(0.5 * M_PI * i / STEPS)));
@@ -485,11 +483,9 @@ static wenv_status lobe_cutoffs(wenv_wavelet *wavelet, const wenv_material *mat,
     }
     /* A half-vector theta_h from the normal turns the mirror direction by at most 2 theta_h. */
     double theta_h = 0.0;
-    wavelet->lobe_m_min = 1.0;
-    for (size_t k = 0; k < mat->n_lobes; k++) {
+    for (size_t k = 0; k < n_lobes; k++)
         theta_h = fmax(theta_h, acos(fmax(-1.0, fmin(1.0, (double)wavelet->lobe_cos_h_min[k]))));
-        wavelet->lobe_m_min = fmin(wavelet->lobe_m_min, mat->lobes[k].roughness);
-    }
+    wavelet->lobe_m_min = fmin(1.0, wenv_material_lobe_width(mat));
     wavelet->light_cone_cos = 2.0 * theta_h >= M_PI ? -1.0 : cos(2.0 * theta_h);
     return WENV_OK;
 }
@@ -526,15 +522,15 @@ static wenv_status albedo_tables(wenv_wavelet *wavelet, const wenv_material *mat
     for (size_t i = 0; i < ALBEDO_N; i++) {
         double c = WENV_GRAZING_Z + (1.0 - WENV_GRAZING_Z) * (double)i / (double)(ALBEDO_N - 1);
         double wo[3] = {sqrt(fmax(0.0, 1.0 - c * c)), 0.0, c};
-        for (size_t l = 0; l < mat->n_lobes; l++) {
-            double a;
+        for (size_t l = 0; l < wenv_material_lobe_count(mat); l++) {
+            double a[3];
             wenv_error lobe_err = {0};
-            if (wenv_lobe_albedo(&mat->lobes[l], mat->shadowing, wo, ALBEDO_SAMPLES, 1, &a, &lobe_err)) {
+            if (wenv_material_lobe_albedo(mat, l, wo, ALBEDO_SAMPLES, a, &lobe_err)) {
                 atomic_store(&failed, 1);
                 continue;
             }
             for (int k = 0; k < 3; k++)
-                wavelet->albedo[3 * i + k] += (float)(a * mat->lobes[l].specular[k]);
+                wavelet->albedo[3 * i + k] += (float)a[k];
         }
     }
     if (failed)
@@ -555,7 +551,7 @@ wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material
 {
     size_t nv = wavelet->nv, nl = wavelet->nl, L = wavelet->q.local_n, V = wavelet->q.view_n;
     size_t keep = wavelet->q.coefficients ? wavelet->q.coefficients : nl;
-    if (mat->n_lobes && build_quadrature(wavelet, quadrature_k(wavelet, mat), err))
+    if (wenv_material_lobe_count(mat) && build_quadrature(wavelet, quadrature_k(wavelet, mat), err))
         return err->status;
     free_material(wavelet);
     wavelet->brdf_start = calloc(nv + 1, sizeof(size_t));
@@ -570,7 +566,7 @@ wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for BRDF slices");
     }
     atomic_int failed = 0;
-    if (mat->n_lobes) {
+    if (wenv_material_lobe_count(mat)) {
 #pragma omp parallel
         {
             float *slice = malloc(nl * 3 * sizeof(float));
@@ -654,7 +650,7 @@ wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material
         return err->status;
     }
     for (int c = 0; c < 3; c++)
-        wavelet->diffuse_over_pi[c] = (float)(mat->diffuse[c] / M_PI);
+        wavelet->diffuse_over_pi[c] = (float)(wenv_material_diffuse(mat)[c] / M_PI);
     wavelet->stats.brdf_terms_total = total;
     wavelet->have_mat = 1;
     return remake_ready(wavelet, 0, err);
@@ -752,9 +748,10 @@ static void shade_direct(const wenv_wavelet *wavelet, const float n[3], const fl
                          float s[3])
 {
     const wenv_material *mat = wavelet->mat;
-    if (mat->diffuse[0] != 0.0 || mat->diffuse[1] != 0.0 || mat->diffuse[2] != 0.0)
+    const double *diffuse = wenv_material_diffuse(mat);
+    if (diffuse[0] != 0.0 || diffuse[1] != 0.0 || diffuse[2] != 0.0)
         wenv_lights_irradiance(wavelet->lights, wenv_lights_level(WENV_LIGHT_IRRADIANCE_WIDTH), n, e);
-    if (mat->n_lobes)
+    if (wenv_material_lobe_count(mat))
         wenv_lights_specular(wavelet->lights, wenv_lights_level(2.0 * wavelet->lobe_m_min * co), mat, wavelet->lobe_cos_h_min,
                              wavelet->light_cone_cos, n, v, co, s);
 }

@@ -1,0 +1,39 @@
+/* What a reflectance model implements to be a material (scene/material.h).  Only the models'
+ * own files include this; everything else sees materials through material.h. */
+#ifndef WENV_MATERIAL_KIND_H
+#define WENV_MATERIAL_KIND_H
+
+#include "scene/material.h"
+
+typedef struct wenv_material_kind {
+    const char *name;
+    /* The glossy part (see material.h for each contract). */
+    void (*specular_cos)(const wenv_material *mat, const double wi[3], const double wo[3], double rgb[3]);
+    void (*specular_cos_batch)(const wenv_material *mat, const double wo[3], const float *wi, size_t n, float *rgb);
+    size_t (*view_terms)(const wenv_material *mat);
+    void (*prepare_view_f)(const wenv_material *mat, const float wo[3], float *terms);
+    void (*specular_cos_f)(const wenv_material *mat, const float wi[3], const float wo[3], const float *terms,
+                           float rgb[3]);
+    wenv_status (*lobe_albedo)(const wenv_material *mat, size_t i, const double wo[3], size_t samples, double rgb[3],
+                               wenv_error *err);
+    wenv_status (*lobe_nodes)(const wenv_material *mat, size_t i, const double wo[3], size_t samples, double *wi,
+                              double *weight, size_t *count, wenv_error *err);
+    wenv_status (*lobe_cells)(const wenv_material *mat, size_t i, const double wo[3], size_t n_theta, size_t n_phi,
+                              double *wi, double *weight, double *solid_angle, size_t *count, wenv_error *err);
+    /* Optional: a copy with every lobe at `roughness` (already validated); NULL if the model cannot. */
+    wenv_status (*with_roughness)(wenv_material **out, const wenv_material *src, double roughness, wenv_error *err);
+} wenv_material_kind;
+
+struct wenv_material {
+    const wenv_material_kind *kind;
+    double diffuse[3];
+    size_t n_lobes;
+    wenv_lobe *lobes; /* owned: the lobes' shapes (Cook-Torrance: the lobes) */
+    wenv_shadowing shadowing;
+};
+
+/* Checks diffuse and the lobes and makes the common part (lobes copied); the kind fills the rest. */
+wenv_status wenv_material_alloc(wenv_material **out, const wenv_material_kind *kind, const double diffuse[3],
+                                const wenv_lobe *lobes, size_t n_lobes, wenv_shadowing shadowing, wenv_error *err);
+
+#endif

@@ -1,0 +1,313 @@
+/* One microfacet lobe (microfacet.h): Fresnel, D, Smith, and the lobe's quadrature rules.
+ *
+ * Formulation chosen for speed and robustness in the hot path (~1e9 calls):
+ *  - Half vector not normalised: s = wi + wo, tan^2(theta_h) = (sx^2 + sy^2) / sz^2 straight from
+ *    components (no cancellation near the normal), and for unit vectors wi.h = |s| / 2 exactly,
+ *    which stays accurate where 1 + wi.wo would cancel.
+ *  - D written in tan^2 only: Beckmann exp(-t/m^2) (1 + t)^2 / (pi m^2), GGX m^2 r^2 / pi with
+ *    r = (1 + t) / (m^2 + t); both finite for t -> inf once t is capped (the capped value is already
+ *    exactly 0 for Beckmann and the limit m^2/pi for GGX).
+ *  - Smith height-correlated G2 / (4 cos_i cos_o) = 1 / (2 (cos_o K_i + cos_i K_o)) with
+ *    K = cos (1 + 2 Lambda): Beckmann K = c erf(a) + m sin exp(-a^2) / sqrt(pi) (a = c / (m sin)),
+ *    GGX K = sqrt(c^2 + m^2 sin^2).  No division by a cosine, no cancellation, finite at the horizon.
+ *  - V-cavity G / (4 cos_i cos_o) = min(1 / (4 cos_i cos_o), sz / (|s|^2 max(cos_i, cos_o))). */
+#include "scene/microfacet.h"
+
+#include <float.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "math/quadrature.h"
+
+#ifndef M_PI
+#define M_PI 3.14159265358979323846
+#endif
+
+#define ALBEDO_SAMPLES_MIN 8
+#define ALBEDO_SAMPLES_MAX 4096
+
+double wenv_alpha_from_roughness(double roughness)
+{
+    return fmax(roughness * roughness, WENV_ALPHA_FROM_ROUGHNESS_MIN);
+}
+
+double wenv_fresnel_dielectric(double cos_i, double ior)
+{
+    /* Exact unpolarised dielectric Fresnel, (Rs + Rp) / 2, in Cook & Torrance's closed form with
+     * g = n cos_t; g > c for ior > 1, so no denominator vanishes and there is no total reflection. */
+    double c = fmin(fmax(cos_i, 0.0), 1.0);
+    double g = sqrt(ior * ior - 1.0 + c * c);
+    double a = (g - c) / (g + c);
+    double b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0);
+    return 0.5 * a * a * (1.0 + b * b);
+}
+
+double wenv_ndf(wenv_distribution dist, double m, double cos_h)
+{
+    if (!(cos_h > 0.0))
+        return 0.0;
+    double c = fmin(cos_h, 1.0);
+    double s2 = (1.0 - c) * (1.0 + c); /* sin^2 without cancellation near c = 1 */
+    return wenv_lobe_ndf_tan2(dist, m, s2 / fmax(c * c, DBL_MIN));
+}
+
+double wenv_smith_lambda(wenv_distribution dist, double m, double cos_theta)
+{
+    double c = fmin(fmax(cos_theta, 0.0), 1.0);
+    double s = sqrt((1.0 - c) * (1.0 + c));
+    double cc = fmax(c, 1e-150); /* horizon: large finite instead of inf (and no overflow of m^2 tan^2) */
+    if (dist == WENV_NDF_GGX) {
+        /* (sqrt(1 + x) - 1) / 2 rewritten as x / (2 (1 + sqrt(1 + x))): no cancellation for small x. */
+        double mt = m * s / cc;
+        double x = mt * mt;
+        return x / (2.0 * (1.0 + sqrt(1.0 + x)));
+    }
+    double a = fmin(cc / fmax(m * s, DBL_MIN), WENV_BECKMANN_A_CAP);
+    /* (erf(a) - 1) / 2 = -erfc(a) / 2: erfc keeps the small difference accurate for large a. */
+    double lambda = 0.5 * (exp(-a * a) * WENV_INV_SQRT_PI / a - erfc(a));
+    return fmax(lambda, 0.0);
+}
+
+double wenv_lobe_eval(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wi[3], const double wo[3])
+{
+    if (!(wi[2] > 0.0) || !(wo[2] > 0.0))
+        return 0.0;
+    return wenv_lobe_value(lobe, shadowing, wi, wo, wenv_lobe_view_k(lobe, shadowing, wo));
+}
+
+wenv_status wenv_lobe_check(const wenv_lobe *lobe, size_t i, wenv_error *err)
+{
+    for (int c = 0; c < 3; c++) {
+        if (!isfinite(lobe->specular[c]) || lobe->specular[c] < 0.0)
+            return wenv_error_set(err, WENV_ERR_VALUE, "lobes[%zu].specular must be finite and >= 0, got %g", i,
+                                  lobe->specular[c]);
+    }
+    if (!isfinite(lobe->roughness) || lobe->roughness < WENV_ROUGHNESS_MIN || lobe->roughness > WENV_ROUGHNESS_MAX)
+        return wenv_error_set(err, WENV_ERR_VALUE, "lobes[%zu].roughness must be finite in [%g, %g], got %g", i,
+                              WENV_ROUGHNESS_MIN, WENV_ROUGHNESS_MAX, lobe->roughness);
+    if (!isfinite(lobe->ior) || !(lobe->ior > 1.0) || lobe->ior > WENV_IOR_MAX)
+        return wenv_error_set(err, WENV_ERR_VALUE, "lobes[%zu].ior must be finite in (1, %g], got %g", i, WENV_IOR_MAX,
+                              lobe->ior);
+    if (lobe->distribution != WENV_NDF_BECKMANN && lobe->distribution != WENV_NDF_GGX)
+        return wenv_error_set(err, WENV_ERR_VALUE, "lobes[%zu].distribution must be beckmann or ggx", i);
+    return WENV_OK;
+}
+
+/* ---------------------------------------------------------------- albedo quadrature */
+
+/* Integrand of the albedo at half vector h(t = tan^2 theta_h, phi) per unit of the distribution's CDF
+ * xi: F G (wo.h) / (co cos_h) = F vis 4 ci (wo.h) / cos_h, vis = G / (4 ci co). */
+static inline double albedo_integrand(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wo[3],
+                                      double k_o, double t, double cp, double sp, int include_fresnel)
+{
+    double ch = 1.0 / sqrt(1.0 + t), sh = sqrt(t) * ch;
+    double h[3] = {sh * cp, sh * sp, ch};
+    double oh = wo[0] * h[0] + wo[1] * h[1] + wo[2] * h[2];
+    double wi[3] = {2.0 * oh * h[0] - wo[0], 2.0 * oh * h[1] - wo[1], 2.0 * oh * h[2] - wo[2]};
+    if (!(oh > 0.0) || !(wi[2] > 0.0)) /* only by rounding at the range's end */
+        return 0.0;
+    double t_h, cos_d;
+    double vis = wenv_lobe_vis(lobe, shadowing, wi, wo, k_o, &t_h, &cos_d);
+    double f = include_fresnel ? wenv_fresnel_dielectric(oh, lobe->ior) : 1.0;
+    return f * vis * 4.0 * wi[2] * oh / ch;
+}
+
+/* Integral of F D G / (4 ci co) * ci over wi, substituted to the half vector (d wi = 4 (wo.h) d wh)
+ * and then to the distribution's CDF xi(theta_h), for which D cos_h d wh = d xi d phi / (2 pi):
+ *   albedo = (1 / 2 pi) Int d phi Int_0^xi_max(phi) F G (wo.h) / (co cos_h) d xi.
+ * Nodes follow D, so peaks of any width are resolved.  Three details keep it accurate for grazing
+ * views and tiny roughness with a modest node count:
+ *  - Range: for azimuth phi' (relative to wo's) the reflected wi is above the horizon exactly for
+ *    theta_h < theta_max = pi/4 + beta/2, beta = atan(tan(theta_o) cos phi') (there cos_i =
+ *    A sin(2 (theta_max - theta_h)) and wo.h > 0 holds), so the rule never straddles that kink.
+ *  - Grading: Smith G changes quickly where cos_i ~ m, just below theta_max, and in xi that band can
+ *    be far narrower than the node spacing; xi = xi_max (1 - (1 - u)^4) crowds nodes there.
+ *  - Azimuth: for grazing views beta swings from +theta_o to -theta_o within ~cos(theta_o) of
+ *    phi' = 90 deg; half of the map phi'(v) follows beta (phi' = acos(tan(theta_o cos(pi v)) /
+ *    tan(theta_o))), half is linear, over the mirror-symmetric half circle [0, pi]. */
+typedef struct {
+    size_t n;            /* nodes on [0, 1] */
+    const double *x, *w; /* positions and weights */
+} unit_rule;
+
+/* The rule's nodes are recorded when node_wi is not NULL (node_weight too; node_omega, the solid
+ * angle in wi each node stands for, may be NULL).  Every (theta, phi) node is recorded, with weight
+ * 0 where rounding puts wi below the horizon, so the count is always 2 nt np. */
+static double lobe_rule_nodes(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wo[3], unit_rule rt,
+                              unit_rule rp, int include_fresnel, double *node_wi, double *node_weight,
+                              double *node_omega, size_t *node_count)
+{
+    size_t recorded = 0;
+    if (node_count)
+        *node_count = 0;
+    if (!(wo[2] > 0.0))
+        return 0.0;
+    int ggx = lobe->distribution == WENV_NDF_GGX;
+    double m2 = lobe->roughness * lobe->roughness;
+    double k_o = wenv_lobe_view_k(lobe, shadowing, wo);
+    double co = wo[2], so = sqrt(wo[0] * wo[0] + wo[1] * wo[1]);
+    double phi_o = atan2(wo[1], wo[0]);
+    double theta_o = atan2(so, co), tan_o = so / co;
+    double lambda = theta_o > 1e-6 ? 0.5 : 0.0; /* near the normal beta is ~0 and the linear map suffices */
+    double total = 0.0;
+    for (size_t j = 0; j < rp.n; j++) {
+        double v = rp.x[j];
+        /* phi' and d phi' / dv of the mixed map (see above). */
+        double phi = M_PI * v, dphi = M_PI;
+        if (lambda > 0.0) {
+            double b = theta_o * cos(M_PI * v), tb = tan(b);
+            /* 1 - y^2 with y = tan(b) / tan_o, from tan_o - tan(b) = sin(theta_o - b) / (cos theta_o cos b)
+             * and theta_o - b = 2 theta_o sin^2(pi v / 2): no cancellation near the ends. */
+            double sv = sin(0.5 * M_PI * v);
+            double diff = sin(2.0 * theta_o * sv * sv) / (cos(theta_o) * cos(b));
+            double sin_phi = sqrt(fmax(diff * (tan_o + tb), 0.0)) / tan_o;
+            double phi_b = atan2(sin_phi, tb / tan_o);
+            double cb = cos(b);
+            double dphi_b = sin_phi > 0.0 ? theta_o * M_PI * sin(M_PI * v) / (cb * cb * tan_o * sin_phi) : 0.0;
+            phi = (1.0 - lambda) * phi + lambda * phi_b;
+            dphi = (1.0 - lambda) * dphi + lambda * dphi_b;
+        }
+        double cp = cos(phi_o + phi), sp = sin(phi_o + phi);
+        double p = so * cos(phi), amp = sqrt(co * co + p * p);
+        double tan_max = p >= 0.0 ? (amp + p) / co : co / (amp - p); /* tan(pi/4 + beta/2), stable */
+        double t_max = tan_max * tan_max;
+        /* xi_max and 1 - xi_max, each without cancellation. */
+        double xi_max, rest;
+        if (ggx) {
+            xi_max = t_max / (m2 + t_max);
+            rest = m2 / (m2 + t_max);
+        } else {
+            xi_max = -expm1(-t_max / m2);
+            rest = exp(-t_max / m2);
+        }
+        double ring = 0.0;
+        for (size_t i = 0; i < rt.n; i++) {
+            double r = 1.0 - rt.x[i], r3 = r * r * r;
+            double xi = xi_max * (1.0 - r3 * r);
+            double one_minus_xi = rest + xi_max * r3 * r;
+            double t = ggx ? m2 * xi / one_minus_xi : -m2 * log(one_minus_xi);
+            double ch = 1.0 / sqrt(1.0 + t), sh = sqrt(t) * ch;
+            double h[3] = {sh * cp, sh * sp, ch};
+            double oh = wo[0] * h[0] + wo[1] * h[1] + wo[2] * h[2];
+            double wi[3] = {2.0 * oh * h[0] - wo[0], 2.0 * oh * h[1] - wo[1], 2.0 * oh * h[2] - wo[2]};
+            double term = 0.0;
+            if (oh > 0.0 && wi[2] > 0.0) { /* fails only by rounding at the range's end */
+                /* vis = G / (4 ci co); the integrand F G (wo.h) / (co ch) = F vis 4 ci (wo.h) / ch. */
+                double t_h, cos_d;
+                double vis = wenv_lobe_vis(lobe, shadowing, wi, wo, k_o, &t_h, &cos_d);
+                double f = include_fresnel ? wenv_fresnel_dielectric(oh, lobe->ior) : 1.0;
+                term = rt.w[i] * 4.0 * r3 * f * vis * 4.0 * wi[2] * oh / ch;
+            }
+            ring += term;
+            if (node_wi) {
+                memcpy(node_wi + 3 * recorded, wi, sizeof wi);
+                if (node_omega) {
+                    /* d wi = 4 (wo.h) d wh and D cos_h d wh = d xi d phi / (2 pi), per unit of the
+                     * rule's variables (the ring's factors follow below) */
+                    double d = wenv_ndf(lobe->distribution, lobe->roughness, ch);
+                    node_omega[recorded] = d > 0.0 ? rt.w[i] * 4.0 * r3 * 4.0 * fabs(oh) / (d * ch) : 0.0;
+                }
+                node_weight[recorded++] = term;
+            }
+        }
+        total += rp.w[j] * dphi * xi_max * ring;
+        if (node_wi) {
+            /* this ring's nodes and their mirror images about the plane of wo and the normal (the
+             * rule covers one half circle), each with half the weight */
+            double scale = rp.w[j] * dphi * xi_max / (2.0 * M_PI), px = -sin(phi_o), py = cos(phi_o);
+            size_t first = *node_count, len = recorded - first;
+            for (size_t k = first; k < recorded; k++) {
+                node_weight[k] *= scale;
+                if (node_omega) {
+                    node_omega[k] *= scale;
+                    node_omega[k + len] = node_omega[k];
+                }
+                double *a = node_wi + 3 * k, *b = node_wi + 3 * (k + len), dp = a[0] * px + a[1] * py;
+                b[0] = a[0] - 2.0 * dp * px;
+                b[1] = a[1] - 2.0 * dp * py;
+                b[2] = a[2];
+                node_weight[k + len] = node_weight[k];
+            }
+            recorded += len;
+            *node_count = recorded;
+        }
+    }
+    return total / M_PI; /* (1 / 2 pi) * 2 halves */
+}
+
+static wenv_status albedo_nodes(size_t samples, double **x, double **w, wenv_error *err)
+{
+    *x = *w = NULL;
+    if (samples < ALBEDO_SAMPLES_MIN || samples > ALBEDO_SAMPLES_MAX)
+        return wenv_error_set(err, WENV_ERR_VALUE, "samples must be in [%d, %d], got %zu", ALBEDO_SAMPLES_MIN,
+                              ALBEDO_SAMPLES_MAX, samples);
+    *x = malloc(2 * samples * sizeof **x);
+    if (!*x)
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for %zu quadrature nodes", samples);
+    *w = *x + samples;
+    wenv_gauss_legendre_01(samples, *x, *w);
+    return WENV_OK;
+}
+
+wenv_status wenv_lobe_albedo(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wo[3], size_t samples,
+                             int include_fresnel, double *albedo, wenv_error *err)
+{
+    *albedo = 0.0;
+    double *x, *w;
+    wenv_status st = albedo_nodes(samples, &x, &w, err);
+    if (st != WENV_OK)
+        return st;
+    unit_rule r = {samples, x, w};
+    *albedo = lobe_rule_nodes(lobe, shadowing, wo, r, r, include_fresnel, NULL, NULL, NULL, NULL);
+    free(x);
+    return WENV_OK;
+}
+
+wenv_status wenv_lobe_nodes(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wo[3], size_t samples,
+                            double *wi, double *weight, size_t *count, wenv_error *err)
+{
+    *count = 0;
+    double *x, *w;
+    wenv_status st = albedo_nodes(samples, &x, &w, err);
+    if (st != WENV_OK)
+        return st;
+    unit_rule r = {samples, x, w};
+    lobe_rule_nodes(lobe, shadowing, wo, r, r, 1, wi, weight, NULL, count);
+    free(x);
+    return WENV_OK;
+}
+
+wenv_status wenv_lobe_cells(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wo[3], size_t n_theta,
+                            size_t n_phi, double *wi, double *weight, double *solid_angle, size_t *count,
+                            wenv_error *err)
+{
+    *count = 0;
+    if (n_theta < 1 || n_phi < 1 || n_theta > ALBEDO_SAMPLES_MAX || n_phi > ALBEDO_SAMPLES_MAX)
+        return wenv_error_set(err, WENV_ERR_VALUE, "cell counts must be in [1, %d], got %zu x %zu",
+                              ALBEDO_SAMPLES_MAX, n_theta, n_phi);
+    double *x = malloc(2 * (n_theta + n_phi) * sizeof *x);
+    if (!x)
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for %zu x %zu cells", n_theta, n_phi);
+    double *w = x + n_theta, *xp = w + n_theta, *wp = xp + n_phi;
+    for (size_t i = 0; i < n_theta; i++) {
+        x[i] = ((double)i + 0.5) / (double)n_theta;
+        w[i] = 1.0 / (double)n_theta;
+    }
+    wenv_gauss_legendre_01(n_phi, xp, wp);
+    unit_rule rt = {n_theta, x, w}, rp = {n_phi, xp, wp};
+    if (!(wo[2] > 0.0)) {
+        /* nothing is reflected; the cells still exist, with weight 0 */
+        size_t n = 2 * n_theta * n_phi;
+        for (size_t k = 0; k < n; k++) {
+            wi[3 * k] = wi[3 * k + 1] = 0.0;
+            wi[3 * k + 2] = 1.0;
+            weight[k] = solid_angle[k] = 0.0;
+        }
+        *count = n;
+    } else {
+        lobe_rule_nodes(lobe, shadowing, wo, rt, rp, 1, wi, weight, solid_angle, count);
+    }
+    free(x);
+    return WENV_OK;
+}

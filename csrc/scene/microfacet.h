@@ -1,0 +1,167 @@
+/* One microfacet lobe: the mathematics Cook-Torrance materials are made of, and the shape every
+ * material describes its glossy lobes by (scene/material.h).
+ *
+ * Directions are unit vectors in a local frame whose +Z is the surface normal.  Cook-Torrance uses
+ * the modern microfacet form f = F D G / (4 cos_i cos_o) (docs/ARCHITECTURE.md §3.6), D normalised so that
+ * the projected microfacet area integrates to one, roughness m the RMS slope (Beckmann) or alpha
+ * (GGX), exact unpolarised dielectric Fresnel at the lobe's index of refraction, and either
+ * Smith's shadowing-masking with the distribution's exact Lambda (height-correlated form
+ * G2 = 1 / (1 + Lambda(wi) + Lambda(wo))) or the original Cook-Torrance V-cavity term.
+ *
+ * Why height-correlated Smith: it is the form Heitz (2014, "Understanding the Masking-Shadowing
+ * Function in Microfacet-Based BRDFs") recommends; unlike the separable G1(wi) G1(wo) it accounts
+ * for the correlation between masking and shadowing by the same microsurface heights, is exact for
+ * the Smith microsurface profile, and is reciprocal.  Lambda is the exact one of the distribution:
+ * Beckmann Lambda(a) = (erf(a) - 1) / 2 + exp(-a^2) / (2 a sqrt(pi)), GGX
+ * Lambda = (-1 + sqrt(1 + m^2 tan^2)) / 2, with a = 1 / (m tan theta).
+ * V-cavity: G = min(1, 2 cos_h cos_o / (wo.h), 2 cos_h cos_i / (wi.h)) (Cook & Torrance 1982).
+ *
+ * Numerics: every function returns finite values for valid inputs, including directions exactly at
+ * the normal or the horizon, cos_h -> 0 and roughness from WENV_ROUGHNESS_MIN to WENV_ROUGHNESS_MAX.
+ * Evaluation never skips work for negligible D (exactness first). */
+#ifndef WENV_MICROFACET_H
+#define WENV_MICROFACET_H
+
+#include <float.h>
+#include <math.h>
+#include <stddef.h>
+
+#include "base/error.h"
+
+typedef enum { WENV_NDF_BECKMANN = 0, WENV_NDF_GGX = 1 } wenv_distribution;
+typedef enum { WENV_SHADOW_SMITH = 0, WENV_SHADOW_VCAVITY = 1 } wenv_shadowing;
+
+typedef struct {
+    double specular[3];   /* RGB scale of the lobe, each >= 0 */
+    double roughness;     /* alpha: Beckmann's RMS slope or GGX's alpha, > 0 */
+    double ior;           /* n > 1 */
+    wenv_distribution distribution;
+} wenv_lobe;
+
+/* The accepted ranges, here and nowhere else (the bindings and the add-on read them from here).
+ * Roughness has a tiny positive floor rather than 0: below it the lobe is a mirror whose peak value
+ * overflows float32 (D(n) = 1/(pi m^2)), and no quadrature or float32 direction resolves it anyway. */
+#define WENV_ROUGHNESS_MIN 1e-6
+#define WENV_ROUGHNESS_MAX 10.0
+#define WENV_IOR_MAX 10.0
+
+/* The one roughness conversion: Blender's (the Principled BSDF's) perceptual roughness r to a
+ * distribution's alpha, alpha = r^2 as Cycles squares it, floored at WENV_ALPHA_FROM_ROUGHNESS_MIN
+ * (a perfect mirror has no lobe width to shade). */
+#define WENV_ALPHA_FROM_ROUGHNESS_MIN 1e-4
+double wenv_alpha_from_roughness(double roughness);
+
+/* cos(89.9 deg): the lowest view that shading tabulates a lobe for; views beyond read its limit. */
+#define WENV_GRAZING_Z 0.0017453283658983088
+
+/* WENV_ERR_VALUE naming the field ("lobes[1].roughness") unless the lobe is within the ranges. */
+wenv_status wenv_lobe_check(const wenv_lobe *lobe, size_t index, wenv_error *err);
+
+/* Unpolarised Fresnel reflectance of a dielectric of index `ior` (outside index 1), cos_i in [0, 1]. */
+double wenv_fresnel_dielectric(double cos_i, double ior);
+
+/* Microfacet distribution D(h) for cos_h = n . h; 0 for cos_h <= 0. */
+double wenv_ndf(wenv_distribution dist, double m, double cos_h);
+
+/* Smith's Lambda for a direction at cos_theta to the normal.  0 at the normal; towards the horizon it
+ * grows like 1/cos_theta and is clamped to a large finite value for cos_theta <= 1e-150. */
+double wenv_smith_lambda(wenv_distribution dist, double m, double cos_theta);
+
+/* One lobe's F D G / (4 cos_i cos_o), without its colour; 0 if either direction is at or below the
+ * horizon (z <= 0).  Directions are unit vectors. */
+double wenv_lobe_eval(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wi[3], const double wo[3]);
+
+/* One lobe's albedo (no colour) by the same quadrature.  include_fresnel = 0 replaces F by 1: the
+ * white-furnace check of the microfacet part D G alone, which must not exceed 1. */
+wenv_status wenv_lobe_albedo(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wo[3],
+                             size_t samples, int include_fresnel, double *albedo, wenv_error *err);
+
+/* The nodes of that rule for one lobe (with Fresnel, without colour), for integrals of other
+ * functions against the lobe: directions wi (unit, above the horizon) and weights with
+ * sum_k weight[k] g(wi[k]) ~ Int g(wi) f(wi, wo) cos_i d wi for smooth g; the weights sum to the
+ * albedo.  The half-circle rule is mirrored about the plane of wo and the normal, so wi and weight
+ * need room for 2 samples^2 nodes (3 doubles per direction); *count gets the number written. */
+wenv_status wenv_lobe_nodes(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wo[3], size_t samples,
+                            double *wi, double *weight, size_t *count, wenv_error *err);
+
+/* The same rule as midpoints of equal cells -- n_theta in the distribution's graded CDF times n_phi
+ * in the azimuth map over the half circle, mirrored -- for integrands that are not smooth, such as
+ * an environment's radiance: with each node also the solid angle in wi its cell covers
+ * (solid_angle), the radiance can be read pre-filtered over that footprint.  Always writes
+ * 2 n_theta n_phi nodes (wi 3 doubles each), in the same order for every wo, so that rules for
+ * neighbouring views can be interpolated node by node; nodes that rounding puts below the horizon,
+ * and all nodes of a view at or below it, have weight 0.  n_theta, n_phi in [1, 4096]. */
+wenv_status wenv_lobe_cells(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wo[3], size_t n_theta,
+                            size_t n_phi, double *wi, double *weight, double *solid_angle, size_t *count,
+                            wenv_error *err);
+
+/* ---- evaluation kernels, inline for the hot loops of Cook-Torrance materials (~1e9 calls) ---- */
+
+#define WENV_INV_PI (1.0 / 3.14159265358979323846)
+#define WENV_INV_SQRT_PI 0.56418958354775628695
+#define WENV_TAN2_CAP 1e150 /* tan^2 beyond this: Beckmann D is exactly 0, GGX D its limit, in double */
+#define WENV_BECKMANN_A_CAP 30.0 /* erf(30) = 1 and exp(-900) = 0 in double: Lambda is exactly 0 */
+
+/* D from tan^2(theta_h); t >= 0. */
+static inline double wenv_lobe_ndf_tan2(wenv_distribution dist, double m, double t)
+{
+    double m2 = m * m;
+    t = fmin(t, WENV_TAN2_CAP);
+    if (dist == WENV_NDF_GGX) {
+        double r = (1.0 + t) / (m2 + t);
+        return m2 * r * r * WENV_INV_PI;
+    }
+    double q = 1.0 + t; /* 1 / cos^2 */
+    return exp(-t / m2) * q * q * WENV_INV_PI / m2;
+}
+
+/* K = cos (1 + 2 Lambda) for a direction with cosine c >= 0 and sine s >= 0 (see the top comment). */
+static inline double wenv_lobe_smith_k(wenv_distribution dist, double m, double c, double s)
+{
+    double ms = m * s;
+    if (dist == WENV_NDF_GGX)
+        return sqrt(c * c + ms * ms);
+    /* a = 1 / (m tan) = c / (m s), capped where Lambda is exactly 0 so no inf enters. */
+    double a = fmin(c / fmax(ms, DBL_MIN), WENV_BECKMANN_A_CAP);
+    return c * erf(a) + ms * exp(-a * a) * WENV_INV_SQRT_PI;
+}
+
+/* Per-lobe term that depends on the view only: K(wo) for Smith (unused by V-cavity). */
+static inline double wenv_lobe_view_k(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wo[3])
+{
+    if (shadowing != WENV_SHADOW_SMITH)
+        return 0.0;
+    double s = sqrt(wo[0] * wo[0] + wo[1] * wo[1]);
+    return wenv_lobe_smith_k(lobe->distribution, lobe->roughness, wo[2], s);
+}
+
+/* G / (4 cos_i cos_o) for cos_i, cos_o > 0 (the caller checks), with k_o = wenv_lobe_view_k(wo); also
+ * returns tan^2(theta_h) and wi.h, which D and F need. */
+static inline double wenv_lobe_vis(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wi[3],
+                              const double wo[3], double k_o, double *tan2_h, double *cos_d)
+{
+    double ci = wi[2], co = wo[2];
+    double sx = wi[0] + wo[0], sy = wi[1] + wo[1], sz = ci + co;
+    double sxy2 = sx * sx + sy * sy;
+    double sz2 = fmax(sz * sz, DBL_MIN);
+    double len2 = sxy2 + sz2;
+    *tan2_h = sxy2 / sz2;
+    *cos_d = fmin(0.5 * sqrt(len2), 1.0); /* wi.h = wo.h = |wi + wo| / 2 for unit vectors */
+    if (shadowing == WENV_SHADOW_SMITH) {
+        double si = sqrt(wi[0] * wi[0] + wi[1] * wi[1]);
+        double k_i = wenv_lobe_smith_k(lobe->distribution, lobe->roughness, ci, si);
+        return 0.5 / fmax(co * k_i + ci * k_o, DBL_MIN);
+    }
+    return fmin(0.25 / (ci * co), sz / (len2 * fmax(ci, co)));
+}
+
+/* F D G / (4 cos_i cos_o) under the same conditions. */
+static inline double wenv_lobe_value(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wi[3],
+                                const double wo[3], double k_o)
+{
+    double t, cos_d;
+    double v = wenv_lobe_vis(lobe, shadowing, wi, wo, k_o, &t, &cos_d);
+    return wenv_fresnel_dielectric(cos_d, lobe->ior) * wenv_lobe_ndf_tan2(lobe->distribution, lobe->roughness, t) * v;
+}
+
+#endif
