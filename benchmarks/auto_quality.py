@@ -296,7 +296,7 @@ def main():
 
 
 def calibrate():
-    """MEDIAN_ERROR of csrc/autoquality.c: per ladder level, the median over the HDRIs of the
+    """MEDIAN_ERROR of csrc/auto/autoquality.c: per ladder level, the median over the HDRIs of the
     estimated error, at roughness 0.05, 0.1, 0.2, 0.5 and for Lambert, from out/auto_quality.json."""
     with open(os.path.join(OUT, "auto_quality.json")) as fp:
         d = json.load(fp)
@@ -308,7 +308,7 @@ def calibrate():
 
 
 def fit(max_misses):
-    """Grid-fit auto's environment factor, SCALE ((1 - l) + SLOPE c) / (1 + d)^POWER (csrc/autoquality.c),
+    """Grid-fit auto's environment factor, SCALE ((1 - l) + SLOPE c) / (1 + d)^POWER (csrc/auto/autoquality.c),
     to the measured errors and every level's estimates in out/auto_quality.json: among the constants
     that miss the target in at most `max_misses` reachable cases, those within 1.25x of the cheapest
     sufficient level in the most.  Then the same fit leaving each HDRI out, scored on that HDRI."""
@@ -405,7 +405,7 @@ def fit(max_misses):
 
 def fit_high(errors, feats, cases, median, top):
     """The last level's factor, HIGH_SCALE ((1 - l) + 10 c')^HIGH_CONTRAST_POWER / (1 + d)^HIGH_DOMINANCE_POWER
-    (csrc/autoquality.c; c' the level before's contrast): least squares in the logs over the cases;
+    (csrc/auto/autoquality.c; c' the level before's contrast): least squares in the logs over the cases;
     prints the constants and returns the factor with them rounded as the C source has them."""
     x, y = [], []
     for h, n in cases:

@@ -1,4 +1,4 @@
-"""Narrow lobes integrated per vertex at grazing views (quality key `grazing`, csrc/grazing.h):
+"""Narrow lobes integrated per vertex at grazing views (quality key `grazing`, csrc/methods/wavelet/grazing.h):
 exact in the white furnace, no change where the local map resolves the lobe, continuous in the
 view, finite everywhere, and far closer to the reference than the wavelet result alone at grazing
 views on Blender's bundled HDRIs."""

@@ -1,4 +1,4 @@
-"""Exact lights (csrc/lights.h): the brightest pixels leave the wavelet lighting and come back per
+"""Exact lights (csrc/methods/wavelet/lights.h): the brightest pixels leave the wavelet lighting and come back per
 vertex, clustered as coarsely as each lobe allows.  With every lit pixel taken out, the shader's
 result is the lights' alone, and must match the reference, which sums the same pixels."""
 import numpy as np

@@ -6,10 +6,11 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "methods/wavelet/lights.h"
 #include "math/maps.h"
-#include "math/octfilter.h"
+#include "scene/envmap_octahedral.h"
 #include "math/spherical_harmonics.h"
+#include "scene/envmap_sh.h"
+#include "methods/wavelet/lights.h"
 
 
 /* Median relative RMSE over the bundled HDRIs per level (rows) at roughness 0.05, 0.1, 0.2, 0.5

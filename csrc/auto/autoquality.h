@@ -40,11 +40,11 @@
 
 #include <stddef.h>
 
-#include "scene/material.h"
-#include "scene/envmap.h"
 #include "base/error.h"
 #include "methods/method.h"
 #include "methods/presets.h"
+#include "scene/envmap.h"
+#include "scene/material.h"
 
 
 /* Level `i` of the ladder (0 <= i < WENV_AUTO_LEVELS). */

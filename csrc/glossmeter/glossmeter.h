@@ -69,8 +69,8 @@
 
 #include <stddef.h>
 
-#include "scene/material.h"
 #include "base/error.h"
+#include "scene/material.h"
 
 /* Default requested error bound on a reading (GU), safety factor between it and the integrator's
  * own tolerance, and cap on integrand evaluations per integral. */

@@ -15,7 +15,6 @@
 
 #include <stddef.h>
 
-#include "scene/envmap.h"
 #include "base/error.h"
 
 #define WENV_SH_ORDER_MAX 32
@@ -24,21 +23,6 @@ static inline size_t wenv_sh_count(size_t order) { return (order + 1) * (order +
 
 /* y[0 .. (order+1)^2) = basis functions at the unit direction d. */
 void wenv_sh_eval(size_t order, const double d[3], double *y);
-
-/* Coefficients (count x 3, RGB interleaved) of the environment's radiance.  Pixels are summed in
- * blocks of `block` x `block` (1: every pixel a point of its exact solid angle, as wenv_reference
- * sums them), each block's flux placed at its flux-weighted mean direction.  Parallel; reports
- * progress. */
-wenv_status wenv_sh_project_envmap_blocks(const wenv_envmap *env, size_t order, size_t block, double *coeffs,
-                                          const wenv_progress *progress, wenv_error *err);
-
-/* The block side wenv_sh_project_envmap uses for `order`: as coarse as keeps band `order` within
- * about 1 % (on a 1024 x 512 image: 16 pixels at order 2, 10 at order 8, 2 at order 32).  A block's
- * flux-weighted direction keeps a lone sun exact. */
-#define WENV_SH_BLOCK_MAX 16
-size_t wenv_sh_projection_block(const wenv_envmap *env, size_t order);
-wenv_status wenv_sh_project_envmap(const wenv_envmap *env, size_t order, double *coeffs,
-                                   const wenv_progress *progress, wenv_error *err);
 
 /* Lambert's clamped-cosine convolution factor A_l (Ramamoorthi and Hanrahan 2001): irradiance is
  * sum_lm A_l L_lm Y_lm(n).  pi, 2 pi / 3, 0 for odd l > 1, pi / 4 for l = 2, ... */

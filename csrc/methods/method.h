@@ -87,6 +87,7 @@ extern const wenv_method WENV_METHOD_ROTATION, WENV_METHOD_SLICING, WENV_METHOD_
 size_t wenv_method_count(void);
 const wenv_method *wenv_method_at(size_t i);
 const wenv_method *wenv_method_named(const char *name); /* NULL if there is none */
+const wenv_method *wenv_method_default(void);            /* what wenv.Shader uses unless told */
 
 /* A method's preset by name (NULL if `name` is not a preset). */
 const void *wenv_method_preset(const wenv_method *method, const char *name);

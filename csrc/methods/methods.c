@@ -23,6 +23,10 @@ const wenv_method *wenv_method_named(const char *name)
     return NULL;
 }
 
+/* Wavelet rotation: the method this project is about, and the fastest at a given accuracy once its
+ * matrices are cached (README, "Speed against accuracy"). */
+const wenv_method *wenv_method_default(void) { return &WENV_METHOD_ROTATION; }
+
 const void *wenv_method_preset(const wenv_method *method, const char *name)
 {
     for (size_t i = 0; name && i < WENV_PRESET_COUNT; i++)

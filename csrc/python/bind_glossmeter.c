@@ -1,8 +1,8 @@
 /* Python glue for the virtual glossmeter: wenv.Glossmeter, wenv.gloss, wenv.haze, wenv.fit_roughness.
  * The numerics live in glossmeter.c; this file parses arguments, releases the GIL around the
  * integrals and turns results into Python values. */
-#include "python/module.h"
 #include "python/bind_material.h"
+#include "python/module.h"
 
 #include <math.h>
 #include <stdint.h>
@@ -15,8 +15,8 @@
 #define M_SQRT1_2 0.70710678118654752440
 #endif
 
-#include "scene/material.h"
 #include "glossmeter/glossmeter.h"
+#include "scene/material.h"
 
 #define HAZE_OFFSET 1.9       /* ASTM E430 method B: receptors at 20 -/+ 1.9 = 18.1 and 21.9 degrees */
 #define HAZE_APERTURE_W 0.4   /* assumed haze slit size, in plane x perpendicular (degrees) */
@@ -137,10 +137,10 @@ static PyObject *result_value(const wenv_gloss_result *r, const wenv_gloss_optio
     return PyFloat_FromDouble(r->value);
 }
 
-/* Measures with the GIL released.  The material object is kept alive by a reference of our own;
- * materials and glossmeters are immutable, so other threads may use them meanwhile. */
-static int run_measure(const wenv_glossmeter *gm, PyObject *material, const wenv_gloss_options *opt,
-                       wenv_gloss_result *r)
+/* A reading (offsets NULL) or haze, with the GIL released.  The material object is kept alive by a
+ * reference of our own; materials and glossmeters are immutable, so other threads may use them. */
+static int run_reading(const wenv_glossmeter *gm, PyObject *material, const double *offsets,
+                       const double *aperture, const wenv_gloss_options *opt, wenv_gloss_result *r)
 {
     const wenv_material *mat = wenv_py_material(material, "material");
     if (!mat)
@@ -149,7 +149,8 @@ static int run_measure(const wenv_glossmeter *gm, PyObject *material, const wenv
     wenv_status st;
     Py_INCREF(material);
     Py_BEGIN_ALLOW_THREADS
-    st = wenv_glossmeter_measure(gm, mat, opt, r, &err);
+    st = offsets ? wenv_glossmeter_haze(gm, mat, offsets, aperture, opt, r, &err)
+                 : wenv_glossmeter_measure(gm, mat, opt, r, &err);
     Py_END_ALLOW_THREADS
     Py_DECREF(material);
     if (st != WENV_OK) {
@@ -159,28 +160,21 @@ static int run_measure(const wenv_glossmeter *gm, PyObject *material, const wenv
     return 0;
 }
 
+static int run_measure(const wenv_glossmeter *gm, PyObject *material, const wenv_gloss_options *opt,
+                       wenv_gloss_result *r)
+{
+    return run_reading(gm, material, NULL, NULL, opt, r);
+}
+
 static int run_haze(const wenv_glossmeter *gm, PyObject *material, PyObject *offsets_obj, PyObject *aperture_obj,
                     const wenv_gloss_options *opt, wenv_gloss_result *r)
 {
     double offsets[2] = {-HAZE_OFFSET, HAZE_OFFSET}, aperture[2] = {HAZE_APERTURE_W, HAZE_APERTURE_H};
     if (get_opt_vec(offsets_obj, "offsets", offsets, 2) < 0 || get_opt_vec(aperture_obj, "aperture", aperture, 2) < 0)
         return -1;
-    const wenv_material *mat = wenv_py_material(material, "material");
-    if (!mat)
-        return -1;
-    wenv_error err = {0};
-    wenv_status st;
-    Py_INCREF(material);
-    Py_BEGIN_ALLOW_THREADS
-    st = wenv_glossmeter_haze(gm, mat, offsets, aperture, opt, r, &err);
-    Py_END_ALLOW_THREADS
-    Py_DECREF(material);
-    if (st != WENV_OK) {
-        wenv_py_raise(&err);
-        return -1;
-    }
-    return 0;
+    return run_reading(gm, material, offsets, aperture, opt, r);
 }
+
 
 static wenv_glossmeter *standard_meter(double geometry)
 {

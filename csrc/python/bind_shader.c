@@ -258,7 +258,7 @@ static int Shader_init(ShaderObject *self, PyObject *args, PyObject *kwargs)
                                           "mesh needs)");
         return -1;
     }
-    const wenv_method *method = method_name ? parse_method(method_name) : &WENV_METHOD_ROTATION;
+    const wenv_method *method = method_name ? parse_method(method_name) : wenv_method_default();
     if (!method)
         return -1;
     if (is_auto) {

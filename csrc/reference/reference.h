@@ -5,9 +5,9 @@
 
 #include <stddef.h>
 
-#include "scene/material.h"
-#include "scene/envmap.h"
 #include "base/error.h"
+#include "scene/envmap.h"
+#include "scene/material.h"
 
 wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, const float *normals,
                            const float *views, size_t n, float *out, const wenv_progress *progress,

@@ -13,7 +13,6 @@
  *  - V-cavity G / (4 cos_i cos_o) = min(1 / (4 cos_i cos_o), sz / (|s|^2 max(cos_i, cos_o))). */
 #include "scene/material_kind.h"
 
-#include <float.h>
 #include <math.h>
 #include <string.h>
 
@@ -154,7 +153,6 @@ static void ct_specular_cos_f(const wenv_material *mat, const float wi[3], const
             rgb[c] += (float)lobe->specular[c] * v;
     }
 }
-
 
 /* ---------------------------------------------------------------- integrals */
 

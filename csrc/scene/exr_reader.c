@@ -5,18 +5,24 @@
 #include "scene/image_readers.h"
 
 #include <errno.h>
-#include <math.h>
-#include <stdint.h>
 #include <stdio.h>
-#include <stdlib.h>
 #include <string.h>
 #include <dlfcn.h>
-#include <omp.h>
 #include <unistd.h>
 
 #include <ImfCRgbaFile.h>
 #include <OpenEXRConfig.h>
 #include <openexr.h>
+
+/* A data window of w x h pixels that the environment can hold. */
+static wenv_status check_data_window(int64_t w, int64_t h, const char *path, wenv_error *err)
+{
+    if (w <= 0 || h <= 0 || (uint64_t)w > WENV_IMAGE_MAX_SIDE || (uint64_t)h > WENV_IMAGE_MAX_SIDE ||
+        (uint64_t)w * (uint64_t)h > WENV_IMAGE_MAX_PIXELS)
+        return wenv_error_set(err, WENV_ERR_IO, "cannot read OpenEXR file '%s': unusable data window %lld x %lld",
+                              path, (long long)w, (long long)h);
+    return WENV_OK;
+}
 
 typedef struct {
     int fd;
@@ -206,12 +212,8 @@ static wenv_status load_exr_rgba(const char *path, float **out, size_t *out_h, s
         wenv_error_set(err, WENV_ERR_IO, "cannot read OpenEXR file '%s': it has no R, G, B (or Y) channels", path);
         goto done;
     }
-    if (w64 <= 0 || h64 <= 0 || (uint64_t)w64 > WENV_IMAGE_MAX_SIDE || (uint64_t)h64 > WENV_IMAGE_MAX_SIDE ||
-        (uint64_t)w64 * (uint64_t)h64 > WENV_IMAGE_MAX_PIXELS) {
-        wenv_error_set(err, WENV_ERR_IO, "cannot read OpenEXR file '%s': unusable data window %lld x %lld", path,
-                       (long long)w64, (long long)h64);
+    if (check_data_window(w64, h64, path, err))
         goto done;
-    }
     size_t width = (size_t)w64, height = (size_t)h64;
     buf = malloc(width * height * sizeof *buf);
     rgb = malloc(width * height * 3 * sizeof *rgb);
@@ -278,12 +280,8 @@ wenv_status wenv_read_exr(int fd, int64_t size, const char *path, float **out, s
         goto done;
     }
     int64_t w64 = (int64_t)dw.max.x - dw.min.x + 1, h64 = (int64_t)dw.max.y - dw.min.y + 1;
-    if (w64 <= 0 || h64 <= 0 || (uint64_t)w64 > WENV_IMAGE_MAX_SIDE || (uint64_t)h64 > WENV_IMAGE_MAX_SIDE ||
-        (uint64_t)w64 * (uint64_t)h64 > WENV_IMAGE_MAX_PIXELS) {
-        wenv_error_set(err, WENV_ERR_IO, "cannot read OpenEXR file '%s': unusable data window %lld x %lld", path,
-                       (long long)w64, (long long)h64);
+    if (check_data_window(w64, h64, path, err))
         goto done;
-    }
     size_t width = (size_t)w64, height = (size_t)h64;
     int have[4] = {0, 0, 0, 0};
     for (int i = 0; i < chl->num_channels; i++) {

@@ -124,6 +124,8 @@ void wenv_material_specular_cos_f(const wenv_material *mat, const float wi[3], c
     mat->kind->specular_cos_f(mat, wi, wo, terms, rgb);
 }
 
+wenv_specular_cos_f_fn wenv_material_specular_cos_f_fn(const wenv_material *mat) { return mat->kind->specular_cos_f; }
+
 static wenv_status check_lobe_index(const wenv_material *mat, size_t i, wenv_error *err)
 {
     if (i >= mat->n_lobes)

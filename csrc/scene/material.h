@@ -89,6 +89,10 @@ size_t wenv_material_view_terms(const wenv_material *mat);
 void wenv_material_prepare_view_f(const wenv_material *mat, const float wo[3], float *terms);
 void wenv_material_specular_cos_f(const wenv_material *mat, const float wi[3], const float wo[3],
                                   const float *terms, float rgb[3]);
+/* The model's own float evaluator, for a loop over many lights to call without the dispatch. */
+typedef void (*wenv_specular_cos_f_fn)(const wenv_material *mat, const float wi[3], const float wo[3],
+                                       const float *terms, float rgb[3]);
+wenv_specular_cos_f_fn wenv_material_specular_cos_f_fn(const wenv_material *mat);
 
 /* ---- integrals ---- */
 

@@ -12,8 +12,7 @@ typedef struct wenv_material_kind {
     void (*specular_cos_batch)(const wenv_material *mat, const double wo[3], const float *wi, size_t n, float *rgb);
     size_t (*view_terms)(const wenv_material *mat);
     void (*prepare_view_f)(const wenv_material *mat, const float wo[3], float *terms);
-    void (*specular_cos_f)(const wenv_material *mat, const float wi[3], const float wo[3], const float *terms,
-                           float rgb[3]);
+    wenv_specular_cos_f_fn specular_cos_f;
     wenv_status (*lobe_albedo)(const wenv_material *mat, size_t i, const double wo[3], size_t samples, double rgb[3],
                                wenv_error *err);
     wenv_status (*lobe_nodes)(const wenv_material *mat, size_t i, const double wo[3], size_t samples, double *wi,

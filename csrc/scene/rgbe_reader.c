@@ -4,7 +4,6 @@
 #include "scene/image_readers.h"
 
 #include <math.h>
-#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>

@@ -7,9 +7,20 @@
 #include <string.h>
 #include <time.h>
 
+#include "base/clock.h"
 #include "math/maps.h"
 #include "math/spherical_harmonics.h"
+#include "scene/envmap_sh.h"
+#include "methods/method.h"
+#include "methods/presets.h"
 
+
+typedef struct {
+    size_t coefficients, slice_bytes, quadrature_nodes;
+    double projection_seconds, slice_seconds;
+} wenv_sh_shading_stats;
+
+typedef struct wenv_sh_shading wenv_sh_shading;
 
 struct wenv_sh_shading {
     wenv_sh_shading_quality q;
@@ -33,17 +44,16 @@ struct wenv_sh_shading {
  * itself under a sixth of band 2's (A_4 / A_2 = 1 / 6). */
 #define IRR_SIDE 128
 
-static double now_seconds(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
-
 static double max_view_theta(void) { return acos(WENV_GRAZING_Z); }
 
-wenv_status wenv_sh_shading_quality_check(const wenv_sh_shading_quality *q, wenv_error *err)
+static const wenv_param PARAMS[] = {
+    {"order", WENV_PARAM_SIZE, offsetof(wenv_sh_shading_quality, order)},
+    {"views", WENV_PARAM_SIZE, offsetof(wenv_sh_shading_quality, views)},
+};
+
+static wenv_status check_quality(const void *quality, wenv_error *err)
 {
+    const wenv_sh_shading_quality *q = quality;
     if (q->order < 2 || q->order > WENV_SH_ORDER_MAX)
         return wenv_error_set(err, WENV_ERR_VALUE, "quality['order'] must be in [2, %d], got %zu", WENV_SH_ORDER_MAX,
                               q->order);
@@ -52,8 +62,9 @@ wenv_status wenv_sh_shading_quality_check(const wenv_sh_shading_quality *q, wenv
     return WENV_OK;
 }
 
-void wenv_sh_shading_free(wenv_sh_shading *sr)
+static void destroy(void *state)
 {
+    wenv_sh_shading *sr = state;
     if (!sr)
         return;
     wenv_sh_rotation_free(sr->rot);
@@ -63,10 +74,13 @@ void wenv_sh_shading_free(wenv_sh_shading *sr)
     free(sr);
 }
 
-wenv_status wenv_sh_shading_create(wenv_sh_shading **out, const wenv_sh_shading_quality *q, wenv_error *err)
+/* No matrices, so no cache and nothing to report: the work is in set_environment / set_material. */
+static wenv_status create(void **state, const void *quality, const wenv_method_setup *setup, wenv_error *err)
 {
-    *out = NULL;
-    if (wenv_sh_shading_quality_check(q, err))
+    (void)setup;
+    const wenv_sh_shading_quality *q = quality;
+    *state = NULL;
+    if (check_quality(q, err))
         return err->status;
     wenv_sh_shading *sr = calloc(1, sizeof *sr);
     if (!sr)
@@ -74,7 +88,7 @@ wenv_status wenv_sh_shading_create(wenv_sh_shading **out, const wenv_sh_shading_
     sr->q = *q;
     sr->count = wenv_sh_count(q->order);
     sr->stats.coefficients = sr->count;
-    *out = sr;
+    *state = sr;
     return WENV_OK;
 }
 
@@ -114,10 +128,11 @@ static wenv_status update_irradiance_map(wenv_sh_shading *sr, wenv_error *err)
     return WENV_OK;
 }
 
-wenv_status wenv_sh_shading_set_environment(wenv_sh_shading *sr, const wenv_envmap *env, const wenv_progress *progress,
+static wenv_status set_environment(void *state, const wenv_envmap *env, const wenv_progress *progress,
                                           wenv_error *err)
 {
-    double t0 = now_seconds();
+    wenv_sh_shading *sr = state;
+    double t0 = wenv_now_seconds();
     double *light = malloc(sr->count * 3 * sizeof(double));
     if (!light)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for SH lighting");
@@ -128,7 +143,7 @@ wenv_status wenv_sh_shading_set_environment(wenv_sh_shading *sr, const wenv_envm
     free(sr->light);
     sr->light = light;
     sr->have_env = 1;
-    sr->stats.projection_seconds = now_seconds() - t0;
+    sr->stats.projection_seconds = wenv_now_seconds() - t0;
     return update_irradiance_map(sr, err);
 }
 
@@ -140,10 +155,11 @@ static size_t lobe_samples(size_t order)
     return s < 48 ? 48 : s;
 }
 
-wenv_status wenv_sh_shading_set_material(wenv_sh_shading *sr, const wenv_material *mat, const wenv_progress *progress,
+static wenv_status set_material(void *state, const wenv_material *mat, const wenv_progress *progress,
                                        wenv_error *err)
 {
-    double t0 = now_seconds();
+    wenv_sh_shading *sr = state;
+    double t0 = wenv_now_seconds();
     size_t V = sr->q.views, count = sr->count, S = lobe_samples(sr->q.order), nodes_max = 2 * S * S;
     size_t n_lobes = wenv_material_lobe_count(mat);
     double *slices = calloc(V * count * 3, sizeof(double));
@@ -211,7 +227,7 @@ wenv_status wenv_sh_shading_set_material(wenv_sh_shading *sr, const wenv_materia
     for (int c = 0; c < 3; c++)
         sr->diffuse_over_pi[c] = wenv_material_diffuse(mat)[c] / M_PI;
     sr->have_mat = 1;
-    sr->stats.slice_seconds = now_seconds() - t0;
+    sr->stats.slice_seconds = wenv_now_seconds() - t0;
     sr->stats.slice_bytes = V * count * 3 * sizeof(double);
     sr->stats.quadrature_nodes = nodes_total;
     return update_irradiance_map(sr, err);
@@ -258,9 +274,10 @@ static wenv_status shade_lambert(const wenv_sh_shading *sr, const float *normals
     return WENV_OK;
 }
 
-wenv_status wenv_sh_shading_shade(const wenv_sh_shading *sr, const float *normals, const float *views, size_t n,
+static wenv_status shade(void *state, const float *normals, const float *views, size_t n,
                                 float *out, wenv_error *err)
 {
+    const wenv_sh_shading *sr = state;
     if (!sr->have_env || !sr->have_mat)
         return wenv_error_set(err, WENV_ERR_VALUE, "the shader needs an environment and a material");
     if (sr->lambert)
@@ -334,4 +351,30 @@ wenv_status wenv_sh_shading_shade(const wenv_sh_shading *sr, const float *normal
     return WENV_OK;
 }
 
-void wenv_sh_shading_get_stats(const wenv_sh_shading *sr, wenv_sh_shading_stats *stats) { *stats = sr->stats; }
+static size_t stats(const void *state, wenv_stat *out)
+{
+    const wenv_sh_shading_stats s = ((const wenv_sh_shading *)state)->stats;
+    size_t k = 0;
+    out[k++] = wenv_stat_count("coefficients", s.coefficients);
+    out[k++] = wenv_stat_count("slice_bytes", s.slice_bytes);
+    out[k++] = wenv_stat_count("quadrature_nodes", s.quadrature_nodes);
+    out[k++] = wenv_stat_real("projection_seconds", s.projection_seconds);
+    out[k++] = wenv_stat_real("slice_seconds", s.slice_seconds);
+    return k;
+}
+
+const wenv_method WENV_METHOD_SH = {
+    .name = "sh",
+    .summary = "spherical harmonics with per-vertex rotation (Kautz, Sloan and Snyder 2002), for comparison",
+    .quality_size = sizeof(wenv_sh_shading_quality),
+    .params = PARAMS,
+    .n_params = sizeof PARAMS / sizeof PARAMS[0],
+    .presets = {&WENV_SH_PRESETS[0], &WENV_SH_PRESETS[1], &WENV_SH_PRESETS[2]},
+    .check_quality = check_quality,
+    .create = create,
+    .destroy = destroy,
+    .set_environment = set_environment,
+    .set_material = set_material,
+    .shade = shade,
+    .stats = stats,
+};

@@ -8,12 +8,23 @@
 #include <string.h>
 #include <time.h>
 
-#include "math/maps.h"
-#include "math/octfilter.h"
+#include "base/clock.h"
 #include "math/frame.h"
+#include "math/maps.h"
+#include "scene/envmap_octahedral.h"
 #include "math/spherical_harmonics.h"
+#include "scene/envmap_sh.h"
+#include "methods/method.h"
+#include "methods/presets.h"
 
 typedef wenv_oct_pyramid pyramid;
+
+typedef struct {
+    size_t lobes, source_side, source_levels, source_bytes, prefilter_bytes, lut_bytes;
+    double environment_seconds, prefilter_seconds, lut_seconds;
+} wenv_splitsum_stats;
+
+typedef struct wenv_splitsum wenv_splitsum;
 
 struct wenv_splitsum {
     wenv_splitsum_quality q;
@@ -29,15 +40,15 @@ struct wenv_splitsum {
     float *prefilter;  /* n_lobes x prefilter^2 x 3, once both are set */
 };
 
-static double now_seconds(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
+static const wenv_param PARAMS[] = {
+    {"prefilter", WENV_PARAM_SIZE, offsetof(wenv_splitsum_quality, prefilter)},
+    {"samples", WENV_PARAM_SIZE, offsetof(wenv_splitsum_quality, samples)},
+    {"lut", WENV_PARAM_SIZE, offsetof(wenv_splitsum_quality, lut)},
+};
 
-wenv_status wenv_splitsum_quality_check(const wenv_splitsum_quality *q, wenv_error *err)
+static wenv_status check_quality(const void *quality, wenv_error *err)
 {
+    const wenv_splitsum_quality *q = quality;
     if (q->prefilter < 8 || q->prefilter > 1024 || q->prefilter % 2)
         return wenv_error_set(err, WENV_ERR_VALUE, "quality['prefilter'] must be an even number in [8, 1024], got %zu",
                               q->prefilter);
@@ -49,8 +60,9 @@ wenv_status wenv_splitsum_quality_check(const wenv_splitsum_quality *q, wenv_err
 }
 
 
-void wenv_splitsum_free(wenv_splitsum *ss)
+static void destroy(void *state)
 {
+    wenv_splitsum *ss = state;
     if (!ss)
         return;
     wenv_oct_pyramid_free(&ss->src);
@@ -60,16 +72,19 @@ void wenv_splitsum_free(wenv_splitsum *ss)
     free(ss);
 }
 
-wenv_status wenv_splitsum_create(wenv_splitsum **out, const wenv_splitsum_quality *q, wenv_error *err)
+/* No matrices, so no cache and nothing to report: the work is in set_environment / set_material. */
+static wenv_status create(void **state, const void *quality, const wenv_method_setup *setup, wenv_error *err)
 {
-    *out = NULL;
-    if (wenv_splitsum_quality_check(q, err))
+    (void)setup;
+    const wenv_splitsum_quality *q = quality;
+    *state = NULL;
+    if (check_quality(q, err))
         return err->status;
     wenv_splitsum *ss = calloc(1, sizeof *ss);
     if (!ss)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the split-sum shader");
     ss->q = *q;
-    *out = ss;
+    *state = ss;
     return WENV_OK;
 }
 
@@ -221,10 +236,11 @@ static void update_bytes(wenv_splitsum *ss)
     ss->stats.source_bytes = source;
 }
 
-wenv_status wenv_splitsum_set_environment(wenv_splitsum *ss, const wenv_envmap *env, const wenv_progress *progress,
+static wenv_status set_environment(void *state, const wenv_envmap *env, const wenv_progress *progress,
                                           wenv_error *err)
 {
-    double t0 = now_seconds();
+    wenv_splitsum *ss = state;
+    double t0 = wenv_now_seconds();
     pyramid src;
     double sh9[9 * 3];
     if (wenv_oct_pyramid_build(&src, env, NULL, 0, 512, err))
@@ -233,7 +249,7 @@ wenv_status wenv_splitsum_set_environment(wenv_splitsum *ss, const wenv_envmap *
         wenv_oct_pyramid_free(&src);
         return err->status;
     }
-    double t1 = now_seconds();
+    double t1 = wenv_now_seconds();
     float *pre = NULL;
     if (ss->have_mat && ss->n_lobes) {
         size_t P = ss->q.prefilter;
@@ -249,7 +265,7 @@ wenv_status wenv_splitsum_set_environment(wenv_splitsum *ss, const wenv_envmap *
         }
         free(ss->prefilter);
         ss->prefilter = pre;
-        ss->stats.prefilter_seconds = now_seconds() - t1;
+        ss->stats.prefilter_seconds = wenv_now_seconds() - t1;
     }
     wenv_oct_pyramid_free(&ss->src);
     ss->src = src;
@@ -264,9 +280,10 @@ wenv_status wenv_splitsum_set_environment(wenv_splitsum *ss, const wenv_envmap *
 
 #define LUT_ALBEDO_SAMPLES 64
 
-wenv_status wenv_splitsum_set_material(wenv_splitsum *ss, const wenv_material *mat, const wenv_progress *progress,
+static wenv_status set_material(void *state, const wenv_material *mat, const wenv_progress *progress,
                                        wenv_error *err)
 {
+    wenv_splitsum *ss = state;
     size_t nl = wenv_material_lobe_count(mat), N = ss->q.lut, P = ss->q.prefilter;
     wenv_lobe *lobes = malloc((nl ? nl : 1) * sizeof *lobes);
     float *lut = malloc((nl ? nl : 1) * N * 3 * sizeof(float));
@@ -278,7 +295,7 @@ wenv_status wenv_splitsum_set_material(wenv_splitsum *ss, const wenv_material *m
     }
     for (size_t l = 0; l < nl; l++)
         lobes[l] = *wenv_material_lobe(mat, l);
-    double t0 = now_seconds();
+    double t0 = wenv_now_seconds();
     atomic_int failed = 0;
     wenv_error lut_err = {0};
 #pragma omp parallel for schedule(dynamic, 1) collapse(2)
@@ -299,7 +316,7 @@ wenv_status wenv_splitsum_set_material(wenv_splitsum *ss, const wenv_material *m
         free(lut);
         return wenv_error_set(err, lut_err.status, "%s", lut_err.message);
     }
-    double t1 = now_seconds();
+    double t1 = wenv_now_seconds();
     if (ss->have_env && nl) {
         pre = malloc(nl * P * P * 3 * sizeof(float));
         if (!pre) {
@@ -313,7 +330,7 @@ wenv_status wenv_splitsum_set_material(wenv_splitsum *ss, const wenv_material *m
             free(lut);
             return err->status;
         }
-        ss->stats.prefilter_seconds = now_seconds() - t1;
+        ss->stats.prefilter_seconds = wenv_now_seconds() - t1;
     }
     free(ss->lobes);
     free(ss->lut);
@@ -331,20 +348,26 @@ wenv_status wenv_splitsum_set_material(wenv_splitsum *ss, const wenv_material *m
 }
 
 /* RGB entries at n.v = (i + 0.5) / N, linear in between. */
-static void lut_lookup(const float *table, size_t N, double mu, double rgb[3])
+static inline void lut_lookup(const float *table, size_t N, double mu, double rgb[3])
 {
-    double x = mu * (double)N - 0.5;
-    size_t i = !(x > 0.0) ? 0 : x >= (double)(N - 1) ? N - 1 : (size_t)x;
-    double f = !(x > 0.0) || x >= (double)(N - 1) ? 0.0 : x - (double)i;
-    for (int c = 0; c < 3; c++) {
-        const float *t = table + 3 * i + (size_t)c;
-        rgb[c] = f > 0.0 ? t[0] + f * (t[3] - t[0]) : t[0];
+    double x = mu * (double)N - 0.5, f = 0.0;
+    size_t i = 0, j = 0;
+    if (x >= (double)(N - 1)) {
+        i = j = N - 1;
+    } else if (x > 0.0) {
+        i = (size_t)x;
+        j = i + 1;
+        f = x - (double)i;
     }
+    const float *a = table + 3 * i, *b = table + 3 * j;
+    for (int c = 0; c < 3; c++)
+        rgb[c] = a[c] + f * (b[c] - a[c]);
 }
 
-wenv_status wenv_splitsum_shade(const wenv_splitsum *ss, const float *normals, const float *views, size_t n,
+static wenv_status shade(void *state, const float *normals, const float *views, size_t n,
                                 float *out, wenv_error *err)
 {
+    const wenv_splitsum *ss = state;
     if (!ss->have_env || !ss->have_mat)
         return wenv_error_set(err, WENV_ERR_VALUE, "the shader needs an environment and a material");
     size_t P = ss->q.prefilter, N = ss->q.lut;
@@ -387,4 +410,34 @@ wenv_status wenv_splitsum_shade(const wenv_splitsum *ss, const float *normals, c
     return WENV_OK;
 }
 
-void wenv_splitsum_get_stats(const wenv_splitsum *ss, wenv_splitsum_stats *stats) { *stats = ss->stats; }
+static size_t stats(const void *state, wenv_stat *out)
+{
+    const wenv_splitsum_stats s = ((const wenv_splitsum *)state)->stats;
+    size_t k = 0;
+    out[k++] = wenv_stat_count("lobes", s.lobes);
+    out[k++] = wenv_stat_count("source_side", s.source_side);
+    out[k++] = wenv_stat_count("source_levels", s.source_levels);
+    out[k++] = wenv_stat_count("source_bytes", s.source_bytes);
+    out[k++] = wenv_stat_count("prefilter_bytes", s.prefilter_bytes);
+    out[k++] = wenv_stat_count("lut_bytes", s.lut_bytes);
+    out[k++] = wenv_stat_real("environment_seconds", s.environment_seconds);
+    out[k++] = wenv_stat_real("prefilter_seconds", s.prefilter_seconds);
+    out[k++] = wenv_stat_real("lut_seconds", s.lut_seconds);
+    return k;
+}
+
+const wenv_method WENV_METHOD_SPLIT_SUM = {
+    .name = "split_sum",
+    .summary = "prefiltered environment maps and an environment-BRDF table (Karis 2013), for comparison",
+    .quality_size = sizeof(wenv_splitsum_quality),
+    .params = PARAMS,
+    .n_params = sizeof PARAMS / sizeof PARAMS[0],
+    .presets = {&WENV_SPLIT_SUM_PRESETS[0], &WENV_SPLIT_SUM_PRESETS[1], &WENV_SPLIT_SUM_PRESETS[2]},
+    .check_quality = check_quality,
+    .create = create,
+    .destroy = destroy,
+    .set_environment = set_environment,
+    .set_material = set_material,
+    .shade = shade,
+    .stats = stats,
+};

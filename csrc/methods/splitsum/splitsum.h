@@ -9,12 +9,16 @@
  *    Hammersley half vectors drawn from the lobe's distribution (Beckmann or GGX), weighted by n.l
  *    (Karis's estimator), each sample read from a solid-angle-matched level of a mip pyramid of the
  *    environment (filtered importance sampling, Colbert and Krivanek 2007, as Filament's cmgen).
- *  - E(n.v): the lobe's directional albedo with its exact distribution, shadowing and dielectric
- *    Fresnel at its own index (wenv_lobe_albedo): the environment-BRDF table of the 2D LUT
- *    (n.v, roughness) taken at the lobe's roughness and index, so no Schlick approximation and no
- *    roughness interpolation; `lut` entries at n.v = (i + 0.5) / lut, linear in between.
+ *  - E(n.v): the lobe's own directional albedo, colour included (wenv_material_lobe_albedo; for
+ *    Cook-Torrance its exact distribution, shadowing and dielectric Fresnel at its index): the
+ *    environment-BRDF table of the 2D LUT (n.v, roughness) taken at the lobe's roughness and index,
+ *    so no Schlick approximation and no roughness interpolation; `lut` entries at
+ *    n.v = (i + 0.5) / lut, linear in between, RGB.
+ * The prefilter assumes each lobe is the microfacet lobe of its shape (scene/material.h): exact
+ * for Cook-Torrance, the closest microfacet lobe for other models.
  * Diffuse: irradiance from the 9-coefficient SH projection of the environment (Ramamoorthi and
  * Hanrahan 2001), clamped at zero, times diffuse / pi.
+ * Registered as WENV_METHOD_SPLIT_SUM (methods/method.h).
  * What the method cannot do (by design): the n = v = r assumption loses the stretching of
  * highlights at grazing views and the dependence of the lobe's shape on the view. */
 #ifndef WENV_SPLITSUM_H
@@ -22,38 +26,10 @@
 
 #include <stddef.h>
 
-#include "scene/material.h"
-#include "scene/envmap.h"
-#include "base/error.h"
-
 typedef struct {
     size_t prefilter; /* side of each lobe's octahedral prefiltered map, even, [8, 1024] */
     size_t samples;   /* importance samples per prefiltered texel, [1, 65536] */
     size_t lut;       /* environment-BRDF entries over n.v per lobe, [2, 4096] */
 } wenv_splitsum_quality;
-
-typedef struct {
-    size_t lobes, source_side, source_levels, source_bytes, prefilter_bytes, lut_bytes;
-    double environment_seconds, prefilter_seconds, lut_seconds;
-} wenv_splitsum_stats;
-
-typedef struct wenv_splitsum wenv_splitsum;
-
-wenv_status wenv_splitsum_quality_check(const wenv_splitsum_quality *q, wenv_error *err);
-wenv_status wenv_splitsum_create(wenv_splitsum **out, const wenv_splitsum_quality *q, wenv_error *err);
-void wenv_splitsum_free(wenv_splitsum *ss);
-
-/* Both keep the shader unchanged when they fail or are cancelled.  Prefiltering (for each lobe of the
- * current material under the current environment) reports progress. */
-wenv_status wenv_splitsum_set_environment(wenv_splitsum *ss, const wenv_envmap *env, const wenv_progress *progress,
-                                          wenv_error *err);
-wenv_status wenv_splitsum_set_material(wenv_splitsum *ss, const wenv_material *mat, const wenv_progress *progress,
-                                       wenv_error *err);
-
-/* As wenv_wavelet_shade: n x 3 normals and views (surface towards eye, non-zero, finite), n x 3 RGB. */
-wenv_status wenv_splitsum_shade(const wenv_splitsum *ss, const float *normals, const float *views, size_t n,
-                                float *out, wenv_error *err);
-
-void wenv_splitsum_get_stats(const wenv_splitsum *ss, wenv_splitsum_stats *stats);
 
 #endif

@@ -6,7 +6,7 @@
 #include <string.h>
 
 #include "math/maps.h"
-#include "math/octfilter.h"
+#include "scene/envmap_octahedral.h"
 
 /* ---- the lighting as an octahedral mip pyramid ------------------------------------------------ */
 

@@ -20,9 +20,9 @@
 
 #include <stddef.h>
 
-#include "scene/material.h"
-#include "scene/envmap.h"
 #include "base/error.h"
+#include "scene/envmap.h"
+#include "scene/material.h"
 
 /* The lighting as an octahedral mip pyramid (radiance, strength applied). */
 typedef struct wenv_grazing_light wenv_grazing_light;

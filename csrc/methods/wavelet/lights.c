@@ -249,7 +249,9 @@ typedef struct {
     const float *cos_h_min;
     float n[3], v[3], wo[3], co, so;
     float terms[MAX_VIEW_TERMS]; /* the material's, for this view */
-    int have_terms;
+    int have_terms;              /* terms and the two below are set */
+    int use_float;               /* the terms fit: the float path (else the double one, rare) */
+    wenv_specular_cos_f_fn specular_cos_f;
 } specular_view;
 
 /* A light off every lobe (n.h below the lobe's cut) costs a few dot products; one inside is
@@ -277,17 +279,20 @@ static inline void specular_range(const light_level *lv, size_t begin, size_t en
         float cphi = si * so > 1e-6f ? (lv_dot - ci * co) / (si * so) : 1.0f;
         cphi = min_f(1.0f, max_f(-1.0f, cphi));
         float wi[3] = {si * cphi, si * sqrtf(1.0f - cphi * cphi), ci}, rgb[3];
-        if (wenv_material_view_terms(mat) > MAX_VIEW_TERMS) { /* rare: no room for them, use the double path */
+        if (!sv->have_terms) {
+            sv->use_float = wenv_material_view_terms(mat) <= MAX_VIEW_TERMS;
+            if (sv->use_float)
+                wenv_material_prepare_view_f(mat, sv->wo, sv->terms);
+            sv->specular_cos_f = wenv_material_specular_cos_f_fn(mat);
+            sv->have_terms = 1;
+        }
+        if (sv->use_float) {
+            sv->specular_cos_f(mat, wi, sv->wo, sv->terms, rgb);
+        } else {
             double wid[3] = {wi[0], wi[1], wi[2]}, wod[3] = {sv->wo[0], sv->wo[1], sv->wo[2]}, rgbd[3];
             wenv_material_specular_cos(mat, wid, wod, rgbd);
             for (int c = 0; c < 3; c++)
                 rgb[c] = (float)rgbd[c];
-        } else {
-            if (!sv->have_terms) {
-                wenv_material_prepare_view_f(mat, sv->wo, sv->terms);
-                sv->have_terms = 1;
-            }
-            wenv_material_specular_cos_f(mat, wi, sv->wo, sv->terms, rgb);
         }
         s[0] += rgb[0] * flux[0];
         s[1] += rgb[1] * flux[1];
@@ -299,7 +304,7 @@ void wenv_lights_specular(const wenv_lights *lights, int level, const wenv_mater
                           double cone_cos, const float n[3], const float v[3], float cos_v, float s[3])
 {
     const light_level *lv = &lights->level[level];
-    specular_view sv = {.mat = mat, .n_lobes = wenv_material_lobe_count(mat), .cos_h_min = cos_h_min, .co = cos_v, .have_terms = 0};
+    specular_view sv = {.mat = mat, .n_lobes = wenv_material_lobe_count(mat), .cos_h_min = cos_h_min, .co = cos_v};
     memcpy(sv.n, n, sizeof sv.n);
     memcpy(sv.v, v, sizeof sv.v);
     /* any frame with +Z the normal will do: the lobes are isotropic */

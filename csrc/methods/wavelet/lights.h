@@ -18,9 +18,9 @@
 
 #include <stddef.h>
 
-#include "scene/material.h"
-#include "scene/envmap.h"
 #include "base/error.h"
+#include "scene/envmap.h"
+#include "scene/material.h"
 
 #define WENV_LIGHT_LEVELS 7
 /* Cluster radius of level k >= 1, radians: 0.25 degrees doubling per level, to 8 degrees. */

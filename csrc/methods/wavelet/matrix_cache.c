@@ -5,11 +5,9 @@
 #include <errno.h>
 #include <math.h>
 #include <stdatomic.h>
-#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <unistd.h>
 #include <zlib.h>
 
 #define CACHE_MAGIC "WENVROT"

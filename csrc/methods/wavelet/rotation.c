@@ -3,10 +3,8 @@
 #include <math.h>
 #include <omp.h>
 #include <stdatomic.h>
-#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-
 
 #include "math/haar.h"
 #include "math/maps.h"

@@ -34,9 +34,9 @@
 
 #include <stddef.h>
 
-#include "scene/material.h"
-#include "scene/envmap.h"
 #include "base/error.h"
+#include "scene/envmap.h"
+#include "scene/material.h"
 
 typedef enum { WENV_WAVELET_ROTATION = 0, WENV_WAVELET_SLICING = 1 } wenv_wavelet_variant;
 

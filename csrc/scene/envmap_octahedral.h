@@ -3,13 +3,13 @@
  * split between the four nearest texel centres and every texel divided by the solid angle it
  * received: a constant environment stays exactly constant and a sun keeps its centroid.  Coarser
  * environments are read by 4 x 4 bilinear lookups per texel, as is any texel no pixel reached. */
-#ifndef WENV_OCTFILTER_H
-#define WENV_OCTFILTER_H
+#ifndef WENV_ENVMAP_OCTAHEDRAL_H
+#define WENV_ENVMAP_OCTAHEDRAL_H
 
 #include <stddef.h>
 
-#include "scene/envmap.h"
 #include "base/error.h"
+#include "scene/envmap.h"
 
 /* texels: side x side x 3 floats (side even).  Radiance includes the environment's strength.
  * `excluded` (ascending pixel indices row * width + col, n_excluded of them, may be NULL) are pixels

@@ -1,4 +1,4 @@
-#include "math/octfilter.h"
+#include "scene/envmap_octahedral.h"
 
 #include <math.h>
 #include <omp.h>

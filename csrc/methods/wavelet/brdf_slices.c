@@ -1,0 +1,300 @@
+/* The wavelet shader's material side: BRDF slices (f cos integrated against each local texel's
+ * tent for every view sample, Haar transformed and cut), the specular albedo table, and the cones
+ * the exact lights test against. */
+#include "methods/wavelet/wavelet_state.h"
+
+#include <math.h>
+#include <stdatomic.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "math/haar.h"
+#include "math/maps.h"
+
+void wenv_wavelet_free_material(wenv_wavelet *wavelet)
+{
+    wenv_material_free(wavelet->mat);
+    free(wavelet->lobe_cos_h_min);
+    free(wavelet->albedo);
+    free(wavelet->view_inv_albedo);
+    wavelet->mat = NULL;
+    wavelet->lobe_cos_h_min = NULL;
+    wavelet->albedo = NULL;
+    wavelet->view_inv_albedo = NULL;
+    wenv_grazing_rule_free(wavelet->grazing_rule);
+    wavelet->grazing_rule = NULL;
+    free(wavelet->brdf_start);
+    free(wavelet->brdf_idx);
+    free(wavelet->brdf_rgb);
+    wavelet->brdf_start = NULL;
+    wavelet->brdf_idx = NULL;
+    wavelet->brdf_rgb = NULL;
+    wavelet->have_mat = 0;
+}
+
+void wenv_wavelet_free_quadrature(wenv_wavelet *wavelet)
+{
+    free(wavelet->quad_dirs);
+    free(wavelet->quad_taps);
+    free(wavelet->quad_w);
+    wavelet->quad_dirs = NULL;
+    wavelet->quad_taps = NULL;
+    wavelet->quad_w = NULL;
+    wavelet->quad_k = 0;
+}
+
+/* Sub-samples of every local texel (k x k per texel, each carrying the texel's exact solid angle
+ * over k^2) with their tent taps, scaled so the cosine weights sum to exactly pi: then a constant
+ * environment gives exactly albedo x radiance. */
+wenv_status wenv_wavelet_build_quadrature(wenv_wavelet *wavelet, size_t k, wenv_error *err)
+{
+    if (wavelet->quad_k == k)
+        return WENV_OK;
+    wenv_wavelet_free_quadrature(wavelet);
+    size_t L = wavelet->q.local_n, nl = wavelet->nl, count = nl * k * k;
+    wavelet->quad_dirs = malloc(count * 3 * sizeof(float));
+    wavelet->quad_taps = malloc(count * 4 * sizeof(uint32_t));
+    wavelet->quad_w = malloc(count * 4 * sizeof(float));
+    double *cosw = calloc(nl, sizeof(double));
+    float *cos_f = malloc(nl * sizeof(float));
+    float *scratch = malloc(L * sizeof(float));
+    if (!wavelet->quad_dirs || !wavelet->quad_taps || !wavelet->quad_w || !cosw || !cos_f || !scratch) {
+        free(cosw);
+        free(cos_f);
+        free(scratch);
+        wenv_wavelet_free_quadrature(wavelet);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the local quadrature");
+    }
+    double h = 2.0 / (double)L, total = 0.0;
+    for (size_t t = 0; t < nl; t++) {
+        size_t i = t % L, j = t / L;
+        double omega = wenv_hemi_texel_solid_angle(L, i, j) / (double)(k * k);
+        for (size_t q = 0; q < k * k; q++) {
+            size_t e = t * k * k + q;
+            double u = -1.0 + h * ((double)i + ((double)(q % k) + 0.5) / (double)k);
+            double v = -1.0 + h * ((double)j + ((double)(q / k) + 0.5) / (double)k);
+            double d[3], w[4];
+            size_t idx[4];
+            wenv_hemi_decode(u, v, d);
+            wenv_hemi_bilinear(L, u, v, idx, w);
+            for (int c = 0; c < 3; c++)
+                wavelet->quad_dirs[3 * e + c] = (float)d[c];
+            for (int c = 0; c < 4; c++) {
+                wavelet->quad_taps[4 * e + c] = (uint32_t)idx[c];
+                wavelet->quad_w[4 * e + c] = (float)(w[c] * omega);
+                cosw[idx[c]] += w[c] * omega * d[2];
+                total += w[c] * omega * d[2];
+            }
+        }
+    }
+    double scale = M_PI / total;
+    for (size_t e = 0; e < count * 4; e++)
+        wavelet->quad_w[e] = (float)(wavelet->quad_w[e] * scale);
+    for (size_t t = 0; t < nl; t++)
+        cos_f[t] = (float)(cosw[t] * scale);
+    wenv_haar2d_forward(cos_f, L, 1, scratch);
+    free(cosw);
+    free(scratch);
+    /* The irradiance weights stay those of the first quadrature: the lighting slices (and their
+     * irradiance) outlive materials, so a slice must not depend on which material was current. */
+    if (wavelet->cosine_haar)
+        free(cos_f);
+    else
+        wavelet->cosine_haar = cos_f;
+    wavelet->quad_count = count;
+    wavelet->quad_k = k;
+    return WENV_OK;
+}
+
+/* Sub-samples per local texel side: enough to resolve the narrowest lobe (its reflected width is
+ * about 1.4 m radians) with a couple of samples. */
+static size_t quadrature_k(const wenv_wavelet *wavelet, const wenv_material *mat)
+{
+    double m = fmin(1.0, wenv_material_lobe_width(mat));
+    double spacing = 2.5 / (double)wavelet->q.local_n;
+    size_t k = (size_t)ceil(2.0 * spacing / (1.41 * m));
+    return k < 2 ? 2 : (k > 16 ? 16 : k);
+}
+
+/* Per lobe, the n.h below which its distribution stays under 1e-7 of its largest value (a scan over
+ * theta_h from the horizon in, stopping one step past the first value above the cut): a direct
+ * light there adds nothing visible, and skipping it keeps the lights cheap per vertex. */
+static wenv_status lobe_cutoffs(wenv_wavelet *wavelet, const wenv_material *mat, wenv_error *err)
+{
+    enum { STEPS = 4096 };
+    size_t n_lobes = wenv_material_lobe_count(mat);
+    wavelet->lobe_cos_h_min = malloc((n_lobes ? n_lobes : 1) * sizeof(float));
+    if (!wavelet->lobe_cos_h_min)
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the material");
+    for (size_t k = 0; k < n_lobes; k++) {
+        const wenv_lobe *lobe = wenv_material_lobe(mat, k);
+        double peak = 0.0;
+        for (int i = 0; i <= STEPS; i++)
+            peak = fmax(peak, wenv_ndf(lobe->distribution, lobe->roughness, cos(0.5 * M_PI * i / STEPS)));
+        int i = STEPS;
+        while (i > 0 && wenv_ndf(lobe->distribution, lobe->roughness, cos(0.5 * M_PI * i / STEPS)) < 1e-7 * peak)
+            i--;
+        i = i < STEPS ? i + 1 : STEPS;
+        wavelet->lobe_cos_h_min[k] = i >= STEPS ? -1.0f : (float)cos(0.5 * M_PI * i / STEPS);
+    }
+    /* A half-vector theta_h from the normal turns the mirror direction by at most 2 theta_h. */
+    double theta_h = 0.0;
+    for (size_t k = 0; k < n_lobes; k++)
+        theta_h = fmax(theta_h, acos(fmax(-1.0, fmin(1.0, (double)wavelet->lobe_cos_h_min[k]))));
+    wavelet->lobe_m_min = fmin(1.0, wenv_material_lobe_width(mat));
+    wavelet->light_cone_cos = 2.0 * theta_h >= M_PI ? -1.0 : cos(2.0 * theta_h);
+    return WENV_OK;
+}
+
+/* The specular lobes' directional albedo over cos(view), and its inverse at each view sample.
+ *
+ * Why: a table entry is the lighting seen through one view sample's BRDF slice, and near grazing
+ * the slice's overall size (Fresnel, masking, 1/cos of the view) changes faster than bilinear
+ * interpolation between view samples follows.  Entries are therefore kept divided by their view's
+ * albedo -- a weighted mean radiance, which varies slowly -- and a vertex multiplies the
+ * interpolated mean by the albedo at its own view.  A constant environment stays exact. */
+static wenv_status albedo_tables(wenv_wavelet *wavelet, const wenv_material *mat, wenv_error *err)
+{
+    size_t V = wavelet->q.view_n;
+    wavelet->albedo = calloc(ALBEDO_N * 3, sizeof(float));
+    wavelet->view_inv_albedo = calloc(wavelet->nv * 3, sizeof(float));
+    if (!wavelet->albedo || !wavelet->view_inv_albedo)
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the material");
+    atomic_int failed = 0;
+#pragma omp parallel for schedule(dynamic, 4)
+    for (size_t i = 0; i < ALBEDO_N; i++) {
+        double c = WENV_GRAZING_Z + (1.0 - WENV_GRAZING_Z) * (double)i / (double)(ALBEDO_N - 1);
+        double wo[3] = {sqrt(fmax(0.0, 1.0 - c * c)), 0.0, c};
+        for (size_t l = 0; l < wenv_material_lobe_count(mat); l++) {
+            double a[3];
+            wenv_error lobe_err = {0};
+            if (wenv_material_lobe_albedo(mat, l, wo, ALBEDO_SAMPLES, a, &lobe_err)) {
+                atomic_store(&failed, 1);
+                continue;
+            }
+            for (int k = 0; k < 3; k++)
+                wavelet->albedo[3 * i + k] += (float)a[k];
+        }
+    }
+    if (failed)
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the material's albedo");
+    for (size_t j = 0; j < wavelet->nv; j++) {
+        double wo[3];
+        wenv_hemi_decode(-1.0 + 2.0 * (double)(j % (V + 1)) / (double)V, -1.0 + 2.0 * (double)(j / (V + 1)) / (double)V,
+                         wo);
+        float a[3];
+        wenv_wavelet_albedo_at(wavelet->albedo, (float)wo[2], a);
+        for (int k = 0; k < 3; k++)
+            wavelet->view_inv_albedo[3 * j + k] = a[k] > 1e-30f ? 1.0f / a[k] : 0.0f;
+    }
+    return WENV_OK;
+}
+
+wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material *mat, wenv_error *err)
+{
+    size_t nv = wavelet->nv, nl = wavelet->nl, L = wavelet->q.local_n, V = wavelet->q.view_n;
+    size_t keep = wavelet->q.coefficients ? wavelet->q.coefficients : nl;
+    if (wenv_material_lobe_count(mat) && wenv_wavelet_build_quadrature(wavelet, quadrature_k(wavelet, mat), err))
+        return err->status;
+    wenv_wavelet_free_material(wavelet);
+    wavelet->brdf_start = calloc(nv + 1, sizeof(size_t));
+    size_t *counts = calloc(nv, sizeof(size_t));
+    uint32_t *all_idx = malloc(nv * keep * sizeof(uint32_t));
+    float *all_rgb = malloc(nv * keep * 3 * sizeof(float));
+    if (!wavelet->brdf_start || !counts || !all_idx || !all_rgb) {
+        free(counts);
+        free(all_idx);
+        free(all_rgb);
+        wenv_wavelet_free_material(wavelet);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for BRDF slices");
+    }
+    atomic_int failed = 0;
+    if (wenv_material_lobe_count(mat)) {
+#pragma omp parallel
+        {
+            float *slice = malloc(nl * 3 * sizeof(float));
+            float *scratch = malloc(L * 3 * sizeof(float));
+            float *mag = malloc(nl * sizeof(float));
+            float *work = malloc(nl * sizeof(float));
+            float *fcos = malloc(wavelet->quad_count * 3 * sizeof(float));
+            if (!slice || !scratch || !mag || !work || !fcos)
+                atomic_store(&failed, 1);
+#pragma omp for schedule(dynamic, 1)
+            for (size_t j = 0; j < nv; j++) {
+                if (atomic_load(&failed))
+                    continue;
+                double wo[3];
+                wenv_hemi_decode(-1.0 + 2.0 * (double)(j % (V + 1)) / (double)V,
+                                 -1.0 + 2.0 * (double)(j / (V + 1)) / (double)V, wo);
+                /* a view exactly on the horizon sees nothing; its limit is what interpolation needs */
+                if (wo[2] < WENV_GRAZING_Z) {
+                    double s = sqrt((1.0 - WENV_GRAZING_Z * WENV_GRAZING_Z) / (wo[0] * wo[0] + wo[1] * wo[1]));
+                    wo[0] *= s;
+                    wo[1] *= s;
+                    wo[2] = WENV_GRAZING_Z;
+                }
+                wenv_material_specular_cos_batch(mat, wo, wavelet->quad_dirs, wavelet->quad_count, fcos);
+                memset(slice, 0, nl * 3 * sizeof(float));
+                for (size_t e = 0; e < wavelet->quad_count; e++) {
+                    const float *g = fcos + 3 * e;
+                    for (int c = 0; c < 4; c++) {
+                        float w = wavelet->quad_w[4 * e + c];
+                        float *o = slice + 3 * (size_t)wavelet->quad_taps[4 * e + c];
+                        o[0] += w * g[0];
+                        o[1] += w * g[1];
+                        o[2] += w * g[2];
+                    }
+                }
+                wenv_haar2d_forward(slice, L, 3, scratch);
+                for (size_t t = 0; t < nl; t++)
+                    mag[t] = slice[3 * t] * slice[3 * t] + slice[3 * t + 1] * slice[3 * t + 1] + slice[3 * t + 2] * slice[3 * t + 2];
+                uint32_t *idx = all_idx + j * keep;
+                size_t count = wenv_select_largest(mag, nl, keep, idx, work);
+                for (size_t e = 0; e < count; e++)
+                    memcpy(all_rgb + (j * keep + e) * 3, slice + 3 * (size_t)idx[e], 3 * sizeof(float));
+                counts[j] = count;
+            }
+            free(slice);
+            free(scratch);
+            free(mag);
+            free(work);
+            free(fcos);
+        }
+    }
+    if (failed) {
+        free(counts);
+        free(all_idx);
+        free(all_rgb);
+        wenv_wavelet_free_material(wavelet);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for BRDF slices");
+    }
+    for (size_t j = 0; j < nv; j++)
+        wavelet->brdf_start[j + 1] = wavelet->brdf_start[j] + counts[j];
+    size_t total = wavelet->brdf_start[nv];
+    wavelet->brdf_idx = malloc((total ? total : 1) * sizeof(uint32_t));
+    wavelet->brdf_rgb = malloc((total ? total : 1) * 3 * sizeof(float));
+    if (!wavelet->brdf_idx || !wavelet->brdf_rgb) {
+        free(counts);
+        free(all_idx);
+        free(all_rgb);
+        wenv_wavelet_free_material(wavelet);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for BRDF slices");
+    }
+    for (size_t j = 0; j < nv; j++) {
+        memcpy(wavelet->brdf_idx + wavelet->brdf_start[j], all_idx + j * keep, counts[j] * sizeof(uint32_t));
+        memcpy(wavelet->brdf_rgb + 3 * wavelet->brdf_start[j], all_rgb + j * keep * 3, counts[j] * 3 * sizeof(float));
+    }
+    free(counts);
+    free(all_idx);
+    free(all_rgb);
+    if (wenv_material_copy(&wavelet->mat, mat, err) || lobe_cutoffs(wavelet, mat, err) || albedo_tables(wavelet, mat, err) ||
+        wenv_grazing_rule_create(&wavelet->grazing_rule, mat, wavelet->q.local_n, wavelet->q.grazing, err)) {
+        wenv_wavelet_free_material(wavelet);
+        return err->status;
+    }
+    for (int c = 0; c < 3; c++)
+        wavelet->diffuse_over_pi[c] = (float)(wenv_material_diffuse(mat)[c] / M_PI);
+    wavelet->stats.brdf_terms_total = total;
+    wavelet->have_mat = 1;
+    return wenv_wavelet_remake_ready(wavelet, 0, err);
+}

@@ -1,0 +1,365 @@
+/* The wavelet shader per vertex: taps on the normal and view samples, the (normal sample, view
+ * sample) radiance table made as vertices need it, the exact lights and the grazing path. */
+#include "methods/wavelet/wavelet_state.h"
+
+#include <math.h>
+#include <stdatomic.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "math/haar.h"
+#include "math/maps.h"
+
+/* Bilinear taps on the normal samples' octahedral grid and on a slice's view-sample corners, in
+ * float with truncating casts: this runs 5 times per vertex per frame, and libm's floor() (a call
+ * on baseline x86-64) and double divisions dominated it.  Same conventions as maps.c. */
+static inline void corner_taps_f(long n, float u, float v, uint32_t idx[4], float w[4])
+{
+    float hi = (float)n, x = (u + 1.0f) * 0.5f * hi, y = (v + 1.0f) * 0.5f * hi;
+    x = x < 0.0f ? 0.0f : (x > hi ? hi : x);
+    y = y < 0.0f ? 0.0f : (y > hi ? hi : y);
+    long i = (long)x, j = (long)y;
+    if (i > n - 1)
+        i = n - 1;
+    if (j > n - 1)
+        j = n - 1;
+    float fx = x - (float)i, fy = y - (float)j;
+    long row = n + 1;
+    idx[0] = (uint32_t)(j * row + i);
+    idx[1] = idx[0] + 1;
+    idx[2] = idx[0] + (uint32_t)row;
+    idx[3] = idx[2] + 1;
+    w[0] = (1.0f - fx) * (1.0f - fy);
+    w[1] = fx * (1.0f - fy);
+    w[2] = (1.0f - fx) * fy;
+    w[3] = fx * fy;
+}
+
+static wenv_status fill_needed(wenv_wavelet *wavelet, wenv_error *err);
+
+/* A new lighting (slices too) or material remakes at once what the latest shade call read -- so
+ * that shading the same view again, the usual case while lighting or material is edited, is a single
+ * pass over the vertices -- and marks everything else stale, to be made when a vertex needs it. */
+wenv_status wenv_wavelet_remake_ready(wenv_wavelet *wavelet, int slices, wenv_error *err)
+{
+    size_t npairs = wavelet->ns * wavelet->nv;
+    if (slices) {
+        for (size_t s = 0; s < wavelet->ns; s++)
+            wavelet->slice_need[s] |= wavelet->slice_ready[s] == USED;
+        memset(wavelet->slice_ready, 0, wavelet->ns);
+    }
+    for (size_t p = 0; p < npairs; p++)
+        wavelet->pair_need[p] |= wavelet->pair_ready[p] == USED;
+    memset(wavelet->pair_ready, 0, npairs);
+    if (!wavelet->have_env || !wavelet->have_mat)
+        return WENV_OK;
+    return fill_needed(wavelet, err);
+}
+
+/* ---- per vertex -------------------------------------------------------------------------------- */
+
+typedef struct {
+    uint32_t sample[4];
+    float sample_w[4];
+    uint32_t pair[16];
+    float pair_w[16];
+    float n[3], v[3]; /* unit vertex normal and view, for the direct lights */
+    float cos_v;      /* n . v, > 0 */
+} vertex_taps;
+
+/* Returns 0 when the view is below the surface (the vertex is black). */
+static int compute_taps(const wenv_wavelet *wavelet, const float *nrm, const float *view, vertex_taps *tp)
+{
+    float n[3] = {nrm[0], nrm[1], nrm[2]}, v[3] = {view[0], view[1], view[2]};
+    float in = 1.0f / sqrtf(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    float iv = 1.0f / sqrtf(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+    for (int c = 0; c < 3; c++) {
+        n[c] *= in;
+        v[c] *= iv;
+    }
+    float nv = n[0] * v[0] + n[1] * v[1] + n[2] * v[2];
+    if (!(nv > 0.0f))
+        return 0;
+    memcpy(tp->n, n, sizeof n);
+    memcpy(tp->v, v, sizeof v);
+    tp->cos_v = nv;
+    float r[3] = {2.0f * nv * n[0] - v[0], 2.0f * nv * n[1] - v[1], 2.0f * nv * n[2] - v[2]};
+    /* octahedral encoding of the normal */
+    float ou, ov;
+    wenv_oct_encode_f(n, &ou, &ov);
+    wenv_oct_bilinear_f((long)wavelet->q.normal_n, ou, ov, tp->sample, tp->sample_w);
+    for (int k = 0; k < 4; k++) {
+        const float *f = wavelet->frames + 9 * (size_t)tp->sample[k];
+        /* mirror of r about the sample normal, in the sample's frame: (-r.t, -r.b, r.n) */
+        float lx = -(f[0] * r[0] + f[1] * r[1] + f[2] * r[2]), ly = -(f[3] * r[0] + f[4] * r[1] + f[5] * r[2]);
+        float lz = f[6] * r[0] + f[7] * r[1] + f[8] * r[2];
+        /* hemi-octahedral encoding; views below the sample's horizon are read on it */
+        float hl = fabsf(lx) + fabsf(ly) + (lz > 0.0f ? lz : 0.0f);
+        float ih = hl > 0.0f ? 1.0f / hl : 0.0f, px = lx * ih, py = ly * ih;
+        uint32_t vidx[4];
+        float vw[4];
+        corner_taps_f((long)wavelet->q.view_n, px + py, px - py, vidx, vw);
+        uint32_t base = tp->sample[k] * (uint32_t)wavelet->nv;
+        for (int j = 0; j < 4; j++) {
+            tp->pair[4 * k + j] = base + vidx[j];
+            tp->pair_w[4 * k + j] = tp->sample_w[k] * vw[j];
+        }
+    }
+    return 1;
+}
+
+static int compute_slice(wenv_wavelet *wavelet, size_t s, float *pixel_work, double *rowsum, float *scratch)
+{
+    if (!wavelet->slices[s]) {
+        wavelet->slices[s] = malloc(wavelet->nl * 3 * sizeof(float));
+        if (!wavelet->slices[s])
+            return -1;
+    }
+    float *slice = wavelet->slices[s];
+    if (wavelet->method == WENV_WAVELET_ROTATION) {
+        wenv_rotation_apply(wavelet->rot, s, wavelet->light_idx, wavelet->light_rgb, wavelet->light_count, slice);
+    } else {
+        /* the double-precision frame the rotation matrices were built with, so that directions on
+         * a frame's horizon fall on the same side in both methods */
+        double n[3], f[9];
+        wenv_normal_sample(wavelet->q.normal_n, s, n);
+        wenv_frame(n, f);
+        wenv_resample_slice(wavelet->resampler, f, wavelet->global_texels, pixel_work, rowsum);
+        wenv_haar2d_forward(pixel_work, wavelet->q.local_n, 3, scratch);
+        memcpy(slice, pixel_work, wavelet->nl * 3 * sizeof(float));
+    }
+    double e[3] = {0, 0, 0};
+    for (size_t t = 0; t < wavelet->nl; t++) {
+        float c = wavelet->cosine_haar[t];
+        e[0] += c * slice[3 * t];
+        e[1] += c * slice[3 * t + 1];
+        e[2] += c * slice[3 * t + 2];
+    }
+    for (int c = 0; c < 3; c++)
+        wavelet->irradiance[3 * s + c] = (float)e[c];
+    return 0;
+}
+
+/* The exact lights at one vertex: irradiance into e (the diffuse term scales it) and the specular
+ * lobes' reflected radiance into s, each from the coarsest cluster level its lobe allows.  Towards
+ * grazing a lobe narrows to about 2 m cos(theta_v) in azimuth, so there the pixels are read. */
+static void shade_direct(const wenv_wavelet *wavelet, const float n[3], const float v[3], float co, float e[3],
+                         float s[3])
+{
+    const wenv_material *mat = wavelet->mat;
+    const double *diffuse = wenv_material_diffuse(mat);
+    if (diffuse[0] != 0.0 || diffuse[1] != 0.0 || diffuse[2] != 0.0)
+        wenv_lights_irradiance(wavelet->lights, wenv_lights_level(WENV_LIGHT_IRRADIANCE_WIDTH), n, e);
+    if (wenv_material_lobe_count(mat))
+        wenv_lights_specular(wavelet->lights, wenv_lights_level(2.0 * wavelet->lobe_m_min * co), mat, wavelet->lobe_cos_h_min,
+                             wavelet->light_cone_cos, n, v, co, s);
+}
+
+static void shade_vertex(const wenv_wavelet *wavelet, const vertex_taps *tp, float *o)
+{
+    float e[3] = {0, 0, 0}, m[3] = {0, 0, 0}, s[3] = {0, 0, 0};
+    if (wenv_lights_count(wavelet->lights, 0))
+        shade_direct(wavelet, tp->n, tp->v, tp->cos_v, e, s);
+    for (int k = 0; k < 4; k++) {
+        const float *ir = wavelet->irradiance + 3 * (size_t)tp->sample[k];
+        e[0] += tp->sample_w[k] * ir[0];
+        e[1] += tp->sample_w[k] * ir[1];
+        e[2] += tp->sample_w[k] * ir[2];
+    }
+    /* table entries are mean radiances under the lobe (see albedo_tables) */
+    for (int k = 0; k < 16; k++) {
+        const float *t = wavelet->table + 3 * (size_t)tp->pair[k];
+        float w = tp->pair_w[k];
+        if (w > 0.0f) {
+            m[0] += w * t[0];
+            m[1] += w * t[1];
+            m[2] += w * t[2];
+        }
+    }
+    float blend = wenv_grazing_blend(wavelet->grazing_rule, tp->cos_v);
+    if (wavelet->albedo && blend < 1.0f) {
+        /* A mean radiance under the lobe lies between the lighting's darkest and brightest
+         * texels; wavelet truncation and interpolation can ring past either, most at narrow
+         * lobes near grazing, where they overshot the brightest pixel several-fold. */
+        float a[3];
+        wenv_wavelet_albedo_at(wavelet->albedo, tp->cos_v, a);
+        for (int c = 0; c < 3; c++) {
+            float mc = m[c] < 0.0f ? 0.0f : (m[c] > wavelet->radiance_max[c] ? wavelet->radiance_max[c] : m[c]);
+            s[c] += (1.0f - blend) * a[c] * mc;
+        }
+    }
+    if (blend > 0.0f) {
+        float g[3];
+        wenv_grazing_shade(wavelet->grazing_rule, wavelet->grazing_light, tp->n, tp->v, tp->cos_v, g);
+        for (int c = 0; c < 3; c++)
+            s[c] += blend * g[c];
+    }
+    for (int c = 0; c < 3; c++) {
+        float val = wavelet->diffuse_over_pi[c] * e[c] + s[c];
+        o[c] = val > 0.0f ? val : 0.0f;
+    }
+}
+
+/* Whether the n states state[idx[k]] read with weight w[k] > 0 are all made; marks those made as
+ * USED. */
+static inline int read_states(unsigned char *state, const uint32_t *idx, const float *w, int n)
+{
+    int all = 1;
+    for (int k = 0; k < n; k++) {
+        unsigned char f;
+#pragma omp atomic read
+        f = state[idx[k]];
+        if (w[k] > 0.0f) {
+            if (!f)
+                all = 0;
+            else if (f == READY) {
+#pragma omp atomic write
+                state[idx[k]] = USED;
+            }
+        }
+    }
+    return all;
+}
+
+/* Whether every slice and table entry the vertex reads is ready; marks those ready as USED. */
+static int read_taps(const wenv_wavelet *wavelet, const vertex_taps *tp)
+{
+    int slices = read_states(wavelet->slice_ready, tp->sample, tp->sample_w, 4);
+    return read_states(wavelet->pair_ready, tp->pair, tp->pair_w, 16) && slices;
+}
+
+/* Flags in `flags` the entries a vertex reads with weight.  Checked before written so that cache
+ * lines shared between threads stay clean; every writer stores 1. */
+static inline void flag_needed(unsigned char *flags, const uint32_t *idx, const float *w, int n)
+{
+    for (int k = 0; k < n; k++) {
+        unsigned char f;
+#pragma omp atomic read
+        f = flags[idx[k]];
+        if (w[k] > 0.0f && !f) {
+#pragma omp atomic write
+            flags[idx[k]] = 1;
+        }
+    }
+}
+
+static inline void flag_taps(const vertex_taps *tp, unsigned char *slice_flags, unsigned char *pair_flags)
+{
+    flag_needed(slice_flags, tp->sample, tp->sample_w, 4);
+    flag_needed(pair_flags, tp->pair, tp->pair_w, 16);
+}
+
+/* Makes the lighting slices and table entries flagged in slice_need / pair_need. */
+static wenv_status fill_needed(wenv_wavelet *wavelet, wenv_error *err)
+{
+    size_t npairs = wavelet->ns * wavelet->nv;
+    size_t *todo = malloc((wavelet->ns > npairs ? wavelet->ns : npairs) * sizeof(size_t));
+    if (!todo)
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory shading");
+    size_t ntodo = 0;
+    for (size_t s = 0; s < wavelet->ns; s++) {
+        if (wavelet->slice_need[s] && !wavelet->slice_ready[s])
+            todo[ntodo++] = s;
+        wavelet->slice_need[s] = 0;
+    }
+    atomic_int failed = 0;
+#pragma omp parallel if (ntodo > 1)
+    {
+        float *pixel_work = malloc(wavelet->nl * 3 * sizeof(float));
+        double *rowsum = malloc(wavelet->nl * sizeof(double));
+        float *scratch = malloc(wavelet->q.local_n * 3 * sizeof(float));
+        if (!pixel_work || !rowsum || !scratch)
+            atomic_store(&failed, 1);
+#pragma omp for schedule(dynamic, 4)
+        for (size_t e = 0; e < ntodo; e++) {
+            if (atomic_load(&failed))
+                continue;
+            if (compute_slice(wavelet, todo[e], pixel_work, rowsum, scratch) < 0)
+                atomic_store(&failed, 1);
+            else
+                wavelet->slice_ready[todo[e]] = USED; /* made for the latest shade call */
+        }
+        free(pixel_work);
+        free(rowsum);
+        free(scratch);
+    }
+    if (failed) {
+        free(todo);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory computing lighting slices");
+    }
+    /* table entries: sparse BRDF slice . dense lighting slice, per RGB channel */
+    ntodo = 0;
+    for (size_t p = 0; p < npairs; p++) {
+        if (wavelet->pair_need[p] && !wavelet->pair_ready[p])
+            todo[ntodo++] = p;
+        wavelet->pair_need[p] = 0;
+    }
+#pragma omp parallel for schedule(dynamic, 64) if (ntodo > 256)
+    for (size_t e = 0; e < ntodo; e++) {
+        size_t p = todo[e], s = p / wavelet->nv, j = p % wavelet->nv;
+        const float *slice = wavelet->slices[s];
+        float acc[3] = {0, 0, 0};
+        for (size_t q = wavelet->brdf_start[j]; q < wavelet->brdf_start[j + 1]; q++) {
+            const float *l = slice + 3 * (size_t)wavelet->brdf_idx[q], *b = wavelet->brdf_rgb + 3 * q;
+            acc[0] += l[0] * b[0];
+            acc[1] += l[1] * b[1];
+            acc[2] += l[2] * b[2];
+        }
+        const float *inv = wavelet->view_inv_albedo + 3 * j;
+        for (int c = 0; c < 3; c++)
+            wavelet->table[3 * p + c] = acc[c] * inv[c];
+        wavelet->pair_ready[p] = USED;
+    }
+    free(todo);
+    return WENV_OK;
+}
+
+wenv_status wenv_wavelet_shade(wenv_wavelet *wavelet, const float *normals, const float *views, size_t n,
+                              float *out, wenv_error *err)
+{
+    if (!wavelet->have_env || !wavelet->have_mat)
+        return wenv_error_set(err, WENV_ERR_VALUE, "the shader needs an environment and a material");
+    /* One pass shades every vertex whose table entries exist (all of them for a view seen before)
+     * and flags what the others need; those are shaded after the missing entries are made. */
+    size_t *pending = malloc((n ? n : 1) * sizeof(size_t));
+    if (!pending)
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory shading");
+    /* what the previous call read is no longer the latest */
+    for (size_t q = 0; q < wavelet->ns; q++)
+        wavelet->slice_ready[q] = wavelet->slice_ready[q] != 0;
+    for (size_t q = 0; q < wavelet->ns * wavelet->nv; q++)
+        wavelet->pair_ready[q] = wavelet->pair_ready[q] != 0;
+    atomic_size_t npending = 0;
+    long long nn = (long long)n;
+#pragma omp parallel for schedule(static)
+    for (long long i = 0; i < nn; i++) {
+        vertex_taps tp;
+        float *o = out + 3 * i;
+        if (!compute_taps(wavelet, normals + 3 * i, views + 3 * i, &tp)) {
+            o[0] = o[1] = o[2] = 0.0f;
+            continue;
+        }
+        if (read_taps(wavelet, &tp)) {
+            shade_vertex(wavelet, &tp, o);
+            continue;
+        }
+        flag_taps(&tp, wavelet->slice_need, wavelet->pair_need);
+        pending[atomic_fetch_add(&npending, 1)] = (size_t)i;
+    }
+    size_t np = atomic_load(&npending);
+    if (np) {
+        if (fill_needed(wavelet, err)) {
+            free(pending);
+            return err->status;
+        }
+#pragma omp parallel for schedule(static)
+        for (size_t e = 0; e < np; e++) {
+            vertex_taps tp;
+            size_t i = pending[e];
+            compute_taps(wavelet, normals + 3 * i, views + 3 * i, &tp);
+            shade_vertex(wavelet, &tp, out + 3 * i);
+        }
+    }
+    free(pending);
+    return WENV_OK;
+}

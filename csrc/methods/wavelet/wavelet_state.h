@@ -1,0 +1,97 @@
+/* What the wavelet shader's files share (wavelet.c: the shader and its lighting; brdf_slices.c: the
+ * material's slices; vertex_shading.c: the table and the vertices).  Private to methods/wavelet/. */
+#ifndef WENV_WAVELET_STATE_H
+#define WENV_WAVELET_STATE_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "methods/wavelet/grazing.h"
+#include "methods/wavelet/lights.h"
+#include "methods/wavelet/rotation.h"
+#include "methods/wavelet/wavelet.h"
+
+struct wenv_wavelet {
+    wenv_wavelet_quality q;
+    wenv_wavelet_variant method;
+    size_t ng, nl, ns, nv;
+    wenv_rotation *rot;      /* rotation method only */
+    wenv_resampler *resampler; /* slicing method only */
+    float *frames;           /* ns x 9 */
+    wenv_wavelet_stats stats;
+
+    /* lighting */
+    int have_env;
+    uint32_t *light_idx;     /* kept global Haar coefficients */
+    float *light_rgb;
+    size_t light_count;
+    float *global_texels;    /* slicing: the kept lighting back in the pixel domain */
+    float **slices;          /* ns pointers to nl x 3 Haar coefficients, NULL until needed */
+    float *irradiance;       /* ns x 3 */
+    float radiance_max[3];   /* brightest texel of the lighting the slices see (lights out) */
+    wenv_lights *lights;     /* pixels taken out as exact directional lights (lights.h) */
+    unsigned char *slice_ready, *slice_need; /* ready: 0 stale, READY, or USED (see READY) */
+    wenv_grazing_light *grazing_light; /* quality.grazing > 0 only */
+
+    /* local quadrature: sub-samples of the local map with their tent taps */
+    size_t quad_k, quad_count;
+    float *quad_dirs;        /* quad_count x 3 */
+    uint32_t *quad_taps;     /* quad_count x 4 */
+    float *quad_w;           /* quad_count x 4: tent weight x solid angle x normalisation */
+    float *cosine_haar;      /* nl: Haar transform of the cosine weights (sum pi) */
+
+    /* material */
+    int have_mat;
+    wenv_material *mat;      /* for the direct lights */
+    float *lobe_cos_h_min;   /* per lobe: below this n.h its D is negligible (< 1e-7 of its peak) */
+    double light_cone_cos;   /* lights farther than this from the mirror direction miss every lobe */
+    double lobe_m_min;       /* the narrowest lobe's roughness (picks the lights' cluster level) */
+    float *albedo;           /* ALBEDO_N x 3: specular albedo at cos(view) = WENV_GRAZING_Z .. 1 */
+    float *view_inv_albedo;  /* nv x 3: 1 / albedo of each view sample (0 where the albedo is 0) */
+    float diffuse_over_pi[3];
+    wenv_grazing_rule *grazing_rule; /* NULL: no lobe is integrated per vertex */
+    size_t *brdf_start;      /* nv + 1 */
+    uint32_t *brdf_idx;
+    float *brdf_rgb;
+
+    /* (normal sample, view sample) radiance table */
+    float *table;            /* ns x nv x 3 */
+    unsigned char *pair_ready, *pair_need;
+};
+
+/* States of a lighting slice or table entry: made (READY), and made and read by the latest shade
+ * call (USED), which a new lighting or material remakes at once.  Marking use on the read that
+ * checks readiness costs nothing extra per vertex. */
+#define READY 1
+#define USED 2
+
+/* Entries of the specular albedo table, uniform in cos(view): 1/256 apart is 0.22 degrees at the
+ * horizon, where the albedo changes fastest. */
+#define ALBEDO_N 257
+#define ALBEDO_SAMPLES 32
+
+
+/* Specular albedo at cos(view) = c, linear in the table. */
+static inline void wenv_wavelet_albedo_at(const float *table, float c, float a[3])
+{
+    float x = (c - (float)WENV_GRAZING_Z) * (float)(ALBEDO_N - 1) / (1.0f - (float)WENV_GRAZING_Z);
+    x = x < 0.0f ? 0.0f : (x > (float)(ALBEDO_N - 1) ? (float)(ALBEDO_N - 1) : x);
+    long i = (long)x;
+    if (i > ALBEDO_N - 2)
+        i = ALBEDO_N - 2;
+    float f = x - (float)i;
+    for (int k = 0; k < 3; k++)
+        a[k] = (1.0f - f) * table[3 * i + k] + f * table[3 * (i + 1) + k];
+}
+
+/* brdf_slices.c: the local map's sub-sample quadrature (k x k per texel), and freeing it and the
+ * material's tables. */
+wenv_status wenv_wavelet_build_quadrature(wenv_wavelet *wavelet, size_t k, wenv_error *err);
+void wenv_wavelet_free_quadrature(wenv_wavelet *wavelet);
+void wenv_wavelet_free_material(wenv_wavelet *wavelet);
+
+/* vertex_shading.c: after a new lighting (slices = 1) or material, remakes at once what the latest
+ * shade call read and marks the rest stale. */
+wenv_status wenv_wavelet_remake_ready(wenv_wavelet *wavelet, int slices, wenv_error *err);
+
+#endif

@@ -1,0 +1,150 @@
+/* The core without Python: materials through the material interface and every registered method
+ * through the shading-method interface, checked against closed forms.  Built and run by
+ * tests/test_core_c.py from csrc/ minus csrc/python/, which shows the layers below the bindings
+ * stand on their own.  Prints one line per check and "N passed, N failed"; exits non-zero on a
+ * failure. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "methods/method.h"
+#include "reference/reference.h"
+#include "scene/envmap.h"
+#include "scene/material.h"
+
+static int passed, failed;
+
+static void check(int ok, const char *what, double got, double want)
+{
+    printf("%s %s: got %.9g, against %.9g\n", ok ? "ok  " : "FAIL", what, got, want);
+    if (ok)
+        passed++;
+    else
+        failed++;
+}
+
+static int near(double got, double want, double rel) { return fabs(got - want) <= rel * fabs(want) + 1e-12; }
+
+/* A constant environment of radiance 1 (equirect 64 x 32). */
+static wenv_envmap *white_environment(void)
+{
+    size_t w = 64, h = 32;
+    float *px = malloc(w * h * 3 * sizeof(float));
+    if (!px)
+        return NULL;
+    for (size_t i = 0; i < w * h * 3; i++)
+        px[i] = 1.0f;
+    wenv_envmap *env = NULL;
+    wenv_error err = {0};
+    if (wenv_envmap_create(&env, px, h, w, 3, WENV_PROJ_EQUIRECT, 0.0, 1.0, &err))
+        fprintf(stderr, "environment: %s\n", err.message);
+    free(px);
+    return env;
+}
+
+static void check_materials(void)
+{
+    wenv_error err = {0};
+    const double grey[3] = {0.5, 0.25, 1.0}, black[3] = {0.0, 0.0, 0.0};
+    wenv_material *lambert = NULL, *ct = NULL;
+    wenv_lobe lobes[2] = {{.specular = {1, 1, 1}, .roughness = 0.3, .ior = 1.5, .distribution = WENV_NDF_GGX},
+                          {.specular = {0.5, 0.5, 0.5}, .roughness = 0.05, .ior = 1.5, .distribution = WENV_NDF_BECKMANN}};
+    if (wenv_lambert_create(&lambert, grey, &err) || wenv_cook_torrance_create(&ct, black, lobes, 2, WENV_SHADOW_SMITH, &err)) {
+        check(0, err.message, 0, 0);
+        return;
+    }
+    double wi[3] = {0.6, 0.0, 0.8}, wo[3] = {-0.6, 0.0, 0.8}, rgb[3], albedo[3];
+    wenv_material_eval_cos(lambert, wi, wo, rgb);
+    check(near(rgb[0], 0.5 * 0.8 / M_PI, 1e-12), "Lambert f cos = albedo cos / pi", rgb[0], 0.5 * 0.8 / M_PI);
+    check(wenv_material_lobe_count(lambert) == 0 && isinf(wenv_material_lobe_width(lambert)),
+          "Lambert has no lobe and no width", (double)wenv_material_lobe_count(lambert), 0);
+    check(wenv_material_lobe_width(ct) == 0.05, "Cook-Torrance width is its narrowest lobe", wenv_material_lobe_width(ct),
+          0.05);
+    /* a lobe's node rule integrates 1 to its albedo, RGB */
+    size_t samples = 64, count = 0;
+    double *nodes = malloc(2 * samples * samples * 3 * sizeof(double)), *weights = malloc(2 * samples * samples * 3 * sizeof(double));
+    double lobe_albedo[3], sum[3] = {0, 0, 0};
+    if (!nodes || !weights || wenv_material_lobe_nodes(ct, 1, wo, samples, nodes, weights, &count, &err) ||
+        wenv_material_lobe_albedo(ct, 1, wo, samples, lobe_albedo, &err)) {
+        check(0, "lobe rules", 0, 0);
+    } else {
+        for (size_t k = 0; k < count; k++)
+            for (int c = 0; c < 3; c++)
+                sum[c] += weights[3 * k + c];
+        check(near(sum[0], lobe_albedo[0], 1e-9), "lobe nodes' weights sum to its albedo", sum[0], lobe_albedo[0]);
+    }
+    free(nodes);
+    free(weights);
+    /* the float path agrees with the double one */
+    float terms[8], wif[3] = {0.6f, 0.0f, 0.8f}, wof[3] = {-0.6f, 0.0f, 0.8f}, rgbf[3];
+    wenv_material_prepare_view_f(ct, wof, terms);
+    wenv_material_specular_cos_f(ct, wif, wof, terms, rgbf);
+    wenv_material_specular_cos(ct, wi, wo, rgb);
+    check(near(rgbf[0], rgb[0], 1e-4), "float and double evaluation agree", rgbf[0], rgb[0]);
+    if (wenv_material_albedo(ct, wo, 128, albedo, &err) == WENV_OK)
+        check(albedo[0] > 0.0 && albedo[0] < 1.0, "Cook-Torrance albedo in (0, 1)", albedo[0], 1.0);
+    wenv_material_free(lambert);
+    wenv_material_free(ct);
+}
+
+/* Every method, with its default preset, shades a Lambertian material under a white environment to
+ * its albedo (what each promises for a constant environment, to its own accuracy). */
+static void check_methods(const wenv_envmap *env)
+{
+    wenv_error err = {0};
+    const double albedo[3] = {0.8, 0.5, 0.2};
+    wenv_material *mat = NULL;
+    if (wenv_lambert_create(&mat, albedo, &err)) {
+        check(0, err.message, 0, 0);
+        return;
+    }
+    float normals[4 * 3] = {0, 0, 1, 1, 0, 0, 0, -1, 0, 0.6f, 0, -0.8f};
+    float views[4 * 3] = {0, 0.6f, 0.8f, 0.8f, 0, 0.6f, 0, -1, 0, 1, 0, 0};
+    for (size_t i = 0; i < wenv_method_count(); i++) {
+        const wenv_method *m = wenv_method_at(i);
+        const void *quality = wenv_method_preset(m, "draft");
+        wenv_method_setup setup = {.cache = WENV_CACHE_NONE};
+        void *state = NULL;
+        float out[4 * 3];
+        char what[160];
+        snprintf(what, sizeof what, "%s: a white environment reflects the albedo", m->name);
+        if (!quality || m->check_quality(quality, &err) || m->create(&state, quality, &setup, &err) ||
+            m->set_environment(state, env, NULL, &err) || m->set_material(state, mat, NULL, &err) ||
+            m->shade(state, normals, views, 4, out, &err)) {
+            check(0, err.message[0] ? err.message : what, 0, 0);
+        } else {
+            double worst = 0.0;
+            for (int k = 0; k < 4; k++)
+                for (int c = 0; c < 3; c++)
+                    worst = fmax(worst, fabs(out[3 * k + c] - albedo[c]) / albedo[c]);
+            check(worst < 0.02, what, worst, 0.0);
+            wenv_stat stats[WENV_STATS_MAX];
+            size_t n = m->stats(state, stats);
+            snprintf(what, sizeof what, "%s: reports stats", m->name);
+            check(n > 0 && n <= WENV_STATS_MAX, what, (double)n, 1);
+        }
+        if (state)
+            m->destroy(state);
+        err = (wenv_error){0};
+    }
+    check(wenv_method_named("no such method") == NULL, "unknown methods are not found", 0, 0);
+    float ref[4 * 3];
+    if (wenv_reference(env, mat, normals, views, 4, ref, NULL, &err) == WENV_OK)
+        check(near(ref[0], albedo[0], 2e-3), "the reference reflects the albedo (pixel sums, 64 x 32)", ref[0], albedo[0]);
+    wenv_material_free(mat);
+}
+
+int main(void)
+{
+    check_materials();
+    wenv_envmap *env = white_environment();
+    if (env) {
+        check_methods(env);
+        wenv_envmap_free(env);
+    } else {
+        check(0, "white environment", 0, 0);
+    }
+    printf("%d passed, %d failed\n", passed, failed);
+    return failed ? 1 : 0;
+}

@@ -1,0 +1,67 @@
+"""The C core below the bindings stands on its own: csrc/ without csrc/python/ builds into a plain
+program (tests/c/core_check.c) that checks the material interface and every registered shading
+method against closed forms, and no numerical file includes Python.h."""
+import glob
+import os
+import re
+import shlex
+import subprocess
+
+import pytest
+
+import wenv
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+CSRC = os.path.join(ROOT, "csrc")
+
+
+def numerical_sources():
+    return sorted(p for p in glob.glob(os.path.join(CSRC, "**", "*.c"), recursive=True)
+                  if os.sep + "python" + os.sep not in p)
+
+
+def test_numerical_code_never_includes_python():
+    files = [p for p in glob.glob(os.path.join(CSRC, "**", "*.[ch]"), recursive=True)
+             if os.sep + "python" + os.sep not in p]
+    assert len(files) > 40
+    offenders = [p for p in files if re.search(r'#include\s*[<"]Python\.h[">]|#include\s*"python/', open(p).read())]
+    assert offenders == []
+
+
+def test_layers_include_only_layers_below():
+    """base <- math <- scene <- methods, reference, glossmeter <- auto <- python (docs/ARCHITECTURE.md §1)."""
+    rank = {"base": 0, "math": 1, "scene": 2, "methods": 3, "reference": 3, "glossmeter": 3, "auto": 4, "python": 5}
+    wrong = []
+    for path in glob.glob(os.path.join(CSRC, "**", "*.[ch]"), recursive=True):
+        layer = os.path.relpath(path, CSRC).split(os.sep)[0]
+        for inc in re.findall(r'#include "([a-z_]+)/', open(path).read()):
+            if rank[inc] > rank[layer] or (rank[inc] == rank[layer] and inc != layer):
+                wrong.append((os.path.relpath(path, CSRC), inc))
+    assert wrong == []
+
+
+def pkg_config(*args):
+    try:
+        return shlex.split(subprocess.run(["pkg-config", *args], check=True, capture_output=True, text=True).stdout)
+    except (OSError, subprocess.CalledProcessError):
+        return []
+
+
+def test_core_without_python(tmp_path):
+    exe = tmp_path / "core_check"
+    exr = [f for f in pkg_config("--cflags", "OpenEXR") if f.startswith("-I")] or ["-I/usr/include/OpenEXR"]
+    cmd = ["gcc", "-std=c11", "-D_DEFAULT_SOURCE", "-O1", "-fopenmp", "-Wall", "-Wextra", "-Werror", "-I" + CSRC,
+           *exr, os.path.join(ROOT, "tests", "c", "core_check.c"), *numerical_sources(), "-o", str(exe),
+           "-lOpenEXRCore", "-lcubature", "-lz", "-lm"]
+    build = subprocess.run(cmd, capture_output=True, text=True)
+    assert build.returncode == 0, build.stderr[-4000:]
+    run = subprocess.run([str(exe)], capture_output=True, text=True, timeout=300,
+                         env=dict(os.environ, OMP_NUM_THREADS="2"))
+    assert "FAIL" not in run.stdout, run.stdout
+    assert run.returncode == 0, run.stdout + run.stderr
+    summary = re.search(r"^(\d+) passed, (\d+) failed$", run.stdout, re.M)
+    assert summary and summary.group(2) == "0"
+    # materials (6), then a white furnace and stats per method, the registry and the reference
+    assert int(summary.group(1)) == 6 + 2 * len(wenv.METHODS) + 2
+    for method in wenv.METHODS:
+        assert f"ok   {method}: a white environment reflects the albedo" in run.stdout
