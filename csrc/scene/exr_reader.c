@@ -247,6 +247,21 @@ done:
     return err->status;
 }
 
+/* Whether reading stops at a chunk: on an error (set), or where OpenEXRCore lacks the compression
+ * (*use_rgba set: OpenEXR's C++ library reads the file instead). */
+static int chunk_failed(exr_result_t rv, int *use_rgba, const char *path, const exr_stream *stream, wenv_error *err)
+{
+    if (rv == EXR_ERR_FEATURE_NOT_IMPLEMENTED) {
+        *use_rgba = 1;
+        return 1;
+    }
+    if (rv != EXR_ERR_SUCCESS) {
+        exr_fail(err, path, stream, rv);
+        return 1;
+    }
+    return 0;
+}
+
 wenv_status wenv_read_exr(int fd, int64_t size, const char *path, float **out, size_t *out_h, size_t *out_w,
                             wenv_error *err)
 {
@@ -330,14 +345,8 @@ wenv_status wenv_read_exr(int fd, int64_t size, const char *path, float **out, s
             if (rv == EXR_ERR_SUCCESS)
                 rv = exr_decode_chunk(ctx, &cinfo, &dec, &initialised, rgb, width, height,
                                       (int64_t)cinfo.start_x - dw.min.x, (int64_t)cinfo.start_y - dw.min.y, grey);
-            if (rv == EXR_ERR_FEATURE_NOT_IMPLEMENTED) {
-                use_rgba = 1;
+            if (chunk_failed(rv, &use_rgba, path, &stream, err))
                 goto done;
-            }
-            if (rv != EXR_ERR_SUCCESS) {
-                exr_fail(err, path, &stream, rv);
-                goto done;
-            }
         }
     } else {
         int32_t tw = 0, th = 0;
@@ -353,14 +362,8 @@ wenv_status wenv_read_exr(int fd, int64_t size, const char *path, float **out, s
                 if (rv == EXR_ERR_SUCCESS)
                     rv = exr_decode_chunk(ctx, &cinfo, &dec, &initialised, rgb, width, height,
                                           (int64_t)(tx * (size_t)tw), (int64_t)(ty * (size_t)th), grey);
-                if (rv == EXR_ERR_FEATURE_NOT_IMPLEMENTED) {
-                    use_rgba = 1;
+                if (chunk_failed(rv, &use_rgba, path, &stream, err))
                     goto done;
-                }
-                if (rv != EXR_ERR_SUCCESS) {
-                    exr_fail(err, path, &stream, rv);
-                    goto done;
-                }
             }
         }
     }
