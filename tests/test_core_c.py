@@ -47,16 +47,21 @@ def pkg_config(*args):
         return []
 
 
-def test_core_without_python(tmp_path):
+@pytest.mark.parametrize("sanitized", [False, True], ids=["plain", "asan-ubsan"])
+def test_core_without_python(tmp_path, sanitized):
+    """With sanitized, AddressSanitizer (leaks included) and UndefinedBehaviorSanitizer watch the run."""
     exe = tmp_path / "core_check"
     exr = [f for f in pkg_config("--cflags", "OpenEXR") if f.startswith("-I")] or ["-I/usr/include/OpenEXR"]
-    cmd = ["gcc", "-std=c11", "-D_DEFAULT_SOURCE", "-O1", "-fopenmp", "-Wall", "-Wextra", "-Werror", "-I" + CSRC,
+    sanitize = ["-g", "-fsanitize=address,undefined", "-fno-sanitize-recover=undefined",
+                "-fno-omit-frame-pointer"] if sanitized else []
+    cmd = ["gcc", "-std=c11", "-D_DEFAULT_SOURCE", "-O1", *sanitize, "-fopenmp", "-Wall", "-Wextra", "-Werror", "-I" + CSRC,
            *exr, os.path.join(ROOT, "tests", "c", "core_check.c"), *numerical_sources(), "-o", str(exe),
            "-lOpenEXRCore", "-lcubature", "-lz", "-lm"]
     build = subprocess.run(cmd, capture_output=True, text=True)
     assert build.returncode == 0, build.stderr[-4000:]
     run = subprocess.run([str(exe)], capture_output=True, text=True, timeout=300,
-                         env=dict(os.environ, OMP_NUM_THREADS="2"))
+                         env=dict(os.environ, OMP_NUM_THREADS="2", ASAN_OPTIONS="detect_leaks=1"))
+    assert "Sanitizer" not in run.stderr and "runtime error" not in run.stderr, run.stderr[-4000:]
     assert "FAIL" not in run.stdout, run.stdout
     assert run.returncode == 0, run.stdout + run.stderr
     summary = re.search(r"^(\d+) passed, (\d+) failed$", run.stdout, re.M)
