@@ -23,20 +23,26 @@
  * source's gnomonic plane, so that region is the source rectangle clipped by four half-planes. */
 #include "glossmeter/glossmeter_internal.h"
 
+/* Luminance weights (Rec. 709 / sRGB primaries), docs/ARCHITECTURE.md §3.7. */
+static const double LUMA[3] = {0.2126, 0.7152, 0.0722};
+
+static double luminance(const double rgb[3]) { return LUMA[0] * rgb[0] + LUMA[1] * rgb[1] + LUMA[2] * rgb[2]; }
+
 /* ---------------------------------------------------------------- the specular lobes (4-D) */
 
 typedef enum { WARP_GAUSS, WARP_CAUCHY } warp_kind;
 
 typedef struct {
-    const wenv_lobe *lobe;
-    double weight;  /* luminance of the lobe colour */
+    const wenv_material *mat;
+    size_t index;   /* the lobe's, in mat: its values come from the material */
+    const wenv_lobe *lobe; /* its shape: widths and warps */
+    double weight;  /* luminance of the shape's colour, for error budgets */
     warp_kind warp; /* the lobe's change of variables, see lobe_warp() */
     double scale;   /* warp scale per unit roughness along the plane of incidence */
 } active_lobe;
 
 typedef struct {
     const wenv_glossmeter *gm;
-    wenv_shadowing shadowing;
     const active_lobe *lobes;
     size_t n_lobes;
     size_t evals;
@@ -174,8 +180,9 @@ static int lobe_integrand(unsigned ndim, size_t npt, const double *x, void *data
             double dens_d = aperture_dir(gm->cd, gm->ud, gm->vd, X, Y, d);
             double cos_d = dot3(d, gm->n);
             to_local(gm, d, dl);
-            double f = wenv_lobe_eval(L->lobe, ctx->shadowing, sl, dl);
-            sum += L->weight * f * cos_s * cos_d * dens_s * dens_d * jx * jy;
+            double f[3];
+            wenv_material_lobe_value(L->mat, L->index, sl, dl, f);
+            sum += luminance(f) * cos_s * cos_d * dens_s * dens_d * jx * jy;
         }
         fval[i] = sum;
     }
@@ -206,28 +213,16 @@ static const double GL5_X[5] = {0.04691007703066800, 0.23076534494715845, 0.5, 0
 static const double GL5_W[5] = {0.11846344252809454, 0.23931433524968324, 0.28444444444444444,
                                 0.23931433524968324, 0.11846344252809454};
 
-/* Shadowing-masking G of a lobe for unit s, d about n (scene/microfacet.h: Smith height-correlated from the
- * exported Lambda, or the V-cavity term), and cos_h = h . n. */
-static double lobe_shadowing(const wenv_lobe *lobe, wenv_shadowing shadowing, double cos_s, double cos_d,
-                             double cos_h, double sh)
-{
-    if (shadowing == WENV_SHADOW_SMITH)
-        return 1.0 / (1.0 + wenv_smith_lambda(lobe->distribution, lobe->roughness, cos_s) +
-                      wenv_smith_lambda(lobe->distribution, lobe->roughness, cos_d));
-    return fmin(1.0, 2.0 * cos_h * fmin(cos_s, cos_d) / sh);
-}
-
 typedef struct {
     const wenv_glossmeter *gm;
-    wenv_shadowing shadowing;
     const active_lobe *lobe;
     double cell[4]; /* slope box p0, p1, q0, q1 integrated by this call */
     size_t evals;
 } half_ctx;
 
-/* F G (s.h) d omega_s at gnomonic source point (x, y) for half vector h. */
-static double half_point(const half_ctx *ctx, const wenv_lobe *lobe, const double h[3], double cos_h, double x,
-                         double y)
+/* F G (s.h) d omega_s at gnomonic source point (x, y) for half vector h (F G: the lobe over its shape's
+ * D, from the material). */
+static double half_point(const half_ctx *ctx, const double h[3], double x, double y)
 {
     const wenv_glossmeter *gm = ctx->gm;
     double s[3], d[3];
@@ -240,12 +235,15 @@ static double half_point(const half_ctx *ctx, const wenv_lobe *lobe, const doubl
     double cos_s = dot3(s, gm->n), cos_d = dot3(d, gm->n);
     if (!(cos_s > 0.0) || !(cos_d > 0.0))
         return 0.0;
-    return wenv_fresnel_dielectric(sh, lobe->ior) * lobe_shadowing(lobe, ctx->shadowing, cos_s, cos_d, cos_h, sh) *
-           sh * dens;
+    double sl[3], dl[3], fg[3];
+    to_local(gm, s, sl);
+    to_local(gm, d, dl);
+    wenv_material_lobe_over_ndf(ctx->lobe->mat, ctx->lobe->index, sl, dl, fg);
+    return luminance(fg) * sh * dens;
 }
 
 /* Inner integral over the source region that h reflects into the receptor. */
-static double half_inner(half_ctx *ctx, const wenv_lobe *lobe, const double h[3], double cos_h)
+static double half_inner(half_ctx *ctx, const double h[3])
 {
     const wenv_glossmeter *gm = ctx->gm;
     polygon p;
@@ -257,8 +255,7 @@ static double half_inner(half_ctx *ctx, const wenv_lobe *lobe, const double h[3]
         for (int i = 0; i < 5; i++)
             for (int j = 0; j < 5; j++)
                 sum += GL5_W[i] * GL5_W[j] *
-                       half_point(ctx, lobe, h, cos_h, gm->hs[0] * (2.0 * GL5_X[i] - 1.0),
-                                  gm->hs[1] * (2.0 * GL5_X[j] - 1.0));
+                       half_point(ctx, h, gm->hs[0] * (2.0 * GL5_X[i] - 1.0), gm->hs[1] * (2.0 * GL5_X[j] - 1.0));
         ctx->evals += 25;
         return sum * 4.0 * gm->hs[0] * gm->hs[1];
     }
@@ -273,7 +270,7 @@ static double half_inner(half_ctx *ctx, const wenv_lobe *lobe, const double h[3]
                 double v = GL5_X[j];
                 double x = A[0] + u * (B[0] - A[0]) + u * v * (C[0] - B[0]);
                 double y = A[1] + u * (B[1] - A[1]) + u * v * (C[1] - B[1]);
-                row += GL5_W[j] * half_point(ctx, lobe, h, cos_h, x, y);
+                row += GL5_W[j] * half_point(ctx, h, x, y);
             }
             tri += GL5_W[i] * u * row;
         }
@@ -317,7 +314,7 @@ static int half_integrand(unsigned ndim, size_t npt, const double *x, void *data
         for (int c = 0; c < 3; c++)
             h[c] = (gm->n[c] + pp * gm->e1[c] + qq * gm->e2[c]) * inv;
         /* 1 / cos(theta_h) turns the slope measure back into D d omega_h. */
-        fval[i] = L->weight * w / inv * half_inner(ctx, lobe, h, inv);
+        fval[i] = w / inv * half_inner(ctx, h);
     }
     return 0;
 }
@@ -337,7 +334,7 @@ static double slope_marginal_mass(const active_lobe *L, double a, double b)
  * inner integral (so every cell's integrand is smooth and no kink hides between a rule's points),
  * skipping Beckmann cuts beyond 12 sigma where the lobe weighs nothing; each cell gets an equal share
  * of the tolerance. */
-static wenv_status half_vector_flux(const wenv_glossmeter *gm, wenv_shadowing shadowing, const active_lobe *L,
+static wenv_status half_vector_flux(const wenv_glossmeter *gm, const active_lobe *L,
                                     double req, size_t max_evals, double *val, double *errv, size_t *evals,
                                     int *converged, wenv_error *err)
 {
@@ -368,7 +365,7 @@ static wenv_status half_vector_flux(const wenv_glossmeter *gm, wenv_shadowing sh
                 *errv += bound;
                 continue;
             }
-            half_ctx ctx = {.gm = gm, .shadowing = shadowing, .lobe = L,
+            half_ctx ctx = {.gm = gm, .lobe = L,
                             .cell = {cuts[0][i], cuts[0][i + 1], cuts[1][j], cuts[1][j + 1]}};
             const double lo[2] = {0.0, 0.0}, hi[2] = {1.0, 1.0};
             size_t budget = max_evals > *evals ? (max_evals - *evals) / 25 : 0;
@@ -410,10 +407,6 @@ static int lobe_needs_half_vector(const wenv_glossmeter *gm, const active_lobe *
     return 0;
 }
 
-/* Luminance weights (Rec. 709 / sRGB primaries), docs/ARCHITECTURE.md §3.7. */
-static const double LUMA[3] = {0.2126, 0.7152, 0.0722};
-
-static double luminance(const double rgb[3]) { return LUMA[0] * rgb[0] + LUMA[1] * rgb[1] + LUMA[2] * rgb[2]; }
 
 /* Flux of `mat` and its error bound: tol_flux / WENV_GLOSS_SAFETY is asked of the lobes' integral and
  * the error returned is WENV_GLOSS_SAFETY times the integrators' estimates (see glossmeter.h). */
@@ -425,7 +418,6 @@ wenv_status wenv_gm_material_flux(const wenv_glossmeter *gm, const wenv_material
     *evals = 0;
     *converged = 1;
     size_t n_lobes = wenv_material_lobe_count(mat);
-    wenv_shadowing shadowing = wenv_material_shadowing(mat);
     if (n_lobes > 64)
         return wenv_error_set(err, WENV_ERR_VALUE, "material has %zu lobes; the glossmeter handles at most 64",
                               n_lobes);
@@ -441,7 +433,7 @@ wenv_status wenv_gm_material_flux(const wenv_glossmeter *gm, const wenv_material
             mirror_ior[n_mirror] = L->ior;
             mirror_w[n_mirror++] = w;
         } else {
-            active_lobe a = {.lobe = L, .weight = w};
+            active_lobe a = {.mat = mat, .index = k, .lobe = L, .weight = w};
             lobe_warp(L->distribution, &a.warp, &a.scale);
             if (method == WENV_GLOSS_HALF_VECTOR || (method == WENV_GLOSS_AUTO && lobe_needs_half_vector(gm, &a)))
                 narrow[n_narrow++] = a;
@@ -472,7 +464,7 @@ wenv_status wenv_gm_material_flux(const wenv_glossmeter *gm, const wenv_material
     double req = tol_flux / WENV_GLOSS_SAFETY / ((n_rough > 0) + (n_narrow > 0) > 1 ? 2.0 : 1.0);
     for (size_t k = 0; k < n_narrow; k++) {
         double v, e;
-        wenv_status st = half_vector_flux(gm, shadowing, &narrow[k], req / (double)n_narrow, max_evals, &v, &e,
+        wenv_status st = half_vector_flux(gm, &narrow[k], req / (double)n_narrow, max_evals, &v, &e,
                                           evals, converged, err);
         if (st)
             return st;
@@ -480,7 +472,7 @@ wenv_status wenv_gm_material_flux(const wenv_glossmeter *gm, const wenv_material
         *flux_err += WENV_GLOSS_SAFETY * e;
     }
     if (n_rough > 0) {
-        lobe_ctx ctx = {.gm = gm, .shadowing = shadowing, .lobes = rough, .n_lobes = n_rough};
+        lobe_ctx ctx = {.gm = gm, .lobes = rough, .n_lobes = n_rough};
         const double lo[4] = {-gm->hs[0], -gm->hs[1], 0.0, 0.0}, hi[4] = {gm->hs[0], gm->hs[1], 1.0, 1.0};
         double v, e;
         if (hcubature_v(1, lobe_integrand, &ctx, 4, lo, hi, max_evals, req, 0.0, ERROR_INDIVIDUAL, &v, &e) != 0)

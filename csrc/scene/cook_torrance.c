@@ -154,6 +154,38 @@ static void ct_specular_cos_f(const wenv_material *mat, const float wi[3], const
     }
 }
 
+/* ---------------------------------------------------------------- one lobe */
+
+static double ct_lobe_cos_h_min(const wenv_material *mat, size_t i) { return wenv_lobe_cos_h_min(&mat->lobes[i]); }
+
+static void ct_lobe_value(const wenv_material *mat, size_t i, const double wi[3], const double wo[3], double rgb[3])
+{
+    const wenv_lobe *lobe = &mat->lobes[i];
+    double f = wenv_lobe_eval(lobe, mat->shadowing, wi, wo);
+    for (int c = 0; c < 3; c++)
+        rgb[c] = lobe->specular[c] * f;
+}
+
+/* F G: Fresnel at wi.h times Smith's height-correlated G2 from the exact Lambda, or the V-cavity term. */
+static void ct_lobe_over_ndf(const wenv_material *mat, size_t i, const double wi[3], const double wo[3],
+                             double rgb[3])
+{
+    rgb[0] = rgb[1] = rgb[2] = 0.0;
+    double ci = wi[2], co = wo[2];
+    double s[3] = {wi[0] + wo[0], wi[1] + wo[1], ci + co}, len = sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2]);
+    if (!(ci > 0.0) || !(co > 0.0) || !(len > 0.0))
+        return;
+    const wenv_lobe *lobe = &mat->lobes[i];
+    double cos_d = 0.5 * len, cos_h = s[2] / len; /* wi.h = |wi + wo| / 2 for unit vectors */
+    double g = mat->shadowing == WENV_SHADOW_SMITH
+                   ? 1.0 / (1.0 + wenv_smith_lambda(lobe->distribution, lobe->roughness, ci) +
+                            wenv_smith_lambda(lobe->distribution, lobe->roughness, co))
+                   : fmin(1.0, 2.0 * cos_h * fmin(ci, co) / cos_d);
+    double fg = wenv_fresnel_dielectric(cos_d, lobe->ior) * g;
+    for (int c = 0; c < 3; c++)
+        rgb[c] = lobe->specular[c] * fg;
+}
+
 /* ---------------------------------------------------------------- integrals */
 
 static wenv_status ct_lobe_albedo(const wenv_material *mat, size_t i, const double wo[3], size_t samples,
@@ -203,6 +235,9 @@ static const wenv_material_kind COOK_TORRANCE = {
     .view_terms = ct_view_terms,
     .prepare_view_f = ct_prepare_view_f,
     .specular_cos_f = ct_specular_cos_f,
+    .lobe_cos_h_min = ct_lobe_cos_h_min,
+    .lobe_value = ct_lobe_value,
+    .lobe_over_ndf = ct_lobe_over_ndf,
     .lobe_albedo = ct_lobe_albedo,
     .lobe_nodes = ct_lobe_nodes,
     .lobe_cells = ct_lobe_cells,

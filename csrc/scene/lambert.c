@@ -40,6 +40,18 @@ static wenv_status no_lobe(wenv_error *err)
     return wenv_error_set(err, WENV_ERR_VALUE, "a Lambertian material has no lobes");
 }
 
+static double lambert_lobe_cos_h_min(const wenv_material *mat, size_t i)
+{
+    (void)mat, (void)i;
+    return -1.0;
+}
+
+static void lambert_lobe_rgb(const wenv_material *mat, size_t i, const double wi[3], const double wo[3], double rgb[3])
+{
+    (void)mat, (void)i, (void)wi, (void)wo;
+    rgb[0] = rgb[1] = rgb[2] = 0.0;
+}
+
 static wenv_status lambert_lobe_albedo(const wenv_material *mat, size_t i, const double wo[3], size_t samples,
                                        double rgb[3], wenv_error *err)
 {
@@ -77,6 +89,9 @@ static const wenv_material_kind LAMBERT = {
     .view_terms = lambert_view_terms,
     .prepare_view_f = lambert_prepare_view_f,
     .specular_cos_f = lambert_specular_cos_f,
+    .lobe_cos_h_min = lambert_lobe_cos_h_min,
+    .lobe_value = lambert_lobe_rgb,
+    .lobe_over_ndf = lambert_lobe_rgb,
     .lobe_albedo = lambert_lobe_albedo,
     .lobe_nodes = lambert_lobe_nodes,
     .lobe_cells = lambert_lobe_cells,

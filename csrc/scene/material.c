@@ -126,6 +126,27 @@ void wenv_material_specular_cos_f(const wenv_material *mat, const float wi[3], c
 
 wenv_specular_cos_f_fn wenv_material_specular_cos_f_fn(const wenv_material *mat) { return mat->kind->specular_cos_f; }
 
+double wenv_material_lobe_cos_h_min(const wenv_material *mat, size_t i)
+{
+    return i < mat->n_lobes ? mat->kind->lobe_cos_h_min(mat, i) : -1.0;
+}
+
+void wenv_material_lobe_value(const wenv_material *mat, size_t i, const double wi[3], const double wo[3],
+                              double rgb[3])
+{
+    rgb[0] = rgb[1] = rgb[2] = 0.0;
+    if (i < mat->n_lobes)
+        mat->kind->lobe_value(mat, i, wi, wo, rgb);
+}
+
+void wenv_material_lobe_over_ndf(const wenv_material *mat, size_t i, const double wi[3], const double wo[3],
+                                 double rgb[3])
+{
+    rgb[0] = rgb[1] = rgb[2] = 0.0;
+    if (i < mat->n_lobes)
+        mat->kind->lobe_over_ndf(mat, i, wi, wo, rgb);
+}
+
 static wenv_status check_lobe_index(const wenv_material *mat, size_t i, wenv_error *err)
 {
     if (i >= mat->n_lobes)

@@ -6,9 +6,9 @@
  * A material is a Lambertian part (its albedo, f_d = diffuse / pi) plus a glossy part described by
  * lobes.  Each lobe has a microfacet shape (scene/microfacet.h: distribution, roughness alpha,
  * index, colour): for Cook-Torrance it is the lobe itself; for other models it is the microfacet
- * lobe closest to it, which places quadrature nodes, bounds where the lobe can reflect (cones of
- * the exact lights), sizes the maps and prefilters (split-sum's assumption), while every value
- * comes from the model's own evaluation and rules below.
+ * lobe closest to it, which places quadrature nodes, warps the glossmeter's integrals, sizes the
+ * maps and prefilters (split-sum's assumption), while every value -- and where a lobe can reflect
+ * (the exact lights' cones) -- comes from the model's own evaluation and rules below.
  *
  * Directions are unit vectors in the local frame whose +Z is the surface normal; wi towards the
  * light, wo towards the eye (docs/ARCHITECTURE.md §3.1).  Everything returns
@@ -93,6 +93,21 @@ void wenv_material_specular_cos_f(const wenv_material *mat, const float wi[3], c
 typedef void (*wenv_specular_cos_f_fn)(const wenv_material *mat, const float wi[3], const float wo[3],
                                        const float *terms, float rgb[3]);
 wenv_specular_cos_f_fn wenv_material_specular_cos_f_fn(const wenv_material *mat);
+
+/* The n.h (h the half vector) below which lobe i reflects nothing visible (under 1e-7 of its peak),
+ * or -1 when it may reflect at any half vector (a retro-reflective lobe, say): what the exact lights
+ * skip without evaluating. */
+double wenv_material_lobe_cos_h_min(const wenv_material *mat, size_t i);
+
+/* Lobe i alone: f_i(wi, wo), no cosine, RGB. */
+void wenv_material_lobe_value(const wenv_material *mat, size_t i, const double wi[3], const double wo[3],
+                              double rgb[3]);
+
+/* Lobe i over its shape's distribution: f_i(wi, wo) 4 cos_i cos_o / D(h), h the half vector, RGB (for
+ * a microfacet lobe, F(wi.h) G(wi, wo) times its colour).  Integrals over half vectors weighted by
+ * the shape's D (the glossmeter's narrow lobes) read the lobe through this. */
+void wenv_material_lobe_over_ndf(const wenv_material *mat, size_t i, const double wi[3], const double wo[3],
+                                 double rgb[3]);
 
 /* ---- integrals ---- */
 

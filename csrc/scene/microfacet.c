@@ -68,6 +68,19 @@ double wenv_smith_lambda(wenv_distribution dist, double m, double cos_theta)
     return fmax(lambda, 0.0);
 }
 
+double wenv_lobe_cos_h_min(const wenv_lobe *lobe)
+{
+    enum { STEPS = 4096 };
+    double peak = 0.0;
+    for (int i = 0; i <= STEPS; i++)
+        peak = fmax(peak, wenv_ndf(lobe->distribution, lobe->roughness, cos(0.5 * M_PI * i / STEPS)));
+    int i = STEPS;
+    while (i > 0 && wenv_ndf(lobe->distribution, lobe->roughness, cos(0.5 * M_PI * i / STEPS)) < 1e-7 * peak)
+        i--;
+    i = i < STEPS ? i + 1 : STEPS;
+    return i >= STEPS ? -1.0 : cos(0.5 * M_PI * i / STEPS);
+}
+
 double wenv_lobe_eval(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wi[3], const double wo[3])
 {
     if (!(wi[2] > 0.0) || !(wo[2] > 0.0))

@@ -67,6 +67,11 @@ double wenv_ndf(wenv_distribution dist, double m, double cos_h);
  * grows like 1/cos_theta and is clamped to a large finite value for cos_theta <= 1e-150. */
 double wenv_smith_lambda(wenv_distribution dist, double m, double cos_theta);
 
+/* The n.h below which the lobe's D stays under 1e-7 of its largest value (a scan over theta_h in
+ * 4096 steps from the horizon in, stopping one step past the first value above the cut); -1 when no
+ * such cut exists. */
+double wenv_lobe_cos_h_min(const wenv_lobe *lobe);
+
 /* One lobe's F D G / (4 cos_i cos_o), without its colour; 0 if either direction is at or below the
  * horizon (z <= 0).  Directions are unit vectors. */
 double wenv_lobe_eval(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wi[3], const double wo[3]);

@@ -82,6 +82,19 @@ static void check_materials(void)
     wenv_material_specular_cos_f(ct, wif, wof, terms, rgbf);
     wenv_material_specular_cos(ct, wi, wo, rgb);
     check(near(rgbf[0], rgb[0], 1e-4), "float and double evaluation agree", rgbf[0], rgb[0]);
+    /* the lobes add up to the glossy part; a lobe over its shape's D, times D / (4 cos cos), is the lobe */
+    double lobe0[3], lobe1[3], over[3];
+    wenv_material_lobe_value(ct, 0, wi, wo, lobe0);
+    wenv_material_lobe_value(ct, 1, wi, wo, lobe1);
+    check(near((lobe0[0] + lobe1[0]) * wi[2], rgb[0], 1e-12), "lobe values add up to the glossy part",
+          (lobe0[0] + lobe1[0]) * wi[2], rgb[0]);
+    double h[3] = {0.0, 0.0, 1.0}; /* the half vector of this mirror pair */
+    const wenv_lobe *shape = wenv_material_lobe(ct, 0);
+    wenv_material_lobe_over_ndf(ct, 0, wi, wo, over);
+    double back = over[0] * wenv_ndf(shape->distribution, shape->roughness, h[2]) / (4.0 * wi[2] * wo[2]);
+    check(near(back, lobe0[0], 1e-12), "a lobe over its shape's D gives the lobe back", back, lobe0[0]);
+    double cut = wenv_material_lobe_cos_h_min(ct, 1);
+    check(cut > 0.0 && cut < 1.0, "a narrow lobe has a cone for the exact lights", cut, 1.0);
     if (wenv_material_albedo(ct, wo, 128, albedo, &err) == WENV_OK)
         check(albedo[0] > 0.0 && albedo[0] < 1.0, "Cook-Torrance albedo in (0, 1)", albedo[0], 1.0);
     wenv_material_free(lambert);

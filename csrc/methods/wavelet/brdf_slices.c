@@ -116,27 +116,16 @@ static size_t quadrature_k(const wenv_wavelet *wavelet, const wenv_material *mat
     return k < 2 ? 2 : (k > 16 ? 16 : k);
 }
 
-/* Per lobe, the n.h below which its distribution stays under 1e-7 of its largest value (a scan over
- * theta_h from the horizon in, stopping one step past the first value above the cut): a direct
- * light there adds nothing visible, and skipping it keeps the lights cheap per vertex. */
+/* Per lobe, the n.h below which it reflects nothing visible (wenv_material_lobe_cos_h_min): a direct
+ * light there adds nothing, and skipping it keeps the lights cheap per vertex. */
 static wenv_status lobe_cutoffs(wenv_wavelet *wavelet, const wenv_material *mat, wenv_error *err)
 {
-    enum { STEPS = 4096 };
     size_t n_lobes = wenv_material_lobe_count(mat);
     wavelet->lobe_cos_h_min = malloc((n_lobes ? n_lobes : 1) * sizeof(float));
     if (!wavelet->lobe_cos_h_min)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the material");
-    for (size_t k = 0; k < n_lobes; k++) {
-        const wenv_lobe *lobe = wenv_material_lobe(mat, k);
-        double peak = 0.0;
-        for (int i = 0; i <= STEPS; i++)
-            peak = fmax(peak, wenv_ndf(lobe->distribution, lobe->roughness, cos(0.5 * M_PI * i / STEPS)));
-        int i = STEPS;
-        while (i > 0 && wenv_ndf(lobe->distribution, lobe->roughness, cos(0.5 * M_PI * i / STEPS)) < 1e-7 * peak)
-            i--;
-        i = i < STEPS ? i + 1 : STEPS;
-        wavelet->lobe_cos_h_min[k] = i >= STEPS ? -1.0f : (float)cos(0.5 * M_PI * i / STEPS);
-    }
+    for (size_t k = 0; k < n_lobes; k++)
+        wavelet->lobe_cos_h_min[k] = (float)wenv_material_lobe_cos_h_min(mat, k);
     /* A half-vector theta_h from the normal turns the mirror direction by at most 2 theta_h. */
     double theta_h = 0.0;
     for (size_t k = 0; k < n_lobes; k++)
