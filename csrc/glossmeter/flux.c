@@ -35,6 +35,7 @@ typedef enum { WARP_GAUSS, WARP_CAUCHY } warp_kind;
 typedef struct {
     const wenv_material *mat;
     size_t index;   /* the lobe's, in mat: its values come from the material */
+    wenv_lobe_rgb_fn value, over_ndf; /* the material's, resolved once */
     const wenv_lobe *lobe; /* its shape: widths and warps */
     double weight;  /* luminance of the shape's colour, for error budgets */
     warp_kind warp; /* the lobe's change of variables, see lobe_warp() */
@@ -181,7 +182,7 @@ static int lobe_integrand(unsigned ndim, size_t npt, const double *x, void *data
             double cos_d = dot3(d, gm->n);
             to_local(gm, d, dl);
             double f[3];
-            wenv_material_lobe_value(L->mat, L->index, sl, dl, f);
+            L->value(L->mat, L->index, sl, dl, f);
             sum += luminance(f) * cos_s * cos_d * dens_s * dens_d * jx * jy;
         }
         fval[i] = sum;
@@ -220,25 +221,22 @@ typedef struct {
     size_t evals;
 } half_ctx;
 
-/* F G (s.h) d omega_s at gnomonic source point (x, y) for half vector h (F G: the lobe over its shape's
- * D, from the material). */
-static double half_point(const half_ctx *ctx, const double h[3], double x, double y)
+/* F G (s.h) d omega_s at gnomonic source point (x, y) for half vector h, given in the specimen's
+ * local frame (F G: the lobe over its shape's D, from the material, which works in that frame). */
+static double half_point(const half_ctx *ctx, const double h_local[3], double x, double y)
 {
     const wenv_glossmeter *gm = ctx->gm;
-    double s[3], d[3];
+    double s[3], sl[3], dl[3], fg[3];
     double dens = aperture_dir(gm->cs, gm->us, gm->vs, x, y, s);
-    double sh = dot3(s, h);
+    to_local(gm, s, sl);
+    double sh = dot3(sl, h_local);
     if (!(sh > 0.0))
         return 0.0;
     for (int k = 0; k < 3; k++)
-        d[k] = 2.0 * sh * h[k] - s[k];
-    double cos_s = dot3(s, gm->n), cos_d = dot3(d, gm->n);
-    if (!(cos_s > 0.0) || !(cos_d > 0.0))
+        dl[k] = 2.0 * sh * h_local[k] - sl[k];
+    if (!(sl[2] > 0.0) || !(dl[2] > 0.0))
         return 0.0;
-    double sl[3], dl[3], fg[3];
-    to_local(gm, s, sl);
-    to_local(gm, d, dl);
-    wenv_material_lobe_over_ndf(ctx->lobe->mat, ctx->lobe->index, sl, dl, fg);
+    ctx->lobe->over_ndf(ctx->lobe->mat, ctx->lobe->index, sl, dl, fg);
     return luminance(fg) * sh * dens;
 }
 
@@ -250,12 +248,15 @@ static double half_inner(half_ctx *ctx, const double h[3])
     wenv_gm_mirror_region(gm, h, &p);
     if (p.n < 3)
         return 0.0;
+    double h_local[3];
+    to_local(gm, h, h_local);
     double sum = 0.0;
     if (wenv_gm_polygon_is_rect(&p, gm->hs)) {
         for (int i = 0; i < 5; i++)
             for (int j = 0; j < 5; j++)
                 sum += GL5_W[i] * GL5_W[j] *
-                       half_point(ctx, h, gm->hs[0] * (2.0 * GL5_X[i] - 1.0), gm->hs[1] * (2.0 * GL5_X[j] - 1.0));
+                       half_point(ctx, h_local, gm->hs[0] * (2.0 * GL5_X[i] - 1.0),
+                                  gm->hs[1] * (2.0 * GL5_X[j] - 1.0));
         ctx->evals += 25;
         return sum * 4.0 * gm->hs[0] * gm->hs[1];
     }
@@ -270,7 +271,7 @@ static double half_inner(half_ctx *ctx, const double h[3])
                 double v = GL5_X[j];
                 double x = A[0] + u * (B[0] - A[0]) + u * v * (C[0] - B[0]);
                 double y = A[1] + u * (B[1] - A[1]) + u * v * (C[1] - B[1]);
-                row += GL5_W[j] * half_point(ctx, h, x, y);
+                row += GL5_W[j] * half_point(ctx, h_local, x, y);
             }
             tri += GL5_W[i] * u * row;
         }
@@ -433,7 +434,8 @@ wenv_status wenv_gm_material_flux(const wenv_glossmeter *gm, const wenv_material
             mirror_ior[n_mirror] = L->ior;
             mirror_w[n_mirror++] = w;
         } else {
-            active_lobe a = {.mat = mat, .index = k, .lobe = L, .weight = w};
+            active_lobe a = {.mat = mat, .index = k, .value = wenv_material_lobe_value_fn(mat),
+                             .over_ndf = wenv_material_lobe_over_ndf_fn(mat), .lobe = L, .weight = w};
             lobe_warp(L->distribution, &a.warp, &a.scale);
             if (method == WENV_GLOSS_HALF_VECTOR || (method == WENV_GLOSS_AUTO && lobe_needs_half_vector(gm, &a)))
                 narrow[n_narrow++] = a;

@@ -161,7 +161,10 @@ static double ct_lobe_cos_h_min(const wenv_material *mat, size_t i) { return wen
 static void ct_lobe_value(const wenv_material *mat, size_t i, const double wi[3], const double wo[3], double rgb[3])
 {
     const wenv_lobe *lobe = &mat->lobes[i];
-    double f = wenv_lobe_eval(lobe, mat->shadowing, wi, wo);
+    /* wenv_lobe_eval, inline: the glossmeter calls this millions of times per reading */
+    double f = wi[2] > 0.0 && wo[2] > 0.0
+                   ? wenv_lobe_value(lobe, mat->shadowing, wi, wo, wenv_lobe_view_k(lobe, mat->shadowing, wo))
+                   : 0.0;
     for (int c = 0; c < 3; c++)
         rgb[c] = lobe->specular[c] * f;
 }
@@ -176,11 +179,11 @@ static void ct_lobe_over_ndf(const wenv_material *mat, size_t i, const double wi
     if (!(ci > 0.0) || !(co > 0.0) || !(len > 0.0))
         return;
     const wenv_lobe *lobe = &mat->lobes[i];
-    double cos_d = 0.5 * len, cos_h = s[2] / len; /* wi.h = |wi + wo| / 2 for unit vectors */
+    double cos_d = 0.5 * len; /* wi.h = |wi + wo| / 2 for unit vectors */
     double g = mat->shadowing == WENV_SHADOW_SMITH
                    ? 1.0 / (1.0 + wenv_smith_lambda(lobe->distribution, lobe->roughness, ci) +
                             wenv_smith_lambda(lobe->distribution, lobe->roughness, co))
-                   : fmin(1.0, 2.0 * cos_h * fmin(ci, co) / cos_d);
+                   : fmin(1.0, 2.0 * (s[2] / len) * fmin(ci, co) / cos_d); /* n.h = s_z / |s| */
     double fg = wenv_fresnel_dielectric(cos_d, lobe->ior) * g;
     for (int c = 0; c < 3; c++)
         rgb[c] = lobe->specular[c] * fg;

@@ -147,6 +147,9 @@ void wenv_material_lobe_over_ndf(const wenv_material *mat, size_t i, const doubl
         mat->kind->lobe_over_ndf(mat, i, wi, wo, rgb);
 }
 
+wenv_lobe_rgb_fn wenv_material_lobe_value_fn(const wenv_material *mat) { return mat->kind->lobe_value; }
+wenv_lobe_rgb_fn wenv_material_lobe_over_ndf_fn(const wenv_material *mat) { return mat->kind->lobe_over_ndf; }
+
 static wenv_status check_lobe_index(const wenv_material *mat, size_t i, wenv_error *err)
 {
     if (i >= mat->n_lobes)

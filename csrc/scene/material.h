@@ -109,6 +109,13 @@ void wenv_material_lobe_value(const wenv_material *mat, size_t i, const double w
 void wenv_material_lobe_over_ndf(const wenv_material *mat, size_t i, const double wi[3], const double wo[3],
                                  double rgb[3]);
 
+/* The model's own functions behind the two above (i < lobe count), for integrands that call them
+ * millions of times to call without the dispatch. */
+typedef void (*wenv_lobe_rgb_fn)(const wenv_material *mat, size_t i, const double wi[3], const double wo[3],
+                                 double rgb[3]);
+wenv_lobe_rgb_fn wenv_material_lobe_value_fn(const wenv_material *mat);
+wenv_lobe_rgb_fn wenv_material_lobe_over_ndf_fn(const wenv_material *mat);
+
 /* ---- integrals ---- */
 
 /* Directional albedo rho(wo) = Int f(wi, wo) cos_i d wi, RGB: the Lambertian part exactly, each lobe

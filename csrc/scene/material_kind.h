@@ -14,8 +14,8 @@ typedef struct wenv_material_kind {
     void (*prepare_view_f)(const wenv_material *mat, const float wo[3], float *terms);
     wenv_specular_cos_f_fn specular_cos_f;
     double (*lobe_cos_h_min)(const wenv_material *mat, size_t i);
-    void (*lobe_value)(const wenv_material *mat, size_t i, const double wi[3], const double wo[3], double rgb[3]);
-    void (*lobe_over_ndf)(const wenv_material *mat, size_t i, const double wi[3], const double wo[3], double rgb[3]);
+    wenv_lobe_rgb_fn lobe_value;
+    wenv_lobe_rgb_fn lobe_over_ndf;
     wenv_status (*lobe_albedo)(const wenv_material *mat, size_t i, const double wo[3], size_t samples, double rgb[3],
                                wenv_error *err);
     wenv_status (*lobe_nodes)(const wenv_material *mat, size_t i, const double wo[3], size_t samples, double *wi,
