@@ -226,9 +226,8 @@ typedef struct {
 static double half_point(const half_ctx *ctx, const double h_local[3], double x, double y)
 {
     const wenv_glossmeter *gm = ctx->gm;
-    double s[3], sl[3], dl[3], fg[3];
-    double dens = aperture_dir(gm->cs, gm->us, gm->vs, x, y, s);
-    to_local(gm, s, sl);
+    double sl[3], dl[3], fg[3];
+    double dens = aperture_dir(gm->cs_local, gm->us_local, gm->vs_local, x, y, sl);
     double sh = dot3(sl, h_local);
     if (!(sh > 0.0))
         return 0.0;

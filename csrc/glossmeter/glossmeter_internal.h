@@ -33,6 +33,7 @@ struct wenv_glossmeter {
     wenv_glossmeter_config cfg;
     double n[3], t1[3], t2[3];        /* unit specimen normal and a tangent frame for the BRDF */
     double cs[3], us[3], vs[3];       /* source centre and its in-plane / perpendicular axes */
+    double cs_local[3], us_local[3], vs_local[3]; /* the same in the specimen frame (t1, t2, n) */
     double cd[3], ud[3], vd[3];       /* receptor centre and axes */
     double hs[2], hd[2];              /* gnomonic half-sides tan(w/2), tan(h/2) */
     double proj_source, proj_receptor; /* projected solid angles about n */

@@ -410,6 +410,9 @@ wenv_status wenv_glossmeter_create(wenv_glossmeter **out, const wenv_glossmeter_
     memcpy(gm->cs, cs, sizeof cs);
     memcpy(gm->us, us, sizeof us);
     memcpy(gm->vs, ey, sizeof ey);
+    to_local(gm, gm->cs, gm->cs_local); /* for the lobes' values, which the material gives in that frame */
+    to_local(gm, gm->us, gm->us_local);
+    to_local(gm, gm->vs, gm->vs_local);
     /* Receptor: mirror direction turned in plane to A + o1, then tilted out of plane by o2 about u. */
     double Ar = A + cfg->receptor_offset[0] * DEG, o2 = cfg->receptor_offset[1] * DEG;
     const double cr[3] = {sin(Ar), 0.0, cos(Ar)}, ur[3] = {cos(Ar), 0.0, -sin(Ar)};
