@@ -4,8 +4,10 @@
 #include "python/module.h"
 
 #include <math.h>
+#include <stdlib.h>
 #include <string.h>
 
+#include "scene/brdf_readers.h"
 #include "scene/material.h"
 
 #define ALBEDO_DEFAULT_SAMPLES 128
@@ -20,6 +22,7 @@ typedef struct {
 static PyTypeObject MaterialType;
 static PyTypeObject LambertType;
 static PyTypeObject CookTorranceType;
+static PyTypeObject TabulatedType;
 
 /* A macro's value as a string literal, for docstrings that state the core's ranges. */
 #define WENV_STR_(x) #x
@@ -280,6 +283,12 @@ static PyObject *material_richcompare(PyObject *a, PyObject *b, int op)
     if ((op != Py_EQ && op != Py_NE) || Py_TYPE(a) != Py_TYPE(b))
         Py_RETURN_NOTIMPLEMENTED;
     const MaterialObject *x = (const MaterialObject *)a, *y = (const MaterialObject *)b;
+    size_t xd[3], yd[3];
+    const float *xt = x->mat ? wenv_tabulated_table(x->mat, xd) : NULL, *yt = y->mat ? wenv_tabulated_table(y->mat, yd) : NULL;
+    if (xt || yt) { /* tables: equal when their samples are */
+        int same = xt && yt && memcmp(xd, yd, sizeof xd) == 0 && memcmp(xt, yt, 3 * xd[0] * xd[1] * xd[2] * sizeof *xt) == 0;
+        return PyBool_FromLong(op == Py_EQ ? same : !same);
+    }
     int equal = x->mat && y->mat && x->distribution == y->distribution &&
                 wenv_material_shadowing(x->mat) == wenv_material_shadowing(y->mat) &&
                 wenv_material_lobe_count(x->mat) == wenv_material_lobe_count(y->mat) &&
@@ -694,6 +703,190 @@ static PyTypeObject CookTorranceType = {
     .tp_methods = ct_methods,
 };
 
+/* ---------------------------------------------------------------- wenv.Tabulated, wenv.load_brdf */
+
+/* Warns (RuntimeWarning) when the material reflects more than it receives at some view: a table
+ * made or measured wrong.  Views at 0, 30, 60 and 80 degrees; -1 with the warning raised as an error. */
+static int warn_if_gaining(const wenv_material *mat, const char *what)
+{
+    static const double degrees[4] = {0.0, 30.0, 60.0, 80.0};
+    double worst = 0.0, at = 0.0;
+    for (int v = 0; v < 4; v++) {
+        double t = degrees[v] * M_PI / 180.0, wo[3] = {sin(t), 0.0, cos(t)}, rgb[3];
+        wenv_error err = {0};
+        if (wenv_material_albedo(mat, wo, 32, rgb, &err)) {
+            wenv_py_raise(&err);
+            return -1;
+        }
+        for (int c = 0; c < 3; c++)
+            if (rgb[c] > worst) {
+                worst = rgb[c];
+                at = degrees[v];
+            }
+    }
+    if (!(worst > 1.01))
+        return 0;
+    char message[800];
+    snprintf(message, sizeof message,
+             "%s reflects %.3g of the light it receives at a view %.0f degrees from the normal (more than 1: not "
+             "energy conserving)",
+             what, worst, at);
+    return PyErr_WarnEx(PyExc_RuntimeWarning, message, 1);
+}
+
+static PyObject *wrap_tabulated(PyTypeObject *type, wenv_material *mat, const char *what)
+{
+    PyObject *obj = wrap_material(type, mat, WENV_NDF_BECKMANN);
+    if (obj && warn_if_gaining(mat, what) < 0)
+        Py_CLEAR(obj);
+    return obj;
+}
+
+static PyObject *tabulated_new(PyTypeObject *type, PyObject *args, PyObject *kwds)
+{
+    static char *kwlist[] = {"table", NULL};
+    PyObject *table_obj;
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O:Tabulated", kwlist, &table_obj))
+        return NULL;
+    /* float32 C-contiguous, converted by numpy from any real array */
+    PyObject *numpy = PyImport_ImportModule("numpy");
+    PyObject *array = numpy ? PyObject_CallMethod(numpy, "ascontiguousarray", "Os", table_obj, "float32") : NULL;
+    Py_XDECREF(numpy);
+    if (!array) {
+        if (PyErr_ExceptionMatches(PyExc_ValueError) || PyErr_ExceptionMatches(PyExc_TypeError)) {
+            PyErr_Clear();
+            PyErr_Format(PyExc_TypeError, "table must be an array of real numbers, got %.100s",
+                         Py_TYPE(table_obj)->tp_name);
+        }
+        return NULL;
+    }
+    Py_buffer b;
+    if (PyObject_GetBuffer(array, &b, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0) {
+        Py_DECREF(array);
+        return NULL;
+    }
+    PyObject *result = NULL;
+    if (b.ndim != 4 || b.shape[3] != 3 || b.shape[0] < 2 || b.shape[1] < 2 || b.shape[2] < 2) {
+        PyErr_SetString(PyExc_ValueError, "table must have shape (n_theta_h, n_theta_d, n_phi_d, 3), each n >= 2");
+        goto done;
+    }
+    size_t dims[3] = {(size_t)b.shape[0], (size_t)b.shape[1], (size_t)b.shape[2]};
+    const float *v = b.buf;
+    for (size_t i = 0; i < 3 * dims[0] * dims[1] * dims[2]; i++)
+        if (!isfinite(v[i]) || v[i] < 0.0f) {
+            char value[32];
+            snprintf(value, sizeof value, "%g", (double)v[i]);
+            PyErr_Format(PyExc_ValueError, "table entries must be finite and >= 0, entry %zu is %s", i, value);
+            goto done;
+        }
+    wenv_material *mat;
+    wenv_error err = {0};
+    if (wenv_tabulated_create(&mat, v, dims, &err) != WENV_OK) {
+        wenv_py_raise(&err);
+        goto done;
+    }
+    result = wrap_tabulated(type, mat, "the table");
+done:
+    PyBuffer_Release(&b);
+    Py_DECREF(array);
+    return result;
+}
+
+static PyObject *tabulated_shape(PyObject *self, void *closure)
+{
+    (void)closure;
+    size_t d[3];
+    wenv_tabulated_table(((MaterialObject *)self)->mat, d);
+    return Py_BuildValue("(nnn)", (Py_ssize_t)d[0], (Py_ssize_t)d[1], (Py_ssize_t)d[2]);
+}
+
+static PyObject *tabulated_table(PyObject *self, void *closure)
+{
+    (void)closure;
+    size_t d[3];
+    const float *t = wenv_tabulated_table(((MaterialObject *)self)->mat, d);
+    Py_ssize_t shape[4] = {(Py_ssize_t)d[0], (Py_ssize_t)d[1], (Py_ssize_t)d[2], 3};
+    float *out;
+    PyObject *array = wenv_py_new_float_array(4, shape, &out);
+    if (array)
+        memcpy(out, t, 3 * d[0] * d[1] * d[2] * sizeof *out);
+    return array;
+}
+
+static PyObject *tabulated_repr(PyObject *self)
+{
+    size_t d[3];
+    wenv_tabulated_table(((MaterialObject *)self)->mat, d);
+    return PyUnicode_FromFormat("wenv.Tabulated(<%zu x %zu x %zu x 3 table>)", d[0], d[1], d[2]);
+}
+
+static PyObject *tabulated_reduce(PyObject *self, PyObject *unused)
+{
+    (void)unused;
+    PyObject *table = tabulated_table(self, NULL);
+    return table ? Py_BuildValue("(O(N))", (PyObject *)Py_TYPE(self), table) : NULL;
+}
+
+static PyGetSetDef tabulated_getset[] = {
+    {"shape", tabulated_shape, NULL, "(n_theta_h, n_theta_d, n_phi_d): the table's samples.", NULL},
+    {"table", tabulated_table, NULL, "A float32 copy of the table, (n_theta_h, n_theta_d, n_phi_d, 3).", NULL},
+    {NULL, NULL, NULL, NULL, NULL},
+};
+
+static PyMethodDef tabulated_methods[] = {
+    {"__reduce__", tabulated_reduce, METH_NOARGS, NULL},
+    {NULL, NULL, 0, NULL},
+};
+
+static PyTypeObject TabulatedType = {
+    PyVarObject_HEAD_INIT(NULL, 0)
+    .tp_name = "wenv.Tabulated",
+    .tp_basicsize = sizeof(MaterialObject),
+    .tp_flags = Py_TPFLAGS_DEFAULT,
+    .tp_doc = "Tabulated(table)\n--\n\nAn isotropic BRDF given as a table of f (RGB, 1/sr) over Rusinkiewicz's half "
+              "and difference angles, in MERL's layout: table[i, j, k] at theta_h = (i / n_theta_h)**2 * 90 degrees, "
+              "theta_d = j / n_theta_d * 90 degrees, phi_d = k / n_phi_d * 180 degrees (phi_d folded by reciprocity). "
+              "Interpolated trilinearly in (sqrt(theta_h), theta_d, phi_d) index coordinates, phi_d periodic, the "
+              "last theta samples held beyond.  Entries finite and >= 0; a RuntimeWarning when the table reflects "
+              "more than it receives.  The table is copied once and shared by every shader that uses the material. "
+              "Immutable.",
+    .tp_base = &MaterialType,
+    .tp_new = tabulated_new,
+    .tp_repr = tabulated_repr,
+    .tp_getset = tabulated_getset,
+    .tp_methods = tabulated_methods,
+};
+
+static PyObject *py_load_brdf(PyObject *self, PyObject *arg)
+{
+    (void)self;
+    PyObject *bytes = NULL;
+    if (!PyUnicode_FSConverter(arg, &bytes))
+        return NULL;
+    const char *path = PyBytes_AS_STRING(bytes);
+    float *rgb = NULL;
+    size_t dims[3];
+    wenv_material *mat = NULL;
+    wenv_error err = {0};
+    wenv_status st;
+    Py_BEGIN_ALLOW_THREADS
+    st = wenv_read_merl(path, &rgb, dims, &err);
+    if (!st)
+        st = wenv_tabulated_create(&mat, rgb, dims, &err);
+    Py_END_ALLOW_THREADS
+    free(rgb);
+    PyObject *result = NULL;
+    if (st)
+        wenv_py_raise(&err);
+    else {
+        char what[600];
+        snprintf(what, sizeof what, "BRDF file '%s'", path);
+        result = wrap_tabulated(&TabulatedType, mat, what);
+    }
+    Py_DECREF(bytes);
+    return result;
+}
+
 /* ---------------------------------------------------------------- private test helpers */
 
 typedef double (*unary_fn)(double x, const void *ctx);
@@ -870,6 +1063,11 @@ static PyObject *py_alpha_from_roughness(PyObject *self, PyObject *arg)
 }
 
 static PyMethodDef material_functions[] = {
+    {"load_brdf", py_load_brdf, METH_O,
+     "load_brdf(path)\n--\n\nA measured BRDF from a MERL .binary file, as a wenv.Tabulated: three int32 dimensions "
+     "(90, 90, 180), then the doubles channel after channel, scaled by 1/1500, 1.15/1500 and 1.66/1500 (R, G, B).  "
+     "Samples stored negative (not measured) take the nearest measured theta_d at the same theta_h and phi_d.  "
+     "OSError naming the file when it is missing, truncated, the wrong size for its dimensions, or holds NaN."},
     {"alpha_from_roughness", py_alpha_from_roughness, METH_O,
      "alpha_from_roughness(roughness)\n--\n\nThe distribution's alpha (CookTorrance lobe 'roughness') for Blender's "
      "perceptual roughness, as Cycles converts it: roughness**2, floored at " WENV_STR(WENV_ALPHA_FROM_ROUGHNESS_MIN)
@@ -888,11 +1086,12 @@ static PyMethodDef material_functions[] = {
 
 int wenv_register_material(PyObject *module)
 {
-    if (PyType_Ready(&MaterialType) < 0 || PyType_Ready(&LambertType) < 0 || PyType_Ready(&CookTorranceType) < 0)
+    if (PyType_Ready(&MaterialType) < 0 || PyType_Ready(&LambertType) < 0 || PyType_Ready(&CookTorranceType) < 0 ||
+        PyType_Ready(&TabulatedType) < 0)
         return -1;
-    PyTypeObject *types[] = {&MaterialType, &LambertType, &CookTorranceType};
-    const char *names[] = {"Material", "Lambert", "CookTorrance"};
-    for (int i = 0; i < 3; i++) {
+    PyTypeObject *types[] = {&MaterialType, &LambertType, &CookTorranceType, &TabulatedType};
+    const char *names[] = {"Material", "Lambert", "CookTorrance", "Tabulated"};
+    for (int i = 0; i < 4; i++) {
         Py_INCREF(types[i]);
         if (PyModule_AddObject(module, names[i], (PyObject *)types[i]) < 0) {
             Py_DECREF(types[i]);

@@ -50,13 +50,21 @@ wenv_status wenv_material_alloc(wenv_material **out, const wenv_material_kind *k
 
 wenv_status wenv_material_copy(wenv_material **out, const wenv_material *src, wenv_error *err)
 {
-    return wenv_material_alloc(out, src->kind, src->diffuse, src->lobes, src->n_lobes, src->shadowing, err);
+    if (wenv_material_alloc(out, src->kind, src->diffuse, src->lobes, src->n_lobes, src->shadowing, err))
+        return err->status;
+    if (src->shared) {
+        atomic_fetch_add(&src->shared->refs, 1);
+        (*out)->shared = src->shared;
+    }
+    return WENV_OK;
 }
 
 void wenv_material_free(wenv_material *mat)
 {
     if (!mat)
         return;
+    if (mat->shared && atomic_fetch_sub(&mat->shared->refs, 1) == 1)
+        mat->shared->destroy(mat->shared);
     free(mat->lobes);
     free(mat);
 }

@@ -38,6 +38,15 @@ wenv_status wenv_lambert_create(wenv_material **out, const double albedo[3], wen
 wenv_status wenv_cook_torrance_create(wenv_material **out, const double diffuse[3], const wenv_lobe *lobes,
                                       size_t n_lobes, wenv_shadowing shadowing, wenv_error *err);
 
+/* An isotropic BRDF tabulated over Rusinkiewicz's half and difference angles in MERL's layout
+ * (scene/tabulated.c: sample positions and trilinear interpolation): rgb is n_h x n_d x n_p x 3
+ * floats of f (1/sr), finite and >= 0; dims in [2, 4096].  Copied once and shared by the material's
+ * copies (a shader's copy costs no copy of the table).  All of it is one glossy lobe. */
+wenv_status wenv_tabulated_create(wenv_material **out, const float *rgb, const size_t dims[3], wenv_error *err);
+
+/* A tabulated material's table, dims filled; NULL for other models. */
+const float *wenv_tabulated_table(const wenv_material *mat, size_t dims[3]);
+
 wenv_status wenv_material_copy(wenv_material **out, const wenv_material *src, wenv_error *err);
 void wenv_material_free(wenv_material *mat);
 

@@ -3,7 +3,16 @@
 #ifndef WENV_MATERIAL_KIND_H
 #define WENV_MATERIAL_KIND_H
 
+#include <stdatomic.h>
+
 #include "scene/material.h"
+
+/* Data a model shares between the copies of a material (a measured table): counted, freed with the
+ * last copy, so a shader's copy of a material costs no copy of its table. */
+typedef struct wenv_shared {
+    atomic_size_t refs;
+    void (*destroy)(struct wenv_shared *shared);
+} wenv_shared;
 
 typedef struct wenv_material_kind {
     const char *name;
@@ -32,6 +41,7 @@ struct wenv_material {
     size_t n_lobes;
     wenv_lobe *lobes; /* owned: the lobes' shapes (Cook-Torrance: the lobes) */
     wenv_shadowing shadowing;
+    wenv_shared *shared; /* the model's data, or NULL */
 };
 
 /* Checks diffuse and the lobes and makes the common part (lobes copied); the kind fills the rest. */

@@ -1,0 +1,540 @@
+"""Tabulated (measured) BRDFs: wenv.Tabulated and wenv.load_brdf (MERL .binary).
+
+Tables are made from analytic BRDFs (tests/merl_files.py) at MERL's sample positions, written in
+MERL's format where a file is needed, and read back; the expected values come from the numpy model
+of the specification in merl_files (interpolate, fill_unmeasured), never from wenv itself."""
+import math
+import os
+import re
+import struct
+import time
+import warnings
+
+import numpy as np
+import pytest
+
+import merl_files as M
+import wenv
+
+SMALL = (16, 16, 32)
+
+
+def f32(v):
+    return np.ascontiguousarray(v, dtype=np.float32)
+
+
+def view(deg, phi_deg=0.0):
+    t, p = math.radians(deg), math.radians(phi_deg)
+    return np.array([math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t)])
+
+
+def f_of(mat, wi, wo):
+    """f (no cosine) from Material.eval, which returns f cos_i as float32 for float32 directions."""
+    wi, wo = f32(wi), f32(wo)
+    cos_i = M.normalised(wi)[..., 2:3]
+    return mat.eval(wi, wo).astype(np.float64) / cos_i
+
+
+def sample_pairs(shape, skip_theta_d0=False, min_cos=1e-3):
+    """float32 directions of every sample position of a table of `shape` whose directions are both
+    above the horizon by min_cos, with their indices.  At theta_d = 0, phi_d is undefined (wi = wo),
+    so those samples are skipped when a table is not constant along phi_d there."""
+    wi, wo = M.directions(*M.rusinkiewicz_samples(*shape))
+    idx = np.indices(shape).reshape(3, -1).T
+    wi, wo = f32(wi.reshape(-1, 3)), f32(wo.reshape(-1, 3))
+    keep = (M.normalised(wi)[:, 2] > min_cos) & (M.normalised(wo)[:, 2] > min_cos)
+    if skip_theta_d0:
+        keep &= idx[:, 1] > 0
+    return wi[keep], wo[keep], idx[keep]
+
+
+def rel_rmse(a, b):
+    return float(np.sqrt(np.mean((np.asarray(a, np.float64) - b) ** 2) / np.mean(np.asarray(b, np.float64) ** 2)))
+
+
+def assert_reproduces(mat, table, wi, wo, rtol=2e-4, atol=None):
+    """mat's f at float32 directions equals the specification's interpolation of `table` at those
+    directions (computed in float64 from the same float32 vectors) to float32 rounding: eval returns
+    f cos_i in float32, so dividing by a grazing cos_i (down to ~0.03 here) magnifies its rounding
+    to ~1e-5, and at theta_d near 90 degrees float32 directions move theta_h by ~1e-3 of a sample."""
+    got = f_of(mat, wi, wo)
+    want = M.interpolate(table, wi, wo)
+    np.testing.assert_allclose(got, want, rtol=rtol, atol=1e-9 * float(np.max(table)) if atol is None else atol)
+
+
+BRDFS = {
+    "cook_torrance": lambda: M.cook_torrance(0.2, 1.6, (0.9, 0.7, 0.4)),
+    "tinted": lambda: M.tinted(0.3),
+    "retro": lambda: M.retro(0.5),
+}
+
+
+@pytest.fixture(scope="module")
+def ct_table():
+    """Cook-Torrance, Beckmann m = 0.3, ior 1.5, white, at 32 x 32 x 64 samples."""
+    return M.tabulate(M.cook_torrance(0.3, 1.5), 32, 32, 64)
+
+
+@pytest.fixture(scope="module")
+def ct_pair(ct_table):
+    return wenv.Tabulated(ct_table), wenv.CookTorrance(0.0, [{"roughness": 0.3, "ior": 1.5, "specular": 1.0}])
+
+
+# ------------------------------------------------------------------ the helpers themselves (numpy only)
+
+def test_helper_directions_invert_half_diff():
+    th, td, pd = M.rusinkiewicz_samples(*SMALL)
+    assert th.shape == td.shape == pd.shape == SMALL
+    assert th[1, 0, 0] == pytest.approx((1 / 16) ** 2 * math.pi / 2) and td[0, 1, 0] == pytest.approx(math.pi / 32)
+    assert pd[0, 0, 1] == pytest.approx(math.pi / 32) and pd.max() < math.pi
+    wi, wo = M.directions(th, td, pd)
+    np.testing.assert_allclose(np.linalg.norm(wi, axis=-1), 1, rtol=1e-14)
+    np.testing.assert_allclose(np.linalg.norm(wo, axis=-1), 1, rtol=1e-14)
+    h = M.normalised(wi + wo)
+    np.testing.assert_allclose(np.arccos(np.clip(h[..., 2], -1, 1)), th, atol=1e-7)
+    np.testing.assert_allclose(np.sum(wi * h, -1), np.cos(td), atol=1e-12)
+    # half_diff inverts directions (phi_d is undefined at theta_d = 0)
+    sel = (td > 0).reshape(-1)
+    a, b, c = M.half_diff(wi.reshape(-1, 3)[sel], wo.reshape(-1, 3)[sel])
+    np.testing.assert_allclose(a, th.reshape(-1)[sel], atol=1e-7)
+    np.testing.assert_allclose(b, td.reshape(-1)[sel], atol=1e-12)
+    dphi = np.abs(c - pd.reshape(-1)[sel])
+    assert np.max(np.minimum(dphi, math.pi - dphi)) < 1e-9
+    # reciprocity: swapping wi and wo is phi_d + 180 degrees, folded to the same phi_d
+    a2, b2, c2 = M.half_diff(wo.reshape(-1, 3)[sel], wi.reshape(-1, 3)[sel])
+    dphi = np.abs(c2 - c) % math.pi
+    assert np.max(np.minimum(dphi, math.pi - dphi)) < 1e-9
+    np.testing.assert_allclose(b2, b, atol=1e-12)
+
+
+def test_helper_writer_layout(tmp_path):
+    rng = np.random.default_rng(0)
+    table = rng.uniform(0.0, 2.0, size=(4, 3, 5, 3))
+    mask = np.zeros((4, 3, 5), bool)
+    mask[2, 1, 3] = True
+    path = M.write_merl(tmp_path / "t.binary", table, mask)
+    data = path.read_bytes()
+    assert len(data) == 12 + 3 * 4 * 3 * 5 * 8
+    assert struct.unpack("<3i", data[:12]) == (4, 3, 5)
+    n = 4 * 3 * 5
+    for c in range(3):
+        for (i, j, k) in ((0, 0, 1), (1, 2, 4), (3, 1, 0)):
+            off = 12 + 8 * (c * n + k + 5 * (j + 3 * i))
+            (v,) = struct.unpack("<d", data[off:off + 8])
+            assert v == pytest.approx(table[i, j, k, c] / M.SCALES[c], rel=1e-15)
+        off = 12 + 8 * (c * n + 3 + 5 * (1 + 3 * 2))
+        assert struct.unpack("<d", data[off:off + 8])[0] == -1.0
+    back, back_mask = M.read_merl(path)
+    np.testing.assert_array_equal(back_mask, mask)
+    np.testing.assert_allclose(back[~mask], table[~mask], rtol=1e-15)
+
+
+def test_helper_cook_torrance_matches_wenv():
+    rng = np.random.default_rng(1)
+    wi, wo = f32(M.random_upper(rng, 3000)), f32(M.random_upper(rng, 3000))
+    for m, ior, colour in ((0.3, 1.5, (1.0, 1.0, 1.0)), (0.1, 2.0, (0.2, 0.5, 0.9)), (0.8, 1.2, (0.5, 0.5, 0.1))):
+        ct = wenv.CookTorrance(0.0, [{"roughness": m, "ior": ior, "specular": colour}])
+        want = M.cook_torrance(m, ior, colour)(wi.astype(np.float64), wo.astype(np.float64))
+        np.testing.assert_allclose(f_of(ct, wi, wo), want, rtol=2e-5, atol=1e-30)
+
+
+def test_helper_fill_unmeasured_model():
+    t = np.arange(2 * 5 * 1 * 3, dtype=np.float64).reshape(2, 5, 1, 3)
+    mask = np.zeros((2, 5, 1), bool)
+    mask[0, [0, 1, 3, 4], 0] = True  # leading, gap, trailing
+    mask[1, :, 0] = True              # nothing measured: takes theta_h 0's filled column
+    got = M.fill_unmeasured(t, mask)
+    np.testing.assert_array_equal(got[0, :, 0], t[0, [2, 2, 2, 2, 2], 0])
+    np.testing.assert_array_equal(got[1, :, 0], got[0, :, 0])
+
+
+def test_helper_analytic_brdfs_are_physical():
+    """The test BRDFs reflect less than they receive, are reciprocal, and have their character:
+    retro peaks at wi = wo, tinted goes from red (theta_d = 0) to blue (grazing theta_d)."""
+    rng = np.random.default_rng(2)
+    wi, wo = M.random_upper(rng, 500), M.random_upper(rng, 500)
+    for name, make in BRDFS.items():
+        f = make()
+        np.testing.assert_allclose(f(wi, wo), f(wo, wi), rtol=1e-10, err_msg=name)
+        for deg in (0, 45, 80):
+            a = M.albedo(f, view(deg), 100, 200)
+            assert np.all(a < 0.95) and np.all(a > 0), (name, deg, a)
+    r = M.retro(0.5)
+    v = view(45)[None]
+    mirror = np.array([[-v[0, 0], 0, v[0, 2]]])
+    assert r(v, v)[0, 0] > 20 * r(mirror, v)[0, 0]
+    t = M.tinted(0.3)
+    near = t(view(1)[None], view(1, 180)[None])[0]
+    wi, wo = M.directions(0.0, math.radians(80), 0.0)
+    grazing = t(wi[None], wo[None])[0]
+    assert near[0] > 5 * near[2] and grazing[2] > 5 * grazing[0]
+
+
+# ------------------------------------------------------------------ (a) the table is reproduced
+
+def test_tabulated_is_a_material_with_shape():
+    table = M.tabulate(M.tinted(0.3), 8, 6, 10)
+    mat = wenv.Tabulated(table)
+    assert isinstance(mat, wenv.Material)
+    assert tuple(mat.shape) == (8, 6, 10)
+    # Below the horizon nothing is reflected, as for every material.
+    up, down = f32(view(30)), f32(-view(30))
+    np.testing.assert_array_equal(mat.eval(up, down), 0.0)
+    np.testing.assert_array_equal(mat.eval(down, up), 0.0)
+
+
+@pytest.mark.parametrize("name", list(BRDFS))
+def test_small_file_reproduces_table_at_samples(name, tmp_path):
+    """16 x 16 x 32 MERL file: load_brdf's material gives the tabulated values at every sample
+    position (float32 rounding only), and equals wenv.Tabulated of the same numpy table."""
+    table = M.tabulate(BRDFS[name](), *SMALL)
+    path = M.write_merl(tmp_path / f"{name}.binary", table)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)  # a physical table draws no warning
+        loaded = wenv.load_brdf(str(path))
+        direct = wenv.Tabulated(table)
+    assert isinstance(loaded, wenv.Tabulated)
+    assert tuple(loaded.shape) == SMALL and tuple(direct.shape) == SMALL
+    wi, wo, idx = sample_pairs(SMALL)
+    assert len(wi) > 0.6 * np.prod(SMALL)
+    # At a sample position the interpolation is the sample itself (up to float32 positions).
+    want_at_samples = table[idx[:, 0], idx[:, 1], idx[:, 2]]
+    np.testing.assert_allclose(M.interpolate(table, wi, wo), want_at_samples, rtol=1e-4,
+                               atol=1e-6 * table.max())
+    swi, swo, _ = sample_pairs(SMALL, skip_theta_d0=True)  # phi_d is undefined at theta_d = 0
+    assert_reproduces(loaded, table, swi, swo)
+    # The same table from numpy is the same material.
+    rng = np.random.default_rng(3)
+    rwi, rwo = f32(M.random_upper(rng, 2000)), f32(M.random_upper(rng, 2000))
+    for a, b in ((wi, wo), (rwi, rwo)):
+        np.testing.assert_allclose(direct.eval(a, b), loaded.eval(a, b), rtol=1e-6, atol=1e-9 * table.max())
+
+
+def test_tabulated_interpolates_trilinearly_between_samples():
+    """Away from the samples the value is the specification's trilinear interpolation, float32 or
+    float64 tables alike."""
+    rng = np.random.default_rng(4)
+    table = M.tabulate(M.cook_torrance(0.2, 1.6, (0.9, 0.7, 0.4)), *SMALL)
+    table *= rng.uniform(0.8, 1.2, size=table.shape)  # not isotropic-smooth: every tap matters
+    table[:, 0] = table[:, 0, :1]                      # but one value at theta_d = 0 (phi_d undefined there)
+    wi, wo = M.random_upper(rng, 4000), M.random_upper(rng, 4000)
+    wi32, wo32 = f32(wi), f32(wo)
+    for t in (table, table.astype(np.float32)):
+        assert_reproduces(wenv.Tabulated(t), table.astype(np.float32).astype(np.float64), wi32, wo32, rtol=1e-4)
+
+
+def test_index_coordinates_and_edges():
+    """A table that is linear in the index coordinates returns them: R = 1 + sqrt(theta_h / 90) n_th,
+    G = 1 + theta_d / 90 n_td, B = 1 + phi_d / 180 n_pd (periodic: from n_pd back to 1 over the last
+    interval), each held at its last sample for theta_h and theta_d beyond it."""
+    n = (6, 5, 8)
+    i, j, k = np.indices(n)
+    scale = 1e-4  # keeps the albedo far below 1
+    table = scale * np.stack([1.0 + i, 1.0 + j, 1.0 + k], -1)
+    mat = wenv.Tabulated(table)
+    deg = math.radians
+    cases = [  # theta_h, theta_d, phi_d (degrees) -> expected (R, G, B) / scale
+        (10.0, 30.0, 50.0),
+        (40.0, 12.0, 100.0),
+        (5.0, 80.0, 170.0),    # theta_d beyond the last sample (72 degrees), phi_d in the wrapping interval
+        (70.0, 5.0, 160.0),    # theta_h beyond the last sample ((5/6)^2 90 = 62.5 degrees)
+        (20.0, 40.0, 179.0),
+    ]
+    for th, td, pd in cases:
+        wi, wo = M.directions(deg(th), deg(td), deg(pd))
+        assert wi[2] > 0.05 and wo[2] > 0.05  # well above the horizon
+        xi = min(math.sqrt(th / 90) * n[0], n[0] - 1)
+        xj = min(td / 90 * n[1], n[1] - 1)
+        xk = pd / 180 * n[2]
+        b = 1 + xk if xk <= n[2] - 1 else n[2] + (xk - (n[2] - 1)) * (1 - n[2])
+        got = f_of(mat, wi, wo) / scale
+        np.testing.assert_allclose(got, [1 + xi, 1 + xj, b], rtol=2e-5, err_msg=str((th, td, pd)))
+
+
+def test_full_size_file_loads_fast_and_reproduces(tmp_path):
+    """The full 90 x 90 x 180 MERL table (35 MB): loaded in well under a second, values exact."""
+    shape = (90, 90, 180)
+    table = M.tabulate(M.cook_torrance(0.08, 1.8, (0.9, 0.6, 0.3)), *shape)
+    path = M.write_merl(tmp_path / "full.binary", table)
+    assert os.path.getsize(path) == 12 + 24 * 90 * 90 * 180
+    times = []
+    for _ in range(2):
+        t0 = time.perf_counter()
+        mat = wenv.load_brdf(str(path))
+        times.append(time.perf_counter() - t0)
+    assert min(times) < 1.0, f"loading a 90x90x180 MERL file took {times} s"
+    assert tuple(mat.shape) == shape
+    wi, wo, idx = sample_pairs(shape, skip_theta_d0=True)  # phi_d is undefined at theta_d = 0
+    pick = np.random.default_rng(5).choice(len(wi), 30000, replace=False)
+    assert_reproduces(mat, table, wi[pick], wo[pick])
+    rng = np.random.default_rng(6)
+    assert_reproduces(mat, table, f32(M.random_upper(rng, 3000)), f32(M.random_upper(rng, 3000)), rtol=1e-4)
+
+
+# ------------------------------------------------------------------ (b) errors
+
+def _good_bytes():
+    return M.merl_bytes(np.full((2, 3, 4, 3), 0.01))
+
+
+def _with_value(value, channel):
+    t = np.full((2, 3, 4, 3), 0.01)
+    t[1, 2, 3, channel] = value
+    return M.merl_bytes(t)
+
+
+BAD_FILES = {
+    "truncated": lambda: _good_bytes()[:-8],
+    "truncated_mid": lambda: _good_bytes()[:12 + 8 * 30],
+    "longer": lambda: _good_bytes() + b"\0" * 8,
+    "longer_by_one_byte": lambda: _good_bytes() + b"\0",
+    "wrong_dims": lambda: M.merl_bytes(np.full((2, 3, 4, 3), 0.01), dims=(2, 3, 5)),
+    "merl_dims_small_data": lambda: M.merl_bytes(np.full((2, 3, 4, 3), 0.01), dims=(90, 90, 180)),
+    "negative_dims": lambda: M.merl_bytes(np.full((2, 3, 4, 3), 0.01), dims=(-2, 3, -4)),  # product matches
+    "zero_dim": lambda: struct.pack("<3i", 0, 90, 180),                                    # product 0 matches
+    "overflowing_dims": lambda: M.merl_bytes(np.full((2, 3, 4, 3), 0.01), dims=(2**31 - 1,) * 3),
+    "nan": lambda: _with_value(float("nan"), 1),
+    "inf": lambda: _with_value(float("inf"), 2),
+    "minus_inf": lambda: _with_value(float("-inf"), 0),
+    "short_header": lambda: struct.pack("<2i", 90, 90),
+    "empty": lambda: b"",
+}
+
+
+@pytest.mark.parametrize("case", list(BAD_FILES))
+def test_bad_files_raise_oserror_naming_the_file(case, tmp_path):
+    path = tmp_path / f"bad_{case}.binary"
+    path.write_bytes(BAD_FILES[case]())
+    with pytest.raises(OSError, match=re.escape(str(path))):
+        wenv.load_brdf(str(path))
+
+
+def test_missing_file_raises_oserror_naming_it(tmp_path):
+    path = tmp_path / "no_such_brdf.binary"
+    with pytest.raises(OSError, match=re.escape(str(path))):
+        wenv.load_brdf(str(path))
+
+
+def test_good_bytes_of_the_error_cases_load(tmp_path):
+    """The error cases differ from a valid file by their defect only."""
+    path = tmp_path / "good.binary"
+    path.write_bytes(_good_bytes())
+    mat = wenv.load_brdf(str(path))
+    assert tuple(mat.shape) == (2, 3, 4)
+    np.testing.assert_allclose(f_of(mat, view(20), view(30, 180)), [0.01] * 3, rtol=1e-6)
+
+
+def _table(shape=(4, 4, 4, 3), value=0.01):
+    return np.full(shape, value)
+
+
+def _poked(value):
+    t = _table()
+    t[1, 2, 3, 1] = value
+    return t
+
+
+BAD_TABLES = {
+    "three_d": lambda: _table((4, 4, 12)),
+    "five_d": lambda: _table((4, 4, 4, 1, 3)),
+    "two_channels": lambda: _table((4, 4, 4, 2)),
+    "four_channels": lambda: _table((4, 4, 4, 4)),
+    "theta_h_axis_1": lambda: _table((1, 4, 4, 3)),
+    "theta_d_axis_1": lambda: _table((4, 1, 4, 3)),
+    "phi_d_axis_1": lambda: _table((4, 4, 1, 3)),
+    "empty_axis": lambda: _table((0, 4, 4, 3)),
+    "nan": lambda: _poked(float("nan")),
+    "inf": lambda: _poked(float("inf")),
+    "negative": lambda: _poked(-1e-3),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD_TABLES))
+def test_bad_tables_raise_valueerror_naming_table(case):
+    with pytest.raises(ValueError, match="table"):
+        wenv.Tabulated(BAD_TABLES[case]())
+
+
+def test_table_reflecting_more_than_it_receives_warns():
+    """A constant 1/sr reflects pi: accepted, with a RuntimeWarning."""
+    with pytest.warns(RuntimeWarning):
+        mat = wenv.Tabulated(np.ones((8, 8, 16, 3)))
+    assert tuple(mat.shape) == (8, 8, 16)
+    np.testing.assert_allclose(f_of(mat, view(10), view(40, 120)), 1.0, rtol=1e-6)
+    # just below the limit (0.3 / sr reflects 0.94): no warning
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        wenv.Tabulated(np.full((8, 8, 16, 3), 0.3))
+
+
+# ------------------------------------------------------------------ (c) unmeasured samples
+
+def test_unmeasured_samples_are_filled(tmp_path):
+    rng = np.random.default_rng(7)
+    table = rng.uniform(0.001, 0.05, size=SMALL + (3,))
+    mask = np.zeros(SMALL, bool)
+    mask[:, 1:, :] = rng.random((16, 15, 32)) < 0.15       # scattered (never at theta_d = 0, see below)
+    mask[3, 5:8, 4] = True                                  # a gap: j = 5, 6, 7 take j = 4
+    mask[3, 4, 4] = False
+    mask[5, 0:3, 10] = True                                 # leading: j = 0, 1, 2 take j = 3
+    mask[5, 3, 10] = False
+    mask[6, 12:, 20] = True                                 # trailing: take j = 11
+    mask[6, 11, 20] = False
+    mask[7, :, 7] = mask[8, :, 7] = True                    # whole columns: i = 7 takes i = 6, i = 8 takes i = 9
+    mask[6, :, 7] = mask[9, :, 7] = False
+    mask[0, :, 30] = True                                   # i = 0 takes i = 1
+    mask[1, :, 30] = False
+    assert not np.any(np.all(mask, axis=1) & ~np.isin(np.arange(16), [7, 8, 0])[:, None])
+    path = M.write_merl(tmp_path / "holes.binary", table, mask)
+    mat = wenv.load_brdf(str(path))
+    filled = M.fill_unmeasured(table, mask)
+    assert np.all(filled >= 0)
+
+    def at(i, j, k):
+        wi, wo = M.directions(*M.rusinkiewicz_samples(*SMALL))
+        return f_of(mat, wi[i, j, k], wo[i, j, k])
+
+    # documented neighbours
+    for j in (5, 6, 7):
+        np.testing.assert_allclose(at(3, j, 4), table[3, 4, 4], rtol=1e-5)
+    for j in (1, 2):  # (theta_d = 0 itself has no phi_d: checked through the whole table below)
+        np.testing.assert_allclose(at(5, j, 10), table[5, 3, 10], rtol=1e-5)
+    for j in (12, 13):
+        np.testing.assert_allclose(at(6, j, 20), table[6, 11, 20], rtol=1e-5)
+    for j in (3, 8):
+        np.testing.assert_allclose(at(7, j, 7), filled[6, j, 7], rtol=1e-5)
+        np.testing.assert_allclose(at(8, j, 7), filled[9, j, 7], rtol=1e-5)
+        np.testing.assert_allclose(at(0, j, 30), filled[1, j, 30], rtol=1e-5)
+    # Every sample (theta_d > 0): the documented filling, then the interpolation.
+    wi, wo, idx = sample_pairs(SMALL, skip_theta_d0=True)
+    # (a random table: neighbours differ by up to 50x, so float rounding in the directions moves a
+    # value by ~1e-4 of itself in either implementation)
+    assert_reproduces(mat, filled, wi, wo, rtol=1e-3, atol=1e-4 * float(np.max(filled)))
+    # No negative value anywhere (an unmeasured -1 never leaks into the interpolation).
+    rng = np.random.default_rng(8)
+    rwi, rwo = f32(M.random_upper(rng, 5000)), f32(M.random_upper(rng, 5000))
+    assert np.all(mat.eval(rwi, rwo) >= 0) and np.all(mat.eval(wi, wo) >= 0)
+
+
+# ------------------------------------------------------------------ (e) white furnace: reference = albedo
+
+def _cosine_weighted(rng, n):
+    u1, u2 = rng.random(n), rng.random(n)
+    r, p = np.sqrt(u1), 2 * math.pi * u2
+    return np.stack([r * np.cos(p), r * np.sin(p), np.sqrt(1 - u1)], -1)
+
+
+def table_error(table, f, rng, max_view_deg=75.0, n=2000):
+    """The table's interpolation error where an albedo weighs it: relative RMSE of f over 2000 pairs,
+    wi cosine-weighted (the albedo's weight), wo uniform in solid angle within max_view_deg of the
+    normal (the views tested).  Also the RMSE over uniform pairs, which grazing pairs dominate."""
+    wi = _cosine_weighted(rng, n)
+    mu = rng.uniform(math.cos(math.radians(max_view_deg)), 1.0, n)
+    ph = rng.uniform(0, 2 * math.pi, n)
+    s = np.sqrt(1 - mu * mu)
+    wo = np.stack([s * np.cos(ph), s * np.sin(ph), mu], -1)
+    weighted = rel_rmse(M.interpolate(table, wi, wo), f(wi, wo))
+    a, b = M.random_upper(rng, n), M.random_upper(rng, n)
+    uniform = rel_rmse(M.interpolate(table, a, b), f(a, b))
+    return weighted, uniform
+
+
+def white_env():
+    return wenv.Environment(np.ones((32, 64, 3), np.float32))
+
+
+def test_reference_of_tabulated_cook_torrance_is_its_albedo(ct_table, ct_pair):
+    tab, ct = ct_pair
+    err, err_uniform = table_error(ct_table, M.cook_torrance(0.3, 1.5), np.random.default_rng(9))
+    degs = (0, 20, 40, 60, 75)
+    views = f32([view(d, 30 * i) for i, d in enumerate(degs)])
+    normals = f32(np.tile([0.0, 0.0, 1.0], (len(degs), 1)))
+    env = white_env()
+    ref_tab = wenv.reference(env, tab, normals, views).astype(np.float64)
+    ref_ct = wenv.reference(env, ct, normals, views).astype(np.float64)
+    tol = 3 * err + 0.005
+    rel = np.abs(ref_tab - ref_ct) / ref_ct
+    assert np.all(rel <= tol), (f"table relative RMSE {err:.4f} (albedo-weighted pairs), "
+                                f"{err_uniform:.4f} (uniform pairs); reference differs by {rel.max(axis=1)}")
+    # ... and each is the material's own albedo: the sum over the 32 x 64 pixels is a quadrature of it
+    np.testing.assert_allclose(ref_ct, ct.albedo(views), rtol=0.01)
+    np.testing.assert_allclose(ref_tab, tab.albedo(views), rtol=0.02)
+    # the table's albedo is the integral of its interpolation (fine quadrature in numpy)
+    interp = lambda a, b: M.interpolate(ct_table, a, b)  # noqa: E731
+    want = np.array([M.albedo(interp, v, 200, 400) for v in views.astype(np.float64)])
+    np.testing.assert_allclose(tab.albedo(views), want, rtol=0.01)
+
+
+# ------------------------------------------------------------------ (f) every method
+
+def smooth_env(h=32, w=64):
+    """tests/test_shade.py's gradient environment without its bright spot: smooth everywhere, so
+    the shading differences measure the materials, not how a method resolves one pixel."""
+    rows, cols = np.mgrid[0:h, 0:w]
+    img = np.empty((h, w, 3), np.float32)
+    img[..., 0] = 0.5 + 0.5 * np.cos(2 * np.pi * cols / w)
+    img[..., 1] = rows / h
+    img[..., 2] = 0.2
+    return wenv.Environment(img)
+
+
+def _pairs(n, seed, max_deg=70.0):
+    """Random normals and views within max_deg of them (the table holds theta_d at its last
+    sample near grazing, an error that is the table's, not the method's)."""
+    rng = np.random.default_rng(seed)
+    nrm = M.normalised(rng.normal(size=(n, 3)))
+    t = np.cross(nrm, M.normalised(rng.normal(size=(n, 3))))
+    t = M.normalised(t)
+    ang = np.arccos(rng.uniform(math.cos(math.radians(max_deg)), 1.0, n))
+    v = np.cos(ang)[:, None] * nrm + np.sin(ang)[:, None] * t
+    return f32(nrm), f32(M.normalised(v))
+
+
+@pytest.fixture(scope="module")
+def smooth_setup(ct_pair):
+    tab, ct = ct_pair
+    env = smooth_env()
+    nrm, v = _pairs(800, 10)
+    ref_tab = wenv.reference(env, tab, nrm, v)
+    ref_ct = wenv.reference(env, ct, nrm, v)
+    return env, nrm, v, rel_rmse(ref_tab, ref_ct)
+
+
+@pytest.mark.parametrize("method", list(wenv.METHODS))
+def test_every_method_shades_tabulated_like_cook_torrance(method, ct_pair, smooth_setup):
+    """Same method, same lighting: the Tabulated copy of a Cook-Torrance lobe shades as the lobe does.
+    Tolerance: the table's own difference under this lighting (from wenv.reference, e_tab) twice,
+    plus 3 % for what a method may do differently with a table (e.g. split_sum prefilters at the
+    roughness of a Beckmann shape fitted to the table, about 0.35 here instead of 0.3, which under
+    smooth lighting changes the result by about 1 %)."""
+    tab, ct = ct_pair
+    env, nrm, v, e_tab = smooth_setup
+    assert e_tab < 0.05, f"the 32x32x64 table differs from its lobe by {e_tab:.4f} under smooth lighting"
+    out_tab = wenv.Shader(env, tab, quality="draft", method=method, cache_dir=False).shade(nrm, v)
+    out_ct = wenv.Shader(env, ct, quality="draft", method=method, cache_dir=False).shade(nrm, v)
+    assert out_tab.shape == (len(nrm), 3) and np.all(np.isfinite(out_tab)) and np.all(out_tab >= 0)
+    err = rel_rmse(out_tab, out_ct)
+    assert err < 0.03 + 2 * e_tab, f"{method}: relative RMSE {err:.4f}, table's own {e_tab:.4f}"
+
+
+# ------------------------------------------------------------------ (g) a lobe no Cook-Torrance has
+
+def test_retro_reflective_table_reference_equals_analytic_albedo(tmp_path):
+    """A retro-reflective lobe (varies along theta_d only, so tabulated with 64 theta_d samples):
+    the reference under white light is the analytic lobe's albedo, by quadrature in numpy."""
+    f = M.retro(0.5)
+    table = M.tabulate(f, 8, 64, 16)
+    tab = wenv.Tabulated(table)
+    path = M.write_merl(tmp_path / "retro.binary", table)
+    loaded = wenv.load_brdf(str(path))
+    degs = (0, 30, 50, 70)
+    views = f32([view(d, 45 * i) for i, d in enumerate(degs)])
+    normals = f32(np.tile([0.0, 0.0, 1.0], (len(degs), 1)))
+    want = np.array([M.albedo(f, w, 200, 400) for w in views.astype(np.float64)])
+    for mat in (tab, loaded):
+        got = wenv.reference(white_env(), mat, normals, views).astype(np.float64)
+        np.testing.assert_allclose(got, want, rtol=0.02)
+    # it is retro-reflective: light returns towards the viewer, not to the mirror direction
+    wo = f32(view(45))
+    mirror = f32(view(45, 180))
+    assert f_of(tab, wo, wo)[0] > 20 * f_of(tab, mirror, wo)[0]
