@@ -538,3 +538,32 @@ def test_retro_reflective_table_reference_equals_analytic_albedo(tmp_path):
     wo = f32(view(45))
     mirror = f32(view(45, 180))
     assert f_of(tab, wo, wo)[0] > 20 * f_of(tab, mirror, wo)[0]
+
+
+def test_glossmeter_reads_a_table_like_its_lobe():
+    """Gloss and haze of a 90 x 90 x 180 table of a Cook-Torrance lobe against the lobe itself: the
+    glossmeter warps by the table's fitted shape and reads the table's values, so what is left is the
+    table's own resolution (largest at 85 degrees, where the reflection is most grazing)."""
+    ct = wenv.CookTorrance(diffuse=0.05, lobes=[{"roughness": 0.3, "ior": 1.5, "specular": (1, 0.8, 0.6)}])
+    lobe = wenv.CookTorrance(lobes=[{"roughness": 0.3, "ior": 1.5, "specular": (1, 0.8, 0.6)}])
+    table = M.tabulate(M.cook_torrance(0.3, 1.5, (1, 0.8, 0.6)), 90, 90, 180)
+    tab = wenv.Tabulated(table)
+    want, got = wenv.gloss(lobe, (20, 60, 85)), wenv.gloss(tab, (20, 60, 85))
+    for w, g, tol in zip(want, got, (0.005, 0.005, 0.02)):
+        assert abs(g - w) <= tol * w + 1e-3, (got, want)
+    assert abs(wenv.haze(tab) - wenv.haze(lobe)) <= 0.005 * wenv.haze(lobe) + 1e-4
+    # a table reads its own value, not its fitted shape's: doubling the table doubles the lobe's reading
+    assert wenv.gloss(wenv.Tabulated(2 * table), 60) == pytest.approx(2 * got[1], rel=2e-3)
+    assert wenv.gloss(ct, 60) > got[1]  # and the diffuse part adds to it
+
+
+def test_auto_chooses_for_a_table_from_its_width():
+    """quality='auto' takes a table: the lobe width it reads is the table's fitted width, so a narrow
+    table is predicted harder than a wide one."""
+    env = wenv.Environment(np.ones((32, 64, 3), np.float32))
+    narrow = wenv.Tabulated(M.tabulate(M.cook_torrance(0.05, 1.5, (1, 1, 1)), *SMALL))
+    wide = wenv.Tabulated(M.tabulate(M.cook_torrance(0.5, 1.5, (1, 1, 1)), *SMALL))
+    a = wenv.Shader(env, narrow, quality="auto", target_error=0.05).stats["auto"]
+    b = wenv.Shader(env, wide, quality="auto", target_error=0.05).stats["auto"]
+    assert a["method"] == b["method"] == "slicing"
+    assert a["levels"][0]["predicted_error"] > b["levels"][0]["predicted_error"]
