@@ -567,3 +567,12 @@ def test_auto_chooses_for_a_table_from_its_width():
     b = wenv.Shader(env, wide, quality="auto", target_error=0.05).stats["auto"]
     assert a["method"] == b["method"] == "slicing"
     assert a["levels"][0]["predicted_error"] > b["levels"][0]["predicted_error"]
+
+
+def test_smooth_limit_of_a_table_is_refused():
+    """A measured table has no smooth limit (its lobes are not microfacet lobes that narrow to a
+    Fresnel mirror): smooth=True says so instead of reading the fitted shape's mirror."""
+    tab = wenv.Tabulated(M.tabulate(M.cook_torrance(0.3, 1.5, (1, 1, 1)), *SMALL))
+    with pytest.raises(ValueError, match="smooth"):
+        wenv.gloss(tab, 60, smooth=True)
+    assert wenv.gloss(tab, 60) > 0

@@ -418,6 +418,9 @@ wenv_status wenv_gm_material_flux(const wenv_glossmeter *gm, const wenv_material
     *evals = 0;
     *converged = 1;
     size_t n_lobes = wenv_material_lobe_count(mat);
+    if (smooth && !wenv_material_has_smooth_limit(mat))
+        return wenv_error_set(err, WENV_ERR_VALUE, "smooth=True reads the smooth limit of a material's lobes, and a %s "
+                              "material has none", wenv_material_kind_name(mat));
     if (n_lobes > 64)
         return wenv_error_set(err, WENV_ERR_VALUE, "material has %zu lobes; the glossmeter handles at most 64",
                               n_lobes);

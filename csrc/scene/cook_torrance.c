@@ -233,6 +233,7 @@ static wenv_status ct_with_roughness(wenv_material **out, const wenv_material *s
 
 static const wenv_material_kind COOK_TORRANCE = {
     .name = "cook_torrance",
+    .smooth_limit = 1,
     .specular_cos = ct_specular_cos,
     .specular_cos_batch = ct_specular_cos_batch,
     .view_terms = ct_view_terms,

@@ -85,6 +85,7 @@ const char *wenv_material_kind_name(const wenv_material *mat) { return mat->kind
 const double *wenv_material_diffuse(const wenv_material *mat) { return mat->diffuse; }
 size_t wenv_material_lobe_count(const wenv_material *mat) { return mat->n_lobes; }
 const wenv_lobe *wenv_material_lobe(const wenv_material *mat, size_t i) { return i < mat->n_lobes ? &mat->lobes[i] : NULL; }
+int wenv_material_has_smooth_limit(const wenv_material *mat) { return mat->kind->smooth_limit; }
 wenv_shadowing wenv_material_shadowing(const wenv_material *mat) { return mat->shadowing; }
 
 double wenv_material_lobe_width(const wenv_material *mat)

@@ -68,6 +68,10 @@ const double *wenv_material_diffuse(const wenv_material *mat);
 size_t wenv_material_lobe_count(const wenv_material *mat);
 const wenv_lobe *wenv_material_lobe(const wenv_material *mat, size_t i);
 
+/* Whether the lobes have a smooth limit: Fresnel mirrors of their shapes' colour and index (the
+ * glossmeter's smooth=True), as microfacet lobes do and a measured table does not. */
+int wenv_material_has_smooth_limit(const wenv_material *mat);
+
 /* The masking-shadowing form the lobes' shapes assume (Smith for models that do not say). */
 wenv_shadowing wenv_material_shadowing(const wenv_material *mat);
 

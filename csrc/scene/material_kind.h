@@ -16,6 +16,8 @@ typedef struct wenv_shared {
 
 typedef struct wenv_material_kind {
     const char *name;
+    int smooth_limit; /* its lobes become Fresnel mirrors of their shape's colour and index as they
+                       * narrow (a microfacet model); 0 for a measured table, which has no such limit */
     /* The glossy part (see material.h for each contract). */
     void (*specular_cos)(const wenv_material *mat, const double wi[3], const double wo[3], double rgb[3]);
     void (*specular_cos_batch)(const wenv_material *mat, const double wo[3], const float *wi, size_t n, float *rgb);

@@ -296,6 +296,7 @@ static wenv_status tab_lobe_cells(const wenv_material *mat, size_t i, const doub
 
 static const wenv_material_kind TABULATED = {
     .name = "tabulated",
+    .smooth_limit = 0,
     .specular_cos = tab_specular_cos,
     .specular_cos_batch = tab_specular_cos_batch,
     .view_terms = tab_view_terms,
