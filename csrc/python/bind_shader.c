@@ -42,14 +42,13 @@ static PyObject *quality_to_dict(const wenv_method *method, const void *quality)
     return d;
 }
 
-static int preset_names_text(char *buf, size_t size, int with_auto)
+static void preset_names_text(char *buf, size_t size, int with_auto)
 {
     size_t used = 0;
     for (size_t i = 0; i < WENV_PRESET_COUNT && used < size; i++)
         used += (size_t)snprintf(buf + used, size - used, "'%s', ", WENV_PRESET_NAMES[i]);
     if (used < size)
         snprintf(buf + used, size - used, "%sor a dict", with_auto ? "'auto' " : "");
-    return 0;
 }
 
 /* quality: a preset name, a dict of the method's keys (missing keys from "default") or NULL. */

@@ -100,34 +100,25 @@ static void table_f(const table *t, const double wi[3], const double wo[3], doub
     axis_taps(td / (0.5 * M_PI) * (double)t->n[1], t->n[1], 0, &j[0], &j[1], &fj);
     axis_taps(pd / M_PI * (double)t->n[2], t->n[2], 1, &k[0], &k[1], &fk);
     /* Samples whose own directions lie below the horizon hold no reflection (or a filled guess):
-     * near the horizon only the others are interpolated, their weights renormalised. */
-    double total = 0.0, kept = 0.0;
+     * near the horizon only the others are interpolated, their weights renormalised; plain
+     * trilinear when every neighbour lies below. */
+    double kept_rgb[3] = {0.0, 0.0, 0.0}, total = 0.0, kept = 0.0;
     for (int a = 0; a < 2; a++)
         for (int b = 0; b < 2; b++)
             for (int c = 0; c < 2; c++) {
                 double w = (a ? fi : 1.0 - fi) * (b ? fj : 1.0 - fj) * (c ? fk : 1.0 - fk);
-                if (w == 0.0)
-                    continue;
                 size_t s = k[c] + t->n[2] * (j[b] + t->n[1] * i[a]);
+                const float *v = t->rgb + 3 * s;
                 total += w;
-                if (!t->above[s])
-                    continue;
-                kept += w;
-                for (int ch = 0; ch < 3; ch++)
-                    rgb[ch] += w * t->rgb[3 * s + (size_t)ch];
-            }
-    double scale = kept > 0.0 ? total / kept : 1.0;
-    if (!(kept > 0.0)) /* every neighbour below the horizon: plain trilinear */
-        for (int a = 0; a < 2; a++)
-            for (int b = 0; b < 2; b++)
-                for (int c = 0; c < 2; c++) {
-                    double w = (a ? fi : 1.0 - fi) * (b ? fj : 1.0 - fj) * (c ? fk : 1.0 - fk);
-                    const float *v = t->rgb + 3 * (k[c] + t->n[2] * (j[b] + t->n[1] * i[a]));
-                    for (int ch = 0; ch < 3; ch++)
-                        rgb[ch] += w * v[ch];
+                kept += t->above[s] ? w : 0.0;
+                for (int ch = 0; ch < 3; ch++) {
+                    rgb[ch] += w * v[ch];
+                    kept_rgb[ch] += t->above[s] ? w * v[ch] : 0.0;
                 }
-    for (int ch = 0; ch < 3; ch++)
-        rgb[ch] *= scale;
+            }
+    if (kept > 0.0)
+        for (int ch = 0; ch < 3; ch++)
+            rgb[ch] = kept_rgb[ch] * (total / kept);
 }
 
 /* ---------------------------------------------------------------- evaluation */

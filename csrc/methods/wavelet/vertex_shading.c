@@ -146,13 +146,11 @@ static int compute_slice(wenv_wavelet *wavelet, size_t s, float *pixel_work, dou
 static void shade_direct(const wenv_wavelet *wavelet, const float n[3], const float v[3], float co, float e[3],
                          float s[3])
 {
-    const wenv_material *mat = wavelet->mat;
-    const double *diffuse = wenv_material_diffuse(mat);
-    if (diffuse[0] != 0.0 || diffuse[1] != 0.0 || diffuse[2] != 0.0)
+    if (wavelet->has_diffuse)
         wenv_lights_irradiance(wavelet->lights, wenv_lights_level(WENV_LIGHT_IRRADIANCE_WIDTH), n, e);
-    if (wenv_material_lobe_count(mat))
-        wenv_lights_specular(wavelet->lights, wenv_lights_level(2.0 * wavelet->lobe_m_min * co), mat, wavelet->lobe_cos_h_min,
-                             wavelet->light_cone_cos, n, v, co, s);
+    if (wavelet->has_lobes)
+        wenv_lights_specular(wavelet->lights, wenv_lights_level(2.0 * wavelet->lobe_m_min * co), wavelet->mat,
+                             wavelet->lobe_cos_h_min, wavelet->light_cone_cos, n, v, co, s);
 }
 
 static void shade_vertex(const wenv_wavelet *wavelet, const vertex_taps *tp, float *o)
