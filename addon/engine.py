@@ -4,6 +4,7 @@ Every other module reaches the core through this one (as Cycles' add-on does thr
 so what the core accepts is read here once, never repeated.  It imports no other add-on module,
 so any of them may import it without a cycle.
 """
+import os
 import threading
 
 import numpy as np
@@ -54,11 +55,52 @@ def environment(pixels, projection="equirect", rotation=0.0, strength=1.0):
     return wenv.Environment(pixels, projection=projection, rotation=rotation, strength=strength)
 
 
+# Measured BRDFs read from files, keyed by (absolute path, size, modification time): each file is read
+# once per version and its table shared by every shader and reading (a 90 x 90 x 180 MERL table is
+# 17.5 MB), not copied per material.
+_MEASURED_CACHE_SIZE = 8
+_measured = {}
+_measured_lock = threading.Lock()
+
+
+def file_signature(path):
+    """(absolute path, size, mtime in ns) of a BRDF file, or (path, None, None) when it cannot be
+    read: what a material's key holds so a changed or replaced file is read again."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return (path, None, None)
+    return (path, st.st_size, st.st_mtime_ns)
+
+
+def measured_brdf(signature, shown_path):
+    """The wenv.Tabulated of a MERL file, `signature` from file_signature; SetupError naming
+    `shown_path` (as the user wrote it) when it is missing or not a MERL table."""
+    path, size, _ = signature
+    if size is None:
+        raise SetupError(f"Measured BRDF file '{shown_path}' not found"
+                         + (f" (looked at {path})" if shown_path != path else ""))
+    with _measured_lock:
+        table = _measured.get(signature)
+        if table is None:
+            try:
+                table = wenv.load_brdf(path)
+            except OSError as exc:
+                raise SetupError(f"Measured BRDF file '{shown_path}' could not be read: {exc}") from None
+            if len(_measured) >= _MEASURED_CACHE_SIZE:
+                _measured.clear()
+            _measured[signature] = table
+    return table
+
+
 def material_from_key(key):
     """wenv material for a materials.material_key(); a missing material is Blender's default
-    grey, Lambertian."""
+    grey, Lambertian.  SetupError for a measured BRDF whose file is missing or unreadable."""
     if key[0] == "default":
         return wenv.Lambert(DEFAULT_GREY)
+    if key[0] == "MEASURED":
+        _, shown_path, signature = key
+        return measured_brdf(signature, shown_path)
     model, diffuse, shadowing, lobes = key
     if model == "LAMBERT":
         return wenv.Lambert(diffuse)
@@ -69,9 +111,11 @@ def material_from_key(key):
 
 
 def gloss(key, geometries):
-    """Glossmeter readings (GU) of a material_key at each geometry; ValueError or RuntimeError if
-    the core cannot read it."""
-    return wenv.gloss(material_from_key(key), geometries)
+    """Glossmeter readings (GU) of a material_key at each geometry, then its haze (HU, ASTM E430 with
+    the 20 degree instrument); ValueError or RuntimeError if the core cannot read it, SetupError if
+    its BRDF file cannot be read."""
+    mat = material_from_key(key)
+    return tuple(wenv.gloss(mat, geometries)) + (wenv.haze(mat),)
 
 
 def fit_roughness(target, **options):

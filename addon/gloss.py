@@ -8,12 +8,13 @@ _gloss_memo = {}
 
 
 def gloss_readings(key):
-    """{20: GU, 60: GU, 85: GU} for a materials.material_key, or a string naming the problem."""
+    """{20: GU, 60: GU, 85: GU, "haze": HU} for a materials.material_key, or a string naming the
+    problem (a measured BRDF's missing file among them)."""
     hit = _gloss_memo.get(key)
     if hit is None:
         try:
-            hit = dict(zip(GEOMETRIES, engine.gloss(key, GEOMETRIES)))
-        except (ValueError, RuntimeError) as exc:
+            hit = dict(zip(GEOMETRIES + ("haze",), engine.gloss(key, GEOMETRIES)))
+        except (ValueError, RuntimeError, SetupError) as exc:
             hit = str(exc)
         if len(_gloss_memo) > 256:
             _gloss_memo.clear()
@@ -33,6 +34,7 @@ def instrument_geometry(gloss60):
 def fit_roughness(settings, target, geometry):
     """Roughness giving `target` GU for a one-lobe Cook-Torrance material (engine.fit_roughness)."""
     if settings.model != "COOK_TORRANCE" or len(settings.lobes) != 1:
+        # a measured BRDF has no roughness to set: it is what was measured
         raise SetupError("Set roughness for a target gloss needs a Cook-Torrance material with exactly one lobe")
     lobe = settings.lobes[0]
     try:

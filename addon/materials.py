@@ -1,14 +1,26 @@
 """Materials: the key a core material is built from, and Principled BSDF values -> wenv lobes."""
 import math
 
+import bpy
+
 from . import engine, world
+
+
+def brdf_file(settings):
+    """The absolute path of a measured material's BRDF file: a path starting with // is relative to
+    the .blend (or to the library the material comes from), as every file path in Blender."""
+    material = settings.id_data
+    return bpy.path.abspath(settings.brdf_path, library=getattr(material, "library", None))
 
 
 def material_key(settings):
     """Plain tuple of every value the wenv material depends on (for caches and the live mode);
-    engine.material_from_key turns it into a core material."""
+    engine.material_from_key turns it into a core material.  A measured material's key holds its
+    file's size and modification time, so a changed file is read again."""
     if settings is None:
         return ("default",)
+    if settings.model == "MEASURED":
+        return ("MEASURED", settings.brdf_path, engine.file_signature(brdf_file(settings)))
     lobes = tuple((tuple(l.specular), l.roughness, l.ior, l.distribution) for l in settings.lobes)
     return (settings.model, tuple(settings.diffuse), settings.shadowing, lobes)
 
@@ -125,10 +137,18 @@ def ensure_material_settings(material):
 
 
 def slot_material_keys(obj):
-    """material_key of each of obj's material slots (filled from the Principled BSDF on first use)."""
+    """material_key of each of obj's material slots (filled from the Principled BSDF on first use).
+    A measured BRDF is read here, on the main thread, so a missing or broken file is a SetupError
+    naming it before any shading starts."""
     keys = []
     for slot in obj.material_slots:
         mat = slot.material
         ensure_material_settings(mat)
-        keys.append(material_key(mat.wenv if mat is not None else None))
+        key = material_key(mat.wenv if mat is not None else None)
+        if key[0] == "MEASURED":
+            try:
+                engine.material_from_key(key)
+            except engine.SetupError as exc:
+                raise engine.SetupError(f"Material '{mat.name}': {exc}") from None
+        keys.append(key)
     return keys or [("default",)]

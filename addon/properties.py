@@ -3,7 +3,7 @@ import math
 
 import bpy
 from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProperty, FloatVectorProperty,
-                       IntProperty, PointerProperty)
+                       IntProperty, PointerProperty, StringProperty)
 
 from . import engine, gloss, materials
 
@@ -29,10 +29,27 @@ def _gloss_getter(geometry):
     return get
 
 
+# Blender 4.5+ warns about "//" paths in a property that does not declare it takes them; older
+# versions know no such option (and need none).
+_BLEND_RELATIVE = ({"PATH_SUPPORTS_BLEND_RELATIVE"}
+                   if "is_path_supports_blend_relative" in bpy.types.Property.bl_rna.properties else set())
+
+
+def _set_up_by_user(self, context):
+    # A model or file the user chose is the material's set-up: the first shading must not replace it
+    # with values from the Principled BSDF.
+    self.initialized = True
+
+
 class WENV_MaterialSettings(bpy.types.PropertyGroup):
-    model: EnumProperty(name="Model", default="COOK_TORRANCE", items=[
+    model: EnumProperty(name="Model", default="COOK_TORRANCE", update=_set_up_by_user, items=[
         ("LAMBERT", "Lambert", "Ideal diffuse reflector"),
-        ("COOK_TORRANCE", "Cook-Torrance", "Diffuse plus microfacet lobes")])
+        ("COOK_TORRANCE", "Cook-Torrance", "Diffuse plus microfacet lobes"),
+        ("MEASURED", "Measured", "A measured isotropic BRDF read from a MERL .binary file")])
+    brdf_path: StringProperty(name="BRDF File", subtype="FILE_PATH", default="", update=_set_up_by_user,
+                              options=_BLEND_RELATIVE,
+                              description="MERL .binary file of a measured BRDF (// at the start: relative to "
+                                          "the .blend file)")
     diffuse: FloatVectorProperty(name="Diffuse", subtype="COLOR", size=3, min=0.0, max=1.0,
                                  default=engine.DEFAULT_GREY, description="Lambertian albedo")
     lobes: CollectionProperty(type=WENV_LobeSettings, name="Lobes")
@@ -50,6 +67,8 @@ class WENV_MaterialSettings(bpy.types.PropertyGroup):
                             description="Specular gloss at 60 degrees, GU (ISO 2813)")
     gloss_85: FloatProperty(name="Gloss 85", get=_gloss_getter(85), precision=2,
                             description="Specular gloss at 85 degrees, GU (ISO 2813)")
+    haze: FloatProperty(name="Haze", get=_gloss_getter("haze"), precision=2,
+                        description="Reflection haze, HU (ASTM E430 method B, 20 degree instrument)")
     target_gloss: FloatProperty(name="Target Gloss", default=50.0, min=0.0, soft_max=200.0, precision=2,
                                 description="Gloss, GU, that 'Set Roughness' aims for")
     target_geometry: EnumProperty(name="Geometry", default="60", items=[

@@ -90,6 +90,19 @@ class WENV_PT_material(_SidebarPanel, bpy.types.Panel):
         layout.operator("wenv.from_principled", icon="NODE_MATERIAL")
         col = _property_column(layout)
         col.prop(st, "model")
+        if st.model == "MEASURED":
+            col.prop(st, "brdf_path")
+            try:
+                table = engine.material_from_key(materials.material_key(st))
+            except engine.SetupError as exc:
+                row = layout.row()
+                row.alert = True
+                row.label(text=str(exc), icon="ERROR")
+                return
+            n_h, n_d, n_p = table.shape
+            layout.label(text=f"Table {n_h} x {n_d} x {n_p} (theta_h, theta_d, phi_d)", icon="CHECKMARK")
+            layout.label(text="Diffuse floor " + ", ".join(f"{c:.3g}" for c in table.diffuse))
+            return
         col.prop(st, "diffuse")
         if st.model != "COOK_TORRANCE":
             return
@@ -132,7 +145,13 @@ class WENV_PT_gloss(_SidebarPanel, bpy.types.Panel):
             # The instrument's own choice for this material (60° reading: 10-70 GU -> 60°, above -> 20°,
             # below -> 85°) is marked.
             row.label(text="instrument" if geometry == used else "", icon="CHECKMARK" if geometry == used else "BLANK1")
+        row = col.row()
+        row.label(text="Haze")
+        row.label(text=f"{readings['haze']:.2f} HU")
+        row.label(text="", icon="BLANK1")
         layout.separator()
+        if st.model == "MEASURED":
+            return  # nothing to fit: a measurement has no roughness to set
         col = _property_column(layout)
         col.prop(st, "target_gloss")
         col.prop(st, "target_geometry")

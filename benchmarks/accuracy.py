@@ -1,10 +1,13 @@
 """Accuracy of the shading engine against the brute-force reference on Blender's eight bundled
 HDRIs, for Lambert and Cook-Torrance m = 0.05, 0.1, 0.2, 0.5, over a fixed set of 2000 random
-(normal, view) pairs.
+(normal, view) pairs; with --tables, for 90 x 90 x 180 tabulated BRDFs (wenv.Tabulated) of the same
+lobes and of lobes no Cook-Torrance lobe represents.
 
     .venv/bin/python benchmarks/accuracy.py                 # error table per preset, out/accuracy.json
     .venv/bin/python benchmarks/accuracy.py --presets high,high-grazing,high-lights
+    .venv/bin/python benchmarks/accuracy.py --tables        # the tables: out/accuracy_tables.json
     .venv/bin/python benchmarks/accuracy.py --make-reference   # recompute tests/data/accuracy_reference.npz
+    .venv/bin/python benchmarks/accuracy.py --make-table-reference   # ... and accuracy_reference_tables.npz
 
 The reference values (wenv.reference: every pixel, its exact solid angle) take about 20 ms per pair
 for a glossy material, so they are computed once and stored; tests/test_accuracy.py recomputes a
@@ -17,6 +20,7 @@ import time
 
 import numpy as np
 
+import merl_files
 import wenv
 from measure import OUT, ROOT, bundled_hdri, random_pairs, relative_rmse
 
@@ -35,6 +39,19 @@ MATERIALS = {
     **{f"m{m}": {"diffuse": [0.0, 0.0, 0.0], "lobes": [{"specular": [1.0, 1.0, 1.0], "roughness": m, "ior": 1.5}]}
        for m in (0.05, 0.1, 0.2, 0.5)},
 }
+# Tabulated BRDFs at MERL's resolution (benchmarks/merl_files.py makes them from numpy BRDFs): the
+# Cook-Torrance lobes above as tables, a paint (that lobe over a coloured diffuse floor, which the
+# table splits off as a Lambertian part), a retro-reflective lobe and a lobe whose colour shifts with
+# theta_d (neither is a Cook-Torrance lobe).  Their reference is wenv.reference of the table itself,
+# so the figures are the methods' error on a table, not the table's own resolution error.
+TABLE_DATA = os.path.join(ROOT, "tests", "data", "accuracy_reference_tables.npz")
+TABLES = {
+    **{f"t{m}": {"brdf": "cook_torrance", "roughness": m} for m in (0.05, 0.1, 0.2, 0.5)},
+    "paint": {"brdf": "cook_torrance", "roughness": 0.2, "diffuse": [0.5, 0.2, 0.1]},
+    "retro": {"brdf": "retro", "width": 0.5},
+    "tinted": {"brdf": "tinted", "roughness": 0.2},
+}
+TABLE_SHAPE = (90, 90, 180)
 PAIRS = 2000
 SEED = 2006
 # What each of `high`'s two per-vertex parts buys: `high` without the grazing path, and `high` with
@@ -50,29 +67,37 @@ def make_pairs(n=PAIRS, seed=SEED):
 
 
 def material(spec):
+    if "brdf" in spec:
+        return table_material(spec)
     if not spec["lobes"]:
         return wenv.Lambert(tuple(spec["diffuse"]))
     return wenv.CookTorrance(diffuse=tuple(spec["diffuse"]), lobes=spec["lobes"])
 
 
-def make_reference(path=DATA, n=PAIRS, seed=SEED):
+def table_material(spec, shape=TABLE_SHAPE):
+    """A wenv.Tabulated of one of TABLES' numpy BRDFs (merl_files.table_of)."""
+    return wenv.Tabulated(merl_files.table_of(spec, shape))
+
+
+def make_reference(path=DATA, n=PAIRS, seed=SEED, materials=MATERIALS):
     """Reference values on n pairs drawn with seed, written to path.  Each HDRI/material is kept in
     out/reference_parts/ as it is done, so a long run that stops can go on where it was."""
     nrm, v = make_pairs(n, seed)
     parts = os.path.join(OUT, "reference_parts", f"{n}_{seed}")
     os.makedirs(parts, exist_ok=True)
+    made = {name: material(spec) for name, spec in materials.items()}
     ref = {}
     for h in HDRIS:
         env = wenv.load_environment(bundled_hdri(h))
-        for name, spec in MATERIALS.items():
+        for name in materials:
             part = os.path.join(parts, f"{h}_{name}.npy")
             if not os.path.exists(part):
                 t0 = time.perf_counter()
-                np.save(part, wenv.reference(env, material(spec), nrm, v))
+                np.save(part, wenv.reference(env, made[name], nrm, v))
                 print(f"{h}/{name}: {time.perf_counter() - t0:.0f} s", flush=True)
             ref[f"{h}/{name}"] = np.load(part)
     os.makedirs(os.path.dirname(path), exist_ok=True)
-    np.savez_compressed(path, normals=nrm, views=v, materials=json.dumps(MATERIALS), hdris=json.dumps(HDRIS), **ref)
+    np.savez_compressed(path, normals=nrm, views=v, materials=json.dumps(materials), hdris=json.dumps(HDRIS), **ref)
     print("wrote", path)
 
 
@@ -88,9 +113,11 @@ def load_reference(n=PAIRS):
     return out
 
 
-def evaluate(presets, method=None):
-    data = np.load(DATA)
+def evaluate(presets, method=None, path=DATA):
+    data = np.load(path)
     nrm, v = data["normals"], data["views"]
+    materials = json.loads(str(data["materials"]))
+    made = {name: material(spec) for name, spec in materials.items()}
     results = {}
     for preset in presets:
         m = method or ("slicing" if preset.startswith("high") else "rotation")
@@ -103,18 +130,18 @@ def evaluate(presets, method=None):
                 shader = wenv.Shader(env, wenv.Lambert((0.5, 0.5, 0.5)), quality=quality, method=m)
             else:
                 shader.set_environment(env)
-            for name, spec in MATERIALS.items():
-                shader.set_material(material(spec))
+            for name in materials:
+                shader.set_material(made[name])
                 row[f"{h}/{name}"] = relative_rmse(shader.shade(nrm, v), data[f"{h}/{name}"])
         results[preset] = row
         print(f"\n{preset} ({m}): relative RMSE, %")
-        print("hdri       " + "".join(f"{m:>9}" for m in MATERIALS))
+        print("hdri       " + "".join(f"{m:>9}" for m in materials))
         for h in HDRIS:
-            print(f"{h:<10} " + "".join(f"{100 * row[f'{h}/{m}']:9.2f}" for m in MATERIALS))
-        worst = {m: max(row[f"{h}/{m}"] for h in HDRIS) for m in MATERIALS}
-        median = {m: float(np.median([row[f"{h}/{m}"] for h in HDRIS])) for m in MATERIALS}
-        print("worst      " + "".join(f"{100 * worst[m]:9.2f}" for m in MATERIALS))
-        print("median     " + "".join(f"{100 * median[m]:9.2f}" for m in MATERIALS), flush=True)
+            print(f"{h:<10} " + "".join(f"{100 * row[f'{h}/{m}']:9.2f}" for m in materials))
+        worst = {m: max(row[f"{h}/{m}"] for h in HDRIS) for m in materials}
+        median = {m: float(np.median([row[f"{h}/{m}"] for h in HDRIS])) for m in materials}
+        print("worst      " + "".join(f"{100 * worst[m]:9.2f}" for m in materials))
+        print("median     " + "".join(f"{100 * median[m]:9.2f}" for m in materials), flush=True)
     return results
 
 
@@ -123,6 +150,9 @@ def main():
     ap.add_argument("--make-reference", action="store_true")
     ap.add_argument("--make-extra-reference", action="store_true",
                     help=f"the {EXTRA_PAIRS} further pairs benchmarks/auto_quality.py judges auto on (about 35 min)")
+    ap.add_argument("--make-table-reference", action="store_true",
+                    help="the tabulated BRDFs' reference on the 2000 pairs (about 25 min)")
+    ap.add_argument("--tables", action="store_true", help="measure the tabulated BRDFs instead")
     ap.add_argument("--presets", default="draft,default,high,high-grazing,high-lights",
                     help="comma-separated presets, or " + ", ".join(SETTINGS))
     ap.add_argument("--method", default=None,
@@ -134,9 +164,12 @@ def main():
     if args.make_extra_reference:
         make_reference(EXTRA_DATA, EXTRA_PAIRS, EXTRA_SEED)
         return
-    results = evaluate(args.presets.split(","), args.method)
+    if args.make_table_reference:
+        make_reference(TABLE_DATA, materials=TABLES)
+        return
+    results = evaluate(args.presets.split(","), args.method, TABLE_DATA if args.tables else DATA)
     os.makedirs(OUT, exist_ok=True)
-    with open(os.path.join(OUT, "accuracy.json"), "w") as fp:
+    with open(os.path.join(OUT, "accuracy_tables.json" if args.tables else "accuracy.json"), "w") as fp:
         json.dump(results, fp, indent=2)
 
 

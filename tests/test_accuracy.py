@@ -54,25 +54,31 @@ def relative_rmse(a, b):
 _errors = {}
 
 
+def shade_errors(preset, data, materials):
+    """{(hdri, material name): relative RMSE} of `preset` over data's pairs against its stored
+    reference, for {name: wenv material}.  HDRIs in the outer loop: a new environment remakes only
+    the lighting slices the pairs read."""
+    nrm, v = data["normals"], data["views"]
+    shader, out = None, {}
+    for h in json.loads(str(data["hdris"])):
+        env = wenv.load_environment(hdri_path(h))
+        if shader is None:
+            shader = wenv.Shader(env, wenv.Lambert((0.5, 0.5, 0.5)), quality=preset, method=METHOD[preset])
+        else:
+            shader.set_environment(env)
+        for name, mat in materials.items():
+            shader.set_material(mat)
+            result = shader.shade(nrm, v)
+            assert np.all(np.isfinite(result)) and np.all(result >= 0)
+            out[(h, name)] = relative_rmse(result, data[f"{h}/{name}"])
+    return out
+
+
 def preset_errors(preset, data):
-    """{(hdri, material): relative RMSE} for one preset, computed once per test session.  HDRIs in
-    the outer loop: a new environment remakes only the lighting slices the pairs read."""
+    """shade_errors of the stored Cook-Torrance and Lambert materials, computed once per session."""
     if preset not in _errors:
         specs = json.loads(str(data["materials"]))
-        nrm, v = data["normals"], data["views"]
-        shader, out = None, {}
-        for h in json.loads(str(data["hdris"])):
-            env = wenv.load_environment(hdri_path(h))
-            if shader is None:
-                shader = wenv.Shader(env, wenv.Lambert((0.5, 0.5, 0.5)), quality=preset, method=METHOD[preset])
-            else:
-                shader.set_environment(env)
-            for name, spec in specs.items():
-                shader.set_material(material(spec))
-                result = shader.shade(nrm, v)
-                assert np.all(np.isfinite(result))
-                out[(h, name)] = relative_rmse(result, data[f"{h}/{name}"])
-        _errors[preset] = out
+        _errors[preset] = shade_errors(preset, data, {name: material(spec) for name, spec in specs.items()})
     return _errors[preset]
 
 

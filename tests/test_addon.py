@@ -586,6 +586,94 @@ def test_fit_roughness_operator(scene):
 
 
 # ---------------------------------------------------------------------------------------------
+# Measured BRDFs (MERL files)
+
+
+def measured_material(obj, path):
+    """A material of model Measured reading `path` (as the user would type it, // relative to the
+    .blend), appended to obj's slots."""
+    mat = bpy.data.materials.new(f"Measured{len(bpy.data.materials)}")
+    mat.wenv.model = "MEASURED"
+    mat.wenv.brdf_path = path
+    obj.data.materials.append(mat)
+    return mat
+
+
+def write_paint_brdf(path):
+    """A small MERL file: a Cook-Torrance lobe (m = 0.2) over a coloured diffuse floor."""
+    from benchmarks import merl_files as M
+    return M.write_merl(path, M.table_of({"brdf": "cook_torrance", "roughness": 0.2, "diffuse": [0.4, 0.2, 0.1]},
+                                         (16, 16, 32)))
+
+
+def test_measured_brdf_file_relative_to_the_blend(scene, tmp_path):
+    """A material reading a MERL file by a path relative to the saved .blend shades as the core does
+    with wenv.load_brdf of that file, reads its gloss and haze, and is set up by choosing it (the
+    first shading does not replace it with the Principled BSDF's values)."""
+    (tmp_path / "brdfs").mkdir()
+    path = write_paint_brdf(tmp_path / "brdfs" / "paint.binary")
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "scene.blend"))
+    env_world(bpy.context.scene, "sunset")
+    obj = add_monkey()
+    mat = measured_material(obj, "//brdfs/paint.binary")
+    assert mat.wenv.initialized
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    assert mat.wenv.model == "MEASURED"
+    _, rgb = attribute(obj)
+    table = wenv.load_brdf(str(path))
+    p, n = world_arrays(obj, corner=False)
+    env = wenv.load_environment(hdri_path("sunset"))
+    want = core_shader(env, table).shade_mesh(p, n, tuple(bpy.context.scene.camera.matrix_world.translation))
+    assert rgb.max() > 0.05
+    np.testing.assert_allclose(rgb, want, rtol=1e-4, atol=1e-5)
+    g = wenv.gloss(table, (20, 60, 85))
+    assert (mat.wenv.gloss_20, mat.wenv.gloss_60, mat.wenv.gloss_85) == pytest.approx(g, abs=1e-3)
+    assert mat.wenv.haze == pytest.approx(wenv.haze(table), abs=1e-3) and mat.wenv.haze > 0
+    # the table is read once per version of the file and shared
+    key = materials.material_key(mat.wenv)
+    assert engine.material_from_key(key) is engine.material_from_key(key)
+
+
+def test_measured_brdf_panels(scene, tmp_path):
+    from addon import ui
+    cube = bpy.data.objects["Cube"]
+    select_only(cube)
+    path = write_paint_brdf(tmp_path / "paint.binary")
+    mat = measured_material(cube, str(path))
+    cube.active_material = mat
+    log = draw_panel(ui.WENV_PT_material)
+    assert ("prop", "brdf_path") in log and ("prop", "diffuse") not in log
+    assert any(l[0] == "label" and l[1].startswith("Table 16 x 16 x 32") for l in log)
+    gloss_panel = draw_panel(ui.WENV_PT_gloss)
+    labels = [l[1] for l in gloss_panel if l[0] == "label"]
+    assert f"{mat.wenv.haze:.2f} HU" in labels and f"{mat.wenv.gloss_60:.2f} GU" in labels
+    assert ("operator", "wenv.fit_roughness") not in gloss_panel  # a measurement has no roughness to set
+
+
+def test_missing_measured_brdf_file_is_named(scene, tmp_path):
+    """A missing or broken file cancels shading with a message naming it, and the panels say so; the
+    file appearing later is read (the key follows the file)."""
+    from addon import ui
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "scene.blend"))
+    cube = bpy.data.objects["Cube"]
+    select_only(cube)
+    mat = measured_material(cube, "//gone.binary")
+    cube.active_material = mat
+    with pytest.raises(RuntimeError, match=r"Material '.*': Measured BRDF file '//gone.binary' not found"):
+        shade_op(view="CAMERA")
+    assert ATTR not in cube.data.color_attributes
+    assert math.isnan(mat.wenv.gloss_60)
+    errors = [l for l in draw_panel(ui.WENV_PT_material) if l[0] == "label" and l[2] == "ERROR"]
+    assert errors and "gone.binary" in errors[0][1] and str(tmp_path) in errors[0][1]
+    (tmp_path / "gone.binary").write_bytes(b"not a MERL table")
+    with pytest.raises(RuntimeError, match="'//gone.binary' could not be read"):
+        shade_op(view="CAMERA")
+    write_paint_brdf(tmp_path / "gone.binary")
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    assert mat.wenv.gloss_60 > 0
+
+
+# ---------------------------------------------------------------------------------------------
 # Live mode, frame changes, precomputation
 
 

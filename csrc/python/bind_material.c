@@ -117,7 +117,10 @@ static PyObject *wrap_material(PyTypeObject *type, wenv_material *mat, wenv_dist
     return (PyObject *)obj;
 }
 
-typedef enum { EVAL_FULL, EVAL_SPECULAR, EVAL_SPECULAR_BATCH } eval_mode;
+/* Room for a model's per-view float terms in _specular_float (the exact lights allow 16). */
+#define WENV_PY_VIEW_TERMS_MAX 16
+
+typedef enum { EVAL_FULL, EVAL_SPECULAR, EVAL_SPECULAR_BATCH, EVAL_SPECULAR_FLOAT } eval_mode;
 
 static PyObject *material_eval_impl(PyObject *self, PyObject *args, PyObject *kwds, eval_mode mode)
 {
@@ -184,6 +187,18 @@ static PyObject *material_eval_impl(PyObject *self, PyObject *args, PyObject *kw
     for (ptrdiff_t k = 0; k < count; k++) {
         double rgb[3];
         const double *a = wi + (size_t)k * si, *b = wo + (size_t)k * so;
+        if (mode == EVAL_SPECULAR_FLOAT) {
+            float af[3] = {(float)a[0], (float)a[1], (float)a[2]}, bf[3] = {(float)b[0], (float)b[1], (float)b[2]};
+            float terms[WENV_PY_VIEW_TERMS_MAX], rgbf[3] = {0.0f, 0.0f, 0.0f};
+            if (wenv_material_view_terms(mat) <= WENV_PY_VIEW_TERMS_MAX) {
+                wenv_material_prepare_view_f(mat, bf, terms);
+                wenv_material_specular_cos_f(mat, af, bf, terms, rgbf);
+            }
+            out[3 * k] = rgbf[0];
+            out[3 * k + 1] = rgbf[1];
+            out[3 * k + 2] = rgbf[2];
+            continue;
+        }
         if (mode == EVAL_FULL)
             wenv_material_eval_cos(mat, a, b, rgb);
         else
@@ -215,6 +230,11 @@ static PyObject *material_specular(PyObject *self, PyObject *args, PyObject *kwd
 static PyObject *material_specular_batch(PyObject *self, PyObject *args, PyObject *kwds)
 {
     return material_eval_impl(self, args, kwds, EVAL_SPECULAR_BATCH);
+}
+
+static PyObject *material_specular_float(PyObject *self, PyObject *args, PyObject *kwds)
+{
+    return material_eval_impl(self, args, kwds, EVAL_SPECULAR_FLOAT);
 }
 
 static int parse_samples(PyObject *obj, size_t *out)
@@ -329,6 +349,9 @@ static PyMethodDef material_methods[] = {
      "_specular(wi, wo)\n--\n\nSpecular lobes only, times cos_i (scalar C path; for tests)."},
     {"_specular_batch", (PyCFunction)(void (*)(void))material_specular_batch, METH_VARARGS | METH_KEYWORDS,
      "_specular_batch(wi, wo)\n--\n\nAs _specular through the one-view batch C path; wo must be single."},
+    {"_specular_float", (PyCFunction)(void (*)(void))material_specular_float, METH_VARARGS | METH_KEYWORDS,
+     "_specular_float(wi, wo)\n--\n\nAs _specular through the float path the exact lights use (0 if the "
+     "model's view terms do not fit; for tests)."},
     {NULL, NULL, 0, NULL},
 };
 
@@ -830,6 +853,9 @@ static PyObject *tabulated_reduce(PyObject *self, PyObject *unused)
 static PyGetSetDef tabulated_getset[] = {
     {"shape", tabulated_shape, NULL, "(n_theta_h, n_theta_d, n_phi_d): the table's samples.", NULL},
     {"table", tabulated_table, NULL, "A float32 copy of the table, (n_theta_h, n_theta_d, n_phi_d, 3).", NULL},
+    {"diffuse", ct_diffuse, NULL,
+     "The Lambertian part split off the table: pi times its smallest value above the horizon, per channel "
+     "(shaded as a Lambertian reflector; the rest is the glossy lobe).", NULL},
     {NULL, NULL, NULL, NULL, NULL},
 };
 

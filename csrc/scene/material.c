@@ -86,6 +86,11 @@ const double *wenv_material_diffuse(const wenv_material *mat) { return mat->diff
 size_t wenv_material_lobe_count(const wenv_material *mat) { return mat->n_lobes; }
 const wenv_lobe *wenv_material_lobe(const wenv_material *mat, size_t i) { return i < mat->n_lobes ? &mat->lobes[i] : NULL; }
 int wenv_material_has_smooth_limit(const wenv_material *mat) { return mat->kind->smooth_limit; }
+
+int wenv_material_mirror_centred(const wenv_material *mat)
+{
+    return mat->kind->mirror_centred ? mat->kind->mirror_centred(mat) : 1;
+}
 wenv_shadowing wenv_material_shadowing(const wenv_material *mat) { return mat->shadowing; }
 
 double wenv_material_lobe_width(const wenv_material *mat)

@@ -41,7 +41,8 @@ wenv_status wenv_cook_torrance_create(wenv_material **out, const double diffuse[
 /* An isotropic BRDF tabulated over Rusinkiewicz's half and difference angles in MERL's layout
  * (scene/tabulated.c: sample positions and trilinear interpolation): rgb is n_h x n_d x n_p x 3
  * floats of f (1/sr), finite and >= 0; dims in [2, 4096].  Copied once and shared by the material's
- * copies (a shader's copy costs no copy of the table).  All of it is one glossy lobe. */
+ * copies (a shader's copy costs no copy of the table).  Its smallest value above the horizon is the
+ * Lambertian part (diffuse = pi x that, per channel), the rest one glossy lobe. */
 wenv_status wenv_tabulated_create(wenv_material **out, const float *rgb, const size_t dims[3], wenv_error *err);
 
 /* A tabulated material's table, dims filled; NULL for other models. */
@@ -71,6 +72,12 @@ const wenv_lobe *wenv_material_lobe(const wenv_material *mat, size_t i);
 /* Whether the lobes have a smooth limit: Fresnel mirrors of their shapes' colour and index (the
  * glossmeter's smooth=True), as microfacet lobes do and a measured table does not. */
 int wenv_material_has_smooth_limit(const wenv_material *mat);
+
+/* Whether the glossy part reflects about the mirror direction, as microfacet lobes do (and a table
+ * whose fitted shape carries its lobe), rather than elsewhere (a retro-reflective lobe, about the
+ * view).  The wavelet shader interpolates between normal samples keeping what the lobe is centred
+ * on: the vertex's mirror direction, or its view. */
+int wenv_material_mirror_centred(const wenv_material *mat);
 
 /* The masking-shadowing form the lobes' shapes assume (Smith for models that do not say). */
 wenv_shadowing wenv_material_shadowing(const wenv_material *mat);

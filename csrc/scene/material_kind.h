@@ -33,6 +33,9 @@ typedef struct wenv_material_kind {
                               double *weight, size_t *count, wenv_error *err);
     wenv_status (*lobe_cells)(const wenv_material *mat, size_t i, const double wo[3], size_t n_theta, size_t n_phi,
                               double *wi, double *weight, double *solid_angle, size_t *count, wenv_error *err);
+    /* Optional: whether the glossy part reflects about the mirror direction (material.h,
+     * wenv_material_mirror_centred); NULL for always. */
+    int (*mirror_centred)(const wenv_material *mat);
     /* Optional: a copy with every lobe at `roughness` (already validated); NULL if the model cannot. */
     wenv_status (*with_roughness)(wenv_material **out, const wenv_material *src, double roughness, wenv_error *err);
 } wenv_material_kind;

@@ -131,6 +131,7 @@ static wenv_status lobe_cutoffs(wenv_wavelet *wavelet, const wenv_material *mat,
     for (size_t k = 0; k < n_lobes; k++)
         theta_h = fmax(theta_h, acos(fmax(-1.0, fmin(1.0, (double)wavelet->lobe_cos_h_min[k]))));
     wavelet->lobe_m_min = fmin(1.0, wenv_material_lobe_width(mat));
+    wavelet->mirror_centred = wenv_material_mirror_centred(mat);
     wavelet->light_cone_cos = 2.0 * theta_h >= M_PI ? -1.0 : cos(2.0 * theta_h);
     return WENV_OK;
 }

@@ -83,16 +83,25 @@ static int compute_taps(const wenv_wavelet *wavelet, const float *nrm, const flo
     memcpy(tp->n, n, sizeof n);
     memcpy(tp->v, v, sizeof v);
     tp->cos_v = nv;
+    /* What each normal sample's view keeps from the vertex: a lobe about the mirror direction sees
+     * the same lighting from every sample when the mirror direction r is kept (the view about the
+     * sample normal is then the mirror of r); a lobe about the view (retro-reflective) when the
+     * view itself is.  The samples' bilinear weights do not reproduce the vertex normal where the
+     * octahedral map folds (x = 0, y = 0: up to half a texel), so keeping the other direction moves
+     * the lobe by twice that. */
     float r[3] = {2.0f * nv * n[0] - v[0], 2.0f * nv * n[1] - v[1], 2.0f * nv * n[2] - v[2]};
+    int keep_mirror = wavelet->mirror_centred;
     /* octahedral encoding of the normal */
     float ou, ov;
     wenv_oct_encode_f(n, &ou, &ov);
     wenv_oct_bilinear_f((long)wavelet->q.normal_n, ou, ov, tp->sample, tp->sample_w);
     for (int k = 0; k < 4; k++) {
         const float *f = wavelet->frames + 9 * (size_t)tp->sample[k];
-        /* mirror of r about the sample normal, in the sample's frame: (-r.t, -r.b, r.n) */
-        float lx = -(f[0] * r[0] + f[1] * r[1] + f[2] * r[2]), ly = -(f[3] * r[0] + f[4] * r[1] + f[5] * r[2]);
-        float lz = f[6] * r[0] + f[7] * r[1] + f[8] * r[2];
+        /* in the sample's frame: the mirror of r about the sample normal, (-r.t, -r.b, r.n), or v */
+        const float *d = keep_mirror ? r : v;
+        float sign = keep_mirror ? -1.0f : 1.0f;
+        float lx = sign * (f[0] * d[0] + f[1] * d[1] + f[2] * d[2]), ly = sign * (f[3] * d[0] + f[4] * d[1] + f[5] * d[2]);
+        float lz = f[6] * d[0] + f[7] * d[1] + f[8] * d[2];
         /* hemi-octahedral encoding; views below the sample's horizon are read on it */
         float hl = fabsf(lx) + fabsf(ly) + (lz > 0.0f ? lz : 0.0f);
         float ih = hl > 0.0f ? 1.0f / hl : 0.0f, px = lx * ih, py = ly * ih;

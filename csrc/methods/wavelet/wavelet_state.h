@@ -46,6 +46,7 @@ struct wenv_wavelet {
     float *lobe_cos_h_min;   /* per lobe: below this n.h its D is negligible (< 1e-7 of its peak) */
     double light_cone_cos;   /* lights farther than this from the mirror direction miss every lobe */
     double lobe_m_min;       /* the narrowest lobe's roughness (picks the lights' cluster level) */
+    int mirror_centred;      /* normal samples keep the vertex's mirror direction (else its view) */
     float *albedo;           /* ALBEDO_N x 3: specular albedo at cos(view) = WENV_GRAZING_Z .. 1 */
     float *view_inv_albedo;  /* nv x 3: 1 / albedo of each view sample (0 where the albedo is 0) */
     float diffuse_over_pi[3];

@@ -327,6 +327,26 @@ def tinted(m):
     return f
 
 
+def table_of(spec, shape=(90, 90, 180)):
+    """The table (shape + (3,), float64) of a BRDF named by a JSON-able spec: {"brdf": "cook_torrance",
+    "roughness": m} (white, index 1.5), {"brdf": "retro", "width": w} or {"brdf": "tinted",
+    "roughness": m}, with an optional "diffuse": [r, g, b] albedo added above the horizon as a
+    Lambertian floor.  What benchmarks/accuracy.py's TABLES and the tests that read their stored
+    references are made from."""
+    if spec["brdf"] == "cook_torrance":
+        f = cook_torrance(spec["roughness"])
+    elif spec["brdf"] == "retro":
+        f = retro(spec["width"])
+    elif spec["brdf"] == "tinted":
+        f = tinted(spec["roughness"])
+    else:
+        raise ValueError(f"unknown brdf {spec['brdf']!r}")
+    table = tabulate(f, *shape)
+    if "diffuse" in spec:
+        table += np.asarray(spec["diffuse"], np.float64) / math.pi * above_horizon(*shape)[..., None]
+    return table
+
+
 # ------------------------------------------------------------------ integrals and sampling
 
 def albedo(f, wo, n_mu=400, n_phi=800):
