@@ -446,9 +446,13 @@ wenv_status wenv_gm_material_flux(const wenv_glossmeter *gm, const wenv_material
         }
     }
 
-    /* Diffuse: f = albedo/pi is constant, so the 4-D integral is the product of the apertures'
-     * projected solid angles (precomputed). */
-    double albedo = luminance(wenv_material_diffuse(mat));
+    /* Diffuse: f = albedo/pi is constant over the apertures, so the 4-D integral is the product of
+     * their projected solid angles (precomputed).  A layered material's albedo changes with the view:
+     * it is read at the receptor's centre, the view of a few degrees' aperture whose first-order
+     * change cancels across it. */
+    double diffuse_rgb[3];
+    wenv_material_diffuse_at(mat, dot3(gm->cd, gm->n), diffuse_rgb);
+    double albedo = luminance(diffuse_rgb);
     *flux += albedo / M_PI * gm->proj_source * gm->proj_receptor;
     *flux_err += WENV_GLOSS_SAFETY * albedo / M_PI * gm->proj_error;
 

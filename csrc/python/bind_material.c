@@ -13,12 +13,6 @@
 #define ALBEDO_DEFAULT_SAMPLES 128
 #define PARALLEL_MIN_ROWS 16384 /* below this, thread start-up costs more than it saves */
 
-typedef struct {
-    PyObject_HEAD
-    wenv_material *mat;              /* owned, immutable after construction */
-    wenv_distribution distribution;  /* CookTorrance's material-level default, kept for .distribution */
-} MaterialObject;
-
 static PyTypeObject MaterialType;
 static PyTypeObject LambertType;
 static PyTypeObject CookTorranceType;
@@ -305,6 +299,12 @@ static PyObject *material_richcompare(PyObject *a, PyObject *b, int op)
     const MaterialObject *x = (const MaterialObject *)a, *y = (const MaterialObject *)b;
     size_t xd[3], yd[3];
     const float *xt = x->mat ? wenv_tabulated_table(x->mat, xd) : NULL, *yt = y->mat ? wenv_tabulated_table(y->mat, yd) : NULL;
+    const wenv_principled_inputs *xp = x->mat ? wenv_principled_inputs_of(x->mat) : NULL,
+                                 *yp = y->mat ? wenv_principled_inputs_of(y->mat) : NULL;
+    if (xp || yp) { /* Principled: equal when their (clamped) inputs are */
+        int same = xp && yp && memcmp(xp, yp, sizeof *xp) == 0;
+        return PyBool_FromLong(op == Py_EQ ? same : !same);
+    }
     if (xt || yt) { /* tables: equal when their samples are */
         int same = xt && yt && memcmp(xd, yd, sizeof xd) == 0 && memcmp(xt, yt, 3 * xd[0] * xd[1] * xd[2] * sizeof *xt) == 0;
         return PyBool_FromLong(op == Py_EQ ? same : !same);
@@ -366,6 +366,8 @@ static PyTypeObject MaterialType = {
     .tp_richcompare = material_richcompare,
     .tp_hash = material_hash,
 };
+
+PyTypeObject *wenv_py_material_type(void) { return &MaterialType; }
 
 /* ---------------------------------------------------------------- wenv.Lambert */
 

@@ -4,7 +4,19 @@
 
 #include "python/convert.h"
 
+#include "scene/microfacet.h"
+
 struct wenv_material;
+
+/* Every wenv material object: the base type's layout, which every kind's type shares. */
+typedef struct {
+    PyObject_HEAD
+    struct wenv_material *mat;       /* owned, immutable after construction */
+    wenv_distribution distribution;  /* CookTorrance's material-level default, kept for .distribution */
+} MaterialObject;
+
+/* wenv.Material, the base type of every kind (bind_principled.c's among them). */
+PyTypeObject *wenv_py_material_type(void);
 
 /* NULL + TypeError naming `name` if obj is not a wenv.Material. */
 const struct wenv_material *wenv_py_material(PyObject *obj, const char *name);

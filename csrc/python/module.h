@@ -6,7 +6,8 @@
 #include "python/convert.h"
 
 int wenv_register_envmap(PyObject *module);     /* bind_envmap.c: Environment, load_environment */
-int wenv_register_material(PyObject *module);   /* bind_material.c: Material, Lambert, CookTorrance */
+int wenv_register_material(PyObject *module);   /* bind_material.c: Material, Lambert, CookTorrance, Tabulated */
+int wenv_register_principled(PyObject *module); /* bind_principled.c: Principled */
 int wenv_register_shader(PyObject *module);     /* bind_shader.c: Shader, the presets */
 int wenv_register_reference(PyObject *module);  /* bind_reference.c: reference */
 int wenv_register_glossmeter(PyObject *module); /* bind_glossmeter.c: Glossmeter, gloss, haze, fit_roughness */

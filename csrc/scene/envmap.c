@@ -249,6 +249,16 @@ size_t wenv_envmap_height(const wenv_envmap *env) { return env->height; }
 wenv_projection wenv_envmap_projection(const wenv_envmap *env) { return env->projection; }
 double wenv_envmap_rotation(const wenv_envmap *env) { return env->rotation; }
 double wenv_envmap_strength(const wenv_envmap *env) { return env->strength; }
+
+double wenv_envmap_pixel_angle(const wenv_envmap *env)
+{
+    switch (env->projection) {
+    case WENV_PROJ_EQUIRECT: return PI / (double)env->height;
+    case WENV_PROJ_MIRROR_BALL: return 4.0 / (double)env->width; /* the disk's pi (w/2)^2 pixels over 4 pi sr */
+    case WENV_PROJ_CUBE_CROSS: break;
+    }
+    return sqrt(4.0 * PI / 6.0) / (double)env->face_size;
+}
 const float *wenv_envmap_pixels(const wenv_envmap *env) { return env->pixels; }
 
 /* ---------------------------------------------------------------------------------------------

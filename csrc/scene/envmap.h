@@ -80,6 +80,10 @@ const float *wenv_envmap_pixels(const wenv_envmap *env);
  * outside the disk. */
 void wenv_envmap_lookup(const wenv_envmap *env, const double dir[3], float rgb[3]);
 
+/* A pixel's angular size in radians, about (the equirect row height; for other projections the
+ * side of a square of the mean pixel solid angle). */
+double wenv_envmap_pixel_angle(const wenv_envmap *env);
+
 /* Every pixel that covers part of the sphere, as a point sample: world direction of its centre
  * (rotation applied), flux = radiance * strength * exact solid angle of the pixel, and (if omega
  * is not NULL) that solid angle.  `dirs` and `flux` hold room for 3 * width * height floats each,

@@ -6,6 +6,10 @@
 #include <stdlib.h>
 #include <string.h>
 
+#ifndef M_PI
+#define M_PI 3.14159265358979323846
+#endif
+
 #define ALBEDO_SAMPLES_MIN 8
 #define ALBEDO_SAMPLES_MAX 4096
 
@@ -86,6 +90,33 @@ const double *wenv_material_diffuse(const wenv_material *mat) { return mat->diff
 size_t wenv_material_lobe_count(const wenv_material *mat) { return mat->n_lobes; }
 const wenv_lobe *wenv_material_lobe(const wenv_material *mat, size_t i) { return i < mat->n_lobes ? &mat->lobes[i] : NULL; }
 int wenv_material_has_smooth_limit(const wenv_material *mat) { return mat->kind->smooth_limit; }
+
+void wenv_material_diffuse_at(const wenv_material *mat, double cos_v, double rgb[3])
+{
+    if (mat->kind->diffuse_at)
+        mat->kind->diffuse_at(mat, cos_v, rgb);
+    else
+        memcpy(rgb, mat->diffuse, 3 * sizeof *rgb);
+}
+
+void wenv_material_diffuse_table(const wenv_material *mat, wenv_diffuse_table *table)
+{
+    table->n = mat->kind->diffuse_at ? WENV_DIFFUSE_TABLE_N : 1;
+    for (size_t i = 0; i < table->n; i++) {
+        double rgb[3];
+        wenv_material_diffuse_at(mat, table->n > 1 ? (double)i / (double)(table->n - 1) : 1.0, rgb);
+        for (int c = 0; c < 3; c++)
+            table->over_pi[3 * i + (size_t)c] = (float)(rgb[c] / M_PI);
+    }
+}
+
+int wenv_diffuse_table_any(const wenv_diffuse_table *t)
+{
+    for (size_t k = 0; k < 3 * t->n; k++)
+        if (t->over_pi[k] != 0.0f)
+            return 1;
+    return 0;
+}
 
 int wenv_material_mirror_centred(const wenv_material *mat)
 {
@@ -208,8 +239,7 @@ wenv_status wenv_material_albedo(const wenv_material *mat, const double wo[3], s
                               ALBEDO_SAMPLES_MAX, samples);
     if (!(wo[2] > 0.0))
         return WENV_OK;
-    for (int c = 0; c < 3; c++)
-        rgb[c] = mat->diffuse[c]; /* Int diffuse / pi cos_i d wi = diffuse exactly */
+    wenv_material_diffuse_at(mat, wo[2], rgb); /* Int diffuse / pi cos_i d wi = diffuse exactly */
     for (size_t l = 0; l < mat->n_lobes; l++) {
         double a[3];
         if (mat->kind->lobe_albedo(mat, l, wo, samples, a, err))

@@ -45,6 +45,36 @@ wenv_status wenv_cook_torrance_create(wenv_material **out, const double diffuse[
  * Lambertian part (diffuse = pi x that, per channel), the rest one glossy lobe. */
 wenv_status wenv_tabulated_create(wenv_material **out, const float *rgb, const size_t dims[3], wenv_error *err);
 
+/* Blender's Principled BSDF node's inputs (Blender 4.x/5.x names in snake case), as Cycles reads
+ * them; wenv_principled_defaults gives the node's defaults. */
+typedef struct {
+    double base_color[3], metallic, roughness, ior, alpha;
+    double specular_ior_level, specular_tint[3];
+    double anisotropic, anisotropic_rotation;
+    double coat_weight, coat_roughness, coat_ior, coat_tint[3];
+    double sheen_weight, sheen_roughness, sheen_tint[3];
+    double subsurface_weight, transmission_weight, diffuse_roughness;
+    double emission_color[3], emission_strength;
+    double thin_film_thickness, thin_film_ior;
+    int multiscatter; /* the node's distribution: "Multiscatter GGX" (1, Blender's default) or "GGX" */
+} wenv_principled_inputs;
+
+void wenv_principled_defaults(wenv_principled_inputs *in);
+
+/* The Principled BSDF's reflection as Cycles evaluates it (scene/principled.c): every input finite
+ * (WENV_ERR_VALUE naming the first that is not), clamped as Cycles' kernel clamps them.  Its lobes
+ * are GGX (coat, metal, dielectric specular, as present); its Lambertian part changes with the view
+ * (wenv_material_diffuse_at). */
+wenv_status wenv_principled_create(wenv_material **out, const wenv_principled_inputs *in, wenv_error *err);
+
+/* A Principled material's inputs (clamped), NULL for other models. */
+const wenv_principled_inputs *wenv_principled_inputs_of(const wenv_material *mat);
+
+/* The names of the inputs set to something wenv does not shade (transmission, subsurface scattering
+ * -- shaded as diffuse --, emission, the see-through part of alpha, sheen, anisotropy, thin film,
+ * diffuse roughness): up to max of them into names; returns how many there are. */
+size_t wenv_principled_unhonoured(const wenv_principled_inputs *in, const char **names, size_t max);
+
 /* A tabulated material's table, dims filled; NULL for other models. */
 const float *wenv_tabulated_table(const wenv_material *mat, size_t dims[3]);
 
@@ -62,8 +92,32 @@ const char *wenv_material_kind_name(const wenv_material *mat);
 
 /* ---- what it is made of ---- */
 
-/* The Lambertian part's albedo (RGB). */
+/* The Lambertian part's albedo (RGB); for a material whose Lambertian part changes with the view,
+ * its value head-on (see wenv_material_diffuse_at). */
 const double *wenv_material_diffuse(const wenv_material *mat);
+
+/* The Lambertian part's albedo for a view at cos_v to the normal (f_d = albedo / pi for every wi):
+ * constant for most models; a layered one (Principled) lets through what its upper layers leave. */
+void wenv_material_diffuse_at(const wenv_material *mat, double cos_v, double rgb[3]);
+
+/* The same over cos_v in [0, 1], tabulated for per-vertex loops: albedo / pi at WENV_DIFFUSE_TABLE_N
+ * cosines i / (n - 1), linear between them (n = 1 when it does not change with the view). */
+#define WENV_DIFFUSE_TABLE_N 257
+typedef struct {
+    size_t n;
+    float over_pi[3 * WENV_DIFFUSE_TABLE_N];
+} wenv_diffuse_table;
+void wenv_material_diffuse_table(const wenv_material *mat, wenv_diffuse_table *table);
+static inline void wenv_diffuse_table_at(const wenv_diffuse_table *t, float cos_v, float out[3])
+{
+    float x = (cos_v < 0.0f ? 0.0f : (cos_v > 1.0f ? 1.0f : cos_v)) * (float)(t->n - 1);
+    size_t i = (size_t)x < t->n - 1 ? (size_t)x : t->n - 1, j = i + 1 < t->n ? i + 1 : i;
+    float f = x - (float)i;
+    for (int c = 0; c < 3; c++)
+        out[c] = (1.0f - f) * t->over_pi[3 * i + (size_t)c] + f * t->over_pi[3 * j + (size_t)c];
+}
+/* Whether any entry is non-zero. */
+int wenv_diffuse_table_any(const wenv_diffuse_table *t);
 
 /* The glossy lobes: how many, and each one's microfacet shape (see above). */
 size_t wenv_material_lobe_count(const wenv_material *mat);

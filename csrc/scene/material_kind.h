@@ -33,6 +33,9 @@ typedef struct wenv_material_kind {
                               double *weight, size_t *count, wenv_error *err);
     wenv_status (*lobe_cells)(const wenv_material *mat, size_t i, const double wo[3], size_t n_theta, size_t n_phi,
                               double *wi, double *weight, double *solid_angle, size_t *count, wenv_error *err);
+    /* Optional: the Lambertian part's albedo for a view (wenv_material_diffuse_at); NULL when it is
+     * the constant `diffuse`. */
+    void (*diffuse_at)(const wenv_material *mat, double cos_v, double rgb[3]);
     /* Optional: whether the glossy part reflects about the mirror direction (material.h,
      * wenv_material_mirror_centred); NULL for always. */
     int (*mirror_centred)(const wenv_material *mat);

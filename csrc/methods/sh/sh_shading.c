@@ -30,7 +30,7 @@ struct wenv_sh_shading {
     int have_env, have_mat;
     double *light;   /* count x 3, world frame */
     double *slices;  /* views x count x 3, local frame, view in the xz plane */
-    double diffuse_over_pi[3];
+    wenv_diffuse_table diffuse; /* the Lambertian part's albedo / pi over the view's cosine */
     size_t n_lobes;
     /* Without lobes the radiance depends on the normal alone and needs no rotation: bands 0 - 2 of
      * the irradiance (nearly all of it) are evaluated per vertex in closed form, bands 3 - order,
@@ -224,8 +224,7 @@ static wenv_status set_material(void *state, const wenv_material *mat, const wen
     free(sr->slices);
     sr->slices = slices;
     sr->n_lobes = n_lobes;
-    for (int c = 0; c < 3; c++)
-        sr->diffuse_over_pi[c] = wenv_material_diffuse(mat)[c] / M_PI;
+    wenv_material_diffuse_table(mat, &sr->diffuse);
     sr->have_mat = 1;
     sr->stats.slice_seconds = wenv_now_seconds() - t0;
     sr->stats.slice_bytes = V * count * 3 * sizeof(double);
@@ -237,7 +236,6 @@ static wenv_status set_material(void *state, const wenv_material *mat, const wen
 static wenv_status shade_lambert(const wenv_sh_shading *sr, const float *normals, const float *views, size_t n,
                                  float *out)
 {
-    float k[3] = {(float)sr->diffuse_over_pi[0], (float)sr->diffuse_over_pi[1], (float)sr->diffuse_over_pi[2]};
     const float *low = sr->low, *map = sr->irr_map;
     long long nn = (long long)n;
 #pragma omp parallel for schedule(static)
@@ -246,10 +244,13 @@ static wenv_status shade_lambert(const wenv_sh_shading *sr, const float *normals
         float *o = out + 3 * i;
         float len = sqrtf(nr[0] * nr[0] + nr[1] * nr[1] + nr[2] * nr[2]);
         float d[3] = {nr[0] / len, nr[1] / len, nr[2] / len};
-        if (!(d[0] * v[0] + d[1] * v[1] + d[2] * v[2] > 0.0f)) {
+        float lv = sqrtf(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]), mu = (d[0] * v[0] + d[1] * v[1] + d[2] * v[2]) / lv;
+        if (!(mu > 0.0f)) {
             o[0] = o[1] = o[2] = 0.0f;
             continue;
         }
+        float k[3];
+        wenv_diffuse_table_at(&sr->diffuse, mu, k);
         float x = d[0], y = d[1], z = d[2];
         /* the real SH of bands 0 - 2 as wenv_sh_eval makes them (Condon-Shortley phase) */
         const float yb[9] = {0.28209479f, -0.48860251f * y, 0.48860251f * z, -0.48860251f * x, 1.09254843f * x * y,
@@ -323,8 +324,10 @@ static wenv_status shade(void *state, const float *normals, const float *views, 
                 for (int k = 0; k < 3; k++)
                     irr[k] += a * c[k];
             }
+            float dk[3];
+            wenv_diffuse_table_at(&sr->diffuse, (float)mu, dk);
             for (int k = 0; k < 3; k++)
-                rgb[k] = sr->diffuse_over_pi[k] * fmax(irr[k], 0.0);
+                rgb[k] = dk[k] * fmax(irr[k], 0.0);
             if (sr->n_lobes) {
                 double x = acos(fmin(1.0, mu)) * view_scale;
                 size_t j = x >= (double)(V - 1) ? V - 2 : (size_t)x;

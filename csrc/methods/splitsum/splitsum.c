@@ -35,7 +35,7 @@ struct wenv_splitsum {
     /* material */
     size_t n_lobes;
     wenv_lobe *lobes;  /* their shapes: what the prefilter assumes */
-    float diffuse_over_pi[3];
+    wenv_diffuse_table diffuse; /* the Lambertian part's albedo / pi over the view's cosine */
     float *lut;        /* n_lobes x q.lut x 3: each lobe's albedo, its colour included */
     float *prefilter;  /* n_lobes x prefilter^2 x 3, once both are set */
 };
@@ -339,8 +339,7 @@ static wenv_status set_material(void *state, const wenv_material *mat, const wen
     ss->lut = lut;
     ss->prefilter = pre;
     ss->n_lobes = nl;
-    for (int c = 0; c < 3; c++)
-        ss->diffuse_over_pi[c] = (float)(wenv_material_diffuse(mat)[c] / M_PI);
+    wenv_material_diffuse_table(mat, &ss->diffuse);
     ss->stats.lut_seconds = t1 - t0;
     ss->have_mat = 1;
     update_bytes(ss);
@@ -389,9 +388,11 @@ static wenv_status shade(void *state, const float *normals, const float *views, 
             continue;
         }
         double irr[3], rgb[3];
+        float d[3];
         wenv_sh_irradiance(2, ss->irradiance_sh, nv3, irr);
+        wenv_diffuse_table_at(&ss->diffuse, (float)mu, d);
         for (int c = 0; c < 3; c++)
-            rgb[c] = ss->diffuse_over_pi[c] * fmax(irr[c], 0.0);
+            rgb[c] = d[c] * fmax(irr[c], 0.0);
         if (ss->n_lobes) {
             double r[3] = {2.0 * mu * nv3[0] - v[0], 2.0 * mu * nv3[1] - v[1], 2.0 * mu * nv3[2] - v[2]}, u, w;
             wenv_oct_encode(r, &u, &w);

@@ -282,10 +282,8 @@ wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material
         wenv_wavelet_free_material(wavelet);
         return err->status;
     }
-    const double *diffuse = wenv_material_diffuse(mat);
-    for (int c = 0; c < 3; c++)
-        wavelet->diffuse_over_pi[c] = (float)(diffuse[c] / M_PI);
-    wavelet->has_diffuse = diffuse[0] != 0.0 || diffuse[1] != 0.0 || diffuse[2] != 0.0;
+    wenv_material_diffuse_table(mat, &wavelet->diffuse);
+    wavelet->has_diffuse = wenv_diffuse_table_any(&wavelet->diffuse);
     wavelet->has_lobes = wenv_material_lobe_count(mat) > 0;
     wavelet->stats.brdf_terms_total = total;
     wavelet->have_mat = 1;

@@ -201,8 +201,10 @@ static void shade_vertex(const wenv_wavelet *wavelet, const vertex_taps *tp, flo
         for (int c = 0; c < 3; c++)
             s[c] += blend * g[c];
     }
+    float d[3];
+    wenv_diffuse_table_at(&wavelet->diffuse, tp->cos_v, d);
     for (int c = 0; c < 3; c++) {
-        float val = wavelet->diffuse_over_pi[c] * e[c] + s[c];
+        float val = d[c] * e[c] + s[c];
         o[c] = val > 0.0f ? val : 0.0f;
     }
 }

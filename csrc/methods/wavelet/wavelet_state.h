@@ -49,7 +49,7 @@ struct wenv_wavelet {
     int mirror_centred;      /* normal samples keep the vertex's mirror direction (else its view) */
     float *albedo;           /* ALBEDO_N x 3: specular albedo at cos(view) = WENV_GRAZING_Z .. 1 */
     float *view_inv_albedo;  /* nv x 3: 1 / albedo of each view sample (0 where the albedo is 0) */
-    float diffuse_over_pi[3];
+    wenv_diffuse_table diffuse; /* the Lambertian part's albedo / pi over the view's cosine */
     int has_diffuse, has_lobes; /* what the exact lights shade per vertex, read once per material */
     wenv_grazing_rule *grazing_rule; /* NULL: no lobe is integrated per vertex */
     size_t *brdf_start;      /* nv + 1 */

@@ -1,0 +1,144 @@
+"""Cycles (through bpy) rendering an unoccluded sphere under a bundled HDRI, and what wenv needs to shade
+the same pixels: the test of wenv.Principled against Cycles (tests/test_principled.py) and the full
+grid (benchmarks/principled_vs_cycles.py) read it.
+
+The scene: a smooth UV sphere (256 x 128) of radius 1 at the origin, an orthographic camera on -Y
+looking along +Y that frames it, the World an Environment Texture of the HDRI (Blender's default
+"Linear" interpolation, which wenv.reference reads lobes narrower than a pixel through), no
+denoising, no adaptive
+sampling, a pixel filter 0.01 pixels wide (every sample at the pixel's centre, so a pixel is one
+(normal, view) pair), "Standard" view transform, 32-bit EXR output (scene-linear, as wenv's
+radiance).  The sphere is convex, so every ray that leaves it sees the World: one bounce is exact.
+
+Each pixel's normal is Cycles' own shading normal, rendered as the colour of an emission shader
+(Geometry > Normal), and the view is -Y (towards the camera)."""
+import math
+import os
+import tempfile
+
+import numpy as np
+
+from measure import bundled_hdri
+
+# Principled BSDF node inputs by wenv.Principled's names
+SOCKETS = {
+    "base_color": "Base Color", "metallic": "Metallic", "roughness": "Roughness", "ior": "IOR", "alpha": "Alpha",
+    "specular_ior_level": "Specular IOR Level", "specular_tint": "Specular Tint", "anisotropic": "Anisotropic",
+    "coat_weight": "Coat Weight", "coat_roughness": "Coat Roughness", "coat_ior": "Coat IOR", "coat_tint": "Coat Tint",
+    "sheen_weight": "Sheen Weight", "sheen_roughness": "Sheen Roughness", "sheen_tint": "Sheen Tint",
+    "subsurface_weight": "Subsurface Weight", "transmission_weight": "Transmission Weight",
+    "diffuse_roughness": "Diffuse Roughness",
+}
+
+
+class SphereScene:
+    """The scene above, built in the current bpy session (it replaces whatever is loaded)."""
+
+    def __init__(self, hdri="sunset", size=64, samples=256):
+        import bpy
+        self.bpy = bpy
+        self.hdri = hdri
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        sc = bpy.context.scene
+        self.scene = sc
+        sc.render.engine = "CYCLES"
+        sc.cycles.device = "CPU"
+        sc.cycles.samples = samples
+        sc.cycles.use_denoising = False
+        sc.cycles.use_adaptive_sampling = False
+        sc.cycles.filter_width = 0.01
+        sc.render.resolution_x = sc.render.resolution_y = size
+        sc.render.resolution_percentage = 100
+        sc.view_settings.view_transform = "Standard"
+        sc.view_settings.look = "None"
+        sc.view_settings.exposure = 0.0
+        sc.view_settings.gamma = 1.0
+        sc.render.image_settings.file_format = "OPEN_EXR"
+        sc.render.image_settings.color_depth = "32"
+        world = bpy.data.worlds.new("wenv-cycles")
+        sc.world = world
+        if self.bpy.app.version < (5, 0, 0):  # nodes are always on from 5.0
+            world.use_nodes = True
+        nt = world.node_tree
+        env = nt.nodes.new("ShaderNodeTexEnvironment")
+        env.image = bpy.data.images.load(bundled_hdri(hdri))
+        nt.links.new(env.outputs["Color"], nt.nodes["Background"].inputs["Color"])
+        bpy.ops.mesh.primitive_uv_sphere_add(segments=256, ring_count=128, radius=1.0)
+        self.sphere = bpy.context.active_object
+        self.sphere.data.shade_smooth()
+        cam_data = bpy.data.cameras.new("wenv-cycles")
+        cam_data.type = "ORTHO"
+        cam_data.ortho_scale = 2.1
+        cam = bpy.data.objects.new("wenv-cycles", cam_data)
+        sc.collection.objects.link(cam)
+        sc.camera = cam
+        cam.location = (0.0, -5.0, 0.0)
+        cam.rotation_euler = (math.pi / 2, 0.0, 0.0)
+        self.folder = tempfile.mkdtemp(prefix="wenv-cycles-")
+        self._use(self._normal_material())
+        normals = self.render(seed=0)
+        self.mask = np.abs(np.linalg.norm(normals, axis=2) - 1.0) < 1e-3
+        self.normals = np.ascontiguousarray(normals[self.mask], np.float32)
+        self.views = np.tile(np.float32([0.0, -1.0, 0.0]), (len(self.normals), 1))
+
+    def _use(self, material):
+        self.sphere.data.materials.clear()
+        self.sphere.data.materials.append(material)
+
+    def _normal_material(self):
+        mat = self.bpy.data.materials.new("wenv-normals")
+        if self.bpy.app.version < (5, 0, 0):  # nodes are always on from 5.0
+            mat.use_nodes = True
+        nt = mat.node_tree
+        for n in list(nt.nodes):
+            if n.bl_idname != "ShaderNodeOutputMaterial":
+                nt.nodes.remove(n)
+        geo, em = nt.nodes.new("ShaderNodeNewGeometry"), nt.nodes.new("ShaderNodeEmission")
+        nt.links.new(geo.outputs["Normal"], em.inputs["Color"])
+        nt.links.new(em.outputs["Emission"], nt.nodes["Material Output"].inputs["Surface"])
+        return mat
+
+    def principled(self, **inputs):
+        """Gives the sphere a Principled BSDF with these inputs (wenv.Principled's names; the
+        distribution keyword sets the node's distribution)."""
+        mat = self.bpy.data.materials.new("wenv-principled")
+        if self.bpy.app.version < (5, 0, 0):  # nodes are always on from 5.0
+            mat.use_nodes = True
+        node = next(n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled")
+        for key, value in inputs.items():
+            if key == "distribution":
+                node.distribution = {"ggx": "GGX", "multiscatter_ggx": "MULTI_GGX"}[value]
+                continue
+            socket = node.inputs[SOCKETS[key]]
+            if isinstance(value, (tuple, list)) and len(socket.default_value) == 4:
+                value = tuple(value) + (1.0,)
+            socket.default_value = value
+        self._use(mat)
+
+    def render(self, seed=0):
+        """The sphere's pixels, float32 (size, size, 3), row 0 the top."""
+        bpy, sc = self.bpy, self.scene
+        sc.cycles.seed = seed
+        path = os.path.join(self.folder, f"render_{seed}.exr")
+        sc.render.filepath = path
+        bpy.ops.render.render(write_still=True)
+        img = bpy.data.images.load(path)
+        px = np.array(img.pixels[:], np.float32).reshape(img.size[1], img.size[0], 4)[::-1, :, :3]
+        bpy.data.images.remove(img)
+        os.remove(path)
+        return px
+
+    def compare(self, material, seeds=(1, 2)):
+        """Cycles' render of the sphere (two seeds) against wenv.reference of `material` on the same
+        pixels: {'noise': one render's relative RMSE from the other's (/ sqrt 2), 'error': the two
+        renders' mean against the reference, 'noise_of_mean': what the mean's own noise adds,
+        'ratio': mean radiance per channel, Cycles over wenv}."""
+        import wenv
+        env = wenv.load_environment(bundled_hdri(self.hdri))
+        a, b = (self.render(seed)[self.mask].astype(np.float64) for seed in seeds)
+        ref = wenv.reference(env, material, self.normals, self.views).astype(np.float64)
+        scale = math.sqrt(float(np.mean(ref ** 2)))
+        noise = math.sqrt(float(np.mean((a - b) ** 2)) / 2) / scale
+        error = math.sqrt(float(np.mean(((a + b) / 2 - ref) ** 2))) / scale
+        return {"noise": noise, "noise_of_mean": noise / math.sqrt(2), "error": error,
+                "ratio": ((a + b) / 2).mean(axis=0) / ref.mean(axis=0), "cycles": (a + b) / 2, "reference": ref}

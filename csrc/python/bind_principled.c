@@ -1,0 +1,305 @@
+/* wenv.Principled: Blender's Principled BSDF as Cycles evaluates it (scene/principled.c). */
+#include "python/bind_material.h"
+#include "python/module.h"
+
+#include <math.h>
+#include <stddef.h>
+#include <string.h>
+
+#include "scene/material.h"
+
+/* The node's inputs by their Python names: offset of a double (n = 1) or a colour (n = 3). */
+typedef struct {
+    const char *name;
+    size_t offset;
+    int n;
+} input_field;
+
+#define FIELD(name, n) {#name, offsetof(wenv_principled_inputs, name), n}
+static const input_field FIELDS[] = {
+    FIELD(base_color, 3),          FIELD(metallic, 1),         FIELD(roughness, 1),
+    FIELD(ior, 1),                 FIELD(alpha, 1),            FIELD(specular_ior_level, 1),
+    FIELD(specular_tint, 3),       FIELD(anisotropic, 1),      FIELD(anisotropic_rotation, 1),
+    FIELD(coat_weight, 1),         FIELD(coat_roughness, 1),   FIELD(coat_ior, 1),
+    FIELD(coat_tint, 3),           FIELD(sheen_weight, 1),     FIELD(sheen_roughness, 1),
+    FIELD(sheen_tint, 3),          FIELD(subsurface_weight, 1), FIELD(transmission_weight, 1),
+    FIELD(diffuse_roughness, 1),   FIELD(emission_color, 3),   FIELD(emission_strength, 1),
+    FIELD(thin_film_thickness, 1), FIELD(thin_film_ior, 1),
+};
+#undef FIELD
+#define N_FIELDS (sizeof FIELDS / sizeof FIELDS[0])
+
+static const char *const DISTRIBUTIONS[] = {"ggx", "multiscatter_ggx"}; /* index = multiscatter */
+
+static PyTypeObject PrincipledType;
+
+/* A colour: a grey number, (r, g, b), or Blender's (r, g, b, a) with a ignored (Cycles ignores it). */
+static int get_colour(PyObject *obj, const char *name, double rgb[3])
+{
+    if (PySequence_Check(obj) && !PyUnicode_Check(obj) && PySequence_Size(obj) == 4) {
+        PyObject *three = PySequence_GetSlice(obj, 0, 3);
+        int r = three ? wenv_py_get_rgb(three, name, rgb) : -1;
+        Py_XDECREF(three);
+        return r;
+    }
+    return wenv_py_get_rgb(obj, name, rgb);
+}
+
+static int set_input(wenv_principled_inputs *in, PyObject *key, PyObject *value)
+{
+    const char *name = PyUnicode_Check(key) ? PyUnicode_AsUTF8(key) : NULL;
+    if (!name) {
+        if (!PyErr_Occurred())
+            PyErr_SetString(PyExc_TypeError, "Principled keywords must be strings");
+        return -1;
+    }
+    if (strcmp(name, "distribution") == 0) {
+        const char *d = PyUnicode_Check(value) ? PyUnicode_AsUTF8(value) : NULL;
+        for (int i = 0; d && i < 2; i++)
+            if (strcmp(d, DISTRIBUTIONS[i]) == 0) {
+                in->multiscatter = i;
+                return 0;
+            }
+        PyErr_Format(PyExc_ValueError, "distribution must be 'multiscatter_ggx' or 'ggx', got %R", value);
+        return -1;
+    }
+    for (size_t f = 0; f < N_FIELDS; f++) {
+        if (strcmp(name, FIELDS[f].name) != 0)
+            continue;
+        double *v = (double *)((char *)in + FIELDS[f].offset);
+        return FIELDS[f].n == 3 ? get_colour(value, name, v) : wenv_py_get_finite(value, name, v);
+    }
+    PyErr_Format(PyExc_TypeError,
+                 "Principled got an unexpected keyword argument '%s' (the Principled BSDF node's inputs in snake "
+                 "case: base_color, metallic, roughness, ior, ..., or distribution)",
+                 name);
+    return -1;
+}
+
+/* {name: value} of every input (clamped as evaluated), colours as tuples, and the distribution. */
+static PyObject *inputs_dict(const wenv_principled_inputs *in, int only_changed)
+{
+    wenv_principled_inputs defaults;
+    wenv_principled_defaults(&defaults);
+    PyObject *d = PyDict_New();
+    for (size_t f = 0; d && f < N_FIELDS; f++) {
+        const double *v = (const double *)((const char *)in + FIELDS[f].offset);
+        const double *w = (const double *)((const char *)&defaults + FIELDS[f].offset);
+        if (only_changed && memcmp(v, w, (size_t)FIELDS[f].n * sizeof *v) == 0)
+            continue;
+        PyObject *value = FIELDS[f].n == 3 ? Py_BuildValue("(ddd)", v[0], v[1], v[2]) : PyFloat_FromDouble(v[0]);
+        if (!value || PyDict_SetItemString(d, FIELDS[f].name, value) < 0)
+            Py_CLEAR(d);
+        Py_XDECREF(value);
+    }
+    if (d && (!only_changed || in->multiscatter != defaults.multiscatter)) {
+        PyObject *name = PyUnicode_FromString(DISTRIBUTIONS[in->multiscatter ? 1 : 0]);
+        if (!name || PyDict_SetItemString(d, "distribution", name) < 0)
+            Py_CLEAR(d);
+        Py_XDECREF(name);
+    }
+    return d;
+}
+
+static PyObject *unhonoured_tuple(const wenv_principled_inputs *in)
+{
+    const char *names[16];
+    size_t n = wenv_principled_unhonoured(in, names, 16);
+    PyObject *t = PyTuple_New((Py_ssize_t)n);
+    for (size_t i = 0; t && i < n; i++) {
+        PyObject *s = PyUnicode_FromString(names[i]);
+        if (!s) {
+            Py_CLEAR(t);
+            break;
+        }
+        PyTuple_SET_ITEM(t, (Py_ssize_t)i, s);
+    }
+    return t;
+}
+
+static PyObject *principled_new(PyTypeObject *type, PyObject *args, PyObject *kwds)
+{
+    if (PyTuple_GET_SIZE(args) != 0) {
+        PyErr_SetString(PyExc_TypeError, "Principled takes keyword arguments only (the node's inputs by name)");
+        return NULL;
+    }
+    wenv_principled_inputs in;
+    wenv_principled_defaults(&in);
+    PyObject *key, *value;
+    Py_ssize_t pos = 0;
+    while (kwds && PyDict_Next(kwds, &pos, &key, &value))
+        if (set_input(&in, key, value) < 0)
+            return NULL;
+    wenv_material *mat = NULL;
+    wenv_error err = {0};
+    if (wenv_principled_create(&mat, &in, &err))
+        return wenv_py_raise(&err);
+    MaterialObject *obj = (MaterialObject *)type->tp_alloc(type, 0);
+    if (!obj) {
+        wenv_material_free(mat);
+        return NULL;
+    }
+    obj->mat = mat;
+    obj->distribution = WENV_NDF_GGX;
+    PyObject *skipped = unhonoured_tuple(wenv_principled_inputs_of(mat));
+    if (!skipped) {
+        Py_DECREF(obj);
+        return NULL;
+    }
+    if (PyTuple_GET_SIZE(skipped) > 0) {
+        PyObject *sep = PyUnicode_FromString(", ");
+        PyObject *joined = sep ? PyUnicode_Join(sep, skipped) : NULL;
+        Py_XDECREF(sep);
+        int failed = !joined || PyErr_WarnFormat(PyExc_UserWarning, 1,
+                                                 "wenv.Principled does not shade %U (reflection only; subsurface "
+                                                 "scattering is shaded as diffuse): see .unhonoured",
+                                                 joined) < 0;
+        Py_XDECREF(joined);
+        if (failed) {
+            Py_DECREF(skipped);
+            Py_DECREF(obj);
+            return NULL;
+        }
+    }
+    Py_DECREF(skipped);
+    return (PyObject *)obj;
+}
+
+static const wenv_principled_inputs *inputs_of(PyObject *self)
+{
+    return wenv_principled_inputs_of(((MaterialObject *)self)->mat);
+}
+
+static PyObject *principled_inputs(PyObject *self, void *closure)
+{
+    (void)closure;
+    return inputs_dict(inputs_of(self), 0);
+}
+
+static PyObject *principled_unhonoured(PyObject *self, void *closure)
+{
+    (void)closure;
+    return unhonoured_tuple(inputs_of(self));
+}
+
+static PyObject *principled_repr(PyObject *self)
+{
+    PyObject *d = inputs_dict(inputs_of(self), 1);
+    if (!d)
+        return NULL;
+    PyObject *r = PyDict_Size(d) ? PyUnicode_FromFormat("wenv.Principled(**%R)", d)
+                                 : PyUnicode_FromString("wenv.Principled()");
+    Py_DECREF(d);
+    return r;
+}
+
+/* Pickled as Principled(**inputs). */
+static PyObject *principled_reduce(PyObject *self, PyObject *unused)
+{
+    (void)unused;
+    PyObject *copyreg = PyImport_ImportModule("copyreg");
+    PyObject *newobj = copyreg ? PyObject_GetAttrString(copyreg, "__newobj_ex__") : NULL;
+    PyObject *kwargs = inputs_dict(inputs_of(self), 1);
+    PyObject *result = newobj && kwargs ? Py_BuildValue("(O(O()O))", newobj, (PyObject *)Py_TYPE(self), kwargs) : NULL;
+    Py_XDECREF(copyreg);
+    Py_XDECREF(newobj);
+    Py_XDECREF(kwargs);
+    return result;
+}
+
+/* The Lambertian part for views at cos_v (an array), RGB float64 (n, 3). */
+static PyObject *principled_diffuse_at(PyObject *self, PyObject *arg)
+{
+    PyObject *numpy = PyImport_ImportModule("numpy");
+    PyObject *array = numpy ? PyObject_CallMethod(numpy, "asarray", "Os", arg, "float64") : NULL;
+    Py_XDECREF(numpy);
+    if (!array)
+        return NULL;
+    Py_buffer b;
+    if (PyObject_GetBuffer(array, &b, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0) {
+        Py_DECREF(array);
+        return NULL;
+    }
+    size_t n = (size_t)(b.len / (Py_ssize_t)sizeof(double));
+    const double *c = b.buf;
+    PyObject *out = PyList_New((Py_ssize_t)n);
+    for (size_t i = 0; out && i < n; i++) {
+        if (!isfinite(c[i])) {
+            PyErr_Format(PyExc_ValueError, "cos_v must be finite, got %g", c[i]);
+            Py_CLEAR(out);
+            break;
+        }
+        double rgb[3];
+        wenv_material_diffuse_at(((MaterialObject *)self)->mat, c[i], rgb);
+        PyObject *t = Py_BuildValue("(ddd)", rgb[0], rgb[1], rgb[2]);
+        if (!t)
+            Py_CLEAR(out);
+        else
+            PyList_SET_ITEM(out, (Py_ssize_t)i, t);
+    }
+    PyBuffer_Release(&b);
+    Py_DECREF(array);
+    return out;
+}
+
+static PyObject *principled_diffuse(PyObject *self, void *closure)
+{
+    (void)closure;
+    const double *d = wenv_material_diffuse(((MaterialObject *)self)->mat);
+    return Py_BuildValue("(ddd)", d[0], d[1], d[2]);
+}
+
+static PyGetSetDef principled_getset[] = {
+    {"diffuse", principled_diffuse, NULL,
+     "The Lambertian part's albedo seen head-on (the upper layers let through less towards grazing: "
+     "diffuse_at).", NULL},
+    {"inputs", principled_inputs, NULL,
+     "{name: value} of every input as evaluated (clamped as Cycles clamps them), and 'distribution'.", NULL},
+    {"unhonoured", principled_unhonoured, NULL,
+     "Names of the inputs set to something wenv does not shade: transmission_weight, subsurface_weight (shaded "
+     "as diffuse), emission_strength, alpha (the see-through part), sheen_weight, anisotropic, "
+     "thin_film_thickness, diffuse_roughness.",
+     NULL},
+    {NULL, NULL, NULL, NULL, NULL},
+};
+
+static PyMethodDef principled_methods[] = {
+    {"__reduce__", principled_reduce, METH_NOARGS, NULL},
+    {"diffuse_at", principled_diffuse_at, METH_O,
+     "diffuse_at(cos_v)\n--\n\nThe Lambertian part's albedo (RGB) for views at cos_v to the normal (a number or "
+     "a sequence): Base Color times what the coat, metal and specular layers let through, as Cycles layers them."},
+    {NULL, NULL, 0, NULL},
+};
+
+static PyTypeObject PrincipledType = {
+    PyVarObject_HEAD_INIT(NULL, 0)
+    .tp_name = "wenv.Principled",
+    .tp_basicsize = sizeof(MaterialObject),
+    .tp_flags = Py_TPFLAGS_DEFAULT,
+    .tp_doc = "Principled(**inputs)\n--\n\nBlender's Principled BSDF, evaluated as Cycles (Blender 4.x/5.x) "
+              "evaluates it: the node's inputs by name in snake case (base_color, metallic, roughness, ior, alpha, "
+              "specular_ior_level, specular_tint, anisotropic, anisotropic_rotation, coat_weight, coat_roughness, "
+              "coat_ior, coat_tint, sheen_weight, sheen_roughness, sheen_tint, subsurface_weight, "
+              "transmission_weight, diffuse_roughness, emission_color, emission_strength, thin_film_thickness, "
+              "thin_film_ior) with Blender's defaults for the rest, and distribution='multiscatter_ggx' (Blender's "
+              "default) or 'ggx'.  Colours are a grey number, (r, g, b) or Blender's (r, g, b, a).  Roughness is "
+              "Blender's (alpha = roughness^2).  Values are clamped as Cycles' kernel clamps them; non-finite ones "
+              "are a ValueError.  Reflection only: `unhonoured` names what is set but not shaded.  Immutable.",
+    .tp_new = principled_new,
+    .tp_repr = principled_repr,
+    .tp_getset = principled_getset,
+    .tp_methods = principled_methods,
+};
+
+int wenv_register_principled(PyObject *module)
+{
+    PrincipledType.tp_base = wenv_py_material_type();
+    if (PyType_Ready(&PrincipledType) < 0)
+        return -1;
+    Py_INCREF(&PrincipledType);
+    if (PyModule_AddObject(module, "Principled", (PyObject *)&PrincipledType) < 0) {
+        Py_DECREF(&PrincipledType);
+        return -1;
+    }
+    return 0;
+}

@@ -1,0 +1,640 @@
+/* Blender's Principled BSDF as Cycles evaluates it ("Principled v2", Blender 4.x and 5.x), reflection
+ * only (material.h, wenv_principled_create).
+ *
+ * Cycles builds the node as closures from the top layer down, each taking from those below what it
+ * reflects (svm_node_closure_bsdf, CLOSURE_BSDF_PRINCIPLED_ID): with W the weight left for the
+ * layers below, starting at Alpha,
+ *   coat     GGX (alpha = Coat Roughness^2), exact dielectric Fresnel of Coat IOR, weight Coat Weight W,
+ *            always energy-compensated; then W *= 1 - its albedo, and the coat's absorption
+ *            W *= mix(1, Coat Tint^(1 / cos_t), Coat Weight), cos_t the view refracted into the coat;
+ *   metal    GGX (alpha = Roughness^2), F82-tint Fresnel (F0 = Base Color, F82 tint = Specular Tint),
+ *            weight Metallic W; then W *= (1 - Metallic) (1 - Transmission Weight);
+ *   specular GGX, the dielectric Fresnel of the IOR remapped from its F0 to F0' = F0 2 Level x
+ *            Specular Tint (the "generalised Schlick" real-Fresnel mode), weight W; then
+ *            W *= 1 - its albedo;
+ *   diffuse  Lambert, Base Color W.
+ * "Multiscatter GGX" (the default) compensates the metal and specular lobes for the energy single
+ * scattering loses (Kulla & Conty): the lobe is divided by its albedo E(mu) with F = 1 and darkened
+ * to 1 + Fms (1 - E) / E, Fms = Fss Eavg / (1 - Fss (1 - Eavg)) with Fss the Fresnel's cosine-weighted
+ * mean.  A layer's albedo is Cycles' estimate: its weight (darkening included) times
+ * mix(F0, 1, s(rough, mu, F0)), s read from a table.  "1 - albedo" is 1 - its largest channel,
+ * clamped to [0, 1].  Every weight depends on the view only (mu = n.v), so the diffuse part is
+ * Lambertian for each view with an albedo that changes with it (wenv_material_diffuse_at).  The
+ * tables (E, Eavg, s) are principled_tables.c, computed from their definitions; a lookup is linear
+ * between nodes at i / (n - 1), clamped, as Cycles reads them.
+ *
+ * What Cycles adds that reflection does not have -- transmission, subsurface scattering, emission,
+ * the see-through part of Alpha, thin film, sheen, anisotropy -- is not shaded; wenv_principled_unhonoured
+ * names each input set to something that needs it.  Subsurface scattering is shaded as the diffuse
+ * reflection it turns into on a smooth convex surface (Base Color as albedo). */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "scene/material_kind.h"
+#include "scene/principled_tables.h"
+
+#define WEIGHT_CUTOFF 1e-5 /* Cycles drops closures whose mean weight is below this */
+
+typedef enum { LOBE_COAT, LOBE_METAL, LOBE_SPECULAR } lobe_role;
+
+typedef struct {
+    lobe_role role;
+    double alpha, rough; /* GGX alpha and Cycles' table coordinate (alpha^(1/2)) */
+    int compensate;      /* energy compensation */
+    double fss[3];       /* the Fresnel's cosine-weighted mean (compensation) */
+    double z;            /* the s table's third coordinate for the albedo estimate */
+    int ior_table;       /* which s table: 1 gen_schlick_ior_s, 0 gen_schlick_s */
+    double f0_est[3];    /* the albedo estimate's mix(f0_est, 1, s) */
+} lobe_model;
+
+typedef struct {
+    wenv_shared shared;
+    wenv_principled_inputs in; /* as given, clamped as Cycles clamps */
+    double base[3];            /* Base Color clamped to [0, 1] */
+    double eta, f0_col[3];     /* the specular lobe's (adjusted) index and tinted F0 */
+    double f0_metal[3], b_metal[3];
+    size_t n;
+    lobe_model lobe[3];
+} principled;
+
+static const principled *model_of(const wenv_material *mat) { return (const principled *)mat->shared; }
+
+static void model_destroy(wenv_shared *shared) { free(shared); }
+
+static double clamp01(double x) { return x < 0.0 ? 0.0 : (x > 1.0 ? 1.0 : x); }
+
+/* ---------------------------------------------------------------- tables, as Cycles reads them */
+
+static double read1(const float *t, size_t n, double x, size_t stride)
+{
+    x = clamp01(x) * (double)(n - 1);
+    size_t i = (size_t)x < n - 1 ? (size_t)x : n - 1, j = i + 1 < n ? i + 1 : n - 1;
+    double f = x - (double)i;
+    return (1.0 - f) * t[i * stride] + f * t[j * stride];
+}
+
+static double read2(const float *t, size_t nx, size_t ny, double x, double y)
+{
+    y = clamp01(y) * (double)(ny - 1);
+    size_t i = (size_t)y < ny - 1 ? (size_t)y : ny - 1, j = i + 1 < ny ? i + 1 : ny - 1;
+    double f = y - (double)i;
+    return (1.0 - f) * read1(t + i * nx, nx, x, 1) + f * read1(t + j * nx, nx, x, 1);
+}
+
+static double read3(const float *t, size_t n, double x, double y, double z)
+{
+    z = clamp01(z) * (double)(n - 1);
+    size_t i = (size_t)z < n - 1 ? (size_t)z : n - 1, j = i + 1 < n ? i + 1 : n - 1;
+    double f = z - (double)i;
+    return (1.0 - f) * read2(t + i * n * n, n, n, x, y) + f * read2(t + j * n * n, n, n, x, y);
+}
+
+/* ---------------------------------------------------------------- Fresnel */
+
+static double f0_from_ior(double eta) { return ((eta - 1.0) / (eta + 1.0)) * ((eta - 1.0) / (eta + 1.0)); }
+
+static double ior_from_f0(double f0)
+{
+    double s = sqrt(fmin(fmax(f0, 0.0), 0.99));
+    return (1.0 + s) / (1.0 - s);
+}
+
+/* Exact unpolarised dielectric Fresnel for a relative index eta (total reflection below 1). */
+static double fresnel_dielectric(double c, double eta)
+{
+    double t = eta * eta - (1.0 - c * c);
+    if (t <= 0.0)
+        return 1.0;
+    c = fabs(c);
+    double ct = sqrt(t) / eta;
+    double rs = (c - eta * ct) / (c + eta * ct), rp = (eta * c - ct) / (eta * c + ct);
+    return 0.5 * (rs * rs + rp * rp);
+}
+
+/* Kulla and Conty's fit of the cosine-weighted mean of the dielectric Fresnel. */
+static double fresnel_dielectric_fss(double eta)
+{
+    return eta >= 1.0 ? (eta - 1.0) / (4.08567 + 1.00071 * eta)
+                      : 0.997118 + eta * (0.1014 - eta * (0.965241 + eta * 0.130607));
+}
+
+/* The lobe's Fresnel at c = wi.h, RGB. */
+static void lobe_fresnel(const principled *p, const lobe_model *l, double c, double f[3])
+{
+    if (l->role == LOBE_COAT) {
+        f[0] = f[1] = f[2] = fresnel_dielectric(c, p->in.coat_ior);
+    } else if (l->role == LOBE_METAL) {
+        /* F82-tint (Kutz et al., "Novel aspects of the Adobe Standard Material") */
+        double s = clamp01(1.0 - c), s5 = s * s * s * s * s;
+        for (int k = 0; k < 3; k++)
+            f[k] = clamp01(p->f0_metal[k] + (1.0 - p->f0_metal[k]) * s5 - p->b_metal[k] * c * s5 * s);
+    } else {
+        double f0 = f0_from_ior(p->eta);
+        double s = clamp01((fresnel_dielectric(c, p->eta) - f0) / (1.0 - f0));
+        for (int k = 0; k < 3; k++)
+            f[k] = p->f0_col[k] + (1.0 - p->f0_col[k]) * s;
+    }
+}
+
+/* ---------------------------------------------------------------- the layers' weights for a view */
+
+typedef struct {
+    double lobe[3][3]; /* each lobe's RGB weight: layer weight x darkening x 1 / E (compensation) */
+    double diffuse[3]; /* the Lambertian albedo */
+} view_weights;
+
+static void weights_for_view(const principled *p, double mu, view_weights *vw)
+{
+    mu = clamp01(mu);
+    double w[3] = {p->in.alpha, p->in.alpha, p->in.alpha};
+    for (size_t i = 0; i < p->n; i++) {
+        const lobe_model *l = &p->lobe[i];
+        double scale = l->role == LOBE_COAT ? p->in.coat_weight : (l->role == LOBE_METAL ? p->in.metallic : 1.0);
+        double dark[3] = {1.0, 1.0, 1.0}, es = 1.0;
+        if (l->compensate) {
+            double e = read2(wenv_ggx_E, 32, 32, l->rough, mu), eavg = read1(wenv_ggx_Eavg, 32, l->rough, 1);
+            e = fmax(e, 1e-6);
+            double missing = (1.0 - e) / e;
+            es = 1.0 + missing;
+            for (int k = 0; k < 3; k++) {
+                double fms = l->fss[k] * eavg / (1.0 - l->fss[k] * (1.0 - eavg));
+                dark[k] = (1.0 + fms * missing) / es;
+            }
+        }
+        for (int k = 0; k < 3; k++)
+            vw->lobe[i][k] = scale * w[k] * dark[k] * es;
+        if (l->role == LOBE_METAL) {
+            double below = (1.0 - p->in.metallic) * (1.0 - p->in.transmission_weight);
+            for (int k = 0; k < 3; k++)
+                w[k] *= below;
+            continue;
+        }
+        /* albedo layering: W *= clamp(1 - max_ch(albedo / W)), the albedo Cycles' estimate */
+        double s = l->ior_table ? read3(wenv_ggx_gen_schlick_ior_s, 16, l->rough, mu, l->z)
+                                : read3(wenv_ggx_gen_schlick_s, 16, l->rough, mu, l->z);
+        double largest = 0.0;
+        for (int k = 0; k < 3; k++)
+            largest = fmax(largest, scale * dark[k] * (l->f0_est[k] + (1.0 - l->f0_est[k]) * s));
+        double keep = clamp01(1.0 - largest);
+        for (int k = 0; k < 3; k++)
+            w[k] *= keep;
+        if (l->role == LOBE_COAT) {
+            /* absorption along the view refracted into the coat */
+            double inv = 1.0 / p->in.coat_ior, cos_t = sqrt(fmax(0.0, 1.0 - inv * inv * (1.0 - mu * mu)));
+            for (int k = 0; k < 3; k++) {
+                double tint = p->in.coat_tint[k] == 1.0 ? 1.0 : pow(p->in.coat_tint[k], 1.0 / fmax(cos_t, 1e-6));
+                w[k] *= 1.0 + (tint - 1.0) * p->in.coat_weight;
+            }
+        }
+    }
+    for (int k = 0; k < 3; k++)
+        vw->diffuse[k] = p->base[k] * w[k];
+}
+
+/* ---------------------------------------------------------------- evaluation */
+
+/* One lobe's f (no cosine) for unit directions above the horizon: weight x F D G2 / (4 ci co). */
+static void lobe_f(const principled *p, const wenv_lobe *shape, size_t i, const view_weights *vw, const double wi[3],
+                   const double wo[3], double rgb[3])
+{
+    double t, cos_d;
+    double k_o = wenv_lobe_view_k(shape, WENV_SHADOW_SMITH, wo);
+    double v = wenv_lobe_vis(shape, WENV_SHADOW_SMITH, wi, wo, k_o, &t, &cos_d) *
+               wenv_lobe_ndf_tan2(WENV_NDF_GGX, shape->roughness, t);
+    double f[3];
+    lobe_fresnel(p, &p->lobe[i], cos_d, f);
+    for (int k = 0; k < 3; k++)
+        rgb[k] = vw->lobe[i][k] * f[k] * v;
+}
+
+static void pr_lobe_value(const wenv_material *mat, size_t i, const double wi[3], const double wo[3], double rgb[3])
+{
+    rgb[0] = rgb[1] = rgb[2] = 0.0;
+    if (!(wi[2] > 0.0) || !(wo[2] > 0.0))
+        return;
+    view_weights vw;
+    weights_for_view(model_of(mat), wo[2], &vw);
+    lobe_f(model_of(mat), &mat->lobes[i], i, &vw, wi, wo, rgb);
+}
+
+static void pr_specular_cos(const wenv_material *mat, const double wi[3], const double wo[3], double rgb[3])
+{
+    rgb[0] = rgb[1] = rgb[2] = 0.0;
+    if (!(wi[2] > 0.0) || !(wo[2] > 0.0))
+        return;
+    const principled *p = model_of(mat);
+    view_weights vw;
+    weights_for_view(p, wo[2], &vw);
+    for (size_t i = 0; i < p->n; i++) {
+        double v[3];
+        lobe_f(p, &mat->lobes[i], i, &vw, wi, wo, v);
+        for (int k = 0; k < 3; k++)
+            rgb[k] += v[k] * wi[2];
+    }
+}
+
+static void pr_specular_cos_batch(const wenv_material *mat, const double wo[3], const float *wi, size_t n,
+                                  float *rgb_out)
+{
+    memset(rgb_out, 0, n * 3 * sizeof *rgb_out);
+    const principled *p = model_of(mat);
+    if (!(wo[2] > 0.0) || p->n == 0)
+        return;
+    view_weights vw;
+    weights_for_view(p, wo[2], &vw);
+    for (size_t q = 0; q < n; q++) {
+        double d[3] = {wi[3 * q], wi[3 * q + 1], wi[3 * q + 2]}, acc[3] = {0.0, 0.0, 0.0};
+        if (!(d[2] > 0.0))
+            continue;
+        for (size_t i = 0; i < p->n; i++) {
+            double v[3];
+            lobe_f(p, &mat->lobes[i], i, &vw, d, wo, v);
+            for (int k = 0; k < 3; k++)
+                acc[k] += v[k] * d[2];
+        }
+        for (int k = 0; k < 3; k++)
+            rgb_out[3 * q + (size_t)k] = (float)acc[k];
+    }
+}
+
+/* The float path: the view's weights and Smith K per lobe are its terms (4 a lobe); the rest in float. */
+static size_t pr_view_terms(const wenv_material *mat) { return 4 * model_of(mat)->n; }
+
+static void pr_prepare_view_f(const wenv_material *mat, const float wo[3], float *terms)
+{
+    const principled *p = model_of(mat);
+    view_weights vw;
+    weights_for_view(p, wo[2], &vw);
+    double wod[3] = {wo[0], wo[1], wo[2]};
+    for (size_t i = 0; i < p->n; i++) {
+        for (int k = 0; k < 3; k++)
+            terms[4 * i + (size_t)k] = (float)vw.lobe[i][k];
+        terms[4 * i + 3] = (float)wenv_lobe_view_k(&mat->lobes[i], WENV_SHADOW_SMITH, wod);
+    }
+}
+
+static void pr_specular_cos_f(const wenv_material *mat, const float wi[3], const float wo[3], const float *terms,
+                              float rgb[3])
+{
+    rgb[0] = rgb[1] = rgb[2] = 0.0f;
+    float ci = wi[2], co = wo[2];
+    if (!(ci > 0.0f) || !(co > 0.0f))
+        return;
+    const principled *p = model_of(mat);
+    float sx = wi[0] + wo[0], sy = wi[1] + wo[1], sz = ci + co;
+    float sxy2 = sx * sx + sy * sy, sz2 = sz * sz > FLT_MIN ? sz * sz : FLT_MIN, len2 = sxy2 + sz2;
+    float t = sxy2 / sz2, cos_d = 0.5f * sqrtf(len2);
+    cos_d = cos_d < 1.0f ? cos_d : 1.0f;
+    float si = sqrtf(wi[0] * wi[0] + wi[1] * wi[1]);
+    for (size_t i = 0; i < p->n; i++) {
+        float m = (float)mat->lobes[i].roughness, m2 = m * m;
+        float k_i = sqrtf(ci * ci + m2 * si * si), den = co * k_i + ci * terms[4 * i + 3];
+        float vis = 0.5f / (den > FLT_MIN ? den : FLT_MIN);
+        float r = (1.0f + t) / (m2 + t), d = m2 * r * r * (float)WENV_INV_PI;
+        double f[3];
+        lobe_fresnel(p, &p->lobe[i], cos_d, f);
+        for (int k = 0; k < 3; k++)
+            rgb[k] += terms[4 * i + (size_t)k] * (float)f[k] * d * vis * ci;
+    }
+}
+
+static double pr_lobe_cos_h_min(const wenv_material *mat, size_t i) { return wenv_lobe_cos_h_min(&mat->lobes[i]); }
+
+/* f 4 ci co / D: weight x F G2. */
+static void pr_lobe_over_ndf(const wenv_material *mat, size_t i, const double wi[3], const double wo[3],
+                             double rgb[3])
+{
+    rgb[0] = rgb[1] = rgb[2] = 0.0;
+    double ci = wi[2], co = wo[2];
+    double s[3] = {wi[0] + wo[0], wi[1] + wo[1], ci + co}, len = sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2]);
+    if (!(ci > 0.0) || !(co > 0.0) || !(len > 0.0))
+        return;
+    const principled *p = model_of(mat);
+    const wenv_lobe *shape = &mat->lobes[i];
+    view_weights vw;
+    weights_for_view(p, co, &vw);
+    double g = 1.0 / (1.0 + wenv_smith_lambda(WENV_NDF_GGX, shape->roughness, ci) +
+                      wenv_smith_lambda(WENV_NDF_GGX, shape->roughness, co));
+    double f[3];
+    lobe_fresnel(p, &p->lobe[i], 0.5 * len, f);
+    for (int k = 0; k < 3; k++)
+        rgb[k] = vw.lobe[i][k] * f[k] * g;
+}
+
+/* ---------------------------------------------------------------- integrals */
+
+/* The shape's rule (GGX, the lobe's alpha, Smith, dielectric Fresnel of the shape's index) re-weighted
+ * node by node to the lobe: D and G2 are the same, so the ratio is the lobe's weight and Fresnel over
+ * the shape's Fresnel, smooth across the rule (weight holds 3 count doubles; the first count are the
+ * shape's colourless weights). */
+static void reweight(const wenv_material *mat, size_t i, const double wo[3], const double *wi, double *weight,
+                     size_t count)
+{
+    const principled *p = model_of(mat);
+    const wenv_lobe *shape = &mat->lobes[i];
+    view_weights vw;
+    weights_for_view(p, wo[2], &vw);
+    for (size_t q = count; q-- > 0;) {
+        const double *d = wi + 3 * q;
+        double s[3] = {d[0] + wo[0], d[1] + wo[1], d[2] + wo[2]};
+        double cos_d = fmin(0.5 * sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2]), 1.0);
+        double f[3], fs = wenv_fresnel_dielectric(cos_d, shape->ior), w = weight[q];
+        lobe_fresnel(p, &p->lobe[i], cos_d, f);
+        for (int k = 2; k >= 0; k--)
+            weight[3 * q + (size_t)k] = fs > 0.0 ? w * vw.lobe[i][k] * f[k] / fs : 0.0;
+    }
+}
+
+static wenv_status pr_lobe_nodes(const wenv_material *mat, size_t i, const double wo[3], size_t samples, double *wi,
+                                 double *weight, size_t *count, wenv_error *err)
+{
+    if (wenv_lobe_nodes(&mat->lobes[i], WENV_SHADOW_SMITH, wo, samples, wi, weight, count, err))
+        return err->status;
+    reweight(mat, i, wo, wi, weight, *count);
+    return WENV_OK;
+}
+
+static wenv_status pr_lobe_cells(const wenv_material *mat, size_t i, const double wo[3], size_t n_theta,
+                                 size_t n_phi, double *wi, double *weight, double *solid_angle, size_t *count,
+                                 wenv_error *err)
+{
+    if (wenv_lobe_cells(&mat->lobes[i], WENV_SHADOW_SMITH, wo, n_theta, n_phi, wi, weight, solid_angle, count, err))
+        return err->status;
+    reweight(mat, i, wo, wi, weight, *count);
+    return WENV_OK;
+}
+
+static wenv_status pr_lobe_albedo(const wenv_material *mat, size_t i, const double wo[3], size_t samples,
+                                  double rgb[3], wenv_error *err)
+{
+    rgb[0] = rgb[1] = rgb[2] = 0.0;
+    size_t max = 2 * samples * samples;
+    double *wi = malloc(max * 6 * sizeof *wi);
+    if (!wi)
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for a lobe's albedo");
+    size_t count = 0;
+    wenv_status st = pr_lobe_nodes(mat, i, wo, samples, wi, wi + 3 * max, &count, err);
+    for (size_t q = 0; !st && q < count; q++)
+        for (int k = 0; k < 3; k++)
+            rgb[k] += wi[3 * max + 3 * q + (size_t)k];
+    free(wi);
+    return st;
+}
+
+static void pr_diffuse_at(const wenv_material *mat, double cos_v, double rgb[3])
+{
+    view_weights vw;
+    weights_for_view(model_of(mat), cos_v, &vw);
+    memcpy(rgb, vw.diffuse, 3 * sizeof *rgb);
+}
+
+static const wenv_material_kind PRINCIPLED = {
+    .name = "principled",
+    .smooth_limit = 0, /* an F82 metal or a remapped dielectric is no Fresnel mirror of one index */
+    .specular_cos = pr_specular_cos,
+    .specular_cos_batch = pr_specular_cos_batch,
+    .view_terms = pr_view_terms,
+    .prepare_view_f = pr_prepare_view_f,
+    .specular_cos_f = pr_specular_cos_f,
+    .lobe_cos_h_min = pr_lobe_cos_h_min,
+    .lobe_value = pr_lobe_value,
+    .lobe_over_ndf = pr_lobe_over_ndf,
+    .lobe_albedo = pr_lobe_albedo,
+    .lobe_nodes = pr_lobe_nodes,
+    .lobe_cells = pr_lobe_cells,
+    .diffuse_at = pr_diffuse_at,
+};
+
+/* ---------------------------------------------------------------- making one */
+
+void wenv_principled_defaults(wenv_principled_inputs *in)
+{
+    /* Blender's node defaults (node_shader_bsdf_principled.cc) */
+    *in = (wenv_principled_inputs){
+        .base_color = {0.8, 0.8, 0.8},
+        .metallic = 0.0,
+        .roughness = 0.5,
+        .ior = 1.5,
+        .alpha = 1.0,
+        .specular_ior_level = 0.5,
+        .specular_tint = {1.0, 1.0, 1.0},
+        .anisotropic = 0.0,
+        .anisotropic_rotation = 0.0,
+        .coat_weight = 0.0,
+        .coat_roughness = 0.03,
+        .coat_ior = 1.5,
+        .coat_tint = {1.0, 1.0, 1.0},
+        .sheen_weight = 0.0,
+        .sheen_roughness = 0.5,
+        .sheen_tint = {1.0, 1.0, 1.0},
+        .subsurface_weight = 0.0,
+        .transmission_weight = 0.0,
+        .diffuse_roughness = 0.0,
+        .emission_color = {1.0, 1.0, 1.0},
+        .emission_strength = 0.0,
+        .thin_film_thickness = 0.0,
+        .thin_film_ior = 1.33,
+        .multiscatter = 1,
+    };
+}
+
+/* Every input finite; the error names the first that is not. */
+static wenv_status check_finite(const wenv_principled_inputs *in, wenv_error *err)
+{
+    struct {
+        const char *name;
+        const double *v;
+        int n;
+    } fields[] = {
+        {"base_color", in->base_color, 3},
+        {"metallic", &in->metallic, 1},
+        {"roughness", &in->roughness, 1},
+        {"ior", &in->ior, 1},
+        {"alpha", &in->alpha, 1},
+        {"specular_ior_level", &in->specular_ior_level, 1},
+        {"specular_tint", in->specular_tint, 3},
+        {"anisotropic", &in->anisotropic, 1},
+        {"anisotropic_rotation", &in->anisotropic_rotation, 1},
+        {"coat_weight", &in->coat_weight, 1},
+        {"coat_roughness", &in->coat_roughness, 1},
+        {"coat_ior", &in->coat_ior, 1},
+        {"coat_tint", in->coat_tint, 3},
+        {"sheen_weight", &in->sheen_weight, 1},
+        {"sheen_roughness", &in->sheen_roughness, 1},
+        {"sheen_tint", in->sheen_tint, 3},
+        {"subsurface_weight", &in->subsurface_weight, 1},
+        {"transmission_weight", &in->transmission_weight, 1},
+        {"diffuse_roughness", &in->diffuse_roughness, 1},
+        {"emission_color", in->emission_color, 3},
+        {"emission_strength", &in->emission_strength, 1},
+        {"thin_film_thickness", &in->thin_film_thickness, 1},
+        {"thin_film_ior", &in->thin_film_ior, 1},
+    };
+    for (size_t f = 0; f < sizeof fields / sizeof fields[0]; f++)
+        for (int k = 0; k < fields[f].n; k++)
+            if (!isfinite(fields[f].v[k]))
+                return wenv_error_set(err, WENV_ERR_VALUE, "%s must be finite, got %g", fields[f].name, fields[f].v[k]);
+    return WENV_OK;
+}
+
+/* The inputs clamped as Cycles' kernel clamps them (svm/closure.h). */
+static void clamp_inputs(wenv_principled_inputs *in)
+{
+    for (int k = 0; k < 3; k++) {
+        in->base_color[k] = fmax(in->base_color[k], 0.0);
+        in->specular_tint[k] = fmax(in->specular_tint[k], 0.0);
+        in->coat_tint[k] = fmax(in->coat_tint[k], 0.0);
+        in->sheen_tint[k] = fmax(in->sheen_tint[k], 0.0);
+    }
+    in->metallic = clamp01(in->metallic);
+    in->roughness = clamp01(in->roughness);
+    in->ior = fmax(in->ior, 1e-5);
+    in->alpha = clamp01(in->alpha);
+    in->specular_ior_level = fmax(in->specular_ior_level, 0.0);
+    in->anisotropic = clamp01(in->anisotropic);
+    in->coat_weight = fmax(in->coat_weight, 0.0);
+    in->coat_roughness = clamp01(in->coat_roughness);
+    in->coat_ior = fmax(in->coat_ior, 1.0);
+    in->sheen_weight = fmax(in->sheen_weight, 0.0);
+    in->sheen_roughness = clamp01(in->sheen_roughness);
+    in->subsurface_weight = clamp01(in->subsurface_weight);
+    in->transmission_weight = clamp01(in->transmission_weight);
+    in->diffuse_roughness = clamp01(in->diffuse_roughness);
+}
+
+/* A GGX lobe's model and shape; the shape's index only places the rules' Fresnel, the lobe's own
+ * Fresnel comes from the model. */
+static void add_lobe(principled *p, wenv_lobe *shapes, lobe_role role, double roughness, int compensate,
+                     const double colour[3])
+{
+    lobe_model *l = &p->lobe[p->n];
+    l->role = role;
+    l->alpha = wenv_alpha_from_roughness(roughness);
+    l->rough = sqrt(l->alpha);
+    l->compensate = compensate;
+    shapes[p->n] = (wenv_lobe){.specular = {colour[0], colour[1], colour[2]}, .roughness = l->alpha,
+                               .ior = 1.5, .distribution = WENV_NDF_GGX};
+    p->n++;
+}
+
+wenv_status wenv_principled_create(wenv_material **out, const wenv_principled_inputs *inputs, wenv_error *err)
+{
+    *out = NULL;
+    if (check_finite(inputs, err))
+        return err->status;
+    principled *p = calloc(1, sizeof *p);
+    if (!p)
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for a Principled material");
+    atomic_init(&p->shared.refs, 1);
+    p->shared.destroy = model_destroy;
+    p->in = *inputs;
+    clamp_inputs(&p->in);
+    const wenv_principled_inputs *in = &p->in;
+    for (int k = 0; k < 3; k++)
+        p->base[k] = fmin(in->base_color[k], 1.0);
+    wenv_lobe shapes[3];
+
+    if (in->coat_weight > WEIGHT_CUTOFF) {
+        lobe_model *l = &p->lobe[p->n];
+        double one[3] = {1.0, 1.0, 1.0};
+        add_lobe(p, shapes, LOBE_COAT, in->coat_roughness, 1, one);
+        double fss = fresnel_dielectric_fss(in->coat_ior), f0 = f0_from_ior(in->coat_ior);
+        for (int k = 0; k < 3; k++) {
+            l->fss[k] = fss;
+            l->f0_est[k] = f0;
+        }
+        l->ior_table = 1;
+        l->z = sqrt(fabs((in->coat_ior - 1.0) / (in->coat_ior + 1.0)));
+        shapes[p->n - 1].ior = fmin(fmax(in->coat_ior, 1.0 + 1e-4), WENV_IOR_MAX);
+    }
+    if (in->metallic > WEIGHT_CUTOFF) {
+        lobe_model *l = &p->lobe[p->n];
+        const double f6_7 = 6.0 / 7.0, f5 = pow(f6_7, 5.0);
+        int white = 1;
+        for (int k = 0; k < 3; k++) {
+            double tint = fmin(in->specular_tint[k], 1.0);
+            white &= tint == 1.0;
+            p->f0_metal[k] = p->base[k];
+            p->b_metal[k] = (p->base[k] + (1.0 - p->base[k]) * f5) * (7.0 / (f5 * f6_7)) * (1.0 - tint);
+        }
+        for (int k = 0; k < 3; k++) {
+            if (white)
+                p->b_metal[k] = 0.0;
+            /* the mean of F82: Int 2 mu (1 - mu)^5 = 1/21, Int 2 mu mu (1 - mu)^6 = 1/126 */
+            l->fss[k] = p->f0_metal[k] + (1.0 - p->f0_metal[k]) / 21.0 - p->b_metal[k] / 126.0;
+            l->f0_est[k] = p->f0_metal[k];
+        }
+        add_lobe(p, shapes, LOBE_METAL, in->roughness, in->multiscatter, p->base);
+        l->ior_table = 0;
+        l->z = 0.5; /* Cycles' estimate reads the Schlick table there (exponent about 5) */
+    }
+    /* the specular lobe's index: Specular IOR Level scales F0 by 2 level */
+    p->eta = in->ior;
+    double f0 = f0_from_ior(in->ior);
+    if (in->specular_ior_level != 0.5) {
+        f0 *= 2.0 * in->specular_ior_level;
+        p->eta = ior_from_f0(f0);
+        if (in->ior < 1.0)
+            p->eta = 1.0 / p->eta;
+    }
+    if (p->eta != 1.0) {
+        lobe_model *l = &p->lobe[p->n];
+        for (int k = 0; k < 3; k++)
+            p->f0_col[k] = clamp01(f0 * in->specular_tint[k]);
+        add_lobe(p, shapes, LOBE_SPECULAR, in->roughness, in->multiscatter, p->f0_col);
+        double f0_real = f0_from_ior(p->eta);
+        double s = clamp01((fresnel_dielectric_fss(p->eta) - f0_real) / (1.0 - f0_real));
+        for (int k = 0; k < 3; k++) {
+            l->fss[k] = p->f0_col[k] + (1.0 - p->f0_col[k]) * s;
+            l->f0_est[k] = p->f0_col[k];
+        }
+        l->ior_table = 1;
+        l->z = sqrt(fabs((p->eta - 1.0) / (p->eta + 1.0)));
+        shapes[p->n - 1].ior = fmin(fmax(p->eta > 1.0 ? p->eta : 1.0 / p->eta, 1.0 + 1e-4), WENV_IOR_MAX);
+    }
+    /* the Lambertian part as seen head-on, for what reads one number (the view-dependent albedo is
+     * wenv_material_diffuse_at); subsurface scattering shaded as diffuse */
+    view_weights vw;
+    weights_for_view(p, 1.0, &vw);
+    double diffuse[3];
+    for (int k = 0; k < 3; k++)
+        diffuse[k] = fmin(vw.diffuse[k], 1.0);
+    if (wenv_material_alloc(out, &PRINCIPLED, diffuse, shapes, p->n, WENV_SHADOW_SMITH, err)) {
+        free(p);
+        return err->status;
+    }
+    (*out)->shared = &p->shared;
+    return WENV_OK;
+}
+
+const wenv_principled_inputs *wenv_principled_inputs_of(const wenv_material *mat)
+{
+    return mat->kind == &PRINCIPLED ? &model_of(mat)->in : NULL;
+}
+
+size_t wenv_principled_unhonoured(const wenv_principled_inputs *in, const char **names, size_t max)
+{
+    const char *found[8];
+    size_t n = 0;
+    if (in->transmission_weight > WEIGHT_CUTOFF)
+        found[n++] = "transmission_weight";
+    if (in->subsurface_weight > WEIGHT_CUTOFF)
+        found[n++] = "subsurface_weight";
+    if (in->emission_strength != 0.0 && (in->emission_color[0] > 0.0 || in->emission_color[1] > 0.0 ||
+                                         in->emission_color[2] > 0.0))
+        found[n++] = "emission_strength";
+    if (in->alpha < 1.0)
+        found[n++] = "alpha";
+    if (in->sheen_weight > WEIGHT_CUTOFF)
+        found[n++] = "sheen_weight";
+    if (in->anisotropic > 0.0)
+        found[n++] = "anisotropic";
+    if (in->thin_film_thickness > 0.1)
+        found[n++] = "thin_film_thickness";
+    if (in->diffuse_roughness >= 1e-5)
+        found[n++] = "diffuse_roughness";
+    for (size_t i = 0; i < n && i < max; i++)
+        names[i] = found[i];
+    return n;
+}
