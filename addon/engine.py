@@ -6,6 +6,7 @@ so any of them may import it without a cycle.
 """
 import os
 import threading
+import warnings
 
 import numpy as np
 import wenv
@@ -101,6 +102,8 @@ def material_from_key(key):
     if key[0] == "MEASURED":
         _, shown_path, signature = key
         return measured_brdf(signature, shown_path)
+    if key[0] == "PRINCIPLED":
+        return principled(dict(key[1]))
     model, diffuse, shadowing, lobes = key
     if model == "LAMBERT":
         return wenv.Lambert(diffuse)
@@ -108,6 +111,24 @@ def material_from_key(key):
         diffuse=diffuse,
         lobes=[{"specular": s, "roughness": r, "ior": n, "distribution": d.lower()} for s, r, n, d in lobes],
         shadowing=shadowing.lower())
+
+
+def principled(inputs):
+    """wenv.Principled of the node's inputs (wenv's names).  What it does not shade the add-on lists
+    itself (materials.principled_notes), so the core's warning about it is not repeated."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        return wenv.Principled(**inputs)
+
+
+def principled_unhonoured(inputs):
+    """The names of the inputs wenv does not shade (wenv.Principled.unhonoured)."""
+    return principled(inputs).unhonoured
+
+
+def fit_principled_roughness(inputs, target, geometry):
+    """The Principled Roughness (Blender's) reading `target` GU, the other inputs kept."""
+    return wenv.fit_roughness(target, geometry, material=principled(inputs))
 
 
 def gloss(key, geometries):

@@ -1,5 +1,5 @@
 """Glossmeter readings of a material (memoised on its values) and the roughness for a target gloss."""
-from . import engine
+from . import engine, materials
 from .engine import SetupError
 
 GEOMETRIES = (20, 60, 85)  # ISO 2813's geometries, degrees
@@ -31,8 +31,22 @@ def instrument_geometry(gloss60):
     return 60
 
 
+def fit_principled_roughness(material, target, geometry):
+    """The Principled BSDF's Roughness (Blender's) reading `target` GU, its other inputs as they are."""
+    node = materials.principled_node(material)
+    if node is None:
+        raise SetupError(f"'{material.name}' has no Principled BSDF whose Roughness could be set")
+    if node.inputs["Roughness"].is_linked:
+        raise SetupError("The Principled BSDF's Roughness is linked (a texture or node): set it there")
+    inputs, _ = materials.principled_inputs(node)
+    try:
+        return engine.fit_principled_roughness(inputs, target, geometry)
+    except ValueError as exc:
+        raise SetupError(str(exc)) from None
+
+
 def fit_roughness(settings, target, geometry):
-    """Roughness giving `target` GU for a one-lobe Cook-Torrance material (engine.fit_roughness)."""
+    """Alpha giving `target` GU for a one-lobe Cook-Torrance material (engine.fit_roughness)."""
     if settings.model != "COOK_TORRANCE" or len(settings.lobes) != 1:
         # a measured BRDF has no roughness to set: it is what was measured
         raise SetupError("Set roughness for a target gloss needs a Cook-Torrance material with exactly one lobe")

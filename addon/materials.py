@@ -1,4 +1,6 @@
-"""Materials: the key a core material is built from, and Principled BSDF values -> wenv lobes."""
+"""Materials: the key a core material is built from -- the Principled BSDF node read as it is, or the
+add-on's own Cook-Torrance, Lambert or measured settings -- what of a material wenv does not shade,
+and the conversion of Principled BSDF values into Cook-Torrance lobes."""
 import math
 
 import bpy
@@ -13,12 +15,64 @@ def brdf_file(settings):
     return bpy.path.abspath(settings.brdf_path, library=getattr(material, "library", None))
 
 
+# The Principled BSDF node's inputs by wenv.Principled's names (Blender 4.x/5.x sockets; the ones a
+# version lacks -- Diffuse Roughness before 4.3, Thin Film before 4.2 -- keep wenv's defaults, which
+# are Blender's).
+PRINCIPLED_SOCKETS = {
+    "base_color": "Base Color", "metallic": "Metallic", "roughness": "Roughness", "ior": "IOR", "alpha": "Alpha",
+    "specular_ior_level": "Specular IOR Level", "specular_tint": "Specular Tint", "anisotropic": "Anisotropic",
+    "anisotropic_rotation": "Anisotropic Rotation", "coat_weight": "Coat Weight", "coat_roughness": "Coat Roughness",
+    "coat_ior": "Coat IOR", "coat_tint": "Coat Tint", "sheen_weight": "Sheen Weight",
+    "sheen_roughness": "Sheen Roughness", "sheen_tint": "Sheen Tint", "subsurface_weight": "Subsurface Weight",
+    "transmission_weight": "Transmission Weight", "diffuse_roughness": "Diffuse Roughness",
+    "emission_color": "Emission Color", "emission_strength": "Emission Strength",
+    "thin_film_thickness": "Thin Film Thickness", "thin_film_ior": "Thin Film IOR",
+}
+# Inputs that shape the surface rather than its reflectance: wenv shades the mesh's own normals.
+GEOMETRY_SOCKETS = ("Normal", "Coat Normal", "Tangent")
+# What wenv does not shade of a Principled BSDF (wenv.Principled.unhonoured's names), in words.
+NOT_SHADED = {
+    "transmission_weight": "Transmission is not shaded (wenv shades reflection: the light through the object "
+                           "is left out)",
+    "subsurface_weight": "Subsurface scattering is shaded as diffuse reflection",
+    "emission_strength": "Emission is not shaded",
+    "alpha": "Alpha below 1: the see-through part is not shaded (the reflection is scaled by Alpha)",
+    "sheen_weight": "Sheen is not shaded",
+    "anisotropic": "Anisotropy is not shaded (the lobes are isotropic)",
+    "thin_film_thickness": "Thin film is not shaded",
+    "diffuse_roughness": "Diffuse Roughness is not shaded (the diffuse part is Lambertian)",
+}
+
+
+def principled_inputs(node):
+    """({wenv name: value} of a Principled BSDF node's unlinked values and its distribution, [names of
+    its linked sockets])."""
+    inputs, linked = {}, []
+    for name, socket_name in PRINCIPLED_SOCKETS.items():
+        sock = node.inputs.get(socket_name)
+        if sock is None:
+            continue
+        if sock.is_linked:
+            linked.append(socket_name)
+        value = sock.default_value
+        inputs[name] = tuple(float(c) for c in value[:3]) if hasattr(value, "__len__") else float(value)
+    inputs["distribution"] = "multiscatter_ggx" if node.distribution == "MULTI_GGX" else "ggx"
+    linked += [s for s in GEOMETRY_SOCKETS if node.inputs.get(s) is not None and node.inputs[s].is_linked]
+    return inputs, linked
+
+
 def material_key(settings):
     """Plain tuple of every value the wenv material depends on (for caches and the live mode);
-    engine.material_from_key turns it into a core material.  A measured material's key holds its
-    file's size and modification time, so a changed file is read again."""
+    engine.material_from_key turns it into a core material.  A Principled material's key holds the
+    node's values as they are now (the node is the source of truth: nothing is copied), a measured
+    one's its file's size and modification time, so a changed file is read again."""
     if settings is None:
         return ("default",)
+    if settings.model == "PRINCIPLED":
+        node = principled_node(settings.id_data)
+        if node is None:  # no Principled BSDF to read: Lambertian with the viewport colour
+            return ("LAMBERT", tuple(min(max(c, 0.0), 1.0) for c in settings.id_data.diffuse_color[:3]), "SMITH", ())
+        return ("PRINCIPLED", tuple(sorted(principled_inputs(node)[0].items())))
     if settings.model == "MEASURED":
         return ("MEASURED", settings.brdf_path, engine.file_signature(brdf_file(settings)))
     lobes = tuple((tuple(l.specular), l.roughness, l.ior, l.distribution) for l in settings.lobes)
@@ -130,10 +184,54 @@ def fill_from_principled(material):
 
 
 def ensure_material_settings(material):
-    """A material shaded for the first time takes its settings from its Principled BSDF."""
-    if material is not None and not material.wenv.initialized:
+    """A Cook-Torrance material never set up takes its lobes from its Principled BSDF (materials set to
+    the Principled model read the node itself at every pass)."""
+    if material is not None and material.wenv.model == "COOK_TORRANCE" and not material.wenv.initialized:
         return fill_from_principled(material)
     return []
+
+
+def _value_text(value):
+    if isinstance(value, tuple):
+        return "(" + ", ".join(f"{c:.3g}" for c in value) + ")"
+    return f"{value:.3g}"
+
+
+def principled_notes(material):
+    """What wenv does not shade of the material as it is set up now, one sentence each: for the
+    Principled model, linked inputs (textures: their unlinked value is used; normal maps), inputs
+    wenv does not shade, a node tree with more than the Principled BSDF; no notes for the add-on's
+    own models."""
+    if material is None or material.wenv.model != "PRINCIPLED":
+        return []
+    node = principled_node(material)
+    if node is None:
+        return ["no Principled BSDF: shaded as Lambertian with its viewport colour"]
+    notes = []
+    inputs, linked = principled_inputs(node)
+    by_socket = {socket: name for name, socket in PRINCIPLED_SOCKETS.items()}
+    for socket in linked:
+        if socket in GEOMETRY_SOCKETS:
+            notes.append(f"'{socket}' is linked (a normal or bump map): not used, the mesh's normals are")
+        else:
+            value = inputs[by_socket[socket]]
+            notes.append(f"'{socket}' is linked (a texture or node): its unlinked value {_value_text(value)} is used")
+    notes += [NOT_SHADED[name] for name in engine.principled_unhonoured(inputs)]
+    tree = material.node_tree
+    out = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
+    out = [n for n in out if n.is_active_output] or out
+    if out and world.source_node(out[0].inputs["Surface"]) != node:  # bpy wrappers: compare, not identity
+        notes.append(f"the material output is not the Principled BSDF alone: only '{node.name}' is shaded")
+    return notes
+
+
+def slot_notes(obj):
+    """principled_notes of obj's materials, each prefixed with the material's name."""
+    notes = []
+    for slot in obj.material_slots:
+        if slot.material is not None:
+            notes += [f"'{slot.material.name}': {n}" for n in principled_notes(slot.material)]
+    return notes
 
 
 def slot_material_keys(obj):
@@ -145,7 +243,7 @@ def slot_material_keys(obj):
         mat = slot.material
         ensure_material_settings(mat)
         key = material_key(mat.wenv if mat is not None else None)
-        if key[0] == "MEASURED":
+        if key[0] in ("MEASURED", "PRINCIPLED"):
             try:
                 engine.material_from_key(key)
             except engine.SetupError as exc:

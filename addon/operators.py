@@ -54,11 +54,18 @@ class _Precomputing:
         return self.execute(context)
 
 
-def _progress_reporter(wm):
+def _progress_reporter(wm, what="precomputing"):
+    """Progress into Blender's progress indicator, and, in background runs and scripts, printed every
+    10 % (there is no indicator to see)."""
     wm.progress_begin(0.0, 1.0)
+    printed = [-1]
 
     def report(fraction):
         wm.progress_update(fraction)
+        step = int(fraction * 10)
+        if bpy.app.background and step > printed[0]:
+            printed[0] = step
+            print(f"wenv: {what}: {100 * fraction:.0f} %", flush=True)
         return False
     return report
 
@@ -73,7 +80,7 @@ class WENV_OT_precompute(_Precomputing, bpy.types.Operator):
         if not engine.shaders.has(quality):
             wm = context.window_manager
             try:
-                engine.shaders.get(quality, _progress_reporter(wm))
+                engine.shaders.get(quality, _progress_reporter(wm, f"precomputing the {quality} matrices"))
             finally:
                 wm.progress_end()
         return {"FINISHED"}
@@ -123,7 +130,9 @@ class WENV_OT_shade(_Precomputing, bpy.types.Operator):
         scene = context.scene
         objects = list(context.selected_objects) if self.target == "SELECTED" else meshes.shaded_objects(scene)
         wm = context.window_manager
-        progress = None if engine.shaders.has(_quality(context)) else _progress_reporter(wm)
+        quality = _quality(context)
+        progress = (None if engine.shaders.has(quality)
+                    else _progress_reporter(wm, f"precomputing the {quality} matrices"))
         try:
             view = resolve_view(context, self.view, self.view_matrix, self.perspective)
             done, notes = shading.shade_objects(scene, context.evaluated_depsgraph_get(), objects, view,
@@ -139,8 +148,6 @@ class WENV_OT_shade(_Precomputing, bpy.types.Operator):
                 wm.progress_end()
         for note in notes:
             self.report({"WARNING"}, note)
-        if scene.wenv.show_in_viewport:
-            views.show_attribute_colors(wm)
         self.report({"INFO"}, f"Shaded {len(done)} object(s)")
         return {"FINISHED"}
 
@@ -225,8 +232,6 @@ class WENV_OT_live(bpy.types.Operator):
                 self.report({"WARNING"}, "Precomputation cancelled" if job.cancelled else f"Precomputation failed: {job.error}")
                 return self._stop(context)
         if LiveState.session.tick(context):
-            if context.scene.wenv.show_in_viewport:
-                views.show_attribute_colors(context.window_manager)
             _redraw_viewports(context)
         return {"PASS_THROUGH"}
 
@@ -243,9 +248,9 @@ class _MaterialOperator:
 
 
 class WENV_OT_from_principled(_MaterialOperator, bpy.types.Operator):
-    """Fill the active material's wenv settings from its Principled BSDF"""
+    """Set the active material to Cook-Torrance lobes approximating its Principled BSDF (editable; the Principled model shades the node itself)"""
     bl_idname = "wenv.from_principled"
-    bl_label = "From Principled BSDF"
+    bl_label = "Cook-Torrance from Principled BSDF"
     bl_options = {"REGISTER", "UNDO"}
 
     def execute(self, context):
@@ -289,7 +294,7 @@ class WENV_OT_lobe_remove(_MaterialOperator, bpy.types.Operator):
 
 
 class WENV_OT_fit_roughness(_MaterialOperator, bpy.types.Operator):
-    """Set the lobe roughness so the material reads the target gloss (one-lobe Cook-Torrance)"""
+    """Set the roughness so the material reads the target gloss (the Principled BSDF's Roughness, or a one-lobe Cook-Torrance's)"""
     bl_idname = "wenv.fit_roughness"
     bl_label = "Set Roughness for Target Gloss"
     bl_options = {"REGISTER", "UNDO"}
@@ -300,17 +305,24 @@ class WENV_OT_fit_roughness(_MaterialOperator, bpy.types.Operator):
         ("20", "20°", ""), ("60", "60°", ""), ("85", "85°", "")])
 
     def execute(self, context):
-        st = _active_material(context).wenv
+        mat = _active_material(context)
+        st = mat.wenv
         target = st.target_gloss if self.target < 0 else self.target
         geometry = int(st.target_geometry if self.geometry == "MATERIAL" else self.geometry)
         try:
+            if st.model == "PRINCIPLED":
+                r = gloss.fit_principled_roughness(mat, target, geometry)
+                materials.principled_node(mat).inputs["Roughness"].default_value = r
+                self.report({"INFO"}, f"Roughness {r:.4g} (the Principled BSDF's) reads {target:g} GU at "
+                                      f"{geometry} degrees")
+                return {"FINISHED"}
             m = gloss.fit_roughness(st, target, geometry)
         except engine.SetupError as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
         st.lobes[0].roughness = m
         st.initialized = True
-        self.report({"INFO"}, f"Roughness {m:.5g} reads {target:g} GU at {geometry} degrees")
+        self.report({"INFO"}, f"Roughness {m ** 0.5:.4g} (alpha {m:.4g}) reads {target:g} GU at {geometry} degrees")
         return {"FINISHED"}
 
 

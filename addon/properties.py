@@ -5,18 +5,30 @@ import bpy
 from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProperty, FloatVectorProperty,
                        IntProperty, PointerProperty, StringProperty)
 
-from . import engine, gloss, materials
+from . import engine, gloss, materials, views
 
 DISTRIBUTIONS = [("GGX", "GGX", "Trowbridge-Reitz / GGX, roughness = alpha (Blender's roughness squared)"),
                  ("BECKMANN", "Beckmann", "Beckmann, roughness = RMS microfacet slope")]
 
 
+def _get_blender_roughness(self):
+    return math.sqrt(self.roughness)
+
+
+def _set_blender_roughness(self, value):
+    self.roughness = min(max(value * value, engine.ROUGHNESS_RANGE[0]), engine.ROUGHNESS_RANGE[1])
+
+
 class WENV_LobeSettings(bpy.types.PropertyGroup):
     specular: FloatVectorProperty(name="Specular", subtype="COLOR", size=3, min=0.0, soft_max=1.0,
                                   default=(1.0, 1.0, 1.0), description="Colour scale of the lobe (times Fresnel)")
-    roughness: FloatProperty(name="Roughness", min=engine.ROUGHNESS_RANGE[0], max=engine.ROUGHNESS_RANGE[1],
+    roughness: FloatProperty(name="Alpha", min=engine.ROUGHNESS_RANGE[0], max=engine.ROUGHNESS_RANGE[1],
                              soft_max=1.0, default=0.2, precision=4,
-                             description="Beckmann RMS slope or GGX alpha (alpha = Principled roughness squared)")
+                             description="The distribution's alpha: Beckmann RMS slope or GGX alpha (Blender's "
+                                         "Roughness squared)")
+    blender_roughness: FloatProperty(name="Roughness", min=0.0, soft_max=1.0, precision=4,
+                                     get=_get_blender_roughness, set=_set_blender_roughness,
+                                     description="Roughness as Blender's BSDF nodes take it (alpha = roughness^2)")
     ior: FloatProperty(name="IOR", min=engine.IOR_MIN, max=engine.IOR_RANGE[1], soft_max=3.0, default=1.5, precision=3,
                        description="Index of refraction of the lobe's Fresnel term")
     distribution: EnumProperty(name="Distribution", items=DISTRIBUTIONS, default="GGX")
@@ -35,6 +47,13 @@ _BLEND_RELATIVE = ({"PATH_SUPPORTS_BLEND_RELATIVE"}
                    if "is_path_supports_blend_relative" in bpy.types.Property.bl_rna.properties else set())
 
 
+def _show_in_viewport_changed(self, context):
+    if self.show_in_viewport:
+        views.show_attribute_colors(context.window_manager, self)
+    else:
+        views.restore_viewports(context.window_manager, self)
+
+
 def _set_up_by_user(self, context):
     # A model or file the user chose is the material's set-up: the first shading must not replace it
     # with values from the Principled BSDF.
@@ -42,10 +61,13 @@ def _set_up_by_user(self, context):
 
 
 class WENV_MaterialSettings(bpy.types.PropertyGroup):
-    model: EnumProperty(name="Model", default="COOK_TORRANCE", update=_set_up_by_user, items=[
-        ("LAMBERT", "Lambert", "Ideal diffuse reflector"),
-        ("COOK_TORRANCE", "Cook-Torrance", "Diffuse plus microfacet lobes"),
-        ("MEASURED", "Measured", "A measured isotropic BRDF read from a MERL .binary file")])
+    # explicit numbers: what a .blend stores, so items may be added in any order
+    model: EnumProperty(name="Model", default="PRINCIPLED", update=_set_up_by_user, items=[
+        ("PRINCIPLED", "Principled BSDF", "The material's own Principled BSDF, read from its node at every pass "
+                                          "and shaded as Cycles evaluates it", 3),
+        ("LAMBERT", "Lambert", "Ideal diffuse reflector", 0),
+        ("COOK_TORRANCE", "Cook-Torrance", "Diffuse plus microfacet lobes set here", 1),
+        ("MEASURED", "Measured", "A measured isotropic BRDF read from a MERL .binary file", 2)])
     brdf_path: StringProperty(name="BRDF File", subtype="FILE_PATH", default="", update=_set_up_by_user,
                               options=_BLEND_RELATIVE,
                               description="MERL .binary file of a measured BRDF (// at the start: relative to "
@@ -106,9 +128,11 @@ class WENV_SceneSettings(bpy.types.PropertyGroup):
         ("LOG", "Logarithmic", "The thesis's global operator log(1 + L) / log(1 + Lmax), values in [0, 1]")])
     max_luminance: FloatProperty(name="Max Luminance", default=10.0, min=1e-3, soft_max=1000.0,
                                  description="Luminance that maps to white in logarithmic tone mapping")
-    show_in_viewport: BoolProperty(name="Show in Viewport", default=True,
-                                   description="Switch 3D viewports to flat solid shading with attribute colours "
-                                               "after shading")
+    show_in_viewport: BoolProperty(name="Show in Viewport", default=False, update=_show_in_viewport_changed,
+                                   description="Show the shaded colours in every open 3D viewport (solid, flat, "
+                                               "attribute colours); off sets the viewports back as they were")
+    viewport_backup: StringProperty(name="Viewport Backup", default="", options={"HIDDEN"},
+                                    description="The viewports' own shading while they show wenv's colours")
     shade_on_frame_change: BoolProperty(name="Shade on Frame Change", default=False,
                                         description="Re-shade the shaded objects from the scene camera on every "
                                                     "frame change (animation playback and rendering)")

@@ -97,6 +97,9 @@ def plan_shading(scene, depsgraph, objects, view, images, progress=None):
                          "No mesh objects to shade: select at least one mesh")
     plan = ShadingPlan(quality, spec, world.environment(spec, images), view, st.tone_mapping, st.max_luminance,
                        st.target_error / 100.0, st.memory_budget)
+    lights = world.scene_lights_note(scene)
+    if lights:
+        notes.append(lights)
     plan.notes = notes
     for obj in mesh_objects:
         data = meshes.read_mesh(obj, depsgraph)
@@ -106,6 +109,7 @@ def plan_shading(scene, depsgraph, objects, view, images, progress=None):
             notes.append(f"'{obj.name}' has no vertices")
             continue
         plan.items.append((obj.name, data, materials.slot_material_keys(obj)))
+        notes += [n for n in materials.slot_notes(obj) if n not in notes]
     if quality != engine.AUTO:
         engine.shaders.get(quality, progress)
     return plan

@@ -42,7 +42,6 @@ class WENV_PT_shading(_SidebarPanel, bpy.types.Panel):
         sub = col.column()
         sub.active = st.tone_mapping == "LOG"
         sub.prop(st, "max_luminance")
-        col.prop(st, "show_in_viewport")
         col.prop(st, "shade_on_frame_change")
 
         row = layout.row(align=True)
@@ -51,7 +50,9 @@ class WENV_PT_shading(_SidebarPanel, bpy.types.Panel):
         live = LiveState.running()
         row.operator("wenv.live", text="Stop Live" if live else "Live", icon="PAUSE" if live else "PLAY",
                      depress=live)
-        layout.operator("wenv.clear", icon="X")
+        row = layout.row(align=True)
+        row.prop(st, "show_in_viewport", text="Show in Viewports", toggle=True, icon="HIDE_OFF")
+        row.operator("wenv.clear", icon="X")
 
         box = layout.box()
         try:
@@ -59,6 +60,9 @@ class WENV_PT_shading(_SidebarPanel, bpy.types.Panel):
         except engine.SetupError as exc:
             box.alert = True
             box.label(text=str(exc), icon="ERROR")
+        lights = world.scene_lights_note(context.scene)
+        if lights:
+            box.label(text=lights, icon="LIGHT")
         problems = [p for p in ((LiveState.session.last_error if live else None), handlers.last_error()) if p]
         for problem in problems:
             row = layout.row()
@@ -72,7 +76,33 @@ class WENV_UL_lobes(bpy.types.UIList):
     def draw_item(self, context, layout, data, item, icon, active_data, active_propname, index):
         row = layout.row(align=True)
         row.label(text=f"Lobe {index + 1}")
-        row.label(text=f"{item.distribution.title()} {item.roughness:.4g}, IOR {item.ior:.3g}")
+        row.label(text=f"{item.distribution.title()} roughness {item.blender_roughness:.3g}, IOR {item.ior:.3g}")
+
+
+# The node's inputs wenv shades, drawn from the node itself: editing them here edits the node.
+PRINCIPLED_SHOWN = ("Base Color", "Metallic", "Roughness", "IOR", "Specular IOR Level", "Specular Tint",
+                    "Coat Weight", "Coat Roughness", "Coat IOR", "Coat Tint")
+
+
+def _draw_principled(layout, mat):
+    node = materials.principled_node(mat)
+    if node is None:
+        layout.label(text="No Principled BSDF: shaded as Lambertian with the viewport colour", icon="INFO")
+        return
+    layout.label(text=f"From the node '{node.name}', as Cycles evaluates it", icon="NODE_MATERIAL")
+    col = _property_column(layout)
+    for name in PRINCIPLED_SHOWN:
+        sock = node.inputs.get(name)
+        if sock is not None and not sock.is_linked:
+            col.prop(sock, "default_value", text=name)
+    col.prop(node, "distribution")
+    notes = materials.principled_notes(mat)
+    if notes:
+        box = layout.box()
+        box.label(text="Not shaded by wenv:", icon="ERROR")
+        for note in notes:
+            box.label(text=note)
+    layout.operator("wenv.from_principled", text="Convert to Cook-Torrance", icon="NODE_MATERIAL")
 
 
 class WENV_PT_material(_SidebarPanel, bpy.types.Panel):
@@ -87,9 +117,12 @@ class WENV_PT_material(_SidebarPanel, bpy.types.Panel):
         mat = _active_material(context)
         st = mat.wenv
         layout.label(text=mat.name, icon="MATERIAL")
-        layout.operator("wenv.from_principled", icon="NODE_MATERIAL")
         col = _property_column(layout)
         col.prop(st, "model")
+        if st.model == "PRINCIPLED":
+            _draw_principled(layout, mat)
+            return
+        layout.operator("wenv.from_principled", icon="NODE_MATERIAL")
         if st.model == "MEASURED":
             col.prop(st, "brdf_path")
             try:
@@ -116,9 +149,11 @@ class WENV_PT_material(_SidebarPanel, bpy.types.Panel):
             lobe = st.lobes[st.active_lobe]
             col = _property_column(layout)
             col.prop(lobe, "specular")
+            col.prop(lobe, "blender_roughness")
             col.prop(lobe, "roughness")
             col.prop(lobe, "ior")
             col.prop(lobe, "distribution")
+
 
 
 class WENV_PT_gloss(_SidebarPanel, bpy.types.Panel):
@@ -150,8 +185,8 @@ class WENV_PT_gloss(_SidebarPanel, bpy.types.Panel):
         row.label(text=f"{readings['haze']:.2f} HU")
         row.label(text="", icon="BLANK1")
         layout.separator()
-        if st.model == "MEASURED":
-            return  # nothing to fit: a measurement has no roughness to set
+        if st.model in ("MEASURED", "LAMBERT"):
+            return  # nothing to fit: a measurement or a Lambertian surface has no roughness to set
         col = _property_column(layout)
         col.prop(st, "target_gloss")
         col.prop(st, "target_geometry")

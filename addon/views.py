@@ -1,4 +1,7 @@
-"""3D views: the View a pass is shaded for (camera, viewport or matrix); viewports set to show colours."""
+"""3D views: the View a pass is shaded for (camera, viewport or matrix); viewports set to show the
+shaded colours, and set back."""
+import json
+
 import numpy as np
 
 from .engine import SetupError
@@ -73,12 +76,37 @@ def find_region_3d(context):
     return None
 
 
-def show_attribute_colors(window_manager):
-    """Every 3D viewport in solid mode, flat lighting, colours from the active colour attribute."""
+def _viewports(window_manager):
+    """(key, shading) of every open 3D viewport; the key names it across redraws (screen, area index)."""
     for window in window_manager.windows:
-        for area in window.screen.areas:
+        for i, area in enumerate(window.screen.areas):
             if area.type == "VIEW_3D":
-                shading = area.spaces.active.shading
-                shading.type = "SOLID"
-                shading.light = "FLAT"
-                shading.color_type = "VERTEX"
+                yield f"{window.screen.name}/{i}", area.spaces.active.shading
+
+
+SHADING_KEYS = ("type", "light", "color_type")
+
+
+def show_attribute_colors(window_manager, settings):
+    """Every open 3D viewport in solid mode, flat lighting, colours from the active colour attribute
+    (the shaded radiance, shown as the scene's view transform maps it); what each had before is kept
+    in settings.viewport_backup (the scene's wenv settings) for restore_viewports.  Viewports already
+    showing the colours keep their first backup."""
+    backup = json.loads(settings.viewport_backup or "{}")
+    for key, shading in _viewports(window_manager):
+        if key not in backup:
+            backup[key] = {k: getattr(shading, k) for k in SHADING_KEYS}
+        shading.type = "SOLID"
+        shading.light = "FLAT"
+        shading.color_type = "VERTEX"
+    settings.viewport_backup = json.dumps(backup)
+
+
+def restore_viewports(window_manager, settings):
+    """Sets every viewport show_attribute_colors changed back as it was (those since closed are
+    forgotten)."""
+    backup = json.loads(settings.viewport_backup or "{}")
+    for key, shading in _viewports(window_manager):
+        for k, value in backup.get(key, {}).items():
+            setattr(shading, k, value)
+    settings.viewport_backup = ""

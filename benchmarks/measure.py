@@ -25,6 +25,25 @@ def bundled_hdri(name):
     raise SystemExit(f"bundled HDRI {name!r} not found")
 
 
+def sphere_image(size):
+    """Normals of a unit sphere seen orthographically from -Y (looking along +Y), one per pixel
+    inside the disk: (mask, normals, view) with the view pointing back at the camera."""
+    t = (np.arange(size) + 0.5) / size * 2 - 1
+    x, z = np.meshgrid(t, -t)
+    r2 = x * x + z * z
+    mask = r2 < 1
+    n = np.stack([x[mask], -np.sqrt(1 - r2[mask]), z[mask]], axis=1).astype(np.float32)
+    return mask, n, np.array([0.0, -1.0, 0.0], np.float32)
+
+
+def tone_map(rgb, l_max):
+    """The thesis's global logarithmic operator: Ld = log10(1 + Lw) / log10(1 + Lmax)."""
+    lw = rgb @ np.array([0.2126, 0.7152, 0.0722], np.float32)
+    ld = np.log10(1 + lw) / np.log10(1 + l_max)
+    scale = np.where(lw > 0, ld / np.maximum(lw, 1e-12), 0)
+    return np.clip(rgb * scale[..., None], 0, 1)
+
+
 def relative_rmse(a, b):
     return float(np.sqrt(np.mean((a - b) ** 2)) / np.sqrt(np.mean(b ** 2)))
 

@@ -17,10 +17,7 @@ import numpy as np
 
 import merl_files
 import wenv
-from measure import OUT, ROOT, bundled_hdri, relative_rmse
-
-sys.path.insert(0, os.path.join(ROOT, "examples"))
-from demo import sphere_image, tone_map  # noqa: E402
+from measure import OUT, ROOT, bundled_hdri, relative_rmse, sphere_image, tone_map
 
 ROWS = {
     "paint: m = 0.2 lobe\nover a diffuse floor": {"brdf": "cook_torrance", "roughness": 0.2,

@@ -7,8 +7,9 @@ Workbench render of each result showing the colour attribute.
         --roughness 0.02 0.1 0.3 --rotation 0 90 180 270 --images
 
 Without --blend a scene is built: smooth Suzanne (subdivided twice, 7958 vertices), a Principled material and
-Blender's bundled "sunset" HDRI.  The object's first material gets its wenv settings from its
-Principled BSDF if it has none yet; the sweep sets the roughness of every lobe.
+Blender's bundled "sunset" HDRI.  The sweep sets the roughness as Blender takes it (alpha = roughness^2): the
+Principled BSDF's Roughness for a material shaded from its node (the add-on's default), every lobe's for a
+Cook-Torrance one.
 """
 import argparse
 import csv
@@ -96,6 +97,7 @@ def main():
     st.show_in_viewport = False
     mat = obj.active_material
     materials.ensure_material_settings(mat)
+    node = materials.principled_node(mat) if mat.wenv.model == "PRINCIPLED" else None
     mapping = mapping_node(scene.world)
     for o in bpy.context.view_layer.objects:
         o.select_set(o == obj)
@@ -109,8 +111,10 @@ def main():
 
     rows = []
     for r in args.roughness:
+        if node is not None:
+            node.inputs["Roughness"].default_value = r
         for lobe in mat.wenv.lobes:
-            lobe.roughness = r
+            lobe.blender_roughness = r
         for deg in args.rotation:
             mapping.inputs["Rotation"].default_value[2] = math.radians(deg)
             t = time.perf_counter()

@@ -257,14 +257,21 @@ def test_view_matrix_viewport_and_orthographic_camera(scene, perspective):
         np.testing.assert_allclose(attribute(obj)[1], sh.shade(n, d), rtol=1e-4, atol=1e-5)
 
 
-def test_viewport_switches_to_attribute_colours(scene):
+def test_viewport_shows_the_colours_only_when_asked_and_is_restored(scene):
+    """Shading leaves the viewports alone; one click (Show in Viewports) shows the colours in every
+    3D viewport, and the next sets each back as the user had it."""
     obj = add_monkey()
     area = next(a for a in bpy.context.screen.areas if a.type == "VIEW_3D")
-    area.spaces.active.shading.type = "MATERIAL"
-    assert shade_op(view="CAMERA") == {"FINISHED"}
     shading = area.spaces.active.shading
+    shading.type, shading.light, shading.color_type = "SOLID", "STUDIO", "OBJECT"
+    assert shade_op(view="CAMERA") == {"FINISHED"} and ATTR in obj.data.color_attributes
+    assert (shading.type, shading.light, shading.color_type) == ("SOLID", "STUDIO", "OBJECT")
+    scene.wenv.show_in_viewport = True
     assert (shading.type, shading.light, shading.color_type) == ("SOLID", "FLAT", "VERTEX")
-    assert ATTR in obj.data.color_attributes
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    scene.wenv.show_in_viewport = False
+    assert (shading.type, shading.light, shading.color_type) == ("SOLID", "STUDIO", "OBJECT")
+    assert scene.wenv.viewport_backup == ""
 
 
 def test_plain_colour_world_is_constant(scene):
@@ -543,13 +550,76 @@ def test_from_principled_warns_about_links_and_missing_node(scene):
     assert plain.wenv.model == "LAMBERT" and tuple(plain.wenv.diffuse) == pytest.approx((0.1, 0.2, 0.3))
 
 
-def test_first_shading_fills_settings_from_principled(scene):
+def test_principled_node_is_the_source_of_truth(scene):
+    """A material's Principled BSDF is shaded as it is at every pass, as wenv.Principled of its inputs
+    (the default model): changing Roughness re-shades with the new value, with no stale copy."""
+    env_world(scene, "sunset")
     obj = add_monkey()
     mat = principled_material("fresh", roughness=0.3)
     obj.data.materials.append(mat)
-    assert not mat.wenv.initialized
-    assert shade_op(view="CAMERA") == {"FINISHED"}
-    assert mat.wenv.initialized and mat.wenv.lobes[0].roughness == pytest.approx(0.09)
+    assert mat.wenv.model == "PRINCIPLED" and not mat.wenv.initialized
+    p, n = world_arrays(obj, corner=False)
+    env = wenv.load_environment(hdri_path("sunset"))
+    eye = tuple(scene.camera.matrix_world.translation)
+    node = mat.node_tree.nodes["Principled BSDF"]
+    for roughness in (0.3, 0.6):
+        node.inputs["Roughness"].default_value = roughness
+        assert shade_op(view="CAMERA") == {"FINISHED"}
+        # the node's values as Blender stores them (float32)
+        want = core_shader(env, wenv.Principled(base_color=tuple(node.inputs["Base Color"].default_value),
+                                                roughness=node.inputs["Roughness"].default_value,
+                                                ior=node.inputs["IOR"].default_value))
+        np.testing.assert_allclose(attribute(obj)[1], want.shade_mesh(p, n, eye), rtol=1e-4, atol=1e-5)
+    assert len(mat.wenv.lobes) == 0  # nothing was copied into the add-on's settings
+    # live mode watches the node: a new Roughness re-shades
+    session = live.LiveSession([obj.name])
+    scene.wenv.view_source = "CAMERA"
+    for value in (0.6, 0.2):
+        node.inputs["Roughness"].default_value = value
+        assert session.tick(bpy.context) is False and session.wait(60)
+        assert session.tick(bpy.context) is True
+    assert session.shades == 2
+    # the glossmeter reads the node, and fitting sets the node's Roughness (Blender's)
+    select_only(obj)
+    obj.active_material = mat
+    assert mat.wenv.gloss_60 == pytest.approx(wenv.gloss(engine.principled(
+        materials.principled_inputs(node)[0]), 60), abs=1e-3)
+    assert bpy.ops.wenv.fit_roughness(target=30.0, geometry="60") == {"FINISHED"}
+    assert 0.0 < node.inputs["Roughness"].default_value < 1.0 and mat.wenv.gloss_60 == pytest.approx(30.0, abs=0.05)
+
+
+def test_what_wenv_does_not_shade_is_reported(scene):
+    """Linked inputs (a texture: its unlinked value is used; a normal map: not used), inputs wenv does
+    not shade, a node tree with more than the Principled BSDF and the scene's Light objects are named
+    in the shading report and in the Material panel, never dropped silently."""
+    from addon import ui
+    env_world(scene, "sunset")
+    obj = add_monkey()
+    select_only(obj)
+    mat = principled_material("textured", roughness=0.3)
+    obj.data.materials.append(mat)
+    obj.active_material = mat
+    tree = mat.node_tree
+    node = tree.nodes["Principled BSDF"]
+    tex = tree.nodes.new("ShaderNodeTexNoise")
+    tree.links.new(tex.outputs["Color"], node.inputs["Base Color"])
+    bump = tree.nodes.new("ShaderNodeBump")
+    tree.links.new(bump.outputs["Normal"], node.inputs["Normal"])
+    node.inputs["Transmission Weight"].default_value = 0.5
+    node.inputs["Emission Strength"].default_value = 2.0
+    notes = materials.principled_notes(mat)
+    assert any("'Base Color' is linked" in n and "(0.8, 0.2, 0.1)" in n for n in notes), notes
+    assert any("'Normal' is linked" in n for n in notes) and any("Transmission" in n for n in notes)
+    assert any("Emission" in n for n in notes)
+    from addon import shading, views
+    view = views.camera_view(bpy.context.scene)
+    _, report = shading.shade_objects(bpy.context.scene, bpy.context.evaluated_depsgraph_get(), [obj], view,
+                                      bpy.data)
+    assert any("Light object(s) ('Light')" in n for n in report), report
+    assert all(f"'textured': {n}" in report for n in notes), report
+    panel = [l[1] for l in draw_panel(ui.WENV_PT_material) if l[0] == "label"]
+    assert all(n in panel for n in notes)
+    assert ("prop", "default_value") in draw_panel(ui.WENV_PT_material)  # the node's own inputs, editable there
 
 
 def test_gloss_readings_follow_settings(scene):

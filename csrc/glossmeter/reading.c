@@ -146,6 +146,10 @@ wenv_status wenv_glossmeter_fit_roughness(const wenv_glossmeter *gm, const wenv_
         wenv_error ignore = {0};
         if (wenv_glossmeter_measure(gm, tmpl, &o, &smooth, &ignore) == WENV_OK)
             smooth_value = smooth.value;
+        if (isnan(smooth_value)) /* a material without a smooth limit (a Principled BSDF, a table) */
+            return wenv_error_set(err, WENV_ERR_VALUE,
+                                  "target_gu %g is out of reach at %g degrees: roughness %g..%g reads %.3f..%.3f GU",
+                                  target, gm->cfg.angle, m_lo, m_hi, ra.value, rb.value);
         return wenv_error_set(err, WENV_ERR_VALUE,
                               "target_gu %g is out of reach at %g degrees: roughness %g..%g reads %.3f..%.3f GU "
                               "(smooth-surface limit %.3f GU)",

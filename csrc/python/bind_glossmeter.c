@@ -23,6 +23,7 @@
 #define HAZE_APERTURE_H 3.6
 #define FIT_M_LO 1e-4
 #define FIT_M_HI 2.0
+#define FIT_PRINCIPLED_LO 1e-3 /* a Principled Roughness: alpha 1e-6, below the core's floor of 1e-4 alpha anyway */
 
 typedef struct {
     PyObject_HEAD
@@ -210,17 +211,27 @@ static PyObject *do_fit(const wenv_glossmeter *gm, PyObject *target_obj, PyObjec
     if (wenv_py_get_finite(target_obj, "target_gu", &target) < 0)
         return NULL;
     PyObject *bracket_obj = pop_kw(params, "bracket"), *tol_obj = pop_kw(params, "tol"),
-             *evals_obj = pop_kw(params, "max_evals");
+             *evals_obj = pop_kw(params, "max_evals"), *material_obj = pop_kw(params, "material");
     PyObject *result = NULL;
     wenv_material *tmpl = NULL;
-    double bracket[2] = {FIT_M_LO, FIT_M_HI};
+    const wenv_material *mat = NULL;
+    /* a given material (wenv.Principled: its Roughness, Blender's, in [0, 1]) or a one-lobe Cook-Torrance */
+    double bracket[2] = {material_obj ? FIT_PRINCIPLED_LO : FIT_M_LO, material_obj ? 1.0 : FIT_M_HI};
     wenv_gloss_options opt;
     if (get_opt_vec(bracket_obj, "bracket", bracket, 2) < 0 || get_options(tol_obj, evals_obj, NULL, &opt) < 0)
         goto done;
-    tmpl = wenv_py_one_lobe_material(params, "fit_roughness()");
-    if (!tmpl)
+    if (material_obj) {
+        if (PyDict_Size(params) > 0) {
+            PyErr_SetString(PyExc_TypeError,
+                            "fit_roughness() takes either material= or the parameters of a Cook-Torrance lobe, not both");
+            goto done;
+        }
+        mat = wenv_py_material(material_obj, "material");
+    } else {
+        mat = tmpl = wenv_py_one_lobe_material(params, "fit_roughness()");
+    }
+    if (!mat)
         goto done;
-    const wenv_material *mat = tmpl;
     double m = NAN;
     wenv_gloss_result r = {0};
     wenv_error err = {0};
@@ -238,6 +249,7 @@ done:
     Py_XDECREF(bracket_obj);
     Py_XDECREF(tol_obj);
     Py_XDECREF(evals_obj);
+    Py_XDECREF(material_obj);
     wenv_material_free(tmpl);
     return result;
 }
@@ -603,6 +615,8 @@ static PyMethodDef glossmeter_functions[] = {
     {"fit_roughness", (PyCFunction)(void (*)(void))module_fit, METH_VARARGS | METH_KEYWORDS,
      "fit_roughness(target_gu, geometry=60, /, **material_params)\n--\n\n"
      "Keyword options: bracket=(1e-4, 2.0), tol=0.05, max_evals=4000000 (geometry may also be a keyword).\n"
+     "material=wenv.Principled(...) instead of material_params fits the node's Roughness (Blender's, in\n"
+     "bracket=(1e-3, 1.0) by default), every other input kept.\n"
      "Roughness m of wenv.CookTorrance(diffuse=..., lobes=[dict(roughness=m, specular=..., ior=...)],\n"
      "distribution=..., shadowing=...) (material_params: diffuse, specular, ior, distribution, shadowing;\n"
      "defaults as in CookTorrance) that reads target_gu at the geometry.  The reading falls monotonically\n"

@@ -389,6 +389,15 @@ static void pr_diffuse_at(const wenv_material *mat, double cos_v, double rgb[3])
     memcpy(rgb, vw.diffuse, 3 * sizeof *rgb);
 }
 
+/* The node's Roughness (Blender's, alpha = roughness^2) set to `roughness`, clamped to [0, 1] as Cycles
+ * clamps it; the coat keeps its own.  What the glossmeter's fit varies. */
+static wenv_status pr_with_roughness(wenv_material **out, const wenv_material *src, double roughness, wenv_error *err)
+{
+    wenv_principled_inputs in = model_of(src)->in;
+    in.roughness = roughness;
+    return wenv_principled_create(out, &in, err);
+}
+
 static const wenv_material_kind PRINCIPLED = {
     .name = "principled",
     .smooth_limit = 0, /* an F82 metal or a remapped dielectric is no Fresnel mirror of one index */
@@ -404,6 +413,7 @@ static const wenv_material_kind PRINCIPLED = {
     .lobe_nodes = pr_lobe_nodes,
     .lobe_cells = pr_lobe_cells,
     .diffuse_at = pr_diffuse_at,
+    .with_roughness = pr_with_roughness,
 };
 
 /* ---------------------------------------------------------------- making one */
