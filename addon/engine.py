@@ -256,8 +256,14 @@ class ShaderCache:
 shaders = ShaderCache()
 
 
-def shade_arrays(shader, data, view):
-    """Radiance (n, 3) for world-space `data` (meshes.MeshData) seen from `view` (views.View)."""
+def shade_arrays(shader, data, view, cull=False):
+    """Radiance (n, 3) for world-space `data` (meshes.MeshData) seen from `view` (views.View), and
+    which vertices were shaded: with `cull` and a viewport's perspective view, only those facing
+    the eye and on screen (the rest are black), else all (None)."""
+    if view.perspective and cull and view.view_projection is not None:
+        seen = wenv.visible_vertices(data.positions, data.normals, view.eye, view.view_projection)
+        return shader.shade_mesh(data.positions, data.normals, view.eye, cull=True,
+                                 view_projection=view.view_projection), seen
     if view.perspective:
-        return shader.shade_mesh(data.positions, data.normals, view.eye)
-    return shader.shade(data.normals, view.direction)
+        return shader.shade_mesh(data.positions, data.normals, view.eye), None
+    return shader.shade(data.normals, view.direction), None

@@ -37,10 +37,8 @@ NOT_SHADED = {
     "subsurface_weight": "Subsurface scattering is shaded as diffuse reflection",
     "emission_strength": "Emission is not shaded",
     "alpha": "Alpha below 1: the see-through part is not shaded (the reflection is scaled by Alpha)",
-    "sheen_weight": "Sheen is not shaded",
     "anisotropic": "Anisotropy is not shaded (the lobes are isotropic)",
     "thin_film_thickness": "Thin film is not shaded",
-    "diffuse_roughness": "Diffuse Roughness is not shaded (the diffuse part is Lambertian)",
 }
 
 

@@ -83,16 +83,20 @@ def read_mesh(obj, depsgraph):
     return MeshData(domain, world_pos, world_nrm, slots, note)
 
 
-def write_colors(mesh, domain, rgb):
+def write_colors(mesh, domain, rgb, seen=None):
     """Writes (n, 3) colours into the add-on's FLOAT_COLOR attribute (recreated if its domain or
-    type differ) and makes it the active colour attribute."""
+    type differ) and makes it the active colour attribute.  With `seen` (bool, n), only those rows:
+    the others keep the colours they had (black in a new attribute)."""
     attr = mesh.color_attributes.get(ATTRIBUTE)
     if attr is not None and (attr.domain != domain or attr.data_type != "FLOAT_COLOR"):
         mesh.color_attributes.remove(attr)
         attr = None
+    rgba = np.ones((len(rgb), 4), np.float32)
     if attr is None:
         attr = mesh.color_attributes.new(ATTRIBUTE, "FLOAT_COLOR", domain)
-    rgba = np.ones((len(rgb), 4), np.float32)
+    elif seen is not None and len(attr.data) == len(rgb):
+        attr.data.foreach_get("color", rgba.ravel())
+        rgb = np.where(seen[:, None], rgb, rgba[:, :3])
     rgba[:, :3] = rgb
     attr.data.foreach_set("color", rgba.ravel())
     mesh.color_attributes.active_color = attr

@@ -133,6 +133,10 @@ class WENV_SceneSettings(bpy.types.PropertyGroup):
                                                "attribute colours); off sets the viewports back as they were")
     viewport_backup: StringProperty(name="Viewport Backup", default="", options={"HIDDEN"},
                                     description="The viewports' own shading while they show wenv's colours")
+    shade_only_seen: BoolProperty(name="Shade Only What Is Seen", default=True,
+                                  description="From a viewport, shade only the vertices facing it and on screen; "
+                                              "the rest keep their colours (camera views, renders and bakes always "
+                                              "shade every vertex)")
     shade_on_frame_change: BoolProperty(name="Shade on Frame Change", default=False,
                                         description="Re-shade the shaded objects from the scene camera on every "
                                                     "frame change (animation playback and rendering)")

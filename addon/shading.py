@@ -22,8 +22,10 @@ class ShadingPlan:
     it may run on a worker thread (the live mode does, the core releases the GIL); `apply` writes
     the colours back on the main thread, by object name."""
 
-    def __init__(self, quality, spec, environment, view, tone, l_max, target_error=0.01, memory_budget_mb=1024):
+    def __init__(self, quality, spec, environment, view, tone, l_max, target_error=0.01, memory_budget_mb=1024,
+                 cull=False):
         self.quality = quality
+        self.cull = cull  # shade only the vertices a viewport sees (engine.shade_arrays)
         self.target_error = target_error
         self.memory_budget_mb = memory_budget_mb
         self.world = spec  # world.WorldSpec
@@ -43,6 +45,7 @@ class ShadingPlan:
                 engine.shaders.use_environment(self.quality, self.world.signature, self.environment)
             for name, data, keys in self.items:
                 rgb = np.empty((data.count, 3), np.float32)
+                seen = np.ones(data.count, bool) if self.cull else None
                 slots = np.clip(data.slots, 0, len(keys) - 1)
                 for s in np.unique(slots):
                     sel = slots == s
@@ -53,27 +56,29 @@ class ShadingPlan:
                     else:
                         shader = engine.shaders.use_material(self.quality, keys[s])
                     if sel.all():
-                        rgb[:] = engine.shade_arrays(shader, data, self.view)
+                        rgb[:], part_seen = engine.shade_arrays(shader, data, self.view, self.cull)
                     else:
                         part = meshes.MeshData(data.domain, np.ascontiguousarray(data.positions[sel]),
                                                np.ascontiguousarray(data.normals[sel]), None)
-                        rgb[sel] = engine.shade_arrays(shader, part, self.view)
+                        rgb[sel], part_seen = engine.shade_arrays(shader, part, self.view, self.cull)
+                    if seen is not None and part_seen is not None:
+                        seen[sel] = part_seen
                 if self.tone == "LOG":
                     rgb = tone_map(rgb, self.l_max)
-                results.append((name, data.domain, rgb))
+                results.append((name, data.domain, rgb, seen))
         self.results = results
 
     def apply(self, objects):
         """Writes the results into the meshes of `objects` (bpy.data.objects); an object deleted or
         edited since plan_shading is skipped.  Returns the names written."""
         done = []
-        for name, domain, rgb in self.results:
+        for name, domain, rgb, seen in self.results:
             obj = objects.get(name)
             if obj is None or obj.type != "MESH":
                 continue
             size = len(obj.data.vertices) if domain == "POINT" else len(obj.data.loops)
             if size == len(rgb):
-                meshes.write_colors(obj.data, domain, rgb)
+                meshes.write_colors(obj.data, domain, rgb, seen)
                 done.append(name)
         return done
 
@@ -96,7 +101,10 @@ def plan_shading(scene, depsgraph, objects, view, images, progress=None):
         raise SetupError("Leave Edit Mode to shade" if editing else
                          "No mesh objects to shade: select at least one mesh")
     plan = ShadingPlan(quality, spec, world.environment(spec, images), view, st.tone_mapping, st.max_luminance,
-                       st.target_error / 100.0, st.memory_budget)
+                       st.target_error / 100.0, st.memory_budget, cull=st.shade_only_seen)
+    if st.shade_only_seen and view.view_projection is None and st.view_source == "VIEWPORT" and not view.perspective:
+        notes.append("Shade Only What Is Seen applies to perspective viewports: this orthographic view shades "
+                     "every vertex")
     lights = world.scene_lights_note(scene)
     if lights:
         notes.append(lights)

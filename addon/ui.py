@@ -38,6 +38,9 @@ class WENV_PT_shading(_SidebarPanel, bpy.types.Panel):
             col.prop(st, "target_error")
             col.prop(st, "memory_budget")
         col.prop(st, "view_source")
+        sub = col.column()
+        sub.active = st.view_source == "VIEWPORT"
+        sub.prop(st, "shade_only_seen")
         col.prop(st, "tone_mapping")
         sub = col.column()
         sub.active = st.tone_mapping == "LOG"
@@ -81,7 +84,8 @@ class WENV_UL_lobes(bpy.types.UIList):
 
 # The node's inputs wenv shades, drawn from the node itself: editing them here edits the node.
 PRINCIPLED_SHOWN = ("Base Color", "Metallic", "Roughness", "IOR", "Specular IOR Level", "Specular Tint",
-                    "Coat Weight", "Coat Roughness", "Coat IOR", "Coat Tint")
+                    "Coat Weight", "Coat Roughness", "Coat IOR", "Coat Tint", "Sheen Weight", "Sheen Roughness",
+                    "Sheen Tint")
 
 
 def _draw_principled(layout, mat):

@@ -8,14 +8,16 @@ from .engine import SetupError
 
 
 class View:
-    """Perspective (eye position) or orthographic (one direction towards the viewer)."""
+    """Perspective (eye position) or orthographic (one direction towards the viewer); a viewport's
+    perspective view also has its world-to-clip matrix, which tells what is on screen."""
 
-    __slots__ = ("perspective", "eye", "direction")
+    __slots__ = ("perspective", "eye", "direction", "view_projection")
 
-    def __init__(self, perspective, eye=None, direction=None):
+    def __init__(self, perspective, eye=None, direction=None, view_projection=None):
         self.perspective = perspective
         self.eye = None if eye is None else tuple(float(x) for x in eye)
         self.direction = None if direction is None else np.asarray(direction, np.float32)
+        self.view_projection = None if view_projection is None else np.asarray(view_projection, np.float64)
 
     @classmethod
     def from_view_matrix(cls, view_matrix, perspective):
@@ -36,7 +38,8 @@ class View:
 
     @property
     def signature(self):
-        return (self.perspective, self.eye, None if self.direction is None else tuple(self.direction.tolist()))
+        return (self.perspective, self.eye, None if self.direction is None else tuple(self.direction.tolist()),
+                None if self.view_projection is None else tuple(self.view_projection.ravel().tolist()))
 
 
 def camera_view(scene):
@@ -56,7 +59,11 @@ def region_view(region_3d, scene):
     m = np.eye(4)
     m[:3, :3] = rot
     m[:3, 3] = np.array(region_3d.view_location, np.float64) + rot[:, 2] * region_3d.view_distance
-    return View.from_camera_matrix(m, region_3d.view_perspective == "PERSP")
+    view = View.from_camera_matrix(m, region_3d.view_perspective == "PERSP")
+    if view.perspective:
+        # the lens and the region's shape (window_matrix) after the view just built
+        view.view_projection = np.array(region_3d.window_matrix, np.float64) @ np.linalg.inv(m)
+    return view
 
 
 def find_region_3d(context):

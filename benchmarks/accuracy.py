@@ -6,13 +6,16 @@ lobes and of lobes no Cook-Torrance lobe represents.
     .venv/bin/python benchmarks/accuracy.py                 # error table per preset, out/accuracy.json
     .venv/bin/python benchmarks/accuracy.py --presets high,high-grazing,high-lights
     .venv/bin/python benchmarks/accuracy.py --tables        # the tables: out/accuracy_tables.json
+    .venv/bin/python benchmarks/accuracy.py --principled    # Principled BSDFs: out/accuracy_principled.json
     .venv/bin/python benchmarks/accuracy.py --make-reference   # recompute tests/data/accuracy_reference.npz
     .venv/bin/python benchmarks/accuracy.py --make-table-reference   # ... and accuracy_reference_tables.npz
+    .venv/bin/python benchmarks/accuracy.py --make-principled-reference   # ... accuracy_reference_principled.npz
 
 The reference values (wenv.reference: every pixel, its exact solid angle) take about 20 ms per pair
 for a glossy material, so they are computed once and stored; tests/test_accuracy.py recomputes a
 sample of them live to keep the stored values honest."""
 import argparse
+import hashlib
 import json
 import os
 import sys
@@ -52,6 +55,15 @@ TABLES = {
     "tinted": {"brdf": "tinted", "roughness": 0.2},
 }
 TABLE_SHAPE = (90, 90, 180)
+# Blender's Principled BSDF (wenv.Principled): a paint, a metal, a coated paint and a satin plastic.
+PRINCIPLED_DATA = os.path.join(ROOT, "tests", "data", "accuracy_reference_principled.npz")
+PRINCIPLED = {
+    "paint": {"principled": {"base_color": [0.6, 0.15, 0.08], "roughness": 0.3}},
+    "metal": {"principled": {"base_color": [0.9, 0.6, 0.3], "metallic": 1.0, "roughness": 0.3}},
+    "coated": {"principled": {"base_color": [0.05, 0.15, 0.45], "roughness": 0.5, "coat_weight": 1.0,
+                              "coat_roughness": 0.1}},
+    "satin": {"principled": {"base_color": [0.8, 0.8, 0.75], "roughness": 0.55, "ior": 1.45}},
+}
 PAIRS = 2000
 SEED = 2006
 # What each of `high`'s two per-vertex parts buys: `high` without the grazing path, and `high` with
@@ -69,6 +81,8 @@ def make_pairs(n=PAIRS, seed=SEED):
 def material(spec):
     if "brdf" in spec:
         return table_material(spec)
+    if "principled" in spec:
+        return wenv.Principled(**spec["principled"])
     if not spec["lobes"]:
         return wenv.Lambert(tuple(spec["diffuse"]))
     return wenv.CookTorrance(diffuse=tuple(spec["diffuse"]), lobes=spec["lobes"])
@@ -81,7 +95,9 @@ def table_material(spec, shape=TABLE_SHAPE):
 
 def make_reference(path=DATA, n=PAIRS, seed=SEED, materials=MATERIALS):
     """Reference values on n pairs drawn with seed, written to path.  Each HDRI/material is kept in
-    out/reference_parts/ as it is done, so a long run that stops can go on where it was."""
+    out/reference_parts/ as it is done (named by a digest of the material's spec, so sets that reuse a
+    name -- a table's "paint" and a Principled one -- never read each other's), so a long run that
+    stops can go on where it was."""
     nrm, v = make_pairs(n, seed)
     parts = os.path.join(OUT, "reference_parts", f"{n}_{seed}")
     os.makedirs(parts, exist_ok=True)
@@ -90,7 +106,8 @@ def make_reference(path=DATA, n=PAIRS, seed=SEED, materials=MATERIALS):
     for h in HDRIS:
         env = wenv.load_environment(bundled_hdri(h))
         for name in materials:
-            part = os.path.join(parts, f"{h}_{name}.npy")
+            digest = hashlib.sha1(json.dumps(materials[name], sort_keys=True).encode()).hexdigest()[:12]
+            part = os.path.join(parts, f"{h}_{name}_{digest}.npy")
             if not os.path.exists(part):
                 t0 = time.perf_counter()
                 np.save(part, wenv.reference(env, made[name], nrm, v))
@@ -153,6 +170,9 @@ def main():
     ap.add_argument("--make-table-reference", action="store_true",
                     help="the tabulated BRDFs' reference on the 2000 pairs (about 25 min)")
     ap.add_argument("--tables", action="store_true", help="measure the tabulated BRDFs instead")
+    ap.add_argument("--make-principled-reference", action="store_true",
+                    help="the Principled BSDFs' reference on the 2000 pairs")
+    ap.add_argument("--principled", action="store_true", help="measure the Principled BSDFs instead")
     ap.add_argument("--presets", default="draft,default,high,high-grazing,high-lights",
                     help="comma-separated presets, or " + ", ".join(SETTINGS))
     ap.add_argument("--method", default=None,
@@ -167,9 +187,14 @@ def main():
     if args.make_table_reference:
         make_reference(TABLE_DATA, materials=TABLES)
         return
-    results = evaluate(args.presets.split(","), args.method, TABLE_DATA if args.tables else DATA)
+    if args.make_principled_reference:
+        make_reference(PRINCIPLED_DATA, materials=PRINCIPLED)
+        return
+    path, name = ((TABLE_DATA, "accuracy_tables.json") if args.tables else
+                  (PRINCIPLED_DATA, "accuracy_principled.json") if args.principled else (DATA, "accuracy.json"))
+    results = evaluate(args.presets.split(","), args.method, path)
     os.makedirs(OUT, exist_ok=True)
-    with open(os.path.join(OUT, "accuracy_tables.json" if args.tables else "accuracy.json"), "w") as fp:
+    with open(os.path.join(OUT, name), "w") as fp:
         json.dump(results, fp, indent=2)
 
 

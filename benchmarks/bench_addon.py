@@ -3,7 +3,9 @@ under Blender's "sunset" HDRI, the median time per view change of
 
   - the add-on's shading path (read the evaluated mesh with foreach_get, shade, write the colour
     attribute with foreach_set), split into its three parts, and
-  - the `wenv.shade` operator called through bpy.ops (adds operator dispatch and the depsgraph).
+  - the `wenv.shade` operator called through bpy.ops (adds operator dispatch and the depsgraph),
+  - the same views as a viewport sees them (50 degree lens, 16:9), shading and writing only the
+    vertices that face the eye and are on screen (Shade Only What Is Seen).
 
 The view orbits the object by a small step each repeat (a new view every time, as when the user
 drags the viewport).  Prints a table and writes out/bench_addon.json.
@@ -59,6 +61,13 @@ def build_scene(levels, quality):
     return scene, obj
 
 
+def perspective(fov_degrees, aspect, near=0.1, far=100.0):
+    """OpenGL's view -> clip matrix, as a viewport's window_matrix."""
+    f = 1.0 / math.tan(math.radians(fov_degrees) / 2)
+    return np.array([[f / aspect, 0, 0, 0], [0, f, 0, 0],
+                     [0, 0, (far + near) / (near - far), 2 * far * near / (near - far)], [0, 0, -1, 0]])
+
+
 def orbit_view(i, distance=4.0):
     """World -> view matrix of a camera orbiting the origin, 1 degree per step."""
     a = math.radians(30 + i)
@@ -78,13 +87,13 @@ def bench(levels, quality, repeats):
     q = engine.quality_value(scene.wenv.quality)
     keys = materials.slot_material_keys(obj)
 
-    parts = {"read": [], "shade": [], "write": [], "total": []}
+    parts = {"read": [], "shade": [], "write": [], "total": [], "shade_seen": [], "write_seen": [], "seen_fraction": []}
     for i in range(1, repeats + 1):
         view = views.View.from_view_matrix(np.array(orbit_view(i)), True)
         t0 = time.perf_counter()
         data = meshes.read_mesh(obj, dg)
         t1 = time.perf_counter()
-        rgb = engine.shade_arrays(engine.shaders.use_material(q, keys[0]), data, view)
+        rgb, _ = engine.shade_arrays(engine.shaders.use_material(q, keys[0]), data, view)
         t2 = time.perf_counter()
         meshes.write_colors(obj.data, data.domain, rgb)
         t3 = time.perf_counter()
@@ -92,6 +101,16 @@ def bench(levels, quality, repeats):
         parts["shade"].append(t2 - t1)
         parts["write"].append(t3 - t2)
         parts["total"].append(t3 - t0)
+        # the same view from a viewport (50 degree lens, 16:9), shading only what it sees
+        view.view_projection = perspective(50.0, 16 / 9) @ np.array(orbit_view(i))
+        t0 = time.perf_counter()
+        rgb, seen = engine.shade_arrays(engine.shaders.use_material(q, keys[0]), data, view, cull=True)
+        t1 = time.perf_counter()
+        meshes.write_colors(obj.data, data.domain, rgb, seen)
+        t2 = time.perf_counter()
+        parts["shade_seen"].append(t1 - t0)
+        parts["write_seen"].append(t2 - t1)
+        parts["seen_fraction"].append(float(seen.mean()) * 1e-3)  # reported x 1e3 below, like the times
 
     op = []
     for i in range(repeats + 1, 2 * repeats + 1):
@@ -116,11 +135,12 @@ def main():
     addon.register()
     rows = [bench(lv, args.quality, args.repeats) for lv in args.levels]
     print(f"quality {args.quality}, {args.threads} threads, median of {args.repeats} view changes (ms):")
-    print(f"{'vertices':>9} {'read':>7} {'shade':>7} {'write':>7} {'total':>7} {'operator':>9}")
+    print(f"{'vertices':>9} {'read':>7} {'shade':>7} {'write':>7} {'total':>7} {'operator':>9}   "
+          f"{'seen':>5} {'shade':>7} {'write':>7}  (only what a viewport sees)")
     for r in rows:
         m = r["median_ms"]
         print(f"{r['vertices']:>9} {m['read']:7.2f} {m['shade']:7.2f} {m['write']:7.2f} {m['total']:7.2f} "
-              f"{m['operator']:9.2f}")
+              f"{m['operator']:9.2f}   {100 * m['seen_fraction']:4.0f}% {m['shade_seen']:7.2f} {m['write_seen']:7.2f}")
     path = args.json
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     with open(path, "w") as fp:

@@ -3,9 +3,10 @@ the same pixels: the test of wenv.Principled against Cycles (tests/test_principl
 grid (benchmarks/principled_vs_cycles.py) read it.
 
 The scene: a smooth UV sphere (256 x 128) of radius 1 at the origin, an orthographic camera on -Y
-looking along +Y that frames it, the World an Environment Texture of the HDRI (Blender's default
-"Linear" interpolation, which wenv.reference reads lobes narrower than a pixel through), no
-denoising, no adaptive
+looking along +Y that frames it, the World an Environment Texture of the HDRI with "Closest"
+interpolation (the piecewise-constant pixels wenv.reference integrates; Blender's default "Linear"
+blurs the lighting by about a pixel, which lobes a few pixels wide reflecting the sunset's sun of a
+few pixels tell apart by a few per cent at the highlight), no denoising, no adaptive
 sampling, a pixel filter 0.01 pixels wide (every sample at the pixel's centre, so a pixel is one
 (normal, view) pair), "Standard" view transform, 32-bit EXR output (scene-linear, as wenv's
 radiance).  The sphere is convex, so every ray that leaves it sees the World: one bounce is exact.
@@ -62,6 +63,7 @@ class SphereScene:
         nt = world.node_tree
         env = nt.nodes.new("ShaderNodeTexEnvironment")
         env.image = bpy.data.images.load(bundled_hdri(hdri))
+        env.interpolation = "Closest"
         nt.links.new(env.outputs["Color"], nt.nodes["Background"].inputs["Color"])
         bpy.ops.mesh.primitive_uv_sphere_add(segments=256, ring_count=128, radius=1.0)
         self.sphere = bpy.context.active_object

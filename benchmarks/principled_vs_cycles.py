@@ -1,5 +1,5 @@
 """wenv.reference of Principled BSDF materials against Cycles' render of them (through bpy): a grid of
-dielectrics, metals and coated paints at several roughnesses and colours, each on an unoccluded
+dielectrics, metals, coated paints, sheens and a rough diffuse at several roughnesses and colours, each on an unoccluded
 sphere under bundled HDRIs (benchmarks/cycles_sphere.py), rendered twice with different seeds so
 that Cycles' own noise is measured beside the difference.  The README's Cycles table.
 
@@ -7,7 +7,7 @@ that Cycles' own noise is measured beside the difference.  The README's Cycles t
 
 Per case: the relative RMSE of one render against the other (/ sqrt 2: one render's noise), of their
 mean against wenv.reference, what the mean's own noise accounts for (noise / sqrt 2), and the mean
-radiance per channel, Cycles over wenv.  Writes out/principled_vs_cycles.json; about 15 minutes."""
+radiance per channel, Cycles over wenv.  Writes out/principled_vs_cycles.json; about 20 minutes."""
 import argparse
 import json
 import os
@@ -36,6 +36,11 @@ GRID = {
                          coat_roughness=0.05),
     "GGX (not Multiscatter) metal r0.6": dict(base_color=(0.9, 0.9, 0.9), metallic=1.0, roughness=0.6,
                                               distribution="ggx"),
+    "velvet: sheen r0.3 over paint": dict(base_color=(0.3, 0.05, 0.1), roughness=0.6, sheen_weight=1.0,
+                                          sheen_roughness=0.3, sheen_tint=(1.0, 0.8, 0.9)),
+    "sheen r0.8 under a coat": dict(base_color=(0.1, 0.3, 0.2), roughness=0.5, sheen_weight=0.7,
+                                    sheen_roughness=0.8, coat_weight=1.0, coat_roughness=0.2),
+    "rough diffuse (Diffuse Roughness 1)": dict(base_color=(0.6, 0.4, 0.3), roughness=0.5, diffuse_roughness=1.0),
 }
 
 
@@ -44,9 +49,9 @@ def main():
     ap.add_argument("--hdris", default="sunset,forest,studio")
     ap.add_argument("--size", type=int, default=48)
     ap.add_argument("--samples", type=int, default=512)
-    ap.add_argument("--cases", default="", help="comma-separated names of GRID (default: all)")
+    ap.add_argument("--cases", default="", help="names of GRID separated by semicolons (default: all)")
     args = ap.parse_args()
-    names = [c for c in args.cases.split(",") if c] or list(GRID)
+    names = [c for c in args.cases.split(";") if c] or list(GRID)
     results = []
     for hdri in args.hdris.split(","):
         scene = SphereScene(hdri, size=args.size, samples=args.samples)

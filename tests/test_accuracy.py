@@ -74,6 +74,22 @@ def shade_errors(preset, data, materials):
     return out
 
 
+def assert_stored_reference_current(data, materials, cases, pick):
+    """wenv.reference recomputed live on the pairs `pick` of the stored ones equals what is stored,
+    for each (hdri, material name) of `cases`; materials: {name: wenv material}."""
+    for h, name in cases:
+        env = wenv.load_environment(hdri_path(h))
+        fresh = wenv.reference(env, materials[name], data["normals"][pick], data["views"][pick])
+        assert np.allclose(fresh, data[f"{h}/{name}"][pick], rtol=1e-5, atol=1e-7), (h, name)
+
+
+def assert_within_bounds(preset, errors, bounds, data, n_materials):
+    """Every HDRI and material of data measured, none above its bound."""
+    assert len(errors) == len(json.loads(str(data["hdris"]))) * n_materials
+    over = {k: round(100 * e, 2) for k, e in errors.items() if e > bounds[preset][k[1]]}
+    assert not over, f"{preset}: relative RMSE (%) above the bounds: {over}"
+
+
 def preset_errors(preset, data):
     """shade_errors of the stored Cook-Torrance and Lambert materials, computed once per session."""
     if preset not in _errors:
@@ -83,12 +99,9 @@ def preset_errors(preset, data):
 
 
 def test_stored_reference_is_current(data):
-    specs = json.loads(str(data["materials"]))
-    pick = np.arange(0, 2000, 125)
-    for h, name in [("sunset", "m0.2"), ("studio", "lambert"), ("forest", "m0.05")]:
-        env = wenv.load_environment(hdri_path(h))
-        fresh = wenv.reference(env, material(specs[name]), data["normals"][pick], data["views"][pick])
-        assert np.allclose(fresh, data[f"{h}/{name}"][pick], rtol=1e-5, atol=1e-7)
+    made = {name: material(spec) for name, spec in json.loads(str(data["materials"])).items()}
+    assert_stored_reference_current(data, made, [("sunset", "m0.2"), ("studio", "lambert"), ("forest", "m0.05")],
+                                    np.arange(0, 2000, 125))
 
 
 def test_extra_reference_is_current_and_new_pairs(data):
@@ -111,9 +124,7 @@ def test_pairs_cover_grazing_views(data):
 
 @pytest.mark.parametrize("preset", ["draft", "default", "high"])
 def test_relative_rmse_within_preset_bounds(preset, data):
-    errors = preset_errors(preset, data)
-    over = {k: round(100 * e, 2) for k, e in errors.items() if e > BOUNDS[preset][k[1]]}
-    assert not over, f"{preset}: relative RMSE (%) above the bounds: {over}"
+    assert_within_bounds(preset, preset_errors(preset, data), BOUNDS, data, len(BOUNDS[preset]))
 
 
 def test_high_within_one_percent_from_m_0_1(data):

@@ -16,7 +16,6 @@ import numpy as np
 import pytest
 
 import wenv
-from conftest import hdri_path
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 from benchmarks import merl_files as M  # noqa: E402
@@ -57,11 +56,8 @@ def preset_errors(preset, data, tables):
 
 
 def test_stored_reference_is_current(data, tables):
-    pick = np.arange(3, 2000, 125)
-    for h, name in [("sunset", "paint"), ("forest", "retro"), ("studio", "t0.05")]:
-        env = wenv.load_environment(hdri_path(h))
-        fresh = wenv.reference(env, tables[name], data["normals"][pick], data["views"][pick])
-        assert np.allclose(fresh, data[f"{h}/{name}"][pick], rtol=1e-5, atol=1e-7)
+    test_accuracy.assert_stored_reference_current(data, tables, [("sunset", "paint"), ("forest", "retro"),
+                                                                 ("studio", "t0.05")], np.arange(3, 2000, 125))
 
 
 def test_same_pairs_as_cook_torrance(data):
@@ -72,10 +68,7 @@ def test_same_pairs_as_cook_torrance(data):
 
 @pytest.mark.parametrize("preset", ["draft", "default", "high"])
 def test_relative_rmse_within_preset_bounds(preset, data, tables):
-    errors = preset_errors(preset, data, tables)
-    assert len(errors) == 8 * len(tables)
-    over = {k: round(100 * e, 2) for k, e in errors.items() if e > BOUNDS[preset][k[1]]}
-    assert not over, f"{preset}: relative RMSE (%) above the bounds: {over}"
+    test_accuracy.assert_within_bounds(preset, preset_errors(preset, data, tables), BOUNDS, data, len(tables))
 
 
 @pytest.mark.parametrize("preset", ["draft", "default", "high"])

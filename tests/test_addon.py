@@ -236,8 +236,9 @@ def test_view_matrix_viewport_and_orthographic_camera(scene, perspective):
         want = sh.shade(n, np.array(inv.col[2][:3], np.float32))
     np.testing.assert_allclose(rgb, want, rtol=1e-4, atol=1e-5)
 
-    # The 3D viewport itself gives the same colours.
+    # The 3D viewport itself gives the same colours (every vertex: test_viewport_shades_only_what_it_sees).
     obj.data.color_attributes.remove(obj.data.color_attributes[ATTR])
+    scene.wenv.shade_only_seen = False
     assert shade_op(view="VIEWPORT") == {"FINISHED"}
     np.testing.assert_allclose(attribute(obj)[1], rgb, rtol=1e-5, atol=1e-6)
     # What the viewport draws, the evaluated mesh, follows each new shading.
@@ -255,6 +256,42 @@ def test_view_matrix_viewport_and_orthographic_camera(scene, perspective):
         assert shade_op(view="CAMERA") == {"FINISHED"}
         d = np.array(scene.camera.matrix_world.col[2][:3], np.float32)
         np.testing.assert_allclose(attribute(obj)[1], sh.shade(n, d), rtol=1e-4, atol=1e-5)
+
+
+def test_viewport_shades_only_what_it_sees(scene):
+    """From a perspective viewport, Shade Only What Is Seen (the default) shades the vertices facing
+    the eye and inside the viewport's frustum (its window_matrix after the view: Blender's
+    perspective_matrix convention) exactly as shading all does, and leaves the others' colours as
+    they were; off, or from the camera, every vertex is shaded."""
+    env_world(scene, "forest")
+    obj = add_monkey(subdivisions=1)
+    mat = set_material(obj)
+    rv3d = next(a for a in bpy.context.screen.areas if a.type == "VIEW_3D").spaces.active.region_3d
+    rv3d.view_location = (0.6, 0.0, 0.4)  # off centre: part of the head is off screen
+    rv3d.view_rotation = mathutils.Euler((1.2, 0.0, 0.3)).to_quaternion()
+    rv3d.view_distance = 2.2
+    rv3d.view_perspective = "PERSP"
+    rot = np.array(rv3d.view_rotation.to_matrix(), np.float64)
+    cam = np.eye(4)
+    cam[:3, :3] = rot
+    cam[:3, 3] = np.array(rv3d.view_location) + rot[:, 2] * rv3d.view_distance
+    vp = np.array(rv3d.window_matrix, np.float64) @ np.linalg.inv(cam)
+    eye = tuple(cam[:3, 3])
+    p, n = world_arrays(obj, corner=False)
+    seen = wenv.visible_vertices(p, n, eye, vp)
+    facing = wenv.visible_vertices(p, n, eye)
+    assert 0.05 < seen.mean() < facing.mean() < 0.9  # some face away, some facing ones are off screen
+
+    meshes.write_colors(obj.data, "POINT", np.full((len(p), 3), 0.25, np.float32))
+    assert scene.wenv.shade_only_seen and shade_op(view="VIEWPORT") == {"FINISHED"}
+    _, rgb = attribute(obj)
+    want = core_shader(wenv.load_environment(hdri_path("forest")), wenv_material(mat)).shade_mesh(p, n, eye)
+    np.testing.assert_allclose(rgb[seen], want[seen], rtol=1e-4, atol=1e-5)
+    assert np.all(rgb[~seen] == 0.25)
+
+    scene.wenv.shade_only_seen = False
+    assert shade_op(view="VIEWPORT") == {"FINISHED"}
+    np.testing.assert_allclose(attribute(obj)[1], want, rtol=1e-4, atol=1e-5)
 
 
 def test_viewport_shows_the_colours_only_when_asked_and_is_restored(scene):

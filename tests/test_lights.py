@@ -33,8 +33,11 @@ def pairs():
     return np.float32(np.r_[nrm, n2]), np.float32(np.r_[v, v2])
 
 
-@pytest.mark.parametrize("roughness", [None, 0.05, 0.1, 0.2, 0.5])
+@pytest.mark.parametrize("roughness", [None, 0.002, 0.005, 0.05, 0.1, 0.2, 0.5])
 def test_lights_alone_match_the_reference(roughness):
+    """Lobes of every width, 0.002 and 0.005 narrower than the pixels (0.012 rad): there each pixel
+    is integrated over its area, as the reference integrates such lobes, where its centre alone
+    would light a lobe only when it happens to fall in it."""
     env = softbox_and_sun()
     nrm, v = pairs()
     if roughness is None:
@@ -45,7 +48,9 @@ def test_lights_alone_match_the_reference(roughness):
     out, ref = shader.shade(nrm, v), wenv.reference(env, mat, nrm, v)
     assert shader.stats["direct_lights"] == 604
     err = float(np.sqrt(np.mean((out - ref) ** 2) / np.mean(ref ** 2)))
-    assert err < 0.002, err  # measured 0.008 - 0.05 %
+    # measured 0.008 - 0.05 %; narrower than a pixel 0.4 - 0.9 % (the pixels' areas on grids of
+    # points against the lobe's own rule), 11 - 98 % at the pixels' centres alone
+    assert err < (0.002 if roughness is None or roughness > 0.01 else 0.015), err
     assert np.abs(out - ref).max() < 0.01 * ref.max()
 
 

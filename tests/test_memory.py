@@ -42,3 +42,47 @@ def test_split_sum_counts_its_source_pyramid(sphere):
     # The environment's mip pyramid, kept to prefilter again for a new material, is most of it.
     assert m["stats"]["source_bytes"] > m["stats"]["prefilter_bytes"] > 0
     assert close_to_model(m), m
+
+
+# What a Shader without `method` runs, and the memory budget for rotation's matrices.
+import numpy as np  # noqa: E402
+
+import wenv  # noqa: E402
+
+DRAFT_MB = 29  # `draft`'s matrices in memory (64 x 64 x 16 x 16 x 16 x 16 at epsilon 1e-3)
+
+
+def flat_scene():
+    return wenv.Environment(np.ones((16, 32, 3), np.float32)), wenv.Lambert(0.5)
+
+
+def test_high_without_a_method_slices_instead_of_building_gigabytes(tmp_path):
+    """`high`'s matrices would take ~9.5 GB: without a method it slices, and rotation asked for by
+    name is a ValueError that says how much, before anything large is built."""
+    env, mat = flat_scene()
+    shader = wenv.Shader(env, mat, quality="high", cache_dir=str(tmp_path))
+    assert shader.method == "slicing" and list(tmp_path.iterdir()) == []
+    with pytest.raises(ValueError, match=r"about 9[0-9]{3} MB, more than memory_budget_mb \(1024\).*slicing"):
+        wenv.Shader(env, mat, quality="high", method="rotation", cache_dir=False)
+    assert wenv.Shader(env, mat, quality="default").method == "rotation"
+
+
+def test_rotation_is_chosen_where_its_matrices_are_cached(tmp_path):
+    """Over the budget and not cached: slicing; once the matrices are in the cache (built with a
+    larger budget), the same call loads them and rotates."""
+    env, mat = flat_scene()
+    small = DRAFT_MB // 2
+    assert wenv.Shader(env, mat, quality="draft", cache_dir=str(tmp_path), memory_budget_mb=small).method == "slicing"
+    with pytest.raises(ValueError, match="memory_budget_mb"):
+        wenv.Shader(env, mat, quality="draft", method="rotation", cache_dir=str(tmp_path), memory_budget_mb=small)
+    built = wenv.Shader(env, mat, quality="draft", method="rotation", cache_dir=str(tmp_path))
+    assert built.stats["cache"] == "built" and abs(built.stats["rotation_bytes"] / 2**20 - DRAFT_MB) < 3
+    again = wenv.Shader(env, mat, quality="draft", cache_dir=str(tmp_path), memory_budget_mb=small)
+    assert again.method == "rotation" and again.stats["cache"] == "loaded"
+
+
+def test_matrix_epsilons_that_print_alike_keep_their_own_cache_files(tmp_path):
+    env, mat = flat_scene()
+    for eps in (1e-3, 1.0004e-3):
+        wenv.Shader(env, mat, quality=dict(SMALL, matrix_epsilon=eps), method="rotation", cache_dir=str(tmp_path))
+    assert len(list(tmp_path.iterdir())) == 2

@@ -113,6 +113,22 @@ def test_white_metal_with_multiscatter_reflects_everything(roughness):
         assert albedo(single, deg) == pytest.approx((e, e, e), abs=0.006), deg
 
 
+@pytest.mark.parametrize("sigma", [0.3, 1.0])
+def test_rough_diffuse_conserves_energy(sigma):
+    """Diffuse Roughness: the energy-preserving Oren-Nayar (OpenPBR's, as Cycles has it) of a white
+    base reflects everything at every view, flattens towards grazing views (brighter there than
+    Lambert's), and is no longer Lambertian (its diffuse_at is 0: it is a lobe)."""
+    rough = wenv.Principled(base_color=1.0, specular_ior_level=0.0, diffuse_roughness=sigma)
+    for deg in (0, 45, 80):
+        assert albedo(rough, deg) == pytest.approx((1, 1, 1), abs=0.005), deg
+    assert rough.diffuse_at([1.0, 0.3]) == [(0.0, 0.0, 0.0)] * 2 and rough.unhonoured == ()
+    lambert = wenv.Principled(base_color=1.0, specular_ior_level=0.0)
+    wo = view(60)
+    # retro-reflection: light from the view itself returns more than Lambert's 1/pi
+    assert rough.eval(wo, wo)[0] > (1.2 if sigma < 0.5 else 1.5) * lambert.eval(wo, wo)[0]
+    assert lambert.eval(wo, wo)[0] == pytest.approx(0.5 / math.pi, rel=1e-5)
+
+
 def test_smooth_dielectric_reflects_its_fresnel():
     """A black dielectric of roughness 0 reflects the exact Fresnel of its IOR at every view; Specular
     IOR Level scales F0 by twice itself (0 removes the lobe); Specular Tint colours F0 only."""
@@ -180,6 +196,8 @@ MATERIALS = {
     "paint": dict(base_color=(0.6, 0.15, 0.08), roughness=0.3),
     "metal": dict(base_color=(0.9, 0.6, 0.3), metallic=1.0, roughness=0.3, specular_tint=(1.0, 0.9, 0.8)),
     "coated": dict(base_color=(0.2, 0.3, 0.6), roughness=0.5, coat_weight=1.0, coat_roughness=0.2),
+    "velvet": dict(base_color=(0.3, 0.05, 0.1), roughness=0.6, sheen_weight=1.0, sheen_roughness=0.3,
+                   sheen_tint=(1.0, 0.8, 0.9)),
 }
 
 
@@ -190,6 +208,8 @@ LIKE = {
     "metal": wenv.CookTorrance(lobes=[dict(roughness=0.09, ior=3.0, specular=(1.0, 0.7, 0.4))], distribution="ggx"),
     "coated": wenv.CookTorrance(diffuse=(0.18, 0.27, 0.55), lobes=[dict(roughness=0.04, ior=1.5),
                                                                     dict(roughness=0.25, ior=1.5)], distribution="ggx"),
+    "velvet": wenv.CookTorrance(diffuse=(0.25, 0.04, 0.08), lobes=[dict(roughness=0.36, ior=1.5),
+                                                                    dict(roughness=1.0, ior=1.5)], distribution="ggx"),
 }
 
 
@@ -202,7 +222,9 @@ def relative_rmse(a, b):
 def test_every_method_shades_principled(method, name):
     """Every method takes a Principled material, its diffuse part changing with the view included,
     and errs on it as on a Cook-Torrance material of the same GGX lobes (within 1.25x + 0.5 point):
-    the BRDF enters only through the material interface."""
+    the BRDF enters only through the material interface.  Split-sum prefilters the lighting about
+    the mirror direction, which a sheen lobe (brightest towards grazing, not about the mirror) is
+    not: there it errs more (5.9 % against 4.0 %, measured), its assumption rather than the interface."""
     mat = wenv.Principled(**MATERIALS[name])
     env = smooth_env()
     nrm, v = pairs(300, 3)
@@ -211,7 +233,43 @@ def test_every_method_shades_principled(method, name):
         out = wenv.Shader(env, m, quality="draft", method=method, cache_dir=False).shade(nrm, v)
         assert np.all(np.isfinite(out)) and np.all(out >= 0)
         errors.append(relative_rmse(out, wenv.reference(env, m, nrm, v)))
-    assert errors[0] < 1.25 * errors[1] + 0.005, (name, method, errors)
+    factor = 1.6 if (name, method) == ("velvet", "split_sum") else 1.25
+    assert errors[0] < factor * errors[1] + 0.005, (name, method, errors)
+
+
+def test_sheen_table_reproduces_cycles_under_a_sun_it_was_not_measured_with():
+    """scripts/measure_sheen_table.py measured Cycles' sheen table under eight sun directions; under
+    another sun, a sheen-only sphere rendered by Cycles (a delta light: every sample the same, so the
+    pixels are exact values of f cos) equals wenv's f cos at every pixel to float precision."""
+    bpy = pytest.importorskip("bpy")
+    from cycles_sphere import SphereScene
+    scene = SphereScene("sunset", size=48, samples=1)
+    scene.scene.world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.0
+    sun_data = bpy.data.lights.new("test-sun", "SUN")
+    sun_data.energy, sun_data.angle = 1.0, 0.0
+    sun = bpy.data.objects.new("test-sun", sun_data)
+    scene.scene.collection.objects.link(sun)
+    sun.rotation_euler = (0.9, 0.0, 2.4)  # shines along its -Z
+    bpy.context.view_layer.update()
+    to_sun = np.array(sun.matrix_world)[:3, 2]
+    nrm = scene.normals.astype(np.float64)
+    view = np.array([0.0, -1.0, 0.0])
+    for roughness in (0.15, 0.45, 0.9):
+        inputs = dict(base_color=(0.0, 0.0, 0.0), specular_ior_level=0.0, sheen_weight=1.0,
+                      sheen_roughness=roughness, sheen_tint=(1.0, 0.7, 0.4))
+        scene.principled(**inputs)
+        cycles = scene.render()[scene.mask].astype(np.float64)
+        mat = wenv.Principled(**inputs)
+        lit = nrm @ to_sun > 0.05
+        # f cos at each pixel: the material in the pixel's frame (z the normal)
+        t = np.cross(nrm, [0.3, 0.2, 0.9])
+        t /= np.linalg.norm(t, axis=1, keepdims=True)
+        b = np.cross(nrm, t)
+        local = lambda d: np.stack([t @ d, b @ d, nrm @ d], 1) if d.ndim == 1 else np.stack(  # noqa: E731
+            [np.sum(t * d, 1), np.sum(b * d, 1), np.sum(nrm * d, 1)], 1)
+        got = mat.eval(np.float32(local(to_sun)[lit]), np.float32(local(view)[lit])).astype(np.float64)
+        np.testing.assert_allclose(got, cycles[lit], rtol=2e-3, atol=1e-6)
+    bpy.data.objects.remove(sun)
 
 
 def test_glossmeter_reads_principled():
@@ -235,14 +293,19 @@ def cycles_scene():
     return SphereScene("sunset", size=48, samples=384)
 
 
-@pytest.mark.parametrize("name", list(MATERIALS) + ["narrow coat"])
+CYCLES_ONLY = {
+    "narrow coat": dict(base_color=(0.2, 0.3, 0.6), roughness=0.5, coat_weight=1.0, coat_roughness=0.05),
+    "rough diffuse": dict(base_color=(0.6, 0.4, 0.3), roughness=0.5, diffuse_roughness=1.0),
+}
+
+
+@pytest.mark.parametrize("name", list(MATERIALS) + list(CYCLES_ONLY))
 def test_reference_matches_cycles_within_its_noise(name, cycles_scene):
     """Cycles' render of the sphere (the mean of two seeds) against wenv.reference of the same
     material on the same pixels: the difference is what the render's own noise makes it (its
     relative RMSE from the reference within 1.5x the mean's noise plus 0.3 %), and the mean radiance
     per channel agrees within 1 % (benchmarks/principled_vs_cycles.py runs the full grid)."""
-    inputs = dict(MATERIALS.get(name, dict(base_color=(0.2, 0.3, 0.6), roughness=0.5, coat_weight=1.0,
-                                           coat_roughness=0.05)))
+    inputs = dict(MATERIALS.get(name) or CYCLES_ONLY[name])
     cycles_scene.principled(**inputs)
     r = cycles_scene.compare(wenv.Principled(**inputs))
     assert r["error"] < 1.5 * r["noise_of_mean"] + 0.003, (name, r["error"], r["noise_of_mean"])

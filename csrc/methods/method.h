@@ -53,6 +53,7 @@ typedef struct {
     wenv_cache_mode cache;
     const char *cache_dir;      /* WENV_CACHE_FOLDER only */
     const wenv_progress *progress; /* for work done while creating (may be NULL) */
+    size_t memory_budget;       /* bytes precomputed data may take (0: no limit) */
 } wenv_method_setup;
 
 typedef struct wenv_method {
@@ -87,7 +88,12 @@ extern const wenv_method WENV_METHOD_ROTATION, WENV_METHOD_SLICING, WENV_METHOD_
 size_t wenv_method_count(void);
 const wenv_method *wenv_method_at(size_t i);
 const wenv_method *wenv_method_named(const char *name); /* NULL if there is none */
-const wenv_method *wenv_method_default(void);            /* what wenv.Shader uses unless told */
+/* The method whose quality keys and presets wenv.Shader reads unless told (wavelet rotation) ... */
+const wenv_method *wenv_method_default(void);
+/* ... and the one it then runs with that quality: rotation where its matrices are in the cache or
+ * cheap to build (within the memory budget and about `default`'s size), else slicing, the same
+ * shading without matrices -- so no preset builds gigabytes unasked. */
+const wenv_method *wenv_method_choose_default(const void *quality, const wenv_method_setup *setup);
 
 /* A method's preset by name (NULL if `name` is not a preset). */
 const void *wenv_method_preset(const wenv_method *method, const char *name);

@@ -1,5 +1,6 @@
 /* The registry of shading methods behind wenv.Shader(method=...). */
 #include "methods/method.h"
+#include "methods/wavelet/wavelet.h"
 
 #include <string.h>
 
@@ -26,6 +27,11 @@ const wenv_method *wenv_method_named(const char *name)
 /* Wavelet rotation: the method this project is about, and the fastest at a given accuracy once its
  * matrices are cached (README, "Speed against accuracy"). */
 const wenv_method *wenv_method_default(void) { return &WENV_METHOD_ROTATION; }
+
+const wenv_method *wenv_method_choose_default(const void *quality, const wenv_method_setup *setup)
+{
+    return wenv_wavelet_default_method(quality, setup);
+}
 
 const void *wenv_method_preset(const wenv_method *method, const char *name)
 {

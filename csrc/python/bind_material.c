@@ -111,8 +111,8 @@ static PyObject *wrap_material(PyTypeObject *type, wenv_material *mat, wenv_dist
     return (PyObject *)obj;
 }
 
-/* Room for a model's per-view float terms in _specular_float (the exact lights allow 16). */
-#define WENV_PY_VIEW_TERMS_MAX 16
+/* Room for a model's per-view float terms in _specular_float (the exact lights allow 32). */
+#define WENV_PY_VIEW_TERMS_MAX 32
 
 typedef enum { EVAL_FULL, EVAL_SPECULAR, EVAL_SPECULAR_BATCH, EVAL_SPECULAR_FLOAT } eval_mode;
 

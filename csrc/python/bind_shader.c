@@ -9,6 +9,7 @@
 #include "auto/autoquality.h"
 #include "methods/method.h"
 #include "methods/presets.h"
+#include "methods/visibility.h"
 #include "python/bind_envmap.h"
 #include "python/bind_material.h"
 
@@ -23,6 +24,7 @@ typedef struct {
     int is_auto;
     wenv_auto_choice auto_choice;
     double target_error, memory_budget_mb;
+    Py_ssize_t visible; /* vertices the last shade_mesh(cull=True) shaded; -1 if it shaded all */
 } ShaderObject;
 
 /* ---- quality dicts, read and written through the method's parameter table ---- */
@@ -192,10 +194,6 @@ static int choose_auto(ShaderObject *self, PyObject *env_obj, PyObject *mat_obj,
         PyErr_Format(PyExc_ValueError, "target_error must be in (0, 1], got %g", self->target_error);
         return -1;
     }
-    if (!(self->memory_budget_mb > 0.0 && self->memory_budget_mb < 1e9)) {
-        PyErr_Format(PyExc_ValueError, "memory_budget_mb must be positive, got %g", self->memory_budget_mb);
-        return -1;
-    }
     const struct wenv_envmap *env = wenv_py_envmap(env_obj, "env");
     const struct wenv_material *mat = wenv_py_material(mat_obj, "material");
     if (!env || !mat)
@@ -236,12 +234,17 @@ static int Shader_init(ShaderObject *self, PyObject *args, PyObject *kwargs)
     const char *method_name = NULL;
     self->target_error = 0.01;
     self->memory_budget_mb = 1024.0;
+    self->visible = -1;
     if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|OzOOddO:Shader", kwlist, &env_obj, &mat_obj, &quality_obj,
                                      &method_name, &cache_obj, &progress_obj, &self->target_error,
                                      &self->memory_budget_mb, &normals_obj))
         return -1;
     if (self->state) {
         PyErr_SetString(PyExc_RuntimeError, "Shader is already initialised");
+        return -1;
+    }
+    if (!(self->memory_budget_mb > 0.0 && self->memory_budget_mb < 1e9)) {
+        PyErr_Format(PyExc_ValueError, "memory_budget_mb must be positive, got %g", self->memory_budget_mb);
         return -1;
     }
     if (!wenv_py_envmap(env_obj, "env") || !wenv_py_material(mat_obj, "material"))
@@ -288,10 +291,13 @@ static int Shader_init(ShaderObject *self, PyObject *args, PyObject *kwargs)
     wenv_py_progress_bridge bridge = {self->progress, 0};
     wenv_progress progress = wenv_py_progress(&bridge);
     setup.progress = &progress;
+    setup.memory_budget = (size_t)(self->memory_budget_mb * 1048576.0);
     wenv_error err = {0};
     wenv_status st;
     void *state = NULL;
     Py_BEGIN_ALLOW_THREADS
+    if (!method_name && !is_auto) /* reads the cache folder, may build a few sample matrices */
+        self->method = method = wenv_method_choose_default(self->quality, &setup);
     st = method->create(&state, self->quality, &setup, &err);
     Py_END_ALLOW_THREADS
     Py_XDECREF(cache_bytes);
@@ -377,28 +383,86 @@ done:
     return result;
 }
 
-static PyObject *Shader_shade_mesh(ShaderObject *self, PyObject *args, PyObject *kwargs)
+/* eye: a sequence of 3 finite numbers. */
+static int parse_eye(PyObject *obj, double eye[3])
 {
-    static char *kwlist[] = {"positions", "normals", "eye", NULL};
-    PyObject *pobj, *nobj, *eobj;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO:shade_mesh", kwlist, &pobj, &nobj, &eobj))
-        return NULL;
-    double eye[3];
-    PyObject *seq = PySequence_Fast(eobj, "eye must be a sequence of 3 numbers");
+    PyObject *seq = PySequence_Fast(obj, "eye must be a sequence of 3 numbers");
     if (!seq)
-        return NULL;
+        return -1;
     if (PySequence_Fast_GET_SIZE(seq) != 3) {
         Py_DECREF(seq);
         PyErr_SetString(PyExc_ValueError, "eye must have 3 components");
-        return NULL;
+        return -1;
     }
     for (int c = 0; c < 3; c++)
         if (wenv_py_get_finite(PySequence_Fast_GET_ITEM(seq, c), "eye", &eye[c]) < 0) {
             Py_DECREF(seq);
-            return NULL;
+            return -1;
         }
     Py_DECREF(seq);
-    Py_buffer pb, nb;
+    return 0;
+}
+
+/* Shades the `count` vertices whose visible[i] is set (all if visible is NULL) into their rows of
+ * out (n x 3); the other rows are left as they are. */
+static int shade_visible(ShaderObject *self, const float *normals, const float *views, size_t n,
+                         const unsigned char *visible, size_t count, float *out)
+{
+    float *gathered = NULL, *shaded = out;
+    if (visible) {
+        gathered = PyMem_Malloc((count ? count : 1) * 9 * sizeof(float)); /* normals, views, radiance */
+        if (!gathered) {
+            PyErr_NoMemory();
+            return -1;
+        }
+        for (size_t i = 0, k = 0; i < n; i++)
+            if (visible[i]) {
+                memcpy(gathered + 3 * k, normals + 3 * i, 3 * sizeof(float));
+                memcpy(gathered + 3 * (count + k), views + 3 * i, 3 * sizeof(float));
+                k++;
+            }
+        normals = gathered;
+        views = gathered + 3 * count;
+        shaded = gathered + 6 * count;
+    }
+    wenv_error err = {0};
+    wenv_status st = WENV_OK;
+    if (count) {
+        Py_BEGIN_ALLOW_THREADS
+        st = self->method->shade(self->state, normals, views, count, shaded, &err);
+        Py_END_ALLOW_THREADS
+    }
+    if (!st && visible)
+        for (size_t i = 0, k = 0; i < n; i++)
+            if (visible[i])
+                memcpy(out + 3 * i, shaded + 3 * k++, 3 * sizeof(float));
+    PyMem_Free(gathered);
+    if (st) {
+        wenv_py_raise(&err);
+        return -1;
+    }
+    return 0;
+}
+
+static PyObject *Shader_shade_mesh(ShaderObject *self, PyObject *args, PyObject *kwargs)
+{
+    static char *kwlist[] = {"positions", "normals", "eye", "cull", "view_projection", "out", NULL};
+    PyObject *pobj, *nobj, *eobj, *vp_obj = Py_None, *out_obj = Py_None;
+    int cull = 0;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO|$pOO:shade_mesh", kwlist, &pobj, &nobj, &eobj, &cull, &vp_obj,
+                                     &out_obj))
+        return NULL;
+    double eye[3], vp[16];
+    if (parse_eye(eobj, eye) < 0)
+        return NULL;
+    if (vp_obj != Py_None && !cull) {
+        PyErr_SetString(PyExc_ValueError, "view_projection is only read with cull=True (it sets which vertices are "
+                                          "off screen)");
+        return NULL;
+    }
+    if (vp_obj != Py_None && wenv_py_get_matrix(vp_obj, "view_projection", 4, 16, vp) < 0)
+        return NULL;
+    Py_buffer pb, nb, ob = {0};
     size_t np, nn;
     if (wenv_py_get_vec3_array(pobj, "positions", 0, &pb, &np, NULL) < 0)
         return NULL;
@@ -408,31 +472,59 @@ static PyObject *Shader_shade_mesh(ShaderObject *self, PyObject *args, PyObject 
     }
     PyObject *result = NULL;
     float *views = NULL;
+    unsigned char *visible = NULL;
+    int claimed = 0;
     if (np != nn) {
         PyErr_Format(PyExc_ValueError, "positions has %zu rows but normals has %zu", np, nn);
         goto done;
     }
+    float *out;
+    if (out_obj == Py_None) {
+        Py_ssize_t shape[2] = {(Py_ssize_t)np, 3};
+        if (!(result = wenv_py_new_float_array(2, shape, &out)))
+            goto done;
+        memset(out, 0, np * 3 * sizeof(float)); /* rows of vertices not seen stay black */
+    } else {
+        if (wenv_py_get_writable_vec3_array(out_obj, "out", np, &ob) < 0)
+            goto done;
+        out = ob.buf;
+        result = Py_NewRef(out_obj);
+    }
     views = PyMem_Malloc((np ? np : 1) * 3 * sizeof(float));
-    if (!views) {
+    visible = cull ? PyMem_Malloc(np ? np : 1) : NULL;
+    if (!views || (cull && !visible)) {
         PyErr_NoMemory();
-        goto done;
+        goto fail;
     }
     const float *p = pb.buf;
     for (size_t i = 0; i < np; i++) {
         double d[3] = {eye[0] - p[3 * i], eye[1] - p[3 * i + 1], eye[2] - p[3 * i + 2]};
         if (d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < 1e-24) {
             PyErr_Format(PyExc_ValueError, "eye coincides with positions[%zu]", i);
-            goto done;
+            goto fail;
         }
         for (int c = 0; c < 3; c++)
             views[3 * i + c] = (float)d[c];
     }
+    size_t count = np;
+    if (cull)
+        count = wenv_visible_vertices(pb.buf, nb.buf, np, eye, vp_obj != Py_None ? vp : NULL, visible);
     if (claim(self) < 0)
-        goto done;
-    result = shade_arrays(self, nb.buf, views, np);
-    self->busy = 0;
+        goto fail;
+    claimed = 1;
+    if (shade_visible(self, nb.buf, views, np, visible, count, out) < 0)
+        goto fail;
+    self->visible = cull ? (Py_ssize_t)count : -1;
+    goto done;
+fail:
+    Py_CLEAR(result);
 done:
+    if (claimed)
+        self->busy = 0;
     PyMem_Free(views);
+    PyMem_Free(visible);
+    if (ob.obj)
+        PyBuffer_Release(&ob);
     PyBuffer_Release(&pb);
     PyBuffer_Release(&nb);
     return result;
@@ -505,6 +597,12 @@ static PyObject *Shader_get_stats(ShaderObject *self, void *closure)
             Py_CLEAR(d);
         Py_XDECREF(v);
     }
+    if (d && self->visible >= 0) {
+        PyObject *v = PyLong_FromSsize_t(self->visible);
+        if (!v || PyDict_SetItemString(d, "visible_vertices", v) < 0)
+            Py_CLEAR(d);
+        Py_XDECREF(v);
+    }
     if (d && self->is_auto) {
         const wenv_auto_choice *a = &self->auto_choice;
         PyObject *used = a->used_normals == (size_t)-1 || a->sh_order ? Py_NewRef(Py_None) : PyLong_FromSize_t(a->used_normals);
@@ -546,7 +644,13 @@ static PyMethodDef Shader_methods[] = {
      "shade(normals, view_dirs)\n--\n\nLinear RGB radiance (float32, n x 3) for world-space normals and "
      "view directions (surface towards eye), float32 (n, 3); view_dirs may be one (3,) vector for all."},
     {"shade_mesh", (PyCFunction)(void (*)(void))Shader_shade_mesh, METH_VARARGS | METH_KEYWORDS,
-     "shade_mesh(positions, normals, eye)\n--\n\nShade vertices seen from a perspective eye position."},
+     "shade_mesh(positions, normals, eye, *, cull=False, view_projection=None, out=None)\n--\n\n"
+     "Shade vertices seen from a perspective eye position.  cull=True shades only what the eye sees: "
+     "vertices whose normal faces it and, given view_projection (the viewport's 4 x 4 world-to-clip "
+     "matrix, row-major: Blender's region_3d.perspective_matrix), those inside its frustum; the rows of "
+     "the others are left as they were in `out` (a float32 (n, 3) array written in place and returned) "
+     "or black in a new array.  stats['visible_vertices'] tells how many were shaded; wenv.visible_vertices "
+     "gives which.  Renders and bakes from other views keep cull=False."},
     {"set_environment", (PyCFunction)Shader_set_environment, METH_O,
      "set_environment(env)\n--\n\nNew lighting; rotation matrices are kept."},
     {"set_material", (PyCFunction)Shader_set_material, METH_O,
@@ -567,12 +671,16 @@ static PyTypeObject ShaderType = {
     PyVarObject_HEAD_INIT(NULL, 0).tp_name = "wenv.Shader",
     .tp_basicsize = sizeof(ShaderObject),
     .tp_flags = Py_TPFLAGS_DEFAULT,
-    .tp_doc = "Shader(env, material, quality='default', method='rotation', cache_dir=None, progress=None, "
+    .tp_doc = "Shader(env, material, quality='default', method=None, cache_dir=None, progress=None, "
               "target_error=0.01, memory_budget_mb=1024, normals=None)\n--\n\n"
               "Environment shading by wavelet rotation.  quality: 'draft', 'default', 'high', 'auto' or a dict of "
               "global, local, normals, views, coefficients, light_coefficients, matrix_epsilon, lights, light_threshold, grazing.  method: "
               "'rotation' (precomputed sparse matrices, cached on disk in cache_dir; None: WENV_CACHE_DIR or "
-              "~/.cache/wenv; False: no cache) or 'slicing' (no matrices).  progress(fraction) is called "
+              "~/.cache/wenv; False: no cache) or 'slicing' (the same shading without matrices); None picks "
+              "'rotation' where the matrices are in the cache or take at most 768 MB (and memory_budget_mb), "
+              "else 'slicing' (`draft` and `default` rotate, `high` slices unless its matrices are cached).  "
+              "Matrices not in the cache that would take more than memory_budget_mb are a ValueError, estimated "
+              "from a few of them before anything large is built.  progress(fraction) is called "
               "during precomputation; returning True cancels it (wenv.CancelledError).\n\n"
               "Peer methods for comparison: 'split_sum' (prefiltered environment maps and an environment-BRDF "
               "table, Karis 2013; quality keys prefilter, samples, lut) and 'sh' (spherical harmonics, Kautz, "
@@ -620,9 +728,52 @@ static int add_object(PyObject *module, const char *name, PyObject *value)
     return 0;
 }
 
+static PyObject *py_visible_vertices(PyObject *module, PyObject *args, PyObject *kwargs)
+{
+    (void)module;
+    static char *kwlist[] = {"positions", "normals", "eye", "view_projection", NULL};
+    PyObject *pobj, *nobj, *eobj, *vp_obj = Py_None;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO|O:visible_vertices", kwlist, &pobj, &nobj, &eobj, &vp_obj))
+        return NULL;
+    double eye[3], vp[16];
+    if (parse_eye(eobj, eye) < 0 || (vp_obj != Py_None && wenv_py_get_matrix(vp_obj, "view_projection", 4, 16, vp) < 0))
+        return NULL;
+    Py_buffer pb, nb;
+    size_t np, nn;
+    if (wenv_py_get_vec3_array(pobj, "positions", 0, &pb, &np, NULL) < 0)
+        return NULL;
+    if (wenv_py_get_vec3_array(nobj, "normals", 0, &nb, &nn, NULL) < 0) {
+        PyBuffer_Release(&pb);
+        return NULL;
+    }
+    PyObject *result = NULL;
+    if (np != nn) {
+        PyErr_Format(PyExc_ValueError, "positions has %zu rows but normals has %zu", np, nn);
+    } else {
+        Py_ssize_t shape[1] = {(Py_ssize_t)np};
+        void *data;
+        if ((result = wenv_py_new_array(1, shape, "bool", &data))) {
+            Py_BEGIN_ALLOW_THREADS
+            wenv_visible_vertices(pb.buf, nb.buf, np, eye, vp_obj != Py_None ? vp : NULL, data);
+            Py_END_ALLOW_THREADS
+        }
+    }
+    PyBuffer_Release(&pb);
+    PyBuffer_Release(&nb);
+    return result;
+}
+
+static PyMethodDef shader_functions[] = {
+    {"visible_vertices", (PyCFunction)(void (*)(void))py_visible_vertices, METH_VARARGS | METH_KEYWORDS,
+     "visible_vertices(positions, normals, eye, view_projection=None)\n--\n\nWhich vertices an eye sees "
+     "(bool, n): those whose normal faces it and, given view_projection (4 x 4 world-to-clip, row-major), "
+     "inside its frustum -- the ones Shader.shade_mesh(cull=True) shades."},
+    {NULL, NULL, 0, NULL},
+};
+
 int wenv_register_shader(PyObject *module)
 {
-    if (PyType_Ready(&ShaderType) < 0)
+    if (PyType_Ready(&ShaderType) < 0 || PyModule_AddFunctions(module, shader_functions) < 0)
         return -1;
     Py_INCREF(&ShaderType);
     if (add_object(module, "Shader", (PyObject *)&ShaderType) < 0)

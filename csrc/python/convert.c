@@ -65,6 +65,58 @@ int wenv_py_get_vec3_array(PyObject *obj, const char *name, int require_nonzero,
     return 0;
 }
 
+int wenv_py_get_writable_vec3_array(PyObject *obj, const char *name, size_t n, Py_buffer *view)
+{
+    if (PyObject_GetBuffer(obj, view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | PyBUF_WRITABLE) < 0) {
+        PyErr_Clear();
+        PyErr_Format(PyExc_TypeError, "%s must be a writable C-contiguous float32 array of shape (%zu, 3), got %.100s",
+                     name, n, Py_TYPE(obj)->tp_name);
+        return -1;
+    }
+    const char *fmt = view->format ? view->format : "B";
+    if ((fmt[0] == '<' || fmt[0] == '=' || fmt[0] == '@') && fmt[1])
+        fmt++;
+    if (view->itemsize != 4 || fmt[0] != 'f' || fmt[1] != '\0' || view->ndim != 2 || (size_t)view->shape[0] != n ||
+        view->shape[1] != 3) {
+        PyErr_Format(PyExc_ValueError, "%s must be a float32 array of shape (%zu, 3)", name, n);
+        PyBuffer_Release(view);
+        return -1;
+    }
+    return 0;
+}
+
+int wenv_py_get_matrix(PyObject *obj, const char *name, size_t rows, size_t count, double *out)
+{
+    size_t cols = count / rows;
+    PyObject *outer = PySequence_Fast(obj, "");
+    if (!outer || (size_t)PySequence_Fast_GET_SIZE(outer) != rows) {
+        Py_XDECREF(outer);
+        PyErr_Clear();
+        PyErr_Format(PyExc_TypeError, "%s must be a %zu x %zu matrix (rows of numbers), got %.100s", name, rows, cols,
+                     Py_TYPE(obj)->tp_name);
+        return -1;
+    }
+    for (size_t r = 0; r < rows; r++) {
+        PyObject *row = PySequence_Fast(PySequence_Fast_GET_ITEM(outer, (Py_ssize_t)r), "");
+        if (!row || (size_t)PySequence_Fast_GET_SIZE(row) != cols) {
+            Py_XDECREF(row);
+            Py_DECREF(outer);
+            PyErr_Clear();
+            PyErr_Format(PyExc_TypeError, "%s must be a %zu x %zu matrix (rows of numbers)", name, rows, cols);
+            return -1;
+        }
+        for (size_t c = 0; c < cols; c++)
+            if (wenv_py_get_finite(PySequence_Fast_GET_ITEM(row, (Py_ssize_t)c), name, &out[r * cols + c]) < 0) {
+                Py_DECREF(row);
+                Py_DECREF(outer);
+                return -1;
+            }
+        Py_DECREF(row);
+    }
+    Py_DECREF(outer);
+    return 0;
+}
+
 int wenv_py_get_size(PyObject *obj, const char *name, size_t *out)
 {
     if (!PyLong_Check(obj) || PyBool_Check(obj)) {

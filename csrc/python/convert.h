@@ -22,6 +22,14 @@ PyObject *wenv_py_cancelled_error(void);
 int wenv_py_get_vec3_array(PyObject *obj, const char *name, int require_nonzero, Py_buffer *view,
                            size_t *n, int *single);
 
+/* Gets a writable float32, C-contiguous buffer of shape (n, 3) -- exactly n rows -- from `obj`,
+ * for results written in place.  On success the caller must PyBuffer_Release(view). */
+int wenv_py_get_writable_vec3_array(PyObject *obj, const char *name, size_t n, Py_buffer *view);
+
+/* Reads `count` finite numbers from a sequence of `rows` sequences of count / rows numbers (a 4 x 4
+ * numpy array or mathutils.Matrix, for one), row-major into out. */
+int wenv_py_get_matrix(PyObject *obj, const char *name, size_t rows, size_t count, double *out);
+
 /* Reads an RGB triple from a number (grey) or a length-3 sequence of finite numbers >= 0. */
 int wenv_py_get_rgb(PyObject *obj, const char *name, double rgb[3]);
 
@@ -31,7 +39,7 @@ int wenv_py_get_size(PyObject *obj, const char *name, size_t *out);
 /* Reads a finite float; ValueError naming `name` otherwise. */
 int wenv_py_get_finite(PyObject *obj, const char *name, double *out);
 
-/* New numpy array of the given shape and dtype ("float32", "float64"); *data points at its storage. */
+/* New numpy array of the given shape and dtype ("float32", "float64", "bool"); *data points at its storage. */
 PyObject *wenv_py_new_array(int ndim, const Py_ssize_t *shape, const char *dtype, void **data);
 
 /* New numpy float32 array of the given shape (numpy.empty); *data points at its storage. */

@@ -9,13 +9,13 @@
 #include "math/frame.h"
 
 #define BLOCK 2048
-/* A lobe narrower than this many pixels (2 alpha against the pixel's angle) is integrated by its own
- * node rule instead of the pixel sum: at pixel centres alone a lobe of alpha 0.001 (Principled's
+/* A lobe narrower than WENV_NARROW_LOBE_PIXELS pixels (2 alpha against twice the pixel's angle) is
+ * integrated by its own node rule instead of the pixel sum: at pixel centres alone a lobe of alpha 0.001 (Principled's
  * default coat) falls between them and reads whichever pixel it happens to hit, while from about a
  * pixel wide the centres sample it well (a Gaussian of one pixel's deviation aliases by ~e^-20).  The
- * rule reads the lighting between pixels as Blender shows it, bilinear (the Environment Texture's
- * default "Linear" interpolation), to which the pixel sum is the limit for lobes many pixels wide. */
-#define NARROW_PIXELS 2.0
+ * rule reads the pixel under each node: the same lighting the pixel sum integrates, each pixel's
+ * radiance over its area (Cycles' "Closest" interpolation; its default "Linear" blurs the lighting by
+ * about a pixel, which a lobe a few pixels wide reflecting a sun of a few pixels tells apart). */
 #define NARROW_SAMPLES 192 /* the rule's divisions: 2 x 192^2 nodes over a lobe a few pixels wide */
 
 /* Lobe i's reflected radiance at view wo (frame f) by its node rule over the lighting, minus
@@ -33,7 +33,7 @@ static wenv_status narrow_lobe(const wenv_envmap *env, const wenv_material *mat,
         double d[3] = {f[0] * l[0] + f[3] * l[1] + f[6] * l[2], f[1] * l[0] + f[4] * l[1] + f[7] * l[2],
                        f[2] * l[0] + f[5] * l[1] + f[8] * l[2]};
         float L[3];
-        wenv_envmap_lookup(env, d, L);
+        wenv_envmap_lookup_nearest(env, d, L);
         for (int c = 0; c < 3; c++)
             acc[c] += weights[3 * k + (size_t)c] * L[c];
     }
@@ -72,9 +72,9 @@ wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, con
     }
     size_t count = wenv_envmap_samples(env, dirs, flux, NULL);
     size_t n_lobes = wenv_material_lobe_count(mat), n_narrow = 0;
-    double narrow_width = 2.0 * NARROW_PIXELS * wenv_envmap_pixel_angle(env);
+    double narrow_roughness = WENV_NARROW_LOBE_PIXELS * wenv_envmap_pixel_angle(env);
     for (size_t l = 0; l < n_lobes; l++)
-        n_narrow += 2.0 * wenv_material_lobe(mat, l)->roughness < narrow_width;
+        n_narrow += wenv_material_lobe(mat, l)->roughness < narrow_roughness;
     atomic_int failed = 0, cancelled = 0;
     atomic_size_t done = 0;
 #pragma omp parallel
@@ -134,7 +134,7 @@ wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, con
             double diffuse[3];
             wenv_material_diffuse_at(mat, wo[2], diffuse);
             for (size_t l = 0; n_narrow && wo[2] > 0.0 && l < n_lobes; l++)
-                if (2.0 * wenv_material_lobe(mat, l)->roughness < narrow_width &&
+                if (wenv_material_lobe(mat, l)->roughness < narrow_roughness &&
                     narrow_lobe(env, mat, l, f, wo, dirs, flux, count, nodes, spec, &lobe_err))
                     atomic_store(&failed, 1);
             for (int c = 0; c < 3; c++)

@@ -371,13 +371,14 @@ double wenv_envmap_pixel_solid_angle(const wenv_envmap *env, size_t row, size_t 
     return 0.0;
 }
 
-/* Image-space direction (unrotated) of the centre of pixel (row, col); 0 if outside the domain. */
-static int pixel_direction(const wenv_envmap *env, size_t row, size_t col, double d[3])
+/* Image-space direction (unrotated) of the point (fx, fy) of pixel (row, col), fx and fy in [0, 1]
+ * across it (0.5, 0.5: its centre); 0 if outside the domain. */
+static int pixel_point_direction(const wenv_envmap *env, size_t row, size_t col, double fx, double fy, double d[3])
 {
     double w = (double)env->width, h = (double)env->height;
     switch (env->projection) {
     case WENV_PROJ_EQUIRECT: {
-        double u = ((double)col + 0.5) / w, v = 1.0 - ((double)row + 0.5) / h;
+        double u = ((double)col + fx) / w, v = 1.0 - ((double)row + fy) / h;
         double phi = PI * (1.0 - 2.0 * u), lat = PI * (v - 0.5);
         d[0] = cos(lat) * cos(phi);
         d[1] = cos(lat) * sin(phi);
@@ -385,7 +386,7 @@ static int pixel_direction(const wenv_envmap *env, size_t row, size_t col, doubl
         return 1;
     }
     case WENV_PROJ_MIRROR_BALL: {
-        double x = (2.0 * (double)col + 1.0 - w) / w, z = (h - 2.0 * (double)row - 1.0) / h;
+        double x = (2.0 * ((double)col + fx) - w) / w, z = (h - 2.0 * ((double)row + fy)) / h;
         double r2 = x * x + z * z;
         if (r2 > 1.0) { /* rim pixel whose centre lies outside: use the nearest point of the disk */
             double s = 1.0 / sqrt(r2);
@@ -406,7 +407,7 @@ static int pixel_direction(const wenv_envmap *env, size_t row, size_t col, doubl
         if (f < 0)
             return 0;
         double nn = (double)n;
-        double s = (2.0 * (double)(col % n) + 1.0 - nn) / nn, t = (2.0 * (double)(row % n) + 1.0 - nn) / nn;
+        double s = (2.0 * ((double)(col % n) + fx) - nn) / nn, t = (2.0 * ((double)(row % n) + fy) - nn) / nn;
         const cube_face *fc = &env->faces[f];
         double len2 = 0.0;
         for (int k = 0; k < 3; k++) {
@@ -420,6 +421,40 @@ static int pixel_direction(const wenv_envmap *env, size_t row, size_t col, doubl
     }
     }
     return 0;
+}
+
+static int pixel_direction(const wenv_envmap *env, size_t row, size_t col, double d[3])
+{
+    return pixel_point_direction(env, row, col, 0.5, 0.5, d);
+}
+
+/* World direction w with R_z(r) w = d, i.e. w = R_z(-r) d. */
+static inline void image_to_world(const wenv_envmap *env, const double d[3], double w[3])
+{
+    w[0] = env->cos_r * d[0] + env->sin_r * d[1];
+    w[1] = -env->sin_r * d[0] + env->cos_r * d[1];
+    w[2] = d[2];
+}
+
+/* Half the vector across pixel (row, col) from its left edge to its right (du) and from its top
+ * to its bottom (dv), through its centre, in world space: centre + a du + b dv, a and b in [-1, 1],
+ * spans the pixel to first order. */
+static void pixel_footprint(const wenv_envmap *env, size_t row, size_t col, float du[3], float dv[3])
+{
+    double a[3], b[3], wa[3], wb[3];
+    const double edge[4][2] = {{0.0, 0.5}, {1.0, 0.5}, {0.5, 0.0}, {0.5, 1.0}};
+    for (int k = 0; k < 2; k++) {
+        float *out = k ? dv : du;
+        if (!pixel_point_direction(env, row, col, edge[2 * k][0], edge[2 * k][1], a) ||
+            !pixel_point_direction(env, row, col, edge[2 * k + 1][0], edge[2 * k + 1][1], b)) {
+            out[0] = out[1] = out[2] = 0.0f;
+            continue;
+        }
+        image_to_world(env, a, wa);
+        image_to_world(env, b, wb);
+        for (int c = 0; c < 3; c++)
+            out[c] = (float)(0.5 * (wb[c] - wa[c]));
+    }
 }
 
 /* One row's valid pixels written from position m on; returns how many. */
@@ -452,7 +487,6 @@ size_t wenv_envmap_row_samples(const wenv_envmap *env, size_t row, float *dirs, 
 {
     if (env->projection == WENV_PROJ_EQUIRECT)
         return dirs ? equirect_row_samples(env, row, dirs, flux, omega_out, cols) : env->width;
-    double c = env->cos_r, s = env->sin_r;
     size_t m = 0;
     for (size_t col = 0; col < env->width; col++) {
         const float *p = pixel_at(env, row, col);
@@ -460,10 +494,10 @@ size_t wenv_envmap_row_samples(const wenv_envmap *env, size_t row, float *dirs, 
         if (!(omega > 0.0) || !pixel_direction(env, row, col, d))
             continue;
         if (dirs) {
-            /* world direction w with R_z(r) w = d, i.e. w = R_z(-r) d */
-            dirs[3 * m] = (float)(c * d[0] + s * d[1]);
-            dirs[3 * m + 1] = (float)(-s * d[0] + c * d[1]);
-            dirs[3 * m + 2] = (float)d[2];
+            double wd[3];
+            image_to_world(env, d, wd);
+            for (int k = 0; k < 3; k++)
+                dirs[3 * m + k] = (float)wd[k];
             double k = omega * env->strength;
             for (int ch = 0; ch < 3; ch++)
                 flux[3 * m + ch] = (float)(p[ch] * k);
@@ -640,6 +674,7 @@ size_t wenv_envmap_brightest(const wenv_envmap *env, size_t k, double relative, 
             if (j < end && out[j].pixel % w == cols[e]) {
                 memcpy(out[j].dir, dirs + 3 * e, sizeof out[j].dir);
                 memcpy(out[j].flux, dirs + 3 * w + 3 * e, sizeof out[j].flux);
+                pixel_footprint(env, row, cols[e], out[j].du, out[j].dv);
                 j++;
             }
         }
@@ -654,7 +689,8 @@ size_t wenv_envmap_brightest(const wenv_envmap *env, size_t k, double relative, 
 /* ---------------------------------------------------------------------------------------------
  * Lookup */
 
-static void lookup_equirect(const wenv_envmap *env, const double d[3], double acc[3])
+/* `nearest`: the pixel whose area holds d instead of the bilinear blend (weights snapped to 0 or 1). */
+static void lookup_equirect(const wenv_envmap *env, const double d[3], int nearest, double acc[3])
 {
     size_t w = env->width, h = env->height;
     double z = fmin(fmax(d[2], -1.0), 1.0);
@@ -663,6 +699,10 @@ static void lookup_equirect(const wenv_envmap *env, const double d[3], double ac
     fy = fmin(fmax(fy, 0.0), (double)(h - 1)); /* the poles clamp to the first and last rows */
     double x0f = floor(fx), y0f = floor(fy);
     double wx = fx - x0f, wy = fy - y0f;
+    if (nearest) {
+        wx = wx >= 0.5;
+        wy = wy >= 0.5;
+    }
     long long xi = (long long)x0f % (long long)w; /* wraps horizontally across the seam */
     if (xi < 0)
         xi += (long long)w;
@@ -674,7 +714,7 @@ static void lookup_equirect(const wenv_envmap *env, const double d[3], double ac
         acc[c] = (1.0 - wy) * ((1.0 - wx) * p00[c] + wx * p01[c]) + wy * ((1.0 - wx) * p10[c] + wx * p11[c]);
 }
 
-static void lookup_mirror_ball(const wenv_envmap *env, const double d[3], double acc[3])
+static void lookup_mirror_ball(const wenv_envmap *env, const double d[3], int nearest, double acc[3])
 {
     /* Cycles' direction_to_mirrorball */
     double x = d[0], y = d[1] - 1.0, z = d[2];
@@ -692,6 +732,10 @@ static void lookup_mirror_ball(const wenv_envmap *env, const double d[3], double
     fy = fmin(fmax(fy, 0.0), (double)(h - 1));
     size_t x0 = (size_t)floor(fx), y0 = (size_t)floor(fy);
     double wx = fx - (double)x0, wy = fy - (double)y0;
+    if (nearest) {
+        wx = wx >= 0.5;
+        wy = wy >= 0.5;
+    }
     size_t xs[2] = {x0, x0 + 1 < w ? x0 + 1 : x0}, ys[2] = {y0, y0 + 1 < h ? y0 + 1 : y0};
     double wxs[2] = {1.0 - wx, wx}, wys[2] = {1.0 - wy, wy};
     /* bilinear over the taps that touch the disk only, so the rim does not fade into the
@@ -737,7 +781,7 @@ static const float *cube_texel(const wenv_envmap *env, int f, long long x, long 
     return pixel_at(env, fc->cell_row * env->face_size + (size_t)y, fc->cell_col * env->face_size + (size_t)x);
 }
 
-static void lookup_cube(const wenv_envmap *env, const double d[3], double acc[3])
+static void lookup_cube(const wenv_envmap *env, const double d[3], int nearest, double acc[3])
 {
     int f = cube_face_of(d);
     const cube_face *fc = &env->faces[f];
@@ -747,6 +791,10 @@ static void lookup_cube(const wenv_envmap *env, const double d[3], double acc[3]
     double fx = fmin(fmax(0.5 * (s + 1.0) * n - 0.5, -0.5), n - 0.5);
     double fy = fmin(fmax(0.5 * (t + 1.0) * n - 0.5, -0.5), n - 0.5);
     double x0f = floor(fx), y0f = floor(fy), wx = fx - x0f, wy = fy - y0f;
+    if (nearest) {
+        wx = wx >= 0.5;
+        wy = wy >= 0.5;
+    }
     long long x0 = (long long)x0f, y0 = (long long)y0f;
     const float *p00 = cube_texel(env, f, x0, y0), *p01 = cube_texel(env, f, x0 + 1, y0);
     const float *p10 = cube_texel(env, f, x0, y0 + 1), *p11 = cube_texel(env, f, x0 + 1, y0 + 1);
@@ -754,7 +802,7 @@ static void lookup_cube(const wenv_envmap *env, const double d[3], double acc[3]
         acc[c] = (1.0 - wy) * ((1.0 - wx) * p00[c] + wx * p01[c]) + wy * ((1.0 - wx) * p10[c] + wx * p11[c]);
 }
 
-void wenv_envmap_lookup(const wenv_envmap *env, const double dir[3], float rgb[3])
+static void lookup(const wenv_envmap *env, const double dir[3], int nearest, float rgb[3])
 {
     double len = sqrt(dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]);
     double w[3] = {0.0, 0.0, 1.0};
@@ -767,12 +815,19 @@ void wenv_envmap_lookup(const wenv_envmap *env, const double dir[3], float rgb[3
     double d[3] = {env->cos_r * w[0] - env->sin_r * w[1], env->sin_r * w[0] + env->cos_r * w[1], w[2]};
     double acc[3] = {0, 0, 0};
     switch (env->projection) {
-    case WENV_PROJ_EQUIRECT: lookup_equirect(env, d, acc); break;
-    case WENV_PROJ_MIRROR_BALL: lookup_mirror_ball(env, d, acc); break;
-    case WENV_PROJ_CUBE_CROSS: lookup_cube(env, d, acc); break;
+    case WENV_PROJ_EQUIRECT: lookup_equirect(env, d, nearest, acc); break;
+    case WENV_PROJ_MIRROR_BALL: lookup_mirror_ball(env, d, nearest, acc); break;
+    case WENV_PROJ_CUBE_CROSS: lookup_cube(env, d, nearest, acc); break;
     }
     for (int c = 0; c < 3; c++)
         rgb[c] = (float)(acc[c] * env->strength);
+}
+
+void wenv_envmap_lookup(const wenv_envmap *env, const double dir[3], float rgb[3]) { lookup(env, dir, 0, rgb); }
+
+void wenv_envmap_lookup_nearest(const wenv_envmap *env, const double dir[3], float rgb[3])
+{
+    lookup(env, dir, 1, rgb);
 }
 
 void wenv_envmap_lookup_many(const wenv_envmap *env, const float *dirs, size_t n, float *rgb)

@@ -80,6 +80,15 @@ const float *wenv_envmap_pixels(const wenv_envmap *env);
  * outside the disk. */
 void wenv_envmap_lookup(const wenv_envmap *env, const double dir[3], float rgb[3]);
 
+/* The same without interpolation: the radiance of the pixel whose area holds `dir` -- the lighting
+ * as wenv_envmap_samples' pixels carry it, piecewise constant (Cycles' "Closest" interpolation). */
+void wenv_envmap_lookup_nearest(const wenv_envmap *env, const double dir[3], float rgb[3]);
+
+/* A lobe of roughness (alpha) below this many pixel angles is narrower than about two pixels: its
+ * reflection of a pixel depends on where in the pixel it falls, so wenv_reference integrates it by
+ * its own rule over the pixels' areas and the exact lights integrate those areas too. */
+#define WENV_NARROW_LOBE_PIXELS 2.0
+
 /* A pixel's angular size in radians, about (the equirect row height; for other projections the
  * side of a square of the mean pixel solid angle). */
 double wenv_envmap_pixel_angle(const wenv_envmap *env);
@@ -104,6 +113,7 @@ typedef struct {
     float dir[3];   /* world direction of its centre, rotation applied */
     float flux[3];  /* radiance * strength * solid angle */
     float radiance; /* its largest channel, strength applied */
+    float du[3], dv[3]; /* its extent: dir + a du + b dv, a and b in [-1, 1], spans it (to first order) */
 } wenv_bright_pixel;
 
 /* The up to k brightest pixels (by largest channel) whose radiance exceeds `relative` times the

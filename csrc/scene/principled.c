@@ -4,6 +4,8 @@
  * Cycles builds the node as closures from the top layer down, each taking from those below what it
  * reflects (svm_node_closure_bsdf, CLOSURE_BSDF_PRINCIPLED_ID): with W the weight left for the
  * layers below, starting at Alpha,
+ *   sheen    Zeltner et al.'s linearly transformed cosine (A, B, albedo R from a table over n.v and Sheen
+ *            Roughness), weight Sheen Weight x Sheen Tint W R; then W *= 1 - its albedo;
  *   coat     GGX (alpha = Coat Roughness^2), exact dielectric Fresnel of Coat IOR, weight Coat Weight W,
  *            always energy-compensated; then W *= 1 - its albedo, and the coat's absorption
  *            W *= mix(1, Coat Tint^(1 / cos_t), Coat Weight), cos_t the view refracted into the coat;
@@ -12,7 +14,9 @@
  *   specular GGX, the dielectric Fresnel of the IOR remapped from its F0 to F0' = F0 2 Level x
  *            Specular Tint (the "generalised Schlick" real-Fresnel mode), weight W; then
  *            W *= 1 - its albedo;
- *   diffuse  Lambert, Base Color W.
+ *   diffuse  Lambert, Base Color W; with Diffuse Roughness (Blender 4.3+) the energy-preserving
+ *            Oren-Nayar of OpenPBR ("EON": Fujii's improved Oren-Nayar and a multiple-scattering term),
+ *            which depends on the light as well, so it is one more lobe.
  * "Multiscatter GGX" (the default) compensates the metal and specular lobes for the energy single
  * scattering loses (Kulla & Conty): the lobe is divided by its albedo E(mu) with F = 1 and darkened
  * to 1 + Fms (1 - E) / E, Fms = Fss Eavg / (1 - Fss (1 - Eavg)) with Fss the Fresnel's cosine-weighted
@@ -24,7 +28,7 @@
  * between nodes at i / (n - 1), clamped, as Cycles reads them.
  *
  * What Cycles adds that reflection does not have -- transmission, subsurface scattering, emission,
- * the see-through part of Alpha, thin film, sheen, anisotropy -- is not shaded; wenv_principled_unhonoured
+ * the see-through part of Alpha, thin film, anisotropy -- is not shaded; wenv_principled_unhonoured
  * names each input set to something that needs it.  Subsurface scattering is shaded as the diffuse
  * reflection it turns into on a smooth convex surface (Base Color as albedo). */
 #include <math.h>
@@ -33,10 +37,13 @@
 
 #include "scene/material_kind.h"
 #include "scene/principled_tables.h"
+#include "scene/sheen_table.h"
 
 #define WEIGHT_CUTOFF 1e-5 /* Cycles drops closures whose mean weight is below this */
 
-typedef enum { LOBE_COAT, LOBE_METAL, LOBE_SPECULAR } lobe_role;
+typedef enum { LOBE_SHEEN, LOBE_COAT, LOBE_METAL, LOBE_SPECULAR, LOBE_DIFFUSE } lobe_role;
+
+#define MAX_LOBES 5
 
 typedef struct {
     lobe_role role;
@@ -54,8 +61,9 @@ typedef struct {
     double base[3];            /* Base Color clamped to [0, 1] */
     double eta, f0_col[3];     /* the specular lobe's (adjusted) index and tinted F0 */
     double f0_metal[3], b_metal[3];
+    double eon_a, eon_b, eon_ems[3]; /* the Oren-Nayar diffuse's constants (Diffuse Roughness > 0) */
     size_t n;
-    lobe_model lobe[3];
+    lobe_model lobe[MAX_LOBES];
 } principled;
 
 static const principled *model_of(const wenv_material *mat) { return (const principled *)mat->shared; }
@@ -140,16 +148,56 @@ static void lobe_fresnel(const principled *p, const lobe_model *l, double c, dou
 /* ---------------------------------------------------------------- the layers' weights for a view */
 
 typedef struct {
-    double lobe[3][3]; /* each lobe's RGB weight: layer weight x darkening x 1 / E (compensation) */
+    double lobe[MAX_LOBES][3]; /* each lobe's RGB weight: layer weight x darkening x 1 / E (compensation) */
+    double sheen_a, sheen_b;   /* the sheen's transformed cosine for this view */
+    double eon_ms[3];          /* the Oren-Nayar diffuse's multiple scattering for this view */
     double diffuse[3]; /* the Lambertian albedo */
 } view_weights;
+
+/* The Oren-Nayar diffuse's G and directional albedo E at cos mu (OpenPBR's EON). */
+static double eon_g(double mu)
+{
+    if (mu < 1e-6)
+        return (0.5 * M_PI - 2.0 / 3.0) - mu;
+    double s = sqrt(fmax(0.0, 1.0 - mu * mu)), theta = acos(fmin(mu, 1.0));
+    return s * (theta - 2.0 / 3.0 - s * mu) + (2.0 / 3.0) * (s / mu) * (1.0 - s * s * s);
+}
+
+static double eon_e(const principled *p, double mu) { return p->eon_a * M_PI + p->eon_b * eon_g(mu); }
 
 static void weights_for_view(const principled *p, double mu, view_weights *vw)
 {
     mu = clamp01(mu);
     double w[3] = {p->in.alpha, p->in.alpha, p->in.alpha};
+    vw->sheen_a = 1.0;
+    vw->sheen_b = 0.0;
     for (size_t i = 0; i < p->n; i++) {
         const lobe_model *l = &p->lobe[i];
+        if (l->role == LOBE_DIFFUSE) { /* the last: what the layers above leave, Base Color W */
+            double loss = 1.0 - eon_e(p, mu);
+            for (int k = 0; k < 3; k++) {
+                vw->lobe[i][k] = p->base[k] * w[k];
+                vw->eon_ms[k] = p->eon_ems[k] * loss;
+                w[k] = 0.0; /* no Lambertian part left */
+            }
+            continue;
+        }
+        if (l->role == LOBE_SHEEN) {
+            double a = read2(wenv_sheen_ltc, 32, 32, mu, l->rough);
+            double b = read2(wenv_sheen_ltc + 32 * 32, 32, 32, mu, l->rough);
+            double r = read2(wenv_sheen_ltc + 2 * 32 * 32, 32, 32, mu, l->rough);
+            int kept = fabs(a) >= WEIGHT_CUTOFF && r >= WEIGHT_CUTOFF; /* Cycles drops it otherwise */
+            double largest = 0.0;
+            for (int k = 0; k < 3; k++) {
+                vw->lobe[i][k] = kept ? p->in.sheen_weight * p->in.sheen_tint[k] * w[k] * r : 0.0;
+                largest = fmax(largest, kept ? p->in.sheen_weight * p->in.sheen_tint[k] * r : 0.0);
+            }
+            vw->sheen_a = a;
+            vw->sheen_b = b;
+            for (int k = 0; k < 3; k++)
+                w[k] *= clamp01(1.0 - largest);
+            continue;
+        }
         double scale = l->role == LOBE_COAT ? p->in.coat_weight : (l->role == LOBE_METAL ? p->in.metallic : 1.0);
         double dark[3] = {1.0, 1.0, 1.0}, es = 1.0;
         if (l->compensate) {
@@ -194,10 +242,40 @@ static void weights_for_view(const principled *p, double mu, view_weights *vw)
 
 /* ---------------------------------------------------------------- evaluation */
 
-/* One lobe's f (no cosine) for unit directions above the horizon: weight x F D G2 / (4 ci co). */
+/* The sheen's f (no cosine) at wi: its transformed cosine in the frame whose x axis is the view's
+ * tangential direction, over cos_i. */
+static double sheen_f(const view_weights *vw, const double wi[3], const double wo[3])
+{
+    double t = sqrt(wo[0] * wo[0] + wo[1] * wo[1]);
+    double tx = t > 1e-12 ? wo[0] / t : 1.0, ty = t > 1e-12 ? wo[1] / t : 0.0; /* head-on: any frame */
+    double ox = tx * wi[0] + ty * wi[1], oy = -ty * wi[0] + tx * wi[1], oz = wi[2];
+    double a = vw->sheen_a, b = vw->sheen_b;
+    double len2 = (a * ox + b * oz) * (a * ox + b * oz) + (a * oy) * (a * oy) + oz * oz;
+    double q = a / len2;
+    return q * q / M_PI;
+}
+
+/* One lobe's f (no cosine) for unit directions above the horizon: weight x F D G2 / (4 ci co), or
+ * weight x the sheen's. */
 static void lobe_f(const principled *p, const wenv_lobe *shape, size_t i, const view_weights *vw, const double wi[3],
                    const double wo[3], double rgb[3])
 {
+    if (p->lobe[i].role == LOBE_SHEEN) {
+        double s = sheen_f(vw, wi, wo);
+        for (int k = 0; k < 3; k++)
+            rgb[k] = vw->lobe[i][k] * s;
+        return;
+    }
+    if (p->lobe[i].role == LOBE_DIFFUSE) {
+        /* (a + b t) + ms (1 - E(cos_i)), t the cosine of the azimuth between them, over the larger cosine */
+        double t = wi[0] * wo[0] + wi[1] * wo[1] + wi[2] * wo[2] - wi[2] * wo[2];
+        if (t > 0.0)
+            t /= fmax(wi[2], wo[2]) + DBL_MIN;
+        double single = p->eon_a + p->eon_b * t, loss = 1.0 - eon_e(p, wi[2]);
+        for (int k = 0; k < 3; k++)
+            rgb[k] = vw->lobe[i][k] * (single + vw->eon_ms[k] * loss);
+        return;
+    }
     double t, cos_d;
     double k_o = wenv_lobe_view_k(shape, WENV_SHADOW_SMITH, wo);
     double v = wenv_lobe_vis(shape, WENV_SHADOW_SMITH, wi, wo, k_o, &t, &cos_d) *
@@ -258,8 +336,9 @@ static void pr_specular_cos_batch(const wenv_material *mat, const double wo[3], 
     }
 }
 
-/* The float path: the view's weights and Smith K per lobe are its terms (4 a lobe); the rest in float. */
-static size_t pr_view_terms(const wenv_material *mat) { return 4 * model_of(mat)->n; }
+/* The float path: the view's weights and Smith K per lobe are its terms (4 a lobe), then the sheen's
+A and B and the Oren-Nayar diffuse's multiple scattering (3); the rest in float. */
+static size_t pr_view_terms(const wenv_material *mat) { return 4 * model_of(mat)->n + 5; }
 
 static void pr_prepare_view_f(const wenv_material *mat, const float wo[3], float *terms)
 {
@@ -272,6 +351,10 @@ static void pr_prepare_view_f(const wenv_material *mat, const float wo[3], float
             terms[4 * i + (size_t)k] = (float)vw.lobe[i][k];
         terms[4 * i + 3] = (float)wenv_lobe_view_k(&mat->lobes[i], WENV_SHADOW_SMITH, wod);
     }
+    terms[4 * p->n] = (float)vw.sheen_a;
+    terms[4 * p->n + 1] = (float)vw.sheen_b;
+    for (int k = 0; k < 3; k++)
+        terms[4 * p->n + 2 + (size_t)k] = (float)vw.eon_ms[k];
 }
 
 static void pr_specular_cos_f(const wenv_material *mat, const float wi[3], const float wo[3], const float *terms,
@@ -288,6 +371,25 @@ static void pr_specular_cos_f(const wenv_material *mat, const float wi[3], const
     cos_d = cos_d < 1.0f ? cos_d : 1.0f;
     float si = sqrtf(wi[0] * wi[0] + wi[1] * wi[1]);
     for (size_t i = 0; i < p->n; i++) {
+        if (p->lobe[i].role == LOBE_DIFFUSE) { /* as lobe_f, in float but for E */
+            float t = wi[0] * wo[0] + wi[1] * wo[1];
+            if (t > 0.0f)
+                t /= (ci > co ? ci : co) + FLT_MIN;
+            float single = (float)p->eon_a + (float)p->eon_b * t, loss = (float)(1.0 - eon_e(p, ci));
+            for (int k = 0; k < 3; k++)
+                rgb[k] += terms[4 * i + (size_t)k] * (single + terms[4 * p->n + 2 + (size_t)k] * loss) * ci;
+            continue;
+        }
+        if (p->lobe[i].role == LOBE_SHEEN) {
+            float so = sqrtf(wo[0] * wo[0] + wo[1] * wo[1]);
+            float tx = so > 1e-6f ? wo[0] / so : 1.0f, ty = so > 1e-6f ? wo[1] / so : 0.0f;
+            float ox = tx * wi[0] + ty * wi[1], oy = -ty * wi[0] + tx * wi[1];
+            float a = terms[4 * p->n], b = terms[4 * p->n + 1];
+            float len2s = (a * ox + b * ci) * (a * ox + b * ci) + (a * oy) * (a * oy) + ci * ci, q = a / len2s;
+            for (int k = 0; k < 3; k++)
+                rgb[k] += terms[4 * i + (size_t)k] * q * q * (float)WENV_INV_PI * ci;
+            continue;
+        }
         float m = (float)mat->lobes[i].roughness, m2 = m * m;
         float k_i = sqrtf(ci * ci + m2 * si * si), den = co * k_i + ci * terms[4 * i + 3];
         float vis = 0.5f / (den > FLT_MIN ? den : FLT_MIN);
@@ -299,7 +401,12 @@ static void pr_specular_cos_f(const wenv_material *mat, const float wi[3], const
     }
 }
 
-static double pr_lobe_cos_h_min(const wenv_material *mat, size_t i) { return wenv_lobe_cos_h_min(&mat->lobes[i]); }
+static double pr_lobe_cos_h_min(const wenv_material *mat, size_t i)
+{
+    /* the sheen (towards grazing most) and the Oren-Nayar diffuse reflect at every half vector */
+    lobe_role role = model_of(mat)->lobe[i].role;
+    return role == LOBE_SHEEN || role == LOBE_DIFFUSE ? -1.0 : wenv_lobe_cos_h_min(&mat->lobes[i]);
+}
 
 /* f 4 ci co / D: weight x F G2. */
 static void pr_lobe_over_ndf(const wenv_material *mat, size_t i, const double wi[3], const double wo[3],
@@ -314,6 +421,13 @@ static void pr_lobe_over_ndf(const wenv_material *mat, size_t i, const double wi
     const wenv_lobe *shape = &mat->lobes[i];
     view_weights vw;
     weights_for_view(p, co, &vw);
+    if (p->lobe[i].role == LOBE_SHEEN || p->lobe[i].role == LOBE_DIFFUSE) { /* f 4 ci co over the shape's D */
+        double f[3], d = wenv_ndf(shape->distribution, shape->roughness, s[2] / len);
+        lobe_f(p, shape, i, &vw, wi, wo, f);
+        for (int k = 0; k < 3; k++)
+            rgb[k] = d > 0.0 ? f[k] * 4.0 * ci * co / d : 0.0;
+        return;
+    }
     double g = 1.0 / (1.0 + wenv_smith_lambda(WENV_NDF_GGX, shape->roughness, ci) +
                       wenv_smith_lambda(WENV_NDF_GGX, shape->roughness, co));
     double f[3];
@@ -324,10 +438,11 @@ static void pr_lobe_over_ndf(const wenv_material *mat, size_t i, const double wi
 
 /* ---------------------------------------------------------------- integrals */
 
-/* The shape's rule (GGX, the lobe's alpha, Smith, dielectric Fresnel of the shape's index) re-weighted
- * node by node to the lobe: D and G2 are the same, so the ratio is the lobe's weight and Fresnel over
- * the shape's Fresnel, smooth across the rule (weight holds 3 count doubles; the first count are the
- * shape's colourless weights). */
+/* The shape's rule (GGX, Smith, dielectric Fresnel of the shape's index) re-weighted node by node to
+ * the lobe, by the ratio of their values: for a GGX lobe D and G2 are the same and the ratio is its
+ * weight and Fresnel over the shape's Fresnel, smooth across the rule; the sheen's broad GGX shape
+ * (alpha 1) is positive everywhere its lobe is (weight holds 3 count doubles; the first count are
+ * the shape's colourless weights). */
 static void reweight(const wenv_material *mat, size_t i, const double wo[3], const double *wi, double *weight,
                      size_t count)
 {
@@ -335,14 +450,15 @@ static void reweight(const wenv_material *mat, size_t i, const double wo[3], con
     const wenv_lobe *shape = &mat->lobes[i];
     view_weights vw;
     weights_for_view(p, wo[2], &vw);
+    double k_o = wenv_lobe_view_k(shape, WENV_SHADOW_SMITH, wo);
     for (size_t q = count; q-- > 0;) {
         const double *d = wi + 3 * q;
-        double s[3] = {d[0] + wo[0], d[1] + wo[1], d[2] + wo[2]};
-        double cos_d = fmin(0.5 * sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2]), 1.0);
-        double f[3], fs = wenv_fresnel_dielectric(cos_d, shape->ior), w = weight[q];
-        lobe_fresnel(p, &p->lobe[i], cos_d, f);
+        double f[3], w = weight[q];
+        double fs = d[2] > 0.0 && wo[2] > 0.0 ? wenv_lobe_value(shape, WENV_SHADOW_SMITH, d, wo, k_o) : 0.0;
+        if (fs > 0.0)
+            lobe_f(p, shape, i, &vw, d, wo, f);
         for (int k = 2; k >= 0; k--)
-            weight[3 * q + (size_t)k] = fs > 0.0 ? w * vw.lobe[i][k] * f[k] / fs : 0.0;
+            weight[3 * q + (size_t)k] = fs > 0.0 ? w * f[k] / fs : 0.0;
     }
 }
 
@@ -543,7 +659,19 @@ wenv_status wenv_principled_create(wenv_material **out, const wenv_principled_in
     const wenv_principled_inputs *in = &p->in;
     for (int k = 0; k < 3; k++)
         p->base[k] = fmin(in->base_color[k], 1.0);
-    wenv_lobe shapes[3];
+    wenv_lobe shapes[MAX_LOBES];
+
+    if (in->sheen_weight > WEIGHT_CUTOFF) {
+        /* the table is read at the Sheen Roughness (clamped as Cycles does); the shape only places
+         * the rules' nodes: a broad GGX */
+        lobe_model *l = &p->lobe[p->n];
+        l->role = LOBE_SHEEN;
+        l->rough = fmin(fmax(in->sheen_roughness, 1e-3), 1.0);
+        l->alpha = 1.0;
+        shapes[p->n] = (wenv_lobe){.specular = {in->sheen_tint[0], in->sheen_tint[1], in->sheen_tint[2]},
+                                   .roughness = 1.0, .ior = 1.5, .distribution = WENV_NDF_GGX};
+        p->n++;
+    }
 
     if (in->coat_weight > WEIGHT_CUTOFF) {
         lobe_model *l = &p->lobe[p->n];
@@ -603,6 +731,25 @@ wenv_status wenv_principled_create(wenv_material **out, const wenv_principled_in
         l->z = sqrt(fabs((p->eta - 1.0) / (p->eta + 1.0)));
         shapes[p->n - 1].ior = fmin(fmax(p->eta > 1.0 ? p->eta : 1.0 / p->eta, 1.0 + 1e-4), WENV_IOR_MAX);
     }
+    if (in->diffuse_roughness >= 1e-5) {
+        /* Oren-Nayar instead of Lambert: its constants (the colour for its multiple scattering is Base
+         * Color clamped to [0, 1]); the lobe's shape, a broad GGX, only places the rules' nodes */
+        double sigma = in->diffuse_roughness;
+        p->eon_a = 1.0 / (M_PI + sigma * (0.5 * M_PI - 2.0 / 3.0));
+        p->eon_b = sigma * p->eon_a;
+        double eavg = p->eon_a * M_PI + ((2.0 * M_PI - 5.6) / 3.0) * p->eon_b;
+        for (int k = 0; k < 3; k++) {
+            double rho = p->base[k];
+            p->eon_ems[k] = rho * rho / M_PI * (eavg / (1.0 - eavg)) / (1.0 - rho * (1.0 - eavg));
+        }
+        lobe_model *l = &p->lobe[p->n];
+        l->role = LOBE_DIFFUSE;
+        l->alpha = 1.0;
+        l->rough = 1.0;
+        shapes[p->n] = (wenv_lobe){.specular = {p->base[0], p->base[1], p->base[2]}, .roughness = 1.0, .ior = 1.5,
+                                   .distribution = WENV_NDF_GGX};
+        p->n++;
+    }
     /* the Lambertian part as seen head-on, for what reads one number (the view-dependent albedo is
      * wenv_material_diffuse_at); subsurface scattering shaded as diffuse */
     view_weights vw;
@@ -636,14 +783,10 @@ size_t wenv_principled_unhonoured(const wenv_principled_inputs *in, const char *
         found[n++] = "emission_strength";
     if (in->alpha < 1.0)
         found[n++] = "alpha";
-    if (in->sheen_weight > WEIGHT_CUTOFF)
-        found[n++] = "sheen_weight";
     if (in->anisotropic > 0.0)
         found[n++] = "anisotropic";
     if (in->thin_film_thickness > 0.1)
         found[n++] = "thin_film_thickness";
-    if (in->diffuse_roughness >= 1e-5)
-        found[n++] = "diffuse_roughness";
     for (size_t i = 0; i < n && i < max; i++)
         names[i] = found[i];
     return n;

@@ -3,7 +3,8 @@
  * Why: a sun, a lamp or a softbox holds much of a scene's flux in few pixels, and wavelet
  * truncation and interpolation between samples smear their highlights.  Taken out of the lighting
  * and shaded as point lights at their pixel centres, they are exact in the reference's own sense
- * (wenv_reference sums the same pixels at the same centres).
+ * (wenv_reference sums the same pixels at the same centres; a lobe narrower than a pixel integrates
+ * its area on a grid of points, where the reference integrates the lobe by its own rule).
  *
  * Cost is kept down two ways:
  *  - levels of clusters: level 0 holds every pixel; level k merges the lights of level k - 1 whose
@@ -48,8 +49,11 @@ void wenv_lights_irradiance(const wenv_lights *lights, int level, const float n[
 
 /* The lobes' reflected radiance at unit normal n and view v (n . v = cos_v > 0), added to s.
  * cos_h_min[k]: lobe k's n.h below which it is negligible; cone_cos: cosine of the half-angle
- * about the mirror direction outside which every lobe is negligible (-1: none). */
+ * about the mirror direction outside which every lobe is negligible (-1: none); narrow_width: for
+ * a lobe narrower than WENV_NARROW_LOBE_PIXELS pixels, its width about there in radians (level 0
+ * then integrates the pixels wider than it over their areas, as wenv_reference does), else 0. */
 void wenv_lights_specular(const wenv_lights *lights, int level, const wenv_material *mat, const float *cos_h_min,
-                          double cone_cos, const float n[3], const float v[3], float cos_v, float s[3]);
+                          double cone_cos, double narrow_width, const float n[3], const float v[3], float cos_v,
+                          float s[3]);
 
 #endif

@@ -306,18 +306,78 @@ wenv_status wenv_rotation_check_sizes(size_t global_n, size_t local_n, size_t no
     return WENV_OK;
 }
 
-wenv_status wenv_rotation_build(wenv_rotation **out, size_t global_n, size_t local_n, size_t normal_n,
-                                double epsilon, const wenv_progress *progress, wenv_error *err)
+/* The block of local coefficients the global transform works on at a time: its dense buffer stays
+ * within 4 MB. */
+static size_t build_chunk(size_t global_n, size_t local_n)
 {
-    *out = NULL;
+    size_t chunk = local_n * local_n, ng = global_n * global_n;
+    while (chunk > 1 && ng * chunk * sizeof(float) > ((size_t)4 << 20))
+        chunk /= 2;
+    return chunk;
+}
+
+static double build_threshold(size_t global_n, size_t local_n, double epsilon)
+{
+    return epsilon * sqrt((double)(local_n * local_n) / (double)(global_n * global_n));
+}
+
+size_t wenv_rotation_bytes(size_t global_n, size_t normal_n, size_t nnz)
+{
+    size_t ns = normal_n * normal_n;
+    return nnz * (sizeof(uint16_t) + sizeof(float)) + ns * (global_n * global_n + 1) * sizeof(size_t) +
+           ns * sizeof(wenv_csc);
+}
+
+#define ESTIMATE_SAMPLES 4
+
+/* The sizes and epsilon checked, and the resampler both the build and its estimate use. */
+static wenv_status check_and_resample(size_t global_n, size_t local_n, size_t normal_n, double epsilon,
+                                      wenv_resampler **rs, wenv_error *err)
+{
     if (wenv_rotation_check_sizes(global_n, local_n, normal_n, err))
         return err->status;
     if (!(epsilon >= 0.0 && epsilon < 1.0))
         return wenv_error_set(err, WENV_ERR_VALUE, "matrix epsilon must be in [0, 1), got %g", epsilon);
+    return wenv_resampler_create(rs, global_n, local_n, err);
+}
+
+wenv_status wenv_rotation_estimate_bytes(size_t global_n, size_t local_n, size_t normal_n, double epsilon,
+                                         size_t *bytes, wenv_error *err)
+{
+    *bytes = 0;
     wenv_resampler *rs = NULL;
-    if (wenv_resampler_create(&rs, global_n, local_n, err))
+    if (check_and_resample(global_n, local_n, normal_n, epsilon, &rs, err))
         return err->status;
-    size_t ns = normal_n * normal_n, nl = local_n * local_n, ng = global_n * global_n;
+    size_t ns = normal_n * normal_n, chunk = build_chunk(global_n, local_n), samples = 0, nnz = 0;
+    size_t want = ns < ESTIMATE_SAMPLES ? ns : ESTIMATE_SAMPLES;
+    build_ws ws;
+    int failed = ws_alloc(&ws, rs, chunk) < 0;
+    for (size_t k = 0; k < want && !failed; k++) {
+        double n[3], f[9];
+        wenv_csc m = {0};
+        wenv_normal_sample(normal_n, (2 * k + 1) * ns / (2 * want), n);
+        wenv_frame(n, f);
+        failed = build_matrix(rs, f, build_threshold(global_n, local_n, epsilon), chunk, &ws, &m) < 0;
+        nnz += wenv_csc_nnz(&m);
+        samples++;
+        wenv_csc_free(&m);
+    }
+    ws_free(&ws);
+    wenv_resampler_free(rs);
+    if (failed)
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory estimating the rotation matrices' size");
+    *bytes = wenv_rotation_bytes(global_n, normal_n, (size_t)((double)nnz / (double)samples * (double)ns));
+    return WENV_OK;
+}
+
+wenv_status wenv_rotation_build(wenv_rotation **out, size_t global_n, size_t local_n, size_t normal_n,
+                                double epsilon, const wenv_progress *progress, wenv_error *err)
+{
+    *out = NULL;
+    wenv_resampler *rs = NULL;
+    if (check_and_resample(global_n, local_n, normal_n, epsilon, &rs, err))
+        return err->status;
+    size_t ns = normal_n * normal_n;
     wenv_rotation *rot = calloc(1, sizeof *rot);
     wenv_csc *mats = rot ? calloc(ns, sizeof *mats) : NULL;
     if (!rot || !mats) {
@@ -330,10 +390,8 @@ wenv_status wenv_rotation_build(wenv_rotation **out, size_t global_n, size_t loc
     rot->normal_n = normal_n;
     rot->epsilon = epsilon;
     rot->matrices = mats;
-    size_t chunk = nl;
-    while (chunk > 1 && ng * chunk * sizeof(float) > ((size_t)4 << 20))
-        chunk /= 2;
-    double threshold = epsilon * sqrt((double)nl / (double)ng);
+    size_t chunk = build_chunk(global_n, local_n);
+    double threshold = build_threshold(global_n, local_n, epsilon);
 
     atomic_int failed = 0, cancelled = 0;
     atomic_size_t done = 0;

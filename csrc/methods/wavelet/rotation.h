@@ -49,6 +49,14 @@ wenv_status wenv_rotation_build(wenv_rotation **out, size_t global_n, size_t loc
                                 double epsilon, const wenv_progress *progress, wenv_error *err);
 void wenv_rotation_free(wenv_rotation *rot);
 size_t wenv_rotation_nnz(const wenv_rotation *rot);
+/* Memory the matrices take: values, row indices and column pointers. */
+size_t wenv_rotation_bytes(size_t global_n, size_t normal_n, size_t nnz);
+
+/* What wenv_rotation_build would take in memory, in bytes, estimated from a few of its matrices
+ * built at normal samples spread over the grid (a fraction of a second where the whole build takes
+ * minutes); a matrix's fill varies little from one normal to the next (within ~10 %). */
+wenv_status wenv_rotation_estimate_bytes(size_t global_n, size_t local_n, size_t normal_n, double epsilon,
+                                         size_t *bytes, wenv_error *err);
 
 /* local (N_local x 3, Haar domain) = R_s applied to the sparse global lighting: `count` Haar
  * coefficients with indices idx (ascending) and RGB values rgb (count x 3). */

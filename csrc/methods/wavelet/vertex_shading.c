@@ -157,9 +157,13 @@ static void shade_direct(const wenv_wavelet *wavelet, const float n[3], const fl
 {
     if (wavelet->has_diffuse)
         wenv_lights_irradiance(wavelet->lights, wenv_lights_level(WENV_LIGHT_IRRADIANCE_WIDTH), n, e);
-    if (wavelet->has_lobes)
-        wenv_lights_specular(wavelet->lights, wenv_lights_level(2.0 * wavelet->lobe_m_min * co), wavelet->mat,
-                             wavelet->lobe_cos_h_min, wavelet->light_cone_cos, n, v, co, s);
+    if (wavelet->has_lobes) {
+        double width = 2.0 * wavelet->lobe_m_min * co;
+        /* a lobe the reference integrates over the pixels' areas does the same here */
+        double narrow = wavelet->lobe_m_min < wavelet->narrow_roughness ? width : 0.0;
+        wenv_lights_specular(wavelet->lights, wenv_lights_level(width), wavelet->mat, wavelet->lobe_cos_h_min,
+                             wavelet->light_cone_cos, narrow, n, v, co, s);
+    }
 }
 
 static void shade_vertex(const wenv_wavelet *wavelet, const vertex_taps *tp, float *o)

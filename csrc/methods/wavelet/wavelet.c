@@ -70,8 +70,36 @@ void wenv_wavelet_free(wenv_wavelet *wavelet)
     free(wavelet);
 }
 
+int wenv_wavelet_rotation_cache_path(const wenv_wavelet_quality *q, const char *cache_dir, char *path, size_t size)
+{
+    /* %a: two epsilons that print alike to a few digits must not share (and overwrite) a file */
+    int n = snprintf(path, size, "%s/wenv-rot-v2-g%zu-l%zu-n%zu-e%a.bin", cache_dir, q->global_n, q->local_n,
+                     q->normal_n, q->matrix_epsilon);
+    return n > 0 && (size_t)n < size ? 0 : -1;
+}
+
+/* Matrices for q not in the cache: built, unless they would take more than memory_budget. */
+static wenv_status build_rotation(wenv_wavelet *wavelet, const wenv_wavelet_quality *q, size_t memory_budget,
+                                  const wenv_progress *progress, wenv_error *err)
+{
+    if (memory_budget) {
+        size_t need;
+        if (wenv_rotation_estimate_bytes(q->global_n, q->local_n, q->normal_n, q->matrix_epsilon, &need, err))
+            return err->status;
+        if (need > memory_budget)
+            return wenv_error_set(err, WENV_ERR_VALUE,
+                                  "rotation matrices for global %zu, local %zu, normals %zu at matrix_epsilon %g would "
+                                  "take about %.0f MB, more than memory_budget_mb (%.0f): use method='slicing' (the "
+                                  "same shading without matrices) or raise memory_budget_mb",
+                                  q->global_n, q->local_n, q->normal_n, q->matrix_epsilon, (double)need / 1048576.0,
+                                  (double)memory_budget / 1048576.0);
+    }
+    return wenv_rotation_build(&wavelet->rot, q->global_n, q->local_n, q->normal_n, q->matrix_epsilon, progress, err);
+}
+
 wenv_status wenv_wavelet_create(wenv_wavelet **out, const wenv_wavelet_quality *q, wenv_wavelet_variant method,
-                               const char *cache_dir, const wenv_progress *progress, wenv_error *err)
+                               const char *cache_dir, size_t memory_budget, const wenv_progress *progress,
+                               wenv_error *err)
 {
     *out = NULL;
     if (wenv_wavelet_quality_check(q, err))
@@ -114,17 +142,16 @@ wenv_status wenv_wavelet_create(wenv_wavelet **out, const wenv_wavelet_quality *
     double t0 = wenv_now_seconds();
     if (method == WENV_WAVELET_ROTATION) {
         char path[4096];
-        path[0] = '\0';
-        if (cache_dir) {
-            snprintf(path, sizeof path, "%s/wenv-rot-v2-g%zu-l%zu-n%zu-e%.3g.bin", cache_dir, q->global_n,
-                     q->local_n, q->normal_n, q->matrix_epsilon);
+        if (!cache_dir || wenv_wavelet_rotation_cache_path(q, cache_dir, path, sizeof path) != 0)
+            path[0] = '\0'; /* no cache, or a folder whose path leaves no room for the name */
+        if (path[0]) {
             wenv_error ignored = {0};
             if (wenv_rotation_load(&wavelet->rot, path, q->global_n, q->local_n, q->normal_n, q->matrix_epsilon,
                                    &ignored) == WENV_OK)
                 wavelet->stats.cache = 1;
         }
         if (!wavelet->rot) {
-            if (wenv_rotation_build(&wavelet->rot, q->global_n, q->local_n, q->normal_n, q->matrix_epsilon, progress, err)) {
+            if (build_rotation(wavelet, q, memory_budget, progress, err)) {
                 wenv_wavelet_free(wavelet);
                 return err->status;
             }
@@ -134,8 +161,7 @@ wenv_status wenv_wavelet_create(wenv_wavelet **out, const wenv_wavelet_quality *
             }
         }
         wavelet->stats.rotation_nnz = wenv_rotation_nnz(wavelet->rot);
-        wavelet->stats.rotation_bytes = wavelet->stats.rotation_nnz * (sizeof(uint16_t) + sizeof(float)) +
-                                   wavelet->ns * (wavelet->ng + 1) * sizeof(size_t);
+        wavelet->stats.rotation_bytes = wenv_rotation_bytes(q->global_n, q->normal_n, wavelet->stats.rotation_nnz);
     } else if (wenv_resampler_create(&wavelet->resampler, q->global_n, q->local_n, err)) {
         wenv_wavelet_free(wavelet);
         return err->status;
@@ -172,6 +198,7 @@ wenv_status wenv_wavelet_set_environment(wenv_wavelet *wavelet, const wenv_envma
     npixels = wenv_envmap_brightest(env, npixels, wavelet->q.light_threshold, bright);
     if ((st = wenv_lights_create(&lights, bright, npixels, err)))
         goto done;
+    wavelet->narrow_roughness = WENV_NARROW_LOBE_PIXELS * wenv_envmap_pixel_angle(env);
     for (size_t i = 0; i < npixels; i++)
         excluded[i] = bright[i].pixel;
     qsort(excluded, npixels, sizeof *excluded, compare_size);

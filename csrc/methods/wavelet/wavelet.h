@@ -37,6 +37,7 @@
 #include "base/error.h"
 #include "scene/envmap.h"
 #include "scene/material.h"
+#include "methods/method.h"
 
 typedef enum { WENV_WAVELET_ROTATION = 0, WENV_WAVELET_SLICING = 1 } wenv_wavelet_variant;
 
@@ -68,8 +69,18 @@ wenv_status wenv_wavelet_quality_check(const wenv_wavelet_quality *q, wenv_error
 
 /* cache_dir may be NULL (no disk cache).  Builds or loads the rotation matrices for
  * WENV_WAVELET_ROTATION, reporting progress. */
+/* memory_budget: the most the rotation matrices may take, in bytes (0: no limit); matrices not in
+ * the cache that would take more (wenv_rotation_estimate_bytes) are a WENV_ERR_VALUE, not built. */
 wenv_status wenv_wavelet_create(wenv_wavelet **out, const wenv_wavelet_quality *q, wenv_wavelet_variant method,
-                               const char *cache_dir, const wenv_progress *progress, wenv_error *err);
+                               const char *cache_dir, size_t memory_budget, const wenv_progress *progress,
+                               wenv_error *err);
+
+/* wenv_method_choose_default for the wavelet quality q (method.h). */
+const wenv_method *wenv_wavelet_default_method(const void *q, const wenv_method_setup *setup);
+
+/* The rotation matrices' cache file for q in cache_dir, into path (room for size bytes): named by
+ * every setting that changes the matrices, epsilon to its last bit.  0 on success. */
+int wenv_wavelet_rotation_cache_path(const wenv_wavelet_quality *q, const char *cache_dir, char *path, size_t size);
 void wenv_wavelet_free(wenv_wavelet *sh);
 
 wenv_status wenv_wavelet_set_environment(wenv_wavelet *sh, const wenv_envmap *env, wenv_error *err);

@@ -30,6 +30,7 @@ struct wenv_wavelet {
     float *irradiance;       /* ns x 3 */
     float radiance_max[3];   /* brightest texel of the lighting the slices see (lights out) */
     wenv_lights *lights;     /* pixels taken out as exact directional lights (lights.h) */
+    double narrow_roughness; /* lobes narrower than this integrate the lights' pixel areas (envmap.h) */
     unsigned char *slice_ready, *slice_need; /* ready: 0 stale, READY, or USED (see READY) */
     wenv_grazing_light *grazing_light; /* quality.grazing > 0 only */
 
