@@ -547,6 +547,11 @@ def test_hdr_files(tmp_path):
     write_hdr(tmp_path / "xyze.hdr", q, header=b"#?RADIANCE\nFORMAT=32-bit_rle_xyze\n\n")
     with pytest.raises(OSError, match="xyze.hdr.*32-bit_rle_rgbe"):
         wenv.load_environment(tmp_path / "xyze.hdr")
+    # bytes that are not UTF-8, in a header or a file name, are an OSError that shows them escaped
+    latin = os.fsencode(tmp_path) + b"/latin\xe9.hdr"
+    write_hdr(latin, q, header=b"#?RADIANCE\nFORMAT=\xff\xfe\n\n")
+    with pytest.raises(OSError, match=r"latin\\xe9\.hdr.*32-bit_rle_rgbe"):
+        wenv.load_environment(latin)
     write_hdr(tmp_path / "flipy.hdr", q, res=b"+Y %d +X %d\n" % (h, w))
     with pytest.raises(OSError, match="flipy.hdr.*orientation"):
         wenv.load_environment(tmp_path / "flipy.hdr")

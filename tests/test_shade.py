@@ -171,6 +171,10 @@ def test_progress_reports_and_cancels():
 
     with pytest.raises(RuntimeError, match="stop here"):
         wenv.Shader(env, wenv.Lambert(0.5), quality=dict(SMALL, normals=16), cache_dir=False, progress=boom)
+    # a return value that cannot be tested for truth stops the work with its own exception
+    with pytest.raises(ValueError, match="truth value of an array"):
+        wenv.Shader(env, wenv.Lambert(0.5), quality=dict(SMALL, normals=16), cache_dir=False,
+                    progress=lambda f: np.array([1, 2]))
 
 
 def test_set_num_threads_is_honoured(cook):
@@ -295,3 +299,17 @@ def test_lights_keep_a_constant_environment_exact():
     sh = wenv.Shader(env, wenv.Lambert(0.5), quality=dict(SMALL, lights=8), cache_dir=False)
     assert sh.stats["direct_lights"] == 0
     assert np.allclose(sh.shade(nrm, v), 0.65, rtol=2e-6)
+
+
+def test_messages_show_the_numbers_they_quote():
+    """Messages with floating-point values print the values (Python's own formatter has no %g: a
+    literal '%g' once stood in for them)."""
+    env = gradient_env()
+    cases = [(lambda: wenv.Shader(env, wenv.Lambert(0.5), quality="auto", target_error=2.5), "got 2.5"),
+             (lambda: wenv.Shader(env, wenv.Lambert(0.5), memory_budget_mb=-3.0), "got -3"),
+             (lambda: wenv.Environment(np.ones((4, 8, 3), np.float32), strength=-1.5), "got -1.5"),
+             (lambda: wenv.CookTorrance(lobes=[{"roughness": -0.5}]), "got -0.5")]
+    for make, text in cases:
+        with pytest.raises(ValueError) as info:
+            make()
+        assert text in str(info.value) and "%" not in str(info.value), str(info.value)

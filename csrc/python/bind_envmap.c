@@ -82,7 +82,7 @@ static int parse_transform(PyObject *rot_obj, PyObject *str_obj, double *rotatio
         if (wenv_py_get_finite(str_obj, "strength", strength) < 0)
             return -1;
         if (*strength < 0.0) {
-            PyErr_Format(PyExc_ValueError, "strength must be >= 0, got %g", *strength);
+            wenv_py_errorf(PyExc_ValueError, "strength must be >= 0, got %g", *strength);
             return -1;
         }
     }

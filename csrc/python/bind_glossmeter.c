@@ -93,7 +93,7 @@ static int get_options(PyObject *tol, PyObject *max_evals, PyObject *smooth, wen
         if (wenv_py_get_finite(tol, "tol", &opt->tol) < 0)
             return -1;
         if (opt->tol <= 0.0) {
-            PyErr_Format(PyExc_ValueError, "tol must be > 0 gloss units, got %g", opt->tol);
+            wenv_py_errorf(PyExc_ValueError, "tol must be > 0 gloss units, got %g", opt->tol);
             return -1;
         }
     }
@@ -122,7 +122,7 @@ static int get_options(PyObject *tol, PyObject *max_evals, PyObject *smooth, wen
 
 static PyObject *not_converged(const wenv_gloss_result *r, const wenv_gloss_options *opt)
 {
-    PyErr_Format(PyExc_RuntimeError,
+    wenv_py_errorf(PyExc_RuntimeError,
                  "glossmeter: the integral did not reach tol=%g within max_evals=%zu evaluations "
                  "(reading %.4f, estimated error %.3g); raise max_evals or tol",
                  opt->tol, opt->max_evals, r->value, r->error);

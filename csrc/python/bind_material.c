@@ -982,9 +982,7 @@ static double lambda_fn(double x, const void *ctx)
 static int check_range(double v, const char *name, double lo, int lo_open, double hi)
 {
     if ((lo_open ? !(v > lo) : !(v >= lo)) || v > hi) {
-        char msg[160]; /* PyErr_Format has no %g */
-        snprintf(msg, sizeof msg, "%s must be in %s%g, %g], got %g", name, lo_open ? "(" : "[", lo, hi, v);
-        PyErr_SetString(PyExc_ValueError, msg);
+        wenv_py_errorf(PyExc_ValueError, "%s must be in %s%g, %g], got %g", name, lo_open ? "(" : "[", lo, hi, v);
         return -1;
     }
     return 0;
@@ -1084,7 +1082,7 @@ static PyObject *py_alpha_from_roughness(PyObject *self, PyObject *arg)
     if (wenv_py_get_finite(arg, "roughness", &r) < 0)
         return NULL;
     if (r < 0.0) {
-        PyErr_Format(PyExc_ValueError, "roughness must be >= 0, got %g", r);
+        wenv_py_errorf(PyExc_ValueError, "roughness must be >= 0, got %g", r);
         return NULL;
     }
     return PyFloat_FromDouble(wenv_alpha_from_roughness(r));

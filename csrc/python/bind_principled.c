@@ -225,7 +225,7 @@ static PyObject *principled_diffuse_at(PyObject *self, PyObject *arg)
     PyObject *out = PyList_New((Py_ssize_t)n);
     for (size_t i = 0; out && i < n; i++) {
         if (!isfinite(c[i])) {
-            PyErr_Format(PyExc_ValueError, "cos_v must be finite, got %g", c[i]);
+            wenv_py_errorf(PyExc_ValueError, "cos_v must be finite, got %g", c[i]);
             Py_CLEAR(out);
             break;
         }

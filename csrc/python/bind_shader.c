@@ -191,7 +191,7 @@ static int do_set(ShaderObject *self, PyObject *obj, int material)
 static int choose_auto(ShaderObject *self, PyObject *env_obj, PyObject *mat_obj, PyObject *normals_obj)
 {
     if (!(self->target_error > 0.0 && self->target_error <= 1.0)) {
-        PyErr_Format(PyExc_ValueError, "target_error must be in (0, 1], got %g", self->target_error);
+        wenv_py_errorf(PyExc_ValueError, "target_error must be in (0, 1], got %g", self->target_error);
         return -1;
     }
     const struct wenv_envmap *env = wenv_py_envmap(env_obj, "env");
@@ -244,7 +244,7 @@ static int Shader_init(ShaderObject *self, PyObject *args, PyObject *kwargs)
         return -1;
     }
     if (!(self->memory_budget_mb > 0.0 && self->memory_budget_mb < 1e9)) {
-        PyErr_Format(PyExc_ValueError, "memory_budget_mb must be positive, got %g", self->memory_budget_mb);
+        wenv_py_errorf(PyExc_ValueError, "memory_budget_mb must be positive, got %g", self->memory_budget_mb);
         return -1;
     }
     if (!wenv_py_envmap(env_obj, "env") || !wenv_py_material(mat_obj, "material"))

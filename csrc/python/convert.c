@@ -2,6 +2,29 @@
 #include "python/convert.h"
 
 #include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <string.h>
+
+static void set_message(PyObject *type, const char *text)
+{
+    PyObject *message = PyUnicode_DecodeUTF8(text, (Py_ssize_t)strlen(text), "backslashreplace");
+    if (message) {
+        PyErr_SetObject(type, message);
+        Py_DECREF(message);
+    }
+}
+
+PyObject *wenv_py_errorf(PyObject *type, const char *fmt, ...)
+{
+    char text[1024];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(text, sizeof text, fmt, ap);
+    va_end(ap);
+    set_message(type, text);
+    return NULL;
+}
 
 PyObject *wenv_py_raise(const wenv_error *err)
 {
@@ -16,7 +39,9 @@ PyObject *wenv_py_raise(const wenv_error *err)
     case WENV_ERR_CANCELLED: type = wenv_py_cancelled_error(); break;
     case WENV_OK: break;
     }
-    PyErr_SetString(type, err->message[0] ? err->message : "wenv: unknown error");
+    /* messages quote paths and file headers, whose bytes need not be UTF-8: undecodable ones are
+     * shown as \x escapes rather than turning the error into a UnicodeDecodeError */
+    set_message(type, err->message[0] ? err->message : "wenv: unknown error");
     return NULL;
 }
 
@@ -246,8 +271,13 @@ static int progress_trampoline(void *ctx, double fraction)
         bridge->raised = 1;
         stop = 1;
     } else {
-        stop = PyObject_IsTrue(result) == 1;
+        int truth = PyObject_IsTrue(result);
         Py_DECREF(result);
+        if (truth < 0) { /* a value that cannot be tested for truth: its exception stops the work */
+            bridge->raised = 1;
+            truth = 1;
+        }
+        stop = truth;
     }
     PyGILState_Release(gil);
     return stop;

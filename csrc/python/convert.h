@@ -12,6 +12,11 @@
  * MemoryError, wenv.CancelledError).  Always returns NULL for convenient `return`. */
 PyObject *wenv_py_raise(const wenv_error *err);
 
+/* Sets an exception of `type` whose message is formatted by C's vsnprintf: PyErr_Format has no
+ * %g, %f or %e (it printed them literally); bytes that are not UTF-8 come out as \x escapes.
+ * Always returns NULL. */
+PyObject *wenv_py_errorf(PyObject *type, const char *fmt, ...);
+
 /* wenv.CancelledError (set up by module.c). */
 PyObject *wenv_py_cancelled_error(void);
 
