@@ -518,6 +518,46 @@ def test_exr_variants(tmp_path):
         wenv.load_environment(tmp_path / "z.exr")
 
 
+def test_every_exr_channel_set_reads_or_is_refused(tmp_path):
+    """Every set of the channels R, G, B, A, Y and Z, in half and float, scanline and tiled: with R,
+    G and B the colour is read, else with Y the grey, else an OSError -- never a crash (OpenEXRCore
+    3.1 wrote through a skipped channel when three half channels held Y and two of R, G, B).  Read
+    in a child process, so that a crash fails this test instead of ending the run."""
+    import itertools
+    import subprocess
+    import sys
+    rng = np.random.default_rng(17)
+    planes = {c: np.float32(np.float16(rng.uniform(0.1, 4.0, (9, 13)))) for c in "RGBAYZ"}
+    cases = []
+    for k in range(1, 7):
+        for chans in itertools.combinations("RGBAYZ", k):
+            for pixel_type, tile in (("half", None), ("float", None), ("half", (4, 4)), ("float", (8, 3))):
+                name = f"{''.join(chans)}_{pixel_type}_{'tiled' if tile else 'scan'}.exr"
+                write_exr(tmp_path / name, np.stack([planes[c] for c in chans], -1), pixel_type, "".join(chans), tile)
+                if {"R", "G", "B"} <= set(chans):
+                    want = np.stack([planes[c] for c in "RGB"], -1)
+                elif "Y" in chans:
+                    want = np.repeat(planes["Y"][..., None], 3, -1)
+                else:
+                    want = None
+                cases.append((name, want))
+    script = (
+        f"import sys\nsys.path.insert(0, {os.path.dirname(wenv.__file__)!r})\nimport numpy as np, wenv\n"
+        "for name in sys.argv[2:]:\n"
+        "    try:\n"
+        "        np.save(sys.argv[1] + '/' + name + '.npy', wenv.load_environment(sys.argv[1] + '/' + name).pixels)\n"
+        "    except OSError as e:\n"
+        "        open(sys.argv[1] + '/' + name + '.err', 'w').write(str(e))\n")
+    run = subprocess.run([sys.executable, "-c", script, str(tmp_path)] + [n for n, _ in cases], capture_output=True)
+    assert run.returncode == 0, run.stderr.decode()[-2000:]
+    assert len(cases) == 63 * 4
+    for name, want in cases:
+        if want is None:
+            assert "R, G and B (or Y)" in (tmp_path / (name + ".err")).read_text(), name
+        else:
+            np.testing.assert_array_equal(np.load(tmp_path / (name + ".npy")), want, err_msg=name)
+
+
 def test_hdr_files(tmp_path):
     rng = np.random.default_rng(12)
     h, w = 9, 40

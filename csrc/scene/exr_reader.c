@@ -94,14 +94,31 @@ static int exr_channel_slot(const char *name)
     return -1;
 }
 
-/* Decodes one chunk whose top-left pixel is (x_off, y_off) in the data window into rgb. */
+/* Room for one chunk's values of one channel, grown as chunks need. */
+typedef struct {
+    float *values;
+    size_t room;
+} exr_scratch;
+
+/* Decodes one chunk whose top-left pixel is (x_off, y_off) in the data window into rgb.  Channels
+ * not wanted are decoded into `scratch` and dropped: OpenEXRCore 3.1 picks unpacking routines for
+ * 3 or 4 half channels that write every channel, a skipped one (decode_to_ptr NULL) included --
+ * a grey file with two of R, G, B beside Y crashed it. */
 static exr_result_t exr_decode_chunk(exr_context_t ctx, const exr_chunk_info_t *cinfo, exr_decode_pipeline_t *dec,
                                      int *initialised, float *rgb, size_t width, size_t height, int64_t x_off,
-                                     int64_t y_off, int grey)
+                                     int64_t y_off, int grey, exr_scratch *scratch)
 {
     if (x_off < 0 || y_off < 0 || cinfo->width <= 0 || cinfo->height <= 0 ||
         (uint64_t)x_off + (uint64_t)cinfo->width > width || (uint64_t)y_off + (uint64_t)cinfo->height > height)
         return EXR_ERR_BAD_CHUNK_LEADER; /* a chunk outside the data window: corrupt file */
+    size_t chunk_pixels = (size_t)cinfo->width * (size_t)cinfo->height;
+    if (scratch->room < chunk_pixels) {
+        float *grown = realloc(scratch->values, chunk_pixels * sizeof(float));
+        if (!grown)
+            return EXR_ERR_OUT_OF_MEMORY;
+        scratch->values = grown;
+        scratch->room = chunk_pixels;
+    }
     exr_result_t rv = *initialised ? exr_decoding_update(ctx, 0, cinfo, dec)
                                    : exr_decoding_initialize(ctx, 0, cinfo, dec);
     if (rv != EXR_ERR_SUCCESS)
@@ -110,13 +127,15 @@ static exr_result_t exr_decode_chunk(exr_context_t ctx, const exr_chunk_info_t *
     for (int16_t c = 0; c < dec->channel_count; c++) {
         exr_coding_channel_info_t *ch = &dec->channels[c];
         int slot = exr_channel_slot(ch->channel_name);
-        if (grey ? slot != 3 : (slot < 0 || slot > 2)) {
-            ch->decode_to_ptr = NULL; /* not wanted: the pipeline skips it */
+        ch->user_bytes_per_element = 4;
+        ch->user_data_type = EXR_PIXEL_FLOAT;
+        if (grey ? slot != 3 : (slot < 0 || slot > 2)) { /* not wanted */
+            ch->decode_to_ptr = (uint8_t *)scratch->values;
+            ch->user_pixel_stride = (int32_t)sizeof(float);
+            ch->user_line_stride = (int32_t)(sizeof(float) * (size_t)cinfo->width);
             continue;
         }
         ch->decode_to_ptr = (uint8_t *)(rgb + ((size_t)y_off * width + (size_t)x_off) * 3 + (grey ? 0 : slot));
-        ch->user_bytes_per_element = 4;
-        ch->user_data_type = EXR_PIXEL_FLOAT;
         ch->user_pixel_stride = 3 * (int32_t)sizeof(float);
         ch->user_line_stride = (int32_t)(3 * sizeof(float) * width);
     }
@@ -281,6 +300,7 @@ wenv_status wenv_read_exr(int fd, int64_t size, const char *path, float **out, s
     float *rgb = NULL;
     exr_decode_pipeline_t dec = EXR_DECODE_PIPELINE_INITIALIZER;
     int initialised = 0, use_rgba = 0;
+    exr_scratch scratch = {NULL, 0};
     exr_storage_t storage;
     exr_attr_box2i_t dw;
     const exr_attr_chlist_t *chl = NULL;
@@ -344,7 +364,8 @@ wenv_status wenv_read_exr(int fd, int64_t size, const char *path, float **out, s
             rv = exr_read_scanline_chunk_info(ctx, 0, (int)y, &cinfo);
             if (rv == EXR_ERR_SUCCESS)
                 rv = exr_decode_chunk(ctx, &cinfo, &dec, &initialised, rgb, width, height,
-                                      (int64_t)cinfo.start_x - dw.min.x, (int64_t)cinfo.start_y - dw.min.y, grey);
+                                      (int64_t)cinfo.start_x - dw.min.x, (int64_t)cinfo.start_y - dw.min.y, grey,
+                                      &scratch);
             if (chunk_failed(rv, &use_rgba, path, &stream, err))
                 goto done;
         }
@@ -361,7 +382,8 @@ wenv_status wenv_read_exr(int fd, int64_t size, const char *path, float **out, s
                 rv = exr_read_tile_chunk_info(ctx, 0, (int)tx, (int)ty, 0, 0, &cinfo);
                 if (rv == EXR_ERR_SUCCESS)
                     rv = exr_decode_chunk(ctx, &cinfo, &dec, &initialised, rgb, width, height,
-                                          (int64_t)(tx * (size_t)tw), (int64_t)(ty * (size_t)th), grey);
+                                          (int64_t)(tx * (size_t)tw), (int64_t)(ty * (size_t)th), grey,
+                                          &scratch);
                 if (chunk_failed(rv, &use_rgba, path, &stream, err))
                     goto done;
             }
@@ -379,6 +401,7 @@ done:
         exr_decoding_destroy(ctx, &dec);
     exr_finish(&ctx);
     free(rgb);
+    free(scratch.values);
     if (use_rgba) /* OpenEXRCore lacks this compression: OpenEXR's C++ library decodes the file */
         return load_exr_rgba(path, out, out_h, out_w, err);
     return err->status;
