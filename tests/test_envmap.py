@@ -510,7 +510,7 @@ def test_exr_variants(tmp_path):
     bad = img[..., :3].copy()
     bad[3, 4, 2] = np.inf
     write_exr(tmp_path / "inf.exr", bad)
-    with pytest.raises(ValueError, match="inf.exr.*not finite"):
+    with pytest.raises(OSError, match="inf.exr.*not finite"):  # a fault of the file, as every other
         wenv.load_environment(tmp_path / "inf.exr")
     # no colour channels
     write_exr(tmp_path / "z.exr", img[..., :1], channels="Z")

@@ -112,23 +112,27 @@ static wenv_status check_shape(size_t height, size_t width, wenv_projection proj
 /* Takes ownership of `rgb` (height x width x 3): validates it, clamps negatives, and wraps it. */
 static int row_stats(wenv_envmap *env);
 
-/* Takes ownership of rgb (height x width x 3).  `checked`: the pixels come from another environment,
- * already finite and non-negative. */
+/* Where pixels come from: an argument (a bad one is a WENV_ERR_VALUE), a file (WENV_ERR_IO, as for
+ * every other fault of a file), or another environment (already finite and non-negative). */
+typedef enum { PIXELS_FROM_ARGUMENT, PIXELS_FROM_FILE, PIXELS_FROM_ENVIRONMENT } pixel_source;
+
+/* Takes ownership of rgb (height x width x 3). */
 static wenv_status envmap_adopt_checked(wenv_envmap **out, float *rgb, size_t height, size_t width,
                                         wenv_projection projection, double rotation, double strength,
-                                        const char *what, int checked, wenv_error *err)
+                                        const char *what, pixel_source source, wenv_error *err)
 {
     *out = NULL;
     if (check_transform(rotation, strength, err) || check_shape(height, width, projection, what, err)) {
         free(rgb);
         return err->status;
     }
-    size_t count = checked ? 0 : height * width * 3;
+    size_t count = source == PIXELS_FROM_ENVIRONMENT ? 0 : height * width * 3;
     for (size_t i = 0; i < count; i++) {
         if (!isfinite(rgb[i])) {
             size_t px = i / 3;
-            wenv_error_set(err, WENV_ERR_VALUE, "%s: pixel [row %zu, column %zu, channel %zu] is not finite", what,
-                           px / width, px % width, i % 3);
+            wenv_error_set(err, source == PIXELS_FROM_FILE ? WENV_ERR_IO : WENV_ERR_VALUE,
+                           "%s: pixel [row %zu, column %zu, channel %zu] is not finite", what, px / width, px % width,
+                           i % 3);
             free(rgb);
             return err->status;
         }
@@ -171,7 +175,7 @@ static wenv_status envmap_adopt_checked(wenv_envmap **out, float *rgb, size_t he
         if (vertical)
             env->faces[1] = vertical_cross_minus_x;
     }
-    if (!checked && row_stats(env) < 0) {
+    if (source != PIXELS_FROM_ENVIRONMENT && row_stats(env) < 0) { /* a copy takes the original's */
         wenv_envmap_free(env);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for an environment");
     }
@@ -181,9 +185,9 @@ static wenv_status envmap_adopt_checked(wenv_envmap **out, float *rgb, size_t he
 
 static wenv_status envmap_adopt(wenv_envmap **out, float *rgb, size_t height, size_t width,
                                 wenv_projection projection, double rotation, double strength, const char *what,
-                                wenv_error *err)
+                                pixel_source source, wenv_error *err)
 {
-    return envmap_adopt_checked(out, rgb, height, width, projection, rotation, strength, what, 0, err);
+    return envmap_adopt_checked(out, rgb, height, width, projection, rotation, strength, what, source, err);
 }
 
 wenv_status wenv_envmap_create(wenv_envmap **out, const float *pixels, size_t height, size_t width,
@@ -203,7 +207,7 @@ wenv_status wenv_envmap_create(wenv_envmap **out, const float *pixels, size_t he
     for (size_t i = 0; i < height * width; i++)
         for (size_t c = 0; c < 3; c++)
             rgb[3 * i + c] = pixels[channels * i + c];
-    return envmap_adopt(out, rgb, height, width, projection, rotation, strength, "pixels", err);
+    return envmap_adopt(out, rgb, height, width, projection, rotation, strength, "pixels", PIXELS_FROM_ARGUMENT, err);
 }
 
 wenv_status wenv_envmap_with_transform(wenv_envmap **out, const wenv_envmap *env, double rotation,
@@ -217,7 +221,7 @@ wenv_status wenv_envmap_with_transform(wenv_envmap **out, const wenv_envmap *env
                               env->height);
     memcpy(rgb, env->pixels, bytes);
     wenv_status st = envmap_adopt_checked(out, rgb, env->height, env->width, env->projection, rotation, strength,
-                                          "pixels", 1, err);
+                                          "pixels", PIXELS_FROM_ENVIRONMENT, err);
     if (st)
         return st;
     /* the rows' statistics do not depend on rotation or strength */
@@ -916,5 +920,5 @@ wenv_status wenv_envmap_load(wenv_envmap **out, const char *path, wenv_projectio
         return status;
     char what[600];
     snprintf(what, sizeof what, "file '%s'", path);
-    return envmap_adopt(out, rgb, h, w, projection, rotation, strength, what, err);
+    return envmap_adopt(out, rgb, h, w, projection, rotation, strength, what, PIXELS_FROM_FILE, err);
 }
