@@ -169,11 +169,14 @@ def environment_from_spec(spec, images):
 def environment(spec, images):
     """The Environment a shading pass uses for a WorldSpec.  An image's pixels are read once and
     kept (untransformed) in engine.shaders, so turning the World or changing its strength is cheap."""
-    if spec.kind == "color":
-        return environment_from_spec(spec, images)
-    untransformed = WorldSpec("image", spec.image_name, spec.projection, 0.0, 1.0, key=spec.key)
-    return engine.shaders.environment(spec.key, spec.signature, spec.rotation, spec.strength,
-                                      lambda: environment_from_spec(untransformed, images))
+    try:
+        if spec.kind == "color":
+            return environment_from_spec(spec, images)
+        untransformed = WorldSpec("image", spec.image_name, spec.projection, 0.0, 1.0, key=spec.key)
+        return engine.shaders.environment(spec.key, spec.signature, spec.rotation, spec.strength,
+                                          lambda: environment_from_spec(untransformed, images))
+    except ValueError as exc:  # lighting the core refuses (a Strength beyond what it can shade)
+        raise SetupError(f"World: {exc}") from None
 
 
 def scene_lights_note(scene):

@@ -401,11 +401,14 @@ def _break(scene, how):
         value = tree.nodes.new("ShaderNodeValue")
         tree.links.new(value.outputs[0], bg.inputs["Strength"])
         return "Background strength"
+    if how == "absurd strength":
+        env_world(scene, "sunset", strength=1e30)
+        return "more than 1e\\+18"
     raise AssertionError(how)
 
 
 @pytest.mark.parametrize("how", ["no world", "no nodes", "nothing connected", "no image", "missing file",
-                                 "sky texture", "x rotation", "linked strength"])
+                                 "sky texture", "x rotation", "linked strength", "absurd strength"])
 def test_broken_world_is_reported_and_cancelled(scene, how):
     expect = _break(scene, how)
     obj = add_monkey()

@@ -512,6 +512,10 @@ def test_exr_variants(tmp_path):
     write_exr(tmp_path / "inf.exr", bad)
     with pytest.raises(OSError, match="inf.exr.*not finite"):  # a fault of the file, as every other
         wenv.load_environment(tmp_path / "inf.exr")
+    bad[3, 4, 2] = 1e30  # finite, but beyond what float32 shading can hold
+    write_exr(tmp_path / "huge.exr", bad)
+    with pytest.raises(OSError, match=r"huge.exr.*1e\+30, more than 1e\+18"):
+        wenv.load_environment(tmp_path / "huge.exr")
     # no colour channels
     write_exr(tmp_path / "z.exr", img[..., :1], channels="Z")
     with pytest.raises(OSError, match="z.exr.*R, G and B"):

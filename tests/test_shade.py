@@ -313,3 +313,24 @@ def test_messages_show_the_numbers_they_quote():
         with pytest.raises(ValueError) as info:
             make()
         assert text in str(info.value) and "%" not in str(info.value), str(info.value)
+
+
+def test_radiance_beyond_float32_shading_is_refused_and_below_it_shades_right():
+    """Lighting whose reflection float32 cannot hold is a ValueError (an OSError from a file): finite
+    values near FLT_MAX once shaded to 0 and strength=1e308 to inf.  Just below the limit, a sun of
+    1e17 over a dim sky shades finite and as the reference does."""
+    sky = np.full((32, 64, 3), 0.5, np.float32)
+    with pytest.raises(ValueError, match=r"pixels: the brightest pixel times strength is 3e\+38"):
+        wenv.Environment(np.full((4, 8, 3), 3e38, np.float32))
+    with pytest.raises(ValueError, match=r"strength is 5e\+307"):
+        wenv.Environment(sky, strength=1e308)
+    with pytest.raises(ValueError, match=r"^strength: .* 5e\+19"):
+        wenv.Environment(sky).with_transform(strength=1e20)
+    sun = sky.copy()
+    sun[6:8, 20:22] = 1e17
+    env = wenv.Environment(sun)
+    mat = wenv.CookTorrance(diffuse=0.3, lobes=[{"roughness": 0.3}])
+    nrm, v = random_pairs(400, 21)
+    out, ref = wenv.Shader(env, mat, quality="draft").shade(nrm, v), wenv.reference(env, mat, nrm, v)
+    assert np.all(np.isfinite(out)) and out.max() > 1e13
+    assert np.sqrt(np.mean((out - ref) ** 2) / np.mean(ref ** 2)) < 0.02

@@ -116,6 +116,21 @@ static int row_stats(wenv_envmap *env);
  * every other fault of a file), or another environment (already finite and non-negative). */
 typedef enum { PIXELS_FROM_ARGUMENT, PIXELS_FROM_FILE, PIXELS_FROM_ENVIRONMENT } pixel_source;
 
+/* Whether pixels x strength stay within WENV_RADIANCE_MAX (the rows' peaks must be set). */
+static wenv_status check_radiance_range(const wenv_envmap *env, const char *what, pixel_source source,
+                                        wenv_error *err)
+{
+    double peak = 0.0;
+    for (size_t row = 0; row < env->height; row++)
+        peak = env->row_peak[row] > peak ? env->row_peak[row] : peak;
+    if (!(peak * env->strength <= WENV_RADIANCE_MAX))
+        return wenv_error_set(err, source == PIXELS_FROM_FILE ? WENV_ERR_IO : WENV_ERR_VALUE,
+                              "%s: the brightest pixel times strength is %g, more than %g: wenv shades in float32, "
+                              "which cannot hold what such lighting reflects (scale the image or strength down)",
+                              what, peak * env->strength, WENV_RADIANCE_MAX);
+    return WENV_OK;
+}
+
 /* Takes ownership of rgb (height x width x 3). */
 static wenv_status envmap_adopt_checked(wenv_envmap **out, float *rgb, size_t height, size_t width,
                                         wenv_projection projection, double rotation, double strength,
@@ -175,9 +190,15 @@ static wenv_status envmap_adopt_checked(wenv_envmap **out, float *rgb, size_t he
         if (vertical)
             env->faces[1] = vertical_cross_minus_x;
     }
-    if (source != PIXELS_FROM_ENVIRONMENT && row_stats(env) < 0) { /* a copy takes the original's */
-        wenv_envmap_free(env);
-        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for an environment");
+    if (source != PIXELS_FROM_ENVIRONMENT) { /* a copy takes the original's statistics */
+        if (row_stats(env) < 0) {
+            wenv_envmap_free(env);
+            return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for an environment");
+        }
+        if (check_radiance_range(env, what, source, err)) {
+            wenv_envmap_free(env);
+            return err->status;
+        }
     }
     *out = env;
     return WENV_OK;
@@ -234,6 +255,11 @@ wenv_status wenv_envmap_with_transform(wenv_envmap **out, const wenv_envmap *env
     }
     memcpy((*out)->row_flux, env->row_flux, env->height * sizeof(double));
     memcpy((*out)->row_peak, env->row_peak, env->height * sizeof(float));
+    if (check_radiance_range(*out, "strength", PIXELS_FROM_ARGUMENT, err)) {
+        wenv_envmap_free(*out);
+        *out = NULL;
+        return err->status;
+    }
     return WENV_OK;
 }
 

@@ -43,6 +43,12 @@ typedef enum {
 
 typedef struct wenv_envmap wenv_envmap;
 
+/* The largest radiance (a pixel times strength) an environment may hold.  Shading works in float32
+ * (up to 3.4e38) and squares Haar coefficients to rank them, so 1e18 leaves room for sums over
+ * thousands of pixels and lobe peaks of 1e6; a sun in physical units is below 1e10.  More is a
+ * WENV_ERR_VALUE (an argument) or WENV_ERR_IO (a file). */
+#define WENV_RADIANCE_MAX 1e18
+
 /* Copies an H x W x C float image (C = 3 or 4, alpha ignored, row 0 the top).  Non-finite pixels
  * are rejected (WENV_ERR_VALUE naming "pixels"); negative values are clamped to 0.  Cube crosses
  * must be 3:4 (vertical) or 4:3 (horizontal). */
