@@ -2,6 +2,7 @@
 finite output everywhere, caching, progress and bad input."""
 import math
 import os
+import struct
 
 import numpy as np
 import pytest
@@ -154,6 +155,72 @@ def test_cache_survives_corruption(tmp_path):
         assert np.array_equal(again.shade(nrm, v), expected), what
     assert wenv.Shader(env, lam, quality=SMALL, cache_dir=str(tmp_path)).stats["cache"] == "loaded"
     assert not [p for p in tmp_path.iterdir() if ".tmp" in p.name]
+
+
+def forge_first_block(data, value):
+    """The cache file `data` with its first matrix's last value set to `value`, every CRC valid."""
+    import zlib
+    head, ns = data[:48], SMALL["normals"] ** 2
+    entries = [list(struct.unpack_from("<QQII", data, 48 + 24 * s)) for s in range(ns)]
+    start, old_size = 48 + 24 * ns, entries[0][0]
+    raw = bytearray(zlib.decompress(data[start:start + old_size]))
+    raw[-4:] = struct.pack("<f", value)
+    block = zlib.compress(bytes(raw))
+    entries[0] = [len(block), len(raw), zlib.crc32(raw), 0]
+    table = b"".join(struct.pack("<QQII", *e) for e in entries)
+    crc = zlib.crc32(table, zlib.crc32(head[:12] + b"\0\0\0\0" + head[16:]))
+    return head[:12] + struct.pack("<I", crc) + head[16:] + table + block + data[start + old_size:]
+
+
+def test_cache_with_valid_crcs_but_impossible_values_is_rebuilt(tmp_path):
+    """A block whose CRCs are right but whose values no rotation matrix can hold (|R_ij| <= sqrt of
+    its rows) is not loaded: the matrices are rebuilt and shade as before.  A value within the
+    bound still loads (the check is the bound, not a guess)."""
+    env, lam = gradient_env(), wenv.Lambert(0.5)
+    first = wenv.Shader(env, lam, quality=SMALL, cache_dir=str(tmp_path))
+    (path,) = list(tmp_path.iterdir())
+    nrm, v = random_pairs(200, 9)
+    expected, data = first.shade(nrm, v), path.read_bytes()
+    path.write_bytes(forge_first_block(data, 0.5))
+    assert wenv.Shader(env, lam, quality=SMALL, cache_dir=str(tmp_path)).stats["cache"] == "loaded"
+    for value in (1e30, -1e3, SMALL["local"] * 1.01):
+        path.write_bytes(forge_first_block(data, value))
+        again = wenv.Shader(env, lam, quality=SMALL, cache_dir=str(tmp_path))
+        assert again.stats["cache"] == "built", value
+        assert np.array_equal(again.shade(nrm, v), expected), value
+
+
+def test_cache_writes_never_follow_a_planted_link_and_concurrent_writers_agree(tmp_path):
+    """The temporary file is created exclusively under a name no one can guess: a symlink planted at
+    the name wenv once used (<cache>.tmp.<pid>) is left alone, its target untouched; threads saving
+    the same matrices at once all succeed and leave one valid file."""
+    env, lam = gradient_env(), wenv.Lambert(0.5)
+    wenv.Shader(env, lam, quality=SMALL, cache_dir=str(tmp_path))
+    (path,) = list(tmp_path.iterdir())
+    path.unlink()
+    precious = tmp_path.parent / (tmp_path.name + "-precious")
+    precious.write_bytes(b"keep me")
+    planted = tmp_path / f"{path.name}.tmp.{os.getpid()}"
+    planted.symlink_to(precious)
+    assert wenv.Shader(env, lam, quality=SMALL, cache_dir=str(tmp_path)).stats["cache"] == "built"
+    assert precious.read_bytes() == b"keep me" and path.is_file() and not path.is_symlink()
+    planted.unlink()
+    path.unlink()
+
+    import threading
+    results = []
+
+    def build():
+        results.append(wenv.Shader(env, lam, quality=SMALL, cache_dir=str(tmp_path)).stats["cache"])
+
+    threads = [threading.Thread(target=build) for _ in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert len(results) == 4 and set(results) <= {"built", "loaded"}, results  # no "built (save failed)"
+    assert [p.name for p in tmp_path.iterdir()] == [path.name]
+    assert wenv.Shader(env, lam, quality=SMALL, cache_dir=str(tmp_path)).stats["cache"] == "loaded"
 
 
 def test_progress_reports_and_cancels():

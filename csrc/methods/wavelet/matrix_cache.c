@@ -3,11 +3,14 @@
 #include "methods/wavelet/rotation.h"
 
 #include <errno.h>
+#include <fcntl.h>
 #include <math.h>
 #include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
 #include <zlib.h>
 
 #define CACHE_MAGIC "WENVROT"
@@ -85,8 +88,12 @@ static int unpack(const unsigned char *buf, size_t size, size_t rows, size_t col
         m->rowidx[e] = r;
     }
     memcpy(m->val, buf, nnz * 4);
+    /* R = H_local S H_global^T with orthonormal Haar bases and S row-stochastic (non-negative, rows
+     * summing to 1): |R_ij| <= ||S||_2 <= sqrt(||S||_1 ||S||_inf) <= sqrt(rows).  A block with valid
+     * CRCs but values beyond that was not written by wenv_rotation_save. */
+    float bound = sqrtf((float)rows) * 1.0001f;
     for (size_t e = 0; e < nnz; e++)
-        if (!isfinite(m->val[e]))
+        if (!(fabsf(m->val[e]) <= bound))
             return -1;
     return 0;
 }
@@ -97,6 +104,24 @@ static uint32_t header_crc(const cache_header *h, const cache_entry *entries, si
     copy.header_crc = 0;
     uLong crc = crc32(0L, (const Bytef *)&copy, sizeof copy);
     return (uint32_t)crc32(crc, (const Bytef *)entries, (uInt)(ns * sizeof *entries));
+}
+
+/* The rename itself reaches the disk only with its folder: best effort (a failure loses the
+ * cache, never its content). */
+static void sync_folder_of(const char *path)
+{
+    const char *slash = strrchr(path, '/');
+    char folder[4096];
+    size_t len = slash ? (size_t)(slash - path) : 0;
+    if (len >= sizeof folder)
+        return;
+    memcpy(folder, path, len);
+    folder[len] = '\0';
+    int fd = open(slash == path ? "/" : len ? folder : ".", O_RDONLY | O_DIRECTORY);
+    if (fd >= 0) {
+        fsync(fd);
+        close(fd);
+    }
 }
 
 wenv_status wenv_rotation_save(const wenv_rotation *rot, const char *path, wenv_error *err)
@@ -151,10 +176,17 @@ wenv_status wenv_rotation_save(const wenv_rotation *rot, const char *path, wenv_
         st = wenv_error_set(err, WENV_ERR_NOMEM, "out of memory writing %s", path);
         goto done;
     }
-    snprintf(tmp, plen, "%s.tmp.%ld", path, (long)getpid());
-    fp = fopen(tmp, "wb");
-    if (!fp) {
+    /* a new file of a name no one can guess (mkstemp: O_CREAT | O_EXCL, so no symlink planted at the
+     * name is followed, and threads and processes writing at once each have their own), renamed over
+     * the cache file once complete and on disk */
+    snprintf(tmp, plen, "%s.tmp.XXXXXX", path);
+    int fd = mkstemp(tmp);
+    if (fd < 0 || fchmod(fd, 0644) != 0 || !(fp = fdopen(fd, "wb"))) {
         st = wenv_error_set(err, WENV_ERR_IO, "cannot write %s: %s", tmp, strerror(errno));
+        if (fd >= 0) {
+            close(fd);
+            remove(tmp);
+        }
         goto done;
     }
     int ok = fwrite(&h, sizeof h, 1, fp) == 1 && fwrite(entries, sizeof *entries, ns, fp) == ns;
@@ -166,6 +198,8 @@ wenv_status wenv_rotation_save(const wenv_rotation *rot, const char *path, wenv_
     if (!ok || rename(tmp, path) != 0) {
         st = wenv_error_set(err, WENV_ERR_IO, "cannot write %s: %s", path, strerror(errno));
         remove(tmp);
+    } else {
+        sync_folder_of(path);
     }
 done:
     for (size_t s = 0; s < ns; s++)
