@@ -6,11 +6,45 @@ from . import engine, meshes, shading, views
 from .live import LiveState
 
 _last_error = {"message": None}
+_render = {"active": False}
+
+LOCK_NEEDED = ("frames are not re-shaded while rendering with the interface unlocked: the viewport would read "
+               "the meshes while wenv writes them (Blender's note on altering data from handlers); turn on "
+               "Render > Lock Interface to re-shade each rendered frame")
+
+
+def interface_runs_beside_renders():
+    """Whether a viewport may draw while a render runs (not in background mode)."""
+    return not bpy.app.background
+
+
+def _report_once(message):
+    # Printed once per distinct problem: a frame handler has no operator to report through.
+    if _last_error["message"] != message:
+        print(message)
+    _last_error["message"] = message
+
+
+@persistent
+def render_init(*_args):
+    _render["active"] = True
+
+
+@persistent
+def render_done(*_args):
+    _render["active"] = False
+
+
+def rendering():
+    return _render["active"]
 
 
 @persistent
 def frame_change_post(scene, depsgraph=None):
     if not scene.wenv.shade_on_frame_change:
+        return
+    if _render["active"] and not scene.render.use_lock_interface and interface_runs_beside_renders():
+        _report_once(f"wenv: {LOCK_NEEDED}")
         return
     objects = meshes.shaded_objects(scene)
     if not objects:
@@ -20,10 +54,7 @@ def frame_change_post(scene, depsgraph=None):
         shading.shade_objects(scene, depsgraph or bpy.context.evaluated_depsgraph_get(), objects, view, bpy.data)
         _last_error["message"] = None
     except engine.SetupError as exc:
-        # Printed once per distinct problem: a frame handler has no operator to report through.
-        if _last_error["message"] != str(exc):
-            print(f"wenv: frame {scene.frame_current}: {exc}")
-        _last_error["message"] = str(exc)
+        _report_once(f"wenv: frame {scene.frame_current}: {exc}")
 
 
 @persistent
@@ -38,7 +69,9 @@ def last_error():
     return _last_error["message"]
 
 
-HANDLERS = ((bpy.app.handlers.frame_change_post, frame_change_post), (bpy.app.handlers.load_post, load_post))
+HANDLERS = ((bpy.app.handlers.frame_change_post, frame_change_post), (bpy.app.handlers.load_post, load_post),
+            (bpy.app.handlers.render_init, render_init), (bpy.app.handlers.render_complete, render_done),
+            (bpy.app.handlers.render_cancel, render_done))
 
 
 def register():

@@ -46,6 +46,8 @@ class WENV_PT_shading(_SidebarPanel, bpy.types.Panel):
         sub.active = st.tone_mapping == "LOG"
         sub.prop(st, "max_luminance")
         col.prop(st, "shade_on_frame_change")
+        if st.shade_on_frame_change and not context.scene.render.use_lock_interface:
+            col.label(text="Renders re-shade frames only with Render > Lock Interface", icon="INFO")
 
         row = layout.row(align=True)
         row.scale_y = 1.3

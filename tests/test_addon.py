@@ -852,6 +852,36 @@ def test_frame_change_shades_from_animated_camera(scene):
     np.testing.assert_allclose(rgb, want, rtol=1e-4, atol=1e-5)
 
 
+def test_frame_changes_during_a_render_write_only_with_the_interface_locked(scene, monkeypatch):
+    """While a render runs beside the interface, the frame handler leaves the meshes alone unless
+    Render > Lock Interface is on (Blender's rule for altering data from handlers), and says so;
+    after the render, and with the lock, it re-shades as before."""
+    from addon import handlers
+    env_world(scene, "sunrise")
+    obj = add_monkey()
+    set_material(obj)
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    scene.wenv.shade_on_frame_change = True
+    monkeypatch.setattr(handlers, "interface_runs_beside_renders", lambda: True)
+    n = len(obj.data.vertices)
+    mark = np.full((n, 3), 0.25, np.float32)
+    try:
+        handlers.render_init(scene)
+        scene.render.use_lock_interface = False
+        meshes.write_colors(obj.data, "POINT", mark)
+        handlers.frame_change_post(scene)
+        assert np.all(attribute(obj)[1] == 0.25) and "Lock Interface" in handlers.last_error()
+        scene.render.use_lock_interface = True
+        handlers.frame_change_post(scene)
+        assert not np.any(attribute(obj)[1] == 0.25)
+    finally:
+        handlers.render_done(scene)
+    scene.render.use_lock_interface = False
+    meshes.write_colors(obj.data, "POINT", mark)
+    handlers.frame_change_post(scene)
+    assert not np.any(attribute(obj)[1] == 0.25)
+
+
 def test_precompute_job_progress_and_cancel(tmp_path, monkeypatch):
     monkeypatch.setenv("WENV_CACHE_DIR", str(tmp_path))
     job = live.PrecomputeJob("default")
