@@ -261,6 +261,58 @@ def test_set_num_threads_is_honoured(cook):
         wenv.set_num_threads(0)
 
 
+def test_thread_count_holds_for_work_started_from_any_thread():
+    """OpenMP keeps its thread count per calling thread; wenv's applies to work started from any
+    thread (the add-on shades from workers), read from the work's own parallel region."""
+    import threading
+    old = wenv.get_num_threads()
+    seen = []
+
+    def work():
+        seen.append(wenv._work_threads())
+
+    try:
+        for n in (1, 2):
+            wenv.set_num_threads(n)
+            worker = threading.Thread(target=work)
+            worker.start()
+            worker.join()
+            assert seen[-1] == n and wenv._work_threads() == n
+    finally:
+        wenv.set_num_threads(old)
+
+
+def test_concurrent_calls_on_one_shader_work_or_say_it_is_busy(cook):
+    """Threads sharing one Shader: each call either shades (the same result as alone) or raises
+    RuntimeError('Shader is busy in another thread'); nothing else, and the Shader stays usable."""
+    import threading
+    env = gradient_env()
+    shader = wenv.Shader(env, cook, quality="draft", cache_dir=False)
+    nrm, v = random_pairs(20000, 31)
+    expected = shader.shade(nrm, v)
+    outcomes = []
+
+    def hammer(k):
+        for i in range(6):
+            try:
+                if (k + i) % 3 == 2:
+                    shader.set_material(cook)
+                    outcomes.append("set")
+                else:
+                    outcomes.append(np.array_equal(shader.shade(nrm, v), expected))
+            except RuntimeError as exc:
+                assert "busy in another thread" in str(exc)
+                outcomes.append("busy")
+
+    threads = [threading.Thread(target=hammer, args=(k,)) for k in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert len(outcomes) == 24 and False not in outcomes
+    assert np.array_equal(shader.shade(nrm, v), expected)
+
+
 def test_reference_constant_environment():
     env = wenv.Environment(np.full((64, 128, 3), 1.0, np.float32))
     nrm, v = random_pairs(50, 12)

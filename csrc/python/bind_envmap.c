@@ -136,9 +136,9 @@ static PyObject *environment_new(PyTypeObject *type, PyObject *args, PyObject *k
     wenv_error err = {WENV_OK, ""};
     size_t h = (size_t)view.shape[0], w = (size_t)view.shape[1], c = (size_t)view.shape[2];
     wenv_status status;
-    Py_BEGIN_ALLOW_THREADS
+    WENV_BEGIN_WORK
     status = wenv_envmap_create(&env, view.buf, h, w, c, projection, rotation, strength, &err);
-    Py_END_ALLOW_THREADS
+    WENV_END_WORK
     PyBuffer_Release(&view);
     if (status != WENV_OK)
         return wenv_py_raise(&err);
@@ -222,9 +222,9 @@ static PyObject *environment_lookup(PyObject *self, PyObject *dirs)
         return NULL;
     }
     if (n >= LOOKUP_NOGIL_MIN) {
-        Py_BEGIN_ALLOW_THREADS
+        WENV_BEGIN_WORK
         wenv_envmap_lookup_many(env, view.buf, n, out);
-        Py_END_ALLOW_THREADS
+        WENV_END_WORK
     } else {
         wenv_envmap_lookup_many(env, view.buf, n, out);
     }
@@ -245,9 +245,9 @@ static PyObject *environment_with_transform(PyObject *self, PyObject *args, PyOb
     wenv_envmap *copy = NULL;
     wenv_error err = {WENV_OK, ""};
     wenv_status status;
-    Py_BEGIN_ALLOW_THREADS
+    WENV_BEGIN_WORK
     status = wenv_envmap_with_transform(&copy, env, rotation, strength, &err);
-    Py_END_ALLOW_THREADS
+    WENV_END_WORK
     if (status != WENV_OK)
         return wenv_py_raise(&err);
     return wrap_envmap(copy);
@@ -264,11 +264,11 @@ static PyObject *environment_solid_angles(PyObject *self, PyObject *unused)
     if (!array)
         return NULL;
     double *data = storage;
-    Py_BEGIN_ALLOW_THREADS
+    WENV_BEGIN_WORK
     for (size_t r = 0; r < h; r++)
         for (size_t c = 0; c < w; c++)
             data[r * w + c] = wenv_envmap_pixel_solid_angle(env, r, c);
-    Py_END_ALLOW_THREADS
+    WENV_END_WORK
     return array;
 }
 
@@ -284,9 +284,9 @@ static PyObject *environment_samples(PyObject *self, PyObject *unused)
         return PyErr_NoMemory();
     }
     size_t m;
-    Py_BEGIN_ALLOW_THREADS
+    WENV_BEGIN_WORK
     m = wenv_envmap_samples(env, dirs, flux, NULL);
-    Py_END_ALLOW_THREADS
+    WENV_END_WORK
     Py_ssize_t shape[2] = {(Py_ssize_t)m, 3};
     float *d_out, *f_out;
     PyObject *d_arr = wenv_py_new_float_array(2, shape, &d_out);
@@ -378,9 +378,9 @@ static PyObject *load_environment(PyObject *module, PyObject *args, PyObject *kw
     wenv_envmap *env = NULL;
     wenv_error err = {WENV_OK, ""};
     wenv_status status;
-    Py_BEGIN_ALLOW_THREADS
+    WENV_BEGIN_WORK
     status = wenv_envmap_load(&env, path, projection, rotation, strength, &err);
-    Py_END_ALLOW_THREADS
+    WENV_END_WORK
     Py_DECREF(path_bytes);
     if (status != WENV_OK)
         return wenv_py_raise(&err);

@@ -149,10 +149,10 @@ static int run_reading(const wenv_glossmeter *gm, PyObject *material, const doub
     wenv_error err = {0};
     wenv_status st;
     Py_INCREF(material);
-    Py_BEGIN_ALLOW_THREADS
+    WENV_BEGIN_WORK
     st = offsets ? wenv_glossmeter_haze(gm, mat, offsets, aperture, opt, r, &err)
                  : wenv_glossmeter_measure(gm, mat, opt, r, &err);
-    Py_END_ALLOW_THREADS
+    WENV_END_WORK
     Py_DECREF(material);
     if (st != WENV_OK) {
         wenv_py_raise(&err);
@@ -236,9 +236,9 @@ static PyObject *do_fit(const wenv_glossmeter *gm, PyObject *target_obj, PyObjec
     wenv_gloss_result r = {0};
     wenv_error err = {0};
     wenv_status st;
-    Py_BEGIN_ALLOW_THREADS
+    WENV_BEGIN_WORK
     st = wenv_glossmeter_fit_roughness(gm, mat, target, bracket[0], bracket[1], &opt, &m, &r, &err);
-    Py_END_ALLOW_THREADS
+    WENV_END_WORK
     if (st != WENV_OK)
         wenv_py_raise(&err);
     else if (!r.converged)
@@ -287,9 +287,9 @@ static PyObject *glossmeter_new(PyTypeObject *type, PyObject *args, PyObject *kw
         return NULL;
     wenv_glossmeter *gm;
     wenv_status st;
-    Py_BEGIN_ALLOW_THREADS
+    WENV_BEGIN_WORK
     st = wenv_glossmeter_create(&gm, &cfg, &err);
-    Py_END_ALLOW_THREADS
+    WENV_END_WORK
     if (st != WENV_OK)
         return wenv_py_raise(&err);
     if (!(wenv_glossmeter_standard_flux(gm, NULL) > 0.0)) {
@@ -534,9 +534,9 @@ static PyObject *module_gloss(PyObject *module, PyObject *args, PyObject *kwds)
     wenv_error err = {0};
     wenv_status st;
     Py_INCREF(material);
-    Py_BEGIN_ALLOW_THREADS
+    WENV_BEGIN_WORK
     st = wenv_glossmeter_measure_many(gms, (size_t)n, mat, &opt, res, &err);
-    Py_END_ALLOW_THREADS
+    WENV_END_WORK
     Py_DECREF(material);
     if (st != WENV_OK) {
         wenv_py_raise(&err);

@@ -2,6 +2,7 @@
  * octahedral maps, the Haar transform and the spherical harmonics.  Not part of the API. */
 #include "python/module.h"
 
+#include <omp.h>
 #include <string.h>
 
 #include "math/haar.h"
@@ -201,7 +202,24 @@ done:
     return result;
 }
 
+/* The number of threads an OpenMP region of wenv's work gets when started from the calling thread. */
+static PyObject *py_work_threads(PyObject *self, PyObject *unused)
+{
+    (void)self;
+    (void)unused;
+    int threads = 0;
+    WENV_BEGIN_WORK
+#pragma omp parallel
+    {
+#pragma omp single
+        threads = omp_get_num_threads();
+    }
+    WENV_END_WORK
+    return PyLong_FromLong(threads);
+}
+
 static PyMethodDef internal_functions[] = {
+    {"_work_threads", py_work_threads, METH_NOARGS, NULL},
     {"_oct_encode", py_oct_encode, METH_VARARGS, NULL},
     {"_oct_decode", py_oct_decode, METH_VARARGS, NULL},
     {"_hemi_encode", py_hemi_encode, METH_VARARGS, NULL},

@@ -169,13 +169,13 @@ static PyObject *material_eval_impl(PyObject *self, PyObject *args, PyObject *kw
         }
         for (size_t k = 0; k < 3 * ni; k++)
             fwi[k] = (float)wi[k];
-        Py_BEGIN_ALLOW_THREADS
+        WENV_BEGIN_WORK
         wenv_material_specular_cos_batch(mat, wo, fwi, n, out);
-        Py_END_ALLOW_THREADS
+        WENV_END_WORK
         goto done;
     }
     size_t si = ni == 1 ? 0 : 3, so = no == 1 ? 0 : 3; /* stride 0 broadcasts a single direction */
-    Py_BEGIN_ALLOW_THREADS
+    WENV_BEGIN_WORK
     ptrdiff_t count = (ptrdiff_t)n;
 #pragma omp parallel for schedule(static) if (count > PARALLEL_MIN_ROWS)
     for (ptrdiff_t k = 0; k < count; k++) {
@@ -201,7 +201,7 @@ static PyObject *material_eval_impl(PyObject *self, PyObject *args, PyObject *kw
         out[3 * k + 1] = (float)rgb[1];
         out[3 * k + 2] = (float)rgb[2];
     }
-    Py_END_ALLOW_THREADS
+    WENV_END_WORK
 done:
     PyMem_Free(fwi);
     PyMem_Free(wi);
@@ -278,10 +278,10 @@ static PyObject *material_albedo(PyObject *self, PyObject *args, PyObject *kwds)
     if (!result)
         goto done;
     wenv_error err = {0};
-    Py_BEGIN_ALLOW_THREADS
+    WENV_BEGIN_WORK
     for (size_t k = 0; k < n && err.status == WENV_OK; k++)
         wenv_material_albedo(mat, wo + 3 * k, samples, out + 3 * k, &err);
-    Py_END_ALLOW_THREADS
+    WENV_END_WORK
     if (err.status != WENV_OK) {
         Py_CLEAR(result);
         wenv_py_raise(&err);
@@ -897,11 +897,11 @@ static PyObject *py_load_brdf(PyObject *self, PyObject *arg)
     wenv_material *mat = NULL;
     wenv_error err = {0};
     wenv_status st;
-    Py_BEGIN_ALLOW_THREADS
+    WENV_BEGIN_WORK
     st = wenv_read_merl(path, &rgb, dims, &err);
     if (!st)
         st = wenv_tabulated_create(&mat, rgb, dims, &err);
-    Py_END_ALLOW_THREADS
+    WENV_END_WORK
     free(rgb);
     PyObject *result = NULL;
     if (st)
@@ -1066,9 +1066,9 @@ static PyObject *py_lobe_albedo(PyObject *self, PyObject *args, PyObject *kwds)
         return NULL;
     double albedo = 0.0;
     wenv_status st;
-    Py_BEGIN_ALLOW_THREADS
+    WENV_BEGIN_WORK
     st = wenv_lobe_albedo(&lobe, (wenv_shadowing)shadowing, wo, samples, fresnel, &albedo, &err);
-    Py_END_ALLOW_THREADS
+    WENV_END_WORK
     PyMem_Free(wo);
     if (st != WENV_OK)
         return wenv_py_raise(&err);

@@ -45,9 +45,9 @@ static PyObject *py_reference(PyObject *self, PyObject *args, PyObject *kwargs)
     wenv_progress progress = wenv_py_progress(&bridge);
     wenv_error err = {0};
     wenv_status st;
-    Py_BEGIN_ALLOW_THREADS
+    WENV_BEGIN_WORK
     st = wenv_reference(env, mat, nb.buf, vb.buf, n, out, &progress, &err);
-    Py_END_ALLOW_THREADS
+    WENV_END_WORK
     if (st) {
         Py_CLEAR(result);
         if (!(bridge.raised && PyErr_Occurred()))

@@ -170,10 +170,10 @@ static int do_set(ShaderObject *self, PyObject *obj, int material)
     wenv_progress progress = wenv_py_progress(&bridge);
     wenv_error err = {0};
     wenv_status st;
-    Py_BEGIN_ALLOW_THREADS
+    WENV_BEGIN_WORK
     st = material ? self->method->set_material(self->state, arg, &progress, &err)
                   : self->method->set_environment(self->state, arg, &progress, &err);
-    Py_END_ALLOW_THREADS
+    WENV_END_WORK
     if (st) {
         if (!(bridge.raised && PyErr_Occurred()))
             wenv_py_raise(&err);
@@ -212,9 +212,9 @@ static int choose_auto(ShaderObject *self, PyObject *env_obj, PyObject *mat_obj,
     wenv_error err = {0};
     wenv_status st;
     size_t budget = (size_t)(self->memory_budget_mb * 1048576.0);
-    Py_BEGIN_ALLOW_THREADS
+    WENV_BEGIN_WORK
     st = wenv_auto_choose(env, analysis, mat, self->target_error, budget, normals, n, &self->auto_choice, &err);
-    Py_END_ALLOW_THREADS
+    WENV_END_WORK
     if (normals)
         PyBuffer_Release(&nb);
     if (st) {
@@ -295,11 +295,11 @@ static int Shader_init(ShaderObject *self, PyObject *args, PyObject *kwargs)
     wenv_error err = {0};
     wenv_status st;
     void *state = NULL;
-    Py_BEGIN_ALLOW_THREADS
+    WENV_BEGIN_WORK
     if (!method_name && !is_auto) /* reads the cache folder, may build a few sample matrices */
         self->method = method = wenv_method_choose_default(self->quality, &setup);
     st = method->create(&state, self->quality, &setup, &err);
-    Py_END_ALLOW_THREADS
+    WENV_END_WORK
     Py_XDECREF(cache_bytes);
     if (st) {
         if (!(bridge.raised && PyErr_Occurred()))
@@ -330,9 +330,9 @@ static PyObject *shade_arrays(ShaderObject *self, const float *normals, const fl
         return result;
     wenv_error err = {0};
     wenv_status st;
-    Py_BEGIN_ALLOW_THREADS
+    WENV_BEGIN_WORK
     st = self->method->shade(self->state, normals, views, n, out, &err);
-    Py_END_ALLOW_THREADS
+    WENV_END_WORK
     if (st) {
         Py_DECREF(result);
         return wenv_py_raise(&err);
@@ -428,9 +428,9 @@ static int shade_visible(ShaderObject *self, const float *normals, const float *
     wenv_error err = {0};
     wenv_status st = WENV_OK;
     if (count) {
-        Py_BEGIN_ALLOW_THREADS
+        WENV_BEGIN_WORK
         st = self->method->shade(self->state, normals, views, count, shaded, &err);
-        Py_END_ALLOW_THREADS
+        WENV_END_WORK
     }
     if (!st && visible)
         for (size_t i = 0, k = 0; i < n; i++)
@@ -753,9 +753,9 @@ static PyObject *py_visible_vertices(PyObject *module, PyObject *args, PyObject 
         Py_ssize_t shape[1] = {(Py_ssize_t)np};
         void *data;
         if ((result = wenv_py_new_array(1, shape, "bool", &data))) {
-            Py_BEGIN_ALLOW_THREADS
+            WENV_BEGIN_WORK
             wenv_visible_vertices(pb.buf, nb.buf, np, eye, vp_obj != Py_None ? vp : NULL, data);
-            Py_END_ALLOW_THREADS
+            WENV_END_WORK
         }
     }
     PyBuffer_Release(&pb);

@@ -2,9 +2,22 @@
 #include "python/module.h"
 
 #include <omp.h>
+#include <stdatomic.h>
 
 
 static PyObject *cancelled_error_type; /* set once at import; read-only afterwards */
+/* wenv.set_num_threads's choice, for every thread of the process (0: none made) -- the one setting a
+ * script changes at run time, as OMP_NUM_THREADS is set for the process. */
+static atomic_int num_threads;
+
+int wenv_py_num_threads(void) { return atomic_load(&num_threads); }
+
+void wenv_py_use_num_threads(void)
+{
+    int n = atomic_load(&num_threads);
+    if (n > 0 && omp_get_max_threads() != n)
+        omp_set_num_threads(n);
+}
 
 PyObject *wenv_py_cancelled_error(void) { return cancelled_error_type ? cancelled_error_type : PyExc_RuntimeError; }
 
@@ -18,6 +31,7 @@ static PyObject *set_num_threads(PyObject *self, PyObject *arg)
         PyErr_SetString(PyExc_ValueError, "n must be between 1 and 4096 threads");
         return NULL;
     }
+    atomic_store(&num_threads, (int)n);
     omp_set_num_threads((int)n);
     Py_RETURN_NONE;
 }
@@ -26,13 +40,14 @@ static PyObject *get_num_threads(PyObject *self, PyObject *unused)
 {
     (void)self;
     (void)unused;
-    return PyLong_FromLong(omp_get_max_threads());
+    int n = atomic_load(&num_threads);
+    return PyLong_FromLong(n > 0 ? n : omp_get_max_threads());
 }
 
 static PyMethodDef module_methods[] = {
     {"set_num_threads", set_num_threads, METH_O,
-     "set_num_threads(n)\n--\n\nUse n OpenMP threads for shading and precomputation "
-     "(the default comes from OMP_NUM_THREADS or the number of cores)."},
+     "set_num_threads(n)\n--\n\nUse n OpenMP threads for shading and precomputation, whichever thread "
+     "calls wenv afterwards (the default comes from OMP_NUM_THREADS or the number of cores)."},
     {"get_num_threads", get_num_threads, METH_NOARGS,
      "get_num_threads()\n--\n\nNumber of OpenMP threads wenv uses."},
     {NULL, NULL, 0, NULL},
