@@ -453,3 +453,33 @@ def test_radiance_beyond_float32_shading_is_refused_and_below_it_shades_right():
     out, ref = wenv.Shader(env, mat, quality="draft").shade(nrm, v), wenv.reference(env, mat, nrm, v)
     assert np.all(np.isfinite(out)) and out.max() > 1e13
     assert np.sqrt(np.mean((out - ref) ** 2) / np.mean(ref ** 2)) < 0.02
+
+
+@pytest.mark.parametrize("method", ["rotation", "slicing"])
+def test_a_new_material_reports_progress_and_a_cancel_keeps_the_old_one(method, cook):
+    """A material's BRDF slices cost its lobes' evaluations (dozens of lobes: seconds), so
+    set_material reports progress through the Shader's callback, rising to 1, and a cancel leaves
+    the Shader shading its previous material, as the peer methods do."""
+    env = gradient_env()
+    seen, stop = [], []
+
+    def progress(fraction):
+        seen.append(fraction)
+        return bool(stop)
+
+    shader = wenv.Shader(env, cook, quality="draft", method=method, cache_dir=False, progress=progress)
+    nrm, v = random_pairs(300, 14)
+    before = shader.shade(nrm, v)
+    many = wenv.CookTorrance(diffuse=0.0, lobes=[dict(specular=0.04, roughness=0.05 + 0.02 * i) for i in range(12)])
+    seen.clear()
+    shader.set_material(many)
+    assert len(seen) > 10 and seen == sorted(seen) and seen[-1] > 0.95
+    after = shader.shade(nrm, v)
+    assert not np.allclose(after, before)
+    stop.append(1)
+    with pytest.raises(wenv.CancelledError, match="material precomputation cancelled"):
+        shader.set_material(cook)
+    assert shader.material is many and np.array_equal(shader.shade(nrm, v), after)
+    stop.clear()
+    shader.set_material(cook)
+    assert np.array_equal(shader.shade(nrm, v), before)

@@ -4,6 +4,7 @@
 #include "methods/wavelet/wavelet_state.h"
 
 #include <math.h>
+#include <omp.h>
 #include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
@@ -180,25 +181,26 @@ static wenv_status albedo_tables(wenv_wavelet *wavelet, const wenv_material *mat
     return WENV_OK;
 }
 
-wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material *mat, wenv_error *err)
+wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material *mat, const wenv_progress *progress,
+                                      wenv_error *err)
 {
     size_t nv = wavelet->nv, nl = wavelet->nl, L = wavelet->q.local_n, V = wavelet->q.view_n;
     size_t keep = wavelet->q.coefficients ? wavelet->q.coefficients : nl;
     if (wenv_material_lobe_count(mat) && wenv_wavelet_build_quadrature(wavelet, quadrature_k(wavelet, mat), err))
         return err->status;
-    wenv_wavelet_free_material(wavelet);
-    wavelet->brdf_start = calloc(nv + 1, sizeof(size_t));
+    /* the slices are made beside the current material, which stays until they exist: a cancel
+     * (or running out of memory here) leaves the shader as it was */
     size_t *counts = calloc(nv, sizeof(size_t));
     uint32_t *all_idx = malloc(nv * keep * sizeof(uint32_t));
     float *all_rgb = malloc(nv * keep * 3 * sizeof(float));
-    if (!wavelet->brdf_start || !counts || !all_idx || !all_rgb) {
+    if (!counts || !all_idx || !all_rgb) {
         free(counts);
         free(all_idx);
         free(all_rgb);
-        wenv_wavelet_free_material(wavelet);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for BRDF slices");
     }
-    atomic_int failed = 0;
+    atomic_int failed = 0, cancelled = 0;
+    atomic_size_t done = 0;
     if (wenv_material_lobe_count(mat)) {
 #pragma omp parallel
         {
@@ -211,7 +213,7 @@ wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material
                 atomic_store(&failed, 1);
 #pragma omp for schedule(dynamic, 1)
             for (size_t j = 0; j < nv; j++) {
-                if (atomic_load(&failed))
+                if (atomic_load(&failed) || atomic_load(&cancelled))
                     continue;
                 double wo[3];
                 wenv_hemi_decode(-1.0 + 2.0 * (double)(j % (V + 1)) / (double)V,
@@ -243,6 +245,11 @@ wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material
                 for (size_t e = 0; e < count; e++)
                     memcpy(all_rgb + (j * keep + e) * 3, slice + 3 * (size_t)idx[e], 3 * sizeof(float));
                 counts[j] = count;
+                /* a slice costs its lobes' evaluations: many lobes make this long enough to report */
+                size_t d = atomic_fetch_add(&done, 1) + 1;
+                if (omp_get_thread_num() == 0 && progress && progress->report &&
+                    progress->report(progress->ctx, (double)d / (double)nv))
+                    atomic_store(&cancelled, 1);
             }
             free(slice);
             free(scratch);
@@ -251,11 +258,19 @@ wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material
             free(fcos);
         }
     }
-    if (failed) {
+    if (failed || cancelled) {
         free(counts);
         free(all_idx);
         free(all_rgb);
-        wenv_wavelet_free_material(wavelet);
+        return cancelled ? wenv_error_set(err, WENV_ERR_CANCELLED, "material precomputation cancelled")
+                         : wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for BRDF slices");
+    }
+    wenv_wavelet_free_material(wavelet);
+    wavelet->brdf_start = calloc(nv + 1, sizeof(size_t));
+    if (!wavelet->brdf_start) {
+        free(counts);
+        free(all_idx);
+        free(all_rgb);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for BRDF slices");
     }
     for (size_t j = 0; j < nv; j++)

@@ -84,7 +84,9 @@ int wenv_wavelet_rotation_cache_path(const wenv_wavelet_quality *q, const char *
 void wenv_wavelet_free(wenv_wavelet *sh);
 
 wenv_status wenv_wavelet_set_environment(wenv_wavelet *sh, const wenv_envmap *env, wenv_error *err);
-wenv_status wenv_wavelet_set_material(wenv_wavelet *sh, const wenv_material *mat, wenv_error *err);
+/* Reports to `progress` (may be NULL) as the BRDF slices are made; a cancel keeps the current material. */
+wenv_status wenv_wavelet_set_material(wenv_wavelet *sh, const wenv_material *mat, const wenv_progress *progress,
+                                      wenv_error *err);
 
 /* normals and views (surface towards eye) are n x 3; need not be unit length but must be
  * non-zero and finite (the bindings check).  out is n x 3 linear RGB radiance. */

@@ -80,8 +80,9 @@ static wenv_status create_slicing(void **state, const void *quality, const wenv_
 
 static void destroy(void *state) { wenv_wavelet_free(state); }
 
-/* Remaking the lighting and material slices reports no progress: it takes milliseconds per slice
- * and is spread over the views that need them. */
+/* A new lighting reports no progress: it takes milliseconds per slice, spread over the views that
+ * need them.  A new material's BRDF slices cost its lobes' evaluations (seconds for dozens of
+ * lobes): they report, and can be cancelled. */
 static wenv_status set_environment(void *state, const wenv_envmap *env, const wenv_progress *progress,
                                    wenv_error *err)
 {
@@ -92,8 +93,7 @@ static wenv_status set_environment(void *state, const wenv_envmap *env, const we
 static wenv_status set_material(void *state, const wenv_material *mat, const wenv_progress *progress,
                                 wenv_error *err)
 {
-    (void)progress;
-    return wenv_wavelet_set_material(state, mat, err);
+    return wenv_wavelet_set_material(state, mat, progress, err);
 }
 
 static wenv_status shade(void *state, const float *normals, const float *views, size_t n, float *out,
