@@ -201,10 +201,16 @@ class ShaderCache:
 
     def build(self, quality, progress=None):
         """Builds (or loads from the matrix cache) the shader for `quality`; `progress(fraction)`
-        may return True to cancel (CancelledError)."""
+        may return True to cancel (CancelledError).  The shader keeps its callback for later
+        set_material calls, so it gets a relay that forwards to `progress` only while building: a
+        callback that holds Blender data (a window manager) must not outlive its operator."""
         placeholder = wenv.Environment(np.ones((4, 8, 4), np.float32))
-        return wenv.Shader(placeholder, wenv.Lambert(DEFAULT_GREY), quality=quality, progress=progress,
-                           cache_dir=self.cache_dir)
+        relay = ProgressRelay(progress)
+        try:
+            return wenv.Shader(placeholder, wenv.Lambert(DEFAULT_GREY), quality=quality, progress=relay,
+                               cache_dir=self.cache_dir)
+        finally:
+            relay.target = None
 
     def get(self, quality, progress=None):
         if quality not in self._shaders:
@@ -251,6 +257,19 @@ class ShaderCache:
             shader.set_material(material_from_key(key))
             self._mat_key[quality] = key
         return shader
+
+
+class ProgressRelay:
+    """A progress callback whose target can be dropped: reports to `target` while it is set."""
+
+    __slots__ = ("target",)
+
+    def __init__(self, target=None):
+        self.target = target
+
+    def __call__(self, fraction):
+        target = self.target
+        return bool(target(fraction)) if target is not None else False
 
 
 shaders = ShaderCache()

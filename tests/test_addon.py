@@ -1141,3 +1141,20 @@ def test_auto_quality_matches_core_and_builds_no_matrices(scene):
     want = wenv.Shader(env, wenv_material(lam), quality="auto", target_error=0.005, normals=n)
     assert want.method == "sh"
     np.testing.assert_allclose(attribute(obj)[1], want.shade_mesh(p, n, eye), rtol=1e-4, atol=1e-5)
+
+
+def test_cached_shaders_do_not_keep_an_operator_s_progress_callback():
+    """A shader built with an operator's progress callback (which holds the window manager) reports
+    to it while building only: its later set_material calls, after the operator is gone, must not
+    reach it (a callback on removed Blender data raised ReferenceError and failed the shade)."""
+    calls = []
+    shader = engine.ShaderCache().build("draft", progress=lambda f: calls.append(f))
+    built = len(calls)  # none when the matrices come from the cache
+    many = wenv.CookTorrance(diffuse=0.0, lobes=[dict(specular=0.04, roughness=0.05 + 0.02 * i) for i in range(8)])
+    shader.set_material(many)
+    assert len(calls) == built
+    # what the relay prevents: the same callback given straight to a Shader hears set_material
+    direct = wenv.Shader(shader.environment, wenv.Lambert(0.5), quality="draft", method="slicing",
+                         progress=lambda f: calls.append(f))
+    direct.set_material(many)
+    assert len(calls) > built
