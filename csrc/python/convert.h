@@ -50,10 +50,9 @@ PyObject *wenv_py_new_array(int ndim, const Py_ssize_t *shape, const char *dtype
 /* New numpy float32 array of the given shape (numpy.empty); *data points at its storage. */
 PyObject *wenv_py_new_float_array(int ndim, const Py_ssize_t *shape, float **data);
 
-/* The thread count wenv.set_num_threads chose (0: OpenMP's own, from OMP_NUM_THREADS or the cores),
- * and WENV_BEGIN_WORK, which applies it to the calling thread before releasing the GIL: OpenMP keeps
- * its thread count per calling thread, and the add-on (or any script) shades from worker threads. */
-int wenv_py_num_threads(void);
+/* WENV_BEGIN_WORK applies the thread count wenv.set_num_threads chose (if any) to the calling thread
+ * before releasing the GIL: OpenMP keeps its thread count per calling thread, and the add-on (or any
+ * script) shades from worker threads. */
 void wenv_py_use_num_threads(void);
 #define WENV_BEGIN_WORK                                                                                          \
     wenv_py_use_num_threads();                                                                                   \

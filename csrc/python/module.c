@@ -10,8 +10,6 @@ static PyObject *cancelled_error_type; /* set once at import; read-only afterwar
  * script changes at run time, as OMP_NUM_THREADS is set for the process. */
 static atomic_int num_threads;
 
-int wenv_py_num_threads(void) { return atomic_load(&num_threads); }
-
 void wenv_py_use_num_threads(void)
 {
     int n = atomic_load(&num_threads);
