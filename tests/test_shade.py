@@ -223,6 +223,49 @@ def test_cache_writes_never_follow_a_planted_link_and_concurrent_writers_agree(t
     assert wenv.Shader(env, lam, quality=SMALL, cache_dir=str(tmp_path)).stats["cache"] == "loaded"
 
 
+def _build_in_a_process(cache_dir, start, results):
+    """A spawned process's work: wait for the others, then build (or load) the draft matrices in
+    `cache_dir` and shade; one thread each, so the processes run side by side on any machine."""
+    import wenv as core
+    core.set_num_threads(1)
+    start.wait(120)
+    shader = core.Shader(gradient_env(), core.Lambert(0.5), quality="draft", method="rotation",
+                         cache_dir=cache_dir)
+    results.put((shader.stats["cache"], shader.shade(*random_pairs(200, 9))))
+
+
+def test_processes_building_the_same_matrices_at_once_leave_one_valid_cache_file(tmp_path):
+    """Processes sharing a cache folder (two Blender sessions, a render farm's nodes) build the same
+    matrices at once: each writes its own temporary file and renames it over the cache file, so all
+    succeed, one file is left (no temporary ones), and it loads and shades as matrices built
+    without a cache."""
+    import multiprocessing
+    n = 4
+    ctx = multiprocessing.get_context("spawn")
+    start, results = ctx.Barrier(n), ctx.Queue()
+    procs = [ctx.Process(target=_build_in_a_process, args=(str(tmp_path), start, results)) for _ in range(n)]
+    for p in procs:
+        p.start()
+    try:
+        got = [results.get(timeout=300) for _ in range(n)]
+    finally:
+        for p in procs:
+            p.join(60)
+    assert [p.exitcode for p in procs] == [0] * n
+    nrm, v = random_pairs(200, 9)
+    expected = wenv.Shader(gradient_env(), wenv.Lambert(0.5), quality="draft", method="rotation",
+                           cache_dir=False).shade(nrm, v)
+    assert {use for use, _ in got} <= {"built", "loaded"}, [use for use, _ in got]  # no "built (save failed)"
+    for _, rgb in got:
+        assert np.array_equal(rgb, expected)
+    files = list(tmp_path.iterdir())
+    assert len(files) == 1 and ".tmp" not in files[0].name, [f.name for f in files]
+    again = wenv.Shader(gradient_env(), wenv.Lambert(0.5), quality="draft", method="rotation",
+                        cache_dir=str(tmp_path))
+    assert again.stats["cache"] == "loaded"
+    assert np.array_equal(again.shade(nrm, v), expected)
+
+
 def test_progress_reports_and_cancels():
     env = gradient_env()
     seen = []
