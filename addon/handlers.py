@@ -1,4 +1,5 @@
-"""App handlers: shade from the scene camera on frame changes; forget per-file state on load."""
+"""App handlers: shade from the scene camera on frame changes; keep the colours and the live session
+right after an undo or redo; forget per-file state on load."""
 import bpy
 from bpy.app.handlers import persistent
 
@@ -58,6 +59,25 @@ def frame_change_post(scene, depsgraph=None):
 
 
 @persistent
+def undo_post(scene, *_args):
+    """After an undo or redo: Blender's data is now a step's.  (Handlers take the scene as an
+    argument and keep nothing: the data they saw before is freed.)"""
+    if LiveState.session is not None:
+        LiveState.session.data_replaced()
+    # Frame changes make no undo step of their own (playback would make one per frame), and Blender
+    # runs frame handlers after the operator that changed the frame has pushed its step, so a step
+    # may hold the colours of the frame before.  Such colours are shaded for the frame restored,
+    # as the frame handler would have; colours of their own frame are left as the step holds them.
+    if scene is None:
+        return
+    st = scene.wenv
+    if st.shade_on_frame_change and st.shaded_frame not in (shading.NO_FRAME, scene.frame_current):
+        # evaluated first: a step holds the camera where it was when pushed, not where its
+        # animation puts it at this frame
+        frame_change_post(scene, bpy.context.evaluated_depsgraph_get())
+
+
+@persistent
 def load_post(*_args):
     # Data of the previous file is gone: stop the live session, drop cached environments (images
     # of the new file may reuse names).  The shaders' rotation matrices stay (they are data-free).
@@ -71,7 +91,8 @@ def last_error():
 
 HANDLERS = ((bpy.app.handlers.frame_change_post, frame_change_post), (bpy.app.handlers.load_post, load_post),
             (bpy.app.handlers.render_init, render_init), (bpy.app.handlers.render_complete, render_done),
-            (bpy.app.handlers.render_cancel, render_done))
+            (bpy.app.handlers.render_cancel, render_done), (bpy.app.handlers.undo_post, undo_post),
+            (bpy.app.handlers.redo_post, undo_post))
 
 
 def register():

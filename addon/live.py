@@ -70,6 +70,7 @@ class LiveSession:
         self._plan = None
         self._worker = None
         self._error = None
+        self._discard = False  # the worker's plan was read from data an undo has since replaced
 
     def objects(self, scene):
         return [scene.objects[n] for n in self.object_names if n in scene.objects]
@@ -106,6 +107,13 @@ class LiveSession:
             self._worker.join(timeout)
         return not self.busy
 
+    def data_replaced(self):
+        """Undo or redo replaced Blender's data: the colours are the restored step's, whatever the
+        last signature says, so shade again; a result still being computed was read from the data
+        before and is dropped."""
+        self.last_signature = None
+        self._discard = self._worker is not None
+
     def _compute(self):
         try:
             self._plan.compute()
@@ -119,12 +127,15 @@ class LiveSession:
         if self._worker is not None:
             if self._worker.is_alive():
                 return False
-            plan, error = self._plan, self._error
+            plan, error, discard = self._plan, self._error, self._discard
             self._plan = self._worker = self._error = None
+            self._discard = False
+            if discard:
+                return False
             if error is not None:
                 self.last_error = str(error)
                 return False
-            written = plan.apply(context.blend_data.objects)
+            written = plan.apply(context.blend_data.objects, context.scene)
             self.last_error = None
             self.shades += bool(written)
             return bool(written)

@@ -176,10 +176,16 @@ def _redraw_viewports(context):
                 area.tag_redraw()
 
 
+LIVE_UNDO_STEP = "Live Shading"
+
+
 class WENV_OT_live(bpy.types.Operator):
     """Re-shade the selected meshes whenever the view, their transforms, the World or the materials change (Esc or click again to stop)"""
     bl_idname = "wenv.live"
     bl_label = "Live"
+    # No UNDO option: the colours written every tick make no step each (they would flood the undo
+    # history); _stop pushes one step for the whole session, as Blender's own modal tools make one
+    # when they finish.
 
     interval: FloatProperty(name="Interval", default=0.05, min=0.01, max=2.0,
                             description="Seconds between checks for changes")
@@ -212,9 +218,21 @@ class WENV_OT_live(bpy.types.Operator):
         wm.event_timer_remove(self._timer)
         if LiveState.job is not None:
             wm.progress_end()
+        wrote = LiveState.session is not None and LiveState.session.shades > 0
         LiveState.reset()
+        if wrote:
+            bpy.ops.ed.undo_push(message=LIVE_UNDO_STEP)
         _redraw_viewports(context)
         return {"FINISHED"}
+
+    def cancel(self, context):
+        # Blender ends the operator itself (a file is loaded, its window closes): the session's data
+        # is gone or going, so no undo step.
+        wm = context.window_manager
+        wm.event_timer_remove(self._timer)
+        if LiveState.job is not None:
+            wm.progress_end()
+        LiveState.reset()
 
     def modal(self, context, event):
         if event.type == "ESC" or LiveState.stop_requested or LiveState.session is None:

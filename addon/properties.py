@@ -1,11 +1,13 @@
-"""Settings stored in the .blend: Scene.wenv (shading) and Material.wenv (reflectance model)."""
+"""Settings stored in the .blend: Scene.wenv (shading) and Material.wenv (reflectance model), undone
+with the data; each 3D viewport's shading to set back (View3DShading.wenv) and the Show in Viewports
+switch (WindowManager.wenv), which belong to the interface and stay out of undo."""
 import math
 
 import bpy
 from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProperty, FloatVectorProperty,
                        IntProperty, PointerProperty, StringProperty)
 
-from . import engine, gloss, materials, views
+from . import engine, gloss, materials, shading, views
 
 DISTRIBUTIONS = [("GGX", "GGX", "Trowbridge-Reitz / GGX, roughness = alpha (Blender's roughness squared)"),
                  ("BECKMANN", "Beckmann", "Beckmann, roughness = RMS microfacet slope")]
@@ -45,13 +47,6 @@ def _gloss_getter(geometry):
 # versions know no such option (and need none).
 _BLEND_RELATIVE = ({"PATH_SUPPORTS_BLEND_RELATIVE"}
                    if "is_path_supports_blend_relative" in bpy.types.Property.bl_rna.properties else set())
-
-
-def _show_in_viewport_changed(self, context):
-    if self.show_in_viewport:
-        views.show_attribute_colors(context.window_manager, self)
-    else:
-        views.restore_viewports(context.window_manager, self)
 
 
 def _set_up_by_user(self, context):
@@ -128,11 +123,6 @@ class WENV_SceneSettings(bpy.types.PropertyGroup):
         ("LOG", "Logarithmic", "The thesis's global operator log(1 + L) / log(1 + Lmax), values in [0, 1]")])
     max_luminance: FloatProperty(name="Max Luminance", default=10.0, min=1e-3, soft_max=1000.0,
                                  description="Luminance that maps to white in logarithmic tone mapping")
-    show_in_viewport: BoolProperty(name="Show in Viewport", default=False, update=_show_in_viewport_changed,
-                                   description="Show the shaded colours in every open 3D viewport (solid, flat, "
-                                               "attribute colours); off sets the viewports back as they were")
-    viewport_backup: StringProperty(name="Viewport Backup", default="", options={"HIDDEN"},
-                                    description="The viewports' own shading while they show wenv's colours")
     shade_only_seen: BoolProperty(name="Shade Only What Is Seen", default=True,
                                   description="From a viewport, shade only the vertices facing it and on screen; "
                                               "the rest keep their colours (camera views, renders and bakes always "
@@ -140,9 +130,43 @@ class WENV_SceneSettings(bpy.types.PropertyGroup):
     shade_on_frame_change: BoolProperty(name="Shade on Frame Change", default=False,
                                         description="Re-shade the shaded objects from the scene camera on every "
                                                     "frame change (animation playback and rendering)")
+    # Undone and saved with the colours, so after an undo or redo the colours' frame is known
+    # (handlers.undo_post).
+    shaded_frame: IntProperty(name="Shaded Frame", default=shading.NO_FRAME, options={"HIDDEN"},
+                              description="The frame at which colours were last written")
 
 
-classes = (WENV_LobeSettings, WENV_MaterialSettings, WENV_SceneSettings)
+class WENV_ViewportBackup(bpy.types.PropertyGroup):
+    """A 3D viewport's own shading while it shows wenv's colours.  Kept in the viewport itself
+    (View3DShading): saved with the screens and, like them, outside undo, so an undo never parts a
+    viewport from what it is to be set back to."""
+    showing: BoolProperty(name="Showing wenv's Colours", default=False)
+    type: StringProperty(name="Shading Type")
+    light: StringProperty(name="Lighting")
+    color_type: StringProperty(name="Colour")
+
+
+def _get_show_in_viewports(self):
+    return views.showing_attribute_colors(self.id_data)
+
+
+def _set_show_in_viewports(self, value):
+    if value:
+        views.show_attribute_colors(self.id_data)
+    else:
+        views.restore_viewports(bpy.data.screens)
+
+
+class WENV_WindowSettings(bpy.types.PropertyGroup):
+    """On the window manager, as the viewports' own settings: what the interface shows is no step of
+    the undo history (Blender makes none for screen and window-manager properties)."""
+    show_in_viewports: BoolProperty(name="Show in Viewports", get=_get_show_in_viewports,
+                                    set=_set_show_in_viewports,
+                                    description="Show the shaded colours in every open 3D viewport (solid, flat, "
+                                                "attribute colours); off sets each viewport back as it was")
+
+
+classes = (WENV_LobeSettings, WENV_MaterialSettings, WENV_SceneSettings, WENV_ViewportBackup, WENV_WindowSettings)
 
 
 def register():
@@ -150,9 +174,13 @@ def register():
         bpy.utils.register_class(cls)
     bpy.types.Scene.wenv = PointerProperty(type=WENV_SceneSettings)
     bpy.types.Material.wenv = PointerProperty(type=WENV_MaterialSettings)
+    bpy.types.View3DShading.wenv = PointerProperty(type=WENV_ViewportBackup)
+    bpy.types.WindowManager.wenv = PointerProperty(type=WENV_WindowSettings)
 
 
 def unregister():
+    del bpy.types.WindowManager.wenv
+    del bpy.types.View3DShading.wenv
     del bpy.types.Material.wenv
     del bpy.types.Scene.wenv
     for cls in reversed(classes):

@@ -5,6 +5,9 @@ from . import engine, materials, meshes, world
 from .engine import SetupError
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722], np.float32)
+# Scene.wenv.shaded_frame before any colours were written.  Every pass notes its frame there, in
+# the data undo restores, so after an undo or redo it is known which frame the colours are of.
+NO_FRAME = -2 ** 31
 
 
 def tone_map(rgb, l_max):
@@ -68,9 +71,10 @@ class ShadingPlan:
                 results.append((name, data.domain, rgb, seen))
         self.results = results
 
-    def apply(self, objects):
+    def apply(self, objects, scene):
         """Writes the results into the meshes of `objects` (bpy.data.objects); an object deleted or
-        edited since plan_shading is skipped.  Returns the names written."""
+        edited since plan_shading is skipped.  Notes the frame in `scene` (see NO_FRAME).  Returns
+        the names written."""
         done = []
         for name, domain, rgb, seen in self.results:
             obj = objects.get(name)
@@ -80,6 +84,8 @@ class ShadingPlan:
             if size == len(rgb):
                 meshes.write_colors(obj.data, domain, rgb, seen)
                 done.append(name)
+        if done and scene.wenv.shaded_frame != scene.frame_current:
+            scene.wenv.shaded_frame = scene.frame_current
         return done
 
 
@@ -132,4 +138,4 @@ def shade_objects(scene, depsgraph, objects, view, blend_data, progress=None):
         plan.notes.append(f"'{name}': Auto chose {engine.describe_auto_choice(choice)} "
                           f"(predicted error {100 * choice['predicted_error']:.2g} %"
                           + ("" if choice["met"] else f", above the {100 * choice['target_error']:.2g} % target") + ")")
-    return plan.apply(blend_data.objects), plan.notes
+    return plan.apply(blend_data.objects, scene), plan.notes

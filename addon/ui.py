@@ -56,7 +56,7 @@ class WENV_PT_shading(_SidebarPanel, bpy.types.Panel):
         row.operator("wenv.live", text="Stop Live" if live else "Live", icon="PAUSE" if live else "PLAY",
                      depress=live)
         row = layout.row(align=True)
-        row.prop(st, "show_in_viewport", text="Show in Viewports", toggle=True, icon="HIDE_OFF")
+        row.prop(context.window_manager.wenv, "show_in_viewports", toggle=True, icon="HIDE_OFF")
         row.operator("wenv.clear", icon="X")
 
         box = layout.box()

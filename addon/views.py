@@ -1,7 +1,5 @@
 """3D views: the View a pass is shaded for (camera, viewport or matrix); viewports set to show the
 shaded colours, and set back."""
-import json
-
 import numpy as np
 
 from .engine import SetupError
@@ -83,37 +81,47 @@ def find_region_3d(context):
     return None
 
 
-def _viewports(window_manager):
-    """(key, shading) of every open 3D viewport; the key names it across redraws (screen, area index)."""
+def _open_viewports(window_manager):
+    """The shading of every 3D viewport shown in a window."""
     for window in window_manager.windows:
-        for i, area in enumerate(window.screen.areas):
+        for area in window.screen.areas:
             if area.type == "VIEW_3D":
-                yield f"{window.screen.name}/{i}", area.spaces.active.shading
+                yield area.spaces.active.shading
 
 
 SHADING_KEYS = ("type", "light", "color_type")
+SHOWN = {"type": "SOLID", "light": "FLAT", "color_type": "VERTEX"}
 
 
-def show_attribute_colors(window_manager, settings):
+def showing_attribute_colors(window_manager):
+    """Whether an open 3D viewport shows the colours (set by show_attribute_colors, not yet set back)."""
+    return any(shading.wenv.showing for shading in _open_viewports(window_manager))
+
+
+def show_attribute_colors(window_manager):
     """Every open 3D viewport in solid mode, flat lighting, colours from the active colour attribute
-    (the shaded radiance, shown as the scene's view transform maps it); what each had before is kept
-    in settings.viewport_backup (the scene's wenv settings) for restore_viewports.  Viewports already
-    showing the colours keep their first backup."""
-    backup = json.loads(settings.viewport_backup or "{}")
-    for key, shading in _viewports(window_manager):
-        if key not in backup:
-            backup[key] = {k: getattr(shading, k) for k in SHADING_KEYS}
-        shading.type = "SOLID"
-        shading.light = "FLAT"
-        shading.color_type = "VERTEX"
-    settings.viewport_backup = json.dumps(backup)
-
-
-def restore_viewports(window_manager, settings):
-    """Sets every viewport show_attribute_colors changed back as it was (those since closed are
-    forgotten)."""
-    backup = json.loads(settings.viewport_backup or "{}")
-    for key, shading in _viewports(window_manager):
-        for k, value in backup.get(key, {}).items():
+    (the shaded radiance, shown as the scene's view transform maps it).  Each keeps what it had in
+    its own shading settings (View3DShading.wenv) for restore_viewports; one already showing the
+    colours keeps its first backup."""
+    for shading in _open_viewports(window_manager):
+        backup = shading.wenv
+        if not backup.showing:
+            for k in SHADING_KEYS:
+                setattr(backup, k, getattr(shading, k))
+            backup.showing = True
+        for k, value in SHOWN.items():
             setattr(shading, k, value)
-    settings.viewport_backup = ""
+
+
+def restore_viewports(screens):
+    """Sets every 3D viewport of `screens` (bpy.data.screens: those of other workspaces and editors
+    hidden in an area too) that show_attribute_colors changed back as it was."""
+    for screen in screens:
+        for area in screen.areas:
+            for space in area.spaces:
+                if space.type != "VIEW_3D" or not space.shading.wenv.showing:
+                    continue
+                shading, backup = space.shading, space.shading.wenv
+                for k in SHADING_KEYS:
+                    setattr(shading, k, getattr(backup, k))
+                backup.showing = False

@@ -36,7 +36,6 @@ def build_scene(levels, quality):
     bpy.ops.wm.read_homefile(use_factory_startup=True)
     scene = bpy.context.scene
     scene.wenv.quality = quality.upper()
-    scene.wenv.show_in_viewport = False
     tree = scene.world.node_tree
     env = tree.nodes.new("ShaderNodeTexEnvironment")
     env.image = bpy.data.images.load(bundled_hdri("sunset"))

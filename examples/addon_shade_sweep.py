@@ -94,7 +94,6 @@ def main():
     st.quality = args.quality.upper()
     st.tone_mapping = "LOG"
     st.max_luminance = args.max_luminance
-    st.show_in_viewport = False
     mat = obj.active_material
     materials.ensure_material_settings(mat)
     node = materials.principled_node(mat) if mat.wenv.model == "PRINCIPLED" else None

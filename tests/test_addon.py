@@ -157,7 +157,12 @@ def test_register_unregister_leaves_nothing():
         assert "wenv" not in bpy.types.Scene.bl_rna.properties
         assert "wenv" not in bpy.types.Material.bl_rna.properties
         assert not [h for h in bpy.app.handlers.frame_change_post if h.__module__.startswith("addon")]
-        assert not [h for h in bpy.app.handlers.load_post if h.__module__.startswith("addon")]
+        for handlers in (bpy.app.handlers.load_post, bpy.app.handlers.undo_post, bpy.app.handlers.redo_post,
+                         bpy.app.handlers.render_init, bpy.app.handlers.render_complete,
+                         bpy.app.handlers.render_cancel):
+            assert not [h for h in handlers if h.__module__.startswith("addon")]
+        assert "wenv" not in bpy.types.WindowManager.bl_rna.properties
+        assert "wenv" not in bpy.types.View3DShading.bl_rna.properties
         assert not engine.shaders.has("draft")
     finally:
         addon.register()
@@ -294,21 +299,57 @@ def test_viewport_shades_only_what_it_sees(scene):
     np.testing.assert_allclose(attribute(obj)[1], want, rtol=1e-4, atol=1e-5)
 
 
-def test_viewport_shows_the_colours_only_when_asked_and_is_restored(scene):
-    """Shading leaves the viewports alone; one click (Show in Viewports) shows the colours in every
-    3D viewport, and the next sets each back as the user had it."""
-    obj = add_monkey()
+def first_viewport():
     area = next(a for a in bpy.context.screen.areas if a.type == "VIEW_3D")
-    shading = area.spaces.active.shading
-    shading.type, shading.light, shading.color_type = "SOLID", "STUDIO", "OBJECT"
+    return area, area.spaces.active.shading
+
+
+def test_viewport_shows_the_colours_only_when_asked_and_is_restored(scene, tmp_path):
+    """Shading (the operator, frame changes, live mode) leaves the viewports alone; one click (Show
+    in Viewports) shows the colours in every 3D viewport, and the next sets each back as the user
+    had it.  Each viewport keeps what it is to be set back to itself, saved with the file and, like
+    the viewports, out of undo: undoing data never parts them, and no undo step is made."""
+    env_world(scene, "sunset")
+    obj = add_monkey()
+    wm = bpy.context.window_manager
+    area, shading = first_viewport()
+    user = ("SOLID", "STUDIO", "OBJECT")
+    shading.type, shading.light, shading.color_type = user
+
+    def state():
+        return (shading.type, shading.light, shading.color_type)
+
     assert shade_op(view="CAMERA") == {"FINISHED"} and ATTR in obj.data.color_attributes
-    assert (shading.type, shading.light, shading.color_type) == ("SOLID", "STUDIO", "OBJECT")
-    scene.wenv.show_in_viewport = True
-    assert (shading.type, shading.light, shading.color_type) == ("SOLID", "FLAT", "VERTEX")
-    assert shade_op(view="CAMERA") == {"FINISHED"}
-    scene.wenv.show_in_viewport = False
-    assert (shading.type, shading.light, shading.color_type) == ("SOLID", "STUDIO", "OBJECT")
-    assert scene.wenv.viewport_backup == ""
+    scene.wenv.shade_on_frame_change = True
+    scene.frame_set(2)
+    session = live.LiveSession([obj.name])
+    assert not session.tick(bpy.context) and session.wait(60) and session.tick(bpy.context)
+    assert state() == user and not wm.wenv.show_in_viewports
+
+    bpy.ops.ed.undo_push(message="before showing")
+    wm.wenv.show_in_viewports = True
+    assert state() == ("SOLID", "FLAT", "VERTEX") and wm.wenv.show_in_viewports
+    wm.wenv.show_in_viewports = True  # clicked on again: the first backup stays
+    bpy.ops.ed.undo_push(message="while showing")
+    bpy.ops.ed.undo()  # the data goes back to before the click; the viewports stay as they are
+    area, shading = first_viewport()
+    assert state() == ("SOLID", "FLAT", "VERTEX") and wm.wenv.show_in_viewports
+
+    path = str(tmp_path / "showing.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.read_homefile(use_factory_startup=True)
+    assert not bpy.context.window_manager.wenv.show_in_viewports
+    bpy.ops.wm.open_mainfile(filepath=path)
+    wm = bpy.context.window_manager
+    area, shading = first_viewport()
+    assert state() == ("SOLID", "FLAT", "VERTEX") and wm.wenv.show_in_viewports
+    # A viewport whose area shows another editor is set back too, for when it returns.
+    area.type = "IMAGE_EDITOR"
+    assert not wm.wenv.show_in_viewports
+    wm.wenv.show_in_viewports = False
+    area.type = "VIEW_3D"
+    shading = area.spaces.active.shading
+    assert state() == user and not wm.wenv.show_in_viewports
 
 
 def test_plain_colour_world_is_constant(scene):
@@ -853,9 +894,10 @@ def test_frame_change_shades_from_animated_camera(scene):
 
 
 def test_frame_changes_during_a_render_write_only_with_the_interface_locked(scene, monkeypatch):
-    """While a render runs beside the interface, the frame handler leaves the meshes alone unless
-    Render > Lock Interface is on (Blender's rule for altering data from handlers), and says so;
-    after the render, and with the lock, it re-shades as before."""
+    """While a render runs beside the interface, the frame handler (and the undo handler, which
+    shades as it does) leaves the meshes alone unless Render > Lock Interface is on (Blender's rule
+    for altering data from handlers), and says so; after the render, and with the lock, it
+    re-shades as before."""
     from addon import handlers
     env_world(scene, "sunrise")
     obj = add_monkey()
@@ -871,6 +913,9 @@ def test_frame_changes_during_a_render_write_only_with_the_interface_locked(scen
         meshes.write_colors(obj.data, "POINT", mark)
         handlers.frame_change_post(scene)
         assert np.all(attribute(obj)[1] == 0.25) and "Lock Interface" in handlers.last_error()
+        scene.wenv.shaded_frame = scene.frame_current - 1  # colours of another frame, after an undo
+        handlers.undo_post(scene)
+        assert np.all(attribute(obj)[1] == 0.25)
         scene.render.use_lock_interface = True
         handlers.frame_change_post(scene)
         assert not np.any(attribute(obj)[1] == 0.25)
@@ -911,28 +956,240 @@ def test_precompute_job_progress_and_cancel(tmp_path, monkeypatch):
 # Undo, save and reload
 
 
-def test_undo_restores_the_mesh(scene):
+def as_the_interface_runs(op, **kw):
+    """An operator called as the interface calls it.  Blender pushes an undo step for an operator with
+    the UNDO option when it finishes, except when it is called from Python, unless asked to
+    (undo=True, the second argument); in background mode the undo stack exists once a first step
+    was pushed."""
+    return op("EXEC_DEFAULT", True, **kw)
+
+
+def test_each_operator_that_changes_data_is_one_undo_step(scene):
+    """Shade, the material operators and Clear each make one step: one undo gives the data from
+    before the operator, one redo what it made.  Precompute changes no data and makes no step."""
+    env_world(scene, "sunset")
+    cube = bpy.data.objects["Cube"]
+    select_only(cube)
+    obj_name, mat_name = cube.name, cube.active_material.name
+
+    def snapshot():
+        # by name: undo frees the data Python held (a kept reference raises ReferenceError)
+        obj, mat = bpy.data.objects[obj_name], bpy.data.materials[mat_name]
+        colours = attribute(obj)[1].tobytes() if ATTR in obj.data.color_attributes else None
+        st = mat.wenv
+        lobes = [(tuple(l.specular), l.roughness, l.ior, l.distribution) for l in st.lobes]
+        node_roughness = materials.principled_node(mat).inputs["Roughness"].default_value
+        return colours, st.model, tuple(st.diffuse), lobes, st.active_lobe, node_roughness
+
+    bpy.ops.ed.undo_push(message="start")
+    steps = [("shade", bpy.ops.wenv.shade, {"view": "CAMERA"}),
+             ("fit the Principled BSDF's roughness", bpy.ops.wenv.fit_roughness, {"target": 60.0, "geometry": "60"}),
+             ("Cook-Torrance from Principled", bpy.ops.wenv.from_principled, {}),
+             ("add a lobe", bpy.ops.wenv.lobe_add, {}),
+             ("remove a lobe", bpy.ops.wenv.lobe_remove, {}),
+             ("fit a lobe's roughness", bpy.ops.wenv.fit_roughness, {"target": 30.0, "geometry": "60"}),
+             ("shade again", bpy.ops.wenv.shade, {"view": "CAMERA"}),
+             ("clear", bpy.ops.wenv.clear, {})]
+    for what, op, kw in steps:
+        before = snapshot()
+        assert as_the_interface_runs(op, **kw) == {"FINISHED"}, what
+        after = snapshot()
+        assert after != before, what
+        bpy.ops.ed.undo()
+        assert snapshot() == before, what
+        bpy.ops.ed.redo()
+        assert snapshot() == after, what
+    cleared = snapshot()
+    assert as_the_interface_runs(bpy.ops.wenv.precompute) == {"FINISHED"} and snapshot() == cleared
+    bpy.ops.ed.undo()  # undoes Clear: precompute pushed no step of its own
+    assert snapshot()[0] is not None
+    # The add-on kept nothing of the data undo freed: shading again works.
+    select_only(bpy.data.objects[obj_name])
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+
+
+class LiveOperator:
+    """The running wenv.live operator as Blender holds it (headless Blender runs no modal
+    operator): a timer, and its own modal() and _stop() called with events."""
+
+    def __init__(self):
+        from addon import operators
+        self.cls = operators.WENV_OT_live
+        self._timer = bpy.context.window_manager.event_timer_add(10.0, window=bpy.context.window)
+        self.reports = []
+
+    def report(self, kind, text):
+        self.reports.append(text)
+
+    def _stop(self, context):
+        return self.cls._stop(self, context)
+
+    def event(self, kind):
+        from types import SimpleNamespace
+        return self.cls.modal(self, bpy.context, SimpleNamespace(type=kind))
+
+    def click(self):
+        return self.cls.invoke(self, bpy.context, None)
+
+
+def bpy_ids_held_by_the_addon():
+    """Every bpy.types.ID reachable from the add-on's modules: their globals, classes, instances
+    of their classes, containers and closures."""
+    import inspect
+    import sys
+    import types
+    found, seen = [], set()
+
+    def ours(x):
+        return (getattr(x, "__module__", None) or "").startswith("addon")
+
+    def walk(x, depth):
+        if depth < 0 or id(x) in seen:
+            return
+        seen.add(id(x))
+        if isinstance(x, bpy.types.ID):
+            found.append(x)
+            return
+        if isinstance(x, dict):
+            items = [*x.keys(), *x.values()]
+        elif isinstance(x, (list, tuple, set, frozenset)):
+            items = list(x)
+        elif isinstance(x, types.FunctionType):
+            items = [c.cell_contents for c in x.__closure__ or () if c.cell_contents is not None] if ours(x) else []
+        elif isinstance(x, types.MethodType):
+            items = [x.__self__, x.__func__]
+        elif inspect.isclass(x):
+            items = list(vars(x).values()) if ours(x) else []
+        elif ours(type(x)):
+            items = list(getattr(x, "__dict__", {}).values())
+            items += [getattr(x, n, None) for c in type(x).__mro__ for n in getattr(c, "__slots__", ())]
+        else:
+            return
+        for item in items:
+            walk(item, depth - 1)
+
+    for name, module in list(sys.modules.items()):
+        if name == "addon" or name.startswith("addon."):
+            for value in vars(module).values():
+                if not isinstance(value, types.ModuleType):
+                    walk(value, 8)
+    return found
+
+
+def test_live_mode_is_one_undo_step_when_it_stops(scene):
+    """Live mode's passes make no undo step each (one every 50 ms would flood the history); when it
+    stops it pushes one for the whole session: one undo gives what was there before it, one redo
+    its last colours.  A session that wrote nothing pushes none.  Meanwhile the add-on holds no
+    Blender data (an undo would free it): objects are held by name."""
     env_world(scene, "sunset")
     obj = add_monkey()
-    name = obj.name
-    co = np.empty(len(obj.data.vertices) * 3, np.float32)
-    obj.data.vertices.foreach_get("co", co)
-    # Operators called from Python in background mode push no undo steps: push them as the UI does
-    # around an operator with the UNDO option.
-    bpy.ops.ed.undo_push(message="before shading")
+    set_material(obj)
+    name, cam = obj.name, scene.camera.name
+    scene.wenv.view_source = "CAMERA"
     assert shade_op(view="CAMERA") == {"FINISHED"}
-    bpy.ops.ed.undo_push(message="Shade")
-    assert ATTR in bpy.data.objects[name].data.color_attributes
+    bpy.ops.ed.undo_push(message="shaded")
+    shaded = attribute(obj)[1].copy()
+    op = LiveOperator()
+    try:
+        live.LiveState.session = live.LiveSession([name])  # as invoke starts it
+        passes = []
+        for x in (5.0, -3.0, 0.0):
+            bpy.data.objects[cam].location.x = x  # a change between passes (by a script: no step)
+            assert op.event("TIMER") == {"PASS_THROUGH"}  # reads the meshes, starts the worker
+            assert not bpy_ids_held_by_the_addon()
+            assert live.LiveState.session.wait(60)
+            op.event("TIMER")  # writes the colours
+            passes.append(attribute(bpy.data.objects[name])[1].copy())
+        assert live.LiveState.session.shades == 3
+        assert all(not np.allclose(a, b) for a, b in zip([shaded] + passes, passes))
+        assert op.click() == {"FINISHED"} and live.LiveState.running()  # clicked again: stops on the next event
+        assert op.event("TIMER") == {"FINISHED"} and not live.LiveState.running()
+    finally:
+        live.LiveState.reset()
+    assert not bpy_ids_held_by_the_addon()
     bpy.ops.ed.undo()
-    me = bpy.data.objects[name].data
-    assert ATTR not in me.color_attributes
-    after = np.empty_like(co)
-    me.vertices.foreach_get("co", after)
-    np.testing.assert_array_equal(after, co)
-    # The add-on holds no stale data after undo: shading again works.
-    select_only(bpy.data.objects[name])
+    np.testing.assert_array_equal(attribute(bpy.data.objects[name])[1], shaded)
+    bpy.ops.ed.redo()
+    np.testing.assert_array_equal(attribute(bpy.data.objects[name])[1], passes[-1])
+    assert tuple(bpy.data.objects[cam].location) == (0.0, pytest.approx(-6.5, abs=1.0), pytest.approx(5.3, abs=1.0))
+
+    op = LiveOperator()
+    live.LiveState.session = live.LiveSession([name])
+    assert op.event("ESC") == {"FINISHED"} and not live.LiveState.running()
+    bpy.ops.ed.undo()  # no step for the empty session: this undoes the first one
+    np.testing.assert_array_equal(attribute(bpy.data.objects[name])[1], shaded)
+
+
+def test_live_mode_shades_what_an_undo_restores(scene):
+    """An undo or redo while live mode runs restores a step, colours included.  Live mode then shades
+    the restored data even when its settings are those it shaded last (the step's colours may be
+    older than its settings), and drops a result it was computing from the data before."""
+    env_world(scene, "sunset")
+    obj = add_monkey()
+    set_material(obj)
+    name, cam = obj.name, scene.camera.name
+    scene.wenv.view_source = "CAMERA"
+    session = live.LiveSession([name])
+    live.LiveState.session = session  # where the undo handler finds it
+
+    def settle():
+        started = session.tick(bpy.context)
+        session.wait(60)
+        return (started, session.tick(bpy.context))
+
+    try:
+        assert settle() == (False, True)
+        shaded = attribute(obj)[1].copy()
+        meshes.write_colors(obj.data, "POINT", np.full((len(shaded), 3), 0.25, np.float32))
+        bpy.ops.ed.undo_push(message="colours older than the settings")
+        assert as_the_interface_runs(bpy.ops.wenv.clear) == {"FINISHED"}
+        assert settle() == (False, False)  # nothing live mode watches changed
+        bpy.ops.ed.undo()
+        assert np.all(attribute(bpy.data.objects[name])[1] == 0.25)
+        assert settle() == (False, True)
+        np.testing.assert_array_equal(attribute(bpy.data.objects[name])[1], shaded)
+
+        bpy.data.objects[cam].location.x = -3.0
+        assert session.tick(bpy.context) is False  # a worker shades the new view
+        bpy.ops.ed.redo()  # meanwhile: the Clear step, without colours
+        assert session.wait(60)
+        assert session.tick(bpy.context) is False and ATTR not in bpy.data.objects[name].data.color_attributes
+        assert settle() == (False, True) and ATTR in bpy.data.objects[name].data.color_attributes
+    finally:
+        live.LiveState.reset()
+
+
+def test_undo_and_redo_show_the_colours_of_the_frame_restored(scene):
+    """Frame changes make no undo step of their own, and Blender pushes a frame change's step before
+    it runs the frame handlers, so that step holds the colours of the frame before.  After an undo or
+    redo such colours are shaded for the frame restored; colours of their own frame stay as the
+    step holds them."""
+    env_world(scene, "sunrise")
+    obj = add_monkey()
+    set_material(obj, lobes=((0.1, 1.5, "GGX"),))
+    name = obj.name
+    cam = scene.camera
+    cam.location = (7.0, -7.0, 5.0)
+    cam.keyframe_insert("location", frame=1)
+    cam.location = (-7.0, -7.0, 2.0)
+    cam.keyframe_insert("location", frame=10)
+    scene.wenv.shade_on_frame_change = True
+    scene.frame_set(1)
     assert shade_op(view="CAMERA") == {"FINISHED"}
-    assert ATTR in bpy.data.objects[name].data.color_attributes
+    n = len(obj.data.vertices)
+    meshes.write_colors(obj.data, "POINT", np.full((n, 3), 0.25, np.float32))  # at frame 1
+    bpy.ops.ed.undo_push(message="frame 1, its own colours")
+    scene.frame_current = 10  # a frame change operator: the frame set, its step pushed,
+    bpy.ops.ed.undo_push(message="Frame Change")
+    scene.frame_set(10)  # then the frame handlers
+    at_10 = attribute(obj)[1].copy()
+    assert not np.any(at_10 == 0.25)
+    bpy.ops.ed.undo()
+    assert bpy.context.scene.frame_current == 1
+    assert np.all(attribute(bpy.data.objects[name])[1] == 0.25)
+    bpy.ops.ed.redo()
+    assert bpy.context.scene.frame_current == 10
+    np.testing.assert_array_equal(attribute(bpy.data.objects[name])[1], at_10)
 
 
 def test_save_reload_reshade(scene, tmp_path):
