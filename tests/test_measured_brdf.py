@@ -329,6 +329,7 @@ BAD_FILES = {
     "nan": lambda: _with_value(float("nan"), 1),
     "inf": lambda: _with_value(float("inf"), 2),
     "minus_inf": lambda: _with_value(float("-inf"), 0),
+    "past_float_range": lambda: _with_value(1e300, 1),  # finite in the file, infinite as a float
     "short_header": lambda: struct.pack("<2i", 90, 90),
     "empty": lambda: b"",
 }

@@ -3,6 +3,7 @@
 #include "scene/brdf_readers.h"
 
 #include <errno.h>
+#include <float.h>
 #include <math.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -122,13 +123,20 @@ wenv_status wenv_read_merl(const char *path, float **rgb_out, size_t dims[3], we
             break;
         }
         for (size_t s = 0; s < n; s++) {
+            double v = block[s] * SCALE[c];
             if (!isfinite(block[s])) {
                 status = wenv_error_set(err, WENV_ERR_IO, "cannot read MERL BRDF file '%s': sample %zu of channel %d "
                                         "is not finite", path, s, c);
                 break;
             }
+            /* a finite double past a float's range would become an infinite table value */
+            if (v > FLT_MAX) {
+                status = wenv_error_set(err, WENV_ERR_IO, "cannot read MERL BRDF file '%s': sample %zu of channel %d "
+                                        "is %g, too large for a float", path, s, c, v);
+                break;
+            }
             /* negative: not measured, kept negative until filled below */
-            rgb[3 * s + (size_t)c] = block[s] < 0.0 ? -1.0f : (float)(block[s] * SCALE[c]);
+            rgb[3 * s + (size_t)c] = block[s] < 0.0 ? -1.0f : (float)v;
         }
     }
     for (int c = 0; c < 3 && !status; c++)
