@@ -675,6 +675,34 @@ def test_corrupt_exr(tmp_path):
         wenv.load_environment(path)
 
 
+def test_exr_window_beyond_the_file_is_refused_before_allocating(tmp_path):
+    """A header claiming 327681 x 1793 pixels over a few hundred bytes (found by tests/fuzz) is a
+    corrupt file, found before the 7 GB image is allocated: under a 3 GB limit on allocations that
+    allocation would fail as a MemoryError."""
+    import subprocess
+    import sys
+
+    write_exr(tmp_path / "ok.exr", np.ones((6, 8, 3), np.float32))
+    data = (tmp_path / "ok.exr").read_bytes()
+    box = struct.pack("<iiii", 0, 0, 7, 5)
+    window = data.index(b"dataWindow\0box2i\0") + len(b"dataWindow\0box2i\0") + 4
+    assert data[window:window + 16] == box
+    (tmp_path / "huge.exr").write_bytes(data[:window] + struct.pack("<iiii", 0, 0, 327680, 1792) + data[window + 16:])
+    env = dict(os.environ)
+    # AddressSanitizer (scripts/sanitize_tests.sh) reserves terabytes of address space, so there
+    # its allocator's own limit stands in for the address-space limit
+    asan = "libasan" in env.get("LD_PRELOAD", "")
+    env["ASAN_OPTIONS"] = env.get("ASAN_OPTIONS", "") + ":allocator_may_return_null=1:max_allocation_size_mb=3072"
+    code = (f"import resource, sys\nsys.path.insert(0, {os.path.dirname(wenv.__file__)!r})\n"
+            + ("" if asan else "resource.setrlimit(resource.RLIMIT_AS, (3 << 30, 3 << 30))\n")
+            + f"import wenv\ntry:\n    wenv.load_environment({str(tmp_path / 'huge.exr')!r})\n"
+            + "except Exception as e:\n    print(type(e).__name__, e)\n")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.startswith("OSError cannot read OpenEXR file"), run.stdout
+    assert "huge.exr" in run.stdout
+
+
 def test_bundled_hdris_load():
     for name in HDRI_NAMES:
         env = wenv.load_environment(hdri_path(name))

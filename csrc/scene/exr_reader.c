@@ -100,17 +100,21 @@ typedef struct {
     size_t room;
 } exr_scratch;
 
+/* Whether a chunk whose top-left pixel is (x_off, y_off) in the data window lies inside it. */
+static int chunk_inside(const exr_chunk_info_t *cinfo, size_t width, size_t height, int64_t x_off, int64_t y_off)
+{
+    return x_off >= 0 && y_off >= 0 && cinfo->width > 0 && cinfo->height > 0 &&
+           (uint64_t)x_off + (uint64_t)cinfo->width <= width && (uint64_t)y_off + (uint64_t)cinfo->height <= height;
+}
+
 /* Decodes one chunk whose top-left pixel is (x_off, y_off) in the data window into rgb.  Channels
  * not wanted are decoded into `scratch` and dropped: OpenEXRCore 3.1 picks unpacking routines for
  * 3 or 4 half channels that write every channel, a skipped one (decode_to_ptr NULL) included --
  * a grey file with two of R, G, B beside Y crashed it. */
 static exr_result_t exr_decode_chunk(exr_context_t ctx, const exr_chunk_info_t *cinfo, exr_decode_pipeline_t *dec,
-                                     int *initialised, float *rgb, size_t width, size_t height, int64_t x_off,
-                                     int64_t y_off, int grey, exr_scratch *scratch)
+                                     int *initialised, float *rgb, size_t width, int64_t x_off, int64_t y_off,
+                                     int grey, exr_scratch *scratch)
 {
-    if (x_off < 0 || y_off < 0 || cinfo->width <= 0 || cinfo->height <= 0 ||
-        (uint64_t)x_off + (uint64_t)cinfo->width > width || (uint64_t)y_off + (uint64_t)cinfo->height > height)
-        return EXR_ERR_BAD_CHUNK_LEADER; /* a chunk outside the data window: corrupt file */
     size_t chunk_pixels = (size_t)cinfo->width * (size_t)cinfo->height;
     if (scratch->room < chunk_pixels) {
         float *grown = realloc(scratch->values, chunk_pixels * sizeof(float));
@@ -143,6 +147,61 @@ static exr_result_t exr_decode_chunk(exr_context_t ctx, const exr_chunk_info_t *
     if (rv != EXR_ERR_SUCCESS)
         return rv;
     return exr_decoding_run(ctx, 0, dec);
+}
+
+/* The decoding state kept from chunk to chunk. */
+typedef struct {
+    exr_decode_pipeline_t pipeline;
+    int initialised;
+    exr_scratch scratch;
+} exr_decoder;
+
+/* Reads every chunk of the data window (width x height, part 0, level 0 if tiled), in order.  With
+ * rgb, decodes each into it; with rgb NULL only checks that each is in the file (its table entry
+ * and leader readable, its pixels inside the window). */
+static exr_result_t exr_walk_chunks(exr_context_t ctx, exr_storage_t storage, const exr_attr_box2i_t *dw,
+                                    size_t width, size_t height, float *rgb, int grey, exr_decoder *d)
+{
+    exr_chunk_info_t cinfo;
+    exr_result_t rv;
+    if (storage == EXR_STORAGE_SCANLINE) {
+        int32_t lines = 0;
+        if ((rv = exr_get_scanlines_per_chunk(ctx, 0, &lines)) != EXR_ERR_SUCCESS)
+            return rv;
+        if (lines <= 0)
+            return EXR_ERR_INVALID_ATTR;
+        for (int64_t y = dw->min.y; y <= dw->max.y; y += lines) {
+            if ((rv = exr_read_scanline_chunk_info(ctx, 0, (int)y, &cinfo)) != EXR_ERR_SUCCESS)
+                return rv;
+            int64_t x_off = (int64_t)cinfo.start_x - dw->min.x, y_off = (int64_t)cinfo.start_y - dw->min.y;
+            if (!chunk_inside(&cinfo, width, height, x_off, y_off))
+                return EXR_ERR_BAD_CHUNK_LEADER; /* a chunk outside the data window: corrupt file */
+            if (rgb && (rv = exr_decode_chunk(ctx, &cinfo, &d->pipeline, &d->initialised, rgb, width, x_off, y_off,
+                                              grey, &d->scratch)) != EXR_ERR_SUCCESS)
+                return rv;
+        }
+        return EXR_ERR_SUCCESS;
+    }
+    int32_t tw = 0, th = 0;
+    if ((rv = exr_get_tile_sizes(ctx, 0, 0, 0, &tw, &th)) != EXR_ERR_SUCCESS)
+        return rv;
+    if (tw <= 0 || th <= 0)
+        return EXR_ERR_INVALID_ATTR;
+    size_t ntx = (width + (size_t)tw - 1) / (size_t)tw, nty = (height + (size_t)th - 1) / (size_t)th;
+    for (size_t ty = 0; ty < nty; ty++) {
+        for (size_t tx = 0; tx < ntx; tx++) {
+            /* tile positions count from the data window's corner */
+            if ((rv = exr_read_tile_chunk_info(ctx, 0, (int)tx, (int)ty, 0, 0, &cinfo)) != EXR_ERR_SUCCESS)
+                return rv;
+            int64_t x_off = (int64_t)(tx * (size_t)tw), y_off = (int64_t)(ty * (size_t)th);
+            if (!chunk_inside(&cinfo, width, height, x_off, y_off))
+                return EXR_ERR_BAD_CHUNK_LEADER;
+            if (rgb && (rv = exr_decode_chunk(ctx, &cinfo, &d->pipeline, &d->initialised, rgb, width, x_off, y_off,
+                                              grey, &d->scratch)) != EXR_ERR_SUCCESS)
+                return rv;
+        }
+    }
+    return EXR_ERR_SUCCESS;
 }
 
 /* OpenEXRCore 3.1 cannot decompress DWAA/DWAB ("not yet implemented in C"), and Blender's bundled
@@ -298,9 +357,8 @@ wenv_status wenv_read_exr(int fd, int64_t size, const char *path, float **out, s
         return err->status;
     }
     float *rgb = NULL;
-    exr_decode_pipeline_t dec = EXR_DECODE_PIPELINE_INITIALIZER;
-    int initialised = 0, use_rgba = 0;
-    exr_scratch scratch = {NULL, 0};
+    exr_decoder decoder = {EXR_DECODE_PIPELINE_INITIALIZER, 0, {NULL, 0}};
+    int use_rgba = 0;
     exr_storage_t storage;
     exr_attr_box2i_t dw;
     const exr_attr_chlist_t *chl = NULL;
@@ -348,47 +406,20 @@ wenv_status wenv_read_exr(int fd, int64_t size, const char *path, float **out, s
                        names[0] ? names : "none");
         goto done;
     }
+    /* every chunk the data window needs must be in the file before the image's memory is taken: a
+     * header claiming a huge window over a few bytes is then a corrupt file, not an allocation of
+     * the size it claims */
+    rv = exr_walk_chunks(ctx, storage, &dw, width, height, NULL, grey, &decoder);
+    if (chunk_failed(rv, &use_rgba, path, &stream, err))
+        goto done;
     rgb = calloc(width * height * 3, sizeof *rgb);
     if (!rgb) {
         wenv_error_set(err, WENV_ERR_NOMEM, "out of memory reading '%s' (%zu x %zu)", path, width, height);
         goto done;
     }
-    exr_chunk_info_t cinfo;
-    if (storage == EXR_STORAGE_SCANLINE) {
-        int32_t lines = 0;
-        if ((rv = exr_get_scanlines_per_chunk(ctx, 0, &lines)) != EXR_ERR_SUCCESS || lines <= 0) {
-            exr_fail(err, path, &stream, rv != EXR_ERR_SUCCESS ? rv : EXR_ERR_INVALID_ATTR);
-            goto done;
-        }
-        for (int64_t y = dw.min.y; y <= dw.max.y; y += lines) {
-            rv = exr_read_scanline_chunk_info(ctx, 0, (int)y, &cinfo);
-            if (rv == EXR_ERR_SUCCESS)
-                rv = exr_decode_chunk(ctx, &cinfo, &dec, &initialised, rgb, width, height,
-                                      (int64_t)cinfo.start_x - dw.min.x, (int64_t)cinfo.start_y - dw.min.y, grey,
-                                      &scratch);
-            if (chunk_failed(rv, &use_rgba, path, &stream, err))
-                goto done;
-        }
-    } else {
-        int32_t tw = 0, th = 0;
-        if ((rv = exr_get_tile_sizes(ctx, 0, 0, 0, &tw, &th)) != EXR_ERR_SUCCESS || tw <= 0 || th <= 0) {
-            exr_fail(err, path, &stream, rv != EXR_ERR_SUCCESS ? rv : EXR_ERR_INVALID_ATTR);
-            goto done;
-        }
-        size_t ntx = (width + (size_t)tw - 1) / (size_t)tw, nty = (height + (size_t)th - 1) / (size_t)th;
-        for (size_t ty = 0; ty < nty; ty++) {
-            for (size_t tx = 0; tx < ntx; tx++) {
-                /* tile positions count from the data window's corner */
-                rv = exr_read_tile_chunk_info(ctx, 0, (int)tx, (int)ty, 0, 0, &cinfo);
-                if (rv == EXR_ERR_SUCCESS)
-                    rv = exr_decode_chunk(ctx, &cinfo, &dec, &initialised, rgb, width, height,
-                                          (int64_t)(tx * (size_t)tw), (int64_t)(ty * (size_t)th), grey,
-                                          &scratch);
-                if (chunk_failed(rv, &use_rgba, path, &stream, err))
-                    goto done;
-            }
-        }
-    }
+    rv = exr_walk_chunks(ctx, storage, &dw, width, height, rgb, grey, &decoder);
+    if (chunk_failed(rv, &use_rgba, path, &stream, err))
+        goto done;
     if (grey)
         for (size_t i = 0; i < width * height; i++)
             rgb[3 * i + 1] = rgb[3 * i + 2] = rgb[3 * i];
@@ -397,11 +428,11 @@ wenv_status wenv_read_exr(int fd, int64_t size, const char *path, float **out, s
     *out_w = width;
     rgb = NULL;
 done:
-    if (initialised)
-        exr_decoding_destroy(ctx, &dec);
+    if (decoder.initialised)
+        exr_decoding_destroy(ctx, &decoder.pipeline);
     exr_finish(&ctx);
     free(rgb);
-    free(scratch.values);
+    free(decoder.scratch.values);
     if (use_rgba) /* OpenEXRCore lacks this compression: OpenEXR's C++ library decodes the file */
         return load_exr_rgba(path, out, out_h, out_w, err);
     return err->status;
