@@ -703,6 +703,26 @@ def test_exr_window_beyond_the_file_is_refused_before_allocating(tmp_path):
     assert "huge.exr" in run.stdout
 
 
+def test_dwa_file_with_header_faults_is_refused(tmp_path):
+    """OpenEXRCore steps over an attribute of impossible size; OpenEXR's C++ library, which decodes
+    DWAA/DWAB, would allocate what the size claims (1.5 GB here, seconds of work; found by
+    tests/fuzz).  Such a file is refused with OpenEXRCore's diagnosis."""
+    write_exr(tmp_path / "ok.exr", np.ones((4, 8, 3), np.float32), pixel_type="half")
+    data = (tmp_path / "ok.exr").read_bytes()
+    c = data.index(b"compression\0compression\0") + len(b"compression\0compression\0") + 4
+    data = data[:c] + b"\x08" + data[c + 1:]  # DWAA: the C++ library's part (the payload is not DWAA)
+    head = exr_header_length(data)
+    bad = b"note\0string\0" + struct.pack("<i", 1500000000)  # no value follows
+    (offset,) = struct.unpack("<Q", data[head:head + 8])  # one chunk of 32 lines for DWAA
+    faulty = data[:head - 1] + bad + b"\0" + struct.pack("<Q", offset + len(bad)) + data[head + 8:]
+    (tmp_path / "dwa.exr").write_bytes(data)
+    with pytest.raises(OSError, match="dwa.exr.*DWA"):  # the C++ library reached, and refusing the payload
+        wenv.load_environment(tmp_path / "dwa.exr")
+    (tmp_path / "faulty.exr").write_bytes(faulty)
+    with pytest.raises(OSError, match="faulty.exr.*'note'.*[Ii]nvalid size 1500000000"):
+        wenv.load_environment(tmp_path / "faulty.exr")
+
+
 def test_bundled_hdris_load():
     for name in HDRI_NAMES:
         env = wenv.load_environment(hdri_path(name))

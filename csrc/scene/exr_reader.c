@@ -356,6 +356,11 @@ wenv_status wenv_read_exr(int fd, int64_t size, const char *path, float **out, s
         exr_finish(&ctx);
         return err->status;
     }
+    /* OpenEXRCore reports a header fault it can step over (an attribute of impossible size, say)
+     * and goes on; OpenEXR's C++ library parses such a header its own way, and 3.1 allocates what
+     * a corrupt attribute's size claims (gigabytes for a file of a few hundred bytes), so it is
+     * handed only files whose header parsed cleanly */
+    int header_clean = !stream.message[0];
     float *rgb = NULL;
     exr_decoder decoder = {EXR_DECODE_PIPELINE_INITIALIZER, 0, {NULL, 0}};
     int use_rgba = 0;
@@ -433,6 +438,8 @@ done:
     exr_finish(&ctx);
     free(rgb);
     free(decoder.scratch.values);
+    if (use_rgba && !header_clean)
+        return wenv_error_set(err, WENV_ERR_IO, "cannot read OpenEXR file '%s': %s", path, stream.message);
     if (use_rgba) /* OpenEXRCore lacks this compression: OpenEXR's C++ library decodes the file */
         return load_exr_rgba(path, out, out_h, out_w, err);
     return err->status;
