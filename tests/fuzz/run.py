@@ -39,17 +39,28 @@ LIBS = ["-lOpenEXRCore", "-lcubature", "-lz", "-lm"]
 
 def pkg_config(*args):
     try:
-        out = subprocess.run(["pkg-config", *args], check=True, capture_output=True, text=True).stdout
+        out = subprocess.run(["pkg-config", *args], check=True, capture_output=True, text=True,
+                             env=child_env()).stdout
     except (OSError, subprocess.CalledProcessError):
         return []
     return out.split()
+
+
+def child_env():
+    """The environment for the compiler and the targets, without what scripts/sanitize_tests.sh sets
+    for python: the targets carry clang's sanitizer runtime, which cannot share a process with gcc's
+    preloaded one."""
+    env = dict(os.environ)
+    for name in ("LD_PRELOAD", "ASAN_OPTIONS", "UBSAN_OPTIONS", "LSAN_OPTIONS"):
+        env.pop(name, None)
+    return env
 
 
 def compile_if_stale(cmd, src_paths, out_path):
     newest = max(os.path.getmtime(p) for p in src_paths)
     if os.path.exists(out_path) and os.path.getmtime(out_path) >= newest:
         return
-    build = subprocess.run(cmd, capture_output=True, text=True)
+    build = subprocess.run(cmd, capture_output=True, text=True, env=child_env())
     if build.returncode != 0:
         raise SystemExit("fuzz build failed:\n" + " ".join(cmd) + "\n" + build.stderr[-6000:])
 
@@ -74,7 +85,7 @@ def build(build_dir, cc="clang"):
     if not os.path.exists(lib) or os.path.getmtime(lib) < max(os.path.getmtime(o) for o in objects):
         if os.path.exists(lib):
             os.remove(lib)
-        subprocess.run(["ar", "rcs", lib, *objects], check=True)
+        subprocess.run(["ar", "rcs", lib, *objects], check=True, env=child_env())
     binaries = {}
     for target in TARGETS:
         src = os.path.join(HERE, f"fuzz_{target}.c")
@@ -86,7 +97,7 @@ def build(build_dir, cc="clang"):
 
 
 def sanitizer_env():
-    env = dict(os.environ)
+    env = child_env()
     env["OMP_NUM_THREADS"] = "1"  # one core: the parallel loops run on one thread
     # leaks are checked by libFuzzer after every input that allocated more than it freed
     env["ASAN_OPTIONS"] = "detect_leaks=1:abort_on_error=0:symbolize=1:allocator_may_return_null=0"
