@@ -675,19 +675,12 @@ def test_corrupt_exr(tmp_path):
         wenv.load_environment(path)
 
 
-def test_exr_window_beyond_the_file_is_refused_before_allocating(tmp_path):
-    """A header claiming 327681 x 1793 pixels over a few hundred bytes (found by tests/fuzz) is a
-    corrupt file, found before the 7 GB image is allocated: under a 3 GB limit on allocations that
-    allocation would fail as a MemoryError."""
+def load_under_allocation_limit(path):
+    """What wenv.load_environment(path) raises, as 'TypeName message', in a child process whose
+    allocations are limited to 3 GB."""
     import subprocess
     import sys
 
-    write_exr(tmp_path / "ok.exr", np.ones((6, 8, 3), np.float32))
-    data = (tmp_path / "ok.exr").read_bytes()
-    box = struct.pack("<iiii", 0, 0, 7, 5)
-    window = data.index(b"dataWindow\0box2i\0") + len(b"dataWindow\0box2i\0") + 4
-    assert data[window:window + 16] == box
-    (tmp_path / "huge.exr").write_bytes(data[:window] + struct.pack("<iiii", 0, 0, 327680, 1792) + data[window + 16:])
     env = dict(os.environ)
     # AddressSanitizer (scripts/sanitize_tests.sh) reserves terabytes of address space, so there
     # its allocator's own limit stands in for the address-space limit
@@ -695,12 +688,33 @@ def test_exr_window_beyond_the_file_is_refused_before_allocating(tmp_path):
     env["ASAN_OPTIONS"] = env.get("ASAN_OPTIONS", "") + ":allocator_may_return_null=1:max_allocation_size_mb=3072"
     code = (f"import resource, sys\nsys.path.insert(0, {os.path.dirname(wenv.__file__)!r})\n"
             + ("" if asan else "resource.setrlimit(resource.RLIMIT_AS, (3 << 30, 3 << 30))\n")
-            + f"import wenv\ntry:\n    wenv.load_environment({str(tmp_path / 'huge.exr')!r})\n"
+            + f"import wenv\ntry:\n    wenv.load_environment({str(path)!r})\n"
             + "except Exception as e:\n    print(type(e).__name__, e)\n")
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
     assert run.returncode == 0, run.stderr
-    assert run.stdout.startswith("OSError cannot read OpenEXR file"), run.stdout
-    assert "huge.exr" in run.stdout
+    return run.stdout
+
+
+def test_exr_window_beyond_the_file_is_refused_before_allocating(tmp_path):
+    """A header claiming 327681 x 1793 pixels over a few hundred bytes (found by tests/fuzz) is a
+    corrupt file, found before the 7 GB image is allocated: under a 3 GB limit on allocations that
+    allocation would fail as a MemoryError."""
+    write_exr(tmp_path / "ok.exr", np.ones((6, 8, 3), np.float32))
+    data = (tmp_path / "ok.exr").read_bytes()
+    box = struct.pack("<iiii", 0, 0, 7, 5)
+    window = data.index(b"dataWindow\0box2i\0") + len(b"dataWindow\0box2i\0") + 4
+    assert data[window:window + 16] == box
+    (tmp_path / "huge.exr").write_bytes(data[:window] + struct.pack("<iiii", 0, 0, 327680, 1792) + data[window + 16:])
+    out = load_under_allocation_limit(tmp_path / "huge.exr")
+    assert out.startswith("OSError cannot read OpenEXR file") and "huge.exr" in out, out
+
+
+def test_hdr_size_beyond_the_file_is_refused_before_allocating(tmp_path):
+    """The same for a Radiance header claiming 32768 x 32768 pixels (12 GB) over 8 pixels."""
+    rgbe = b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 32768 +X 32768\n" + bytes([128, 128, 128, 129]) * 8
+    (tmp_path / "huge.hdr").write_bytes(rgbe)
+    out = load_under_allocation_limit(tmp_path / "huge.hdr")
+    assert out.startswith("OSError cannot read Radiance HDR file") and "huge.hdr" in out and "truncated" in out, out
 
 
 def test_dwa_file_with_header_faults_is_refused(tmp_path):
