@@ -709,6 +709,41 @@ def test_exr_window_beyond_the_file_is_refused_before_allocating(tmp_path):
     assert out.startswith("OSError cannot read OpenEXR file") and "huge.exr" in out, out
 
 
+def exr_with_chunks(header, window, compression, lines_per_chunk, payload):
+    """A scanline OpenEXR file: `header` (a file of write_exr's whose header is reused) with its data
+    window and compression replaced, and one chunk of `payload` bytes per `lines_per_chunk` rows."""
+    head = header[:exr_header_length(header)]
+    w = head.index(b"dataWindow\0box2i\0") + len(b"dataWindow\0box2i\0") + 4
+    head = head[:w] + struct.pack("<iiii", 0, 0, window[0] - 1, window[1] - 1) + head[w + 16:]
+    c = head.index(b"compression\0compression\0") + len(b"compression\0compression\0") + 4
+    head = head[:c] + bytes([compression]) + head[c + 1:]
+    n = -(-window[1] // lines_per_chunk)
+    chunks = [struct.pack("<ii", k * lines_per_chunk, len(payload)) + payload for k in range(n)]
+    offsets = np.cumsum([len(head) + 8 * n] + [len(ch) for ch in chunks[:-1]])
+    return head + b"".join(struct.pack("<Q", int(o)) for o in offsets) + b"".join(chunks)
+
+
+def test_exr_chunks_shorter_than_their_pixels_are_refused(tmp_path):
+    """Uncompressed chunks of 96 bytes under a window 800 pixels wide (found by tests/fuzz): an
+    OSError saying so; OpenEXRCore decodes such a chunk to nothing, and the file read as black."""
+    write_exr(tmp_path / "ok.exr", np.ones((6, 8, 3), np.float32))
+    data = (tmp_path / "ok.exr").read_bytes()
+    np.testing.assert_array_equal(wenv.load_environment(tmp_path / "ok.exr").pixels, 1.0)
+    (tmp_path / "short.exr").write_bytes(exr_with_chunks(data, (800, 6), 0, 1, data[-96:]))
+    with pytest.raises(OSError, match=r"short.exr.*holds 96 bytes for 9600 bytes"):
+        wenv.load_environment(tmp_path / "short.exr")
+
+
+def test_dwa_window_beyond_the_file_is_refused_before_allocating(tmp_path):
+    """A DWAA header claiming 32768 x 32768 pixels over 1024 chunks of 16 bytes: OpenEXR's C++ library
+    reads it in bands, so the corrupt first chunk is an OSError, not a 20 GB allocation."""
+    write_exr(tmp_path / "ok.exr", np.ones((4, 8, 3), np.float32), pixel_type="half")
+    data = (tmp_path / "ok.exr").read_bytes()
+    (tmp_path / "huge_dwa.exr").write_bytes(exr_with_chunks(data, (32768, 32768), 8, 32, bytes(range(16))))
+    out = load_under_allocation_limit(tmp_path / "huge_dwa.exr")
+    assert out.startswith("OSError cannot read OpenEXR file") and "huge_dwa.exr" in out, out
+
+
 def test_hdr_size_beyond_the_file_is_refused_before_allocating(tmp_path):
     """The same for a Radiance header claiming 32768 x 32768 pixels (12 GB) over 8 pixels."""
     rgbe = b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 32768 +X 32768\n" + bytes([128, 128, 128, 129]) * 8
