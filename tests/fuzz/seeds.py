@@ -110,15 +110,18 @@ def matrix_cache_seeds(out):
 
 
 def exr_regressions(out):
-    from test_envmap import exr_header_length, write_exr
+    from test_envmap import exr_header_length, exr_with_chunks, write_exr
 
     path = os.path.join(out, "regress_window.exr")
     write_exr(path, np.ones((6, 8, 3), np.float32))
     data = open(path, "rb").read()
     window = data.index(b"dataWindow\0box2i\0") + len(b"dataWindow\0box2i\0") + 4
-    # a window of 2047 x 2049 pixels over a file of 6 rows: found before its memory is taken
+    # a window of 1023 x 1025 pixels over a file of 6 rows: its missing chunks found before decoding
     with open(path, "wb") as f:
-        f.write(data[:window] + struct.pack("<iiii", 0, 0, 2046, 2048) + data[window + 16:])
+        f.write(data[:window] + struct.pack("<iiii", 0, 0, 1022, 1024) + data[window + 16:])
+    # uncompressed chunks of 8 pixels under a window 800 wide: OpenEXRCore 3.1 decodes them to nothing
+    with open(os.path.join(out, "regress_short_chunks.exr"), "wb") as f:
+        f.write(exr_with_chunks(data, (800, 6), 0, 1, data[-96:]))
     # DWAA (OpenEXR's C++ library decodes it) with an attribute claiming 2 GB that OpenEXRCore steps over
     write_exr(path, np.ones((4, 8, 3), np.float32), pixel_type="half")
     data = open(path, "rb").read()
