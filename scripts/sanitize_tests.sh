@@ -24,7 +24,6 @@ export LD_PRELOAD="$(gcc -print-file-name=libasan.so) $(gcc -print-file-name=lib
 # MemoryError paths the tests take stay what they are; suppressions: see the file
 export ASAN_OPTIONS="detect_leaks=0:halt_on_error=1:allocator_may_return_null=1:suppressions=$PWD/scripts/sanitize.supp"
 export UBSAN_OPTIONS="halt_on_error=1:print_stacktrace=1:suppressions=$PWD/scripts/sanitize.supp"
-export PYTHONPATH="$PWD/$out/lib${PYTHONPATH:+:$PYTHONPATH}"
 if [ $# -eq 0 ]; then
     set -- tests
 fi
@@ -32,12 +31,16 @@ fi
 # count of its arrays, which AddressSanitizer's shadow memory, redzones and quarantine inflate
 set -- "$@" --deselect tests/test_memory.py::test_rotation_memory_grows_with_the_setting \
     --deselect tests/test_memory.py::test_split_sum_counts_its_source_pyramid
-# -P: the checkout (the current folder), which holds the in-place build, is not put on sys.path; wenv
-# is imported before pytest starts, so every later import (tests that put the checkout on sys.path
-# for benchmarks/ included) gets the sanitized build
+# The sanitized build goes first on this process's sys.path only, and is imported before pytest
+# starts, so every later import gets it (tests that put the checkout, with its in-place build, on
+# sys.path for benchmarks/ included); -P keeps the current folder off sys.path.  Child processes
+# that load wenv are given its folder by the tests (dirname(wenv.__file__)); PYTHONPATH is left
+# alone, as tests/test_addon_install.py checks that a fresh process sees no development copy.
 exec "$PY" -P -c '
-import sys, wenv, pytest
+import sys
+sys.path.insert(0, sys.argv[1])
+import pytest, wenv
 if not wenv.__file__.startswith(sys.argv[1]):
     sys.exit("not the sanitized build: " + wenv.__file__)
 print("wenv:", wenv.__file__)
-sys.exit(pytest.main(["-q", *sys.argv[2:]]))' "$PWD/$out/" "$@"
+sys.exit(pytest.main(["-q", *sys.argv[2:]]))' "$PWD/$out/lib/" "$@"
