@@ -25,10 +25,19 @@ include_dirs = [f[2:] for f in exr_cflags if f.startswith("-I")]
 # Only the C library (OpenEXRCore) is used; the C++ libraries OpenEXR's .pc lists are not needed.
 exr_libs = [f[2:] for f in pkg_config("--libs", "OpenEXR") if f.startswith("-lOpenEXRCore")] or ["OpenEXRCore"]
 
+# WENV_DEBUG=1: unoptimised, with AddressSanitizer and UndefinedBehaviorSanitizer, for a debugger.
+# WENV_SANITIZE=1: the same sanitizers at -O1, fast enough for the whole test suite
+# (scripts/sanitize_tests.sh).  Either build needs libasan preloaded into python.
 debug = os.environ.get("WENV_DEBUG") == "1"
+sanitize = os.environ.get("WENV_SANITIZE") == "1"
 extra_compile_args = ["-std=c11", "-D_DEFAULT_SOURCE", "-Wall", "-Wextra", "-fopenmp", "-fno-math-errno"]
-extra_compile_args += ["-O0", "-g", "-fsanitize=address,undefined"] if debug else ["-O3"]
-extra_link_args = ["-fopenmp"] + (["-fsanitize=address,undefined"] if debug else [])
+if debug:
+    extra_compile_args += ["-O0", "-g", "-fsanitize=address,undefined"]
+elif sanitize:
+    extra_compile_args += ["-O1", "-g", "-fno-omit-frame-pointer", "-fsanitize=address,undefined"]
+else:
+    extra_compile_args += ["-O3"]
+extra_link_args = ["-fopenmp"] + (["-fsanitize=address,undefined"] if debug or sanitize else [])
 
 setup(
     name="wenv",

@@ -675,6 +675,103 @@ def test_corrupt_exr(tmp_path):
         wenv.load_environment(path)
 
 
+def load_under_allocation_limit(path):
+    """What wenv.load_environment(path) raises, as 'TypeName message', in a child process whose
+    allocations are limited to 3 GB."""
+    import subprocess
+    import sys
+
+    env = dict(os.environ)
+    # AddressSanitizer (scripts/sanitize_tests.sh) reserves terabytes of address space, so there
+    # its allocator's own limit stands in for the address-space limit
+    asan = "libasan" in env.get("LD_PRELOAD", "")
+    env["ASAN_OPTIONS"] = env.get("ASAN_OPTIONS", "") + ":allocator_may_return_null=1:max_allocation_size_mb=3072"
+    code = (f"import resource, sys\nsys.path.insert(0, {os.path.dirname(wenv.__file__)!r})\n"
+            + ("" if asan else "resource.setrlimit(resource.RLIMIT_AS, (3 << 30, 3 << 30))\n")
+            + f"import wenv\ntry:\n    wenv.load_environment({str(path)!r})\n"
+            + "except Exception as e:\n    print(type(e).__name__, e)\n")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
+    assert run.returncode == 0, run.stderr
+    return run.stdout
+
+
+def test_exr_window_beyond_the_file_is_refused_before_allocating(tmp_path):
+    """A header claiming 327681 x 1793 pixels over a few hundred bytes (found by tests/fuzz) is a
+    corrupt file, found before the 7 GB image is allocated: under a 3 GB limit on allocations that
+    allocation would fail as a MemoryError."""
+    write_exr(tmp_path / "ok.exr", np.ones((6, 8, 3), np.float32))
+    data = (tmp_path / "ok.exr").read_bytes()
+    box = struct.pack("<iiii", 0, 0, 7, 5)
+    window = data.index(b"dataWindow\0box2i\0") + len(b"dataWindow\0box2i\0") + 4
+    assert data[window:window + 16] == box
+    (tmp_path / "huge.exr").write_bytes(data[:window] + struct.pack("<iiii", 0, 0, 327680, 1792) + data[window + 16:])
+    out = load_under_allocation_limit(tmp_path / "huge.exr")
+    assert out.startswith("OSError cannot read OpenEXR file") and "huge.exr" in out, out
+
+
+def exr_with_chunks(header, window, compression, lines_per_chunk, payload):
+    """A scanline OpenEXR file: `header` (a file of write_exr's whose header is reused) with its data
+    window and compression replaced, and one chunk of `payload` bytes per `lines_per_chunk` rows."""
+    head = header[:exr_header_length(header)]
+    w = head.index(b"dataWindow\0box2i\0") + len(b"dataWindow\0box2i\0") + 4
+    head = head[:w] + struct.pack("<iiii", 0, 0, window[0] - 1, window[1] - 1) + head[w + 16:]
+    c = head.index(b"compression\0compression\0") + len(b"compression\0compression\0") + 4
+    head = head[:c] + bytes([compression]) + head[c + 1:]
+    n = -(-window[1] // lines_per_chunk)
+    chunks = [struct.pack("<ii", k * lines_per_chunk, len(payload)) + payload for k in range(n)]
+    offsets = np.cumsum([len(head) + 8 * n] + [len(ch) for ch in chunks[:-1]])
+    return head + b"".join(struct.pack("<Q", int(o)) for o in offsets) + b"".join(chunks)
+
+
+def test_exr_chunks_shorter_than_their_pixels_are_refused(tmp_path):
+    """Uncompressed chunks of 96 bytes under a window 800 pixels wide (found by tests/fuzz): an
+    OSError saying so; OpenEXRCore decodes such a chunk to nothing, and the file read as black."""
+    write_exr(tmp_path / "ok.exr", np.ones((6, 8, 3), np.float32))
+    data = (tmp_path / "ok.exr").read_bytes()
+    np.testing.assert_array_equal(wenv.load_environment(tmp_path / "ok.exr").pixels, 1.0)
+    (tmp_path / "short.exr").write_bytes(exr_with_chunks(data, (800, 6), 0, 1, data[-96:]))
+    with pytest.raises(OSError, match=r"short.exr.*holds 96 bytes for 9600 bytes"):
+        wenv.load_environment(tmp_path / "short.exr")
+
+
+def test_dwa_window_beyond_the_file_is_refused_before_allocating(tmp_path):
+    """A DWAA header claiming 32768 x 32768 pixels over 1024 chunks of 16 bytes: OpenEXR's C++ library
+    reads it in bands, so the corrupt first chunk is an OSError, not a 20 GB allocation."""
+    write_exr(tmp_path / "ok.exr", np.ones((4, 8, 3), np.float32), pixel_type="half")
+    data = (tmp_path / "ok.exr").read_bytes()
+    (tmp_path / "huge_dwa.exr").write_bytes(exr_with_chunks(data, (32768, 32768), 8, 32, bytes(range(16))))
+    out = load_under_allocation_limit(tmp_path / "huge_dwa.exr")
+    assert out.startswith("OSError cannot read OpenEXR file") and "huge_dwa.exr" in out, out
+
+
+def test_hdr_size_beyond_the_file_is_refused_before_allocating(tmp_path):
+    """The same for a Radiance header claiming 32768 x 32768 pixels (12 GB) over 8 pixels."""
+    rgbe = b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 32768 +X 32768\n" + bytes([128, 128, 128, 129]) * 8
+    (tmp_path / "huge.hdr").write_bytes(rgbe)
+    out = load_under_allocation_limit(tmp_path / "huge.hdr")
+    assert out.startswith("OSError cannot read Radiance HDR file") and "huge.hdr" in out and "truncated" in out, out
+
+
+def test_dwa_file_with_header_faults_is_refused(tmp_path):
+    """OpenEXRCore steps over an attribute of impossible size; OpenEXR's C++ library, which decodes
+    DWAA/DWAB, would allocate what the size claims (1.5 GB here, seconds of work; found by
+    tests/fuzz).  Such a file is refused with OpenEXRCore's diagnosis."""
+    write_exr(tmp_path / "ok.exr", np.ones((4, 8, 3), np.float32), pixel_type="half")
+    data = (tmp_path / "ok.exr").read_bytes()
+    c = data.index(b"compression\0compression\0") + len(b"compression\0compression\0") + 4
+    data = data[:c] + b"\x08" + data[c + 1:]  # DWAA: the C++ library's part (the payload is not DWAA)
+    head = exr_header_length(data)
+    bad = b"note\0string\0" + struct.pack("<i", 1500000000)  # no value follows
+    (offset,) = struct.unpack("<Q", data[head:head + 8])  # one chunk of 32 lines for DWAA
+    faulty = data[:head - 1] + bad + b"\0" + struct.pack("<Q", offset + len(bad)) + data[head + 8:]
+    (tmp_path / "dwa.exr").write_bytes(data)
+    with pytest.raises(OSError, match="dwa.exr.*DWA"):  # the C++ library reached, and refusing the payload
+        wenv.load_environment(tmp_path / "dwa.exr")
+    (tmp_path / "faulty.exr").write_bytes(faulty)
+    with pytest.raises(OSError, match="faulty.exr.*'note'.*[Ii]nvalid size 1500000000"):
+        wenv.load_environment(tmp_path / "faulty.exr")
+
+
 def test_bundled_hdris_load():
     for name in HDRI_NAMES:
         env = wenv.load_environment(hdri_path(name))

@@ -329,6 +329,7 @@ BAD_FILES = {
     "nan": lambda: _with_value(float("nan"), 1),
     "inf": lambda: _with_value(float("inf"), 2),
     "minus_inf": lambda: _with_value(float("-inf"), 0),
+    "past_float_range": lambda: _with_value(1e300, 1),  # finite in the file, infinite as a float
     "short_header": lambda: struct.pack("<2i", 90, 90),
     "empty": lambda: b"",
 }
@@ -401,6 +402,24 @@ def test_table_reflecting_more_than_it_receives_warns():
 
 
 # ------------------------------------------------------------------ (c) unmeasured samples
+
+def test_table_measured_at_one_theta_h_fills_in_linear_time(tmp_path):
+    """Columns with nothing measured take the nearest measured theta_h at their phi_d: a table of
+    4096 theta_h measured only at the first fills in one pass per phi_d (well under a second; the
+    search outwards from each column took 3 s here), every column a copy of the measured one."""
+    shape = (4096, 2, 64)
+    table = np.random.default_rng(8).uniform(0.001, 0.05, size=shape + (3,))
+    mask = np.ones(shape, bool)
+    mask[0] = False
+    path = M.write_merl(tmp_path / "one_theta_h.binary", table, mask)
+    t0 = time.perf_counter()
+    mat = wenv.load_brdf(str(path))
+    elapsed = time.perf_counter() - t0
+    assert elapsed < 1.5, f"loading took {elapsed:.2f} s"
+    held = np.asarray(mat.table)
+    np.testing.assert_allclose(held, np.broadcast_to(held[:1], held.shape), rtol=0)
+    np.testing.assert_allclose(held[0], table[0], rtol=1e-6)
+
 
 def test_unmeasured_samples_are_filled(tmp_path):
     rng = np.random.default_rng(7)

@@ -15,7 +15,7 @@
  * no measured sample takes the nearest column in theta_h at the same phi_d that has one.  rgb:
  * n x 3 floats (malloc'd, the caller's), dims: the three dimensions.  WENV_ERR_IO naming the file
  * for a missing, short, truncated or over-long file, dimensions the size does not match, a NaN or
- * infinite entry, or a table with no measured sample. */
+ * infinite entry or one past a float's range once scaled, or a table with no measured sample. */
 wenv_status wenv_read_merl(const char *path, float **rgb, size_t dims[3], wenv_error *err);
 
 #endif

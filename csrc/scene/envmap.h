@@ -57,8 +57,8 @@ wenv_status wenv_envmap_create(wenv_envmap **out, const float *pixels, size_t he
                                double strength, wenv_error *err);
 
 /* Reads an OpenEXR or Radiance .hdr file (format from its magic bytes); WENV_ERR_IO naming the
- * file when it is missing, unreadable or corrupt (WENV_ERR_VALUE for non-finite pixels or a cube
- * cross of the wrong aspect).  OpenEXR: first part, scanline or tiled (level 0), half or float
+ * file when it is missing, unreadable or corrupt, non-finite pixels included (WENV_ERR_VALUE for a
+ * cube cross of the wrong aspect).  OpenEXR: first part, scanline or tiled (level 0), half or float
  * R, G, B (or Y) channels, decoded by OpenEXRCore; DWAA/DWAB, which OpenEXRCore 3.1 cannot
  * decompress, go through OpenEXR's C interface to its C++ library (ImfCRgbaFile.h, loaded with
  * dlopen).  Radiance: FORMAT=32-bit_rle_rgbe, '-Y H +X W', flat, old-style or new-style RLE

@@ -100,17 +100,21 @@ typedef struct {
     size_t room;
 } exr_scratch;
 
+/* Whether a chunk whose top-left pixel is (x_off, y_off) in the data window lies inside it. */
+static int chunk_inside(const exr_chunk_info_t *cinfo, size_t width, size_t height, int64_t x_off, int64_t y_off)
+{
+    return x_off >= 0 && y_off >= 0 && cinfo->width > 0 && cinfo->height > 0 &&
+           (uint64_t)x_off + (uint64_t)cinfo->width <= width && (uint64_t)y_off + (uint64_t)cinfo->height <= height;
+}
+
 /* Decodes one chunk whose top-left pixel is (x_off, y_off) in the data window into rgb.  Channels
  * not wanted are decoded into `scratch` and dropped: OpenEXRCore 3.1 picks unpacking routines for
  * 3 or 4 half channels that write every channel, a skipped one (decode_to_ptr NULL) included --
  * a grey file with two of R, G, B beside Y crashed it. */
 static exr_result_t exr_decode_chunk(exr_context_t ctx, const exr_chunk_info_t *cinfo, exr_decode_pipeline_t *dec,
-                                     int *initialised, float *rgb, size_t width, size_t height, int64_t x_off,
-                                     int64_t y_off, int grey, exr_scratch *scratch)
+                                     int *initialised, float *rgb, size_t width, int64_t x_off, int64_t y_off,
+                                     int grey, exr_scratch *scratch)
 {
-    if (x_off < 0 || y_off < 0 || cinfo->width <= 0 || cinfo->height <= 0 ||
-        (uint64_t)x_off + (uint64_t)cinfo->width > width || (uint64_t)y_off + (uint64_t)cinfo->height > height)
-        return EXR_ERR_BAD_CHUNK_LEADER; /* a chunk outside the data window: corrupt file */
     size_t chunk_pixels = (size_t)cinfo->width * (size_t)cinfo->height;
     if (scratch->room < chunk_pixels) {
         float *grown = realloc(scratch->values, chunk_pixels * sizeof(float));
@@ -143,6 +147,108 @@ static exr_result_t exr_decode_chunk(exr_context_t ctx, const exr_chunk_info_t *
     if (rv != EXR_ERR_SUCCESS)
         return rv;
     return exr_decoding_run(ctx, 0, dec);
+}
+
+/* The decoding state kept from chunk to chunk. */
+typedef struct {
+    exr_decode_pipeline_t pipeline;
+    int initialised;
+    exr_scratch scratch;
+} exr_decoder;
+
+/* The image as it is decoded: its first `rows` rows held (zeroed until decoded), grown as chunks
+ * further down arrive, so that memory follows what the file holds rather than what its header
+ * claims (a huge window over a few compressed bytes fails at its first chunk, not at an allocation
+ * of its size). */
+typedef struct {
+    float *rgb;
+    size_t rows, width, height;
+} exr_image;
+
+static int image_cover(exr_image *img, size_t rows)
+{
+    if (rows <= img->rows)
+        return 0;
+    size_t room = img->rows * 2 > rows ? img->rows * 2 : rows;
+    room = room < img->height ? room : img->height;
+    size_t row_floats = img->width * 3;
+    float *grown = realloc(img->rgb, room * row_floats * sizeof *grown);
+    if (!grown)
+        return -1;
+    memset(grown + img->rows * row_floats, 0, (room - img->rows) * row_floats * sizeof *grown);
+    img->rgb = grown;
+    img->rows = room;
+    return 0;
+}
+
+/* One chunk whose top-left pixel is (x_off, y_off) in the data window: checked to lie inside it and
+ * to hold as many bytes as its pixels can come from, then with img decoded into it. */
+static exr_result_t exr_visit_chunk(exr_context_t ctx, const exr_chunk_info_t *cinfo, int64_t x_off, int64_t y_off,
+                                    exr_image *img, size_t width, size_t height, int grey, exr_decoder *d,
+                                    exr_stream *stream)
+{
+    if (!chunk_inside(cinfo, width, height, x_off, y_off))
+        return EXR_ERR_BAD_CHUNK_LEADER; /* a chunk outside the data window: corrupt file */
+    /* Writers store a chunk that would not shrink as it is, so a chunk never holds more bytes than
+     * its pixels, and an uncompressed one exactly as many: OpenEXRCore 3.1 decodes a short
+     * uncompressed chunk to nothing and reports success. */
+    if (cinfo->packed_size == 0 || cinfo->packed_size > cinfo->unpacked_size ||
+        (cinfo->compression == EXR_COMPRESSION_NONE && cinfo->packed_size != cinfo->unpacked_size)) {
+        if (!stream->message[0])
+            snprintf(stream->message, sizeof stream->message,
+                     "the chunk at pixel (%lld, %lld) holds %llu bytes for %llu bytes of pixels", (long long)x_off,
+                     (long long)y_off, (unsigned long long)cinfo->packed_size,
+                     (unsigned long long)cinfo->unpacked_size);
+        return EXR_ERR_CORRUPT_CHUNK;
+    }
+    if (!img)
+        return EXR_ERR_SUCCESS;
+    if (image_cover(img, (size_t)y_off + (size_t)cinfo->height) < 0)
+        return EXR_ERR_OUT_OF_MEMORY;
+    return exr_decode_chunk(ctx, cinfo, &d->pipeline, &d->initialised, img->rgb, width, x_off, y_off, grey,
+                            &d->scratch);
+}
+
+/* Visits every chunk of the data window (width x height, part 0, level 0 if tiled) in order of rows:
+ * with img, decoding each into it; with img NULL only checking that each is in the file (its table
+ * entry and leader readable, its sizes possible). */
+static exr_result_t exr_walk_chunks(exr_context_t ctx, exr_storage_t storage, const exr_attr_box2i_t *dw,
+                                    size_t width, size_t height, exr_image *img, int grey, exr_decoder *d,
+                                    exr_stream *stream)
+{
+    exr_chunk_info_t cinfo;
+    exr_result_t rv;
+    if (storage == EXR_STORAGE_SCANLINE) {
+        int32_t lines = 0;
+        if ((rv = exr_get_scanlines_per_chunk(ctx, 0, &lines)) != EXR_ERR_SUCCESS)
+            return rv;
+        if (lines <= 0)
+            return EXR_ERR_INVALID_ATTR;
+        for (int64_t y = dw->min.y; y <= dw->max.y; y += lines) {
+            if ((rv = exr_read_scanline_chunk_info(ctx, 0, (int)y, &cinfo)) != EXR_ERR_SUCCESS ||
+                (rv = exr_visit_chunk(ctx, &cinfo, (int64_t)cinfo.start_x - dw->min.x,
+                                      (int64_t)cinfo.start_y - dw->min.y, img, width, height, grey, d, stream)) !=
+                    EXR_ERR_SUCCESS)
+                return rv;
+        }
+        return EXR_ERR_SUCCESS;
+    }
+    int32_t tw = 0, th = 0;
+    if ((rv = exr_get_tile_sizes(ctx, 0, 0, 0, &tw, &th)) != EXR_ERR_SUCCESS)
+        return rv;
+    if (tw <= 0 || th <= 0)
+        return EXR_ERR_INVALID_ATTR;
+    size_t ntx = (width + (size_t)tw - 1) / (size_t)tw, nty = (height + (size_t)th - 1) / (size_t)th;
+    for (size_t ty = 0; ty < nty; ty++) {
+        for (size_t tx = 0; tx < ntx; tx++) {
+            /* tile positions count from the data window's corner */
+            if ((rv = exr_read_tile_chunk_info(ctx, 0, (int)tx, (int)ty, 0, 0, &cinfo)) != EXR_ERR_SUCCESS ||
+                (rv = exr_visit_chunk(ctx, &cinfo, (int64_t)(tx * (size_t)tw), (int64_t)(ty * (size_t)th), img,
+                                      width, height, grey, d, stream)) != EXR_ERR_SUCCESS)
+                return rv;
+        }
+    }
+    return EXR_ERR_SUCCESS;
 }
 
 /* OpenEXRCore 3.1 cannot decompress DWAA/DWAB ("not yet implemented in C"), and Blender's bundled
@@ -222,7 +328,8 @@ static wenv_status load_exr_rgba(const char *path, float **out, size_t *out_h, s
         const char *m = api.error_message();
         return wenv_error_set(err, WENV_ERR_IO, "cannot read OpenEXR file '%s': %s", path, m ? m : "unknown error");
     }
-    float *rgb = NULL, *row_f = NULL;
+    exr_image image = {NULL, 0, 0, 0};
+    float *row_f = NULL;
     ImfRgba *buf = NULL;
     int x_min, y_min, x_max, y_max;
     api.data_window(api.header(in), &x_min, &y_min, &x_max, &y_max);
@@ -234,34 +341,49 @@ static wenv_status load_exr_rgba(const char *path, float **out, size_t *out_h, s
     if (check_data_window(w64, h64, path, err))
         goto done;
     size_t width = (size_t)w64, height = (size_t)h64;
-    buf = malloc(width * height * sizeof *buf);
-    rgb = malloc(width * height * 3 * sizeof *rgb);
+    image.width = width;
+    image.height = height;
+    /* bands of 256 rows (a DWAB chunk), fewer where a band would pass 16 MB, the image grown as they
+     * arrive (exr_image) */
+    size_t band = ((size_t)16 << 20) / (width * sizeof *buf);
+    band = band < 1 ? 1 : band > 256 ? 256 : band;
+    buf = malloc(width * band * sizeof *buf);
     row_f = malloc(width * 4 * sizeof *row_f);
-    if (!buf || !rgb || !row_f) {
+    if (!buf || !row_f) {
         wenv_error_set(err, WENV_ERR_NOMEM, "out of memory reading '%s' (%zu x %zu)", path, width, height);
         goto done;
     }
-    /* the RGBA interface addresses pixels by absolute (x, y): shift the base by the window's corner */
-    uintptr_t base = (uintptr_t)buf - ((uintptr_t)(intptr_t)x_min + (uintptr_t)(intptr_t)y_min * width) * sizeof *buf;
-    if (!api.set_frame_buffer(in, (ImfRgba *)base, 1, width) || !api.read_pixels(in, y_min, y_max)) {
-        const char *m = api.error_message();
-        wenv_error_set(err, WENV_ERR_IO, "cannot read OpenEXR file '%s': %s", path, m ? m : "unknown error");
-        goto done;
+    for (size_t r0 = 0; r0 < height; r0 += band) {
+        size_t rows = height - r0 < band ? height - r0 : band;
+        int64_t y0 = (int64_t)y_min + (int64_t)r0;
+        /* the RGBA interface addresses pixels by absolute (x, y): shift the base by the band's corner */
+        uintptr_t base = (uintptr_t)buf - ((uintptr_t)(intptr_t)x_min + (uintptr_t)(intptr_t)y0 * width) * sizeof *buf;
+        if (!api.set_frame_buffer(in, (ImfRgba *)base, 1, width) ||
+            !api.read_pixels(in, (int)y0, (int)(y0 + (int64_t)rows - 1))) {
+            const char *m = api.error_message();
+            wenv_error_set(err, WENV_ERR_IO, "cannot read OpenEXR file '%s': %s", path, m ? m : "unknown error");
+            goto done;
+        }
+        if (image_cover(&image, r0 + rows) < 0) {
+            wenv_error_set(err, WENV_ERR_NOMEM, "out of memory reading '%s' (%zu x %zu)", path, width, height);
+            goto done;
+        }
+        for (size_t r = 0; r < rows; r++) {
+            api.half_to_float((int)(4 * width), &buf[r * width].r, row_f);
+            float *dst = image.rgb + (r0 + r) * width * 3;
+            for (size_t x = 0; x < width; x++)
+                for (size_t c = 0; c < 3; c++)
+                    dst[x * 3 + c] = row_f[4 * x + c];
+        }
     }
-    for (size_t r = 0; r < height; r++) {
-        api.half_to_float((int)(4 * width), &buf[r * width].r, row_f);
-        for (size_t x = 0; x < width; x++)
-            for (size_t c = 0; c < 3; c++)
-                rgb[(r * width + x) * 3 + c] = row_f[4 * x + c];
-    }
-    *out = rgb;
+    *out = image.rgb;
     *out_h = height;
     *out_w = width;
-    rgb = NULL;
+    image.rgb = NULL;
 done:
     api.close(in);
     free(buf);
-    free(rgb);
+    free(image.rgb);
     free(row_f);
     return err->status;
 }
@@ -297,10 +419,14 @@ wenv_status wenv_read_exr(int fd, int64_t size, const char *path, float **out, s
         exr_finish(&ctx);
         return err->status;
     }
-    float *rgb = NULL;
-    exr_decode_pipeline_t dec = EXR_DECODE_PIPELINE_INITIALIZER;
-    int initialised = 0, use_rgba = 0;
-    exr_scratch scratch = {NULL, 0};
+    /* OpenEXRCore reports a header fault it can step over (an attribute of impossible size, say)
+     * and goes on; OpenEXR's C++ library parses such a header its own way, and 3.1 allocates what
+     * a corrupt attribute's size claims (gigabytes for a file of a few hundred bytes), so it is
+     * handed only files whose header parsed cleanly */
+    int header_clean = !stream.message[0];
+    exr_image image = {NULL, 0, 0, 0};
+    exr_decoder decoder = {EXR_DECODE_PIPELINE_INITIALIZER, 0, {NULL, 0}};
+    int use_rgba = 0;
     exr_storage_t storage;
     exr_attr_box2i_t dw;
     const exr_attr_chlist_t *chl = NULL;
@@ -348,60 +474,40 @@ wenv_status wenv_read_exr(int fd, int64_t size, const char *path, float **out, s
                        names[0] ? names : "none");
         goto done;
     }
-    rgb = calloc(width * height * 3, sizeof *rgb);
-    if (!rgb) {
+    /* every chunk the data window needs must be in the file, its sizes possible, before any is
+     * decoded (or the file handed to OpenEXR's C++ library) */
+    rv = exr_walk_chunks(ctx, storage, &dw, width, height, NULL, grey, &decoder, &stream);
+    if (chunk_failed(rv, &use_rgba, path, &stream, err))
+        goto done;
+    image.width = width;
+    image.height = height;
+    rv = exr_walk_chunks(ctx, storage, &dw, width, height, &image, grey, &decoder, &stream);
+    if (rv == EXR_ERR_OUT_OF_MEMORY) {
         wenv_error_set(err, WENV_ERR_NOMEM, "out of memory reading '%s' (%zu x %zu)", path, width, height);
         goto done;
     }
-    exr_chunk_info_t cinfo;
-    if (storage == EXR_STORAGE_SCANLINE) {
-        int32_t lines = 0;
-        if ((rv = exr_get_scanlines_per_chunk(ctx, 0, &lines)) != EXR_ERR_SUCCESS || lines <= 0) {
-            exr_fail(err, path, &stream, rv != EXR_ERR_SUCCESS ? rv : EXR_ERR_INVALID_ATTR);
-            goto done;
-        }
-        for (int64_t y = dw.min.y; y <= dw.max.y; y += lines) {
-            rv = exr_read_scanline_chunk_info(ctx, 0, (int)y, &cinfo);
-            if (rv == EXR_ERR_SUCCESS)
-                rv = exr_decode_chunk(ctx, &cinfo, &dec, &initialised, rgb, width, height,
-                                      (int64_t)cinfo.start_x - dw.min.x, (int64_t)cinfo.start_y - dw.min.y, grey,
-                                      &scratch);
-            if (chunk_failed(rv, &use_rgba, path, &stream, err))
-                goto done;
-        }
-    } else {
-        int32_t tw = 0, th = 0;
-        if ((rv = exr_get_tile_sizes(ctx, 0, 0, 0, &tw, &th)) != EXR_ERR_SUCCESS || tw <= 0 || th <= 0) {
-            exr_fail(err, path, &stream, rv != EXR_ERR_SUCCESS ? rv : EXR_ERR_INVALID_ATTR);
-            goto done;
-        }
-        size_t ntx = (width + (size_t)tw - 1) / (size_t)tw, nty = (height + (size_t)th - 1) / (size_t)th;
-        for (size_t ty = 0; ty < nty; ty++) {
-            for (size_t tx = 0; tx < ntx; tx++) {
-                /* tile positions count from the data window's corner */
-                rv = exr_read_tile_chunk_info(ctx, 0, (int)tx, (int)ty, 0, 0, &cinfo);
-                if (rv == EXR_ERR_SUCCESS)
-                    rv = exr_decode_chunk(ctx, &cinfo, &dec, &initialised, rgb, width, height,
-                                          (int64_t)(tx * (size_t)tw), (int64_t)(ty * (size_t)th), grey,
-                                          &scratch);
-                if (chunk_failed(rv, &use_rgba, path, &stream, err))
-                    goto done;
-            }
-        }
+    if (chunk_failed(rv, &use_rgba, path, &stream, err))
+        goto done;
+    if (image.rows != height) { /* every row is some chunk's: the walk covered them all */
+        wenv_error_set(err, WENV_ERR_IO, "cannot read OpenEXR file '%s': rows past %zu have no chunk", path,
+                       image.rows);
+        goto done;
     }
     if (grey)
         for (size_t i = 0; i < width * height; i++)
-            rgb[3 * i + 1] = rgb[3 * i + 2] = rgb[3 * i];
-    *out = rgb;
+            image.rgb[3 * i + 1] = image.rgb[3 * i + 2] = image.rgb[3 * i];
+    *out = image.rgb;
     *out_h = height;
     *out_w = width;
-    rgb = NULL;
+    image.rgb = NULL;
 done:
-    if (initialised)
-        exr_decoding_destroy(ctx, &dec);
+    if (decoder.initialised)
+        exr_decoding_destroy(ctx, &decoder.pipeline);
     exr_finish(&ctx);
-    free(rgb);
-    free(scratch.values);
+    free(image.rgb);
+    free(decoder.scratch.values);
+    if (use_rgba && !header_clean)
+        return wenv_error_set(err, WENV_ERR_IO, "cannot read OpenEXR file '%s': %s", path, stream.message);
     if (use_rgba) /* OpenEXRCore lacks this compression: OpenEXR's C++ library decodes the file */
         return load_exr_rgba(path, out, out_h, out_w, err);
     return err->status;

@@ -3,6 +3,7 @@
 #include "scene/brdf_readers.h"
 
 #include <errno.h>
+#include <float.h>
 #include <math.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -22,8 +23,9 @@ static wenv_status io_error(wenv_error *err, const char *path, const char *why)
 }
 
 /* Fills the unmeasured (negative) entries of one channel, stride 3 (see brdf_readers.h).  Returns 0
- * when nothing at all was measured. */
-static int fill_unmeasured(float *rgb, const size_t dims[3], int *column_measured)
+ * when nothing at all was measured.  column_measured: dims[0] x dims[2] flags; nearest: dims[0]
+ * indices of scratch. */
+static int fill_unmeasured(float *rgb, const size_t dims[3], int *column_measured, size_t *nearest)
 {
     size_t nh = dims[0], nd = dims[1], np = dims[2];
     int any = 0;
@@ -48,23 +50,31 @@ static int fill_unmeasured(float *rgb, const size_t dims[3], int *column_measure
         }
     if (!any)
         return 0;
-    /* columns with nothing measured: the nearest theta_h at the same phi_d that has one */
-    for (size_t i = 0; i < nh; i++)
-        for (size_t k = 0; k < np; k++) {
+    /* columns with nothing measured: the nearest theta_h at the same phi_d that has one (the smaller
+     * on a tie), found in one pass up and one down per phi_d (a search outwards from each column
+     * took 76 s on a 4096 x 2 x 512 table measured at one theta_h) */
+    for (size_t k = 0; k < np; k++) {
+        size_t below = SIZE_MAX;
+        for (size_t i = 0; i < nh; i++) {
             if (column_measured[i * np + k])
+                below = i;
+            nearest[i] = below;
+        }
+        size_t above = SIZE_MAX;
+        for (size_t i = nh; i-- > 0;) {
+            if (column_measured[i * np + k]) {
+                above = i;
                 continue;
-            size_t src = SIZE_MAX;
-            for (size_t step = 1; step < nh && src == SIZE_MAX; step++) {
-                if (i >= step && column_measured[(i - step) * np + k])
-                    src = i - step;
-                else if (i + step < nh && column_measured[(i + step) * np + k])
-                    src = i + step;
             }
+            size_t src = nearest[i];
+            if (above != SIZE_MAX && (src == SIZE_MAX || above - i < i - src))
+                src = above;
             float *col = rgb + 3 * (k + np * nd * i);
             const float *from = src == SIZE_MAX ? NULL : rgb + 3 * (k + np * nd * src);
             for (size_t j = 0; j < nd; j++) /* no column at this phi_d measured: black, not negative */
                 col[j * 3 * np] = from ? from[j * 3 * np] : 0.0f;
         }
+    }
     return 1;
 }
 
@@ -83,6 +93,7 @@ wenv_status wenv_read_merl(const char *path, float **rgb_out, size_t dims[3], we
     double *block = NULL;
     float *rgb = NULL;
     int *measured = NULL;
+    size_t *nearest = NULL;
     if (fstat(fileno(fp), &st) != 0 || !S_ISREG(st.st_mode)) {
         status = io_error(err, path, "not a regular file");
         goto done;
@@ -112,7 +123,8 @@ wenv_status wenv_read_merl(const char *path, float **rgb_out, size_t dims[3], we
     block = malloc(n * sizeof *block);
     rgb = malloc(n * 3 * sizeof *rgb);
     measured = malloc(dims[0] * dims[2] * sizeof *measured);
-    if (!block || !rgb || !measured) {
+    nearest = malloc(dims[0] * sizeof *nearest);
+    if (!block || !rgb || !measured || !nearest) {
         status = wenv_error_set(err, WENV_ERR_NOMEM, "out of memory reading '%s'", path);
         goto done;
     }
@@ -122,22 +134,30 @@ wenv_status wenv_read_merl(const char *path, float **rgb_out, size_t dims[3], we
             break;
         }
         for (size_t s = 0; s < n; s++) {
+            double v = block[s] * SCALE[c];
             if (!isfinite(block[s])) {
                 status = wenv_error_set(err, WENV_ERR_IO, "cannot read MERL BRDF file '%s': sample %zu of channel %d "
                                         "is not finite", path, s, c);
                 break;
             }
+            /* a finite double past a float's range would become an infinite table value */
+            if (v > FLT_MAX) {
+                status = wenv_error_set(err, WENV_ERR_IO, "cannot read MERL BRDF file '%s': sample %zu of channel %d "
+                                        "is %g, too large for a float", path, s, c, v);
+                break;
+            }
             /* negative: not measured, kept negative until filled below */
-            rgb[3 * s + (size_t)c] = block[s] < 0.0 ? -1.0f : (float)(block[s] * SCALE[c]);
+            rgb[3 * s + (size_t)c] = block[s] < 0.0 ? -1.0f : (float)v;
         }
     }
     for (int c = 0; c < 3 && !status; c++)
-        if (!fill_unmeasured(rgb + c, dims, measured))
+        if (!fill_unmeasured(rgb + c, dims, measured, nearest))
             status = io_error(err, path, "no sample was measured");
 done:
     fclose(fp);
     free(block);
     free(measured);
+    free(nearest);
     if (status) {
         free(rgb);
         return status;

@@ -108,23 +108,6 @@ wenv_status wenv_lobe_check(const wenv_lobe *lobe, size_t i, wenv_error *err)
 
 /* ---------------------------------------------------------------- albedo quadrature */
 
-/* Integrand of the albedo at half vector h(t = tan^2 theta_h, phi) per unit of the distribution's CDF
- * xi: F G (wo.h) / (co cos_h) = F vis 4 ci (wo.h) / cos_h, vis = G / (4 ci co). */
-static inline double albedo_integrand(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wo[3],
-                                      double k_o, double t, double cp, double sp, int include_fresnel)
-{
-    double ch = 1.0 / sqrt(1.0 + t), sh = sqrt(t) * ch;
-    double h[3] = {sh * cp, sh * sp, ch};
-    double oh = wo[0] * h[0] + wo[1] * h[1] + wo[2] * h[2];
-    double wi[3] = {2.0 * oh * h[0] - wo[0], 2.0 * oh * h[1] - wo[1], 2.0 * oh * h[2] - wo[2]};
-    if (!(oh > 0.0) || !(wi[2] > 0.0)) /* only by rounding at the range's end */
-        return 0.0;
-    double t_h, cos_d;
-    double vis = wenv_lobe_vis(lobe, shadowing, wi, wo, k_o, &t_h, &cos_d);
-    double f = include_fresnel ? wenv_fresnel_dielectric(oh, lobe->ior) : 1.0;
-    return f * vis * 4.0 * wi[2] * oh / ch;
-}
-
 /* Integral of F D G / (4 ci co) * ci over wi, substituted to the half vector (d wi = 4 (wo.h) d wh)
  * and then to the distribution's CDF xi(theta_h), for which D cos_h d wh = d xi d phi / (2 pi):
  *   albedo = (1 / 2 pi) Int d phi Int_0^xi_max(phi) F G (wo.h) / (co cos_h) d xi.

@@ -135,18 +135,30 @@ wenv_status wenv_read_rgbe(const uint8_t *buf, size_t size, const char *path, fl
         return wenv_error_set(err, WENV_ERR_IO, "cannot read Radiance HDR file '%s': unusable size %llu x %llu",
                               path, w, h);
     size_t width = (size_t)w, height = (size_t)h;
-    float *rgb = malloc(width * height * 3 * sizeof *rgb);
+    /* rows are held as they are decoded, the room doubling: a header claiming a huge image over a
+     * few bytes is a truncated file, not an allocation of the size it claims */
+    float *rgb = NULL;
+    size_t room = 0;
     uint8_t *scan = malloc(width * 4);
-    if (!rgb || !scan) {
-        free(rgb);
-        free(scan);
+    if (!scan)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory reading '%s' (%zu x %zu)", path, width, height);
-    }
     for (size_t row = 0; row < height; row++) {
         if (hdr_scanline(&p, end, scan, width, path, row, err) != WENV_OK) {
             free(rgb);
             free(scan);
             return err->status;
+        }
+        if (row == room) {
+            size_t more = room ? 2 * room : 16;
+            room = more < height ? more : height;
+            float *grown = realloc(rgb, room * width * 3 * sizeof *rgb);
+            if (!grown) {
+                free(rgb);
+                free(scan);
+                return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory reading '%s' (%zu x %zu)", path, width,
+                                      height);
+            }
+            rgb = grown;
         }
         float *dst = rgb + row * width * 3;
         for (size_t x = 0; x < width; x++) {

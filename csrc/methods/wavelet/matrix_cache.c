@@ -251,12 +251,26 @@ wenv_status wenv_rotation_load(wenv_rotation **out, const char *path, size_t glo
     rot->normal_n = normal_n;
     rot->epsilon = epsilon;
     size_t max_raw = 8 + (ng + 1) * 4 + nl * ng * 6;
+    struct stat file;
+    uint64_t table_end = sizeof h + ns * sizeof *entries;
+    if (fstat(fileno(fp), &file) != 0 || file.st_size < 0 || (uint64_t)file.st_size < table_end) {
+        st = wenv_error_set(err, WENV_ERR_IO, "%s: truncated or unreadable", path);
+        goto fail;
+    }
+    uint64_t left = (uint64_t)file.st_size - table_end;
     for (size_t s = 0; s < ns; s++) {
         cache_entry *e = &entries[s];
-        if (e->raw_size > max_raw || e->comp_size > compressBound((uLong)e->raw_size)) {
-            st = wenv_error_set(err, WENV_ERR_IO, "%s: corrupt block table", path);
+        /* sizes are checked against what the file still holds before anything is allocated for
+         * them: zlib never inflates more than 1032 times (a deflate match of 258 bytes takes at
+         * least 2 bits), so a block table claiming more is corrupt whatever its CRC says */
+        if (e->raw_size > max_raw || e->comp_size > compressBound((uLong)e->raw_size) || e->comp_size > left ||
+            e->raw_size > 1032 * e->comp_size) {
+            st = wenv_error_set(err, WENV_ERR_IO, "%s: corrupt block table (block %zu: %llu bytes inflating to %llu, "
+                                "%llu bytes left in the file)", path, s, (unsigned long long)e->comp_size,
+                                (unsigned long long)e->raw_size, (unsigned long long)left);
             goto fail;
         }
+        left -= e->comp_size;
         unsigned char *comp = malloc(e->comp_size ? e->comp_size : 1);
         unsigned char *raw = malloc(e->raw_size ? e->raw_size : 1);
         int ok = comp && raw && fread(comp, 1, e->comp_size, fp) == e->comp_size;
