@@ -47,6 +47,24 @@ def clamp_ior(ior):
     return min(max(float(ior), IOR_MIN), IOR_RANGE[1])
 
 
+# View angles at which lobes' summed albedo is taken: those the core checks (0 to 75 degrees; closer to
+# grazing lobes added rather than layered commonly pass 1, which the core leaves as the model gives it).
+_ENERGY_VIEW_DEGREES = (0.0, 36.9, 53.1, 66.4, 74.9)
+
+
+def lobes_peak_albedo(lobes):
+    """The most the Cook-Torrance lobes (dicts as wenv.CookTorrance takes) reflect together of
+    what they receive, over the views the core checks and the three channels."""
+    t = np.radians(_ENERGY_VIEW_DEGREES)
+    views = np.stack([np.sin(t), np.zeros_like(t), np.cos(t)], axis=1).astype(np.float32)
+    total = np.zeros((len(t), 3))
+    for lobe in lobes:
+        white = wenv.CookTorrance(lobes=[{"specular": 1.0, "roughness": lobe["roughness"], "ior": lobe["ior"],
+                                          "distribution": lobe["distribution"].lower()}])
+        total += white.albedo(views) * np.asarray(lobe["specular"], np.float64)
+    return float(total.max()) if lobes else 0.0
+
+
 # ---------------------------------------------------------------------------------------------
 # Core objects from plain values
 
@@ -275,12 +293,35 @@ class ProgressRelay:
 shaders = ShaderCache()
 
 
+# What the live mode refines to while the view rests, from which settings (Auto picks its own).
+REFINE_QUALITY = "high"
+REFINABLE = ("draft", "default")
+
+
+def shade_step(shader, data, view, cull, out, first, budget):
+    """One step of shade_arrays into `out`: the vertices to shade from the first-th on, for about
+    `budget` seconds (the core's shade_mesh(first=, budget=)).  Returns (next, total): where the
+    next step starts and how many there are to shade.  An orthographic view is shaded whole."""
+    if view.perspective:
+        kw = {"cull": True, "view_projection": view.view_projection} if cull and view.view_projection is not None else {}
+        shader.shade_mesh(data.positions, data.normals, view.eye, out=out, first=first, budget=budget, **kw)
+        stats = shader.stats
+        return stats["next_vertex"], stats.get("visible_vertices", data.count)
+    out[:] = shader.shade(data.normals, view.direction)
+    return data.count, data.count
+
+
+def visible_vertices(data, view):
+    """Which vertices of `data` a perspective viewport's `view` sees (facing it, on screen)."""
+    return wenv.visible_vertices(data.positions, data.normals, view.eye, view.view_projection)
+
+
 def shade_arrays(shader, data, view, cull=False):
     """Radiance (n, 3) for world-space `data` (meshes.MeshData) seen from `view` (views.View), and
     which vertices were shaded: with `cull` and a viewport's perspective view, only those facing
     the eye and on screen (the rest are black), else all (None)."""
     if view.perspective and cull and view.view_projection is not None:
-        seen = wenv.visible_vertices(data.positions, data.normals, view.eye, view.view_projection)
+        seen = visible_vertices(data, view)
         return shader.shade_mesh(data.positions, data.normals, view.eye, cull=True,
                                  view_projection=view.view_projection), seen
     if view.perspective:

@@ -5,32 +5,24 @@ import threading
 from . import engine, materials, shading, views, world
 
 
-class PrecomputeJob:
-    """Builds a wenv.Shader on a worker thread (the core releases the GIL), reporting a fraction
-    and stopping when `cancel()` is called.  The main thread polls `done` and takes `result`."""
+class _WorkerJob:
+    """Work on a worker thread (the core releases the GIL) that reports a fraction and stops when
+    `cancel()` is called; the main thread polls `done`.  Subclasses define `_work`, which records
+    its outcome; an exception is kept in `error`, reported on the main thread."""
 
-    def __init__(self, quality):
-        self.quality = quality
+    def __init__(self, name):
         self.fraction = 0.0
-        self.result = None
         self.error = None
-        self.cancelled = False
         self._cancel = threading.Event()
-        self._thread = threading.Thread(target=self._run, name=f"wenv-precompute-{quality}", daemon=True)
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
 
     def start(self):
         self._thread.start()
         return self
 
-    def _progress(self, fraction):
-        self.fraction = fraction
-        return self._cancel.is_set()
-
     def _run(self):
         try:
-            self.result = engine.shaders.build(self.quality, self._progress)
-        except engine.CancelledError:
-            self.cancelled = True
+            self._work()
         except Exception as exc:  # reported on the main thread
             self.error = exc
 
@@ -45,11 +37,54 @@ class PrecomputeJob:
         self._thread.join(timeout)
         return self.done
 
+
+class PrecomputeJob(_WorkerJob):
+    """Builds a wenv.Shader; the main thread takes `result`."""
+
+    def __init__(self, quality):
+        super().__init__(f"wenv-precompute-{quality}")
+        self.quality = quality
+        self.result = None
+        self.cancelled = False
+
+    def _progress(self, fraction):
+        self.fraction = fraction
+        return self._cancel.is_set()
+
+    def _work(self):
+        try:
+            self.result = engine.shaders.build(self.quality, self._progress)
+        except engine.CancelledError:
+            self.cancelled = True
+
     def install(self):
         """Main thread: puts the finished shader into the cache.  True if there was one."""
         if self.result is not None and not engine.shaders.has(self.quality):
             engine.shaders.add(self.quality, self.result)
         return self.result is not None
+
+
+class RefineJob(_WorkerJob):
+    """Shades a pass already written again at engine.REFINE_QUALITY, while the view rests, in steps
+    of STEP_SECONDS, so that `cancel()` takes effect within a step; `results` is None if cancelled."""
+
+    STEP_SECONDS = 0.05
+
+    def __init__(self, plan):
+        super().__init__("wenv-refine")
+        self.plan = plan
+        self.results = None
+
+    def _report(self, fraction):
+        self.fraction = fraction
+
+    def _work(self):
+        self.results = self.plan.refine(engine.REFINE_QUALITY, self.STEP_SECONDS, self._report, self._cancel)
+
+    def apply(self, objects, scene):
+        """Main thread: writes the refined colours (see ShadingPlan.apply)."""
+        self.plan.results = self.results
+        return self.plan.apply(objects, scene)
 
 
 def _matrix_tuple(m):
@@ -71,6 +106,16 @@ class LiveSession:
         self._worker = None
         self._error = None
         self._discard = False  # the worker's plan was read from data an undo has since replaced
+        self._refine = None  # RefineJob of the last pass written, while the view rests
+        self.refined = False  # the colours shown are the refinement's
+
+    def stop(self):
+        """Drops the refinement and waits for the workers (they hold the shaders)."""
+        job = self._refine
+        self._drop_refinement()
+        if job is not None:
+            job.wait()
+        self.wait()
 
     def objects(self, scene):
         return [scene.objects[n] for n in self.object_names if n in scene.objects]
@@ -96,16 +141,55 @@ class LiveSession:
             mats = tuple(materials.material_key(s.material.wenv if s.material else None) for s in obj.material_slots)
             objs.append((obj.name, _matrix_tuple(obj.matrix_world), len(obj.data.vertices), mats))
         return (view.signature, world_sig, tuple(objs), st.quality, st.tone_mapping, st.max_luminance, st.target_error,
-                st.memory_budget)
+                st.memory_budget, st.shade_only_seen, st.refine_at_rest)
 
     @property
     def busy(self):
-        return self._worker is not None and self._worker.is_alive()
+        return (self._worker is not None and self._worker.is_alive()) or (self._refine is not None and
+                                                                           not self._refine.done)
 
     def wait(self, timeout=None):
+        """Waits for the pass being shaded and the refinement being made (a step of it once
+        cancelled)."""
         if self._worker is not None:
             self._worker.join(timeout)
+        if self._refine is not None:
+            self._refine.wait(timeout)
         return not self.busy
+
+    @property
+    def refine_status(self):
+        """What the panel shows of the refinement: None, ("REFINING", fraction) or ("REFINED",)."""
+        if self.refined:
+            return ("REFINED",)
+        if self._refine is not None:
+            return ("REFINING", self._refine.fraction)
+        return None
+
+    def _drop_refinement(self):
+        if self._refine is not None:
+            self._refine.cancel()
+        self._refine = None
+        self.refined = False
+
+    def _start_refinement(self, scene, plan):
+        if scene.wenv.refine_at_rest and plan.quality in engine.REFINABLE:
+            self._refine = RefineJob(plan).start()
+
+    def _refinement_tick(self, context):
+        """The view rests: writes the refinement once it is made.  Returns True when it wrote."""
+        job = self._refine
+        if job is None or not job.done:
+            return False
+        self._refine = None
+        if job.error is not None:
+            self.last_error = f"Refinement failed: {job.error}"
+            return False
+        if job.results is None:
+            return False
+        written = job.apply(context.blend_data.objects, context.scene)
+        self.refined = bool(written)
+        return bool(written)
 
     def data_replaced(self):
         """Undo or redo replaced Blender's data: the colours are the restored step's, whatever the
@@ -113,6 +197,7 @@ class LiveSession:
         before and is dropped."""
         self.last_signature = None
         self._discard = self._worker is not None
+        self._drop_refinement()
 
     def _compute(self):
         try:
@@ -138,6 +223,8 @@ class LiveSession:
             written = plan.apply(context.blend_data.objects, context.scene)
             self.last_error = None
             self.shades += bool(written)
+            if written:
+                self._start_refinement(context.scene, plan)
             return bool(written)
         depsgraph = context.evaluated_depsgraph_get()  # brings matrix_world etc. up to date
         try:
@@ -147,7 +234,8 @@ class LiveSession:
             return False
         sig = self.signature(context, view)
         if sig == self.last_signature:
-            return False
+            return self._refinement_tick(context)
+        self._drop_refinement()  # anything changed: the fast setting shows it at once
         self.last_signature = sig
         scene = context.scene
         try:
@@ -176,7 +264,7 @@ class LiveState:
         if cls.job is not None:
             cls.job.cancel()
         if cls.session is not None:
-            cls.session.wait()  # its worker holds the shader
+            cls.session.stop()
         cls.session = None
         cls.job = None
         cls.stop_requested = False

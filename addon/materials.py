@@ -96,6 +96,11 @@ def _fresnel0(n):
     return ((n - 1) / (n + 1)) ** 2
 
 
+# What principled_lobes lets its lobes reflect together: all of it (the core allows 1 % more, its
+# quadrature's margin; a single lobe coloured at most 1 stays under 1 and is left alone).
+ENERGY_LIMIT = 1.0
+
+
 def principled_lobes(base, metallic, roughness, ior, spec_level=0.5, spec_tint=(1, 1, 1),
                      coat=0.0, coat_roughness=0.03, coat_ior=1.5):
     """wenv settings (diffuse, lobes) for Principled BSDF values.  See README "From Principled BSDF".
@@ -106,7 +111,11 @@ def principled_lobes(base, metallic, roughness, ior, spec_level=0.5, spec_tint=(
     - metallic part: a GGX lobe coloured base / F0(n_m) with n_m the index whose normal-incidence
       reflectance is the brightest base channel, so it reflects the base colour head-on and rises
       towards grazing like a conductor;
-    - Coat Weight > 0 adds a clear lobe (Coat Roughness^2, Coat IOR) on top.
+    - Coat Weight > 0 adds a clear lobe (Coat Roughness^2, Coat IOR) on top;
+    - Cook-Torrance adds its lobes where Cycles layers them (a coat dims what lies under it), so
+      where their sum would reflect more than the surface receives at the views the core checks
+      (0 to 75 degrees) every lobe is scaled down until it reflects at most that (the core
+      refuses more).
     """
     base = [min(max(float(c), 0.0), 1.0) for c in base[:3]]
     t = min(max(float(metallic), 0.0), 1.0)
@@ -127,6 +136,10 @@ def principled_lobes(base, metallic, roughness, ior, spec_level=0.5, spec_tint=(
     if coat > 0:
         lobes.append({"specular": (float(coat),) * 3, "roughness": engine.ggx_alpha(coat_roughness),
                       "ior": engine.clamp_ior(coat_ior), "distribution": "GGX"})
+    peak = engine.lobes_peak_albedo(lobes)
+    if peak > ENERGY_LIMIT:
+        for lobe in lobes:
+            lobe["specular"] = tuple(c * ENERGY_LIMIT / peak for c in lobe["specular"])
     return diffuse, lobes
 
 
@@ -234,17 +247,18 @@ def slot_notes(obj):
 
 def slot_material_keys(obj):
     """material_key of each of obj's material slots (filled from the Principled BSDF on first use).
-    A measured BRDF is read here, on the main thread, so a missing or broken file is a SetupError
-    naming it before any shading starts."""
+    Each is made here, on the main thread, so a missing or broken measured BRDF file, or lobes
+    the core refuses (reflecting more than they receive), are a SetupError naming the material
+    before any shading starts."""
     keys = []
     for slot in obj.material_slots:
         mat = slot.material
         ensure_material_settings(mat)
         key = material_key(mat.wenv if mat is not None else None)
-        if key[0] in ("MEASURED", "PRINCIPLED"):
+        if key[0] != "default":
             try:
                 engine.material_from_key(key)
-            except engine.SetupError as exc:
+            except (engine.SetupError, ValueError) as exc:
                 raise engine.SetupError(f"Material '{mat.name}': {exc}") from None
         keys.append(key)
     return keys or [("default",)]

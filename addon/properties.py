@@ -127,6 +127,11 @@ class WENV_SceneSettings(bpy.types.PropertyGroup):
                                   description="From a viewport, shade only the vertices facing it and on screen; "
                                               "the rest keep their colours (camera views, renders and bakes always "
                                               "shade every vertex)")
+    refine_at_rest: BoolProperty(name="Refine at Rest", default=True,
+                                 description="In live mode at Draft or Default, while the view, World and "
+                                             "materials stay still, refine the colours in the background to "
+                                             "High (within 1 % of the reference for roughness 0.1 and up); any "
+                                             "change shows the quality set at once and drops the refinement")
     shade_on_frame_change: BoolProperty(name="Shade on Frame Change", default=False,
                                         description="Re-shade the shaded objects from the scene camera on every "
                                                     "frame change (animation playback and rendering)")

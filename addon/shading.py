@@ -41,35 +41,72 @@ class ShadingPlan:
         self.results = None
         self.auto_choices = {}  # (object name, material key) -> stats["auto"] of the shader used
 
+    def _parts(self):
+        """Per object: (name, data, keys, parts), parts being (slot, selection, MeshData of the
+        vertices of that material slot) -- the mesh itself when one slot holds them all."""
+        for name, data, keys in self.items:
+            slots = np.clip(data.slots, 0, len(keys) - 1)
+            parts = []
+            for s in np.unique(slots):
+                sel = slots == s
+                part = data if sel.all() else meshes.MeshData(
+                    data.domain, np.ascontiguousarray(data.positions[sel]), np.ascontiguousarray(data.normals[sel]), None)
+                parts.append((s, sel, part))
+            yield name, data, keys, parts
+
+    def _result(self, name, data, rgb, seen):
+        return name, data.domain, tone_map(rgb, self.l_max) if self.tone == "LOG" else rgb, seen
+
     def compute(self):
         results = []
         with engine.shaders.lock:
             if self.quality != engine.AUTO:
                 engine.shaders.use_environment(self.quality, self.world.signature, self.environment)
-            for name, data, keys in self.items:
+            for name, data, keys, parts in self._parts():
                 rgb = np.empty((data.count, 3), np.float32)
                 seen = np.ones(data.count, bool) if self.cull else None
-                slots = np.clip(data.slots, 0, len(keys) - 1)
-                for s in np.unique(slots):
-                    sel = slots == s
+                for s, sel, part in parts:
                     if self.quality == engine.AUTO:
                         shader = engine.shaders.auto(self.world.signature, self.environment, keys[s],
-                                                     self.target_error, self.memory_budget_mb, data.normals[sel])
+                                                     self.target_error, self.memory_budget_mb, part.normals)
                         self.auto_choices[(name, keys[s])] = shader.stats["auto"]
                     else:
                         shader = engine.shaders.use_material(self.quality, keys[s])
-                    if sel.all():
-                        rgb[:], part_seen = engine.shade_arrays(shader, data, self.view, self.cull)
-                    else:
-                        part = meshes.MeshData(data.domain, np.ascontiguousarray(data.positions[sel]),
-                                               np.ascontiguousarray(data.normals[sel]), None)
-                        rgb[sel], part_seen = engine.shade_arrays(shader, part, self.view, self.cull)
+                    rgb[sel], part_seen = engine.shade_arrays(shader, part, self.view, self.cull)
                     if seen is not None and part_seen is not None:
                         seen[sel] = part_seen
-                if self.tone == "LOG":
-                    rgb = tone_map(rgb, self.l_max)
-                results.append((name, data.domain, rgb, seen))
+                results.append(self._result(name, data, rgb, seen))
         self.results = results
+
+    def refine(self, quality, step_seconds, report, cancelled):
+        """compute() again at `quality`, in steps of about `step_seconds` that each hold the
+        shader cache's lock only for themselves, so a new pass waits at most a step.  Returns the
+        results as compute() makes them, or None once `cancelled` (a threading.Event) is set;
+        `report(fraction)` after each step."""
+        results = []
+        total = sum(data.count for _, data, _ in self.items)
+        done = 0
+        for name, data, keys, parts in self._parts():
+            rgb = np.zeros((data.count, 3), np.float32)
+            seen = np.ones(data.count, bool) if self.cull else None
+            for s, sel, part in parts:
+                out = np.zeros((part.count, 3), np.float32)
+                first, count = 0, None
+                while count is None or first < count:
+                    if cancelled.is_set():
+                        return None
+                    with engine.shaders.lock:
+                        engine.shaders.get(quality)
+                        engine.shaders.use_environment(quality, self.world.signature, self.environment)
+                        shader = engine.shaders.use_material(quality, keys[s])
+                        first, count = engine.shade_step(shader, part, self.view, self.cull, out, first, step_seconds)
+                    report((done + part.count * (first / count if count else 1.0)) / total)
+                rgb[sel] = out
+                done += part.count
+                if seen is not None and self.view.perspective and self.view.view_projection is not None:
+                    seen[sel] = engine.visible_vertices(part, self.view)
+            results.append(self._result(name, data, rgb, seen))
+        return results
 
     def apply(self, objects, scene):
         """Writes the results into the meshes of `objects` (bpy.data.objects); an object deleted or

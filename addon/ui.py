@@ -45,6 +45,9 @@ class WENV_PT_shading(_SidebarPanel, bpy.types.Panel):
         sub = col.column()
         sub.active = st.tone_mapping == "LOG"
         sub.prop(st, "max_luminance")
+        sub = col.column()
+        sub.active = engine.quality_value(st.quality) in engine.REFINABLE
+        sub.prop(st, "refine_at_rest")
         col.prop(st, "shade_on_frame_change")
         if st.shade_on_frame_change and not context.scene.render.use_lock_interface:
             col.label(text="Renders re-shade frames only with Render > Lock Interface", icon="INFO")
@@ -55,6 +58,14 @@ class WENV_PT_shading(_SidebarPanel, bpy.types.Panel):
         live = LiveState.running()
         row.operator("wenv.live", text="Stop Live" if live else "Live", icon="PAUSE" if live else "PLAY",
                      depress=live)
+        status = LiveState.session.refine_status if live else None
+        if status is not None:
+            shown = st.bl_rna.properties["quality"].enum_items[st.quality].name
+            if status[0] == "REFINING":
+                layout.label(text=f"{shown} shown, refining to High (within 1 %): {100 * status[1]:.0f} %", icon="TIME")
+            else:
+                layout.label(text="Refined to High: within 1 % of the reference for roughness 0.1 and up",
+                             icon="CHECKMARK")
         row = layout.row(align=True)
         row.prop(context.window_manager.wenv, "show_in_viewports", toggle=True, icon="HIDE_OFF")
         row.operator("wenv.clear", icon="X")

@@ -37,10 +37,13 @@ def registered(tmp_path_factory):
 
 @pytest.fixture
 def scene():
-    """Blender's factory start-up scene (cube, camera, light, grey World), draft quality."""
+    """Blender's factory start-up scene (cube, camera, light, grey World), draft quality, live mode
+    not refining at rest (the tests of refinement turn it on)."""
     bpy.ops.wm.read_homefile(use_factory_startup=True)
     sc = bpy.context.scene
     sc.wenv.quality = "DRAFT"
+    assert sc.wenv.refine_at_rest  # on for users
+    sc.wenv.refine_at_rest = False
     return sc
 
 
@@ -135,6 +138,14 @@ def attribute(obj):
 
 def core_shader(env, mat):
     return wenv.Shader(env, mat, quality="draft")
+
+
+def animate_camera(cam):
+    """Keys the camera at (7, -7, 5) on frame 1 and (-7, -7, 2) on frame 10."""
+    cam.location = (7.0, -7.0, 5.0)
+    cam.keyframe_insert("location", frame=1)
+    cam.location = (-7.0, -7.0, 2.0)
+    cam.keyframe_insert("location", frame=10)
 
 
 def shade_op(**kw):
@@ -871,15 +882,71 @@ def test_live_session_reshades_on_changes_only(scene):
     assert session.last_error is None
 
 
+def test_live_session_refines_at_rest_and_drops_it_on_a_change(scene):
+    """At Draft, live mode writes Draft's colours at once, then, while nothing changes, High's
+    (the core's result at high for the same arrays); a change shows Draft again at once and drops
+    the refinement under way; the panel says which it shows."""
+    from addon import engine, ui
+    env_world(scene, "forest")
+    obj = add_monkey(subdivisions=1)
+    mat = set_material(obj, lobes=((0.1, 1.5, "BECKMANN"),))
+    scene.wenv.view_source = "CAMERA"
+    scene.wenv.refine_at_rest = True
+    session = live.LiveSession([obj.name])
+    live.LiveState.session = session  # what the panel reads
+    ctx = bpy.context
+    p, n = world_arrays(obj, corner=False)
+    core_env, core_mat = wenv.load_environment(hdri_path("forest")), wenv_material(mat)
+
+    def core(quality):
+        eye = tuple(scene.camera.matrix_world.translation)
+        return wenv.Shader(core_env, core_mat, quality=quality).shade_mesh(p, n, eye)
+
+    assert session.tick(ctx) is False  # the Draft pass starts on a worker
+    session._worker.join(60)
+    assert session.tick(ctx) is True  # Draft written; the refinement starts
+    assert session.refine_status[0] == "REFINING" and not session.refined
+    np.testing.assert_allclose(attribute(obj)[1], core("draft"), rtol=1e-4, atol=1e-5)
+    labels = [l[1] for l in draw_panel(ui.WENV_PT_shading) if l[0] == "label"]
+    assert any(t.startswith("Draft shown, refining to High") for t in labels), labels
+    session.wait(300)
+    assert session.tick(ctx) is True and session.refined and session.refine_status == ("REFINED",)
+    high = core("high")
+    np.testing.assert_allclose(attribute(obj)[1], high, rtol=1e-4, atol=1e-5)
+    assert not np.allclose(high, core("draft"), rtol=1e-2)
+    assert session.tick(ctx) is False  # nothing changed, nothing more to refine
+    labels = [l[1] for l in draw_panel(ui.WENV_PT_shading) if l[0] == "label"]
+    assert any(t.startswith("Refined to High") for t in labels), labels
+
+    # a change: Draft at once, the refinement dropped and started again from the new pass
+    scene.camera.location = (6.0, -6.0, 2.0)
+    assert session.tick(ctx) is False and session.refine_status is None and not session.refined
+    session._worker.join(60)
+    assert session.tick(ctx) is True and session.refine_status[0] == "REFINING"
+    np.testing.assert_allclose(attribute(obj)[1], core("draft"), rtol=1e-4, atol=1e-5)
+    # a change while refining cancels it: its result is never written
+    job = session._refine
+    scene.camera.location = (6.0, -5.0, 2.5)
+    assert session.tick(ctx) is False and job._cancel.is_set()
+    session.wait(300)
+    assert job.done and session.tick(ctx) is True  # the new Draft pass
+    np.testing.assert_allclose(attribute(obj)[1], core("draft"), rtol=1e-4, atol=1e-5)
+    # off: no refinement
+    session.stop()
+    scene.wenv.refine_at_rest = False
+    assert session.tick(ctx) is False and session.refine_status is None  # the setting is part of the signature
+    session.wait(60)
+    assert session.tick(ctx) is True and session.refine_status is None
+    assert engine.REFINE_QUALITY == "high"
+    live.LiveState.reset()
+
+
 def test_frame_change_shades_from_animated_camera(scene):
     env_world(scene, "sunrise")
     obj = add_monkey()
     mat = set_material(obj, lobes=((0.1, 1.5, "GGX"),))
     cam = scene.camera
-    cam.location = (7.0, -7.0, 5.0)
-    cam.keyframe_insert("location", frame=1)
-    cam.location = (-7.0, -7.0, 2.0)
-    cam.keyframe_insert("location", frame=10)
+    animate_camera(cam)
     scene.wenv.shade_on_frame_change = True
     scene.frame_set(1)
     assert ATTR not in obj.data.color_attributes  # only objects shaded before follow the camera
@@ -1169,10 +1236,7 @@ def test_undo_and_redo_show_the_colours_of_the_frame_restored(scene):
     set_material(obj, lobes=((0.1, 1.5, "GGX"),))
     name = obj.name
     cam = scene.camera
-    cam.location = (7.0, -7.0, 5.0)
-    cam.keyframe_insert("location", frame=1)
-    cam.location = (-7.0, -7.0, 2.0)
-    cam.keyframe_insert("location", frame=10)
+    animate_camera(cam)
     scene.wenv.shade_on_frame_change = True
     scene.frame_set(1)
     assert shade_op(view="CAMERA") == {"FINISHED"}

@@ -339,7 +339,7 @@ def test_batch_equals_scalar_path():
     wi /= np.linalg.norm(wi, axis=1, keepdims=True)
     wi[:10] = edge_directions()[:10]
     for shadow in SHADOWS:
-        mat = wenv.CookTorrance(0.5, [{"roughness": 0.05, "ior": 1.5}, {"roughness": 0.3, "distribution": "ggx",
+        mat = wenv.CookTorrance(0.5, [{"roughness": 0.05, "ior": 1.5, "specular": 0.4}, {"roughness": 0.3, "distribution": "ggx",
                                                                         "specular": (0.2, 0.4, 0.6)},
                                       {"roughness": 2.0, "ior": 4.0, "specular": 0.1}], shadowing=shadow)
         for deg in (0, 30, 70, 89.9, 90, 120):
@@ -492,3 +492,27 @@ def test_one_roughness_range_and_conversion():
         wenv.alpha_from_roughness(float("nan"))
     with pytest.raises(ValueError, match="roughness"):
         wenv.alpha_from_roughness(-0.1)
+
+
+def test_lobes_that_reflect_more_than_they_receive_are_refused():
+    # what the material's own albedo says, independently of the check: five white lobes pass 1 at 75 degrees
+    one = wenv.CookTorrance(0.0, [{"specular": 1, "roughness": 0.1, "ior": 1.5}])
+    assert 5 * one.albedo(direction(75))[0] > 1.1
+    with pytest.raises(ValueError, match="lobes reflect .* times the light they receive .* 75 degrees"):
+        wenv.CookTorrance(0.0, [{"specular": 1, "roughness": 0.1, "ior": 1.5}] * 5)
+    # towards grazing lobes added rather than layered pass 1 (a coat over a paint's gloss): accepted
+    two = wenv.CookTorrance(0.0, [{"specular": 1, "roughness": 0.1, "ior": 1.5}] * 2)
+    assert two.albedo(direction(89))[0] > 1.05
+    with pytest.raises(ValueError, match="blue channel"):
+        wenv.CookTorrance(0.0, [{"specular": (0.2, 0.2, 30.0), "roughness": 0.3, "ior": 1.5}])
+    # a hundred white lobes reflected 4.4 times a unit environment
+    with pytest.raises(ValueError, match="lobes: at most 64, got 100"):
+        wenv.CookTorrance(0.0, [{"specular": 1, "roughness": 0.1, "ior": 1.5}] * 100)
+    # lobes that share an albedo of at most 1 are accepted, up to the limit, and so is each white lobe alone
+    half = wenv.CookTorrance(0.0, [{"specular": 0.5, "roughness": m, "ior": 1.5} for m in (0.1, 0.3)])
+    assert np.all(half.albedo(np.stack([direction(d) for d in (0, 60, 89)])) <= 1.0)
+    wenv.CookTorrance(0.0, [{"specular": 0.01, "roughness": 0.05 + 0.01 * i, "ior": 1.5} for i in range(64)])
+    for dist in DISTS:
+        for shadow in SHADOWS:
+            for m in (0.001, 0.05, 1.0):
+                wenv.CookTorrance(0.0, [{"specular": 1, "roughness": m, "ior": 10.0}], dist, shadow)

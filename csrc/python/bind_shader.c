@@ -4,11 +4,13 @@
  * core's. */
 #include "python/module.h"
 
+#include <math.h>
 #include <string.h>
 
 #include "auto/autoquality.h"
 #include "methods/method.h"
 #include "methods/presets.h"
+#include "methods/shade_budget.h"
 #include "methods/visibility.h"
 #include "python/bind_envmap.h"
 #include "python/bind_material.h"
@@ -25,6 +27,7 @@ typedef struct {
     wenv_auto_choice auto_choice;
     double target_error, memory_budget_mb;
     Py_ssize_t visible; /* vertices the last shade_mesh(cull=True) shaded; -1 if it shaded all */
+    Py_ssize_t next_vertex; /* the first of them the last shade_mesh left unshaded (its budget); -1 before one */
 } ShaderObject;
 
 /* ---- quality dicts, read and written through the method's parameter table ---- */
@@ -235,6 +238,7 @@ static int Shader_init(ShaderObject *self, PyObject *args, PyObject *kwargs)
     self->target_error = 0.01;
     self->memory_budget_mb = 1024.0;
     self->visible = -1;
+    self->next_vertex = -1;
     if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|OzOOddO:Shader", kwlist, &env_obj, &mat_obj, &quality_obj,
                                      &method_name, &cache_obj, &progress_obj, &self->target_error,
                                      &self->memory_budget_mb, &normals_obj))
@@ -405,8 +409,11 @@ static int parse_eye(PyObject *obj, double eye[3])
 
 /* Shades the `count` vertices whose visible[i] is set (all if visible is NULL) into their rows of
  * out (n x 3); the other rows are left as they are. */
+/* Shades the vertices to shade (the `count` visible ones, or all n) from the first-th of them on, within
+ * `budget` seconds (wenv_shade_for); *next gets the first left. */
 static int shade_visible(ShaderObject *self, const float *normals, const float *views, size_t n,
-                         const unsigned char *visible, size_t count, float *out)
+                         const unsigned char *visible, size_t count, size_t first, double budget, float *out,
+                         size_t *next)
 {
     float *gathered = NULL, *shaded = out;
     if (visible) {
@@ -427,15 +434,19 @@ static int shade_visible(ShaderObject *self, const float *normals, const float *
     }
     wenv_error err = {0};
     wenv_status st = WENV_OK;
-    if (count) {
+    *next = first;
+    if (first < count) {
         WENV_BEGIN_WORK
-        st = self->method->shade(self->state, normals, views, count, shaded, &err);
+        st = wenv_shade_for(self->method, self->state, normals, views, count, first, budget, shaded, next, &err);
         WENV_END_WORK
     }
     if (!st && visible)
-        for (size_t i = 0, k = 0; i < n; i++)
-            if (visible[i])
-                memcpy(out + 3 * i, shaded + 3 * k++, 3 * sizeof(float));
+        for (size_t i = 0, k = 0; i < n && k < *next; i++)
+            if (visible[i]) {
+                if (k >= first)
+                    memcpy(out + 3 * i, shaded + 3 * k, 3 * sizeof(float));
+                k++;
+            }
     PyMem_Free(gathered);
     if (st) {
         wenv_py_raise(&err);
@@ -446,12 +457,32 @@ static int shade_visible(ShaderObject *self, const float *normals, const float *
 
 static PyObject *Shader_shade_mesh(ShaderObject *self, PyObject *args, PyObject *kwargs)
 {
-    static char *kwlist[] = {"positions", "normals", "eye", "cull", "view_projection", "out", NULL};
-    PyObject *pobj, *nobj, *eobj, *vp_obj = Py_None, *out_obj = Py_None;
+    static char *kwlist[] = {"positions", "normals", "eye", "cull", "view_projection", "out", "first", "budget", NULL};
+    PyObject *pobj, *nobj, *eobj, *vp_obj = Py_None, *out_obj = Py_None, *budget_obj = Py_None;
     int cull = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO|$pOO:shade_mesh", kwlist, &pobj, &nobj, &eobj, &cull, &vp_obj,
-                                     &out_obj))
+    Py_ssize_t first = 0;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO|$pOOnO:shade_mesh", kwlist, &pobj, &nobj, &eobj, &cull, &vp_obj,
+                                     &out_obj, &first, &budget_obj))
         return NULL;
+    double budget = INFINITY;
+    if (first < 0) {
+        PyErr_Format(PyExc_ValueError, "first must be >= 0, got %zd", first);
+        return NULL;
+    }
+    if (budget_obj != Py_None) {
+        if (!PyFloat_Check(budget_obj) && !PyLong_Check(budget_obj)) {
+            PyErr_Format(PyExc_TypeError, "budget must be a number of seconds or None, got %.100s",
+                         Py_TYPE(budget_obj)->tp_name);
+            return NULL;
+        }
+        budget = PyFloat_AsDouble(budget_obj);
+        if (budget == -1.0 && PyErr_Occurred())
+            return NULL;
+        if (!(budget >= 0.0)) {
+            PyErr_Format(PyExc_ValueError, "budget must be >= 0 seconds, got %R", budget_obj);
+            return NULL;
+        }
+    }
     double eye[3], vp[16];
     if (parse_eye(eobj, eye) < 0)
         return NULL;
@@ -506,15 +537,20 @@ static PyObject *Shader_shade_mesh(ShaderObject *self, PyObject *args, PyObject 
         for (int c = 0; c < 3; c++)
             views[3 * i + c] = (float)d[c];
     }
-    size_t count = np;
+    size_t count = np, next;
     if (cull)
         count = wenv_visible_vertices(pb.buf, nb.buf, np, eye, vp_obj != Py_None ? vp : NULL, visible);
+    if ((size_t)first > count) {
+        PyErr_Format(PyExc_ValueError, "first (%zd) is past the %zu vertices to shade", first, count);
+        goto fail;
+    }
     if (claim(self) < 0)
         goto fail;
     claimed = 1;
-    if (shade_visible(self, nb.buf, views, np, visible, count, out) < 0)
+    if (shade_visible(self, nb.buf, views, np, visible, count, (size_t)first, budget, out, &next) < 0)
         goto fail;
     self->visible = cull ? (Py_ssize_t)count : -1;
+    self->next_vertex = (Py_ssize_t)next;
     goto done;
 fail:
     Py_CLEAR(result);
@@ -603,6 +639,12 @@ static PyObject *Shader_get_stats(ShaderObject *self, void *closure)
             Py_CLEAR(d);
         Py_XDECREF(v);
     }
+    if (d && self->next_vertex >= 0) {
+        PyObject *v = PyLong_FromSsize_t(self->next_vertex);
+        if (!v || PyDict_SetItemString(d, "next_vertex", v) < 0)
+            Py_CLEAR(d);
+        Py_XDECREF(v);
+    }
     if (d && self->is_auto) {
         const wenv_auto_choice *a = &self->auto_choice;
         PyObject *used = a->used_normals == (size_t)-1 || a->sh_order ? Py_NewRef(Py_None) : PyLong_FromSize_t(a->used_normals);
@@ -644,13 +686,19 @@ static PyMethodDef Shader_methods[] = {
      "shade(normals, view_dirs)\n--\n\nLinear RGB radiance (float32, n x 3) for world-space normals and "
      "view directions (surface towards eye), float32 (n, 3); view_dirs may be one (3,) vector for all."},
     {"shade_mesh", (PyCFunction)(void (*)(void))Shader_shade_mesh, METH_VARARGS | METH_KEYWORDS,
-     "shade_mesh(positions, normals, eye, *, cull=False, view_projection=None, out=None)\n--\n\n"
+     "shade_mesh(positions, normals, eye, *, cull=False, view_projection=None, out=None, first=0, budget=None)\n--\n\n"
      "Shade vertices seen from a perspective eye position.  cull=True shades only what the eye sees: "
      "vertices whose normal faces it and, given view_projection (the viewport's 4 x 4 world-to-clip "
      "matrix, row-major: Blender's region_3d.perspective_matrix), those inside its frustum; the rows of "
      "the others are left as they were in `out` (a float32 (n, 3) array written in place and returned) "
      "or black in a new array.  stats['visible_vertices'] tells how many were shaded; wenv.visible_vertices "
-     "gives which.  Renders and bakes from other views keep cull=False."},
+     "gives which.  Renders and bakes from other views keep cull=False.\n\n"
+     "first and budget shade in steps: the vertices to shade (the visible ones, in order, with cull=True) "
+     "from the first-th on, in blocks until budget seconds have passed (at least one block); "
+     "stats['next_vertex'] is where the next step starts (the number to shade once all are done), and "
+     "rows not reached keep what `out` held.  So a view that rests is refined by an accurate Shader "
+     "over a fast one's result: out = fast.shade_mesh(...); then accurate.shade_mesh(..., out=out, "
+     "first=k, budget=0.05) until k reaches the count."},
     {"set_environment", (PyCFunction)Shader_set_environment, METH_O,
      "set_environment(env)\n--\n\nNew lighting; rotation matrices are kept."},
     {"set_material", (PyCFunction)Shader_set_material, METH_O,

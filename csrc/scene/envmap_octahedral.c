@@ -141,8 +141,7 @@ wenv_status wenv_oct_from_envmap(const wenv_envmap *env, size_t side, float *tex
 
 void wenv_oct_pyramid_free(wenv_oct_pyramid *p)
 {
-    for (size_t k = 0; k < p->levels; k++)
-        free(p->texels[k]);
+    free(p->texels[0]); /* every level lives in level 0's block */
     memset(p, 0, sizeof *p);
 }
 
@@ -164,14 +163,20 @@ wenv_status wenv_oct_pyramid_build(wenv_oct_pyramid *p, const wenv_envmap *env, 
         base *= 2;
     while (base > 2 && base > max_side)
         base /= 2;
+    /* one block, level after level, so a lookup can address any level from one base */
+    size_t total = 0;
     for (size_t s = base; s >= 2; s /= 2) {
-        p->side[p->levels] = s;
-        p->texels[p->levels] = malloc(s * s * 3 * sizeof(float));
-        if (!p->texels[p->levels]) {
-            wenv_oct_pyramid_free(p);
-            return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the environment pyramid");
-        }
-        p->levels++;
+        p->side[p->levels++] = s;
+        total += s * s * 3;
+    }
+    float *block = malloc(total * sizeof(float));
+    if (!block) {
+        memset(p, 0, sizeof *p);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the environment pyramid");
+    }
+    for (size_t k = 0, at = 0; k < p->levels; k++) {
+        p->texels[k] = block + at;
+        at += p->side[k] * p->side[k] * 3;
     }
     if (wenv_oct_from_envmap(env, base, p->texels[0], excluded, n_excluded, err)) {
         wenv_oct_pyramid_free(p);

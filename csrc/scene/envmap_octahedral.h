@@ -22,7 +22,7 @@ wenv_status wenv_oct_from_envmap(const wenv_envmap *env, size_t side, float *tex
  * as fine as the environment up to max_side (a power of two in [64, max_side] with about a pixel
  * per texel, or max_side itself when that is below 64; made by wenv_oct_from_envmap with `excluded`
  * black), each coarser texel the solid-angle-weighted mean of its four children (the octahedral
- * square nests). */
+ * square nests).  The levels lie one after another in texels[0]'s block. */
 typedef struct {
     size_t levels;
     size_t side[16];

@@ -126,6 +126,11 @@ const wenv_lobe *wenv_material_lobe(const wenv_material *mat, size_t i);
 /* Whether the lobes have a smooth limit: Fresnel mirrors of their shapes' colour and index (the
  * glossmeter's smooth=True), as microfacet lobes do and a measured table does not. */
 int wenv_material_has_smooth_limit(const wenv_material *mat);
+/* Whether each lobe is its shape's D (wenv_material_lobe) times factors that vary slowly across it
+ * (Fresnel, masking, constant weights), so that the shape's width and tails bound it: Cook-Torrance's
+ * and Principled's microfacet lobes; not a table's (its shape is only a fit) nor Principled's sheen
+ * and rough diffuse, which only borrow a shape. */
+int wenv_material_lobes_follow_shapes(const wenv_material *mat);
 
 /* Whether the glossy part reflects about the mirror direction, as microfacet lobes do (and a table
  * whose fitted shape carries its lobe), rather than elsewhere (a retro-reflective lobe, about the
@@ -163,6 +168,11 @@ size_t wenv_material_view_terms(const wenv_material *mat);
 void wenv_material_prepare_view_f(const wenv_material *mat, const float wo[3], float *terms);
 void wenv_material_specular_cos_f(const wenv_material *mat, const float wi[3], const float wo[3],
                                   const float *terms, float rgb[3]);
+/* Float form for n directions at once (one view, its terms as above), structure of arrays: wi =
+ * (x[k], y[k], z[k]) unit; f cos into r, g, b.  Models with a vectorised evaluator run it on the
+ * widest instructions the CPU has; others loop over wenv_material_specular_cos_f. */
+void wenv_material_specular_cos_f_many(const wenv_material *mat, const float wo[3], const float *terms, size_t n,
+                                       const float *x, const float *y, const float *z, float *r, float *g, float *b);
 /* The model's own float evaluator, for a loop over many lights to call without the dispatch. */
 typedef void (*wenv_specular_cos_f_fn)(const wenv_material *mat, const float wi[3], const float wo[3],
                                        const float *terms, float rgb[3]);
@@ -215,5 +225,12 @@ wenv_status wenv_material_lobe_nodes(const wenv_material *mat, size_t i, const d
 wenv_status wenv_material_lobe_cells(const wenv_material *mat, size_t i, const double wo[3], size_t n_theta,
                                      size_t n_phi, double *wi, double *weight, double *solid_angle, size_t *count,
                                      wenv_error *err);
+
+/* Lobe i's rule on its shape's slope grid (wenv_lobe_slope_cells): n_x n_y nodes, wi and RGB weight
+ * (3 doubles each) with sum_k weight[k] E(wi[k]) ~ Int E(wi) f_i(wi, wo) cos_i d wi, and each cell's
+ * footprint `size` in radians, for a lobe about the mirror direction (wenv_material_mirror_centred). */
+wenv_status wenv_material_lobe_slope_cells(const wenv_material *mat, size_t i, const double wo[3], size_t n_x,
+                                           size_t n_y, double *wi, double *weight, double *size, size_t *count,
+                                           wenv_error *err);
 
 #endif

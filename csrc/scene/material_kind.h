@@ -24,6 +24,9 @@ typedef struct wenv_material_kind {
     size_t (*view_terms)(const wenv_material *mat);
     void (*prepare_view_f)(const wenv_material *mat, const float wo[3], float *terms);
     wenv_specular_cos_f_fn specular_cos_f;
+    /* Optional: specular_cos_f over arrays (wenv_material_specular_cos_f_many); NULL loops over it. */
+    void (*specular_cos_f_many)(const wenv_material *mat, const float wo[3], const float *terms, size_t n,
+                                const float *x, const float *y, const float *z, float *r, float *g, float *b);
     double (*lobe_cos_h_min)(const wenv_material *mat, size_t i);
     wenv_lobe_rgb_fn lobe_value;
     wenv_lobe_rgb_fn lobe_over_ndf;
@@ -39,6 +42,9 @@ typedef struct wenv_material_kind {
     /* Optional: whether the glossy part reflects about the mirror direction (material.h,
      * wenv_material_mirror_centred); NULL for always. */
     int (*mirror_centred)(const wenv_material *mat);
+    /* Optional: whether each lobe is its shape's D times factors that vary slowly over it
+     * (wenv_material_lobes_follow_shapes); NULL for never. */
+    int (*lobes_follow_shapes)(const wenv_material *mat);
     /* Optional: a copy with every lobe at `roughness` (already validated); NULL if the model cannot. */
     wenv_status (*with_roughness)(wenv_material **out, const wenv_material *src, double roughness, wenv_error *err);
 } wenv_material_kind;

@@ -306,3 +306,120 @@ wenv_status wenv_lobe_cells(const wenv_lobe *lobe, wenv_shadowing shadowing, con
     free(x);
     return WENV_OK;
 }
+
+/* ---- the rule on a grid in slope space ---------------------------------------------------------- */
+
+/* A half vector's slopes (x, y) = tan(theta_h) (cos phi_h, sin phi_h).  The distribution's slope
+ * density P22 (D cos_h per unit slope area) is Beckmann's Gaussian exp(-(x^2 + y^2) / a^2) / (pi a^2)
+ * or GGX's a^2 / (pi (a^2 + x^2 + y^2)^2); the cells below are graded in y's marginal CDF and in x's
+ * CDF given y, so each holds the mass of D it is credited with. */
+static double slope_marginal_cdf(int ggx, double a, double y)
+{
+    return ggx ? 0.5 + 0.5 * y / sqrt(a * a + y * y) : 0.5 * erfc(-y / a);
+}
+
+static double slope_marginal_pdf(int ggx, double a, double y)
+{
+    if (!ggx)
+        return exp(-y * y / (a * a)) / (a * sqrt(M_PI));
+    double q = a * a + y * y;
+    return a * a / (2.0 * q * sqrt(q));
+}
+
+static double slope_conditional_cdf(int ggx, double a, double y, double x)
+{
+    if (!ggx)
+        return 0.5 * erfc(-x / a);
+    double b = sqrt(a * a + y * y);
+    return 0.5 + (b * x / (b * b + x * x) + atan(x / b)) / M_PI;
+}
+
+static double slope_conditional_pdf(int ggx, double a, double y, double x)
+{
+    if (!ggx)
+        return exp(-x * x / (a * a)) / (a * sqrt(M_PI));
+    double b = sqrt(a * a + y * y), q = b * b + x * x;
+    return 2.0 * b * b * b / (M_PI * q * q);
+}
+
+/* The slope at CDF value u (marginal if !conditional), by bisection: monotone, and these run only
+ * when a material's rules are made. */
+static double slope_inverse(int ggx, double a, double y, double u, int conditional)
+{
+    double lo = -1e4 * a - 1.0, hi = 1e4 * a + 1.0;
+    for (int it = 0; it < 100; it++) {
+        double mid = 0.5 * (lo + hi);
+        double f = conditional ? slope_conditional_cdf(ggx, a, y, mid) : slope_marginal_cdf(ggx, a, mid);
+        if (f < u)
+            lo = mid;
+        else
+            hi = mid;
+    }
+    return 0.5 * (lo + hi);
+}
+
+/* wi for half-vector slopes (x, y) and wo = (s, 0, c); v.h and cos_h into *vh, *ch. */
+static void slope_reflect(double x, double y, const double wo[3], double wi[3], double *vh, double *ch)
+{
+    double inv = 1.0 / sqrt(1.0 + x * x + y * y), h[3] = {x * inv, y * inv, inv};
+    *vh = wo[0] * h[0] + wo[2] * h[2];
+    *ch = inv;
+    for (int c = 0; c < 3; c++)
+        wi[c] = 2.0 * *vh * h[c] - wo[c];
+}
+
+static double angle_between(const double a[3], const double b[3])
+{
+    double cx = a[1] * b[2] - a[2] * b[1], cy = a[2] * b[0] - a[0] * b[2], cz = a[0] * b[1] - a[1] * b[0];
+    return atan2(sqrt(cx * cx + cy * cy + cz * cz), a[0] * b[0] + a[1] * b[1] + a[2] * b[2]);
+}
+
+wenv_status wenv_lobe_slope_cells(const wenv_lobe *lobe, const double wo[3], size_t n_x, size_t n_y, double *wi,
+                                  double *mass, double *size, size_t *count, wenv_error *err)
+{
+    *count = 0;
+    if (n_x < 1 || n_y < 1 || n_x > ALBEDO_SAMPLES_MAX || n_y > ALBEDO_SAMPLES_MAX)
+        return wenv_error_set(err, WENV_ERR_VALUE, "cell counts must be in [1, %d], got %zu x %zu",
+                              ALBEDO_SAMPLES_MAX, n_x, n_y);
+    int ggx = lobe->distribution == WENV_NDF_GGX;
+    double a = lobe->roughness, so = sqrt(wo[0] * wo[0] + wo[1] * wo[1]), co = wo[2];
+    /* work with the view in the xz plane, turn the nodes back at the end */
+    double cp = so > 0.0 ? wo[0] / so : 1.0, sp = so > 0.0 ? wo[1] / so : 0.0, w[3] = {so, 0.0, co};
+    size_t n = 0;
+    for (size_t j = 0; j < n_y; j++) {
+        double y = slope_inverse(ggx, a, 0.0, ((double)j + 0.5) / (double)n_y, 0);
+        double dy = 1.0 / (double)n_y / slope_marginal_pdf(ggx, a, y);
+        /* the slopes x whose reflection lies above the horizon: c x^2 - 2 s x + c (y^2 - 1) < 0 */
+        double r = sqrt(fmax(0.0, 1.0 - co * co * y * y));
+        double x1 = co * (y * y - 1.0) / (so + r), x2 = co > 0.0 ? (so + r) / co : INFINITY;
+        double f_lo = slope_conditional_cdf(ggx, a, y, x1), f_hi = isinf(x2) ? 1.0 : slope_conditional_cdf(ggx, a, y, x2);
+        double df = (f_hi - f_lo) / (double)n_x;
+        for (size_t i = 0; i < n_x; i++, n++) {
+            double *d = wi + 3 * n;
+            double x = slope_inverse(ggx, a, y, f_lo + ((double)i + 0.5) * df, 1);
+            double dx = df / slope_conditional_pdf(ggx, a, y, x);
+            double vh, ch;
+            slope_reflect(x, y, w, d, &vh, &ch);
+            mass[n] = size[n] = 0.0;
+            if (co > 0.0 && d[2] > 0.0 && vh > 0.0 && df > 0.0) {
+                /* Int f cos E d wi = Int (f 4 cos_i cos_o / D) (v.h) / (cos_o cos_h) E dP(slopes):
+                 * the cell's share of P times the factor that turns the lobe's value over D into it */
+                mass[n] = df / (double)n_y * vh / (co * ch);
+                /* the cell's extent in wi along each axis; its footprint is their geometric mean */
+                double e[2], p[3], q[3], t1, t2;
+                slope_reflect(x - 0.5 * dx, y, w, p, &t1, &t2);
+                slope_reflect(x + 0.5 * dx, y, w, q, &t1, &t2);
+                e[0] = angle_between(p, q);
+                slope_reflect(x, y - 0.5 * dy, w, p, &t1, &t2);
+                slope_reflect(x, y + 0.5 * dy, w, q, &t1, &t2);
+                e[1] = angle_between(p, q);
+                size[n] = sqrt(e[0] * e[1]);
+            }
+            double rx = cp * d[0] - sp * d[1], ry = sp * d[0] + cp * d[1];
+            d[0] = rx;
+            d[1] = ry;
+        }
+    }
+    *count = n;
+    return WENV_OK;
+}

@@ -100,6 +100,19 @@ wenv_status wenv_lobe_cells(const wenv_lobe *lobe, wenv_shadowing shadowing, con
                             size_t n_phi, double *wi, double *weight, double *solid_angle, size_t *count,
                             wenv_error *err);
 
+/* The lobe's cells on a grid of half-vector slopes: n_y rows across the plane of wo and the normal
+ * times n_x columns along it, each graded in the distribution's CDF (rows in the marginal, columns
+ * in the conditional one, over the slopes whose reflection lies above the horizon).  Towards grazing
+ * the reflected lobe is squeezed across that plane by about cos(theta_o) + alpha, so a few rows and
+ * many columns keep the cells about as wide as long in wi, where a rule in theta_h and phi_h makes
+ * long thin cells that a pre-filtered lookup cannot read well (under Blender's forest and courtyard
+ * 24 x 4 of these cells read as accurately as 1024 polar ones).  Writes n_x n_y nodes, in the same
+ * order for every wo: wi (3 doubles each, unit), mass (what turns the lobe's value over its D,
+ * wenv_material_lobe_over_ndf, into the node's weight) and size (the cell's footprint in wi,
+ * radians); nodes below the horizon have mass 0. */
+wenv_status wenv_lobe_slope_cells(const wenv_lobe *lobe, const double wo[3], size_t n_x, size_t n_y, double *wi,
+                                  double *mass, double *size, size_t *count, wenv_error *err);
+
 /* ---- evaluation kernels, inline for the hot loops of Cook-Torrance materials (~1e9 calls) ---- */
 
 #define WENV_INV_PI (1.0 / 3.14159265358979323846)

@@ -514,6 +514,16 @@ static wenv_status pr_with_roughness(wenv_material **out, const wenv_material *s
     return wenv_principled_create(out, &in, err);
 }
 
+/* The sheen and the rough diffuse borrow a GGX shape they do not follow. */
+static int pr_lobes_follow_shapes(const wenv_material *mat)
+{
+    const principled *p = model_of(mat);
+    for (size_t i = 0; i < p->n; i++)
+        if (p->lobe[i].role == LOBE_SHEEN || p->lobe[i].role == LOBE_DIFFUSE)
+            return 0;
+    return 1;
+}
+
 static const wenv_material_kind PRINCIPLED = {
     .name = "principled",
     .smooth_limit = 0, /* an F82 metal or a remapped dielectric is no Fresnel mirror of one index */
@@ -530,6 +540,7 @@ static const wenv_material_kind PRINCIPLED = {
     .lobe_cells = pr_lobe_cells,
     .diffuse_at = pr_diffuse_at,
     .with_roughness = pr_with_roughness,
+    .lobes_follow_shapes = pr_lobes_follow_shapes,
 };
 
 /* ---------------------------------------------------------------- making one */

@@ -9,6 +9,7 @@
 #include <string.h>
 
 #include "methods/method.h"
+#include "methods/wavelet/grazing_nodes.h"
 #include "reference/reference.h"
 #include "scene/envmap.h"
 #include "scene/material.h"
@@ -148,8 +149,55 @@ static void check_methods(const wenv_envmap *env)
     wenv_material_free(mat);
 }
 
+/* The grazing path's node loop chosen for this CPU (AVX-512, AVX2 or portable) against the portable
+ * one, on random nodes over a random pyramid, edges of the octahedral square and every level
+ * included. */
+static void check_grazing_nodes(void)
+{
+    enum { LEVELS = 6, NODES = 64, STRIDE = 64 };
+    int32_t side = 32, total = 0;
+    wenv_node_pyramid p = {.top = LEVELS - 1, .lod_offset = 3.5f};
+    for (int k = 0; k < LEVELS; k++, side /= 2) {
+        p.side[k] = side;
+        p.offset[k] = total;
+        total += side * side;
+    }
+    float *texels = malloc((size_t)total * 3 * sizeof(float)), *a = malloc(2 * 7 * STRIDE * sizeof(float));
+    if (!texels || !a) {
+        check(0, "memory for the node check", 0, 0);
+        free(texels);
+        free(a);
+        return;
+    }
+    unsigned state = 12345u;
+#define NEXT_UNIFORM() ((state = state * 1664525u + 1013904223u), (float)(state >> 8) / 16777216.0f)
+    for (int32_t i = 0; i < total * 3; i++)
+        texels[i] = NEXT_UNIFORM();
+    p.texels = texels;
+    for (int e = 0; e < 2; e++)
+        for (int k = 0; k < NODES; k++) {
+            float *entry = a + e * 7 * STRIDE;
+            float th = 3.14159265f * NEXT_UNIFORM(), ph = 6.2831853f * NEXT_UNIFORM();
+            entry[k] = sinf(th) * cosf(ph);
+            entry[STRIDE + k] = sinf(th) * sinf(ph);
+            entry[2 * STRIDE + k] = cosf(th);
+            for (int c = 3; c < 6; c++)
+                entry[c * STRIDE + k] = NEXT_UNIFORM();
+            entry[6 * STRIDE + k] = -10.0f + 12.0f * NEXT_UNIFORM(); /* below level 0 to past the top */
+        }
+#undef NEXT_UNIFORM
+    float x[3] = {0.6f, 0.8f, 0.0f}, y[3] = {0.0f, 0.0f, 1.0f}, z[3] = {0.8f, -0.6f, 0.0f}, want[3], got[3];
+    wenv_grazing_nodes_portable(a, a + 7 * STRIDE, STRIDE, NODES, 0.3f, 0.7f, x, y, z, &p, want);
+    wenv_grazing_nodes_for_cpu()(a, a + 7 * STRIDE, STRIDE, NODES, 0.3f, 0.7f, x, y, z, &p, got);
+    for (int c = 0; c < 3; c++)
+        check(near(got[c], want[c], 1e-5), "the CPU's grazing node loop equals the portable one", got[c], want[c]);
+    free(texels);
+    free(a);
+}
+
 int main(void)
 {
+    check_grazing_nodes();
     check_materials();
     wenv_envmap *env = white_environment();
     if (env) {

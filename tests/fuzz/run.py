@@ -34,7 +34,9 @@ TARGETS = ["exr", "rgbe", "merl", "matrix_cache"]
 # and inputs that stay small keep the targets fast
 CFLAGS = ["-std=c11", "-D_DEFAULT_SOURCE", "-O1", "-g", "-fno-omit-frame-pointer", "-fopenmp", "-Wall", "-Wextra",
           "-Werror", "-fsanitize=address,undefined", "-fno-sanitize-recover=all",
-          "-DWENV_IMAGE_MAX_PIXELS=((size_t)1<<20)"]
+          "-DWENV_IMAGE_MAX_PIXELS=((size_t)1<<20)",
+          # at -O1 clang does not vectorise the loops marked `omp simd` and says so; speed is gcc's concern
+          "-Wno-pass-failed"]
 LIBS = ["-lOpenEXRCore", "-lcubature", "-lz", "-lm"]
 
 

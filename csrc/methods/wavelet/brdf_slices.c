@@ -133,6 +133,7 @@ static wenv_status lobe_cutoffs(wenv_wavelet *wavelet, const wenv_material *mat,
         theta_h = fmax(theta_h, acos(fmax(-1.0, fmin(1.0, (double)wavelet->lobe_cos_h_min[k]))));
     wavelet->lobe_m_min = fmin(1.0, wenv_material_lobe_width(mat));
     wavelet->mirror_centred = wenv_material_mirror_centred(mat);
+    wavelet->lobes_modelled = wavelet->mirror_centred && wenv_material_lobes_follow_shapes(mat);
     wavelet->light_cone_cos = 2.0 * theta_h >= M_PI ? -1.0 : cos(2.0 * theta_h);
     return WENV_OK;
 }
@@ -179,6 +180,12 @@ static wenv_status albedo_tables(wenv_wavelet *wavelet, const wenv_material *mat
             wavelet->view_inv_albedo[3 * j + k] = a[k] > 1e-30f ? 1.0f / a[k] : 0.0f;
     }
     return WENV_OK;
+}
+
+static int compare_u32(const void *a, const void *b)
+{
+    uint32_t x = *(const uint32_t *)a, y = *(const uint32_t *)b;
+    return (x > y) - (x < y);
 }
 
 wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material *mat, const wenv_progress *progress,
@@ -242,6 +249,8 @@ wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material
                     mag[t] = slice[3 * t] * slice[3 * t] + slice[3 * t + 1] * slice[3 * t + 1] + slice[3 * t + 2] * slice[3 * t + 2];
                 uint32_t *idx = all_idx + j * keep;
                 size_t count = wenv_select_largest(mag, nl, keep, idx, work);
+                /* in index order: the table rows then read the lighting slices front to back */
+                qsort(idx, count, sizeof *idx, compare_u32);
                 for (size_t e = 0; e < count; e++)
                     memcpy(all_rgb + (j * keep + e) * 3, slice + 3 * (size_t)idx[e], 3 * sizeof(float));
                 counts[j] = count;

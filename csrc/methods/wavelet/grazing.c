@@ -6,13 +6,14 @@
 #include <string.h>
 
 #include "math/maps.h"
+#include "methods/wavelet/grazing_nodes.h"
 #include "scene/envmap_octahedral.h"
 
 /* ---- the lighting as an octahedral mip pyramid ------------------------------------------------ */
 
 struct wenv_grazing_light {
     wenv_oct_pyramid pyramid;
-    float lod_offset; /* level = half log2 of a cell's solid angle + this */
+    wenv_node_pyramid nodes; /* the same, as the node loop reads it */
 };
 
 void wenv_grazing_light_free(wenv_grazing_light *light)
@@ -39,34 +40,37 @@ wenv_status wenv_grazing_light_create(wenv_grazing_light **out, const wenv_envma
         free(light);
         return err->status;
     }
+    /* a 512 base halves down to 2: 9 levels */
+    if (light->pyramid.levels > WENV_NODE_LEVELS_MAX) {
+        wenv_grazing_light_free(light);
+        return wenv_error_set(err, WENV_ERR_VALUE, "the grazing lighting has %zu levels, at most %d", light->pyramid.levels,
+                              WENV_NODE_LEVELS_MAX);
+    }
+    light->nodes.texels = light->pyramid.texels[0];
+    for (size_t k = 0; k < light->pyramid.levels; k++) {
+        light->nodes.side[k] = (int32_t)light->pyramid.side[k];
+        light->nodes.offset[k] = (int32_t)((light->pyramid.texels[k] - light->pyramid.texels[0]) / 3);
+    }
+    light->nodes.top = (int32_t)light->pyramid.levels - 1;
     /* a base texel covers about 4 pi / base^2 */
-    light->lod_offset = (float)(log2((double)light->pyramid.side[0]) - 0.5 * log2(4.0 * M_PI));
+    light->nodes.lod_offset = (float)(log2((double)light->pyramid.side[0]) - 0.5 * log2(4.0 * M_PI));
     *out = light;
     return WENV_OK;
 }
 
-static inline void level_bilinear(const wenv_grazing_light *light, size_t l, float u, float v, float w_level,
-                                  const float wn[3], float acc[3])
-{
-    uint32_t idx[4];
-    float w[4];
-    wenv_oct_bilinear_f((long)light->pyramid.side[l], u, v, idx, w);
-    const float *t = light->pyramid.texels[l];
-    for (int k = 0; k < 4; k++) {
-        const float *p = t + 3 * (size_t)idx[k];
-        float s = w_level * w[k];
-        acc[0] += s * wn[0] * p[0];
-        acc[1] += s * wn[1] * p[1];
-        acc[2] += s * wn[2] * p[2];
-    }
-}
-
 /* ---- the lobes' rules over the view angle ----------------------------------------------------- */
 
-/* Cells per lobe: N_THETA in the distribution's CDF times N_PHI on the half circle (mirrored). */
+/* Cells per lobe, for a lobe about the mirror direction: N_X along the plane of the view and the
+ * normal times N_Y across it, on the slope grid (wenv_lobe_slope_cells); otherwise (a
+ * retro-reflective table) the polar rule's N_THETA in the distribution's CDF times N_PHI on the half
+ * circle, mirrored. */
+#define N_X 24
+#define N_Y 4
 #define N_THETA 32
 #define N_PHI 16
-#define NODE_FLOATS 7 /* local x y z, weight r g b, half log2 of the cell's solid angle */
+/* Per node: local x y z, weight r g b, log2 of the cell's footprint (radians); each entry holds
+ * them as NODE_FLOATS arrays of n_nodes (one per field), for the vectorised loop. */
+#define NODE_FLOATS 7
 /* Rules tabulated at this many view angles, uniform in log cos(theta) over the range the blend
  * reaches: near the horizon the rule's azimuth map follows tan(theta), which changes by its own size
  * within a step of cos(theta). */
@@ -76,7 +80,9 @@ struct wenv_grazing_rule {
     size_t n_nodes;
     float log_c_hi, dlog_c; /* entry e at log cos = log_c_hi - e dlog_c */
     float rho_scale, m_min, threshold; /* rho = rho_scale (cos_v + m_min) */
-    float *nodes; /* ENTRIES x n_nodes x NODE_FLOATS */
+    size_t stride; /* n_nodes rounded up to a multiple of 16: one field's array */
+    float *nodes;  /* ENTRIES x NODE_FLOATS x stride */
+    wenv_grazing_nodes_fn read_nodes; /* the node loop for this CPU */
 };
 
 void wenv_grazing_rule_free(wenv_grazing_rule *rule)
@@ -89,7 +95,7 @@ void wenv_grazing_rule_free(wenv_grazing_rule *rule)
 
 size_t wenv_grazing_rule_bytes(const wenv_grazing_rule *rule)
 {
-    return rule ? ENTRIES * rule->n_nodes * NODE_FLOATS * sizeof(float) : 0;
+    return rule ? ENTRIES * rule->stride * NODE_FLOATS * sizeof(float) : 0;
 }
 
 static int lobe_is_black(const wenv_lobe *lobe)
@@ -107,7 +113,16 @@ wenv_status wenv_grazing_rule_create(wenv_grazing_rule **out, const wenv_materia
         lobes += !lobe_is_black(wenv_material_lobe(mat, k));
     if (!lobes || !(threshold > 0.0))
         return WENV_OK;
-    size_t per_lobe = 2 * N_THETA * N_PHI;
+    /* The slope grid is graded in the lobe shape's D and takes one point per cell: exact enough
+     * for Beckmann lobes that follow their shape; the polar rule's 10x more nodes for the rest.
+     * GGX's heavy tails, which a grazing view's reflection weighs by slope, lost 1.6 % of a
+     * Cook-Torrance lobe and 10 % of a Principled metal; a table's lobe over its fitted shape's D
+     * varies within the cells (courtyard, t0.1: 0.76 % against 0.58 %). */
+    int slope = wenv_material_mirror_centred(mat) && wenv_material_lobes_follow_shapes(mat);
+    for (size_t k = 0; k < n_lobes; k++)
+        if (!lobe_is_black(wenv_material_lobe(mat, k)) && wenv_material_lobe(mat, k)->distribution != WENV_NDF_BECKMANN)
+            slope = 0;
+    size_t per_lobe = slope ? N_X * N_Y : 2 * N_THETA * N_PHI;
     wenv_grazing_rule *rule = calloc(1, sizeof *rule);
     double *wi = malloc(per_lobe * 7 * sizeof(double));
     if (!rule || !wi) {
@@ -120,6 +135,7 @@ wenv_status wenv_grazing_rule_create(wenv_grazing_rule **out, const wenv_materia
     rule->rho_scale = (float)(4.0 * (double)local_n * m_min / M_PI);
     rule->m_min = (float)m_min;
     rule->threshold = (float)threshold;
+    rule->read_nodes = wenv_grazing_nodes_for_cpu();
     /* the blend is 0 from rho = 2 threshold up */
     double c_hi = 2.0 * threshold / (double)rule->rho_scale - m_min;
     if (!(c_hi > WENV_GRAZING_Z)) { /* the local map resolves this material's lobes at every view */
@@ -130,7 +146,9 @@ wenv_status wenv_grazing_rule_create(wenv_grazing_rule **out, const wenv_materia
     double log_hi = log(fmin(c_hi, 1.0)), log_lo = log(WENV_GRAZING_Z);
     rule->log_c_hi = (float)log_hi;
     rule->dlog_c = (float)((log_hi - log_lo) / (ENTRIES - 1));
-    rule->nodes = malloc(ENTRIES * rule->n_nodes * NODE_FLOATS * sizeof(float));
+    rule->stride = (rule->n_nodes + 15) / 16 * 16;
+    /* the padding's weights are 0: it reads the lighting and adds nothing */
+    rule->nodes = calloc(ENTRIES * rule->stride * NODE_FLOATS, sizeof(float));
     if (!rule->nodes) {
         free(wi);
         wenv_grazing_rule_free(rule);
@@ -139,22 +157,27 @@ wenv_status wenv_grazing_rule_create(wenv_grazing_rule **out, const wenv_materia
     for (size_t e = 0; e < ENTRIES; e++) {
         double c = exp(log_hi - (log_hi - log_lo) * (double)e / (ENTRIES - 1));
         double wo[3] = {sqrt(fmax(0.0, 1.0 - c * c)), 0.0, c};
-        float *node = rule->nodes + e * rule->n_nodes * NODE_FLOATS;
+        float *entry = rule->nodes + e * rule->stride * NODE_FLOATS;
+        size_t at = 0;
         for (size_t k = 0; k < n_lobes; k++) {
             if (lobe_is_black(wenv_material_lobe(mat, k)))
                 continue;
             size_t count;
-            if (wenv_material_lobe_cells(mat, k, wo, N_THETA, N_PHI, wi, weight, omega, &count, err)) {
+            /* omega: each cell's footprint, radians (slope) or its solid angle (polar) */
+            wenv_status st = slope ? wenv_material_lobe_slope_cells(mat, k, wo, N_X, N_Y, wi, weight, omega, &count, err)
+                                   : wenv_material_lobe_cells(mat, k, wo, N_THETA, N_PHI, wi, weight, omega, &count, err);
+            if (st) {
                 free(wi);
                 wenv_grazing_rule_free(rule);
                 return err->status;
             }
-            for (size_t i = 0; i < count; i++, node += NODE_FLOATS) {
-                for (int c = 0; c < 3; c++) {
-                    node[c] = (float)wi[3 * i + c];
-                    node[3 + c] = (float)weight[3 * i + c];
+            for (size_t i = 0; i < count; i++, at++) {
+                for (size_t c = 0; c < 3; c++) {
+                    entry[c * rule->stride + at] = (float)wi[3 * i + c];
+                    entry[(3 + c) * rule->stride + at] = (float)weight[3 * i + c];
                 }
-                node[6] = omega[i] > 0.0 ? (float)(0.5 * log2(omega[i])) : -64.0f;
+                double footprint = slope ? omega[i] : sqrt(fmax(omega[i], 0.0));
+                entry[6 * rule->stride + at] = footprint > 0.0 ? (float)log2(footprint) : -64.0f;
             }
         }
     }
@@ -197,25 +220,8 @@ void wenv_grazing_shade(const wenv_grazing_rule *rule, const wenv_grazing_light 
     size_t e = (size_t)pos;
     if (e > ENTRIES - 2)
         e = ENTRIES - 2;
-    float f = pos - (float)e, g = 1.0f - f;
-    const float *a = rule->nodes + e * rule->n_nodes * NODE_FLOATS, *b = a + rule->n_nodes * NODE_FLOATS;
-    float top = (float)(light->pyramid.levels - 1), acc[3] = {0.0f, 0.0f, 0.0f};
-    for (size_t k = 0; k < rule->n_nodes; k++, a += NODE_FLOATS, b += NODE_FLOATS) {
-        float w[3] = {g * a[3] + f * b[3], g * a[4] + f * b[4], g * a[5] + f * b[5]};
-        if (!(w[0] + w[1] + w[2] > 0.0f))
-            continue;
-        float lx = g * a[0] + f * b[0], ly = g * a[1] + f * b[1], lz = g * a[2] + f * b[2];
-        float d[3] = {lx * x[0] + ly * y[0] + lz * n[0], lx * x[1] + ly * y[1] + lz * n[1],
-                      lx * x[2] + ly * y[2] + lz * n[2]};
-        float u, vv;
-        wenv_oct_encode_f(d, &u, &vv);
-        float lod = g * a[6] + f * b[6] + light->lod_offset;
-        lod = lod < 0.0f ? 0.0f : (lod > top ? top : lod);
-        size_t l0 = (size_t)lod;
-        float fl = lod - (float)l0;
-        level_bilinear(light, l0, u, vv, 1.0f - fl, w, acc);
-        if (fl > 0.0f)
-            level_bilinear(light, l0 + 1, u, vv, fl, w, acc);
-    }
-    memcpy(rgb, acc, sizeof acc);
+    float f = pos - (float)e;
+    size_t entry = rule->stride * NODE_FLOATS;
+    const float *a = rule->nodes + e * entry;
+    rule->read_nodes(a, a + entry, rule->stride, rule->stride, 1.0f - f, f, x, y, n, &light->nodes, rgb);
 }

@@ -6,11 +6,6 @@
 
 #include "math/maps.h"
 
-/* Octahedral direction bins per side: 64 bins of about 0.2 sr, so a narrow lobe's cone meets a few. */
-#define BIN_SIDE 8
-#define BINS (BIN_SIDE * BIN_SIDE)
-/* Levels with fewer lights than this skip the bin tests: testing every light is as cheap. */
-#define FEW_LIGHTS 32
 #define MAX_VIEW_TERMS 32 /* a layered material: 4 a lobe, 5 of its own */
 /* A pixel seen through a lobe narrower than itself is integrated over its area on a grid of points
  * this many per lobe width (about: the lobe's width against the pixel's), up to MAX_SUBPIXELS a side. */
@@ -19,15 +14,14 @@
 
 typedef struct {
     size_t count;
-    float *dir;  /* count x 3, unit, grouped by bin */
-    float *flux; /* count x 3: radiance x solid angle */
-    float *span; /* count: |flux-weighted mean direction| of its pixels (1 for a pixel), so that
-                  * irradiance, linear in the direction above the horizon, stays exact */
+    float *dir;    /* count x 3, unit: the flux-weighted centre */
+    float *flux;   /* count x 3: radiance x solid angle */
+    float *vec;    /* count x 9: per channel, the sum of its pixels' flux x direction, so that
+                    * irradiance, linear in the direction above the horizon, is exact for a cluster */
+    float *sin_radius; /* count: sine of the angle about dir that holds every pixel centre in it */
+    uint32_t *child;   /* count + 1 (levels >= 1): children are child[i] .. child[i + 1] - 1 below */
     float *extent; /* level 0 only, count x 6: each pixel's du, dv (wenv_bright_pixel) */
     float reach;   /* level 0: the largest |du| + |dv|, radians about: how far a pixel reaches */
-    size_t offset[BINS + 1];
-    float axis[BINS * 3];               /* each bin's bounding cone ... */
-    float cos_radius[BINS], sin_radius[BINS]; /* ... and its half-angle */
 } light_level;
 
 struct wenv_lights {
@@ -38,16 +32,20 @@ struct wenv_lights {
  * instruction), and these run per vertex and light. */
 static inline float min_f(float a, float b) { return a < b ? a : b; }
 static inline float max_f(float a, float b) { return a > b ? a : b; }
+static inline float dot3(const float a[3], const float b[3]) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 
 void wenv_lights_free(wenv_lights *lights)
 {
     if (!lights)
         return;
     for (int k = 0; k < WENV_LIGHT_LEVELS; k++) {
-        free(lights->level[k].dir);
-        free(lights->level[k].flux);
-        free(lights->level[k].span);
-        free(lights->level[k].extent);
+        light_level *lv = &lights->level[k];
+        free(lv->dir);
+        free(lv->flux);
+        free(lv->vec);
+        free(lv->sin_radius);
+        free(lv->child);
+        free(lv->extent);
     }
     free(lights);
 }
@@ -57,92 +55,31 @@ size_t wenv_lights_count(const wenv_lights *lights, int level)
     return lights && level >= 0 && level < WENV_LIGHT_LEVELS ? lights->level[level].count : 0;
 }
 
-int wenv_lights_level(double width)
+static int alloc_level(light_level *lv, size_t n, int pixels)
 {
-    for (int k = WENV_LIGHT_LEVELS - 1; k > 0; k--)
-        if (WENV_LIGHT_RADIUS(k) <= WENV_LIGHT_WIDTH_FRACTION * width)
-            return k;
-    return 0;
-}
-
-static size_t bin_of(const float d[3])
-{
-    return wenv_oct_texel_f(d, BIN_SIDE);
-}
-
-/* Fills a level from n lights (directions, fluxes, spans and, for the pixels, extents), sorting
- * them into bins. */
-static int fill_level(light_level *lv, const float *dir, const float *flux, const float *span, const float *extent,
-                      size_t n)
-{
+    size_t room = n ? n : 1;
     lv->count = n;
-    lv->dir = malloc((n ? n : 1) * 3 * sizeof(float));
-    lv->flux = malloc((n ? n : 1) * 3 * sizeof(float));
-    lv->span = malloc((n ? n : 1) * sizeof(float));
-    lv->extent = extent ? malloc((n ? n : 1) * 6 * sizeof(float)) : NULL;
-    size_t *bin = malloc((n ? n : 1) * sizeof(size_t));
-    if (!lv->dir || !lv->flux || !lv->span || (extent && !lv->extent) || !bin) {
-        free(bin);
-        return -1;
-    }
-    size_t next[BINS];
-    memset(lv->offset, 0, sizeof lv->offset);
-    for (size_t i = 0; i < n; i++) {
-        bin[i] = bin_of(dir + 3 * i);
-        lv->offset[bin[i] + 1]++;
-    }
-    for (size_t b = 0; b < BINS; b++)
-        lv->offset[b + 1] += lv->offset[b];
-    memcpy(next, lv->offset, sizeof next);
-    for (size_t i = 0; i < n; i++) {
-        size_t j = next[bin[i]]++;
-        memcpy(lv->dir + 3 * j, dir + 3 * i, 3 * sizeof(float));
-        memcpy(lv->flux + 3 * j, flux + 3 * i, 3 * sizeof(float));
-        lv->span[j] = span[i];
-        if (extent) {
-            memcpy(lv->extent + 6 * j, extent + 6 * i, 6 * sizeof(float));
-            const float *e = extent + 6 * i;
-            float reach = sqrtf(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]) + sqrtf(e[3] * e[3] + e[4] * e[4] + e[5] * e[5]);
-            lv->reach = max_f(lv->reach, reach);
-        }
-    }
-    free(bin);
-    for (size_t b = 0; b < BINS; b++) {
-        double a[3] = {0.0, 0.0, 0.0};
-        for (size_t j = lv->offset[b]; j < lv->offset[b + 1]; j++)
-            for (int c = 0; c < 3; c++)
-                a[c] += lv->dir[3 * j + c];
-        double len = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
-        double cr = 1.0;
-        if (len > 0.0) {
-            for (int c = 0; c < 3; c++)
-                lv->axis[3 * b + c] = (float)(a[c] / len);
-            for (size_t j = lv->offset[b]; j < lv->offset[b + 1]; j++) {
-                const float *d = lv->dir + 3 * j, *x = lv->axis + 3 * b;
-                double dot = (double)d[0] * x[0] + (double)d[1] * x[1] + (double)d[2] * x[2];
-                cr = dot < cr ? dot : cr;
-            }
-        } else { /* empty, or lights cancelling out: a cone that takes in everything */
-            lv->axis[3 * b] = lv->axis[3 * b + 1] = 0.0f;
-            lv->axis[3 * b + 2] = 1.0f;
-            cr = lv->offset[b + 1] > lv->offset[b] ? -1.0 : 1.0;
-        }
-        /* a hair wider than measured, so float rounding in the test never drops a light */
-        double r = fmin(M_PI, acos(fmax(-1.0, fmin(1.0, cr))) + 1e-4);
-        lv->cos_radius[b] = (float)cos(r);
-        lv->sin_radius[b] = (float)sin(r);
-    }
-    return 0;
+    lv->dir = malloc(room * 3 * sizeof(float));
+    lv->flux = malloc(room * 3 * sizeof(float));
+    lv->vec = malloc(room * 9 * sizeof(float));
+    lv->sin_radius = malloc(room * sizeof(float));
+    lv->child = pixels ? NULL : malloc((n + 1) * sizeof(uint32_t));
+    lv->extent = pixels ? malloc(room * 6 * sizeof(float)) : NULL;
+    return lv->dir && lv->flux && lv->vec && lv->sin_radius && (pixels ? lv->extent != NULL : lv->child != NULL)
+               ? 0
+               : -1;
 }
 
-/* Greedy clustering, brightest first: each light joins the first cluster whose seed lies within
- * `radius` of it, or seeds a new one.  Writes the clusters' flux-weighted unit directions, spans
- * and summed fluxes (room for n) and returns their number; (size_t)-1 when out of memory. */
-static size_t cluster(const float *dir, const float *flux, const float *span, size_t n, double radius, float *cdir,
-                      float *cflux, float *cspan)
+/* Greedy clustering, brightest first: each light of `below` joins the first cluster whose seed
+ * lies within `radius` of it, or seeds a new one.  parent[i] gets light i's cluster; the clusters'
+ * flux-weighted unit directions, summed fluxes and flux vectors go to cdir, cflux, cvec (room for
+ * below->count).  Returns their number; (size_t)-1 when out of memory. */
+static size_t cluster(const light_level *below, double radius, uint32_t *parent, float *cdir, float *cflux,
+                      float *cvec)
 {
+    size_t n = below->count;
     size_t *seed = malloc((n ? n : 1) * sizeof *seed);
-    double *acc = calloc((n ? n : 1) * 6, sizeof *acc); /* weighted direction, flux */
+    double *acc = calloc((n ? n : 1) * 15, sizeof *acc); /* weighted direction, flux, flux vectors */
     if (!seed || !acc) {
         free(seed);
         free(acc);
@@ -151,36 +88,79 @@ static size_t cluster(const float *dir, const float *flux, const float *span, si
     double cos_r = cos(radius);
     size_t nc = 0;
     for (size_t i = 0; i < n; i++) {
-        const float *d = dir + 3 * i;
+        const float *d = below->dir + 3 * i;
         size_t c = 0;
         while (c < nc) {
-            const float *o = dir + 3 * seed[c];
+            const float *o = below->dir + 3 * seed[c];
             if ((double)d[0] * o[0] + (double)d[1] * o[1] + (double)d[2] * o[2] >= cos_r)
                 break;
             c++;
         }
         if (c == nc)
             seed[nc++] = i;
-        const float *f = flux + 3 * i;
-        double w = ((double)f[0] + f[1] + f[2]) / 3.0;
+        parent[i] = (uint32_t)c;
+        const float *f = below->flux + 3 * i, *vec = below->vec + 9 * i;
+        double *a = acc + 15 * c;
         for (int k = 0; k < 3; k++) {
-            acc[6 * c + k] += w * span[i] * d[k];
-            acc[6 * c + 3 + k] += f[k];
+            /* channels averaged: the flux-weighted direction */
+            a[k] += ((double)vec[k] + vec[3 + k] + vec[6 + k]) / 3.0;
+            a[3 + k] += f[k];
         }
+        for (int k = 0; k < 9; k++)
+            a[6 + k] += vec[k];
     }
     for (size_t c = 0; c < nc; c++) {
-        double *a = acc + 6 * c, len = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
-        double w = (a[3] + a[4] + a[5]) / 3.0;
-        cspan[c] = len > 0.0 && w > 0.0 ? (float)fmin(1.0, len / w) : 1.0f;
+        double *a = acc + 15 * c, len = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
         for (int k = 0; k < 3; k++) {
             /* a black cluster (all weights 0) keeps its seed's direction */
-            cdir[3 * c + k] = len > 0.0 ? (float)(a[k] / len) : dir[3 * seed[c] + k];
+            cdir[3 * c + k] = len > 0.0 ? (float)(a[k] / len) : below->dir[3 * seed[c] + k];
             cflux[3 * c + k] = (float)a[3 + k];
         }
+        for (int k = 0; k < 9; k++)
+            cvec[9 * c + k] = (float)a[6 + k];
     }
     free(seed);
     free(acc);
     return nc;
+}
+
+/* Puts level k's lights in the order `order` gives (order[new] = old), carrying their children
+ * ranges' old order along in `key` (the position each old light's parent now has). */
+static int permute_level(light_level *lv, const size_t *order)
+{
+    size_t n = lv->count;
+    light_level t = {0};
+    if (alloc_level(&t, n, lv->extent != NULL))
+        goto fail;
+    for (size_t j = 0; j < n; j++) {
+        size_t i = order[j];
+        memcpy(t.dir + 3 * j, lv->dir + 3 * i, 3 * sizeof(float));
+        memcpy(t.flux + 3 * j, lv->flux + 3 * i, 3 * sizeof(float));
+        memcpy(t.vec + 9 * j, lv->vec + 9 * i, 9 * sizeof(float));
+        t.sin_radius[j] = lv->sin_radius[i];
+        if (lv->extent)
+            memcpy(t.extent + 6 * j, lv->extent + 6 * i, 6 * sizeof(float));
+    }
+    free(lv->dir);
+    free(lv->flux);
+    free(lv->vec);
+    free(lv->sin_radius);
+    free(lv->extent);
+    lv->dir = t.dir;
+    lv->flux = t.flux;
+    lv->vec = t.vec;
+    lv->sin_radius = t.sin_radius;
+    lv->extent = t.extent;
+    free(t.child); /* the children ranges are filled by the caller */
+    return 0;
+fail:
+    free(t.dir);
+    free(t.flux);
+    free(t.vec);
+    free(t.sin_radius);
+    free(t.child);
+    free(t.extent);
+    return -1;
 }
 
 wenv_status wenv_lights_create(wenv_lights **out, const wenv_bright_pixel *px, size_t n, wenv_error *err)
@@ -188,77 +168,129 @@ wenv_status wenv_lights_create(wenv_lights **out, const wenv_bright_pixel *px, s
     *out = NULL;
     size_t room = n ? n : 1;
     wenv_lights *lights = calloc(1, sizeof *lights);
-    /* two sets of (direction, flux, span): the level below, and the one being clustered from it;
-     * then the pixels' extents */
-    float *buf = malloc(room * 20 * sizeof(float));
-    if (!lights || !buf)
+    /* per level above the pixels, each light's parent; a scratch for orders and positions */
+    uint32_t *parent = malloc(room * WENV_LIGHT_LEVELS * sizeof *parent);
+    size_t *order = malloc(room * sizeof *order), *pos = malloc(room * sizeof *pos), *next = malloc((room + 1) * sizeof *next);
+    if (!lights || !parent || !order || !pos || !next)
         goto nomem;
-    float *dir = buf, *flux = buf + 3 * room, *span = buf + 6 * room;
-    float *cdir = buf + 7 * room, *cflux = buf + 10 * room, *cspan = buf + 13 * room, *extent = buf + 14 * room;
+    light_level *pixels = &lights->level[0];
+    if (alloc_level(pixels, n, 1))
+        goto nomem;
     for (size_t i = 0; i < n; i++) {
-        memcpy(dir + 3 * i, px[i].dir, 3 * sizeof(float));
-        memcpy(flux + 3 * i, px[i].flux, 3 * sizeof(float));
-        memcpy(extent + 6 * i, px[i].du, 3 * sizeof(float));
-        memcpy(extent + 6 * i + 3, px[i].dv, 3 * sizeof(float));
-        span[i] = 1.0f;
+        memcpy(pixels->dir + 3 * i, px[i].dir, 3 * sizeof(float));
+        memcpy(pixels->flux + 3 * i, px[i].flux, 3 * sizeof(float));
+        memcpy(pixels->extent + 6 * i, px[i].du, 3 * sizeof(float));
+        memcpy(pixels->extent + 6 * i + 3, px[i].dv, 3 * sizeof(float));
+        const float *e = pixels->extent + 6 * i;
+        float reach = sqrtf(dot3(e, e)) + sqrtf(dot3(e + 3, e + 3));
+        pixels->reach = max_f(pixels->reach, reach);
+        for (int c = 0; c < 3; c++)
+            for (int k = 0; k < 3; k++)
+                pixels->vec[9 * i + 3 * c + k] = px[i].flux[c] * px[i].dir[k];
+        pixels->sin_radius[i] = 0.0f;
     }
-    if (fill_level(&lights->level[0], dir, flux, span, extent, n))
-        goto nomem;
-    /* each level clusters the one below it, in the order its seeds were made (brightest first) */
-    size_t m = n;
+    /* each level clusters the one below it, seeds brightest first */
     for (int k = 1; k < WENV_LIGHT_LEVELS; k++) {
-        size_t nc = cluster(dir, flux, span, m, WENV_LIGHT_RADIUS(k), cdir, cflux, cspan);
-        if (nc == (size_t)-1 || fill_level(&lights->level[k], cdir, cflux, cspan, NULL, nc))
+        light_level *below = &lights->level[k - 1], *lv = &lights->level[k];
+        if (alloc_level(lv, below->count, 0))
             goto nomem;
-        float *t;
-        t = dir, dir = cdir, cdir = t;
-        t = flux, flux = cflux, cflux = t;
-        t = span, span = cspan, cspan = t;
-        m = nc;
+        uint32_t *par = parent + (size_t)(k - 1) * room;
+        size_t nc = cluster(below, WENV_LIGHT_RADIUS(k), par, lv->dir, lv->flux, lv->vec);
+        if (nc == (size_t)-1)
+            goto nomem;
+        lv->count = nc;
     }
-    free(buf);
+    /* top down: order each level so that every cluster's children are consecutive below it */
+    for (int k = WENV_LIGHT_LEVELS - 1; k >= 1; k--) {
+        light_level *lv = &lights->level[k], *below = &lights->level[k - 1];
+        const uint32_t *par = parent + (size_t)(k - 1) * room;
+        /* pos[c]: where cluster c (in cluster order) now sits in level k; identity at the top */
+        if (k == WENV_LIGHT_LEVELS - 1)
+            for (size_t c = 0; c < lv->count; c++)
+                pos[c] = c;
+        /* counting sort of the lights below by their parent's position */
+        memset(next, 0, (lv->count + 1) * sizeof *next);
+        for (size_t i = 0; i < below->count; i++)
+            next[pos[par[i]] + 1]++;
+        for (size_t c = 0; c < lv->count; c++)
+            next[c + 1] += next[c];
+        for (size_t c = 0; c <= lv->count; c++)
+            lv->child[c] = (uint32_t)next[c];
+        for (size_t i = 0; i < below->count; i++)
+            order[next[pos[par[i]]]++] = i;
+        if (permute_level(below, order))
+            goto nomem;
+        /* the next level down finds its parents (lights of this one below) by their new places */
+        for (size_t j = 0; j < below->count; j++)
+            pos[order[j]] = j;
+    }
+    /* radii, bottom up: every pixel centre of a cluster lies within its sin_radius of its direction */
+    for (int k = 1; k < WENV_LIGHT_LEVELS; k++) {
+        light_level *lv = &lights->level[k], *below = &lights->level[k - 1];
+        for (size_t c = 0; c < lv->count; c++) {
+            double r = 0.0;
+            for (uint32_t j = lv->child[c]; j < lv->child[c + 1]; j++) {
+                const float *a = lv->dir + 3 * c, *b = below->dir + 3 * j;
+                double d = fmax(-1.0, fmin(1.0, (double)a[0] * b[0] + (double)a[1] * b[1] + (double)a[2] * b[2]));
+                r = fmax(r, acos(d) + asin(fmin(1.0, (double)below->sin_radius[j])));
+            }
+            /* a hair wider than measured, so float rounding in the tests never misjudges a light */
+            r += 1e-4;
+            lv->sin_radius[c] = r >= 0.5 * M_PI ? 1.0f : (float)sin(r);
+        }
+    }
+    free(parent);
+    free(order);
+    free(pos);
+    free(next);
     *out = lights;
     return WENV_OK;
 nomem:
     wenv_lights_free(lights);
-    free(buf);
+    free(parent);
+    free(order);
+    free(pos);
+    free(next);
     return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the exact lights");
 }
 
-/* Whether bin b's cone meets the cone of half-angle alpha (cos_a, sin_a) about axis x. */
-static inline int bin_meets(const light_level *lv, size_t b, const float x[3], float cos_a, float sin_a)
-{
-    float cr = lv->cos_radius[b], sr = lv->sin_radius[b];
-    if (cos_a <= -cr) /* alpha + radius >= pi */
-        return 1;
-    const float *a = lv->axis + 3 * b;
-    return a[0] * x[0] + a[1] * x[1] + a[2] * x[2] >= cos_a * cr - sin_a * sr;
-}
+/* Depth-first walk over the cluster tree: a stack of ranges of lights, one per level at most. */
+typedef struct {
+    int level;
+    uint32_t next, end;
+} tree_range;
 
-static inline void irradiance_range(const light_level *lv, size_t begin, size_t end, const float n[3], float e[3])
+void wenv_lights_irradiance(const wenv_lights *lights, const float n[3], float e[3])
 {
-    for (size_t i = begin; i < end; i++) {
-        const float *l = lv->dir + 3 * i, *flux = lv->flux + 3 * i;
-        float ci = n[0] * l[0] + n[1] * l[1] + n[2] * l[2];
-        if (!(ci > 0.0f))
+    const int top = WENV_LIGHT_LEVELS - 1;
+    tree_range stack[WENV_LIGHT_LEVELS];
+    int depth = 0;
+    stack[depth++] = (tree_range){top, 0, (uint32_t)lights->level[top].count};
+    while (depth) {
+        tree_range *r = &stack[depth - 1];
+        if (r->next == r->end) {
+            depth--;
             continue;
-        ci *= lv->span[i];
-        e[0] += ci * flux[0];
-        e[1] += ci * flux[1];
-        e[2] += ci * flux[2];
+        }
+        const light_level *lv = &lights->level[r->level];
+        uint32_t i = r->next++;
+        const float *l = lv->dir + 3 * i, *vec = lv->vec + 9 * i;
+        float ci = dot3(n, l), sr = lv->sin_radius[i];
+        /* the cosine is linear in the direction: a cluster wholly above the horizon is exact as its
+         * flux vectors; one wholly below adds nothing; one across the horizon is read from its parts
+         * (a pixel, at its centre as the reference reads it) */
+        if (ci <= -sr)
+            continue;
+        if (ci >= sr || r->level == 0) {
+            if (ci > 0.0f) {
+                e[0] += dot3(n, vec);
+                e[1] += dot3(n, vec + 3);
+                e[2] += dot3(n, vec + 6);
+            }
+            continue;
+        }
+        stack[depth++] = (tree_range){r->level - 1, lv->child[i], lv->child[i + 1]};
     }
-}
-
-void wenv_lights_irradiance(const wenv_lights *lights, int level, const float n[3], float e[3])
-{
-    const light_level *lv = &lights->level[level];
-    if (lv->count < FEW_LIGHTS) {
-        irradiance_range(lv, 0, lv->count, n, e);
-        return;
-    }
-    for (size_t b = 0; b < BINS; b++)
-        if (lv->offset[b] < lv->offset[b + 1] && bin_meets(lv, b, n, 0.0f, 1.0f))
-            irradiance_range(lv, lv->offset[b], lv->offset[b + 1], n, e);
 }
 
 /* The view's terms, computed once per vertex (and only if a light is near a lobe). */
@@ -293,39 +325,107 @@ static inline float cos_half(const specular_view *sv, const float l[3], float ci
     return h2 > 1e-12f ? (ci + sv->co) / sqrtf(h2) : -2.0f;
 }
 
-/* The lobes' f cos for light direction l (n.l = ci > 0, l.v = lv_dot) times `flux` x weight, added to s. */
-static inline void add_light(specular_view *sv, float ci, float lv_dot, const float flux[3], float weight, float s[3])
+/* Light direction l (n.l = ci > 0, l.v = lv_dot) in the view's frame (+Z the normal, wo in xz). */
+static inline void view_frame_dir(const specular_view *sv, float ci, float lv_dot, float wi[3])
 {
-    const wenv_material *mat = sv->mat;
     float co = sv->co, so = sv->so;
     float si = sqrtf(max_f(0.0f, 1.0f - ci * ci));
     float cphi = si * so > 1e-6f ? (lv_dot - ci * co) / (si * so) : 1.0f;
     cphi = min_f(1.0f, max_f(-1.0f, cphi));
-    float wi[3] = {si * cphi, si * sqrtf(1.0f - cphi * cphi), ci}, rgb[3];
-    if (!sv->have_terms) {
-        sv->use_float = wenv_material_view_terms(mat) <= MAX_VIEW_TERMS;
-        if (sv->use_float)
-            wenv_material_prepare_view_f(mat, sv->wo, sv->terms);
-        sv->specular_cos_f = wenv_material_specular_cos_f_fn(mat);
-        sv->have_terms = 1;
-    }
+    wi[0] = si * cphi;
+    wi[1] = si * sqrtf(1.0f - cphi * cphi);
+    wi[2] = ci;
+}
+
+static inline void prepare_terms(specular_view *sv)
+{
+    if (sv->have_terms)
+        return;
+    sv->use_float = wenv_material_view_terms(sv->mat) <= MAX_VIEW_TERMS;
+    if (sv->use_float)
+        wenv_material_prepare_view_f(sv->mat, sv->wo, sv->terms);
+    sv->specular_cos_f = wenv_material_specular_cos_f_fn(sv->mat);
+    sv->have_terms = 1;
+}
+
+/* The lobes' f cos for light direction l (n.l = ci > 0, l.v = lv_dot), into rgb. */
+static inline void eval_light(specular_view *sv, float ci, float lv_dot, float rgb[3])
+{
+    float wi[3];
+    view_frame_dir(sv, ci, lv_dot, wi);
+    prepare_terms(sv);
     if (sv->use_float) {
-        sv->specular_cos_f(mat, wi, sv->wo, sv->terms, rgb);
+        sv->specular_cos_f(sv->mat, wi, sv->wo, sv->terms, rgb);
     } else {
         double wid[3] = {wi[0], wi[1], wi[2]}, wod[3] = {sv->wo[0], sv->wo[1], sv->wo[2]}, rgbd[3];
-        wenv_material_specular_cos(mat, wid, wod, rgbd);
+        wenv_material_specular_cos(sv->mat, wid, wod, rgbd);
         for (int c = 0; c < 3; c++)
             rgb[c] = (float)rgbd[c];
     }
-    s[0] += weight * rgb[0] * flux[0];
-    s[1] += weight * rgb[1] * flux[1];
-    s[2] += weight * rgb[2] * flux[2];
+}
+
+/* Lights accepted by a vertex's walk, evaluated together (the model's batched float evaluator
+ * runs several directions per instruction where the CPU allows). */
+#define BATCH 64
+typedef struct {
+    size_t n;
+    float x[BATCH], y[BATCH], z[BATCH];    /* wi in the view's frame */
+    float fr[BATCH], fg[BATCH], fb[BATCH]; /* flux x weight */
+    float r[BATCH], g[BATCH], b[BATCH];    /* f cos, filled by the evaluator */
+} light_batch;
+
+static void flush_batch(specular_view *sv, light_batch *lb, float s[3])
+{
+    size_t n = lb->n;
+    if (!n)
+        return;
+    prepare_terms(sv);
+    if (sv->use_float) {
+        wenv_material_specular_cos_f_many(sv->mat, sv->wo, sv->terms, n, lb->x, lb->y, lb->z, lb->r, lb->g, lb->b);
+    } else {
+        double wod[3] = {sv->wo[0], sv->wo[1], sv->wo[2]};
+        for (size_t k = 0; k < n; k++) {
+            double wid[3] = {lb->x[k], lb->y[k], lb->z[k]}, rgbd[3];
+            wenv_material_specular_cos(sv->mat, wid, wod, rgbd);
+            lb->r[k] = (float)rgbd[0];
+            lb->g[k] = (float)rgbd[1];
+            lb->b[k] = (float)rgbd[2];
+        }
+    }
+    float a0 = 0.0f, a1 = 0.0f, a2 = 0.0f;
+    for (size_t k = 0; k < n; k++) {
+        a0 += lb->r[k] * lb->fr[k];
+        a1 += lb->g[k] * lb->fg[k];
+        a2 += lb->b[k] * lb->fb[k];
+    }
+    s[0] += a0;
+    s[1] += a1;
+    s[2] += a2;
+    lb->n = 0;
+}
+
+/* Queues light direction l (n.l = ci > 0, l.v = lv_dot) with `flux` x weight. */
+static inline void push_light(specular_view *sv, light_batch *lb, float ci, float lv_dot, const float flux[3],
+                              float weight, float s[3])
+{
+    float wi[3];
+    view_frame_dir(sv, ci, lv_dot, wi);
+    size_t k = lb->n++;
+    lb->x[k] = wi[0];
+    lb->y[k] = wi[1];
+    lb->z[k] = wi[2];
+    lb->fr[k] = weight * flux[0];
+    lb->fg[k] = weight * flux[1];
+    lb->fb[k] = weight * flux[2];
+    if (lb->n == BATCH)
+        flush_batch(sv, lb, s);
 }
 
 /* A pixel wider than the lobe: its point at the centre would alias (a lobe narrower than a pixel
  * reflects it where its centre happens to fall), so its area is integrated on a grid of points as
  * the reference integrates narrow lobes over the pixels' areas.  Returns 0 if a point suffices. */
-static inline int add_pixel_area(specular_view *sv, const float l[3], const float e[6], const float flux[3], float s[3])
+static inline int add_pixel_area(specular_view *sv, light_batch *lb, const float l[3], const float e[6],
+                                  const float flux[3], float s[3])
 {
     float lu = sqrtf(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]), lv = sqrtf(e[3] * e[3] + e[4] * e[4] + e[5] * e[5]);
     int nu = (int)min_f((float)MAX_SUBPIXELS, ceilf(sv->subpixel_scale * lu));
@@ -349,39 +449,42 @@ static inline int add_pixel_area(specular_view *sv, const float l[3], const floa
             float ci = n[0] * p[0] + n[1] * p[1] + n[2] * p[2], lv_dot;
             if (!(ci > 0.0f) || !near_a_lobe(sv, cos_half(sv, p, ci, &lv_dot), 0.0f))
                 continue;
-            add_light(sv, ci, lv_dot, flux, weight, s);
+            push_light(sv, lb, ci, lv_dot, flux, weight, s);
         }
     }
     return 1;
 }
 
-/* A light off every lobe (n.h below the lobe's cut) costs a few dot products; one inside is
- * evaluated exactly in float. */
-static inline void specular_range(const light_level *lv, size_t begin, size_t end, specular_view *sv, float s[3])
+/* One pixel: a light off every lobe (n.h below the lobe's cut) costs a few dot products; one inside
+ * is evaluated exactly in float, or over its area when the lobe is narrower than it. */
+static inline void specular_pixel(const light_level *lv, size_t i, specular_view *sv, light_batch *lb, float s[3])
 {
-    const float *n = sv->n;
-    float slack = sv->slack;
-    for (size_t i = begin; i < end; i++) {
-        const float *l = lv->dir + 3 * i, *flux = lv->flux + 3 * i;
-        float ci = n[0] * l[0] + n[1] * l[1] + n[2] * l[2], lv_dot;
-        if (!(ci > -sv->reach))
-            continue;
-        float ch = cos_half(sv, l, ci, &lv_dot);
-        if (!near_a_lobe(sv, ch, slack))
-            continue;
-        if (sv->reach > 0.0f && add_pixel_area(sv, l, lv->extent + 6 * i, flux, s))
-            continue;
-        if (!(ci > 0.0f) || !near_a_lobe(sv, ch, 0.0f))
-            continue;
-        add_light(sv, ci, lv_dot, flux, 1.0f, s);
-    }
+    const float *l = lv->dir + 3 * i, *flux = lv->flux + 3 * i;
+    float ci = dot3(sv->n, l), lv_dot;
+    if (!(ci > -sv->reach))
+        return;
+    float ch = cos_half(sv, l, ci, &lv_dot);
+    if (!near_a_lobe(sv, ch, sv->slack))
+        return;
+    if (sv->reach > 0.0f && add_pixel_area(sv, lb, l, lv->extent + 6 * i, flux, s))
+        return;
+    if (!(ci > 0.0f) || !near_a_lobe(sv, ch, 0.0f))
+        return;
+    push_light(sv, lb, ci, lv_dot, flux, 1.0f, s);
 }
 
-void wenv_lights_specular(const wenv_lights *lights, int level, const wenv_material *mat, const float *cos_h_min,
-                          double cone_cos, double narrow_width, const float n[3], const float v[3], float cos_v,
-                          float s[3])
+/* A cluster is read at its flux-weighted centre, which is exact to first order; the second-order
+ * error is about its flux x f cos x (radius / w)^2 (1 + 2 q) for a lobe w wide across (Gaussian
+ * about the mirror direction, q its exponent at the centre).  The walk reads a cluster whole when
+ * that is within the tolerance and its radius a fraction of the lobe's width, or when all of it lies
+ * so far out in the lobe's tail that the whole cluster is within the tolerance; otherwise its
+ * children. */
+#define CLUSTER_WIDTH_FRACTION 0.5f
+
+void wenv_lights_specular(const wenv_lights *lights, const wenv_material *mat, const float *cos_h_min,
+                          const wenv_lights_lobe *lobe, const float n[3], const float v[3], float cos_v,
+                          float tolerance, float s[3])
 {
-    const light_level *lv = &lights->level[level];
     specular_view sv = {.mat = mat, .n_lobes = wenv_material_lobe_count(mat), .cos_h_min = cos_h_min, .co = cos_v};
     memcpy(sv.n, n, sizeof sv.n);
     memcpy(sv.v, v, sizeof sv.v);
@@ -390,25 +493,126 @@ void wenv_lights_specular(const wenv_lights *lights, int level, const wenv_mater
     sv.wo[0] = sv.so;
     sv.wo[1] = 0.0f;
     sv.wo[2] = cos_v;
-    if (lv->extent && narrow_width > 0.0 && 2.0 * SUBPIXELS_PER_WIDTH * lv->reach > narrow_width) {
+    const light_level *pixels = &lights->level[0];
+    double cone_cos = lobe->cone_cos;
+    /* across the mirror direction a lobe of roughness m is about 2 m cos(theta_v) wide, squeezed
+     * against the horizon (to about m^2 / 4 at it), and 2 m along it */
+    float m = (float)lobe->roughness, w_across = 2.0f * m * cos_v + 0.25f * m * m, w_along = 2.0f * m;
+    if (lobe->narrow && 2.0f * SUBPIXELS_PER_WIDTH * pixels->reach > w_across) {
         /* pixels wider than the lobe: their extents are read, and a pixel whose centre is off the
          * lobe by less than its reach may still meet it.  Near the mirror direction n.h moves by
          * up to the light's displacement over 2 n.v; the cone about it widens by the reach. */
-        sv.subpixel_scale = (float)(2.0 * SUBPIXELS_PER_WIDTH / narrow_width);
-        sv.reach = lv->reach;
-        sv.slack = (float)fmin(2.0, lv->reach / (2.0 * fmax(cos_v, 1e-3)) + 1e-6);
+        sv.subpixel_scale = 2.0f * SUBPIXELS_PER_WIDTH / w_across;
+        sv.reach = pixels->reach;
+        sv.slack = (float)fmin(2.0, pixels->reach / (2.0 * fmax(cos_v, 1e-3)) + 1e-6);
         if (cone_cos > -1.0) {
-            double cone = acos(fmin(1.0, cone_cos)) + lv->reach;
+            double cone = acos(fmin(1.0, cone_cos)) + pixels->reach;
             cone_cos = cone >= M_PI ? -1.0 : cos(cone);
         }
     }
-    if (lv->count < FEW_LIGHTS || cone_cos <= -1.0) {
-        specular_range(lv, 0, lv->count, &sv, s);
-        return;
-    }
     float r[3] = {2.0f * cos_v * n[0] - v[0], 2.0f * cos_v * n[1] - v[1], 2.0f * cos_v * n[2] - v[2]};
-    float cos_a = (float)cone_cos, sin_a = (float)sqrt(fmax(0.0, 1.0 - cone_cos * cone_cos));
-    for (size_t b = 0; b < BINS; b++)
-        if (lv->offset[b] < lv->offset[b + 1] && bin_meets(lv, b, r, cos_a, sin_a))
-            specular_range(lv, lv->offset[b], lv->offset[b + 1], &sv, s);
+    /* axes about r: across (perpendicular to the plane of n and r) and along (in it) */
+    float across[3] = {n[1] * r[2] - n[2] * r[1], n[2] * r[0] - n[0] * r[2], n[0] * r[1] - n[1] * r[0]};
+    float len = sqrtf(dot3(across, across));
+    /* only lobes whose width and tails are known bound a cluster's error */
+    int centred = lobe->modelled;
+    if (len > 1e-6f) {
+        for (int c = 0; c < 3; c++)
+            across[c] /= len;
+    } else { /* the view along the normal: the lobe is round */
+        w_across = w_along = min_f(w_across, w_along);
+        float a[3] = {fabsf(r[0]) < 0.9f ? 1.0f : 0.0f, fabsf(r[0]) < 0.9f ? 0.0f : 1.0f, 0.0f};
+        float d = dot3(a, r);
+        for (int c = 0; c < 3; c++)
+            across[c] = a[c] - d * r[c];
+        len = sqrtf(dot3(across, across));
+        for (int c = 0; c < 3; c++)
+            across[c] /= len;
+    }
+    float along[3] = {r[1] * across[2] - r[2] * across[1], r[2] * across[0] - r[0] * across[2],
+                      r[0] * across[1] - r[1] * across[0]};
+    float inv_across = 1.0f / w_across, inv_along = 1.0f / w_along;
+    float cone = cone_cos > -1.0 ? (float)cone_cos : -2.0f;
+    /* about the lobes' largest f cos (RGB summed): at the mirror direction, or, towards grazing,
+     * where the cosine has grown before D falls (about m above it), with a margin */
+    float peak = 0.0f;
+    if (centred) {
+        float up[3] = {n[0] - cos_v * r[0], n[1] - cos_v * r[1], n[2] - cos_v * r[2]};
+        float ul = sqrtf(dot3(up, up));
+        for (int t = 0; t < 3; t++) {
+            float ang = 0.5f * (float)t * m, ca = cosf(ang), sa = ul > 1e-6f ? sinf(ang) / ul : 0.0f;
+            float d[3] = {ca * r[0] + sa * up[0], ca * r[1] + sa * up[1], ca * r[2] + sa * up[2]};
+            float cd = dot3(n, d), rgb[3];
+            if (!(cd > 0.0f))
+                continue;
+            eval_light(&sv, cd, dot3(d, v), rgb);
+            peak = max_f(peak, rgb[0] + rgb[1] + rgb[2]);
+        }
+        peak *= 1.5f;
+    }
+
+    light_batch lb;
+    lb.n = 0;
+    const int top = WENV_LIGHT_LEVELS - 1;
+    tree_range stack[WENV_LIGHT_LEVELS];
+    int depth = 0;
+    stack[depth++] = (tree_range){top, 0, (uint32_t)lights->level[top].count};
+    while (depth) {
+        tree_range *rg = &stack[depth - 1];
+        if (rg->next == rg->end) {
+            depth--;
+            continue;
+        }
+        int k = rg->level;
+        const light_level *lv = &lights->level[k];
+        uint32_t i = rg->next++;
+        if (k == 0) {
+            specular_pixel(lv, i, &sv, &lb, s);
+            continue;
+        }
+        const float *l = lv->dir + 3 * i, *flux = lv->flux + 3 * i;
+        float sr = lv->sin_radius[i] + sv.reach, cr = sqrtf(max_f(0.0f, 1.0f - sr * sr));
+        float ci = dot3(n, l);
+        if (ci <= -sr) /* wholly below the horizon */
+            continue;
+        float cd = dot3(r, l), sd = sqrtf(max_f(0.0f, 1.0f - cd * cd));
+        /* cos of the nearest angle to r: wholly outside every lobe's cone is skipped */
+        float c_near = sd <= sr ? 1.0f : cd * cr + sd * sr;
+        if (c_near < cone)
+            continue;
+        float flux_sum = flux[0] + flux[1] + flux[2];
+        float bound = INFINITY, q = 0.0f;
+        if (centred) {
+            /* the Gaussian exponent at the centre, and at the cluster's point nearest the peak (each
+             * axis on its own); a Gaussian or GGX tail falls at least as 1 / (1 + q)^2 */
+            float a = dot3(l, across), b = dot3(l, along), ra = sr * inv_across, rb = sr * inv_along;
+            a *= inv_across;
+            b *= inv_along;
+            q = a * a + b * b;
+            float an = max_f(0.0f, fabsf(a) - ra), bn = max_f(0.0f, fabsf(b) - rb);
+            float t = 1.0f / (1.0f + an * an + bn * bn);
+            /* behind the mirror direction (cd < 0) the lobe holds nothing of note */
+            bound = cd > 0.0f ? flux_sum * peak * t * t : 0.0f;
+            if (bound <= tolerance) {
+                /* all of it is within the tolerance: its centre stands for it */
+                float lv_dot;
+                float ch = cos_half(&sv, l, ci, &lv_dot);
+                if (ci > 0.0f && near_a_lobe(&sv, ch, 0.0f))
+                    push_light(&sv, &lb, ci, lv_dot, flux, 1.0f, s);
+                continue;
+            }
+        }
+        /* Without a model of the lobe's shape every pixel is read: a table's lobe only resembles
+         * its fitted shape (sunset, t0.1: 0.72 % against 0.36 %), and a retro-reflective one lies
+         * elsewhere (courtyard, retro: 1.15 % against 0.55 %). */
+        if (centred && ci >= sr && sr <= CLUSTER_WIDTH_FRACTION * w_across) {
+            float x = sr * inv_across;
+            if (bound * x * x * (1.0f + 2.0f * q) <= tolerance) {
+                push_light(&sv, &lb, ci, dot3(l, v), flux, 1.0f, s);
+                continue;
+            }
+        }
+        stack[depth++] = (tree_range){k - 1, lv->child[i], lv->child[i + 1]};
+    }
+    flush_batch(&sv, &lb, s);
 }

@@ -18,6 +18,7 @@ struct wenv_resampler {
     size_t global_n, local_n, k;
     float *sub_dirs;    /* N_global * k * k * 3 */
     double *sub_omega;  /* N_global: solid angle of one sub-sample of each texel */
+    float *cone;        /* N_global * 4: a unit axis and the sine of the angle holding its sub-samples */
 };
 
 wenv_status wenv_resampler_create(wenv_resampler **out, size_t global_n, size_t local_n, wenv_error *err)
@@ -35,7 +36,8 @@ wenv_status wenv_resampler_create(wenv_resampler **out, size_t global_n, size_t 
     size_t ng = global_n * global_n, kk = rs->k * rs->k;
     rs->sub_dirs = malloc(ng * kk * 3 * sizeof(float));
     rs->sub_omega = malloc(ng * sizeof(double));
-    if (!rs->sub_dirs || !rs->sub_omega) {
+    rs->cone = malloc(ng * 4 * sizeof(float));
+    if (!rs->sub_dirs || !rs->sub_omega || !rs->cone) {
         wenv_resampler_free(rs);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the resampler");
     }
@@ -53,6 +55,18 @@ wenv_status wenv_resampler_create(wenv_resampler **out, size_t global_n, size_t 
             o[1] = (float)d[1];
             o[2] = (float)d[2];
         }
+        /* the texel's cone: its centre, and the widest angle to a sub-sample (a hair more) */
+        double c[3], r = 0.0;
+        wenv_oct_decode(wenv_map_texel_center(global_n, i), wenv_map_texel_center(global_n, j), c);
+        for (size_t q = 0; q < kk; q++) {
+            const float *o = rs->sub_dirs + (u * kk + q) * 3;
+            double dot = c[0] * o[0] + c[1] * o[1] + c[2] * o[2];
+            r = fmax(r, acos(fmax(-1.0, fmin(1.0, dot))));
+        }
+        float *cone = rs->cone + 4 * u;
+        for (int q = 0; q < 3; q++)
+            cone[q] = (float)c[q];
+        cone[3] = (float)sin(fmin(0.5 * M_PI, r + 1e-4));
     }
     *out = rs;
     return WENV_OK;
@@ -64,6 +78,7 @@ void wenv_resampler_free(wenv_resampler *rs)
         return;
     free(rs->sub_dirs);
     free(rs->sub_omega);
+    free(rs->cone);
     free(rs);
 }
 
@@ -71,10 +86,13 @@ void wenv_resampler_free(wenv_resampler *rs)
 static size_t splat_texel(const wenv_resampler *rs, const double f[9], size_t u, uint32_t *tap_t, double *tap_w)
 {
     size_t kk = rs->k * rs->k, count = 0;
-    const float *d = rs->sub_dirs + u * kk * 3;
+    const float *d = rs->sub_dirs + u * kk * 3, *cone = rs->cone + 4 * u;
     float ff[9];
     for (int c = 0; c < 9; c++)
         ff[c] = (float)f[c];
+    /* a texel wholly below the frame's horizon gives nothing: half of them, skipped whole */
+    if (ff[6] * cone[0] + ff[7] * cone[1] + ff[8] * cone[2] < -cone[3])
+        return 0;
     for (size_t q = 0; q < kk; q++, d += 3) {
         float loc[3] = {ff[0] * d[0] + ff[1] * d[1] + ff[2] * d[2], ff[3] * d[0] + ff[4] * d[1] + ff[5] * d[2],
                         ff[6] * d[0] + ff[7] * d[1] + ff[8] * d[2]};

@@ -42,15 +42,14 @@ static wenv_status fill_needed(wenv_wavelet *wavelet, wenv_error *err);
  * pass over the vertices -- and marks everything else stale, to be made when a vertex needs it. */
 wenv_status wenv_wavelet_remake_ready(wenv_wavelet *wavelet, int slices, wenv_error *err)
 {
-    size_t npairs = wavelet->ns * wavelet->nv;
     if (slices) {
         for (size_t s = 0; s < wavelet->ns; s++)
             wavelet->slice_need[s] |= wavelet->slice_ready[s] == USED;
         memset(wavelet->slice_ready, 0, wavelet->ns);
     }
-    for (size_t p = 0; p < npairs; p++)
-        wavelet->pair_need[p] |= wavelet->pair_ready[p] == USED;
-    memset(wavelet->pair_ready, 0, npairs);
+    for (size_t s = 0; s < wavelet->ns; s++)
+        wavelet->row_need[s] |= wavelet->row_ready[s] == USED;
+    memset(wavelet->row_ready, 0, wavelet->ns);
     if (!wavelet->have_env || !wavelet->have_mat)
         return WENV_OK;
     return fill_needed(wavelet, err);
@@ -149,28 +148,14 @@ static int compute_slice(wenv_wavelet *wavelet, size_t s, float *pixel_work, dou
     return 0;
 }
 
-/* The exact lights at one vertex: irradiance into e (the diffuse term scales it) and the specular
- * lobes' reflected radiance into s, each from the coarsest cluster level its lobe allows.  Towards
- * grazing a lobe narrows to about 2 m cos(theta_v) in azimuth, so there the pixels are read. */
-static void shade_direct(const wenv_wavelet *wavelet, const float n[3], const float v[3], float co, float e[3],
-                         float s[3])
-{
-    if (wavelet->has_diffuse)
-        wenv_lights_irradiance(wavelet->lights, wenv_lights_level(WENV_LIGHT_IRRADIANCE_WIDTH), n, e);
-    if (wavelet->has_lobes) {
-        double width = 2.0 * wavelet->lobe_m_min * co;
-        /* a lobe the reference integrates over the pixels' areas does the same here */
-        double narrow = wavelet->lobe_m_min < wavelet->narrow_roughness ? width : 0.0;
-        wenv_lights_specular(wavelet->lights, wenv_lights_level(width), wavelet->mat, wavelet->lobe_cos_h_min,
-                             wavelet->light_cone_cos, narrow, n, v, co, s);
-    }
-}
+/* The exact lights' error allowed per cluster, against the vertex's radiance without them plus
+ * what a uniform environment of the mean radiance would reflect (so that a vertex that sees
+ * little of the rest still reads its lights to a tolerance the whole image's error notices). */
+#define LIGHT_TOLERANCE 0.003f
 
 static void shade_vertex(const wenv_wavelet *wavelet, const vertex_taps *tp, float *o)
 {
     float e[3] = {0, 0, 0}, m[3] = {0, 0, 0}, s[3] = {0, 0, 0};
-    if (wenv_lights_count(wavelet->lights, 0))
-        shade_direct(wavelet, tp->n, tp->v, tp->cos_v, e, s);
     for (int k = 0; k < 4; k++) {
         const float *ir = wavelet->irradiance + 3 * (size_t)tp->sample[k];
         e[0] += tp->sample_w[k] * ir[0];
@@ -188,12 +173,13 @@ static void shade_vertex(const wenv_wavelet *wavelet, const vertex_taps *tp, flo
         }
     }
     float blend = wenv_grazing_blend(wavelet->grazing_rule, tp->cos_v);
+    float a[3] = {0.0f, 0.0f, 0.0f};
+    if (wavelet->albedo)
+        wenv_wavelet_albedo_at(wavelet->albedo, tp->cos_v, a);
     if (wavelet->albedo && blend < 1.0f) {
         /* A mean radiance under the lobe lies between the lighting's darkest and brightest
          * texels; wavelet truncation and interpolation can ring past either, most at narrow
          * lobes near grazing, where they overshot the brightest pixel several-fold. */
-        float a[3];
-        wenv_wavelet_albedo_at(wavelet->albedo, tp->cos_v, a);
         for (int c = 0; c < 3; c++) {
             float mc = m[c] < 0.0f ? 0.0f : (m[c] > wavelet->radiance_max[c] ? wavelet->radiance_max[c] : m[c]);
             s[c] += (1.0f - blend) * a[c] * mc;
@@ -204,6 +190,19 @@ static void shade_vertex(const wenv_wavelet *wavelet, const vertex_taps *tp, flo
         wenv_grazing_shade(wavelet->grazing_rule, wavelet->grazing_light, tp->n, tp->v, tp->cos_v, g);
         for (int c = 0; c < 3; c++)
             s[c] += blend * g[c];
+    }
+    if (wenv_lights_count(wavelet->lights, 0)) {
+        if (wavelet->has_diffuse)
+            wenv_lights_irradiance(wavelet->lights, tp->n, e);
+        if (wavelet->has_lobes) {
+            wenv_lights_lobe lobe = {.roughness = wavelet->lobe_m_min,
+                                     .cone_cos = wavelet->light_cone_cos,
+                                     .modelled = wavelet->lobes_modelled,
+                                     .narrow = wavelet->lobe_m_min < wavelet->narrow_roughness};
+            float scale = s[0] + s[1] + s[2] + wavelet->mean_radiance * (a[0] + a[1] + a[2]);
+            wenv_lights_specular(wavelet->lights, wavelet->mat, wavelet->lobe_cos_h_min, &lobe, tp->n, tp->v,
+                                 tp->cos_v, LIGHT_TOLERANCE * scale, s);
+        }
     }
     float d[3];
     wenv_diffuse_table_at(&wavelet->diffuse, tp->cos_v, d);
@@ -234,11 +233,11 @@ static inline int read_states(unsigned char *state, const uint32_t *idx, const f
     return all;
 }
 
-/* Whether every slice and table entry the vertex reads is ready; marks those ready as USED. */
+/* Whether every slice and table row the vertex reads is ready; marks those ready as USED. */
 static int read_taps(const wenv_wavelet *wavelet, const vertex_taps *tp)
 {
     int slices = read_states(wavelet->slice_ready, tp->sample, tp->sample_w, 4);
-    return read_states(wavelet->pair_ready, tp->pair, tp->pair_w, 16) && slices;
+    return read_states(wavelet->row_ready, tp->sample, tp->sample_w, 4) && slices;
 }
 
 /* Flags in `flags` the entries a vertex reads with weight.  Checked before written so that cache
@@ -256,17 +255,16 @@ static inline void flag_needed(unsigned char *flags, const uint32_t *idx, const 
     }
 }
 
-static inline void flag_taps(const vertex_taps *tp, unsigned char *slice_flags, unsigned char *pair_flags)
+static inline void flag_taps(const vertex_taps *tp, unsigned char *slice_flags, unsigned char *row_flags)
 {
     flag_needed(slice_flags, tp->sample, tp->sample_w, 4);
-    flag_needed(pair_flags, tp->pair, tp->pair_w, 16);
+    flag_needed(row_flags, tp->sample, tp->sample_w, 4);
 }
 
-/* Makes the lighting slices and table entries flagged in slice_need / pair_need. */
+/* Makes the lighting slices and table rows flagged in slice_need / row_need. */
 static wenv_status fill_needed(wenv_wavelet *wavelet, wenv_error *err)
 {
-    size_t npairs = wavelet->ns * wavelet->nv;
-    size_t *todo = malloc((wavelet->ns > npairs ? wavelet->ns : npairs) * sizeof(size_t));
+    size_t *todo = malloc(wavelet->ns * sizeof(size_t));
     if (!todo)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory shading");
     size_t ntodo = 0;
@@ -300,31 +298,18 @@ static wenv_status fill_needed(wenv_wavelet *wavelet, wenv_error *err)
         free(todo);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory computing lighting slices");
     }
-    /* table entries: sparse BRDF slice . dense lighting slice, per RGB channel */
     ntodo = 0;
-    for (size_t p = 0; p < npairs; p++) {
-        if (wavelet->pair_need[p] && !wavelet->pair_ready[p])
-            todo[ntodo++] = p;
-        wavelet->pair_need[p] = 0;
+    for (size_t s = 0; s < wavelet->ns; s++) {
+        if (wavelet->row_need[s] && !wavelet->row_ready[s])
+            todo[ntodo++] = s;
+        wavelet->row_need[s] = 0;
     }
-#pragma omp parallel for schedule(dynamic, 64) if (ntodo > 256)
-    for (size_t e = 0; e < ntodo; e++) {
-        size_t p = todo[e], s = p / wavelet->nv, j = p % wavelet->nv;
-        const float *slice = wavelet->slices[s];
-        float acc[3] = {0, 0, 0};
-        for (size_t q = wavelet->brdf_start[j]; q < wavelet->brdf_start[j + 1]; q++) {
-            const float *l = slice + 3 * (size_t)wavelet->brdf_idx[q], *b = wavelet->brdf_rgb + 3 * q;
-            acc[0] += l[0] * b[0];
-            acc[1] += l[1] * b[1];
-            acc[2] += l[2] * b[2];
-        }
-        const float *inv = wavelet->view_inv_albedo + 3 * j;
-        for (int c = 0; c < 3; c++)
-            wavelet->table[3 * p + c] = acc[c] * inv[c];
-        wavelet->pair_ready[p] = USED;
-    }
+    wenv_status st = ntodo ? wenv_wavelet_fill_rows(wavelet, todo, ntodo, err) : WENV_OK;
+    if (!st)
+        for (size_t e = 0; e < ntodo; e++)
+            wavelet->row_ready[todo[e]] = USED;
     free(todo);
-    return WENV_OK;
+    return st;
 }
 
 wenv_status wenv_wavelet_shade(wenv_wavelet *wavelet, const float *normals, const float *views, size_t n,
@@ -332,16 +317,17 @@ wenv_status wenv_wavelet_shade(wenv_wavelet *wavelet, const float *normals, cons
 {
     if (!wavelet->have_env || !wavelet->have_mat)
         return wenv_error_set(err, WENV_ERR_VALUE, "the shader needs an environment and a material");
-    /* One pass shades every vertex whose table entries exist (all of them for a view seen before)
-     * and flags what the others need; those are shaded after the missing entries are made. */
+    /* One pass shades every vertex whose table rows exist (all of them once its normals were seen,
+     * whatever the view) and flags what the others need; those are shaded after the missing rows
+     * are made. */
     size_t *pending = malloc((n ? n : 1) * sizeof(size_t));
     if (!pending)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory shading");
     /* what the previous call read is no longer the latest */
     for (size_t q = 0; q < wavelet->ns; q++)
         wavelet->slice_ready[q] = wavelet->slice_ready[q] != 0;
-    for (size_t q = 0; q < wavelet->ns * wavelet->nv; q++)
-        wavelet->pair_ready[q] = wavelet->pair_ready[q] != 0;
+    for (size_t q = 0; q < wavelet->ns; q++)
+        wavelet->row_ready[q] = wavelet->row_ready[q] != 0;
     atomic_size_t npending = 0;
     long long nn = (long long)n;
 #pragma omp parallel for schedule(static)
@@ -356,7 +342,7 @@ wenv_status wenv_wavelet_shade(wenv_wavelet *wavelet, const float *normals, cons
             shade_vertex(wavelet, &tp, o);
             continue;
         }
-        flag_taps(&tp, wavelet->slice_need, wavelet->pair_need);
+        flag_taps(&tp, wavelet->slice_need, wavelet->row_need);
         pending[atomic_fetch_add(&npending, 1)] = (size_t)i;
     }
     size_t np = atomic_load(&npending);

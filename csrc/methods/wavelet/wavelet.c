@@ -65,8 +65,8 @@ void wenv_wavelet_free(wenv_wavelet *wavelet)
     free(wavelet->cosine_haar);
     wenv_wavelet_free_material(wavelet);
     free(wavelet->table);
-    free(wavelet->pair_ready);
-    free(wavelet->pair_need);
+    free(wavelet->row_ready);
+    free(wavelet->row_need);
     free(wavelet);
 }
 
@@ -119,10 +119,10 @@ wenv_status wenv_wavelet_create(wenv_wavelet **out, const wenv_wavelet_quality *
     wavelet->slice_ready = calloc(wavelet->ns, 1);
     wavelet->slice_need = calloc(wavelet->ns, 1);
     wavelet->table = malloc(wavelet->ns * wavelet->nv * 3 * sizeof(float));
-    wavelet->pair_ready = calloc(wavelet->ns * wavelet->nv, 1);
-    wavelet->pair_need = calloc(wavelet->ns * wavelet->nv, 1);
+    wavelet->row_ready = calloc(wavelet->ns, 1);
+    wavelet->row_need = calloc(wavelet->ns, 1);
     if (!wavelet->frames || !wavelet->slices || !wavelet->irradiance || !wavelet->slice_ready || !wavelet->slice_need || !wavelet->table ||
-        !wavelet->pair_ready || !wavelet->pair_need) {
+        !wavelet->row_ready || !wavelet->row_need) {
         wenv_wavelet_free(wavelet);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the shader tables");
     }
@@ -199,6 +199,7 @@ wenv_status wenv_wavelet_set_environment(wenv_wavelet *wavelet, const wenv_envma
     if ((st = wenv_lights_create(&lights, bright, npixels, err)))
         goto done;
     wavelet->narrow_roughness = WENV_NARROW_LOBE_PIXELS * wenv_envmap_pixel_angle(env);
+    wavelet->mean_radiance = (float)(wenv_envmap_flux(env) / (4.0 * M_PI));
     for (size_t i = 0; i < npixels; i++)
         excluded[i] = bright[i].pixel;
     qsort(excluded, npixels, sizeof *excluded, compare_size);
@@ -270,14 +271,14 @@ void wenv_wavelet_get_stats(const wenv_wavelet *wavelet, wenv_wavelet_stats *sta
     size_t slices = 0, pairs = 0;
     for (size_t s = 0; s < wavelet->ns; s++)
         slices += wavelet->slices[s] != NULL;
-    for (size_t p = 0; p < wavelet->ns * wavelet->nv; p++)
-        pairs += wavelet->pair_ready[p] != 0;
+    for (size_t p = 0; p < wavelet->ns; p++)
+        pairs += wavelet->row_ready[p] != 0 ? wavelet->nv : 0;
     stats->slices_ready = slices;
     stats->pairs_ready = pairs;
     stats->light_terms = wavelet->light_count;
     stats->direct_lights = wenv_lights_count(wavelet->lights, 0);
     stats->slice_bytes = slices * wavelet->nl * 3 * sizeof(float);
-    stats->table_bytes = wavelet->ns * wavelet->nv * (3 * sizeof(float) + 2);
+    stats->table_bytes = wavelet->ns * (wavelet->nv * 3 * sizeof(float) + 2);
     stats->brdf_bytes = wavelet->stats.brdf_terms_total * 4 * sizeof(float);
     stats->grazing_bytes = wenv_grazing_light_bytes(wavelet->grazing_light) + wenv_grazing_rule_bytes(wavelet->grazing_rule);
 }

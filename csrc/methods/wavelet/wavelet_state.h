@@ -30,6 +30,7 @@ struct wenv_wavelet {
     float *irradiance;       /* ns x 3 */
     float radiance_max[3];   /* brightest texel of the lighting the slices see (lights out) */
     wenv_lights *lights;     /* pixels taken out as exact directional lights (lights.h) */
+    float mean_radiance;     /* the environment's, lights included (channels averaged) */
     double narrow_roughness; /* lobes narrower than this integrate the lights' pixel areas (envmap.h) */
     unsigned char *slice_ready, *slice_need; /* ready: 0 stale, READY, or USED (see READY) */
     wenv_grazing_light *grazing_light; /* quality.grazing > 0 only */
@@ -46,8 +47,9 @@ struct wenv_wavelet {
     wenv_material *mat;      /* for the direct lights */
     float *lobe_cos_h_min;   /* per lobe: below this n.h its D is negligible (< 1e-7 of its peak) */
     double light_cone_cos;   /* lights farther than this from the mirror direction miss every lobe */
-    double lobe_m_min;       /* the narrowest lobe's roughness (picks the lights' cluster level) */
+    double lobe_m_min;       /* the narrowest lobe's roughness (how finely the lights are read) */
     int mirror_centred;      /* normal samples keep the vertex's mirror direction (else its view) */
+    int lobes_modelled;      /* mirror-centred lobes that follow their shapes (lights.h) */
     float *albedo;           /* ALBEDO_N x 3: specular albedo at cos(view) = WENV_GRAZING_Z .. 1 */
     float *view_inv_albedo;  /* nv x 3: 1 / albedo of each view sample (0 where the albedo is 0) */
     wenv_diffuse_table diffuse; /* the Lambertian part's albedo / pi over the view's cosine */
@@ -57,12 +59,12 @@ struct wenv_wavelet {
     uint32_t *brdf_idx;
     float *brdf_rgb;
 
-    /* (normal sample, view sample) radiance table */
+    /* (normal sample, view sample) radiance table, made a row (a normal sample, every view) at a time */
     float *table;            /* ns x nv x 3 */
-    unsigned char *pair_ready, *pair_need;
+    unsigned char *row_ready, *row_need; /* per normal sample, as slice_ready and slice_need */
 };
 
-/* States of a lighting slice or table entry: made (READY), and made and read by the latest shade
+/* States of a lighting slice or table row: made (READY), and made and read by the latest shade
  * call (USED), which a new lighting or material remakes at once.  Marking use on the read that
  * checks readiness costs nothing extra per vertex. */
 #define READY 1
@@ -95,6 +97,8 @@ void wenv_wavelet_free_material(wenv_wavelet *wavelet);
 
 /* vertex_shading.c: after a new lighting (slices = 1) or material, remakes at once what the latest
  * shade call read and marks the rest stale. */
+/* table_rows.c: the table rows of the n normal samples rows[] (their lighting slices made). */
+wenv_status wenv_wavelet_fill_rows(wenv_wavelet *wavelet, const size_t *rows, size_t n, wenv_error *err);
 wenv_status wenv_wavelet_remake_ready(wenv_wavelet *wavelet, int slices, wenv_error *err);
 
 #endif

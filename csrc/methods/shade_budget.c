@@ -1,0 +1,34 @@
+#include "methods/shade_budget.h"
+
+#include "base/clock.h"
+
+/* The first block is small, so that a step whose lighting slices and table rows are not made yet
+ * (each vertex may need new ones) returns close to its budget; later blocks grow while they take
+ * well under what is left of it. */
+#define FIRST_BLOCK 256
+#define LARGEST_BLOCK 65536
+
+wenv_status wenv_shade_for(const wenv_method *method, void *state, const float *normals, const float *views, size_t n,
+                           size_t first, double budget, float *out, size_t *next, wenv_error *err)
+{
+    *next = first < n ? first : n;
+    if (!(budget >= 0.0))
+        return wenv_error_set(err, WENV_ERR_VALUE, "budget must be >= 0 seconds, got %g", budget);
+    double start = wenv_now_seconds();
+    size_t block = FIRST_BLOCK, at = *next;
+    while (at < n) {
+        size_t count = n - at < block ? n - at : block;
+        double t0 = wenv_now_seconds();
+        if (method->shade(state, normals + 3 * at, views + 3 * at, count, out + 3 * at, err))
+            return err->status;
+        at += count;
+        *next = at;
+        double now = wenv_now_seconds(), left = budget - (now - start);
+        if (!(left > 0.0))
+            break;
+        /* at the rate this block ran, a block twice its size would still leave half the budget */
+        if (4.0 * (now - t0) < left && block < LARGEST_BLOCK)
+            block *= 2;
+    }
+    return WENV_OK;
+}

@@ -1,0 +1,17 @@
+/* Shading in blocks until a time budget is spent: how a view that rests is refined in steps that a
+ * caller interleaves with its own work (the add-on's live mode, a script's refine loop). */
+#ifndef WENV_SHADE_BUDGET_H
+#define WENV_SHADE_BUDGET_H
+
+#include <stddef.h>
+
+#include "methods/method.h"
+
+/* Shades pairs first .. n - 1 of normals and views into out (as method->shade) in blocks, in order,
+ * until `budget` seconds have passed -- at least one block, whatever the budget -- and sets *next to
+ * the first pair left unshaded (n when none is).  Pairs before `first` and after *next are not
+ * touched.  A budget of infinity shades them all. */
+wenv_status wenv_shade_for(const wenv_method *method, void *state, const float *normals, const float *views, size_t n,
+                           size_t first, double budget, float *out, size_t *next, wenv_error *err);
+
+#endif

@@ -1,0 +1,261 @@
+/* The grazing path's node loop (grazing_nodes.h) in three versions: AVX-512 and AVX2 with gathers,
+ * and a portable one.  GCC did not vectorise the portable loop (the octahedral edge folds and the
+ * two levels' selects stayed branches), which left the path at about 4 ns a node; the versions
+ * below read 16 or 8 nodes per instruction.  All three compute the same thing in the same order per
+ * node; only the final sum's order differs. */
+#include "methods/wavelet/grazing_nodes.h"
+
+#include <math.h>
+
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <immintrin.h>
+#define WENV_HAVE_X86_NODES 1
+#endif
+
+/* ---- portable ---------------------------------------------------------------------------------- */
+
+static inline void level_read(const wenv_node_pyramid *p, int32_t level, float u, float v, float wl, float sum[3])
+{
+    int32_t side = p->side[level], base = p->offset[level];
+    float fx = (u + 1.0f) * 0.5f * (float)side - 0.5f, fy = (v + 1.0f) * 0.5f * (float)side - 0.5f;
+    int32_t ix = (int32_t)(fx + 1.0f) - 1, iy = (int32_t)(fy + 1.0f) - 1; /* floor for x >= -1 */
+    float tx = fx - (float)ix, ty = fy - (float)iy;
+    for (int32_t c = 0; c < 4; c++) {
+        int32_t i = ix + (c & 1), j = iy + (c >> 1);
+        /* crossing an edge of the octahedral square lands on the same edge, mirrored */
+        int32_t out_i = i < 0 || i >= side;
+        int32_t i1 = out_i ? (i < 0 ? 0 : side - 1) : i, j1 = out_i ? side - 1 - j : j;
+        int32_t out_j = j1 < 0 || j1 >= side;
+        int32_t j2 = out_j ? (j1 < 0 ? 0 : side - 1) : j1, i2 = out_j ? side - 1 - i1 : i1;
+        float wt = wl * ((c & 1) ? tx : 1.0f - tx) * ((c >> 1) ? ty : 1.0f - ty);
+        const float *t = p->texels + 3 * (size_t)(base + j2 * side + i2);
+        sum[0] += wt * t[0];
+        sum[1] += wt * t[1];
+        sum[2] += wt * t[2];
+    }
+}
+
+void wenv_grazing_nodes_portable(const float *a, const float *b, size_t stride, size_t n, float g, float f,
+                                 const float x[3], const float y[3], const float z[3], const wenv_node_pyramid *p,
+                                 float rgb[3])
+{
+    float acc[3] = {0.0f, 0.0f, 0.0f}, top = (float)p->top;
+    for (size_t k = 0; k < n; k++) {
+        float lx = g * a[k] + f * b[k], ly = g * a[stride + k] + f * b[stride + k];
+        float lz = g * a[2 * stride + k] + f * b[2 * stride + k];
+        float d0 = lx * x[0] + ly * y[0] + lz * z[0], d1 = lx * x[1] + ly * y[1] + lz * z[1];
+        float d2 = lx * x[2] + ly * y[2] + lz * z[2];
+        /* octahedral encoding (wenv_oct_encode_f) */
+        float l1 = 1.0f / (fabsf(d0) + fabsf(d1) + fabsf(d2) + 1e-30f);
+        float pu = d0 * l1, pv = d1 * l1;
+        float u = d2 < 0.0f ? copysignf(1.0f - fabsf(pv), pu) : pu, v = d2 < 0.0f ? copysignf(1.0f - fabsf(pu), pv) : pv;
+        float lod = g * a[6 * stride + k] + f * b[6 * stride + k] + p->lod_offset;
+        lod = lod < 0.0f ? 0.0f : (lod > top ? top : lod);
+        int32_t l0 = (int32_t)lod, l1v = l0 + 1 < p->top ? l0 + 1 : p->top;
+        float fl = lod - (float)l0, sum[3] = {0.0f, 0.0f, 0.0f};
+        level_read(p, l0, u, v, 1.0f - fl, sum);
+        level_read(p, l1v, u, v, fl, sum);
+        for (int c = 0; c < 3; c++)
+            acc[c] += (g * a[(3 + (size_t)c) * stride + k] + f * b[(3 + (size_t)c) * stride + k]) * sum[c];
+    }
+    rgb[0] = acc[0];
+    rgb[1] = acc[1];
+    rgb[2] = acc[2];
+}
+
+#ifdef WENV_HAVE_X86_NODES
+
+/* ---- AVX-512: 16 nodes at a time --------------------------------------------------------------- */
+
+#define AVX512 __attribute__((target("avx512f")))
+
+AVX512 static inline __m512 mix16(const float *a, const float *b, size_t k, __m512 g, __m512 f)
+{
+    return _mm512_fmadd_ps(g, _mm512_loadu_ps(a + k), _mm512_mul_ps(f, _mm512_loadu_ps(b + k)));
+}
+
+AVX512 static inline __m512i clamp16(__m512i i, __m512i hi)
+{
+    return _mm512_min_epi32(_mm512_max_epi32(i, _mm512_setzero_si512()), hi);
+}
+
+AVX512 static inline void level_read16(const float *texels, __m512i side, __m512i base, __m512 u, __m512 v, __m512 wl,
+                                       __m512 sum[3])
+{
+    const __m512 one = _mm512_set1_ps(1.0f), half = _mm512_set1_ps(0.5f);
+    const __m512i ione = _mm512_set1_epi32(1), zero = _mm512_setzero_si512(), three = _mm512_set1_epi32(3);
+    __m512 sf = _mm512_cvtepi32_ps(side);
+    __m512 fx = _mm512_fmsub_ps(_mm512_mul_ps(_mm512_add_ps(u, one), half), sf, half);
+    __m512 fy = _mm512_fmsub_ps(_mm512_mul_ps(_mm512_add_ps(v, one), half), sf, half);
+    __m512i ix = _mm512_sub_epi32(_mm512_cvttps_epi32(_mm512_add_ps(fx, one)), ione);
+    __m512i iy = _mm512_sub_epi32(_mm512_cvttps_epi32(_mm512_add_ps(fy, one)), ione);
+    __m512 tx = _mm512_sub_ps(fx, _mm512_cvtepi32_ps(ix)), ty = _mm512_sub_ps(fy, _mm512_cvtepi32_ps(iy));
+    __m512 wx[2] = {_mm512_sub_ps(one, tx), tx}, wy[2] = {_mm512_sub_ps(one, ty), ty};
+    __m512i last = _mm512_sub_epi32(side, ione);
+    for (int c = 0; c < 4; c++) {
+        __m512i i = _mm512_add_epi32(ix, _mm512_set1_epi32(c & 1)), j = _mm512_add_epi32(iy, _mm512_set1_epi32(c >> 1));
+        __mmask16 out_i = _mm512_cmplt_epi32_mask(i, zero) | _mm512_cmpgt_epi32_mask(i, last);
+        __m512i i1 = _mm512_mask_blend_epi32(out_i, i, clamp16(i, last));
+        __m512i j1 = _mm512_mask_blend_epi32(out_i, j, _mm512_sub_epi32(last, j));
+        __mmask16 out_j = _mm512_cmplt_epi32_mask(j1, zero) | _mm512_cmpgt_epi32_mask(j1, last);
+        __m512i j2 = _mm512_mask_blend_epi32(out_j, j1, clamp16(j1, last));
+        __m512i i2 = _mm512_mask_blend_epi32(out_j, i1, _mm512_sub_epi32(last, i1));
+        __m512i at = _mm512_mullo_epi32(_mm512_add_epi32(base, _mm512_add_epi32(_mm512_mullo_epi32(j2, side), i2)), three);
+        __m512 wt = _mm512_mul_ps(wl, _mm512_mul_ps(wx[c & 1], wy[c >> 1]));
+        sum[0] = _mm512_fmadd_ps(wt, _mm512_i32gather_ps(at, texels, 4), sum[0]);
+        sum[1] = _mm512_fmadd_ps(wt, _mm512_i32gather_ps(at, texels + 1, 4), sum[1]);
+        sum[2] = _mm512_fmadd_ps(wt, _mm512_i32gather_ps(at, texels + 2, 4), sum[2]);
+    }
+}
+
+AVX512 static void nodes_avx512(const float *a, const float *b, size_t stride, size_t n, float g, float f,
+                                const float x[3], const float y[3], const float z[3], const wenv_node_pyramid *p,
+                                float rgb[3])
+{
+    const __m512 G = _mm512_set1_ps(g), F = _mm512_set1_ps(f), one = _mm512_set1_ps(1.0f), zero = _mm512_setzero_ps();
+    const __m512 top = _mm512_set1_ps((float)p->top), lod_offset = _mm512_set1_ps(p->lod_offset);
+    const __m512 tiny = _mm512_set1_ps(1e-30f);
+    const __m512i sides = _mm512_loadu_si512(p->side), offsets = _mm512_loadu_si512(p->offset);
+    const __m512i itop = _mm512_set1_epi32(p->top), ione = _mm512_set1_epi32(1), sign = _mm512_set1_epi32(INT32_MIN);
+    __m512 acc[3] = {zero, zero, zero};
+    for (size_t k = 0; k < n; k += 16) {
+        __m512 lx = mix16(a, b, k, G, F), ly = mix16(a + stride, b + stride, k, G, F);
+        __m512 lz = mix16(a + 2 * stride, b + 2 * stride, k, G, F);
+        __m512 d0 = _mm512_fmadd_ps(lx, _mm512_set1_ps(x[0]), _mm512_fmadd_ps(ly, _mm512_set1_ps(y[0]), _mm512_mul_ps(lz, _mm512_set1_ps(z[0]))));
+        __m512 d1 = _mm512_fmadd_ps(lx, _mm512_set1_ps(x[1]), _mm512_fmadd_ps(ly, _mm512_set1_ps(y[1]), _mm512_mul_ps(lz, _mm512_set1_ps(z[1]))));
+        __m512 d2 = _mm512_fmadd_ps(lx, _mm512_set1_ps(x[2]), _mm512_fmadd_ps(ly, _mm512_set1_ps(y[2]), _mm512_mul_ps(lz, _mm512_set1_ps(z[2]))));
+        __m512 l1 = _mm512_div_ps(one, _mm512_add_ps(_mm512_add_ps(_mm512_abs_ps(d0), _mm512_abs_ps(d1)),
+                                                     _mm512_add_ps(_mm512_abs_ps(d2), tiny)));
+        __m512 pu = _mm512_mul_ps(d0, l1), pv = _mm512_mul_ps(d1, l1);
+        /* copysign(1 - |p|, q): 1 - |p| >= 0, so q's sign bit is or-ed in */
+        __m512 qu = _mm512_castsi512_ps(_mm512_or_si512(_mm512_castps_si512(_mm512_sub_ps(one, _mm512_abs_ps(pv))),
+                                                        _mm512_and_si512(_mm512_castps_si512(pu), sign)));
+        __m512 qv = _mm512_castsi512_ps(_mm512_or_si512(_mm512_castps_si512(_mm512_sub_ps(one, _mm512_abs_ps(pu))),
+                                                        _mm512_and_si512(_mm512_castps_si512(pv), sign)));
+        __mmask16 below = _mm512_cmp_ps_mask(d2, zero, _CMP_LT_OQ);
+        __m512 u = _mm512_mask_blend_ps(below, pu, qu), v = _mm512_mask_blend_ps(below, pv, qv);
+        __m512 lod = _mm512_add_ps(mix16(a + 6 * stride, b + 6 * stride, k, G, F), lod_offset);
+        lod = _mm512_min_ps(_mm512_max_ps(lod, zero), top);
+        __m512i l0 = _mm512_cvttps_epi32(lod), l1v = _mm512_min_epi32(_mm512_add_epi32(l0, ione), itop);
+        __m512 fl = _mm512_sub_ps(lod, _mm512_cvtepi32_ps(l0));
+        __m512 sum[3] = {zero, zero, zero};
+        level_read16(p->texels, _mm512_permutexvar_epi32(l0, sides), _mm512_permutexvar_epi32(l0, offsets), u, v,
+                     _mm512_sub_ps(one, fl), sum);
+        level_read16(p->texels, _mm512_permutexvar_epi32(l1v, sides), _mm512_permutexvar_epi32(l1v, offsets), u, v, fl,
+                     sum);
+        for (int c = 0; c < 3; c++)
+            acc[c] = _mm512_fmadd_ps(mix16(a + (3 + (size_t)c) * stride, b + (3 + (size_t)c) * stride, k, G, F), sum[c],
+                                     acc[c]);
+    }
+    for (int c = 0; c < 3; c++)
+        rgb[c] = _mm512_reduce_add_ps(acc[c]);
+}
+
+/* ---- AVX2: 8 nodes at a time ------------------------------------------------------------------- */
+
+#define AVX2 __attribute__((target("avx2,fma")))
+
+AVX2 static inline __m256 mix8(const float *a, const float *b, size_t k, __m256 g, __m256 f)
+{
+    return _mm256_fmadd_ps(g, _mm256_loadu_ps(a + k), _mm256_mul_ps(f, _mm256_loadu_ps(b + k)));
+}
+
+AVX2 static inline __m256 abs8(__m256 x) { return _mm256_andnot_ps(_mm256_set1_ps(-0.0f), x); }
+
+AVX2 static inline __m256i outside8(__m256i i, __m256i last)
+{
+    return _mm256_or_si256(_mm256_cmpgt_epi32(_mm256_setzero_si256(), i), _mm256_cmpgt_epi32(i, last));
+}
+
+AVX2 static inline __m256i clamp8(__m256i i, __m256i hi)
+{
+    return _mm256_min_epi32(_mm256_max_epi32(i, _mm256_setzero_si256()), hi);
+}
+
+AVX2 static inline void level_read8(const float *texels, __m256i side, __m256i base, __m256 u, __m256 v, __m256 wl,
+                                    __m256 sum[3])
+{
+    const __m256 one = _mm256_set1_ps(1.0f), half = _mm256_set1_ps(0.5f);
+    const __m256i ione = _mm256_set1_epi32(1), three = _mm256_set1_epi32(3);
+    __m256 sf = _mm256_cvtepi32_ps(side);
+    __m256 fx = _mm256_fmsub_ps(_mm256_mul_ps(_mm256_add_ps(u, one), half), sf, half);
+    __m256 fy = _mm256_fmsub_ps(_mm256_mul_ps(_mm256_add_ps(v, one), half), sf, half);
+    __m256i ix = _mm256_sub_epi32(_mm256_cvttps_epi32(_mm256_add_ps(fx, one)), ione);
+    __m256i iy = _mm256_sub_epi32(_mm256_cvttps_epi32(_mm256_add_ps(fy, one)), ione);
+    __m256 tx = _mm256_sub_ps(fx, _mm256_cvtepi32_ps(ix)), ty = _mm256_sub_ps(fy, _mm256_cvtepi32_ps(iy));
+    __m256 wx[2] = {_mm256_sub_ps(one, tx), tx}, wy[2] = {_mm256_sub_ps(one, ty), ty};
+    __m256i last = _mm256_sub_epi32(side, ione);
+    for (int c = 0; c < 4; c++) {
+        __m256i i = _mm256_add_epi32(ix, _mm256_set1_epi32(c & 1)), j = _mm256_add_epi32(iy, _mm256_set1_epi32(c >> 1));
+        __m256i out_i = outside8(i, last);
+        __m256i i1 = _mm256_blendv_epi8(i, clamp8(i, last), out_i);
+        __m256i j1 = _mm256_blendv_epi8(j, _mm256_sub_epi32(last, j), out_i);
+        __m256i out_j = outside8(j1, last);
+        __m256i j2 = _mm256_blendv_epi8(j1, clamp8(j1, last), out_j);
+        __m256i i2 = _mm256_blendv_epi8(i1, _mm256_sub_epi32(last, i1), out_j);
+        __m256i at = _mm256_mullo_epi32(_mm256_add_epi32(base, _mm256_add_epi32(_mm256_mullo_epi32(j2, side), i2)), three);
+        __m256 wt = _mm256_mul_ps(wl, _mm256_mul_ps(wx[c & 1], wy[c >> 1]));
+        sum[0] = _mm256_fmadd_ps(wt, _mm256_i32gather_ps(texels, at, 4), sum[0]);
+        sum[1] = _mm256_fmadd_ps(wt, _mm256_i32gather_ps(texels + 1, at, 4), sum[1]);
+        sum[2] = _mm256_fmadd_ps(wt, _mm256_i32gather_ps(texels + 2, at, 4), sum[2]);
+    }
+}
+
+AVX2 static float sum8(__m256 v)
+{
+    __m128 s = _mm_add_ps(_mm256_castps256_ps128(v), _mm256_extractf128_ps(v, 1));
+    s = _mm_add_ps(s, _mm_movehl_ps(s, s));
+    s = _mm_add_ss(s, _mm_shuffle_ps(s, s, 1));
+    return _mm_cvtss_f32(s);
+}
+
+AVX2 static void nodes_avx2(const float *a, const float *b, size_t stride, size_t n, float g, float f, const float x[3],
+                            const float y[3], const float z[3], const wenv_node_pyramid *p, float rgb[3])
+{
+    const __m256 G = _mm256_set1_ps(g), F = _mm256_set1_ps(f), one = _mm256_set1_ps(1.0f), zero = _mm256_setzero_ps();
+    const __m256 top = _mm256_set1_ps((float)p->top), lod_offset = _mm256_set1_ps(p->lod_offset);
+    const __m256 tiny = _mm256_set1_ps(1e-30f), sign = _mm256_set1_ps(-0.0f);
+    const __m256i itop = _mm256_set1_epi32(p->top), ione = _mm256_set1_epi32(1);
+    __m256 acc[3] = {zero, zero, zero};
+    for (size_t k = 0; k < n; k += 8) {
+        __m256 lx = mix8(a, b, k, G, F), ly = mix8(a + stride, b + stride, k, G, F);
+        __m256 lz = mix8(a + 2 * stride, b + 2 * stride, k, G, F);
+        __m256 d0 = _mm256_fmadd_ps(lx, _mm256_set1_ps(x[0]), _mm256_fmadd_ps(ly, _mm256_set1_ps(y[0]), _mm256_mul_ps(lz, _mm256_set1_ps(z[0]))));
+        __m256 d1 = _mm256_fmadd_ps(lx, _mm256_set1_ps(x[1]), _mm256_fmadd_ps(ly, _mm256_set1_ps(y[1]), _mm256_mul_ps(lz, _mm256_set1_ps(z[1]))));
+        __m256 d2 = _mm256_fmadd_ps(lx, _mm256_set1_ps(x[2]), _mm256_fmadd_ps(ly, _mm256_set1_ps(y[2]), _mm256_mul_ps(lz, _mm256_set1_ps(z[2]))));
+        __m256 l1 = _mm256_div_ps(one, _mm256_add_ps(_mm256_add_ps(abs8(d0), abs8(d1)), _mm256_add_ps(abs8(d2), tiny)));
+        __m256 pu = _mm256_mul_ps(d0, l1), pv = _mm256_mul_ps(d1, l1);
+        __m256 qu = _mm256_or_ps(_mm256_sub_ps(one, abs8(pv)), _mm256_and_ps(pu, sign));
+        __m256 qv = _mm256_or_ps(_mm256_sub_ps(one, abs8(pu)), _mm256_and_ps(pv, sign));
+        __m256 below = _mm256_cmp_ps(d2, zero, _CMP_LT_OQ);
+        __m256 u = _mm256_blendv_ps(pu, qu, below), v = _mm256_blendv_ps(pv, qv, below);
+        __m256 lod = _mm256_add_ps(mix8(a + 6 * stride, b + 6 * stride, k, G, F), lod_offset);
+        lod = _mm256_min_ps(_mm256_max_ps(lod, zero), top);
+        __m256i l0 = _mm256_cvttps_epi32(lod), l1v = _mm256_min_epi32(_mm256_add_epi32(l0, ione), itop);
+        __m256 fl = _mm256_sub_ps(lod, _mm256_cvtepi32_ps(l0));
+        __m256 sum[3] = {zero, zero, zero};
+        level_read8(p->texels, _mm256_i32gather_epi32(p->side, l0, 4), _mm256_i32gather_epi32(p->offset, l0, 4), u, v,
+                    _mm256_sub_ps(one, fl), sum);
+        level_read8(p->texels, _mm256_i32gather_epi32(p->side, l1v, 4), _mm256_i32gather_epi32(p->offset, l1v, 4), u, v,
+                    fl, sum);
+        for (int c = 0; c < 3; c++)
+            acc[c] = _mm256_fmadd_ps(mix8(a + (3 + (size_t)c) * stride, b + (3 + (size_t)c) * stride, k, G, F), sum[c],
+                                     acc[c]);
+    }
+    for (int c = 0; c < 3; c++)
+        rgb[c] = sum8(acc[c]);
+}
+
+#endif /* WENV_HAVE_X86_NODES */
+
+wenv_grazing_nodes_fn wenv_grazing_nodes_for_cpu(void)
+{
+#ifdef WENV_HAVE_X86_NODES
+    __builtin_cpu_init();
+    if (__builtin_cpu_supports("avx512f"))
+        return nodes_avx512;
+    if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma"))
+        return nodes_avx2;
+#endif
+    return wenv_grazing_nodes_portable;
+}

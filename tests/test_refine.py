@@ -1,0 +1,101 @@
+"""Refining a view that rests (Shader.shade_mesh(first=, budget=)): an accurate Shader shades in steps
+over a fast one's result.  The steps together give exactly what the accurate setting gives in one
+call; each step touches only its own rows, starts where the last stopped and keeps to its budget
+give or take one block."""
+import time
+
+import numpy as np
+import pytest
+
+import wenv
+from test_culling import look_at, sphere
+
+
+@pytest.fixture(scope="module")
+def scene():
+    env = wenv.Environment(np.float32(np.random.default_rng(4).uniform(0.1, 3.0, (32, 64, 3))))
+    mat = wenv.CookTorrance(diffuse=0.2, lobes=[{"roughness": 0.1, "ior": 1.5}])
+    return env, mat
+
+
+def refine(accurate, pos, nrm, eye, out, budget, **kw):
+    """Steps until every vertex to shade is done; the steps' (first, next) ranges."""
+    steps, first = [], 0
+    while True:
+        before = out.copy()
+        accurate.shade_mesh(pos, nrm, eye, out=out, first=first, budget=budget, **kw)
+        nxt = accurate.stats["next_vertex"]
+        steps.append((first, nxt, before, out.copy()))
+        if nxt == first:
+            raise AssertionError("a step made no progress")
+        first = nxt
+        total = accurate.stats.get("visible_vertices", len(pos))
+        if first >= total:
+            return steps
+
+
+@pytest.mark.parametrize("cull", [False, True])
+def test_steps_end_at_the_accurate_result(scene, cull):
+    env, mat = scene
+    pos, nrm = sphere(20000, seed=5)
+    eye = (0.5, -6.0, 1.0)
+    vp = look_at(eye, (1.0, 0.0, 0.6), fov_degrees=25.0) if cull else None
+    kw = {"cull": True, "view_projection": vp} if cull else {}
+    fast = wenv.Shader(env, mat, quality="draft")
+    accurate = wenv.Shader(env, mat, quality={"global": 64, "local": 32, "normals": 32, "views": 16,
+                                              "coefficients": 256, "grazing": 4}, method="slicing")
+    out = fast.shade_mesh(pos, nrm, eye, **kw)
+    start = out.copy()
+    steps = refine(accurate, pos, nrm, eye, out, 0.0, **kw)  # a zero budget: one block a step
+    assert len(steps) > 3
+    # the same setting in one call, on a Shader of its own
+    whole = wenv.Shader(env, mat, quality=accurate.quality, method="slicing").shade_mesh(pos, nrm, eye, **kw)
+    assert np.array_equal(out, whole)
+    assert not np.array_equal(start, whole)  # the fast and accurate settings differ
+    # each step wrote only the rows from its first to its next vertex (in shading order)
+    order = np.flatnonzero(wenv.visible_vertices(pos, nrm, eye, vp)) if cull else np.arange(len(pos))
+    for first, nxt, before, after in steps:
+        others = np.setdiff1d(np.arange(len(pos)), order[first:nxt])
+        assert np.array_equal(after[others], before[others])
+        assert np.array_equal(after[order[first:nxt]], whole[order[first:nxt]])
+        assert np.array_equal(after[order[nxt:]], start[order[nxt:]])  # not reached yet: the fast result
+    assert steps[0][0] == 0 and all(a[1] == b[0] for a, b in zip(steps, steps[1:]))
+
+
+def test_a_budget_is_kept_within_a_block(scene):
+    env, mat = scene
+    pos, nrm = sphere(200000, seed=6)
+    eye = (0.3, -5.0, 0.4)
+    shader = wenv.Shader(env, mat, quality="draft")
+    shader.shade_mesh(pos, nrm, eye)  # every table row made: steps cost their vertices only
+    out = np.zeros((len(pos), 3), np.float32)
+    t0 = time.perf_counter()
+    shader.shade_mesh(pos, nrm, eye, out=out, budget=0.0)
+    step = time.perf_counter() - t0
+    nxt = shader.stats["next_vertex"]
+    assert 0 < nxt < len(pos) // 4  # a zero budget shades one small block
+    assert not out[nxt:].any() and out[:nxt].any()
+    # without a budget every vertex is shaded in one call, and next_vertex says so
+    shader.shade_mesh(pos, nrm, eye, out=out, first=nxt)
+    assert shader.stats["next_vertex"] == len(pos)
+    assert np.array_equal(out, shader.shade_mesh(pos, nrm, eye))
+    assert step < 5.0  # sanity only: timing belongs to benchmarks
+
+
+def test_step_arguments_are_checked(scene):
+    env, mat = scene
+    shader = wenv.Shader(env, mat, quality="draft")
+    pos, nrm = sphere(100)
+    eye = (0, -5, 0)
+    with pytest.raises(ValueError, match="first must be >= 0, got -1"):
+        shader.shade_mesh(pos, nrm, eye, first=-1)
+    with pytest.raises(ValueError, match=r"first \(101\) is past the 100 vertices to shade"):
+        shader.shade_mesh(pos, nrm, eye, first=101)
+    with pytest.raises(ValueError, match="budget must be >= 0 seconds"):
+        shader.shade_mesh(pos, nrm, eye, budget=-0.5)
+    with pytest.raises(ValueError, match="budget must be >= 0 seconds"):
+        shader.shade_mesh(pos, nrm, eye, budget=float("nan"))
+    with pytest.raises(TypeError, match="budget must be a number of seconds or None"):
+        shader.shade_mesh(pos, nrm, eye, budget="1")
+    out = shader.shade_mesh(pos, nrm, eye, first=100)  # nothing left to shade is fine
+    assert shader.stats["next_vertex"] == 100 and not out.any()
