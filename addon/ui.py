@@ -85,7 +85,7 @@ class WENV_PT_shading(_SidebarPanel, bpy.types.Panel):
             row.alert = True
             row.label(text=problem, icon="ERROR")
         if not engine.shaders.has(engine.quality_value(st.quality)):
-            layout.label(text="Matrices are precomputed on first use", icon="INFO")
+            layout.label(text="Precomputed on first use", icon="INFO")
 
 
 class WENV_UL_lobes(bpy.types.UIList):

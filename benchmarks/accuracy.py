@@ -137,7 +137,7 @@ def evaluate(presets, method=None, path=DATA):
     made = {name: material(spec) for name, spec in materials.items()}
     results = {}
     for preset in presets:
-        m = method or ("slicing" if preset.startswith("high") else "rotation")
+        m = method or ("rotation" if preset == "draft" else "slicing")
         quality = SETTINGS.get(preset, preset)
         shader = None
         row = {}

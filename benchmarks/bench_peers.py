@@ -21,7 +21,7 @@ from bench_shade import orbit_eye, suzanne
 from measure import OUT, bundled_hdri, random_pairs, relative_rmse
 
 CONFIGS = [
-    ("rotation", "draft"), ("rotation", "default"),
+    ("rotation", "draft"), ("slicing", "default"),
     ("split_sum", "draft"), ("split_sum", "default"), ("split_sum", "high"),
     ("sh", {"order": 2}), ("sh", "draft"), ("sh", "default"), ("sh", "high"),
 ]

@@ -50,7 +50,7 @@ def main():
     mats = materials()
     results = {"vertices": len(pos), "threads": wenv.get_num_threads(), "hdri": args.hdri, "presets": {}}
     for preset in args.presets.split(","):
-        method = "slicing" if preset == "high" else "rotation"
+        method = "rotation" if preset == "draft" else "slicing"
         shaders, set_s = {}, {}
         base = wenv.Shader(env, wenv.Lambert(0.5), quality=preset, method=method)  # matrices built or loaded once
         for name, mat in mats.items():

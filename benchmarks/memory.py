@@ -116,6 +116,8 @@ def _child(spec):
     baseline = _status_mb()[0]
 
     kwargs = {} if spec["cache_dir"] is None else {"cache_dir": spec["cache_dir"]}
+    if spec["method"] == "rotation":
+        kwargs["memory_budget_mb"] = 4096  # rotation at 64/32/64 holds 2.1 GB of matrices
     shader = wenv.Shader(env, mat, quality=spec["quality"], method=spec["method"], **kwargs)
     x, y, z = spec["eye"]
     for a in np.radians(20.0) * np.arange(spec["views"]):

@@ -1,5 +1,5 @@
-"""The README's gallery of Principled BSDF materials: spheres shaded by wenv (rotation at `default`,
-slicing at `high`) beside wenv.reference and Cycles' render of the same sphere (through bpy), each
+"""The README's gallery of Principled BSDF materials: spheres shaded by wenv (`default` and `high`,
+both through slicing) beside wenv.reference and Cycles' render of the same sphere (through bpy), each
 with its relative RMSE against the reference (Cycles': the render's noise included; its noise alone
 is measured from a second seed).
 
@@ -40,7 +40,7 @@ def main():
         r = scene.compare(mat)
         ref = r["reference"]
         shaded = {}
-        for method, preset in (("rotation", "default"), ("slicing", "high")):
+        for method, preset in (("slicing", "default"), ("slicing", "high")):
             shaded[preset] = wenv.Shader(env, mat, quality=preset, method=method).shade(scene.normals, scene.views)
         row = {p: relative_rmse(v, ref) for p, v in shaded.items()}
         row.update(cycles=r["error"], cycles_noise=r["noise"], cycles_ratio=r["ratio"].tolist())

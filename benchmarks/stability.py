@@ -22,7 +22,7 @@ from measure import OUT, ROOT, bundled_hdri
 
 DOCS = os.path.join(ROOT, "docs")
 CONFIGS = [
-    ("rotation", "draft"), ("rotation", "default"), ("slicing", "high"),
+    ("rotation", "draft"), ("slicing", "default"), ("slicing", "high"),
     ("split_sum", "default"), ("split_sum", "high"),
     ("sh", {"order": 2}), ("sh", "draft"), ("sh", "default"), ("sh", "high"),
 ]

@@ -1,8 +1,8 @@
 """Spheres shaded with tabulated BRDFs (90 x 90 x 180, MERL's layout) next to the reference: the README's
 picture of measured and tabulated materials.  Each row is one table -- a paint (a Cook-Torrance lobe
 over a coloured diffuse floor), a retro-reflective lobe and a lobe whose colour shifts with the
-difference angle, neither of them a Cook-Torrance lobe -- shaded by rotation at `default`, by
-`high` (slicing) and by wenv.reference, with the difference of `high` from the reference x 10.
+difference angle, neither of them a Cook-Torrance lobe -- shaded at `default` and
+`high` (both through slicing) and by wenv.reference, with the difference of `high` from the reference x 10.
 
     .venv/bin/python benchmarks/tabulated_spheres.py [--hdri sunset] [--size 96]   # ~5 min
 
@@ -25,7 +25,7 @@ ROWS = {
     "retro-reflective": {"brdf": "retro", "width": 0.5},
     "colour shifting\nwith theta_d": {"brdf": "tinted", "roughness": 0.2},
 }
-COLUMNS = (("rotation", "default"), ("slicing", "high"))
+COLUMNS = (("slicing", "default"), ("slicing", "high"))
 
 
 def main():

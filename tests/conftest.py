@@ -18,6 +18,13 @@ def bundled_hdri_dir():
     raise RuntimeError("bpy is installed but its studiolights/world folder was not found")
 
 
+# The wavelet settings besides the resolutions that `default` had while it was the 64/32/32 rotation
+# setting: tests that sweep resolutions, lights or the grazing path keep the rest fixed with these (a
+# partial quality dict takes its missing keys from `default`, which now slices at high's local
+# resolution with the grazing path and lights read to 5 %).
+WAVELET_BASE = {"light_coefficients": 1024, "matrix_epsilon": 1e-3, "lights": 128, "light_threshold": 256.0,
+                "light_tolerance": 0.003, "grazing": 0.0, "grazing_slopes": 0}
+
 HDRI_NAMES = ["city", "courtyard", "forest", "interior", "night", "studio", "sunrise", "sunset"]
 
 

@@ -996,7 +996,7 @@ def test_frame_changes_during_a_render_write_only_with_the_interface_locked(scen
 
 def test_precompute_job_progress_and_cancel(tmp_path, monkeypatch):
     monkeypatch.setenv("WENV_CACHE_DIR", str(tmp_path))
-    job = live.PrecomputeJob("default")
+    job = live.PrecomputeJob("draft")  # the one preset with rotation matrices to build
     seen = []
     orig = job._progress
 

@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 
 import wenv
-from conftest import hdri_path
+from conftest import WAVELET_BASE, hdri_path
 
 DATA = os.path.join(os.path.dirname(__file__), "data", "accuracy_reference.npz")
 HIGH = wenv.QUALITY_PRESETS["high"]
-SMALL = {"global": 32, "local": 16, "normals": 16, "views": 8, "coefficients": 0, "lights": 0}
+SMALL = {**WAVELET_BASE, "global": 32, "local": 16, "normals": 16, "views": 8, "coefficients": 0, "lights": 0}
 
 
 def lobe(m):

@@ -5,10 +5,11 @@ import numpy as np
 import pytest
 
 import wenv
+from conftest import WAVELET_BASE
 from test_shade import random_pairs
 
-QUALITY = {"global": 32, "local": 16, "normals": 16, "views": 8, "coefficients": 0, "lights": 4096,
-           "light_threshold": 1.0}
+QUALITY = {**WAVELET_BASE, "global": 32, "local": 16, "normals": 16, "views": 8, "coefficients": 0,
+           "lights": 4096, "light_threshold": 1.0}
 
 
 def softbox_and_sun():

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import wenv
+from conftest import WAVELET_BASE
 from test_culling import look_at, sphere
 
 
@@ -42,8 +43,8 @@ def test_steps_end_at_the_accurate_result(scene, cull):
     vp = look_at(eye, (1.0, 0.0, 0.6), fov_degrees=25.0) if cull else None
     kw = {"cull": True, "view_projection": vp} if cull else {}
     fast = wenv.Shader(env, mat, quality="draft")
-    accurate = wenv.Shader(env, mat, quality={"global": 64, "local": 32, "normals": 32, "views": 16,
-                                              "coefficients": 256, "grazing": 4}, method="slicing")
+    accurate = wenv.Shader(env, mat, quality={**WAVELET_BASE, "global": 64, "local": 32, "normals": 32,
+                                              "views": 16, "coefficients": 256, "grazing": 4}, method="slicing")
     out = fast.shade_mesh(pos, nrm, eye, **kw)
     start = out.copy()
     steps = refine(accurate, pos, nrm, eye, out, 0.0, **kw)  # a zero budget: one block a step

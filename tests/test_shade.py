@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 import wenv
+from conftest import WAVELET_BASE
 
-SMALL = {"global": 16, "local": 8, "normals": 8, "views": 4, "coefficients": 0}
+SMALL = {**WAVELET_BASE, "global": 16, "local": 8, "normals": 8, "views": 4, "coefficients": 0}
 
 
 def unit(a):
@@ -370,7 +371,9 @@ def test_reference_constant_environment():
     ({"bogus": 1}, "bogus"), ("ultra", "quality"), ({"lights": 5000}, "lights"), ({"lights": -1}, "lights"),
     ({"light_threshold": 0.5}, "light_threshold"), ({"light_threshold": float("inf")}, "light_threshold"),
     ({"grazing": -1.0}, "grazing"), ({"grazing": float("nan")}, "grazing"), ({"grazing": 1e3}, "grazing"),
-    ({"grazing": "yes"}, "grazing"),
+    ({"grazing": "yes"}, "grazing"), ({"light_tolerance": 0.0}, "light_tolerance"),
+    ({"light_tolerance": float("nan")}, "light_tolerance"), ({"light_tolerance": 2.0}, "light_tolerance"),
+    ({"grazing_slopes": 2}, "grazing_slopes"), ({"grazing_slopes": -1}, "grazing_slopes"),
 ])
 def test_bad_quality(quality, message):
     env = gradient_env()

@@ -11,17 +11,17 @@ import numpy as np
 import pytest
 
 import wenv
-from conftest import hdri_path
+from conftest import WAVELET_BASE, hdri_path
 
 METHODS = ["rotation", "slicing", "split_sum", "sh"]
 # Rising quality per method: rotation builds its matrices here (no cache), so it stops at 32/16/16;
 # slicing is the same method without matrices and goes one step higher.
 LADDERS = {
-    "rotation": [{"global": 16, "local": 8, "normals": 8, "views": 4, "coefficients": 0},
-                 {"global": 32, "local": 16, "normals": 16, "views": 8, "coefficients": 0}],
-    "slicing": [{"global": 16, "local": 8, "normals": 8, "views": 4, "coefficients": 0},
-                {"global": 32, "local": 16, "normals": 16, "views": 8, "coefficients": 0},
-                {"global": 64, "local": 32, "normals": 32, "views": 16, "coefficients": 0}],
+    "rotation": [{**WAVELET_BASE, "global": 16, "local": 8, "normals": 8, "views": 4, "coefficients": 0},
+                 {**WAVELET_BASE, "global": 32, "local": 16, "normals": 16, "views": 8, "coefficients": 0}],
+    "slicing": [{**WAVELET_BASE, "global": 16, "local": 8, "normals": 8, "views": 4, "coefficients": 0},
+                {**WAVELET_BASE, "global": 32, "local": 16, "normals": 16, "views": 8, "coefficients": 0},
+                {**WAVELET_BASE, "global": 64, "local": 32, "normals": 32, "views": 16, "coefficients": 0}],
     "split_sum": [{"prefilter": 16, "samples": 16, "lut": 8}, {"prefilter": 32, "samples": 64, "lut": 16},
                   {"prefilter": 64, "samples": 128, "lut": 32}],
     "sh": [{"order": 2, "views": 8}, {"order": 4, "views": 8}, {"order": 8, "views": 16}],

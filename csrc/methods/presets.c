@@ -2,20 +2,24 @@
 
 const char *const WENV_PRESET_NAMES[WENV_PRESET_COUNT] = {"draft", "default", "high"};
 
-/* draft and default take out suns and lamps (pixels above 256x the mean radiance) and are built for
- * interactive rates; high also takes out every bright extended feature (above 8x the mean, up to
- * 4096) and integrates narrow lobes at grazing views per vertex -- what brings m >= 0.1 within 1 %
- * on the bundled HDRIs (README, "Speed against accuracy"). */
+/* draft and default take out suns and lamps (pixels above 256x the mean radiance); high also takes
+ * out every bright extended feature (above 8x the mean, up to 4096) -- what brings m >= 0.1 within
+ * 1 % on the bundled HDRIs (README, "Speed against accuracy").  default and high integrate narrow
+ * lobes at grazing views per vertex.  default is built for a view change within 30 ms at 126k
+ * vertices and 3 % at m >= 0.2: high's local resolution (the per-view cost does not grow with it),
+ * half its normal samples, its lights read to 5 % instead of 0.3 %, GGX lobes (Principled) on the
+ * grazing path's slope cells; through slicing (its rotation matrices would take ~2.4 GB). */
 const wenv_wavelet_quality WENV_WAVELET_PRESETS[WENV_PRESET_COUNT] = {
     [WENV_PRESET_DRAFT] = {.global_n = 32, .local_n = 16, .normal_n = 16, .view_n = 8, .coefficients = 32,
                            .light_coefficients = 256, .matrix_epsilon = 1e-3, .lights = 64,
-                           .light_threshold = 256, .grazing = 0},
-    [WENV_PRESET_DEFAULT] = {.global_n = 64, .local_n = 32, .normal_n = 32, .view_n = 16, .coefficients = 128,
-                             .light_coefficients = 1024, .matrix_epsilon = 1e-3, .lights = 128,
-                             .light_threshold = 256, .grazing = 0},
+                           .light_threshold = 256, .light_tolerance = 0.003, .grazing = 0},
+    [WENV_PRESET_DEFAULT] = {.global_n = 128, .local_n = 64, .normal_n = 32, .view_n = 24, .coefficients = 512,
+                             .light_coefficients = 0, .matrix_epsilon = 1e-4, .lights = 4096,
+                             .light_threshold = 256, .light_tolerance = 0.05, .grazing = 6,
+                             .grazing_slopes = 1},
     [WENV_PRESET_HIGH] = {.global_n = 128, .local_n = 64, .normal_n = 64, .view_n = 32, .coefficients = 512,
                           .light_coefficients = 0, .matrix_epsilon = 1e-4, .lights = 4096,
-                          .light_threshold = 8, .grazing = 6},
+                          .light_threshold = 8, .light_tolerance = 0.003, .grazing = 6},
 };
 
 const wenv_splitsum_quality WENV_SPLIT_SUM_PRESETS[WENV_PRESET_COUNT] = {
@@ -35,15 +39,15 @@ const wenv_sh_shading_quality WENV_SH_PRESETS[WENV_PRESET_COUNT] = {
  * (auto/autoquality.c): change one and recalibrate.  The last level is the "high" preset. */
 const wenv_wavelet_quality WENV_AUTO_LADDER[WENV_AUTO_LEVELS] = {
     {.global_n = 32, .local_n = 16, .normal_n = 16, .view_n = 8, .coefficients = 64, .light_coefficients = 0,
-     .matrix_epsilon = 1e-3, .lights = 64, .light_threshold = 256, .grazing = 0},
+     .matrix_epsilon = 1e-3, .lights = 64, .light_threshold = 256, .light_tolerance = 0.003, .grazing = 0},
     {.global_n = 64, .local_n = 32, .normal_n = 32, .view_n = 16, .coefficients = 128, .light_coefficients = 0,
-     .matrix_epsilon = 1e-3, .lights = 128, .light_threshold = 256, .grazing = 0},
+     .matrix_epsilon = 1e-3, .lights = 128, .light_threshold = 256, .light_tolerance = 0.003, .grazing = 0},
     {.global_n = 128, .local_n = 64, .normal_n = 32, .view_n = 16, .coefficients = 256, .light_coefficients = 0,
-     .matrix_epsilon = 1e-4, .lights = 512, .light_threshold = 256, .grazing = 0},
+     .matrix_epsilon = 1e-4, .lights = 512, .light_threshold = 256, .light_tolerance = 0.003, .grazing = 0},
     {.global_n = 128, .local_n = 64, .normal_n = 64, .view_n = 32, .coefficients = 512, .light_coefficients = 0,
-     .matrix_epsilon = 1e-4, .lights = 1024, .light_threshold = 256, .grazing = 0},
+     .matrix_epsilon = 1e-4, .lights = 1024, .light_threshold = 256, .light_tolerance = 0.003, .grazing = 0},
     {.global_n = 128, .local_n = 64, .normal_n = 64, .view_n = 32, .coefficients = 512, .light_coefficients = 0,
-     .matrix_epsilon = 1e-4, .lights = 4096, .light_threshold = 8, .grazing = 6},
+     .matrix_epsilon = 1e-4, .lights = 4096, .light_threshold = 8, .light_tolerance = 0.003, .grazing = 6},
 };
 
 const size_t WENV_AUTO_SH_ORDERS[WENV_AUTO_SH_ORDER_COUNT] = {2, 4, 6, 8, 10, 12, 14, 16};

@@ -8,8 +8,8 @@
 #define FIRST_BLOCK 256
 #define LARGEST_BLOCK 65536
 
-wenv_status wenv_shade_for(const wenv_method *method, void *state, const float *normals, const float *views, size_t n,
-                           size_t first, double budget, float *out, size_t *next, wenv_error *err)
+wenv_status wenv_shade_for(const wenv_lighting_frame *frame, const wenv_method *method, void *state,
+                           const float *normals, const float *views, size_t n, size_t first, double budget, float *out, size_t *next, wenv_error *err)
 {
     *next = first < n ? first : n;
     if (!(budget >= 0.0))
@@ -19,7 +19,7 @@ wenv_status wenv_shade_for(const wenv_method *method, void *state, const float *
     while (at < n) {
         size_t count = n - at < block ? n - at : block;
         double t0 = wenv_now_seconds();
-        if (method->shade(state, normals + 3 * at, views + 3 * at, count, out + 3 * at, err))
+        if (wenv_lighting_frame_shade(frame, method, state, normals + 3 * at, views + 3 * at, count, out + 3 * at, err))
             return err->status;
         at += count;
         *next = at;

@@ -10,6 +10,7 @@
 #include "auto/autoquality.h"
 #include "methods/method.h"
 #include "methods/presets.h"
+#include "methods/lighting_frame.h"
 #include "methods/shade_budget.h"
 #include "methods/visibility.h"
 #include "python/bind_envmap.h"
@@ -21,6 +22,7 @@ typedef struct {
     void *state;   /* the method's, once made */
     void *quality; /* method->quality_size bytes */
     PyObject *environment, *material;
+    wenv_lighting_frame frame; /* the latest environment against the one the method holds */
     PyObject *progress; /* owned, or NULL: reported to by precomputation, here and in set_* */
     int busy;
     int is_auto;
@@ -175,7 +177,7 @@ static int do_set(ShaderObject *self, PyObject *obj, int material)
     wenv_status st;
     WENV_BEGIN_WORK
     st = material ? self->method->set_material(self->state, arg, &progress, &err)
-                  : self->method->set_environment(self->state, arg, &progress, &err);
+                  : wenv_lighting_frame_set(&self->frame, self->method, self->state, arg, &progress, &err);
     WENV_END_WORK
     if (st) {
         if (!(bridge.raised && PyErr_Occurred()))
@@ -311,6 +313,7 @@ static int Shader_init(ShaderObject *self, PyObject *args, PyObject *kwargs)
         return -1;
     }
     self->state = state;
+    memset(&self->frame, 0, sizeof self->frame);
     return do_set(self, env_obj, 0) < 0 || do_set(self, mat_obj, 1) < 0 ? -1 : 0;
 }
 
@@ -335,7 +338,7 @@ static PyObject *shade_arrays(ShaderObject *self, const float *normals, const fl
     wenv_error err = {0};
     wenv_status st;
     WENV_BEGIN_WORK
-    st = self->method->shade(self->state, normals, views, n, out, &err);
+    st = wenv_lighting_frame_shade(&self->frame, self->method, self->state, normals, views, n, out, &err);
     WENV_END_WORK
     if (st) {
         Py_DECREF(result);
@@ -437,7 +440,7 @@ static int shade_visible(ShaderObject *self, const float *normals, const float *
     *next = first;
     if (first < count) {
         WENV_BEGIN_WORK
-        st = wenv_shade_for(self->method, self->state, normals, views, count, first, budget, shaded, next, &err);
+        st = wenv_shade_for(&self->frame, self->method, self->state, normals, views, count, first, budget, shaded, next, &err);
         WENV_END_WORK
     }
     if (!st && visible)
@@ -722,7 +725,8 @@ static PyTypeObject ShaderType = {
     .tp_doc = "Shader(env, material, quality='default', method=None, cache_dir=None, progress=None, "
               "target_error=0.01, memory_budget_mb=1024, normals=None)\n--\n\n"
               "Environment shading by wavelet rotation.  quality: 'draft', 'default', 'high', 'auto' or a dict of "
-              "global, local, normals, views, coefficients, light_coefficients, matrix_epsilon, lights, light_threshold, grazing.  method: "
+              "global, local, normals, views, coefficients, light_coefficients, matrix_epsilon, lights, light_threshold, "
+              "light_tolerance, grazing, grazing_slopes.  method: "
               "'rotation' (precomputed sparse matrices, cached on disk in cache_dir; None: WENV_CACHE_DIR or "
               "~/.cache/wenv; False: no cache) or 'slicing' (the same shading without matrices); None picks "
               "'rotation' where the matrices are in the cache or take at most 768 MB (and memory_budget_mb), "

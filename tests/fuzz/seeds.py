@@ -146,7 +146,7 @@ def merl_regressions(out):
 def matrix_cache_regressions(out):
     # valid CRCs over a block table whose first block claims 40 GB (80 GB inflated) in a file of 144 bytes
     ns = 4
-    head = b"WENVROT\0" + struct.pack("<II", 2, 0) + struct.pack("<QQQd", 512, 256, 2, 1e-3)
+    head = b"WENVROT\0" + struct.pack("<II", 3, 0) + struct.pack("<QQQd", 512, 256, 2, 1e-3)
     table = struct.pack("<QQII", 40 << 30, 80 << 30, 0, 0) + struct.pack("<QQII", 8, 8, 0, 0) * (ns - 1)
     crc = zlib.crc32(table, zlib.crc32(head))
     with open(os.path.join(out, "regress_block_sizes.bin"), "wb") as f:

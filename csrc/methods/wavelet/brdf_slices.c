@@ -135,6 +135,8 @@ static wenv_status lobe_cutoffs(wenv_wavelet *wavelet, const wenv_material *mat,
     wavelet->mirror_centred = wenv_material_mirror_centred(mat);
     wavelet->lobes_modelled = wavelet->mirror_centred && wenv_material_lobes_follow_shapes(mat);
     wavelet->light_cone_cos = 2.0 * theta_h >= M_PI ? -1.0 : cos(2.0 * theta_h);
+    if (wavelet->lobes_modelled)
+        wenv_lights_peak_table(mat, wavelet->lobe_m_min, wavelet->lobe_peak);
     return WENV_OK;
 }
 
@@ -302,7 +304,8 @@ wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material
     free(all_idx);
     free(all_rgb);
     if (wenv_material_copy(&wavelet->mat, mat, err) || lobe_cutoffs(wavelet, mat, err) || albedo_tables(wavelet, mat, err) ||
-        wenv_grazing_rule_create(&wavelet->grazing_rule, mat, wavelet->q.local_n, wavelet->q.grazing, err)) {
+        wenv_grazing_rule_create(&wavelet->grazing_rule, mat, wavelet->q.local_n, wavelet->q.grazing,
+                                 wavelet->q.grazing_slopes != 0, err)) {
         wenv_wavelet_free_material(wavelet);
         return err->status;
     }

@@ -37,9 +37,10 @@ size_t wenv_grazing_light_bytes(const wenv_grazing_light *light);
 typedef struct wenv_grazing_rule wenv_grazing_rule;
 
 /* threshold > 0 is rho below which a vertex is shaded by the rule alone; local_n the local map's
- * side.  A material without lobes (or with only black ones) gives *out = NULL: nothing to do. */
+ * side; all_slopes puts GGX lobes on the slope grid too (wenv_wavelet_quality.grazing_slopes).  A
+ * material without lobes (or with only black ones) gives *out = NULL: nothing to do. */
 wenv_status wenv_grazing_rule_create(wenv_grazing_rule **out, const wenv_material *mat, size_t local_n,
-                                     double threshold, wenv_error *err);
+                                     double threshold, int all_slopes, wenv_error *err);
 void wenv_grazing_rule_free(wenv_grazing_rule *rule);
 size_t wenv_grazing_rule_bytes(const wenv_grazing_rule *rule);
 

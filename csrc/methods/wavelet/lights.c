@@ -260,7 +260,7 @@ typedef struct {
     uint32_t next, end;
 } tree_range;
 
-void wenv_lights_irradiance(const wenv_lights *lights, const float n[3], float e[3])
+void wenv_lights_irradiance(const wenv_lights *lights, const float n[3], float tolerance, float e[3])
 {
     const int top = WENV_LIGHT_LEVELS - 1;
     tree_range stack[WENV_LIGHT_LEVELS];
@@ -274,18 +274,17 @@ void wenv_lights_irradiance(const wenv_lights *lights, const float n[3], float e
         }
         const light_level *lv = &lights->level[r->level];
         uint32_t i = r->next++;
-        const float *l = lv->dir + 3 * i, *vec = lv->vec + 9 * i;
+        const float *l = lv->dir + 3 * i, *vec = lv->vec + 9 * i, *flux = lv->flux + 3 * i;
         float ci = dot3(n, l), sr = lv->sin_radius[i];
-        /* the cosine is linear in the direction: a cluster wholly above the horizon is exact as its
-         * flux vectors; one wholly below adds nothing; one across the horizon is read from its parts
-         * (a pixel, at its centre as the reference reads it) */
         if (ci <= -sr)
             continue;
-        if (ci >= sr || r->level == 0) {
+        /* across the horizon (|n.centre| < sin radius) a light's n.l is within 2 sin radius of 0:
+         * those below subtract, or those above are missed, at most that x their flux */
+        if (ci >= sr || r->level == 0 || 2.0f * (flux[0] + flux[1] + flux[2]) * sr <= tolerance) {
             if (ci > 0.0f) {
-                e[0] += dot3(n, vec);
-                e[1] += dot3(n, vec + 3);
-                e[2] += dot3(n, vec + 6);
+                e[0] += max_f(0.0f, dot3(n, vec));
+                e[1] += max_f(0.0f, dot3(n, vec + 3));
+                e[2] += max_f(0.0f, dot3(n, vec + 6));
             }
             continue;
         }
@@ -481,76 +480,19 @@ static inline void specular_pixel(const light_level *lv, size_t i, specular_view
  * children. */
 #define CLUSTER_WIDTH_FRACTION 0.5f
 
-void wenv_lights_specular(const wenv_lights *lights, const wenv_material *mat, const float *cos_h_min,
-                          const wenv_lights_lobe *lobe, const float n[3], const float v[3], float cos_v,
-                          float tolerance, float s[3])
-{
-    specular_view sv = {.mat = mat, .n_lobes = wenv_material_lobe_count(mat), .cos_h_min = cos_h_min, .co = cos_v};
-    memcpy(sv.n, n, sizeof sv.n);
-    memcpy(sv.v, v, sizeof sv.v);
-    /* any frame with +Z the normal will do: the lobes are isotropic */
-    sv.so = sqrtf(max_f(0.0f, 1.0f - cos_v * cos_v));
-    sv.wo[0] = sv.so;
-    sv.wo[1] = 0.0f;
-    sv.wo[2] = cos_v;
-    const light_level *pixels = &lights->level[0];
-    double cone_cos = lobe->cone_cos;
-    /* across the mirror direction a lobe of roughness m is about 2 m cos(theta_v) wide, squeezed
-     * against the horizon (to about m^2 / 4 at it), and 2 m along it */
-    float m = (float)lobe->roughness, w_across = 2.0f * m * cos_v + 0.25f * m * m, w_along = 2.0f * m;
-    if (lobe->narrow && 2.0f * SUBPIXELS_PER_WIDTH * pixels->reach > w_across) {
-        /* pixels wider than the lobe: their extents are read, and a pixel whose centre is off the
-         * lobe by less than its reach may still meet it.  Near the mirror direction n.h moves by
-         * up to the light's displacement over 2 n.v; the cone about it widens by the reach. */
-        sv.subpixel_scale = 2.0f * SUBPIXELS_PER_WIDTH / w_across;
-        sv.reach = pixels->reach;
-        sv.slack = (float)fmin(2.0, pixels->reach / (2.0 * fmax(cos_v, 1e-3)) + 1e-6);
-        if (cone_cos > -1.0) {
-            double cone = acos(fmin(1.0, cone_cos)) + pixels->reach;
-            cone_cos = cone >= M_PI ? -1.0 : cos(cone);
-        }
-    }
-    float r[3] = {2.0f * cos_v * n[0] - v[0], 2.0f * cos_v * n[1] - v[1], 2.0f * cos_v * n[2] - v[2]};
-    /* axes about r: across (perpendicular to the plane of n and r) and along (in it) */
-    float across[3] = {n[1] * r[2] - n[2] * r[1], n[2] * r[0] - n[0] * r[2], n[0] * r[1] - n[1] * r[0]};
-    float len = sqrtf(dot3(across, across));
-    /* only lobes whose width and tails are known bound a cluster's error */
-    int centred = lobe->modelled;
-    if (len > 1e-6f) {
-        for (int c = 0; c < 3; c++)
-            across[c] /= len;
-    } else { /* the view along the normal: the lobe is round */
-        w_across = w_along = min_f(w_across, w_along);
-        float a[3] = {fabsf(r[0]) < 0.9f ? 1.0f : 0.0f, fabsf(r[0]) < 0.9f ? 0.0f : 1.0f, 0.0f};
-        float d = dot3(a, r);
-        for (int c = 0; c < 3; c++)
-            across[c] = a[c] - d * r[c];
-        len = sqrtf(dot3(across, across));
-        for (int c = 0; c < 3; c++)
-            across[c] /= len;
-    }
-    float along[3] = {r[1] * across[2] - r[2] * across[1], r[2] * across[0] - r[0] * across[2],
-                      r[0] * across[1] - r[1] * across[0]};
-    float inv_across = 1.0f / w_across, inv_along = 1.0f / w_along;
-    float cone = cone_cos > -1.0 ? (float)cone_cos : -2.0f;
-    /* about the lobes' largest f cos (RGB summed): at the mirror direction, or, towards grazing,
-     * where the cosine has grown before D falls (about m above it), with a margin */
-    float peak = 0.0f;
-    if (centred) {
-        float up[3] = {n[0] - cos_v * r[0], n[1] - cos_v * r[1], n[2] - cos_v * r[2]};
-        float ul = sqrtf(dot3(up, up));
-        for (int t = 0; t < 3; t++) {
-            float ang = 0.5f * (float)t * m, ca = cosf(ang), sa = ul > 1e-6f ? sinf(ang) / ul : 0.0f;
-            float d[3] = {ca * r[0] + sa * up[0], ca * r[1] + sa * up[1], ca * r[2] + sa * up[2]};
-            float cd = dot3(n, d), rgb[3];
-            if (!(cd > 0.0f))
-                continue;
-            eval_light(&sv, cd, dot3(d, v), rgb);
-            peak = max_f(peak, rgb[0] + rgb[1] + rgb[2]);
-        }
-        peak *= 1.5f;
-    }
+/* What the walk needs of the lobes about this vertex's mirror direction r. */
+typedef struct {
+    float r[3], across[3], along[3]; /* axes about r: across the plane of n and r, and along it */
+    float w_across, inv_across, inv_along;
+    float cone; /* cos of the cone about r outside which the lobes are negligible (-2: none) */
+    float peak; /* about the lobes' largest f cos, RGB summed, with a margin */
+    int centred; /* the lobes' width and tails bound a cluster's error */
+} lobe_axes;
 
+/* One walk over the cluster tree at absolute tolerance `tolerance`, adding to s. */
+static void walk_clusters(const wenv_lights *lights, specular_view *sv, const lobe_axes *ax, float tolerance,
+                          float s[3])
+{
     light_batch lb;
     lb.n = 0;
     const int top = WENV_LIGHT_LEVELS - 1;
@@ -567,52 +509,146 @@ void wenv_lights_specular(const wenv_lights *lights, const wenv_material *mat, c
         const light_level *lv = &lights->level[k];
         uint32_t i = rg->next++;
         if (k == 0) {
-            specular_pixel(lv, i, &sv, &lb, s);
+            specular_pixel(lv, i, sv, &lb, s);
             continue;
         }
         const float *l = lv->dir + 3 * i, *flux = lv->flux + 3 * i;
-        float sr = lv->sin_radius[i] + sv.reach, cr = sqrtf(max_f(0.0f, 1.0f - sr * sr));
-        float ci = dot3(n, l);
+        float sr = lv->sin_radius[i] + sv->reach, cr = sqrtf(max_f(0.0f, 1.0f - sr * sr));
+        float ci = dot3(sv->n, l);
         if (ci <= -sr) /* wholly below the horizon */
             continue;
-        float cd = dot3(r, l), sd = sqrtf(max_f(0.0f, 1.0f - cd * cd));
-        /* cos of the nearest angle to r: wholly outside every lobe's cone is skipped */
+        float cd = dot3(ax->r, l), sd = sqrtf(max_f(0.0f, 1.0f - cd * cd));
+        /* cos of the nearest angle to r: wholly outside every lobe's ax->cone is skipped */
         float c_near = sd <= sr ? 1.0f : cd * cr + sd * sr;
-        if (c_near < cone)
+        if (c_near < ax->cone)
             continue;
         float flux_sum = flux[0] + flux[1] + flux[2];
         float bound = INFINITY, q = 0.0f;
-        if (centred) {
-            /* the Gaussian exponent at the centre, and at the cluster's point nearest the peak (each
+        if (ax->centred) {
+            /* the Gaussian exponent at the centre, and at the cluster's point nearest the ax->peak (each
              * axis on its own); a Gaussian or GGX tail falls at least as 1 / (1 + q)^2 */
-            float a = dot3(l, across), b = dot3(l, along), ra = sr * inv_across, rb = sr * inv_along;
-            a *= inv_across;
-            b *= inv_along;
+            float a = dot3(l, ax->across), b = dot3(l, ax->along), ra = sr * ax->inv_across, rb = sr * ax->inv_along;
+            a *= ax->inv_across;
+            b *= ax->inv_along;
             q = a * a + b * b;
             float an = max_f(0.0f, fabsf(a) - ra), bn = max_f(0.0f, fabsf(b) - rb);
             float t = 1.0f / (1.0f + an * an + bn * bn);
             /* behind the mirror direction (cd < 0) the lobe holds nothing of note */
-            bound = cd > 0.0f ? flux_sum * peak * t * t : 0.0f;
+            bound = cd > 0.0f ? flux_sum * ax->peak * t * t : 0.0f;
             if (bound <= tolerance) {
                 /* all of it is within the tolerance: its centre stands for it */
                 float lv_dot;
-                float ch = cos_half(&sv, l, ci, &lv_dot);
-                if (ci > 0.0f && near_a_lobe(&sv, ch, 0.0f))
-                    push_light(&sv, &lb, ci, lv_dot, flux, 1.0f, s);
+                float ch = cos_half(sv, l, ci, &lv_dot);
+                if (ci > 0.0f && near_a_lobe(sv, ch, 0.0f))
+                    push_light(sv, &lb, ci, lv_dot, flux, 1.0f, s);
                 continue;
             }
         }
         /* Without a model of the lobe's shape every pixel is read: a table's lobe only resembles
          * its fitted shape (sunset, t0.1: 0.72 % against 0.36 %), and a retro-reflective one lies
          * elsewhere (courtyard, retro: 1.15 % against 0.55 %). */
-        if (centred && ci >= sr && sr <= CLUSTER_WIDTH_FRACTION * w_across) {
-            float x = sr * inv_across;
+        if (ax->centred && ci >= sr && sr <= CLUSTER_WIDTH_FRACTION * ax->w_across) {
+            float x = sr * ax->inv_across;
             if (bound * x * x * (1.0f + 2.0f * q) <= tolerance) {
-                push_light(&sv, &lb, ci, dot3(l, v), flux, 1.0f, s);
+                push_light(sv, &lb, ci, dot3(l, sv->v), flux, 1.0f, s);
                 continue;
             }
         }
         stack[depth++] = (tree_range){k - 1, lv->child[i], lv->child[i + 1]};
     }
-    flush_batch(&sv, &lb, s);
+    flush_batch(sv, &lb, s);
+}
+
+void wenv_lights_peak_table(const wenv_material *mat, double roughness, float peak[WENV_LIGHT_PEAK_SAMPLES + 1])
+{
+    float m = (float)roughness;
+    for (size_t i = 0; i <= WENV_LIGHT_PEAK_SAMPLES; i++) {
+        float t = (float)i / (float)WENV_LIGHT_PEAK_SAMPLES, cos_v = max_f(1e-4f, t * t);
+        specular_view sv = {.mat = mat, .n_lobes = wenv_material_lobe_count(mat), .co = cos_v};
+        sv.so = sqrtf(max_f(0.0f, 1.0f - cos_v * cos_v));
+        sv.n[2] = 1.0f;
+        sv.v[0] = sv.wo[0] = sv.so;
+        sv.v[2] = sv.wo[2] = cos_v;
+        /* at the mirror direction r and, towards grazing, where the cosine has grown before D falls
+         * (about m above it) */
+        float r[3] = {-sv.so, 0.0f, cos_v}, up[3] = {sv.so * cos_v, 0.0f, 1.0f - cos_v * cos_v};
+        float ul = sqrtf(dot3(up, up)), best = 0.0f;
+        for (int k = 0; k < 3; k++) {
+            float ang = 0.5f * (float)k * m, ca = cosf(ang), sa = ul > 1e-6f ? sinf(ang) / ul : 0.0f;
+            float d[3] = {ca * r[0] + sa * up[0], ca * r[1] + sa * up[1], ca * r[2] + sa * up[2]};
+            float rgb[3];
+            if (!(d[2] > 0.0f))
+                continue;
+            eval_light(&sv, d[2], dot3(d, sv.v), rgb);
+            best = max_f(best, rgb[0] + rgb[1] + rgb[2]);
+        }
+        peak[i] = 1.5f * best;
+    }
+}
+
+void wenv_lights_specular(const wenv_lights *lights, const wenv_material *mat, const float *cos_h_min,
+                          const wenv_lights_lobe *lobe, const float n[3], const float v[3], float cos_v,
+                          float tolerance, float s[3])
+{
+    specular_view sv = {.mat = mat, .n_lobes = wenv_material_lobe_count(mat), .cos_h_min = cos_h_min, .co = cos_v};
+    memcpy(sv.n, n, sizeof sv.n);
+    memcpy(sv.v, v, sizeof sv.v);
+    /* any frame with +Z the normal will do: the lobes are isotropic */
+    sv.so = sqrtf(max_f(0.0f, 1.0f - cos_v * cos_v));
+    sv.wo[0] = sv.so;
+    sv.wo[1] = 0.0f;
+    sv.wo[2] = cos_v;
+    const light_level *pixels = &lights->level[0];
+    double cone_cos = lobe->cone_cos;
+    lobe_axes ax = {.centred = lobe->modelled};
+    /* across the mirror direction a lobe of roughness m is about 2 m cos(theta_v) wide, squeezed
+     * against the horizon (to about m^2 / 4 at it), and 2 m along it */
+    float m = (float)lobe->roughness, w_across = 2.0f * m * cos_v + 0.25f * m * m, w_along = 2.0f * m;
+    if (lobe->narrow && 2.0f * SUBPIXELS_PER_WIDTH * pixels->reach > w_across) {
+        /* pixels wider than the lobe: their extents are read, and a pixel whose centre is off the
+         * lobe by less than its reach may still meet it.  Near the mirror direction n.h moves by
+         * up to the light's displacement over 2 n.v; the cone about it widens by the reach. */
+        sv.subpixel_scale = 2.0f * SUBPIXELS_PER_WIDTH / w_across;
+        sv.reach = pixels->reach;
+        sv.slack = (float)fmin(2.0, pixels->reach / (2.0 * fmax(cos_v, 1e-3)) + 1e-6);
+        if (cone_cos > -1.0) {
+            double cone = acos(fmin(1.0, cone_cos)) + pixels->reach;
+            cone_cos = cone >= M_PI ? -1.0 : cos(cone);
+        }
+    }
+    float *r = ax.r, *across = ax.across, *along = ax.along;
+    for (int c = 0; c < 3; c++)
+        r[c] = 2.0f * cos_v * n[c] - v[c];
+    across[0] = n[1] * r[2] - n[2] * r[1];
+    across[1] = n[2] * r[0] - n[0] * r[2];
+    across[2] = n[0] * r[1] - n[1] * r[0];
+    float len = sqrtf(dot3(across, across));
+    if (len > 1e-6f) {
+        for (int c = 0; c < 3; c++)
+            across[c] /= len;
+    } else { /* the view along the normal: the lobe is round */
+        w_across = w_along = min_f(w_across, w_along);
+        float a[3] = {fabsf(r[0]) < 0.9f ? 1.0f : 0.0f, fabsf(r[0]) < 0.9f ? 0.0f : 1.0f, 0.0f};
+        float d = dot3(a, r);
+        for (int c = 0; c < 3; c++)
+            across[c] = a[c] - d * r[c];
+        len = sqrtf(dot3(across, across));
+        for (int c = 0; c < 3; c++)
+            across[c] /= len;
+    }
+    along[0] = r[1] * across[2] - r[2] * across[1];
+    along[1] = r[2] * across[0] - r[0] * across[2];
+    along[2] = r[0] * across[1] - r[1] * across[0];
+    ax.w_across = w_across;
+    ax.inv_across = 1.0f / w_across;
+    ax.inv_along = 1.0f / w_along;
+    ax.cone = cone_cos > -1.0 ? (float)cone_cos : -2.0f;
+    if (ax.centred) {
+        /* between two samples the larger, the table's margin covering the change within a step */
+        float pos = sqrtf(max_f(0.0f, min_f(1.0f, cos_v))) * (float)WENV_LIGHT_PEAK_SAMPLES;
+        size_t at = (size_t)pos;
+        at = at < WENV_LIGHT_PEAK_SAMPLES ? at : WENV_LIGHT_PEAK_SAMPLES - 1;
+        ax.peak = max_f(lobe->peak[at], lobe->peak[at + 1]);
+    }
+    walk_clusters(lights, &sv, &ax, tolerance, s);
 }

@@ -37,9 +37,11 @@ void wenv_lights_free(wenv_lights *lights);
 /* Lights at a level (level 0: the pixels). */
 size_t wenv_lights_count(const wenv_lights *lights, int level);
 
-/* Irradiance at unit normal n, added to e: exact for the pixels' centres (clusters wholly above the
- * horizon are read whole, the cosine being linear in the direction). */
-void wenv_lights_irradiance(const wenv_lights *lights, const float n[3], float e[3]);
+/* Irradiance at unit normal n, added to e.  Clusters wholly above the horizon are exact as their
+ * flux vectors (the cosine is linear in the direction); one across it is read whole when what its
+ * lights below the horizon could add, its flux x its radius, is within `tolerance` (RGB summed),
+ * else from its parts, down to the pixels' centres as the reference reads them. */
+void wenv_lights_irradiance(const wenv_lights *lights, const float n[3], float tolerance, float e[3]);
 
 /* What the walk over the clusters needs to know of a material's lobes. */
 typedef struct {
@@ -51,7 +53,15 @@ typedef struct {
                          * cluster's error */
     int narrow;         /* the lobe is narrower than WENV_NARROW_LOBE_PIXELS pixels: level 0 integrates
                          * pixels wider than it over their areas, as wenv_reference does */
+    const float *peak;  /* modelled lobes: wenv_lights_peak_table's */
 } wenv_lights_lobe;
+
+/* The lobes' largest f cos (RGB summed) about the mirror direction, with a margin, at
+ * WENV_LIGHT_PEAK_SAMPLES + 1 views uniform in sqrt(cos(theta_v)) from 0 to 1: it bounds what a
+ * cluster can add, and depends on the view's angle alone (isotropic lobes), so it is made once per
+ * material rather than per vertex.  roughness: wenv_lights_lobe's. */
+#define WENV_LIGHT_PEAK_SAMPLES 64
+void wenv_lights_peak_table(const wenv_material *mat, double roughness, float peak[WENV_LIGHT_PEAK_SAMPLES + 1]);
 
 /* The lobes' reflected radiance at unit normal n and view v (n . v = cos_v > 0), added to s.
  * cos_h_min[k]: lobe k's n.h below which it is negligible.  Clusters are read whole where their

@@ -187,14 +187,19 @@ typedef struct {
     uint32_t *tap_t;    /* N_global * 4k^2 */
     double *tap_w;
     size_t *tap_start;  /* N_global + 1 */
-    float *acc;         /* N_local */
-    uint32_t *touched;  /* N_local */
-    unsigned char *mark;/* N_local */
+    float *acc;         /* N_local, then N_global: a column's sums */
+    uint32_t *touched;  /* N_local, then N_global: where acc is non-zero */
+    unsigned char *mark;/* N_local, then N_global */
     triplets p, out;
-    float *block;       /* N_global * chunk */
-    float *scratch;     /* global_n * chunk */
-    size_t *imp_idx;    /* 3 log2(L) + 1 */
-    float *imp_val;
+    size_t *col_start;  /* N_local + 1: P's entries of each local coefficient */
+    uint32_t *col_u;    /* P's entries grouped by local coefficient: global texel, value */
+    float *col_v;
+    size_t col_room;
+    /* the Haar transform of a unit impulse at each texel of the local and of the global map (3 log2 n
+     * + 1 terms each), made once: the build reads them a few hundred million times */
+    size_t local_per, global_per;
+    uint32_t *local_idx, *global_idx;
+    float *local_val, *global_val;
 } build_ws;
 
 static void ws_free(build_ws *ws)
@@ -208,40 +213,112 @@ static void ws_free(build_ws *ws)
     free(ws->mark);
     triplets_free(&ws->p);
     triplets_free(&ws->out);
-    free(ws->block);
-    free(ws->scratch);
-    free(ws->imp_idx);
-    free(ws->imp_val);
+    free(ws->col_start);
+    free(ws->col_u);
+    free(ws->col_v);
+    free(ws->local_idx);
+    free(ws->local_val);
+    free(ws->global_idx);
+    free(ws->global_val);
 }
 
-static int ws_alloc(build_ws *ws, const wenv_resampler *rs, size_t chunk)
+/* Every texel's impulse response on an n x n map: per terms each, into *idx and *val. */
+static int make_impulses(size_t n, size_t *per, uint32_t **idx, float **val)
+{
+    size_t idx_one[64];
+    float val_one[64];
+    *per = wenv_haar2d_impulse(n, 0, 0, idx_one, val_one);
+    *idx = malloc(n * n * *per * sizeof **idx);
+    *val = malloc(n * n * *per * sizeof **val);
+    if (!*idx || !*val)
+        return -1;
+    for (size_t t = 0; t < n * n; t++) {
+        wenv_haar2d_impulse(n, t % n, t / n, idx_one, val_one);
+        for (size_t e = 0; e < *per; e++) {
+            (*idx)[t * *per + e] = (uint32_t)idx_one[e];
+            (*val)[t * *per + e] = val_one[e];
+        }
+    }
+    return 0;
+}
+
+static int ws_alloc(build_ws *ws, const wenv_resampler *rs)
 {
     size_t nl = rs->local_n * rs->local_n, ng = rs->global_n * rs->global_n, kk4 = 4 * rs->k * rs->k;
+    size_t most = nl > ng ? nl : ng;
     memset(ws, 0, sizeof *ws);
     ws->rowsum = malloc(nl * sizeof(double));
     ws->tap_t = malloc(ng * kk4 * sizeof(uint32_t));
     ws->tap_w = malloc(ng * kk4 * sizeof(double));
     ws->tap_start = malloc((ng + 1) * sizeof(size_t));
-    ws->acc = calloc(nl, sizeof(float));
-    ws->touched = malloc(nl * sizeof(uint32_t));
-    ws->mark = calloc(nl, 1);
-    ws->block = malloc(ng * chunk * sizeof(float));
-    ws->scratch = malloc(rs->global_n * chunk * sizeof(float));
-    ws->imp_idx = malloc(64 * sizeof(size_t));
-    ws->imp_val = malloc(64 * sizeof(float));
+    ws->acc = calloc(most, sizeof(float));
+    ws->touched = malloc(most * sizeof(uint32_t));
+    ws->mark = calloc(most, 1);
+    ws->col_start = malloc((nl + 1) * sizeof(size_t));
+    if (make_impulses(rs->local_n, &ws->local_per, &ws->local_idx, &ws->local_val) ||
+        make_impulses(rs->global_n, &ws->global_per, &ws->global_idx, &ws->global_val))
+        return -1;
     return ws->rowsum && ws->tap_t && ws->tap_w && ws->tap_start && ws->acc && ws->touched && ws->mark &&
-                   ws->block && ws->scratch && ws->imp_idx && ws->imp_val
+                   ws->col_start
                ? 0
                : -1;
 }
 
-/* R_s = H_local S_s H_global^T, computed as (H_local S_s) first (sparse: each global texel touches
- * a few local texels, whose Haar transforms are impulse responses), then the global transform on
- * blocks of `chunk` local coefficients at a time so the dense work buffer stays small. */
-static int build_matrix(const wenv_resampler *rs, const double f[9], double threshold, size_t chunk,
-                        build_ws *ws, wenv_csc *m)
+/* Adds w x the impulse response `per` terms at idx, val into ws->acc, noting the coefficients it
+ * reaches first in ws->touched; returns the new count of those. */
+static size_t add_impulse(build_ws *ws, const uint32_t *idx, const float *val, size_t per, float w, size_t ntouched)
 {
-    size_t L = rs->local_n, G = rs->global_n, nl = L * L, ng = G * G;
+    for (size_t e = 0; e < per; e++) {
+        uint32_t jj = idx[e];
+        if (!ws->mark[jj]) {
+            ws->mark[jj] = 1;
+            ws->touched[ntouched++] = jj;
+        }
+        ws->acc[jj] += w * val[e];
+    }
+    return ntouched;
+}
+
+/* P's entries (global texel u, local coefficient j, value) grouped by j, in u order within each. */
+static int group_by_local(build_ws *ws, size_t nl)
+{
+    size_t np = ws->p.count;
+    if (np > ws->col_room) {
+        uint32_t *u = realloc(ws->col_u, np * sizeof *u);
+        if (u)
+            ws->col_u = u;
+        float *v = realloc(ws->col_v, np * sizeof *v);
+        if (v)
+            ws->col_v = v;
+        if (!u || !v)
+            return -1;
+        ws->col_room = np;
+    }
+    memset(ws->col_start, 0, (nl + 1) * sizeof(size_t));
+    for (size_t e = 0; e < np; e++)
+        ws->col_start[ws->p.j[e] + 1]++;
+    for (size_t j = 0; j < nl; j++)
+        ws->col_start[j + 1] += ws->col_start[j];
+    for (size_t e = 0; e < np; e++) {
+        size_t at = ws->col_start[ws->p.j[e]]++;
+        ws->col_u[at] = ws->p.u[e];
+        ws->col_v[at] = ws->p.v[e];
+    }
+    /* filling moved each start to where the next one begins: shift back */
+    for (size_t j = nl; j > 0; j--)
+        ws->col_start[j] = ws->col_start[j - 1];
+    ws->col_start[0] = 0;
+    return 0;
+}
+
+/* R_s = H_local S_s H_global^T, computed as (H_local S_s) first (sparse: each global texel touches
+ * a few local texels, whose Haar transforms are impulse responses), then the global transform of
+ * each of its columns the same way: a column holds the few global texels that reach one local
+ * coefficient, and their impulse responses (3 log2 G + 1 terms each) cost far less than
+ * transforming the dense N_global x N_local block (the thesis's largest set: 45 s -> X s). */
+static int build_matrix(const wenv_resampler *rs, const double f[9], double threshold, build_ws *ws, wenv_csc *m)
+{
+    size_t nl = rs->local_n * rs->local_n, ng = rs->global_n * rs->global_n;
     size_t kk4 = 4 * rs->k * rs->k;
     memset(ws->rowsum, 0, nl * sizeof(double));
     for (size_t u = 0; u < ng; u++) {
@@ -255,16 +332,8 @@ static int build_matrix(const wenv_resampler *rs, const double f[9], double thre
         size_t ntouched = 0;
         for (size_t q = 0; q < ws->tap_start[u]; q++) {
             uint32_t t = ws->tap_t[u * kk4 + q];
-            float w = (float)(ws->tap_w[u * kk4 + q] / ws->rowsum[t]);
-            size_t n = wenv_haar2d_impulse(L, t % L, t / L, ws->imp_idx, ws->imp_val);
-            for (size_t e = 0; e < n; e++) {
-                size_t jj = ws->imp_idx[e];
-                if (!ws->mark[jj]) {
-                    ws->mark[jj] = 1;
-                    ws->touched[ntouched++] = (uint32_t)jj;
-                }
-                ws->acc[jj] += w * ws->imp_val[e];
-            }
+            ntouched = add_impulse(ws, ws->local_idx + t * ws->local_per, ws->local_val + t * ws->local_per,
+                                   ws->local_per, (float)(ws->tap_w[u * kk4 + q] / ws->rowsum[t]), ntouched);
         }
         for (size_t e = 0; e < ntouched; e++) {
             uint32_t jj = ws->touched[e];
@@ -274,20 +343,21 @@ static int build_matrix(const wenv_resampler *rs, const double f[9], double thre
             ws->mark[jj] = 0;
         }
     }
+    if (group_by_local(ws, nl) < 0)
+        return -1;
     ws->out.count = 0;
-    for (size_t j0 = 0; j0 < nl; j0 += chunk) {
-        memset(ws->block, 0, ng * chunk * sizeof(float));
-        for (size_t e = 0; e < ws->p.count; e++) {
-            uint32_t jj = ws->p.j[e];
-            if (jj >= j0 && jj < j0 + chunk)
-                ws->block[(size_t)ws->p.u[e] * chunk + (jj - j0)] += ws->p.v[e];
-        }
-        wenv_haar2d_forward(ws->block, G, chunk, ws->scratch);
-        for (size_t u = 0; u < ng; u++) {
-            const float *b = ws->block + u * chunk;
-            for (size_t c = 0; c < chunk; c++)
-                if (fabsf(b[c]) > threshold && triplets_push(&ws->out, (uint32_t)u, (uint32_t)(j0 + c), b[c]) < 0)
-                    return -1;
+    for (size_t jj = 0; jj < nl; jj++) {
+        size_t ntouched = 0;
+        for (size_t e = ws->col_start[jj]; e < ws->col_start[jj + 1]; e++)
+            ntouched = add_impulse(ws, ws->global_idx + (size_t)ws->col_u[e] * ws->global_per,
+                                   ws->global_val + (size_t)ws->col_u[e] * ws->global_per, ws->global_per,
+                                   ws->col_v[e], ntouched);
+        for (size_t e = 0; e < ntouched; e++) {
+            uint32_t g = ws->touched[e];
+            if (fabsf(ws->acc[g]) > threshold && triplets_push(&ws->out, g, (uint32_t)jj, ws->acc[g]) < 0)
+                return -1;
+            ws->acc[g] = 0.0f;
+            ws->mark[g] = 0;
         }
     }
     /* counting sort by global coefficient: within a column, rows stay ascending */
@@ -324,16 +394,6 @@ wenv_status wenv_rotation_check_sizes(size_t global_n, size_t local_n, size_t no
     return WENV_OK;
 }
 
-/* The block of local coefficients the global transform works on at a time: its dense buffer stays
- * within 4 MB. */
-static size_t build_chunk(size_t global_n, size_t local_n)
-{
-    size_t chunk = local_n * local_n, ng = global_n * global_n;
-    while (chunk > 1 && ng * chunk * sizeof(float) > ((size_t)4 << 20))
-        chunk /= 2;
-    return chunk;
-}
-
 static double build_threshold(size_t global_n, size_t local_n, double epsilon)
 {
     return epsilon * sqrt((double)(local_n * local_n) / (double)(global_n * global_n));
@@ -366,16 +426,16 @@ wenv_status wenv_rotation_estimate_bytes(size_t global_n, size_t local_n, size_t
     wenv_resampler *rs = NULL;
     if (check_and_resample(global_n, local_n, normal_n, epsilon, &rs, err))
         return err->status;
-    size_t ns = normal_n * normal_n, chunk = build_chunk(global_n, local_n), samples = 0, nnz = 0;
+    size_t ns = normal_n * normal_n, samples = 0, nnz = 0;
     size_t want = ns < ESTIMATE_SAMPLES ? ns : ESTIMATE_SAMPLES;
     build_ws ws;
-    int failed = ws_alloc(&ws, rs, chunk) < 0;
+    int failed = ws_alloc(&ws, rs) < 0;
     for (size_t k = 0; k < want && !failed; k++) {
         double n[3], f[9];
         wenv_csc m = {0};
         wenv_normal_sample(normal_n, (2 * k + 1) * ns / (2 * want), n);
         wenv_frame(n, f);
-        failed = build_matrix(rs, f, build_threshold(global_n, local_n, epsilon), chunk, &ws, &m) < 0;
+        failed = build_matrix(rs, f, build_threshold(global_n, local_n, epsilon), &ws, &m) < 0;
         nnz += wenv_csc_nnz(&m);
         samples++;
         wenv_csc_free(&m);
@@ -408,7 +468,6 @@ wenv_status wenv_rotation_build(wenv_rotation **out, size_t global_n, size_t loc
     rot->normal_n = normal_n;
     rot->epsilon = epsilon;
     rot->matrices = mats;
-    size_t chunk = build_chunk(global_n, local_n);
     double threshold = build_threshold(global_n, local_n, epsilon);
 
     atomic_int failed = 0, cancelled = 0;
@@ -416,7 +475,7 @@ wenv_status wenv_rotation_build(wenv_rotation **out, size_t global_n, size_t loc
 #pragma omp parallel
     {
         build_ws ws;
-        if (ws_alloc(&ws, rs, chunk) < 0)
+        if (ws_alloc(&ws, rs) < 0)
             atomic_store(&failed, 1);
 #pragma omp for schedule(dynamic, 1)
         for (size_t s = 0; s < ns; s++) {
@@ -425,7 +484,7 @@ wenv_status wenv_rotation_build(wenv_rotation **out, size_t global_n, size_t loc
             double n[3], f[9];
             wenv_normal_sample(normal_n, s, n);
             wenv_frame(n, f);
-            if (build_matrix(rs, f, threshold, chunk, &ws, &mats[s]) < 0)
+            if (build_matrix(rs, f, threshold, &ws, &mats[s]) < 0)
                 atomic_store(&failed, 1);
             size_t d = atomic_fetch_add(&done, 1) + 1;
             if (omp_get_thread_num() == 0 && progress && progress->report &&

@@ -148,11 +148,6 @@ static int compute_slice(wenv_wavelet *wavelet, size_t s, float *pixel_work, dou
     return 0;
 }
 
-/* The exact lights' error allowed per cluster, against the vertex's radiance without them plus
- * what a uniform environment of the mean radiance would reflect (so that a vertex that sees
- * little of the rest still reads its lights to a tolerance the whole image's error notices). */
-#define LIGHT_TOLERANCE 0.003f
-
 static void shade_vertex(const wenv_wavelet *wavelet, const vertex_taps *tp, float *o)
 {
     float e[3] = {0, 0, 0}, m[3] = {0, 0, 0}, s[3] = {0, 0, 0};
@@ -192,16 +187,23 @@ static void shade_vertex(const wenv_wavelet *wavelet, const vertex_taps *tp, flo
             s[c] += blend * g[c];
     }
     if (wenv_lights_count(wavelet->lights, 0)) {
-        if (wavelet->has_diffuse)
-            wenv_lights_irradiance(wavelet->lights, tp->n, e);
+        if (wavelet->has_diffuse) {
+            /* as for the lobes below: against the rest's irradiance plus a uniform mean's */
+            float scale = e[0] + e[1] + e[2] + 3.0f * (float)M_PI * wavelet->mean_radiance;
+            wenv_lights_irradiance(wavelet->lights, tp->n, (float)wavelet->q.light_tolerance * scale, e);
+        }
         if (wavelet->has_lobes) {
             wenv_lights_lobe lobe = {.roughness = wavelet->lobe_m_min,
                                      .cone_cos = wavelet->light_cone_cos,
                                      .modelled = wavelet->lobes_modelled,
-                                     .narrow = wavelet->lobe_m_min < wavelet->narrow_roughness};
+                                     .narrow = wavelet->lobe_m_min < wavelet->narrow_roughness,
+                                     .peak = wavelet->lobe_peak};
+            /* the error allowed per cluster is against the vertex's radiance without the lights plus
+             * what a uniform environment of the mean radiance would reflect (so that a vertex that
+             * sees little of the rest still reads its lights to a tolerance the image notices) */
             float scale = s[0] + s[1] + s[2] + wavelet->mean_radiance * (a[0] + a[1] + a[2]);
             wenv_lights_specular(wavelet->lights, wavelet->mat, wavelet->lobe_cos_h_min, &lobe, tp->n, tp->v,
-                                 tp->cos_v, LIGHT_TOLERANCE * scale, s);
+                                 tp->cos_v, (float)wavelet->q.light_tolerance * scale, s);
         }
     }
     float d[3];

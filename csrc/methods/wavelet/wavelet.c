@@ -32,8 +32,13 @@ wenv_status wenv_wavelet_quality_check(const wenv_wavelet_quality *q, wenv_error
     if (!(q->light_threshold >= 1.0 && q->light_threshold <= 1e12))
         return wenv_error_set(err, WENV_ERR_VALUE, "quality['light_threshold'] must be in [1, 1e12], got %g",
                               q->light_threshold);
+    if (!(q->light_tolerance > 0.0 && q->light_tolerance <= 1.0))
+        return wenv_error_set(err, WENV_ERR_VALUE, "quality['light_tolerance'] must be in (0, 1], got %g",
+                              q->light_tolerance);
     if (!(q->grazing >= 0.0 && q->grazing <= 64.0))
         return wenv_error_set(err, WENV_ERR_VALUE, "quality['grazing'] must be in [0, 64], got %g", q->grazing);
+    if (q->grazing_slopes > 1)
+        return wenv_error_set(err, WENV_ERR_VALUE, "quality['grazing_slopes'] must be 0 or 1, got %zu", q->grazing_slopes);
     if (!(q->matrix_epsilon >= 0.0 && q->matrix_epsilon < 1.0))
         return wenv_error_set(err, WENV_ERR_VALUE, "quality['matrix_epsilon'] must be in [0, 1), got %g", q->matrix_epsilon);
     size_t table = q->normal_n * q->normal_n * (q->view_n + 1) * (q->view_n + 1);

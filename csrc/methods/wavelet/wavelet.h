@@ -51,8 +51,12 @@ typedef struct {
     double matrix_epsilon;     /* rotation-matrix entries dropped below this (relative) */
     size_t lights;             /* brightest pixels shaded as exact directional lights (0: none) */
     double light_threshold;    /* ... when brighter than this many times the mean radiance */
+    double light_tolerance;    /* a cluster of lights is read whole when its error is within this
+                                * fraction of what the vertex reflects otherwise (lights.h) */
     double grazing;            /* lobes narrower than this many local texels are integrated per vertex
                                 * (grazing.h; 0: never) */
+    size_t grazing_slopes;     /* 1: GGX lobes too on the grazing path's 96 slope cells (else 1024
+                                * polar nodes: exact for GGX's tails, 10x the cost) */
 } wenv_wavelet_quality;
 
 typedef struct {

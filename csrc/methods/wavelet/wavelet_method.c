@@ -21,7 +21,9 @@ static const wenv_param PARAMS[] = {
     PARAM("matrix_epsilon", WENV_PARAM_REAL, matrix_epsilon),
     PARAM("lights", WENV_PARAM_SIZE, lights),
     PARAM("light_threshold", WENV_PARAM_REAL, light_threshold),
+    PARAM("light_tolerance", WENV_PARAM_REAL, light_tolerance),
     PARAM("grazing", WENV_PARAM_REAL, grazing),
+    PARAM("grazing_slopes", WENV_PARAM_SIZE, grazing_slopes),
 };
 #undef PARAM
 

@@ -1,0 +1,98 @@
+#include "methods/lighting_frame.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+uint64_t wenv_lighting_frame_hash(const wenv_envmap *env)
+{
+    /* over the 32-bit words: a few ms for a 4k image, far below remaking what the method holds */
+    const float *px = wenv_envmap_pixels(env);
+    size_t n = wenv_envmap_width(env) * wenv_envmap_height(env) * 3;
+    uint64_t h = 0xcbf29ce484222325ull;
+    for (size_t i = 0; i < n; i++) {
+        uint32_t w;
+        memcpy(&w, px + i, sizeof w);
+        h = (h ^ w) * 0x100000001b3ull;
+    }
+    return h ^ (uint64_t)n;
+}
+
+/* The frame of env's rotation and strength about the held image. */
+static void follow(wenv_lighting_frame *frame, const wenv_envmap *env)
+{
+    /* measured against the unrotated image: R_z(rotation) takes a world direction to it */
+    double r = wenv_envmap_rotation(env), c = cos(r), s = sin(r);
+    float turn[9] = {(float)c, (float)-s, 0.0f, (float)s, (float)c, 0.0f, 0.0f, 0.0f, 1.0f};
+    memcpy(frame->turn, turn, sizeof turn);
+    frame->scale = frame->held_strength > 0.0 ? (float)(wenv_envmap_strength(env) / frame->held_strength) : 0.0f;
+    frame->identity = r == 0.0 && frame->scale == 1.0f;
+}
+
+static int holds(const wenv_lighting_frame *frame, const wenv_envmap *env, uint64_t hash)
+{
+    return frame->have && hash == frame->image_hash && wenv_envmap_width(env) == frame->width &&
+           wenv_envmap_height(env) == frame->height && wenv_envmap_projection(env) == frame->projection;
+}
+
+wenv_status wenv_lighting_frame_set(wenv_lighting_frame *frame, const wenv_method *method, void *state,
+                                    const wenv_envmap *env, const wenv_progress *progress, wenv_error *err)
+{
+    uint64_t hash = wenv_lighting_frame_hash(env);
+    if (holds(frame, env, hash) && (frame->held_strength == 1.0 || wenv_envmap_strength(env) == frame->held_strength)) {
+        follow(frame, env);
+        return WENV_OK;
+    }
+    /* an image too bright for strength 1 is held at the World's own strength (and given anew
+     * when that changes) */
+    wenv_envmap *canonical = NULL;
+    wenv_error ignored = {0};
+    double held = 1.0;
+    if (wenv_envmap_with_transform(&canonical, env, 0.0, 1.0, &ignored) != WENV_OK) {
+        held = wenv_envmap_strength(env);
+        if (wenv_envmap_with_transform(&canonical, env, 0.0, held, err) != WENV_OK)
+            return err->status;
+    }
+    wenv_status st = method->set_environment(state, canonical, progress, err);
+    wenv_envmap_free(canonical);
+    if (st)
+        return st;
+    frame->have = 1;
+    frame->image_hash = hash;
+    frame->width = wenv_envmap_width(env);
+    frame->height = wenv_envmap_height(env);
+    frame->projection = wenv_envmap_projection(env);
+    frame->held_strength = held;
+    follow(frame, env);
+    return WENV_OK;
+}
+
+static void turn_all(const float t[9], const float *in, size_t n, float *out)
+{
+    for (size_t i = 0; i < n; i++) {
+        const float *a = in + 3 * i;
+        float *b = out + 3 * i;
+        b[0] = t[0] * a[0] + t[1] * a[1] + t[2] * a[2];
+        b[1] = t[3] * a[0] + t[4] * a[1] + t[5] * a[2];
+        b[2] = t[6] * a[0] + t[7] * a[1] + t[8] * a[2];
+    }
+}
+
+wenv_status wenv_lighting_frame_shade(const wenv_lighting_frame *frame, const wenv_method *method, void *state,
+                                      const float *normals, const float *views, size_t n, float *out,
+                                      wenv_error *err)
+{
+    if (frame->identity || n == 0)
+        return method->shade(state, normals, views, n, out, err);
+    float *turned = malloc(n * 6 * sizeof(float));
+    if (!turned)
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory turning %zu normals and views", n);
+    turn_all(frame->turn, normals, n, turned);
+    turn_all(frame->turn, views, n, turned + 3 * n);
+    wenv_status st = method->shade(state, turned, turned + 3 * n, n, out, err);
+    free(turned);
+    if (!st && frame->scale != 1.0f)
+        for (size_t i = 0; i < 3 * n; i++)
+            out[i] *= frame->scale;
+    return st;
+}
