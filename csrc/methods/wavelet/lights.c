@@ -518,14 +518,14 @@ static void walk_clusters(const wenv_lights *lights, specular_view *sv, const lo
         if (ci <= -sr) /* wholly below the horizon */
             continue;
         float cd = dot3(ax->r, l), sd = sqrtf(max_f(0.0f, 1.0f - cd * cd));
-        /* cos of the nearest angle to r: wholly outside every lobe's ax->cone is skipped */
+        /* cos of the nearest angle to r: wholly outside every lobe's cone is skipped */
         float c_near = sd <= sr ? 1.0f : cd * cr + sd * sr;
         if (c_near < ax->cone)
             continue;
         float flux_sum = flux[0] + flux[1] + flux[2];
         float bound = INFINITY, q = 0.0f;
         if (ax->centred) {
-            /* the Gaussian exponent at the centre, and at the cluster's point nearest the ax->peak (each
+            /* the Gaussian exponent at the centre, and at the cluster's point nearest the peak (each
              * axis on its own); a Gaussian or GGX tail falls at least as 1 / (1 + q)^2 */
             float a = dot3(l, ax->across), b = dot3(l, ax->along), ra = sr * ax->inv_across, rb = sr * ax->inv_along;
             a *= ax->inv_across;
