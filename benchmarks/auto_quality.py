@@ -66,6 +66,9 @@ def setting_of(choice):
     return f"sh{choice['sh_order']}" if choice["method"] == "sh" else choice["level"]
 
 
+# The estimate's floor: the control variate's two terms, read on different pairs, can sum below 0
+# where a setting errs far less than the stored pairs resolve (estimated_error then gives 0).
+RESOLVED_ERROR = 1e-4
 SUBSET = 2000  # pairs in benchmarks/accuracy.py's table: the metric's noise is read off subsets this size
 
 
@@ -277,7 +280,9 @@ def main():
             print(f"{kind}: the estimate from one half of the {args.control_pairs} weighted pairs against "
                   f"the other: rms ratio {noise[kind]['estimate_halves_rms_ratio']:.3f}x, at most "
                   f"{noise[kind]['estimate_halves_max_ratio']:.2f}x", flush=True)
-    logs = [math.log(plain_errors[k] / errors[k]) for k in errors if k[2] != control and k[1] != "lambert"]
+    # (an estimate of 0 is an error below what the measure resolves: no ratio to take)
+    logs = [math.log(plain_errors[k] / errors[k]) for k in errors
+            if k[2] != control and k[1] != "lambert" and errors[k] > 0]
     noise.setdefault("lobes", {})["stored_pairs_alone_rms_ratio"] = float(np.exp(np.sqrt(np.mean(np.square(logs)))))
     noise["lobes"]["stored_pairs_alone_max_ratio"] = float(np.exp(np.max(np.abs(logs))))
     print(f"lobes: the error over the {len(nrm)} stored pairs alone against the estimate: rms ratio "
@@ -322,6 +327,7 @@ def fit(max_misses):
 
     def score(env_factor, only):
         met = within = reach = 0
+        picked_ms = cheapest_ms = 0.0
         for (h, n), t in itertools.product(cases, d["targets"]):
             if h not in only:
                 continue
@@ -332,19 +338,35 @@ def fit(max_misses):
                 continue
             reach += 1
             cheapest = min(ok, key=lambda lv: times[f"{n}/{lv}"])
+            picked_ms += times[f"{n}/{pick}"]
+            cheapest_ms += times[f"{n}/{cheapest}"]
             if errors[f"{h}/{n}/{pick}"] <= t:
                 met += 1
                 within += times[f"{n}/{pick}"] <= 1.25 * times[f"{n}/{cheapest}"]
-        return reach, met, within
+        return reach, met, within, picked_ms / cheapest_ms if cheapest_ms else 1.0
 
+    # The top level (high) is taken when nothing cheaper is predicted to meet the target: its factor
+    # only says whether it does, a least-squares fit.  A grazing level below it (default) is picked
+    # on its prediction, so its constants are fitted as the other levels' are: every target some
+    # level meets met, then as few levels picked too high as that allows.
     top = levels[-1]
-    high = fit_high(errors, feats, cases, median, top)
+    high = fit_grazing(errors, feats, cases, median, top)
+    middle = [lv for lv in levels if lv != top and d["ladder"][lv]["grazing"] > 0]
+    middle_grid = [(round(k, 2), p, q) for k in np.arange(0.5, 4.01, 0.05) for p in (0.25, 0.5, 0.75, 1.0)
+                   for q in (0, 0.0625, 0.125, 0.25)]
 
-    def model(scale, slope, power):
+    def grazing_factor(f, constants):
+        scale, contrast_power, dominance_power = constants
+        return (scale * ((1 - f["lights_share"]) + 10 * f["sun_contrast"]) ** contrast_power /
+                (1 + f["light_dominance"]) ** dominance_power)
+
+    def model(scale, slope, power, middle_constants):
         def env_factor(h, n, lv):
             f = feats[f"{h}/{n}"][lv]
             if lv == top:
-                factor = high(f, feats[f"{h}/{n}"][lv - 1])
+                factor = grazing_factor(f, high)
+            elif lv in middle:
+                factor = grazing_factor(f, middle_constants)
             else:
                 factor = scale * ((1 - f["lights_share"]) + slope * f["contrast"]) / (1 + f["light_dominance"]) ** power
             return min(8.0, max(0.15, factor))  # ENV_FACTOR_MAX, ENV_FACTOR_MIN
@@ -353,14 +375,27 @@ def fit(max_misses):
     grid = [(round(k, 2), s, p) for k in np.arange(0.5, 2.51, 0.05) for s in (0, 1, 2, 3, 4, 5, 6, 8, 10, 12, 15, 20)
             for p in (0, 0.0625, 0.125, 0.1875, 0.25, 0.375, 0.5)]
 
-    def best(only):
-        scored = [(score(model(*g), only), g) for g in grid]
+    def choose(candidates, only):
+        """Among constants missing at most max_misses reachable cases: the most within 1.25x, then
+        the most met, the least summed time, the scale nearest 1."""
+        scored = [(score(model(*g), only), g) for g in candidates]
         ok = [(r, g) for r, g in scored if r[0] - r[1] <= max_misses] or scored
-        return max(ok, key=lambda x: (x[0][2], x[0][1], -abs(x[1][0] - 1)))
+        return max(ok, key=lambda x: (x[0][2], x[0][1], -x[0][3], -abs(x[1][0] - 1)))
 
-    (reach, met, within), g = best(hdris)
-    print(f"ERROR_SCALE {g[0]}  CONTRAST_SLOPE {g[1]}  DOMINANCE_POWER {g[2]}: of {reach} reachable cases "
-          f"met {met}, within 1.25x {within}")
+    def best(only):
+        """The levels' constants and the middle grazing level's, each fitted with the other held
+        (twice over), from the most cautious middle constants: a start from which no level's miss
+        hides another's."""
+        g = (1.0, 10, 0.0625, (4.0, 0.25, 0.0))
+        for _ in range(2):
+            _, g = choose([(*c, g[3]) for c in grid], only)
+            r, g = choose([(*g[:3], c) for c in middle_grid], only)
+        return r, g
+
+    (reach, met, within, ratio), g = best(hdris)
+    print(f"ERROR_SCALE {g[0]}  CONTRAST_SLOPE {g[1]}  DOMINANCE_POWER {g[2]}; levels {middle}: GRAZING_FACTOR "
+          f"{{{g[3][0]}, {g[3][1]}, {g[3][2]}}}: of {reach} reachable cases met {met}, within 1.25x {within}, "
+          f"summed time {ratio:.2f}x the cheapest sufficient")
     # auto's `met` flag: does the picked level's prediction say the target is met where it is?
     right = wrong_yes = wrong_no = 0
     for (h, n), t in itertools.product(cases, d["targets"]):
@@ -375,19 +410,21 @@ def fit(max_misses):
     # What an exact measure of the environment would give if it were one number per HDRI and roughness
     # (its true factor at level 0, carried to the other levels by the medians' shape): the levels'
     # shape varies between environments, which a factor the same for every level cannot follow.
-    oracle = max((score(lambda h, n, lv, k=k: k * errors[f"{h}/{n}/0"] / median[n, 0], hdris)[1:], k)
+    oracle = max((score(lambda h, n, lv, k=k: k * errors[f"{h}/{n}/0"] / median[n, 0], hdris)[1:3], k)
                  for k in np.arange(1.0, 3.0, 0.01))
     print(f"with each HDRI and roughness's exact level-0 factor at every level (times {oracle[1]:.2f}): met "
           f"{oracle[0][0]}, within 1.25x {oracle[0][1]}")
     # Better still: the model's own per-level shape, times each HDRI and roughness's exact factor
-    # (the geometric mean of measured over predicted on levels 0-3), with the smallest margin that
+    # (the geometric mean of measured over predicted on the levels without the grazing path), with the
+    # smallest margin that
     # meets every target.  No measure of the environment can do better than one exact factor per
     # HDRI and roughness, and the levels' own deviations from it are what remain.
     exact = {}
     for h, n in cases:
         pred = [lv["predicted_error"] for lv in feats[f"{h}/{n}"]]
-        g = math.exp(statistics.fmean(math.log(errors[f"{h}/{n}/{lv}"] / pred[lv]) for lv in levels[:-1]))
-        exact[h, n] = [p * (g if lv < top else 1.0) for lv, p in enumerate(pred)]
+        g = math.exp(statistics.fmean(math.log(max(errors[f"{h}/{n}/{lv}"], RESOLVED_ERROR) / pred[lv])
+                                      for lv in levels if lv not in middle and lv != top))
+        exact[h, n] = [p * (g if lv not in middle and lv != top else 1.0) for lv, p in enumerate(pred)]
     for margin in np.arange(1.0, 2.0, 0.01):
         r = score(lambda h, n, lv, k=margin: k * exact[h, n][lv] / median[n, lv], hdris)
         if r[0] == r[1]:
@@ -397,30 +434,30 @@ def fit(max_misses):
     tot = np.zeros(3, int)
     for h in hdris:
         _, g = best([x for x in hdris if x != h])
-        r = score(model(*g), [h])
+        r = score(model(*g), [h])[:3]
         tot += r
         print(f"  fitted without {h}: {g} -> on {h}: reachable {r[0]}, met {r[1]}, within {r[2]}")
     print(f"leave one HDRI out: reachable {tot[0]}, met {tot[1]}, within 1.25x {tot[2]}")
 
 
-def fit_high(errors, feats, cases, median, top):
-    """The last level's factor, HIGH_SCALE ((1 - l) + 10 c')^HIGH_CONTRAST_POWER / (1 + d)^HIGH_DOMINANCE_POWER
-    (csrc/auto/autoquality.c; c' the level before's contrast): least squares in the logs over the cases;
-    prints the constants and returns the factor with them rounded as the C source has them."""
+def fit_grazing(errors, feats, cases, median, level):
+    """The factor of a level with the grazing path, scale ((1 - l) + 10 c_s)^contrast_power /
+    (1 + d)^dominance_power (GRAZING_FACTOR in csrc/auto/autoquality.c; c_s the bright extended share
+    the suns alone leave): least squares in the logs over the cases whose error the estimate
+    resolves; prints the constants and returns them rounded as the C source has them."""
     x, y = [], []
     for h, n in cases:
-        f, before = feats[f"{h}/{n}"][top], feats[f"{h}/{n}"][top - 1]
-        x.append([1.0, math.log((1 - f["lights_share"]) + 10 * before["contrast"]), -math.log1p(f["light_dominance"])])
-        y.append(math.log(errors[f"{h}/{n}/{top}"] / median[n, top]))
+        f, e = feats[f"{h}/{n}"][level], errors[f"{h}/{n}/{level}"]
+        if e < RESOLVED_ERROR:  # below what the estimate resolves: no shape to fit
+            continue
+        x.append([1.0, math.log((1 - f["lights_share"]) + 10 * f["sun_contrast"]), -math.log1p(f["light_dominance"])])
+        y.append(math.log(e / median[n, level]))
     (a, p, q), *_ = np.linalg.lstsq(np.array(x), np.array(y), rcond=None)
     res = np.array(y) - np.array(x) @ np.array([a, p, q])
-    scale, p, q = round(math.exp(a), 1), round(4 * p) / 4, round(8 * q) / 8
-    print(f"level {top}: HIGH_SCALE {scale}  HIGH_CONTRAST_POWER {p}  HIGH_DOMINANCE_POWER {q} "
+    constants = (round(math.exp(a), 2), round(4 * p) / 4, round(8 * q) / 8)
+    print(f"level {level}: GRAZING_FACTOR {{{constants[0]}, {constants[1]}, {constants[2]}}} "
           f"(log residuals: rms {np.sqrt(np.mean(res ** 2)):.2f}, from {res.min():.2f} to {res.max():.2f})")
-
-    def factor(f, before):
-        return scale * ((1 - f["lights_share"]) + 10 * before["contrast"]) ** p / (1 + f["light_dominance"]) ** q
-    return factor
+    return constants
 
 
 if __name__ == "__main__":

@@ -18,35 +18,48 @@
  * on 50000 pairs weighted toward the bright reflections, the reference on 8000), --calibrate. */
 static const double ROUGHNESS[4] = {0.05, 0.1, 0.2, 0.5};
 static const double MEDIAN_ERROR[WENV_AUTO_LEVELS][5] = {
-    {0.13155, 0.15058, 0.13531, 0.07411, 0.01689},
-    {0.07541, 0.07611, 0.05115, 0.02507, 0.00473},
-    {0.06017, 0.04829, 0.03685, 0.01754, 0.00297},
-    {0.05031, 0.02939, 0.01881, 0.00754, 0.00125},
-    {0.00407, 0.00204, 0.00338, 0.00459, 0.00102},
+    {0.13151, 0.15083, 0.13559, 0.07411, 0.01689},
+    {0.07523, 0.07632, 0.05140, 0.02507, 0.00473},
+    {0.06002, 0.04847, 0.03684, 0.01752, 0.00297},
+    {0.00844, 0.00412, 0.00636, 0.01366, 0.00297},
+    {0.05008, 0.02951, 0.01881, 0.00755, 0.00124},
+    {0.00405, 0.00179, 0.00288, 0.00469, 0.00102},
 };
-/* A level's error under an environment (every level but the last, below) is its median error times
- *     SCALE ((1 - l) + CONTRAST_SLOPE c) / (1 + d)^DOMINANCE_POWER
- * with l the share of the flux its lights take (exact: the rest carries the error), c the share in
- * bright extended features it leaves in the lighting, and d its lights' dominance of the reflected
- * signal under the narrowest lobe (estimate_levels).  The constants are fitted on the bundled
- * HDRIs (benchmarks/auto_quality.py --fit): the target met wherever some level meets it, and as few
- * levels picked too high as that allows. */
+/* A level's error under an environment is its median error times a factor of three measures
+ * (estimate_levels): l, the share of the flux its lights take (exact: the rest carries the error),
+ * c, the share in bright extended features it leaves in the lighting, and d, its lights' dominance
+ * of the reflected signal under the narrowest lobe.  For the levels without the grazing path the
+ * factor is
+ *     SCALE ((1 - l) + CONTRAST_SLOPE c) / (1 + d)^DOMINANCE_POWER,
+ * its constants fitted on the bundled HDRIs (benchmarks/auto_quality.py --fit): the target met
+ * wherever some level meets it, and as few levels picked too high as that allows. */
 #define ERROR_SCALE 0.85
 #define CONTRAST_SLOPE 10.0
 #define DOMINANCE_POWER 0.0625
 #define ENV_FACTOR_MAX 8.0
 /* Lights that take nearly all the flux drive the formula toward 0, but what they leave -- grazing
- * views, the clusters' spread -- still errs (studio's level 4 measures 0.15-0.4 times its median). */
+ * views, the clusters' spread -- still errs (studio's high measures 0.15-0.4 times its median). */
 #define ENV_FACTOR_MIN 0.15
-/* The last level (high) takes the bright extended features out as clustered lights and integrates
- * narrow lobes at grazing views per vertex, so it errs where those features were: its factor is
- *     HIGH_SCALE ((1 - l) + CONTRAST_SLOPE c')^HIGH_CONTRAST_POWER / (1 + d)^HIGH_DOMINANCE_POWER
- * with l and d its own and c' the bright extended share the level before it leaves in the lighting.
- * A least-squares fit on the bundled HDRIs (benchmarks/auto_quality.py --fit); the first formula
- * there put courtyard's error at a quarter of what it measures and claimed 1 % reachable. */
-#define HIGH_SCALE 1.4
-#define HIGH_CONTRAST_POWER 0.75
-#define HIGH_DOMINANCE_POWER 0.25
+/* The levels with the grazing path (default, high) integrate narrow lobes at grazing views per
+ * vertex, and high also takes the bright extended features out as clustered lights, so what
+ * remains of their error sits where those features are or were.  Their factor is
+ *     scale ((1 - l) + CONTRAST_SLOPE c_s)^contrast_power / (1 + d)^dominance_power
+ * with l and d their own and c_s the bright extended share that suns alone (lights above
+ * SUN_THRESHOLD times the mean) leave in the lighting (benchmarks/auto_quality.py --fit).  high's
+ * is a least-squares fit: it is taken when nothing cheaper is predicted to meet the target, and its
+ * factor only says whether it does (the levels' formula put courtyard's error under high at a
+ * quarter of what it measures, and claimed 1 % there).  default's is fitted as the levels' are, for
+ * the target met wherever some level meets it: its lights, read to 5 %, do not lower its error as
+ * high's do (night's lamps just below the sun threshold err 1.1 % at m = 0.05 beneath a light
+ * dominance of 48), hence no dominance term. */
+#define SUN_THRESHOLD 256.0
+typedef struct {
+    double scale, contrast_power, dominance_power;
+} grazing_factor;
+static const grazing_factor GRAZING_FACTOR[WENV_AUTO_LEVELS] = {
+    [3] = {1.25, 0.75, 0.0},
+    [5] = {1.44, 0.75, 0.25},
+};
 
 const wenv_wavelet_quality *wenv_auto_level(size_t i)
 {
@@ -154,8 +167,8 @@ static int by_pixel(const void *a, const void *b)
 /* What auto reads of an environment whatever the material, in two parts each made on first need
  * and then kept: for the slicing ladder the brightest pixels (each level's lights are a prefix of
  * them: the brightest above its threshold, up to its budget), the lighting without any of them as
- * an octahedral pyramid and the flux in bright extended features (8-20 ms on Blender's HDRIs); for
- * SH irradiance the lighting's power per band (13-16 ms).  A material without lobes needs only the
+ * an octahedral pyramid and the flux in bright extended features (8-14 ms on Blender's HDRIs); for
+ * SH irradiance the lighting's power per band (9-10 ms).  A material without lobes needs only the
  * second, one with lobes only the first.  The lock makes a part once however many threads choose. */
 struct wenv_auto_analysis {
     const wenv_envmap *env;
@@ -306,16 +319,19 @@ static wenv_status estimate_levels(const wenv_auto_analysis *an, double m, wenv_
     double mean = an->mean;
     for (size_t i = 0; i < WENV_AUTO_LEVELS; i++) {
         size_t nl = 0;
-        double light_flux = 0.0, bright_lights = 0.0;
+        double light_flux = 0.0, bright_lights = 0.0, bright_suns = 0.0;
         while (nl < nb && nl < WENV_AUTO_LADDER[i].lights && (double)bright[nl].radiance > WENV_AUTO_LADDER[i].light_threshold * mean) {
             double f = ((double)bright[nl].flux[0] + bright[nl].flux[1] + bright[nl].flux[2]) / 3.0;
             light_flux += f;
             if ((double)bright[nl].radiance > CONTRAST_FACTOR * mean)
                 bright_lights += f;
+            if ((double)bright[nl].radiance > SUN_THRESHOLD * mean)
+                bright_suns += f;
             nl++;
         }
         est[i].lights_share = fmin(1.0, light_flux / an->total);
         est[i].contrast = fmin(1.0, fmax(0.0, (an->bright_flux - bright_lights) / an->total));
+        est[i].sun_contrast = fmin(1.0, fmax(0.0, (an->bright_flux - bright_suns) / an->total));
         if (m > 0.0 && nl) {
             double a = log1p(light_dominance_at(&grid[0], bright, nl, nb));
             double b = log1p(light_dominance_at(&grid[1], bright, nl, nb));
@@ -487,14 +503,14 @@ wenv_status wenv_auto_choose(const wenv_envmap *env, wenv_auto_analysis *analysi
         goto done;
     for (size_t i = 0; i < WENV_AUTO_LEVELS; i++) {
         wenv_auto_level_estimate *e = &out->levels[i];
-        if (i + 1 < WENV_AUTO_LEVELS)
+        const grazing_factor *g = &GRAZING_FACTOR[i];
+        if (WENV_AUTO_LADDER[i].grazing > 0.0)
+            e->env_factor = g->scale *
+                            pow((1.0 - e->lights_share) + CONTRAST_SLOPE * e->sun_contrast, g->contrast_power) /
+                            pow(1.0 + e->light_dominance, g->dominance_power);
+        else
             e->env_factor = ERROR_SCALE * ((1.0 - e->lights_share) + CONTRAST_SLOPE * e->contrast) /
                             pow(1.0 + e->light_dominance, DOMINANCE_POWER);
-        else
-            e->env_factor = HIGH_SCALE *
-                            pow((1.0 - e->lights_share) + CONTRAST_SLOPE * out->levels[i - 1].contrast,
-                                HIGH_CONTRAST_POWER) /
-                            pow(1.0 + e->light_dominance, HIGH_DOMINANCE_POWER);
         e->env_factor = fmin(ENV_FACTOR_MAX, fmax(ENV_FACTOR_MIN, e->env_factor));
         e->predicted_error = level_error(i, m) * e->env_factor;
     }

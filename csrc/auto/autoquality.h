@@ -16,7 +16,8 @@
  *     dominate the reflected signal under the narrowest lobe (mean squares of the lights and of
  *     the rest over octahedral texels as wide as the lobe), which is what relative RMSE divides by.
  *
- * The last level is the "high" preset, so auto reaches its accuracy where the scene needs it.
+ * Level 3 is the "default" preset and the last level the "high" preset, so auto reaches high's
+ * accuracy where the scene needs it.
  *
  * For glossy materials the chosen method is "slicing": at equal resolutions it shades a view
  * exactly as fast as "rotation" (both read the same table), it has no matrices to build or hold,
@@ -31,7 +32,7 @@
  * the highest order cannot.
  *
  * Everything auto reads of the environment alone is made once per environment and kept
- * (wenv_auto_analysis: 8-20 ms for the slicing ladder, 13-16 ms for SH, on Blender's 1024 x 512
+ * (wenv_auto_analysis: 8-14 ms for the slicing ladder, 9-10 ms for SH, on Blender's 1024 x 512
  * HDRIs); a choice then costs a fraction of a millisecond plus a pass over the mesh's normals when
  * given.  SH order 2 makes a first view in a few milliseconds, so choosing must cost far less for
  * auto to match it. */
@@ -59,6 +60,7 @@ size_t wenv_auto_level_bytes(size_t i, size_t used_normals);
 typedef struct {
     double lights_share;    /* flux share of the pixels it shades as exact lights */
     double contrast;        /* flux share of the bright extended features it leaves in the lighting */
+    double sun_contrast;    /* the same, left by the suns alone (its lights above 256x the mean) */
     double light_dominance; /* its lights' mean square over the rest's, under the narrowest lobe */
     double env_factor;      /* its error relative to its median over the bundled HDRIs */
     double predicted_error; /* relative RMSE */

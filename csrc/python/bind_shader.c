@@ -657,9 +657,10 @@ static PyObject *Shader_get_stats(ShaderObject *self, void *closure)
         PyObject *levels = a->sh_order ? Py_NewRef(Py_None) : PyList_New(WENV_AUTO_LEVELS);
         for (size_t i = 0; levels && !a->sh_order && i < WENV_AUTO_LEVELS; i++) {
             const wenv_auto_level_estimate *e = &a->levels[i];
-            PyObject *li = Py_BuildValue("{s:d,s:d,s:d,s:d,s:d}", "predicted_error", e->predicted_error, "lights_share",
-                                         e->lights_share, "contrast", e->contrast, "light_dominance", e->light_dominance,
-                                         "env_factor", e->env_factor);
+            PyObject *li = Py_BuildValue("{s:d,s:d,s:d,s:d,s:d,s:d}", "predicted_error", e->predicted_error,
+                                         "lights_share", e->lights_share, "contrast", e->contrast, "sun_contrast",
+                                         e->sun_contrast, "light_dominance", e->light_dominance, "env_factor",
+                                         e->env_factor);
             if (!li)
                 Py_CLEAR(levels);
             else
@@ -738,7 +739,7 @@ static PyTypeObject ShaderType = {
               "table, Karis 2013; quality keys prefilter, samples, lut) and 'sh' (spherical harmonics, Kautz, "
               "Sloan and Snyder 2002; quality keys order, views); presets in wenv.PEER_QUALITY_PRESETS.  Their "
               "precomputation runs in set_environment and set_material, which then also report to progress.\n\n"
-              "quality='auto' picks the cheapest setting of wenv.AUTO_LADDER (method 'slicing'; its last level is "
+              "quality='auto' picks the cheapest setting of wenv.AUTO_LADDER (method 'slicing'; level 3 is 'default', the last "
               "'high') whose error is predicted, from the narrowest lobe's roughness, the share of the flux the "
               "level's exact lights take, the bright features they leave and how far their reflections dominate, to be at "
               "most target_error (relative RMSE) within memory_budget_mb, counting lighting slices only for the "
