@@ -85,6 +85,22 @@ def test_another_image_goes_to_the_method_and_a_black_world_keeps_its_image(scen
     assert np.array_equal(shader.shade(n, v), wenv.Shader(bright, mat, quality="default", method="slicing").shade(n, v))
 
 
+def test_one_pixel_changed_is_another_image(scene):
+    """The image's fingerprint is made with it and kept by its turned copies: a copy with one pixel
+    changed (the same shape) goes to the method anew, a turned copy does not."""
+    env, mat, n, v = scene
+    img = env.pixels[..., :3].copy()
+    img[9, 21, 1] += np.float32(0.5)  # a tint in the lamp
+    tinted = wenv.Environment(img)
+    shader = wenv.Shader(env, mat, quality="default", method="slicing")
+    held = shader.shade(n, v)
+    shader.set_environment(tinted.with_transform(rotation=0.5))
+    got = shader.shade(n, v)
+    assert not np.array_equal(got, held)
+    assert np.array_equal(got, wenv.Shader(tinted.with_transform(rotation=0.5), mat, quality="default",
+                                           method="slicing").shade(n, v))
+
+
 def test_an_image_too_bright_for_strength_one_is_held_at_its_own(scene):
     """Pixels of 1e20 at strength 0.001 are a valid World, the same pixels at strength 1 are not
     (1e18 at most, envmap.h): the method holds them at the World's strength, which then cannot be

@@ -4,20 +4,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-uint64_t wenv_lighting_frame_hash(const wenv_envmap *env)
-{
-    /* over the 32-bit words: a few ms for a 4k image, far below remaking what the method holds */
-    const float *px = wenv_envmap_pixels(env);
-    size_t n = wenv_envmap_width(env) * wenv_envmap_height(env) * 3;
-    uint64_t h = 0xcbf29ce484222325ull;
-    for (size_t i = 0; i < n; i++) {
-        uint32_t w;
-        memcpy(&w, px + i, sizeof w);
-        h = (h ^ w) * 0x100000001b3ull;
-    }
-    return h ^ (uint64_t)n;
-}
-
 /* The frame of env's rotation and strength about the held image. */
 static void follow(wenv_lighting_frame *frame, const wenv_envmap *env)
 {
@@ -38,7 +24,7 @@ static int holds(const wenv_lighting_frame *frame, const wenv_envmap *env, uint6
 wenv_status wenv_lighting_frame_set(wenv_lighting_frame *frame, const wenv_method *method, void *state,
                                     const wenv_envmap *env, const wenv_progress *progress, wenv_error *err)
 {
-    uint64_t hash = wenv_lighting_frame_hash(env);
+    uint64_t hash = wenv_envmap_fingerprint(env);
     if (holds(frame, env, hash) && (frame->held_strength == 1.0 || wenv_envmap_strength(env) == frame->held_strength)) {
         follow(frame, env);
         return WENV_OK;

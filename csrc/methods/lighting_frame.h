@@ -20,7 +20,7 @@
 
 typedef struct {
     int have;                  /* the method holds an image */
-    uint64_t image_hash;       /* of the image it holds (wenv_lighting_frame_hash) */
+    uint64_t image_hash;       /* of the image it holds (wenv_envmap_fingerprint) */
     size_t width, height;
     wenv_projection projection;
     double held_strength;      /* 1, or the World's own where the image at 1 would be out of range */
@@ -28,9 +28,6 @@ typedef struct {
     float scale;               /* the World's strength over the held one */
     int identity;              /* turn is the identity and scale 1 */
 } wenv_lighting_frame;
-
-/* The image's fingerprint: 64-bit FNV-1a over its pixels. */
-uint64_t wenv_lighting_frame_hash(const wenv_envmap *env);
 
 /* Makes env the lighting: the method is given env's image at rotation 0 and strength 1 unless it
  * holds that image already, and the frame takes env's rotation and strength.  On failure the frame

@@ -32,6 +32,7 @@ struct wenv_envmap {
     double *column_xy;   /* equirect: world (x, y) of each column's azimuth, rotation applied */
     double *row_flux;    /* per row: sum of solid angle x channel mean over its pixels (no strength) */
     float *row_peak;     /* per row: its brightest channel value (no strength) */
+    uint64_t fingerprint; /* of the pixels (wenv_envmap_fingerprint) */
 };
 
 /* Face frames as documented in envmap.h (order +X, -X, +Y, -Y, +Z, -Z). */
@@ -255,6 +256,7 @@ wenv_status wenv_envmap_with_transform(wenv_envmap **out, const wenv_envmap *env
     }
     memcpy((*out)->row_flux, env->row_flux, env->height * sizeof(double));
     memcpy((*out)->row_peak, env->row_peak, env->height * sizeof(float));
+    (*out)->fingerprint = env->fingerprint;
     if (check_radiance_range(*out, "strength", PIXELS_FROM_ARGUMENT, err)) {
         wenv_envmap_free(*out);
         *out = NULL;
@@ -624,18 +626,37 @@ static int cmp_pixel(const void *a, const void *b)
     return (x > y) - (x < y);
 }
 
-/* Per-row flux and peak, once per image (they do not change with rotation or strength): the search
- * for the brightest pixels at each lighting change then reads only rows that can hold one. */
+#define FNV_OFFSET 0xcbf29ce484222325ull
+#define FNV_PRIME 0x100000001b3ull
+
+/* 64-bit FNV-1a over 32-bit words, from h. */
+static uint64_t fnv1a_words(uint64_t h, const float *words, size_t n)
+{
+    for (size_t i = 0; i < n; i++) {
+        uint32_t w;
+        memcpy(&w, words + i, sizeof w);
+        h = (h ^ w) * FNV_PRIME;
+    }
+    return h;
+}
+
+/* Per-row flux, peak and fingerprint, once per image (they do not change with rotation or
+ * strength): the search for the brightest pixels at each lighting change then reads only rows that
+ * can hold one, and a lighting change tells a new image from a turned one at no cost. */
 static int row_stats(wenv_envmap *env)
 {
     size_t w = env->width, h = env->height;
     env->row_flux = malloc((h ? h : 1) * sizeof(double));
     env->row_peak = malloc((h ? h : 1) * sizeof(float));
-    if (!env->row_flux || !env->row_peak)
+    uint64_t *row_hash = malloc((h ? h : 1) * sizeof(uint64_t));
+    if (!env->row_flux || !env->row_peak || !row_hash) {
+        free(row_hash);
         return -1;
+    }
 #pragma omp parallel for schedule(static)
     for (size_t row = 0; row < h; row++) {
         const float *p = pixel_at(env, row, 0);
+        row_hash[row] = fnv1a_words(FNV_OFFSET, p, 3 * w);
         double flux = 0.0, row_omega = env->projection == WENV_PROJ_EQUIRECT ? wenv_envmap_pixel_solid_angle(env, row, 0)
                                                                                : -1.0;
         float peak = 0.0f;
@@ -651,7 +672,17 @@ static int row_stats(wenv_envmap *env)
         env->row_flux[row] = flux;
         env->row_peak[row] = peak;
     }
+    uint64_t fp = FNV_OFFSET;
+    for (size_t row = 0; row < h; row++)
+        fp = (fp ^ row_hash[row]) * FNV_PRIME;
+    env->fingerprint = fp ^ (uint64_t)(w * h);
+    free(row_hash);
     return 0;
+}
+
+uint64_t wenv_envmap_fingerprint(const wenv_envmap *env)
+{
+    return env->fingerprint;
 }
 
 double wenv_envmap_flux(const wenv_envmap *env)

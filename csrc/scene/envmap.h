@@ -128,6 +128,11 @@ typedef struct {
  * nothing is taken out, which is always a valid answer). */
 size_t wenv_envmap_brightest(const wenv_envmap *env, size_t k, double relative, wenv_bright_pixel *out);
 
+/* The image's fingerprint (64-bit FNV-1a over each row's pixels, the rows' combined in order):
+ * made with the image, kept by its copies under another rotation or strength, so telling whether
+ * two environments hold the same image costs nothing at a lighting change. */
+uint64_t wenv_envmap_fingerprint(const wenv_envmap *env);
+
 /* Total flux: the sum over pixels of solid angle x radiance (channels averaged, strength applied);
  * kept per row with the image, so this costs one pass over the rows. */
 double wenv_envmap_flux(const wenv_envmap *env);
