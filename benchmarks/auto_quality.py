@@ -415,16 +415,16 @@ def fit(max_misses):
     print(f"with each HDRI and roughness's exact level-0 factor at every level (times {oracle[1]:.2f}): met "
           f"{oracle[0][0]}, within 1.25x {oracle[0][1]}")
     # Better still: the model's own per-level shape, times each HDRI and roughness's exact factor
-    # (the geometric mean of measured over predicted on the levels without the grazing path), with the
-    # smallest margin that
-    # meets every target.  No measure of the environment can do better than one exact factor per
-    # HDRI and roughness, and the levels' own deviations from it are what remain.
+    # (the geometric mean of measured over predicted on the levels without the grazing path), with
+    # the smallest margin that meets every target.  No measure of the environment can do better than
+    # one exact factor per HDRI and roughness, and the levels' own deviations from it are what remain.
+    plain = [lv for lv in levels if not d["ladder"][lv]["grazing"]]
     exact = {}
     for h, n in cases:
         pred = [lv["predicted_error"] for lv in feats[f"{h}/{n}"]]
         g = math.exp(statistics.fmean(math.log(max(errors[f"{h}/{n}/{lv}"], RESOLVED_ERROR) / pred[lv])
-                                      for lv in levels if lv not in middle and lv != top))
-        exact[h, n] = [p * (g if lv not in middle and lv != top else 1.0) for lv, p in enumerate(pred)]
+                                      for lv in plain))
+        exact[h, n] = [p * (g if lv in plain else 1.0) for lv, p in enumerate(pred)]
     for margin in np.arange(1.0, 2.0, 0.01):
         r = score(lambda h, n, lv, k=margin: k * exact[h, n][lv] / median[n, lv], hdris)
         if r[0] == r[1]:

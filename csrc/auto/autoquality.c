@@ -53,6 +53,7 @@ static const double MEDIAN_ERROR[WENV_AUTO_LEVELS][5] = {
  * high's do (night's lamps just below the sun threshold err 1.1 % at m = 0.05 beneath a light
  * dominance of 48), hence no dominance term. */
 #define SUN_THRESHOLD 256.0
+/* A level given a factor here (scale > 0) is predicted by it; the others by the levels' formula. */
 typedef struct {
     double scale, contrast_power, dominance_power;
 } grazing_factor;
@@ -504,7 +505,7 @@ wenv_status wenv_auto_choose(const wenv_envmap *env, wenv_auto_analysis *analysi
     for (size_t i = 0; i < WENV_AUTO_LEVELS; i++) {
         wenv_auto_level_estimate *e = &out->levels[i];
         const grazing_factor *g = &GRAZING_FACTOR[i];
-        if (WENV_AUTO_LADDER[i].grazing > 0.0)
+        if (g->scale > 0.0)
             e->env_factor = g->scale *
                             pow((1.0 - e->lights_share) + CONTRAST_SLOPE * e->sun_contrast, g->contrast_power) /
                             pow(1.0 + e->light_dominance, g->dominance_power);
