@@ -65,21 +65,23 @@ class PrecomputeJob(_WorkerJob):
 
 
 class RefineJob(_WorkerJob):
-    """Shades a pass already written again at engine.REFINE_QUALITY, while the view rests, in steps
-    of STEP_SECONDS, so that `cancel()` takes effect within a step; `results` is None if cancelled."""
+    """Shades a pass already written again at `quality` (the scene's own after a preview, then
+    engine.REFINE_QUALITY), while the view rests, in steps of STEP_SECONDS, so that `cancel()` takes
+    effect within a step; `results` is None if cancelled."""
 
     STEP_SECONDS = 0.05
 
-    def __init__(self, plan):
-        super().__init__("wenv-refine")
+    def __init__(self, plan, quality):
+        super().__init__(f"wenv-refine-{quality}")
         self.plan = plan
+        self.quality = quality
         self.results = None
 
     def _report(self, fraction):
         self.fraction = fraction
 
     def _work(self):
-        self.results = self.plan.refine(engine.REFINE_QUALITY, self.STEP_SECONDS, self._report, self._cancel)
+        self.results = self.plan.refine(self.quality, self.STEP_SECONDS, self._report, self._cancel)
 
     def apply(self, objects, scene):
         """Main thread: writes the refined colours (see ShadingPlan.apply)."""
@@ -107,7 +109,8 @@ class LiveSession:
         self._error = None
         self._discard = False  # the worker's plan was read from data an undo has since replaced
         self._refine = None  # RefineJob of the last pass written, while the view rests
-        self.refined = False  # the colours shown are the refinement's
+        self.shown = None  # the quality of the colours shown (of the last pass or refinement written)
+        self.refined = False  # the colours shown are engine.REFINE_QUALITY's refinement
 
     def stop(self):
         """Drops the refinement and waits for the workers (they hold the shaders)."""
@@ -141,7 +144,7 @@ class LiveSession:
             mats = tuple(materials.material_key(s.material.wenv if s.material else None) for s in obj.material_slots)
             objs.append((obj.name, _matrix_tuple(obj.matrix_world), len(obj.data.vertices), mats))
         return (view.signature, world_sig, tuple(objs), st.quality, st.tone_mapping, st.max_luminance, st.target_error,
-                st.memory_budget, st.shade_only_seen, st.refine_at_rest)
+                st.memory_budget, st.shade_only_seen, st.refine_at_rest, st.preview_changes)
 
     @property
     def busy(self):
@@ -159,11 +162,12 @@ class LiveSession:
 
     @property
     def refine_status(self):
-        """What the panel shows of the refinement: None, ("REFINING", fraction) or ("REFINED",)."""
+        """What the panel shows of the refinement: None (the scene's quality is shown, nothing to
+        refine), ("REFINING", fraction, quality shown, quality being made) or ("REFINED",)."""
         if self.refined:
             return ("REFINED",)
         if self._refine is not None:
-            return ("REFINING", self._refine.fraction)
+            return ("REFINING", self._refine.fraction, self.shown, self._refine.quality)
         return None
 
     def _drop_refinement(self):
@@ -172,9 +176,17 @@ class LiveSession:
         self._refine = None
         self.refined = False
 
-    def _start_refinement(self, scene, plan):
-        if scene.wenv.refine_at_rest and plan.quality in engine.REFINABLE:
-            self._refine = RefineJob(plan).start()
+    def _wrote(self, scene, plan, quality):
+        """Colours at `quality` of `plan` are shown: starts what comes next while the view rests --
+        the scene's own quality after a preview, then (Refine at Rest) engine.REFINE_QUALITY."""
+        self.shown = quality
+        self.refined = quality == engine.REFINE_QUALITY and quality != plan.quality
+        steps = [plan.quality, plan.chosen]
+        if scene.wenv.refine_at_rest and plan.chosen in engine.REFINABLE:
+            steps.append(engine.REFINE_QUALITY)
+        later = [q for q in steps[steps.index(quality) + 1:] if q != quality]
+        if later:
+            self._refine = RefineJob(plan, later[0]).start()
 
     def _refinement_tick(self, context):
         """The view rests: writes the refinement once it is made.  Returns True when it wrote."""
@@ -188,7 +200,8 @@ class LiveSession:
         if job.results is None:
             return False
         written = job.apply(context.blend_data.objects, context.scene)
-        self.refined = bool(written)
+        if written:
+            self._wrote(context.scene, job.plan, job.quality)
         return bool(written)
 
     def data_replaced(self):
@@ -224,7 +237,7 @@ class LiveSession:
             self.last_error = None
             self.shades += bool(written)
             if written:
-                self._start_refinement(context.scene, plan)
+                self._wrote(context.scene, plan, plan.quality)
             return bool(written)
         depsgraph = context.evaluated_depsgraph_get()  # brings matrix_world etc. up to date
         try:
@@ -239,7 +252,8 @@ class LiveSession:
         self.last_signature = sig
         scene = context.scene
         try:
-            self._plan = shading.plan_shading(scene, depsgraph, self.objects(scene), view, context.blend_data.images)
+            self._plan = shading.plan_shading(scene, depsgraph, self.objects(scene), view, context.blend_data.images,
+                                              preview=True)
         except engine.SetupError as exc:
             self.last_error = str(exc)
             return False
@@ -253,6 +267,7 @@ class LiveState:
 
     session = None
     job = None
+    preview_job = None  # builds engine.PREVIEW_QUALITY's shader without holding up the session
     stop_requested = False
 
     @classmethod
@@ -261,11 +276,13 @@ class LiveState:
 
     @classmethod
     def reset(cls):
-        if cls.job is not None:
-            cls.job.cancel()
+        for job in (cls.job, cls.preview_job):
+            if job is not None:
+                job.cancel()
         if cls.session is not None:
             cls.session.stop()
         cls.session = None
         cls.job = None
+        cls.preview_job = None
         cls.stop_requested = False
 

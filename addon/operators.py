@@ -204,6 +204,8 @@ class WENV_OT_live(bpy.types.Operator):
         if not engine.shaders.has(_quality(context)):
             LiveState.job = PrecomputeJob(_quality(context)).start()
             wm.progress_begin(0.0, 1.0)
+        if context.scene.wenv.preview_changes and not engine.shaders.has(engine.PREVIEW_QUALITY):
+            LiveState.preview_job = PrecomputeJob(engine.PREVIEW_QUALITY).start()
         self._timer = wm.event_timer_add(self.interval, window=context.window)
         wm.modal_handler_add(self)
         return {"RUNNING_MODAL"}
@@ -239,6 +241,10 @@ class WENV_OT_live(bpy.types.Operator):
             return self._stop(context)
         if event.type != "TIMER":
             return {"PASS_THROUGH"}
+        preview = LiveState.preview_job
+        if preview is not None and preview.done:
+            LiveState.preview_job = None
+            preview.install()  # if it failed, changes simply show the scene's quality when made
         job = LiveState.job
         if job is not None:
             context.window_manager.progress_update(job.fraction)

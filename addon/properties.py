@@ -140,6 +140,13 @@ class WENV_SceneSettings(bpy.types.PropertyGroup):
                                              "materials stay still, refine the colours in the background to "
                                              "High (within 1 % of the reference for roughness 0.1 and up); any "
                                              "change shows the quality set at once and drops the refinement")
+    preview_changes: BoolProperty(name="Draft While Remaking", default=True,
+                                  description="In live mode at Default, High or Auto, a change that makes the "
+                                              "setting remake its slices (a new World image, a material edit) "
+                                              "shows Draft at once (~20 ms for 126k vertices), then the setting "
+                                              "itself once it is made (~0.3 s for an image, ~0.7 s for a "
+                                              "material at Default); a World rotation or strength and a view "
+                                              "change need no remaking")
     shade_on_frame_change: BoolProperty(name="Shade on Frame Change", default=False,
                                         description="Re-shade the shaded objects from the scene camera on every "
                                                     "frame change (animation playback and rendering)")

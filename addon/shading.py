@@ -27,7 +27,8 @@ class ShadingPlan:
 
     def __init__(self, quality, spec, environment, view, tone, l_max, target_error=0.01, memory_budget_mb=1024,
                  cull=False):
-        self.quality = quality
+        self.quality = quality  # what compute() shades at
+        self.chosen = quality  # the scene's setting: quality is PREVIEW_QUALITY while this one is made
         self.cull = cull  # shade only the vertices a viewport sees (engine.shade_arrays)
         self.target_error = target_error
         self.memory_budget_mb = memory_budget_mb
@@ -57,21 +58,37 @@ class ShadingPlan:
     def _result(self, name, data, rgb, seen):
         return name, data.domain, tone_map(rgb, self.l_max) if self.tone == "LOG" else rgb, seen
 
+    def material_keys(self):
+        return {keys[s] for _, data, keys in self.items for s in np.unique(np.clip(data.slots, 0, len(keys) - 1))}
+
+    def preview_if_slow(self):
+        """Shade at engine.PREVIEW_QUALITY instead when the setting chosen would first remake its
+        lighting or BRDF slices (engine.ShaderCache.ready) and the preview's shader is built."""
+        if (self.chosen != engine.PREVIEW_QUALITY and engine.shaders.has(engine.PREVIEW_QUALITY)
+                and not engine.shaders.ready(self.chosen, self.world, self.material_keys(), self.target_error,
+                                             self.memory_budget_mb)):
+            self.quality = engine.PREVIEW_QUALITY
+
+    def _shader(self, quality, name, key, normals, cancelled=None):
+        """The shader for one material at `quality`, holding this pass's lighting (under the
+        shader cache's lock)."""
+        if quality == engine.AUTO:
+            shader = engine.shaders.auto(self.world.signature, self.environment, key, self.target_error,
+                                         self.memory_budget_mb, normals, cancelled)
+            self.auto_choices[(name, key)] = shader.stats["auto"]
+            return shader
+        engine.shaders.get(quality)
+        engine.shaders.use_environment(quality, self.world.signature, self.environment)
+        return engine.shaders.use_material(quality, key, cancelled)
+
     def compute(self):
         results = []
         with engine.shaders.lock:
-            if self.quality != engine.AUTO:
-                engine.shaders.use_environment(self.quality, self.world.signature, self.environment)
             for name, data, keys, parts in self._parts():
                 rgb = np.empty((data.count, 3), np.float32)
                 seen = np.ones(data.count, bool) if self.cull else None
                 for s, sel, part in parts:
-                    if self.quality == engine.AUTO:
-                        shader = engine.shaders.auto(self.world.signature, self.environment, keys[s],
-                                                     self.target_error, self.memory_budget_mb, part.normals)
-                        self.auto_choices[(name, keys[s])] = shader.stats["auto"]
-                    else:
-                        shader = engine.shaders.use_material(self.quality, keys[s])
+                    shader = self._shader(self.quality, name, keys[s], part.normals)
                     rgb[sel], part_seen = engine.shade_arrays(shader, part, self.view, self.cull)
                     if seen is not None and part_seen is not None:
                         seen[sel] = part_seen
@@ -80,8 +97,9 @@ class ShadingPlan:
 
     def refine(self, quality, step_seconds, report, cancelled):
         """compute() again at `quality`, in steps of about `step_seconds` that each hold the
-        shader cache's lock only for themselves, so a new pass waits at most a step.  Returns the
-        results as compute() makes them, or None once `cancelled` (a threading.Event) is set;
+        shader cache's lock only for themselves, so a new pass waits at most a step (a new
+        material's BRDF slices, made in the first step, stop when cancelled).  Returns the results
+        as compute() makes them, or None once `cancelled` (a threading.Event) is set;
         `report(fraction)` after each step."""
         results = []
         total = sum(data.count for _, data, _ in self.items)
@@ -96,9 +114,10 @@ class ShadingPlan:
                     if cancelled.is_set():
                         return None
                     with engine.shaders.lock:
-                        engine.shaders.get(quality)
-                        engine.shaders.use_environment(quality, self.world.signature, self.environment)
-                        shader = engine.shaders.use_material(quality, keys[s])
+                        try:
+                            shader = self._shader(quality, name, keys[s], part.normals, cancelled)
+                        except engine.CancelledError:
+                            return None
                         first, count = engine.shade_step(shader, part, self.view, self.cull, out, first, step_seconds)
                     report((done + part.count * (first / count if count else 1.0)) / total)
                 rgb[sel] = out
@@ -126,9 +145,12 @@ class ShadingPlan:
         return done
 
 
-def plan_shading(scene, depsgraph, objects, view, images, progress=None):
-    """Reads everything a pass over `objects` needs (main thread); builds the scene quality's
-    shader first if it is missing.  Raises SetupError for a set-up that cannot be shaded."""
+def plan_shading(scene, depsgraph, objects, view, images, progress=None, preview=False):
+    """Reads everything a pass over `objects` needs (main thread); builds the shader it shades
+    with first if it is missing.  With `preview` (the live mode) and the scene's Draft While
+    Remaking, a pass the scene's quality would first remake slices for is planned at
+    engine.PREVIEW_QUALITY (plan.chosen keeps the scene's).  Raises SetupError for a set-up that
+    cannot be shaded."""
     st = scene.wenv
     spec = world.world_spec(scene.world)
     quality = engine.quality_value(st.quality)
@@ -161,8 +183,10 @@ def plan_shading(scene, depsgraph, objects, view, images, progress=None):
             continue
         plan.items.append((obj.name, data, materials.slot_material_keys(obj)))
         notes += [n for n in materials.slot_notes(obj) if n not in notes]
-    if quality != engine.AUTO:
-        engine.shaders.get(quality, progress)
+    if preview and st.preview_changes:
+        plan.preview_if_slow()
+    if plan.quality != engine.AUTO:
+        engine.shaders.get(plan.quality, progress)
     return plan
 
 

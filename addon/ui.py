@@ -48,6 +48,9 @@ class WENV_PT_shading(_SidebarPanel, bpy.types.Panel):
         sub = col.column()
         sub.active = engine.quality_value(st.quality) in engine.REFINABLE
         sub.prop(st, "refine_at_rest")
+        sub = col.column()
+        sub.active = engine.quality_value(st.quality) != engine.PREVIEW_QUALITY
+        sub.prop(st, "preview_changes")
         col.prop(st, "shade_on_frame_change")
         if st.shade_on_frame_change and not context.scene.render.use_lock_interface:
             col.label(text="Renders re-shade frames only with Render > Lock Interface", icon="INFO")
@@ -60,9 +63,11 @@ class WENV_PT_shading(_SidebarPanel, bpy.types.Panel):
                      depress=live)
         status = LiveState.session.refine_status if live else None
         if status is not None:
-            shown = st.bl_rna.properties["quality"].enum_items[st.quality].name
             if status[0] == "REFINING":
-                layout.label(text=f"{shown} shown, refining to High (within 1 %): {100 * status[1]:.0f} %", icon="TIME")
+                _, fraction, shown, making = status
+                goal = " (within 1 %)" if making == engine.REFINE_QUALITY else ""
+                layout.label(text=f"{shown.title()} shown, refining to {making.title()}{goal}: {100 * fraction:.0f} %",
+                             icon="TIME")
             else:
                 layout.label(text="Refined to High: within 1 % of the reference for roughness 0.1 and up",
                              icon="CHECKMARK")

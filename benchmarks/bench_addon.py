@@ -50,6 +50,7 @@ def build_scene(levels, quality):
     obj.data.shade_smooth()
     mat = bpy.data.materials.new("paint")
     st = mat.wenv
+    st.model = "COOK_TORRANCE"  # a new material has a Principled BSDF node, which the default model would read
     st.diffuse = (0.3, 0.1, 0.05)
     lobe = st.lobes.add()
     lobe.roughness = 0.2

@@ -5,6 +5,7 @@ Expected values are computed here independently (mathutils transforms, the core 
 from its file, fresh wenv.Shader objects) and compared with what the operator wrote."""
 import math
 import os
+import time
 
 import numpy as np
 import pytest
@@ -941,6 +942,98 @@ def test_live_session_refines_at_rest_and_drops_it_on_a_change(scene):
     live.LiveState.reset()
 
 
+def test_live_session_shows_draft_while_the_setting_remakes_its_slices(scene):
+    """At Default, a change that makes Default remake its slices -- the first pass, a new World
+    image, a material edit -- shows Draft at once, then Default's own colours once made; a view
+    change or a World rotation shows Default at once.  A change while Default's BRDF slices are
+    being made cancels them, and the shader is whole afterwards.  Off, Default is shown at once."""
+    from addon import engine, ui
+    forest = env_world(scene, "forest").image
+    obj = add_monkey(subdivisions=1)
+    mat = set_material(obj, lobes=((0.3, 1.5, "GGX"),))
+    scene.wenv.quality = "DEFAULT"
+    scene.wenv.view_source = "CAMERA"
+    session = live.LiveSession([obj.name])
+    live.LiveState.session = session  # what the panel reads
+    engine.shaders.get(engine.PREVIEW_QUALITY)  # the live operator builds it on a worker
+    ctx = bpy.context
+    p, n = world_arrays(obj, corner=False)
+
+    def core(quality, hdri="forest", rotation=0.0):
+        env = wenv.load_environment(hdri_path(hdri)).with_transform(rotation=rotation)
+        eye = tuple(scene.camera.matrix_world.translation)
+        return wenv.Shader(env, wenv_material(mat), quality=quality).shade_mesh(p, n, eye)
+
+    def shows(quality, **world):
+        np.testing.assert_allclose(attribute(obj)[1], core(quality, **world), rtol=1e-4, atol=1e-5)
+        return True
+
+    def pass_written():
+        assert session.tick(ctx) is False
+        session._worker.join(60)
+        return session.tick(ctx) is True
+
+    def previewed(**world):
+        """Draft written at once, Default being made; then Default written, nothing after it."""
+        assert pass_written() and session.shown == "draft" and shows("draft", **world)
+        status = session.refine_status
+        assert status[0] == "REFINING" and status[2:] == ("draft", "default"), status
+        labels = [l[1] for l in draw_panel(ui.WENV_PT_shading) if l[0] == "label"]
+        assert any(t.startswith("Draft shown, refining to Default: ") for t in labels), labels
+        session.wait(300)
+        assert session.tick(ctx) is True and session.shown == "default" and shows("default", **world)
+        assert session.refine_status is None and not session.refined  # Refine at Rest is off
+        return session.tick(ctx) is False  # nothing more to make
+
+    def at_once(**world):
+        assert pass_written() and session.shown == "default" and session.refine_status is None
+        return shows("default", **world)
+
+    assert previewed()  # Default's lighting and BRDF slices are made for the first pass
+    scene.camera.location = (6.0, -6.0, 2.0)
+    assert at_once()
+    mat.wenv.lobes[0].roughness = 0.25  # new BRDF slices
+    assert previewed()
+    env_world(scene, image=forest, rotation=0.6)  # the same image (its pixels read once), turned
+    assert at_once(rotation=0.6)
+    env_world(scene, "city", rotation=0.6)  # a new image
+    assert previewed(hdri="city", rotation=0.6)
+    # a change while Default makes BRDF slices: they stop, and the next change makes them whole
+    mat.wenv.lobes[0].roughness = 0.35
+    assert pass_written() and session.shown == "draft"
+    job = session._refine
+    while not job.done and engine.shaders._mat_key.get("default") is not None:
+        time.sleep(0.002)  # Default's set_material has begun once its material key is dropped
+    scene.camera.location = (6.0, -5.0, 2.5)
+    assert session.tick(ctx) is False and job._cancel.is_set()
+    session.wait(300)
+    assert job.done and job.results is None and job.error is None
+    assert session.tick(ctx) is True and session.shown == "draft"
+    p, n = world_arrays(obj, corner=False)
+    session.wait(300)
+    assert session.tick(ctx) is True and shows("default", hdri="city", rotation=0.6)
+    # off: Default at once after a material edit
+    scene.wenv.preview_changes = False
+    mat.wenv.lobes[0].roughness = 0.3
+    assert at_once(hdri="city", rotation=0.6)
+    live.LiveState.reset()
+    # the live operator builds the preview's shader beside the session and installs it on a tick
+    scene.wenv.preview_changes = True
+    engine.shaders.clear()
+    engine.shaders.get("default")
+    op = LiveOperator()
+    try:
+        session = live.LiveState.session = live.LiveSession([obj.name])
+        job = live.LiveState.preview_job = live.PrecomputeJob(engine.PREVIEW_QUALITY).start()  # as invoke does
+        assert job.wait(120) and job.error is None
+        assert op.event("TIMER") == {"PASS_THROUGH"} and live.LiveState.preview_job is None
+        assert engine.shaders.has(engine.PREVIEW_QUALITY)
+        session.wait(60)
+        assert op.event("TIMER") == {"PASS_THROUGH"} and session.shown == "draft"
+    finally:
+        live.LiveState.reset()
+
+
 def test_frame_change_shades_from_animated_camera(scene):
     env_world(scene, "sunrise")
     obj = add_monkey()
@@ -1012,7 +1105,7 @@ def test_precompute_job_progress_and_cancel(tmp_path, monkeypatch):
     assert len(seen) >= 3 and 0 < seen[0] <= seen[-1] < 1
     done = live.PrecomputeJob("draft").start()
     assert done.wait(60) and done.error is None and done.result is not None
-    assert done.fraction == pytest.approx(1.0, abs=0.05) and done.result.stats["cache"] == "built"
+    assert done.fraction == pytest.approx(1.0, abs=0.05) and done.result[0].stats["cache"] == "built"
     # The operator's synchronous path (scripts; the UI runs the job above in a modal timer).
     engine.shaders.clear()
     bpy.context.scene.wenv.quality = "DRAFT"
@@ -1469,7 +1562,7 @@ def test_cached_shaders_do_not_keep_an_operator_s_progress_callback():
     to it while building only: its later set_material calls, after the operator is gone, must not
     reach it (a callback on removed Blender data raised ReferenceError and failed the shade)."""
     calls = []
-    shader = engine.ShaderCache().build("draft", progress=lambda f: calls.append(f))
+    shader, _relay = engine.ShaderCache().build("draft", progress=lambda f: calls.append(f))
     built = len(calls)  # none when the matrices come from the cache
     many = wenv.CookTorrance(diffuse=0.0, lobes=[dict(specular=0.04, roughness=0.05 + 0.02 * i) for i in range(8)])
     shader.set_material(many)
