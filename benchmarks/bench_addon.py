@@ -1,5 +1,7 @@
 """End-to-end speed of the Blender add-on in bpy: for Suzanne subdivided to ~31k and ~126k vertices
-under Blender's "sunset" HDRI, the median time per view change of
+under Blender's "sunset" HDRI, wearing one Cook-Torrance lobe of Blender roughness 0.2 (or, with
+--material principled, a new material's Principled BSDF as Blender makes it), the median time per
+view change of
 
   - the add-on's shading path (read the evaluated mesh with foreach_get, shade, write the colour
     attribute with foreach_set), split into its three parts, and
@@ -10,7 +12,7 @@ under Blender's "sunset" HDRI, the median time per view change of
 The view orbits the object by a small step each repeat (a new view every time, as when the user
 drags the viewport).  Prints a table and writes out/bench_addon.json.
 
-    python benchmarks/bench_addon.py [--quality default] [--repeats 21] [--threads 2]
+    python benchmarks/bench_addon.py [--quality default] [--material cook_torrance] [--repeats 21] [--threads 2]
 """
 import argparse
 import json
@@ -32,7 +34,7 @@ from addon import engine, materials, meshes, shading, views  # noqa: E402
 from measure import OUT, bundled_hdri  # noqa: E402
 
 
-def build_scene(levels, quality):
+def build_scene(levels, quality, material="cook_torrance"):
     bpy.ops.wm.read_homefile(use_factory_startup=True)
     scene = bpy.context.scene
     scene.wenv.quality = quality.upper()
@@ -50,10 +52,11 @@ def build_scene(levels, quality):
     obj.data.shade_smooth()
     mat = bpy.data.materials.new("paint")
     st = mat.wenv
-    st.model = "COOK_TORRANCE"  # a new material has a Principled BSDF node, which the default model would read
-    st.diffuse = (0.3, 0.1, 0.05)
-    lobe = st.lobes.add()
-    lobe.roughness = 0.2
+    if material == "cook_torrance":
+        st.model = "COOK_TORRANCE"  # else the new material's Principled BSDF node, as Blender made it
+        st.diffuse = (0.3, 0.1, 0.05)
+        lobe = st.lobes.add()
+        lobe.roughness = 0.2
     st.initialized = True
     obj.data.materials.append(mat)
     for o in bpy.context.view_layer.objects:
@@ -76,8 +79,8 @@ def orbit_view(i, distance=4.0):
     return (mathutils.Matrix.Translation(eye) @ rot).inverted()
 
 
-def bench(levels, quality, repeats):
-    scene, obj = build_scene(levels, quality)
+def bench(levels, quality, repeats, material):
+    scene, obj = build_scene(levels, quality, material)
     n = len(obj.data.vertices)
     dg = bpy.context.evaluated_depsgraph_get()
     t = time.perf_counter()
@@ -127,14 +130,17 @@ def main():
     ap.add_argument("--quality", default="default", choices=engine.QUALITIES)
     ap.add_argument("--repeats", type=int, default=21)
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--material", default="cook_torrance", choices=["cook_torrance", "principled"],
+                    help="one Cook-Torrance lobe of Blender roughness 0.2, or a new material's Principled BSDF "
+                         "as Blender makes it (roughness 0.5)")
     ap.add_argument("--levels", type=int, nargs="+", default=[3, 4],
                     help="Subdivision levels of Suzanne (3: 31.5k vertices, 4: 126k)")
     ap.add_argument("--json", default=os.path.join(OUT, "bench_addon.json"))
     args = ap.parse_args()
     wenv.set_num_threads(args.threads)
     addon.register()
-    rows = [bench(lv, args.quality, args.repeats) for lv in args.levels]
-    print(f"quality {args.quality}, {args.threads} threads, median of {args.repeats} view changes (ms):")
+    rows = [bench(lv, args.quality, args.repeats, args.material) for lv in args.levels]
+    print(f"quality {args.quality}, {args.material}, {args.threads} threads, median of {args.repeats} view changes (ms):")
     print(f"{'vertices':>9} {'read':>7} {'shade':>7} {'write':>7} {'total':>7} {'operator':>9}   "
           f"{'seen':>5} {'shade':>7} {'write':>7}  (only what a viewport sees)")
     for r in rows:
@@ -144,7 +150,8 @@ def main():
     path = args.json
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     with open(path, "w") as fp:
-        json.dump({"quality": args.quality, "threads": args.threads, "repeats": args.repeats, "results": rows},
+        json.dump({"quality": args.quality, "material": args.material, "threads": args.threads,
+                   "repeats": args.repeats, "results": rows},
                   fp, indent=2)
     print("wrote", path)
     addon.unregister()
