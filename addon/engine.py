@@ -249,7 +249,7 @@ class ShaderCache:
             return all((spec.signature, k, target_error, memory_budget_mb) in self._auto for k in keys)
         held = self._env_sig.get(quality)
         return (quality in self._shaders and held is not None and held[0] == spec.key and len(keys) == 1
-                and self._mat_key.get(quality) in keys)
+                and self.held_material(quality) in keys)
 
     def environment(self, image_key, signature, rotation, strength, load_base):
         """The image `image_key`'s Environment turned and scaled as the World asks.  The
@@ -281,11 +281,19 @@ class ShaderCache:
         if shader is None:
             if len(self._auto) >= AUTO_CACHE_SIZE:
                 self._auto.clear()
-            stop = (lambda _fraction: cancelled.is_set()) if cancelled is not None else None
-            shader = wenv.Shader(env, material_from_key(key), quality=AUTO, target_error=target_error,
-                                 memory_budget_mb=memory_budget_mb, normals=normals, progress=stop)
+            # a relay, so that the cached shader keeps no tie to this refinement's event
+            relay = ProgressRelay((lambda _fraction: cancelled.is_set()) if cancelled is not None else None)
+            try:
+                shader = wenv.Shader(env, material_from_key(key), quality=AUTO, target_error=target_error,
+                                     memory_budget_mb=memory_budget_mb, normals=normals, progress=relay)
+            finally:
+                relay.target = None
             self._auto[cache_key] = shader
         return shader
+
+    def held_material(self, quality):
+        """The material key the shader for `quality` holds (None: none, or Auto's per-material shaders)."""
+        return self._mat_key.get(quality)
 
     def use_material(self, quality, key, cancelled=None):
         """The shader for `quality` holding material `key`; a new material's BRDF slices stop with

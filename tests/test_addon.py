@@ -1016,6 +1016,16 @@ def test_live_session_shows_draft_while_the_setting_remakes_its_slices(scene):
     scene.wenv.preview_changes = False
     mat.wenv.lobes[0].roughness = 0.3
     assert at_once(hdri="city", rotation=0.6)
+    # Auto: Draft while its shader is chosen and made, then Auto's colours
+    scene.wenv.preview_changes = True
+    scene.wenv.quality = "AUTO"
+    assert pass_written() and session.shown == "draft" and session.refine_status[2:] == ("draft", "auto")
+    session.wait(300)
+    assert session.tick(ctx) is True and session.shown == "auto" and session.refine_status is None
+    env = wenv.load_environment(hdri_path("city")).with_transform(rotation=0.6)
+    want = wenv.Shader(env, wenv_material(mat), quality="auto", target_error=scene.wenv.target_error / 100, normals=n)
+    np.testing.assert_allclose(attribute(obj)[1], want.shade_mesh(p, n, tuple(scene.camera.matrix_world.translation)),
+                               rtol=1e-4, atol=1e-5)
     live.LiveState.reset()
     # the live operator builds the preview's shader beside the session and installs it on a tick
     scene.wenv.preview_changes = True
@@ -1032,6 +1042,47 @@ def test_live_session_shows_draft_while_the_setting_remakes_its_slices(scene):
         assert op.event("TIMER") == {"PASS_THROUGH"} and session.shown == "draft"
     finally:
         live.LiveState.reset()
+
+
+def test_a_pass_sets_each_material_once_and_the_held_one_first(scene, monkeypatch):
+    """One shader per quality holds one material at a time; a pass over meshes of two materials
+    sets each once (not once per mesh) and starts with the material the shader holds, so a second
+    pass sets one material, not two; the colours are each mesh's own."""
+    env_world(scene, "sunset")
+    a, b, c = add_monkey(name="A"), add_monkey(name="B"), add_monkey(name="C")
+    b.location = (3.0, 0.0, 0.0)
+    c.location = (-3.0, 0.0, 0.0)
+    paint = set_material(a, lobes=((0.3, 1.5, "GGX"),))
+    b.data.materials.append(set_material(b, model="LAMBERT", diffuse=(0.5, 0.5, 0.5)))
+    c.data.materials.append(paint)
+    scene.wenv.view_source = "CAMERA"
+    class CountingShader:
+        def __init__(self, shader):
+            self.shader, self.sets = shader, 0
+
+        def set_material(self, mat):
+            self.sets += 1
+            return self.shader.set_material(mat)
+
+        def __getattr__(self, name):
+            return getattr(self.shader, name)
+
+    engine.shaders.clear()
+    counted = CountingShader(engine.shaders.get("draft"))
+    monkeypatch.setitem(engine.shaders._shaders, "draft", counted)
+    dg = bpy.context.evaluated_depsgraph_get()
+    objs = [a, b, c]
+    for eye, sets in (((7.0, -7.0, 5.0), 2), ((6.0, -7.5, 4.0), 1), ((6.5, -7.0, 4.5), 1)):
+        scene.camera.location = eye
+        dg.update()
+        counted.sets = 0
+        assert len(shading.shade_objects(scene, dg, objs, views.camera_view(scene), bpy.data)[0]) == 3
+        assert counted.sets == sets
+        env = wenv.load_environment(hdri_path("sunset"))
+        for obj in objs:
+            p, n = world_arrays(obj, corner=False)
+            want = core_shader(env, wenv_material(obj.data.materials[0])).shade_mesh(p, n, eye)
+            np.testing.assert_allclose(attribute(obj)[1], want, rtol=1e-4, atol=1e-5)
 
 
 def test_frame_change_shades_from_animated_camera(scene):

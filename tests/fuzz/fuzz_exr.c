@@ -3,6 +3,8 @@
  * Built and run by tests/fuzz/run.py. */
 #include "fuzz_input.h"
 
+#include <float.h>
+
 #include "scene/envmap.h"
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
@@ -17,7 +19,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         const float *px = wenv_envmap_pixels(env);
         size_t n = wenv_envmap_height(env) * wenv_envmap_width(env) * 3;
         for (size_t i = 0; i < n; i++)
-            if (!(px[i] >= 0.0f && px[i] <= 3.4e38f))
+            if (!(px[i] >= 0.0f && px[i] <= FLT_MAX))
                 abort();
         wenv_envmap_free(env);
     } else {

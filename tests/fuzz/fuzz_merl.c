@@ -2,6 +2,8 @@
  * by tests/fuzz/run.py. */
 #include "fuzz_input.h"
 
+#include <float.h>
+
 #include "scene/brdf_readers.h"
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
@@ -22,7 +24,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             n *= dims[d];
         }
         for (size_t i = 0; i < n; i++)
-            if (!(rgb[i] >= 0.0f && rgb[i] <= 3.4e38f)) {
+            if (!(rgb[i] >= 0.0f && rgb[i] <= FLT_MAX)) {
                 fprintf(stderr, "table value %zu is %g\n", i, (double)rgb[i]);
                 abort();
             }

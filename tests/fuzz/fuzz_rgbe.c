@@ -2,6 +2,8 @@
  * hands it the whole file.  Built and run by tests/fuzz/run.py. */
 #include "fuzz_input.h"
 
+#include <float.h>
+
 #include "scene/image_readers.h"
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
@@ -16,7 +18,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         if (h == 0 || w == 0 || h > WENV_IMAGE_MAX_SIDE || w > WENV_IMAGE_MAX_SIDE)
             abort();
         for (size_t i = 0; i < h * w * 3; i++)
-            if (!(rgb[i] >= 0.0f && rgb[i] <= 3.4e38f))
+            if (!(rgb[i] >= 0.0f && rgb[i] <= FLT_MAX))
                 abort();
         free(rgb);
     } else {

@@ -141,6 +141,9 @@ def merl_regressions(out):
     table[1, 2, 3, 1] = 1e300  # finite as a double, infinite as a float
     with open(os.path.join(out, "regress_past_float.binary"), "wb") as f:
         f.write(merl_bytes(table))
+    table[1, 2, 3, 1] = 3.402e38  # a float (FLT_MAX is 3.4028e38), past the 3.4e38 the target once took for the largest
+    with open(os.path.join(out, "regress_near_float_max.binary"), "wb") as f:
+        f.write(merl_bytes(table))
 
 
 def matrix_cache_regressions(out):
