@@ -187,7 +187,9 @@ class ShaderCache:
         # the last transformed Environment, kept so Auto's analysis of it (made on its first Auto
         # shader) serves later passes and materials under the same World
         self._env_current = (None, None)
-        self._mat_key = {}
+        # quality -> the material keys its shader keeps (the core keeps the last few it was given:
+        # setting one again makes nothing), the current one first
+        self._kept = {}
         self._relays = {}  # quality -> the ProgressRelay its shader reports to (set_material cancels)
         self._auto = {}  # (World signature, material key, target, budget) -> wenv.Shader
         self.lock = threading.Lock()
@@ -199,13 +201,13 @@ class ShaderCache:
         self._env_sig.clear()
         self._env_base.clear()
         self._env_current = (None, None)
-        self._mat_key.clear()
+        self._kept.clear()
         self._relays.clear()
 
     def forget_data(self):
         """Drops everything derived from Blender data (environments, materials), keeps matrices."""
         self._env_sig = dict.fromkeys(self._env_sig)
-        self._mat_key = dict.fromkeys(self._mat_key)
+        self._kept.clear()  # the core still recognises them: setting one again costs nothing
         self._env_base.clear()
         self._env_current = (None, None)
         self._auto.clear()
@@ -218,7 +220,7 @@ class ShaderCache:
         """Keeps `built` (what build() returned) as the shader for `quality`."""
         self._shaders[quality], self._relays[quality] = built
         self._env_sig[quality] = spec.signature if spec is not None else None
-        self._mat_key[quality] = mat_key
+        self._kept[quality] = [mat_key] if mat_key is not None else []
 
     def build(self, quality, progress=None):
         """Builds (or loads from the matrix cache) the shader for `quality`; `progress(fraction)`
@@ -242,15 +244,14 @@ class ShaderCache:
     def ready(self, quality, spec, keys, target_error, memory_budget_mb):
         """Whether a pass at `quality` under the World `spec` with the material keys `keys` costs
         only its shading: the shader holds this image (a new rotation or strength remakes nothing)
-        and the one material, or Auto has a shader for each.  Otherwise the pass remakes lighting
-        slices or BRDF slices first (a new image ~0.25 s, a new material ~0.7 s at `default` for
-        126k vertices): what the live mode shows PREVIEW_QUALITY for meanwhile."""
+        and keeps every one of the materials, or Auto has a shader for each.  Otherwise the pass
+        remakes lighting slices or BRDF slices first (a new image ~0.25 s, a new material ~0.3-0.7 s
+        at `default` for 126k vertices): what the live mode shows PREVIEW_QUALITY for meanwhile."""
         if quality == AUTO:
             return all((spec.signature, k, target_error, memory_budget_mb) in self._auto for k in keys)
         held = self._env_sig.get(quality)
-        return (quality in self._shaders and held is not None and held[0] == spec.key and len(keys) == 1
-                and self.held_material(quality) in keys)
-
+        kept = self._kept.get(quality, ())
+        return quality in self._shaders and held is not None and held[0] == spec.key and all(k in kept for k in keys)
     def environment(self, image_key, signature, rotation, strength, load_base):
         """The image `image_key`'s Environment turned and scaled as the World asks.  The
         untransformed one is kept per image, so `load_base()` (which reads the pixels out of
@@ -291,25 +292,25 @@ class ShaderCache:
             self._auto[cache_key] = shader
         return shader
 
-    def held_material(self, quality):
-        """The material key the shader for `quality` holds (None: none, or Auto's per-material shaders)."""
-        return self._mat_key.get(quality)
+    def kept_materials(self, quality):
+        """The material keys the shader for `quality` keeps, the current one first (Auto: none)."""
+        return tuple(self._kept.get(quality, ()))
 
     def use_material(self, quality, key, cancelled=None):
         """The shader for `quality` holding material `key`; a new material's BRDF slices stop with
-        CancelledError once `cancelled` (a threading.Event) is set."""
+        CancelledError once `cancelled` (a threading.Event) is set, the shader left as it was."""
         shader = self._shaders[quality]
-        if self._mat_key.get(quality) != key:
-            self._mat_key[quality] = None  # a cancelled or failed set_material leaves no material
+        kept = self._kept.setdefault(quality, [])
+        if not kept or kept[0] != key:
             relay = self._relays.get(quality)
             if relay is not None and cancelled is not None:
                 relay.target = lambda _fraction: cancelled.is_set()
             try:
-                shader.set_material(material_from_key(key))
+                shader.set_material(material_from_key(key))  # one the core keeps costs nothing
             finally:
                 if relay is not None:
                     relay.target = None
-            self._mat_key[quality] = key
+            kept[:] = ([key] + [k for k in kept if k != key])[:shader.stats.get("materials_kept", 1)]
         return shader
 
 

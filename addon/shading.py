@@ -83,16 +83,18 @@ class ShadingPlan:
 
     def _ordered_parts(self, quality):
         """(object index, name, material key, selection, part) of every part of the pass, those of
-        one material together and the material the shader at `quality` holds first: a shader
-        holds one material at a time, so each material's BRDF slices are made at most once per
-        pass (~0.3-0.7 s at `default`) and the held one's not at all."""
-        held = engine.shaders.held_material(quality)
+        one material together, the materials the shader at `quality` keeps first (the current one
+        first of all): a shader holds one material at a time and keeps the last few, so each
+        material's BRDF slices are made at most once per pass (~0.3-0.7 s at `default`) and a kept
+        one's not at all."""
+        kept = engine.shaders.kept_materials(quality)
         work, order = [], {}
         for i, (name, _data, keys, parts) in enumerate(self._parts()):
             for s, sel, part in parts:
                 order.setdefault(keys[s], len(order))
                 work.append((i, name, keys[s], sel, part))
-        work.sort(key=lambda w: (w[2] != held, order[w[2]]))  # stable: meshes in order within a material
+        # stable: meshes in order within a material
+        work.sort(key=lambda w: (kept.index(w[2]) if w[2] in kept else len(kept), order[w[2]]))
         return work
 
     def _buffers(self):

@@ -1,9 +1,11 @@
 """What the Blender add-on's live mode shows after a change, and when: Suzanne subdivided to ~126k
 vertices under Blender's "sunset" HDRI, seen from the scene camera (every vertex shaded), one GGX
 lobe of roughness 0.45 (m = 0.2), 2 threads.  For a view change, a World rotation, a new World
-image (two HDRIs in turn, their pixels read once) and a material edit (the roughness nudged), the
-median time from the change to the first colours written and to the colours of the quality set,
-with Draft While Remaking on and off, side by side in one run.
+image (two HDRIs in turn, their pixels read once), a material edit (the roughness nudged) and the
+last edit undone and redone (materials the shader keeps), the median time from the change to the first colours written and to the colours of the quality set,
+with Draft While Remaking on and off, side by side in one run.  Then a view change with a second
+mesh of another material beside her (a UV sphere of 32k vertices): the shader keeps both
+materials, so neither is made again.
 
 The session is ticked every millisecond (the live operator's timer ticks every 50 ms, which adds up
 to that much to each figure in Blender).  Prints a table and writes out/bench_live.json.
@@ -80,11 +82,14 @@ def bench(quality, repeats, preview):
         env_node.image = images[(i + 1) % 2]
 
     def material(i):
-        lobe.roughness = 0.46 + 0.01 * (i % 4)
+        lobe.roughness = 0.46 + 0.01 * i
+
+    def material_back(i):  # the last edit undone and redone: materials the shader keeps
+        lobe.roughness = 0.46 + 0.01 * (repeats - 2 + i % 2)
 
     out = {}
     for name, change in (("view change", view), ("World rotation", rotation), ("new image", image),
-                         ("material edit", material)):
+                         ("material edit", material), ("material edit undone", material_back)):
         runs = []
         for i in range(repeats):
             change(i)
@@ -92,6 +97,25 @@ def bench(quality, repeats, preview):
         out[name] = {"first_ms": statistics.median(r[0] for r in runs) * 1e3,
                      "quality_ms": statistics.median(r[1] for r in runs) * 1e3,
                      "first_shown": sorted({r[2] for r in runs})}
+    # a second mesh of another material: the shader keeps both, so a view change makes neither again
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=256, ring_count=128, location=(2.5, 0.0, 0.0))
+    ball = bpy.context.object
+    other = bpy.data.materials.new("glaze")
+    other.wenv.model = "COOK_TORRANCE"
+    other.wenv.lobes.add().roughness = 0.3
+    other.wenv.initialized = True
+    ball.data.materials.append(other)
+    session.stop()
+    session = live.LiveSession([obj.name, ball.name])
+    settle(session, quality)
+    runs = []
+    for i in range(repeats):
+        view(i + repeats)
+        runs.append(settle(session, quality))
+    out["view change, two materials"] = {"first_ms": statistics.median(r[0] for r in runs) * 1e3,
+                                         "quality_ms": statistics.median(r[1] for r in runs) * 1e3,
+                                         "first_shown": sorted({r[2] for r in runs}),
+                                         "vertices": len(obj.data.vertices) + len(ball.data.vertices)}
     session.stop()
     return len(obj.data.vertices), out
 
@@ -110,10 +134,10 @@ def main():
         n, results["on" if preview else "off"] = bench(args.quality, args.repeats, preview)
     print(f"live mode at {args.quality}, {n} vertices, {args.threads} threads, median of {args.repeats} changes (ms): "
           f"first colours (quality shown) / {args.quality}'s colours")
-    print(f"{'change':16s} {'Draft While Remaking on':>34s} {'off':>16s}")
+    print(f"{'change':28s} {'Draft While Remaking on':>34s} {'off':>16s}")
     for case in results["on"]:
         on, off = results["on"][case], results["off"][case]
-        print(f"{case:16s} {on['first_ms']:9.0f} ({'/'.join(on['first_shown']):>7s}) / {on['quality_ms']:6.0f}"
+        print(f"{case:28s} {on['first_ms']:9.0f} ({'/'.join(on['first_shown']):>7s}) / {on['quality_ms']:6.0f}"
               f" {off['first_ms']:9.0f} / {off['quality_ms']:6.0f}")
     os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)
     with open(args.json, "w") as fp:

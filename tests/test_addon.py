@@ -16,7 +16,7 @@ bpy = pytest.importorskip("bpy", reason="the bpy module is installed by scripts/
 import mathutils  # noqa: E402  (ships with bpy)
 
 import addon  # noqa: E402
-from addon import engine, gloss, live, materials, meshes, shading, views  # noqa: E402
+from addon import engine, gloss, live, materials, meshes, shading, views, world  # noqa: E402
 
 from conftest import hdri_path  # noqa: E402
 
@@ -1002,8 +1002,8 @@ def test_live_session_shows_draft_while_the_setting_remakes_its_slices(scene):
     mat.wenv.lobes[0].roughness = 0.35
     assert pass_written() and session.shown == "draft"
     job = session._refine
-    while not job.done and engine.shaders._mat_key.get("default") is not None:
-        time.sleep(0.002)  # Default's set_material has begun once its material key is dropped
+    while not job.done and engine.shaders._relays["default"].target is None:
+        time.sleep(0.002)  # Default's set_material has begun once its relay listens for the cancel
     scene.camera.location = (6.0, -5.0, 2.5)
     assert session.tick(ctx) is False and job._cancel.is_set()
     session.wait(300)
@@ -1045,9 +1045,10 @@ def test_live_session_shows_draft_while_the_setting_remakes_its_slices(scene):
 
 
 def test_a_pass_sets_each_material_once_and_the_held_one_first(scene, monkeypatch):
-    """One shader per quality holds one material at a time; a pass over meshes of two materials
-    sets each once (not once per mesh) and starts with the material the shader holds, so a second
-    pass sets one material, not two; the colours are each mesh's own."""
+    """One shader per quality holds one material at a time and keeps the last few; a pass over
+    meshes of two materials sets each once (not once per mesh), starting with the material the
+    shader holds, and later passes make neither again (the live mode shows them at once); the
+    colours are each mesh's own."""
     env_world(scene, "sunset")
     a, b, c = add_monkey(name="A"), add_monkey(name="B"), add_monkey(name="C")
     b.location = (3.0, 0.0, 0.0)
@@ -1072,12 +1073,15 @@ def test_a_pass_sets_each_material_once_and_the_held_one_first(scene, monkeypatc
     monkeypatch.setitem(engine.shaders._shaders, "draft", counted)
     dg = bpy.context.evaluated_depsgraph_get()
     objs = [a, b, c]
-    for eye, sets in (((7.0, -7.0, 5.0), 2), ((6.0, -7.5, 4.0), 1), ((6.5, -7.0, 4.5), 1)):
+    keys = {materials.material_key(o.data.materials[0].wenv) for o in objs}
+    spec = world.world_spec(scene.world)
+    for eye, sets, made in (((7.0, -7.0, 5.0), 2, 2), ((6.0, -7.5, 4.0), 1, 0), ((6.5, -7.0, 4.5), 1, 0)):
         scene.camera.location = eye
         dg.update()
-        counted.sets = 0
+        counted.sets, reused = 0, counted.stats["materials_reused"]
         assert len(shading.shade_objects(scene, dg, objs, views.camera_view(scene), bpy.data)[0]) == 3
-        assert counted.sets == sets
+        assert counted.sets == sets and counted.sets - (counted.stats["materials_reused"] - reused) == made
+        assert engine.shaders.ready("draft", spec, keys, 0.01, 1024)
         env = wenv.load_environment(hdri_path("sunset"))
         for obj in objs:
             p, n = world_arrays(obj, corner=False)

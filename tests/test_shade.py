@@ -502,6 +502,40 @@ def test_radiance_beyond_float32_shading_is_refused_and_below_it_shades_right():
 
 
 @pytest.mark.parametrize("method", ["rotation", "slicing"])
+def test_a_shader_keeps_the_materials_set_before_it(method, tmp_path):
+    """Meshes of a few materials shaded in turn: a material among the last four set (made again
+    from the same values counts) is set again without making anything, and shades exactly as a
+    shader made for it; a fifth puts out the oldest; a new lighting keeps them, their table rows
+    made again for it; one value apart is another material."""
+    env, dusk = gradient_env(), wenv.Environment(gradient_env().pixels[:, ::-1].copy())
+    made = [dict(diffuse=0.1 * k, lobes=[{"roughness": 0.2 + 0.1 * k}]) for k in range(5)]
+    mats = [wenv.CookTorrance(**m) for m in made]
+    nrm, v = random_pairs(300, 5)
+
+    def own(lighting, k):
+        return wenv.Shader(lighting, mats[k], quality="draft", method=method, cache_dir=tmp_path).shade(nrm, v)
+
+    shader = wenv.Shader(env, mats[0], quality="draft", method=method, cache_dir=tmp_path)
+    for k in (1, 2, 3):
+        shader.set_material(mats[k])
+    assert (shader.stats["materials_kept"], shader.stats["materials_reused"]) == (4, 0)
+    for k in (0, 2, 1, 3):
+        shader.set_material(wenv.CookTorrance(**made[k]))
+        assert np.array_equal(shader.shade(nrm, v), own(env, k))
+    assert shader.stats["materials_reused"] == 4
+    shader.set_material(mats[4])  # 0 goes
+    shader.set_material(mats[0])  # made again; 2 goes
+    assert (shader.stats["materials_kept"], shader.stats["materials_reused"]) == (4, 4)
+    shader.set_environment(dusk)
+    for k in (3, 4, 1):
+        shader.set_material(mats[k])
+        assert np.array_equal(shader.shade(nrm, v), own(dusk, k))
+    assert shader.stats["materials_reused"] == 7
+    shader.set_material(wenv.CookTorrance(diffuse=0.3, lobes=[{"roughness": 0.5 + 1e-9}]))
+    assert shader.stats["materials_reused"] == 7 and not np.array_equal(shader.shade(nrm, v), own(dusk, 3))
+
+
+@pytest.mark.parametrize("method", ["rotation", "slicing"])
 def test_a_new_material_reports_progress_and_a_cancel_keeps_the_old_one(method, cook):
     """A material's BRDF slices cost its lobes' evaluations (dozens of lobes: seconds), so
     set_material reports progress through the Shader's callback, rising to 1, and a cancel leaves
@@ -523,9 +557,13 @@ def test_a_new_material_reports_progress_and_a_cancel_keeps_the_old_one(method, 
     after = shader.shade(nrm, v)
     assert not np.allclose(after, before)
     stop.append(1)
+    new = wenv.CookTorrance(diffuse=0.2, lobes=[{"roughness": 0.4}])
     with pytest.raises(wenv.CancelledError, match="material precomputation cancelled"):
-        shader.set_material(cook)
+        shader.set_material(new)
     assert shader.material is many and np.array_equal(shader.shade(nrm, v), after)
-    stop.clear()
+    # a material set before is kept: setting it again makes nothing, so there is nothing to cancel
     shader.set_material(cook)
     assert np.array_equal(shader.shade(nrm, v), before)
+    stop.clear()
+    shader.set_material(new)
+    assert not np.allclose(shader.shade(nrm, v), before)

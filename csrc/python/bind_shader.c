@@ -706,7 +706,8 @@ static PyMethodDef Shader_methods[] = {
     {"set_environment", (PyCFunction)Shader_set_environment, METH_O,
      "set_environment(env)\n--\n\nNew lighting; rotation matrices are kept."},
     {"set_material", (PyCFunction)Shader_set_material, METH_O,
-     "set_material(material)\n--\n\nNew BRDF; rotation matrices and lighting slices are kept."},
+     "set_material(material)\n--\n\nNew BRDF; rotation matrices and lighting slices are kept.  The wavelet methods "
+     "keep the last four materials set: one of them set again (equal in every value) makes nothing anew."},
     {NULL, NULL, 0, NULL},
 };
 

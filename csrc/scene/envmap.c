@@ -14,6 +14,8 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "base/fingerprint.h"
+
 #define PI 3.14159265358979323846
 
 typedef struct {
@@ -626,20 +628,6 @@ static int cmp_pixel(const void *a, const void *b)
     return (x > y) - (x < y);
 }
 
-#define FNV_OFFSET 0xcbf29ce484222325ull
-#define FNV_PRIME 0x100000001b3ull
-
-/* 64-bit FNV-1a over 32-bit words, from h. */
-static uint64_t fnv1a_words(uint64_t h, const float *words, size_t n)
-{
-    for (size_t i = 0; i < n; i++) {
-        uint32_t w;
-        memcpy(&w, words + i, sizeof w);
-        h = (h ^ w) * FNV_PRIME;
-    }
-    return h;
-}
-
 /* Per-row flux, peak and fingerprint, once per image (they do not change with rotation or
  * strength): the search for the brightest pixels at each lighting change then reads only rows that
  * can hold one, and a lighting change tells a new image from a turned one at no cost. */
@@ -656,7 +644,7 @@ static int row_stats(wenv_envmap *env)
 #pragma omp parallel for schedule(static)
     for (size_t row = 0; row < h; row++) {
         const float *p = pixel_at(env, row, 0);
-        row_hash[row] = fnv1a_words(FNV_OFFSET, p, 3 * w);
+        row_hash[row] = wenv_fingerprint_floats(WENV_FINGERPRINT_START, p, 3 * w);
         double flux = 0.0, row_omega = env->projection == WENV_PROJ_EQUIRECT ? wenv_envmap_pixel_solid_angle(env, row, 0)
                                                                                : -1.0;
         float peak = 0.0f;
@@ -672,9 +660,9 @@ static int row_stats(wenv_envmap *env)
         env->row_flux[row] = flux;
         env->row_peak[row] = peak;
     }
-    uint64_t fp = FNV_OFFSET;
+    uint64_t fp = WENV_FINGERPRINT_START;
     for (size_t row = 0; row < h; row++)
-        fp = (fp ^ row_hash[row]) * FNV_PRIME;
+        fp = wenv_fingerprint_word(fp, row_hash[row]);
     env->fingerprint = fp ^ (uint64_t)(w * h);
     free(row_hash);
     return 0;

@@ -63,6 +63,20 @@ wenv_status wenv_material_copy(wenv_material **out, const wenv_material *src, we
     return WENV_OK;
 }
 
+int wenv_material_same(const wenv_material *a, const wenv_material *b)
+{
+    if (a->kind != b->kind || a->n_lobes != b->n_lobes || a->shadowing != b->shadowing ||
+        memcmp(a->diffuse, b->diffuse, sizeof a->diffuse) != 0 || !a->shared != !b->shared)
+        return 0;
+    for (size_t i = 0; i < a->n_lobes; i++) {
+        const wenv_lobe *x = &a->lobes[i], *y = &b->lobes[i];
+        if (memcmp(x->specular, y->specular, sizeof x->specular) != 0 || x->roughness != y->roughness ||
+            x->ior != y->ior || x->distribution != y->distribution)
+            return 0;
+    }
+    return !a->shared || a->shared == b->shared || a->shared->fingerprint == b->shared->fingerprint;
+}
+
 void wenv_material_free(wenv_material *mat)
 {
     if (!mat)

@@ -81,6 +81,11 @@ const float *wenv_tabulated_table(const wenv_material *mat, size_t dims[3]);
 wenv_status wenv_material_copy(wenv_material **out, const wenv_material *src, wenv_error *err);
 void wenv_material_free(wenv_material *mat);
 
+/* Whether a and b reflect alike: the same model made from the same values (a copy, or one made
+ * again from them), so that what was computed for one serves the other.  A measured table or a
+ * Principled BSDF's inputs compare by a 64-bit fingerprint. */
+int wenv_material_same(const wenv_material *a, const wenv_material *b);
+
 /* A new material equal to `src` except that every lobe's roughness is `roughness` (validated, error
  * naming "roughness"); a copy for a material without lobes.  The glossmeter's one-parameter inverse
  * (find the roughness that reads a gloss).  WENV_ERR_VALUE for a model whose lobes cannot be set. */

@@ -4,6 +4,7 @@
 #define WENV_MATERIAL_KIND_H
 
 #include <stdatomic.h>
+#include <stdint.h>
 
 #include "scene/material.h"
 
@@ -12,6 +13,7 @@
 typedef struct wenv_shared {
     atomic_size_t refs;
     void (*destroy)(struct wenv_shared *shared);
+    uint64_t fingerprint; /* of what the model made it from (base/fingerprint.h): wenv_material_same */
 } wenv_shared;
 
 typedef struct wenv_material_kind {

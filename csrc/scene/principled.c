@@ -35,6 +35,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "base/fingerprint.h"
 #include "scene/material_kind.h"
 #include "scene/principled_tables.h"
 #include "scene/sheen_table.h"
@@ -655,6 +656,21 @@ static void add_lobe(principled *p, wenv_lobe *shapes, lobe_role role, double ro
     p->n++;
 }
 
+/* The inputs field by field (the struct's padding is not data). */
+static uint64_t inputs_fingerprint(const wenv_principled_inputs *in)
+{
+    const double fields[] = {in->base_color[0], in->base_color[1], in->base_color[2], in->metallic, in->roughness,
+                             in->ior, in->alpha, in->specular_ior_level, in->specular_tint[0], in->specular_tint[1],
+                             in->specular_tint[2], in->anisotropic, in->anisotropic_rotation, in->coat_weight,
+                             in->coat_roughness, in->coat_ior, in->coat_tint[0], in->coat_tint[1], in->coat_tint[2],
+                             in->sheen_weight, in->sheen_roughness, in->sheen_tint[0], in->sheen_tint[1],
+                             in->sheen_tint[2], in->subsurface_weight, in->transmission_weight,
+                             in->diffuse_roughness, in->emission_color[0], in->emission_color[1],
+                             in->emission_color[2], in->emission_strength, in->thin_film_thickness, in->thin_film_ior};
+    uint64_t h = wenv_fingerprint_doubles(WENV_FINGERPRINT_START, fields, sizeof fields / sizeof fields[0]);
+    return wenv_fingerprint_word(h, (uint64_t)in->multiscatter);
+}
+
 wenv_status wenv_principled_create(wenv_material **out, const wenv_principled_inputs *inputs, wenv_error *err)
 {
     *out = NULL;
@@ -668,6 +684,7 @@ wenv_status wenv_principled_create(wenv_material **out, const wenv_principled_in
     p->in = *inputs;
     clamp_inputs(&p->in);
     const wenv_principled_inputs *in = &p->in;
+    p->shared.fingerprint = inputs_fingerprint(in);
     for (int k = 0; k < 3; k++)
         p->base[k] = fmin(in->base_color[k], 1.0);
     wenv_lobe shapes[MAX_LOBES];

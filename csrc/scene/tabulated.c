@@ -23,6 +23,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "base/fingerprint.h"
 #include "scene/material_kind.h"
 
 #ifndef M_PI
@@ -504,6 +505,9 @@ wenv_status wenv_tabulated_create(wenv_material **out, const float *rgb, const s
             }
     atomic_init(&t->shared.refs, 1);
     t->shared.destroy = table_destroy;
+    t->shared.fingerprint = wenv_fingerprint_floats(
+        wenv_fingerprint_word(wenv_fingerprint_word(wenv_fingerprint_word(WENV_FINGERPRINT_START, dims[0]), dims[1]), dims[2]),
+        copy, 3 * n);
     /* The Lambertian floor: the smallest value above the horizon per channel (a measured BRDF's
      * diffuse reflection, a tabulated diffuse + glossy material's diffuse term), capped at albedo 1.
      * Shading it as a Lambertian part is exact (the interpolation's weights sum to one) and lets the

@@ -12,25 +12,28 @@
 #include "math/haar.h"
 #include "math/maps.h"
 
-void wenv_wavelet_free_material(wenv_wavelet *wavelet)
+void wenv_wavelet_material_free(wenv_wavelet_material *m)
 {
-    wenv_material_free(wavelet->mat);
-    free(wavelet->lobe_cos_h_min);
-    free(wavelet->albedo);
-    free(wavelet->view_inv_albedo);
-    wavelet->mat = NULL;
-    wavelet->lobe_cos_h_min = NULL;
-    wavelet->albedo = NULL;
-    wavelet->view_inv_albedo = NULL;
-    wenv_grazing_rule_free(wavelet->grazing_rule);
-    wavelet->grazing_rule = NULL;
-    free(wavelet->brdf_start);
-    free(wavelet->brdf_idx);
-    free(wavelet->brdf_rgb);
-    wavelet->brdf_start = NULL;
-    wavelet->brdf_idx = NULL;
-    wavelet->brdf_rgb = NULL;
-    wavelet->have_mat = 0;
+    if (!m)
+        return;
+    wenv_material_free(m->mat);
+    free(m->lobe_cos_h_min);
+    free(m->albedo);
+    free(m->view_inv_albedo);
+    wenv_grazing_rule_free(m->grazing_rule);
+    free(m->brdf_start);
+    free(m->brdf_idx);
+    free(m->brdf_rgb);
+    free(m->table);
+    free(m->row_ready);
+    free(m->row_need);
+    free(m);
+}
+
+size_t wenv_wavelet_material_bytes(const wenv_wavelet *wavelet, const wenv_wavelet_material *m)
+{
+    return wavelet->ns * (wavelet->nv * 3 * sizeof(float) + 2) + m->brdf_terms * 4 * sizeof(float) +
+           wavelet->nv * 3 * sizeof(float) + wenv_grazing_rule_bytes(m->grazing_rule);
 }
 
 void wenv_wavelet_free_quadrature(wenv_wavelet *wavelet)
@@ -119,24 +122,24 @@ static size_t quadrature_k(const wenv_wavelet *wavelet, const wenv_material *mat
 
 /* Per lobe, the n.h below which it reflects nothing visible (wenv_material_lobe_cos_h_min): a direct
  * light there adds nothing, and skipping it keeps the lights cheap per vertex. */
-static wenv_status lobe_cutoffs(wenv_wavelet *wavelet, const wenv_material *mat, wenv_error *err)
+static wenv_status lobe_cutoffs(wenv_wavelet_material *m, const wenv_material *mat, wenv_error *err)
 {
     size_t n_lobes = wenv_material_lobe_count(mat);
-    wavelet->lobe_cos_h_min = malloc((n_lobes ? n_lobes : 1) * sizeof(float));
-    if (!wavelet->lobe_cos_h_min)
+    m->lobe_cos_h_min = malloc((n_lobes ? n_lobes : 1) * sizeof(float));
+    if (!m->lobe_cos_h_min)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the material");
     for (size_t k = 0; k < n_lobes; k++)
-        wavelet->lobe_cos_h_min[k] = (float)wenv_material_lobe_cos_h_min(mat, k);
+        m->lobe_cos_h_min[k] = (float)wenv_material_lobe_cos_h_min(mat, k);
     /* A half-vector theta_h from the normal turns the mirror direction by at most 2 theta_h. */
     double theta_h = 0.0;
     for (size_t k = 0; k < n_lobes; k++)
-        theta_h = fmax(theta_h, acos(fmax(-1.0, fmin(1.0, (double)wavelet->lobe_cos_h_min[k]))));
-    wavelet->lobe_m_min = fmin(1.0, wenv_material_lobe_width(mat));
-    wavelet->mirror_centred = wenv_material_mirror_centred(mat);
-    wavelet->lobes_modelled = wavelet->mirror_centred && wenv_material_lobes_follow_shapes(mat);
-    wavelet->light_cone_cos = 2.0 * theta_h >= M_PI ? -1.0 : cos(2.0 * theta_h);
-    if (wavelet->lobes_modelled)
-        wenv_lights_peak_table(mat, wavelet->lobe_m_min, wavelet->lobe_peak);
+        theta_h = fmax(theta_h, acos(fmax(-1.0, fmin(1.0, (double)m->lobe_cos_h_min[k]))));
+    m->lobe_m_min = fmin(1.0, wenv_material_lobe_width(mat));
+    m->mirror_centred = wenv_material_mirror_centred(mat);
+    m->lobes_modelled = m->mirror_centred && wenv_material_lobes_follow_shapes(mat);
+    m->light_cone_cos = 2.0 * theta_h >= M_PI ? -1.0 : cos(2.0 * theta_h);
+    if (m->lobes_modelled)
+        wenv_lights_peak_table(mat, m->lobe_m_min, m->lobe_peak);
     return WENV_OK;
 }
 
@@ -147,12 +150,13 @@ static wenv_status lobe_cutoffs(wenv_wavelet *wavelet, const wenv_material *mat,
  * interpolation between view samples follows.  Entries are therefore kept divided by their view's
  * albedo -- a weighted mean radiance, which varies slowly -- and a vertex multiplies the
  * interpolated mean by the albedo at its own view.  A constant environment stays exact. */
-static wenv_status albedo_tables(wenv_wavelet *wavelet, const wenv_material *mat, wenv_error *err)
+static wenv_status albedo_tables(const wenv_wavelet *wavelet, wenv_wavelet_material *m, const wenv_material *mat,
+                                 wenv_error *err)
 {
     size_t V = wavelet->q.view_n;
-    wavelet->albedo = calloc(ALBEDO_N * 3, sizeof(float));
-    wavelet->view_inv_albedo = calloc(wavelet->nv * 3, sizeof(float));
-    if (!wavelet->albedo || !wavelet->view_inv_albedo)
+    m->albedo = calloc(ALBEDO_N * 3, sizeof(float));
+    m->view_inv_albedo = calloc(wavelet->nv * 3, sizeof(float));
+    if (!m->albedo || !m->view_inv_albedo)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the material");
     atomic_int failed = 0;
 #pragma omp parallel for schedule(dynamic, 4)
@@ -167,7 +171,7 @@ static wenv_status albedo_tables(wenv_wavelet *wavelet, const wenv_material *mat
                 continue;
             }
             for (int k = 0; k < 3; k++)
-                wavelet->albedo[3 * i + k] += (float)a[k];
+                m->albedo[3 * i + k] += (float)a[k];
         }
     }
     if (failed)
@@ -177,11 +181,33 @@ static wenv_status albedo_tables(wenv_wavelet *wavelet, const wenv_material *mat
         wenv_hemi_decode(-1.0 + 2.0 * (double)(j % (V + 1)) / (double)V, -1.0 + 2.0 * (double)(j / (V + 1)) / (double)V,
                          wo);
         float a[3];
-        wenv_wavelet_albedo_at(wavelet->albedo, (float)wo[2], a);
+        wenv_wavelet_albedo_at(m->albedo, (float)wo[2], a);
         for (int k = 0; k < 3; k++)
-            wavelet->view_inv_albedo[3 * j + k] = a[k] > 1e-30f ? 1.0f / a[k] : 0.0f;
+            m->view_inv_albedo[3 * j + k] = a[k] > 1e-30f ? 1.0f / a[k] : 0.0f;
     }
     return WENV_OK;
+}
+
+/* The table rows the latest shade call read under material `before` are remade at once for `m`
+ * when it becomes current (as after a new lighting: shading the same view again, the usual case
+ * while a material is edited, is then one pass); the rest as vertices need them. */
+static void carry_used_rows(size_t ns, const wenv_wavelet_material *before, wenv_wavelet_material *m)
+{
+    for (size_t s = 0; before && before != m && s < ns; s++)
+        m->row_need[s] |= before->row_ready[s] == USED;
+}
+
+/* Makes kept material m the current one, at the front of the kept. */
+static wenv_status install(wenv_wavelet *wavelet, wenv_wavelet_material *m, wenv_error *err)
+{
+    size_t at = 0;
+    while (wavelet->kept[at] != m)
+        at++;
+    carry_used_rows(wavelet->ns, wavelet->m, m);
+    memmove(wavelet->kept + 1, wavelet->kept, at * sizeof *wavelet->kept);
+    wavelet->kept[0] = m;
+    wavelet->m = m;
+    return wenv_wavelet_remake_ready(wavelet, 0, err);
 }
 
 static int compare_u32(const void *a, const void *b)
@@ -193,6 +219,11 @@ static int compare_u32(const void *a, const void *b)
 wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material *mat, const wenv_progress *progress,
                                       wenv_error *err)
 {
+    for (size_t i = 0; i < wavelet->n_kept; i++)
+        if (wenv_material_same(wavelet->kept[i]->mat, mat)) {
+            wavelet->stats.materials_reused++;
+            return install(wavelet, wavelet->kept[i], err);
+        }
     size_t nv = wavelet->nv, nl = wavelet->nl, L = wavelet->q.local_n, V = wavelet->q.view_n;
     size_t keep = wavelet->q.coefficients ? wavelet->q.coefficients : nl;
     if (wenv_material_lobe_count(mat) && wenv_wavelet_build_quadrature(wavelet, quadrature_k(wavelet, mat), err))
@@ -276,43 +307,65 @@ wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material
         return cancelled ? wenv_error_set(err, WENV_ERR_CANCELLED, "material precomputation cancelled")
                          : wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for BRDF slices");
     }
-    wenv_wavelet_free_material(wavelet);
-    wavelet->brdf_start = calloc(nv + 1, sizeof(size_t));
-    if (!wavelet->brdf_start) {
+    /* the new material's part, made whole before it replaces anything */
+    wenv_wavelet_material *m = calloc(1, sizeof *m);
+    if (m) {
+        m->brdf_start = calloc(nv + 1, sizeof(size_t));
+        m->table = malloc(wavelet->ns * nv * 3 * sizeof(float));
+        m->row_ready = calloc(wavelet->ns, 1);
+        m->row_need = calloc(wavelet->ns, 1);
+    }
+    if (!m || !m->brdf_start || !m->table || !m->row_ready || !m->row_need) {
         free(counts);
         free(all_idx);
         free(all_rgb);
+        wenv_wavelet_material_free(m);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for BRDF slices");
     }
+    /* touch the table now rather than page by page during the first views */
+    memset(m->table, 0, wavelet->ns * nv * 3 * sizeof(float));
     for (size_t j = 0; j < nv; j++)
-        wavelet->brdf_start[j + 1] = wavelet->brdf_start[j] + counts[j];
-    size_t total = wavelet->brdf_start[nv];
-    wavelet->brdf_idx = malloc((total ? total : 1) * sizeof(uint32_t));
-    wavelet->brdf_rgb = malloc((total ? total : 1) * 3 * sizeof(float));
-    if (!wavelet->brdf_idx || !wavelet->brdf_rgb) {
+        m->brdf_start[j + 1] = m->brdf_start[j] + counts[j];
+    size_t total = m->brdf_start[nv];
+    m->brdf_terms = total;
+    m->brdf_idx = malloc((total ? total : 1) * sizeof(uint32_t));
+    m->brdf_rgb = malloc((total ? total : 1) * 3 * sizeof(float));
+    if (!m->brdf_idx || !m->brdf_rgb) {
         free(counts);
         free(all_idx);
         free(all_rgb);
-        wenv_wavelet_free_material(wavelet);
+        wenv_wavelet_material_free(m);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for BRDF slices");
     }
     for (size_t j = 0; j < nv; j++) {
-        memcpy(wavelet->brdf_idx + wavelet->brdf_start[j], all_idx + j * keep, counts[j] * sizeof(uint32_t));
-        memcpy(wavelet->brdf_rgb + 3 * wavelet->brdf_start[j], all_rgb + j * keep * 3, counts[j] * 3 * sizeof(float));
+        memcpy(m->brdf_idx + m->brdf_start[j], all_idx + j * keep, counts[j] * sizeof(uint32_t));
+        memcpy(m->brdf_rgb + 3 * m->brdf_start[j], all_rgb + j * keep * 3, counts[j] * 3 * sizeof(float));
     }
     free(counts);
     free(all_idx);
     free(all_rgb);
-    if (wenv_material_copy(&wavelet->mat, mat, err) || lobe_cutoffs(wavelet, mat, err) || albedo_tables(wavelet, mat, err) ||
-        wenv_grazing_rule_create(&wavelet->grazing_rule, mat, wavelet->q.local_n, wavelet->q.grazing,
+    if (wenv_material_copy(&m->mat, mat, err) || lobe_cutoffs(m, mat, err) || albedo_tables(wavelet, m, mat, err) ||
+        wenv_grazing_rule_create(&m->grazing_rule, mat, wavelet->q.local_n, wavelet->q.grazing,
                                  wavelet->q.grazing_slopes != 0, err)) {
-        wenv_wavelet_free_material(wavelet);
+        wenv_wavelet_material_free(m);
         return err->status;
     }
-    wenv_material_diffuse_table(mat, &wavelet->diffuse);
-    wavelet->has_diffuse = wenv_diffuse_table_any(&wavelet->diffuse);
-    wavelet->has_lobes = wenv_material_lobe_count(mat) > 0;
-    wavelet->stats.brdf_terms_total = total;
-    wavelet->have_mat = 1;
+    wenv_material_diffuse_table(mat, &m->diffuse);
+    m->has_diffuse = wenv_diffuse_table_any(&m->diffuse);
+    m->has_lobes = wenv_material_lobe_count(mat) > 0;
+    carry_used_rows(wavelet->ns, wavelet->m, m);
+    /* kept at the front, ahead of the others; the oldest go past the count or the bytes */
+    if (wavelet->n_kept == WENV_WAVELET_KEPT_MATERIALS)
+        wenv_wavelet_material_free(wavelet->kept[--wavelet->n_kept]);
+    memmove(wavelet->kept + 1, wavelet->kept, wavelet->n_kept * sizeof *wavelet->kept);
+    wavelet->kept[0] = m;
+    wavelet->n_kept++;
+    size_t others = 0, n = 1;
+    while (n < wavelet->n_kept &&
+           others + wenv_wavelet_material_bytes(wavelet, wavelet->kept[n]) <= WENV_WAVELET_KEPT_BYTES)
+        others += wenv_wavelet_material_bytes(wavelet, wavelet->kept[n++]);
+    while (wavelet->n_kept > n)
+        wenv_wavelet_material_free(wavelet->kept[--wavelet->n_kept]);
+    wavelet->m = m;
     return wenv_wavelet_remake_ready(wavelet, 0, err);
 }

@@ -71,9 +71,9 @@ wenv_status wenv_wavelet_fill_rows(wenv_wavelet *wavelet, const size_t *rows, si
                     for (int c = 0; c < 3; c++)
                         lit[(t * 3 + (size_t)c) * ROW_BLOCK + s] = slice ? slice[3 * t + (size_t)c] : 0.0f;
                 if (s < count)
-                    out[s] = wavelet->table + rows[first + s] * nv * 3;
+                    out[s] = wavelet->m->table + rows[first + s] * nv * 3;
             }
-            block_rows(lit, wavelet->brdf_start, wavelet->brdf_idx, wavelet->brdf_rgb, nv, wavelet->view_inv_albedo,
+            block_rows(lit, wavelet->m->brdf_start, wavelet->m->brdf_idx, wavelet->m->brdf_rgb, nv, wavelet->m->view_inv_albedo,
                        out, count);
         }
         free(lit);

@@ -37,20 +37,24 @@ static inline void corner_taps_f(long n, float u, float v, uint32_t idx[4], floa
 
 static wenv_status fill_needed(wenv_wavelet *wavelet, wenv_error *err);
 
-/* A new lighting (slices too) or material remakes at once what the latest shade call read -- so
- * that shading the same view again, the usual case while lighting or material is edited, is a single
- * pass over the vertices -- and marks everything else stale, to be made when a vertex needs it. */
-wenv_status wenv_wavelet_remake_ready(wenv_wavelet *wavelet, int slices, wenv_error *err)
+/* A new lighting remakes at once what the latest shade call read -- so that shading the same view
+ * again, the usual case while lighting or material is edited, is a single pass over the vertices --
+ * and marks everything else stale (every kept material's table rows too), to be made when a vertex
+ * needs it.  A material made current (lighting = 0) keeps its rows; those flagged are made. */
+wenv_status wenv_wavelet_remake_ready(wenv_wavelet *wavelet, int lighting, wenv_error *err)
 {
-    if (slices) {
+    if (lighting) {
         for (size_t s = 0; s < wavelet->ns; s++)
             wavelet->slice_need[s] |= wavelet->slice_ready[s] == USED;
         memset(wavelet->slice_ready, 0, wavelet->ns);
+        for (size_t i = 0; i < wavelet->n_kept; i++) {
+            wenv_wavelet_material *k = wavelet->kept[i];
+            for (size_t s = 0; s < wavelet->ns; s++)
+                k->row_need[s] = k == wavelet->m && (k->row_need[s] || k->row_ready[s] == USED);
+            memset(k->row_ready, 0, wavelet->ns);
+        }
     }
-    for (size_t s = 0; s < wavelet->ns; s++)
-        wavelet->row_need[s] |= wavelet->row_ready[s] == USED;
-    memset(wavelet->row_ready, 0, wavelet->ns);
-    if (!wavelet->have_env || !wavelet->have_mat)
+    if (!wavelet->have_env || !wavelet->m)
         return WENV_OK;
     return fill_needed(wavelet, err);
 }
@@ -89,7 +93,7 @@ static int compute_taps(const wenv_wavelet *wavelet, const float *nrm, const flo
      * octahedral map folds (x = 0, y = 0: up to half a texel), so keeping the other direction moves
      * the lobe by twice that. */
     float r[3] = {2.0f * nv * n[0] - v[0], 2.0f * nv * n[1] - v[1], 2.0f * nv * n[2] - v[2]};
-    int keep_mirror = wavelet->mirror_centred;
+    int keep_mirror = wavelet->m->mirror_centred;
     /* octahedral encoding of the normal */
     float ou, ov;
     wenv_oct_encode_f(n, &ou, &ov);
@@ -159,7 +163,7 @@ static void shade_vertex(const wenv_wavelet *wavelet, const vertex_taps *tp, flo
     }
     /* table entries are mean radiances under the lobe (see albedo_tables) */
     for (int k = 0; k < 16; k++) {
-        const float *t = wavelet->table + 3 * (size_t)tp->pair[k];
+        const float *t = wavelet->m->table + 3 * (size_t)tp->pair[k];
         float w = tp->pair_w[k];
         if (w > 0.0f) {
             m[0] += w * t[0];
@@ -167,11 +171,11 @@ static void shade_vertex(const wenv_wavelet *wavelet, const vertex_taps *tp, flo
             m[2] += w * t[2];
         }
     }
-    float blend = wenv_grazing_blend(wavelet->grazing_rule, tp->cos_v);
+    float blend = wenv_grazing_blend(wavelet->m->grazing_rule, tp->cos_v);
     float a[3] = {0.0f, 0.0f, 0.0f};
-    if (wavelet->albedo)
-        wenv_wavelet_albedo_at(wavelet->albedo, tp->cos_v, a);
-    if (wavelet->albedo && blend < 1.0f) {
+    if (wavelet->m->albedo)
+        wenv_wavelet_albedo_at(wavelet->m->albedo, tp->cos_v, a);
+    if (wavelet->m->albedo && blend < 1.0f) {
         /* A mean radiance under the lobe lies between the lighting's darkest and brightest
          * texels; wavelet truncation and interpolation can ring past either, most at narrow
          * lobes near grazing, where they overshot the brightest pixel several-fold. */
@@ -182,32 +186,32 @@ static void shade_vertex(const wenv_wavelet *wavelet, const vertex_taps *tp, flo
     }
     if (blend > 0.0f) {
         float g[3];
-        wenv_grazing_shade(wavelet->grazing_rule, wavelet->grazing_light, tp->n, tp->v, tp->cos_v, g);
+        wenv_grazing_shade(wavelet->m->grazing_rule, wavelet->grazing_light, tp->n, tp->v, tp->cos_v, g);
         for (int c = 0; c < 3; c++)
             s[c] += blend * g[c];
     }
     if (wenv_lights_count(wavelet->lights, 0)) {
-        if (wavelet->has_diffuse) {
+        if (wavelet->m->has_diffuse) {
             /* as for the lobes below: against the rest's irradiance plus a uniform mean's */
             float scale = e[0] + e[1] + e[2] + 3.0f * (float)M_PI * wavelet->mean_radiance;
             wenv_lights_irradiance(wavelet->lights, tp->n, (float)wavelet->q.light_tolerance * scale, e);
         }
-        if (wavelet->has_lobes) {
-            wenv_lights_lobe lobe = {.roughness = wavelet->lobe_m_min,
-                                     .cone_cos = wavelet->light_cone_cos,
-                                     .modelled = wavelet->lobes_modelled,
-                                     .narrow = wavelet->lobe_m_min < wavelet->narrow_roughness,
-                                     .peak = wavelet->lobe_peak};
+        if (wavelet->m->has_lobes) {
+            wenv_lights_lobe lobe = {.roughness = wavelet->m->lobe_m_min,
+                                     .cone_cos = wavelet->m->light_cone_cos,
+                                     .modelled = wavelet->m->lobes_modelled,
+                                     .narrow = wavelet->m->lobe_m_min < wavelet->narrow_roughness,
+                                     .peak = wavelet->m->lobe_peak};
             /* the error allowed per cluster is against the vertex's radiance without the lights plus
              * what a uniform environment of the mean radiance would reflect (so that a vertex that
              * sees little of the rest still reads its lights to a tolerance the image notices) */
             float scale = s[0] + s[1] + s[2] + wavelet->mean_radiance * (a[0] + a[1] + a[2]);
-            wenv_lights_specular(wavelet->lights, wavelet->mat, wavelet->lobe_cos_h_min, &lobe, tp->n, tp->v,
+            wenv_lights_specular(wavelet->lights, wavelet->m->mat, wavelet->m->lobe_cos_h_min, &lobe, tp->n, tp->v,
                                  tp->cos_v, (float)wavelet->q.light_tolerance * scale, s);
         }
     }
     float d[3];
-    wenv_diffuse_table_at(&wavelet->diffuse, tp->cos_v, d);
+    wenv_diffuse_table_at(&wavelet->m->diffuse, tp->cos_v, d);
     for (int c = 0; c < 3; c++) {
         float val = d[c] * e[c] + s[c];
         o[c] = val > 0.0f ? val : 0.0f;
@@ -239,7 +243,7 @@ static inline int read_states(unsigned char *state, const uint32_t *idx, const f
 static int read_taps(const wenv_wavelet *wavelet, const vertex_taps *tp)
 {
     int slices = read_states(wavelet->slice_ready, tp->sample, tp->sample_w, 4);
-    return read_states(wavelet->row_ready, tp->sample, tp->sample_w, 4) && slices;
+    return read_states(wavelet->m->row_ready, tp->sample, tp->sample_w, 4) && slices;
 }
 
 /* Flags in `flags` the entries a vertex reads with weight.  Checked before written so that cache
@@ -302,14 +306,14 @@ static wenv_status fill_needed(wenv_wavelet *wavelet, wenv_error *err)
     }
     ntodo = 0;
     for (size_t s = 0; s < wavelet->ns; s++) {
-        if (wavelet->row_need[s] && !wavelet->row_ready[s])
+        if (wavelet->m->row_need[s] && !wavelet->m->row_ready[s])
             todo[ntodo++] = s;
-        wavelet->row_need[s] = 0;
+        wavelet->m->row_need[s] = 0;
     }
     wenv_status st = ntodo ? wenv_wavelet_fill_rows(wavelet, todo, ntodo, err) : WENV_OK;
     if (!st)
         for (size_t e = 0; e < ntodo; e++)
-            wavelet->row_ready[todo[e]] = USED;
+            wavelet->m->row_ready[todo[e]] = USED;
     free(todo);
     return st;
 }
@@ -317,7 +321,7 @@ static wenv_status fill_needed(wenv_wavelet *wavelet, wenv_error *err)
 wenv_status wenv_wavelet_shade(wenv_wavelet *wavelet, const float *normals, const float *views, size_t n,
                               float *out, wenv_error *err)
 {
-    if (!wavelet->have_env || !wavelet->have_mat)
+    if (!wavelet->have_env || !wavelet->m)
         return wenv_error_set(err, WENV_ERR_VALUE, "the shader needs an environment and a material");
     /* One pass shades every vertex whose table rows exist (all of them once its normals were seen,
      * whatever the view) and flags what the others need; those are shaded after the missing rows
@@ -329,7 +333,7 @@ wenv_status wenv_wavelet_shade(wenv_wavelet *wavelet, const float *normals, cons
     for (size_t q = 0; q < wavelet->ns; q++)
         wavelet->slice_ready[q] = wavelet->slice_ready[q] != 0;
     for (size_t q = 0; q < wavelet->ns; q++)
-        wavelet->row_ready[q] = wavelet->row_ready[q] != 0;
+        wavelet->m->row_ready[q] = wavelet->m->row_ready[q] != 0;
     atomic_size_t npending = 0;
     long long nn = (long long)n;
 #pragma omp parallel for schedule(static)
@@ -344,7 +348,7 @@ wenv_status wenv_wavelet_shade(wenv_wavelet *wavelet, const float *normals, cons
             shade_vertex(wavelet, &tp, o);
             continue;
         }
-        flag_taps(&tp, wavelet->slice_need, wavelet->row_need);
+        flag_taps(&tp, wavelet->slice_need, wavelet->m->row_need);
         pending[atomic_fetch_add(&npending, 1)] = (size_t)i;
     }
     size_t np = atomic_load(&npending);

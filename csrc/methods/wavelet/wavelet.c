@@ -68,10 +68,8 @@ void wenv_wavelet_free(wenv_wavelet *wavelet)
     free(wavelet->slice_need);
     wenv_wavelet_free_quadrature(wavelet);
     free(wavelet->cosine_haar);
-    wenv_wavelet_free_material(wavelet);
-    free(wavelet->table);
-    free(wavelet->row_ready);
-    free(wavelet->row_need);
+    for (size_t i = 0; i < wavelet->n_kept; i++)
+        wenv_wavelet_material_free(wavelet->kept[i]);
     free(wavelet);
 }
 
@@ -123,16 +121,10 @@ wenv_status wenv_wavelet_create(wenv_wavelet **out, const wenv_wavelet_quality *
     wavelet->irradiance = calloc(wavelet->ns * 3, sizeof(float));
     wavelet->slice_ready = calloc(wavelet->ns, 1);
     wavelet->slice_need = calloc(wavelet->ns, 1);
-    wavelet->table = malloc(wavelet->ns * wavelet->nv * 3 * sizeof(float));
-    wavelet->row_ready = calloc(wavelet->ns, 1);
-    wavelet->row_need = calloc(wavelet->ns, 1);
-    if (!wavelet->frames || !wavelet->slices || !wavelet->irradiance || !wavelet->slice_ready || !wavelet->slice_need || !wavelet->table ||
-        !wavelet->row_ready || !wavelet->row_need) {
+    if (!wavelet->frames || !wavelet->slices || !wavelet->irradiance || !wavelet->slice_ready || !wavelet->slice_need) {
         wenv_wavelet_free(wavelet);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the shader tables");
     }
-    /* touch the table now rather than page by page during the first views */
-    memset(wavelet->table, 0, wavelet->ns * wavelet->nv * 3 * sizeof(float));
     for (size_t s = 0; s < wavelet->ns; s++) {
         double n[3], f[9];
         wenv_normal_sample(q->normal_n, s, n);
@@ -276,14 +268,21 @@ void wenv_wavelet_get_stats(const wenv_wavelet *wavelet, wenv_wavelet_stats *sta
     size_t slices = 0, pairs = 0;
     for (size_t s = 0; s < wavelet->ns; s++)
         slices += wavelet->slices[s] != NULL;
-    for (size_t p = 0; p < wavelet->ns; p++)
-        pairs += wavelet->row_ready[p] != 0 ? wavelet->nv : 0;
+    for (size_t p = 0; wavelet->m && p < wavelet->ns; p++)
+        pairs += wavelet->m->row_ready[p] != 0 ? wavelet->nv : 0;
     stats->slices_ready = slices;
     stats->pairs_ready = pairs;
     stats->light_terms = wavelet->light_count;
     stats->direct_lights = wenv_lights_count(wavelet->lights, 0);
     stats->slice_bytes = slices * wavelet->nl * 3 * sizeof(float);
-    stats->table_bytes = wavelet->ns * (wavelet->nv * 3 * sizeof(float) + 2);
-    stats->brdf_bytes = wavelet->stats.brdf_terms_total * 4 * sizeof(float);
-    stats->grazing_bytes = wenv_grazing_light_bytes(wavelet->grazing_light) + wenv_grazing_rule_bytes(wavelet->grazing_rule);
+    /* every material kept, the current one's first */
+    stats->brdf_terms_total = wavelet->m ? wavelet->m->brdf_terms : 0;
+    stats->table_bytes = stats->brdf_bytes = 0;
+    stats->grazing_bytes = wenv_grazing_light_bytes(wavelet->grazing_light);
+    for (size_t i = 0; i < wavelet->n_kept; i++) {
+        stats->table_bytes += wavelet->ns * (wavelet->nv * 3 * sizeof(float) + 2);
+        stats->brdf_bytes += wavelet->kept[i]->brdf_terms * 4 * sizeof(float);
+        stats->grazing_bytes += wenv_grazing_rule_bytes(wavelet->kept[i]->grazing_rule);
+    }
+    stats->materials_kept = wavelet->n_kept;
 }

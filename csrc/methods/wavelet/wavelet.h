@@ -59,11 +59,19 @@ typedef struct {
                                 * polar nodes: exact for GGX's tails, 10x the cost) */
 } wenv_wavelet_quality;
 
+/* Materials a shader keeps besides the current one's, most recently set first, while they hold at
+ * most WENV_WAVELET_KEPT_BYTES between them: setting one of them again (meshes of a few materials
+ * shaded in turn) costs nothing while the lighting holds, and its table rows as they are needed
+ * after a new lighting. */
+#define WENV_WAVELET_KEPT_MATERIALS 4
+#define WENV_WAVELET_KEPT_BYTES ((size_t)256 << 20)
+
 typedef struct {
     size_t rotation_nnz, rotation_bytes;
     int cache; /* 0 no cache used, 1 loaded, 2 built and saved, 3 built, save failed */
     size_t slices_ready, pairs_ready, light_terms, brdf_terms_total, direct_lights;
     size_t slice_bytes, table_bytes, brdf_bytes, grazing_bytes;
+    size_t materials_kept, materials_reused; /* kept now (the current one included); set again and found */
     double rotation_seconds;
 } wenv_wavelet_stats;
 

@@ -123,6 +123,8 @@ static size_t stats(const void *state, wenv_stat *out)
     out[k++] = wenv_stat_count("brdf_bytes", s.brdf_bytes);
     out[k++] = wenv_stat_count("direct_lights", s.direct_lights);
     out[k++] = wenv_stat_count("grazing_bytes", s.grazing_bytes);
+    out[k++] = wenv_stat_count("materials_kept", s.materials_kept);
+    out[k++] = wenv_stat_count("materials_reused", s.materials_reused);
     return k;
 }
 

@@ -11,6 +11,31 @@
 #include "methods/wavelet/rotation.h"
 #include "methods/wavelet/wavelet.h"
 
+/* One material's part of the shader (brdf_slices.c): its BRDF slices, what the exact lights and the
+ * grazing path read of it, and its (normal sample, view sample) radiance table, made a row (a normal
+ * sample, every view) at a time.  The shader keeps the last few, so that meshes of a few materials
+ * shaded in turn each make their slices once while the lighting holds. */
+typedef struct {
+    wenv_material *mat;      /* for the direct lights, and to recognise the material set again */
+    float *lobe_cos_h_min;   /* per lobe: below this n.h its D is negligible (< 1e-7 of its peak) */
+    double light_cone_cos;   /* lights farther than this from the mirror direction miss every lobe */
+    double lobe_m_min;       /* the narrowest lobe's roughness (how finely the lights are read) */
+    int mirror_centred;      /* normal samples keep the vertex's mirror direction (else its view) */
+    int lobes_modelled;      /* mirror-centred lobes that follow their shapes (lights.h) */
+    float lobe_peak[WENV_LIGHT_PEAK_SAMPLES + 1]; /* modelled lobes: wenv_lights_peak_table */
+    float *albedo;           /* ALBEDO_N x 3: specular albedo at cos(view) = WENV_GRAZING_Z .. 1 */
+    float *view_inv_albedo;  /* nv x 3: 1 / albedo of each view sample (0 where the albedo is 0) */
+    wenv_diffuse_table diffuse; /* the Lambertian part's albedo / pi over the view's cosine */
+    int has_diffuse, has_lobes; /* what the exact lights shade per vertex */
+    wenv_grazing_rule *grazing_rule; /* NULL: no lobe is integrated per vertex */
+    size_t *brdf_start;      /* nv + 1 */
+    uint32_t *brdf_idx;
+    float *brdf_rgb;
+    size_t brdf_terms;
+    float *table;            /* ns x nv x 3 */
+    unsigned char *row_ready, *row_need; /* per normal sample, as slice_ready and slice_need */
+} wenv_wavelet_material;
+
 struct wenv_wavelet {
     wenv_wavelet_quality q;
     wenv_wavelet_variant method;
@@ -42,27 +67,10 @@ struct wenv_wavelet {
     float *quad_w;           /* quad_count x 4: tent weight x solid angle x normalisation */
     float *cosine_haar;      /* nl: Haar transform of the cosine weights (sum pi) */
 
-    /* material */
-    int have_mat;
-    wenv_material *mat;      /* for the direct lights */
-    float *lobe_cos_h_min;   /* per lobe: below this n.h its D is negligible (< 1e-7 of its peak) */
-    double light_cone_cos;   /* lights farther than this from the mirror direction miss every lobe */
-    double lobe_m_min;       /* the narrowest lobe's roughness (how finely the lights are read) */
-    int mirror_centred;      /* normal samples keep the vertex's mirror direction (else its view) */
-    int lobes_modelled;      /* mirror-centred lobes that follow their shapes (lights.h) */
-    float lobe_peak[WENV_LIGHT_PEAK_SAMPLES + 1]; /* modelled lobes: wenv_lights_peak_table */
-    float *albedo;           /* ALBEDO_N x 3: specular albedo at cos(view) = WENV_GRAZING_Z .. 1 */
-    float *view_inv_albedo;  /* nv x 3: 1 / albedo of each view sample (0 where the albedo is 0) */
-    wenv_diffuse_table diffuse; /* the Lambertian part's albedo / pi over the view's cosine */
-    int has_diffuse, has_lobes; /* what the exact lights shade per vertex, read once per material */
-    wenv_grazing_rule *grazing_rule; /* NULL: no lobe is integrated per vertex */
-    size_t *brdf_start;      /* nv + 1 */
-    uint32_t *brdf_idx;
-    float *brdf_rgb;
-
-    /* (normal sample, view sample) radiance table, made a row (a normal sample, every view) at a time */
-    float *table;            /* ns x nv x 3 */
-    unsigned char *row_ready, *row_need; /* per normal sample, as slice_ready and slice_need */
+    /* materials: the current one first, then those set before it, most recent first */
+    wenv_wavelet_material *kept[WENV_WAVELET_KEPT_MATERIALS];
+    size_t n_kept;
+    wenv_wavelet_material *m; /* kept[0], the current material; NULL before the first */
 };
 
 /* States of a lighting slice or table row: made (READY), and made and read by the latest shade
@@ -90,16 +98,17 @@ static inline void wenv_wavelet_albedo_at(const float *table, float c, float a[3
         a[k] = (1.0f - f) * table[3 * i + k] + f * table[3 * (i + 1) + k];
 }
 
-/* brdf_slices.c: the local map's sub-sample quadrature (k x k per texel), and freeing it and the
- * material's tables. */
+/* brdf_slices.c: the local map's sub-sample quadrature (k x k per texel), and freeing it and a
+ * material's part; the bytes a material's part holds. */
 wenv_status wenv_wavelet_build_quadrature(wenv_wavelet *wavelet, size_t k, wenv_error *err);
 void wenv_wavelet_free_quadrature(wenv_wavelet *wavelet);
-void wenv_wavelet_free_material(wenv_wavelet *wavelet);
+void wenv_wavelet_material_free(wenv_wavelet_material *m);
+size_t wenv_wavelet_material_bytes(const wenv_wavelet *wavelet, const wenv_wavelet_material *m);
 
-/* vertex_shading.c: after a new lighting (slices = 1) or material, remakes at once what the latest
- * shade call read and marks the rest stale. */
+/* vertex_shading.c: after a new lighting (lighting = 1) or a material made current, remakes at once
+ * what the latest shade call read; a new lighting marks the rest stale. */
 /* table_rows.c: the table rows of the n normal samples rows[] (their lighting slices made). */
 wenv_status wenv_wavelet_fill_rows(wenv_wavelet *wavelet, const size_t *rows, size_t n, wenv_error *err);
-wenv_status wenv_wavelet_remake_ready(wenv_wavelet *wavelet, int slices, wenv_error *err);
+wenv_status wenv_wavelet_remake_ready(wenv_wavelet *wavelet, int lighting, wenv_error *err);
 
 #endif
