@@ -275,6 +275,17 @@ class LiveState:
         return cls.session is not None
 
     @classmethod
+    def start_jobs(cls, quality, preview_changes):
+        """What the live operator starts with: the shader for `quality` if missing (the session
+        waits for it: `job`, True returned) and, for Draft While Remaking, PREVIEW_QUALITY's if
+        missing (`preview_job`, which the session does not wait for)."""
+        if not engine.shaders.has(quality):
+            cls.job = PrecomputeJob(quality).start()
+        if preview_changes and quality != engine.PREVIEW_QUALITY and not engine.shaders.has(engine.PREVIEW_QUALITY):
+            cls.preview_job = PrecomputeJob(engine.PREVIEW_QUALITY).start()
+        return cls.job is not None
+
+    @classmethod
     def reset(cls):
         for job in (cls.job, cls.preview_job):
             if job is not None:

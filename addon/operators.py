@@ -201,11 +201,8 @@ class WENV_OT_live(bpy.types.Operator):
         LiveState.reset()
         LiveState.session = LiveSession(names)
         wm = context.window_manager
-        if not engine.shaders.has(_quality(context)):
-            LiveState.job = PrecomputeJob(_quality(context)).start()
+        if LiveState.start_jobs(_quality(context), context.scene.wenv.preview_changes):
             wm.progress_begin(0.0, 1.0)
-        if context.scene.wenv.preview_changes and not engine.shaders.has(engine.PREVIEW_QUALITY):
-            LiveState.preview_job = PrecomputeJob(engine.PREVIEW_QUALITY).start()
         self._timer = wm.event_timer_add(self.interval, window=context.window)
         wm.modal_handler_add(self)
         return {"RUNNING_MODAL"}

@@ -1034,12 +1034,22 @@ def test_live_session_shows_draft_while_the_setting_remakes_its_slices(scene):
     op = LiveOperator()
     try:
         session = live.LiveState.session = live.LiveSession([obj.name])
-        job = live.LiveState.preview_job = live.PrecomputeJob(engine.PREVIEW_QUALITY).start()  # as invoke does
+        # as invoke starts them: Default's shader is there, so the session waits for nothing
+        assert live.LiveState.start_jobs("default", True) is False and live.LiveState.job is None
+        job = live.LiveState.preview_job
+        assert job is not None and job.quality == engine.PREVIEW_QUALITY
         assert job.wait(120) and job.error is None
         assert op.event("TIMER") == {"PASS_THROUGH"} and live.LiveState.preview_job is None
         assert engine.shaders.has(engine.PREVIEW_QUALITY)
         session.wait(60)
         assert op.event("TIMER") == {"PASS_THROUGH"} and session.shown == "draft"
+    finally:
+        live.LiveState.reset()
+    # at Draft itself there is no preview to build: one job, which the session waits for
+    engine.shaders.clear()
+    try:
+        assert live.LiveState.start_jobs("draft", True) is True and live.LiveState.preview_job is None
+        assert live.LiveState.job.quality == "draft" and live.LiveState.job.wait(120)
     finally:
         live.LiveState.reset()
 
