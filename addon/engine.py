@@ -252,6 +252,7 @@ class ShaderCache:
         held = self._env_sig.get(quality)
         kept = self._kept.get(quality, ())
         return quality in self._shaders and held is not None and held[0] == spec.key and all(k in kept for k in keys)
+
     def environment(self, image_key, signature, rotation, strength, load_base):
         """The image `image_key`'s Environment turned and scaled as the World asks.  The
         untransformed one is kept per image, so `load_base()` (which reads the pixels out of
