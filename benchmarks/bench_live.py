@@ -87,16 +87,20 @@ def bench(quality, repeats, preview):
     def material_back(i):  # the last edit undone and redone: materials the shader keeps
         lobe.roughness = 0.46 + 0.01 * (repeats - 2 + i % 2)
 
-    out = {}
-    for name, change in (("view change", view), ("World rotation", rotation), ("new image", image),
-                         ("material edit", material), ("material edit undone", material_back)):
+    def timed(session, change):
+        """Medians over `repeats` changes (change(i), then settle)."""
         runs = []
         for i in range(repeats):
             change(i)
             runs.append(settle(session, quality))
-        out[name] = {"first_ms": statistics.median(r[0] for r in runs) * 1e3,
-                     "quality_ms": statistics.median(r[1] for r in runs) * 1e3,
-                     "first_shown": sorted({r[2] for r in runs})}
+        return {"first_ms": statistics.median(r[0] for r in runs) * 1e3,
+                "quality_ms": statistics.median(r[1] for r in runs) * 1e3,
+                "first_shown": sorted({r[2] for r in runs})}
+
+    out = {}
+    for name, change in (("view change", view), ("World rotation", rotation), ("new image", image),
+                         ("material edit", material), ("material edit undone", material_back)):
+        out[name] = timed(session, change)
     # a second mesh of another material: the shader keeps both, so a view change makes neither again
     bpy.ops.mesh.primitive_uv_sphere_add(segments=256, ring_count=128, location=(2.5, 0.0, 0.0))
     ball = bpy.context.object
@@ -108,14 +112,8 @@ def bench(quality, repeats, preview):
     session.stop()
     session = live.LiveSession([obj.name, ball.name])
     settle(session, quality)
-    runs = []
-    for i in range(repeats):
-        view(i + repeats)
-        runs.append(settle(session, quality))
-    out["view change, two materials"] = {"first_ms": statistics.median(r[0] for r in runs) * 1e3,
-                                         "quality_ms": statistics.median(r[1] for r in runs) * 1e3,
-                                         "first_shown": sorted({r[2] for r in runs}),
-                                         "vertices": len(obj.data.vertices) + len(ball.data.vertices)}
+    out["view change, two materials"] = timed(session, lambda i: view(i + repeats))
+    out["view change, two materials"]["vertices"] = len(obj.data.vertices) + len(ball.data.vertices)
     session.stop()
     return len(obj.data.vertices), out
 

@@ -32,7 +32,7 @@ void wenv_wavelet_material_free(wenv_wavelet_material *m)
 
 size_t wenv_wavelet_material_bytes(const wenv_wavelet *wavelet, const wenv_wavelet_material *m)
 {
-    return wavelet->ns * (wavelet->nv * 3 * sizeof(float) + 2) + m->brdf_terms * 4 * sizeof(float) +
+    return wenv_wavelet_table_bytes(wavelet) + m->brdf_terms * 4 * sizeof(float) +
            wavelet->nv * 3 * sizeof(float) + wenv_grazing_rule_bytes(m->grazing_rule);
 }
 

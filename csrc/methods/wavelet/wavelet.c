@@ -280,7 +280,7 @@ void wenv_wavelet_get_stats(const wenv_wavelet *wavelet, wenv_wavelet_stats *sta
     stats->table_bytes = stats->brdf_bytes = 0;
     stats->grazing_bytes = wenv_grazing_light_bytes(wavelet->grazing_light);
     for (size_t i = 0; i < wavelet->n_kept; i++) {
-        stats->table_bytes += wavelet->ns * (wavelet->nv * 3 * sizeof(float) + 2);
+        stats->table_bytes += wenv_wavelet_table_bytes(wavelet);
         stats->brdf_bytes += wavelet->kept[i]->brdf_terms * 4 * sizeof(float);
         stats->grazing_bytes += wenv_grazing_rule_bytes(wavelet->kept[i]->grazing_rule);
     }

@@ -105,6 +105,12 @@ void wenv_wavelet_free_quadrature(wenv_wavelet *wavelet);
 void wenv_wavelet_material_free(wenv_wavelet_material *m);
 size_t wenv_wavelet_material_bytes(const wenv_wavelet *wavelet, const wenv_wavelet_material *m);
 
+/* A material's table and its rows' two states. */
+static inline size_t wenv_wavelet_table_bytes(const wenv_wavelet *wavelet)
+{
+    return wavelet->ns * (wavelet->nv * 3 * sizeof(float) + 2);
+}
+
 /* vertex_shading.c: after a new lighting (lighting = 1) or a material made current, remakes at once
  * what the latest shade call read; a new lighting marks the rest stale. */
 /* table_rows.c: the table rows of the n normal samples rows[] (their lighting slices made). */
