@@ -49,6 +49,15 @@ def test_texel_solid_angles_sum(n):
         assert 3.0 < oct_.max() / oct_.min() < 8.0
 
 
+@pytest.mark.parametrize("n", [2, 6, 16, 64])
+def test_all_texel_solid_angles_at_once_equal_each_texel_s(n):
+    """The pyramid of the grazing path reads every base texel's solid angle per image: computed
+    once per orbit of the square's symmetries, they must be each texel's own."""
+    each = np.array(wenv._texel_solid_angles(n, False))
+    at_once = np.array(wenv._oct_texel_solid_angles_all(n))
+    assert np.allclose(at_once, each, rtol=1e-12, atol=0)
+
+
 def test_texel_solid_angle_matches_monte_carlo():
     n = 8
     exact = np.array(wenv._texel_solid_angles(n, False)).reshape(n, n)

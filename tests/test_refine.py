@@ -83,6 +83,26 @@ def test_a_budget_is_kept_within_a_block(scene):
     assert step < 5.0  # sanity only: timing belongs to benchmarks
 
 
+def test_a_new_lighting_remakes_at_once_every_row_the_last_whole_call_read(scene):
+    """Without a budget a mesh is shaded in one call, so what a new lighting remakes at once (what
+    the latest call read) is all the mesh read, not its last block's share: shading the same view
+    again then makes nothing."""
+    env, mat = scene
+    pos, nrm = sphere(20000, seed=7)
+    eye = (0.4, -5.0, 0.8)
+    shader = wenv.Shader(env, mat, quality={**WAVELET_BASE, "global": 32, "local": 16, "normals": 32,
+                                            "views": 8, "coefficients": 64}, method="slicing")
+    first = shader.shade_mesh(pos, nrm, eye)
+    read = shader.stats["pairs_ready"]
+    other = wenv.Environment(np.float32(np.random.default_rng(9).uniform(0.1, 3.0, (32, 64, 3))))
+    shader.set_environment(other)
+    assert shader.stats["pairs_ready"] == read > 0
+    again = shader.shade_mesh(pos, nrm, eye)
+    assert shader.stats["pairs_ready"] == read and not np.array_equal(first, again)
+    assert np.array_equal(again, wenv.Shader(other, mat, quality=shader.quality, method="slicing")
+                          .shade_mesh(pos, nrm, eye))
+
+
 def test_step_arguments_are_checked(scene):
     env, mat = scene
     shader = wenv.Shader(env, mat, quality="draft")

@@ -66,6 +66,53 @@ def test_rotation_equals_slicing_without_truncation(cook):
     assert np.max(np.abs(ra - rb)) <= 1e-4 * np.max(np.abs(rb))
 
 
+def noise_env(seed=7, h=32, w=64):
+    """An image without any symmetry: each slicing operator serves up to 8 normal samples through
+    texel permutations, and a wrong one would read the wrong texels."""
+    rng = np.random.default_rng(seed)
+    return wenv.Environment(rng.lognormal(0.0, 1.0, size=(h, w, 3)).astype(np.float32))
+
+
+@pytest.mark.parametrize("sizes", [(16, 8, 8), (4, 16, 6)])
+def test_slicing_shares_operators_and_equals_rotation_at_every_normal_sample(cook, sizes):
+    """Rotation builds every sample's matrix from its own splat; slicing reads one operator per
+    orbit of the square's symmetries.  (4, 16): local texels finer than global ones, up to 576
+    taps per global texel (these sizes crashed slicing before)."""
+    g, l, n = sizes
+    env = noise_env()
+    q = dict(SMALL, matrix_epsilon=0.0, light_coefficients=0, normals=n, **{"global": g, "local": l})
+    a = wenv.Shader(env, cook, quality=q, method="rotation", cache_dir=False)
+    b = wenv.Shader(env, cook, quality=q, method="slicing", cache_dir=False)
+    # every normal sample's own direction, each seen from several views
+    cells = (np.arange(n) + 0.5) / n * 2 - 1
+    uu, vv = np.meshgrid(cells, cells)
+    samples = np.asarray(wenv._oct_decode(np.stack([uu.ravel(), vv.ravel()], -1)), np.float32)
+    nrm, v = random_pairs(4000, 5)
+    nrm = np.concatenate([np.repeat(samples, 8, axis=0), nrm])
+    v = np.concatenate([unit(np.repeat(samples, 8, axis=0) + 0.6 * random_pairs(8 * n * n, 6)[0]), v])
+    v[np.sum(nrm * v, axis=1) < 0] *= -1
+    ra, rb = a.shade(nrm, v), b.shade(nrm, v)
+    assert np.all(np.isfinite(rb)) and np.max(rb) > 0
+    assert np.max(np.abs(ra - rb)) <= 1e-4 * np.max(np.abs(rb))
+    assert b.stats["resampling_bytes"] > 0 and a.stats["resampling_bytes"] == 0
+
+
+def test_slices_past_the_operators_budget_equal_those_kept(cook):
+    """memory_budget_mb / 8 caps the operators slicing keeps; the others are made per slice and
+    dropped, which changes nothing in the result."""
+    env = noise_env(3)
+    q = dict(SMALL, normals=16)
+    kept = wenv.Shader(env, cook, quality=q, method="slicing", cache_dir=False)
+    dropped = wenv.Shader(env, cook, quality=q, method="slicing", cache_dir=False, memory_budget_mb=0.05)
+    nrm, v = random_pairs(3000, 8)
+    ra, rb = kept.shade(nrm, v), dropped.shade(nrm, v)
+    assert np.array_equal(ra, rb)
+    assert dropped.stats["resampling_bytes"] <= 0.05 * 2 ** 20 / 8 < kept.stats["resampling_bytes"]
+    dropped.set_environment(noise_env(4))
+    kept.set_environment(noise_env(4))
+    assert np.array_equal(kept.shade(nrm, v), dropped.shade(nrm, v))
+
+
 def test_truncation_changes_little_and_keeps_fewer_terms(cook):
     env = gradient_env()
     full = wenv.Shader(env, cook, quality=dict(SMALL, matrix_epsilon=0.0), cache_dir=False)

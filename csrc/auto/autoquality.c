@@ -11,6 +11,8 @@
 #include "math/spherical_harmonics.h"
 #include "scene/envmap_sh.h"
 #include "methods/wavelet/lights.h"
+#include "methods/wavelet/slice_operators.h"
+#include "methods/wavelet/wavelet.h"
 
 
 /* Median relative RMSE over the bundled HDRIs per level (rows) at roughness 0.05, 0.1, 0.2, 0.5
@@ -77,7 +79,10 @@ size_t wenv_auto_level_bytes(size_t i, size_t used_normals)
     size_t brdf = nv * q->coefficients * 4 * sizeof(float);  /* index and RGB per kept term */
     size_t lights = q->lights * WENV_LIGHT_LEVELS * 7 * sizeof(float); /* direction, flux, span per cluster level */
     size_t grazing = q->grazing > 0.0 ? 512 * 512 * 3 * sizeof(float) * 4 / 3 : 0; /* its pyramid, at most */
-    return table + slices + brdf + ng * 3 * sizeof(float) + lights + grazing;
+    size_t operators = wenv_slice_operators_estimate_bytes(q->global_n, q->local_n, q->normal_n, made);
+    if (operators > WENV_WAVELET_OPERATOR_BYTES)
+        operators = WENV_WAVELET_OPERATOR_BYTES;
+    return table + slices + brdf + ng * 3 * sizeof(float) + lights + grazing + operators;
 }
 
 /* Pixels brighter than CONTRAST_FACTOR times the mean radiance that a level does not take out as

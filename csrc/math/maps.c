@@ -30,7 +30,7 @@ void wenv_oct_decode(double u, double v, double d[3])
 {
     d[0] = u;
     d[1] = v;
-    d[2] = 1.0 - fabs(u) - fabs(v);
+    d[2] = 1.0 - (fabs(u) + fabs(v)); /* the same for (v, u): the square's symmetries stay exact */
     if (d[2] < 0.0) {
         double x = (1.0 - fabs(v)) * sgn(u);
         double y = (1.0 - fabs(u)) * sgn(v);
@@ -57,13 +57,15 @@ void wenv_hemi_decode(double u, double v, double d[3])
 {
     d[0] = 0.5 * (u + v);
     d[1] = 0.5 * (u - v);
-    d[2] = 1.0 - fabs(d[0]) - fabs(d[1]);
+    d[2] = 1.0 - (fabs(d[0]) + fabs(d[1]));
     if (d[2] < 0.0)
         d[2] = 0.0;
     normalize3(d);
 }
 
-double wenv_map_texel_center(size_t n, size_t i) { return -1.0 + (2.0 * (double)i + 1.0) / (double)n; }
+/* One rounding of an exact numerator: texel i's centre is exactly minus texel n - 1 - i's, so the
+ * square's symmetries take centres onto centres bit for bit (slice_operators.h relies on it). */
+double wenv_map_texel_center(size_t n, size_t i) { return (2.0 * (double)i + 1.0 - (double)n) / (double)n; }
 
 double wenv_spherical_triangle(const double a[3], const double b[3], const double c[3])
 {
@@ -97,6 +99,21 @@ static double texel_solid_angle(size_t n, size_t i, size_t j, int hemi)
 
 double wenv_oct_texel_solid_angle(size_t n, size_t i, size_t j) { return texel_solid_angle(n, i, j, 0); }
 double wenv_hemi_texel_solid_angle(size_t n, size_t i, size_t j) { return texel_solid_angle(n, i, j, 1); }
+
+void wenv_oct_texel_solid_angles(size_t n, double *out)
+{
+    size_t half = (n + 1) / 2;
+    for (size_t b = 0; b < half; b++)
+        for (size_t a = 0; a <= b; a++) {
+            double omega = wenv_oct_texel_solid_angle(n, a, b);
+            size_t xs[2] = {a, n - 1 - a}, ys[2] = {b, n - 1 - b};
+            for (int p = 0; p < 2; p++)
+                for (int q = 0; q < 2; q++) {
+                    out[ys[q] * n + xs[p]] = omega;
+                    out[xs[p] * n + ys[q]] = omega;
+                }
+        }
+}
 
 /* Texel coordinate of map coordinate u: texel centres sit at integers. */
 static double texel_coord(size_t n, double u) { return (u + 1.0) * 0.5 * (double)n - 0.5; }

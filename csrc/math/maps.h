@@ -24,6 +24,9 @@ double wenv_map_texel_center(size_t n, size_t i);
 /* Exact solid angle of a texel; they sum to 4 pi (octahedral) and 2 pi (hemi-octahedral). */
 double wenv_oct_texel_solid_angle(size_t n, size_t i, size_t j);
 double wenv_hemi_texel_solid_angle(size_t n, size_t i, size_t j);
+/* Every texel's solid angle on an n x n octahedral map (out: n^2, row by row), each computed once
+ * per orbit of the square's symmetries: an eighth of the calls. */
+void wenv_oct_texel_solid_angles(size_t n, double *out);
 
 /* Bilinear interpolation taps between texel centres for map point (u, v): four texel indices and
  * weights summing to one.  The octahedral map continues across its edges, which fold onto

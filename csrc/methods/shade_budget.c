@@ -1,5 +1,7 @@
 #include "methods/shade_budget.h"
 
+#include <math.h>
+
 #include "base/clock.h"
 
 /* The first block is small, so that a step whose lighting slices and table rows are not made yet
@@ -15,7 +17,9 @@ wenv_status wenv_shade_for(const wenv_lighting_frame *frame, const wenv_method *
     if (!(budget >= 0.0))
         return wenv_error_set(err, WENV_ERR_VALUE, "budget must be >= 0 seconds, got %g", budget);
     double start = wenv_now_seconds();
-    size_t block = FIRST_BLOCK, at = *next;
+    /* without a budget, one block: one call reads every slice and row it needs (what a new lighting
+     * remakes at once, wenv_wavelet_remake_ready), and makes those missing in one parallel pass */
+    size_t at = *next, block = isinf(budget) ? n - at : FIRST_BLOCK;
     while (at < n) {
         size_t count = n - at < block ? n - at : block;
         double t0 = wenv_now_seconds();

@@ -72,6 +72,28 @@ static PyObject *py_texel_solid_angles(PyObject *self, PyObject *args)
     return list;
 }
 
+/* wenv_oct_texel_solid_angles: every texel at once, by the map's symmetries. */
+static PyObject *py_oct_texel_solid_angles_all(PyObject *self, PyObject *args)
+{
+    (void)self;
+    Py_ssize_t n;
+    if (!PyArg_ParseTuple(args, "n", &n))
+        return NULL;
+    if (n < 2 || n > 4096 || n % 2) {
+        PyErr_SetString(PyExc_ValueError, "n must be even in [2, 4096]");
+        return NULL;
+    }
+    double *omega = PyMem_Malloc((size_t)(n * n) * sizeof(double));
+    if (!omega)
+        return PyErr_NoMemory();
+    wenv_oct_texel_solid_angles((size_t)n, omega);
+    PyObject *list = PyList_New(n * n);
+    for (Py_ssize_t t = 0; list && t < n * n; t++)
+        PyList_SET_ITEM(list, t, PyFloat_FromDouble(omega[t]));
+    PyMem_Free(omega);
+    return list;
+}
+
 static PyObject *py_haar2d(PyObject *self, PyObject *args, PyObject *kwargs)
 {
     (void)self;
@@ -225,6 +247,7 @@ static PyMethodDef internal_functions[] = {
     {"_hemi_encode", py_hemi_encode, METH_VARARGS, NULL},
     {"_hemi_decode", py_hemi_decode, METH_VARARGS, NULL},
     {"_texel_solid_angles", py_texel_solid_angles, METH_VARARGS, NULL},
+    {"_oct_texel_solid_angles_all", py_oct_texel_solid_angles_all, METH_VARARGS, NULL},
     {"_haar2d", (PyCFunction)(void (*)(void))py_haar2d, METH_VARARGS | METH_KEYWORDS, NULL},
     {"_sh_basis", py_sh_basis, METH_VARARGS, NULL},
     {"_sh_rotate", py_sh_rotate, METH_VARARGS, NULL},

@@ -182,25 +182,35 @@ wenv_status wenv_oct_pyramid_build(wenv_oct_pyramid *p, const wenv_envmap *env, 
         wenv_oct_pyramid_free(p);
         return err->status;
     }
+    /* each level averages the one below over solid angle; a coarse texel's is the sum of its four */
+    double *omega = malloc((base * base + (base / 2) * (base / 2)) * sizeof(double));
+    if (!omega) {
+        wenv_oct_pyramid_free(p);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the environment pyramid");
+    }
+    double *fine_omega = omega, *coarse_omega = omega + base * base;
+    wenv_oct_texel_solid_angles(base, fine_omega);
     for (size_t k = 1; k < p->levels; k++) {
         size_t s = p->side[k], fs = p->side[k - 1];
         const float *fine = p->texels[k - 1];
         float *coarse = p->texels[k];
-#pragma omp parallel for schedule(dynamic, 16)
+#pragma omp parallel for schedule(static)
         for (size_t t = 0; t < s * s; t++) {
             size_t i = t % s, j = t / s;
             double acc[3] = {0, 0, 0}, wsum = 0.0;
             for (size_t c = 0; c < 4; c++) {
-                size_t fi = 2 * i + (c & 1), fj = 2 * j + (c >> 1);
-                double w = wenv_oct_texel_solid_angle(fs, fi, fj);
-                const float *f = fine + 3 * (fj * fs + fi);
+                size_t f = (2 * j + (c >> 1)) * fs + 2 * i + (c & 1);
                 for (int ch = 0; ch < 3; ch++)
-                    acc[ch] += w * f[ch];
-                wsum += w;
+                    acc[ch] += fine_omega[f] * fine[3 * f + ch];
+                wsum += fine_omega[f];
             }
             for (int ch = 0; ch < 3; ch++)
                 coarse[3 * t + ch] = (float)(acc[ch] / wsum);
+            coarse_omega[t] = wsum;
         }
+        /* the next level reads this one's: its sums move to the front of the scratch */
+        memmove(fine_omega, coarse_omega, s * s * sizeof(double));
     }
+    free(omega);
     return WENV_OK;
 }

@@ -41,13 +41,14 @@ wenv_status wenv_resampler_create(wenv_resampler **out, size_t global_n, size_t 
         wenv_resampler_free(rs);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the resampler");
     }
-    double h = 2.0 / (double)global_n;
+    double kn = (double)(rs->k * global_n);
     for (size_t u = 0; u < ng; u++) {
         size_t i = u % global_n, j = u / global_n;
         rs->sub_omega[u] = wenv_oct_texel_solid_angle(global_n, i, j) / (double)kk;
         for (size_t q = 0; q < kk; q++) {
-            double su = -1.0 + h * ((double)i + ((double)(q % rs->k) + 0.5) / (double)rs->k);
-            double sv = -1.0 + h * ((double)j + ((double)(q / rs->k) + 0.5) / (double)rs->k);
+            /* as texel centres (maps.c): mirrored sub-samples mirror exactly */
+            double su = (2.0 * (double)(i * rs->k + q % rs->k) + 1.0 - kn) / kn;
+            double sv = (2.0 * (double)(j * rs->k + q / rs->k) + 1.0 - kn) / kn;
             double d[3];
             wenv_oct_decode(su, sv, d);
             float *o = rs->sub_dirs + (u * kk + q) * 3;
@@ -82,8 +83,12 @@ void wenv_resampler_free(wenv_resampler *rs)
     free(rs);
 }
 
-/* Tent taps of global texel u's sub-samples in the local map of `frame`: up to 4 k^2 pairs. */
-static size_t splat_texel(const wenv_resampler *rs, const double f[9], size_t u, uint32_t *tap_t, double *tap_w)
+size_t wenv_resampler_global_n(const wenv_resampler *rs) { return rs->global_n; }
+size_t wenv_resampler_local_n(const wenv_resampler *rs) { return rs->local_n; }
+size_t wenv_resampler_max_taps(const wenv_resampler *rs) { return 4 * rs->k * rs->k; }
+
+size_t wenv_resampler_texel_taps(const wenv_resampler *rs, const double f[9], size_t u, uint32_t *tap_t,
+                                 double *tap_w)
 {
     size_t kk = rs->k * rs->k, count = 0;
     const float *d = rs->sub_dirs + u * kk * 3, *cone = rs->cone + 4 * u;
@@ -110,37 +115,6 @@ static size_t splat_texel(const wenv_resampler *rs, const double f[9], size_t u,
         }
     }
     return count;
-}
-
-void wenv_resample_slice(const wenv_resampler *rs, const double frame[9], const float *global_texels,
-                         float *local_texels, double *rowsum)
-{
-    size_t nl = rs->local_n * rs->local_n, ng = rs->global_n * rs->global_n;
-    uint32_t tap_t[4 * 64];
-    double tap_w[4 * 64];
-    double acc[3];
-    memset(rowsum, 0, nl * sizeof(double));
-    memset(local_texels, 0, nl * 3 * sizeof(float));
-    for (size_t u = 0; u < ng; u++) {
-        const float *g = global_texels + 3 * u;
-        size_t count = splat_texel(rs, frame, u, tap_t, tap_w);
-        for (size_t c = 0; c < count; c++) {
-            float *l = local_texels + 3 * (size_t)tap_t[c];
-            acc[0] = tap_w[c] * g[0];
-            acc[1] = tap_w[c] * g[1];
-            acc[2] = tap_w[c] * g[2];
-            l[0] += (float)acc[0];
-            l[1] += (float)acc[1];
-            l[2] += (float)acc[2];
-            rowsum[tap_t[c]] += tap_w[c];
-        }
-    }
-    for (size_t t = 0; t < nl; t++) {
-        float inv = rowsum[t] > 0.0 ? (float)(1.0 / rowsum[t]) : 0.0f;
-        local_texels[3 * t] *= inv;
-        local_texels[3 * t + 1] *= inv;
-        local_texels[3 * t + 2] *= inv;
-    }
 }
 
 /* ---- building R_s ---------------------------------------------------------------------------- */
@@ -322,7 +296,7 @@ static int build_matrix(const wenv_resampler *rs, const double f[9], double thre
     size_t kk4 = 4 * rs->k * rs->k;
     memset(ws->rowsum, 0, nl * sizeof(double));
     for (size_t u = 0; u < ng; u++) {
-        size_t c = splat_texel(rs, f, u, ws->tap_t + u * kk4, ws->tap_w + u * kk4);
+        size_t c = wenv_resampler_texel_taps(rs, f, u, ws->tap_t + u * kk4, ws->tap_w + u * kk4);
         ws->tap_start[u] = c; /* count for now */
         for (size_t q = 0; q < c; q++)
             ws->rowsum[ws->tap_t[u * kk4 + q]] += ws->tap_w[u * kk4 + q];

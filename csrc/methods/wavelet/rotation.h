@@ -37,10 +37,16 @@ typedef struct wenv_resampler wenv_resampler;
 wenv_status wenv_resampler_create(wenv_resampler **out, size_t global_n, size_t local_n, wenv_error *err);
 void wenv_resampler_free(wenv_resampler *rs);
 
-/* Local texels (pixel domain, N_local x 3) of the lighting given as global texels (N_global x 3)
- * resampled into `frame`: S_s applied directly ("slicing").  `rowsum` holds N_local doubles. */
-void wenv_resample_slice(const wenv_resampler *rs, const double frame[9], const float *global_texels,
-                         float *local_texels, double *rowsum);
+/* The maps rs resamples between, and the most taps one global texel gives (4 k^2). */
+size_t wenv_resampler_global_n(const wenv_resampler *rs);
+size_t wenv_resampler_local_n(const wenv_resampler *rs);
+size_t wenv_resampler_max_taps(const wenv_resampler *rs);
+
+/* S_s's taps of global texel u in the local map of `frame` (tent weight x the sub-sample's solid
+ * angle, before each local row's normalisation): at most wenv_resampler_max_taps pairs of local
+ * texel and weight; returns how many.  Applied to an image: slice_operators.h. */
+size_t wenv_resampler_texel_taps(const wenv_resampler *rs, const double frame[9], size_t u, uint32_t *tap_t,
+                                 double *tap_w);
 
 /* WENV_ERR_VALUE unless the sizes are ones the matrices can be built for. */
 wenv_status wenv_rotation_check_sizes(size_t global_n, size_t local_n, size_t normal_n, wenv_error *err);

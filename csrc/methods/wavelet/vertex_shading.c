@@ -120,7 +120,7 @@ static int compute_taps(const wenv_wavelet *wavelet, const float *nrm, const flo
     return 1;
 }
 
-static int compute_slice(wenv_wavelet *wavelet, size_t s, float *pixel_work, double *rowsum, float *scratch)
+static int compute_slice(wenv_wavelet *wavelet, size_t s, float *pixel_work, wenv_slice_work *work, float *scratch)
 {
     if (!wavelet->slices[s]) {
         wavelet->slices[s] = malloc(wavelet->nl * 3 * sizeof(float));
@@ -131,12 +131,8 @@ static int compute_slice(wenv_wavelet *wavelet, size_t s, float *pixel_work, dou
     if (wavelet->method == WENV_WAVELET_ROTATION) {
         wenv_rotation_apply(wavelet->rot, s, wavelet->light_idx, wavelet->light_rgb, wavelet->light_count, slice);
     } else {
-        /* the double-precision frame the rotation matrices were built with, so that directions on
-         * a frame's horizon fall on the same side in both methods */
-        double n[3], f[9];
-        wenv_normal_sample(wavelet->q.normal_n, s, n);
-        wenv_frame(n, f);
-        wenv_resample_slice(wavelet->resampler, f, wavelet->global_texels, pixel_work, rowsum);
+        if (wenv_slice_operators_resample(wavelet->slice_ops, s, wavelet->global_texels, pixel_work, work) < 0)
+            return -1;
         wenv_haar2d_forward(pixel_work, wavelet->q.local_n, 3, scratch);
         memcpy(slice, pixel_work, wavelet->nl * 3 * sizeof(float));
     }
@@ -279,25 +275,25 @@ static wenv_status fill_needed(wenv_wavelet *wavelet, wenv_error *err)
             todo[ntodo++] = s;
         wavelet->slice_need[s] = 0;
     }
-    atomic_int failed = 0;
+    atomic_int failed = wavelet->slice_ops && wenv_slice_operators_prepare(wavelet->slice_ops, todo, ntodo) < 0;
 #pragma omp parallel if (ntodo > 1)
     {
         float *pixel_work = malloc(wavelet->nl * 3 * sizeof(float));
-        double *rowsum = malloc(wavelet->nl * sizeof(double));
+        wenv_slice_work *work = wavelet->slice_ops ? wenv_slice_work_new(wavelet->slice_ops) : NULL;
         float *scratch = malloc(wavelet->q.local_n * 3 * sizeof(float));
-        if (!pixel_work || !rowsum || !scratch)
+        if (!pixel_work || (wavelet->slice_ops && !work) || !scratch)
             atomic_store(&failed, 1);
 #pragma omp for schedule(dynamic, 4)
         for (size_t e = 0; e < ntodo; e++) {
             if (atomic_load(&failed))
                 continue;
-            if (compute_slice(wavelet, todo[e], pixel_work, rowsum, scratch) < 0)
+            if (compute_slice(wavelet, todo[e], pixel_work, work, scratch) < 0)
                 atomic_store(&failed, 1);
             else
                 wavelet->slice_ready[todo[e]] = USED; /* made for the latest shade call */
         }
         free(pixel_work);
-        free(rowsum);
+        wenv_slice_work_free(work);
         free(scratch);
     }
     if (failed) {

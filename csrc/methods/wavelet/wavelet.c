@@ -52,6 +52,7 @@ void wenv_wavelet_free(wenv_wavelet *wavelet)
     if (!wavelet)
         return;
     wenv_rotation_free(wavelet->rot);
+    wenv_slice_operators_free(wavelet->slice_ops);
     wenv_resampler_free(wavelet->resampler);
     free(wavelet->frames);
     free(wavelet->light_idx);
@@ -159,13 +160,21 @@ wenv_status wenv_wavelet_create(wenv_wavelet **out, const wenv_wavelet_quality *
         }
         wavelet->stats.rotation_nnz = wenv_rotation_nnz(wavelet->rot);
         wavelet->stats.rotation_bytes = wenv_rotation_bytes(q->global_n, q->normal_n, wavelet->stats.rotation_nnz);
-    } else if (wenv_resampler_create(&wavelet->resampler, q->global_n, q->local_n, err)) {
+    } else if (wenv_resampler_create(&wavelet->resampler, q->global_n, q->local_n, err) ||
+               wenv_slice_operators_create(&wavelet->slice_ops, wavelet->resampler, q->normal_n,
+                                           wenv_wavelet_operator_budget(memory_budget), err)) {
         wenv_wavelet_free(wavelet);
         return err->status;
     }
     wavelet->stats.rotation_seconds = wenv_now_seconds() - t0;
     *out = wavelet;
     return WENV_OK;
+}
+
+size_t wenv_wavelet_operator_budget(size_t memory_budget)
+{
+    size_t share = memory_budget / 8;
+    return memory_budget && share < WENV_WAVELET_OPERATOR_BYTES ? share : WENV_WAVELET_OPERATOR_BYTES;
 }
 
 static int compare_size(const void *a, const void *b)
@@ -285,4 +294,5 @@ void wenv_wavelet_get_stats(const wenv_wavelet *wavelet, wenv_wavelet_stats *sta
         stats->grazing_bytes += wenv_grazing_rule_bytes(wavelet->kept[i]->grazing_rule);
     }
     stats->materials_kept = wavelet->n_kept;
+    stats->resampling_bytes = wavelet->slice_ops ? wenv_slice_operators_bytes(wavelet->slice_ops) : 0;
 }

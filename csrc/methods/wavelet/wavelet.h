@@ -66,12 +66,18 @@ typedef struct {
 #define WENV_WAVELET_KEPT_MATERIALS 4
 #define WENV_WAVELET_KEPT_BYTES ((size_t)256 << 20)
 
+/* Slicing keeps its resampling operators (slice_operators.h) while they take at most this and an
+ * eighth of the shader's memory budget: all of `default`'s (47 MB), 70 % of `high`'s (~185 MB). */
+#define WENV_WAVELET_OPERATOR_BYTES ((size_t)128 << 20)
+size_t wenv_wavelet_operator_budget(size_t memory_budget);
+
 typedef struct {
     size_t rotation_nnz, rotation_bytes;
     int cache; /* 0 no cache used, 1 loaded, 2 built and saved, 3 built, save failed */
     size_t slices_ready, pairs_ready, light_terms, brdf_terms_total, direct_lights;
     size_t slice_bytes, table_bytes, brdf_bytes, grazing_bytes;
     size_t materials_kept, materials_reused; /* kept now (the current one included); set again and found */
+    size_t resampling_bytes; /* slicing: the resampling operators kept (slice_operators.h) */
     double rotation_seconds;
 } wenv_wavelet_stats;
 

@@ -125,6 +125,7 @@ static size_t stats(const void *state, wenv_stat *out)
     out[k++] = wenv_stat_count("grazing_bytes", s.grazing_bytes);
     out[k++] = wenv_stat_count("materials_kept", s.materials_kept);
     out[k++] = wenv_stat_count("materials_reused", s.materials_reused);
+    out[k++] = wenv_stat_count("resampling_bytes", s.resampling_bytes);
     return k;
 }
 

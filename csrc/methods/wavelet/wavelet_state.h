@@ -9,6 +9,7 @@
 #include "methods/wavelet/grazing.h"
 #include "methods/wavelet/lights.h"
 #include "methods/wavelet/rotation.h"
+#include "methods/wavelet/slice_operators.h"
 #include "methods/wavelet/wavelet.h"
 
 /* One material's part of the shader (brdf_slices.c): its BRDF slices, what the exact lights and the
@@ -42,6 +43,7 @@ struct wenv_wavelet {
     size_t ng, nl, ns, nv;
     wenv_rotation *rot;      /* rotation method only */
     wenv_resampler *resampler; /* slicing method only */
+    wenv_slice_operators *slice_ops; /* slicing method only: S_s of each orbit of samples, kept */
     float *frames;           /* ns x 9 */
     wenv_wavelet_stats stats;
 
