@@ -109,27 +109,41 @@ void wenv_slice_operators_free(wenv_slice_operators *ops)
     free(ops);
 }
 
+/* The texel of an n x n octahedral (or hemi-octahedral) map whose centre is m (or m^T) times texel
+ * t's centre direction; SIZE_MAX when that is no texel's centre. */
+static size_t texel_image(size_t n, int hemi, const double m[9], int transpose, size_t t)
+{
+    double d[3], e[3], u = wenv_map_texel_center(n, t % n), v = wenv_map_texel_center(n, t / n);
+    if (hemi)
+        wenv_hemi_decode(u, v, d);
+    else
+        wenv_oct_decode(u, v, d);
+    if (transpose)
+        transpose_times(m, d, e);
+    else
+        times(m, d, e);
+    if (hemi)
+        wenv_hemi_encode(e, &u, &v);
+    else
+        wenv_oct_encode(e, &u, &v);
+    return centre_texel(n, u, v);
+}
+
 /* Texel permutations of symmetry g on both maps; 0 when g does not map texel centres onto texel
  * centres (then no sample uses it). */
 static int make_permutations(wenv_slice_operators *ops, int g)
 {
-    double m[9], d[3], e[3], u, v;
+    double m[9];
     symmetry_matrix(g, m);
     size_t gn = wenv_resampler_global_n(ops->rs), ln = wenv_resampler_local_n(ops->rs);
     for (size_t t = 0; t < ops->ng; t++) {
-        wenv_oct_decode(wenv_map_texel_center(gn, t % gn), wenv_map_texel_center(gn, t / gn), d);
-        transpose_times(m, d, e);
-        wenv_oct_encode(e, &u, &v);
-        size_t to = centre_texel(gn, u, v);
+        size_t to = texel_image(gn, 0, m, 1, t);
         if (to == SIZE_MAX)
             return 0;
         ops->global_perm[g][t] = (uint32_t)to;
     }
     for (size_t t = 0; t < ops->nl; t++) {
-        wenv_hemi_decode(wenv_map_texel_center(ln, t % ln), wenv_map_texel_center(ln, t / ln), d);
-        times(m, d, e);
-        wenv_hemi_encode(e, &u, &v);
-        size_t to = centre_texel(ln, u, v);
+        size_t to = texel_image(ln, 1, m, 0, t);
         if (to == SIZE_MAX)
             return 0;
         ops->local_perm[g][t] = (uint16_t)to;
@@ -141,17 +155,14 @@ static int make_permutations(wenv_slice_operators *ops, int g)
  * and P = F_s M^T F_c^T, the signed permutation of tangents that relates the two frames. */
 static void find_orbit(wenv_slice_operators *ops, const int usable[SYMMETRIES], size_t s)
 {
-    double n[3], m[9], e[3], u, v;
-    wenv_normal_sample(ops->normal_n, s, n);
+    double m[9];
     size_t best = s;
     int best_g = 0;
     for (int g = 0; g < SYMMETRIES; g++) {
         if (!usable[g])
             continue;
         symmetry_matrix(g, m);
-        times(m, n, e);
-        wenv_oct_encode(e, &u, &v);
-        size_t to = centre_texel(ops->normal_n, u, v);
+        size_t to = texel_image(ops->normal_n, 0, m, 0, s); /* normal samples are texel centres */
         if (to < best) {
             best = to;
             best_g = g;
@@ -161,8 +172,9 @@ static void find_orbit(wenv_slice_operators *ops, const int usable[SYMMETRIES], 
     ops->global_of[s] = ops->local_of[s] = 0;
     if (best == s)
         return;
-    double fs[9], fc[9], nc[3], p[9];
+    double n[3], e[3], fs[9], fc[9], nc[3], p[9];
     symmetry_matrix(best_g, m);
+    wenv_normal_sample(ops->normal_n, s, n);
     wenv_frame(n, fs);
     wenv_normal_sample(ops->normal_n, best, nc);
     wenv_frame(nc, fc);
@@ -293,7 +305,9 @@ static int reserve(wenv_slice_work *w, size_t texels, size_t taps)
 }
 
 /* Sample c's operator into w->op: the resampler's taps with each global texel's taps on one local
- * texel summed, then every local row normalised. */
+ * texel summed, then every local row normalised.  Its frame is the double-precision one rotation's
+ * matrices are built with, so that directions on a frame's horizon fall on the same side in both
+ * methods. */
 static int build_operator(const wenv_slice_operators *ops, size_t c, wenv_slice_work *w)
 {
     double n[3], f[9];
