@@ -120,7 +120,7 @@ static int compute_taps(const wenv_wavelet *wavelet, const float *nrm, const flo
     return 1;
 }
 
-static int compute_slice(wenv_wavelet *wavelet, size_t s, float *pixel_work, wenv_slice_work *work, float *scratch)
+static int compute_slice(wenv_wavelet *wavelet, size_t s, wenv_slice_work *work, float *scratch)
 {
     if (!wavelet->slices[s]) {
         wavelet->slices[s] = malloc(wavelet->nl * 3 * sizeof(float));
@@ -131,10 +131,10 @@ static int compute_slice(wenv_wavelet *wavelet, size_t s, float *pixel_work, wen
     if (wavelet->method == WENV_WAVELET_ROTATION) {
         wenv_rotation_apply(wavelet->rot, s, wavelet->light_idx, wavelet->light_rgb, wavelet->light_count, slice);
     } else {
-        if (wenv_slice_operators_resample(wavelet->slice_ops, s, wavelet->global_texels, pixel_work, work) < 0)
+        /* resampled and transformed in place */
+        if (wenv_slice_operators_resample(wavelet->slice_ops, s, wavelet->global_texels, slice, work) < 0)
             return -1;
-        wenv_haar2d_forward(pixel_work, wavelet->q.local_n, 3, scratch);
-        memcpy(slice, pixel_work, wavelet->nl * 3 * sizeof(float));
+        wenv_haar2d_forward(slice, wavelet->q.local_n, 3, scratch);
     }
     double e[3] = {0, 0, 0};
     for (size_t t = 0; t < wavelet->nl; t++) {
@@ -278,21 +278,19 @@ static wenv_status fill_needed(wenv_wavelet *wavelet, wenv_error *err)
     atomic_int failed = wavelet->slice_ops && wenv_slice_operators_prepare(wavelet->slice_ops, todo, ntodo) < 0;
 #pragma omp parallel if (ntodo > 1)
     {
-        float *pixel_work = malloc(wavelet->nl * 3 * sizeof(float));
         wenv_slice_work *work = wavelet->slice_ops ? wenv_slice_work_new(wavelet->slice_ops) : NULL;
         float *scratch = malloc(wavelet->q.local_n * 3 * sizeof(float));
-        if (!pixel_work || (wavelet->slice_ops && !work) || !scratch)
+        if ((wavelet->slice_ops && !work) || !scratch)
             atomic_store(&failed, 1);
 #pragma omp for schedule(dynamic, 4)
         for (size_t e = 0; e < ntodo; e++) {
             if (atomic_load(&failed))
                 continue;
-            if (compute_slice(wavelet, todo[e], pixel_work, work, scratch) < 0)
+            if (compute_slice(wavelet, todo[e], work, scratch) < 0)
                 atomic_store(&failed, 1);
             else
                 wavelet->slice_ready[todo[e]] = USED; /* made for the latest shade call */
         }
-        free(pixel_work);
         wenv_slice_work_free(work);
         free(scratch);
     }
