@@ -54,7 +54,7 @@ typedef struct {
 
 struct wenv_slice_operators {
     const wenv_resampler *rs;
-    size_t normal_n, ns, ng, nl, max_taps, budget, shared;
+    size_t normal_n, ns, ng, nl, max_taps, budget;
     size_t *orbit;                     /* ns: the sample whose operator serves s (s itself for those) */
     unsigned char *global_of, *local_of; /* ns: the symmetry each map is read through */
     uint32_t *global_perm[SYMMETRIES]; /* ng each: the texel of G read as texel u (identity at 0) */
@@ -196,7 +196,6 @@ static void find_orbit(wenv_slice_operators *ops, const int usable[SYMMETRIES], 
             ops->orbit[s] = best;
             ops->global_of[s] = (unsigned char)best_g;
             ops->local_of[s] = (unsigned char)g;
-            ops->shared++;
             return;
         }
     }
@@ -462,9 +461,4 @@ size_t wenv_slice_operators_estimate_bytes(size_t global_n, size_t local_n, size
 size_t wenv_slice_operators_bytes(const wenv_slice_operators *ops)
 {
     return atomic_load(&ops->bytes);
-}
-
-size_t wenv_slice_operators_shared(const wenv_slice_operators *ops)
-{
-    return ops->shared;
 }

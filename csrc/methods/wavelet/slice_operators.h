@@ -47,8 +47,7 @@ int wenv_slice_operators_resample(const wenv_slice_operators *ops, size_t s, con
  * within ~10 % above what they take for the maps of AUTO_LADDER, without building one. */
 size_t wenv_slice_operators_estimate_bytes(size_t global_n, size_t local_n, size_t normal_n, size_t used_normals);
 
-/* Memory the kept operators take; how many samples share another's operator. */
+/* Memory the kept operators take. */
 size_t wenv_slice_operators_bytes(const wenv_slice_operators *ops);
-size_t wenv_slice_operators_shared(const wenv_slice_operators *ops);
 
 #endif

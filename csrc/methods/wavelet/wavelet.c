@@ -101,6 +101,13 @@ static wenv_status build_rotation(wenv_wavelet *wavelet, const wenv_wavelet_qual
     return wenv_rotation_build(&wavelet->rot, q->global_n, q->local_n, q->normal_n, q->matrix_epsilon, progress, err);
 }
 
+/* What slicing may keep of its resampling operators under the shader's memory budget (wavelet.h). */
+static size_t operator_budget(size_t memory_budget)
+{
+    size_t share = memory_budget / 8;
+    return memory_budget && share < WENV_WAVELET_OPERATOR_BYTES ? share : WENV_WAVELET_OPERATOR_BYTES;
+}
+
 wenv_status wenv_wavelet_create(wenv_wavelet **out, const wenv_wavelet_quality *q, wenv_wavelet_variant method,
                                const char *cache_dir, size_t memory_budget, const wenv_progress *progress,
                                wenv_error *err)
@@ -162,19 +169,13 @@ wenv_status wenv_wavelet_create(wenv_wavelet **out, const wenv_wavelet_quality *
         wavelet->stats.rotation_bytes = wenv_rotation_bytes(q->global_n, q->normal_n, wavelet->stats.rotation_nnz);
     } else if (wenv_resampler_create(&wavelet->resampler, q->global_n, q->local_n, err) ||
                wenv_slice_operators_create(&wavelet->slice_ops, wavelet->resampler, q->normal_n,
-                                           wenv_wavelet_operator_budget(memory_budget), err)) {
+                                           operator_budget(memory_budget), err)) {
         wenv_wavelet_free(wavelet);
         return err->status;
     }
     wavelet->stats.rotation_seconds = wenv_now_seconds() - t0;
     *out = wavelet;
     return WENV_OK;
-}
-
-size_t wenv_wavelet_operator_budget(size_t memory_budget)
-{
-    size_t share = memory_budget / 8;
-    return memory_budget && share < WENV_WAVELET_OPERATOR_BYTES ? share : WENV_WAVELET_OPERATOR_BYTES;
 }
 
 static int compare_size(const void *a, const void *b)

@@ -69,7 +69,6 @@ typedef struct {
 /* Slicing keeps its resampling operators (slice_operators.h) while they take at most this and an
  * eighth of the shader's memory budget: all of `default`'s (47 MB), 70 % of `high`'s (~185 MB). */
 #define WENV_WAVELET_OPERATOR_BYTES ((size_t)128 << 20)
-size_t wenv_wavelet_operator_budget(size_t memory_budget);
 
 typedef struct {
     size_t rotation_nnz, rotation_bytes;
