@@ -97,3 +97,61 @@ def test_haar_is_nonstandard():
     img[5, 11, 0] = 1.0
     h = wenv._haar2d(img)
     assert np.count_nonzero(np.abs(h) > 1e-7) == 3 * 4 + 1
+
+
+def plain_nonstandard_haar(img):
+    """The nonstandard Haar transform written out in numpy (float64): each level the rows of the
+    top-left block (averages left, details right), then its columns (averages on top)."""
+    h = img.astype(np.float64).copy()
+    s = h.shape[0]
+    while s > 1:
+        blk = h[:s, :s]
+        blk = np.concatenate([blk[:, 0::2] + blk[:, 1::2], blk[:, 0::2] - blk[:, 1::2]], axis=1) / math.sqrt(2)
+        h[:s, :s] = np.concatenate([blk[0::2] + blk[1::2], blk[0::2] - blk[1::2]], axis=0) / math.sqrt(2)
+        s //= 2
+    return h
+
+
+@pytest.mark.parametrize("n,ch", [(1, 3), (2, 1), (4, 2), (16, 3), (64, 3), (32, 4)])
+def test_haar_equals_the_transform_written_out(n, ch):
+    rng = np.random.default_rng(100 + n)
+    img = rng.normal(size=(n, n, ch)).astype(np.float32)
+    h = wenv._haar2d(img)
+    expected = plain_nonstandard_haar(img)
+    assert np.allclose(h, expected, rtol=1e-5, atol=1e-5 * math.log2(2 * n))
+    assert np.allclose(wenv._haar2d(h, inverse=True), img, atol=1e-5)
+
+
+def noise_environment(height, width, seed):
+    rng = np.random.default_rng(seed)
+    return wenv.Environment(rng.uniform(0.0, 4.0, size=(height, width, 3)).astype(np.float32))
+
+
+@pytest.mark.parametrize("height,sides", [(256, [128, 32]), (512, [512, 128]), (32, [16, 64, 8])])
+def test_maps_made_in_one_pass_equal_each_made_alone(height, sides):
+    """A new lighting makes the global map and the grazing path's pyramid base in one pass over the
+    image; each map must be what a pass of its own makes (sides too fine for the image are looked
+    up, the others splatted)."""
+    env = noise_environment(height, 2 * height, height)
+    together = wenv._oct_maps(env, sides)
+    for side, m in zip(sides, together):
+        assert m.shape == (side, side, 3)
+        alone = wenv._oct_maps(env, [side])[0]
+        assert np.array_equal(m, alone)
+        assert np.all(np.isfinite(m)) and m.min() >= 0.0 and 0.5 < m.mean() < 3.5
+
+
+def test_a_constant_environment_gives_constant_maps():
+    env = wenv.Environment(np.full((512, 1024, 3), 1.75, np.float32))
+    for m in wenv._oct_maps(env, [512, 128, 16]):
+        assert np.allclose(m, 1.75, rtol=1e-6, atol=0)
+
+
+def test_oct_maps_reject_bad_input():
+    env = noise_environment(16, 32, 1)
+    with pytest.raises(ValueError, match="sides"):
+        wenv._oct_maps(env, [3])
+    with pytest.raises(ValueError, match="sides"):
+        wenv._oct_maps(env, [])
+    with pytest.raises(TypeError, match="env"):
+        wenv._oct_maps(np.zeros((4, 8, 3), np.float32), [8])

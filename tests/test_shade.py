@@ -73,11 +73,12 @@ def noise_env(seed=7, h=32, w=64):
     return wenv.Environment(rng.lognormal(0.0, 1.0, size=(h, w, 3)).astype(np.float32))
 
 
-@pytest.mark.parametrize("sizes", [(16, 8, 8), (4, 16, 6)])
+@pytest.mark.parametrize("sizes", [(16, 8, 8), (4, 16, 6), (512, 8, 4)])
 def test_slicing_shares_operators_and_equals_rotation_at_every_normal_sample(cook, sizes):
     """Rotation builds every sample's matrix from its own splat; slicing reads one operator per
     orbit of the square's symmetries.  (4, 16): local texels finer than global ones, up to 576
-    taps per global texel (these sizes crashed slicing before)."""
+    taps per global texel (these sizes crashed slicing before).  (512, 8): more global texels than
+    16-bit indices reach, so the kept operators hold 32-bit ones."""
     g, l, n = sizes
     env = noise_env()
     q = dict(SMALL, matrix_epsilon=0.0, light_coefficients=0, normals=n, **{"global": g, "local": l})

@@ -266,7 +266,7 @@ static wenv_status make_lights(wenv_auto_analysis *an, wenv_error *err)
     for (size_t i = 0; i < an->nb; i++)
         excluded[i] = an->bright[i].pixel;
     qsort(excluded, an->nb, sizeof *excluded, by_pixel);
-    wenv_status st = wenv_oct_pyramid_build(&an->pyramid, env, excluded, an->nb, DOMINANCE_GRID_MAX, err);
+    wenv_status st = wenv_oct_pyramid_build(&an->pyramid, env, excluded, an->nb, DOMINANCE_GRID_MAX, 0, NULL, err);
     free(excluded);
     if (st)
         return st;

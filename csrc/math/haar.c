@@ -7,45 +7,77 @@
 
 int wenv_is_power_of_two(size_t n) { return n > 0 && (n & (n - 1)) == 0; }
 
-/* One Haar step along a line of `len` pixels whose k-th pixel starts at base + k * step. */
-static void forward_line(float *base, size_t len, size_t step, size_t ch, float *scratch)
+/* One Haar step over `len` elements of `width` floats, element k at base + k * stride: averages to
+ * elements 0 .. len/2 - 1, details after them.  Averages go in place (element k was read by pair
+ * k/2 <= k, already done; pair 0 reads before it writes); details wait in scratch, as elements from
+ * len/2 on are still to be read.  A row step has elements of one pixel, a column step of a whole
+ * row: the latter's inner loop runs over contiguous floats. */
+static inline __attribute__((always_inline)) void forward_step(float *base, size_t len, size_t stride, size_t width,
+                                                               float *scratch)
 {
     size_t half = len / 2;
     for (size_t k = 0; k < half; k++) {
-        const float *a = base + (2 * k) * step, *b = base + (2 * k + 1) * step;
-        float *lo = scratch + k * ch, *hi = scratch + (half + k) * ch;
-        for (size_t c = 0; c < ch; c++) {
-            lo[c] = (a[c] + b[c]) * INV_SQRT2;
-            hi[c] = (a[c] - b[c]) * INV_SQRT2;
+        const float *a = base + 2 * k * stride, *b = a + stride;
+        float *lo = base + k * stride, *hi = scratch + k * width;
+        for (size_t c = 0; c < width; c++) {
+            float x = a[c], y = b[c];
+            lo[c] = (x + y) * INV_SQRT2;
+            hi[c] = (x - y) * INV_SQRT2;
         }
     }
-    for (size_t k = 0; k < len; k++)
-        memcpy(base + k * step, scratch + k * ch, ch * sizeof(float));
+    for (size_t k = 0; k < half; k++)
+        memcpy(base + (half + k) * stride, scratch + k * width, width * sizeof(float));
 }
 
-static void inverse_line(float *base, size_t len, size_t step, size_t ch, float *scratch)
+/* The step undone: details to scratch first, then pairs from the last down (pair k writes elements
+ * 2k and 2k + 1, whose averages were read already; pair 0 reads before it writes). */
+static inline __attribute__((always_inline)) void inverse_step(float *base, size_t len, size_t stride, size_t width,
+                                                               float *scratch)
 {
     size_t half = len / 2;
-    for (size_t k = 0; k < half; k++) {
-        const float *lo = base + k * step, *hi = base + (half + k) * step;
-        float *a = scratch + (2 * k) * ch, *b = scratch + (2 * k + 1) * ch;
-        for (size_t c = 0; c < ch; c++) {
-            a[c] = (lo[c] + hi[c]) * INV_SQRT2;
-            b[c] = (lo[c] - hi[c]) * INV_SQRT2;
+    for (size_t k = 0; k < half; k++)
+        memcpy(scratch + k * width, base + (half + k) * stride, width * sizeof(float));
+    for (size_t k = half; k-- > 0;) {
+        const float *lo = base + k * stride, *hi = scratch + k * width;
+        float *a = base + 2 * k * stride, *b = a + stride;
+        for (size_t c = 0; c < width; c++) {
+            float x = lo[c], y = hi[c];
+            a[c] = (x + y) * INV_SQRT2;
+            b[c] = (x - y) * INV_SQRT2;
         }
     }
-    for (size_t k = 0; k < len; k++)
-        memcpy(base + k * step, scratch + k * ch, ch * sizeof(float));
 }
+
+/* Rows of pixels: the channel counts wenv uses get loops of constant width. */
+static void forward_row(float *row, size_t len, size_t ch, float *scratch)
+{
+    if (ch == 3)
+        forward_step(row, len, 3, 3, scratch);
+    else if (ch == 1)
+        forward_step(row, len, 1, 1, scratch);
+    else
+        forward_step(row, len, ch, ch, scratch);
+}
+
+static void inverse_row(float *row, size_t len, size_t ch, float *scratch)
+{
+    if (ch == 3)
+        inverse_step(row, len, 3, 3, scratch);
+    else if (ch == 1)
+        inverse_step(row, len, 1, 1, scratch);
+    else
+        inverse_step(row, len, ch, ch, scratch);
+}
+
+size_t wenv_haar2d_scratch_floats(size_t n, size_t channels) { return (n / 2 > 0 ? n / 2 : 1) * n * channels; }
 
 void wenv_haar2d_forward(float *data, size_t n, size_t channels, float *scratch)
 {
     size_t row_step = n * channels;
     for (size_t s = n; s > 1; s /= 2) {
         for (size_t r = 0; r < s; r++)
-            forward_line(data + r * row_step, s, channels, channels, scratch);
-        for (size_t c = 0; c < s; c++)
-            forward_line(data + c * channels, s, row_step, channels, scratch);
+            forward_row(data + r * row_step, s, channels, scratch);
+        forward_step(data, s, row_step, s * channels, scratch);
     }
 }
 
@@ -53,10 +85,9 @@ void wenv_haar2d_inverse(float *data, size_t n, size_t channels, float *scratch)
 {
     size_t row_step = n * channels;
     for (size_t s = 2; s <= n; s *= 2) {
-        for (size_t c = 0; c < s; c++)
-            inverse_line(data + c * channels, s, row_step, channels, scratch);
+        inverse_step(data, s, row_step, s * channels, scratch);
         for (size_t r = 0; r < s; r++)
-            inverse_line(data + r * row_step, s, channels, channels, scratch);
+            inverse_row(data + r * row_step, s, channels, scratch);
     }
 }
 

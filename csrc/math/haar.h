@@ -5,7 +5,7 @@
  * contiguously (index (row * n + col) * channels + c); every channel is transformed alike.  One
  * level transforms the rows of the top-left s x s block (averages to the left half, details to
  * the right half), then its columns (averages on top), and recurses on the s/2 x s/2 average
- * block.  `scratch` holds n * channels floats. */
+ * block.  `scratch` holds wenv_haar2d_scratch_floats(n, channels) floats (half the image). */
 #ifndef WENV_HAAR_H
 #define WENV_HAAR_H
 
@@ -13,6 +13,7 @@
 
 int wenv_is_power_of_two(size_t n);
 
+size_t wenv_haar2d_scratch_floats(size_t n, size_t channels);
 void wenv_haar2d_forward(float *data, size_t n, size_t channels, float *scratch);
 void wenv_haar2d_inverse(float *data, size_t n, size_t channels, float *scratch);
 

@@ -8,6 +8,8 @@
 #include "math/haar.h"
 #include "math/maps.h"
 #include "math/spherical_harmonics.h"
+#include "python/bind_envmap.h"
+#include "scene/envmap_octahedral.h"
 
 
 static PyObject *map_convert(PyObject *args, int hemi, int encode)
@@ -114,7 +116,7 @@ static PyObject *py_haar2d(PyObject *self, PyObject *args, PyObject *kwargs)
     Py_ssize_t shape[3] = {b.shape[0], b.shape[1], b.shape[2]};
     float *out;
     PyObject *result = wenv_py_new_float_array(3, shape, &out);
-    float *scratch = PyMem_Malloc(n * ch * sizeof(float) + 1);
+    float *scratch = PyMem_Malloc(wenv_haar2d_scratch_floats(n, ch) * sizeof(float) + 1);
     if (result && scratch) {
         memcpy(out, b.buf, n * n * ch * sizeof(float));
         if (inverse)
@@ -224,6 +226,63 @@ done:
     return result;
 }
 
+/* wenv_oct_from_envmap_sides: the octahedral maps of an Environment at the given sides, made in one
+ * pass over its image (a list of (side, side, 3) arrays). */
+static PyObject *py_oct_maps(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *env_obj, *sides_obj;
+    if (!PyArg_ParseTuple(args, "OO", &env_obj, &sides_obj))
+        return NULL;
+    const struct wenv_envmap *env = wenv_py_envmap(env_obj, "env");
+    if (!env)
+        return NULL;
+    PyObject *seq = PySequence_Fast(sides_obj, "sides must be a sequence of even sides");
+    if (!seq)
+        return NULL;
+    Py_ssize_t count = PySequence_Fast_GET_SIZE(seq);
+    if (count < 1 || count > WENV_OCT_SIDES_MAX) {
+        Py_DECREF(seq);
+        return PyErr_Format(PyExc_ValueError, "sides must hold 1 to %d sides", WENV_OCT_SIDES_MAX);
+    }
+    size_t sides[WENV_OCT_SIDES_MAX];
+    float *maps[WENV_OCT_SIDES_MAX];
+    PyObject *list = PyList_New(count);
+    for (Py_ssize_t k = 0; list && k < count; k++) {
+        Py_ssize_t n = PyNumber_AsSsize_t(PySequence_Fast_GET_ITEM(seq, k), PyExc_OverflowError);
+        if (n == -1 && PyErr_Occurred()) {
+            Py_CLEAR(list);
+            break;
+        }
+        if (n < 2 || n > 1024 || n % 2) {
+            PyErr_SetString(PyExc_ValueError, "sides must be even, in [2, 1024]");
+            Py_CLEAR(list);
+            break;
+        }
+        Py_ssize_t shape[3] = {n, n, 3};
+        PyObject *arr = wenv_py_new_float_array(3, shape, &maps[k]);
+        if (!arr) {
+            Py_CLEAR(list);
+            break;
+        }
+        sides[k] = (size_t)n;
+        PyList_SET_ITEM(list, k, arr);
+    }
+    Py_DECREF(seq);
+    if (!list)
+        return NULL;
+    wenv_error err = {0};
+    wenv_status st;
+    WENV_BEGIN_WORK
+    st = wenv_oct_from_envmap_sides(env, (size_t)count, sides, maps, NULL, 0, &err);
+    WENV_END_WORK
+    if (st) {
+        Py_DECREF(list);
+        return wenv_py_raise(&err);
+    }
+    return list;
+}
+
 /* The number of threads an OpenMP region of wenv's work gets when started from the calling thread. */
 static PyObject *py_work_threads(PyObject *self, PyObject *unused)
 {
@@ -248,6 +307,7 @@ static PyMethodDef internal_functions[] = {
     {"_hemi_decode", py_hemi_decode, METH_VARARGS, NULL},
     {"_texel_solid_angles", py_texel_solid_angles, METH_VARARGS, NULL},
     {"_oct_texel_solid_angles_all", py_oct_texel_solid_angles_all, METH_VARARGS, NULL},
+    {"_oct_maps", py_oct_maps, METH_VARARGS, NULL},
     {"_haar2d", (PyCFunction)(void (*)(void))py_haar2d, METH_VARARGS | METH_KEYWORDS, NULL},
     {"_sh_basis", py_sh_basis, METH_VARARGS, NULL},
     {"_sh_rotate", py_sh_rotate, METH_VARARGS, NULL},

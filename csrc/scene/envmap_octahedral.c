@@ -7,6 +7,7 @@
 #include <string.h>
 
 #include "math/maps.h"
+#include "math/vector_math.h"
 
 static void supersample_texel(const wenv_envmap *env, size_t side, size_t t, float *rgb)
 {
@@ -44,47 +45,96 @@ static size_t lower_bound(const size_t *a, size_t n, size_t x)
     return lo;
 }
 
-wenv_status wenv_oct_from_envmap(const wenv_envmap *env, size_t side, float *texels, const size_t *excluded,
-                                 size_t n_excluded, wenv_error *err)
+/* Texels of a map no pixel reached (a coarse image, or none near) are read by lookups. */
+static wenv_status supersample_map(const wenv_envmap *env, size_t side, float *texels, const size_t *excluded,
+                                   size_t n_excluded, wenv_error *err)
 {
+    /* a coarse image is looked up, so excluded pixels are blacked out in a copy */
+    wenv_envmap *residual = NULL;
+    if (n_excluded) {
+        size_t npix = wenv_envmap_width(env) * wenv_envmap_height(env);
+        float *px = malloc(npix * 3 * sizeof(float));
+        if (!px)
+            return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory filtering the environment");
+        memcpy(px, wenv_envmap_pixels(env), npix * 3 * sizeof(float));
+        for (size_t e = 0; e < n_excluded; e++)
+            px[3 * excluded[e]] = px[3 * excluded[e] + 1] = px[3 * excluded[e] + 2] = 0.0f;
+        wenv_status st = wenv_envmap_create(&residual, px, wenv_envmap_height(env), wenv_envmap_width(env), 3,
+                                            wenv_envmap_projection(env), wenv_envmap_rotation(env),
+                                            wenv_envmap_strength(env), err);
+        free(px);
+        if (st)
+            return st;
+    }
+    const wenv_envmap *src = residual ? residual : env;
     size_t nt = side * side;
-    if (!splats(env, side)) {
-        /* a coarse image is looked up, so excluded pixels are blacked out in a copy */
-        wenv_envmap *residual = NULL;
-        if (n_excluded) {
-            size_t npix = wenv_envmap_width(env) * wenv_envmap_height(env);
-            float *px = malloc(npix * 3 * sizeof(float));
-            if (!px)
-                return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory filtering the environment");
-            memcpy(px, wenv_envmap_pixels(env), npix * 3 * sizeof(float));
-            for (size_t e = 0; e < n_excluded; e++)
-                px[3 * excluded[e]] = px[3 * excluded[e] + 1] = px[3 * excluded[e] + 2] = 0.0f;
-            wenv_status st = wenv_envmap_create(&residual, px, wenv_envmap_height(env), wenv_envmap_width(env), 3,
-                                                wenv_envmap_projection(env), wenv_envmap_rotation(env),
-                                                wenv_envmap_strength(env), err);
-            free(px);
+#pragma omp parallel for schedule(dynamic, 64)
+    for (size_t t = 0; t < nt; t++)
+        supersample_texel(src, side, t, texels + 3 * t);
+    wenv_envmap_free(residual);
+    return WENV_OK;
+}
+
+/* flux r g b and solid angle of a texel, summed in one vector; in double, so that the sums (then
+ * rounded to float) do not depend on how the rows were split between threads */
+typedef double flux4 __attribute__((vector_size(4 * sizeof(double))));
+
+/* One row's samples splatted onto every map (accumulators one after another), the pixel's flux
+ * and solid angle as one vector: a single AVX instruction per tap where the CPU has it. */
+WENV_VECTOR_CLONES
+static void splat_row(const float *dirs, const float *flux, const float *omega, size_t n, const size_t *sides,
+                      size_t n_sides, flux4 *acc)
+{
+    for (size_t p = 0; p < n; p++) {
+        float u, v, wt[4];
+        uint32_t idx[4];
+        flux4 f = {(double)flux[3 * p], (double)flux[3 * p + 1], (double)flux[3 * p + 2], (double)omega[p]};
+        wenv_oct_encode_f(dirs + 3 * p, &u, &v);
+        flux4 *a = acc;
+        for (size_t k = 0; k < n_sides; k++) {
+            wenv_oct_bilinear_f((long)sides[k], u, v, idx, wt);
+            for (int c = 0; c < 4; c++)
+                a[idx[c]] += (double)wt[c] * f;
+            a += sides[k] * sides[k];
+        }
+    }
+}
+
+wenv_status wenv_oct_from_envmap_sides(const wenv_envmap *env, size_t count, const size_t *sides, float *const *texels,
+                                       const size_t *excluded, size_t n_excluded, wenv_error *err)
+{
+    /* maps of sides the image is too coarse to splat onto are looked up */
+    if (count > WENV_OCT_SIDES_MAX)
+        return wenv_error_set(err, WENV_ERR_VALUE, "at most %d octahedral maps in one pass, not %zu", WENV_OCT_SIDES_MAX,
+                              count);
+    size_t splat_sides[WENV_OCT_SIDES_MAX], splat_of[WENV_OCT_SIDES_MAX], n_splat = 0, acc_texels = 0;
+    for (size_t k = 0; k < count; k++) {
+        if (!splats(env, sides[k])) {
+            wenv_status st = supersample_map(env, sides[k], texels[k], excluded, n_excluded, err);
             if (st)
                 return st;
+            continue;
         }
-        const wenv_envmap *src = residual ? residual : env;
-#pragma omp parallel for schedule(dynamic, 64)
-        for (size_t t = 0; t < nt; t++)
-            supersample_texel(src, side, t, texels + 3 * t);
-        wenv_envmap_free(residual);
-        return WENV_OK;
+        splat_of[n_splat] = k;
+        splat_sides[n_splat++] = sides[k];
+        acc_texels += sides[k] * sides[k];
     }
+    if (!n_splat)
+        return WENV_OK;
     int threads = omp_get_max_threads();
     size_t w = wenv_envmap_width(env), h = wenv_envmap_height(env);
     /* One accumulator per thread, and each image row sampled into a small per-thread buffer and
      * splatted at once: this runs over every pixel at each lighting change, and materialising
      * every pixel's sample would stream tens of megabytes through memory. */
-    double *acc = calloc((size_t)threads * nt * 4, sizeof(double));
+    /* aligned as the vector type (AVX loads it whole) */
+    flux4 *acc = aligned_alloc(sizeof(flux4), (size_t)threads * acc_texels * sizeof(flux4));
     if (!acc)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory filtering the environment");
+    memset(acc, 0, (size_t)threads * acc_texels * sizeof(flux4));
     int failed = 0;
 #pragma omp parallel num_threads(threads) reduction(| : failed)
     {
-        double *mine = acc + (size_t)omp_get_thread_num() * nt * 4;
+        flux4 *mine = acc + (size_t)omp_get_thread_num() * acc_texels;
         float *dirs = malloc(w * 7 * sizeof(float)), *flux = NULL, *omega = NULL;
         uint32_t *cols = malloc(w * sizeof(uint32_t));
         failed = !dirs || !cols;
@@ -96,25 +146,16 @@ wenv_status wenv_oct_from_envmap(const wenv_envmap *env, size_t side, float *tex
         for (size_t row = 0; row < h; row++) {
             if (!dirs || !cols)
                 continue;
-            size_t count = wenv_envmap_row_samples(env, row, dirs, flux, omega, cols);
-            size_t lo = lower_bound(excluded, n_excluded, row * w), hi = lower_bound(excluded, n_excluded, (row + 1) * w);
-            for (size_t e = lo; e < hi; e++) /* black, solid angle kept */
-                for (size_t p = 0; p < count; p++)
-                    if (row * w + cols[p] == excluded[e])
-                        flux[3 * p] = flux[3 * p + 1] = flux[3 * p + 2] = 0.0f;
-            for (size_t p = 0; p < count; p++) {
-                float u, v, wt[4];
-                uint32_t idx[4];
-                wenv_oct_encode_f(dirs + 3 * p, &u, &v);
-                wenv_oct_bilinear_f((long)side, u, v, idx, wt);
-                for (int c = 0; c < 4; c++) {
-                    double *a = mine + 4 * (size_t)idx[c];
-                    a[0] += (double)wt[c] * flux[3 * p];
-                    a[1] += (double)wt[c] * flux[3 * p + 1];
-                    a[2] += (double)wt[c] * flux[3 * p + 2];
-                    a[3] += (double)wt[c] * omega[p];
-                }
+            size_t n = wenv_envmap_row_samples(env, row, dirs, flux, omega, cols);
+            /* excluded pixels: black, solid angle kept (both lists ascend, so one walk) */
+            size_t e = lower_bound(excluded, n_excluded, row * w), end = lower_bound(excluded, n_excluded, (row + 1) * w);
+            for (size_t p = 0; p < n && e < end; p++) {
+                while (e < end && excluded[e] < row * w + cols[p])
+                    e++;
+                if (e < end && excluded[e] == row * w + cols[p])
+                    flux[3 * p] = flux[3 * p + 1] = flux[3 * p + 2] = 0.0f;
             }
+            splat_row(dirs, flux, omega, n, splat_sides, n_splat, mine);
         }
         free(dirs);
         free(cols);
@@ -124,19 +165,31 @@ wenv_status wenv_oct_from_envmap(const wenv_envmap *env, size_t side, float *tex
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory filtering the environment");
     }
     for (int t = 1; t < threads; t++)
-        for (size_t e = 0; e < nt * 4; e++)
-            acc[e] += acc[(size_t)t * nt * 4 + e];
+        for (size_t e = 0; e < acc_texels; e++)
+            acc[e] += acc[(size_t)t * acc_texels + e];
+    const flux4 *a = acc;
+    for (size_t k = 0; k < n_splat; k++) {
+        size_t side = splat_sides[k], nt = side * side;
+        float *out = texels[splat_of[k]];
 #pragma omp parallel for schedule(dynamic, 64)
-    for (size_t t = 0; t < nt; t++) {
-        if (acc[4 * t + 3] > 0.0) {
-            for (int c = 0; c < 3; c++)
-                texels[3 * t + c] = (float)(acc[4 * t + c] / acc[4 * t + 3]);
-        } else {
-            supersample_texel(env, side, t, texels + 3 * t);
+        for (size_t t = 0; t < nt; t++) {
+            if (a[t][3] > 0.0) {
+                for (int c = 0; c < 3; c++)
+                    out[3 * t + c] = (float)(a[t][c] / a[t][3]);
+            } else {
+                supersample_texel(env, side, t, out + 3 * t);
+            }
         }
+        a += nt;
     }
     free(acc);
     return WENV_OK;
+}
+
+wenv_status wenv_oct_from_envmap(const wenv_envmap *env, size_t side, float *texels, const size_t *excluded,
+                                 size_t n_excluded, wenv_error *err)
+{
+    return wenv_oct_from_envmap_sides(env, 1, &side, &texels, excluded, n_excluded, err);
 }
 
 void wenv_oct_pyramid_free(wenv_oct_pyramid *p)
@@ -154,7 +207,7 @@ size_t wenv_oct_pyramid_bytes(const wenv_oct_pyramid *p)
 }
 
 wenv_status wenv_oct_pyramid_build(wenv_oct_pyramid *p, const wenv_envmap *env, const size_t *excluded, size_t n_excluded,
-                                   size_t max_side, wenv_error *err)
+                                   size_t max_side, size_t also_side, float *also_texels, wenv_error *err)
 {
     memset(p, 0, sizeof *p);
     double npix = (double)(wenv_envmap_width(env) * wenv_envmap_height(env));
@@ -178,7 +231,9 @@ wenv_status wenv_oct_pyramid_build(wenv_oct_pyramid *p, const wenv_envmap *env, 
         p->texels[k] = block + at;
         at += p->side[k] * p->side[k] * 3;
     }
-    if (wenv_oct_from_envmap(env, base, p->texels[0], excluded, n_excluded, err)) {
+    size_t sides[2] = {base, also_side};
+    float *maps[2] = {p->texels[0], also_texels};
+    if (wenv_oct_from_envmap_sides(env, also_texels ? 2 : 1, sides, maps, excluded, n_excluded, err)) {
         wenv_oct_pyramid_free(p);
         return err->status;
     }

@@ -243,7 +243,7 @@ static wenv_status set_environment(void *state, const wenv_envmap *env, const we
     double t0 = wenv_now_seconds();
     pyramid src;
     double sh9[9 * 3];
-    if (wenv_oct_pyramid_build(&src, env, NULL, 0, 512, err))
+    if (wenv_oct_pyramid_build(&src, env, NULL, 0, 512, 0, NULL, err))
         return err->status;
     if (wenv_sh_project_envmap(env, 2, sh9, NULL, err)) {
         wenv_oct_pyramid_free(&src);

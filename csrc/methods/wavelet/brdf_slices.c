@@ -61,7 +61,7 @@ wenv_status wenv_wavelet_build_quadrature(wenv_wavelet *wavelet, size_t k, wenv_
     wavelet->quad_w = malloc(count * 4 * sizeof(float));
     double *cosw = calloc(nl, sizeof(double));
     float *cos_f = malloc(nl * sizeof(float));
-    float *scratch = malloc(L * sizeof(float));
+    float *scratch = malloc(wenv_haar2d_scratch_floats(L, 1) * sizeof(float));
     if (!wavelet->quad_dirs || !wavelet->quad_taps || !wavelet->quad_w || !cosw || !cos_f || !scratch) {
         free(cosw);
         free(cos_f);
@@ -245,7 +245,7 @@ wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material
 #pragma omp parallel
         {
             float *slice = malloc(nl * 3 * sizeof(float));
-            float *scratch = malloc(L * 3 * sizeof(float));
+            float *scratch = malloc(wenv_haar2d_scratch_floats(L, 3) * sizeof(float));
             float *mag = malloc(nl * sizeof(float));
             float *work = malloc(nl * sizeof(float));
             float *fcos = malloc(wavelet->quad_count * 3 * sizeof(float));

@@ -31,13 +31,13 @@ size_t wenv_grazing_light_bytes(const wenv_grazing_light *light)
 }
 
 wenv_status wenv_grazing_light_create(wenv_grazing_light **out, const wenv_envmap *env, const size_t *excluded,
-                                      size_t n_excluded, wenv_error *err)
+                                      size_t n_excluded, size_t also_side, float *also_texels, wenv_error *err)
 {
     *out = NULL;
     wenv_grazing_light *light = calloc(1, sizeof *light);
     if (!light)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the grazing lighting");
-    if (wenv_oct_pyramid_build(&light->pyramid, env, excluded, n_excluded, 512, err)) {
+    if (wenv_oct_pyramid_build(&light->pyramid, env, excluded, n_excluded, 512, also_side, also_texels, err)) {
         free(light);
         return err->status;
     }

@@ -27,9 +27,10 @@
 /* The lighting as an octahedral mip pyramid (radiance, strength applied). */
 typedef struct wenv_grazing_light wenv_grazing_light;
 
-/* The pyramid of wenv_oct_pyramid_build; `excluded` as for wenv_oct_from_envmap. */
+/* The pyramid of wenv_oct_pyramid_build; `excluded` as for wenv_oct_from_envmap, also_side and
+ * also_texels (or NULL) a map made in the same pass over the image. */
 wenv_status wenv_grazing_light_create(wenv_grazing_light **out, const wenv_envmap *env, const size_t *excluded,
-                                      size_t n_excluded, wenv_error *err);
+                                      size_t n_excluded, size_t also_side, float *also_texels, wenv_error *err);
 void wenv_grazing_light_free(wenv_grazing_light *light);
 size_t wenv_grazing_light_bytes(const wenv_grazing_light *light);
 

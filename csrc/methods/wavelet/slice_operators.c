@@ -44,13 +44,26 @@ static size_t centre_texel(size_t n, double u, double v)
     return (size_t)j * n + (size_t)i;
 }
 
+/* An operator by local texel (a gather): each local texel's sum is made in registers and stored
+ * once, where splatting by global texel stored every tap (twice as slow). */
+typedef struct {
+    uint32_t *start;    /* nl + 1: local texel t's taps are start[t] .. start[t + 1] - 1 */
+    uint32_t *texel;    /* each tap's global texel, ascending within a local texel; or NULL and */
+    uint16_t *texel16;  /* the same in 16 bits, kept so when the global map has at most 2^16 texels */
+    float *weight;      /* each tap's weight, a local texel's summing to one */
+    size_t n_taps;
+} slice_operator;
+
+static inline size_t tap_texel(const slice_operator *op, size_t q) { return op->texel16 ? op->texel16[q] : op->texel[q]; }
+
+/* The resampler's taps as they are made, by global texel (the scatter the gather is sorted from). */
 typedef struct {
     uint32_t *texel;  /* global texels with taps, ascending */
     uint32_t *count;  /* how many taps each has */
     uint16_t *local;  /* each tap's local texel */
-    float *weight;    /* each tap's weight, its local texel's row normalised to sum to one */
+    double *raw;      /* each tap's weight, before its local texel's row is normalised */
     size_t n_texels, n_taps;
-} slice_operator;
+} scatter_taps;
 
 struct wenv_slice_operators {
     const wenv_resampler *rs;
@@ -63,12 +76,14 @@ struct wenv_slice_operators {
     atomic_size_t bytes;
 };
 
+typedef float rgbx __attribute__((vector_size(4 * sizeof(float))));
+
 struct wenv_slice_work {
     uint32_t *tap_t;  /* max_taps */
     double *tap_w;
     double *rowsum;   /* nl */
     int32_t *slot;    /* nl: a local texel's tap among the current global texel's, or -1 */
-    double *raw;      /* the taps' weights before normalisation */
+    scatter_taps scatter;
     slice_operator op; /* an operator made here: kept ones are copied out of it */
     size_t room_texels, room_taps;
 };
@@ -77,15 +92,16 @@ static void operator_free(slice_operator *op)
 {
     if (!op)
         return;
+    free(op->start);
     free(op->texel);
-    free(op->count);
-    free(op->local);
+    free(op->texel16);
     free(op->weight);
 }
 
-static size_t operator_bytes(const slice_operator *op)
+static size_t operator_bytes(const slice_operator *op, size_t nl)
 {
-    return sizeof *op + op->n_texels * 2 * sizeof(uint32_t) + op->n_taps * (sizeof(uint16_t) + sizeof(float));
+    size_t index = op->texel16 ? sizeof(uint16_t) : sizeof(uint32_t);
+    return sizeof *op + (nl + 1) * sizeof(uint32_t) + op->n_taps * (index + sizeof(float));
 }
 
 void wenv_slice_operators_free(wenv_slice_operators *ops)
@@ -253,7 +269,8 @@ wenv_slice_work *wenv_slice_work_new(const wenv_slice_operators *ops)
     w->tap_w = malloc(ops->max_taps * sizeof(double));
     w->rowsum = malloc(ops->nl * sizeof(double));
     w->slot = malloc(ops->nl * sizeof(int32_t));
-    if (!w->tap_t || !w->tap_w || !w->rowsum || !w->slot) {
+    w->op.start = malloc((ops->nl + 1) * sizeof(uint32_t));
+    if (!w->tap_t || !w->tap_w || !w->rowsum || !w->slot || !w->op.start) {
         wenv_slice_work_free(w);
         return NULL;
     }
@@ -270,7 +287,10 @@ void wenv_slice_work_free(wenv_slice_work *w)
     free(w->tap_w);
     free(w->rowsum);
     free(w->slot);
-    free(w->raw);
+    free(w->scatter.texel);
+    free(w->scatter.count);
+    free(w->scatter.local);
+    free(w->scatter.raw);
     operator_free(&w->op);
     free(w);
 }
@@ -284,19 +304,20 @@ static int grow(void **p, size_t size)
     return 0;
 }
 
-/* Room in w->op for `texels` global texels and `taps` taps. */
+/* Room in w->scatter and w->op for `texels` global texels and `taps` taps. */
 static int reserve(wenv_slice_work *w, size_t texels, size_t taps)
 {
+    scatter_taps *sc = &w->scatter;
     if (texels > w->room_texels) {
         size_t room = texels > 2 * w->room_texels ? texels : 2 * w->room_texels;
-        if (grow((void **)&w->op.texel, room * sizeof(uint32_t)) || grow((void **)&w->op.count, room * sizeof(uint32_t)))
+        if (grow((void **)&sc->texel, room * sizeof(uint32_t)) || grow((void **)&sc->count, room * sizeof(uint32_t)))
             return -1;
         w->room_texels = room;
     }
     if (taps > w->room_taps) {
         size_t room = taps > 2 * w->room_taps ? taps : 2 * w->room_taps;
-        if (grow((void **)&w->op.local, room * sizeof(uint16_t)) || grow((void **)&w->op.weight, room * sizeof(float)) ||
-            grow((void **)&w->raw, room * sizeof(double)))
+        if (grow((void **)&sc->local, room * sizeof(uint16_t)) || grow((void **)&sc->raw, room * sizeof(double)) ||
+            grow((void **)&w->op.texel, room * sizeof(uint32_t)) || grow((void **)&w->op.weight, room * sizeof(float)))
             return -1;
         w->room_taps = room;
     }
@@ -312,57 +333,78 @@ static int build_operator(const wenv_slice_operators *ops, size_t c, wenv_slice_
     double n[3], f[9];
     wenv_normal_sample(ops->normal_n, c, n);
     wenv_frame(n, f);
-    slice_operator *op = &w->op;
-    op->n_texels = op->n_taps = 0;
+    scatter_taps *sc = &w->scatter;
+    sc->n_texels = sc->n_taps = 0;
     memset(w->rowsum, 0, ops->nl * sizeof(double));
     for (size_t u = 0; u < ops->ng; u++) {
         size_t count = wenv_resampler_texel_taps(ops->rs, f, u, w->tap_t, w->tap_w);
         if (!count)
             continue;
-        if (reserve(w, op->n_texels + 1, op->n_taps + count) < 0)
+        if (reserve(w, sc->n_texels + 1, sc->n_taps + count) < 0)
             return -1;
-        size_t first = op->n_taps;
+        size_t first = sc->n_taps;
         for (size_t q = 0; q < count; q++) {
             uint32_t t = w->tap_t[q];
             if (w->slot[t] < 0) {
-                w->slot[t] = (int32_t)(op->n_taps - first);
-                op->local[op->n_taps] = (uint16_t)t;
-                w->raw[op->n_taps++] = 0.0;
+                w->slot[t] = (int32_t)(sc->n_taps - first);
+                sc->local[sc->n_taps] = (uint16_t)t;
+                sc->raw[sc->n_taps++] = 0.0;
             }
-            w->raw[first + (size_t)w->slot[t]] += w->tap_w[q];
+            sc->raw[first + (size_t)w->slot[t]] += w->tap_w[q];
             w->rowsum[t] += w->tap_w[q];
         }
-        for (size_t e = first; e < op->n_taps; e++)
-            w->slot[op->local[e]] = -1;
-        op->texel[op->n_texels] = (uint32_t)u;
-        op->count[op->n_texels++] = (uint32_t)(op->n_taps - first);
+        for (size_t e = first; e < sc->n_taps; e++)
+            w->slot[sc->local[e]] = -1;
+        sc->texel[sc->n_texels] = (uint32_t)u;
+        sc->count[sc->n_texels++] = (uint32_t)(sc->n_taps - first);
     }
-    for (size_t e = 0; e < op->n_taps; e++)
-        op->weight[e] = (float)(w->raw[e] / w->rowsum[op->local[e]]);
+    /* sorted by local texel (counting sort; global texels stay ascending within each) */
+    slice_operator *op = &w->op;
+    memset(op->start, 0, (ops->nl + 1) * sizeof(uint32_t));
+    for (size_t e = 0; e < sc->n_taps; e++)
+        op->start[sc->local[e] + 1]++;
+    for (size_t t = 0; t < ops->nl; t++)
+        op->start[t + 1] += op->start[t];
+    for (size_t t = 0; t < ops->nl; t++)
+        w->slot[t] = (int32_t)op->start[t]; /* the next free tap of each local texel */
+    for (size_t k = 0, e = 0; k < sc->n_texels; k++)
+        for (size_t end = e + sc->count[k]; e < end; e++) {
+            size_t t = sc->local[e], q = (size_t)w->slot[t]++;
+            op->texel[q] = sc->texel[k];
+            op->weight[q] = (float)(sc->raw[e] / w->rowsum[t]);
+        }
+    for (size_t t = 0; t < ops->nl; t++)
+        w->slot[t] = -1;
+    op->n_taps = sc->n_taps;
     return 0;
 }
 
-/* A copy of op in memory of its own size. */
-static slice_operator *operator_copy(const slice_operator *op)
+/* A copy of op in memory of its own size, its global texels in 16 bits where they fit. */
+static slice_operator *operator_copy(const slice_operator *op, size_t nl, size_t ng)
 {
     slice_operator *k = calloc(1, sizeof *k);
     if (!k)
         return NULL;
-    size_t texels = op->n_texels ? op->n_texels : 1, taps = op->n_taps ? op->n_taps : 1;
-    k->texel = malloc(texels * sizeof(uint32_t));
-    k->count = malloc(texels * sizeof(uint32_t));
-    k->local = malloc(taps * sizeof(uint16_t));
+    size_t taps = op->n_taps ? op->n_taps : 1;
+    int narrow = ng <= (size_t)UINT16_MAX + 1;
+    k->start = malloc((nl + 1) * sizeof(uint32_t));
+    if (narrow)
+        k->texel16 = malloc(taps * sizeof(uint16_t));
+    else
+        k->texel = malloc(taps * sizeof(uint32_t));
     k->weight = malloc(taps * sizeof(float));
-    if (!k->texel || !k->count || !k->local || !k->weight) {
+    if (!k->start || !(k->texel || k->texel16) || !k->weight) {
         operator_free(k);
         free(k);
         return NULL;
     }
-    memcpy(k->texel, op->texel, op->n_texels * sizeof(uint32_t));
-    memcpy(k->count, op->count, op->n_texels * sizeof(uint32_t));
-    memcpy(k->local, op->local, op->n_taps * sizeof(uint16_t));
+    memcpy(k->start, op->start, (nl + 1) * sizeof(uint32_t));
+    if (narrow)
+        for (size_t q = 0; q < op->n_taps; q++)
+            k->texel16[q] = (uint16_t)op->texel[q];
+    else
+        memcpy(k->texel, op->texel, op->n_taps * sizeof(uint32_t));
     memcpy(k->weight, op->weight, op->n_taps * sizeof(float));
-    k->n_texels = op->n_texels;
     k->n_taps = op->n_taps;
     return k;
 }
@@ -398,11 +440,11 @@ int wenv_slice_operators_prepare(wenv_slice_operators *ops, const size_t *slices
             if (atomic_load(&failed) || atomic_load(&ops->bytes) >= ops->budget)
                 continue;
             slice_operator *k = NULL;
-            if (build_operator(ops, todo[e], w) < 0 || !(k = operator_copy(&w->op))) {
+            if (build_operator(ops, todo[e], w) < 0 || !(k = operator_copy(&w->op, ops->nl, ops->ng))) {
                 atomic_store(&failed, 1);
                 continue;
             }
-            size_t bytes = operator_bytes(k);
+            size_t bytes = operator_bytes(k, ops->nl);
             if (atomic_fetch_add(&ops->bytes, bytes) + bytes > ops->budget) {
                 /* past the budget: made again whenever a slice needs it */
                 atomic_fetch_sub(&ops->bytes, bytes);
@@ -418,7 +460,7 @@ int wenv_slice_operators_prepare(wenv_slice_operators *ops, const size_t *slices
     return atomic_load(&failed) ? -1 : 0;
 }
 
-int wenv_slice_operators_resample(const wenv_slice_operators *ops, size_t s, const float *global_texels,
+int wenv_slice_operators_resample(const wenv_slice_operators *ops, size_t s, const float *global_rgbx,
                                   float *local, wenv_slice_work *w)
 {
     size_t c = ops->orbit[s];
@@ -429,18 +471,24 @@ int wenv_slice_operators_resample(const wenv_slice_operators *ops, size_t s, con
         op = &w->op;
     }
     const uint32_t *from = ops->global_perm[ops->global_of[s]];
+    const rgbx *g = (const rgbx *)global_rgbx;
     const uint16_t *to = ops->local_perm[ops->local_of[s]];
-    memset(local, 0, ops->nl * 3 * sizeof(float));
-    size_t e = 0;
-    for (size_t k = 0; k < op->n_texels; k++) {
-        const float *g = global_texels + 3 * (size_t)from[op->texel[k]];
-        float g0 = g[0], g1 = g[1], g2 = g[2];
-        for (size_t end = e + op->count[k]; e < end; e++) {
-            float *l = local + 3 * (size_t)to[op->local[e]], wt = op->weight[e];
-            l[0] += wt * g0;
-            l[1] += wt * g1;
-            l[2] += wt * g2;
+    const float *weight = op->weight;
+    for (size_t t = 0; t < ops->nl; t++) {
+        /* two sums, so that each tap does not wait for the last one's addition */
+        rgbx a = {0.0f, 0.0f, 0.0f, 0.0f}, b = a;
+        size_t q = op->start[t], end = op->start[t + 1];
+        for (; q + 1 < end; q += 2) {
+            a += weight[q] * g[from[tap_texel(op, q)]];
+            b += weight[q + 1] * g[from[tap_texel(op, q + 1)]];
         }
+        if (q < end)
+            a += weight[q] * g[from[tap_texel(op, q)]];
+        a += b;
+        float *l = local + 3 * (size_t)to[t];
+        l[0] = a[0];
+        l[1] = a[1];
+        l[2] = a[2];
     }
     return 0;
 }
@@ -454,7 +502,9 @@ size_t wenv_slice_operators_estimate_bytes(size_t global_n, size_t local_n, size
      * wider than local/global texels) and their tents reach */
     double ratio = (double)local_n / (double)global_n, k = fmax(2.0, ceil(2.83 * ratio));
     double taps = fmin(4.0 * k * k, (M_SQRT2 * ratio + 1.8) * (M_SQRT2 * ratio + 1.8));
-    double per_orbit = 0.5 * (double)(global_n * global_n) * (2 * sizeof(uint32_t) + taps * (sizeof(uint16_t) + sizeof(float)));
+    size_t index = global_n * global_n <= (size_t)UINT16_MAX + 1 ? sizeof(uint16_t) : sizeof(uint32_t);
+    double per_orbit = (double)((local_n * local_n + 1) * sizeof(uint32_t)) +
+                       0.5 * (double)(global_n * global_n) * taps * (double)(index + sizeof(float));
     return (size_t)((double)used * per_orbit);
 }
 

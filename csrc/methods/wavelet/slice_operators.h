@@ -38,9 +38,10 @@ typedef struct wenv_slice_work wenv_slice_work;
 wenv_slice_work *wenv_slice_work_new(const wenv_slice_operators *ops);
 void wenv_slice_work_free(wenv_slice_work *work);
 
-/* local (N_local x 3, pixel domain) = S_s applied to global_texels (N_global x 3).  Reads only the
- * operators, so threads may resample at once.  -1 when out of memory. */
-int wenv_slice_operators_resample(const wenv_slice_operators *ops, size_t s, const float *global_texels,
+/* local (N_local x 3, pixel domain) = S_s applied to the global lighting texels, given as r g b and
+ * a pad (N_global x 4 floats, 16-byte aligned).  Reads only the operators, so threads may resample
+ * at once.  -1 when out of memory. */
+int wenv_slice_operators_resample(const wenv_slice_operators *ops, size_t s, const float *global_rgbx,
                                   float *local, wenv_slice_work *work);
 
 /* What the operators of `used_normals` of the normal samples would take, at most (no budget):

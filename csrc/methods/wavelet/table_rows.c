@@ -65,13 +65,18 @@ wenv_status wenv_wavelet_fill_rows(wenv_wavelet *wavelet, const size_t *rows, si
                 continue;
             size_t first = blk * ROW_BLOCK, count = n - first < ROW_BLOCK ? n - first : ROW_BLOCK;
             float *out[ROW_BLOCK];
-            for (size_t s = 0; s < ROW_BLOCK; s++) {
-                const float *slice = s < count ? wavelet->slices[rows[first + s]] : NULL;
-                for (size_t t = 0; t < nl; t++)
-                    for (int c = 0; c < 3; c++)
-                        lit[(t * 3 + (size_t)c) * ROW_BLOCK + s] = slice ? slice[3 * t + (size_t)c] : 0.0f;
-                if (s < count)
-                    out[s] = wavelet->m->table + rows[first + s] * nv * 3;
+            const float *slice[ROW_BLOCK];
+            for (size_t s = 0; s < count; s++) {
+                slice[s] = wavelet->slices[rows[first + s]];
+                out[s] = wavelet->m->table + rows[first + s] * nv * 3;
+            }
+            /* laid side by side: each slice read in order, the block written in order */
+            for (size_t e = 0; e < nl * 3; e++) {
+                float *to = lit + e * ROW_BLOCK;
+                for (size_t s = 0; s < count; s++)
+                    to[s] = slice[s][e];
+                for (size_t s = count; s < ROW_BLOCK; s++)
+                    to[s] = 0.0f;
             }
             block_rows(lit, wavelet->m->brdf_start, wavelet->m->brdf_idx, wavelet->m->brdf_rgb, nv, wavelet->m->view_inv_albedo,
                        out, count);

@@ -132,7 +132,7 @@ static int compute_slice(wenv_wavelet *wavelet, size_t s, wenv_slice_work *work,
         wenv_rotation_apply(wavelet->rot, s, wavelet->light_idx, wavelet->light_rgb, wavelet->light_count, slice);
     } else {
         /* resampled and transformed in place */
-        if (wenv_slice_operators_resample(wavelet->slice_ops, s, wavelet->global_texels, slice, work) < 0)
+        if (wenv_slice_operators_resample(wavelet->slice_ops, s, wavelet->global_rgbx, slice, work) < 0)
             return -1;
         wenv_haar2d_forward(slice, wavelet->q.local_n, 3, scratch);
     }
@@ -279,7 +279,7 @@ static wenv_status fill_needed(wenv_wavelet *wavelet, wenv_error *err)
 #pragma omp parallel if (ntodo > 1)
     {
         wenv_slice_work *work = wavelet->slice_ops ? wenv_slice_work_new(wavelet->slice_ops) : NULL;
-        float *scratch = malloc(wavelet->q.local_n * 3 * sizeof(float));
+        float *scratch = malloc(wenv_haar2d_scratch_floats(wavelet->q.local_n, 3) * sizeof(float));
         if ((wavelet->slice_ops && !work) || !scratch)
             atomic_store(&failed, 1);
 #pragma omp for schedule(dynamic, 4)

@@ -57,7 +57,7 @@ void wenv_wavelet_free(wenv_wavelet *wavelet)
     free(wavelet->frames);
     free(wavelet->light_idx);
     free(wavelet->light_rgb);
-    free(wavelet->global_texels);
+    free(wavelet->global_rgbx);
     if (wavelet->slices)
         for (size_t s = 0; s < wavelet->ns; s++)
             free(wavelet->slices[s]);
@@ -188,7 +188,7 @@ wenv_status wenv_wavelet_set_environment(wenv_wavelet *wavelet, const wenv_envma
 {
     size_t G = wavelet->q.global_n, ng = wavelet->ng;
     float *texels = malloc(ng * 3 * sizeof(float));
-    float *scratch = malloc(G * 3 * sizeof(float));
+    float *scratch = malloc(wenv_haar2d_scratch_floats(G, 3) * sizeof(float));
     float *mag = malloc(ng * sizeof(float));
     float *work = malloc(ng * sizeof(float));
     uint32_t *idx = malloc(ng * sizeof(uint32_t));
@@ -210,14 +210,15 @@ wenv_status wenv_wavelet_set_environment(wenv_wavelet *wavelet, const wenv_envma
     for (size_t i = 0; i < npixels; i++)
         excluded[i] = bright[i].pixel;
     qsort(excluded, npixels, sizeof *excluded, compare_size);
-    if ((st = wenv_oct_from_envmap(env, G, texels, excluded, npixels, err)))
-        goto done;
     if (wavelet->q.grazing > 0.0) {
+        /* the grazing path's pyramid and the global map in one pass over the image */
         wenv_grazing_light *gl;
-        if ((st = wenv_grazing_light_create(&gl, env, excluded, npixels, err)))
+        if ((st = wenv_grazing_light_create(&gl, env, excluded, npixels, G, texels, err)))
             goto done;
         wenv_grazing_light_free(wavelet->grazing_light);
         wavelet->grazing_light = gl;
+    } else if ((st = wenv_oct_from_envmap(env, G, texels, excluded, npixels, err))) {
+        goto done;
     }
     float peak[3] = {0.0f, 0.0f, 0.0f};
     for (size_t u = 0; u < ng; u++)
@@ -242,9 +243,18 @@ wenv_status wenv_wavelet_set_environment(wenv_wavelet *wavelet, const wenv_envma
         for (size_t e = 0; e < count; e++)
             memcpy(texels + 3 * (size_t)idx[e], rgb + 3 * e, 3 * sizeof(float));
         wenv_haar2d_inverse(texels, G, 3, scratch);
-        free(wavelet->global_texels);
-        wavelet->global_texels = texels;
-        texels = NULL;
+        /* r g b and a pad per texel: the resampling reads a texel as one vector */
+        float *rgbx = aligned_alloc(4 * sizeof(float), ng * 4 * sizeof(float));
+        if (!rgbx) {
+            st = wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the environment");
+            goto done;
+        }
+        for (size_t u = 0; u < ng; u++) {
+            memcpy(rgbx + 4 * u, texels + 3 * u, 3 * sizeof(float));
+            rgbx[4 * u + 3] = 0.0f;
+        }
+        free(wavelet->global_rgbx);
+        wavelet->global_rgbx = rgbx;
     }
     free(wavelet->light_idx);
     free(wavelet->light_rgb);

@@ -52,7 +52,7 @@ struct wenv_wavelet {
     uint32_t *light_idx;     /* kept global Haar coefficients */
     float *light_rgb;
     size_t light_count;
-    float *global_texels;    /* slicing: the kept lighting back in the pixel domain */
+    float *global_rgbx;      /* slicing: the kept lighting back in the pixel domain, r g b and a pad */
     float **slices;          /* ns pointers to nl x 3 Haar coefficients, NULL until needed */
     float *irradiance;       /* ns x 3 */
     float radiance_max[3];   /* brightest texel of the lighting the slices see (lights out) */
