@@ -162,7 +162,7 @@ static void check_grazing_nodes(void)
         p.offset[k] = total;
         total += side * side;
     }
-    float *texels = malloc((size_t)total * 3 * sizeof(float)), *a = malloc(2 * 7 * STRIDE * sizeof(float));
+    float *texels = malloc((size_t)total * 4 * sizeof(float)), *a = malloc(2 * 7 * STRIDE * sizeof(float));
     if (!texels || !a) {
         check(0, "memory for the node check", 0, 0);
         free(texels);
@@ -171,8 +171,8 @@ static void check_grazing_nodes(void)
     }
     unsigned state = 12345u;
 #define NEXT_UNIFORM() ((state = state * 1664525u + 1013904223u), (float)(state >> 8) / 16777216.0f)
-    for (int32_t i = 0; i < total * 3; i++)
-        texels[i] = NEXT_UNIFORM();
+    for (int32_t i = 0; i < total * 4; i++) /* r g b and a pad that must not be read: 1e30 */
+        texels[i] = (i % 4 == 3) ? 1e30f : NEXT_UNIFORM();
     p.texels = texels;
     for (int e = 0; e < 2; e++)
         for (int k = 0; k < NODES; k++) {

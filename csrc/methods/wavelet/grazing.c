@@ -13,7 +13,8 @@
 /* ---- the lighting as an octahedral mip pyramid ------------------------------------------------ */
 
 struct wenv_grazing_light {
-    wenv_oct_pyramid pyramid;
+    float *rgbx;             /* the pyramid's texels as r g b and a pad, level after level */
+    size_t bytes;
     wenv_node_pyramid nodes; /* the same, as the node loop reads it */
 };
 
@@ -21,13 +22,13 @@ void wenv_grazing_light_free(wenv_grazing_light *light)
 {
     if (!light)
         return;
-    wenv_oct_pyramid_free(&light->pyramid);
+    free(light->rgbx);
     free(light);
 }
 
 size_t wenv_grazing_light_bytes(const wenv_grazing_light *light)
 {
-    return light ? wenv_oct_pyramid_bytes(&light->pyramid) : 0;
+    return light ? light->bytes : 0;
 }
 
 wenv_status wenv_grazing_light_create(wenv_grazing_light **out, const wenv_envmap *env, const size_t *excluded,
@@ -37,24 +38,41 @@ wenv_status wenv_grazing_light_create(wenv_grazing_light **out, const wenv_envma
     wenv_grazing_light *light = calloc(1, sizeof *light);
     if (!light)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the grazing lighting");
-    if (wenv_oct_pyramid_build(&light->pyramid, env, excluded, n_excluded, 512, also_side, also_texels, err)) {
+    wenv_oct_pyramid pyramid;
+    if (wenv_oct_pyramid_build(&pyramid, env, excluded, n_excluded, 512, also_side, also_texels, err)) {
         free(light);
         return err->status;
     }
     /* a 512 base halves down to 2: 9 levels */
-    if (light->pyramid.levels > WENV_NODE_LEVELS_MAX) {
-        wenv_grazing_light_free(light);
-        return wenv_error_set(err, WENV_ERR_VALUE, "the grazing lighting has %zu levels, at most %d", light->pyramid.levels,
+    if (pyramid.levels > WENV_NODE_LEVELS_MAX) {
+        wenv_oct_pyramid_free(&pyramid);
+        free(light);
+        return wenv_error_set(err, WENV_ERR_VALUE, "the grazing lighting has %zu levels, at most %d", pyramid.levels,
                               WENV_NODE_LEVELS_MAX);
     }
-    light->nodes.texels = light->pyramid.texels[0];
-    for (size_t k = 0; k < light->pyramid.levels; k++) {
-        light->nodes.side[k] = (int32_t)light->pyramid.side[k];
-        light->nodes.offset[k] = (int32_t)((light->pyramid.texels[k] - light->pyramid.texels[0]) / 3);
+    /* the node loop reads a texel's r and g as one 64-bit word (grazing_nodes.h) */
+    size_t texels = wenv_oct_pyramid_bytes(&pyramid) / (3 * sizeof(float));
+    light->rgbx = malloc(texels * 4 * sizeof(float));
+    if (!light->rgbx) {
+        wenv_oct_pyramid_free(&pyramid);
+        free(light);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the grazing lighting");
     }
-    light->nodes.top = (int32_t)light->pyramid.levels - 1;
+    const float *rgb = pyramid.texels[0];
+    for (size_t t = 0; t < texels; t++) {
+        memcpy(light->rgbx + 4 * t, rgb + 3 * t, 3 * sizeof(float));
+        light->rgbx[4 * t + 3] = 0.0f;
+    }
+    light->bytes = texels * 4 * sizeof(float);
+    light->nodes.texels = light->rgbx;
+    for (size_t k = 0; k < pyramid.levels; k++) {
+        light->nodes.side[k] = (int32_t)pyramid.side[k];
+        light->nodes.offset[k] = (int32_t)((pyramid.texels[k] - pyramid.texels[0]) / 3);
+    }
+    light->nodes.top = (int32_t)pyramid.levels - 1;
     /* a base texel covers about 4 pi / base^2 */
-    light->nodes.lod_offset = (float)(log2((double)light->pyramid.side[0]) - 0.5 * log2(4.0 * M_PI));
+    light->nodes.lod_offset = (float)(log2((double)pyramid.side[0]) - 0.5 * log2(4.0 * M_PI));
+    wenv_oct_pyramid_free(&pyramid);
     *out = light;
     return WENV_OK;
 }

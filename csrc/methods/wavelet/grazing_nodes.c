@@ -28,7 +28,7 @@ static inline void level_read(const wenv_node_pyramid *p, int32_t level, float u
         int32_t out_j = j1 < 0 || j1 >= side;
         int32_t j2 = out_j ? (j1 < 0 ? 0 : side - 1) : j1, i2 = out_j ? side - 1 - i1 : i1;
         float wt = wl * ((c & 1) ? tx : 1.0f - tx) * ((c >> 1) ? ty : 1.0f - ty);
-        const float *t = p->texels + 3 * (size_t)(base + j2 * side + i2);
+        const float *t = p->texels + 4 * (size_t)(base + j2 * side + i2);
         sum[0] += wt * t[0];
         sum[1] += wt * t[1];
         sum[2] += wt * t[2];
@@ -83,7 +83,10 @@ AVX512 static inline void level_read16(const float *texels, __m512i side, __m512
                                        __m512 sum[3])
 {
     const __m512 one = _mm512_set1_ps(1.0f), half = _mm512_set1_ps(0.5f);
-    const __m512i ione = _mm512_set1_epi32(1), zero = _mm512_setzero_si512(), three = _mm512_set1_epi32(3);
+    const __m512i ione = _mm512_set1_epi32(1), zero = _mm512_setzero_si512();
+    /* lanes 0-7 of r g pairs from the first 8-lane gather, 8-15 from the second */
+    const __m512i evens = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24, 26, 28, 30);
+    const __m512i odds = _mm512_add_epi32(evens, ione);
     __m512 sf = _mm512_cvtepi32_ps(side);
     __m512 fx = _mm512_fmsub_ps(_mm512_mul_ps(_mm512_add_ps(u, one), half), sf, half);
     __m512 fy = _mm512_fmsub_ps(_mm512_mul_ps(_mm512_add_ps(v, one), half), sf, half);
@@ -100,11 +103,14 @@ AVX512 static inline void level_read16(const float *texels, __m512i side, __m512
         __mmask16 out_j = _mm512_cmplt_epi32_mask(j1, zero) | _mm512_cmpgt_epi32_mask(j1, last);
         __m512i j2 = _mm512_mask_blend_epi32(out_j, j1, clamp16(j1, last));
         __m512i i2 = _mm512_mask_blend_epi32(out_j, i1, _mm512_sub_epi32(last, i1));
-        __m512i at = _mm512_mullo_epi32(_mm512_add_epi32(base, _mm512_add_epi32(_mm512_mullo_epi32(j2, side), i2)), three);
+        __m512i at = _mm512_add_epi32(base, _mm512_add_epi32(_mm512_mullo_epi32(j2, side), i2));
+        __m512i pairs = _mm512_slli_epi32(at, 1); /* in 64-bit words */
+        __m512 rg_lo = _mm512_castpd_ps(_mm512_i32gather_pd(_mm512_castsi512_si256(pairs), texels, 8));
+        __m512 rg_hi = _mm512_castpd_ps(_mm512_i32gather_pd(_mm512_extracti64x4_epi64(pairs, 1), texels, 8));
         __m512 wt = _mm512_mul_ps(wl, _mm512_mul_ps(wx[c & 1], wy[c >> 1]));
-        sum[0] = _mm512_fmadd_ps(wt, _mm512_i32gather_ps(at, texels, 4), sum[0]);
-        sum[1] = _mm512_fmadd_ps(wt, _mm512_i32gather_ps(at, texels + 1, 4), sum[1]);
-        sum[2] = _mm512_fmadd_ps(wt, _mm512_i32gather_ps(at, texels + 2, 4), sum[2]);
+        sum[0] = _mm512_fmadd_ps(wt, _mm512_permutex2var_ps(rg_lo, evens, rg_hi), sum[0]);
+        sum[1] = _mm512_fmadd_ps(wt, _mm512_permutex2var_ps(rg_lo, odds, rg_hi), sum[1]);
+        sum[2] = _mm512_fmadd_ps(wt, _mm512_i32gather_ps(_mm512_slli_epi32(at, 2), texels + 2, 4), sum[2]);
     }
 }
 
@@ -176,7 +182,7 @@ AVX2 static inline void level_read8(const float *texels, __m256i side, __m256i b
                                     __m256 sum[3])
 {
     const __m256 one = _mm256_set1_ps(1.0f), half = _mm256_set1_ps(0.5f);
-    const __m256i ione = _mm256_set1_epi32(1), three = _mm256_set1_epi32(3);
+    const __m256i ione = _mm256_set1_epi32(1);
     __m256 sf = _mm256_cvtepi32_ps(side);
     __m256 fx = _mm256_fmsub_ps(_mm256_mul_ps(_mm256_add_ps(u, one), half), sf, half);
     __m256 fy = _mm256_fmsub_ps(_mm256_mul_ps(_mm256_add_ps(v, one), half), sf, half);
@@ -193,7 +199,7 @@ AVX2 static inline void level_read8(const float *texels, __m256i side, __m256i b
         __m256i out_j = outside8(j1, last);
         __m256i j2 = _mm256_blendv_epi8(j1, clamp8(j1, last), out_j);
         __m256i i2 = _mm256_blendv_epi8(i1, _mm256_sub_epi32(last, i1), out_j);
-        __m256i at = _mm256_mullo_epi32(_mm256_add_epi32(base, _mm256_add_epi32(_mm256_mullo_epi32(j2, side), i2)), three);
+        __m256i at = _mm256_slli_epi32(_mm256_add_epi32(base, _mm256_add_epi32(_mm256_mullo_epi32(j2, side), i2)), 2);
         __m256 wt = _mm256_mul_ps(wl, _mm256_mul_ps(wx[c & 1], wy[c >> 1]));
         sum[0] = _mm256_fmadd_ps(wt, _mm256_i32gather_ps(texels, at, 4), sum[0]);
         sum[1] = _mm256_fmadd_ps(wt, _mm256_i32gather_ps(texels + 1, at, 4), sum[1]);

@@ -8,7 +8,8 @@
 
 #define WENV_NODE_LEVELS_MAX 16
 
-/* The lighting as the nodes read it: an octahedral mip pyramid in one block of RGB texels. */
+/* The lighting as the nodes read it: an octahedral mip pyramid in one block of texels of 4 floats,
+ * r g b and a pad (AVX-512 reads r and g as one 64-bit word: a third fewer gathered elements). */
 typedef struct {
     const float *texels;
     int32_t side[WENV_NODE_LEVELS_MAX], offset[WENV_NODE_LEVELS_MAX]; /* each level's side, first texel */
