@@ -59,6 +59,7 @@ wenv_status wenv_grazing_light_create(wenv_grazing_light **out, const wenv_envma
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the grazing lighting");
     }
     const float *rgb = pyramid.texels[0];
+#pragma omp parallel for schedule(static)
     for (size_t t = 0; t < texels; t++) {
         memcpy(light->rgbx + 4 * t, rgb + 3 * t, 3 * sizeof(float));
         light->rgbx[4 * t + 3] = 0.0f;
