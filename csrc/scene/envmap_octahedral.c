@@ -45,7 +45,7 @@ static size_t lower_bound(const size_t *a, size_t n, size_t x)
     return lo;
 }
 
-/* Texels of a map no pixel reached (a coarse image, or none near) are read by lookups. */
+/* A map the image is too coarse to splat onto: 4 x 4 lookups per texel, excluded pixels black. */
 static wenv_status supersample_map(const wenv_envmap *env, size_t side, float *texels, const size_t *excluded,
                                    size_t n_excluded, wenv_error *err)
 {
@@ -125,8 +125,8 @@ wenv_status wenv_oct_from_envmap_sides(const wenv_envmap *env, size_t count, con
     size_t w = wenv_envmap_width(env), h = wenv_envmap_height(env);
     /* One accumulator per thread, and each image row sampled into a small per-thread buffer and
      * splatted at once: this runs over every pixel at each lighting change, and materialising
-     * every pixel's sample would stream tens of megabytes through memory. */
-    /* aligned as the vector type (AVX loads it whole) */
+     * every pixel's sample would stream tens of megabytes through memory.  Aligned as the vector
+     * type (AVX loads it whole). */
     flux4 *acc = aligned_alloc(sizeof(flux4), (size_t)threads * acc_texels * sizeof(flux4));
     if (!acc)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory filtering the environment");
