@@ -155,3 +155,20 @@ def test_oct_maps_reject_bad_input():
         wenv._oct_maps(env, [])
     with pytest.raises(TypeError, match="env"):
         wenv._oct_maps(np.zeros((4, 8, 3), np.float32), [8])
+
+
+def test_maps_do_not_depend_on_the_number_of_threads():
+    """Each thread sums its rows' pixels apart; the sums stay in double so that the maps, rounded
+    to float, come out the same however the rows were split."""
+    env = noise_environment(512, 1024, 5)
+    before = wenv._work_threads()
+    try:
+        maps = {}
+        for threads in (1, 2, 3, 5):
+            wenv.set_num_threads(threads)
+            maps[threads] = wenv._oct_maps(env, [512, 128])
+    finally:
+        wenv.set_num_threads(before)
+    for threads in (2, 3, 5):
+        for a, b in zip(maps[1], maps[threads]):
+            assert np.array_equal(a, b)

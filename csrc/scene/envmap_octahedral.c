@@ -130,11 +130,15 @@ wenv_status wenv_oct_from_envmap_sides(const wenv_envmap *env, size_t count, con
     flux4 *acc = aligned_alloc(sizeof(flux4), (size_t)threads * acc_texels * sizeof(flux4));
     if (!acc)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory filtering the environment");
-    memset(acc, 0, (size_t)threads * acc_texels * sizeof(flux4));
-    int failed = 0;
+    int failed = 0, used = 1;
 #pragma omp parallel num_threads(threads) reduction(| : failed)
     {
+        /* each thread clears its own accumulator (and so first touches its pages); the region may
+         * get fewer threads than asked, and only theirs are summed */
+        if (omp_get_thread_num() == 0)
+            used = omp_get_num_threads();
         flux4 *mine = acc + (size_t)omp_get_thread_num() * acc_texels;
+        memset(mine, 0, acc_texels * sizeof(flux4));
         float *dirs = malloc(w * 7 * sizeof(float)), *flux = NULL, *omega = NULL;
         uint32_t *cols = malloc(w * sizeof(uint32_t));
         failed = !dirs || !cols;
@@ -164,8 +168,9 @@ wenv_status wenv_oct_from_envmap_sides(const wenv_envmap *env, size_t count, con
         free(acc);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory filtering the environment");
     }
-    for (int t = 1; t < threads; t++)
-        for (size_t e = 0; e < acc_texels; e++)
+#pragma omp parallel for schedule(static)
+    for (size_t e = 0; e < acc_texels; e++)
+        for (int t = 1; t < used; t++)
             acc[e] += acc[(size_t)t * acc_texels + e];
     const flux4 *a = acc;
     for (size_t k = 0; k < n_splat; k++) {
