@@ -1,11 +1,14 @@
-/* exp and erf in float for loops the compiler vectorises: no library calls (a call stops a loop
+/* What loops the compiler vectorises share: their CPU clones, texels padded to one vector, and
+ * exp and erf in float: no library calls (a call stops a loop
  * from running several lanes per instruction), no branches, only arithmetic, selects and a bit
  * cast.  Relative error about 2e-7 for exp, absolute 1.5e-7 for erf (Abramowitz and Stegun 7.1.26),
  * against float's own 6e-8: well inside what the float evaluators promise (~1e-5). */
 #ifndef WENV_VECTOR_MATH_H
 #define WENV_VECTOR_MATH_H
 
+#include <stddef.h>
 #include <stdint.h>
+#include <stdlib.h>
 #include <string.h>
 
 /* Loops written for the vectoriser are compiled for AVX-512, AVX2 and baseline x86-64, the best
@@ -16,6 +19,21 @@
 #else
 #define WENV_VECTOR_CLONES
 #endif
+
+/* n r g b texels as r g b and a pad (4 floats, 16-byte aligned), so that a loop reads a texel as
+ * one vector; NULL when out of memory.  The caller frees it. */
+static inline float *wenv_rgbx_from_rgb(const float *rgb, size_t n)
+{
+    float *rgbx = aligned_alloc(4 * sizeof(float), (n ? n : 1) * 4 * sizeof(float));
+    if (!rgbx)
+        return NULL;
+#pragma omp parallel for schedule(static) if (n > 65536)
+    for (size_t t = 0; t < n; t++) {
+        memcpy(rgbx + 4 * t, rgb + 3 * t, 3 * sizeof(float));
+        rgbx[4 * t + 3] = 0.0f;
+    }
+    return rgbx;
+}
 
 /* e^x; 0 below -87 (e^-87 is near float's smallest normal), capped above 88. */
 static inline float wenv_exp_vf(float x)

@@ -7,6 +7,7 @@
 #include <string.h>
 
 #include "math/maps.h"
+#include "math/vector_math.h"
 #include "methods/wavelet/grazing_nodes.h"
 #include "scene/envmap_octahedral.h"
 
@@ -52,17 +53,11 @@ wenv_status wenv_grazing_light_create(wenv_grazing_light **out, const wenv_envma
     }
     /* the node loop reads a texel's r and g as one 64-bit word (grazing_nodes.h) */
     size_t texels = wenv_oct_pyramid_bytes(&pyramid) / (3 * sizeof(float));
-    light->rgbx = malloc(texels * 4 * sizeof(float));
+    light->rgbx = wenv_rgbx_from_rgb(pyramid.texels[0], texels);
     if (!light->rgbx) {
         wenv_oct_pyramid_free(&pyramid);
         free(light);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the grazing lighting");
-    }
-    const float *rgb = pyramid.texels[0];
-#pragma omp parallel for schedule(static)
-    for (size_t t = 0; t < texels; t++) {
-        memcpy(light->rgbx + 4 * t, rgb + 3 * t, 3 * sizeof(float));
-        light->rgbx[4 * t + 3] = 0.0f;
     }
     light->bytes = texels * 4 * sizeof(float);
     light->nodes.texels = light->rgbx;

@@ -9,6 +9,7 @@
 
 #include "base/clock.h"
 #include "math/haar.h"
+#include "math/vector_math.h"
 #include "scene/envmap_octahedral.h"
 
 wenv_status wenv_wavelet_quality_check(const wenv_wavelet_quality *q, wenv_error *err)
@@ -243,15 +244,11 @@ wenv_status wenv_wavelet_set_environment(wenv_wavelet *wavelet, const wenv_envma
         for (size_t e = 0; e < count; e++)
             memcpy(texels + 3 * (size_t)idx[e], rgb + 3 * e, 3 * sizeof(float));
         wenv_haar2d_inverse(texels, G, 3, scratch);
-        /* r g b and a pad per texel: the resampling reads a texel as one vector */
-        float *rgbx = aligned_alloc(4 * sizeof(float), ng * 4 * sizeof(float));
+        /* the resampling reads a texel as one vector */
+        float *rgbx = wenv_rgbx_from_rgb(texels, ng);
         if (!rgbx) {
             st = wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the environment");
             goto done;
-        }
-        for (size_t u = 0; u < ng; u++) {
-            memcpy(rgbx + 4 * u, texels + 3 * u, 3 * sizeof(float));
-            rgbx[4 * u + 3] = 0.0f;
         }
         free(wavelet->global_rgbx);
         wavelet->global_rgbx = rgbx;
