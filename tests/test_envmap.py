@@ -1,5 +1,6 @@
 """wenv.Environment / wenv.load_environment: projections, solid angles, lookup, file readers, and the
 orientation check against Cycles."""
+import gc
 import math
 import os
 import struct
@@ -1001,3 +1002,22 @@ def test_orientation_against_cycles(bpy, tmp_path):
                   wenv.Environment(px[::-1].copy(), "mirror_ball", rotation, strength),
                   env.with_transform(rotation=rotation + math.pi / 2), env.with_transform(rotation=-rotation)]:
         assert np.abs(colours - wrong.lookup(f32(dirs)))[keep].max() > 0.05
+
+
+def test_a_turned_copy_shares_the_image_and_outlives_its_original():
+    """with_transform shares the (never changed) image instead of copying it; whichever of the
+    environments goes first, the others keep the image and read it as before."""
+    img = np.random.default_rng(2).random((16, 32, 3)).astype(np.float32)
+    env = wenv.Environment(img, rotation=0.2)
+    turned = env.with_transform(rotation=1.1, strength=2.5)
+    again = turned.with_transform(rotation=0.0)
+    d = np.float32([[0.3, -0.5, 0.81], [0.0, 0.0, -1.0]])
+    expected = env.with_transform(rotation=1.1, strength=2.5).lookup(d)
+    del env
+    gc.collect()
+    assert np.array_equal(turned.pixels, img) and np.array_equal(again.pixels, img)
+    assert np.array_equal(turned.lookup(d), expected)
+    assert (turned.rotation, turned.strength, again.rotation, again.strength) == (1.1, 2.5, 0.0, 2.5)
+    del turned
+    gc.collect()
+    assert np.array_equal(again.pixels, img)

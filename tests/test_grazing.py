@@ -42,7 +42,9 @@ def test_constant_environment_gives_the_albedo():
 
 def test_no_change_where_the_map_resolves_the_lobe():
     """Off (0), and for a wide lobe (m = 0.5 at local 64 is at least 20 texels wide at any view),
-    the result is the wavelet one, bit for bit."""
+    the result is the wavelet one, bit for bit, and nothing is made for the grazing path (no rule,
+    and no pyramid of the lighting, which only a material with a rule reads); a narrow lobe makes
+    both."""
     env = wenv.load_environment(hdri_path("sunset"))
     rng = np.random.default_rng(3)
     n = rng.normal(size=(300, 3)).astype(np.float32)
@@ -54,7 +56,10 @@ def test_no_change_where_the_map_resolves_the_lobe():
     base = wenv.Shader(env, lobe(0.5), quality=q, method="slicing")
     on = wenv.Shader(env, lobe(0.5), quality={**q, "grazing": 4.0}, method="slicing")
     assert np.array_equal(base.shade(n, v), on.shade(n, v))
-    assert on.stats["grazing_bytes"] > 0 and base.stats["grazing_bytes"] == 0
+    assert on.stats["grazing_bytes"] == 0 and base.stats["grazing_bytes"] == 0
+    on.set_material(lobe(0.05))
+    on.shade(n, v)
+    assert on.stats["grazing_bytes"] > 512 * 512 * 16  # the pyramid: a 512^2 base of r g b and a pad
 
 
 def test_continuous_in_the_view_and_finite():
@@ -115,3 +120,29 @@ def test_high_owes_its_narrow_lobes_to_the_grazing_path():
                 out = wenv.Shader(env, mat, quality={**HIGH, "grazing": grazing}, method="slicing").shade(nrm, v)
                 err.append(float(np.sqrt(np.mean((out - ref) ** 2)) / np.sqrt(np.mean(ref ** 2))))
             assert err[0] < 0.25 * err[1], (h, name, err)
+
+
+def test_the_pyramid_is_made_only_for_a_material_that_reads_it():
+    """A diffuse material makes neither the grazing path's pyramid nor a lighting slice (its
+    irradiance is summed over the global map); a lobe made current later, or kept and made current
+    again after a new image, makes the pyramid then and shades as a shader made with it does."""
+    sunset, city = (wenv.load_environment(hdri_path(h)) for h in ("sunset", "city"))
+    rng = np.random.default_rng(5)
+    n = rng.normal(size=(400, 3)).astype(np.float32)
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    v = rng.normal(size=(400, 3)).astype(np.float32)
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    v[np.sum(n * v, axis=1) < 0] *= -1
+    q = {**SMALL, "grazing": 4.0}
+    diffuse, glossy = wenv.Lambert((0.8, 0.6, 0.4)), lobe(0.1)
+    sh = wenv.Shader(sunset, diffuse, quality=q, method="slicing")
+    sh.shade(n, v)
+    assert sh.stats["grazing_bytes"] == 0 and sh.stats["slices_ready"] == 0
+    for env in (sunset, city):
+        sh.set_environment(env)
+        sh.set_material(glossy)
+        fresh = wenv.Shader(env, glossy, quality=q, method="slicing")
+        assert np.array_equal(sh.shade(n, v), fresh.shade(n, v))
+        assert sh.stats["grazing_bytes"] == fresh.stats["grazing_bytes"] > 0
+        sh.set_material(diffuse)
+        assert np.array_equal(sh.shade(n, v), wenv.Shader(env, diffuse, quality=q, method="slicing").shade(n, v))

@@ -8,6 +8,7 @@
 #include <errno.h>
 #include <fcntl.h>
 #include <math.h>
+#include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -34,6 +35,8 @@ struct wenv_envmap {
     double *column_xy;   /* equirect: world (x, y) of each column's azimuth, rotation applied */
     double *row_flux;    /* per row: sum of solid angle x channel mean over its pixels (no strength) */
     float *row_peak;     /* per row: its brightest channel value (no strength) */
+    atomic_size_t *image_users; /* environments sharing pixels, row_flux and row_peak (never changed
+                                   once made): copies with another transform share them */
     uint64_t fingerprint; /* of the pixels (wenv_envmap_fingerprint) */
 };
 
@@ -115,9 +118,9 @@ static wenv_status check_shape(size_t height, size_t width, wenv_projection proj
 /* Takes ownership of `rgb` (height x width x 3): validates it, clamps negatives, and wraps it. */
 static int row_stats(wenv_envmap *env);
 
-/* Where pixels come from: an argument (a bad one is a WENV_ERR_VALUE), a file (WENV_ERR_IO, as for
- * every other fault of a file), or another environment (already finite and non-negative). */
-typedef enum { PIXELS_FROM_ARGUMENT, PIXELS_FROM_FILE, PIXELS_FROM_ENVIRONMENT } pixel_source;
+/* Where pixels come from: an argument (a bad one is a WENV_ERR_VALUE) or a file (WENV_ERR_IO, as for
+ * every other fault of a file). */
+typedef enum { PIXELS_FROM_ARGUMENT, PIXELS_FROM_FILE } pixel_source;
 
 /* Whether pixels x strength stay within WENV_RADIANCE_MAX (the rows' peaks must be set). */
 static wenv_status check_radiance_range(const wenv_envmap *env, const char *what, pixel_source source,
@@ -134,6 +137,25 @@ static wenv_status check_radiance_range(const wenv_envmap *env, const char *what
     return WENV_OK;
 }
 
+/* Equirect: world (x, y) of each column's azimuth under the rotation, so that sampling every pixel
+ * at a lighting change needs no sincos.  -1 when out of memory. */
+static int column_azimuths(wenv_envmap *env)
+{
+    if (env->projection != WENV_PROJ_EQUIRECT)
+        return 0;
+    env->column_xy = malloc(2 * env->width * sizeof(double));
+    if (!env->column_xy)
+        return -1;
+    for (size_t col = 0; col < env->width; col++) {
+        double phi = PI * (1.0 - 2.0 * (((double)col + 0.5) / (double)env->width));
+        double x = cos(phi), y = sin(phi);
+        /* world direction w = R_z(-r) d */
+        env->column_xy[2 * col] = env->cos_r * x + env->sin_r * y;
+        env->column_xy[2 * col + 1] = -env->sin_r * x + env->cos_r * y;
+    }
+    return 0;
+}
+
 /* Takes ownership of rgb (height x width x 3). */
 static wenv_status envmap_adopt_checked(wenv_envmap **out, float *rgb, size_t height, size_t width,
                                         wenv_projection projection, double rotation, double strength,
@@ -144,7 +166,7 @@ static wenv_status envmap_adopt_checked(wenv_envmap **out, float *rgb, size_t he
         free(rgb);
         return err->status;
     }
-    size_t count = source == PIXELS_FROM_ENVIRONMENT ? 0 : height * width * 3;
+    size_t count = height * width * 3;
     for (size_t i = 0; i < count; i++) {
         if (!isfinite(rgb[i])) {
             size_t px = i / 3;
@@ -170,21 +192,12 @@ static wenv_status envmap_adopt_checked(wenv_envmap **out, float *rgb, size_t he
     env->cos_r = cos(rotation);
     env->sin_r = sin(rotation);
     env->pixels = rgb;
-    if (projection == WENV_PROJ_EQUIRECT) {
-        /* per-column azimuths, so that sampling every pixel at a lighting change needs no sincos */
-        env->column_xy = malloc(2 * width * sizeof(double));
-        if (!env->column_xy) {
-            free(rgb);
-            free(env);
-            return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for an environment");
-        }
-        for (size_t col = 0; col < width; col++) {
-            double phi = PI * (1.0 - 2.0 * (((double)col + 0.5) / (double)width));
-            double x = cos(phi), y = sin(phi);
-            /* world direction w = R_z(-r) d */
-            env->column_xy[2 * col] = env->cos_r * x + env->sin_r * y;
-            env->column_xy[2 * col + 1] = -env->sin_r * x + env->cos_r * y;
-        }
+    env->image_users = malloc(sizeof *env->image_users);
+    if (env->image_users)
+        atomic_init(env->image_users, 1);
+    if (!env->image_users || column_azimuths(env) < 0) {
+        wenv_envmap_free(env);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for an environment");
     }
     if (projection == WENV_PROJ_CUBE_CROSS) {
         int vertical = width * 4 == height * 3;
@@ -193,15 +206,13 @@ static wenv_status envmap_adopt_checked(wenv_envmap **out, float *rgb, size_t he
         if (vertical)
             env->faces[1] = vertical_cross_minus_x;
     }
-    if (source != PIXELS_FROM_ENVIRONMENT) { /* a copy takes the original's statistics */
-        if (row_stats(env) < 0) {
-            wenv_envmap_free(env);
-            return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for an environment");
-        }
-        if (check_radiance_range(env, what, source, err)) {
-            wenv_envmap_free(env);
-            return err->status;
-        }
+    if (row_stats(env) < 0) {
+        wenv_envmap_free(env);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for an environment");
+    }
+    if (check_radiance_range(env, what, source, err)) {
+        wenv_envmap_free(env);
+        return err->status;
     }
     *out = env;
     return WENV_OK;
@@ -237,45 +248,45 @@ wenv_status wenv_envmap_create(wenv_envmap **out, const float *pixels, size_t he
 wenv_status wenv_envmap_with_transform(wenv_envmap **out, const wenv_envmap *env, double rotation,
                                        double strength, wenv_error *err)
 {
-    /* a plain copy: the pixels were checked when the original was made (a lighting change) */
-    size_t bytes = env->height * env->width * 3 * sizeof(float);
-    float *rgb = malloc(bytes ? bytes : 1);
-    if (!rgb)
-        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for a %zu x %zu environment", env->width,
-                              env->height);
-    memcpy(rgb, env->pixels, bytes);
-    wenv_status st = envmap_adopt_checked(out, rgb, env->height, env->width, env->projection, rotation, strength,
-                                          "pixels", PIXELS_FROM_ENVIRONMENT, err);
-    if (st)
-        return st;
-    /* the rows' statistics do not depend on rotation or strength */
-    (*out)->row_flux = malloc((env->height ? env->height : 1) * sizeof(double));
-    (*out)->row_peak = malloc((env->height ? env->height : 1) * sizeof(float));
-    if (!(*out)->row_flux || !(*out)->row_peak) {
-        wenv_envmap_free(*out);
-        *out = NULL;
+    /* the image is shared, not copied: a lighting change makes one of these per new image */
+    *out = NULL;
+    if (check_transform(rotation, strength, err))
+        return err->status;
+    wenv_envmap *copy = malloc(sizeof *copy);
+    if (!copy)
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for an environment");
+    *copy = *env;
+    copy->rotation = rotation;
+    copy->strength = strength;
+    copy->cos_r = cos(rotation);
+    copy->sin_r = sin(rotation);
+    copy->column_xy = NULL;
+    atomic_fetch_add(copy->image_users, 1);
+    if (column_azimuths(copy) < 0) {
+        wenv_envmap_free(copy);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for an environment");
     }
-    memcpy((*out)->row_flux, env->row_flux, env->height * sizeof(double));
-    memcpy((*out)->row_peak, env->row_peak, env->height * sizeof(float));
-    (*out)->fingerprint = env->fingerprint;
-    if (check_radiance_range(*out, "strength", PIXELS_FROM_ARGUMENT, err)) {
-        wenv_envmap_free(*out);
-        *out = NULL;
+    if (check_radiance_range(copy, "strength", PIXELS_FROM_ARGUMENT, err)) {
+        wenv_envmap_free(copy);
         return err->status;
     }
+    *out = copy;
     return WENV_OK;
 }
 
 void wenv_envmap_free(wenv_envmap *env)
 {
-    if (env) {
+    if (!env)
+        return;
+    /* the last of the environments sharing the image frees it */
+    if (!env->image_users || atomic_fetch_sub(env->image_users, 1) == 1) {
         free(env->pixels);
-        free(env->column_xy);
         free(env->row_flux);
         free(env->row_peak);
-        free(env);
+        free(env->image_users);
     }
+    free(env->column_xy);
+    free(env);
 }
 
 size_t wenv_envmap_width(const wenv_envmap *env) { return env->width; }

@@ -66,7 +66,8 @@ wenv_status wenv_envmap_create(wenv_envmap **out, const float *pixels, size_t he
 wenv_status wenv_envmap_load(wenv_envmap **out, const char *path, wenv_projection projection,
                              double rotation, double strength, wenv_error *err);
 
-/* A copy with another rotation and strength, sharing nothing with the original. */
+/* A copy with another rotation and strength.  It shares the image with the original (an image is
+ * never changed once made; the last environment freed frees it), so it costs no pixels. */
 wenv_status wenv_envmap_with_transform(wenv_envmap **out, const wenv_envmap *env, double rotation,
                                        double strength, wenv_error *err);
 

@@ -59,13 +59,7 @@ wenv_status wenv_wavelet_build_quadrature(wenv_wavelet *wavelet, size_t k, wenv_
     wavelet->quad_dirs = malloc(count * 3 * sizeof(float));
     wavelet->quad_taps = malloc(count * 4 * sizeof(uint32_t));
     wavelet->quad_w = malloc(count * 4 * sizeof(float));
-    double *cosw = calloc(nl, sizeof(double));
-    float *cos_f = malloc(nl * sizeof(float));
-    float *scratch = malloc(wenv_haar2d_scratch_floats(L, 1) * sizeof(float));
-    if (!wavelet->quad_dirs || !wavelet->quad_taps || !wavelet->quad_w || !cosw || !cos_f || !scratch) {
-        free(cosw);
-        free(cos_f);
-        free(scratch);
+    if (!wavelet->quad_dirs || !wavelet->quad_taps || !wavelet->quad_w) {
         wenv_wavelet_free_quadrature(wavelet);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the local quadrature");
     }
@@ -86,7 +80,6 @@ wenv_status wenv_wavelet_build_quadrature(wenv_wavelet *wavelet, size_t k, wenv_
             for (int c = 0; c < 4; c++) {
                 wavelet->quad_taps[4 * e + c] = (uint32_t)idx[c];
                 wavelet->quad_w[4 * e + c] = (float)(w[c] * omega);
-                cosw[idx[c]] += w[c] * omega * d[2];
                 total += w[c] * omega * d[2];
             }
         }
@@ -94,17 +87,6 @@ wenv_status wenv_wavelet_build_quadrature(wenv_wavelet *wavelet, size_t k, wenv_
     double scale = M_PI / total;
     for (size_t e = 0; e < count * 4; e++)
         wavelet->quad_w[e] = (float)(wavelet->quad_w[e] * scale);
-    for (size_t t = 0; t < nl; t++)
-        cos_f[t] = (float)(cosw[t] * scale);
-    wenv_haar2d_forward(cos_f, L, 1, scratch);
-    free(cosw);
-    free(scratch);
-    /* The irradiance weights stay those of the first quadrature: the lighting slices (and their
-     * irradiance) outlive materials, so a slice must not depend on which material was current. */
-    if (wavelet->cosine_haar)
-        free(cos_f);
-    else
-        wavelet->cosine_haar = cos_f;
     wavelet->quad_count = count;
     wavelet->quad_k = k;
     return WENV_OK;

@@ -56,6 +56,8 @@ wenv_status wenv_wavelet_remake_ready(wenv_wavelet *wavelet, int lighting, wenv_
     }
     if (!wavelet->have_env || !wavelet->m)
         return WENV_OK;
+    if (wenv_wavelet_ensure_grazing(wavelet, err))
+        return err->status;
     return fill_needed(wavelet, err);
 }
 
@@ -136,15 +138,6 @@ static int compute_slice(wenv_wavelet *wavelet, size_t s, wenv_slice_work *work,
             return -1;
         wenv_haar2d_forward(slice, wavelet->q.local_n, 3, scratch);
     }
-    double e[3] = {0, 0, 0};
-    for (size_t t = 0; t < wavelet->nl; t++) {
-        float c = wavelet->cosine_haar[t];
-        e[0] += c * slice[3 * t];
-        e[1] += c * slice[3 * t + 1];
-        e[2] += c * slice[3 * t + 2];
-    }
-    for (int c = 0; c < 3; c++)
-        wavelet->irradiance[3 * s + c] = (float)e[c];
     return 0;
 }
 
@@ -158,7 +151,7 @@ static void shade_vertex(const wenv_wavelet *wavelet, const vertex_taps *tp, flo
         e[2] += tp->sample_w[k] * ir[2];
     }
     /* table entries are mean radiances under the lobe (see albedo_tables) */
-    for (int k = 0; k < 16; k++) {
+    for (int k = 0; k < 16 && wavelet->m->brdf_terms; k++) {
         const float *t = wavelet->m->table + 3 * (size_t)tp->pair[k];
         float w = tp->pair_w[k];
         if (w > 0.0f) {
@@ -235,9 +228,13 @@ static inline int read_states(unsigned char *state, const uint32_t *idx, const f
     return all;
 }
 
-/* Whether every slice and table row the vertex reads is ready; marks those ready as USED. */
+/* Whether every slice and table row the vertex reads is ready; marks those ready as USED.  A
+ * material without BRDF slices (diffuse only) reads neither: its table is zero, and the irradiance
+ * is made with the lighting. */
 static int read_taps(const wenv_wavelet *wavelet, const vertex_taps *tp)
 {
+    if (!wavelet->m->brdf_terms)
+        return 1;
     int slices = read_states(wavelet->slice_ready, tp->sample, tp->sample_w, 4);
     return read_states(wavelet->m->row_ready, tp->sample, tp->sample_w, 4) && slices;
 }
@@ -317,6 +314,8 @@ wenv_status wenv_wavelet_shade(wenv_wavelet *wavelet, const float *normals, cons
 {
     if (!wavelet->have_env || !wavelet->m)
         return wenv_error_set(err, WENV_ERR_VALUE, "the shader needs an environment and a material");
+    if (wenv_wavelet_ensure_grazing(wavelet, err)) /* not made when memory ran out before */
+        return err->status;
     /* One pass shades every vertex whose table rows exist (all of them once its normals were seen,
      * whatever the view) and flags what the others need; those are shaded after the missing rows
      * are made. */

@@ -64,12 +64,14 @@ void wenv_wavelet_free(wenv_wavelet *wavelet)
             free(wavelet->slices[s]);
     free(wavelet->slices);
     free(wavelet->irradiance);
+    wenv_irradiance_rule_free(wavelet->irradiance_rule);
     wenv_lights_free(wavelet->lights);
     wenv_grazing_light_free(wavelet->grazing_light);
+    wenv_envmap_free(wavelet->image);
+    free(wavelet->excluded);
     free(wavelet->slice_ready);
     free(wavelet->slice_need);
     wenv_wavelet_free_quadrature(wavelet);
-    free(wavelet->cosine_haar);
     for (size_t i = 0; i < wavelet->n_kept; i++)
         wenv_wavelet_material_free(wavelet->kept[i]);
     free(wavelet);
@@ -141,7 +143,8 @@ wenv_status wenv_wavelet_create(wenv_wavelet **out, const wenv_wavelet_quality *
         for (int c = 0; c < 9; c++)
             wavelet->frames[9 * s + c] = (float)f[c];
     }
-    if (wenv_wavelet_build_quadrature(wavelet, 2, err)) {
+    if (wenv_irradiance_rule_create(&wavelet->irradiance_rule, q->global_n, err) ||
+        wenv_wavelet_build_quadrature(wavelet, 2, err)) {
         wenv_wavelet_free(wavelet);
         return err->status;
     }
@@ -193,16 +196,20 @@ wenv_status wenv_wavelet_set_environment(wenv_wavelet *wavelet, const wenv_envma
     float *mag = malloc(ng * sizeof(float));
     float *work = malloc(ng * sizeof(float));
     uint32_t *idx = malloc(ng * sizeof(uint32_t));
-    float *rgb = NULL;
+    float *rgb = NULL, *irradiance = malloc(wavelet->ns * 3 * sizeof(float));
     wenv_status st = WENV_OK;
     size_t npixels = wavelet->q.lights;
     wenv_bright_pixel *bright = malloc((npixels ? npixels : 1) * sizeof *bright);
     size_t *excluded = malloc((npixels ? npixels : 1) * sizeof *excluded);
     wenv_lights *lights = NULL;
-    if (!texels || !scratch || !mag || !work || !idx || !bright || !excluded) {
+    wenv_grazing_light *grazing = NULL;
+    wenv_envmap *image = NULL;
+    if (!texels || !scratch || !mag || !work || !idx || !irradiance || !bright || !excluded) {
         st = wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the environment");
         goto done;
     }
+    if ((st = wenv_envmap_with_transform(&image, env, wenv_envmap_rotation(env), wenv_envmap_strength(env), err)))
+        goto done;
     npixels = wenv_envmap_brightest(env, npixels, wavelet->q.light_threshold, bright);
     if ((st = wenv_lights_create(&lights, bright, npixels, err)))
         goto done;
@@ -211,13 +218,10 @@ wenv_status wenv_wavelet_set_environment(wenv_wavelet *wavelet, const wenv_envma
     for (size_t i = 0; i < npixels; i++)
         excluded[i] = bright[i].pixel;
     qsort(excluded, npixels, sizeof *excluded, compare_size);
-    if (wavelet->q.grazing > 0.0) {
+    if (wavelet->m && wavelet->m->grazing_rule) {
         /* the grazing path's pyramid and the global map in one pass over the image */
-        wenv_grazing_light *gl;
-        if ((st = wenv_grazing_light_create(&gl, env, excluded, npixels, G, texels, err)))
+        if ((st = wenv_grazing_light_create(&grazing, env, excluded, npixels, G, texels, err)))
             goto done;
-        wenv_grazing_light_free(wavelet->grazing_light);
-        wavelet->grazing_light = gl;
     } else if ((st = wenv_oct_from_envmap(env, G, texels, excluded, npixels, err))) {
         goto done;
     }
@@ -238,12 +242,16 @@ wenv_status wenv_wavelet_set_environment(wenv_wavelet *wavelet, const wenv_envma
     }
     for (size_t e = 0; e < count; e++)
         memcpy(rgb + 3 * e, texels + 3 * (size_t)idx[e], 3 * sizeof(float));
+    /* the kept lighting back in the pixel domain: the normal samples' irradiance sums it, and
+     * slicing resamples it */
+    memset(texels, 0, ng * 3 * sizeof(float));
+    for (size_t e = 0; e < count; e++)
+        memcpy(texels + 3 * (size_t)idx[e], rgb + 3 * e, 3 * sizeof(float));
+    wenv_haar2d_inverse(texels, G, 3, scratch);
+    if ((st = wenv_irradiance_compute(wavelet->irradiance_rule, texels, wavelet->frames + 6, 9, wavelet->ns, irradiance,
+                                      err)))
+        goto done;
     if (wavelet->method == WENV_WAVELET_SLICING) {
-        /* slicing reads the kept lighting back in the pixel domain */
-        memset(texels, 0, ng * 3 * sizeof(float));
-        for (size_t e = 0; e < count; e++)
-            memcpy(texels + 3 * (size_t)idx[e], rgb + 3 * e, 3 * sizeof(float));
-        wenv_haar2d_inverse(texels, G, 3, scratch);
         /* the resampling reads a texel as one vector */
         float *rgbx = wenv_rgbx_from_rgb(texels, ng);
         if (!rgbx) {
@@ -259,11 +267,24 @@ wenv_status wenv_wavelet_set_environment(wenv_wavelet *wavelet, const wenv_envma
     wavelet->light_rgb = rgb;
     wavelet->light_count = count;
     memcpy(wavelet->radiance_max, peak, sizeof peak);
+    free(wavelet->irradiance);
+    wavelet->irradiance = irradiance;
     idx = NULL;
     rgb = NULL;
+    irradiance = NULL;
     wenv_lights_free(wavelet->lights);
     wavelet->lights = lights;
     lights = NULL;
+    wenv_grazing_light_free(wavelet->grazing_light);
+    wavelet->grazing_light = grazing;
+    grazing = NULL;
+    wenv_envmap_free(wavelet->image);
+    wavelet->image = image;
+    image = NULL;
+    free(wavelet->excluded);
+    wavelet->excluded = excluded;
+    wavelet->n_excluded = npixels;
+    excluded = NULL;
     wavelet->have_env = 1;
     st = wenv_wavelet_remake_ready(wavelet, 1, err);
 done:
@@ -273,10 +294,21 @@ done:
     free(work);
     free(idx);
     free(rgb);
+    free(irradiance);
     free(bright);
     free(excluded);
     wenv_lights_free(lights);
+    wenv_grazing_light_free(grazing);
+    wenv_envmap_free(image);
     return st;
+}
+
+wenv_status wenv_wavelet_ensure_grazing(wenv_wavelet *wavelet, wenv_error *err)
+{
+    if (!wavelet->have_env || wavelet->grazing_light || !wavelet->m || !wavelet->m->grazing_rule)
+        return WENV_OK;
+    return wenv_grazing_light_create(&wavelet->grazing_light, wavelet->image, wavelet->excluded, wavelet->n_excluded,
+                                     0, NULL, err);
 }
 
 void wenv_wavelet_get_stats(const wenv_wavelet *wavelet, wenv_wavelet_stats *stats)

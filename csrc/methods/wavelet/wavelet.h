@@ -9,7 +9,8 @@
  * Material: for each view sample (a hemi-octahedral grid of local view directions) the BRDF
  * slice f(w, v) cos(w) is integrated against each local texel's tent, Haar transformed and cut to
  * its largest coefficients (RGB share their indices).  The diffuse part is view-independent: it
- * uses the irradiance of each normal sample, computed once per slice.
+ * uses the irradiance of each normal sample, summed over the global map with the lighting
+ * (irradiance.h).
  *
  * Per vertex: the normal is interpolated bilinearly between the 4 nearest normal samples.  Each
  * sample is shaded with the view that has the same mirror direction about the sample's normal as

@@ -7,6 +7,7 @@
 #include <stdint.h>
 
 #include "methods/wavelet/grazing.h"
+#include "methods/wavelet/irradiance.h"
 #include "methods/wavelet/lights.h"
 #include "methods/wavelet/rotation.h"
 #include "methods/wavelet/slice_operators.h"
@@ -54,20 +55,23 @@ struct wenv_wavelet {
     size_t light_count;
     float *global_rgbx;      /* slicing: the kept lighting back in the pixel domain, r g b and a pad */
     float **slices;          /* ns pointers to nl x 3 Haar coefficients, NULL until needed */
-    float *irradiance;       /* ns x 3 */
+    float *irradiance;       /* ns x 3, every normal sample's, made with the lighting */
+    wenv_irradiance_rule *irradiance_rule;
     float radiance_max[3];   /* brightest texel of the lighting the slices see (lights out) */
     wenv_lights *lights;     /* pixels taken out as exact directional lights (lights.h) */
     float mean_radiance;     /* the environment's, lights included (channels averaged) */
     double narrow_roughness; /* lobes narrower than this integrate the lights' pixel areas (envmap.h) */
     unsigned char *slice_ready, *slice_need; /* ready: 0 stale, READY, or USED (see READY) */
-    wenv_grazing_light *grazing_light; /* quality.grazing > 0 only */
+    wenv_grazing_light *grazing_light; /* made while the current material reads it (NULL otherwise) */
+    wenv_envmap *image;      /* the lighting's image (shared with the caller's, not copied) and the */
+    size_t *excluded;        /* pixels the lights took out (ascending), for a pyramid made later */
+    size_t n_excluded;
 
     /* local quadrature: sub-samples of the local map with their tent taps */
     size_t quad_k, quad_count;
     float *quad_dirs;        /* quad_count x 3 */
     uint32_t *quad_taps;     /* quad_count x 4 */
     float *quad_w;           /* quad_count x 4: tent weight x solid angle x normalisation */
-    float *cosine_haar;      /* nl: Haar transform of the cosine weights (sum pi) */
 
     /* materials: the current one first, then those set before it, most recent first */
     wenv_wavelet_material *kept[WENV_WAVELET_KEPT_MATERIALS];
@@ -118,5 +122,10 @@ static inline size_t wenv_wavelet_table_bytes(const wenv_wavelet *wavelet)
 /* table_rows.c: the table rows of the n normal samples rows[] (their lighting slices made). */
 wenv_status wenv_wavelet_fill_rows(wenv_wavelet *wavelet, const size_t *rows, size_t n, wenv_error *err);
 wenv_status wenv_wavelet_remake_ready(wenv_wavelet *wavelet, int lighting, wenv_error *err);
+
+/* wavelet.c: makes the grazing path's pyramid of the lighting if the current material reads it and
+ * it is not made: a diffuse material never pays for it, and one with lobes made current later
+ * does. */
+wenv_status wenv_wavelet_ensure_grazing(wenv_wavelet *wavelet, wenv_error *err);
 
 #endif
