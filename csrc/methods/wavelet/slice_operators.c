@@ -460,35 +460,70 @@ int wenv_slice_operators_prepare(wenv_slice_operators *ops, const size_t *slices
     return atomic_load(&failed) ? -1 : 0;
 }
 
-int wenv_slice_operators_resample(const wenv_slice_operators *ops, size_t s, const float *global_rgbx,
-                                  float *local, wenv_slice_work *w)
+size_t wenv_slice_operators_orbit(const wenv_slice_operators *ops, size_t s) { return ops->orbit[s]; }
+
+/* k samples' slices through one read of their operator.  Each sample's taps are summed exactly as
+ * for one sample alone, so a slice does not depend on which of its orbit were made with it: two
+ * sums, even and odd taps, so that a tap does not wait for the last one's addition.  Inlined for
+ * each constant k, so that the sums stay in registers. */
+static inline __attribute__((always_inline)) void resample_orbit(const slice_operator *op, size_t nl,
+                                                                 const uint32_t *const *from,
+                                                                 const uint16_t *const *to, const rgbx *g,
+                                                                 float *const *locals, const size_t k)
 {
-    size_t c = ops->orbit[s];
+    const float *weight = op->weight;
+    for (size_t t = 0; t < nl; t++) {
+        rgbx a[WENV_ORBIT_MAX] = {{0.0f}}, b[WENV_ORBIT_MAX] = {{0.0f}};
+        size_t q = op->start[t], end = op->start[t + 1];
+        for (; q + 1 < end; q += 2) {
+            float w0 = weight[q], w1 = weight[q + 1];
+            size_t u0 = tap_texel(op, q), u1 = tap_texel(op, q + 1);
+            for (size_t i = 0; i < k; i++) {
+                a[i] += w0 * g[from[i][u0]];
+                b[i] += w1 * g[from[i][u1]];
+            }
+        }
+        if (q < end)
+            for (size_t i = 0; i < k; i++)
+                a[i] += weight[q] * g[from[i][tap_texel(op, q)]];
+        for (size_t i = 0; i < k; i++) {
+            rgbx sum = a[i] + b[i];
+            float *l = locals[i] + 3 * (size_t)to[i][t];
+            l[0] = sum[0];
+            l[1] = sum[1];
+            l[2] = sum[2];
+        }
+    }
+}
+
+int wenv_slice_operators_resample(const wenv_slice_operators *ops, const size_t *samples, size_t k,
+                                  const float *global_rgbx, float *const *locals, wenv_slice_work *w)
+{
+    if (k < 1 || k > WENV_ORBIT_MAX)
+        return -1;
+    size_t c = ops->orbit[samples[0]];
     const slice_operator *op = ops->kept[c];
     if (!op) {
         if (build_operator(ops, c, w) < 0)
             return -1;
         op = &w->op;
     }
-    const uint32_t *from = ops->global_perm[ops->global_of[s]];
+    const uint32_t *from[WENV_ORBIT_MAX];
+    const uint16_t *to[WENV_ORBIT_MAX];
+    for (size_t i = 0; i < k; i++) {
+        from[i] = ops->global_perm[ops->global_of[samples[i]]];
+        to[i] = ops->local_perm[ops->local_of[samples[i]]];
+    }
     const rgbx *g = (const rgbx *)global_rgbx;
-    const uint16_t *to = ops->local_perm[ops->local_of[s]];
-    const float *weight = op->weight;
-    for (size_t t = 0; t < ops->nl; t++) {
-        /* two sums, so that each tap does not wait for the last one's addition */
-        rgbx a = {0.0f, 0.0f, 0.0f, 0.0f}, b = a;
-        size_t q = op->start[t], end = op->start[t + 1];
-        for (; q + 1 < end; q += 2) {
-            a += weight[q] * g[from[tap_texel(op, q)]];
-            b += weight[q + 1] * g[from[tap_texel(op, q + 1)]];
-        }
-        if (q < end)
-            a += weight[q] * g[from[tap_texel(op, q)]];
-        a += b;
-        float *l = local + 3 * (size_t)to[t];
-        l[0] = a[0];
-        l[1] = a[1];
-        l[2] = a[2];
+    switch (k) {
+    case 1: resample_orbit(op, ops->nl, from, to, g, locals, 1); break;
+    case 2: resample_orbit(op, ops->nl, from, to, g, locals, 2); break;
+    case 3: resample_orbit(op, ops->nl, from, to, g, locals, 3); break;
+    case 4: resample_orbit(op, ops->nl, from, to, g, locals, 4); break;
+    case 5: resample_orbit(op, ops->nl, from, to, g, locals, 5); break;
+    case 6: resample_orbit(op, ops->nl, from, to, g, locals, 6); break;
+    case 7: resample_orbit(op, ops->nl, from, to, g, locals, 7); break;
+    default: resample_orbit(op, ops->nl, from, to, g, locals, 8); break;
     }
     return 0;
 }

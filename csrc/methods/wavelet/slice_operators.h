@@ -38,11 +38,19 @@ typedef struct wenv_slice_work wenv_slice_work;
 wenv_slice_work *wenv_slice_work_new(const wenv_slice_operators *ops);
 void wenv_slice_work_free(wenv_slice_work *work);
 
-/* local (N_local x 3, pixel domain) = S_s applied to the global lighting texels, given as r g b and
- * a pad (N_global x 4 floats, 16-byte aligned).  Reads only the operators, so threads may resample
+/* The samples of an orbit share its representative's operator: at most this many. */
+#define WENV_ORBIT_MAX 8
+
+/* The representative of s's orbit (samples with the same one share an operator). */
+size_t wenv_slice_operators_orbit(const wenv_slice_operators *ops, size_t s);
+
+/* locals[i] (N_local x 3, pixel domain) = S_{samples[i]} applied to the global lighting texels,
+ * given as r g b and a pad (N_global x 4 floats, 16-byte aligned), for 1 <= k <= WENV_ORBIT_MAX
+ * samples of one orbit: their operator is read once for all of them (a slice of a new image is
+ * bound by streaming its operator from memory).  Reads only the operators, so threads may resample
  * at once.  -1 when out of memory. */
-int wenv_slice_operators_resample(const wenv_slice_operators *ops, size_t s, const float *global_rgbx,
-                                  float *local, wenv_slice_work *work);
+int wenv_slice_operators_resample(const wenv_slice_operators *ops, const size_t *samples, size_t k,
+                                  const float *global_rgbx, float *const *locals, wenv_slice_work *work);
 
 /* What the operators of `used_normals` of the normal samples would take, at most (no budget):
  * within ~10 % above what they take for the maps of AUTO_LADDER, without building one. */

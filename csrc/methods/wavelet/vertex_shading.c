@@ -122,22 +122,28 @@ static int compute_taps(const wenv_wavelet *wavelet, const float *nrm, const flo
     return 1;
 }
 
-static int compute_slice(wenv_wavelet *wavelet, size_t s, wenv_slice_work *work, float *scratch)
+/* The lighting slices of samples[0..k): one sample (rotation), or up to WENV_ORBIT_MAX samples of
+ * one orbit (slicing), resampled through one read of their operator. */
+static int compute_slices(wenv_wavelet *wavelet, const size_t *samples, size_t k, wenv_slice_work *work,
+                          float *scratch)
 {
-    if (!wavelet->slices[s]) {
-        wavelet->slices[s] = malloc(wavelet->nl * 3 * sizeof(float));
-        if (!wavelet->slices[s])
+    float *slice[WENV_ORBIT_MAX];
+    for (size_t i = 0; i < k; i++) {
+        size_t s = samples[i];
+        if (!wavelet->slices[s] && !(wavelet->slices[s] = malloc(wavelet->nl * 3 * sizeof(float))))
             return -1;
+        slice[i] = wavelet->slices[s];
     }
-    float *slice = wavelet->slices[s];
     if (wavelet->method == WENV_WAVELET_ROTATION) {
-        wenv_rotation_apply(wavelet->rot, s, wavelet->light_idx, wavelet->light_rgb, wavelet->light_count, slice);
-    } else {
-        /* resampled and transformed in place */
-        if (wenv_slice_operators_resample(wavelet->slice_ops, s, wavelet->global_rgbx, slice, work) < 0)
-            return -1;
-        wenv_haar2d_forward(slice, wavelet->q.local_n, 3, scratch);
+        wenv_rotation_apply(wavelet->rot, samples[0], wavelet->light_idx, wavelet->light_rgb, wavelet->light_count,
+                            slice[0]);
+        return 0;
     }
+    /* resampled, then transformed in place */
+    if (wenv_slice_operators_resample(wavelet->slice_ops, samples, k, wavelet->global_rgbx, slice, work) < 0)
+        return -1;
+    for (size_t i = 0; i < k; i++)
+        wenv_haar2d_forward(slice[i], wavelet->q.local_n, 3, scratch);
     return 0;
 }
 
@@ -260,6 +266,26 @@ static inline void flag_taps(const vertex_taps *tp, unsigned char *slice_flags, 
     flag_needed(row_flags, tp->sample, tp->sample_w, 4);
 }
 
+static int compare_u64(const void *a, const void *b)
+{
+    uint64_t x = *(const uint64_t *)a, y = *(const uint64_t *)b;
+    return (x > y) - (x < y);
+}
+
+/* samples[0..n) ordered by their orbit, then by sample: an orbit's samples next to each other. */
+static void order_by_orbit(const wenv_slice_operators *ops, size_t *samples, size_t n)
+{
+    uint64_t *key = malloc((n ? n : 1) * sizeof(uint64_t));
+    if (!key)
+        return; /* unordered: the same slices, each orbit's operator read more often */
+    for (size_t e = 0; e < n; e++)
+        key[e] = ((uint64_t)wenv_slice_operators_orbit(ops, samples[e]) << 32) | (uint64_t)samples[e];
+    qsort(key, n, sizeof *key, compare_u64);
+    for (size_t e = 0; e < n; e++)
+        samples[e] = (size_t)(key[e] & 0xffffffffu);
+    free(key);
+}
+
 /* Makes the lighting slices and table rows flagged in slice_need / row_need. */
 static wenv_status fill_needed(wenv_wavelet *wavelet, wenv_error *err)
 {
@@ -272,25 +298,40 @@ static wenv_status fill_needed(wenv_wavelet *wavelet, wenv_error *err)
             todo[ntodo++] = s;
         wavelet->slice_need[s] = 0;
     }
-    atomic_int failed = wavelet->slice_ops && wenv_slice_operators_prepare(wavelet->slice_ops, todo, ntodo) < 0;
-#pragma omp parallel if (ntodo > 1)
+    /* slicing: the samples of an orbit in one group, which reads their operator once */
+    size_t *group = malloc((ntodo + 1) * sizeof(size_t)), ngroups = 0;
+    atomic_int failed = !group || (wavelet->slice_ops && wenv_slice_operators_prepare(wavelet->slice_ops, todo, ntodo) < 0);
+    if (!failed && wavelet->slice_ops)
+        order_by_orbit(wavelet->slice_ops, todo, ntodo);
+    for (size_t e = 0; !failed && e < ntodo; e++)
+        if (e == 0 || !wavelet->slice_ops || e - group[ngroups - 1] == WENV_ORBIT_MAX ||
+            wenv_slice_operators_orbit(wavelet->slice_ops, todo[e]) !=
+                wenv_slice_operators_orbit(wavelet->slice_ops, todo[e - 1]))
+            group[ngroups++] = e;
+    if (group)
+        group[ngroups] = ntodo;
+#pragma omp parallel if (ngroups > 1)
     {
         wenv_slice_work *work = wavelet->slice_ops ? wenv_slice_work_new(wavelet->slice_ops) : NULL;
         float *scratch = malloc(wenv_haar2d_scratch_floats(wavelet->q.local_n, 3) * sizeof(float));
         if ((wavelet->slice_ops && !work) || !scratch)
             atomic_store(&failed, 1);
-#pragma omp for schedule(dynamic, 4)
-        for (size_t e = 0; e < ntodo; e++) {
+#pragma omp for schedule(dynamic, 1)
+        for (size_t gi = 0; gi < ngroups; gi++) {
             if (atomic_load(&failed))
                 continue;
-            if (compute_slice(wavelet, todo[e], work, scratch) < 0)
+            size_t first = group[gi], k = group[gi + 1] - first;
+            if (compute_slices(wavelet, todo + first, k, work, scratch) < 0) {
                 atomic_store(&failed, 1);
-            else
-                wavelet->slice_ready[todo[e]] = USED; /* made for the latest shade call */
+                continue;
+            }
+            for (size_t i = 0; i < k; i++)
+                wavelet->slice_ready[todo[first + i]] = USED; /* made for the latest shade call */
         }
         wenv_slice_work_free(work);
         free(scratch);
     }
+    free(group);
     if (failed) {
         free(todo);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory computing lighting slices");
