@@ -3,6 +3,7 @@ import glob
 import importlib.util
 import os
 
+import numpy as np
 import pytest
 
 
@@ -35,3 +36,17 @@ def hdri_path(name):
 @pytest.fixture(scope="session")
 def hdri_dir():
     return bundled_hdri_dir()
+
+
+def unit(a):
+    a = np.asarray(a, dtype=np.float64)
+    return (a / np.linalg.norm(a, axis=-1, keepdims=True)).astype(np.float32)
+
+
+def random_pairs(n, seed=0):
+    """n (normal, view) pairs, float32: normals uniform on the sphere, views on their hemisphere."""
+    rng = np.random.default_rng(seed)
+    nrm = unit(rng.normal(size=(n, 3)))
+    v = unit(rng.normal(size=(n, 3)))
+    v[np.sum(nrm * v, axis=1) < 0] *= -1
+    return nrm, v

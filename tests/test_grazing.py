@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import wenv
-from conftest import WAVELET_BASE, hdri_path
+from conftest import WAVELET_BASE, hdri_path, random_pairs
 
 DATA = os.path.join(os.path.dirname(__file__), "data", "accuracy_reference.npz")
 HIGH = wenv.QUALITY_PRESETS["high"]
@@ -46,12 +46,7 @@ def test_no_change_where_the_map_resolves_the_lobe():
     and no pyramid of the lighting, which only a material with a rule reads); a narrow lobe makes
     both."""
     env = wenv.load_environment(hdri_path("sunset"))
-    rng = np.random.default_rng(3)
-    n = rng.normal(size=(300, 3)).astype(np.float32)
-    n /= np.linalg.norm(n, axis=1, keepdims=True)
-    v = rng.normal(size=(300, 3)).astype(np.float32)
-    v /= np.linalg.norm(v, axis=1, keepdims=True)
-    v[np.sum(n * v, axis=1) < 0] *= -1
+    n, v = random_pairs(300, 3)
     q = {**SMALL, "local": 64}
     base = wenv.Shader(env, lobe(0.5), quality=q, method="slicing")
     on = wenv.Shader(env, lobe(0.5), quality={**q, "grazing": 4.0}, method="slicing")
@@ -127,12 +122,7 @@ def test_the_pyramid_is_made_only_for_a_material_that_reads_it():
     irradiance is summed over the global map); a lobe made current later, or kept and made current
     again after a new image, makes the pyramid then and shades as a shader made with it does."""
     sunset, city = (wenv.load_environment(hdri_path(h)) for h in ("sunset", "city"))
-    rng = np.random.default_rng(5)
-    n = rng.normal(size=(400, 3)).astype(np.float32)
-    n /= np.linalg.norm(n, axis=1, keepdims=True)
-    v = rng.normal(size=(400, 3)).astype(np.float32)
-    v /= np.linalg.norm(v, axis=1, keepdims=True)
-    v[np.sum(n * v, axis=1) < 0] *= -1
+    n, v = random_pairs(400, 5)
     q = {**SMALL, "grazing": 4.0}
     diffuse, glossy = wenv.Lambert((0.8, 0.6, 0.4)), lobe(0.1)
     sh = wenv.Shader(sunset, diffuse, quality=q, method="slicing")

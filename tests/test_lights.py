@@ -5,8 +5,7 @@ import numpy as np
 import pytest
 
 import wenv
-from conftest import WAVELET_BASE
-from test_shade import random_pairs
+from conftest import WAVELET_BASE, random_pairs
 
 QUALITY = {**WAVELET_BASE, "global": 32, "local": 16, "normals": 16, "views": 8, "coefficients": 0,
            "lights": 4096, "light_threshold": 1.0}

@@ -7,23 +7,10 @@ import numpy as np
 import pytest
 
 import wenv
-from conftest import hdri_path
+from conftest import hdri_path, random_pairs, unit
 
 METHODS = ["split_sum", "sh"]
 DRAFT_DICTS = {"split_sum": {"prefilter": 16, "samples": 16, "lut": 8}, "sh": {"order": 2, "views": 4}}
-
-
-def unit(a):
-    a = np.asarray(a, dtype=np.float64)
-    return (a / np.linalg.norm(a, axis=-1, keepdims=True)).astype(np.float32)
-
-
-def random_pairs(n, seed=0):
-    rng = np.random.default_rng(seed)
-    nrm = unit(rng.normal(size=(n, 3)))
-    v = unit(rng.normal(size=(n, 3)))
-    v[np.sum(nrm * v, axis=1) < 0] *= -1
-    return nrm, v
 
 
 def rel_rmse(a, b):

@@ -8,23 +8,9 @@ import numpy as np
 import pytest
 
 import wenv
-from conftest import WAVELET_BASE
+from conftest import WAVELET_BASE, random_pairs, unit
 
 SMALL = {**WAVELET_BASE, "global": 16, "local": 8, "normals": 8, "views": 4, "coefficients": 0}
-
-
-def unit(a):
-    a = np.asarray(a, dtype=np.float64)
-    return (a / np.linalg.norm(a, axis=-1, keepdims=True)).astype(np.float32)
-
-
-def random_pairs(n, seed=0):
-    rng = np.random.default_rng(seed)
-    nrm = unit(rng.normal(size=(n, 3)))
-    v = unit(rng.normal(size=(n, 3)))
-    flip = np.sum(nrm * v, axis=1) < 0
-    v[flip] *= -1
-    return nrm, v
 
 
 def gradient_env(h=32, w=64):

@@ -3,7 +3,8 @@
  *
  * Why: S_s does not depend on the image, but splatting every global texel's sub-samples (a rotation,
  * a hemi-octahedral encoding and four tents each) cost ~0.7 ms per slice at `default`, two thirds of
- * a new image's time.  Kept, a slice is one streaming pass over its taps.
+ * a new image's time.  Kept, a slice is one streaming pass over its taps (and the samples of an orbit
+ * that are needed together share that pass).
  *
  * Why orbits: the octahedral maps and the tangent frames (math/frame.h) share the symmetries of the
  * square about the z axis, the mirrors x -> -x, y -> -y and the swap x <-> y (8 in all): the frame
