@@ -49,7 +49,7 @@ size_t wenv_slice_operators_orbit(const wenv_slice_operators *ops, size_t s);
  * given as r g b and a pad (N_global x 4 floats, 16-byte aligned), for 1 <= k <= WENV_ORBIT_MAX
  * samples of one orbit: their operator is read once for all of them (a slice of a new image is
  * bound by streaming its operator from memory).  Reads only the operators, so threads may resample
- * at once.  -1 when out of memory. */
+ * at once.  -1 when out of memory or k is out of range. */
 int wenv_slice_operators_resample(const wenv_slice_operators *ops, const size_t *samples, size_t k,
                                   const float *global_rgbx, float *const *locals, wenv_slice_work *work);
 
