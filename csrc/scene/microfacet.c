@@ -342,20 +342,30 @@ static double slope_conditional_pdf(int ggx, double a, double y, double x)
     return 2.0 * b * b * b / (M_PI * q * q);
 }
 
-/* The slope at CDF value u (marginal if !conditional), by bisection: monotone, and these run only
- * when a material's rules are made. */
+/* The slope at CDF value u (marginal if !conditional): Newton's steps on the CDF from the median,
+ * inside a bracket that each step narrows, bisecting where a step would leave it.  A material's
+ * grazing rules take tens of thousands of these; bisection alone took 100 CDF evaluations each (half
+ * of a material change's time), Newton takes about six. */
 static double slope_inverse(int ggx, double a, double y, double u, int conditional)
 {
-    double lo = -1e4 * a - 1.0, hi = 1e4 * a + 1.0;
-    for (int it = 0; it < 100; it++) {
-        double mid = 0.5 * (lo + hi);
-        double f = conditional ? slope_conditional_cdf(ggx, a, y, mid) : slope_marginal_cdf(ggx, a, mid);
-        if (f < u)
-            lo = mid;
+    double lo = -1e4 * a - 1.0, hi = 1e4 * a + 1.0, x = 0.0;
+    for (int it = 0; it < 200; it++) {
+        double f = (conditional ? slope_conditional_cdf(ggx, a, y, x) : slope_marginal_cdf(ggx, a, x)) - u;
+        if (f == 0.0)
+            return x;
+        if (f < 0.0)
+            lo = x;
         else
-            hi = mid;
+            hi = x;
+        double p = conditional ? slope_conditional_pdf(ggx, a, y, x) : slope_marginal_pdf(ggx, a, x);
+        double next = p > 0.0 ? x - f / p : 0.5 * (lo + hi);
+        if (!(next > lo && next < hi))
+            next = 0.5 * (lo + hi);
+        if (fabs(next - x) <= 1e-14 * (a + fabs(x)) || hi - lo <= 1e-14 * (a + fabs(x)))
+            return next;
+        x = next;
     }
-    return 0.5 * (lo + hi);
+    return x;
 }
 
 /* wi for half-vector slopes (x, y) and wo = (s, 0, c); v.h and cos_h into *vh, *ch. */
