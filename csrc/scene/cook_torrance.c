@@ -296,6 +296,7 @@ static int ct_lobes_follow_shapes(const wenv_material *mat)
 
 static const wenv_material_kind COOK_TORRANCE = {
     .name = "cook_torrance",
+    .mirror_symmetric = 1, /* isotropic microfacet lobes: dot products with the normal and each other */
     .smooth_limit = 1,
     .lobes_follow_shapes = ct_lobes_follow_shapes,
     .specular_cos = ct_specular_cos,

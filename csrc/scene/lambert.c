@@ -84,6 +84,7 @@ static wenv_status lambert_with_roughness(wenv_material **out, const wenv_materi
 
 static const wenv_material_kind LAMBERT = {
     .name = "lambert",
+    .mirror_symmetric = 1,
     .smooth_limit = 1, /* no lobes: its smooth limit is itself */
     .specular_cos = lambert_specular_cos,
     .specular_cos_batch = lambert_specular_cos_batch,

@@ -104,6 +104,7 @@ const double *wenv_material_diffuse(const wenv_material *mat) { return mat->diff
 size_t wenv_material_lobe_count(const wenv_material *mat) { return mat->n_lobes; }
 const wenv_lobe *wenv_material_lobe(const wenv_material *mat, size_t i) { return i < mat->n_lobes ? &mat->lobes[i] : NULL; }
 int wenv_material_has_smooth_limit(const wenv_material *mat) { return mat->kind->smooth_limit; }
+int wenv_material_mirror_symmetric(const wenv_material *mat) { return mat->kind->mirror_symmetric; }
 
 int wenv_material_lobes_follow_shapes(const wenv_material *mat)
 {

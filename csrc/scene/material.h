@@ -131,6 +131,11 @@ const wenv_lobe *wenv_material_lobe(const wenv_material *mat, size_t i);
 /* Whether the lobes have a smooth limit: Fresnel mirrors of their shapes' colour and index (the
  * glossmeter's smooth=True), as microfacet lobes do and a measured table does not. */
 int wenv_material_has_smooth_limit(const wenv_material *mat);
+/* Whether f(M wi, M wo) = f(wi, wo) for every reflection M about a plane through the normal (and so
+ * every turn about it): the wavelet shader then makes one BRDF slice per orbit of the view samples
+ * under the square's symmetries and permutes it for the rest.  Isotropic models; not a table, whose
+ * phi_d is folded by reciprocity only. */
+int wenv_material_mirror_symmetric(const wenv_material *mat);
 /* Whether each lobe is its shape's D (wenv_material_lobe) times factors that vary slowly across it
  * (Fresnel, masking, constant weights), so that the shape's width and tails bound it: Cook-Torrance's
  * and Principled's microfacet lobes; not a table's (its shape is only a fit) nor Principled's sheen

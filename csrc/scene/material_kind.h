@@ -18,6 +18,8 @@ typedef struct wenv_shared {
 
 typedef struct wenv_material_kind {
     const char *name;
+    int mirror_symmetric; /* f(M wi, M wo) = f(wi, wo) for every reflection M about a plane through
+                           * the normal, to the model's own rounding (wenv_material_mirror_symmetric) */
     int smooth_limit; /* its lobes become Fresnel mirrors of their shape's colour and index as they
                        * narrow (a microfacet model); 0 for a measured table, which has no such limit */
     /* The glossy part (see material.h for each contract). */

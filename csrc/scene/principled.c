@@ -527,6 +527,7 @@ static int pr_lobes_follow_shapes(const wenv_material *mat)
 
 static const wenv_material_kind PRINCIPLED = {
     .name = "principled",
+    .mirror_symmetric = 1, /* shaded isotropic (anisotropy is unhonoured): functions of dot products */
     .smooth_limit = 0, /* an F82 metal or a remapped dielectric is no Fresnel mirror of one index */
     .specular_cos = pr_specular_cos,
     .specular_cos_batch = pr_specular_cos_batch,

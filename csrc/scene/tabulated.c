@@ -399,6 +399,7 @@ static wenv_status decide_rule(const wenv_material *mat, table *t, wenv_error *e
 
 static const wenv_material_kind TABULATED = {
     .name = "tabulated",
+    .mirror_symmetric = 0, /* phi_d folds into [0, 180) by reciprocity: a mirror reads 180 - phi_d */
     .smooth_limit = 0,
     .specular_cos = tab_specular_cos,
     .specular_cos_batch = tab_specular_cos_batch,

@@ -198,6 +198,55 @@ static int compare_u32(const void *a, const void *b)
     return (x > y) - (x < y);
 }
 
+/* The square's symmetries on an n x n grid of the local frame's hemi-octahedral square (texels,
+ * n = local_n, or view-sample corners, n = views + 1): g = 4 swap + 2 (u mirrored) + (v mirrored).
+ * Each is a turn or mirror of directions about the normal (hemi_decode: u and v are x + y and
+ * x - y), and acts alike on both grids. */
+#define SQUARE_SYMMETRIES 8
+
+static size_t grid_image(size_t n, size_t idx, int g)
+{
+    size_t a = idx % n, b = idx / n;
+    if (g & 4) {
+        size_t t = a;
+        a = b;
+        b = t;
+    }
+    if (g & 2)
+        a = n - 1 - a;
+    if (g & 1)
+        b = n - 1 - b;
+    return b * n + a;
+}
+
+/* The first index of idx's orbit: the view sample whose slice the orbit's are permuted from. */
+static size_t orbit_first(size_t n, size_t idx)
+{
+    size_t first = idx;
+    for (int g = 1; g < SQUARE_SYMMETRIES; g++) {
+        size_t j = grid_image(n, idx, g);
+        first = j < first ? j : first;
+    }
+    return first;
+}
+
+/* A pixel-domain slice (L x L x 3, transformed in place) cut to its `keep` largest Haar
+ * coefficients (RGB sharing indices), in index order into idx / rgb; returns how many. */
+static size_t truncated_slice(float *slice, size_t L, size_t keep, float *scratch, float *mag, float *work,
+                              uint32_t *idx, float *rgb)
+{
+    size_t nl = L * L;
+    wenv_haar2d_forward(slice, L, 3, scratch);
+    for (size_t t = 0; t < nl; t++)
+        mag[t] = slice[3 * t] * slice[3 * t] + slice[3 * t + 1] * slice[3 * t + 1] + slice[3 * t + 2] * slice[3 * t + 2];
+    size_t count = wenv_select_largest(mag, nl, keep, idx, work);
+    /* in index order: the table rows then read the lighting slices front to back */
+    qsort(idx, count, sizeof *idx, compare_u32);
+    for (size_t e = 0; e < count; e++)
+        memcpy(rgb + e * 3, slice + 3 * (size_t)idx[e], 3 * sizeof(float));
+    return count;
+}
+
 wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material *mat, const wenv_progress *progress,
                                       wenv_error *err)
 {
@@ -221,30 +270,44 @@ wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material
         free(all_rgb);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for BRDF slices");
     }
+    /* an isotropic model's slice for a view turned or mirrored about the normal is its slice so
+     * turned: one per orbit of the view samples is made, and permuted for the rest */
+    int symmetric = wenv_material_mirror_symmetric(mat);
+    size_t *reps = malloc(nv * sizeof(size_t)), n_reps = 0;
+    if (!reps) {
+        free(counts);
+        free(all_idx);
+        free(all_rgb);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for BRDF slices");
+    }
+    for (size_t j = 0; j < nv; j++)
+        if (!symmetric || orbit_first(V + 1, j) == j)
+            reps[n_reps++] = j;
     atomic_int failed = 0, cancelled = 0;
     atomic_size_t done = 0;
     if (wenv_material_lobe_count(mat)) {
 #pragma omp parallel
         {
-            float *slice = malloc(nl * 3 * sizeof(float));
+            float *slice = malloc(nl * 3 * sizeof(float)), *turned = malloc(nl * 3 * sizeof(float));
             float *scratch = malloc(wenv_haar2d_scratch_floats(L, 3) * sizeof(float));
             float *mag = malloc(nl * sizeof(float));
             float *work = malloc(nl * sizeof(float));
             float *fcos = malloc(wavelet->quad_count * 3 * sizeof(float));
-            if (!slice || !scratch || !mag || !work || !fcos)
+            if (!slice || !turned || !scratch || !mag || !work || !fcos)
                 atomic_store(&failed, 1);
 #pragma omp for schedule(dynamic, 1)
-            for (size_t j = 0; j < nv; j++) {
+            for (size_t r = 0; r < n_reps; r++) {
                 if (atomic_load(&failed) || atomic_load(&cancelled))
                     continue;
+                size_t rep = reps[r];
                 double wo[3];
-                wenv_hemi_decode(-1.0 + 2.0 * (double)(j % (V + 1)) / (double)V,
-                                 -1.0 + 2.0 * (double)(j / (V + 1)) / (double)V, wo);
+                wenv_hemi_decode(-1.0 + 2.0 * (double)(rep % (V + 1)) / (double)V,
+                                 -1.0 + 2.0 * (double)(rep / (V + 1)) / (double)V, wo);
                 /* a view exactly on the horizon sees nothing; its limit is what interpolation needs */
                 if (wo[2] < WENV_GRAZING_Z) {
-                    double s = sqrt((1.0 - WENV_GRAZING_Z * WENV_GRAZING_Z) / (wo[0] * wo[0] + wo[1] * wo[1]));
-                    wo[0] *= s;
-                    wo[1] *= s;
+                    double sc = sqrt((1.0 - WENV_GRAZING_Z * WENV_GRAZING_Z) / (wo[0] * wo[0] + wo[1] * wo[1]));
+                    wo[0] *= sc;
+                    wo[1] *= sc;
                     wo[2] = WENV_GRAZING_Z;
                 }
                 wenv_material_specular_cos_batch(mat, wo, wavelet->quad_dirs, wavelet->quad_count, fcos);
@@ -259,29 +322,34 @@ wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material
                         o[2] += w * g[2];
                     }
                 }
-                wenv_haar2d_forward(slice, L, 3, scratch);
-                for (size_t t = 0; t < nl; t++)
-                    mag[t] = slice[3 * t] * slice[3 * t] + slice[3 * t + 1] * slice[3 * t + 1] + slice[3 * t + 2] * slice[3 * t + 2];
-                uint32_t *idx = all_idx + j * keep;
-                size_t count = wenv_select_largest(mag, nl, keep, idx, work);
-                /* in index order: the table rows then read the lighting slices front to back */
-                qsort(idx, count, sizeof *idx, compare_u32);
-                for (size_t e = 0; e < count; e++)
-                    memcpy(all_rgb + (j * keep + e) * 3, slice + 3 * (size_t)idx[e], 3 * sizeof(float));
-                counts[j] = count;
-                /* a slice costs its lobes' evaluations: many lobes make this long enough to report */
-                size_t d = atomic_fetch_add(&done, 1) + 1;
-                if (omp_get_thread_num() == 0 && progress && progress->report &&
-                    progress->report(progress->ctx, (double)d / (double)nv))
-                    atomic_store(&cancelled, 1);
+                /* the orbit's views, each once: view g(rep) reads texel t of the rep's slice at g(t) */
+                for (int g = 0; g < (symmetric ? SQUARE_SYMMETRIES : 1); g++) {
+                    size_t j = grid_image(V + 1, rep, g);
+                    int seen = 0;
+                    for (int h = 0; h < g && !seen; h++)
+                        seen = grid_image(V + 1, rep, h) == j;
+                    if (seen)
+                        continue;
+                    for (size_t t = 0; t < nl; t++)
+                        memcpy(turned + 3 * grid_image(L, t, g), slice + 3 * t, 3 * sizeof(float));
+                    counts[j] = truncated_slice(turned, L, keep, scratch, mag, work, all_idx + j * keep,
+                                                all_rgb + j * keep * 3);
+                    /* a slice costs its lobes' evaluations: many lobes make this long enough to report */
+                    size_t d = atomic_fetch_add(&done, 1) + 1;
+                    if (omp_get_thread_num() == 0 && progress && progress->report &&
+                        progress->report(progress->ctx, (double)d / (double)nv))
+                        atomic_store(&cancelled, 1);
+                }
             }
             free(slice);
+            free(turned);
             free(scratch);
             free(mag);
             free(work);
             free(fcos);
         }
     }
+    free(reps);
     if (failed || cancelled) {
         free(counts);
         free(all_idx);
