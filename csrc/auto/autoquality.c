@@ -20,12 +20,12 @@
  * on 50000 pairs weighted toward the bright reflections, the reference on 8000), --calibrate. */
 static const double ROUGHNESS[4] = {0.05, 0.1, 0.2, 0.5};
 static const double MEDIAN_ERROR[WENV_AUTO_LEVELS][5] = {
-    {0.13151, 0.15083, 0.13559, 0.07411, 0.01689},
-    {0.07523, 0.07632, 0.05140, 0.02507, 0.00473},
-    {0.06002, 0.04847, 0.03684, 0.01752, 0.00297},
-    {0.00844, 0.00412, 0.00636, 0.01366, 0.00297},
-    {0.05008, 0.02951, 0.01881, 0.00755, 0.00124},
-    {0.00405, 0.00179, 0.00288, 0.00469, 0.00102},
+    {0.13151, 0.15083, 0.13559, 0.07411, 0.01108},
+    {0.07523, 0.07632, 0.05140, 0.02507, 0.00333},
+    {0.06002, 0.04847, 0.03684, 0.01752, 0.00275},
+    {0.00844, 0.00412, 0.00636, 0.01366, 0.00275},
+    {0.05008, 0.02951, 0.01881, 0.00755, 0.00099},
+    {0.00405, 0.00179, 0.00288, 0.00469, 0.00089},
 };
 /* A level's error under an environment is its median error times a factor of three measures
  * (estimate_levels): l, the share of the flux its lights take (exact: the rest carries the error),
