@@ -516,3 +516,59 @@ def test_lobes_that_reflect_more_than_they_receive_are_refused():
         for shadow in SHADOWS:
             for m in (0.001, 0.05, 1.0):
                 wenv.CookTorrance(0.0, [{"specular": 1, "roughness": m, "ior": 10.0}], dist, shadow)
+
+
+# ------------------------------------------------------------------ symmetry the wavelet shader relies on
+
+# The square's eight symmetries of the hemi-octahedral grids, as maps of (x, y) about the normal:
+# brdf_slices.c integrates one BRDF slice per orbit of the view samples and permutes it for the rest
+# for every kind whose `mirror_symmetric` flag is set (Lambert, Cook-Torrance, Principled).
+SQUARE_SYMMETRIES = [np.array(m, np.float32) for m in (
+    [[1, 0], [0, 1]], [[0, 1], [1, 0]], [[0, -1], [-1, 0]], [[-1, 0], [0, -1]],
+    [[1, 0], [0, -1]], [[-1, 0], [0, 1]], [[0, 1], [-1, 0]], [[0, -1], [1, 0]])]
+
+
+def turned(v, m):
+    out = v.copy()
+    out[:, :2] = v[:, :2] @ m.T
+    return out
+
+
+@pytest.mark.parametrize("name", ["lambert", "cook_torrance", "principled", "principled_anisotropic"])
+def test_kinds_flagged_mirror_symmetric_are(name):
+    """f(M wi, M wo) = f(wi, wo) for each symmetry M: what sharing slices across an orbit assumes.
+    Principled's anisotropy is unhonoured today; honouring it must clear the kind's flag, and this
+    test then fails for the anisotropic material."""
+    mat = {
+        "lambert": lambda: wenv.Lambert((0.6, 0.3, 0.2)),
+        "cook_torrance": lambda: wenv.CookTorrance(0.2, [{"roughness": 0.15, "ior": 1.5, "specular": 1.0},
+                                                         {"roughness": 0.5, "ior": 1.8, "specular": 0.4,
+                                                          "distribution": "ggx"}]),
+        "principled": lambda: wenv.Principled(base_color=(0.8, 0.5, 0.2), metallic=0.3, roughness=0.35,
+                                              coat_weight=0.7, coat_roughness=0.1, sheen_weight=0.5),
+        "principled_anisotropic": lambda: wenv.Principled(base_color=(0.8, 0.5, 0.2), roughness=0.35,
+                                                          anisotropic=0.8, anisotropic_rotation=0.1),
+    }[name]
+    if name == "principled_anisotropic":
+        with pytest.warns(UserWarning, match="anisotropic"):
+            mat = mat()
+    else:
+        mat = mat()
+    rng = np.random.default_rng(5)
+    wi, wo = random_upper(rng, 500), random_upper(rng, 500)
+    base = mat.eval(wi, wo)
+    assert np.all(base > 0)
+    for m in SQUARE_SYMMETRIES[1:]:
+        np.testing.assert_allclose(mat.eval(turned(wi, m), turned(wo, m)), base, rtol=2e-5, atol=1e-9)
+
+
+def test_mirror_symmetry_check_can_fail():
+    """A table whose phi_d half is brighter than its mirror is not mirror symmetric (its kind's flag is
+    clear): the property above is not a tautology of the evaluation."""
+    table = np.full((16, 16, 32, 3), 0.05, np.float64)
+    table[:, :, 4:12] = 0.3
+    mat = wenv.Tabulated(table)
+    rng = np.random.default_rng(6)
+    wi, wo = random_upper(rng, 500), random_upper(rng, 500)
+    mirrored = mat.eval(turned(wi, SQUARE_SYMMETRIES[4]), turned(wo, SQUARE_SYMMETRIES[4]))
+    assert np.max(np.abs(mirrored - mat.eval(wi, wo))) > 0.1
