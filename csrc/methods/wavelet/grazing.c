@@ -134,8 +134,9 @@ wenv_status wenv_grazing_rule_create(wenv_grazing_rule **out, const wenv_materia
      * Cook-Torrance lobe and 10 % of a Principled metal; a table's lobe over its fitted shape's D
      * varies within the cells (courtyard, t0.1: 0.76 % against 0.58 %).  all_slopes takes GGX
      * lobes on the grid anyway, for interactive rates: a Principled paint at roughness 0.3 went from
-     * ~200 to ~25 ms a view of 126k vertices, its error from 1.9 to 3.0 % (a metal's 2.8 to 6.3 %). */
-    int slope = wenv_material_mirror_centred(mat) && wenv_material_lobes_follow_shapes(mat);
+     * ~200 to ~25 ms a view of 126k vertices, its error from 1.9 to 3.0 % (a metal's 2.8 to 6.3 %),
+     * and a table's lobe about the mirror direction on its fitted shape's grid. */
+    int slope = wenv_material_mirror_centred(mat) && (wenv_material_lobes_follow_shapes(mat) || all_slopes);
     for (size_t k = 0; k < n_lobes && !all_slopes; k++)
         if (!lobe_is_black(wenv_material_lobe(mat, k)) && wenv_material_lobe(mat, k)->distribution != WENV_NDF_BECKMANN)
             slope = 0;
