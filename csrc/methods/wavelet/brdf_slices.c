@@ -122,6 +122,8 @@ static wenv_status lobe_cutoffs(wenv_wavelet_material *m, const wenv_material *m
     m->light_cone_cos = 2.0 * theta_h >= M_PI ? -1.0 : cos(2.0 * theta_h);
     if (m->lobes_modelled)
         wenv_lights_peak_table(mat, m->lobe_m_min, m->lobe_peak);
+    else if (n_lobes)
+        wenv_lights_envelope_table(mat, m->lobe_envelope);
     return WENV_OK;
 }
 

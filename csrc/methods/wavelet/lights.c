@@ -487,7 +487,17 @@ typedef struct {
     float cone; /* cos of the cone about r outside which the lobes are negligible (-2: none) */
     float peak; /* about the lobes' largest f cos, RGB summed, with a margin */
     int centred; /* the lobes' width and tails bound a cluster's error */
+    const float *envelope_lo, *envelope_hi; /* else, when given: the envelope's rows about cos_v */
 } lobe_axes;
+
+/* What a cluster whose nearest point lies `deviation` radians from the mirror direction can add per
+ * unit flux, for lobes not modelled: the envelope's bin at or below it, the larger of the two views'. */
+static inline float envelope_at(const lobe_axes *ax, float deviation)
+{
+    float pos = sqrtf(max_f(0.0f, deviation) * (float)(1.0 / M_PI)) * (float)(WENV_LIGHT_ENVELOPE_BINS - 1);
+    size_t j = pos < (float)(WENV_LIGHT_ENVELOPE_BINS - 1) ? (size_t)pos : WENV_LIGHT_ENVELOPE_BINS - 1;
+    return max_f(ax->envelope_lo[j], ax->envelope_hi[j]);
+}
 
 /* One walk over the cluster tree at absolute tolerance `tolerance`, adding to s. */
 static void walk_clusters(const wenv_lights *lights, specular_view *sv, const lobe_axes *ax, float tolerance,
@@ -535,14 +545,17 @@ static void walk_clusters(const wenv_lights *lights, specular_view *sv, const lo
             float t = 1.0f / (1.0f + an * an + bn * bn);
             /* behind the mirror direction (cd < 0) the lobe holds nothing of note */
             bound = cd > 0.0f ? flux_sum * ax->peak * t * t : 0.0f;
-            if (bound <= tolerance) {
-                /* all of it is within the tolerance: its centre stands for it */
-                float lv_dot;
-                float ch = cos_half(sv, l, ci, &lv_dot);
-                if (ci > 0.0f && near_a_lobe(sv, ch, 0.0f))
-                    push_light(sv, &lb, ci, lv_dot, flux, 1.0f, s);
-                continue;
-            }
+        } else if (ax->envelope_lo) {
+            float deviation = acosf(min_f(1.0f, max_f(-1.0f, cd))) - asinf(min_f(1.0f, sr));
+            bound = flux_sum * envelope_at(ax, deviation);
+        }
+        if (bound <= tolerance) {
+            /* all of it is within the tolerance: its centre stands for it */
+            float lv_dot;
+            float ch = cos_half(sv, l, ci, &lv_dot);
+            if (ci > 0.0f && near_a_lobe(sv, ch, 0.0f))
+                push_light(sv, &lb, ci, lv_dot, flux, 1.0f, s);
+            continue;
         }
         /* Without a model of the lobe's shape every pixel is read: a table's lobe only resembles
          * its fitted shape (sunset, t0.1: 0.72 % against 0.36 %), and a retro-reflective one lies
@@ -583,6 +596,62 @@ void wenv_lights_peak_table(const wenv_material *mat, double roughness, float pe
             best = max_f(best, rgb[0] + rgb[1] + rgb[2]);
         }
         peak[i] = 1.5f * best;
+    }
+}
+
+/* Deviations sampled per bin, and azimuths about the mirror direction over half a turn (a light's
+ * direction enters the lobes through n.l and l.v alone, view_frame_dir, so the other half repeats). */
+#define ENVELOPE_STEPS 3
+#define ENVELOPE_AZIMUTHS 16
+
+void wenv_lights_envelope_table(const wenv_material *mat,
+                                float envelope[(WENV_LIGHT_PEAK_SAMPLES + 1) * WENV_LIGHT_ENVELOPE_BINS])
+{
+#pragma omp parallel for schedule(dynamic, 1)
+    for (size_t i = 0; i <= WENV_LIGHT_PEAK_SAMPLES; i++) {
+        float t = (float)i / (float)WENV_LIGHT_PEAK_SAMPLES, cos_v = max_f(1e-4f, t * t);
+        specular_view sv = {.mat = mat, .n_lobes = wenv_material_lobe_count(mat), .co = cos_v};
+        sv.so = sqrtf(max_f(0.0f, 1.0f - cos_v * cos_v));
+        sv.n[2] = 1.0f;
+        sv.v[0] = sv.wo[0] = sv.so;
+        sv.v[2] = sv.wo[2] = cos_v;
+        /* axes about the mirror direction r: up (towards the normal, in the plane of r and n) and across */
+        float r[3] = {-sv.so, 0.0f, cos_v}, up[3] = {sv.so * cos_v, 0.0f, 1.0f - cos_v * cos_v};
+        float ul = sqrtf(dot3(up, up));
+        if (ul > 1e-6f) {
+            for (int c = 0; c < 3; c++)
+                up[c] /= ul;
+        } else {
+            up[0] = 1.0f;
+            up[2] = 0.0f;
+        }
+        float *row = envelope + i * WENV_LIGHT_ENVELOPE_BINS;
+        for (size_t j = 0; j < WENV_LIGHT_ENVELOPE_BINS; j++) {
+            double lo = WENV_LIGHT_ENVELOPE_ANGLE(j);
+            double hi = j + 1 < WENV_LIGHT_ENVELOPE_BINS ? WENV_LIGHT_ENVELOPE_ANGLE(j + 1) : lo;
+            float best = 0.0f;
+            for (int a = 0; a < ENVELOPE_STEPS; a++) {
+                double dev = lo + (hi - lo) * (double)a / ENVELOPE_STEPS;
+                float cd = (float)cos(dev), sd = (float)sin(dev);
+                for (int k = 0; k <= ENVELOPE_AZIMUTHS; k++) {
+                    double psi = M_PI * (double)k / ENVELOPE_AZIMUTHS;
+                    float cp = (float)cos(psi), sp = (float)sin(psi), d[3], rgb[3];
+                    d[0] = cd * r[0] + sd * cp * up[0];
+                    d[1] = sd * sp;
+                    d[2] = cd * r[2] + sd * cp * up[2];
+                    if (!(d[2] > 0.0f))
+                        continue;
+                    eval_light(&sv, d[2], dot3(d, sv.v), rgb);
+                    best = max_f(best, rgb[0] + rgb[1] + rgb[2]);
+                }
+            }
+            row[j] = best;
+        }
+        /* a bin bounds every deviation from its own on */
+        for (size_t j = WENV_LIGHT_ENVELOPE_BINS - 1; j-- > 0;)
+            row[j] = max_f(row[j], row[j + 1]);
+        for (size_t j = 0; j < WENV_LIGHT_ENVELOPE_BINS; j++)
+            row[j] *= 1.5f;
     }
 }
 
@@ -649,6 +718,12 @@ void wenv_lights_specular(const wenv_lights *lights, const wenv_material *mat, c
         size_t at = (size_t)pos;
         at = at < WENV_LIGHT_PEAK_SAMPLES ? at : WENV_LIGHT_PEAK_SAMPLES - 1;
         ax.peak = max_f(lobe->peak[at], lobe->peak[at + 1]);
+    } else if (lobe->envelope) {
+        float pos = sqrtf(max_f(0.0f, min_f(1.0f, cos_v))) * (float)WENV_LIGHT_PEAK_SAMPLES;
+        size_t at = (size_t)pos;
+        at = at < WENV_LIGHT_PEAK_SAMPLES ? at : WENV_LIGHT_PEAK_SAMPLES - 1;
+        ax.envelope_lo = lobe->envelope + at * WENV_LIGHT_ENVELOPE_BINS;
+        ax.envelope_hi = ax.envelope_lo + WENV_LIGHT_ENVELOPE_BINS;
     }
     walk_clusters(lights, &sv, &ax, tolerance, s);
 }

@@ -54,6 +54,7 @@ typedef struct {
     int narrow;         /* the lobe is narrower than WENV_NARROW_LOBE_PIXELS pixels: level 0 integrates
                          * pixels wider than it over their areas, as wenv_reference does */
     const float *peak;  /* modelled lobes: wenv_lights_peak_table's */
+    const float *envelope; /* lobes not modelled: wenv_lights_envelope_table's (NULL: every pixel read) */
 } wenv_lights_lobe;
 
 /* The lobes' largest f cos (RGB summed) about the mirror direction, with a margin, at
@@ -62,6 +63,17 @@ typedef struct {
  * material rather than per vertex.  roughness: wenv_lights_lobe's. */
 #define WENV_LIGHT_PEAK_SAMPLES 64
 void wenv_lights_peak_table(const wenv_material *mat, double roughness, float peak[WENV_LIGHT_PEAK_SAMPLES + 1]);
+
+/* For lobes not modelled (tables), what bounds a cluster instead of the shape: the lobes' largest
+ * f cos (RGB summed) over light directions at least WENV_LIGHT_ENVELOPE_ANGLE(j) from the mirror
+ * direction, with a margin, sampled at the peak table's views (row i) and nearer deviations, so a
+ * cluster far out in a measured lobe's tail is read whole as a modelled lobe's is.  Rows of
+ * WENV_LIGHT_ENVELOPE_BINS, each non-increasing. */
+#define WENV_LIGHT_ENVELOPE_BINS 32
+#define WENV_LIGHT_ENVELOPE_ANGLE(j) \
+    (3.14159265358979323846 * ((double)(j) / (WENV_LIGHT_ENVELOPE_BINS - 1)) * ((double)(j) / (WENV_LIGHT_ENVELOPE_BINS - 1)))
+void wenv_lights_envelope_table(const wenv_material *mat,
+                                float envelope[(WENV_LIGHT_PEAK_SAMPLES + 1) * WENV_LIGHT_ENVELOPE_BINS]);
 
 /* The lobes' reflected radiance at unit normal n and view v (n . v = cos_v > 0), added to s.
  * cos_h_min[k]: lobe k's n.h below which it is negligible.  Clusters are read whole where their

@@ -196,7 +196,8 @@ static void shade_vertex(const wenv_wavelet *wavelet, const vertex_taps *tp, flo
                                      .cone_cos = wavelet->m->light_cone_cos,
                                      .modelled = wavelet->m->lobes_modelled,
                                      .narrow = wavelet->m->lobe_m_min < wavelet->narrow_roughness,
-                                     .peak = wavelet->m->lobe_peak};
+                                     .peak = wavelet->m->lobe_peak,
+                                     .envelope = wavelet->m->lobes_modelled ? NULL : wavelet->m->lobe_envelope};
             /* the error allowed per cluster is against the vertex's radiance without the lights plus
              * what a uniform environment of the mean radiance would reflect (so that a vertex that
              * sees little of the rest still reads its lights to a tolerance the image notices) */

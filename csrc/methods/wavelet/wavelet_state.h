@@ -25,6 +25,7 @@ typedef struct {
     int mirror_centred;      /* normal samples keep the vertex's mirror direction (else its view) */
     int lobes_modelled;      /* mirror-centred lobes that follow their shapes (lights.h) */
     float lobe_peak[WENV_LIGHT_PEAK_SAMPLES + 1]; /* modelled lobes: wenv_lights_peak_table */
+    float lobe_envelope[(WENV_LIGHT_PEAK_SAMPLES + 1) * WENV_LIGHT_ENVELOPE_BINS]; /* the others' bound */
     float *albedo;           /* ALBEDO_N x 3: specular albedo at cos(view) = WENV_GRAZING_Z .. 1 */
     float *view_inv_albedo;  /* nv x 3: 1 / albedo of each view sample (0 where the albedo is 0) */
     wenv_diffuse_table diffuse; /* the Lambertian part's albedo / pi over the view's cosine */
