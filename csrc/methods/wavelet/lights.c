@@ -577,20 +577,35 @@ static void walk_clusters(const wenv_lights *lights, specular_view *sv, const lo
     flush_batch(sv, &lb, s);
 }
 
+/* The peak and envelope tables' view i (cos_v uniform in sqrt from 0 to 1) in the normal's frame, its
+ * mirror direction r and up, towards the normal in the plane of r and n (not normalised: its
+ * length is returned). */
+static float table_view(const wenv_material *mat, size_t i, specular_view *sv, float r[3], float up[3])
+{
+    float t = (float)i / (float)WENV_LIGHT_PEAK_SAMPLES, cos_v = max_f(1e-4f, t * t);
+    *sv = (specular_view){.mat = mat, .n_lobes = wenv_material_lobe_count(mat), .co = cos_v};
+    sv->so = sqrtf(max_f(0.0f, 1.0f - cos_v * cos_v));
+    sv->n[2] = 1.0f;
+    sv->v[0] = sv->wo[0] = sv->so;
+    sv->v[2] = sv->wo[2] = cos_v;
+    r[0] = -sv->so;
+    r[1] = 0.0f;
+    r[2] = cos_v;
+    up[0] = sv->so * cos_v;
+    up[1] = 0.0f;
+    up[2] = 1.0f - cos_v * cos_v;
+    return sqrtf(dot3(up, up));
+}
+
 void wenv_lights_peak_table(const wenv_material *mat, double roughness, float peak[WENV_LIGHT_PEAK_SAMPLES + 1])
 {
     float m = (float)roughness;
     for (size_t i = 0; i <= WENV_LIGHT_PEAK_SAMPLES; i++) {
-        float t = (float)i / (float)WENV_LIGHT_PEAK_SAMPLES, cos_v = max_f(1e-4f, t * t);
-        specular_view sv = {.mat = mat, .n_lobes = wenv_material_lobe_count(mat), .co = cos_v};
-        sv.so = sqrtf(max_f(0.0f, 1.0f - cos_v * cos_v));
-        sv.n[2] = 1.0f;
-        sv.v[0] = sv.wo[0] = sv.so;
-        sv.v[2] = sv.wo[2] = cos_v;
+        specular_view sv;
+        float r[3], up[3];
         /* at the mirror direction r and, towards grazing, where the cosine has grown before D falls
          * (about m above it) */
-        float r[3] = {-sv.so, 0.0f, cos_v}, up[3] = {sv.so * cos_v, 0.0f, 1.0f - cos_v * cos_v};
-        float ul = sqrtf(dot3(up, up)), best = 0.0f;
+        float ul = table_view(mat, i, &sv, r, up), best = 0.0f;
         for (int k = 0; k < 3; k++) {
             float ang = 0.5f * (float)k * m, ca = cosf(ang), sa = ul > 1e-6f ? sinf(ang) / ul : 0.0f;
             float d[3] = {ca * r[0] + sa * up[0], ca * r[1] + sa * up[1], ca * r[2] + sa * up[2]};
@@ -614,15 +629,10 @@ void wenv_lights_envelope_table(const wenv_material *mat,
 {
 #pragma omp parallel for schedule(dynamic, 1)
     for (size_t i = 0; i <= WENV_LIGHT_PEAK_SAMPLES; i++) {
-        float t = (float)i / (float)WENV_LIGHT_PEAK_SAMPLES, cos_v = max_f(1e-4f, t * t);
-        specular_view sv = {.mat = mat, .n_lobes = wenv_material_lobe_count(mat), .co = cos_v};
-        sv.so = sqrtf(max_f(0.0f, 1.0f - cos_v * cos_v));
-        sv.n[2] = 1.0f;
-        sv.v[0] = sv.wo[0] = sv.so;
-        sv.v[2] = sv.wo[2] = cos_v;
-        /* axes about the mirror direction r: up (towards the normal, in the plane of r and n) and across */
-        float r[3] = {-sv.so, 0.0f, cos_v}, up[3] = {sv.so * cos_v, 0.0f, 1.0f - cos_v * cos_v};
-        float ul = sqrtf(dot3(up, up));
+        specular_view sv;
+        float r[3], up[3];
+        /* axes about the mirror direction r: up (normalised here) and across, +Y */
+        float ul = table_view(mat, i, &sv, r, up);
         if (ul > 1e-6f) {
             for (int c = 0; c < 3; c++)
                 up[c] /= ul;
