@@ -533,23 +533,24 @@ static void walk_clusters(const wenv_lights *lights, specular_view *sv, const lo
         if (c_near < ax->cone)
             continue;
         float flux_sum = flux[0] + flux[1] + flux[2];
-        float bound = INFINITY, q = 0.0f;
-        if (ax->centred) {
-            /* the Gaussian exponent at the centre, and at the cluster's point nearest the peak (each
-             * axis on its own); a Gaussian or GGX tail falls at least as 1 / (1 + q)^2 */
-            float a = dot3(l, ax->across), b = dot3(l, ax->along), ra = sr * ax->inv_across, rb = sr * ax->inv_along;
-            a *= ax->inv_across;
-            b *= ax->inv_along;
+        int bounded = ax->centred || ax->envelope_lo;
+        float bound = INFINITY, q = 0.0f, a = 0.0f, b = 0.0f;
+        if (bounded) {
+            /* the Gaussian exponent at the centre, in the lobe's widths along each axis */
+            a = dot3(l, ax->across) * ax->inv_across;
+            b = dot3(l, ax->along) * ax->inv_along;
             q = a * a + b * b;
-            float an = max_f(0.0f, fabsf(a) - ra), bn = max_f(0.0f, fabsf(b) - rb);
+        }
+        if (ax->centred) {
+            /* ... and at the cluster's point nearest the peak (each axis on its own); a Gaussian or
+             * GGX tail falls at least as 1 / (1 + q)^2 */
+            float an = max_f(0.0f, fabsf(a) - sr * ax->inv_across), bn = max_f(0.0f, fabsf(b) - sr * ax->inv_along);
             float t = 1.0f / (1.0f + an * an + bn * bn);
             /* behind the mirror direction (cd < 0) the lobe holds nothing of note */
             bound = cd > 0.0f ? flux_sum * ax->peak * t * t : 0.0f;
         } else if (ax->envelope_lo) {
             float deviation = acosf(min_f(1.0f, max_f(-1.0f, cd))) - asinf(min_f(1.0f, sr));
             bound = flux_sum * envelope_at(ax, deviation);
-            float a = dot3(l, ax->across) * ax->inv_across, b = dot3(l, ax->along) * ax->inv_along;
-            q = a * a + b * b;
         }
         if (bound <= tolerance) {
             /* all of it is within the tolerance: its centre stands for it */
@@ -565,7 +566,7 @@ static void walk_clusters(const wenv_lights *lights, specular_view *sv, const lo
          * against 0.36 %); its width is the shape's, which holds for a retro-reflective lobe too:
          * every table's error within 0.1 point of reading every pixel (benchmarks/accuracy.py
          * --tables) at 5-15x fewer evaluations. */
-        if ((ax->centred || ax->envelope_lo) && ci >= sr && sr <= CLUSTER_WIDTH_FRACTION * ax->w_across) {
+        if (bounded && ci >= sr && sr <= CLUSTER_WIDTH_FRACTION * ax->w_across) {
             float x = sr * ax->inv_across;
             if (bound * x * x * (1.0f + 2.0f * q) <= tolerance) {
                 push_light(sv, &lb, ci, dot3(l, sv->v), flux, 1.0f, s);
