@@ -2,7 +2,7 @@
 UndefinedBehaviorSanitizer, 25 s per target, about two minutes with the build): no crash, leak,
 failed check or input slower than 10 s, and each target tried many inputs and found new ones
 beyond its seeds.  The seeds include the inputs that once broke a reader, so they are replayed
-first."""
+first.  Then the Python API's random-input run (tests/fuzz/api.py), a fixed seed's iterations."""
 import json
 import os
 import re
@@ -52,3 +52,27 @@ def test_fuzz_script_reports_and_exits_cleanly(fuzz_results):
         line = re.search(r"^%s +(\d+) inputs in .* 0 crash\(es\), slowest corpus input \d+ ms, corpus (\d+)" % target,
                          run.stdout, re.M)
         assert line and int(line.group(1)) == results[target]["execs"], run.stdout
+
+
+API_ITERATIONS = 1500
+
+
+def test_api_survives_random_input(tmp_path):
+    """Random odd and bad arguments to every public function and method: each raises TypeError,
+    ValueError or OSError (or returns finite values for finite input) and nothing crashes or hangs;
+    enough calls got through to shade, so the run reached the shading code and not only the checks."""
+    out = tmp_path / "api.json"
+    env = dict(os.environ, WENV_CACHE_DIR=str(tmp_path / "cache"))
+    run = subprocess.run([sys.executable, os.path.join(ROOT, "tests", "fuzz", "api.py"), "--seed", "0", "--iterations",
+                          str(API_ITERATIONS), "--json", str(out)], capture_output=True, text=True, timeout=900, env=env)
+    assert out.exists(), f"exit {run.returncode}\n" + run.stdout + run.stderr[-6000:]
+    summary = json.load(open(out))
+    assert summary["finding"] is None and run.returncode == 0, run.stdout[-6000:]
+    counts = summary["counts"]
+    assert summary["iterations"] == API_ITERATIONS
+    for error in ("TypeError", "ValueError", "OSError"):
+        assert counts.get("raised " + error, 0) >= 50, counts
+    assert counts.get("returned Shader", 0) >= 50, counts
+    assert counts.get("returned Shader.shade", 0) + counts.get("returned Shader.shade_mesh", 0) >= 30, counts
+    assert counts.get("returned Shader.set_environment", 0) + counts.get("returned Shader.set_material", 0) >= 20, counts
+    assert counts.get("returned glossmeter gloss", 0) + counts.get("returned glossmeter measure", 0) >= 3, counts

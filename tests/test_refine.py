@@ -108,8 +108,12 @@ def test_step_arguments_are_checked(scene):
     shader = wenv.Shader(env, mat, quality="draft")
     pos, nrm = sphere(100)
     eye = (0, -5, 0)
-    with pytest.raises(ValueError, match="first must be >= 0, got -1"):
+    with pytest.raises(ValueError, match="first must not be negative, got -1"):
         shader.shade_mesh(pos, nrm, eye, first=-1)
+    with pytest.raises(ValueError, match="first is out of range"):
+        shader.shade_mesh(pos, nrm, eye, first=2**70)
+    with pytest.raises(TypeError, match="first must be an int, got float"):
+        shader.shade_mesh(pos, nrm, eye, first=0.5)
     with pytest.raises(ValueError, match=r"first \(101\) is past the 100 vertices to shade"):
         shader.shade_mesh(pos, nrm, eye, first=101)
     with pytest.raises(ValueError, match="budget must be >= 0 seconds"):

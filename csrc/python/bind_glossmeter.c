@@ -98,18 +98,14 @@ static int get_options(PyObject *tol, PyObject *max_evals, PyObject *smooth, wen
         }
     }
     if (max_evals && max_evals != Py_None) {
-        if (!PyLong_Check(max_evals)) {
-            PyErr_Format(PyExc_TypeError, "max_evals must be an int, got %.100s", Py_TYPE(max_evals)->tp_name);
-            return -1;
-        }
-        long long v = PyLong_AsLongLong(max_evals);
-        if (v == -1 && PyErr_Occurred())
+        size_t v;
+        if (wenv_py_get_size(max_evals, "max_evals", &v) < 0)
             return -1;
         if (v < 1000) {
-            PyErr_Format(PyExc_ValueError, "max_evals must be at least 1000, got %lld", v);
+            PyErr_Format(PyExc_ValueError, "max_evals must be at least 1000, got %zu", v);
             return -1;
         }
-        opt->max_evals = (size_t)v;
+        opt->max_evals = v;
     }
     if (smooth) {
         int b = PyObject_IsTrue(smooth);

@@ -461,17 +461,15 @@ static int shade_visible(ShaderObject *self, const float *normals, const float *
 static PyObject *Shader_shade_mesh(ShaderObject *self, PyObject *args, PyObject *kwargs)
 {
     static char *kwlist[] = {"positions", "normals", "eye", "cull", "view_projection", "out", "first", "budget", NULL};
-    PyObject *pobj, *nobj, *eobj, *vp_obj = Py_None, *out_obj = Py_None, *budget_obj = Py_None;
+    PyObject *pobj, *nobj, *eobj, *vp_obj = Py_None, *out_obj = Py_None, *budget_obj = Py_None, *first_obj = NULL;
     int cull = 0;
-    Py_ssize_t first = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO|$pOOnO:shade_mesh", kwlist, &pobj, &nobj, &eobj, &cull, &vp_obj,
-                                     &out_obj, &first, &budget_obj))
+    size_t first = 0;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO|$pOOOO:shade_mesh", kwlist, &pobj, &nobj, &eobj, &cull, &vp_obj,
+                                     &out_obj, &first_obj, &budget_obj))
+        return NULL;
+    if (first_obj && wenv_py_get_size(first_obj, "first", &first) < 0)
         return NULL;
     double budget = INFINITY;
-    if (first < 0) {
-        PyErr_Format(PyExc_ValueError, "first must be >= 0, got %zd", first);
-        return NULL;
-    }
     if (budget_obj != Py_None) {
         if (!PyFloat_Check(budget_obj) && !PyLong_Check(budget_obj)) {
             PyErr_Format(PyExc_TypeError, "budget must be a number of seconds or None, got %.100s",
@@ -543,14 +541,14 @@ static PyObject *Shader_shade_mesh(ShaderObject *self, PyObject *args, PyObject 
     size_t count = np, next;
     if (cull)
         count = wenv_visible_vertices(pb.buf, nb.buf, np, eye, vp_obj != Py_None ? vp : NULL, visible);
-    if ((size_t)first > count) {
-        PyErr_Format(PyExc_ValueError, "first (%zd) is past the %zu vertices to shade", first, count);
+    if (first > count) {
+        PyErr_Format(PyExc_ValueError, "first (%zu) is past the %zu vertices to shade", first, count);
         goto fail;
     }
     if (claim(self) < 0)
         goto fail;
     claimed = 1;
-    if (shade_visible(self, nb.buf, views, np, visible, count, (size_t)first, budget, out, &next) < 0)
+    if (shade_visible(self, nb.buf, views, np, visible, count, first, budget, out, &next) < 0)
         goto fail;
     self->visible = cull ? (Py_ssize_t)count : -1;
     self->next_vertex = (Py_ssize_t)next;
