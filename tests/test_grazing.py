@@ -136,3 +136,27 @@ def test_the_pyramid_is_made_only_for_a_material_that_reads_it():
         assert sh.stats["grazing_bytes"] == fresh.stats["grazing_bytes"] > 0
         sh.set_material(diffuse)
         assert np.array_equal(sh.shade(n, v), wenv.Shader(env, diffuse, quality=q, method="slicing").shade(n, v))
+
+
+def test_lobes_the_grazing_path_takes_at_every_view_make_no_slices():
+    """Where the grazing path's share is 1 up to normal incidence (lobes narrower than `grazing`
+    local texels even there: m = 0.05 at `default`'s 64^2 maps, a clear coat), the BRDF slices would
+    never be read: the material makes none and a new image no lighting slice or table row, and the
+    result is that of the grazing path and lights alone -- against the reference as before (m = 0.05
+    under sunset at `default`: tests/test_accuracy.py's bound).  m = 0.1 reads its slices at steep
+    views and keeps them."""
+    sunset, city = (wenv.load_environment(hdri_path(h)) for h in ("sunset", "city"))
+    n, v = random_pairs(2000, 9)
+    for mat in (lobe(0.05), wenv.Principled(base_color=(0.6, 0.15, 0.08), roughness=0.3, coat_weight=1.0)):
+        sh = wenv.Shader(sunset, mat, quality="default", method="slicing")
+        out = sh.shade(n, v)
+        assert sh.stats["brdf_terms"] == 0 and sh.stats["slices_ready"] == 0 and sh.stats["pairs_ready"] == 0
+        sh.set_environment(city)
+        assert np.array_equal(sh.shade(n, v), wenv.Shader(city, mat, quality="default", method="slicing").shade(n, v))
+        assert sh.stats["slices_ready"] == 0 and sh.stats["pairs_ready"] == 0
+    ref = wenv.reference(sunset, lobe(0.05), n, v)
+    out = wenv.Shader(sunset, lobe(0.05), quality="default", method="slicing").shade(n, v)
+    assert np.sqrt(np.mean((out - ref) ** 2) / np.mean(ref ** 2)) < 0.02
+    sh = wenv.Shader(sunset, lobe(0.1), quality="default", method="slicing")
+    sh.shade(n, v)
+    assert sh.stats["brdf_terms"] > 0 and sh.stats["slices_ready"] > 0

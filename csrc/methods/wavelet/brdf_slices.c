@@ -12,6 +12,12 @@
 #include "math/haar.h"
 #include "math/maps.h"
 
+/* sub-samples per texel side of the rule every texel takes */
+#define COARSE_K 2
+/* the fine rule's reach about the mirror direction, in lobe widths: twice (reflection doubles the
+ * half-vector's angle) 12 widths, where GGX keeps 1/145 of its lobe beyond and Beckmann nothing */
+#define NARROW_REACH 24.0
+
 void wenv_wavelet_material_free(wenv_wavelet_material *m)
 {
     if (!m)
@@ -36,33 +42,50 @@ size_t wenv_wavelet_material_bytes(const wenv_wavelet *wavelet, const wenv_wavel
            wavelet->nv * 3 * sizeof(float) + wenv_grazing_rule_bytes(m->grazing_rule);
 }
 
+static void texel_rule_free(wenv_texel_rule *rule)
+{
+    free(rule->dirs);
+    free(rule->taps);
+    free(rule->w);
+    memset(rule, 0, sizeof *rule);
+}
+
 void wenv_wavelet_free_quadrature(wenv_wavelet *wavelet)
 {
-    free(wavelet->quad_dirs);
-    free(wavelet->quad_taps);
-    free(wavelet->quad_w);
-    wavelet->quad_dirs = NULL;
-    wavelet->quad_taps = NULL;
-    wavelet->quad_w = NULL;
-    wavelet->quad_k = 0;
+    texel_rule_free(&wavelet->quad);
+    texel_rule_free(&wavelet->fine);
+    texel_rule_free(&wavelet->fine_coarse);
+    free(wavelet->texel_centre);
+    wavelet->texel_centre = NULL;
+}
+
+/* Each texel's share of a rule's cosine weight: its sub-samples' weights times cos theta. */
+static double texel_cos_weight(const wenv_texel_rule *rule, size_t t)
+{
+    double sum = 0.0;
+    for (size_t e = t * rule->k * rule->k; e < (t + 1) * rule->k * rule->k; e++)
+        for (int c = 0; c < 4; c++)
+            sum += (double)rule->w[4 * e + c] * rule->dirs[3 * e + 2];
+    return sum;
 }
 
 /* Sub-samples of every local texel (k x k per texel, each carrying the texel's exact solid angle
- * over k^2) with their tent taps, scaled so the cosine weights sum to exactly pi: then a constant
- * environment gives exactly albedo x radiance. */
-wenv_status wenv_wavelet_build_quadrature(wenv_wavelet *wavelet, size_t k, wenv_error *err)
+ * over k^2) with their tent taps.  Without `like`, scaled so the cosine weights sum to exactly pi:
+ * then a constant environment gives exactly albedo x radiance.  With it, each texel's weights are
+ * scaled to that texel's weight in `like`, so that the rules can be mixed texel by texel. */
+static wenv_status texel_rule_build(wenv_texel_rule *rule, size_t L, size_t k, const wenv_texel_rule *like,
+                                    wenv_error *err)
 {
-    if (wavelet->quad_k == k)
-        return WENV_OK;
-    wenv_wavelet_free_quadrature(wavelet);
-    size_t L = wavelet->q.local_n, nl = wavelet->nl, count = nl * k * k;
-    wavelet->quad_dirs = malloc(count * 3 * sizeof(float));
-    wavelet->quad_taps = malloc(count * 4 * sizeof(uint32_t));
-    wavelet->quad_w = malloc(count * 4 * sizeof(float));
-    if (!wavelet->quad_dirs || !wavelet->quad_taps || !wavelet->quad_w) {
-        wenv_wavelet_free_quadrature(wavelet);
+    size_t nl = L * L, count = nl * k * k;
+    rule->dirs = malloc(count * 3 * sizeof(float));
+    rule->taps = malloc(count * 4 * sizeof(uint32_t));
+    rule->w = malloc(count * 4 * sizeof(float));
+    if (!rule->dirs || !rule->taps || !rule->w) {
+        texel_rule_free(rule);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the local quadrature");
     }
+    rule->k = k;
+    rule->count = count;
     double h = 2.0 / (double)L, total = 0.0;
     for (size_t t = 0; t < nl; t++) {
         size_t i = t % L, j = t / L;
@@ -76,19 +99,44 @@ wenv_status wenv_wavelet_build_quadrature(wenv_wavelet *wavelet, size_t k, wenv_
             wenv_hemi_decode(u, v, d);
             wenv_hemi_bilinear(L, u, v, idx, w);
             for (int c = 0; c < 3; c++)
-                wavelet->quad_dirs[3 * e + c] = (float)d[c];
+                rule->dirs[3 * e + c] = (float)d[c];
             for (int c = 0; c < 4; c++) {
-                wavelet->quad_taps[4 * e + c] = (uint32_t)idx[c];
-                wavelet->quad_w[4 * e + c] = (float)(w[c] * omega);
+                rule->taps[4 * e + c] = (uint32_t)idx[c];
+                rule->w[4 * e + c] = (float)(w[c] * omega);
                 total += w[c] * omega * d[2];
             }
         }
     }
-    double scale = M_PI / total;
-    for (size_t e = 0; e < count * 4; e++)
-        wavelet->quad_w[e] = (float)(wavelet->quad_w[e] * scale);
-    wavelet->quad_count = count;
-    wavelet->quad_k = k;
+    if (!like) {
+        double scale = M_PI / total;
+        for (size_t e = 0; e < count * 4; e++)
+            rule->w[e] = (float)(rule->w[e] * scale);
+        return WENV_OK;
+    }
+    for (size_t t = 0; t < nl; t++) {
+        double mine = texel_cos_weight(rule, t), target = texel_cos_weight(like, t);
+        double scale = mine > 0.0 ? target / mine : 0.0;
+        for (size_t e = t * k * k * 4; e < (t + 1) * k * k * 4; e++)
+            rule->w[e] = (float)(rule->w[e] * scale);
+    }
+    return WENV_OK;
+}
+
+/* The 2 x 2 rule and the texels' centre directions, made once per shader. */
+wenv_status wenv_wavelet_build_quadrature(wenv_wavelet *wavelet, wenv_error *err)
+{
+    size_t L = wavelet->q.local_n, nl = wavelet->nl;
+    if (texel_rule_build(&wavelet->quad, L, COARSE_K, NULL, err))
+        return err->status;
+    if (!(wavelet->texel_centre = malloc(nl * 3 * sizeof(float))))
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the local quadrature");
+    for (size_t t = 0; t < nl; t++) {
+        double d[3];
+        wenv_hemi_decode(-1.0 + 2.0 * ((double)(t % L) + 0.5) / (double)L, -1.0 + 2.0 * ((double)(t / L) + 0.5) / (double)L,
+                         d);
+        for (int c = 0; c < 3; c++)
+            wavelet->texel_centre[3 * t + c] = (float)d[c];
+    }
     return WENV_OK;
 }
 
@@ -99,7 +147,81 @@ static size_t quadrature_k(const wenv_wavelet *wavelet, const wenv_material *mat
     double m = fmin(1.0, wenv_material_lobe_width(mat));
     double spacing = 2.5 / (double)wavelet->q.local_n;
     size_t k = (size_t)ceil(2.0 * spacing / (1.41 * m));
-    return k < 2 ? 2 : (k > 16 ? 16 : k);
+    return k < COARSE_K ? COARSE_K : (k > 16 ? 16 : k);
+}
+
+/* The finer rule a material's narrowest lobe needs, when the 2 x 2 one is too coarse for it, and
+ * the 2 x 2 rule weighted like it texel by texel (so that the two mixed still sum to pi). */
+static wenv_status fine_rule_for(wenv_wavelet *wavelet, const wenv_material *mat, int *fine, wenv_error *err)
+{
+    size_t k = quadrature_k(wavelet, mat), L = wavelet->q.local_n;
+    *fine = k > COARSE_K;
+    if (!*fine || k == wavelet->fine.k)
+        return WENV_OK;
+    texel_rule_free(&wavelet->fine);
+    texel_rule_free(&wavelet->fine_coarse);
+    if (texel_rule_build(&wavelet->fine, L, k, NULL, err) ||
+        texel_rule_build(&wavelet->fine_coarse, L, COARSE_K, &wavelet->fine, err)) {
+        texel_rule_free(&wavelet->fine);
+        return err->status;
+    }
+    return WENV_OK;
+}
+
+/* Adds texels [t0, t1) of a rule to the slice: f cos at their sub-samples, spread by the taps, in
+ * batches of at most `cap` sub-samples (fcos holds cap x 3). */
+static void integrate_texels(const wenv_material *mat, const double wo[3], const wenv_texel_rule *rule, size_t t0,
+                             size_t t1, float *fcos, size_t cap, float *slice)
+{
+    size_t per = rule->k * rule->k, step = cap / per > 0 ? cap / per : 1;
+    for (size_t t = t0; t < t1; t += step) {
+        size_t first = t * per, count = ((t + step < t1 ? t + step : t1) - t) * per;
+        wenv_material_specular_cos_batch(mat, wo, rule->dirs + 3 * first, count, fcos);
+        for (size_t e = 0; e < count; e++) {
+            const float *g = fcos + 3 * e;
+            for (int c = 0; c < 4; c++) {
+                float w = rule->w[4 * (first + e) + c];
+                float *o = slice + 3 * (size_t)rule->taps[4 * (first + e) + c];
+                o[0] += w * g[0];
+                o[1] += w * g[1];
+                o[2] += w * g[2];
+            }
+        }
+    }
+}
+
+/* A view's BRDF slice (pixel domain).  A lobe narrower than the 2 x 2 rule resolves takes the fine
+ * rule only on the texels within NARROW_REACH of its widths from the mirror direction (plus two
+ * texels); the rest holds its tails, which 2 x 2 sub-samples weighted like the fine rule follow.
+ * Reading the fine rule everywhere cost a coat or a mirror-like table 10-20x the material's time.
+ * A lobe that need not lie about the mirror direction takes the fine rule everywhere. */
+static void brdf_slice(const wenv_wavelet *wavelet, const wenv_material *mat, int fine, const double wo[3],
+                       float *fcos, float *slice)
+{
+    size_t nl = wavelet->nl, cap = wavelet->quad.count;
+    memset(slice, 0, nl * 3 * sizeof(float));
+    if (!fine || !wenv_material_mirror_centred(mat)) {
+        integrate_texels(mat, wo, fine ? &wavelet->fine : &wavelet->quad, 0, nl, fcos, cap, slice);
+        return;
+    }
+    double reach = NARROW_REACH * wenv_material_lobe_width(mat) + 2.0 * 2.5 / (double)wavelet->q.local_n;
+    double cos_reach = reach < M_PI ? cos(reach) : -1.0;
+    /* the mirror direction; the products in an order a turn or mirror of both vectors keeps, so
+     * that a slice permuted across its orbit takes the fine rule on the same texels */
+    double r[3] = {-wo[0], -wo[1], wo[2]};
+    size_t t = 0;
+    while (t < nl) {
+        const float *c = wavelet->texel_centre + 3 * t;
+        int near = (c[0] * r[0] + c[1] * r[1]) + c[2] * r[2] >= cos_reach;
+        size_t end = t + 1;
+        for (; end < nl; end++) {
+            const float *e = wavelet->texel_centre + 3 * end;
+            if (((e[0] * r[0] + e[1] * r[1]) + e[2] * r[2] >= cos_reach) != near)
+                break;
+        }
+        integrate_texels(mat, wo, near ? &wavelet->fine : &wavelet->fine_coarse, t, end, fcos, cap, slice);
+        t = end;
+    }
 }
 
 /* Per lobe, the n.h below which it reflects nothing visible (wenv_material_lobe_cos_h_min): a direct
@@ -259,8 +381,16 @@ wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material
         }
     size_t nv = wavelet->nv, nl = wavelet->nl, L = wavelet->q.local_n, V = wavelet->q.view_n;
     size_t keep = wavelet->q.coefficients ? wavelet->q.coefficients : nl;
-    if (wenv_material_lobe_count(mat) && wenv_wavelet_build_quadrature(wavelet, quadrature_k(wavelet, mat), err))
+    /* the grazing path's rule first: where it takes every view, the lobes need no BRDF slice (a
+     * coat, a Cook-Torrance lobe of m < 0.07 at 64^2 local maps), and a new image no lighting slice */
+    wenv_grazing_rule *grazing = NULL;
+    if (wenv_grazing_rule_create(&grazing, mat, L, wavelet->q.grazing, wavelet->q.grazing_slopes != 0, err))
         return err->status;
+    int sliced = wenv_material_lobe_count(mat) && !wenv_grazing_every_view(grazing), fine = 0;
+    if (sliced && fine_rule_for(wavelet, mat, &fine, err)) {
+        wenv_grazing_rule_free(grazing);
+        return err->status;
+    }
     /* the slices are made beside the current material, which stays until they exist: a cancel
      * (or running out of memory here) leaves the shader as it was */
     size_t *counts = calloc(nv, sizeof(size_t));
@@ -270,6 +400,7 @@ wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material
         free(counts);
         free(all_idx);
         free(all_rgb);
+        wenv_grazing_rule_free(grazing);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for BRDF slices");
     }
     /* an isotropic model's slice for a view turned or mirrored about the normal is its slice so
@@ -280,6 +411,7 @@ wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material
         free(counts);
         free(all_idx);
         free(all_rgb);
+        wenv_grazing_rule_free(grazing);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for BRDF slices");
     }
     for (size_t j = 0; j < nv; j++)
@@ -287,14 +419,14 @@ wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material
             reps[n_reps++] = j;
     atomic_int failed = 0, cancelled = 0;
     atomic_size_t done = 0;
-    if (wenv_material_lobe_count(mat)) {
+    if (sliced) {
 #pragma omp parallel
         {
             float *slice = malloc(nl * 3 * sizeof(float)), *turned = malloc(nl * 3 * sizeof(float));
             float *scratch = malloc(wenv_haar2d_scratch_floats(L, 3) * sizeof(float));
             float *mag = malloc(nl * sizeof(float));
             float *work = malloc(nl * sizeof(float));
-            float *fcos = malloc(wavelet->quad_count * 3 * sizeof(float));
+            float *fcos = malloc(wavelet->quad.count * 3 * sizeof(float));
             if (!slice || !turned || !scratch || !mag || !work || !fcos)
                 atomic_store(&failed, 1);
 #pragma omp for schedule(dynamic, 1)
@@ -312,18 +444,7 @@ wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material
                     wo[1] *= sc;
                     wo[2] = WENV_GRAZING_Z;
                 }
-                wenv_material_specular_cos_batch(mat, wo, wavelet->quad_dirs, wavelet->quad_count, fcos);
-                memset(slice, 0, nl * 3 * sizeof(float));
-                for (size_t e = 0; e < wavelet->quad_count; e++) {
-                    const float *g = fcos + 3 * e;
-                    for (int c = 0; c < 4; c++) {
-                        float w = wavelet->quad_w[4 * e + c];
-                        float *o = slice + 3 * (size_t)wavelet->quad_taps[4 * e + c];
-                        o[0] += w * g[0];
-                        o[1] += w * g[1];
-                        o[2] += w * g[2];
-                    }
-                }
+                brdf_slice(wavelet, mat, fine, wo, fcos, slice);
                 /* the orbit's views, each once: view g(rep) reads texel t of the rep's slice at g(t) */
                 for (int g = 0; g < (symmetric ? SQUARE_SYMMETRIES : 1); g++) {
                     size_t j = grid_image(V + 1, rep, g);
@@ -356,6 +477,7 @@ wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material
         free(counts);
         free(all_idx);
         free(all_rgb);
+        wenv_grazing_rule_free(grazing);
         return cancelled ? wenv_error_set(err, WENV_ERR_CANCELLED, "material precomputation cancelled")
                          : wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for BRDF slices");
     }
@@ -372,8 +494,10 @@ wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material
         free(all_idx);
         free(all_rgb);
         wenv_wavelet_material_free(m);
+        wenv_grazing_rule_free(grazing);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for BRDF slices");
     }
+    m->grazing_rule = grazing;
     /* touch the table now rather than page by page during the first views */
     memset(m->table, 0, wavelet->ns * nv * 3 * sizeof(float));
     for (size_t j = 0; j < nv; j++)
@@ -396,9 +520,7 @@ wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material
     free(counts);
     free(all_idx);
     free(all_rgb);
-    if (wenv_material_copy(&m->mat, mat, err) || lobe_cutoffs(m, mat, err) || albedo_tables(wavelet, m, mat, err) ||
-        wenv_grazing_rule_create(&m->grazing_rule, mat, wavelet->q.local_n, wavelet->q.grazing,
-                                 wavelet->q.grazing_slopes != 0, err)) {
+    if (wenv_material_copy(&m->mat, mat, err) || lobe_cutoffs(m, mat, err) || albedo_tables(wavelet, m, mat, err)) {
         wenv_wavelet_material_free(m);
         return err->status;
     }

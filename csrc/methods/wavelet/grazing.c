@@ -229,6 +229,12 @@ float wenv_grazing_blend(const wenv_grazing_rule *rule, float cos_v)
     return t * t * (3.0f - 2.0f * t);
 }
 
+int wenv_grazing_every_view(const wenv_grazing_rule *rule)
+{
+    /* past normal incidence, for views a rounding above cos 1 */
+    return rule && wenv_grazing_blend(rule, 1.01f) >= 1.0f;
+}
+
 void wenv_grazing_shade(const wenv_grazing_rule *rule, const wenv_grazing_light *light, const float n[3],
                         const float v[3], float cos_v, float rgb[3])
 {

@@ -49,6 +49,10 @@ size_t wenv_grazing_rule_bytes(const wenv_grazing_rule *rule);
  * local map resolves every lobe. */
 float wenv_grazing_blend(const wenv_grazing_rule *rule, float cos_v);
 
+/* Whether the per-vertex result is the whole at every view (lobes narrower than the threshold even
+ * at normal incidence), so that the material's BRDF slices would never be read. */
+int wenv_grazing_every_view(const wenv_grazing_rule *rule);
+
 /* The lobes' reflected radiance at one vertex: unit normal n, unit view v (towards the eye),
  * cos_v = n.v > 0.  Thread-safe. */
 void wenv_grazing_shade(const wenv_grazing_rule *rule, const wenv_grazing_light *light, const float n[3],

@@ -144,7 +144,7 @@ wenv_status wenv_wavelet_create(wenv_wavelet **out, const wenv_wavelet_quality *
             wavelet->frames[9 * s + c] = (float)f[c];
     }
     if (wenv_irradiance_rule_create(&wavelet->irradiance_rule, q->global_n, err) ||
-        wenv_wavelet_build_quadrature(wavelet, 2, err)) {
+        wenv_wavelet_build_quadrature(wavelet, err)) {
         wenv_wavelet_free(wavelet);
         return err->status;
     }

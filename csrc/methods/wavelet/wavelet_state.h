@@ -39,6 +39,14 @@ typedef struct {
     unsigned char *row_ready, *row_need; /* per normal sample, as slice_ready and slice_need */
 } wenv_wavelet_material;
 
+/* Sub-samples of the local map's texels, k x k per texel in texel order, with their tent taps. */
+typedef struct {
+    size_t k, count;
+    float *dirs;    /* count x 3 */
+    uint32_t *taps; /* count x 4 */
+    float *w;       /* count x 4: tent weight x solid angle x normalisation */
+} wenv_texel_rule;
+
 struct wenv_wavelet {
     wenv_wavelet_quality q;
     wenv_wavelet_variant method;
@@ -68,11 +76,11 @@ struct wenv_wavelet {
     size_t *excluded;        /* pixels the lights took out (ascending), for a pyramid made later */
     size_t n_excluded;
 
-    /* local quadrature: sub-samples of the local map with their tent taps */
-    size_t quad_k, quad_count;
-    float *quad_dirs;        /* quad_count x 3 */
-    uint32_t *quad_taps;     /* quad_count x 4 */
-    float *quad_w;           /* quad_count x 4: tent weight x solid angle x normalisation */
+    /* local quadrature: 2 x 2 sub-samples per texel, and for a lobe too narrow for them a finer
+     * rule, read near the lobe, with a 2 x 2 rule weighted like it per texel for the rest
+     * (brdf_slices.c) */
+    wenv_texel_rule quad, fine, fine_coarse;
+    float *texel_centre;     /* nl x 3: each local texel's centre direction */
 
     /* materials: the current one first, then those set before it, most recent first */
     wenv_wavelet_material *kept[WENV_WAVELET_KEPT_MATERIALS];
@@ -107,7 +115,7 @@ static inline void wenv_wavelet_albedo_at(const float *table, float c, float a[3
 
 /* brdf_slices.c: the local map's sub-sample quadrature (k x k per texel), and freeing it and a
  * material's part; the bytes a material's part holds. */
-wenv_status wenv_wavelet_build_quadrature(wenv_wavelet *wavelet, size_t k, wenv_error *err);
+wenv_status wenv_wavelet_build_quadrature(wenv_wavelet *wavelet, wenv_error *err);
 void wenv_wavelet_free_quadrature(wenv_wavelet *wavelet);
 void wenv_wavelet_material_free(wenv_wavelet_material *m);
 size_t wenv_wavelet_material_bytes(const wenv_wavelet *wavelet, const wenv_wavelet_material *m);
