@@ -190,6 +190,15 @@ static void integrate_texels(const wenv_material *mat, const double wo[3], const
     }
 }
 
+/* Whether texel t's centre lies within the reach (cos_reach) of direction r; the products in an
+ * order a turn or mirror of both vectors keeps, so that a slice permuted across its orbit takes the
+ * fine rule on the same texels. */
+static inline int texel_near(const wenv_wavelet *wavelet, size_t t, const double r[3], double cos_reach)
+{
+    const float *c = wavelet->texel_centre + 3 * t;
+    return (c[0] * r[0] + c[1] * r[1]) + c[2] * r[2] >= cos_reach;
+}
+
 /* A view's BRDF slice (pixel domain).  A lobe narrower than the 2 x 2 rule resolves takes the fine
  * rule only on the texels within NARROW_REACH of its widths from the mirror direction (plus two
  * texels); the rest holds its tails, which 2 x 2 sub-samples weighted like the fine rule follow.
@@ -206,21 +215,13 @@ static void brdf_slice(const wenv_wavelet *wavelet, const wenv_material *mat, in
     }
     double reach = NARROW_REACH * wenv_material_lobe_width(mat) + 2.0 * 2.5 / (double)wavelet->q.local_n;
     double cos_reach = reach < M_PI ? cos(reach) : -1.0;
-    /* the mirror direction; the products in an order a turn or mirror of both vectors keeps, so
-     * that a slice permuted across its orbit takes the fine rule on the same texels */
-    double r[3] = {-wo[0], -wo[1], wo[2]};
-    size_t t = 0;
-    while (t < nl) {
-        const float *c = wavelet->texel_centre + 3 * t;
-        int near = (c[0] * r[0] + c[1] * r[1]) + c[2] * r[2] >= cos_reach;
-        size_t end = t + 1;
-        for (; end < nl; end++) {
-            const float *e = wavelet->texel_centre + 3 * end;
-            if (((e[0] * r[0] + e[1] * r[1]) + e[2] * r[2] >= cos_reach) != near)
-                break;
-        }
+    double r[3] = {-wo[0], -wo[1], wo[2]}; /* the mirror direction */
+    /* runs of texels on the same side, each integrated in one batch */
+    for (size_t t = 0, end; t < nl; t = end) {
+        int near = texel_near(wavelet, t, r, cos_reach);
+        for (end = t + 1; end < nl && texel_near(wavelet, end, r, cos_reach) == near; end++)
+            ;
         integrate_texels(mat, wo, near ? &wavelet->fine : &wavelet->fine_coarse, t, end, fcos, cap, slice);
-        t = end;
     }
 }
 
@@ -381,39 +382,32 @@ wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material
         }
     size_t nv = wavelet->nv, nl = wavelet->nl, L = wavelet->q.local_n, V = wavelet->q.view_n;
     size_t keep = wavelet->q.coefficients ? wavelet->q.coefficients : nl;
+    /* the slices are made beside the current material, which stays until they exist: a cancel
+     * (or running out of memory here) leaves the shader as it was */
+    size_t *counts = NULL, *reps = NULL, n_reps = 0;
+    uint32_t *all_idx = NULL;
+    float *all_rgb = NULL;
+    wenv_wavelet_material *m = NULL;
+    wenv_status st;
     /* the grazing path's rule first: where it takes every view, the lobes need no BRDF slice (a
      * coat, a Cook-Torrance lobe of m < 0.07 at 64^2 local maps), and a new image no lighting slice */
     wenv_grazing_rule *grazing = NULL;
-    if (wenv_grazing_rule_create(&grazing, mat, L, wavelet->q.grazing, wavelet->q.grazing_slopes != 0, err))
-        return err->status;
+    if ((st = wenv_grazing_rule_create(&grazing, mat, L, wavelet->q.grazing, wavelet->q.grazing_slopes != 0, err)))
+        return st;
     int sliced = wenv_material_lobe_count(mat) && !wenv_grazing_every_view(grazing), fine = 0;
-    if (sliced && fine_rule_for(wavelet, mat, &fine, err)) {
-        wenv_grazing_rule_free(grazing);
-        return err->status;
-    }
-    /* the slices are made beside the current material, which stays until they exist: a cancel
-     * (or running out of memory here) leaves the shader as it was */
-    size_t *counts = calloc(nv, sizeof(size_t));
-    uint32_t *all_idx = malloc(nv * keep * sizeof(uint32_t));
-    float *all_rgb = malloc(nv * keep * 3 * sizeof(float));
-    if (!counts || !all_idx || !all_rgb) {
-        free(counts);
-        free(all_idx);
-        free(all_rgb);
-        wenv_grazing_rule_free(grazing);
-        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for BRDF slices");
+    if (sliced && (st = fine_rule_for(wavelet, mat, &fine, err)))
+        goto fail;
+    counts = calloc(nv, sizeof(size_t));
+    all_idx = malloc(nv * keep * sizeof(uint32_t));
+    all_rgb = malloc(nv * keep * 3 * sizeof(float));
+    reps = malloc(nv * sizeof(size_t));
+    if (!counts || !all_idx || !all_rgb || !reps) {
+        st = wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for BRDF slices");
+        goto fail;
     }
     /* an isotropic model's slice for a view turned or mirrored about the normal is its slice so
      * turned: one per orbit of the view samples is made, and permuted for the rest */
     int symmetric = wenv_material_mirror_symmetric(mat);
-    size_t *reps = malloc(nv * sizeof(size_t)), n_reps = 0;
-    if (!reps) {
-        free(counts);
-        free(all_idx);
-        free(all_rgb);
-        wenv_grazing_rule_free(grazing);
-        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for BRDF slices");
-    }
     for (size_t j = 0; j < nv; j++)
         if (!symmetric || orbit_first(V + 1, j) == j)
             reps[n_reps++] = j;
@@ -472,17 +466,13 @@ wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material
             free(fcos);
         }
     }
-    free(reps);
     if (failed || cancelled) {
-        free(counts);
-        free(all_idx);
-        free(all_rgb);
-        wenv_grazing_rule_free(grazing);
-        return cancelled ? wenv_error_set(err, WENV_ERR_CANCELLED, "material precomputation cancelled")
-                         : wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for BRDF slices");
+        st = cancelled ? wenv_error_set(err, WENV_ERR_CANCELLED, "material precomputation cancelled")
+                       : wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for BRDF slices");
+        goto fail;
     }
     /* the new material's part, made whole before it replaces anything */
-    wenv_wavelet_material *m = calloc(1, sizeof *m);
+    m = calloc(1, sizeof *m);
     if (m) {
         m->brdf_start = calloc(nv + 1, sizeof(size_t));
         m->table = malloc(wavelet->ns * nv * 3 * sizeof(float));
@@ -490,14 +480,11 @@ wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material
         m->row_need = calloc(wavelet->ns, 1);
     }
     if (!m || !m->brdf_start || !m->table || !m->row_ready || !m->row_need) {
-        free(counts);
-        free(all_idx);
-        free(all_rgb);
-        wenv_wavelet_material_free(m);
-        wenv_grazing_rule_free(grazing);
-        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for BRDF slices");
+        st = wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for BRDF slices");
+        goto fail;
     }
     m->grazing_rule = grazing;
+    grazing = NULL;
     /* touch the table now rather than page by page during the first views */
     memset(m->table, 0, wavelet->ns * nv * 3 * sizeof(float));
     for (size_t j = 0; j < nv; j++)
@@ -507,23 +494,21 @@ wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material
     m->brdf_idx = malloc((total ? total : 1) * sizeof(uint32_t));
     m->brdf_rgb = malloc((total ? total : 1) * 3 * sizeof(float));
     if (!m->brdf_idx || !m->brdf_rgb) {
-        free(counts);
-        free(all_idx);
-        free(all_rgb);
-        wenv_wavelet_material_free(m);
-        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for BRDF slices");
+        st = wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for BRDF slices");
+        goto fail;
     }
     for (size_t j = 0; j < nv; j++) {
         memcpy(m->brdf_idx + m->brdf_start[j], all_idx + j * keep, counts[j] * sizeof(uint32_t));
         memcpy(m->brdf_rgb + 3 * m->brdf_start[j], all_rgb + j * keep * 3, counts[j] * 3 * sizeof(float));
     }
+    if (wenv_material_copy(&m->mat, mat, err) || lobe_cutoffs(m, mat, err) || albedo_tables(wavelet, m, mat, err)) {
+        st = err->status;
+        goto fail;
+    }
     free(counts);
     free(all_idx);
     free(all_rgb);
-    if (wenv_material_copy(&m->mat, mat, err) || lobe_cutoffs(m, mat, err) || albedo_tables(wavelet, m, mat, err)) {
-        wenv_wavelet_material_free(m);
-        return err->status;
-    }
+    free(reps);
     wenv_material_diffuse_table(mat, &m->diffuse);
     m->has_diffuse = wenv_diffuse_table_any(&m->diffuse);
     m->has_lobes = wenv_material_lobe_count(mat) > 0;
@@ -542,4 +527,12 @@ wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material
         wenv_wavelet_material_free(wavelet->kept[--wavelet->n_kept]);
     wavelet->m = m;
     return wenv_wavelet_remake_ready(wavelet, 0, err);
+fail:
+    free(counts);
+    free(all_idx);
+    free(all_rgb);
+    free(reps);
+    wenv_wavelet_material_free(m);
+    wenv_grazing_rule_free(grazing);
+    return st;
 }
