@@ -322,6 +322,41 @@ def test_progress_reports_and_cancels():
                     progress=lambda f: np.array([1, 2]))
 
 
+@pytest.mark.parametrize("method", ["rotation", "slicing"])
+def test_a_stop_asked_at_the_last_report_is_honoured(method, cook):
+    """Thread 0 reports as items finish, and a dynamic schedule may give all of a short loop's last
+    items to the other thread; the last report, 1, comes from the calling thread after the loop,
+    so a stop asked for there is never lost (before, a cancel of a short set_material was ignored
+    now and then on a busy machine).  Repeated, so that either thread takes the last item."""
+    env = gradient_env()
+    seen, stop_at_end = [], []
+
+    def progress(fraction):
+        seen.append(fraction)
+        return bool(stop_at_end) and fraction >= 1.0
+
+    shader = wenv.Shader(env, cook, quality="draft", method=method, cache_dir=False, progress=progress)
+    assert seen and seen[-1] == 1.0
+    nrm, v = random_pairs(200, 16)
+    before = shader.shade(nrm, v)
+    stop_at_end.append(1)
+    new = wenv.CookTorrance(diffuse=0.2, lobes=[{"roughness": 0.4}])
+    for _ in range(20):
+        seen.clear()
+        with pytest.raises(wenv.CancelledError, match="material precomputation cancelled"):
+            shader.set_material(new)
+        assert seen[-1] == 1.0 and shader.material is cook
+    assert np.array_equal(shader.shade(nrm, v), before)
+    if method == "rotation":  # the matrices' build (no cache) ends the same way
+        with pytest.raises(wenv.CancelledError, match="rotation matrix precomputation cancelled"):
+            wenv.Shader(env, cook, quality=dict(SMALL, normals=16), method="rotation", cache_dir=False,
+                        progress=progress)
+    reported = []
+    with pytest.raises(wenv.CancelledError, match="reference cancelled"):
+        wenv.reference(env, cook, nrm[:3], v[:3], progress=lambda f: reported.append(f) or f >= 1.0)
+    assert reported[-1] == 1.0
+
+
 def test_set_num_threads_is_honoured(cook):
     env = gradient_env()
     nrm, v = random_pairs(1000, 11)

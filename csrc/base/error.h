@@ -22,11 +22,4 @@ typedef struct {
 wenv_status wenv_error_set(wenv_error *err, wenv_status status, const char *fmt, ...)
     __attribute__((format(printf, 3, 4)));
 
-/* Progress reporting for long work.  `report` is called from one thread only with a fraction in
- * [0, 1]; it returns nonzero to ask the work to stop.  Either field may be NULL. */
-typedef struct {
-    int (*report)(void *ctx, double fraction);
-    void *ctx;
-} wenv_progress;
-
 #endif

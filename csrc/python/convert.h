@@ -7,6 +7,7 @@
 #include <Python.h>
 
 #include "base/error.h"
+#include "base/progress.h"
 
 /* Raises the Python exception that matches err->status (ValueError, TypeError, OSError,
  * MemoryError, wenv.CancelledError).  Always returns NULL for convenient `return`. */

@@ -140,8 +140,7 @@ wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, con
             for (int c = 0; c < 3; c++)
                 out[3 * i + c] = (float)(spec[c] + irr[c] * diffuse[c] / M_PI);
             size_t d = atomic_fetch_add(&done, 1) + 1;
-            if (omp_get_thread_num() == 0 && progress && progress->report &&
-                progress->report(progress->ctx, (double)d / (double)n))
+            if (wenv_progress_step(progress, d, n))
                 atomic_store(&cancelled, 1);
         }
         free(wi);
@@ -153,7 +152,7 @@ wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, con
     free(flux);
     if (failed)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the reference");
-    if (cancelled)
+    if (cancelled || wenv_progress_finish(progress))
         return wenv_error_set(err, WENV_ERR_CANCELLED, "reference cancelled");
     return WENV_OK;
 }

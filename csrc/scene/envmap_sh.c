@@ -76,8 +76,7 @@ wenv_status wenv_sh_project_envmap_blocks(const wenv_envmap *env, size_t order, 
                 }
             }
             size_t dn = atomic_fetch_add(&done, 1) + 1;
-            if (omp_get_thread_num() == 0 && progress && progress->report &&
-                progress->report(progress->ctx, (double)dn / (double)strips))
+            if (wenv_progress_step(progress, dn, strips))
                 atomic_store(&cancelled, 1);
         }
         if (!atomic_load(&failed)) {
@@ -96,7 +95,7 @@ wenv_status wenv_sh_project_envmap_blocks(const wenv_envmap *env, size_t order, 
     if (failed)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory projecting the environment");
     /* the last strip may have been another thread's: report completion (and honour a stop) here */
-    if (cancelled || (progress && progress->report && progress->report(progress->ctx, 1.0)))
+    if (cancelled || wenv_progress_finish(progress))
         return wenv_error_set(err, WENV_ERR_CANCELLED, "projection of the environment cancelled");
     return WENV_OK;
 }

@@ -6,6 +6,7 @@
 #include <stddef.h>
 
 #include "base/error.h"
+#include "base/progress.h"
 #include "math/spherical_harmonics.h"
 #include "scene/envmap.h"
 

@@ -205,8 +205,7 @@ static wenv_status set_material(void *state, const wenv_material *mat, const wen
                     }
                 }
                 size_t d = atomic_fetch_add(&done, 1) + 1;
-                if (omp_get_thread_num() == 0 && progress && progress->report &&
-                    progress->report(progress->ctx, (double)d / (double)V))
+                if (wenv_progress_step(progress, d, V))
                     atomic_store(&cancelled, 1);
             }
             free(wi);
@@ -214,7 +213,7 @@ static wenv_status set_material(void *state, const wenv_material *mat, const wen
             free(y);
         }
     }
-    if (!failed && !cancelled && progress && progress->report && progress->report(progress->ctx, 1.0))
+    if (!failed && !cancelled && wenv_progress_finish(progress))
         cancelled = 1;
     if (failed || cancelled) {
         free(slices);

@@ -211,15 +211,14 @@ static wenv_status prefilter_all(const wenv_splitsum *ss, const pyramid *src, co
             for (int c = 0; c < 3; c++)
                 map[3 * t + c] = wsum > 0.0 ? (float)(acc[c] / wsum) : 0.0f;
             size_t d = atomic_fetch_add(&done, 1) + 1;
-            if (omp_get_thread_num() == 0 && (d & 255) == 0 && progress && progress->report &&
-                progress->report(progress->ctx, (double)d / (double)total))
+            if ((d & 255) == 0 && wenv_progress_step(progress, d, total))
                 atomic_store(&cancelled, 1);
         }
     }
     free(samples);
     if (cancelled)
         return wenv_error_set(err, WENV_ERR_CANCELLED, "prefiltering cancelled");
-    if (progress && progress->report && progress->report(progress->ctx, 1.0))
+    if (wenv_progress_finish(progress))
         return wenv_error_set(err, WENV_ERR_CANCELLED, "prefiltering cancelled");
     return WENV_OK;
 }

@@ -453,8 +453,7 @@ wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material
                                                 all_rgb + j * keep * 3);
                     /* a slice costs its lobes' evaluations: many lobes make this long enough to report */
                     size_t d = atomic_fetch_add(&done, 1) + 1;
-                    if (omp_get_thread_num() == 0 && progress && progress->report &&
-                        progress->report(progress->ctx, (double)d / (double)nv))
+                    if (wenv_progress_step(progress, d, nv))
                         atomic_store(&cancelled, 1);
                 }
             }
@@ -466,6 +465,8 @@ wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material
             free(fcos);
         }
     }
+    if (!failed && !cancelled && wenv_progress_finish(progress))
+        cancelled = 1;
     if (failed || cancelled) {
         st = cancelled ? wenv_error_set(err, WENV_ERR_CANCELLED, "material precomputation cancelled")
                        : wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for BRDF slices");

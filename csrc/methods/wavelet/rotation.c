@@ -461,13 +461,14 @@ wenv_status wenv_rotation_build(wenv_rotation **out, size_t global_n, size_t loc
             if (build_matrix(rs, f, threshold, &ws, &mats[s]) < 0)
                 atomic_store(&failed, 1);
             size_t d = atomic_fetch_add(&done, 1) + 1;
-            if (omp_get_thread_num() == 0 && progress && progress->report &&
-                progress->report(progress->ctx, (double)d / (double)ns))
+            if (wenv_progress_step(progress, d, ns))
                 atomic_store(&cancelled, 1);
         }
         ws_free(&ws);
     }
     wenv_resampler_free(rs);
+    if (!failed && !cancelled && wenv_progress_finish(progress))
+        cancelled = 1;
     if (failed || cancelled) {
         wenv_rotation_free(rot);
         if (cancelled)

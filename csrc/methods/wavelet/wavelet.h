@@ -36,6 +36,7 @@
 #include <stddef.h>
 
 #include "base/error.h"
+#include "base/progress.h"
 #include "scene/envmap.h"
 #include "scene/material.h"
 #include "methods/method.h"
