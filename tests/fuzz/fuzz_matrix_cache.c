@@ -11,29 +11,15 @@
 
 #include <zlib.h>
 
+#include "methods/wavelet/matrix_cache_format.h"
 #include "methods/wavelet/rotation.h"
-
-/* The file's layout, as matrix_cache.c writes it (x86-64: no padding). */
-typedef struct {
-    char magic[8];
-    uint32_t version, header_crc;
-    uint64_t global_n, local_n, normal_n;
-    double epsilon;
-} cache_header;
-
-typedef struct {
-    uint64_t comp_size, raw_size;
-    uint32_t crc, pad;
-} cache_entry;
-
-_Static_assert(sizeof(cache_header) == 48 && sizeof(cache_entry) == 24, "the cache file's layout");
 
 /* More than any input libFuzzer is given here (-max_len), so a parsed file is always small. */
 #define MAX_FILE ((size_t)1 << 22)
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
-    cache_header h = {{0}, 0, 0, 4, 4, 2, 1e-3};
+    wenv_matrix_cache_header h = {{0}, 0, 0, 4, 4, 2, 1e-3};
     if (size)
         memcpy(&h, data, size < sizeof h ? size : sizeof h);
     char path[64];
@@ -62,9 +48,9 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 size_t LLVMFuzzerMutate(uint8_t *data, size_t size, size_t max_size);
 
 typedef struct {
-    cache_header h;
+    wenv_matrix_cache_header h;
     size_t ns;
-    cache_entry *entries;
+    wenv_matrix_cache_entry *entries;
     unsigned char **raw; /* each block uncompressed */
 } parsed_cache;
 
@@ -87,7 +73,7 @@ static int parse(const uint8_t *data, size_t size, parsed_cache *p)
         return -1;
     p->ns = (size_t)(p->h.normal_n * p->h.normal_n);
     size_t pos = sizeof p->h;
-    if (p->ns > (size - pos) / sizeof(cache_entry))
+    if (p->ns > (size - pos) / sizeof(wenv_matrix_cache_entry))
         return -1;
     p->entries = malloc(p->ns * sizeof *p->entries);
     p->raw = calloc(p->ns, sizeof *p->raw);
@@ -96,7 +82,7 @@ static int parse(const uint8_t *data, size_t size, parsed_cache *p)
     memcpy(p->entries, data + pos, p->ns * sizeof *p->entries);
     pos += p->ns * sizeof *p->entries;
     for (size_t s = 0; s < p->ns; s++) {
-        cache_entry *e = &p->entries[s];
+        wenv_matrix_cache_entry *e = &p->entries[s];
         if (e->comp_size > size - pos || e->raw_size > MAX_FILE)
             return -1;
         p->raw[s] = malloc(e->raw_size ? e->raw_size : 1);
@@ -116,7 +102,7 @@ static size_t serialise(parsed_cache *p, uint8_t *out, size_t max_size)
     if (pos > max_size)
         return 0;
     for (size_t s = 0; s < p->ns; s++) {
-        cache_entry *e = &p->entries[s];
+        wenv_matrix_cache_entry *e = &p->entries[s];
         uLongf comp = compressBound((uLong)e->raw_size);
         if (comp > max_size - pos)
             return 0;
@@ -126,11 +112,7 @@ static size_t serialise(parsed_cache *p, uint8_t *out, size_t max_size)
         e->crc = (uint32_t)crc32(0L, p->raw[s], (uInt)e->raw_size);
         pos += comp;
     }
-    /* the header's CRC covers the header (its CRC field zero) and the block table */
-    cache_header copy = p->h;
-    copy.header_crc = 0;
-    uLong crc = crc32(0L, (const Bytef *)&copy, sizeof copy);
-    p->h.header_crc = (uint32_t)crc32(crc, (const Bytef *)p->entries, (uInt)(p->ns * sizeof *p->entries));
+    p->h.header_crc = wenv_matrix_cache_header_crc(&p->h, p->entries, p->ns);
     memcpy(out, &p->h, sizeof p->h);
     memcpy(out + sizeof p->h, p->entries, p->ns * sizeof *p->entries);
     return pos;

@@ -19,20 +19,7 @@
 #include <unistd.h>
 #include <zlib.h>
 
-#define CACHE_MAGIC "WENVROT"
-#define CACHE_VERSION 3u /* 2: float resampling splat; 3: byte planes, run-length zlib */
-
-typedef struct {
-    char magic[8];
-    uint32_t version, header_crc;
-    uint64_t global_n, local_n, normal_n;
-    double epsilon;
-} cache_header;
-
-typedef struct {
-    uint64_t comp_size, raw_size;
-    uint32_t crc, pad;
-} cache_entry;
+#include "methods/wavelet/matrix_cache_format.h"
 
 /* Raw block of one matrix: nnz (u64), colptr as u32 (cols + 1), the rows' deltas within their column
  * as two byte planes of nnz, the f32 values as four. */
@@ -144,14 +131,6 @@ static int compress_block(const unsigned char *in, size_t size, unsigned char *o
     return r == Z_STREAM_END ? 0 : -1;
 }
 
-static uint32_t header_crc(const cache_header *h, const cache_entry *entries, size_t ns)
-{
-    cache_header copy = *h;
-    copy.header_crc = 0;
-    uLong crc = crc32(0L, (const Bytef *)&copy, sizeof copy);
-    return (uint32_t)crc32(crc, (const Bytef *)entries, (uInt)(ns * sizeof *entries));
-}
-
 /* The rename itself reaches the disk only with its folder: best effort (a failure loses the
  * cache, never its content). */
 static void sync_folder_of(const char *path)
@@ -173,7 +152,7 @@ static void sync_folder_of(const char *path)
 wenv_status wenv_rotation_save(const wenv_rotation *rot, const char *path, wenv_error *err)
 {
     size_t ns = rot->normal_n * rot->normal_n;
-    cache_entry *entries = calloc(ns, sizeof *entries);
+    wenv_matrix_cache_entry *entries = calloc(ns, sizeof *entries);
     unsigned char **blobs = calloc(ns, sizeof *blobs);
     if (!entries || !blobs) {
         free(entries);
@@ -207,15 +186,15 @@ wenv_status wenv_rotation_save(const wenv_rotation *rot, const char *path, wenv_
         st = wenv_error_set(err, WENV_ERR_NOMEM, "out of memory compressing rotation matrices for %s", path);
         goto done;
     }
-    cache_header h;
+    wenv_matrix_cache_header h;
     memset(&h, 0, sizeof h);
-    memcpy(h.magic, CACHE_MAGIC, sizeof CACHE_MAGIC);
-    h.version = CACHE_VERSION;
+    memcpy(h.magic, WENV_MATRIX_CACHE_MAGIC, sizeof WENV_MATRIX_CACHE_MAGIC);
+    h.version = WENV_MATRIX_CACHE_VERSION;
     h.global_n = rot->global_n;
     h.local_n = rot->local_n;
     h.normal_n = rot->normal_n;
     h.epsilon = rot->epsilon;
-    h.header_crc = header_crc(&h, entries, ns);
+    h.header_crc = wenv_matrix_cache_header_crc(&h, entries, ns);
     size_t plen = strlen(path) + 64;
     tmp = malloc(plen);
     if (!tmp) {
@@ -266,12 +245,12 @@ wenv_status wenv_rotation_load(wenv_rotation **out, const char *path, size_t glo
     if (!fp)
         return wenv_error_set(err, WENV_ERR_IO, "cannot open %s: %s", path, strerror(errno));
     size_t ns = normal_n * normal_n, nl = local_n * local_n, ng = global_n * global_n;
-    cache_header h;
-    cache_entry *entries = NULL;
+    wenv_matrix_cache_header h;
+    wenv_matrix_cache_entry *entries = NULL;
     wenv_rotation *rot = NULL;
     wenv_status st = WENV_OK;
-    if (fread(&h, sizeof h, 1, fp) != 1 || memcmp(h.magic, CACHE_MAGIC, sizeof CACHE_MAGIC) != 0 ||
-        h.version != CACHE_VERSION || h.global_n != global_n || h.local_n != local_n ||
+    if (fread(&h, sizeof h, 1, fp) != 1 || memcmp(h.magic, WENV_MATRIX_CACHE_MAGIC, sizeof WENV_MATRIX_CACHE_MAGIC) != 0 ||
+        h.version != WENV_MATRIX_CACHE_VERSION || h.global_n != global_n || h.local_n != local_n ||
         h.normal_n != normal_n || h.epsilon != epsilon) {
         st = wenv_error_set(err, WENV_ERR_IO, "%s is not a wenv rotation cache for these sizes", path);
         goto fail;
@@ -281,7 +260,7 @@ wenv_status wenv_rotation_load(wenv_rotation **out, const char *path, size_t glo
         st = wenv_error_set(err, WENV_ERR_NOMEM, "out of memory reading %s", path);
         goto fail;
     }
-    if (fread(entries, sizeof *entries, ns, fp) != ns || header_crc(&h, entries, ns) != h.header_crc) {
+    if (fread(entries, sizeof *entries, ns, fp) != ns || wenv_matrix_cache_header_crc(&h, entries, ns) != h.header_crc) {
         st = wenv_error_set(err, WENV_ERR_IO, "%s: truncated or corrupt header", path);
         goto fail;
     }
@@ -305,7 +284,7 @@ wenv_status wenv_rotation_load(wenv_rotation **out, const char *path, size_t glo
     }
     uint64_t left = (uint64_t)file.st_size - table_end;
     for (size_t s = 0; s < ns; s++) {
-        cache_entry *e = &entries[s];
+        wenv_matrix_cache_entry *e = &entries[s];
         /* sizes are checked against what the file still holds before anything is allocated for
          * them: zlib never inflates more than 1032 times (a deflate match of 258 bytes takes at
          * least 2 bits), so a block table claiming more is corrupt whatever its CRC says */
