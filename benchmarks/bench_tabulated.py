@@ -4,7 +4,9 @@ each preset, for Cook-Torrance (Beckmann, index 1.5, over diffuse 0.2) at m = 0.
 90 x 90 x 180 table of the same material, the shaders of a preset timed in turn view by view so that
 the machine's load falls on all alike.  A retro-reflective table (no Cook-Torrance lobe, reflecting at
 every half vector, so the exact lights cannot skip any) is timed beside them for comparison.  Also the
-time to set each material on a shader (precomputation: BRDF slices, albedo tables, grazing rules).
+time to set each material on a shader (precomputation: BRDF slices, albedo tables, grazing rules),
+and to load MERL files: a full 90 x 90 x 180 measurement (35 MB) and a 4096 x 2 x 64 table measured
+at its first theta_h only, whose unmeasured columns are all filled from it.
 
     .venv/bin/python benchmarks/bench_tabulated.py [--views 7] [--presets draft,default,high]
 
@@ -13,6 +15,7 @@ import argparse
 import json
 import os
 import statistics
+import tempfile
 import time
 
 import numpy as np
@@ -38,6 +41,28 @@ def materials():
     return out
 
 
+def loading(repeats=5):
+    """{case: median seconds of wenv.load_brdf} for MERL files written to a temporary folder."""
+    rng = np.random.default_rng(8)
+    sparse = rng.uniform(0.001, 0.05, size=(4096, 2, 64, 3))
+    unmeasured = np.ones(sparse.shape[:3], bool)
+    unmeasured[0] = False
+    cases = {"full 90x90x180": (merl_files.table_of({"brdf": "cook_torrance", "roughness": 0.08}), None),
+             "4096x2x64 measured at one theta_h": (sparse, unmeasured)}
+    out = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for k, (name, (table, mask)) in enumerate(cases.items()):
+            path = merl_files.write_merl(os.path.join(tmp, f"{k}.binary"), table, mask)
+            times = []
+            for _ in range(repeats):
+                t0 = time.perf_counter()
+                wenv.load_brdf(path)
+                times.append(time.perf_counter() - t0)
+            out[name] = statistics.median(times)
+            print(f"load_brdf, {name}: {out[name]:.3f} s (median of {repeats})", flush=True)
+    return out
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--views", type=int, default=7)
@@ -48,7 +73,8 @@ def main():
     pos, nrm = suzanne(4)
     env = wenv.load_environment(bundled_hdri(args.hdri))
     mats = materials()
-    results = {"vertices": len(pos), "threads": wenv.get_num_threads(), "hdri": args.hdri, "presets": {}}
+    results = {"vertices": len(pos), "threads": wenv.get_num_threads(), "hdri": args.hdri,
+               "load_seconds": loading(), "presets": {}}
     for preset in args.presets.split(","):
         method = "rotation" if preset == "draft" else "slicing"
         shaders, set_s = {}, {}

@@ -7,7 +7,6 @@ import math
 import os
 import re
 import struct
-import time
 import warnings
 
 import sys
@@ -287,18 +286,14 @@ def test_index_coordinates_and_edges():
         np.testing.assert_allclose(got, [1 + xi, 1 + xj, b], rtol=2e-5, err_msg=str((th, td, pd)))
 
 
-def test_full_size_file_loads_fast_and_reproduces(tmp_path):
-    """The full 90 x 90 x 180 MERL table (35 MB): loaded in well under a second, values exact."""
+def test_full_size_file_loads_and_reproduces(tmp_path):
+    """The full 90 x 90 x 180 MERL table (35 MB): values exact (its loading time:
+    benchmarks/bench_tabulated.py)."""
     shape = (90, 90, 180)
     table = M.tabulate(M.cook_torrance(0.08, 1.8, (0.9, 0.6, 0.3)), *shape)
     path = M.write_merl(tmp_path / "full.binary", table)
     assert os.path.getsize(path) == 12 + 24 * 90 * 90 * 180
-    times = []
-    for _ in range(2):
-        t0 = time.perf_counter()
-        mat = wenv.load_brdf(str(path))
-        times.append(time.perf_counter() - t0)
-    assert min(times) < 1.0, f"loading a 90x90x180 MERL file took {times} s"
+    mat = wenv.load_brdf(str(path))
     assert tuple(mat.shape) == shape
     wi, wo, idx = sample_pairs(shape, skip_theta_d0=True)  # phi_d is undefined at theta_d = 0
     pick = np.random.default_rng(5).choice(len(wi), 30000, replace=False)
@@ -406,19 +401,17 @@ def test_table_reflecting_more_than_it_receives_warns():
 
 # ------------------------------------------------------------------ (c) unmeasured samples
 
-def test_table_measured_at_one_theta_h_fills_in_linear_time(tmp_path):
+def test_table_measured_at_one_theta_h_fills_every_column_from_it(tmp_path):
     """Columns with nothing measured take the nearest measured theta_h at their phi_d: a table of
-    4096 theta_h measured only at the first fills in one pass per phi_d (well under a second; the
-    search outwards from each column took 3 s here), every column a copy of the measured one."""
+    4096 theta_h measured only at the first has every column a copy of the measured one.  (It fills
+    in one pass per phi_d; its loading time, which a search outwards from each column took to 3 s,
+    is in benchmarks/bench_tabulated.py.)"""
     shape = (4096, 2, 64)
     table = np.random.default_rng(8).uniform(0.001, 0.05, size=shape + (3,))
     mask = np.ones(shape, bool)
     mask[0] = False
     path = M.write_merl(tmp_path / "one_theta_h.binary", table, mask)
-    t0 = time.perf_counter()
     mat = wenv.load_brdf(str(path))
-    elapsed = time.perf_counter() - t0
-    assert elapsed < 1.5, f"loading took {elapsed:.2f} s"
     held = np.asarray(mat.table)
     np.testing.assert_allclose(held, np.broadcast_to(held[:1], held.shape), rtol=0)
     np.testing.assert_allclose(held[0], table[0], rtol=1e-6)

@@ -2,7 +2,6 @@
 over a fast one's result.  The steps together give exactly what the accurate setting gives in one
 call; each step touches only its own rows, starts where the last stopped and keeps to its budget
 give or take one block."""
-import time
 
 import numpy as np
 import pytest
@@ -70,9 +69,7 @@ def test_a_budget_is_kept_within_a_block(scene):
     shader = wenv.Shader(env, mat, quality="draft")
     shader.shade_mesh(pos, nrm, eye)  # every table row made: steps cost their vertices only
     out = np.zeros((len(pos), 3), np.float32)
-    t0 = time.perf_counter()
     shader.shade_mesh(pos, nrm, eye, out=out, budget=0.0)
-    step = time.perf_counter() - t0
     nxt = shader.stats["next_vertex"]
     assert 0 < nxt < len(pos) // 4  # a zero budget shades one small block
     assert not out[nxt:].any() and out[:nxt].any()
@@ -80,7 +77,6 @@ def test_a_budget_is_kept_within_a_block(scene):
     shader.shade_mesh(pos, nrm, eye, out=out, first=nxt)
     assert shader.stats["next_vertex"] == len(pos)
     assert np.array_equal(out, shader.shade_mesh(pos, nrm, eye))
-    assert step < 5.0  # sanity only: timing belongs to benchmarks
 
 
 def test_a_new_lighting_remakes_at_once_every_row_the_last_whole_call_read(scene):
