@@ -12,7 +12,7 @@ import pytest
 
 import wenv
 
-bpy = pytest.importorskip("bpy", reason="the bpy module is installed by scripts/setup.sh")
+import bpy  # noqa: E402  (installed by scripts/setup.sh; missing, the tests fail rather than skip)
 import mathutils  # noqa: E402  (ships with bpy)
 
 import addon  # noqa: E402

@@ -790,7 +790,8 @@ def test_bundled_hdris_load():
 
 @pytest.fixture(scope="module")
 def bpy():
-    bpy = pytest.importorskip("bpy")
+    import bpy
+
     bpy.ops.wm.read_factory_settings(use_empty=True)
     return bpy
 

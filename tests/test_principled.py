@@ -36,7 +36,8 @@ def albedo(mat, deg, samples=256):
 
 def test_defaults_are_the_nodes():
     """Every input's default is the Blender node's (read from bpy), and the node's names map."""
-    bpy = pytest.importorskip("bpy")
+    import bpy
+
     from cycles_sphere import SOCKETS
     mat = bpy.data.materials.new("defaults")
     if bpy.app.version < (5, 0, 0):  # nodes are always on from 5.0
@@ -241,7 +242,8 @@ def test_sheen_table_reproduces_cycles_under_a_sun_it_was_not_measured_with():
     """scripts/measure_sheen_table.py measured Cycles' sheen table under eight sun directions; under
     another sun, a sheen-only sphere rendered by Cycles (a delta light: every sample the same, so the
     pixels are exact values of f cos) equals wenv's f cos at every pixel to float precision."""
-    bpy = pytest.importorskip("bpy")
+    import bpy
+
     from cycles_sphere import SphereScene
     scene = SphereScene("sunset", size=48, samples=1)
     scene.scene.world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.0
@@ -288,7 +290,6 @@ def test_glossmeter_reads_principled():
 
 @pytest.fixture(scope="module")
 def cycles_scene():
-    pytest.importorskip("bpy")
     from cycles_sphere import SphereScene
     return SphereScene("sunset", size=48, samples=384)
 
