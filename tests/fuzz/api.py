@@ -4,9 +4,11 @@ public function and method, in random order, on objects made from random input w
 
 What counts as found: an exception other than TypeError, ValueError, OSError or wenv.CancelledError
 (and the glossmeter's documented RuntimeError when its integral runs out of evaluations), a
-non-finite value returned for finite input, a call slower than --slow seconds, or a crash of the
-process (the test runs this in a subprocess).  Iteration i draws from its own generator seeded with
-(seed, i), so a finding is replayed alone with --only i.
+non-finite value returned for finite input, a slow call, or a crash of the
+process (the test runs this in a subprocess).  A call is slow when it takes more than --slow
+seconds of CPU per thread of wenv's (what it would take on a quiet machine, however busy this one
+is) or more than six times that of wall-clock time (a stall that burns no CPU).  Iteration i draws
+from its own generator seeded with (seed, i), so a finding is replayed alone with --only i.
 
     .venv/bin/python tests/fuzz/api.py --seed 0 --iterations 3000 [--json out.json]
     .venv/bin/python tests/fuzz/api.py --seed 0 --only 1234         # replay one iteration, verbosely
@@ -236,7 +238,7 @@ class Fuzzer:
     def call(self, name, f, *args, finite=False, **kwargs):
         """Calls f; returns its result or None when it raised what bad input may raise."""
         self.counts["calls"] += 1
-        t0 = time.perf_counter()
+        t0, cpu0 = time.perf_counter(), time.process_time()
         try:
             out = f(*args, **kwargs)
         except EXPECTED as e:
@@ -252,9 +254,9 @@ class Fuzzer:
         except Exception as e:
             raise Found(f"{name} raised {type(e).__name__}: {e}") from e
         finally:
-            dt = time.perf_counter() - t0
-            if dt > self.slow:
-                raise Found(f"{name} took {dt:.1f} s")
+            wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0
+            if cpu > self.slow * wenv.get_num_threads() or wall > 6 * self.slow:
+                raise Found(f"{name} took {wall:.1f} s ({cpu:.1f} s of CPU)")
         self.counts["returned " + name] += 1
         if finite:
             for value in (out if isinstance(out, tuple) else (out,)):
@@ -397,7 +399,9 @@ def main():
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--iterations", type=int, default=3000)
     ap.add_argument("--only", type=int, help="replay this iteration alone, printing every call")
-    ap.add_argument("--slow", type=float, default=10.0, help="a call slower than this many seconds is a finding")
+    ap.add_argument("--slow", type=float, default=10.0,
+                    help="a call taking more than this many seconds of CPU per thread (or six times it "
+                    "of wall-clock time) is a finding")
     ap.add_argument("--json", help="write the summary and any finding here")
     args = ap.parse_args()
     wenv.set_num_threads(2)
