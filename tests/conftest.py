@@ -38,6 +38,18 @@ def hdri_dir():
     return bundled_hdri_dir()
 
 
+@pytest.fixture
+def one_thread():
+    """wenv on one thread for the test: progress is reported by OpenMP's thread 0 as its items
+    finish, so how many reports come before the last depends on the schedule (and the machine's
+    load) unless thread 0 does every item."""
+    import wenv
+    old = wenv.get_num_threads()
+    wenv.set_num_threads(1)
+    yield
+    wenv.set_num_threads(old)
+
+
 def unit(a):
     a = np.asarray(a, dtype=np.float64)
     return (a / np.linalg.norm(a, axis=-1, keepdims=True)).astype(np.float32)

@@ -1152,7 +1152,7 @@ def test_frame_changes_during_a_render_write_only_with_the_interface_locked(scen
     assert not np.any(attribute(obj)[1] == 0.25)
 
 
-def test_precompute_job_progress_and_cancel(tmp_path, monkeypatch):
+def test_precompute_job_progress_and_cancel(tmp_path, monkeypatch, one_thread):
     monkeypatch.setenv("WENV_CACHE_DIR", str(tmp_path))
     job = live.PrecomputeJob("draft")  # the one preset with rotation matrices to build
     seen = []

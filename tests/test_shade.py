@@ -301,7 +301,7 @@ def test_processes_building_the_same_matrices_at_once_leave_one_valid_cache_file
     assert np.array_equal(again.shade(nrm, v), expected)
 
 
-def test_progress_reports_and_cancels():
+def test_progress_reports_and_cancels(one_thread):
     env = gradient_env()
     seen = []
     wenv.Shader(env, wenv.Lambert(0.5), quality=dict(SMALL, normals=16), cache_dir=False, progress=seen.append)
@@ -605,7 +605,7 @@ def test_a_shader_keeps_the_materials_set_before_it(method, tmp_path):
 
 
 @pytest.mark.parametrize("method", ["rotation", "slicing"])
-def test_a_new_material_reports_progress_and_a_cancel_keeps_the_old_one(method, cook):
+def test_a_new_material_reports_progress_and_a_cancel_keeps_the_old_one(method, cook, one_thread):
     """A material's BRDF slices cost its lobes' evaluations (dozens of lobes: seconds), so
     set_material reports progress through the Shader's callback, rising to 1, and a cancel leaves
     the Shader shading its previous material, as the peer methods do."""
