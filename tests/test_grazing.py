@@ -149,7 +149,7 @@ def test_lobes_the_grazing_path_takes_at_every_view_make_no_slices():
     n, v = random_pairs(2000, 9)
     for mat in (lobe(0.05), wenv.Principled(base_color=(0.6, 0.15, 0.08), roughness=0.3, coat_weight=1.0)):
         sh = wenv.Shader(sunset, mat, quality="default", method="slicing")
-        out = sh.shade(n, v)
+        sh.shade(n, v)
         assert sh.stats["brdf_terms"] == 0 and sh.stats["slices_ready"] == 0 and sh.stats["pairs_ready"] == 0
         sh.set_environment(city)
         assert np.array_equal(sh.shade(n, v), wenv.Shader(city, mat, quality="default", method="slicing").shade(n, v))

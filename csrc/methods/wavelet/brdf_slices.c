@@ -132,8 +132,7 @@ wenv_status wenv_wavelet_build_quadrature(wenv_wavelet *wavelet, wenv_error *err
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the local quadrature");
     for (size_t t = 0; t < nl; t++) {
         double d[3];
-        wenv_hemi_decode(-1.0 + 2.0 * ((double)(t % L) + 0.5) / (double)L, -1.0 + 2.0 * ((double)(t / L) + 0.5) / (double)L,
-                         d);
+        wenv_hemi_decode(wenv_map_texel_center(L, t % L), wenv_map_texel_center(L, t / L), d);
         for (int c = 0; c < 3; c++)
             wavelet->texel_centre[3 * t + c] = (float)d[c];
     }
