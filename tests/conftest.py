@@ -2,6 +2,7 @@
 import glob
 import importlib.util
 import os
+import pathlib
 
 import numpy as np
 import pytest
@@ -62,3 +63,27 @@ def random_pairs(n, seed=0):
     v = unit(rng.normal(size=(n, 3)))
     v[np.sum(nrm * v, axis=1) < 0] *= -1
     return nrm, v
+
+
+README = pathlib.Path(__file__).resolve().parents[1] / "README.md"
+
+
+def python_blocks():
+    """Every ```python block of the README, in order."""
+    blocks, block = [], None
+    for line in README.read_text(encoding="utf-8").splitlines():
+        if block is None and line.strip() == "```python":
+            block = []
+        elif block is not None and line.strip() == "```":
+            blocks.append("\n".join(block) + "\n")
+            block = None
+        elif block is not None:
+            block.append(line)
+    return blocks
+
+
+def readme_block(first_line):
+    """The README's Python block whose first line starts with `first_line`."""
+    hits = [b for b in python_blocks() if b.startswith(first_line)]
+    assert len(hits) == 1, f"README.md has {len(hits)} Python blocks starting with {first_line!r}"
+    return hits[0]

@@ -18,7 +18,7 @@ import mathutils  # noqa: E402  (ships with bpy)
 import addon  # noqa: E402
 from addon import engine, gloss, live, materials, meshes, shading, views, world  # noqa: E402
 
-from conftest import hdri_path  # noqa: E402
+from conftest import hdri_path, readme_block  # noqa: E402
 
 ATTR = meshes.ATTRIBUTE
 
@@ -746,6 +746,35 @@ def test_fit_roughness_operator(scene):
     with pytest.raises(RuntimeError, match="exactly one lobe"):
         bpy.ops.wenv.fit_roughness()
     assert bpy.ops.wenv.lobe_remove() == {"FINISHED"} and len(mat.wenv.lobes) == 1
+
+
+def test_readme_scripting_block_runs_as_written(scene):
+    """README.md's "Scripting" block, as written, on Suzanne with a Principled material named
+    "paint" under the sunset HDRI: every line works and does what its comment says."""
+    env_world(scene, "sunset")
+    suzanne = add_monkey()
+    suzanne.data.materials.append(principled_material("paint", base=(0.6, 0.15, 0.08), roughness=0.3))
+    ns = {}
+    try:
+        exec(compile(readme_block("import bpy\nscene = bpy.context.scene"), "README.md", "exec"), ns)
+        assert bpy.context.window_manager.wenv.show_in_viewports
+    finally:
+        bpy.context.window_manager.wenv.show_in_viewports = False
+    mat = bpy.data.materials["paint"]
+    # fit_roughness set the node's Roughness so that the node reads 60 GU at 60 degrees
+    node = mat.node_tree.nodes["Principled BSDF"]
+    fitted = wenv.Principled(base_color=(0.6, 0.15, 0.08), roughness=node.inputs["Roughness"].default_value,
+                             ior=node.inputs["IOR"].default_value)
+    assert wenv.gloss(fitted, 60) == pytest.approx(60.0, abs=0.05)
+    # the shade wrote the colour attribute the block reads (per vertex on a smooth mesh), lit
+    colors = ns["colors"]
+    rgba = np.empty(len(colors.data) * 4, np.float32)
+    colors.data.foreach_get("color", rgba)
+    assert (colors.domain, len(colors.data)) == ("POINT", len(suzanne.data.vertices))
+    assert np.isfinite(rgba).all() and rgba.max() > 0.0
+    # from_principled made the add-on's lobes, then the block set a lobe and the measured model
+    assert mat.wenv.lobes[0].blender_roughness == pytest.approx(0.2)
+    assert (mat.wenv.model, mat.wenv.brdf_path) == ("MEASURED", "//brdfs/gold-metallic-paint.binary")
 
 
 # ---------------------------------------------------------------------------------------------
