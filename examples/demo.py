@@ -5,7 +5,7 @@ to an image (Workbench, flat attribute colours) beside Cycles' render of the sam
 the material is read as a glossmeter would.  Writes out/demo.png (wenv | Cycles | difference x 4)
 and prints the timings, the difference and the readings.
 
-    .venv/bin/python examples/demo.py [--hdri sunset] [--quality default] [--size 320] [--samples 64]
+    .venv/bin/python examples/demo.py [--hdri sunset] [--quality default] [--size 320] [--samples 64] [--out out/demo.png]
 
 Cycles renders what wenv leaves out -- Suzanne shadowing and lighting herself (her eyes, ears and
 mouth) -- so the two differ most in her hollows; on an unoccluded sphere wenv's reference matches
@@ -89,6 +89,7 @@ def main():
     ap.add_argument("--quality", default="default", choices=["draft", "default", "high", "auto"])
     ap.add_argument("--size", type=int, default=320, help="image side in pixels")
     ap.add_argument("--samples", type=int, default=64, help="Cycles samples per pixel")
+    ap.add_argument("--out", default=os.path.join(OUT, "demo.png"), help="the picture written")
     args = ap.parse_args()
 
     addon.register()
@@ -107,17 +108,17 @@ def main():
     assert bpy.ops.wenv.shade(view="CAMERA") == {"FINISHED"}
     t_view = time.perf_counter() - t0
 
-    folder = tempfile.mkdtemp(prefix="wenv-demo-")
     scene.display.shading.light = "FLAT"
     scene.display.shading.color_type = "VERTEX"
     mesh = obj.data
     mesh.color_attributes.active_color_name = meshes.ATTRIBUTE
-    wenv_img = render(scene, "BLENDER_WORKBENCH", folder)
     scene.cycles.samples = args.samples
     scene.cycles.use_denoising = False
-    t0 = time.perf_counter()
-    cycles_img = render(scene, "CYCLES", folder)
-    t_cycles = time.perf_counter() - t0
+    with tempfile.TemporaryDirectory(prefix="wenv-demo-") as folder:
+        wenv_img = render(scene, "BLENDER_WORKBENCH", folder)
+        t0 = time.perf_counter()
+        cycles_img = render(scene, "CYCLES", folder)
+        t_cycles = time.perf_counter() - t0
 
     mask = (wenv_img[..., 3] > 0.99) & (cycles_img[..., 3] > 0.99)  # Workbench keeps alpha at half precision
     a, b = wenv_img[..., :3][mask].astype(np.float64), cycles_img[..., :3][mask].astype(np.float64)
@@ -148,10 +149,9 @@ def main():
         ax.axis("off")
     fig.suptitle(f"Principled paint under {args.hdri}: 60 deg gloss {st.gloss_60:.1f} GU, relative RMSE "
                  f"{100 * rel:.1f} %", fontsize=11)
-    os.makedirs(OUT, exist_ok=True)
-    path = os.path.join(OUT, "demo.png")
-    fig.savefig(path, dpi=90, bbox_inches="tight")
-    print(f"  wrote {path}")
+    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
+    fig.savefig(args.out, dpi=90, bbox_inches="tight")
+    print(f"  wrote {args.out}")
 
 
 if __name__ == "__main__":

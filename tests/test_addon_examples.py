@@ -47,3 +47,17 @@ def test_bench_runs(tmp_path):
     result = json.load(open(path))["results"][0]
     assert result["vertices"] == 2012  # Suzanne subdivided once
     assert all(v > 0 for v in result["median_ms"].values())
+
+
+def test_demo_runs_and_prints_what_the_readme_shows(tmp_path):
+    """The main job (README's first command) at a small size: it runs, writes its picture, its wenv
+    colours agree with Cycles' on average, and its gloss line -- which depends on no render -- is the
+    README's."""
+    picture = tmp_path / "demo.png"
+    out = run(tmp_path, "examples/demo.py", "--size", "64", "--samples", "8", "--out", str(picture))
+    assert picture.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    ratio = float(out.split("mean radiance ratio")[1].split()[0])
+    assert 0.9 < ratio < 1.2  # wenv leaves out her self-shadowing: a little brighter than Cycles
+    gloss = next(line.strip() for line in out.splitlines() if line.strip().startswith("gloss:"))
+    readme = open(os.path.join(ROOT, "README.md"), encoding="utf-8").read()
+    assert "\n  " + gloss + "\n" in readme
