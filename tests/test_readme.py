@@ -4,6 +4,7 @@ is what a user copies first, so it must stay true as the code changes.  The Blen
 example runs in tests/test_addon.py (it needs the registered add-on)."""
 import ast
 import io
+import re
 import math
 import pathlib
 import sys
@@ -15,6 +16,7 @@ import pytest
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 from benchmarks import merl_files  # noqa: E402
 import wenv  # noqa: E402
+import conftest  # noqa: E402
 from conftest import bundled_hdri_dir, python_blocks, random_pairs, readme_block  # noqa: E402
 
 
@@ -180,3 +182,18 @@ def test_every_python_block_is_run():
     blocks = python_blocks()
     assert [sum(b.startswith(first) for first in run) for b in blocks] == [1] * len(blocks)
     assert len(blocks) == len(run)
+
+
+def test_every_name_the_readme_gives_exists(api_namespace):
+    """Every `wenv.<name>` in the README's text is the module's or one of the add-on's operators, and
+    every `stats["key"]` it names is in a Shader's stats."""
+    text = conftest.README.read_text(encoding="utf-8")
+    operators_py = conftest.README.parent / "addon" / "operators.py"
+    operators = re.findall(r'bl_idname = "wenv\.(\w+)"', operators_py.read_text(encoding="utf-8"))
+    names = set(re.findall(r"(?<![\w.])wenv\.([A-Za-z_]\w*)", text))
+    assert len(names) >= 30 and len(operators) == 8
+    assert sorted(n for n in names if not hasattr(wenv, n) and n not in operators) == []
+    keys = set(re.findall(r'stats\["(\w+)"\]', text))
+    ns = api_namespace
+    stats = {**ns["shader"].stats, **wenv.Shader(ns["env"], ns["mat"], quality="auto").stats}
+    assert "next_vertex" in keys and sorted(k for k in keys if k not in stats) == []
