@@ -39,6 +39,7 @@ NOT_SHADED = {
     "alpha": "Alpha below 1: the see-through part is not shaded (the reflection is scaled by Alpha)",
     "anisotropic": "Anisotropy is not shaded (the lobes are isotropic)",
     "thin_film_thickness": "Thin film is not shaded",
+    "coat_tint": "Coat Tint above 1 is shaded as 1 (a coat that adds light grows without bound towards grazing)",
 }
 
 
@@ -96,6 +97,10 @@ def _fresnel0(n):
     return ((n - 1) / (n + 1)) ** 2
 
 
+def _unit(x):
+    return min(max(float(x), 0.0), 1.0)
+
+
 # What principled_lobes lets its lobes reflect together: all of it (the core allows 1 % more, its
 # quadrature's margin; a single lobe coloured at most 1 stays under 1 and is left alone).
 ENERGY_LIMIT = 1.0
@@ -117,9 +122,12 @@ def principled_lobes(base, metallic, roughness, ior, spec_level=0.5, spec_tint=(
       (0 to 75 degrees) every lobe is scaled down until it reflects at most that (the core
       refuses more).
     """
-    base = [min(max(float(c), 0.0), 1.0) for c in base[:3]]
-    t = min(max(float(metallic), 0.0), 1.0)
-    alpha = engine.ggx_alpha(roughness)
+    # clamped as Cycles clamps the node's inputs (a script may set a socket past its range)
+    base = [_unit(c) for c in base[:3]]
+    t = _unit(metallic)
+    alpha = engine.ggx_alpha(_unit(roughness))
+    spec_level = max(float(spec_level), 0.0)
+    spec_tint = [max(float(c), 0.0) for c in spec_tint[:3]]
     ior = engine.clamp_ior(ior)
     diffuse = tuple(c * (1 - t) for c in base)
     lobes = []
@@ -134,7 +142,7 @@ def principled_lobes(base, metallic, roughness, ior, spec_level=0.5, spec_tint=(
         lobes.append({"specular": tuple(t * c / f0 for c in base), "roughness": alpha, "ior": n_m,
                       "distribution": "GGX"})
     if coat > 0:
-        lobes.append({"specular": (float(coat),) * 3, "roughness": engine.ggx_alpha(coat_roughness),
+        lobes.append({"specular": (float(coat),) * 3, "roughness": engine.ggx_alpha(_unit(coat_roughness)),
                       "ior": engine.clamp_ior(coat_ior), "distribution": "GGX"})
     peak = engine.lobes_peak_albedo(lobes)
     if peak > ENERGY_LIMIT:
@@ -172,6 +180,10 @@ def fill_from_principled(material):
     v = {name: _input_value(node, name, warnings) for name in
          ("Base Color", "Metallic", "Roughness", "IOR", "Specular IOR Level", "Specular Tint",
           "Coat Weight", "Coat Roughness", "Coat IOR")}
+    for name, value in v.items():
+        values = () if value is None else tuple(value[:3]) if hasattr(value, "__len__") else (value,)
+        if not all(math.isfinite(float(x)) for x in values):
+            raise engine.SetupError(f"'{material.name}': the Principled BSDF's {name} is not finite")
     diffuse, lobes = principled_lobes(
         v["Base Color"], v["Metallic"], v["Roughness"], v["IOR"],
         spec_level=v["Specular IOR Level"] if v["Specular IOR Level"] is not None else 0.5,

@@ -6,17 +6,19 @@ ATTRIBUTE = "wenv_radiance"
 
 class MeshData:
     """World-space positions and normals of one object's evaluated mesh, per point or per corner,
-    with the material slot of each element."""
+    with the material slot of each element; `unplaced` (bool, or None) marks the elements whose
+    position is not finite, which are left black."""
 
-    __slots__ = ("domain", "positions", "normals", "slots", "count", "note")
+    __slots__ = ("domain", "positions", "normals", "slots", "count", "notes", "unplaced")
 
-    def __init__(self, domain, positions, normals, slots, note=None):
+    def __init__(self, domain, positions, normals, slots, notes=(), unplaced=None):
         self.domain = domain
         self.positions = positions
         self.normals = normals
         self.slots = slots
         self.count = len(positions)
-        self.note = note
+        self.notes = list(notes)
+        self.unplaced = unplaced
 
 
 def _read(collection, attr, count, width, dtype=np.float32):
@@ -32,15 +34,15 @@ def read_mesh(obj, depsgraph):
     ob_eval = obj.evaluated_get(depsgraph)
     mesh = ob_eval.data
     base = obj.data
-    note = None
+    notes = []
     if (len(mesh.vertices), len(mesh.loops), len(mesh.polygons)) != (len(base.vertices), len(base.loops),
                                                                        len(base.polygons)):
         mesh = base
-        note = f"'{obj.name}': modifiers change the topology; shaded the base mesh (its colours are interpolated)"
+        notes.append(f"'{obj.name}': modifiers change the topology; shaded the base mesh (its colours are interpolated)")
     nv, nl, npoly = len(mesh.vertices), len(mesh.loops), len(mesh.polygons)
     if nv == 0:
         return MeshData("POINT", np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32),
-                        np.zeros(0, np.int32), note)
+                        np.zeros(0, np.int32), notes)
     # Generic attributes copy in one memcpy-like pass; the older per-element collections
     # (mesh.loops, mesh.polygons) go through RNA item by item, 10-500x slower on large meshes.
     pos = _read(mesh.attributes["position"].data, "vector", nv, 3)
@@ -71,16 +73,29 @@ def read_mesh(obj, depsgraph):
         domain = "CORNER"
     mw = ob_eval.matrix_world
     m = np.array(mw, np.float32)
-    world_pos = np.matmul(pos, m[:3, :3].T)
-    world_pos += m[:3, 3]
-    # Normals by the inverse transpose; the core normalises them, so no unit length is needed here.
-    # It does refuse zero ones, which degenerate faces have: any direction will do for those.
-    # (mathutils inverts in place; numpy.linalg would wake BLAS threads that compete with OpenMP's.)
-    world_nrm = np.matmul(nrm, np.array(mw.to_3x3().inverted_safe(), np.float32))
-    zero = np.einsum("ij,ij->i", world_nrm, world_nrm) < 1e-30
+    with np.errstate(invalid="ignore", over="ignore"):  # positions not finite: found below
+        world_pos = np.matmul(pos, m[:3, :3].T)
+        world_pos += m[:3, 3]
+        # Normals by the inverse transpose; the core normalises them, so no unit length is needed
+        # here.  It does refuse zero ones, which degenerate faces have: any direction will do for
+        # those.  (mathutils inverts in place; numpy.linalg would wake BLAS threads that compete
+        # with OpenMP's.)
+        world_nrm = np.matmul(nrm, np.array(mw.to_3x3().inverted_safe(), np.float32))
+        zero = np.einsum("ij,ij->i", world_nrm, world_nrm) < 1e-30
     if zero.any():
         world_nrm[zero] = (0.0, 0.0, 1.0)
-    return MeshData(domain, world_pos, world_nrm, slots, note)
+    # A vertex at NaN or infinity (a broken import, a scale past float's range) is lit from nowhere:
+    # it is left black and the rest shaded, with a note (the core refuses such positions).
+    unplaced = ~(np.isfinite(world_pos).all(axis=1) & np.isfinite(world_nrm).all(axis=1))
+    if unplaced.any():
+        world_pos[unplaced] = 0.0
+        world_nrm[unplaced] = (0.0, 0.0, 1.0)
+        what = "vertices" if domain == "POINT" else "face corners"
+        notes.append(f"'{obj.name}': {int(unplaced.sum())} {what} at no finite position (NaN or infinite) "
+                     "left black")
+    else:
+        unplaced = None
+    return MeshData(domain, world_pos, world_nrm, slots, notes, unplaced)
 
 
 def write_colors(mesh, domain, rgb, seen=None):

@@ -275,7 +275,12 @@ class WENV_OT_from_principled(_MaterialOperator, bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     def execute(self, context):
-        for w in materials.fill_from_principled(_active_material(context)):
+        try:
+            notes = materials.fill_from_principled(_active_material(context))
+        except engine.SetupError as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        for w in notes:
             self.report({"WARNING"}, w)
         return {"FINISHED"}
 

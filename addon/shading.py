@@ -1,4 +1,6 @@
 """Shading passes: Blender data read into a plan, shaded by the engine, colours written back."""
+import math
+
 import numpy as np
 
 from . import engine, materials, meshes, world
@@ -56,6 +58,10 @@ class ShadingPlan:
             yield name, data, keys, parts
 
     def _result(self, name, data, rgb, seen):
+        if data.unplaced is not None:
+            rgb[data.unplaced] = 0.0
+            if seen is not None:
+                seen[data.unplaced] = True  # written black, not left as they were
         return name, data.domain, tone_map(rgb, self.l_max) if self.tone == "LOG" else rgb, seen
 
     def material_keys(self):
@@ -167,6 +173,10 @@ def plan_shading(scene, depsgraph, objects, view, images, progress=None, preview
     engine.PREVIEW_QUALITY (plan.chosen keeps the scene's).  Raises SetupError for a set-up that
     cannot be shaded."""
     st = scene.wenv
+    # Blender's limits on a float property let NaN through (a script may set it)
+    for label, value in (("Max Luminance", st.max_luminance), ("Target Error", st.target_error)):
+        if not math.isfinite(value):
+            raise SetupError(f"The scene's wenv {label} is {value}: set a number")
     spec = world.world_spec(scene.world)
     quality = engine.quality_value(st.quality)
     notes = []
@@ -191,8 +201,7 @@ def plan_shading(scene, depsgraph, objects, view, images, progress=None, preview
     plan.notes = notes
     for obj in mesh_objects:
         data = meshes.read_mesh(obj, depsgraph)
-        if data.note:
-            notes.append(data.note)
+        notes.extend(data.notes)
         if data.count == 0:
             notes.append(f"'{obj.name}' has no vertices")
             continue

@@ -20,12 +20,20 @@ class View:
     @classmethod
     def from_view_matrix(cls, view_matrix, perspective):
         """From a world -> view matrix (RegionView3D.view_matrix convention, camera looks along -Z)."""
-        inv = np.linalg.inv(np.asarray(view_matrix, np.float64).reshape(4, 4))
+        m = np.asarray(view_matrix, np.float64).reshape(4, 4)
+        if not np.isfinite(m).all():
+            raise SetupError("The view matrix holds values that are not finite")
+        try:
+            inv = np.linalg.inv(m)
+        except np.linalg.LinAlgError:
+            raise SetupError("The view matrix is singular: no view it could come from") from None
         return cls.from_camera_matrix(inv, perspective)
 
     @classmethod
     def from_camera_matrix(cls, camera_to_world, perspective):
         m = np.asarray(camera_to_world, np.float64).reshape(4, 4)
+        if not np.isfinite(m).all():
+            raise SetupError("The view (camera) matrix holds values that are not finite")
         if perspective:
             return cls(True, eye=m[:3, 3])
         z = m[:3, 2]

@@ -516,7 +516,53 @@ def test_topology_changing_modifier_shades_base_mesh(scene):
     domain, rgb = attribute(obj)
     assert domain == "POINT" and len(rgb) == len(obj.data.vertices)
     assert np.isfinite(rgb).all() and rgb.max() > 0
-    assert "topology" in meshes.read_mesh(obj, bpy.context.evaluated_depsgraph_get()).note
+    assert "topology" in " ".join(meshes.read_mesh(obj, bpy.context.evaluated_depsgraph_get()).notes)
+
+
+def test_vertices_at_no_finite_position_are_left_black(scene):
+    """A vertex at NaN or infinity (a broken import) is lit from nowhere: it is black, the rest of
+    the mesh is shaded as without it, and the pass says so."""
+    env_world(scene, "sunset")
+    obj = add_monkey()
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    before = attribute(obj)[1]
+    pos = np.empty(len(obj.data.vertices) * 3, np.float32)
+    obj.data.vertices.foreach_get("co", pos)
+    pos = pos.reshape(-1, 3)
+    # the smooth normals of the faces around a moved vertex change, so the check is on the others
+    bad = [3, 100]
+    pos[3, 0], pos[100, 2] = np.nan, np.inf
+    obj.data.vertices.foreach_set("co", pos.ravel())
+    obj.data.update()
+    touched = {v for f in obj.data.polygons for v in f.vertices if set(f.vertices) & set(bad)}
+    data = meshes.read_mesh(obj, bpy.context.evaluated_depsgraph_get())
+    assert data.unplaced.nonzero()[0].tolist() == bad
+    assert any("2 vertices at no finite position" in n for n in data.notes)
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    after = attribute(obj)[1]
+    assert np.isfinite(after).all() and (after[bad] == 0).all()
+    keep = np.array([i not in touched and i not in bad for i in range(len(pos))])
+    np.testing.assert_allclose(after[keep], before[keep], rtol=1e-5, atol=1e-7)
+
+
+@pytest.mark.parametrize("setting,label", [("max_luminance", "Max Luminance"), ("target_error", "Target Error")])
+def test_a_scene_setting_a_script_set_to_nan_is_reported(scene, setting, label):
+    """Blender's limits on a float property let NaN through; the pass says which setting it is
+    rather than writing NaN colours (Max Luminance's tone mapping) or failing in the core."""
+    env_world(scene, "sunset")
+    obj = add_monkey()
+    scene.wenv.tone_mapping = "LOG"
+    setattr(scene.wenv, setting, math.nan)
+    with pytest.raises(RuntimeError, match=f"wenv {label} is nan"):
+        shade_op(view="CAMERA")
+    assert ATTR not in obj.data.color_attributes
+
+
+@pytest.mark.parametrize("matrix", [np.zeros((4, 4)), np.full((4, 4), np.nan)])
+def test_a_view_matrix_with_no_view_is_reported(scene, matrix):
+    add_monkey()
+    with pytest.raises(RuntimeError, match="view matrix (is singular|holds values that are not finite)"):
+        shade_op(view="MATRIX", view_matrix=[tuple(r) for r in matrix.tolist()])
 
 
 def test_non_mesh_and_empty_objects(scene):
@@ -641,6 +687,23 @@ def test_from_principled_warns_about_links_and_missing_node(scene):
     plain.diffuse_color = (0.1, 0.2, 0.3, 1)
     assert any("no Principled BSDF" in w for w in materials.fill_from_principled(plain))
     assert plain.wenv.model == "LAMBERT" and tuple(plain.wenv.diffuse) == pytest.approx((0.1, 0.2, 0.3))
+
+
+def test_from_principled_clamps_as_cycles_and_refuses_nan(scene):
+    """Sockets a script set past their range are read as Cycles clamps them; NaN is reported."""
+    cube = bpy.data.objects["Cube"]
+    select_only(cube)
+    mat = principled_material("odd", roughness=0.0)
+    cube.active_material = mat
+    node = mat.node_tree.nodes["Principled BSDF"]
+    node.inputs["Roughness"].default_value = -1.0
+    assert bpy.ops.wenv.from_principled() == {"FINISHED"}
+    floor = mat.wenv.lobes[0].roughness
+    node.inputs["Roughness"].default_value = 0.0
+    assert bpy.ops.wenv.from_principled() == {"FINISHED"} and mat.wenv.lobes[0].roughness == floor
+    node.inputs["Roughness"].default_value = math.nan
+    with pytest.raises(RuntimeError, match="Roughness is not finite"):
+        bpy.ops.wenv.from_principled()
 
 
 def test_principled_node_is_the_source_of_truth(scene):

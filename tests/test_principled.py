@@ -19,6 +19,7 @@ import wenv
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(ROOT, "benchmarks"))
 sys.path.insert(0, os.path.join(ROOT, "scripts"))
+from conftest import random_pairs, unit  # noqa: E402
 from test_measured_brdf import _pairs, smooth_env  # noqa: E402  (the same smooth lighting and pairs)
 
 
@@ -93,6 +94,28 @@ def test_what_is_not_shaded_is_named():
     with pytest.warns(UserWarning):
         assert wenv.Principled(anisotropic=0.3, thin_film_thickness=300.0).unhonoured == \
             ("anisotropic", "thin_film_thickness")
+
+
+def test_a_coat_tint_above_one_is_named_and_read_as_one(hdri_dir):
+    """A tint above 1 is a coat that adds light, tint^(1/cos) towards grazing: Cycles lets it grow to
+    infinity.  wenv names it and shades it as 1, so every method, the reference and the glossmeter
+    stay finite (the add-on's fuzzing found infinities written for a tint of 1e30)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert wenv.Principled(coat_weight=0.0, coat_tint=(5.0, 1.0, 1.0)).unhonoured == ()  # no coat
+    with pytest.warns(UserWarning, match="coat_tint"):
+        bright = wenv.Principled(coat_weight=0.5, coat_tint=(2.0, 0.25, 1e30))
+    assert bright.unhonoured == ("coat_tint",)
+    clear = wenv.Principled(coat_weight=0.5, coat_tint=(1.0, 0.25, 1.0))
+    env = wenv.load_environment(os.path.join(hdri_dir, "sunset.exr"))
+    n, v = random_pairs(300, seed=8)
+    v[:100] = unit(v[:100] - 0.999 * n[:100] * np.sum(v[:100] * n[:100], 1, keepdims=True))  # near grazing
+    for method in ("reference", "draft", "default"):
+        got = [wenv.reference(env, m, n, v) if method == "reference" else
+               wenv.Shader(env, m, quality=method).shade(n, v) for m in (bright, clear)]
+        assert np.isfinite(got[0]).all()
+        np.testing.assert_array_equal(got[0], got[1])
+    assert wenv.gloss(bright, (20, 60, 85)) == wenv.gloss(clear, (20, 60, 85))
 
 
 # ------------------------------------------------------------------ closed forms

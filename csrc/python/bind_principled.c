@@ -152,7 +152,8 @@ static PyObject *principled_new(PyTypeObject *type, PyObject *args, PyObject *kw
         Py_XDECREF(sep);
         int failed = !joined || PyErr_WarnFormat(PyExc_UserWarning, 1,
                                                  "wenv.Principled does not shade %U (reflection only; subsurface "
-                                                 "scattering is shaded as diffuse): see .unhonoured",
+                                                 "scattering is shaded as diffuse, a coat tint above 1 as 1): "
+                                                 "see .unhonoured",
                                                  joined) < 0;
         Py_XDECREF(joined);
         if (failed) {

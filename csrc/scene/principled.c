@@ -28,8 +28,8 @@
  * between nodes at i / (n - 1), clamped, as Cycles reads them.
  *
  * What Cycles adds that reflection does not have -- transmission, subsurface scattering, emission,
- * the see-through part of Alpha, thin film, anisotropy -- is not shaded; wenv_principled_unhonoured
- * names each input set to something that needs it.  Subsurface scattering is shaded as the diffuse
+ * the see-through part of Alpha, thin film, anisotropy -- is not shaded, nor a Coat Tint above 1
+ * (read as 1); wenv_principled_unhonoured names each input set to something that needs it.  Subsurface scattering is shaded as the diffuse
  * reflection it turns into on a smooth convex surface (Base Color as albedo). */
 #include <math.h>
 #include <stdlib.h>
@@ -232,7 +232,10 @@ static void weights_for_view(const principled *p, double mu, view_weights *vw)
             /* absorption along the view refracted into the coat */
             double inv = 1.0 / p->in.coat_ior, cos_t = sqrt(fmax(0.0, 1.0 - inv * inv * (1.0 - mu * mu)));
             for (int k = 0; k < 3; k++) {
-                double tint = p->in.coat_tint[k] == 1.0 ? 1.0 : pow(p->in.coat_tint[k], 1.0 / fmax(cos_t, 1e-6));
+                /* a tint above 1 (a coat that adds light) grows without bound towards grazing in
+                 * Cycles, to infinity in float: read as 1 (wenv_principled_unhonoured names it) */
+                double c = fmin(p->in.coat_tint[k], 1.0);
+                double tint = c == 1.0 ? 1.0 : pow(c, 1.0 / fmax(cos_t, 1e-6));
                 w[k] *= 1.0 + (tint - 1.0) * p->in.coat_weight;
             }
         }
@@ -816,6 +819,9 @@ size_t wenv_principled_unhonoured(const wenv_principled_inputs *in, const char *
         found[n++] = "anisotropic";
     if (in->thin_film_thickness > 0.1)
         found[n++] = "thin_film_thickness";
+    if (in->coat_weight > WEIGHT_CUTOFF &&
+        (in->coat_tint[0] > 1.0 || in->coat_tint[1] > 1.0 || in->coat_tint[2] > 1.0))
+        found[n++] = "coat_tint";
     for (size_t i = 0; i < n && i < max; i++)
         names[i] = found[i];
     return n;
