@@ -195,9 +195,9 @@ def plan_shading(scene, depsgraph, objects, view, images, progress=None, preview
     if st.shade_only_seen and view.view_projection is None and st.view_source == "VIEWPORT" and not view.perspective:
         notes.append("Shade Only What Is Seen applies to perspective viewports: this orthographic view shades "
                      "every vertex")
-    lights = world.scene_lights_note(scene)
-    if lights:
-        notes.append(lights)
+    for note in (world.scene_lights_note(scene), world.image_note(spec, images)):
+        if note:
+            notes.append(note)
     plan.notes = notes
     for obj in mesh_objects:
         data = meshes.read_mesh(obj, depsgraph)

@@ -143,9 +143,28 @@ def image_pixels(image):
     else:
         rgba[..., :3] = px[..., :1]
     # Float images come linear; byte images hand out their stored, display-encoded values.
-    if not image.is_float and image.colorspace_settings.name in {"sRGB", "sRGB EOTF"}:
+    if not image.is_float and image.colorspace_settings.name in SRGB_SPACES:
         rgba[..., :3] = _srgb_to_linear(rgba[..., :3])
     return rgba
+
+
+# The colour spaces of an 8-bit World image that image_pixels reads as Blender does: sRGB decoded,
+# the linear Rec.709 ones (and data) as stored.  Blender converts float images itself.
+SRGB_SPACES = {"sRGB", "sRGB EOTF"}
+LINEAR_SPACES = {"Linear Rec.709", "scene_linear", "Non-Color", "Linear", "Raw"}
+
+
+def image_note(spec, images):
+    """A sentence when an 8-bit World image is in a colour space wenv does not decode (its stored
+    values are then read as linear Rec.709), else None."""
+    image = images.get(spec.image_name) if spec.kind == "image" else None
+    if image is None or image.is_float:
+        return None
+    space = image.colorspace_settings.name
+    if space in SRGB_SPACES or space in LINEAR_SPACES:
+        return None
+    return (f"World image '{image.name}' is 8-bit in colour space '{space}', which wenv does not decode: its "
+            "values were read as linear Rec.709 (set it to sRGB or a linear space, or use a float image)")
 
 
 def environment_from_spec(spec, images):

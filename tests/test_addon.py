@@ -421,6 +421,26 @@ def test_packed_image_and_mirror_ball(scene, tmp_path, projection):
     np.testing.assert_allclose(rgb, want, rtol=1e-5, atol=1e-7)
 
 
+@pytest.mark.parametrize("space,decoded", [("sRGB", True), ("Non-Color", False), ("Display P3", False)])
+def test_8_bit_world_images_by_colour_space(scene, space, decoded):
+    """An 8-bit World image: sRGB is decoded, a linear space or data read as stored, and any other
+    space read as stored with a note saying so (Blender hands out 8-bit images' stored values)."""
+    img = bpy.data.images.new("ldr", 16, 8, alpha=True, float_buffer=False)
+    img.colorspace_settings.name = space  # first: a generated image is made again when it changes
+    img.pixels.foreach_set(np.full(16 * 8 * 4, 0.5, np.float32))
+    env_world(scene, image=img)
+    obj = add_monkey()
+    spec = world.world_spec(scene.world)
+    held = world.image_pixels(img)[..., :3]
+    byte = np.float32(128 / 255)  # 0.5 as stored in 8 bits
+    np.testing.assert_allclose(held, world._srgb_to_linear(byte) if decoded else byte, rtol=1e-6)
+    _, notes = shading.shade_objects(scene, bpy.context.evaluated_depsgraph_get(), [obj],
+                                     views.camera_view(scene), bpy.data)
+    noted = [n for n in notes if "8-bit in colour space" in n]
+    assert noted == ([] if space != "Display P3" else [world.image_note(spec, bpy.data.images)])
+    assert (space == "Display P3") == bool(noted) and (not noted or "'Display P3'" in noted[0])
+
+
 def _break(scene, how):
     tree = scene.world.node_tree
     bg = tree.nodes["Background"]

@@ -96,6 +96,22 @@ def test_what_is_not_shaded_is_named():
             ("anisotropic", "thin_film_thickness")
 
 
+@pytest.mark.parametrize("name", ["base_color", "specular_ior_level", "specular_tint", "coat_weight",
+                                  "sheen_weight", "sheen_tint"])
+def test_inputs_that_scale_the_reflection_are_bounded(name, hdri_dir):
+    """Cycles takes any weight or colour, but Blender's sockets hold up to 3.4e38, which times the
+    lighting overflows (the add-on's fuzzing wrote infinities for a Sheen Weight of 3.4e38): past a
+    million such an input is a ValueError naming it, and at a million the shading stays finite."""
+    with pytest.raises(ValueError, match=f"{name} must be at most 1e\\+06, got 3.4"):
+        wenv.Principled(**{name: 3.4e38})
+    big = wenv.Principled(**{name: 1e6, **({"sheen_weight": 1.0} if name == "sheen_tint" else {})})
+    env = wenv.load_environment(os.path.join(hdri_dir, "sunset.exr"), strength=1e6)
+    n, v = random_pairs(100, seed=9)
+    for got in (wenv.reference(env, big, n[:20], v[:20]), wenv.Shader(env, big, quality="draft").shade(n, v),
+                wenv.Shader(env, big, quality="default").shade(n, v)):
+        assert np.isfinite(got).all() and got.max() > 0
+
+
 def test_a_coat_tint_above_one_is_named_and_read_as_one(hdri_dir):
     """A tint above 1 is a coat that adds light, tint^(1/cos) towards grazing: Cycles lets it grow to
     infinity.  wenv names it and shades it as 1, so every method, the reference and the glossmeter

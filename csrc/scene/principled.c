@@ -581,42 +581,54 @@ void wenv_principled_defaults(wenv_principled_inputs *in)
     };
 }
 
-/* Every input finite; the error names the first that is not. */
-static wenv_status check_finite(const wenv_principled_inputs *in, wenv_error *err)
+/* Inputs that scale what is reflected, and the most each may be: Cycles takes any value, but one
+ * near float's largest (Blender's sockets hold up to 3.4e38) times the lighting overflows to
+ * infinity.  A million keeps every product finite under the brightest lighting a World may give. */
+#define WENV_PRINCIPLED_SCALE_MAX 1e6
+
+/* Every input finite, and those that scale the reflection at most WENV_PRINCIPLED_SCALE_MAX; the
+ * error names the first that is not. */
+static wenv_status check_inputs(const wenv_principled_inputs *in, wenv_error *err)
 {
     struct {
         const char *name;
         const double *v;
         int n;
+        int scales; /* multiplies what is reflected */
     } fields[] = {
-        {"base_color", in->base_color, 3},
-        {"metallic", &in->metallic, 1},
-        {"roughness", &in->roughness, 1},
-        {"ior", &in->ior, 1},
-        {"alpha", &in->alpha, 1},
-        {"specular_ior_level", &in->specular_ior_level, 1},
-        {"specular_tint", in->specular_tint, 3},
-        {"anisotropic", &in->anisotropic, 1},
-        {"anisotropic_rotation", &in->anisotropic_rotation, 1},
-        {"coat_weight", &in->coat_weight, 1},
-        {"coat_roughness", &in->coat_roughness, 1},
-        {"coat_ior", &in->coat_ior, 1},
-        {"coat_tint", in->coat_tint, 3},
-        {"sheen_weight", &in->sheen_weight, 1},
-        {"sheen_roughness", &in->sheen_roughness, 1},
-        {"sheen_tint", in->sheen_tint, 3},
-        {"subsurface_weight", &in->subsurface_weight, 1},
-        {"transmission_weight", &in->transmission_weight, 1},
-        {"diffuse_roughness", &in->diffuse_roughness, 1},
-        {"emission_color", in->emission_color, 3},
-        {"emission_strength", &in->emission_strength, 1},
-        {"thin_film_thickness", &in->thin_film_thickness, 1},
-        {"thin_film_ior", &in->thin_film_ior, 1},
+        {"base_color", in->base_color, 3, 1},
+        {"metallic", &in->metallic, 1, 0},
+        {"roughness", &in->roughness, 1, 0},
+        {"ior", &in->ior, 1, 0},
+        {"alpha", &in->alpha, 1, 0},
+        {"specular_ior_level", &in->specular_ior_level, 1, 1},
+        {"specular_tint", in->specular_tint, 3, 1},
+        {"anisotropic", &in->anisotropic, 1, 0},
+        {"anisotropic_rotation", &in->anisotropic_rotation, 1, 0},
+        {"coat_weight", &in->coat_weight, 1, 1},
+        {"coat_roughness", &in->coat_roughness, 1, 0},
+        {"coat_ior", &in->coat_ior, 1, 0},
+        {"coat_tint", in->coat_tint, 3, 0}, /* read at most 1 */
+        {"sheen_weight", &in->sheen_weight, 1, 1},
+        {"sheen_roughness", &in->sheen_roughness, 1, 0},
+        {"sheen_tint", in->sheen_tint, 3, 1},
+        {"subsurface_weight", &in->subsurface_weight, 1, 0},
+        {"transmission_weight", &in->transmission_weight, 1, 0},
+        {"diffuse_roughness", &in->diffuse_roughness, 1, 0},
+        {"emission_color", in->emission_color, 3, 0},
+        {"emission_strength", &in->emission_strength, 1, 0},
+        {"thin_film_thickness", &in->thin_film_thickness, 1, 0},
+        {"thin_film_ior", &in->thin_film_ior, 1, 0},
     };
     for (size_t f = 0; f < sizeof fields / sizeof fields[0]; f++)
-        for (int k = 0; k < fields[f].n; k++)
-            if (!isfinite(fields[f].v[k]))
-                return wenv_error_set(err, WENV_ERR_VALUE, "%s must be finite, got %g", fields[f].name, fields[f].v[k]);
+        for (int k = 0; k < fields[f].n; k++) {
+            double v = fields[f].v[k];
+            if (!isfinite(v))
+                return wenv_error_set(err, WENV_ERR_VALUE, "%s must be finite, got %g", fields[f].name, v);
+            if (fields[f].scales && v > WENV_PRINCIPLED_SCALE_MAX)
+                return wenv_error_set(err, WENV_ERR_VALUE, "%s must be at most %g, got %g", fields[f].name,
+                                      WENV_PRINCIPLED_SCALE_MAX, v);
+        }
     return WENV_OK;
 }
 
@@ -678,7 +690,7 @@ static uint64_t inputs_fingerprint(const wenv_principled_inputs *in)
 wenv_status wenv_principled_create(wenv_material **out, const wenv_principled_inputs *inputs, wenv_error *err)
 {
     *out = NULL;
-    if (check_finite(inputs, err))
+    if (check_inputs(inputs, err))
         return err->status;
     principled *p = calloc(1, sizeof *p);
     if (!p)

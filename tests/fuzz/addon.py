@@ -98,6 +98,9 @@ class AddonFuzzer:
         if k <= 2:  # generated; odd pixels among ordinary ones
             w, h = int(self.pick([1, 2, 3, 8, 33, 64])), int(self.pick([1, 2, 4, 16, 32]))
             img = bpy.data.images.new("sky", w, h, alpha=True, float_buffer=self.chance(0.7))
+            if self.chance(0.2):  # before the pixels: a generated image is made again when it changes
+                spaces = img.colorspace_settings.bl_rna.properties["name"].enum_items
+                self.assign(img.colorspace_settings, "name", self.pick([i.identifier for i in spaces]))
             px = self.r.lognormal(-1.0, 1.5, size=(h, w, 4)).astype(np.float32)
             px[..., 3] = 1.0
             if k == 2:
@@ -361,7 +364,7 @@ class AddonFuzzer:
             self.assign(mat.wenv, "model", self.pick(["PRINCIPLED", "COOK_TORRANCE", "LAMBERT"]))
 
     def act(self, scene, objs):
-        k = int(self.r.integers(12))
+        k = int(self.r.integers(13))
         if k <= 3:
             kw = {"view": self.pick(["CAMERA", "CAMERA", "SCENE", "VIEWPORT", "MATRIX"])}
             if kw["view"] == "MATRIX":
@@ -400,12 +403,29 @@ class AddonFuzzer:
             bpy.ops.wm.open_mainfile(filepath=path)
             self.log("saved and reloaded")
             return False  # the objects are new Python objects now
-        else:
-            mats = [m for m in bpy.data.materials if m.users]
-            if mats:
-                self.material_edit(self.pick(mats))
-            self.world(scene) if self.chance(0.3) else self.scene_settings(scene)
+        elif k == 11:
+            self.edit(scene)
+        else:  # an edit undone, and perhaps redone (handlers.undo_post re-reads what was shaded)
+            bpy.ops.ed.undo_push(message="before")
+            self.edit(scene)
+            self.op("shade", view="CAMERA")
+            bpy.ops.ed.undo_push(message="after")
+            bpy.ops.ed.undo()
+            if self.chance(0.5):
+                bpy.ops.ed.redo()
+            self.check_colours(list(bpy.context.scene.objects))
+            self.log("undo")
+            return False  # the data are undo's copies now
         return True
+
+    def edit(self, scene):
+        mats = [m for m in bpy.data.materials if m.users]
+        if mats:
+            self.material_edit(self.pick(mats))
+        if self.chance(0.3):
+            self.world(scene)
+        else:
+            self.scene_settings(scene)
 
     def iteration(self):
         scene, objs = self.build()
