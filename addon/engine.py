@@ -339,13 +339,29 @@ REFINABLE = ("draft", "default")
 PREVIEW_QUALITY = "draft"
 
 
+def _off_the_eye(data, eye):
+    """data's positions with any at the eye itself (within the core's 1e-12) moved off it along its
+    normal, and which they were (None when none): such a vertex has no view, and is left black
+    rather than failing the pass (the core refuses it)."""
+    d = data.positions.astype(np.float64) - np.asarray(eye, np.float64)
+    at_eye = np.einsum("ij,ij->i", d, d) < 1e-24
+    if not at_eye.any():
+        return data.positions, None
+    positions = data.positions.copy()
+    positions[at_eye] -= data.normals[at_eye]
+    return positions, at_eye
+
+
 def shade_step(shader, data, view, cull, out, first, budget):
     """One step of shade_arrays into `out`: the vertices to shade from the first-th on, for about
     `budget` seconds (the core's shade_mesh(first=, budget=)).  Returns (next, total): where the
     next step starts and how many there are to shade.  An orthographic view is shaded whole."""
     if view.perspective:
         kw = {"cull": True, "view_projection": view.view_projection} if cull and view.view_projection is not None else {}
-        shader.shade_mesh(data.positions, data.normals, view.eye, out=out, first=first, budget=budget, **kw)
+        positions, at_eye = _off_the_eye(data, view.eye)
+        shader.shade_mesh(positions, data.normals, view.eye, out=out, first=first, budget=budget, **kw)
+        if at_eye is not None:
+            out[at_eye] = 0.0
         stats = shader.stats
         return stats["next_vertex"], stats.get("visible_vertices", data.count)
     out[:] = shader.shade(data.normals, view.direction)
@@ -354,17 +370,25 @@ def shade_step(shader, data, view, cull, out, first, budget):
 
 def visible_vertices(data, view):
     """Which vertices of `data` a perspective viewport's `view` sees (facing it, on screen)."""
-    return wenv.visible_vertices(data.positions, data.normals, view.eye, view.view_projection)
+    positions, at_eye = _off_the_eye(data, view.eye)
+    seen = wenv.visible_vertices(positions, data.normals, view.eye, view.view_projection)
+    if at_eye is not None:
+        seen[at_eye] = True  # written black
+    return seen
 
 
 def shade_arrays(shader, data, view, cull=False):
     """Radiance (n, 3) for world-space `data` (meshes.MeshData) seen from `view` (views.View), and
     which vertices were shaded: with `cull` and a viewport's perspective view, only those facing
-    the eye and on screen (the rest are black), else all (None)."""
-    if view.perspective and cull and view.view_projection is not None:
+    the eye and on screen (the rest are black), else all (None).  A vertex at the eye is black."""
+    if not view.perspective:
+        return shader.shade(data.normals, view.direction), None
+    positions, at_eye = _off_the_eye(data, view.eye)
+    if cull and view.view_projection is not None:
         seen = visible_vertices(data, view)
-        return shader.shade_mesh(data.positions, data.normals, view.eye, cull=True,
-                                 view_projection=view.view_projection), seen
-    if view.perspective:
-        return shader.shade_mesh(data.positions, data.normals, view.eye), None
-    return shader.shade(data.normals, view.direction), None
+        rgb = shader.shade_mesh(positions, data.normals, view.eye, cull=True, view_projection=view.view_projection)
+    else:
+        seen, rgb = None, shader.shade_mesh(positions, data.normals, view.eye)
+    if at_eye is not None:
+        rgb[at_eye] = 0.0
+    return rgb, seen

@@ -565,6 +565,30 @@ def test_vertices_at_no_finite_position_are_left_black(scene):
     np.testing.assert_allclose(after[keep], before[keep], rtol=1e-5, atol=1e-7)
 
 
+@pytest.mark.parametrize("cull", [False, True])
+def test_a_vertex_at_the_eye_is_black(scene, cull):
+    """A vertex exactly at the eye has no view (the core refuses it): it is black, the rest shaded."""
+    env_world(scene, "sunset")
+    eye = tuple(scene.camera.matrix_world.translation)
+    mesh = bpy.data.meshes.new("at eye")
+    mesh.from_pydata([eye, (0, 0, 0), (1, 0, 0), (0, 1, 0)], [], [(0, 1, 2), (1, 2, 3)])
+    obj = bpy.data.objects.new("at eye", mesh)
+    scene.collection.objects.link(obj)
+    select_only(obj)
+    view = views.camera_view(scene)
+    if cull:  # as a viewport's view, which tells what is on screen
+        view.view_projection = np.array(scene.camera.calc_matrix_camera(bpy.context.evaluated_depsgraph_get())) @ \
+            np.array(scene.camera.matrix_world.inverted())
+    data = meshes.read_mesh(obj, bpy.context.evaluated_depsgraph_get())
+    shader = core_shader(world.environment(world.world_spec(scene.world), bpy.data.images), wenv.Lambert(0.8))
+    rgb, seen = engine.shade_arrays(shader, data, view, cull=cull)
+    assert np.isfinite(rgb).all() and (rgb[0] == 0).all() and (rgb[1:].max(axis=1) > 0).any()
+    if cull:
+        assert seen[0]
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    assert (attribute(obj)[1][0] == 0).all()
+
+
 @pytest.mark.parametrize("setting,label", [("max_luminance", "Max Luminance"), ("target_error", "Target Error")])
 def test_a_scene_setting_a_script_set_to_nan_is_reported(scene, setting, label):
     """Blender's limits on a float property let NaN through; the pass says which setting it is
