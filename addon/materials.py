@@ -239,7 +239,10 @@ def principled_notes(material):
         else:
             value = inputs[by_socket[socket]]
             notes.append(f"'{socket}' is linked (a texture or node): its unlinked value {_value_text(value)} is used")
-    notes += [NOT_SHADED[name] for name in engine.principled_unhonoured(inputs)]
+    try:
+        notes += [NOT_SHADED[name] for name in engine.principled_unhonoured(inputs)]
+    except ValueError as exc:  # a value the core refuses (NaN, or past what it can shade)
+        notes.append(f"cannot be shaded: {exc}")
     tree = material.node_tree
     out = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
     out = [n for n in out if n.is_active_output] or out

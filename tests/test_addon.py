@@ -750,6 +750,19 @@ def test_from_principled_clamps_as_cycles_and_refuses_nan(scene):
         bpy.ops.wenv.from_principled()
 
 
+def test_a_principled_value_the_core_refuses_is_a_note_and_an_error(scene):
+    """A socket a script set past what the core shades (3.4e38, the most a socket holds): the
+    panel's notes say so (they never fail), and shading reports it naming the material."""
+    obj = add_monkey()
+    mat = principled_material("huge")
+    obj.data.materials.append(mat)
+    mat.node_tree.nodes["Principled BSDF"].inputs["Sheen Weight"].default_value = 3.4e38
+    assert any(n.startswith("cannot be shaded: sheen_weight must be at most") for n in
+               materials.principled_notes(mat))
+    with pytest.raises(RuntimeError, match="'huge'.*sheen_weight must be at most 1e\\+06"):
+        shade_op(view="CAMERA")
+
+
 def test_principled_node_is_the_source_of_truth(scene):
     """A material's Principled BSDF is shaded as it is at every pass, as wenv.Principled of its inputs
     (the default model): changing Roughness re-shades with the new value, with no stale copy."""

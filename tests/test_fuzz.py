@@ -84,10 +84,10 @@ ADDON_ITERATIONS = 300
 
 def test_addon_survives_random_scenes_and_use(tmp_path):
     """Random scenes (odd Worlds, meshes, materials, settings, cameras) and random use of the add-on
-    (its operators, the live session, gloss readings, frame changes, save and reload): no operator
-    fails with a traceback, no exception escapes a getter, update or handler, every colour written is
-    finite and non-negative, nothing crashes or hangs; and the run reached the shading, not only the
-    set-up checks."""
+    (its operators, the live session, gloss readings, the panels' drawing, frame changes, undo,
+    save and reload): no operator fails with a traceback, no exception escapes a getter, update,
+    handler or panel, every colour written is finite and non-negative, nothing crashes or hangs; and
+    the run reached the shading, not only the set-up checks."""
     out = tmp_path / "addon.json"
     run = subprocess.run([sys.executable, os.path.join(ROOT, "tests", "fuzz", "addon.py"), "--seed", "0",
                           "--iterations", str(ADDON_ITERATIONS), "--json", str(out)],
@@ -101,5 +101,5 @@ def test_addon_survives_random_scenes_and_use(tmp_path):
     assert counts.get("live ok", 0) >= 30, counts
     assert sum(v for k, v in counts.items() if k.startswith("shade reported")) >= 60, counts
     for what in ("gloss read", "frame change", "saved and reloaded", "fit_roughness FINISHED",
-                 "from_principled FINISHED"):
+                 "from_principled FINISHED", "undo", "panels drawn"):
         assert counts.get(what, 0) >= 3, (what, counts)

@@ -37,7 +37,7 @@ sys.path.insert(0, ROOT)
 import bpy  # noqa: E402
 
 import addon  # noqa: E402
-from addon import engine, live, meshes  # noqa: E402
+from addon import engine, live, meshes, ui  # noqa: E402
 from benchmarks import merl_files  # noqa: E402
 
 HDRIS = sorted(glob.glob(os.path.join(bpy.utils.system_resource("DATAFILES", path="studiolights/world"), "*.exr")))
@@ -51,6 +51,24 @@ NUMBERS = (0.0, 1.0, -1.0, 0.5, 0.2, 0.05, 1e-6, 2.0, 1e6, 1e30, -1e30, math.nan
 
 class Found(Exception):
     pass
+
+
+class FakeLayout:
+    """Stands in for Blender's UILayout, which only a drawn region has (none in background mode): every
+    call and attribute is taken, so that a panel's own code runs as Blender would run it."""
+
+    def __getattr__(self, name):
+        return self._take
+
+    def __setattr__(self, name, value):
+        pass
+
+    def _take(self, *args, **kwargs):
+        return self
+
+
+class FakePanel:
+    layout = FakeLayout()
 
 
 class AddonFuzzer:
@@ -364,7 +382,7 @@ class AddonFuzzer:
             self.assign(mat.wenv, "model", self.pick(["PRINCIPLED", "COOK_TORRANCE", "LAMBERT"]))
 
     def act(self, scene, objs):
-        k = int(self.r.integers(13))
+        k = int(self.r.integers(14))
         if k <= 3:
             kw = {"view": self.pick(["CAMERA", "CAMERA", "SCENE", "VIEWPORT", "MATRIX"])}
             if kw["view"] == "MATRIX":
@@ -405,6 +423,8 @@ class AddonFuzzer:
             return False  # the objects are new Python objects now
         elif k == 11:
             self.edit(scene)
+        elif k == 13:
+            self.draw_panels()
         else:  # an edit undone, and perhaps redone (handlers.undo_post re-reads what was shaded)
             bpy.ops.ed.undo_push(message="before")
             self.edit(scene)
@@ -417,6 +437,22 @@ class AddonFuzzer:
             self.log("undo")
             return False  # the data are undo's copies now
         return True
+
+    def draw_panels(self):
+        """The sidebar's panels drawn for the active object (an exception in a draw is Blender's
+        "Python: Traceback" in the panel)."""
+        try:
+            for cls in ui.classes:
+                if issubclass(cls, bpy.types.Panel) and (not hasattr(cls, "poll") or cls.poll(bpy.context)):
+                    cls.draw(FakePanel(), bpy.context)
+            obj = bpy.context.object
+            mat = obj.active_material if obj is not None else None
+            for i, lobe in enumerate(mat.wenv.lobes if mat is not None else ()):
+                ui.WENV_UL_lobes.draw_item(None, bpy.context, FakeLayout(), mat.wenv, lobe, 0, mat.wenv,
+                                           "active_lobe", i)
+        except Exception:
+            raise Found("a panel's draw failed:\n" + traceback.format_exc()) from None
+        self.log("panels drawn")
 
     def edit(self, scene):
         mats = [m for m in bpy.data.materials if m.users]
