@@ -339,17 +339,25 @@ REFINABLE = ("draft", "default")
 PREVIEW_QUALITY = "draft"
 
 
-def _off_the_eye(data, eye):
-    """data's positions with any at the eye itself (within the core's 1e-12) moved off it along its
-    normal, and which they were (None when none): such a vertex has no view, and is left black
-    rather than failing the pass (the core refuses it)."""
+# The core's ValueError for a vertex exactly at the eye (it has no view direction).
+EYE_AT_VERTEX = "eye coincides with positions"
+
+
+def _sparing_the_eye(call, data, eye):
+    """call(positions) for data's positions; should the core refuse a vertex exactly at the eye, the
+    call is made again with such vertices moved off it along their normals.  Returns (result, which
+    were moved, or None): the caller leaves them black.  The search runs only after a refusal, so an
+    ordinary pass pays nothing for it."""
+    try:
+        return call(data.positions), None
+    except ValueError as exc:
+        if EYE_AT_VERTEX not in str(exc):
+            raise
     d = data.positions.astype(np.float64) - np.asarray(eye, np.float64)
-    at_eye = np.einsum("ij,ij->i", d, d) < 1e-24
-    if not at_eye.any():
-        return data.positions, None
+    at_eye = np.einsum("ij,ij->i", d, d) < 1e-24  # the core's test
     positions = data.positions.copy()
     positions[at_eye] -= data.normals[at_eye]
-    return positions, at_eye
+    return call(positions), at_eye
 
 
 def shade_step(shader, data, view, cull, out, first, budget):
@@ -358,8 +366,8 @@ def shade_step(shader, data, view, cull, out, first, budget):
     next step starts and how many there are to shade.  An orthographic view is shaded whole."""
     if view.perspective:
         kw = {"cull": True, "view_projection": view.view_projection} if cull and view.view_projection is not None else {}
-        positions, at_eye = _off_the_eye(data, view.eye)
-        shader.shade_mesh(positions, data.normals, view.eye, out=out, first=first, budget=budget, **kw)
+        _, at_eye = _sparing_the_eye(lambda p: shader.shade_mesh(p, data.normals, view.eye, out=out, first=first,
+                                                                 budget=budget, **kw), data, view.eye)
         if at_eye is not None:
             out[at_eye] = 0.0
         stats = shader.stats
@@ -370,11 +378,7 @@ def shade_step(shader, data, view, cull, out, first, budget):
 
 def visible_vertices(data, view):
     """Which vertices of `data` a perspective viewport's `view` sees (facing it, on screen)."""
-    positions, at_eye = _off_the_eye(data, view.eye)
-    seen = wenv.visible_vertices(positions, data.normals, view.eye, view.view_projection)
-    if at_eye is not None:
-        seen[at_eye] = True  # written black
-    return seen
+    return wenv.visible_vertices(data.positions, data.normals, view.eye, view.view_projection)
 
 
 def shade_arrays(shader, data, view, cull=False):
@@ -383,12 +387,14 @@ def shade_arrays(shader, data, view, cull=False):
     the eye and on screen (the rest are black), else all (None).  A vertex at the eye is black."""
     if not view.perspective:
         return shader.shade(data.normals, view.direction), None
-    positions, at_eye = _off_the_eye(data, view.eye)
+    seen = None
+    kw = {}
     if cull and view.view_projection is not None:
         seen = visible_vertices(data, view)
-        rgb = shader.shade_mesh(positions, data.normals, view.eye, cull=True, view_projection=view.view_projection)
-    else:
-        seen, rgb = None, shader.shade_mesh(positions, data.normals, view.eye)
+        kw = {"cull": True, "view_projection": view.view_projection}
+    rgb, at_eye = _sparing_the_eye(lambda p: shader.shade_mesh(p, data.normals, view.eye, **kw), data, view.eye)
     if at_eye is not None:
         rgb[at_eye] = 0.0
+        if seen is not None:
+            seen[at_eye] = True  # written black
     return rgb, seen

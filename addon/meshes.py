@@ -38,7 +38,8 @@ def read_mesh(obj, depsgraph):
     if (len(mesh.vertices), len(mesh.loops), len(mesh.polygons)) != (len(base.vertices), len(base.loops),
                                                                        len(base.polygons)):
         mesh = base
-        notes.append(f"'{obj.name}': modifiers change the topology; shaded the base mesh (its colours are interpolated)")
+        notes.append(f"'{obj.name}': modifiers change the topology; shaded the base mesh (its colours are "
+                     "interpolated)")
     nv, nl, npoly = len(mesh.vertices), len(mesh.loops), len(mesh.polygons)
     if nv == 0:
         return MeshData("POINT", np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32),
@@ -86,15 +87,14 @@ def read_mesh(obj, depsgraph):
         world_nrm[zero] = (0.0, 0.0, 1.0)
     # A vertex at NaN or infinity (a broken import, a scale past float's range) is lit from nowhere:
     # it is left black and the rest shaded, with a note (the core refuses such positions).
-    unplaced = ~(np.isfinite(world_pos).all(axis=1) & np.isfinite(world_nrm).all(axis=1))
-    if unplaced.any():
+    unplaced = None
+    if not (np.isfinite(world_pos).all() and np.isfinite(world_nrm).all()):  # ~30x cheaper than by rows
+        unplaced = ~(np.isfinite(world_pos).all(axis=1) & np.isfinite(world_nrm).all(axis=1))
         world_pos[unplaced] = 0.0
         world_nrm[unplaced] = (0.0, 0.0, 1.0)
         what = "vertices" if domain == "POINT" else "face corners"
         notes.append(f"'{obj.name}': {int(unplaced.sum())} {what} at no finite position (NaN or infinite) "
                      "left black")
-    else:
-        unplaced = None
     return MeshData(domain, world_pos, world_nrm, slots, notes, unplaced)
 
 
