@@ -3,7 +3,7 @@ UndefinedBehaviorSanitizer, 25 s per target, about two minutes with the build): 
 failed check or input slower than 10 s, and each target tried many inputs and found new ones
 beyond its seeds.  The seeds include the inputs that once broke a reader, so they are replayed
 first.  Then the Python API's random-input run (tests/fuzz/api.py) and the add-on's random scenes
-and use (tests/fuzz/addon.py), a fixed seed's iterations each."""
+and use (tests/fuzz/addon_scenes.py), a fixed seed's iterations each."""
 import json
 import os
 import re
@@ -89,7 +89,7 @@ def test_addon_survives_random_scenes_and_use(tmp_path):
     handler or panel, every colour written is finite and non-negative, nothing crashes or hangs; and
     the run reached the shading, not only the set-up checks."""
     out = tmp_path / "addon.json"
-    run = subprocess.run([sys.executable, os.path.join(ROOT, "tests", "fuzz", "addon.py"), "--seed", "0",
+    run = subprocess.run([sys.executable, os.path.join(ROOT, "tests", "fuzz", "addon_scenes.py"), "--seed", "0",
                           "--iterations", str(ADDON_ITERATIONS), "--json", str(out)],
                          capture_output=True, text=True, timeout=900)
     assert out.exists(), f"exit {run.returncode}\n" + run.stdout[-3000:] + run.stderr[-6000:]

@@ -13,12 +13,9 @@ from its own generator seeded with (seed, i), so a finding is replayed alone wit
     .venv/bin/python tests/fuzz/api.py --seed 0 --iterations 3000 [--json out.json]
     .venv/bin/python tests/fuzz/api.py --seed 0 --only 1234         # replay one iteration, verbosely
 """
-import argparse
 import collections
-import json
 import math
 import os
-import sys
 import tempfile
 import time
 import traceback
@@ -27,6 +24,7 @@ import warnings
 import numpy as np
 
 import wenv
+from draws import Draws, arguments, report
 
 EXPECTED = (TypeError, ValueError, OSError, wenv.CancelledError)
 GLOSSMETER_OUT_OF_EVALS = "did not reach tol"
@@ -36,20 +34,8 @@ class Found(Exception):
     pass
 
 
-class Fuzzer:
-    def __init__(self, rng, tmp, slow, verbose=False):
-        self.r = rng
-        self.tmp = tmp
-        self.slow = slow
-        self.verbose = verbose
-        self.counts = collections.Counter()
-
+class Fuzzer(Draws):
     # ---- values ------------------------------------------------------------------------------
-    def pick(self, seq):
-        return seq[self.r.integers(len(seq))]
-
-    def chance(self, p):
-        return self.r.random() < p
 
     def odd(self, valid, p=0.2):
         """valid, or with probability p something odd (deep paths need mostly valid input)."""
@@ -395,29 +381,10 @@ def run(seed, iterations, only=None, slow=10.0, verbose=False):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--iterations", type=int, default=3000)
-    ap.add_argument("--only", type=int, help="replay this iteration alone, printing every call")
-    ap.add_argument("--slow", type=float, default=10.0,
-                    help="a call taking more than this many seconds of CPU per thread (or six times it "
-                    "of wall-clock time) is a finding")
-    ap.add_argument("--json", help="write the summary and any finding here")
-    args = ap.parse_args()
+    args = arguments(__doc__, 3000, 10.0, "a call taking more than this many seconds of CPU per thread (or six "
+                     "times it of wall-clock time) is a finding")
     wenv.set_num_threads(2)
-    summary, finding = run(args.seed, args.iterations, args.only, args.slow, verbose=args.only is not None)
-    summary["finding"] = finding
-    if args.json:
-        with open(args.json, "w") as f:
-            json.dump(summary, f, indent=1)
-    print(f"{summary['iterations']} iterations in {summary['seconds']:.1f} s, {summary['counts'].get('calls', 0)} calls")
-    for key in sorted(summary["counts"]):
-        if key != "calls":
-            print(f"  {key}: {summary['counts'][key]}")
-    if finding:
-        print(f"FOUND at iteration {finding['iteration']} (replay: --seed {args.seed} --only {finding['iteration']}): "
-              f"{finding['what']}\n{finding['traceback']}")
-        sys.exit(1)
+    report(args, *run(args.seed, args.iterations, args.only, args.slow, verbose=args.only is not None))
 
 
 if __name__ == "__main__":

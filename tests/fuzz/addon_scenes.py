@@ -16,13 +16,11 @@ non-negative, a slow iteration, or a crash of the process (the test runs this in
 Iteration i draws from its own generator seeded with (seed, i), so a finding is replayed alone
 with --only i.
 
-    .venv/bin/python tests/fuzz/addon.py --seed 0 --iterations 300 [--json out.json]
-    .venv/bin/python tests/fuzz/addon.py --seed 0 --only 12          # replay one iteration, verbosely
+    .venv/bin/python tests/fuzz/addon_scenes.py --seed 0 --iterations 300 [--json out.json]
+    .venv/bin/python tests/fuzz/addon_scenes.py --seed 0 --only 12          # replay one iteration, verbosely
 """
-import argparse
 import collections
 import glob
-import json
 import math
 import os
 import sys
@@ -39,6 +37,7 @@ import bpy  # noqa: E402
 import addon  # noqa: E402
 from addon import engine, live, meshes, ui  # noqa: E402
 from benchmarks import merl_files  # noqa: E402
+from draws import Draws, arguments, report  # noqa: E402  (tests/fuzz, the script's folder)
 
 HDRIS = sorted(glob.glob(os.path.join(bpy.utils.system_resource("DATAFILES", path="studiolights/world"), "*.exr")))
 # Principled inputs a user sets, and values from ordinary to absurd (Blender clamps to the sockets' limits)
@@ -71,20 +70,8 @@ class FakePanel:
     layout = FakeLayout()
 
 
-class AddonFuzzer:
-    def __init__(self, rng, tmp, slow, verbose=False):
-        self.r = rng
-        self.tmp = tmp
-        self.slow = slow
-        self.verbose = verbose
-        self.counts = collections.Counter()
-
+class AddonFuzzer(Draws):
     # ---- values ------------------------------------------------------------------------------
-    def pick(self, seq):
-        return seq[self.r.integers(len(seq))]
-
-    def chance(self, p):
-        return self.r.random() < p
 
     def number(self, ordinary=0.5, p=0.3):
         return float(self.pick(NUMBERS)) if self.chance(p) else ordinary * float(self.r.uniform(0.0, 2.0))
@@ -506,28 +493,9 @@ def run(seed, iterations, only=None, slow=60.0, verbose=False):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--iterations", type=int, default=300)
-    ap.add_argument("--only", type=int, help="replay this iteration alone, printing every step")
-    ap.add_argument("--slow", type=float, default=60.0,
-                    help="an iteration taking more than twice this many seconds of CPU (or six times it of "
-                    "wall-clock time) is a finding")
-    ap.add_argument("--json", help="write the summary and any finding here")
-    args = ap.parse_args()
-    summary, finding = run(args.seed, args.iterations, args.only, args.slow, verbose=args.only is not None)
-    summary["finding"] = finding
-    if args.json:
-        with open(args.json, "w") as f:
-            json.dump(summary, f, indent=1)
-    print(f"{summary['iterations']} iterations in {summary['seconds']:.1f} s")
-    for key in sorted(summary["counts"]):
-        print(f"  {key}: {summary['counts'][key]}")
-    if finding:
-        print(f"FOUND at iteration {finding['iteration']} (replay: --seed {args.seed} --only {finding['iteration']}): "
-              f"{finding['what']}")
-        sys.exit(1)
-    sys.exit(0)
+    args = arguments(__doc__, 300, 60.0, "an iteration taking more than twice this many seconds of CPU (or six "
+                     "times it of wall-clock time) is a finding")
+    report(args, *run(args.seed, args.iterations, args.only, args.slow, verbose=args.only is not None))
 
 
 if __name__ == "__main__":
