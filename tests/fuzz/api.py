@@ -150,8 +150,10 @@ class Fuzzer(Draws):
                      "diffuse_roughness", "emission_color", "emission_strength", "thin_film_thickness",
                      "thin_film_ior", "bogus", "distribution"]
             chosen = self.r.choice(len(names), size=int(self.r.integers(5)), replace=False)
-            return wenv.Principled(**{names[i]: self.odd(self.pick([0.0, 0.3, 1.0, (0.8, 0.2, 0.1), 1.45, 500.0]), 0.15)
-                                      for i in chosen})
+            # finite extremes too: 1e6 is the most an input that scales the reflection may be, 3.4e38 the
+            # most a Blender socket holds
+            values = [0.0, 0.3, 1.0, (0.8, 0.2, 0.1), 1.45, 500.0, 1e6, 3.4e38, (1e6, 0.5, 2.0)]
+            return wenv.Principled(**{names[i]: self.odd(self.pick(values), 0.15) for i in chosen})
         if k == 3:
             shape = self.pick([(2, 2, 2, 3), (1, 1, 1, 3), (4, 3, 2, 3), (2, 2, 3), (0, 2, 2, 3), (3, 3, 4, 1),
                                (8, 8, 8, 3)])
