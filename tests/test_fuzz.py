@@ -15,6 +15,7 @@ import pytest
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(ROOT, "tests", "fuzz"))
 from run import TARGETS  # noqa: E402
+import wenv  # noqa: E402
 
 SECONDS = 25
 MIN_INPUTS = 10_000  # each target runs 10^4 to 10^5 inputs a second here
@@ -58,17 +59,27 @@ def test_fuzz_script_reports_and_exits_cleanly(fuzz_results):
 API_ITERATIONS = 1500
 
 
+def run_fuzz_script(tmp_path, script, *args):
+    """tests/fuzz/<script> in a child process with the wenv this process imported first on its path
+    (under scripts/sanitize_tests.sh, the sanitized build) and a cache folder of its own: its JSON
+    summary, once the run found nothing."""
+    out = tmp_path / (script + ".json")
+    path = [os.path.dirname(wenv.__file__)] + ([os.environ["PYTHONPATH"]] if os.environ.get("PYTHONPATH") else [])
+    env = dict(os.environ, WENV_CACHE_DIR=str(tmp_path / "cache"), PYTHONPATH=os.pathsep.join(path))
+    run = subprocess.run([sys.executable, os.path.join(ROOT, "tests", "fuzz", script), *args, "--json", str(out)],
+                         capture_output=True, text=True, timeout=900, env=env)
+    assert out.exists(), f"exit {run.returncode}\n" + run.stdout[-3000:] + run.stderr[-6000:]
+    summary = json.load(open(out))
+    assert summary["wenv"] == wenv.__file__  # the build this run tests
+    assert summary["finding"] is None and run.returncode == 0, run.stdout[-6000:]
+    return summary
+
+
 def test_api_survives_random_input(tmp_path):
     """Random odd and bad arguments to every public function and method: each raises TypeError,
     ValueError or OSError (or returns finite values for finite input) and nothing crashes or hangs;
     enough calls got through to shade, so the run reached the shading code and not only the checks."""
-    out = tmp_path / "api.json"
-    env = dict(os.environ, WENV_CACHE_DIR=str(tmp_path / "cache"))
-    run = subprocess.run([sys.executable, os.path.join(ROOT, "tests", "fuzz", "api.py"), "--seed", "0", "--iterations",
-                          str(API_ITERATIONS), "--json", str(out)], capture_output=True, text=True, timeout=900, env=env)
-    assert out.exists(), f"exit {run.returncode}\n" + run.stdout + run.stderr[-6000:]
-    summary = json.load(open(out))
-    assert summary["finding"] is None and run.returncode == 0, run.stdout[-6000:]
+    summary = run_fuzz_script(tmp_path, "api.py", "--seed", "0", "--iterations", str(API_ITERATIONS))
     counts = summary["counts"]
     assert summary["iterations"] == API_ITERATIONS
     for error in ("TypeError", "ValueError", "OSError"):
@@ -88,13 +99,7 @@ def test_addon_survives_random_scenes_and_use(tmp_path):
     save and reload): no operator fails with a traceback, no exception escapes a getter, update,
     handler or panel, every colour written is finite and non-negative, nothing crashes or hangs; and
     the run reached the shading, not only the set-up checks."""
-    out = tmp_path / "addon.json"
-    run = subprocess.run([sys.executable, os.path.join(ROOT, "tests", "fuzz", "addon_scenes.py"), "--seed", "0",
-                          "--iterations", str(ADDON_ITERATIONS), "--json", str(out)],
-                         capture_output=True, text=True, timeout=900)
-    assert out.exists(), f"exit {run.returncode}\n" + run.stdout[-3000:] + run.stderr[-6000:]
-    summary = json.load(open(out))
-    assert summary["finding"] is None and run.returncode == 0, run.stdout[-6000:]
+    summary = run_fuzz_script(tmp_path, "addon_scenes.py", "--seed", "0", "--iterations", str(ADDON_ITERATIONS))
     counts = summary["counts"]
     assert summary["iterations"] == ADDON_ITERATIONS
     assert counts.get("shade FINISHED", 0) >= 60, counts

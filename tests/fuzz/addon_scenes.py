@@ -31,7 +31,7 @@ import traceback
 import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-sys.path.insert(0, ROOT)
+sys.path.append(ROOT)  # after PYTHONPATH: scripts/sanitize_tests.sh puts its sanitized wenv there
 import bpy  # noqa: E402
 
 import addon  # noqa: E402

@@ -35,6 +35,8 @@ def arguments(doc, iterations, slow, slow_help):
 def report(args, summary, finding):
     """Prints the summary (and writes it to --json) with any finding; exit status 1 on a finding."""
     summary["finding"] = finding
+    wenv = sys.modules.get("wenv")
+    summary["wenv"] = wenv.__file__ if wenv is not None else None  # which build was fuzzed
     if args.json:
         with open(args.json, "w") as f:
             json.dump(summary, f, indent=1)
