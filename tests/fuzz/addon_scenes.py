@@ -386,7 +386,13 @@ class AddonFuzzer(Draws):
         elif k == 5:
             self.op("clear")
         elif k == 6:
-            self.op(self.pick(["from_principled", "lobe_add", "lobe_remove"]))
+            self.op(self.pick(["from_principled", "lobe_add", "lobe_remove", "precompute"]))
+            obj = bpy.context.object
+            if obj is not None and obj.type == "MESH" and self.chance(0.3):  # a shade while a mesh is edited
+                bpy.ops.object.mode_set(mode="EDIT")
+                self.op("shade", view="CAMERA")
+                bpy.ops.object.mode_set(mode="OBJECT")
+                self.log("edit mode")
         elif k == 7:
             self.op("fit_roughness", target=self.pick([50.0, 0.0, 1e6, 95.0, 5.0, math.nan]),
                     geometry=self.pick(["20", "60", "85"]))
