@@ -8,6 +8,11 @@ import bpy
 from . import engine, world
 
 
+def _unit(x):
+    """x clamped to [0, 1], as Cycles clamps a colour channel or a weight."""
+    return min(max(float(x), 0.0), 1.0)
+
+
 def brdf_file(settings):
     """The absolute path of a measured material's BRDF file: a path starting with // is relative to
     the .blend (or to the library the material comes from), as every file path in Blender."""
@@ -70,7 +75,7 @@ def material_key(settings):
     if settings.model == "PRINCIPLED":
         node = principled_node(settings.id_data)
         if node is None:  # no Principled BSDF to read: Lambertian with the viewport colour
-            return ("LAMBERT", tuple(min(max(c, 0.0), 1.0) for c in settings.id_data.diffuse_color[:3]), "SMITH", ())
+            return ("LAMBERT", tuple(_unit(c) for c in settings.id_data.diffuse_color[:3]), "SMITH", ())
         return ("PRINCIPLED", tuple(sorted(principled_inputs(node)[0].items())))
     if settings.model == "MEASURED":
         return ("MEASURED", settings.brdf_path, engine.file_signature(brdf_file(settings)))
@@ -95,10 +100,6 @@ def _ior_for_reflectance(f0):
 
 def _fresnel0(n):
     return ((n - 1) / (n + 1)) ** 2
-
-
-def _unit(x):
-    return min(max(float(x), 0.0), 1.0)
 
 
 # What principled_lobes lets its lobes reflect together: all of it (the core allows 1 % more, its

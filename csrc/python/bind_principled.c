@@ -285,7 +285,8 @@ static PyTypeObject PrincipledType = {
               "thin_film_ior) with Blender's defaults for the rest, and distribution='multiscatter_ggx' (Blender's "
               "default) or 'ggx'.  Colours are a grey number, (r, g, b) or Blender's (r, g, b, a).  Roughness is "
               "Blender's (alpha = roughness^2).  Values are clamped as Cycles' kernel clamps them; non-finite ones, "
-              "and inputs that scale the reflection past 1e6, are a ValueError.  Reflection only: `unhonoured` names what is set but not shaded.  Immutable.",
+              "and inputs that scale the reflection past 1e6, are a ValueError.  Reflection only: `unhonoured` "
+              "names what is set but not shaded.  Immutable.",
     .tp_new = principled_new,
     .tp_repr = principled_repr,
     .tp_getset = principled_getset,

@@ -29,8 +29,9 @@
  *
  * What Cycles adds that reflection does not have -- transmission, subsurface scattering, emission,
  * the see-through part of Alpha, thin film, anisotropy -- is not shaded, nor a Coat Tint above 1
- * (read as 1); wenv_principled_unhonoured names each input set to something that needs it.  Subsurface scattering is shaded as the diffuse
- * reflection it turns into on a smooth convex surface (Base Color as albedo). */
+ * (read as 1); wenv_principled_unhonoured names each input set to something that needs it.
+ * Subsurface scattering is shaded as the diffuse reflection it turns into on a smooth convex surface
+ * (Base Color as albedo). */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
