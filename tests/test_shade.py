@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import wenv
-from conftest import WAVELET_BASE, random_pairs, unit
+from conftest import WAVELET_BASE, hdri_path, random_pairs, unit
 
 SMALL = {**WAVELET_BASE, "global": 16, "local": 8, "normals": 8, "views": 4, "coefficients": 0}
 
@@ -372,6 +372,31 @@ def test_set_num_threads_is_honoured(cook):
     assert np.allclose(a, b, rtol=1e-5, atol=1e-6)
     with pytest.raises(ValueError):
         wenv.set_num_threads(0)
+
+
+@pytest.mark.parametrize("method,quality", [("rotation", "draft"), ("slicing", "default"), ("slicing", "high"),
+                                            (None, "auto")])
+def test_results_do_not_depend_on_the_number_of_threads(method, quality):
+    """Colours, the reference and gloss readings to the bit with 1, 2, 3 or 8 threads (more threads
+    than cores included): every sum over the image or the mesh is made in an order of its own."""
+    env = wenv.load_environment(hdri_path("city"))
+    mat = wenv.Principled(base_color=(0.8, 0.2, 0.1), roughness=0.3, coat_weight=0.5, sheen_weight=0.3)
+    nrm, v = random_pairs(600, 3)
+    meter = wenv.Glossmeter(60)
+    old = wenv.get_num_threads()
+    runs = []
+    try:
+        for threads in (1, 2, 3, 8):
+            wenv.set_num_threads(threads)
+            kw = {"method": method} if method else {"target_error": 0.02}
+            shaded = wenv.Shader(env, mat, quality=quality, cache_dir=False, **kw).shade(nrm, v)
+            extra = (wenv.reference(env, mat, nrm[:50], v[:50]), meter.measure(mat)) if method is None else ()
+            runs.append((shaded,) + extra)
+    finally:
+        wenv.set_num_threads(old)
+    for run in runs[1:]:
+        for got, first in zip(run, runs[0]):
+            assert np.array_equal(got, first)
 
 
 def test_thread_count_holds_for_work_started_from_any_thread():

@@ -6,6 +6,9 @@
 #include <stdlib.h>
 #include <string.h>
 
+/* groups of strips summed apart (see below): enough to share among many threads */
+#define SUM_GROUPS 64
+
 size_t wenv_sh_projection_block(const wenv_envmap *env, size_t order)
 {
     /* pixel side from the mean solid angle; a block spans at most pi / (8 order), an eighth of
@@ -18,6 +21,56 @@ size_t wenv_sh_projection_block(const wenv_envmap *env, size_t order)
     return side > (double)WENV_SH_BLOCK_MAX ? WENV_SH_BLOCK_MAX : (size_t)side;
 }
 
+/* One thread's buffers for a strip of image rows. */
+typedef struct {
+    double *y;     /* count */
+    float *dirs;   /* w x 3 */
+    float *flux;   /* w x 3 */
+    float *omega;  /* w */
+    uint32_t *cols;
+    double *cell;  /* per block: flux RGB, flux-weighted direction, area-weighted direction */
+} strip_scratch;
+
+/* acc += strip s's blocks, each block's flux at its direction. */
+static void project_strip(const wenv_envmap *env, size_t order, size_t block, size_t s, size_t cells,
+                          strip_scratch *t, double *acc)
+{
+    size_t count = wenv_sh_count(order), h = wenv_envmap_height(env);
+    memset(t->cell, 0, cells * 9 * sizeof(double));
+    size_t end = (s + 1) * block < h ? (s + 1) * block : h;
+    for (size_t row = s * block; row < end; row++) {
+        size_t n = wenv_envmap_row_samples(env, row, t->dirs, t->flux, t->omega, t->cols);
+        for (size_t p = 0; p < n; p++) {
+            const float *f = t->flux + 3 * p, *d = t->dirs + 3 * p;
+            double *c = t->cell + 9 * (t->cols[p] / block);
+            double wgt = fabs((double)f[0]) + fabs((double)f[1]) + fabs((double)f[2]);
+            for (int k = 0; k < 3; k++) {
+                c[k] += f[k];
+                c[3 + k] += wgt * d[k];
+                c[6 + k] += t->omega[p] * d[k];
+            }
+        }
+    }
+    /* A block's flux at its flux-weighted mean direction: exact for a lone bright pixel (a sun
+     * keeps its place), second order in the spread of the flux otherwise. */
+    for (size_t b = 0; b < cells; b++) {
+        const double *c = t->cell + 9 * b;
+        if (c[0] == 0.0 && c[1] == 0.0 && c[2] == 0.0)
+            continue;
+        const double *m = (c[3] != 0.0 || c[4] != 0.0 || c[5] != 0.0) ? c + 3 : c + 6;
+        double len = sqrt(m[0] * m[0] + m[1] * m[1] + m[2] * m[2]);
+        if (!(len > 0.0))
+            continue;
+        double d[3] = {m[0] / len, m[1] / len, m[2] / len};
+        wenv_sh_eval(order, d, t->y);
+        for (size_t i = 0; i < count; i++) {
+            acc[3 * i] += t->y[i] * c[0];
+            acc[3 * i + 1] += t->y[i] * c[1];
+            acc[3 * i + 2] += t->y[i] * c[2];
+        }
+    }
+}
+
 wenv_status wenv_sh_project_envmap_blocks(const wenv_envmap *env, size_t order, size_t block, double *coeffs,
                                           const wenv_progress *progress, wenv_error *err)
 {
@@ -25,73 +78,44 @@ wenv_status wenv_sh_project_envmap_blocks(const wenv_envmap *env, size_t order, 
     if (block < 1)
         block = 1;
     size_t strips = (h + block - 1) / block, cells = (w + block - 1) / block;
+    /* Strips are summed in a fixed number of groups of consecutive strips, each in strip order,
+     * and the groups in order: the coefficients do not depend on how many threads ran or which
+     * finished first. */
+    size_t groups = strips < SUM_GROUPS ? strips : SUM_GROUPS;
+    double *partial = calloc(groups * count * 3, sizeof(double));
     memset(coeffs, 0, count * 3 * sizeof(double));
+    if (!partial)
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory projecting the environment");
     atomic_int failed = 0, cancelled = 0;
     atomic_size_t done = 0;
 #pragma omp parallel
     {
-        double *acc = calloc(count * 3, sizeof(double));
-        double *y = malloc(count * sizeof(double));
-        float *dirs = malloc(w * 3 * sizeof(float)), *flux = malloc(w * 3 * sizeof(float));
-        uint32_t *cols = malloc(w * sizeof(uint32_t));
-        double *cell = malloc(cells * 9 * sizeof(double)); /* per block: flux RGB, flux-weighted dir, area-weighted dir */
-        float *omega = malloc(w * sizeof(float));
-        if (!acc || !y || !dirs || !flux || !cols || !cell || !omega)
+        strip_scratch t = {.y = malloc(count * sizeof(double)), .dirs = malloc(w * 3 * sizeof(float)),
+                           .flux = malloc(w * 3 * sizeof(float)), .omega = malloc(w * sizeof(float)),
+                           .cols = malloc(w * sizeof(uint32_t)), .cell = malloc(cells * 9 * sizeof(double))};
+        if (!t.y || !t.dirs || !t.flux || !t.omega || !t.cols || !t.cell)
             atomic_store(&failed, 1);
 #pragma omp for schedule(dynamic, 1)
-        for (size_t s = 0; s < strips; s++) {
-            if (atomic_load(&failed) || atomic_load(&cancelled))
-                continue;
-            memset(cell, 0, cells * 9 * sizeof(double));
-            size_t end = (s + 1) * block < h ? (s + 1) * block : h;
-            for (size_t row = s * block; row < end; row++) {
-                size_t n = wenv_envmap_row_samples(env, row, dirs, flux, omega, cols);
-                for (size_t p = 0; p < n; p++) {
-                    const float *f = flux + 3 * p, *d = dirs + 3 * p;
-                    double *c = cell + 9 * (cols[p] / block);
-                    double wgt = fabs((double)f[0]) + fabs((double)f[1]) + fabs((double)f[2]);
-                    for (int k = 0; k < 3; k++) {
-                        c[k] += f[k];
-                        c[3 + k] += wgt * d[k];
-                        c[6 + k] += omega[p] * d[k];
-                    }
-                }
+        for (size_t g = 0; g < groups; g++) {
+            for (size_t s = g * strips / groups; s < (g + 1) * strips / groups; s++) {
+                if (atomic_load(&failed) || atomic_load(&cancelled))
+                    break;
+                project_strip(env, order, block, s, cells, &t, partial + g * count * 3);
+                if (wenv_progress_step(progress, atomic_fetch_add(&done, 1) + 1, strips))
+                    atomic_store(&cancelled, 1);
             }
-            /* A block's flux at its flux-weighted mean direction: exact for a lone bright pixel (a
-             * sun keeps its place), second order in the spread of the flux otherwise. */
-            for (size_t b = 0; b < cells; b++) {
-                const double *c = cell + 9 * b;
-                if (c[0] == 0.0 && c[1] == 0.0 && c[2] == 0.0)
-                    continue;
-                const double *m = (c[3] != 0.0 || c[4] != 0.0 || c[5] != 0.0) ? c + 3 : c + 6;
-                double len = sqrt(m[0] * m[0] + m[1] * m[1] + m[2] * m[2]);
-                if (!(len > 0.0))
-                    continue;
-                double d[3] = {m[0] / len, m[1] / len, m[2] / len};
-                wenv_sh_eval(order, d, y);
-                for (size_t i = 0; i < count; i++) {
-                    acc[3 * i] += y[i] * c[0];
-                    acc[3 * i + 1] += y[i] * c[1];
-                    acc[3 * i + 2] += y[i] * c[2];
-                }
-            }
-            size_t dn = atomic_fetch_add(&done, 1) + 1;
-            if (wenv_progress_step(progress, dn, strips))
-                atomic_store(&cancelled, 1);
         }
-        if (!atomic_load(&failed)) {
-#pragma omp critical(wenv_sh_project)
-            for (size_t i = 0; i < 3 * count; i++)
-                coeffs[i] += acc[i];
-        }
-        free(acc);
-        free(y);
-        free(dirs);
-        free(flux);
-        free(cols);
-        free(cell);
-        free(omega);
+        free(t.y);
+        free(t.dirs);
+        free(t.flux);
+        free(t.omega);
+        free(t.cols);
+        free(t.cell);
     }
+    for (size_t g = 0; g < groups; g++)
+        for (size_t i = 0; i < 3 * count; i++)
+            coeffs[i] += partial[g * count * 3 + i];
+    free(partial);
     if (failed)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory projecting the environment");
     /* the last strip may have been another thread's: report completion (and honour a stop) here */
