@@ -248,33 +248,3 @@ def test_quality_presets_and_dicts():
 def test_bad_quality(method, quality, exc, message):
     with pytest.raises(exc, match=message):
         wenv.Shader(blob_env(), wenv.Lambert(0.5), quality=quality, method=method, cache_dir=False)
-
-
-@pytest.mark.parametrize("method", METHODS)
-def test_bad_arguments(method, cook):
-    env = blob_env()
-    sh = wenv.Shader(env, cook, quality="draft", method=method)
-    good = unit([[0, 0, 1]] * 4)
-    with pytest.raises(TypeError, match="normals"):
-        sh.shade(good.astype(np.float64), good)
-    with pytest.raises(ValueError, match="view_dirs"):
-        sh.shade(good, good[:3])
-    with pytest.raises(ValueError, match="normals"):
-        sh.shade(np.zeros((4, 3), np.float32), good)
-    with pytest.raises(ValueError, match="view_dirs"):
-        sh.shade(good, np.full((4, 3), np.nan, np.float32))
-    with pytest.raises(ValueError, match="normals"):
-        sh.shade(np.ones((4, 2), np.float32), good)
-    with pytest.raises(ValueError, match="eye"):
-        sh.shade_mesh(np.zeros((1, 3), np.float32), good[:1], (0.0, 0.0, 0.0))
-    with pytest.raises(TypeError, match="env"):
-        sh.set_environment("sunset")
-    with pytest.raises(TypeError, match="material"):
-        sh.set_material(None)
-    with pytest.raises(TypeError, match="env"):
-        wenv.Shader("env", cook, method=method)
-    with pytest.raises(TypeError, match="material"):
-        wenv.Shader(env, "material", method=method)
-    with pytest.raises(TypeError, match="progress"):
-        wenv.Shader(env, cook, method=method, progress=3)
-    assert sh.shade(np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32)).shape == (0, 3)

@@ -475,9 +475,10 @@ def test_bad_quality(quality, message):
         wenv.Shader(env, wenv.Lambert(0.5), quality=quality, cache_dir=False)
 
 
-def test_bad_arguments(cook):
+@pytest.mark.parametrize("method", wenv.METHODS)
+def test_bad_arguments(method, cook):
     env = gradient_env()
-    sh = wenv.Shader(env, cook, quality="draft", cache_dir=False)
+    sh = wenv.Shader(env, cook, quality="draft", method=method, cache_dir=False)
     good = unit([[0, 0, 1]] * 4)
     with pytest.raises(TypeError, match="normals"):
         sh.shade(good.astype(np.float64), good)
@@ -491,19 +492,31 @@ def test_bad_arguments(cook):
         sh.shade(np.ones((4, 2), np.float32), good)
     with pytest.raises(TypeError, match="normals"):
         sh.shade("not an array", good)
-    with pytest.raises(TypeError, match="env"):
-        wenv.Shader("env", cook)
-    with pytest.raises(TypeError, match="material"):
-        wenv.Shader(env, "material")
-    with pytest.raises(ValueError, match="method"):
-        wenv.Shader(env, cook, method="magic")
-    with pytest.raises(OSError, match="cache_dir"):
-        wenv.Shader(env, cook, quality="draft", cache_dir="/nonexistent/folder")
     with pytest.raises(ValueError, match="eye"):
         sh.shade_mesh(np.zeros((1, 3), np.float32), good[:1], (0.0, 0.0, 0.0))
+    with pytest.raises(TypeError, match="env"):
+        sh.set_environment("sunset")
+    with pytest.raises(TypeError, match="material"):
+        sh.set_material(None)
+    with pytest.raises(TypeError, match="env"):
+        wenv.Shader("env", cook, method=method)
+    with pytest.raises(TypeError, match="material"):
+        wenv.Shader(env, "material", method=method)
+    with pytest.raises(TypeError, match="progress"):
+        wenv.Shader(env, cook, method=method, progress=3)
+    if method == "rotation":  # the only method with a cache
+        with pytest.raises(OSError, match="cache_dir"):
+            wenv.Shader(env, cook, quality="draft", method=method, cache_dir="/nonexistent/folder")
+    assert sh.shade(np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32)).shape == (0, 3)
+
+
+def test_bad_method_and_reference_arguments(cook):
+    env = gradient_env()
+    good = unit([[0, 0, 1]] * 4)
+    with pytest.raises(ValueError, match="method"):
+        wenv.Shader(env, cook, method="magic")
     with pytest.raises(ValueError, match="view_dirs"):
         wenv.reference(env, cook, good[:2], good[:3])
-    assert sh.shade(np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32)).shape == (0, 3)
 
 
 @pytest.mark.parametrize("method", ["rotation", "slicing"])
