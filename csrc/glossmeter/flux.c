@@ -283,10 +283,7 @@ static double half_inner(half_ctx *ctx, const double h[3])
 /* Slope density of the lobe (scene/microfacet.h's D written on slopes: D cos(theta_h) d omega_h = P dp dq). */
 static double slope_density(const wenv_lobe *lobe, double p, double q)
 {
-    double m2 = lobe->roughness * lobe->roughness, r2 = (p * p + q * q) / m2;
-    if (lobe->distribution == WENV_NDF_GGX)
-        return 1.0 / (M_PI * m2 * (1.0 + r2) * (1.0 + r2));
-    return exp(-r2) / (M_PI * m2);
+    return wenv_slope_density(lobe->distribution, lobe->roughness, p * p + q * q);
 }
 
 static int half_integrand(unsigned ndim, size_t npt, const double *x, void *data, unsigned fdim, double *fval)

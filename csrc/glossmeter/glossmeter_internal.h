@@ -77,21 +77,6 @@ static inline double aperture_dir(const double c[3], const double u[3], const do
     return inv * inv * inv;
 }
 
-/* Orthonormal frame around unit n (Duff et al. 2017, docs/ARCHITECTURE.md §3.1).  Any frame serves
- * isotropic lobes; this one is deterministic. */
-static inline void tangent_frame(const double n[3], double t1[3], double t2[3])
-{
-    double sign = copysign(1.0, n[2]);
-    double a = -1.0 / (sign + n[2]);
-    double b = n[0] * n[1] * a;
-    t1[0] = 1.0 + sign * n[0] * n[0] * a;
-    t1[1] = sign * b;
-    t1[2] = -sign * n[0];
-    t2[0] = b;
-    t2[1] = sign + n[1] * n[1] * a;
-    t2[2] = -n[1];
-}
-
 static inline void to_local(const wenv_glossmeter *gm, const double w[3], double out[3])
 {
     out[0] = dot3(w, gm->t1);

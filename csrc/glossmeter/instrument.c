@@ -1,6 +1,7 @@
 /* The instrument: apertures, the specimen frame, the mirror region of the source, the standard's
  * flux and the 2-D integrals over the source (glossmeter.h). */
 #include "glossmeter/glossmeter_internal.h"
+#include "math/frame.h"
 
 /* ---------------------------------------------------------------- configuration */
 
@@ -402,7 +403,10 @@ wenv_status wenv_glossmeter_create(wenv_glossmeter **out, const wenv_glossmeter_
     gm->cfg = *cfg;
     for (int k = 0; k < 3; k++)
         gm->n[k] = cfg->normal[k] / nlen;
-    tangent_frame(gm->n, gm->t1, gm->t2);
+    double frame[9]; /* the one tangent frame (docs/ARCHITECTURE.md §3.1); any serves isotropic lobes */
+    wenv_frame(gm->n, frame);
+    memcpy(gm->t1, frame, sizeof gm->t1);
+    memcpy(gm->t2, frame + 3, sizeof gm->t2);
 
     /* Source: polar angle A on the -X side; u = d c / d(polar angle), v = +Y. */
     double A = cfg->angle * DEG;

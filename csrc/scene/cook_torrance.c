@@ -1,16 +1,5 @@
-/* Multi-lobe Cook-Torrance (modern microfacet form, microfacet.h) as a material (material.h).
- *
- * Formulation chosen for speed and robustness in the hot path (~1e9 calls):
- *  - Half vector not normalised: s = wi + wo, tan^2(theta_h) = (sx^2 + sy^2) / sz^2 straight from
- *    components (no cancellation near the normal), and for unit vectors wi.h = |s| / 2 exactly,
- *    which stays accurate where 1 + wi.wo would cancel.
- *  - D written in tan^2 only: Beckmann exp(-t/m^2) (1 + t)^2 / (pi m^2), GGX m^2 r^2 / pi with
- *    r = (1 + t) / (m^2 + t); both finite for t -> inf once t is capped (the capped value is already
- *    exactly 0 for Beckmann and the limit m^2/pi for GGX).
- *  - Smith height-correlated G2 / (4 cos_i cos_o) = 1 / (2 (cos_o K_i + cos_i K_o)) with
- *    K = cos (1 + 2 Lambda): Beckmann K = c erf(a) + m sin exp(-a^2) / sqrt(pi) (a = c / (m sin)),
- *    GGX K = sqrt(c^2 + m^2 sin^2).  No division by a cosine, no cancellation, finite at the horizon.
- *  - V-cavity G / (4 cos_i cos_o) = min(1 / (4 cos_i cos_o), sz / (|s|^2 max(cos_i, cos_o))). */
+/* Multi-lobe Cook-Torrance as a material (material.h): each lobe is scene/microfacet.h's lobe, F D G /
+ * (4 cos_i cos_o) times its colour; the terms and their formulation are microfacet_terms.inc's. */
 #include "math/vector_math.h"
 #include "scene/material_kind.h"
 
@@ -77,48 +66,6 @@ static void ct_specular_cos_batch(const wenv_material *mat, const double wo[3], 
     }
 }
 
-/* Plain comparisons: fminf/fmaxf are library calls on x86-64 (their NaN rules have no single
- * instruction), and these run per vertex and light. */
-static inline float min_f(float a, float b) { return a < b ? a : b; }
-static inline float max_f(float a, float b) { return a > b ? a : b; }
-
-/* ---------------------------------------------------------------- float path */
-
-/* The same formulation in float, for the per-vertex direct lights of shading (millions of calls per
- * frame, where double exp/erf dominated).  Caps as above, at float's range. */
-#define TAN2_CAP_F 1e30f
-#define BECKMANN_A_CAP_F 10.0f /* erff(10) = 1, expf(-100) ~ 4e-44: Lambda is 0 in float */
-
-static inline float fresnel_f(float c, float ior)
-{
-    c = min_f(max_f(c, 0.0f), 1.0f);
-    float g = sqrtf(ior * ior - 1.0f + c * c);
-    float a = (g - c) / (g + c);
-    float b = (c * (g + c) - 1.0f) / (c * (g - c) + 1.0f);
-    return 0.5f * a * a * (1.0f + b * b);
-}
-
-static inline float ndf_tan2_f(wenv_distribution dist, float m, float t)
-{
-    float m2 = m * m;
-    t = min_f(t, TAN2_CAP_F);
-    if (dist == WENV_NDF_GGX) {
-        float r = (1.0f + t) / (m2 + t);
-        return m2 * r * r * (float)WENV_INV_PI;
-    }
-    float q = 1.0f + t;
-    return expf(-t / m2) * q * q * (float)WENV_INV_PI / m2;
-}
-
-static inline float smith_k_f(wenv_distribution dist, float m, float c, float s)
-{
-    float ms = m * s;
-    if (dist == WENV_NDF_GGX)
-        return sqrtf(c * c + ms * ms);
-    float a = min_f(c / max_f(ms, FLT_MIN), BECKMANN_A_CAP_F);
-    return c * erff(a) + ms * expf(-a * a) * (float)WENV_INV_SQRT_PI;
-}
-
 /* The float path over arrays of directions, the lobes' parameters hoisted and every per-direction
  * step branch-free, so the loop runs 8 or 16 lanes per instruction on CPUs that have AVX2 or
  * AVX-512 (WENV_VECTOR_CLONES).  The same formulas as
@@ -129,45 +76,26 @@ static void ct_specular_cos_f_many(const wenv_material *mat, const float wo[3], 
 {
     for (size_t k = 0; k < n; k++)
         r[k] = g[k] = b[k] = 0.0f;
-    float co = wo[2], wx = wo[0], wy = wo[1];
+    float co = wo[2];
     if (!(co > 0.0f))
         return;
     int smith = mat->shadowing == WENV_SHADOW_SMITH;
     for (size_t l = 0; l < mat->n_lobes; l++) {
         const wenv_lobe *lobe = &mat->lobes[l];
-        float m = (float)lobe->roughness, m2 = m * m, inv_m2 = 1.0f / m2, ior2 = (float)(lobe->ior * lobe->ior);
+        float m = (float)lobe->roughness, ior = (float)lobe->ior, ko = k_o[l];
         float s0 = (float)lobe->specular[0], s1 = (float)lobe->specular[1], s2 = (float)lobe->specular[2];
-        float ko = k_o[l];
         int ggx = lobe->distribution == WENV_NDF_GGX;
 #pragma omp simd
         for (size_t k = 0; k < n; k++) {
             float ci = z[k];
-            float cip = ci > 0.0f ? ci : 1.0f; /* a safe stand-in where the light is below: its value is 0 */
-            float sx = x[k] + wx, sy = y[k] + wy, sz = cip + co;
-            float sxy2 = sx * sx + sy * sy, sz2 = max_f(sz * sz, FLT_MIN), len2 = sxy2 + sz2;
-            float t = min_f(sxy2 / sz2, TAN2_CAP_F), cos_d = min_f(0.5f * sqrtf(len2), 1.0f);
-            float si = sqrtf(x[k] * x[k] + y[k] * y[k]);
-            /* D */
-            float q = 1.0f + t, rg = q / (m2 + t);
-            float tm = t * inv_m2;
-            /* past e^-80 Beckmann's D is 0 (and q^2 may overflow) */
-            float ex = wenv_exp_vf(-min_f(tm, 80.0f));
-            float d_beck = (tm < 80.0f ? ex : 0.0f) * min_f(q * q, 1e30f) * (float)WENV_INV_PI * inv_m2;
-            float d = ggx ? m2 * rg * rg * (float)WENV_INV_PI : d_beck;
-            /* Smith's K(wi), or V-cavity */
-            float ms = m * si;
-            float a = min_f(cip / max_f(ms, FLT_MIN), BECKMANN_A_CAP_F), e = wenv_exp_vf(-a * a);
-            float k_beck = cip * wenv_erf_vf(a, e) + ms * e * (float)WENV_INV_SQRT_PI;
-            float k_i = ggx ? sqrtf(cip * cip + ms * ms) : k_beck;
-            float vis_smith = 0.5f / max_f(co * k_i + cip * ko, FLT_MIN);
-            float vis_cavity = min_f(0.25f / (cip * co), sz / (len2 * max_f(cip, co)));
-            float vis = smith ? vis_smith : vis_cavity;
-            /* F */
-            float gg = sqrtf(ior2 - 1.0f + cos_d * cos_d);
-            float fa = (gg - cos_d) / (gg + cos_d);
-            float fb = (cos_d * (gg + cos_d) - 1.0f) / (cos_d * (gg - cos_d) + 1.0f);
-            float f = 0.5f * fa * fa * (1.0f + fb * fb);
-            float v = ci > 0.0f ? f * d * vis * ci : 0.0f;
+            /* a safe stand-in where the light is below: its value is 0 */
+            float wi[3] = {x[k], y[k], ci > 0.0f ? ci : 1.0f};
+            wenv_half_vector_f h = wenv_half_vector_of_f(wi, wo);
+            float si = sqrtf(wi[0] * wi[0] + wi[1] * wi[1]);
+            float vis = smith ? wenv_vis_smith_f(wi[2], co, wenv_smith_k_f(ggx, m, wi[2], si), ko)
+                              : wenv_vis_vcavity_f(wi[2], co, h);
+            float v = wenv_fresnel_dielectric_f(h.cos_d, ior) * wenv_ndf_tan2_f(ggx, m, h.tan2) * vis * ci;
+            v = ci > 0.0f ? v : 0.0f;
             r[k] += s0 * v;
             g[k] += s1 * v;
             b[k] += s2 * v;
@@ -183,32 +111,15 @@ static void ct_prepare_view_f(const wenv_material *mat, const float wo[3], float
     float s = sqrtf(wo[0] * wo[0] + wo[1] * wo[1]);
     for (size_t l = 0; l < mat->n_lobes; l++)
         k_o[l] = mat->shadowing == WENV_SHADOW_SMITH
-                     ? smith_k_f(mat->lobes[l].distribution, (float)mat->lobes[l].roughness, wo[2], s)
+                     ? wenv_smith_k_f(mat->lobes[l].distribution == WENV_NDF_GGX, (float)mat->lobes[l].roughness,
+                                      wo[2], s)
                      : 0.0f;
 }
 
 static void ct_specular_cos_f(const wenv_material *mat, const float wi[3], const float wo[3], const float *k_o,
                              float rgb[3])
 {
-    rgb[0] = rgb[1] = rgb[2] = 0.0f;
-    float ci = wi[2], co = wo[2];
-    if (!(ci > 0.0f) || !(co > 0.0f))
-        return;
-    float sx = wi[0] + wo[0], sy = wi[1] + wo[1], sz = ci + co;
-    float sxy2 = sx * sx + sy * sy, sz2 = max_f(sz * sz, FLT_MIN), len2 = sxy2 + sz2;
-    float t = sxy2 / sz2, cos_d = min_f(0.5f * sqrtf(len2), 1.0f);
-    float si = sqrtf(wi[0] * wi[0] + wi[1] * wi[1]);
-    for (size_t l = 0; l < mat->n_lobes; l++) {
-        const wenv_lobe *lobe = &mat->lobes[l];
-        float m = (float)lobe->roughness, vis;
-        if (mat->shadowing == WENV_SHADOW_SMITH)
-            vis = 0.5f / max_f(co * smith_k_f(lobe->distribution, m, ci, si) + ci * k_o[l], FLT_MIN);
-        else
-            vis = min_f(0.25f / (ci * co), sz / (len2 * max_f(ci, co)));
-        float v = fresnel_f(cos_d, (float)lobe->ior) * ndf_tan2_f(lobe->distribution, m, t) * vis * ci;
-        for (int c = 0; c < 3; c++)
-            rgb[c] += (float)lobe->specular[c] * v;
-    }
+    ct_specular_cos_f_many(mat, wo, k_o, 1, &wi[0], &wi[1], &wi[2], &rgb[0], &rgb[1], &rgb[2]);
 }
 
 /* ---------------------------------------------------------------- one lobe */
@@ -226,22 +137,17 @@ static void ct_lobe_value(const wenv_material *mat, size_t i, const double wi[3]
         rgb[c] = lobe->specular[c] * f;
 }
 
-/* F G: Fresnel at wi.h times Smith's height-correlated G2 from the exact Lambda, or the V-cavity term. */
+/* F G, G = 4 cos_i cos_o V from the one visibility term. */
 static void ct_lobe_over_ndf(const wenv_material *mat, size_t i, const double wi[3], const double wo[3],
                              double rgb[3])
 {
     rgb[0] = rgb[1] = rgb[2] = 0.0;
-    double ci = wi[2], co = wo[2];
-    double s[3] = {wi[0] + wo[0], wi[1] + wo[1], ci + co}, len = sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2]);
-    if (!(ci > 0.0) || !(co > 0.0) || !(len > 0.0))
+    if (!(wi[2] > 0.0) || !(wo[2] > 0.0))
         return;
     const wenv_lobe *lobe = &mat->lobes[i];
-    double cos_d = 0.5 * len; /* wi.h = |wi + wo| / 2 for unit vectors */
-    double g = mat->shadowing == WENV_SHADOW_SMITH
-                   ? 1.0 / (1.0 + wenv_smith_lambda(lobe->distribution, lobe->roughness, ci) +
-                            wenv_smith_lambda(lobe->distribution, lobe->roughness, co))
-                   : fmin(1.0, 2.0 * (s[2] / len) * fmin(ci, co) / cos_d); /* n.h = s_z / |s| */
-    double fg = wenv_fresnel_dielectric(cos_d, lobe->ior) * g;
+    wenv_half_vector h = wenv_half_vector_of(wi, wo);
+    double g = 4.0 * wi[2] * wo[2] * wenv_lobe_vis(lobe, mat->shadowing, wi, wo, wenv_lobe_view_k(lobe, mat->shadowing, wo), h);
+    double fg = wenv_fresnel_dielectric(h.cos_d, lobe->ior) * g;
     for (int c = 0; c < 3; c++)
         rgb[c] = lobe->specular[c] * fg;
 }

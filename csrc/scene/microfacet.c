@@ -1,16 +1,5 @@
-/* One microfacet lobe (microfacet.h): Fresnel, D, Smith, and the lobe's quadrature rules.
- *
- * Formulation chosen for speed and robustness in the hot path (~1e9 calls):
- *  - Half vector not normalised: s = wi + wo, tan^2(theta_h) = (sx^2 + sy^2) / sz^2 straight from
- *    components (no cancellation near the normal), and for unit vectors wi.h = |s| / 2 exactly,
- *    which stays accurate where 1 + wi.wo would cancel.
- *  - D written in tan^2 only: Beckmann exp(-t/m^2) (1 + t)^2 / (pi m^2), GGX m^2 r^2 / pi with
- *    r = (1 + t) / (m^2 + t); both finite for t -> inf once t is capped (the capped value is already
- *    exactly 0 for Beckmann and the limit m^2/pi for GGX).
- *  - Smith height-correlated G2 / (4 cos_i cos_o) = 1 / (2 (cos_o K_i + cos_i K_o)) with
- *    K = cos (1 + 2 Lambda): Beckmann K = c erf(a) + m sin exp(-a^2) / sqrt(pi) (a = c / (m sin)),
- *    GGX K = sqrt(c^2 + m^2 sin^2).  No division by a cosine, no cancellation, finite at the horizon.
- *  - V-cavity G / (4 cos_i cos_o) = min(1 / (4 cos_i cos_o), sz / (|s|^2 max(cos_i, cos_o))). */
+/* One microfacet lobe (microfacet.h): what is not inline there -- D by cos_h, Lambda, the CDF, the
+ * checks -- and the lobe's quadrature rules. */
 #include "scene/microfacet.h"
 
 #include <math.h>
@@ -31,24 +20,37 @@ double wenv_alpha_from_roughness(double roughness)
     return fmax(roughness * roughness, WENV_ALPHA_FROM_ROUGHNESS_MIN);
 }
 
-double wenv_fresnel_dielectric(double cos_i, double ior)
-{
-    /* Exact unpolarised dielectric Fresnel, (Rs + Rp) / 2, in Cook & Torrance's closed form with
-     * g = n cos_t; g > c for ior > 1, so no denominator vanishes and there is no total reflection. */
-    double c = fmin(fmax(cos_i, 0.0), 1.0);
-    double g = sqrt(ior * ior - 1.0 + c * c);
-    double a = (g - c) / (g + c);
-    double b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0);
-    return 0.5 * a * a * (1.0 + b * b);
-}
-
 double wenv_ndf(wenv_distribution dist, double m, double cos_h)
 {
     if (!(cos_h > 0.0))
         return 0.0;
     double c = fmin(cos_h, 1.0);
     double s2 = (1.0 - c) * (1.0 + c); /* sin^2 without cancellation near c = 1 */
-    return wenv_lobe_ndf_tan2(dist, m, s2 / fmax(c * c, DBL_MIN));
+    return wenv_ndf_tan2(dist == WENV_NDF_GGX, m, s2 / fmax(c * c, DBL_MIN));
+}
+
+void wenv_ndf_cdf(wenv_distribution dist, double m, double tan2, double *xi, double *rest)
+{
+    double m2 = m * m;
+    if (dist == WENV_NDF_GGX) {
+        *xi = tan2 / (m2 + tan2);
+        *rest = m2 / (m2 + tan2);
+    } else {
+        *xi = -expm1(-tan2 / m2);
+        *rest = exp(-tan2 / m2);
+    }
+}
+
+double wenv_ndf_tan2_at(wenv_distribution dist, double m, double xi, double rest)
+{
+    double m2 = m * m;
+    return dist == WENV_NDF_GGX ? m2 * xi / rest : -m2 * log(rest);
+}
+
+double wenv_slope_density(wenv_distribution dist, double m, double tan2)
+{
+    double q = 1.0 + tan2;
+    return wenv_ndf_tan2(dist == WENV_NDF_GGX, m, tan2) / (q * q);
 }
 
 double wenv_smith_lambda(wenv_distribution dist, double m, double cos_theta)
@@ -138,8 +140,6 @@ static double lobe_rule_nodes(const wenv_lobe *lobe, wenv_shadowing shadowing, c
         *node_count = 0;
     if (!(wo[2] > 0.0))
         return 0.0;
-    int ggx = lobe->distribution == WENV_NDF_GGX;
-    double m2 = lobe->roughness * lobe->roughness;
     double k_o = wenv_lobe_view_k(lobe, shadowing, wo);
     double co = wo[2], so = sqrt(wo[0] * wo[0] + wo[1] * wo[1]);
     double phi_o = atan2(wo[1], wo[0]);
@@ -169,19 +169,13 @@ static double lobe_rule_nodes(const wenv_lobe *lobe, wenv_shadowing shadowing, c
         double t_max = tan_max * tan_max;
         /* xi_max and 1 - xi_max, each without cancellation. */
         double xi_max, rest;
-        if (ggx) {
-            xi_max = t_max / (m2 + t_max);
-            rest = m2 / (m2 + t_max);
-        } else {
-            xi_max = -expm1(-t_max / m2);
-            rest = exp(-t_max / m2);
-        }
+        wenv_ndf_cdf(lobe->distribution, lobe->roughness, t_max, &xi_max, &rest);
         double ring = 0.0;
         for (size_t i = 0; i < rt.n; i++) {
             double r = 1.0 - rt.x[i], r3 = r * r * r;
             double xi = xi_max * (1.0 - r3 * r);
             double one_minus_xi = rest + xi_max * r3 * r;
-            double t = ggx ? m2 * xi / one_minus_xi : -m2 * log(one_minus_xi);
+            double t = wenv_ndf_tan2_at(lobe->distribution, lobe->roughness, xi, one_minus_xi);
             double ch = 1.0 / sqrt(1.0 + t), sh = sqrt(t) * ch;
             double h[3] = {sh * cp, sh * sp, ch};
             double oh = wo[0] * h[0] + wo[1] * h[1] + wo[2] * h[2];
@@ -189,8 +183,7 @@ static double lobe_rule_nodes(const wenv_lobe *lobe, wenv_shadowing shadowing, c
             double term = 0.0;
             if (oh > 0.0 && wi[2] > 0.0) { /* fails only by rounding at the range's end */
                 /* vis = G / (4 ci co); the integrand F G (wo.h) / (co ch) = F vis 4 ci (wo.h) / ch. */
-                double t_h, cos_d;
-                double vis = wenv_lobe_vis(lobe, shadowing, wi, wo, k_o, &t_h, &cos_d);
+                double vis = wenv_lobe_vis(lobe, shadowing, wi, wo, k_o, wenv_half_vector_of(wi, wo));
                 double f = include_fresnel ? wenv_fresnel_dielectric(oh, lobe->ior) : 1.0;
                 term = rt.w[i] * 4.0 * r3 * f * vis * 4.0 * wi[2] * oh / ch;
             }

@@ -27,6 +27,7 @@
 #include <stddef.h>
 
 #include "base/error.h"
+#include "math/vector_math.h"
 
 typedef enum { WENV_NDF_BECKMANN = 0, WENV_NDF_GGX = 1 } wenv_distribution;
 typedef enum { WENV_SHADOW_SMITH = 0, WENV_SHADOW_VCAVITY = 1 } wenv_shadowing;
@@ -57,11 +58,18 @@ double wenv_alpha_from_roughness(double roughness);
 /* WENV_ERR_VALUE naming the field ("lobes[1].roughness") unless the lobe is within the ranges. */
 wenv_status wenv_lobe_check(const wenv_lobe *lobe, size_t index, wenv_error *err);
 
-/* Unpolarised Fresnel reflectance of a dielectric of index `ior` (outside index 1), cos_i in [0, 1]. */
-double wenv_fresnel_dielectric(double cos_i, double ior);
-
 /* Microfacet distribution D(h) for cos_h = n . h; 0 for cos_h <= 0. */
 double wenv_ndf(wenv_distribution dist, double m, double cos_h);
+
+/* The distribution's CDF over tan^2(theta_h), the share xi of D cos_h d omega_h within theta_h, as
+ * xi and 1 - xi (*rest), each without cancellation; and its inverse, tan^2 at (xi, 1 - xi).  What
+ * the lobe's rules and split-sum's importance samples are graded by. */
+void wenv_ndf_cdf(wenv_distribution dist, double m, double tan2, double *xi, double *rest);
+double wenv_ndf_tan2_at(wenv_distribution dist, double m, double xi, double rest);
+
+/* The slope distribution D cos^4(theta_h) at tan^2(theta_h) = p^2 + q^2: D cos_h d omega_h = P dp dq
+ * over the half vector's slopes (p, q) (the glossmeter integrates over slopes). */
+double wenv_slope_density(wenv_distribution dist, double m, double tan2);
 
 /* Smith's Lambda for a direction at cos_theta to the normal.  0 at the normal; towards the horizon it
  * grows like 1/cos_theta and is clamped to a large finite value for cos_theta <= 1e-150. */
@@ -113,73 +121,91 @@ wenv_status wenv_lobe_cells(const wenv_lobe *lobe, wenv_shadowing shadowing, con
 wenv_status wenv_lobe_slope_cells(const wenv_lobe *lobe, const double wo[3], size_t n_x, size_t n_y, double *wi,
                                   double *mass, double *size, size_t *count, wenv_error *err);
 
-/* ---- evaluation kernels, inline for the hot loops of Cook-Torrance materials (~1e9 calls) ---- */
+/* ---- the lobe's terms, inline for the hot loops (~1e9 calls): written once (microfacet_terms.inc),
+ * compiled in double (wenv_fresnel_dielectric, wenv_ndf_tan2, wenv_smith_k, wenv_half_vector_of,
+ * wenv_vis_smith, wenv_vis_vcavity) and in float (the same names with _f) ---- */
 
 #define WENV_INV_PI (1.0 / 3.14159265358979323846)
 #define WENV_INV_SQRT_PI 0.56418958354775628695
-#define WENV_TAN2_CAP 1e150 /* tan^2 beyond this: Beckmann D is exactly 0, GGX D its limit, in double */
 #define WENV_BECKMANN_A_CAP 30.0 /* erf(30) = 1 and exp(-900) = 0 in double: Lambda is exactly 0 */
 
-/* D from tan^2(theta_h); t >= 0. */
-static inline double wenv_lobe_ndf_tan2(wenv_distribution dist, double m, double t)
-{
-    double m2 = m * m;
-    t = fmin(t, WENV_TAN2_CAP);
-    if (dist == WENV_NDF_GGX) {
-        double r = (1.0 + t) / (m2 + t);
-        return m2 * r * r * WENV_INV_PI;
-    }
-    double q = 1.0 + t; /* 1 / cos^2 */
-    return exp(-t / m2) * q * q * WENV_INV_PI / m2;
-}
+#define WENV_MF_T double
+#define WENV_MF(name) wenv_##name
+#define WENV_MF_C(x) x
+#define WENV_MF_SQRT sqrt
+#define WENV_MF_EXP exp
+#define WENV_MF_ERF(a, e) erf(a)
+#define WENV_MF_OVER(x, y) ((x) / (y))
+#define WENV_MF_TINY DBL_MIN
+#define WENV_MF_TAN2_CAP 1e150 /* tan^2 beyond this: Beckmann D is exactly 0, GGX D its limit */
+#define WENV_MF_A_CAP WENV_BECKMANN_A_CAP
+#include "scene/microfacet_terms.inc"
+#undef WENV_MF_T
+#undef WENV_MF
+#undef WENV_MF_C
+#undef WENV_MF_SQRT
+#undef WENV_MF_EXP
+#undef WENV_MF_ERF
+#undef WENV_MF_OVER
+#undef WENV_MF_TINY
+#undef WENV_MF_TAN2_CAP
+#undef WENV_MF_A_CAP
 
-/* K = cos (1 + 2 Lambda) for a direction with cosine c >= 0 and sine s >= 0 (see the top comment). */
-static inline double wenv_lobe_smith_k(wenv_distribution dist, double m, double c, double s)
-{
-    double ms = m * s;
-    if (dist == WENV_NDF_GGX)
-        return sqrt(c * c + ms * ms);
-    /* a = 1 / (m tan) = c / (m s), capped where Lambda is exactly 0 so no inf enters. */
-    double a = fmin(c / fmax(ms, DBL_MIN), WENV_BECKMANN_A_CAP);
-    return c * erf(a) + ms * exp(-a * a) * WENV_INV_SQRT_PI;
-}
+/* float: exp and erf without library calls (math/vector_math.h), so loops over directions run
+ * several lanes per instruction; caps at float's range */
+#define WENV_MF_T float
+#define WENV_MF(name) wenv_##name##_f
+#define WENV_MF_C(x) x##f
+#define WENV_MF_SQRT sqrtf
+#define WENV_MF_EXP wenv_exp_vf
+#define WENV_MF_ERF(a, e) wenv_erf_vf(a, e)
+#define WENV_MF_OVER(x, y) ((x) * (1.0f / (y)))
+#define WENV_MF_TINY FLT_MIN
+#define WENV_MF_TAN2_CAP 1e30f
+#define WENV_MF_A_CAP 10.0f /* erff(10) = 1, expf(-100) ~ 4e-44: Lambda is 0 in float */
+#include "scene/microfacet_terms.inc"
+#undef WENV_MF_T
+#undef WENV_MF
+#undef WENV_MF_C
+#undef WENV_MF_SQRT
+#undef WENV_MF_EXP
+#undef WENV_MF_ERF
+#undef WENV_MF_OVER
+#undef WENV_MF_TINY
+#undef WENV_MF_TAN2_CAP
+#undef WENV_MF_A_CAP
 
-/* Per-lobe term that depends on the view only: K(wo) for Smith (unused by V-cavity). */
+/* ---- one lobe of a material, from those terms (double) ---- */
+
+/* The view's part of the visibility term: K(wo) for Smith (unused by V-cavity). */
 static inline double wenv_lobe_view_k(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wo[3])
 {
     if (shadowing != WENV_SHADOW_SMITH)
         return 0.0;
     double s = sqrt(wo[0] * wo[0] + wo[1] * wo[1]);
-    return wenv_lobe_smith_k(lobe->distribution, lobe->roughness, wo[2], s);
+    return wenv_smith_k(lobe->distribution == WENV_NDF_GGX, lobe->roughness, wo[2], s);
 }
 
-/* G / (4 cos_i cos_o) for cos_i, cos_o > 0 (the caller checks), with k_o = wenv_lobe_view_k(wo); also
- * returns tan^2(theta_h) and wi.h, which D and F need. */
+/* V = G / (4 cos_i cos_o) for cos_i, cos_o > 0 (the caller checks), k_o = wenv_lobe_view_k(wo). */
 static inline double wenv_lobe_vis(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wi[3],
-                              const double wo[3], double k_o, double *tan2_h, double *cos_d)
+                                   const double wo[3], double k_o, wenv_half_vector h)
 {
-    double ci = wi[2], co = wo[2];
-    double sx = wi[0] + wo[0], sy = wi[1] + wo[1], sz = ci + co;
-    double sxy2 = sx * sx + sy * sy;
-    double sz2 = fmax(sz * sz, DBL_MIN);
-    double len2 = sxy2 + sz2;
-    *tan2_h = sxy2 / sz2;
-    *cos_d = fmin(0.5 * sqrt(len2), 1.0); /* wi.h = wo.h = |wi + wo| / 2 for unit vectors */
     if (shadowing == WENV_SHADOW_SMITH) {
         double si = sqrt(wi[0] * wi[0] + wi[1] * wi[1]);
-        double k_i = wenv_lobe_smith_k(lobe->distribution, lobe->roughness, ci, si);
-        return 0.5 / fmax(co * k_i + ci * k_o, DBL_MIN);
+        double k_i = wenv_smith_k(lobe->distribution == WENV_NDF_GGX, lobe->roughness, wi[2], si);
+        return wenv_vis_smith(wi[2], wo[2], k_i, k_o);
     }
-    return fmin(0.25 / (ci * co), sz / (len2 * fmax(ci, co)));
+    return wenv_vis_vcavity(wi[2], wo[2], h);
 }
 
 /* F D G / (4 cos_i cos_o) under the same conditions. */
 static inline double wenv_lobe_value(const wenv_lobe *lobe, wenv_shadowing shadowing, const double wi[3],
-                                const double wo[3], double k_o)
+                                     const double wo[3], double k_o)
 {
-    double t, cos_d;
-    double v = wenv_lobe_vis(lobe, shadowing, wi, wo, k_o, &t, &cos_d);
-    return wenv_fresnel_dielectric(cos_d, lobe->ior) * wenv_lobe_ndf_tan2(lobe->distribution, lobe->roughness, t) * v;
+    wenv_half_vector h = wenv_half_vector_of(wi, wo);
+    double v = wenv_lobe_vis(lobe, shadowing, wi, wo, k_o, h);
+    return wenv_fresnel_dielectric(h.cos_d, lobe->ior) * wenv_ndf_tan2(lobe->distribution == WENV_NDF_GGX,
+                                                                        lobe->roughness, h.tan2) * v;
 }
 
 #endif

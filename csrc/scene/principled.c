@@ -110,18 +110,6 @@ static double ior_from_f0(double f0)
     return (1.0 + s) / (1.0 - s);
 }
 
-/* Exact unpolarised dielectric Fresnel for a relative index eta (total reflection below 1). */
-static double fresnel_dielectric(double c, double eta)
-{
-    double t = eta * eta - (1.0 - c * c);
-    if (t <= 0.0)
-        return 1.0;
-    c = fabs(c);
-    double ct = sqrt(t) / eta;
-    double rs = (c - eta * ct) / (c + eta * ct), rp = (eta * c - ct) / (eta * c + ct);
-    return 0.5 * (rs * rs + rp * rp);
-}
-
 /* Kulla and Conty's fit of the cosine-weighted mean of the dielectric Fresnel. */
 static double fresnel_dielectric_fss(double eta)
 {
@@ -133,7 +121,7 @@ static double fresnel_dielectric_fss(double eta)
 static void lobe_fresnel(const principled *p, const lobe_model *l, double c, double f[3])
 {
     if (l->role == LOBE_COAT) {
-        f[0] = f[1] = f[2] = fresnel_dielectric(c, p->in.coat_ior);
+        f[0] = f[1] = f[2] = wenv_fresnel_dielectric(c, p->in.coat_ior);
     } else if (l->role == LOBE_METAL) {
         /* F82-tint (Kutz et al., "Novel aspects of the Adobe Standard Material") */
         double s = clamp01(1.0 - c), s5 = s * s * s * s * s;
@@ -141,7 +129,7 @@ static void lobe_fresnel(const principled *p, const lobe_model *l, double c, dou
             f[k] = clamp01(p->f0_metal[k] + (1.0 - p->f0_metal[k]) * s5 - p->b_metal[k] * c * s5 * s);
     } else {
         double f0 = f0_from_ior(p->eta);
-        double s = clamp01((fresnel_dielectric(c, p->eta) - f0) / (1.0 - f0));
+        double s = clamp01((wenv_fresnel_dielectric(c, p->eta) - f0) / (1.0 - f0));
         for (int k = 0; k < 3; k++)
             f[k] = p->f0_col[k] + (1.0 - p->f0_col[k]) * s;
     }
@@ -281,12 +269,11 @@ static void lobe_f(const principled *p, const wenv_lobe *shape, size_t i, const 
             rgb[k] = vw->lobe[i][k] * (single + vw->eon_ms[k] * loss);
         return;
     }
-    double t, cos_d;
+    wenv_half_vector h = wenv_half_vector_of(wi, wo);
     double k_o = wenv_lobe_view_k(shape, WENV_SHADOW_SMITH, wo);
-    double v = wenv_lobe_vis(shape, WENV_SHADOW_SMITH, wi, wo, k_o, &t, &cos_d) *
-               wenv_lobe_ndf_tan2(WENV_NDF_GGX, shape->roughness, t);
+    double v = wenv_lobe_vis(shape, WENV_SHADOW_SMITH, wi, wo, k_o, h) * wenv_ndf_tan2(1, shape->roughness, h.tan2);
     double f[3];
-    lobe_fresnel(p, &p->lobe[i], cos_d, f);
+    lobe_fresnel(p, &p->lobe[i], h.cos_d, f);
     for (int k = 0; k < 3; k++)
         rgb[k] = vw->lobe[i][k] * f[k] * v;
 }
@@ -370,10 +357,7 @@ static void pr_specular_cos_f(const wenv_material *mat, const float wi[3], const
     if (!(ci > 0.0f) || !(co > 0.0f))
         return;
     const principled *p = model_of(mat);
-    float sx = wi[0] + wo[0], sy = wi[1] + wo[1], sz = ci + co;
-    float sxy2 = sx * sx + sy * sy, sz2 = sz * sz > FLT_MIN ? sz * sz : FLT_MIN, len2 = sxy2 + sz2;
-    float t = sxy2 / sz2, cos_d = 0.5f * sqrtf(len2);
-    cos_d = cos_d < 1.0f ? cos_d : 1.0f;
+    wenv_half_vector_f h = wenv_half_vector_of_f(wi, wo);
     float si = sqrtf(wi[0] * wi[0] + wi[1] * wi[1]);
     for (size_t i = 0; i < p->n; i++) {
         if (p->lobe[i].role == LOBE_DIFFUSE) { /* as lobe_f, in float but for E */
@@ -395,12 +379,11 @@ static void pr_specular_cos_f(const wenv_material *mat, const float wi[3], const
                 rgb[k] += terms[4 * i + (size_t)k] * q * q * (float)WENV_INV_PI * ci;
             continue;
         }
-        float m = (float)mat->lobes[i].roughness, m2 = m * m;
-        float k_i = sqrtf(ci * ci + m2 * si * si), den = co * k_i + ci * terms[4 * i + 3];
-        float vis = 0.5f / (den > FLT_MIN ? den : FLT_MIN);
-        float r = (1.0f + t) / (m2 + t), d = m2 * r * r * (float)WENV_INV_PI;
+        float m = (float)mat->lobes[i].roughness;
+        float vis = wenv_vis_smith_f(ci, co, wenv_smith_k_f(1, m, ci, si), terms[4 * i + 3]);
+        float d = wenv_ndf_tan2_f(1, m, h.tan2);
         double f[3];
-        lobe_fresnel(p, &p->lobe[i], cos_d, f);
+        lobe_fresnel(p, &p->lobe[i], h.cos_d, f);
         for (int k = 0; k < 3; k++)
             rgb[k] += terms[4 * i + (size_t)k] * (float)f[k] * d * vis * ci;
     }
@@ -433,10 +416,10 @@ static void pr_lobe_over_ndf(const wenv_material *mat, size_t i, const double wi
             rgb[k] = d > 0.0 ? f[k] * 4.0 * ci * co / d : 0.0;
         return;
     }
-    double g = 1.0 / (1.0 + wenv_smith_lambda(WENV_NDF_GGX, shape->roughness, ci) +
-                      wenv_smith_lambda(WENV_NDF_GGX, shape->roughness, co));
+    wenv_half_vector h = wenv_half_vector_of(wi, wo);
+    double g = 4.0 * ci * co * wenv_lobe_vis(shape, WENV_SHADOW_SMITH, wi, wo, wenv_lobe_view_k(shape, WENV_SHADOW_SMITH, wo), h);
     double f[3];
-    lobe_fresnel(p, &p->lobe[i], 0.5 * len, f);
+    lobe_fresnel(p, &p->lobe[i], h.cos_d, f);
     for (int k = 0; k < 3; k++)
         rgb[k] = vw.lobe[i][k] * f[k] * g;
 }

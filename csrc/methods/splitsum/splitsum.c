@@ -143,12 +143,11 @@ typedef struct {
  * of D(h) cos(theta_h) at Hammersley points, l = 2 (n.h) h - n with pdf(l) = D(h) / 4. */
 static size_t prefilter_samples(const wenv_lobe *lobe, size_t count, size_t base_side, prefilter_sample *out)
 {
-    double m2 = lobe->roughness * lobe->roughness;
     double texel_omega = 4.0 * M_PI / (double)(base_side * base_side);
     size_t kept = 0;
     for (size_t k = 0; k < count; k++) {
         double u1 = ((double)k + 0.5) / (double)count, phi = 2.0 * M_PI * radical_inverse2((uint32_t)k);
-        double t = lobe->distribution == WENV_NDF_GGX ? m2 * u1 / (1.0 - u1) : -m2 * log1p(-u1);
+        double t = wenv_ndf_tan2_at(lobe->distribution, lobe->roughness, u1, 1.0 - u1);
         double ch = 1.0 / sqrt(1.0 + t), sh = sqrt(t) * ch;
         double nl = 2.0 * ch * ch - 1.0;
         if (!(nl > 0.0))
