@@ -186,7 +186,8 @@ static PyObject *material_eval_impl(PyObject *self, PyObject *args, PyObject *kw
             float terms[WENV_PY_VIEW_TERMS_MAX], rgbf[3] = {0.0f, 0.0f, 0.0f};
             if (wenv_material_view_terms(mat) <= WENV_PY_VIEW_TERMS_MAX) {
                 wenv_material_prepare_view_f(mat, bf, terms);
-                wenv_material_specular_cos_f(mat, af, bf, terms, rgbf);
+                wenv_material_specular_cos_f_many(mat, bf, terms, 1, &af[0], &af[1], &af[2], &rgbf[0], &rgbf[1],
+                                                  &rgbf[2]);
             }
             out[3 * k] = rgbf[0];
             out[3 * k + 1] = rgbf[1];

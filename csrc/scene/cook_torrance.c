@@ -17,19 +17,6 @@ static void colour_weights(const wenv_lobe *lobe, double *weight, size_t count)
     }
 }
 
-static void ct_specular_cos(const wenv_material *mat, const double wi[3], const double wo[3], double rgb[3])
-{
-    rgb[0] = rgb[1] = rgb[2] = 0.0;
-    if (!(wi[2] > 0.0) || !(wo[2] > 0.0))
-        return;
-    for (size_t l = 0; l < mat->n_lobes; l++) {
-        const wenv_lobe *lobe = &mat->lobes[l];
-        double v = wenv_lobe_value(lobe, mat->shadowing, wi, wo, wenv_lobe_view_k(lobe, mat->shadowing, wo)) * wi[2];
-        for (int c = 0; c < 3; c++)
-            rgb[c] += lobe->specular[c] * v;
-    }
-}
-
 /* Block size of the batch path: the view term is recomputed once per block and lobe (< 1% of the
  * work at 128), which keeps the function allocation-free for any number of lobes. */
 #define BATCH_BLOCK 128
@@ -116,15 +103,7 @@ static void ct_prepare_view_f(const wenv_material *mat, const float wo[3], float
                      : 0.0f;
 }
 
-static void ct_specular_cos_f(const wenv_material *mat, const float wi[3], const float wo[3], const float *k_o,
-                             float rgb[3])
-{
-    ct_specular_cos_f_many(mat, wo, k_o, 1, &wi[0], &wi[1], &wi[2], &rgb[0], &rgb[1], &rgb[2]);
-}
-
 /* ---------------------------------------------------------------- one lobe */
-
-static double ct_lobe_cos_h_min(const wenv_material *mat, size_t i) { return wenv_lobe_cos_h_min(&mat->lobes[i]); }
 
 static void ct_lobe_value(const wenv_material *mat, size_t i, const double wi[3], const double wo[3], double rgb[3])
 {
@@ -205,14 +184,13 @@ static const wenv_material_kind COOK_TORRANCE = {
     .mirror_symmetric = 1, /* isotropic microfacet lobes: dot products with the normal and each other */
     .smooth_limit = 1,
     .lobes_follow_shapes = ct_lobes_follow_shapes,
-    .specular_cos = ct_specular_cos,
+    .lobe_value = ct_lobe_value,
+    /* accelerators: the view's terms once per batch and lobe, a vectorised float loop, and the
+     * lobe's own rules (exact colour weights, no re-weighting) */
     .specular_cos_batch = ct_specular_cos_batch,
     .view_terms = ct_view_terms,
     .prepare_view_f = ct_prepare_view_f,
-    .specular_cos_f = ct_specular_cos_f,
     .specular_cos_f_many = ct_specular_cos_f_many,
-    .lobe_cos_h_min = ct_lobe_cos_h_min,
-    .lobe_value = ct_lobe_value,
     .lobe_over_ndf = ct_lobe_over_ndf,
     .lobe_albedo = ct_lobe_albedo,
     .lobe_nodes = ct_lobe_nodes,

@@ -94,9 +94,11 @@ wenv_status wenv_material_with_roughness(wenv_material **out, const wenv_materia
     if (!isfinite(roughness) || roughness < WENV_ROUGHNESS_MIN || roughness > WENV_ROUGHNESS_MAX)
         return wenv_error_set(err, WENV_ERR_VALUE, "roughness must be finite in [%g, %g], got %g", WENV_ROUGHNESS_MIN,
                               WENV_ROUGHNESS_MAX, roughness);
-    if (!src->kind->with_roughness)
-        return wenv_error_set(err, WENV_ERR_VALUE, "a %s material has no roughness to set", src->kind->name);
-    return src->kind->with_roughness(out, src, roughness, err);
+    if (src->kind->with_roughness)
+        return src->kind->with_roughness(out, src, roughness, err);
+    if (src->n_lobes == 0) /* nothing to set: the same material */
+        return wenv_material_copy(out, src, err);
+    return wenv_error_set(err, WENV_ERR_VALUE, "a %s material has no roughness to set", src->kind->name);
 }
 
 const char *wenv_material_kind_name(const wenv_material *mat) { return mat->kind->name; }
@@ -155,14 +157,24 @@ double wenv_material_lobe_width(const wenv_material *mat)
     return width;
 }
 
+/* ---------------------------------------------------------------- evaluation */
+
 void wenv_material_specular_cos(const wenv_material *mat, const double wi[3], const double wo[3], double rgb[3])
 {
-    mat->kind->specular_cos(mat, wi, wo, rgb);
+    rgb[0] = rgb[1] = rgb[2] = 0.0;
+    if (!(wi[2] > 0.0) || !(wo[2] > 0.0))
+        return;
+    for (size_t i = 0; i < mat->n_lobes; i++) {
+        double v[3];
+        mat->kind->lobe_value(mat, i, wi, wo, v);
+        for (int c = 0; c < 3; c++)
+            rgb[c] += v[c] * wi[2];
+    }
 }
 
 void wenv_material_eval_cos(const wenv_material *mat, const double wi[3], const double wo[3], double rgb[3])
 {
-    mat->kind->specular_cos(mat, wi, wo, rgb);
+    wenv_material_specular_cos(mat, wi, wo, rgb);
     if (!(wi[2] > 0.0) || !(wo[2] > 0.0))
         return;
     double k = wi[2] * WENV_INV_PI;
@@ -170,46 +182,70 @@ void wenv_material_eval_cos(const wenv_material *mat, const double wi[3], const 
         rgb[c] += mat->diffuse[c] * k;
 }
 
+void wenv_material_derived_specular_cos_batch(const wenv_material *mat, const double wo[3], const float *wi,
+                                              size_t n, float *rgb)
+{
+    for (size_t k = 0; k < n; k++) {
+        double d[3] = {wi[3 * k], wi[3 * k + 1], wi[3 * k + 2]}, v[3];
+        wenv_material_specular_cos(mat, d, wo, v);
+        for (int c = 0; c < 3; c++)
+            rgb[3 * k + (size_t)c] = (float)v[c];
+    }
+}
+
 void wenv_material_specular_cos_batch(const wenv_material *mat, const double wo[3], const float *wi, size_t n,
                                       float *rgb_out)
 {
-    mat->kind->specular_cos_batch(mat, wo, wi, n, rgb_out);
+    if (mat->kind->specular_cos_batch)
+        mat->kind->specular_cos_batch(mat, wo, wi, n, rgb_out);
+    else
+        wenv_material_derived_specular_cos_batch(mat, wo, wi, n, rgb_out);
 }
 
-size_t wenv_material_view_terms(const wenv_material *mat) { return mat->kind->view_terms(mat); }
+size_t wenv_material_view_terms(const wenv_material *mat)
+{
+    return mat->kind->view_terms ? mat->kind->view_terms(mat) : 0;
+}
 
 void wenv_material_prepare_view_f(const wenv_material *mat, const float wo[3], float *terms)
 {
-    mat->kind->prepare_view_f(mat, wo, terms);
+    if (mat->kind->prepare_view_f)
+        mat->kind->prepare_view_f(mat, wo, terms);
 }
 
-void wenv_material_specular_cos_f(const wenv_material *mat, const float wi[3], const float wo[3], const float *terms,
-                                  float rgb[3])
+void wenv_material_derived_specular_cos_f_many(const wenv_material *mat, const float wo[3], size_t n,
+                                               const float *x, const float *y, const float *z, float *r, float *g,
+                                               float *b)
 {
-    mat->kind->specular_cos_f(mat, wi, wo, terms, rgb);
+    double wod[3] = {wo[0], wo[1], wo[2]};
+    for (size_t k = 0; k < n; k++) {
+        double wi[3] = {x[k], y[k], z[k]}, v[3];
+        wenv_material_specular_cos(mat, wi, wod, v);
+        r[k] = (float)v[0];
+        g[k] = (float)v[1];
+        b[k] = (float)v[2];
+    }
 }
-
-wenv_specular_cos_f_fn wenv_material_specular_cos_f_fn(const wenv_material *mat) { return mat->kind->specular_cos_f; }
 
 void wenv_material_specular_cos_f_many(const wenv_material *mat, const float wo[3], const float *terms, size_t n,
                                        const float *x, const float *y, const float *z, float *r, float *g, float *b)
 {
-    if (mat->kind->specular_cos_f_many) {
+    if (mat->kind->specular_cos_f_many)
         mat->kind->specular_cos_f_many(mat, wo, terms, n, x, y, z, r, g, b);
-        return;
-    }
-    for (size_t k = 0; k < n; k++) {
-        float wi[3] = {x[k], y[k], z[k]}, rgb[3];
-        mat->kind->specular_cos_f(mat, wi, wo, terms, rgb);
-        r[k] = rgb[0];
-        g[k] = rgb[1];
-        b[k] = rgb[2];
-    }
+    else
+        wenv_material_derived_specular_cos_f_many(mat, wo, n, x, y, z, r, g, b);
+}
+
+double wenv_material_derived_lobe_cos_h_min(const wenv_material *mat, size_t i)
+{
+    return wenv_material_lobes_follow_shapes(mat) ? wenv_lobe_cos_h_min(&mat->lobes[i]) : -1.0;
 }
 
 double wenv_material_lobe_cos_h_min(const wenv_material *mat, size_t i)
 {
-    return i < mat->n_lobes ? mat->kind->lobe_cos_h_min(mat, i) : -1.0;
+    if (i >= mat->n_lobes)
+        return -1.0;
+    return mat->kind->lobe_cos_h_min ? mat->kind->lobe_cos_h_min(mat, i) : wenv_material_derived_lobe_cos_h_min(mat, i);
 }
 
 void wenv_material_lobe_value(const wenv_material *mat, size_t i, const double wi[3], const double wo[3],
@@ -220,16 +256,110 @@ void wenv_material_lobe_value(const wenv_material *mat, size_t i, const double w
         mat->kind->lobe_value(mat, i, wi, wo, rgb);
 }
 
+void wenv_material_derived_lobe_over_ndf(const wenv_material *mat, size_t i, const double wi[3], const double wo[3],
+                                         double rgb[3])
+{
+    rgb[0] = rgb[1] = rgb[2] = 0.0;
+    if (!(wi[2] > 0.0) || !(wo[2] > 0.0))
+        return;
+    double h[3] = {wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]};
+    double len = sqrt(h[0] * h[0] + h[1] * h[1] + h[2] * h[2]);
+    const wenv_lobe *shape = &mat->lobes[i];
+    double d = len > 0.0 ? wenv_ndf(shape->distribution, shape->roughness, h[2] / len) : 0.0;
+    if (!(d > 0.0))
+        return;
+    mat->kind->lobe_value(mat, i, wi, wo, rgb);
+    double k = 4.0 * wi[2] * wo[2] / d;
+    for (int c = 0; c < 3; c++)
+        rgb[c] *= k;
+}
+
 void wenv_material_lobe_over_ndf(const wenv_material *mat, size_t i, const double wi[3], const double wo[3],
                                  double rgb[3])
 {
     rgb[0] = rgb[1] = rgb[2] = 0.0;
     if (i < mat->n_lobes)
-        mat->kind->lobe_over_ndf(mat, i, wi, wo, rgb);
+        wenv_material_lobe_over_ndf_fn(mat)(mat, i, wi, wo, rgb);
 }
 
 wenv_lobe_rgb_fn wenv_material_lobe_value_fn(const wenv_material *mat) { return mat->kind->lobe_value; }
-wenv_lobe_rgb_fn wenv_material_lobe_over_ndf_fn(const wenv_material *mat) { return mat->kind->lobe_over_ndf; }
+wenv_lobe_rgb_fn wenv_material_lobe_over_ndf_fn(const wenv_material *mat)
+{
+    return mat->kind->lobe_over_ndf ? mat->kind->lobe_over_ndf : wenv_material_derived_lobe_over_ndf;
+}
+
+/* ---------------------------------------------------------------- rules */
+
+void wenv_material_reweight_nodes(const wenv_material *mat, size_t i, const double wo[3], const double *wi,
+                                  double *weight, size_t count, wenv_lobe_value_at_fn value, const void *ctx)
+{
+    const wenv_lobe *shape = &mat->lobes[i];
+    double k_o = wenv_lobe_view_k(shape, mat->shadowing, wo);
+    for (size_t q = count; q-- > 0;) { /* from the back: weight[q] becomes weight[3q..3q+2] */
+        const double *d = wi + 3 * q;
+        double f[3], w = weight[q];
+        double fs = d[2] > 0.0 && wo[2] > 0.0 ? wenv_lobe_value(shape, mat->shadowing, d, wo, k_o) : 0.0;
+        if (fs > 0.0)
+            value(ctx, d, f);
+        for (int k = 2; k >= 0; k--)
+            weight[3 * q + (size_t)k] = fs > 0.0 ? w * f[k] / fs : 0.0;
+    }
+}
+
+typedef struct {
+    const wenv_material *mat;
+    size_t i;
+    const double *wo;
+} lobe_at_view;
+
+static void value_at(const void *ctx, const double wi[3], double rgb[3])
+{
+    const lobe_at_view *c = ctx;
+    c->mat->kind->lobe_value(c->mat, c->i, wi, c->wo, rgb);
+}
+
+wenv_status wenv_material_derived_lobe_nodes(const wenv_material *mat, size_t i, const double wo[3], size_t samples,
+                                             double *wi, double *weight, size_t *count, wenv_error *err)
+{
+    if (wenv_lobe_nodes(&mat->lobes[i], mat->shadowing, wo, samples, wi, weight, count, err))
+        return err->status;
+    lobe_at_view ctx = {mat, i, wo};
+    wenv_material_reweight_nodes(mat, i, wo, wi, weight, *count, value_at, &ctx);
+    return WENV_OK;
+}
+
+wenv_status wenv_material_derived_lobe_cells(const wenv_material *mat, size_t i, const double wo[3], size_t n_theta,
+                                             size_t n_phi, double *wi, double *weight, double *solid_angle,
+                                             size_t *count, wenv_error *err)
+{
+    if (wenv_lobe_cells(&mat->lobes[i], mat->shadowing, wo, n_theta, n_phi, wi, weight, solid_angle, count, err))
+        return err->status;
+    lobe_at_view ctx = {mat, i, wo};
+    wenv_material_reweight_nodes(mat, i, wo, wi, weight, *count, value_at, &ctx);
+    return WENV_OK;
+}
+
+wenv_status wenv_material_derived_lobe_albedo(const wenv_material *mat, size_t i, const double wo[3], size_t samples,
+                                              double rgb[3], wenv_error *err)
+{
+    rgb[0] = rgb[1] = rgb[2] = 0.0;
+    if (samples < ALBEDO_SAMPLES_MIN || samples > ALBEDO_SAMPLES_MAX)
+        return wenv_error_set(err, WENV_ERR_VALUE, "samples must be in [%d, %d], got %zu", ALBEDO_SAMPLES_MIN,
+                              ALBEDO_SAMPLES_MAX, samples);
+    size_t max = 2 * samples * samples;
+    double *wi = malloc(max * 6 * sizeof *wi);
+    if (!wi)
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for a lobe's albedo");
+    size_t count = 0;
+    wenv_status st = mat->kind->lobe_nodes ? mat->kind->lobe_nodes(mat, i, wo, samples, wi, wi + 3 * max, &count, err)
+                                           : wenv_material_derived_lobe_nodes(mat, i, wo, samples, wi, wi + 3 * max,
+                                                                              &count, err);
+    for (size_t q = 0; !st && q < count; q++)
+        for (int k = 0; k < 3; k++)
+            rgb[k] += wi[3 * max + 3 * q + (size_t)k];
+    free(wi);
+    return st;
+}
 
 static wenv_status check_lobe_index(const wenv_material *mat, size_t i, wenv_error *err)
 {
@@ -244,7 +374,8 @@ wenv_status wenv_material_lobe_albedo(const wenv_material *mat, size_t i, const 
     rgb[0] = rgb[1] = rgb[2] = 0.0;
     if (check_lobe_index(mat, i, err))
         return err->status;
-    return mat->kind->lobe_albedo(mat, i, wo, samples, rgb, err);
+    return mat->kind->lobe_albedo ? mat->kind->lobe_albedo(mat, i, wo, samples, rgb, err)
+                                  : wenv_material_derived_lobe_albedo(mat, i, wo, samples, rgb, err);
 }
 
 wenv_status wenv_material_lobe_nodes(const wenv_material *mat, size_t i, const double wo[3], size_t samples,
@@ -253,7 +384,8 @@ wenv_status wenv_material_lobe_nodes(const wenv_material *mat, size_t i, const d
     *count = 0;
     if (check_lobe_index(mat, i, err))
         return err->status;
-    return mat->kind->lobe_nodes(mat, i, wo, samples, wi, weight, count, err);
+    return mat->kind->lobe_nodes ? mat->kind->lobe_nodes(mat, i, wo, samples, wi, weight, count, err)
+                                 : wenv_material_derived_lobe_nodes(mat, i, wo, samples, wi, weight, count, err);
 }
 
 wenv_status wenv_material_lobe_cells(const wenv_material *mat, size_t i, const double wo[3], size_t n_theta,
@@ -263,7 +395,9 @@ wenv_status wenv_material_lobe_cells(const wenv_material *mat, size_t i, const d
     *count = 0;
     if (check_lobe_index(mat, i, err))
         return err->status;
-    return mat->kind->lobe_cells(mat, i, wo, n_theta, n_phi, wi, weight, solid_angle, count, err);
+    return mat->kind->lobe_cells
+               ? mat->kind->lobe_cells(mat, i, wo, n_theta, n_phi, wi, weight, solid_angle, count, err)
+               : wenv_material_derived_lobe_cells(mat, i, wo, n_theta, n_phi, wi, weight, solid_angle, count, err);
 }
 
 wenv_status wenv_material_albedo(const wenv_material *mat, const double wo[3], size_t samples, double rgb[3],
@@ -278,7 +412,7 @@ wenv_status wenv_material_albedo(const wenv_material *mat, const double wo[3], s
     wenv_material_diffuse_at(mat, wo[2], rgb); /* Int diffuse / pi cos_i d wi = diffuse exactly */
     for (size_t l = 0; l < mat->n_lobes; l++) {
         double a[3];
-        if (mat->kind->lobe_albedo(mat, l, wo, samples, a, err))
+        if (wenv_material_lobe_albedo(mat, l, wo, samples, a, err))
             return err->status;
         for (int c = 0; c < 3; c++)
             rgb[c] += a[c];
@@ -310,6 +444,7 @@ wenv_status wenv_material_lobe_slope_cells(const wenv_material *mat, size_t i, c
         return err->status;
     }
     memset(weight, 0, *count * 3 * sizeof *weight);
+    wenv_lobe_rgb_fn over_ndf = wenv_material_lobe_over_ndf_fn(mat);
     /* fine row r, column c lies in coarse row r / K, column c / K: each fine row splits its own
      * range of columns into fx, so K of them make one coarse column */
     for (size_t r = 0; r < fy; r++)
@@ -318,7 +453,7 @@ wenv_status wenv_material_lobe_slope_cells(const wenv_material *mat, size_t i, c
             if (!(fmass[f] > 0.0))
                 continue;
             double rgb[3];
-            mat->kind->lobe_over_ndf(mat, i, fwi + 3 * f, wo, rgb);
+            over_ndf(mat, i, fwi + 3 * f, wo, rgb);
             for (int q = 0; q < 3; q++)
                 weight[3 * k + (size_t)q] += rgb[q] * fmass[f];
         }

@@ -170,23 +170,15 @@ void wenv_material_specular_cos(const wenv_material *mat, const double wi[3], co
 void wenv_material_specular_cos_batch(const wenv_material *mat, const double wo[3], const float *wi, size_t n,
                                       float *rgb_out);
 
-/* Float form for hot per-vertex loops (the exact lights): same model in float precision (relative
- * error ~1e-5 against the double path where the value is not negligible).  Terms that depend on the
- * view only are made once per view into `terms` (wenv_material_view_terms(mat) floats) and passed to
- * every call with that view. */
+/* Float form for the hot per-vertex loops (the exact lights): the same model in float precision
+ * (relative error ~1e-5 against the double path where the value is not negligible).  Terms that
+ * depend on the view only are made once per view into `terms` (wenv_material_view_terms(mat)
+ * floats), then n directions at once, structure of arrays: wi = (x[k], y[k], z[k]) unit; f cos into
+ * r, g, b.  Models with a vectorised evaluator run it on the widest instructions the CPU has. */
 size_t wenv_material_view_terms(const wenv_material *mat);
 void wenv_material_prepare_view_f(const wenv_material *mat, const float wo[3], float *terms);
-void wenv_material_specular_cos_f(const wenv_material *mat, const float wi[3], const float wo[3],
-                                  const float *terms, float rgb[3]);
-/* Float form for n directions at once (one view, its terms as above), structure of arrays: wi =
- * (x[k], y[k], z[k]) unit; f cos into r, g, b.  Models with a vectorised evaluator run it on the
- * widest instructions the CPU has; others loop over wenv_material_specular_cos_f. */
 void wenv_material_specular_cos_f_many(const wenv_material *mat, const float wo[3], const float *terms, size_t n,
                                        const float *x, const float *y, const float *z, float *r, float *g, float *b);
-/* The model's own float evaluator, for a loop over many lights to call without the dispatch. */
-typedef void (*wenv_specular_cos_f_fn)(const wenv_material *mat, const float wi[3], const float wo[3],
-                                       const float *terms, float rgb[3]);
-wenv_specular_cos_f_fn wenv_material_specular_cos_f_fn(const wenv_material *mat);
 
 /* The n.h (h the half vector) below which lobe i reflects nothing visible (under 1e-7 of its peak),
  * or -1 when it may reflect at any half vector (a retro-reflective lobe, say): what the exact lights
@@ -203,8 +195,8 @@ void wenv_material_lobe_value(const wenv_material *mat, size_t i, const double w
 void wenv_material_lobe_over_ndf(const wenv_material *mat, size_t i, const double wi[3], const double wo[3],
                                  double rgb[3]);
 
-/* The model's own functions behind the two above (i < lobe count), for integrands that call them
- * millions of times to call without the dispatch. */
+/* The functions behind the two above (i < lobe count), for integrands that call them millions of
+ * times to call without the dispatch. */
 typedef void (*wenv_lobe_rgb_fn)(const wenv_material *mat, size_t i, const double wi[3], const double wo[3],
                                  double rgb[3]);
 wenv_lobe_rgb_fn wenv_material_lobe_value_fn(const wenv_material *mat);

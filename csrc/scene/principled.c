@@ -288,22 +288,6 @@ static void pr_lobe_value(const wenv_material *mat, size_t i, const double wi[3]
     lobe_f(model_of(mat), &mat->lobes[i], i, &vw, wi, wo, rgb);
 }
 
-static void pr_specular_cos(const wenv_material *mat, const double wi[3], const double wo[3], double rgb[3])
-{
-    rgb[0] = rgb[1] = rgb[2] = 0.0;
-    if (!(wi[2] > 0.0) || !(wo[2] > 0.0))
-        return;
-    const principled *p = model_of(mat);
-    view_weights vw;
-    weights_for_view(p, wo[2], &vw);
-    for (size_t i = 0; i < p->n; i++) {
-        double v[3];
-        lobe_f(p, &mat->lobes[i], i, &vw, wi, wo, v);
-        for (int k = 0; k < 3; k++)
-            rgb[k] += v[k] * wi[2];
-    }
-}
-
 static void pr_specular_cos_batch(const wenv_material *mat, const double wo[3], const float *wi, size_t n,
                                   float *rgb_out)
 {
@@ -349,14 +333,13 @@ static void pr_prepare_view_f(const wenv_material *mat, const float wo[3], float
         terms[4 * p->n + 2 + (size_t)k] = (float)vw.eon_ms[k];
 }
 
-static void pr_specular_cos_f(const wenv_material *mat, const float wi[3], const float wo[3], const float *terms,
-                              float rgb[3])
+static void specular_cos_f(const principled *p, const wenv_lobe *shapes, const float wi[3], const float wo[3],
+                           const float *terms, float rgb[3])
 {
     rgb[0] = rgb[1] = rgb[2] = 0.0f;
     float ci = wi[2], co = wo[2];
     if (!(ci > 0.0f) || !(co > 0.0f))
         return;
-    const principled *p = model_of(mat);
     wenv_half_vector_f h = wenv_half_vector_of_f(wi, wo);
     float si = sqrtf(wi[0] * wi[0] + wi[1] * wi[1]);
     for (size_t i = 0; i < p->n; i++) {
@@ -379,13 +362,25 @@ static void pr_specular_cos_f(const wenv_material *mat, const float wi[3], const
                 rgb[k] += terms[4 * i + (size_t)k] * q * q * (float)WENV_INV_PI * ci;
             continue;
         }
-        float m = (float)mat->lobes[i].roughness;
+        float m = (float)shapes[i].roughness;
         float vis = wenv_vis_smith_f(ci, co, wenv_smith_k_f(1, m, ci, si), terms[4 * i + 3]);
         float d = wenv_ndf_tan2_f(1, m, h.tan2);
         double f[3];
         lobe_fresnel(p, &p->lobe[i], h.cos_d, f);
         for (int k = 0; k < 3; k++)
             rgb[k] += terms[4 * i + (size_t)k] * (float)f[k] * d * vis * ci;
+    }
+}
+
+static void pr_specular_cos_f_many(const wenv_material *mat, const float wo[3], const float *terms, size_t n,
+                                   const float *x, const float *y, const float *z, float *r, float *g, float *b)
+{
+    for (size_t k = 0; k < n; k++) {
+        float wi[3] = {x[k], y[k], z[k]}, rgb[3];
+        specular_cos_f(model_of(mat), mat->lobes, wi, wo, terms, rgb);
+        r[k] = rgb[0];
+        g[k] = rgb[1];
+        b[k] = rgb[2];
     }
 }
 
@@ -426,28 +421,31 @@ static void pr_lobe_over_ndf(const wenv_material *mat, size_t i, const double wi
 
 /* ---------------------------------------------------------------- integrals */
 
-/* The shape's rule (GGX, Smith, dielectric Fresnel of the shape's index) re-weighted node by node to
- * the lobe, by the ratio of their values: for a GGX lobe D and G2 are the same and the ratio is its
- * weight and Fresnel over the shape's Fresnel, smooth across the rule; the sheen's broad GGX shape
- * (alpha 1) is positive everywhere its lobe is (weight holds 3 count doubles; the first count are
- * the shape's colourless weights). */
+/* The shape's rules (GGX, Smith, dielectric Fresnel of the shape's index) re-weighted node by node to
+ * the lobe (wenv_material_reweight_nodes), with the view's weights made once rather than per node:
+ * for a GGX lobe D and G2 are the same and the ratio is its weight and Fresnel over the shape's
+ * Fresnel, smooth across the rule; the sheen's broad GGX shape (alpha 1) is positive everywhere its
+ * lobe is. */
+typedef struct {
+    const principled *p;
+    const wenv_lobe *shape;
+    size_t i;
+    const double *wo;
+    view_weights vw;
+} lobe_at_view;
+
+static void value_at(const void *ctx, const double wi[3], double rgb[3])
+{
+    const lobe_at_view *c = ctx;
+    lobe_f(c->p, c->shape, c->i, &c->vw, wi, c->wo, rgb);
+}
+
 static void reweight(const wenv_material *mat, size_t i, const double wo[3], const double *wi, double *weight,
                      size_t count)
 {
-    const principled *p = model_of(mat);
-    const wenv_lobe *shape = &mat->lobes[i];
-    view_weights vw;
-    weights_for_view(p, wo[2], &vw);
-    double k_o = wenv_lobe_view_k(shape, WENV_SHADOW_SMITH, wo);
-    for (size_t q = count; q-- > 0;) {
-        const double *d = wi + 3 * q;
-        double f[3], w = weight[q];
-        double fs = d[2] > 0.0 && wo[2] > 0.0 ? wenv_lobe_value(shape, WENV_SHADOW_SMITH, d, wo, k_o) : 0.0;
-        if (fs > 0.0)
-            lobe_f(p, shape, i, &vw, d, wo, f);
-        for (int k = 2; k >= 0; k--)
-            weight[3 * q + (size_t)k] = fs > 0.0 ? w * f[k] / fs : 0.0;
-    }
+    lobe_at_view ctx = {.p = model_of(mat), .shape = &mat->lobes[i], .i = i, .wo = wo};
+    weights_for_view(ctx.p, wo[2], &ctx.vw);
+    wenv_material_reweight_nodes(mat, i, wo, wi, weight, count, value_at, &ctx);
 }
 
 static wenv_status pr_lobe_nodes(const wenv_material *mat, size_t i, const double wo[3], size_t samples, double *wi,
@@ -467,23 +465,6 @@ static wenv_status pr_lobe_cells(const wenv_material *mat, size_t i, const doubl
         return err->status;
     reweight(mat, i, wo, wi, weight, *count);
     return WENV_OK;
-}
-
-static wenv_status pr_lobe_albedo(const wenv_material *mat, size_t i, const double wo[3], size_t samples,
-                                  double rgb[3], wenv_error *err)
-{
-    rgb[0] = rgb[1] = rgb[2] = 0.0;
-    size_t max = 2 * samples * samples;
-    double *wi = malloc(max * 6 * sizeof *wi);
-    if (!wi)
-        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for a lobe's albedo");
-    size_t count = 0;
-    wenv_status st = pr_lobe_nodes(mat, i, wo, samples, wi, wi + 3 * max, &count, err);
-    for (size_t q = 0; !st && q < count; q++)
-        for (int k = 0; k < 3; k++)
-            rgb[k] += wi[3 * max + 3 * q + (size_t)k];
-    free(wi);
-    return st;
 }
 
 static void pr_diffuse_at(const wenv_material *mat, double cos_v, double rgb[3])
@@ -516,17 +497,16 @@ static const wenv_material_kind PRINCIPLED = {
     .name = "principled",
     .mirror_symmetric = 1, /* shaded isotropic (anisotropy is unhonoured): functions of dot products */
     .smooth_limit = 0, /* an F82 metal or a remapped dielectric is no Fresnel mirror of one index */
-    .specular_cos = pr_specular_cos,
+    .lobe_value = pr_lobe_value,
+    /* accelerators: the layers' weights for a view made once per batch or rule, not per direction */
     .specular_cos_batch = pr_specular_cos_batch,
     .view_terms = pr_view_terms,
     .prepare_view_f = pr_prepare_view_f,
-    .specular_cos_f = pr_specular_cos_f,
-    .lobe_cos_h_min = pr_lobe_cos_h_min,
-    .lobe_value = pr_lobe_value,
+    .specular_cos_f_many = pr_specular_cos_f_many,
     .lobe_over_ndf = pr_lobe_over_ndf,
-    .lobe_albedo = pr_lobe_albedo,
     .lobe_nodes = pr_lobe_nodes,
     .lobe_cells = pr_lobe_cells,
+    .lobe_cos_h_min = pr_lobe_cos_h_min,
     .diffuse_at = pr_diffuse_at,
     .with_roughness = pr_with_roughness,
     .lobes_follow_shapes = pr_lobes_follow_shapes,

@@ -184,49 +184,23 @@ static void tab_lobe_value(const wenv_material *mat, size_t i, const double wi[3
     lobe_f(table_of(mat), wi, wo, rgb);
 }
 
-static void tab_specular_cos(const wenv_material *mat, const double wi[3], const double wo[3], double rgb[3])
-{
-    lobe_f(table_of(mat), wi, wo, rgb);
-    for (int c = 0; c < 3; c++)
-        rgb[c] *= wi[2] > 0.0 ? wi[2] : 0.0;
-}
-
-static void tab_specular_cos_batch(const wenv_material *mat, const double wo[3], const float *wi, size_t n,
-                                   float *rgb)
-{
-    for (size_t k = 0; k < n; k++) {
-        double d[3] = {wi[3 * k], wi[3 * k + 1], wi[3 * k + 2]}, v[3];
-        tab_specular_cos(mat, d, wo, v);
-        for (int c = 0; c < 3; c++)
-            rgb[3 * k + (size_t)c] = (float)v[c];
-    }
-}
-
-static size_t tab_view_terms(const wenv_material *mat)
-{
-    (void)mat;
-    return 0;
-}
-
-static void tab_prepare_view_f(const wenv_material *mat, const float wo[3], float *terms)
-{
-    (void)mat, (void)wo, (void)terms;
-}
-
 /* The float path: the angles in float (the per-vertex loops' cost), the interpolation in double. */
-static void tab_specular_cos_f(const wenv_material *mat, const float wi[3], const float wo[3], const float *terms,
-                               float rgb[3])
+static void tab_specular_cos_f_many(const wenv_material *mat, const float wo[3], const float *terms, size_t n,
+                                    const float *x, const float *y, const float *z, float *r, float *g, float *b)
 {
     (void)terms;
-    rgb[0] = rgb[1] = rgb[2] = 0.0f;
-    if (!(wi[2] > 0.0f) || !(wo[2] > 0.0f))
-        return;
     const table *t = table_of(mat);
-    double x[3], v[3];
-    index_coords_float(t->n, wi, wo, x);
-    lobe_at(t, x, v);
-    for (int c = 0; c < 3; c++)
-        rgb[c] = (float)(v[c] * wi[2]);
+    for (size_t k = 0; k < n; k++) {
+        float wi[3] = {x[k], y[k], z[k]};
+        double c[3], v[3] = {0.0, 0.0, 0.0};
+        if (wi[2] > 0.0f && wo[2] > 0.0f) {
+            index_coords_float(t->n, wi, wo, c);
+            lobe_at(t, c, v);
+        }
+        r[k] = (float)(v[0] * wi[2]);
+        g[k] = (float)(v[1] * wi[2]);
+        b[k] = (float)(v[2] * wi[2]);
+    }
 }
 
 /* A lobe its fitted shape covers lies about the mirror direction (decide_rule); one it does not
@@ -237,20 +211,6 @@ static double tab_lobe_cos_h_min(const wenv_material *mat, size_t i)
 {
     (void)i;
     return table_of(mat)->cos_h_min;
-}
-
-/* f 4 cos_i cos_o / D(h) with D the shape's: 0 where D is (the shape places no node there). */
-static void tab_lobe_over_ndf(const wenv_material *mat, size_t i, const double wi[3], const double wo[3],
-                              double rgb[3])
-{
-    lobe_f(table_of(mat), wi, wo, rgb);
-    double h[3] = {wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]};
-    double len = sqrt(h[0] * h[0] + h[1] * h[1] + h[2] * h[2]);
-    const wenv_lobe *shape = &mat->lobes[i];
-    double d = len > 0.0 ? wenv_ndf(shape->distribution, shape->roughness, h[2] / len) : 0.0;
-    double k = d > 0.0 ? 4.0 * wi[2] * wo[2] / d : 0.0;
-    for (int c = 0; c < 3; c++)
-        rgb[c] *= k;
 }
 
 /* ---------------------------------------------------------------- integrals */
@@ -401,14 +361,11 @@ static const wenv_material_kind TABULATED = {
     .name = "tabulated",
     .mirror_symmetric = 0, /* phi_d folds into [0, 180) by reciprocity: a mirror reads 180 - phi_d */
     .smooth_limit = 0,
-    .specular_cos = tab_specular_cos,
-    .specular_cos_batch = tab_specular_cos_batch,
-    .view_terms = tab_view_terms,
-    .prepare_view_f = tab_prepare_view_f,
-    .specular_cos_f = tab_specular_cos_f,
-    .lobe_cos_h_min = tab_lobe_cos_h_min,
     .lobe_value = tab_lobe_value,
-    .lobe_over_ndf = tab_lobe_over_ndf,
+    /* accelerators: the float path's angles in float; rules that mix the shape's cells with uniform
+     * ones (a measured lobe may lie away from its fitted shape) */
+    .specular_cos_f_many = tab_specular_cos_f_many,
+    .lobe_cos_h_min = tab_lobe_cos_h_min,
     .lobe_albedo = tab_lobe_albedo,
     .lobe_nodes = tab_lobe_nodes,
     .lobe_cells = tab_lobe_cells,

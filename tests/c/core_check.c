@@ -12,7 +12,7 @@
 #include "methods/wavelet/grazing_nodes.h"
 #include "reference/reference.h"
 #include "scene/envmap.h"
-#include "scene/material.h"
+#include "scene/material_kind.h"
 
 static int passed, failed;
 
@@ -80,7 +80,7 @@ static void check_materials(void)
     /* the float path agrees with the double one */
     float terms[8], wif[3] = {0.6f, 0.0f, 0.8f}, wof[3] = {-0.6f, 0.0f, 0.8f}, rgbf[3];
     wenv_material_prepare_view_f(ct, wof, terms);
-    wenv_material_specular_cos_f(ct, wif, wof, terms, rgbf);
+    wenv_material_specular_cos_f_many(ct, wof, terms, 1, &wif[0], &wif[1], &wif[2], &rgbf[0], &rgbf[1], &rgbf[2]);
     wenv_material_specular_cos(ct, wi, wo, rgb);
     check(near(rgbf[0], rgb[0], 1e-4), "float and double evaluation agree", rgbf[0], rgb[0]);
     /* the lobes add up to the glossy part; a lobe over its shape's D, times D / (4 cos cos), is the lobe */
@@ -100,6 +100,155 @@ static void check_materials(void)
         check(albedo[0] > 0.0 && albedo[0] < 1.0, "Cook-Torrance albedo in (0, 1)", albedo[0], 1.0);
     wenv_material_free(lambert);
     wenv_material_free(ct);
+}
+
+/* The largest relative difference of a and b over n values, against the largest of them. */
+static double worst_difference(const double *a, const double *b, size_t n)
+{
+    double diff = 0.0, scale = 0.0;
+    for (size_t k = 0; k < n; k++) {
+        diff = fmax(diff, fabs(a[k] - b[k]));
+        scale = fmax(scale, fmax(fabs(a[k]), fabs(b[k])));
+    }
+    return scale > 0.0 ? diff / scale : diff;
+}
+
+/* A model's accelerators against the defaults derived from its lobe_value (material_kind.h): the
+ * interface's promise that an accelerator only makes faster what lobe_value defines. */
+static void check_accelerators(const char *name, const wenv_material *mat)
+{
+    enum { N = 64, S = 16 };
+    const double wo[3] = {0.6, 0.1, sqrt(1.0 - 0.37)};
+    const float wof[3] = {(float)wo[0], (float)wo[1], (float)wo[2]};
+    float wi[3 * N], x[N], y[N], z[N], fast[3 * N], slow[3 * N], r[N], g[N], b[N], r2[N], g2[N], b2[N];
+    for (size_t k = 0; k < N; k++) { /* directions over the hemisphere and a few below it */
+        double u = ((double)k + 0.5) / N, phi = 2.39996322972865332 * (double)k, c = 1.1 * u - 0.1;
+        double s = sqrt(fmax(0.0, 1.0 - c * c));
+        x[k] = wi[3 * k] = (float)(s * cos(phi));
+        y[k] = wi[3 * k + 1] = (float)(s * sin(phi));
+        z[k] = wi[3 * k + 2] = (float)c;
+    }
+    double a[3 * N], d[3 * N];
+    char what[200];
+    const wenv_material_kind *kind = mat->kind;
+    if (kind->specular_cos_batch) {
+        wenv_material_specular_cos_batch(mat, wo, wi, N, fast);
+        wenv_material_derived_specular_cos_batch(mat, wo, wi, N, slow);
+        for (size_t k = 0; k < 3 * N; k++) {
+            a[k] = fast[k];
+            d[k] = slow[k];
+        }
+        snprintf(what, sizeof what, "%s: the batched evaluation is lobe_value's", name);
+        check(worst_difference(a, d, 3 * N) < 1e-6, what, worst_difference(a, d, 3 * N), 0.0);
+    }
+    float terms[64];
+    if (kind->specular_cos_f_many && wenv_material_view_terms(mat) <= 64) {
+        wenv_material_prepare_view_f(mat, wof, terms);
+        wenv_material_specular_cos_f_many(mat, wof, terms, N, x, y, z, r, g, b);
+        wenv_material_derived_specular_cos_f_many(mat, wof, N, x, y, z, r2, g2, b2);
+        for (size_t k = 0; k < N; k++) {
+            a[3 * k] = r[k], a[3 * k + 1] = g[k], a[3 * k + 2] = b[k];
+            d[3 * k] = r2[k], d[3 * k + 1] = g2[k], d[3 * k + 2] = b2[k];
+        }
+        snprintf(what, sizeof what, "%s: the float evaluation is lobe_value's to float's accuracy", name);
+        check(worst_difference(a, d, 3 * N) < 1e-4, what, worst_difference(a, d, 3 * N), 0.0);
+    }
+    wenv_error err = {0};
+    double *nodes = malloc(4 * 2 * S * S * 3 * sizeof *nodes);
+    if (!nodes) {
+        check(0, "out of memory", 0, 0);
+        return;
+    }
+    double *w_fast = nodes + 2 * S * S * 3, *w_slow = w_fast + 2 * S * S * 3, *omega = w_slow + 2 * S * S * 3;
+    for (size_t i = 0; i < wenv_material_lobe_count(mat); i++) {
+        double dir[3] = {wi[3 * 40], wi[3 * 40 + 1], wi[3 * 40 + 2]};
+        if (kind->lobe_over_ndf) {
+            double fo[3], so[3];
+            wenv_material_lobe_over_ndf(mat, i, dir, wo, fo);
+            wenv_material_derived_lobe_over_ndf(mat, i, dir, wo, so);
+            snprintf(what, sizeof what, "%s lobe %zu: over its shape's D as lobe_value gives it", name, i);
+            check(worst_difference(fo, so, 3) < 1e-9, what, worst_difference(fo, so, 3), 0.0);
+        }
+        if (kind->lobe_cells) {
+            size_t n_fast = 0, n_slow = 0;
+            double sum_fast[3] = {0, 0, 0}, sum_slow[3] = {0, 0, 0};
+            if (wenv_material_lobe_cells(mat, i, wo, S, S, nodes, w_fast, omega, &n_fast, &err) ||
+                wenv_material_derived_lobe_cells(mat, i, wo, S, S, nodes, w_slow, omega, &n_slow, &err)) {
+                check(0, err.message, 0, 0);
+                continue;
+            }
+            for (size_t k = 0; k < n_fast; k++)
+                for (int c = 0; c < 3; c++)
+                    sum_fast[c] += w_fast[3 * k + (size_t)c];
+            for (size_t k = 0; k < n_slow; k++)
+                for (int c = 0; c < 3; c++)
+                    sum_slow[c] += w_slow[3 * k + (size_t)c];
+            /* different rules may integrate the same lobe: they agree to the rules' accuracy */
+            snprintf(what, sizeof what, "%s lobe %zu: its cells hold the mass the derived cells hold", name, i);
+            check(worst_difference(sum_fast, sum_slow, 3) < 0.02, what, worst_difference(sum_fast, sum_slow, 3), 0.0);
+        }
+        if (kind->lobe_albedo) {
+            double alb_fast[3], alb_slow[3];
+            if (wenv_material_lobe_albedo(mat, i, wo, S, alb_fast, &err) ||
+                wenv_material_derived_lobe_albedo(mat, i, wo, S, alb_slow, &err)) {
+                check(0, err.message, 0, 0);
+                continue;
+            }
+            snprintf(what, sizeof what, "%s lobe %zu: its albedo is the derived one", name, i);
+            check(worst_difference(alb_fast, alb_slow, 3) < 0.02, what, worst_difference(alb_fast, alb_slow, 3), 0.0);
+        }
+        if (kind->lobe_cos_h_min && wenv_material_lobes_follow_shapes(mat)) {
+            double cut = wenv_material_lobe_cos_h_min(mat, i), derived = wenv_material_derived_lobe_cos_h_min(mat, i);
+            snprintf(what, sizeof what, "%s lobe %zu: its cone for the exact lights is its shape's", name, i);
+            check(cut == derived, what, cut, derived);
+        }
+    }
+    free(nodes);
+}
+
+static void check_models(void)
+{
+    wenv_error err = {0};
+    const double black[3] = {0.0, 0.0, 0.0};
+    wenv_lobe lobes[2] = {{.specular = {1, 0.8, 0.6}, .roughness = 0.3, .ior = 1.5, .distribution = WENV_NDF_GGX},
+                          {.specular = {0.5, 0.5, 0.5}, .roughness = 0.1, .ior = 1.7, .distribution = WENV_NDF_BECKMANN}};
+    wenv_material *ct = NULL, *cavity = NULL, *coated = NULL, *sheen = NULL, *table = NULL;
+    wenv_principled_inputs in;
+    wenv_principled_defaults(&in);
+    in.metallic = 0.5;
+    in.coat_weight = 1.0;
+    in.coat_roughness = 0.02; /* narrow enough for a cone */
+    in.roughness = 0.4;
+    wenv_principled_inputs soft;
+    wenv_principled_defaults(&soft);
+    soft.sheen_weight = 1.0;
+    soft.diffuse_roughness = 0.7;
+    /* a small table of a smooth lobe */
+    size_t dims[3] = {16, 16, 32}, n = dims[0] * dims[1] * dims[2];
+    float *rgb = malloc(3 * n * sizeof *rgb);
+    for (size_t k = 0; rgb && k < n; k++) {
+        double th = pow((double)(k / (dims[1] * dims[2])) / (double)dims[0], 2.0) * 0.5 * M_PI;
+        for (int c = 0; c < 3; c++)
+            rgb[3 * k + (size_t)c] = (float)(0.05 + 2.0 * exp(-th * th / 0.02));
+    }
+    if (!rgb || wenv_cook_torrance_create(&ct, black, lobes, 2, WENV_SHADOW_SMITH, &err) ||
+        wenv_cook_torrance_create(&cavity, black, lobes, 1, WENV_SHADOW_VCAVITY, &err) ||
+        wenv_principled_create(&coated, &in, &err) || wenv_principled_create(&sheen, &soft, &err) ||
+        wenv_tabulated_create(&table, rgb, dims, &err)) {
+        check(0, err.message[0] ? err.message : "out of memory", 0, 0);
+    } else {
+        check_accelerators("Cook-Torrance", ct);
+        check_accelerators("Cook-Torrance (V-cavity)", cavity);
+        check_accelerators("Principled (coated metal)", coated);
+        check_accelerators("Principled (sheen, rough diffuse)", sheen);
+        check_accelerators("tabulated", table);
+    }
+    free(rgb);
+    wenv_material_free(ct);
+    wenv_material_free(cavity);
+    wenv_material_free(coated);
+    wenv_material_free(sheen);
+    wenv_material_free(table);
 }
 
 /* Every method, with its default preset, shades a Lambertian material under a white environment to
@@ -199,6 +348,7 @@ int main(void)
 {
     check_grazing_nodes();
     check_materials();
+    check_models();
     wenv_envmap *env = white_environment();
     if (env) {
         check_methods(env);

@@ -302,9 +302,8 @@ typedef struct {
     float reach;          /* how far a pixel may reach from its centre (0: pixels are points) */
     float slack;          /* how far a pixel's centre may lie outside a lobe's n.h cut and still meet it */
     float terms[MAX_VIEW_TERMS]; /* the material's, for this view */
-    int have_terms;              /* terms and the two below are set */
+    int have_terms;              /* terms and the one below are set */
     int use_float;               /* the terms fit: the float path (else the double one, rare) */
-    wenv_specular_cos_f_fn specular_cos_f;
 } specular_view;
 
 static inline int near_a_lobe(const specular_view *sv, float ch, float slack)
@@ -343,7 +342,6 @@ static inline void prepare_terms(specular_view *sv)
     sv->use_float = wenv_material_view_terms(sv->mat) <= MAX_VIEW_TERMS;
     if (sv->use_float)
         wenv_material_prepare_view_f(sv->mat, sv->wo, sv->terms);
-    sv->specular_cos_f = wenv_material_specular_cos_f_fn(sv->mat);
     sv->have_terms = 1;
 }
 
@@ -354,7 +352,8 @@ static inline void eval_light(specular_view *sv, float ci, float lv_dot, float r
     view_frame_dir(sv, ci, lv_dot, wi);
     prepare_terms(sv);
     if (sv->use_float) {
-        sv->specular_cos_f(sv->mat, wi, sv->wo, sv->terms, rgb);
+        wenv_material_specular_cos_f_many(sv->mat, sv->wo, sv->terms, 1, &wi[0], &wi[1], &wi[2], &rgb[0], &rgb[1],
+                                          &rgb[2]);
     } else {
         double wid[3] = {wi[0], wi[1], wi[2]}, wod[3] = {sv->wo[0], sv->wo[1], sv->wo[2]}, rgbd[3];
         wenv_material_specular_cos(sv->mat, wid, wod, rgbd);
