@@ -2,7 +2,8 @@
 after an expression (`wenv.gloss(paint, 60)   # 91.39 GU`) is what the expression gives, to the
 digits shown: the documentation is what a user copies first, so it must stay true as the code
 changes.  The Blender scripting examples run in tests/test_addon.py (they need the registered
-add-on).  Every name the documentation gives exists."""
+add-on).  Also: every name the documentation gives exists, every relative link between its files
+resolves, and every command block names scripts that exist."""
 import ast
 import io
 import re
@@ -18,7 +19,7 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 from benchmarks import merl_files  # noqa: E402
 import wenv  # noqa: E402
 import conftest  # noqa: E402
-from conftest import bundled_hdri_dir, markdown_files, python_blocks, random_pairs, readme_block  # noqa: E402
+from conftest import bundled_hdri_dir, fenced_blocks, markdown_files, python_blocks, random_pairs, readme_block  # noqa: E402
 
 ROOT = conftest.ROOT
 # The first lines of each example, as readme_block finds it (a prefix only one block has).
@@ -234,3 +235,90 @@ def test_every_name_the_documentation_gives_exists(api_namespace):
     ns = api_namespace
     stats = {**ns["shader"].stats, **wenv.Shader(ns["env"], ns["mat"], quality="auto").stats}
     assert "next_vertex" in keys and sorted(k for k in keys if k not in stats) == []
+
+
+FENCE = re.compile(r"^ *```.*?^ *```[ \t]*$", re.M | re.S)
+LINK = re.compile(r"!?\[[^\]]*\]\(([^()\s]+)\)")
+
+
+def heading_anchors(path):
+    """The anchors GitHub gives the headings of a Markdown file: lower case, punctuation dropped,
+    spaces to hyphens, a repeated one numbered."""
+    anchors, seen = set(), {}
+    for line in FENCE.sub("", path.read_text(encoding="utf-8")).splitlines():
+        m = re.match(r"#{1,6} +(.*?) *#*$", line)
+        if not m:
+            continue
+        slug = re.sub(r"[^\w\- ]", "", m.group(1).lower()).replace(" ", "-")
+        n = seen.get(slug, 0)
+        seen[slug] = n + 1
+        anchors.add(slug if n == 0 else f"{slug}-{n}")
+    return anchors
+
+
+def relative_links(path):
+    """(target, anchor) of every relative link and image in `path`, code blocks left out."""
+    links = []
+    for target in LINK.findall(FENCE.sub("", path.read_text(encoding="utf-8"))):
+        if re.match(r"[a-z]+:", target):
+            continue  # http:, https:, mailto:
+        file, _, anchor = target.partition("#")
+        links.append((file, anchor))
+    return links
+
+
+def test_the_link_checker_reads_anchors_as_github_does(tmp_path):
+    page = tmp_path / "page.md"
+    page.write_text("# wenv\n## Peer methods: split-sum and `sh`\n### 3.4 Blender's environments\n"
+                    "## Notes\n## Notes\n```sh\n# not a heading\n```\n[a](other.md#x) ![b](pic.png)\n"
+                    "[c](#notes-1) [d](https://example.org/x)\n")
+    assert heading_anchors(page) == {"wenv", "peer-methods-split-sum-and-sh", "34-blenders-environments",
+                                     "notes", "notes-1"}
+    assert relative_links(page) == [("other.md", "x"), ("pic.png", ""), ("", "notes-1")]
+
+
+def test_every_relative_link_resolves():
+    """Every relative link and picture in README.md, CHANGELOG.md and docs/*.md points to a file of
+    the repository, and an anchor to a heading of the file it names."""
+    broken = []
+    for path in [*markdown_files(), ROOT / "CHANGELOG.md"]:
+        for file, anchor in relative_links(path):
+            target = (path.parent / file).resolve() if file else path
+            name = f"{path.relative_to(ROOT).as_posix()}: {file}#{anchor}"
+            if not target.exists() or ROOT not in target.parents:
+                broken.append(name)
+            elif anchor and (target.suffix != ".md" or anchor not in heading_anchors(target)):
+                broken.append(name)
+    assert len(list(ROOT.glob("docs/*.md"))) >= 8
+    assert broken == []
+
+
+def test_no_path_outside_the_repository():
+    """The documentation cites papers and the thesis by name, never a file beside the checkout."""
+    text = documentation_text([*markdown_files(), ROOT / "CHANGELOG.md"])
+    assert re.findall(r"\.\./shared|shared/seed|\.\./\.\./", text) == []
+
+
+def test_command_blocks_are_the_two_commands_or_name_existing_scripts():
+    """The README's first command block is the two commands, and `.ci/run` runs exactly the second;
+    every other ```sh or ```bash line of README.md and docs/*.md runs a script of the repository
+    (with `bash`, `python` or `.venv/bin/python`) that exists."""
+    first = fenced_blocks(conftest.README, ("sh", "bash"))[0][1]
+    commands = [line for line in first.splitlines() if line and not line.startswith("#")]
+    setup = "bash scripts/setup.sh && "
+    assert commands == [setup + ".venv/bin/python examples/demo.py", setup + ".venv/bin/python -m pytest -q tests"]
+    ci = [line for line in (ROOT / ".ci" / "run").read_text().splitlines() if line and not line.startswith(("#", "set ", "cd "))]
+    assert ci == [commands[1]]
+    run = 0
+    for path in markdown_files():
+        for _, block in fenced_blocks(path, ("sh", "bash")):
+            for line in block.splitlines():
+                line = line.split("  #")[0].strip()
+                if not line or line.startswith("#"):
+                    continue
+                for command in line.split("&&"):
+                    words = command.split()
+                    assert words[0] in ("bash", "python", ".venv/bin/python"), f"{path.name}: {command}"
+                    assert words[1] == "-m" or (ROOT / words[1]).is_file(), f"{path.name}: {command}"
+                    run += 1
+    assert run >= 20
