@@ -19,7 +19,8 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 from benchmarks import merl_files  # noqa: E402
 import wenv  # noqa: E402
 import conftest  # noqa: E402
-from conftest import bundled_hdri_dir, fenced_blocks, markdown_files, python_blocks, random_pairs, readme_block  # noqa: E402
+from conftest import (bundled_hdri_dir, fenced_blocks, markdown_files, python_blocks, random_pairs,  # noqa: E402
+                      readme_block)
 
 ROOT = conftest.ROOT
 # The first lines of each example, as readme_block finds it (a prefix only one block has).
@@ -307,7 +308,8 @@ def test_command_blocks_are_the_two_commands_or_name_existing_scripts():
     commands = [line for line in first.splitlines() if line and not line.startswith("#")]
     setup = "bash scripts/setup.sh && "
     assert commands == [setup + ".venv/bin/python examples/demo.py", setup + ".venv/bin/python -m pytest -q tests"]
-    ci = [line for line in (ROOT / ".ci" / "run").read_text().splitlines() if line and not line.startswith(("#", "set ", "cd "))]
+    ci = [line for line in (ROOT / ".ci" / "run").read_text().splitlines()
+          if line and not line.startswith(("#", "set ", "cd "))]
     assert ci == [commands[1]]
     run = 0
     for path in markdown_files():
