@@ -68,7 +68,6 @@ print("RESULT " + json.dumps(out))
 def test_readme_installs_as_this_test_does():
     """The README's installation block makes the call this test's fresh process makes (on the zip it
     builds), and names the zip scripts/build_extension.sh writes."""
-    sys.path.insert(0, os.path.join(ROOT, "tests"))
     from conftest import readme_block
     block = readme_block("import bpy\nbpy.ops.extensions.package_install_files(")
     call = " ".join(block.split("(", 1)[1].split(")", 1)[0].split())
