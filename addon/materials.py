@@ -109,7 +109,8 @@ ENERGY_LIMIT = 1.0
 
 def principled_lobes(base, metallic, roughness, ior, spec_level=0.5, spec_tint=(1, 1, 1),
                      coat=0.0, coat_roughness=0.03, coat_ior=1.5):
-    """wenv settings (diffuse, lobes) for Principled BSDF values.  See README "From Principled BSDF".
+    """wenv settings (diffuse, lobes) for Principled BSDF values.  See docs/addon.md, "Cook-Torrance
+    from Principled BSDF".
 
     - roughness r -> GGX alpha r^2 (as Cycles), floored (engine.ggx_alpha);
     - dielectric part (weight 1 - metallic): diffuse = base colour, one GGX lobe of index IOR,

@@ -94,7 +94,7 @@ class WENV_MaterialSettings(bpy.types.PropertyGroup):
 
 
 # What each preset is for, in a Blender user's terms (roughness as the Principled BSDF's: alpha = r^2);
-# README.md, "Speed against accuracy" and "Interactive rates".
+# docs/performance.md, "Speed against accuracy" and "Interactive rates".
 QUALITY_NOTES = {
     "draft": "fastest, coarse (rotation matrices, 29 MB, built once)",
     "default": "interactive: within 3 % of the reference from roughness 0.45 up, ~30 ms per view of 126k vertices",

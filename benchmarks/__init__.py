@@ -1,4 +1,4 @@
-"""Benchmarks and the generators of the README's figures and tables (see README.md here).
+"""Benchmarks and the generators of the figures and tables of the README and docs/ (see README.md here).
 
 The scripts are run as scripts (`.venv/bin/python benchmarks/X.py`) and import their siblings by
 plain name (`from measure import ...`); the tests import the two library modules as

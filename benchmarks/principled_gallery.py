@@ -1,4 +1,4 @@
-"""The README's gallery of Principled BSDF materials: spheres shaded by wenv (`default` and `high`,
+"""docs/principled.md's gallery of Principled BSDF materials: spheres shaded by wenv (`default` and `high`,
 both through slicing) beside wenv.reference and Cycles' render of the same sphere (through bpy), each
 with its relative RMSE against the reference (Cycles': the render's noise included; its noise alone
 is measured from a second seed).

@@ -1,7 +1,7 @@
 """wenv.reference of Principled BSDF materials against Cycles' render of them (through bpy): a grid of
 dielectrics, metals, coated paints, sheens and a rough diffuse at several roughnesses and colours, each on an unoccluded
 sphere under bundled HDRIs (benchmarks/cycles_sphere.py), rendered twice with different seeds so
-that Cycles' own noise is measured beside the difference.  The README's Cycles table.
+that Cycles' own noise is measured beside the difference.  docs/principled.md's Cycles table.
 
     .venv/bin/python benchmarks/principled_vs_cycles.py [--hdris sunset,forest,studio] [--size 48] [--samples 512]
 

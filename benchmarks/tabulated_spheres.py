@@ -1,4 +1,4 @@
-"""Spheres shaded with tabulated BRDFs (90 x 90 x 180, MERL's layout) next to the reference: the README's
+"""Spheres shaded with tabulated BRDFs (90 x 90 x 180, MERL's layout) next to the reference: docs/measured_brdfs.md's
 picture of measured and tabulated materials.  Each row is one table -- a paint (a Cook-Torrance lobe
 over a coloured diffuse floor), a retro-reflective lobe and a lobe whose colour shifts with the
 difference angle, neither of them a Cook-Torrance lobe -- shaded at `default` and

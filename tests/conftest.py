@@ -65,25 +65,39 @@ def random_pairs(n, seed=0):
     return nrm, v
 
 
-README = pathlib.Path(__file__).resolve().parents[1] / "README.md"
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+README = ROOT / "README.md"
 
 
-def python_blocks():
-    """Every ```python block of the README, in order."""
-    blocks, block = [], None
-    for line in README.read_text(encoding="utf-8").splitlines():
-        if block is None and line.strip() == "```python":
-            block = []
-        elif block is not None and line.strip() == "```":
-            blocks.append("\n".join(block) + "\n")
+def markdown_files():
+    """The documentation whose examples are tested: README.md, then every docs/*.md."""
+    return [README, *sorted((ROOT / "docs").glob("*.md"))]
+
+
+def fenced_blocks(path, languages=("python",)):
+    """(language, text) of every fenced block of `path` in one of `languages`, in order."""
+    blocks, block, language = [], None, None
+    for line in path.read_text(encoding="utf-8").splitlines():
+        fence = line.strip()
+        if block is None and fence.startswith("```") and fence[3:] in languages:
+            block, language = [], fence[3:]
+        elif block is not None and fence == "```":
+            blocks.append((language, "\n".join(block) + "\n"))
             block = None
         elif block is not None:
             block.append(line)
     return blocks
 
 
+def python_blocks(path=None):
+    """Every ```python block of README.md and docs/*.md (of `path` alone if given), in order, each
+    as (path, text)."""
+    return [(p, text) for p in ([path] if path else markdown_files()) for _, text in fenced_blocks(p)]
+
+
 def readme_block(first_line):
-    """The README's Python block whose first line starts with `first_line`."""
-    hits = [b for b in python_blocks() if b.startswith(first_line)]
-    assert len(hits) == 1, f"README.md has {len(hits)} Python blocks starting with {first_line!r}"
+    """The Python block of README.md or a docs/*.md whose first lines start with `first_line`:
+    exactly one must, wherever the block lives."""
+    hits = [text for _, text in python_blocks() if text.startswith(first_line)]
+    assert len(hits) == 1, f"README.md and docs/*.md have {len(hits)} Python blocks starting with {first_line!r}"
     return hits[0]

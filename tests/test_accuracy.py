@@ -29,7 +29,7 @@ EXTRA_DATA = os.path.join(os.path.dirname(__file__), "data", "accuracy_reference
 # `high` takes per vertex (every pixel above 8x the mean radiance as a light, narrow lobes at grazing
 # integrated per vertex); `default` takes the grazing views per vertex and resolves the features with
 # high's local maps (1.48 % at m = 0.2, 2.21 % at m = 0.5, courtyard; 2.67 % at m = 0.1, forest;
-# 29 / 9.8 / 44 % when it was the 64/32/32 rotation setting).  README.md, "Status and measured figures".  high's
+# 29 / 9.8 / 44 % when it was the 64/32/32 rotation setting).  docs/performance.md, "Accuracy".  high's
 # m = 0.1 went from 0.61 to 0.77 % (courtyard) when the grazing path's 1024 polar nodes became 96
 # slope cells (aliasing of the lighting between nodes: 128 or 192 cells give 0.68 and 0.75 %).
 BOUNDS = {

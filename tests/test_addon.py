@@ -871,8 +871,9 @@ def test_fit_roughness_operator(scene):
 
 
 def test_readme_scripting_block_runs_as_written(scene):
-    """README.md's "Scripting" block, as written, on Suzanne with a Principled material named
-    "paint" under the sunset HDRI: every line works and does what its comment says."""
+    """The scripting blocks as written -- README.md's quick start, then docs/addon.md's, which sets
+    the add-on's own models -- on Suzanne with a Principled material named "paint" under the sunset
+    HDRI: every line works and does what its comment says."""
     env_world(scene, "sunset")
     suzanne = add_monkey()
     suzanne.data.materials.append(principled_material("paint", base=(0.6, 0.15, 0.08), roughness=0.3))
@@ -882,6 +883,7 @@ def test_readme_scripting_block_runs_as_written(scene):
         assert bpy.context.window_manager.wenv.show_in_viewports
     finally:
         bpy.context.window_manager.wenv.show_in_viewports = False
+    exec(compile(readme_block('import bpy\nmat = bpy.data.materials["paint"]'), "docs/addon.md", "exec"), {})
     mat = bpy.data.materials["paint"]
     # fit_roughness set the node's Roughness so that the node reads 60 GU at 60 degrees
     node = mat.node_tree.nodes["Principled BSDF"]

@@ -65,6 +65,18 @@ print("RESULT " + json.dumps(out))
 '''
 
 
+def test_readme_installs_as_this_test_does():
+    """The README's installation block makes the call this test's fresh process makes (on the zip it
+    builds), and names the zip scripts/build_extension.sh writes."""
+    from conftest import readme_block
+    block = readme_block("import bpy\nbpy.ops.extensions.package_install_files(")
+    call = " ".join(block.split("(", 1)[1].split(")", 1)[0].split())
+    manifest = open(os.path.join(ROOT, "addon", "blender_manifest.toml"), encoding="utf-8").read()
+    version = manifest.split('\nversion = "', 1)[1].split('"', 1)[0]
+    zip_name = f'"dist/wenv-{version}.zip"'
+    assert zip_name in call and call.replace(zip_name, "sys.argv[2]") in SCRIPT
+
+
 @pytest.fixture(scope="module")
 def extension_zip():
     proc = subprocess.run(["bash", os.path.join(ROOT, "scripts", "build_extension.sh")], cwd=ROOT,

@@ -1,7 +1,9 @@
-"""README.md's Python examples run as written, and every value a comment shows after an expression
-(`wenv.gloss(paint, 60)   # 91.39 GU`) is what the expression gives, to the digits shown: the README
-is what a user copies first, so it must stay true as the code changes.  The Blender scripting
-example runs in tests/test_addon.py (it needs the registered add-on)."""
+"""The Python examples of README.md and docs/*.md run as written, and every value a comment shows
+after an expression (`wenv.gloss(paint, 60)   # 91.39 GU`) is what the expression gives, to the
+digits shown: the documentation is what a user copies first, so it must stay true as the code
+changes.  The Blender scripting examples run in tests/test_addon.py (they need the registered
+add-on).  Also: every name the documentation gives exists, every relative link between its files
+resolves, and every command block names scripts that exist."""
 import ast
 import io
 import re
@@ -17,7 +19,17 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 from benchmarks import merl_files  # noqa: E402
 import wenv  # noqa: E402
 import conftest  # noqa: E402
-from conftest import bundled_hdri_dir, python_blocks, random_pairs, readme_block  # noqa: E402
+from conftest import (bundled_hdri_dir, fenced_blocks, markdown_files, python_blocks, random_pairs,  # noqa: E402
+                      readme_block)
+
+ROOT = conftest.ROOT
+# The first lines of each example, as readme_block finds it (a prefix only one block has).
+QUICK_START = 'import numpy as np, wenv\n\nenv = wenv.load_environment("sunset.exr")'
+API = 'import numpy as np, wenv\n\nenv = wenv.load_environment("sunset.exr", projection='
+AUTO = 'shader = wenv.Shader(env, mat, quality="auto"'
+PRINCIPLED = "paint = wenv.Principled("
+TABULATED = "mat = wenv.load_brdf("
+GLOSSMETER = "import wenv\n\npaint = "
 
 
 def leading_literal(comment):
@@ -81,21 +93,21 @@ def disagreement(value, node, text):
     return None if value == shown and type(value) is type(shown) else f"{value!r} is not {shown!r}"
 
 
-def run_checked(source, namespace):
+def run_checked(source, namespace, name="README.md"):
     """Runs the block statement by statement; returns how many expression values its comments show,
-    each checked."""
+    each checked.  `name` is the file the block is from, for messages."""
     comments = comments_by_line(source)
     checked = 0
     for stmt in ast.parse(source).body:
         code = ast.get_source_segment(source, stmt)
         literal = leading_literal(comments.get(stmt.end_lineno, "#"))
         if not isinstance(stmt, ast.Expr) or literal is None:
-            exec(compile(code, "README.md", "exec"), namespace)
+            exec(compile(code, name, "exec"), namespace)
             continue
-        value = eval(compile(code, "README.md", "eval"), namespace)
+        value = eval(compile(code, name, "eval"), namespace)
         node = ast.parse(literal, mode="eval").body
         why = disagreement(value, node, literal)
-        assert why is None, f"README.md: `{code}` shows {literal}, gives {value!r} ({why})"
+        assert why is None, f"{name}: `{code}` shows {literal}, gives {value!r} ({why})"
         checked += 1
     return checked
 
@@ -111,9 +123,21 @@ def test_the_checker_catches_a_wrong_figure():
     assert run_checked("x   # the reading\n", ns) == 0
 
 
+def test_quick_start_runs_and_shows_true_values(monkeypatch):
+    """The README's Python quick start, as written, in the folder of Blender's bundled sunset.exr
+    (the name it loads): it shades its sphere and shows the shape and the gloss readings."""
+    monkeypatch.chdir(bundled_hdri_dir())
+    ns = {}
+    assert run_checked(readme_block(QUICK_START), ns) == 2  # the shape, the gloss readings
+    rgb, normals = ns["rgb"], ns["normals"]
+    assert np.isfinite(rgb).all() and (rgb >= 0).all()
+    facing = normals @ (np.array(ns["eye"]) / np.linalg.norm(ns["eye"])) > 0.3
+    assert (rgb[facing].max(axis=1) > 0).all()  # what faces the eye is lit
+
+
 @pytest.fixture(scope="module")
 def api_namespace():
-    """The Python API block run on a small sphere's vertices under the bundled sunset.exr (the
+    """The Python API block (docs/python.md) run on a small sphere's vertices under the bundled sunset.exr (the
     name it loads), with the names it leaves to the reader defined."""
     threads = wenv.get_num_threads()
     normals, view_dirs = random_pairs(200, seed=5)
@@ -131,7 +155,7 @@ def api_namespace():
           "other_material": wenv.Lambert((0.5, 0.5, 0.5))}
     with pytest.MonkeyPatch.context() as mp:
         mp.chdir(bundled_hdri_dir())
-        checked = run_checked(readme_block("import numpy as np, wenv"), ns)
+        checked = run_checked(readme_block(API), ns, "docs/python.md")
     wenv.set_num_threads(threads)
     ns["checked"] = checked
     return ns
@@ -148,13 +172,13 @@ def test_api_block_runs_and_shows_true_values(api_namespace):
 
 def test_auto_block_shows_true_values(api_namespace):
     ns = dict(api_namespace, mesh_normals=api_namespace["normals"])
-    assert run_checked(readme_block("shader = wenv.Shader(env, mat, quality=\"auto\""), ns) == 1
+    assert run_checked(readme_block(AUTO), ns, "docs/performance.md") == 1
     assert ns["shader"].stats["auto"]["predicted_error"] <= 0.01
 
 
 def test_principled_block_runs(api_namespace):
     ns = dict(api_namespace)
-    assert run_checked(readme_block("paint = wenv.Principled("), ns) == 5
+    assert run_checked(readme_block(PRINCIPLED), ns, "docs/principled.md") == 5
     assert ns["metal"].inputs["coat_weight"] == 1.0
 
 
@@ -164,31 +188,46 @@ def test_tabulated_block_runs(api_namespace, tmp_path, monkeypatch):
     ns = dict(api_namespace, table=merl_files.tabulate(merl_files.cook_torrance(0.2), 16, 16, 32))
     merl_files.write_merl(tmp_path / "gold-metallic-paint.binary", ns["table"])
     monkeypatch.chdir(tmp_path)
-    run_checked(readme_block("mat = wenv.load_brdf("), ns)
+    run_checked(readme_block(TABULATED), ns, "docs/measured_brdfs.md")
     assert tuple(ns["mat"].shape) == (16, 16, 32)
 
 
 def test_glossmeter_block_shows_true_readings():
-    assert run_checked(readme_block("import wenv\n\npaint = "), {}) == 5
+    assert run_checked(readme_block(GLOSSMETER), {}, "docs/glossmeter.md") == 5
 
 
 def test_every_python_block_is_run():
-    """A Python block added to the README gets a test: these are the blocks run here, the Blender
-    scripting one (tests/test_addon.py) and the extension's installation (tests/test_addon_install.py
-    runs the same call on the zip it builds)."""
-    run = ("import numpy as np, wenv", 'shader = wenv.Shader(env, mat, quality="auto"', "paint = wenv.Principled(",
-           "mat = wenv.load_brdf(", "import wenv\n\npaint = ", "import bpy\nscene = bpy.context.scene",
-           "import bpy\nbpy.ops.extensions.package_install_files(")
-    blocks = python_blocks()
-    assert [sum(b.startswith(first) for first in run) for b in blocks] == [1] * len(blocks)
-    assert len(blocks) == len(run)
+    """A Python block added to README.md or a docs/*.md gets a test: these are the blocks run here,
+    each in the file it is in, the Blender scripting ones (tests/test_addon.py) and the extension's
+    installation (tests/test_addon_install.py runs the same call on the zip it builds)."""
+    run = {
+        "README.md": [QUICK_START, "import bpy\nbpy.ops.extensions.package_install_files(",
+                      "import bpy\nscene = bpy.context.scene"],
+        "docs/python.md": [API],
+        "docs/performance.md": [AUTO],
+        "docs/principled.md": [PRINCIPLED],
+        "docs/measured_brdfs.md": [TABULATED],
+        "docs/glossmeter.md": [GLOSSMETER],
+        "docs/addon.md": ['import bpy\nmat = bpy.data.materials["paint"]'],
+    }
+    found = {}
+    for path, text in python_blocks():
+        name = path.relative_to(ROOT).as_posix()
+        firsts = [first for first in run.get(name, []) if text.startswith(first)]
+        assert len(firsts) == 1, f"{name}: a Python block no test runs (or two tests claim): {text[:80]!r}"
+        found.setdefault(name, []).extend(firsts)
+    assert found == run
 
 
-def test_every_name_the_readme_gives_exists(api_namespace):
-    """Every `wenv.<name>` in the README's text is the module's or one of the add-on's operators, and
-    every `stats["key"]` it names is in a Shader's stats."""
-    text = conftest.README.read_text(encoding="utf-8")
-    operators_py = conftest.README.parent / "addon" / "operators.py"
+def documentation_text(files=None):
+    return "\n".join(p.read_text(encoding="utf-8") for p in (files or markdown_files()))
+
+
+def test_every_name_the_documentation_gives_exists(api_namespace):
+    """Every `wenv.<name>` in the text of README.md and docs/*.md is the module's or one of the
+    add-on's operators, and every `stats["key"]` they name is in a Shader's stats."""
+    text = documentation_text()
+    operators_py = ROOT / "addon" / "operators.py"
     operators = re.findall(r'bl_idname = "wenv\.(\w+)"', operators_py.read_text(encoding="utf-8"))
     names = set(re.findall(r"(?<![\w.])wenv\.([A-Za-z_]\w*)", text))
     assert len(names) >= 30 and len(operators) == 8
@@ -197,3 +236,91 @@ def test_every_name_the_readme_gives_exists(api_namespace):
     ns = api_namespace
     stats = {**ns["shader"].stats, **wenv.Shader(ns["env"], ns["mat"], quality="auto").stats}
     assert "next_vertex" in keys and sorted(k for k in keys if k not in stats) == []
+
+
+FENCE = re.compile(r"^ *```.*?^ *```[ \t]*$", re.M | re.S)
+LINK = re.compile(r"!?\[[^\]]*\]\(([^()\s]+)\)")
+
+
+def heading_anchors(path):
+    """The anchors GitHub gives the headings of a Markdown file: lower case, punctuation dropped,
+    spaces to hyphens, a repeated one numbered."""
+    anchors, seen = set(), {}
+    for line in FENCE.sub("", path.read_text(encoding="utf-8")).splitlines():
+        m = re.match(r"#{1,6} +(.*?) *#*$", line)
+        if not m:
+            continue
+        slug = re.sub(r"[^\w\- ]", "", m.group(1).lower()).replace(" ", "-")
+        n = seen.get(slug, 0)
+        seen[slug] = n + 1
+        anchors.add(slug if n == 0 else f"{slug}-{n}")
+    return anchors
+
+
+def relative_links(path):
+    """(target, anchor) of every relative link and image in `path`, code blocks left out."""
+    links = []
+    for target in LINK.findall(FENCE.sub("", path.read_text(encoding="utf-8"))):
+        if re.match(r"[a-z]+:", target):
+            continue  # http:, https:, mailto:
+        file, _, anchor = target.partition("#")
+        links.append((file, anchor))
+    return links
+
+
+def test_the_link_checker_reads_anchors_as_github_does(tmp_path):
+    page = tmp_path / "page.md"
+    page.write_text("# wenv\n## Peer methods: split-sum and `sh`\n### 3.4 Blender's environments\n"
+                    "## Notes\n## Notes\n```sh\n# not a heading\n```\n[a](other.md#x) ![b](pic.png)\n"
+                    "[c](#notes-1) [d](https://example.org/x)\n")
+    assert heading_anchors(page) == {"wenv", "peer-methods-split-sum-and-sh", "34-blenders-environments",
+                                     "notes", "notes-1"}
+    assert relative_links(page) == [("other.md", "x"), ("pic.png", ""), ("", "notes-1")]
+
+
+def test_every_relative_link_resolves():
+    """Every relative link and picture in README.md, CHANGELOG.md and docs/*.md points to a file of
+    the repository, and an anchor to a heading of the file it names."""
+    broken = []
+    for path in [*markdown_files(), ROOT / "CHANGELOG.md"]:
+        for file, anchor in relative_links(path):
+            target = (path.parent / file).resolve() if file else path
+            name = f"{path.relative_to(ROOT).as_posix()}: {file}#{anchor}"
+            if not target.exists() or ROOT not in target.parents:
+                broken.append(name)
+            elif anchor and (target.suffix != ".md" or anchor not in heading_anchors(target)):
+                broken.append(name)
+    assert len(list(ROOT.glob("docs/*.md"))) >= 8
+    assert broken == []
+
+
+def test_no_path_outside_the_repository():
+    """The documentation cites papers and the thesis by name, never a file beside the checkout."""
+    text = documentation_text([*markdown_files(), ROOT / "CHANGELOG.md"])
+    assert re.findall(r"\.\./shared|shared/seed|\.\./\.\./", text) == []
+
+
+def test_command_blocks_are_the_two_commands_or_name_existing_scripts():
+    """The README's first command block is the two commands, and `.ci/run` runs exactly the second;
+    every other ```sh or ```bash line of README.md and docs/*.md runs a script of the repository
+    (with `bash`, `python` or `.venv/bin/python`) that exists."""
+    first = fenced_blocks(conftest.README, ("sh", "bash"))[0][1]
+    commands = [line for line in first.splitlines() if line and not line.startswith("#")]
+    setup = "bash scripts/setup.sh && "
+    assert commands == [setup + ".venv/bin/python examples/demo.py", setup + ".venv/bin/python -m pytest -q tests"]
+    ci = [line for line in (ROOT / ".ci" / "run").read_text().splitlines()
+          if line and not line.startswith(("#", "set ", "cd "))]
+    assert ci == [commands[1]]
+    run = 0
+    for path in markdown_files():
+        for _, block in fenced_blocks(path, ("sh", "bash")):
+            for line in block.splitlines():
+                line = line.split("  #")[0].strip()
+                if not line or line.startswith("#"):
+                    continue
+                for command in line.split("&&"):
+                    words = command.split()
+                    assert words[0] in ("bash", "python", ".venv/bin/python"), f"{path.name}: {command}"
+                    assert words[1] == "-m" or (ROOT / words[1]).is_file(), f"{path.name}: {command}"
+                    run += 1
+    assert run >= 20

@@ -25,7 +25,7 @@ const wenv_method *wenv_method_named(const char *name)
 }
 
 /* Wavelet rotation: the method this project is about, and the fastest at a given accuracy once its
- * matrices are cached (README, "Speed against accuracy"). */
+ * matrices are cached (docs/performance.md, "Speed against accuracy"). */
 const wenv_method *wenv_method_default(void) { return &WENV_METHOD_ROTATION; }
 
 const wenv_method *wenv_method_choose_default(const void *quality, const wenv_method_setup *setup)

@@ -4,7 +4,7 @@ const char *const WENV_PRESET_NAMES[WENV_PRESET_COUNT] = {"draft", "default", "h
 
 /* draft and default take out suns and lamps (pixels above 256x the mean radiance); high also takes
  * out every bright extended feature (above 8x the mean, up to 4096) -- what brings m >= 0.1 within
- * 1 % on the bundled HDRIs (README, "Speed against accuracy").  default and high integrate narrow
+ * 1 % on the bundled HDRIs (docs/performance.md, "Speed against accuracy").  default and high integrate narrow
  * lobes at grazing views per vertex.  default is built for a view change within 30 ms at 126k
  * vertices and 3 % at m >= 0.2: high's local resolution (the per-view cost does not grow with it),
  * half its normal samples, its lights read to 5 % instead of 0.3 %, GGX lobes (Principled) on the
