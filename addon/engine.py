@@ -18,7 +18,7 @@ QUALITY_PRESETS = wenv.QUALITY_PRESETS
 QUALITIES = tuple(QUALITY_PRESETS)  # preset names, cheapest first
 AUTO = "auto"  # quality_value("AUTO"): one slicing shader per World and material, nothing to precompute
 AUTO_CACHE_SIZE = 16
-ROUGHNESS_RANGE = wenv.ROUGHNESS_RANGE  # (min, max) lobe roughness, both ends accepted
+ALPHA_RANGE = wenv.ALPHA_RANGE  # (min, max) of a lobe's alpha, both ends accepted
 IOR_RANGE = wenv.IOR_RANGE  # (min, max): an index must be > min and <= max
 IOR_MIN = IOR_RANGE[0] + 1e-4  # the lowest index offered, since the core refuses IOR_RANGE[0] itself
 
@@ -37,9 +37,20 @@ def quality_value(name):
     return name.lower()
 
 
-def ggx_alpha(roughness):
-    """GGX alpha for a Principled-style roughness: the core's one conversion (r^2, as Cycles, floored)."""
+def alpha_from_roughness(roughness):
+    """A lobe's alpha for Blender's roughness r: the core's one conversion (r^2, as Cycles, floored)."""
     return wenv.alpha_from_roughness(float(roughness))
+
+
+def roughness_from_alpha(alpha):
+    """Blender's roughness r whose alpha (alpha_from_roughness) is `alpha`, above the conversion's floor."""
+    return float(alpha) ** 0.5
+
+
+# The Principled BSDF's inputs as the core defines them, once (wenv.Principled.INPUTS): name, socket,
+# size, default, whether wenv shades it ("yes", "partly", "no") and the note a user reads when it
+# is set to something wenv does not shade.
+PRINCIPLED_INPUTS = wenv.Principled.INPUTS
 
 
 def clamp_ior(ior):
@@ -59,7 +70,7 @@ def lobes_peak_albedo(lobes):
     views = np.stack([np.sin(t), np.zeros_like(t), np.cos(t)], axis=1).astype(np.float32)
     total = np.zeros((len(t), 3))
     for lobe in lobes:
-        white = wenv.CookTorrance(lobes=[{"specular": 1.0, "roughness": lobe["roughness"], "ior": lobe["ior"],
+        white = wenv.CookTorrance(lobes=[{"specular": 1.0, "alpha": lobe["alpha"], "ior": lobe["ior"],
                                           "distribution": lobe["distribution"].lower()}])
         total += white.albedo(views) * np.asarray(lobe["specular"], np.float64)
     return float(total.max()) if lobes else 0.0
@@ -127,7 +138,7 @@ def material_from_key(key):
         return wenv.Lambert(diffuse)
     return wenv.CookTorrance(
         diffuse=diffuse,
-        lobes=[{"specular": s, "roughness": r, "ior": n, "distribution": d.lower()} for s, r, n, d in lobes],
+        lobes=[{"specular": s, "alpha": a, "ior": n, "distribution": d.lower()} for s, a, n, d in lobes],
         shadowing=shadowing.lower())
 
 
@@ -157,9 +168,30 @@ def gloss(key, geometries):
     return tuple(wenv.gloss(mat, geometries)) + (wenv.haze(mat),)
 
 
-def fit_roughness(target, **options):
-    """wenv.fit_roughness: the roughness reading `target` GU (ValueError if none can)."""
-    return wenv.fit_roughness(target, **options)
+def fit_alpha(target, **options):
+    """wenv.fit_alpha: a Cook-Torrance lobe's alpha reading `target` GU (ValueError if none can)."""
+    return wenv.fit_alpha(target, **options)
+
+
+_method_memo = {}
+
+
+def needs_matrices(quality):
+    """Whether shading at `quality` starts by precomputing rotation matrices (built once, then read
+    from the cache); slicing, which `default`, `high` and Auto use unless matrices are cached,
+    precomputes nothing.  The core's choice, asked once per quality and cache folder (panels ask at
+    every redraw)."""
+    if quality == AUTO:
+        return False
+    key = (quality, shaders.cache_dir)
+    if key not in _method_memo:
+        _method_memo[key] = wenv.method_for(quality, cache_dir=shaders.cache_dir) == "rotation"
+    return _method_memo[key]
+
+
+def preparing(quality):
+    """What building the shader for `quality` does, in a user's words (for progress messages)."""
+    return f"precomputing the {quality} matrices" if needs_matrices(quality) else f"preparing {quality} shading"
 
 
 def describe_auto_choice(choice):
@@ -339,22 +371,15 @@ REFINABLE = ("draft", "default")
 PREVIEW_QUALITY = "draft"
 
 
-# The core's ValueError for a vertex exactly at the eye (it has no view direction).
-EYE_AT_VERTEX = "eye coincides with positions"
-
-
 def _sparing_the_eye(call, data, eye):
-    """call(positions) for data's positions; should the core refuse a vertex exactly at the eye, the
-    call is made again with such vertices moved off it along their normals.  Returns (result, which
-    were moved, or None): the caller leaves them black.  The search runs only after a refusal, so an
-    ordinary pass pays nothing for it."""
+    """call(positions) for data's positions; should the core refuse vertices exactly at the eye
+    (wenv.EyeAtVertexError, which lists them), the call is made again with those moved off it along
+    their normals.  Returns (result, which were moved, or None): the caller leaves them black."""
     try:
         return call(data.positions), None
-    except ValueError as exc:
-        if EYE_AT_VERTEX not in str(exc):
-            raise
-    d = data.positions.astype(np.float64) - np.asarray(eye, np.float64)
-    at_eye = np.einsum("ij,ij->i", d, d) < 1e-24  # the core's test
+    except wenv.EyeAtVertexError as exc:
+        at_eye = np.zeros(len(data.positions), bool)
+        at_eye[exc.vertices] = True
     positions = data.positions.copy()
     positions[at_eye] -= data.normals[at_eye]
     return call(positions), at_eye

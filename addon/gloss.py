@@ -1,4 +1,5 @@
-"""Glossmeter readings of a material (memoised on its values) and the roughness for a target gloss."""
+"""Glossmeter readings of a material (memoised on its values), and the roughness (a Principled BSDF's)
+or alpha (a Cook-Torrance lobe's) for a target gloss."""
 from . import engine, materials
 from .engine import SetupError
 
@@ -45,14 +46,14 @@ def fit_principled_roughness(material, target, geometry):
         raise SetupError(str(exc)) from None
 
 
-def fit_roughness(settings, target, geometry):
-    """Alpha giving `target` GU for a one-lobe Cook-Torrance material (engine.fit_roughness)."""
+def fit_alpha(settings, target, geometry):
+    """The lobe's alpha giving `target` GU for a one-lobe Cook-Torrance material (engine.fit_alpha)."""
     if settings.model != "COOK_TORRANCE" or len(settings.lobes) != 1:
         # a measured BRDF has no roughness to set: it is what was measured
         raise SetupError("Set roughness for a target gloss needs a Cook-Torrance material with exactly one lobe")
     lobe = settings.lobes[0]
     try:
-        return engine.fit_roughness(target, geometry=geometry, diffuse=tuple(settings.diffuse),
+        return engine.fit_alpha(target, geometry=geometry, diffuse=tuple(settings.diffuse),
                                   specular=tuple(lobe.specular), ior=lobe.ior,
                                   distribution=lobe.distribution.lower(), shadowing=settings.shadowing.lower())
     except ValueError as exc:

@@ -3,7 +3,7 @@ right after an undo or redo; forget per-file state on load."""
 import bpy
 from bpy.app.handlers import persistent
 
-from . import engine, meshes, shading, views
+from . import engine, meshes, properties, shading, views
 from .live import LiveState
 
 _last_error = {"message": None}
@@ -83,6 +83,7 @@ def load_post(*_args):
     # of the new file may reuse names).  The shaders' rotation matrices stay (they are data-free).
     LiveState.reset()
     engine.shaders.forget_data()
+    properties.migrate(bpy.data)
 
 
 def last_error():

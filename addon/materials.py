@@ -20,41 +20,25 @@ def brdf_file(settings):
     return bpy.path.abspath(settings.brdf_path, library=getattr(material, "library", None))
 
 
-# The Principled BSDF node's inputs by wenv.Principled's names (Blender 4.x/5.x sockets; the ones a
-# version lacks -- Diffuse Roughness before 4.3, Thin Film before 4.2 -- keep wenv's defaults, which
-# are Blender's).
-PRINCIPLED_SOCKETS = {
-    "base_color": "Base Color", "metallic": "Metallic", "roughness": "Roughness", "ior": "IOR", "alpha": "Alpha",
-    "specular_ior_level": "Specular IOR Level", "specular_tint": "Specular Tint", "anisotropic": "Anisotropic",
-    "anisotropic_rotation": "Anisotropic Rotation", "coat_weight": "Coat Weight", "coat_roughness": "Coat Roughness",
-    "coat_ior": "Coat IOR", "coat_tint": "Coat Tint", "sheen_weight": "Sheen Weight",
-    "sheen_roughness": "Sheen Roughness", "sheen_tint": "Sheen Tint", "subsurface_weight": "Subsurface Weight",
-    "transmission_weight": "Transmission Weight", "diffuse_roughness": "Diffuse Roughness",
-    "emission_color": "Emission Color", "emission_strength": "Emission Strength",
-    "thin_film_thickness": "Thin Film Thickness", "thin_film_ior": "Thin Film IOR",
-}
+# The Principled BSDF node's sockets by wenv.Principled's names, from the core's one list of them
+# (the ones a Blender version lacks -- Diffuse Roughness before 4.3, Thin Film before 4.2 -- keep
+# wenv's defaults, which are Blender's).
+PRINCIPLED_SOCKETS = {row["name"]: row["socket"] for row in engine.PRINCIPLED_INPUTS}
 # Inputs that shape the surface rather than its reflectance: wenv shades the mesh's own normals.
 GEOMETRY_SOCKETS = ("Normal", "Coat Normal", "Tangent")
 # What wenv does not shade of a Principled BSDF (wenv.Principled.unhonoured's names), in words.
-NOT_SHADED = {
-    "transmission_weight": "Transmission is not shaded (wenv shades reflection: the light through the object "
-                           "is left out)",
-    "subsurface_weight": "Subsurface scattering is shaded as diffuse reflection",
-    "emission_strength": "Emission is not shaded",
-    "alpha": "Alpha below 1: the see-through part is not shaded (the reflection is scaled by Alpha)",
-    "anisotropic": "Anisotropy is not shaded (the lobes are isotropic)",
-    "thin_film_thickness": "Thin film is not shaded",
-    "coat_tint": "Coat Tint above 1 is shaded as 1 (a coat that adds light grows without bound towards grazing)",
-}
+NOT_SHADED = {row["name"]: row["note"] for row in engine.PRINCIPLED_INPUTS if row["note"]}
 
 
 def principled_inputs(node):
     """({wenv name: value} of a Principled BSDF node's unlinked values and its distribution, [names of
     its linked sockets])."""
     inputs, linked = {}, []
-    for name, socket_name in PRINCIPLED_SOCKETS.items():
+    for row in engine.PRINCIPLED_INPUTS:
+        name, socket_name = row["name"], row["socket"]
         sock = node.inputs.get(socket_name)
-        if sock is None:
+        if sock is None:  # a socket this Blender lacks: the node's default in the versions that have it
+            inputs[name] = row["default"]
             continue
         if sock.is_linked:
             linked.append(socket_name)
@@ -79,17 +63,8 @@ def material_key(settings):
         return ("PRINCIPLED", tuple(sorted(principled_inputs(node)[0].items())))
     if settings.model == "MEASURED":
         return ("MEASURED", settings.brdf_path, engine.file_signature(brdf_file(settings)))
-    lobes = tuple((tuple(l.specular), l.roughness, l.ior, l.distribution) for l in settings.lobes)
+    lobes = tuple((tuple(l.specular), l.alpha, l.ior, l.distribution) for l in settings.lobes)
     return (settings.model, tuple(settings.diffuse), settings.shadowing, lobes)
-
-
-def _input_value(node, name, warnings):
-    sock = node.inputs.get(name)
-    if sock is None:
-        return None
-    if sock.is_linked:
-        warnings.append(f"'{name}' is linked; its unlinked value was used")
-    return sock.default_value
 
 
 def _ior_for_reflectance(f0):
@@ -112,7 +87,7 @@ def principled_lobes(base, metallic, roughness, ior, spec_level=0.5, spec_tint=(
     """wenv settings (diffuse, lobes) for Principled BSDF values.  See docs/addon.md, "Cook-Torrance
     from Principled BSDF".
 
-    - roughness r -> GGX alpha r^2 (as Cycles), floored (engine.ggx_alpha);
+    - roughness r -> GGX alpha r^2 (as Cycles), floored (engine.alpha_from_roughness);
     - dielectric part (weight 1 - metallic): diffuse = base colour, one GGX lobe of index IOR,
       scaled by Specular Tint and 2 x Specular IOR Level (0.5 keeps Fresnel unchanged);
     - metallic part: a GGX lobe coloured base / F0(n_m) with n_m the index whose normal-incidence
@@ -127,7 +102,7 @@ def principled_lobes(base, metallic, roughness, ior, spec_level=0.5, spec_tint=(
     # clamped as Cycles clamps the node's inputs (a script may set a socket past its range)
     base = [_unit(c) for c in base[:3]]
     t = _unit(metallic)
-    alpha = engine.ggx_alpha(_unit(roughness))
+    alpha = engine.alpha_from_roughness(_unit(roughness))
     spec_level = max(float(spec_level), 0.0)
     spec_tint = [max(float(c), 0.0) for c in spec_tint[:3]]
     ior = engine.clamp_ior(ior)
@@ -136,15 +111,15 @@ def principled_lobes(base, metallic, roughness, ior, spec_level=0.5, spec_tint=(
     if t < 1:
         scale = (1 - t) * 2 * float(spec_level)
         if scale > 0:
-            lobes.append({"specular": tuple(scale * float(c) for c in spec_tint[:3]), "roughness": alpha,
+            lobes.append({"specular": tuple(scale * float(c) for c in spec_tint[:3]), "alpha": alpha,
                           "ior": ior, "distribution": "GGX"})
     if t > 0:
         n_m = _ior_for_reflectance(max(base))
         f0 = _fresnel0(n_m)
-        lobes.append({"specular": tuple(t * c / f0 for c in base), "roughness": alpha, "ior": n_m,
+        lobes.append({"specular": tuple(t * c / f0 for c in base), "alpha": alpha, "ior": n_m,
                       "distribution": "GGX"})
     if coat > 0:
-        lobes.append({"specular": (float(coat),) * 3, "roughness": engine.ggx_alpha(_unit(coat_roughness)),
+        lobes.append({"specular": (float(coat),) * 3, "alpha": engine.alpha_from_roughness(_unit(coat_roughness)),
                       "ior": engine.clamp_ior(coat_ior), "distribution": "GGX"})
     peak = engine.lobes_peak_albedo(lobes)
     if peak > ENERGY_LIMIT:
@@ -179,20 +154,20 @@ def fill_from_principled(material):
         warnings.append(f"'{material.name}' has no Principled BSDF: Lambertian with its viewport colour")
         st.initialized = True
         return warnings
-    v = {name: _input_value(node, name, warnings) for name in
-         ("Base Color", "Metallic", "Roughness", "IOR", "Specular IOR Level", "Specular Tint",
-          "Coat Weight", "Coat Roughness", "Coat IOR")}
-    for name, value in v.items():
-        values = () if value is None else tuple(value[:3]) if hasattr(value, "__len__") else (value,)
-        if not all(math.isfinite(float(x)) for x in values):
-            raise engine.SetupError(f"'{material.name}': the Principled BSDF's {name} is not finite")
-    diffuse, lobes = principled_lobes(
-        v["Base Color"], v["Metallic"], v["Roughness"], v["IOR"],
-        spec_level=v["Specular IOR Level"] if v["Specular IOR Level"] is not None else 0.5,
-        spec_tint=v["Specular Tint"] if v["Specular Tint"] is not None else (1, 1, 1),
-        coat=v["Coat Weight"] or 0.0,
-        coat_roughness=v["Coat Roughness"] if v["Coat Roughness"] is not None else 0.03,
-        coat_ior=v["Coat IOR"] if v["Coat IOR"] is not None else 1.5)
+    v, linked = principled_inputs(node)
+    used = ("base_color", "metallic", "roughness", "ior", "specular_ior_level", "specular_tint", "coat_weight",
+            "coat_roughness", "coat_ior")
+    warnings += [f"'{PRINCIPLED_SOCKETS[name]}' is linked; its unlinked value was used" for name in used
+                 if PRINCIPLED_SOCKETS[name] in linked]
+    for name in used:
+        values = v[name] if isinstance(v[name], tuple) else (v[name],)
+        if not all(math.isfinite(x) for x in values):
+            raise engine.SetupError(f"'{material.name}': the Principled BSDF's {PRINCIPLED_SOCKETS[name]} is not "
+                                    "finite")
+    diffuse, lobes = principled_lobes(v["base_color"], v["metallic"], v["roughness"], v["ior"],
+                                      spec_level=v["specular_ior_level"], spec_tint=v["specular_tint"],
+                                      coat=v["coat_weight"], coat_roughness=v["coat_roughness"],
+                                      coat_ior=v["coat_ior"])
     st.model = "COOK_TORRANCE"
     st.shadowing = "SMITH"
     st.diffuse = diffuse
@@ -200,7 +175,7 @@ def fill_from_principled(material):
     for lobe in lobes:
         item = st.lobes.add()
         item.specular = lobe["specular"]
-        item.roughness = lobe["roughness"]
+        item.alpha = lobe["alpha"]
         item.ior = lobe["ior"]
         item.distribution = lobe["distribution"]
     st.active_lobe = 0

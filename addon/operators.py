@@ -80,7 +80,7 @@ class WENV_OT_precompute(_Precomputing, bpy.types.Operator):
         if not engine.shaders.has(quality):
             wm = context.window_manager
             try:
-                engine.shaders.get(quality, _progress_reporter(wm, f"precomputing the {quality} matrices"))
+                engine.shaders.get(quality, _progress_reporter(wm, engine.preparing(quality)))
             finally:
                 wm.progress_end()
         return {"FINISHED"}
@@ -132,7 +132,7 @@ class WENV_OT_shade(_Precomputing, bpy.types.Operator):
         wm = context.window_manager
         quality = _quality(context)
         progress = (None if engine.shaders.has(quality)
-                    else _progress_reporter(wm, f"precomputing the {quality} matrices"))
+                    else _progress_reporter(wm, engine.preparing(quality)))
         try:
             view = resolve_view(context, self.view, self.view_matrix, self.perspective)
             done, notes = shading.shade_objects(scene, context.evaluated_depsgraph_get(), objects, view,
@@ -320,7 +320,7 @@ class WENV_OT_lobe_remove(_MaterialOperator, bpy.types.Operator):
 
 
 class WENV_OT_fit_roughness(_MaterialOperator, bpy.types.Operator):
-    """Set the roughness so the material reads the target gloss (the Principled BSDF's Roughness, or a one-lobe Cook-Torrance's)"""
+    """Set the roughness so the material reads the target gloss (the Principled BSDF's Roughness, or a one-lobe Cook-Torrance's alpha)"""
     bl_idname = "wenv.fit_roughness"
     bl_label = "Set Roughness for Target Gloss"
     bl_options = {"REGISTER", "UNDO"}
@@ -342,13 +342,15 @@ class WENV_OT_fit_roughness(_MaterialOperator, bpy.types.Operator):
                 self.report({"INFO"}, f"Roughness {r:.4g} (the Principled BSDF's) reads {target:g} GU at "
                                       f"{geometry} degrees")
                 return {"FINISHED"}
-            m = gloss.fit_roughness(st, target, geometry)
+            alpha = gloss.fit_alpha(st, target, geometry)
         except engine.SetupError as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
-        st.lobes[0].roughness = m
+        lobe = st.lobes[0]
+        lobe.alpha = alpha
         st.initialized = True
-        self.report({"INFO"}, f"Roughness {m ** 0.5:.4g} (alpha {m:.4g}) reads {target:g} GU at {geometry} degrees")
+        self.report({"INFO"}, f"Roughness {lobe.roughness:.4g} (alpha {alpha:.4g}) reads {target:g} GU at "
+                              f"{geometry} degrees")
         return {"FINISHED"}
 
 

@@ -9,28 +9,34 @@ from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProp
 
 from . import engine, gloss, materials, shading, views
 
-DISTRIBUTIONS = [("GGX", "GGX", "Trowbridge-Reitz / GGX, roughness = alpha (Blender's roughness squared)"),
-                 ("BECKMANN", "Beckmann", "Beckmann, roughness = RMS microfacet slope")]
+DISTRIBUTIONS = [("GGX", "GGX", "Trowbridge-Reitz / GGX, alpha = Blender's roughness squared"),
+                 ("BECKMANN", "Beckmann", "Beckmann, alpha = RMS microfacet slope")]
 
 
-def _get_blender_roughness(self):
-    return math.sqrt(self.roughness)
+def _get_roughness(self):
+    return engine.roughness_from_alpha(self.alpha)
 
 
-def _set_blender_roughness(self, value):
-    self.roughness = min(max(value * value, engine.ROUGHNESS_RANGE[0]), engine.ROUGHNESS_RANGE[1])
+def _set_roughness(self, value):
+    # the core's one conversion (r^2, floored as Cycles floors it), within what a lobe accepts; a
+    # setter cannot refuse, so a NaN a script sets leaves the lobe as it was
+    if math.isnan(value):
+        return
+    alpha = engine.alpha_from_roughness(min(max(value, 0.0), 1e6))
+    self.alpha = min(max(alpha, engine.ALPHA_RANGE[0]), engine.ALPHA_RANGE[1])
 
 
 class WENV_LobeSettings(bpy.types.PropertyGroup):
     specular: FloatVectorProperty(name="Specular", subtype="COLOR", size=3, min=0.0, soft_max=1.0,
                                   default=(1.0, 1.0, 1.0), description="Colour scale of the lobe (times Fresnel)")
-    roughness: FloatProperty(name="Alpha", min=engine.ROUGHNESS_RANGE[0], max=engine.ROUGHNESS_RANGE[1],
-                             soft_max=1.0, default=0.2, precision=4,
-                             description="The distribution's alpha: Beckmann RMS slope or GGX alpha (Blender's "
-                                         "Roughness squared)")
-    blender_roughness: FloatProperty(name="Roughness", min=0.0, soft_max=1.0, precision=4,
-                                     get=_get_blender_roughness, set=_set_blender_roughness,
-                                     description="Roughness as Blender's BSDF nodes take it (alpha = roughness^2)")
+    alpha: FloatProperty(name="Alpha", min=engine.ALPHA_RANGE[0], max=engine.ALPHA_RANGE[1],
+                         soft_max=1.0, default=0.2, precision=4,
+                         description="The distribution's alpha: Beckmann RMS slope or GGX alpha (Blender's "
+                                     "Roughness squared)")
+    # not stored: Blender's roughness, the alpha above through the core's one conversion
+    roughness: FloatProperty(name="Roughness", min=0.0, soft_max=1.0, precision=4, get=_get_roughness,
+                             set=_set_roughness,
+                             description="Roughness as Blender's BSDF nodes take it (alpha = roughness^2)")
     ior: FloatProperty(name="IOR", min=engine.IOR_MIN, max=engine.IOR_RANGE[1], soft_max=3.0, default=1.5, precision=3,
                        description="Index of refraction of the lobe's Fresnel term")
     distribution: EnumProperty(name="Distribution", items=DISTRIBUTIONS, default="GGX")
@@ -187,6 +193,28 @@ class WENV_WindowSettings(bpy.types.PropertyGroup):
 
 
 classes = (WENV_LobeSettings, WENV_MaterialSettings, WENV_SceneSettings, WENV_ViewportBackup, WENV_WindowSettings)
+
+
+# Settings a .blend may hold under an earlier name: (collection of the settings, old key, new property).
+# A lobe's alpha was stored as "roughness" until `roughness` took Blender's meaning (alpha = r^2);
+# the old key, now no property's storage, is read once into the new one and removed.
+_RENAMED_LOBE_KEYS = (("roughness", "alpha"),)
+
+
+def migrate(blend_data):
+    """Brings settings saved under an earlier name up to date in every material of `blend_data` (run
+    when a file is loaded); returns how many values moved."""
+    moved = 0
+    for material in blend_data.materials:
+        if material.library is not None:  # linked data is the library's to migrate, and read-only here
+            continue
+        for lobe in material.wenv.lobes:
+            for old, new in _RENAMED_LOBE_KEYS:
+                if old in lobe.keys():
+                    setattr(lobe, new, float(lobe[old]))
+                    del lobe[old]
+                    moved += 1
+    return moved
 
 
 def register():

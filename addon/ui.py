@@ -89,21 +89,21 @@ class WENV_PT_shading(_SidebarPanel, bpy.types.Panel):
             row = layout.row()
             row.alert = True
             row.label(text=problem, icon="ERROR")
-        if not engine.shaders.has(engine.quality_value(st.quality)):
-            layout.label(text="Precomputed on first use", icon="INFO")
+        quality = engine.quality_value(st.quality)
+        if not engine.shaders.has(quality) and engine.needs_matrices(quality):
+            layout.label(text="Rotation matrices: precomputed on first use", icon="INFO")
 
 
 class WENV_UL_lobes(bpy.types.UIList):
     def draw_item(self, context, layout, data, item, icon, active_data, active_propname, index):
         row = layout.row(align=True)
         row.label(text=f"Lobe {index + 1}")
-        row.label(text=f"{item.distribution.title()} roughness {item.blender_roughness:.3g}, IOR {item.ior:.3g}")
+        row.label(text=f"{item.distribution.title()} roughness {item.roughness:.3g}, IOR {item.ior:.3g}")
 
 
-# The node's inputs wenv shades, drawn from the node itself: editing them here edits the node.
-PRINCIPLED_SHOWN = ("Base Color", "Metallic", "Roughness", "IOR", "Specular IOR Level", "Specular Tint",
-                    "Coat Weight", "Coat Roughness", "Coat IOR", "Coat Tint", "Sheen Weight", "Sheen Roughness",
-                    "Sheen Tint")
+# The node's inputs wenv shades (in full or in part: the core's list of them), drawn from the node
+# itself: editing them here edits the node.
+PRINCIPLED_SHOWN = tuple(row["socket"] for row in engine.PRINCIPLED_INPUTS if row["shaded"] != "no")
 
 
 def _draw_principled(layout, mat):
@@ -171,8 +171,8 @@ class WENV_PT_material(_SidebarPanel, bpy.types.Panel):
             lobe = st.lobes[st.active_lobe]
             col = _property_column(layout)
             col.prop(lobe, "specular")
-            col.prop(lobe, "blender_roughness")
             col.prop(lobe, "roughness")
+            col.prop(lobe, "alpha")
             col.prop(lobe, "ior")
             col.prop(lobe, "distribution")
 

@@ -39,7 +39,7 @@ HDRIS = ["city", "courtyard", "forest", "interior", "night", "studio", "sunrise"
 # Specular-only Cook-Torrance (no diffuse to hide the glossy error behind), a white Lambert.
 MATERIALS = {
     "lambert": {"diffuse": [0.8, 0.8, 0.8], "lobes": []},
-    **{f"m{m}": {"diffuse": [0.0, 0.0, 0.0], "lobes": [{"specular": [1.0, 1.0, 1.0], "roughness": m, "ior": 1.5}]}
+    **{f"m{m}": {"diffuse": [0.0, 0.0, 0.0], "lobes": [{"specular": [1.0, 1.0, 1.0], "alpha": m, "ior": 1.5}]}
        for m in (0.05, 0.1, 0.2, 0.5)},
 }
 # Tabulated BRDFs at MERL's resolution (benchmarks/merl_files.py makes them from numpy BRDFs): the

@@ -115,7 +115,7 @@ def main():
         env = wenv.load_environment(bundled_hdri(h))
         for j, name in enumerate(names):
             lobes = MATERIALS[name]["lobes"]
-            m = min(lobe["roughness"] for lobe in lobes) if lobes else 1.0
+            m = min(lobe["alpha"] for lobe in lobes) if lobes else 1.0
             many[h, name] = mirror_weighted_pairs(env, m, args.control_pairs, 1000 + 100 * i + j,
                                                   share=0.5 if lobes else 0.0)
     out, out_many = {}, {}
@@ -169,7 +169,7 @@ def main():
     # The analysis is made once per environment, part by part as materials need them (the lights and
     # pyramid for lobes, the SH spectrum without): each part is timed apart, on fresh copies.
     features, analysis_ms = {}, {}
-    glossy = {"diffuse": [0.1] * 3, "lobes": [{"specular": 1.0, "roughness": 0.2, "ior": 1.5}]}
+    glossy = {"diffuse": [0.1] * 3, "lobes": [{"specular": 1.0, "alpha": 0.2, "ior": 1.5}]}
     for h in HDRIS:
         env = wenv.load_environment(bundled_hdri(h))
         analysis_ms[h] = {part: statistics.median(

@@ -24,7 +24,7 @@ PAIRS = [(1e-4, 0.1), (1e-3, 0.05), (3e-3, 0.3), (0.01, 0.1), (0.02, 0.2), (0.05
 def material(dist, m1, m2):
     return wenv.CookTorrance(
         diffuse=(0.35, 0.12, 0.05),
-        lobes=[dict(roughness=m1, ior=1.5), dict(roughness=m2, specular=(0.6, 0.5, 0.4), ior=1.8)],
+        lobes=[dict(alpha=m1, ior=1.5), dict(alpha=m2, specular=(0.6, 0.5, 0.4), ior=1.8)],
         distribution=dist,
     )
 

@@ -23,8 +23,8 @@ from accuracy import HDRIS
 
 MATERIALS = {
     "lambert": lambda: wenv.Lambert((0.8, 0.8, 0.8)),
-    "m0.1": lambda: wenv.CookTorrance(diffuse=0.0, lobes=[{"specular": 1.0, "roughness": 0.1, "ior": 1.5}]),
-    "m0.2": lambda: wenv.CookTorrance(diffuse=0.0, lobes=[{"specular": 1.0, "roughness": 0.2, "ior": 1.5}]),
+    "m0.1": lambda: wenv.CookTorrance(diffuse=0.0, lobes=[{"specular": 1.0, "alpha": 0.1, "ior": 1.5}]),
+    "m0.2": lambda: wenv.CookTorrance(diffuse=0.0, lobes=[{"specular": 1.0, "alpha": 0.2, "ior": 1.5}]),
 }
 METHOD = {"draft": "rotation", "default": "slicing", "high": "slicing"}
 ORBIT = 8

@@ -47,7 +47,7 @@ def main():
     print(f"{args.hdri}, {args.pairs} random pairs, Suzanne {len(pos)} vertices, {results['threads']} threads")
     print(f"{'method':32s} {'m':>5s} {'rel RMSE':>9s} {'setup s':>8s} {'shade ms':>9s}")
     for m in args.roughness:
-        mat = wenv.CookTorrance(diffuse=(0.2, 0.2, 0.2), lobes=[{"specular": (1, 1, 1), "roughness": m, "ior": 1.5}])
+        mat = wenv.CookTorrance(diffuse=(0.2, 0.2, 0.2), lobes=[{"specular": (1, 1, 1), "alpha": m, "ior": 1.5}])
         t0 = time.perf_counter()
         ref = wenv.reference(env, mat, nrm, v)
         ref_s = time.perf_counter() - t0

@@ -74,7 +74,7 @@ def main():
     args = ap.parse_args()
     wenv.set_num_threads(2)
     env = wenv.load_environment(bundled_hdri(args.hdri))
-    material = wenv.CookTorrance(diffuse=(0.2, 0.2, 0.2), lobes=[{"specular": (1, 1, 1), "roughness": 0.2, "ior": 1.5}])
+    material = wenv.CookTorrance(diffuse=(0.2, 0.2, 0.2), lobes=[{"specular": (1, 1, 1), "alpha": 0.2, "ior": 1.5}])
     results = {"threads": wenv.get_num_threads(), "hdri": args.hdri, "quality": wenv.QUALITY_PRESETS["default"]}
 
     t0 = time.perf_counter()

@@ -33,7 +33,7 @@ def materials():
     """{name: material}: each Cook-Torrance material, its table, and the retro-reflective table."""
     out = {}
     for m in ROUGHNESS:
-        out[f"ct m={m}"] = wenv.CookTorrance(diffuse=DIFFUSE, lobes=[{"roughness": m, "ior": 1.5}],
+        out[f"ct m={m}"] = wenv.CookTorrance(diffuse=DIFFUSE, lobes=[{"alpha": m, "ior": 1.5}],
                                             distribution="beckmann")
         out[f"table m={m}"] = wenv.Tabulated(merl_files.table_of(
             {"brdf": "cook_torrance", "roughness": m, "diffuse": [DIFFUSE] * 3}))

@@ -18,18 +18,12 @@ import os
 import tempfile
 
 import numpy as np
+import wenv
 
 from measure import bundled_hdri
 
-# Principled BSDF node inputs by wenv.Principled's names
-SOCKETS = {
-    "base_color": "Base Color", "metallic": "Metallic", "roughness": "Roughness", "ior": "IOR", "alpha": "Alpha",
-    "specular_ior_level": "Specular IOR Level", "specular_tint": "Specular Tint", "anisotropic": "Anisotropic",
-    "coat_weight": "Coat Weight", "coat_roughness": "Coat Roughness", "coat_ior": "Coat IOR", "coat_tint": "Coat Tint",
-    "sheen_weight": "Sheen Weight", "sheen_roughness": "Sheen Roughness", "sheen_tint": "Sheen Tint",
-    "subsurface_weight": "Subsurface Weight", "transmission_weight": "Transmission Weight",
-    "diffuse_roughness": "Diffuse Roughness",
-}
+# Principled BSDF node inputs by wenv.Principled's names: the core's one list of them
+SOCKETS = {row["name"]: row["socket"] for row in wenv.Principled.INPUTS}
 
 
 class SphereScene:

@@ -21,7 +21,7 @@ COLOURS = {20: "tab:blue", 60: "tab:green", 85: "tab:red"}
 def sweep(distribution, roughness, ior, diffuse):
     rows = []
     for m in roughness:
-        mat = wenv.CookTorrance(diffuse=diffuse, lobes=[dict(roughness=float(m), ior=ior)], distribution=distribution)
+        mat = wenv.CookTorrance(diffuse=diffuse, lobes=[dict(alpha=float(m), ior=ior)], distribution=distribution)
         readings = wenv.gloss(mat, GEOMETRIES, return_error=True)
         rows.append((distribution, float(m), *[g for g, _ in readings], *[e for _, e in readings]))
     return rows
@@ -45,7 +45,7 @@ def main():
     t0 = time.perf_counter()
     rows = sweep("beckmann", roughness, args.ior, args.diffuse) + sweep("ggx", roughness, args.ior, args.diffuse)
     elapsed = time.perf_counter() - t0
-    smooth = wenv.gloss(wenv.CookTorrance(diffuse=args.diffuse, lobes=[dict(roughness=1e-4, ior=args.ior)]),
+    smooth = wenv.gloss(wenv.CookTorrance(diffuse=args.diffuse, lobes=[dict(alpha=1e-4, ior=args.ior)]),
                         GEOMETRIES, smooth=True)
 
     csv_path = os.path.join(args.out, "gloss_sweep.csv")

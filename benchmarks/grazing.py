@@ -66,7 +66,7 @@ def main():
         "normals on normal samples": (on_normals, grazing_views(on_normals, rng)),
         "normals and views on samples": (on_normals, on_views),
     }
-    mat = wenv.CookTorrance(diffuse=0.0, lobes=[{"specular": 1.0, "roughness": 0.1, "ior": 1.5}])
+    mat = wenv.CookTorrance(diffuse=0.0, lobes=[{"specular": 1.0, "alpha": 0.1, "ior": 1.5}])
     settings = {"high": HIGH, "views 64": {**HIGH, "views": 64},
                 "local 128, global 256": {**HIGH, "local": 128, "global": 256},
                 "local 256, global 256": {**HIGH, "local": 256, "global": 256}}

@@ -264,7 +264,7 @@ def _upper(wi, wo):
 
 
 def cook_torrance(m, ior=1.5, colour=(1.0, 1.0, 1.0)):
-    """wenv.CookTorrance(diffuse=0, lobes=[{"roughness": m, "ior": ior, "specular": colour}]) with the
+    """wenv.CookTorrance(diffuse=0, lobes=[{"alpha": m, "ior": ior, "specular": colour}]) with the
     default Beckmann distribution and Smith shadowing, as f(wi, wo) (no cosine)."""
     colour = np.broadcast_to(np.asarray(colour, np.float64), (3,))
 

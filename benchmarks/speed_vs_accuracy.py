@@ -330,7 +330,7 @@ def main():
         # the control (`high`) on the stored pairs and on pairs weighted toward the bright reflections
         many, control, control_many = {}, {}, {}
         for i, h in enumerate(hdris):
-            many[h] = mirror_weighted_pairs(envs[h], MATERIALS[name]["lobes"][0]["roughness"], args.control_pairs,
+            many[h] = mirror_weighted_pairs(envs[h], MATERIALS[name]["lobes"][0]["alpha"], args.control_pairs,
                                             3000 + 100 * i + ROUGHNESS.index(name))
             high = wenv.Shader(envs[h], mat, quality="high", method="slicing")
             control[h], control_many[h] = high.shade(nrm, v), high.shade(*many[h][:2])

@@ -27,7 +27,7 @@ def main():
         gm = wenv.Glossmeter(angle=angle)
         for dist in ("beckmann", "ggx"):
             for m in ROUGHNESS:
-                mat = wenv.CookTorrance(diffuse=0.3, lobes=[dict(roughness=m, ior=1.567)], distribution=dist)
+                mat = wenv.CookTorrance(diffuse=0.3, lobes=[dict(alpha=m, ior=1.567)], distribution=dist)
                 r = gm.reading(mat)
                 ref = gm.reading(mat, tol=1e-4, max_evals=50_000_000)
                 err = abs(r["gloss"] - ref["gloss"])
@@ -48,7 +48,7 @@ def main():
         gm = wenv.Glossmeter(**kw)
         for dist in ("beckmann", "ggx"):
             for m in (1e-5, 1e-4, 1e-3, 3e-3):
-                mat = wenv.CookTorrance(lobes=[dict(roughness=m, ior=1.5)], distribution=dist)
+                mat = wenv.CookTorrance(lobes=[dict(alpha=m, ior=1.5)], distribution=dist)
                 a = gm.reading(mat, method="aperture", tol=0.002, max_evals=50_000_000)["gloss"]
                 h = gm.reading(mat, method="half_vector", tol=0.002, max_evals=50_000_000)["gloss"]
                 auto = gm.measure(mat)
@@ -57,7 +57,7 @@ def main():
 
     print("3. a 90 x 90 x 180 table against its Cook-Torrance lobe (GU at 20 / 60 / 85, haze HU):")
     for m in TABLE_ROUGHNESS:
-        lobe = wenv.CookTorrance(diffuse=0.05, lobes=[dict(roughness=m, ior=1.5)])
+        lobe = wenv.CookTorrance(diffuse=0.05, lobes=[dict(alpha=m, ior=1.5)])
         table = wenv.Tabulated(merl_files.table_of({"brdf": "cook_torrance", "roughness": m, "diffuse": [0.05] * 3}))
         want = wenv.gloss(lobe, (20, 60, 85)) + (wenv.haze(lobe),)
         got = wenv.gloss(table, (20, 60, 85)) + (wenv.haze(table),)

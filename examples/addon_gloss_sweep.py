@@ -60,7 +60,7 @@ def main():
         st = mat.wenv
         g = (st.gloss_20, st.gloss_60, st.gloss_85)
         rows.append({"material": mat.name, "model": st.model, "lobes": len(st.lobes),
-                     "roughness": ";".join(f"{l.roughness:.4g}" for l in st.lobes),
+                     "alpha": ";".join(f"{l.alpha:.4g}" for l in st.lobes),
                      "gloss_20": f"{g[0]:.2f}", "gloss_60": f"{g[1]:.2f}", "gloss_85": f"{g[2]:.2f}",
                      "instrument_geometry": gloss.instrument_geometry(g[1]), "notes": " / ".join(notes)})
         print(f"{mat.name:>16}: {g[0]:7.2f} {g[1]:7.2f} {g[2]:7.2f} GU  (instrument: "

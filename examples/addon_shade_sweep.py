@@ -113,7 +113,7 @@ def main():
         if node is not None:
             node.inputs["Roughness"].default_value = r
         for lobe in mat.wenv.lobes:
-            lobe.blender_roughness = r
+            lobe.roughness = r
         for deg in args.rotation:
             mapping.inputs["Rotation"].default_value[2] = math.radians(deg)
             t = time.perf_counter()

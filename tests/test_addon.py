@@ -95,9 +95,9 @@ def set_material(obj, model="COOK_TORRANCE", diffuse=(0.3, 0.2, 0.1), lobes=((0.
     st = mat.wenv
     st.model = model
     st.diffuse = diffuse
-    for roughness, ior, dist in lobes:
+    for alpha, ior, dist in lobes:
         lobe = st.lobes.add()
-        lobe.roughness, lobe.ior, lobe.distribution = roughness, ior, dist
+        lobe.alpha, lobe.ior, lobe.distribution = alpha, ior, dist
     st.initialized = True
     obj.data.materials.append(mat)
     return mat
@@ -108,7 +108,7 @@ def wenv_material(mat):
     if st.model == "LAMBERT":
         return wenv.Lambert(tuple(st.diffuse))
     return wenv.CookTorrance(diffuse=tuple(st.diffuse), lobes=[
-        {"specular": tuple(l.specular), "roughness": l.roughness, "ior": l.ior,
+        {"specular": tuple(l.specular), "alpha": l.alpha, "ior": l.ior,
          "distribution": l.distribution.lower()} for l in st.lobes], shadowing=st.shadowing.lower())
 
 
@@ -193,12 +193,12 @@ def test_only_engine_touches_the_core():
     quality = bpy.types.Scene.bl_rna.properties["wenv"].fixed_type.properties["quality"]
     assert [i.identifier for i in quality.enum_items] == [q.upper() for q in wenv.QUALITY_PRESETS] + ["AUTO"]
     lobe = bpy.types.Material.bl_rna.properties["wenv"].fixed_type.properties["lobes"].fixed_type.properties
-    assert (lobe["roughness"].hard_min, lobe["roughness"].hard_max) == pytest.approx(wenv.ROUGHNESS_RANGE)
+    assert (lobe["alpha"].hard_min, lobe["alpha"].hard_max) == pytest.approx(wenv.ALPHA_RANGE)
     assert wenv.IOR_RANGE[0] < lobe["ior"].hard_min < 1.001 and lobe["ior"].hard_max == pytest.approx(wenv.IOR_RANGE[1])
     # Principled values past the core's limits come out clamped into them, mirrors floored at 1e-4 alpha.
-    assert engine.ggx_alpha(0.3) == pytest.approx(0.09) and engine.ggx_alpha(0.0) == 1e-4
+    assert engine.alpha_from_roughness(0.3) == pytest.approx(0.09) and engine.alpha_from_roughness(0.0) == 1e-4
     _, lobes = materials.principled_lobes((0.5, 0.5, 0.5), 0.5, 0.0, 50.0, coat=1.0, coat_roughness=0.0, coat_ior=1.0)
-    assert [l["roughness"] for l in lobes] == [1e-4] * 3
+    assert [l["alpha"] for l in lobes] == [1e-4] * 3
     assert all(wenv.IOR_RANGE[0] < l["ior"] <= wenv.IOR_RANGE[1] for l in lobes)
     assert lobes[0]["ior"] == wenv.IOR_RANGE[1] and lobes[2]["ior"] > wenv.IOR_RANGE[0]
     wenv.CookTorrance(diffuse=(0.5, 0.5, 0.5), lobes=[dict(l, distribution="ggx") for l in lobes])  # accepted
@@ -695,7 +695,7 @@ def test_from_principled_dielectric_metal_and_coat(scene):
     assert tuple(round(c, 5) for c in st.diffuse) == (0.8, 0.2, 0.1)
     assert len(st.lobes) == 1
     lobe = st.lobes[0]
-    assert lobe.roughness == pytest.approx(0.16) and lobe.ior == pytest.approx(1.45)
+    assert lobe.alpha == pytest.approx(0.16) and lobe.ior == pytest.approx(1.45)
     assert lobe.distribution == "GGX" and tuple(lobe.specular) == pytest.approx((1, 1, 1))
 
     gold = principled_material("gold", base=(1.0, 0.78, 0.34), metallic=1.0, roughness=0.2)
@@ -709,14 +709,14 @@ def test_from_principled_dielectric_metal_and_coat(scene):
     n = st.lobes[0].ior
     f0 = ((n - 1) / (n + 1)) ** 2
     assert np.array(st.lobes[0].specular) * f0 == pytest.approx((1.0, 0.78, 0.34), rel=1e-5)
-    assert st.lobes[0].roughness == pytest.approx(0.04)
+    assert st.lobes[0].alpha == pytest.approx(0.04)
     assert isinstance(m, wenv.CookTorrance)
 
     coated = principled_material("coated", roughness=0.5, coat=1.0)
     coated.node_tree.nodes["Principled BSDF"].inputs["Coat Roughness"].default_value = 0.1
     cube.active_material = coated
     bpy.ops.wenv.from_principled()
-    assert [round(l.roughness, 6) for l in coated.wenv.lobes] == [0.25, 0.01]
+    assert [round(l.alpha, 6) for l in coated.wenv.lobes] == [0.25, 0.01]
 
 
 def test_from_principled_warns_about_links_and_missing_node(scene):
@@ -744,9 +744,9 @@ def test_from_principled_clamps_as_cycles_and_refuses_nan(scene):
     node = mat.node_tree.nodes["Principled BSDF"]
     node.inputs["Roughness"].default_value = -1.0
     assert bpy.ops.wenv.from_principled() == {"FINISHED"}
-    floor = mat.wenv.lobes[0].roughness
+    floor = mat.wenv.lobes[0].alpha
     node.inputs["Roughness"].default_value = 0.0
-    assert bpy.ops.wenv.from_principled() == {"FINISHED"} and mat.wenv.lobes[0].roughness == floor
+    assert bpy.ops.wenv.from_principled() == {"FINISHED"} and mat.wenv.lobes[0].alpha == floor
     node.inputs["Roughness"].default_value = math.nan
     with pytest.raises(RuntimeError, match="Roughness is not finite"):
         bpy.ops.wenv.from_principled()
@@ -843,7 +843,7 @@ def test_gloss_readings_follow_settings(scene):
     want = wenv.gloss(wenv_material(mat), (20, 60, 85))
     assert (mat.wenv.gloss_20, mat.wenv.gloss_60, mat.wenv.gloss_85) == pytest.approx(want, abs=1e-3)
     before = mat.wenv.gloss_60
-    mat.wenv.lobes[0].roughness = 0.2
+    mat.wenv.lobes[0].alpha = 0.2
     assert mat.wenv.gloss_60 < before - 5
     assert mat.wenv.gloss_60 == pytest.approx(wenv.gloss(wenv_material(mat), 60), abs=1e-3)
     assert gloss.instrument_geometry(mat.wenv.gloss_60) == (60 if 10 <= mat.wenv.gloss_60 <= 70 else
@@ -897,7 +897,7 @@ def test_readme_scripting_block_runs_as_written(scene):
     assert (colors.domain, len(colors.data)) == ("POINT", len(suzanne.data.vertices))
     assert np.isfinite(rgba).all() and rgba.max() > 0.0
     # from_principled made the add-on's lobes, then the block set a lobe and the measured model
-    assert mat.wenv.lobes[0].blender_roughness == pytest.approx(0.2)
+    assert mat.wenv.lobes[0].roughness == pytest.approx(0.2)
     assert (mat.wenv.model, mat.wenv.brdf_path) == ("MEASURED", "//brdfs/gold-metallic-paint.binary")
 
 
@@ -1021,7 +1021,7 @@ def test_live_session_reshades_on_changes_only(scene):
         return (shaded, moved) == (True, True)
 
     assert changed(lambda: setattr(obj, "location", (0.3, 0.0, 0.0)))
-    assert changed(lambda: setattr(mat.wenv.lobes[0], "roughness", 0.5))
+    assert changed(lambda: setattr(mat.wenv.lobes[0], "alpha", 0.5))
     mapping_env = scene.world.node_tree.nodes["Background"].inputs["Strength"]
     assert changed(lambda: setattr(mapping_env, "default_value", 3.0))
     assert changed(lambda: setattr(scene.camera, "location", (5.0, -5.0, 3.0)))
@@ -1145,14 +1145,14 @@ def test_live_session_shows_draft_while_the_setting_remakes_its_slices(scene):
     assert previewed()  # Default's lighting and BRDF slices are made for the first pass
     scene.camera.location = (6.0, -6.0, 2.0)
     assert at_once()
-    mat.wenv.lobes[0].roughness = 0.25  # new BRDF slices
+    mat.wenv.lobes[0].alpha = 0.25  # new BRDF slices
     assert previewed()
     env_world(scene, image=forest, rotation=0.6)  # the same image (its pixels read once), turned
     assert at_once(rotation=0.6)
     env_world(scene, "city", rotation=0.6)  # a new image
     assert previewed(hdri="city", rotation=0.6)
     # a change while Default makes BRDF slices: they stop, and the next change makes them whole
-    mat.wenv.lobes[0].roughness = 0.35
+    mat.wenv.lobes[0].alpha = 0.35
     assert pass_written() and session.shown == "draft"
     job = session._refine
     while not job.done and engine.shaders._relays["default"].target is None:
@@ -1167,7 +1167,7 @@ def test_live_session_shows_draft_while_the_setting_remakes_its_slices(scene):
     assert session.tick(ctx) is True and shows("default", hdri="city", rotation=0.6)
     # off: Default at once after a material edit
     scene.wenv.preview_changes = False
-    mat.wenv.lobes[0].roughness = 0.3
+    mat.wenv.lobes[0].alpha = 0.3
     assert at_once(hdri="city", rotation=0.6)
     # Auto: Draft while its shader is chosen and made, then Auto's colours
     scene.wenv.preview_changes = True
@@ -1355,7 +1355,7 @@ def test_each_operator_that_changes_data_is_one_undo_step(scene):
         obj, mat = bpy.data.objects[obj_name], bpy.data.materials[mat_name]
         colours = attribute(obj)[1].tobytes() if ATTR in obj.data.color_attributes else None
         st = mat.wenv
-        lobes = [(tuple(l.specular), l.roughness, l.ior, l.distribution) for l in st.lobes]
+        lobes = [(tuple(l.specular), l.alpha, l.ior, l.distribution) for l in st.lobes]
         node_roughness = materials.principled_node(mat).inputs["Roughness"].default_value
         return colours, st.model, tuple(st.diffuse), lobes, st.active_lobe, node_roughness
 
@@ -1567,6 +1567,58 @@ def test_undo_and_redo_show_the_colours_of_the_frame_restored(scene):
     np.testing.assert_array_equal(attribute(bpy.data.objects[name])[1], at_10)
 
 
+def test_a_file_saved_before_the_rename_opens_with_its_alphas(scene, tmp_path):
+    """A lobe's alpha was stored as "roughness" until `roughness` took Blender's meaning: a file saved
+    so opens with each lobe's alpha where it was, the old key gone, and Roughness reads sqrt(alpha)."""
+    obj = add_monkey()
+    mat = set_material(obj, lobes=((0.09, 1.5, "GGX"), (0.3, 1.4, "BECKMANN")))
+    for lobe in mat.wenv.lobes:  # as the earlier add-on stored it: the alpha under "roughness"
+        lobe["roughness"] = lobe.alpha
+        del lobe["alpha"]
+    assert "roughness" in mat.wenv.lobes[0].keys() and "alpha" not in mat.wenv.lobes[0].keys()
+    name, path = mat.name, str(tmp_path / "old.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.read_homefile(use_factory_startup=True)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    lobes = bpy.data.materials[name].wenv.lobes
+    assert [l.alpha for l in lobes] == [pytest.approx(0.09), pytest.approx(0.3)]
+    assert [l.roughness for l in lobes] == [pytest.approx(0.3), pytest.approx(0.3 ** 0.5)]
+    assert all("roughness" not in l.keys() for l in lobes)
+    lobes[0].roughness = 0.5  # Blender's roughness, through the core's one conversion
+    assert lobes[0].alpha == pytest.approx(wenv.alpha_from_roughness(0.5))
+    lobes[0].roughness = 0.0  # a mirror keeps the conversion's floor
+    assert lobes[0].alpha == pytest.approx(wenv.alpha_from_roughness(0.0))
+    lobes[0].roughness = math.nan  # a script's NaN: a setter cannot refuse it, so nothing changes
+    assert lobes[0].alpha == pytest.approx(wenv.alpha_from_roughness(0.0))
+
+
+def test_the_panels_follow_the_core(scene):
+    """What the panels say comes from the core: only rotation precomputes matrices (`draft`; the
+    panel says so until they are built), `default` slices and precomputes nothing (the panel says
+    nothing of matrices); the Principled inputs shown are the core's list of those wenv shades."""
+    from addon import ui
+    cube = bpy.data.objects["Cube"]
+    select_only(cube)
+    engine.shaders.clear()
+    said = {}
+    for quality in ("DRAFT", "DEFAULT"):
+        scene.wenv.quality = quality
+        said[quality] = [l[1] for l in draw_panel(ui.WENV_PT_shading) if l[0] == "label" and "matrices" in l[1]]
+    assert engine.needs_matrices("draft") and not engine.needs_matrices("default")
+    assert said == {"DRAFT": ["Rotation matrices: precomputed on first use"], "DEFAULT": []}
+    assert engine.preparing("draft") == "precomputing the draft matrices"
+    assert engine.preparing("default") == "preparing default shading"
+    mat = bpy.data.materials.new("principled panel")
+    if bpy.app.version < (5, 0, 0):
+        mat.use_nodes = True
+    mat.wenv.model = "PRINCIPLED"
+    cube.active_material = mat
+    shown = [l for l in draw_panel(ui.WENV_PT_material) if l == ("prop", "default_value")]
+    assert ui.PRINCIPLED_SHOWN == tuple(r["socket"] for r in wenv.Principled.INPUTS if r["shaded"] != "no")
+    assert len(shown) == len(ui.PRINCIPLED_SHOWN) and "Coat Tint" in ui.PRINCIPLED_SHOWN
+    assert "Transmission Weight" not in ui.PRINCIPLED_SHOWN
+
+
 def test_save_reload_reshade(scene, tmp_path):
     env_world(scene, "night", rotation=1.2, strength=4.0)
     obj = add_monkey()
@@ -1587,7 +1639,7 @@ def test_save_reload_reshade(scene, tmp_path):
     assert (sc.wenv.quality, sc.wenv.tone_mapping, sc.wenv.max_luminance, sc.wenv.view_source) == \
         ("DRAFT", "LOG", pytest.approx(3.0), "CAMERA")
     st = bpy.data.materials[mat_name].wenv
-    assert [(l.roughness, l.distribution) for l in st.lobes] == [(pytest.approx(0.07), "BECKMANN"),
+    assert [(l.alpha, l.distribution) for l in st.lobes] == [(pytest.approx(0.07), "BECKMANN"),
                                                                 (pytest.approx(0.3), "GGX")]
     assert st.target_gloss == pytest.approx(42.0)
     obj = bpy.data.objects["Suzanne"]
@@ -1782,7 +1834,7 @@ def test_cached_shaders_do_not_keep_an_operator_s_progress_callback():
     calls = []
     shader, _relay = engine.ShaderCache().build("draft", progress=lambda f: calls.append(f))
     built = len(calls)  # none when the matrices come from the cache
-    many = wenv.CookTorrance(diffuse=0.0, lobes=[dict(specular=0.04, roughness=0.05 + 0.02 * i) for i in range(8)])
+    many = wenv.CookTorrance(diffuse=0.0, lobes=[dict(specular=0.04, alpha=0.05 + 0.02 * i) for i in range(8)])
     shader.set_material(many)
     assert len(calls) == built
     # what the relay prevents: the same callback given straight to a Shader hears set_material

@@ -28,7 +28,7 @@ def sunset():
 
 
 def glossy(m):
-    return wenv.CookTorrance(diffuse=0.1, lobes=[{"specular": 1, "roughness": m, "ior": 1.5}])
+    return wenv.CookTorrance(diffuse=0.1, lobes=[{"specular": 1, "alpha": m, "ior": 1.5}])
 
 
 def test_lambert_builds_no_matrices(sunset):

@@ -159,7 +159,7 @@ def test_eval_matches_textbook_formulas(dist, shadow):
     rng = np.random.default_rng(1)
     wi, wo = random_upper(rng, 500), random_upper(rng, 500)
     for m, ior in ((0.05, 1.5), (0.4, 2.0), (1.5, 1.2)):
-        mat = wenv.CookTorrance(lobes=[{"roughness": m, "ior": ior}], distribution=dist, shadowing=shadow)
+        mat = wenv.CookTorrance(lobes=[{"alpha": m, "ior": ior}], distribution=dist, shadowing=shadow)
         ref = lobe_ref(dist, shadow, m, ior, wi, wo) * unit64(wi)[:, 2]
         got = mat.eval(wi, wo)
         assert got.dtype == np.float32 and got.shape == (500, 3)
@@ -172,8 +172,8 @@ def test_eval_matches_textbook_formulas(dist, shadow):
 def test_reciprocity(dist, shadow):
     rng = np.random.default_rng(2)
     wi, wo = random_upper(rng, 2000), random_upper(rng, 2000)
-    mat = wenv.CookTorrance(diffuse=(0.2, 0.1, 0.05), lobes=[{"roughness": 0.2, "ior": 1.6},
-                                                             {"roughness": 0.7, "specular": (0.3, 0.5, 0.9)}],
+    mat = wenv.CookTorrance(diffuse=(0.2, 0.1, 0.05), lobes=[{"alpha": 0.2, "ior": 1.6},
+                                                             {"alpha": 0.7, "specular": (0.3, 0.5, 0.9)}],
                             distribution=dist, shadowing=shadow)
     f_io = mat.eval(wi, wo) / unit64(wi)[:, 2:3]
     f_oi = mat.eval(wo, wi) / unit64(wo)[:, 2:3]
@@ -183,14 +183,14 @@ def test_reciprocity(dist, shadow):
 def test_multilobe_is_sum_of_lobes_and_lobe_distribution_overrides():
     rng = np.random.default_rng(3)
     wi, wo = random_upper(rng, 300), random_upper(rng, 300)
-    l1 = {"roughness": 0.1, "ior": 1.4, "specular": (1.0, 0.5, 0.25)}
-    l2 = {"roughness": 0.5, "ior": 2.0, "specular": 0.5, "distribution": "ggx"}
+    l1 = {"alpha": 0.1, "ior": 1.4, "specular": (1.0, 0.5, 0.25)}
+    l2 = {"alpha": 0.5, "ior": 2.0, "specular": 0.5, "distribution": "ggx"}
     both = wenv.CookTorrance(0.3, [l1, l2], distribution="beckmann")
     assert [l["distribution"] for l in both.lobes] == ["beckmann", "ggx"]
     a = wenv.CookTorrance(0.3, [l1])
     b = wenv.CookTorrance(0.0, [dict(l2, distribution="ggx")])
     np.testing.assert_allclose(both.eval(wi, wo), a.eval(wi, wo) + b.eval(wi, wo), rtol=1e-5, atol=1e-7)
-    g = wenv.CookTorrance(0.0, [{"roughness": 0.5, "ior": 2.0, "specular": 0.5}], distribution="ggx")
+    g = wenv.CookTorrance(0.0, [{"alpha": 0.5, "ior": 2.0, "specular": 0.5}], distribution="ggx")
     np.testing.assert_allclose(b.eval(wi, wo), g.eval(wi, wo), rtol=0)
 
 
@@ -212,7 +212,7 @@ def test_lambert():
 
 
 def test_eval_shapes_broadcasting_and_normalisation():
-    mat = wenv.CookTorrance(0.1, [{"roughness": 0.3}])
+    mat = wenv.CookTorrance(0.1, [{"alpha": 0.3}])
     wi = direction(30, 10)
     wo = direction(45, 200)
     single = mat.eval(wi, wo)
@@ -225,7 +225,7 @@ def test_eval_shapes_broadcasting_and_normalisation():
 
 
 def test_below_horizon_is_zero():
-    mat = wenv.CookTorrance(0.5, [{"roughness": 0.3}])
+    mat = wenv.CookTorrance(0.5, [{"alpha": 0.3}])
     up, down, flat = direction(30), direction(120), np.array([0.6, -0.8, 0.0], np.float32)
     for a, b in ((up, down), (down, up), (flat, up), (up, flat), (flat, flat), (down, down)):
         np.testing.assert_array_equal(mat.eval(a, b), 0.0)
@@ -251,7 +251,7 @@ def test_no_nan_or_inf_at_edge_cases(dist, shadow):
     wo = np.tile(d, (len(d), 1))
     for m in (1e-6, 1e-4, 0.01, 0.3, 1.0, 10.0):
         for ior in (1.0001, 1.5, 10.0):
-            mat = wenv.CookTorrance(1.0, [{"roughness": m, "ior": ior}], distribution=dist, shadowing=shadow)
+            mat = wenv.CookTorrance(1.0, [{"alpha": m, "ior": ior}], distribution=dist, shadowing=shadow)
             v = mat.eval(wi, wo)
             assert np.all(np.isfinite(v)), (m, ior)
             assert np.all(v >= 0)
@@ -266,7 +266,7 @@ def test_no_nan_or_inf_at_edge_cases(dist, shadow):
 def test_exact_normal_incidence_and_mirror_configuration():
     n = np.array([0, 0, 1], np.float32)
     for dist in DISTS:
-        mat = wenv.CookTorrance(lobes=[{"roughness": 1e-4, "ior": 1.5}], distribution=dist)
+        mat = wenv.CookTorrance(lobes=[{"alpha": 1e-4, "ior": 1.5}], distribution=dist)
         v = mat.eval(n, n)[0]
         # D(n) = 1/(pi m^2), G = 1, F = 0.04: f cos = 0.04 / (4 pi m^2)
         assert v == pytest.approx(0.04 / (4 * math.pi * 1e-8), rel=1e-5)
@@ -296,7 +296,7 @@ def test_white_material_albedo_below_one(shadow):
     views = np.stack([direction(d) for d in VIEWS])
     for dist in DISTS:
         for m in WHITE_ROUGHNESS:
-            mat = wenv.CookTorrance(0.0, [{"specular": (1, 1, 1), "roughness": m, "ior": 10.0}], dist, shadow)
+            mat = wenv.CookTorrance(0.0, [{"specular": (1, 1, 1), "alpha": m, "ior": 10.0}], dist, shadow)
             a = mat.albedo(views)
             assert a.dtype == np.float64 and a.shape == (len(VIEWS), 3)
             assert np.all(a <= 1 + 1e-3) and np.all(a > 0)
@@ -322,8 +322,8 @@ def test_albedo_agrees_with_brute_force_over_incident_directions():
     s = np.sqrt(1 - M**2)
     wi = np.stack([s * np.cos(P), s * np.sin(P), M], -1).reshape(-1, 3).astype(np.float32)
     weights = (np.outer(wz / 2, np.full(600, 2 * math.pi / 600))).reshape(-1)
-    mat = wenv.CookTorrance((0.1, 0.2, 0.3), [{"roughness": 0.4, "ior": 1.5, "specular": (1, 0.5, 0.25)},
-                                               {"roughness": 0.8, "ior": 3.0, "distribution": "ggx"}])
+    mat = wenv.CookTorrance((0.1, 0.2, 0.3), [{"alpha": 0.4, "ior": 1.5, "specular": (1, 0.5, 0.25)},
+                                               {"alpha": 0.8, "ior": 3.0, "distribution": "ggx"}])
     for deg in (0, 50, 80):
         wo = direction(deg, 20)
         # eval() already includes cos_i, and d omega = d mu d phi
@@ -339,13 +339,13 @@ def test_batch_equals_scalar_path():
     wi /= np.linalg.norm(wi, axis=1, keepdims=True)
     wi[:10] = edge_directions()[:10]
     for shadow in SHADOWS:
-        mat = wenv.CookTorrance(0.5, [{"roughness": 0.05, "ior": 1.5, "specular": 0.4}, {"roughness": 0.3, "distribution": "ggx",
+        mat = wenv.CookTorrance(0.5, [{"alpha": 0.05, "ior": 1.5, "specular": 0.4}, {"alpha": 0.3, "distribution": "ggx",
                                                                         "specular": (0.2, 0.4, 0.6)},
-                                      {"roughness": 2.0, "ior": 4.0, "specular": 0.1}], shadowing=shadow)
+                                      {"alpha": 2.0, "ior": 4.0, "specular": 0.1}], shadowing=shadow)
         for deg in (0, 30, 70, 89.9, 90, 120):
             wo = direction(deg, 33)
-            batch = mat._specular_batch(wi, wo)
-            scalar = mat._specular(wi, wo)
+            batch = wenv._specular_batch(mat, wi, wo)
+            scalar = wenv._specular(mat, wi, wo)
             np.testing.assert_allclose(batch, scalar, rtol=1e-12, atol=0)
             # eval = specular + diffuse/pi cos_i (above the horizon)
             if deg < 90:
@@ -356,11 +356,11 @@ def test_batch_equals_scalar_path():
 # ------------------------------------------------------------------ Python object behaviour
 
 def test_attributes_repr_pickle_and_immutability():
-    ct = wenv.CookTorrance(diffuse=(0.1, 0.2, 0.3), lobes=[{"roughness": 0.2}], distribution="ggx",
+    ct = wenv.CookTorrance(diffuse=(0.1, 0.2, 0.3), lobes=[{"alpha": 0.2}], distribution="ggx",
                            shadowing="vcavity")
     assert isinstance(ct, wenv.Material) and isinstance(wenv.Lambert(0.1), wenv.Material)
     assert ct.diffuse == (0.1, 0.2, 0.3)
-    assert ct.lobes == [{"specular": (1.0, 1.0, 1.0), "roughness": 0.2, "ior": 1.5, "distribution": "ggx"}]
+    assert ct.lobes == [{"specular": (1.0, 1.0, 1.0), "alpha": 0.2, "ior": 1.5, "distribution": "ggx"}]
     assert ct.distribution == "ggx" and ct.shadowing == "vcavity"
     assert "CookTorrance" in repr(ct) and "vcavity" in repr(ct)
     assert eval(repr(ct), {"wenv": wenv}) == ct
@@ -371,35 +371,53 @@ def test_attributes_repr_pickle_and_immutability():
     for obj, attr in ((ct, "diffuse"), (ct, "lobes"), (ct, "distribution"), (ct, "shadowing"), (lam, "color")):
         with pytest.raises(AttributeError):
             setattr(obj, attr, 0)
-    ct.lobes[0]["roughness"] = 5.0  # a copy: the material does not change
-    assert ct.lobes[0]["roughness"] == 0.2
+    ct.lobes[0]["alpha"] = 5.0  # a copy: the material does not change
+    assert ct.lobes[0]["alpha"] == 0.2
     with pytest.raises(TypeError):
         wenv.Material()
 
 
-def test_with_roughness():
-    ct = wenv.CookTorrance(0.1, [{"roughness": 0.2, "ior": 1.7}, {"roughness": 0.5, "distribution": "ggx"}],
+def test_with_alpha():
+    ct = wenv.CookTorrance(0.1, [{"alpha": 0.2, "ior": 1.7}, {"alpha": 0.5, "distribution": "ggx"}],
                            shadowing="vcavity")
-    r = ct.with_roughness(0.05)
-    assert [l["roughness"] for l in r.lobes] == [0.05, 0.05]
+    r = ct.with_alpha(0.05)
+    assert [l["alpha"] for l in r.lobes] == [0.05, 0.05]
     assert [l["ior"] for l in r.lobes] == [1.7, 1.5] and r.shadowing == "vcavity"
-    assert ct.lobes[0]["roughness"] == 0.2
-    with pytest.raises(ValueError, match="roughness"):
-        ct.with_roughness(0.0)
-    with pytest.raises(ValueError, match="roughness"):
-        ct.with_roughness(float("nan"))
+    assert ct.lobes[0]["alpha"] == 0.2
+    with pytest.raises(ValueError, match="alpha"):
+        ct.with_alpha(0.0)
+    with pytest.raises(ValueError, match="alpha"):
+        ct.with_alpha(float("nan"))
+
+
+def test_roughness_is_blenders_everywhere():
+    """`roughness` is Blender's perceptual r wherever a user meets it; a lobe's parameter is alpha.
+    The names that meant alpha fail with an error that names what replaced them."""
+    with pytest.raises(ValueError, match=r"lobes\[0\]: a lobe takes 'alpha'.*alpha_from_roughness"):
+        wenv.CookTorrance(lobes=[{"roughness": 0.2}])
+    ct = wenv.CookTorrance(lobes=[{"alpha": 0.2}])
+    with pytest.raises(TypeError, match=r"with_alpha\(alpha\)"):
+        ct.with_roughness(0.2)
+    with pytest.raises(AttributeError, match="ALPHA_RANGE"):
+        wenv.ROUGHNESS_RANGE
+    with pytest.raises(AttributeError, match="no attribute 'NO_SUCH_NAME'"):
+        wenv.NO_SUCH_NAME
+    # the one conversion takes a Principled roughness to the lobe's alpha
+    paint = wenv.Principled(roughness=0.3, base_color=0.0, specular_ior_level=0.0, metallic=1.0)
+    assert paint.inputs["roughness"] == 0.3
+    assert wenv.alpha_from_roughness(0.3) == pytest.approx(0.09)
 
 
 # ------------------------------------------------------------------ argument validation
 
 def ct(**kw):
-    args = dict(diffuse=0.1, lobes=[{"roughness": 0.2}])
+    args = dict(diffuse=0.1, lobes=[{"alpha": 0.2}])
     args.update(kw)
     return wenv.CookTorrance(**args)
 
 
 def lobe(**kw):
-    d = {"roughness": 0.2, "ior": 1.5, "specular": 1.0}
+    d = {"alpha": 0.2, "ior": 1.5, "specular": 1.0}
     d.update(kw)
     return d
 
@@ -416,16 +434,16 @@ BAD = [
     (lambda: ct(diffuse=(0.1, -0.1, 0.1)), ValueError, "diffuse"),
     (lambda: ct(diffuse=None), TypeError, "diffuse"),
     (lambda: ct(lobes=5), TypeError, "lobes"),
-    (lambda: ct(lobes={"roughness": 0.2}), TypeError, "lobes"),
+    (lambda: ct(lobes={"alpha": 0.2}), TypeError, "lobes"),
     (lambda: ct(lobes=[lobe(), 3]), TypeError, "lobes[1]"),
     (lambda: ct(lobes=[lobe(gloss=1)]), ValueError, "gloss"),
-    (lambda: ct(lobes=[lobe(), {"specular": 1.0}]), ValueError, "lobes[1].roughness"),
-    (lambda: ct(lobes=[lobe(roughness=0.0)]), ValueError, "lobes[0].roughness"),
-    (lambda: ct(lobes=[lobe(), lobe(roughness=-1.0)]), ValueError, "lobes[1].roughness"),
-    (lambda: ct(lobes=[lobe(roughness=10.5)]), ValueError, "lobes[0].roughness"),
-    (lambda: ct(lobes=[lobe(roughness=float("inf"))]), ValueError, "lobes[0].roughness"),
-    (lambda: ct(lobes=[lobe(roughness=float("nan"))]), ValueError, "lobes[0].roughness"),
-    (lambda: ct(lobes=[lobe(roughness="rough")]), TypeError, "lobes[0].roughness"),
+    (lambda: ct(lobes=[lobe(), {"specular": 1.0}]), ValueError, "lobes[1].alpha"),
+    (lambda: ct(lobes=[lobe(alpha=0.0)]), ValueError, "lobes[0].alpha"),
+    (lambda: ct(lobes=[lobe(), lobe(alpha=-1.0)]), ValueError, "lobes[1].alpha"),
+    (lambda: ct(lobes=[lobe(alpha=10.5)]), ValueError, "lobes[0].alpha"),
+    (lambda: ct(lobes=[lobe(alpha=float("inf"))]), ValueError, "lobes[0].alpha"),
+    (lambda: ct(lobes=[lobe(alpha=float("nan"))]), ValueError, "lobes[0].alpha"),
+    (lambda: ct(lobes=[lobe(alpha="rough")]), TypeError, "lobes[0].alpha"),
     (lambda: ct(lobes=[lobe(ior=1.0)]), ValueError, "lobes[0].ior"),
     (lambda: ct(lobes=[lobe(ior=0.5)]), ValueError, "lobes[0].ior"),
     (lambda: ct(lobes=[lobe(), lobe(ior=10.01)]), ValueError, "lobes[1].ior"),
@@ -465,7 +483,7 @@ def test_bad_eval_and_albedo_arguments():
         (lambda: mat.albedo(good, samples=-1), ValueError, "samples"),
         (lambda: mat.albedo(good, samples=64.0), TypeError, "samples"),
         (lambda: mat.albedo(np.ones((2, 2), np.float32)), ValueError, "wo"),
-        (lambda: wenv._ndf("beckmann", 0.0, 0.5), ValueError, "roughness"),
+        (lambda: wenv._ndf("beckmann", 0.0, 0.5), ValueError, "alpha"),
         (lambda: wenv._fresnel(0.5, 1.0), ValueError, "ior"),
     ]
     for fn, exc, text in cases:
@@ -476,15 +494,15 @@ def test_bad_eval_and_albedo_arguments():
 
 def test_one_roughness_range_and_conversion():
     """The accepted range and Blender's roughness conversion come from the core, once."""
-    lo, hi = wenv.ROUGHNESS_RANGE
-    wenv.CookTorrance(lobes=[{"roughness": lo}, {"roughness": hi}])
+    lo, hi = wenv.ALPHA_RANGE
+    wenv.CookTorrance(lobes=[{"alpha": lo}, {"alpha": hi}])
     for bad in (lo * 0.999, hi * 1.001):
-        with pytest.raises(ValueError, match="roughness"):
-            wenv.CookTorrance(lobes=[{"roughness": bad}])
+        with pytest.raises(ValueError, match="alpha"):
+            wenv.CookTorrance(lobes=[{"alpha": bad}])
     ior_lo, ior_hi = wenv.IOR_RANGE
-    wenv.CookTorrance(lobes=[{"roughness": 0.1, "ior": ior_hi}])
+    wenv.CookTorrance(lobes=[{"alpha": 0.1, "ior": ior_hi}])
     with pytest.raises(ValueError, match="ior"):
-        wenv.CookTorrance(lobes=[{"roughness": 0.1, "ior": ior_lo}])
+        wenv.CookTorrance(lobes=[{"alpha": 0.1, "ior": ior_lo}])
     assert wenv.alpha_from_roughness(0.5) == 0.25
     assert wenv.alpha_from_roughness(0.0) == 1e-4          # a mirror keeps a lobe
     assert lo <= wenv.alpha_from_roughness(0.0) and wenv.alpha_from_roughness(1.0) <= hi
@@ -496,26 +514,26 @@ def test_one_roughness_range_and_conversion():
 
 def test_lobes_that_reflect_more_than_they_receive_are_refused():
     # what the material's own albedo says, independently of the check: five white lobes pass 1 at 75 degrees
-    one = wenv.CookTorrance(0.0, [{"specular": 1, "roughness": 0.1, "ior": 1.5}])
+    one = wenv.CookTorrance(0.0, [{"specular": 1, "alpha": 0.1, "ior": 1.5}])
     assert 5 * one.albedo(direction(75))[0] > 1.1
     with pytest.raises(ValueError, match="lobes reflect .* times the light they receive .* 75 degrees"):
-        wenv.CookTorrance(0.0, [{"specular": 1, "roughness": 0.1, "ior": 1.5}] * 5)
+        wenv.CookTorrance(0.0, [{"specular": 1, "alpha": 0.1, "ior": 1.5}] * 5)
     # towards grazing lobes added rather than layered pass 1 (a coat over a paint's gloss): accepted
-    two = wenv.CookTorrance(0.0, [{"specular": 1, "roughness": 0.1, "ior": 1.5}] * 2)
+    two = wenv.CookTorrance(0.0, [{"specular": 1, "alpha": 0.1, "ior": 1.5}] * 2)
     assert two.albedo(direction(89))[0] > 1.05
     with pytest.raises(ValueError, match="blue channel"):
-        wenv.CookTorrance(0.0, [{"specular": (0.2, 0.2, 30.0), "roughness": 0.3, "ior": 1.5}])
+        wenv.CookTorrance(0.0, [{"specular": (0.2, 0.2, 30.0), "alpha": 0.3, "ior": 1.5}])
     # a hundred white lobes reflected 4.4 times a unit environment
     with pytest.raises(ValueError, match="lobes: at most 64, got 100"):
-        wenv.CookTorrance(0.0, [{"specular": 1, "roughness": 0.1, "ior": 1.5}] * 100)
+        wenv.CookTorrance(0.0, [{"specular": 1, "alpha": 0.1, "ior": 1.5}] * 100)
     # lobes that share an albedo of at most 1 are accepted, up to the limit, and so is each white lobe alone
-    half = wenv.CookTorrance(0.0, [{"specular": 0.5, "roughness": m, "ior": 1.5} for m in (0.1, 0.3)])
+    half = wenv.CookTorrance(0.0, [{"specular": 0.5, "alpha": m, "ior": 1.5} for m in (0.1, 0.3)])
     assert np.all(half.albedo(np.stack([direction(d) for d in (0, 60, 89)])) <= 1.0)
-    wenv.CookTorrance(0.0, [{"specular": 0.01, "roughness": 0.05 + 0.01 * i, "ior": 1.5} for i in range(64)])
+    wenv.CookTorrance(0.0, [{"specular": 0.01, "alpha": 0.05 + 0.01 * i, "ior": 1.5} for i in range(64)])
     for dist in DISTS:
         for shadow in SHADOWS:
             for m in (0.001, 0.05, 1.0):
-                wenv.CookTorrance(0.0, [{"specular": 1, "roughness": m, "ior": 10.0}], dist, shadow)
+                wenv.CookTorrance(0.0, [{"specular": 1, "alpha": m, "ior": 10.0}], dist, shadow)
 
 
 # ------------------------------------------------------------------ symmetry the wavelet shader relies on
@@ -541,8 +559,8 @@ def test_kinds_flagged_mirror_symmetric_are(name):
     test then fails for the anisotropic material."""
     mat = {
         "lambert": lambda: wenv.Lambert((0.6, 0.3, 0.2)),
-        "cook_torrance": lambda: wenv.CookTorrance(0.2, [{"roughness": 0.15, "ior": 1.5, "specular": 1.0},
-                                                         {"roughness": 0.5, "ior": 1.8, "specular": 0.4,
+        "cook_torrance": lambda: wenv.CookTorrance(0.2, [{"alpha": 0.15, "ior": 1.5, "specular": 1.0},
+                                                         {"alpha": 0.5, "ior": 1.8, "specular": 0.4,
                                                           "distribution": "ggx"}]),
         "principled": lambda: wenv.Principled(base_color=(0.8, 0.5, 0.2), metallic=0.3, roughness=0.35,
                                               coat_weight=0.7, coat_roughness=0.1, sheen_weight=0.5),
@@ -600,7 +618,7 @@ def test_narrow_lobe_slices_take_the_fine_rule_about_the_mirror_direction(m, dis
     the fine rule everywhere -- GGX's long tails included."""
     from conftest import random_pairs
     env = smooth_environment()
-    mat = wenv.CookTorrance(diffuse=0.0, lobes=[{"roughness": m, "ior": 1.5}], distribution=dist)
+    mat = wenv.CookTorrance(diffuse=0.0, lobes=[{"alpha": m, "ior": 1.5}], distribution=dist)
     nrm, v = random_pairs(400, seed=3)
     keep = np.sum(nrm * v, axis=1) > 0.5
     nrm, v = nrm[keep], v[keep]

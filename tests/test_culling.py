@@ -45,7 +45,7 @@ def expected_visible(pos, nrm, eye, vp=None):
 @pytest.fixture(scope="module")
 def shader():
     env = wenv.Environment(np.float32(np.random.default_rng(1).uniform(0.1, 2.0, (32, 64, 3))))
-    mat = wenv.CookTorrance(diffuse=0.3, lobes=[{"roughness": 0.2}])
+    mat = wenv.CookTorrance(diffuse=0.3, lobes=[{"alpha": 0.2}])
     return wenv.Shader(env, mat, quality="draft")
 
 

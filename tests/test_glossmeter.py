@@ -80,12 +80,12 @@ def mirror_flux(angle, ior, size=(0.75, 2.5), order=24):
 
 def two_lobe(dist="beckmann", m1=0.01, m2=0.2):
     return wenv.CookTorrance(diffuse=(0.3, 0.2, 0.1),
-                             lobes=[dict(roughness=m1, ior=1.5), dict(roughness=m2, specular=(0.5, 0.4, 0.3), ior=1.8)],
+                             lobes=[dict(alpha=m1, ior=1.5), dict(alpha=m2, specular=(0.5, 0.4, 0.3), ior=1.8)],
                              distribution=dist)
 
 
 def one_lobe(m, dist="beckmann", ior=1.5, **kw):
-    return wenv.CookTorrance(lobes=[dict(roughness=m, ior=ior)], distribution=dist, **kw)
+    return wenv.CookTorrance(lobes=[dict(alpha=m, ior=ior)], distribution=dist, **kw)
 
 
 # ---------------------------------------------------------------- the standard and smooth surfaces
@@ -157,14 +157,14 @@ def test_lambert_closed_form(angle):
 def test_luminance_of_coloured_lobes():
     spec, diff = (0.9, 0.4, 0.1), (0.2, 0.6, 0.3)
     y = lambda c: 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]  # noqa: E731
-    coloured = wenv.CookTorrance(diffuse=diff, lobes=[dict(roughness=0.05, specular=spec)])
-    grey = wenv.CookTorrance(diffuse=y(diff), lobes=[dict(roughness=0.05, specular=y(spec))])
+    coloured = wenv.CookTorrance(diffuse=diff, lobes=[dict(alpha=0.05, specular=spec)])
+    grey = wenv.CookTorrance(diffuse=y(diff), lobes=[dict(alpha=0.05, specular=y(spec))])
     for angle in GEOMETRIES:
         assert wenv.gloss(coloured, angle) == pytest.approx(wenv.gloss(grey, angle), rel=1e-12)
 
 
 def test_multi_lobe_is_sum_of_lobes():
-    lobes = [dict(roughness=0.003, ior=1.5), dict(roughness=0.08, ior=2.0, specular=0.5)]
+    lobes = [dict(alpha=0.003, ior=1.5), dict(alpha=0.08, ior=2.0, specular=0.5)]
     both = wenv.CookTorrance(lobes=lobes, distribution="ggx")
     for angle in GEOMETRIES:
         parts = [wenv.gloss(wenv.CookTorrance(lobes=[lb], distribution="ggx"), angle, tol=0.005) for lb in lobes]
@@ -281,23 +281,42 @@ def test_haze():
 
 @pytest.mark.parametrize("angle,dist,m", [(60, "beckmann", 0.02), (60, "ggx", 0.1), (20, "beckmann", 0.005),
                                           (85, "ggx", 0.05)])
-def test_fit_roughness_round_trip(angle, dist, m):
+def test_fit_alpha_round_trip(angle, dist, m):
     params = dict(diffuse=0.05, ior=1.5, distribution=dist)
-    target = wenv.gloss(wenv.CookTorrance(diffuse=0.05, lobes=[dict(roughness=m, ior=1.5)], distribution=dist), angle)
-    fitted = wenv.fit_roughness(target, geometry=angle, **params)
+    mat = wenv.CookTorrance(diffuse=0.05, lobes=[dict(alpha=m, ior=1.5)], distribution=dist)
+    target = wenv.gloss(mat, angle)
+    fitted = wenv.fit_alpha(target, geometry=angle, **params)
     assert fitted == pytest.approx(m, rel=0.01)
+    assert wenv.fit_alpha(target, angle, material=mat) == fitted  # the same lobe, given whole
 
 
-def test_fit_roughness_out_of_reach():
+def test_fit_roughness_is_blenders_and_fit_alpha_the_lobes():
+    """fit_roughness solves for Blender's roughness r of a material that takes it (a Principled
+    BSDF); a Cook-Torrance lobe's parameter is alpha, and asking fit_roughness for it says so."""
+    paint = wenv.Principled(base_color=(0.5, 0.1, 0.1), roughness=0.3)
+    target = wenv.gloss(paint, 60)
+    r = wenv.fit_roughness(target, 60, material=wenv.Principled(base_color=(0.5, 0.1, 0.1)))
+    assert r == pytest.approx(0.3, rel=0.01)
+    with pytest.raises(TypeError, match="fit_alpha"):
+        wenv.fit_roughness(50.0, 60, diffuse=0.1)  # a lobe's parameters: its alpha is fit_alpha's
+    with pytest.raises(ValueError, match="set by alpha"):
+        wenv.fit_roughness(50.0, 60, material=one_lobe(0.1))
+    with pytest.raises(ValueError, match="not set by alpha.*roughness"):
+        wenv.fit_alpha(50.0, 60, material=paint)
+    with pytest.raises(ValueError, match="bracket"):
+        wenv.fit_roughness(50.0, 60, material=paint, bracket=(0.01, 2.0))  # Blender's roughness is at most 1
+
+
+def test_fit_alpha_out_of_reach():
     smooth = wenv.gloss(one_lobe(1e-4), 60, smooth=True)
     with pytest.raises(ValueError, match="target_gu"):
-        wenv.fit_roughness(smooth + 1.0, geometry=60)
+        wenv.fit_alpha(smooth + 1.0, geometry=60)
     with pytest.raises(ValueError, match="target_gu"):
-        wenv.fit_roughness(0.0, geometry=60, diffuse=0.5)  # the diffuse floor is above 0
-    with pytest.raises(TypeError, match="roughness"):
-        wenv.fit_roughness(50.0, roughness=0.1)
+        wenv.fit_alpha(0.0, geometry=60, diffuse=0.5)  # the diffuse floor is above 0
+    with pytest.raises(TypeError, match="alpha"):
+        wenv.fit_alpha(50.0, alpha=0.1)
     with pytest.raises(TypeError, match="colour"):
-        wenv.fit_roughness(50.0, colour=0.1)
+        wenv.fit_alpha(50.0, colour=0.1)
 
 
 # ---------------------------------------------------------------- bad arguments
@@ -332,7 +351,7 @@ def test_bad_call_arguments():
     with pytest.raises(ValueError, match="aperture"):
         wenv.haze(mat, aperture=(0.0, 3.6))
     with pytest.raises(ValueError, match="target_gu"):
-        wenv.fit_roughness(float("nan"))
+        wenv.fit_alpha(float("nan"))
     with pytest.raises(ValueError, match="method"):
         wenv.Glossmeter().reading(mat, method="simpson")
 

@@ -18,7 +18,7 @@ SMALL = {**WAVELET_BASE, "global": 32, "local": 16, "normals": 16, "views": 8, "
 
 
 def lobe(m):
-    return wenv.CookTorrance(diffuse=0.0, lobes=[{"specular": 1.0, "roughness": m, "ior": 1.5}])
+    return wenv.CookTorrance(diffuse=0.0, lobes=[{"specular": 1.0, "alpha": m, "ior": 1.5}])
 
 
 def views_at(degrees):

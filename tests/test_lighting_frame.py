@@ -20,7 +20,7 @@ def scene():
     img = np.float32(rng.uniform(0.05, 1.0, (32, 64, 3)))
     img[8:11, 20:24] = 40.0  # a lamp: the exact lights take it
     env = wenv.Environment(img)
-    mat = wenv.CookTorrance(diffuse=0.3, lobes=[{"specular": 0.8, "roughness": 0.2, "ior": 1.5}])
+    mat = wenv.CookTorrance(diffuse=0.3, lobes=[{"specular": 0.8, "alpha": 0.2, "ior": 1.5}])
     n = rng.normal(size=(400, 3))
     n /= np.linalg.norm(n, axis=1, keepdims=True)
     v = rng.normal(size=(400, 3))

@@ -49,7 +49,7 @@ def test_lights_alone_match_the_reference(roughness):
     if roughness is None:
         mat = wenv.Lambert(0.8)
     else:
-        mat = wenv.CookTorrance(diffuse=0.0, lobes=[{"specular": 1, "roughness": roughness, "ior": 1.5}])
+        mat = wenv.CookTorrance(diffuse=0.0, lobes=[{"specular": 1, "alpha": roughness, "ior": 1.5}])
     shader = wenv.Shader(env, mat, quality=QUALITY, method="slicing")
     out, ref = shader.shade(nrm, v), wenv.reference(env, mat, nrm, v)
     assert shader.stats["direct_lights"] == 604
@@ -65,7 +65,7 @@ def test_fewer_lights_leave_the_rest_to_the_wavelets():
     remainder stays in the wavelet lighting: still close, far closer than no lights at all."""
     env = softbox_and_sun()
     nrm, v = random_pairs(800, seed=7)
-    mat = wenv.CookTorrance(diffuse=0.2, lobes=[{"specular": 1, "roughness": 0.2, "ior": 1.5}])
+    mat = wenv.CookTorrance(diffuse=0.2, lobes=[{"specular": 1, "alpha": 0.2, "ior": 1.5}])
     ref = wenv.reference(env, mat, nrm, v)
     err = {}
     for lights in (0, 4, 604):

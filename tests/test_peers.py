@@ -31,8 +31,8 @@ def blob_env(h=32, w=64):
 @pytest.fixture(scope="module")
 def cook():
     return wenv.CookTorrance(diffuse=(0.3, 0.2, 0.1),
-                             lobes=[{"specular": (1, 1, 1), "roughness": 0.3, "ior": 1.5},
-                                    {"specular": (0.5, 0.6, 0.7), "roughness": 0.08, "ior": 2.0}])
+                             lobes=[{"specular": (1, 1, 1), "alpha": 0.3, "ior": 1.5},
+                                    {"specular": (0.5, 0.6, 0.7), "alpha": 0.08, "ior": 2.0}])
 
 
 @pytest.mark.parametrize("method", METHODS)
@@ -52,8 +52,8 @@ def test_white_furnace_matches_albedo(distribution):
     """Under a constant environment both methods give radiance x directional albedo: split-sum's
     prefilter of a constant is that constant and its table is the albedo; SH needs only band 0."""
     env = wenv.Environment(np.full((64, 128, 3), 1.0, np.float32))
-    mat = wenv.CookTorrance(diffuse=0.1, lobes=[dict(roughness=0.2, ior=1.5),
-                                                dict(roughness=0.05, ior=2.0, specular=(0.3, 0.5, 0.7))],
+    mat = wenv.CookTorrance(diffuse=0.1, lobes=[dict(alpha=0.2, ior=1.5),
+                                                dict(alpha=0.05, ior=2.0, specular=(0.3, 0.5, 0.7))],
                             distribution=distribution)
     angles = np.radians([0, 30, 60, 80, 89])
     views = unit(np.stack([np.sin(angles), 0 * angles, np.cos(angles)], axis=1))
@@ -70,7 +70,7 @@ def test_white_furnace_matches_albedo(distribution):
 @pytest.mark.parametrize("roughness", [0.2, 0.5])
 def test_sh_converges_to_reference(roughness):
     env = blob_env()
-    mat = wenv.CookTorrance(diffuse=0.2, lobes=[dict(roughness=roughness, ior=1.5)])
+    mat = wenv.CookTorrance(diffuse=0.2, lobes=[dict(alpha=roughness, ior=1.5)])
     nrm, v = random_pairs(200, 1)
     ref = wenv.reference(env, mat, nrm, v)
     errors = [rel_rmse(wenv.Shader(env, mat, method="sh", quality={"order": order}).shade(nrm, v), ref)
@@ -84,7 +84,7 @@ def test_split_sum_converges_to_its_approximation(roughness):
     """Split-sum converges to the n = v = r approximation, not to the reference: at normal incidence
     (where n = v = r holds) it is close; at grazing views its error stays whatever the quality."""
     env = blob_env()
-    mat = wenv.CookTorrance(diffuse=0.2, lobes=[dict(roughness=roughness, ior=1.5)])
+    mat = wenv.CookTorrance(diffuse=0.2, lobes=[dict(alpha=roughness, ior=1.5)])
     nrm = unit(np.random.default_rng(2).normal(size=(150, 3)))
     ref = wenv.reference(env, mat, nrm, nrm)
     errors = [rel_rmse(wenv.Shader(env, mat, method="split_sum", quality=q).shade(nrm, nrm), ref)
@@ -211,7 +211,7 @@ def test_progress_reports_and_cancels_without_changing_the_shader(method, cook):
     sh2 = wenv.Shader(env, cook, quality="draft", method=method, progress=lambda f: bool(stop))
     stop.append(1)
     with pytest.raises(wenv.CancelledError):
-        sh2.set_material(wenv.CookTorrance(lobes=[dict(roughness=0.5)]))
+        sh2.set_material(wenv.CookTorrance(lobes=[dict(alpha=0.5)]))
     with pytest.raises(wenv.CancelledError):
         sh2.set_environment(wenv.Environment(np.full((8, 16, 3), 3.0, np.float32)))
     assert np.array_equal(sh2.shade(nrm, v), before) and sh2.material is cook and sh2.environment is env

@@ -35,26 +35,54 @@ def albedo(mat, deg, samples=256):
 # ------------------------------------------------------------------ inputs
 
 
+# Sockets that shape the surface rather than its reflectance (the mesh's normals are shaded), and
+# the node's internal closure weight (never shown).
+NOT_INPUTS = {"Normal", "Coat Normal", "Tangent", "Weight"}
+
+
 def test_defaults_are_the_nodes():
-    """Every input's default is the Blender node's (read from bpy), and the node's names map."""
+    """The one list of inputs (wenv.Principled.INPUTS) is the Blender node's: every socket of the
+    node that is not geometry has its row, and every row's default is the node's (read from bpy)
+    and is what wenv.Principled() holds."""
     import bpy
 
-    from cycles_sphere import SOCKETS
     mat = bpy.data.materials.new("defaults")
     if bpy.app.version < (5, 0, 0):  # nodes are always on from 5.0
         mat.use_nodes = True
     node = next(n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled")
     inputs = wenv.Principled().inputs
     assert node.distribution == "MULTI_GGX" and inputs["distribution"] == "multiscatter_ggx"
-    names = {**SOCKETS, "emission_color": "Emission Color", "emission_strength": "Emission Strength",
-             "anisotropic_rotation": "Anisotropic Rotation", "thin_film_thickness": "Thin Film Thickness",
-             "thin_film_ior": "Thin Film IOR"}
-    assert set(names) == set(inputs) - {"distribution"}
-    for name, socket in names.items():
-        want = node.inputs[socket].default_value
+    rows = wenv.Principled.INPUTS
+    sockets = {s.name: s for s in node.inputs if s.name not in NOT_INPUTS}  # (by name: a lookup skips hidden ones)
+    assert sorted(r["socket"] for r in rows) == sorted(sockets)
+    assert [r["name"] for r in rows] + ["distribution"] == list(inputs)
+    for row in rows:
+        want = sockets[row["socket"]].default_value
         want = tuple(want)[:3] if hasattr(want, "__len__") else want
-        assert inputs[name] == pytest.approx(want, abs=1e-6), name
+        assert inputs[row["name"]] == pytest.approx(want, abs=1e-6), row["name"]
+        assert row["default"] == pytest.approx(want, abs=1e-6), row["name"]
+        assert row["size"] == (3 if isinstance(want, tuple) else 1)
+        assert row["shaded"] in ("yes", "partly", "no")
     bpy.data.materials.remove(mat)
+
+
+def test_one_row_per_input_drives_unhonoured_and_its_notes():
+    """What wenv does not shade follows the list: every input it names when set has a note a user
+    reads, every input shaded in part or not at all that can be set so has one, and each name comes
+    with its row's note, in the list's order."""
+    rows = {r["name"]: r for r in wenv.Principled.INPUTS}
+    odd = dict(alpha=0.5, anisotropic=0.5, coat_weight=1.0, coat_tint=(2.0, 1.0, 1.0), subsurface_weight=0.5,
+               transmission_weight=0.5, emission_strength=3.0, thin_film_thickness=500.0)
+    with pytest.warns(UserWarning, match="does not shade"):
+        named = wenv.Principled(**odd).unhonoured
+    assert list(named) == [n for n in rows if n in named]  # the list's order
+    assert set(named) == set(odd) - {"coat_weight"}
+    assert all(rows[n]["note"] and rows[n]["shaded"] != "yes" for n in named)
+    # the partner rules: a coat tint without a coat, emission without colour, are not named
+    assert wenv.Principled(coat_tint=(2.0, 1.0, 1.0)).unhonoured == ()
+    with pytest.warns(UserWarning):
+        assert "emission_strength" in wenv.Principled(emission_strength=1.0).unhonoured
+    assert wenv.Principled(emission_strength=1.0, emission_color=0.0).unhonoured == ()
 
 
 def test_bad_inputs_are_named():
@@ -88,9 +116,9 @@ def test_what_is_not_shaded_is_named():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert wenv.Principled(base_color=(0.5, 0.2, 0.1), coat_weight=1.0).unhonoured == ()
-    with pytest.warns(UserWarning, match="transmission_weight, subsurface_weight, emission_strength, alpha"):
+    with pytest.warns(UserWarning, match="alpha, subsurface_weight, transmission_weight, emission_strength"):
         m = wenv.Principled(transmission_weight=0.5, subsurface_weight=0.2, emission_strength=2.0, alpha=0.5)
-    assert m.unhonoured == ("transmission_weight", "subsurface_weight", "emission_strength", "alpha")
+    assert m.unhonoured == ("alpha", "subsurface_weight", "transmission_weight", "emission_strength")  # the node's order
     with pytest.warns(UserWarning):
         assert wenv.Principled(anisotropic=0.3, thin_film_thickness=300.0).unhonoured == \
             ("anisotropic", "thin_film_thickness")
@@ -244,12 +272,12 @@ MATERIALS = {
 # Cook-Torrance materials with the same GGX lobes (alpha = roughness^2), for what a method's error on
 # lobes of these widths is
 LIKE = {
-    "paint": wenv.CookTorrance(diffuse=(0.57, 0.14, 0.08), lobes=[dict(roughness=0.09, ior=1.5)], distribution="ggx"),
-    "metal": wenv.CookTorrance(lobes=[dict(roughness=0.09, ior=3.0, specular=(1.0, 0.7, 0.4))], distribution="ggx"),
-    "coated": wenv.CookTorrance(diffuse=(0.18, 0.27, 0.55), lobes=[dict(roughness=0.04, ior=1.5),
-                                                                    dict(roughness=0.25, ior=1.5)], distribution="ggx"),
-    "velvet": wenv.CookTorrance(diffuse=(0.25, 0.04, 0.08), lobes=[dict(roughness=0.36, ior=1.5),
-                                                                    dict(roughness=1.0, ior=1.5)], distribution="ggx"),
+    "paint": wenv.CookTorrance(diffuse=(0.57, 0.14, 0.08), lobes=[dict(alpha=0.09, ior=1.5)], distribution="ggx"),
+    "metal": wenv.CookTorrance(lobes=[dict(alpha=0.09, ior=3.0, specular=(1.0, 0.7, 0.4))], distribution="ggx"),
+    "coated": wenv.CookTorrance(diffuse=(0.18, 0.27, 0.55), lobes=[dict(alpha=0.04, ior=1.5),
+                                                                    dict(alpha=0.25, ior=1.5)], distribution="ggx"),
+    "velvet": wenv.CookTorrance(diffuse=(0.25, 0.04, 0.08), lobes=[dict(alpha=0.36, ior=1.5),
+                                                                    dict(alpha=1.0, ior=1.5)], distribution="ggx"),
 }
 
 

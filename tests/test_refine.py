@@ -14,7 +14,7 @@ from test_culling import look_at, sphere
 @pytest.fixture(scope="module")
 def scene():
     env = wenv.Environment(np.float32(np.random.default_rng(4).uniform(0.1, 3.0, (32, 64, 3))))
-    mat = wenv.CookTorrance(diffuse=0.2, lobes=[{"roughness": 0.1, "ior": 1.5}])
+    mat = wenv.CookTorrance(diffuse=0.2, lobes=[{"alpha": 0.1, "ior": 1.5}])
     return env, mat
 
 

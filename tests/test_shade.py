@@ -27,8 +27,8 @@ def gradient_env(h=32, w=64):
 @pytest.fixture(scope="module")
 def cook():
     return wenv.CookTorrance(diffuse=(0.3, 0.2, 0.1),
-                             lobes=[{"specular": (1, 1, 1), "roughness": 0.3, "ior": 1.5},
-                                    {"specular": (0.5, 0.6, 0.7), "roughness": 0.08, "ior": 2.0}])
+                             lobes=[{"specular": (1, 1, 1), "alpha": 0.3, "ior": 1.5},
+                                    {"specular": (0.5, 0.6, 0.7), "alpha": 0.08, "ior": 2.0}])
 
 
 @pytest.mark.parametrize("method", ["rotation", "slicing"])
@@ -340,7 +340,7 @@ def test_a_stop_asked_at_the_last_report_is_honoured(method, cook):
     nrm, v = random_pairs(200, 16)
     before = shader.shade(nrm, v)
     stop_at_end.append(1)
-    new = wenv.CookTorrance(diffuse=0.2, lobes=[{"roughness": 0.4}])
+    new = wenv.CookTorrance(diffuse=0.2, lobes=[{"alpha": 0.4}])
     for _ in range(20):
         seen.clear()
         with pytest.raises(wenv.CancelledError, match="material precomputation cancelled"):
@@ -522,7 +522,7 @@ def test_bad_method_and_reference_arguments(cook):
 @pytest.mark.parametrize("method", ["rotation", "slicing"])
 def test_results_do_not_depend_on_earlier_materials_or_lighting(method, cook):
     """A shader that shaded with other settings before gives what a fresh one gives."""
-    sharp = wenv.CookTorrance(diffuse=(0.1, 0.2, 0.3), lobes=[{"specular": (1, 1, 1), "roughness": 0.05, "ior": 1.6}])
+    sharp = wenv.CookTorrance(diffuse=(0.1, 0.2, 0.3), lobes=[{"specular": (1, 1, 1), "alpha": 0.05, "ior": 1.6}])
     lambert = wenv.Lambert((0.5, 0.4, 0.3))
     env_a, env_b = gradient_env(), gradient_env().with_transform(rotation=1.0, strength=2.0)
     nrm, v = random_pairs(1500, 9)
@@ -553,7 +553,7 @@ def test_sun_is_shaded_as_exact_lights(method):
     env = sun_env()
     nrm, v = random_pairs(1500, seed=3)
     q = dict(SMALL, light_coefficients=0)
-    for mat in (wenv.Lambert(0.8), wenv.CookTorrance(diffuse=0.1, lobes=[{"specular": 1, "roughness": 0.1, "ior": 1.5}])):
+    for mat in (wenv.Lambert(0.8), wenv.CookTorrance(diffuse=0.1, lobes=[{"specular": 1, "alpha": 0.1, "ior": 1.5}])):
         ref = wenv.reference(env, mat, nrm, v)
         lit = wenv.Shader(env, mat, quality=dict(q, lights=16), method=method, cache_dir=False)
         unlit = wenv.Shader(env, mat, quality=dict(q, lights=0), method=method, cache_dir=False)
@@ -580,7 +580,7 @@ def test_messages_show_the_numbers_they_quote():
     cases = [(lambda: wenv.Shader(env, wenv.Lambert(0.5), quality="auto", target_error=2.5), "got 2.5"),
              (lambda: wenv.Shader(env, wenv.Lambert(0.5), memory_budget_mb=-3.0), "got -3"),
              (lambda: wenv.Environment(np.ones((4, 8, 3), np.float32), strength=-1.5), "got -1.5"),
-             (lambda: wenv.CookTorrance(lobes=[{"roughness": -0.5}]), "got -0.5")]
+             (lambda: wenv.CookTorrance(lobes=[{"alpha": -0.5}]), "got -0.5")]
     for make, text in cases:
         with pytest.raises(ValueError) as info:
             make()
@@ -601,7 +601,7 @@ def test_radiance_beyond_float32_shading_is_refused_and_below_it_shades_right():
     sun = sky.copy()
     sun[6:8, 20:22] = 1e17
     env = wenv.Environment(sun)
-    mat = wenv.CookTorrance(diffuse=0.3, lobes=[{"roughness": 0.3}])
+    mat = wenv.CookTorrance(diffuse=0.3, lobes=[{"alpha": 0.3}])
     nrm, v = random_pairs(400, 21)
     out, ref = wenv.Shader(env, mat, quality="draft").shade(nrm, v), wenv.reference(env, mat, nrm, v)
     assert np.all(np.isfinite(out)) and out.max() > 1e13
@@ -615,7 +615,7 @@ def test_a_shader_keeps_the_materials_set_before_it(method, tmp_path):
     shader made for it; a fifth puts out the oldest; a new lighting keeps them, their table rows
     made again for it; one value apart is another material."""
     env, dusk = gradient_env(), wenv.Environment(gradient_env().pixels[:, ::-1].copy())
-    made = [dict(diffuse=0.1 * k, lobes=[{"roughness": 0.2 + 0.1 * k}]) for k in range(5)]
+    made = [dict(diffuse=0.1 * k, lobes=[{"alpha": 0.2 + 0.1 * k}]) for k in range(5)]
     mats = [wenv.CookTorrance(**m) for m in made]
     nrm, v = random_pairs(300, 5)
 
@@ -638,7 +638,7 @@ def test_a_shader_keeps_the_materials_set_before_it(method, tmp_path):
         shader.set_material(mats[k])
         assert np.array_equal(shader.shade(nrm, v), own(dusk, k))
     assert shader.stats["materials_reused"] == 7
-    shader.set_material(wenv.CookTorrance(diffuse=0.3, lobes=[{"roughness": 0.5 + 1e-9}]))
+    shader.set_material(wenv.CookTorrance(diffuse=0.3, lobes=[{"alpha": 0.5 + 1e-9}]))
     assert shader.stats["materials_reused"] == 7 and not np.array_equal(shader.shade(nrm, v), own(dusk, 3))
 
 
@@ -657,14 +657,14 @@ def test_a_new_material_reports_progress_and_a_cancel_keeps_the_old_one(method, 
     shader = wenv.Shader(env, cook, quality="draft", method=method, cache_dir=False, progress=progress)
     nrm, v = random_pairs(300, 14)
     before = shader.shade(nrm, v)
-    many = wenv.CookTorrance(diffuse=0.0, lobes=[dict(specular=0.04, roughness=0.05 + 0.02 * i) for i in range(12)])
+    many = wenv.CookTorrance(diffuse=0.0, lobes=[dict(specular=0.04, alpha=0.05 + 0.02 * i) for i in range(12)])
     seen.clear()
     shader.set_material(many)
     assert len(seen) > 10 and seen == sorted(seen) and seen[-1] > 0.95
     after = shader.shade(nrm, v)
     assert not np.allclose(after, before)
     stop.append(1)
-    new = wenv.CookTorrance(diffuse=0.2, lobes=[{"roughness": 0.4}])
+    new = wenv.CookTorrance(diffuse=0.2, lobes=[{"alpha": 0.4}])
     with pytest.raises(wenv.CancelledError, match="material precomputation cancelled"):
         shader.set_material(new)
     assert shader.material is many and np.array_equal(shader.shade(nrm, v), after)

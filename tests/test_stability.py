@@ -64,7 +64,7 @@ def tilted(nrm, angle_deg, azimuth_deg, helper=(0.31, 0.52, 0.79)):
 def specular(*roughness):
     """Specular-only Cook-Torrance; several lobes share an albedo of at most 1."""
     k = 1.0 / len(roughness)
-    return wenv.CookTorrance(diffuse=0.0, lobes=[dict(specular=(k, k, k), roughness=m, ior=1.5) for m in roughness])
+    return wenv.CookTorrance(diffuse=0.0, lobes=[dict(specular=(k, k, k), alpha=m, ior=1.5) for m in roughness])
 
 
 def rel_rmse(a, b):

@@ -164,7 +164,7 @@ static int lobe_integrand(unsigned ndim, size_t npt, const double *x, void *data
         double sum = 0.0;
         for (size_t k = 0; k < ctx->n_lobes; k++) {
             const active_lobe *L = ctx->lobes + k;
-            double w = L->scale * L->lobe->roughness;
+            double w = L->scale * L->lobe->alpha;
             double ax = far ? 1.0 : fmin(w, 1.0), ay = far ? 1.0 : fmin(w * cos_s, 1.0);
             double jx, jy;
             double X = warp_map(L->warp, p[2], X0, ax, -gm->hd[0], gm->hd[0], &jx);
@@ -283,7 +283,7 @@ static double half_inner(half_ctx *ctx, const double h[3])
 /* Slope density of the lobe (scene/microfacet.h's D written on slopes: D cos(theta_h) d omega_h = P dp dq). */
 static double slope_density(const wenv_lobe *lobe, double p, double q)
 {
-    return wenv_slope_density(lobe->distribution, lobe->roughness, p * p + q * q);
+    return wenv_slope_density(lobe->distribution, lobe->alpha, p * p + q * q);
 }
 
 static int half_integrand(unsigned ndim, size_t npt, const double *x, void *data, unsigned fdim, double *fval)
@@ -297,7 +297,7 @@ static int half_integrand(unsigned ndim, size_t npt, const double *x, void *data
     /* Slope warps centred on the normal: Gaussian of sigma m/sqrt(2) per axis (Beckmann: exactly the
      * slope density), Cauchy of scale m then, given p, Cauchy of scale m sqrt(1 + (p/m)^2) (GGX, as in
      * lobe_warp()); restricted to the cell, which keeps the domain a rectangle for every p. */
-    double a = L->warp == WARP_GAUSS ? lobe->roughness * M_SQRT1_2 : lobe->roughness;
+    double a = L->warp == WARP_GAUSS ? lobe->alpha * M_SQRT1_2 : lobe->alpha;
     for (size_t i = 0; i < npt; i++) {
         double jp, jq;
         double pp = warp_map(L->warp, x[2 * i], 0.0, a, ctx->cell[0], ctx->cell[1], &jp);
@@ -320,7 +320,7 @@ static int half_integrand(unsigned ndim, size_t npt, const double *x, void *data
  * m/sqrt(2) for Beckmann; (1 + x/sqrt(1 + x^2))/2 in x = slope/m for GGX). */
 static double slope_marginal_mass(const active_lobe *L, double a, double b)
 {
-    double m = L->lobe->roughness;
+    double m = L->lobe->alpha;
     if (L->warp == WARP_GAUSS)
         return 0.5 * fabs(erfc(-b / m) - erfc(-a / m)); /* slope / (sigma sqrt 2) = slope / m */
     double xa = a / m, xb = b / m;
@@ -337,7 +337,7 @@ static wenv_status half_vector_flux(const wenv_glossmeter *gm, const active_lobe
 {
     double cuts[2][MAX_KINKS + 2];
     size_t nc[2];
-    double reach = L->warp == WARP_GAUSS ? 12.0 * L->lobe->roughness * M_SQRT1_2 : INFINITY;
+    double reach = L->warp == WARP_GAUSS ? 12.0 * L->lobe->alpha * M_SQRT1_2 : INFINITY;
     for (int axis = 0; axis < 2; axis++) {
         size_t n = 0;
         cuts[axis][n++] = gm->hbox[2 * axis];
@@ -392,7 +392,7 @@ static int lobe_needs_half_vector(const wenv_glossmeter *gm, const active_lobe *
     if (gm->image_far)
         return 0;
     double width[2];
-    width[0] = L->scale * L->lobe->roughness;
+    width[0] = L->scale * L->lobe->alpha;
     width[1] = width[0] * gm->cos_i0;
     for (int k = 0; k < 2; k++) {
         double lo = gm->image_lo[k], hi = gm->image_hi[k];

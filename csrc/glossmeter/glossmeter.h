@@ -154,13 +154,18 @@ wenv_status wenv_glossmeter_haze(const wenv_glossmeter *specular, const wenv_mat
                                  const wenv_gloss_options *opt, wenv_gloss_result *out,
                                  wenv_error *err);
 
-/* Roughness of lobe 0 of `tmpl` (other fields kept) that makes the reading `target` (GU), searched
- * in log m over [m_lo, m_hi] by bracketed Illinois-secant iteration (the reading falls monotonically
- * with m).  WENV_ERR_VALUE naming "target_gu" when the target lies outside the readings at m_hi and
- * m_lo (the message gives both and the smooth-limit value), or if tmpl has no lobe. */
-wenv_status wenv_glossmeter_fit_roughness(const wenv_glossmeter *gm, const wenv_material *tmpl,
-                                          double target, double m_lo, double m_hi,
-                                          const wenv_gloss_options *opt, double *roughness,
-                                          wenv_gloss_result *at_root, wenv_error *err);
+/* What the inverse varies: every lobe's alpha (Cook-Torrance, wenv_material_with_alpha), or Blender's
+ * roughness r (a Principled BSDF's Roughness, wenv_material_with_roughness). */
+typedef enum { WENV_FIT_ALPHA = 0, WENV_FIT_ROUGHNESS = 1 } wenv_fit_param;
+
+/* The value of `param` for `tmpl` (other fields kept) that makes the reading `target` (GU), searched
+ * in its logarithm over [lo, hi] by bracketed Illinois-secant iteration (the reading falls
+ * monotonically as lobes widen).  Brackets: alpha within WENV_ALPHA_MIN..WENV_ALPHA_MAX, roughness
+ * within (0, 1].  WENV_ERR_VALUE naming "target_gu" when the target lies outside the readings at hi
+ * and lo (the message gives both and the smooth-limit value), or if tmpl has no lobe or does not
+ * take the parameter. */
+wenv_status wenv_glossmeter_fit(const wenv_glossmeter *gm, const wenv_material *tmpl, wenv_fit_param param,
+                                double target, double lo, double hi, const wenv_gloss_options *opt,
+                                double *value, wenv_gloss_result *at_root, wenv_error *err);
 
 #endif

@@ -1,5 +1,5 @@
 /* A material's reading: its flux into the receptor (diffuse, smooth limits, lobes) over the
- * standard's, haze, and the roughness that reads a target (glossmeter.h). */
+ * standard's, haze, and the alpha or roughness that reads a target (glossmeter.h). */
 #include "glossmeter/glossmeter_internal.h"
 
 static wenv_status check_options(const wenv_gloss_options *opt, wenv_error *err)
@@ -107,14 +107,17 @@ wenv_status wenv_glossmeter_haze(const wenv_glossmeter *specular, const wenv_mat
     return WENV_OK;
 }
 
-/* ---------------------------------------------------------------- inverse: roughness for a reading */
+/* ---------------------------------------------------------------- inverse: alpha or roughness for a reading */
 
-/* Reading of `tmpl` with every lobe's roughness set to m. */
-static wenv_status reading_at(const wenv_glossmeter *gm, const wenv_material *tmpl, double m,
+static const char *const FIT_NAMES[] = {"alpha", "roughness"};
+
+/* Reading of `tmpl` with its alpha or roughness set to x. */
+static wenv_status reading_at(const wenv_glossmeter *gm, const wenv_material *tmpl, wenv_fit_param param, double x,
                               const wenv_gloss_options *opt, wenv_gloss_result *r, wenv_error *err)
 {
     wenv_material *mat;
-    wenv_status st = wenv_material_with_roughness(&mat, tmpl, m, err);
+    wenv_status st = param == WENV_FIT_ALPHA ? wenv_material_with_alpha(&mat, tmpl, x, err)
+                                             : wenv_material_with_roughness(&mat, tmpl, x, err);
     if (st)
         return st;
     st = wenv_glossmeter_measure(gm, mat, opt, r, err);
@@ -122,22 +125,26 @@ static wenv_status reading_at(const wenv_glossmeter *gm, const wenv_material *tm
     return st;
 }
 
-wenv_status wenv_glossmeter_fit_roughness(const wenv_glossmeter *gm, const wenv_material *tmpl, double target,
-                                          double m_lo, double m_hi, const wenv_gloss_options *opt,
-                                          double *roughness, wenv_gloss_result *at_root, wenv_error *err)
+wenv_status wenv_glossmeter_fit(const wenv_glossmeter *gm, const wenv_material *tmpl, wenv_fit_param param,
+                                double target, double m_lo, double m_hi, const wenv_gloss_options *opt,
+                                double *value, wenv_gloss_result *at_root, wenv_error *err)
 {
     if (!isfinite(target))
         return wenv_error_set(err, WENV_ERR_VALUE, "target_gu must be finite");
-    if (!(m_lo >= WENV_ROUGHNESS_MIN) || !(m_hi > m_lo) || !(m_hi <= WENV_ROUGHNESS_MAX))
-        return wenv_error_set(err, WENV_ERR_VALUE, "bracket must satisfy %g <= lo < hi <= %g, got (%g, %g)",
-                              WENV_ROUGHNESS_MIN, WENV_ROUGHNESS_MAX, m_lo, m_hi);
+    if (param != WENV_FIT_ALPHA && param != WENV_FIT_ROUGHNESS)
+        return wenv_error_set(err, WENV_ERR_VALUE, "param must be alpha or roughness");
+    const char *name = FIT_NAMES[param];
+    double lo_min = param == WENV_FIT_ALPHA ? WENV_ALPHA_MIN : 0.0, hi_max = param == WENV_FIT_ALPHA ? WENV_ALPHA_MAX : 1.0;
+    if (!(m_lo >= lo_min && m_lo > 0.0) || !(m_hi > m_lo) || !(m_hi <= hi_max))
+        return wenv_error_set(err, WENV_ERR_VALUE, "bracket must satisfy %g %s lo < hi <= %g for %s, got (%g, %g)",
+                              lo_min, lo_min > 0.0 ? "<=" : "<", hi_max, name, m_lo, m_hi);
     if (wenv_material_lobe_count(tmpl) < 1)
-        return wenv_error_set(err, WENV_ERR_VALUE, "fit_roughness needs a material with a specular lobe");
+        return wenv_error_set(err, WENV_ERR_VALUE, "fitting %s needs a material with a specular lobe", name);
     wenv_gloss_options o = *opt;
     o.smooth = 0;
     wenv_gloss_result ra, rb, r;
     wenv_status st;
-    if ((st = reading_at(gm, tmpl, m_lo, &o, &ra, err)) || (st = reading_at(gm, tmpl, m_hi, &o, &rb, err)))
+    if ((st = reading_at(gm, tmpl, param, m_lo, &o, &ra, err)) || (st = reading_at(gm, tmpl, param, m_hi, &o, &rb, err)))
         return st;
     if (!(target <= ra.value && target >= rb.value)) {
         wenv_gloss_result smooth;
@@ -148,12 +155,12 @@ wenv_status wenv_glossmeter_fit_roughness(const wenv_glossmeter *gm, const wenv_
             smooth_value = smooth.value;
         if (isnan(smooth_value)) /* a material without a smooth limit (a Principled BSDF, a table) */
             return wenv_error_set(err, WENV_ERR_VALUE,
-                                  "target_gu %g is out of reach at %g degrees: roughness %g..%g reads %.3f..%.3f GU",
-                                  target, gm->cfg.angle, m_lo, m_hi, ra.value, rb.value);
+                                  "target_gu %g is out of reach at %g degrees: %s %g..%g reads %.3f..%.3f GU",
+                                  target, gm->cfg.angle, name, m_lo, m_hi, ra.value, rb.value);
         return wenv_error_set(err, WENV_ERR_VALUE,
-                              "target_gu %g is out of reach at %g degrees: roughness %g..%g reads %.3f..%.3f GU "
+                              "target_gu %g is out of reach at %g degrees: %s %g..%g reads %.3f..%.3f GU "
                               "(smooth-surface limit %.3f GU)",
-                              target, gm->cfg.angle, m_lo, m_hi, ra.value, rb.value, smooth_value);
+                              target, gm->cfg.angle, name, m_lo, m_hi, ra.value, rb.value, smooth_value);
     }
     /* Illinois (modified regula falsi) on x = ln m with g(x) = reading - target decreasing in x.  The
      * bracket [xa, xb] always holds the root, so the search cannot leave [m_lo, m_hi]; it stops when
@@ -174,13 +181,13 @@ wenv_status wenv_glossmeter_fit_roughness(const wenv_glossmeter *gm, const wenv_
             double xn = xb - gb * (xb - xa) / (gb - ga);
             if (!(xn > xa && xn < xb) || it % 8 == 7) /* degenerate step, or slow: bisect */
                 xn = 0.5 * (xa + xb);
-            if ((st = reading_at(gm, tmpl, exp(xn), &o, &r, err)))
+            if ((st = reading_at(gm, tmpl, param, exp(xn), &o, &r, err)))
                 return st;
             double gn = r.value - target;
             x = xn;
             if (fabs(gn) <= half_tol || xb - xa < 1e-9 || it >= 100)
                 break;
-            if (gn > 0.0) { /* reading still too high: the root lies at larger roughness */
+            if (gn > 0.0) { /* reading still too high: the root lies at wider lobes */
                 xa = xn;
                 ga = gn;
                 if (side == -1)
@@ -195,7 +202,7 @@ wenv_status wenv_glossmeter_fit_roughness(const wenv_glossmeter *gm, const wenv_
             }
         }
     }
-    *roughness = exp(x);
+    *value = exp(x);
     if (at_root)
         *at_root = r;
     return WENV_OK;

@@ -1,4 +1,5 @@
-/* Python glue for the virtual glossmeter: wenv.Glossmeter, wenv.gloss, wenv.haze, wenv.fit_roughness.
+/* Python glue for the virtual glossmeter: wenv.Glossmeter, wenv.gloss, wenv.haze, wenv.fit_alpha,
+ * wenv.fit_roughness.
  * The numerics live in glossmeter.c; this file parses arguments, releases the GIL around the
  * integrals and turns results into Python values. */
 #include "python/bind_material.h"
@@ -21,9 +22,10 @@
 #define HAZE_OFFSET 1.9       /* ASTM E430 method B: receptors at 20 -/+ 1.9 = 18.1 and 21.9 degrees */
 #define HAZE_APERTURE_W 0.4   /* assumed haze slit size, in plane x perpendicular (degrees) */
 #define HAZE_APERTURE_H 3.6
-#define FIT_M_LO 1e-4
-#define FIT_M_HI 2.0
-#define FIT_PRINCIPLED_LO 1e-3 /* a Principled Roughness: alpha 1e-6, below the core's floor of 1e-4 alpha anyway */
+#define FIT_ALPHA_LO 1e-4
+#define FIT_ALPHA_HI 2.0
+#define FIT_ROUGHNESS_LO 1e-3 /* Blender's roughness r: alpha 1e-6, below the core's floor of 1e-4 alpha anyway */
+#define FIT_ROUGHNESS_HI 1.0
 
 typedef struct {
     PyObject_HEAD
@@ -201,8 +203,13 @@ static PyObject *pop_kw(PyObject *kw, const char *name)
     return v;
 }
 
-static PyObject *do_fit(const wenv_glossmeter *gm, PyObject *target_obj, PyObject *params)
+static const char *const FIT_CALLERS[] = {"fit_alpha()", "fit_roughness()"};
+
+/* The fit of `param`: of a given material, or (alpha only) of a one-lobe Cook-Torrance made from the
+ * remaining keyword parameters. */
+static PyObject *do_fit(const wenv_glossmeter *gm, wenv_fit_param param, PyObject *target_obj, PyObject *params)
 {
+    const char *caller = FIT_CALLERS[param];
     double target;
     if (wenv_py_get_finite(target_obj, "target_gu", &target) < 0)
         return NULL;
@@ -211,36 +218,41 @@ static PyObject *do_fit(const wenv_glossmeter *gm, PyObject *target_obj, PyObjec
     PyObject *result = NULL;
     wenv_material *tmpl = NULL;
     const wenv_material *mat = NULL;
-    /* a given material (wenv.Principled: its Roughness, Blender's, in [0, 1]) or a one-lobe Cook-Torrance */
-    double bracket[2] = {material_obj ? FIT_PRINCIPLED_LO : FIT_M_LO, material_obj ? 1.0 : FIT_M_HI};
+    double bracket[2] = {param == WENV_FIT_ALPHA ? FIT_ALPHA_LO : FIT_ROUGHNESS_LO,
+                         param == WENV_FIT_ALPHA ? FIT_ALPHA_HI : FIT_ROUGHNESS_HI};
     wenv_gloss_options opt;
     if (get_opt_vec(bracket_obj, "bracket", bracket, 2) < 0 || get_options(tol_obj, evals_obj, NULL, &opt) < 0)
         goto done;
     if (material_obj) {
         if (PyDict_Size(params) > 0) {
-            PyErr_SetString(PyExc_TypeError,
-                            "fit_roughness() takes either material= or the parameters of a Cook-Torrance lobe, not both");
+            PyErr_Format(PyExc_TypeError, "%s takes either material= or the parameters of a Cook-Torrance lobe, not both",
+                         caller);
             goto done;
         }
         mat = wenv_py_material(material_obj, "material");
+    } else if (param == WENV_FIT_ROUGHNESS) {
+        PyErr_SetString(PyExc_TypeError,
+                        "fit_roughness() fits Blender's roughness r of material=... (a wenv.Principled); a Cook-Torrance "
+                        "lobe's parameter is alpha: fit_alpha(target_gu, geometry, **lobe_params)");
+        goto done;
     } else {
-        mat = tmpl = wenv_py_one_lobe_material(params, "fit_roughness()");
+        mat = tmpl = wenv_py_one_lobe_material(params, caller);
     }
     if (!mat)
         goto done;
-    double m = NAN;
+    double value = NAN;
     wenv_gloss_result r = {0};
     wenv_error err = {0};
     wenv_status st;
     WENV_BEGIN_WORK
-    st = wenv_glossmeter_fit_roughness(gm, mat, target, bracket[0], bracket[1], &opt, &m, &r, &err);
+    st = wenv_glossmeter_fit(gm, mat, param, target, bracket[0], bracket[1], &opt, &value, &r, &err);
     WENV_END_WORK
     if (st != WENV_OK)
         wenv_py_raise(&err);
     else if (!r.converged)
         not_converged(&r, &opt);
     else
-        result = PyFloat_FromDouble(m);
+        result = PyFloat_FromDouble(value);
 done:
     Py_XDECREF(bracket_obj);
     Py_XDECREF(tol_obj);
@@ -362,17 +374,27 @@ static PyObject *glossmeter_haze(PyObject *self, PyObject *args, PyObject *kwds)
     return haze_impl(meter_of(self), args, kwds);
 }
 
-static PyObject *glossmeter_fit(PyObject *self, PyObject *args, PyObject *kwds)
+static PyObject *glossmeter_fit(PyObject *self, PyObject *args, PyObject *kwds, wenv_fit_param param)
 {
     PyObject *target;
-    if (!PyArg_ParseTuple(args, "O:fit_roughness", &target))
+    if (!PyArg_ParseTuple(args, param == WENV_FIT_ALPHA ? "O:fit_alpha" : "O:fit_roughness", &target))
         return NULL;
     PyObject *params = kwds ? PyDict_Copy(kwds) : PyDict_New();
     if (!params)
         return NULL;
-    PyObject *r = do_fit(meter_of(self), target, params);
+    PyObject *r = do_fit(meter_of(self), param, target, params);
     Py_DECREF(params);
     return r;
+}
+
+static PyObject *glossmeter_fit_alpha(PyObject *self, PyObject *args, PyObject *kwds)
+{
+    return glossmeter_fit(self, args, kwds, WENV_FIT_ALPHA);
+}
+
+static PyObject *glossmeter_fit_roughness(PyObject *self, PyObject *args, PyObject *kwds)
+{
+    return glossmeter_fit(self, args, kwds, WENV_FIT_ROUGHNESS);
 }
 
 static PyObject *glossmeter_repr(PyObject *self)
@@ -447,11 +469,15 @@ static PyMethodDef glossmeter_methods[] = {
      "Haze (ASTM E430 method B style) in haze units: 100 x the flux into two receptors of size `aperture`\n"
      "whose centres are turned in the plane of incidence by `offsets` (degrees) from the mirror direction,\n"
      "summed, over this glossmeter's standard flux."},
-    {"fit_roughness", (PyCFunction)(void (*)(void))glossmeter_fit, METH_VARARGS | METH_KEYWORDS,
-     "fit_roughness($self, target_gu, /, **material_params)\n--\n\n"
+    {"fit_alpha", (PyCFunction)(void (*)(void))glossmeter_fit_alpha, METH_VARARGS | METH_KEYWORDS,
+     "fit_alpha($self, target_gu, /, **material_params)\n--\n\n"
      "Keyword options: bracket=(1e-4, 2.0), tol=0.05, max_evals=4000000.\n"
-     "Roughness of a one-lobe wenv.CookTorrance(**material_params) that this glossmeter reads as target_gu;\n"
-     "see wenv.fit_roughness."},
+     "The lobes' alpha of a one-lobe wenv.CookTorrance(**material_params), or of material=wenv.CookTorrance(...),\n"
+     "that this glossmeter reads as target_gu; see wenv.fit_alpha."},
+    {"fit_roughness", (PyCFunction)(void (*)(void))glossmeter_fit_roughness, METH_VARARGS | METH_KEYWORDS,
+     "fit_roughness($self, target_gu, /, *, material, bracket=(1e-3, 1.0), tol=0.05, max_evals=4000000)\n--\n\n"
+     "Blender's roughness r of material (a wenv.Principled) that this glossmeter reads as target_gu; see\n"
+     "wenv.fit_roughness."},
     {NULL, NULL, 0, NULL},
 };
 
@@ -569,11 +595,11 @@ static PyObject *module_haze(PyObject *module, PyObject *args, PyObject *kwds)
     return r;
 }
 
-static PyObject *module_fit(PyObject *module, PyObject *args, PyObject *kwds)
+static PyObject *module_fit(PyObject *args, PyObject *kwds, wenv_fit_param param)
 {
-    (void)module;
+    const char *caller = FIT_CALLERS[param];
     PyObject *target, *geometry = NULL;
-    if (!PyArg_ParseTuple(args, "O|O:fit_roughness", &target, &geometry))
+    if (!PyArg_ParseTuple(args, param == WENV_FIT_ALPHA ? "O|O:fit_alpha" : "O|O:fit_roughness", &target, &geometry))
         return NULL;
     PyObject *params = kwds ? PyDict_Copy(kwds) : PyDict_New();
     if (!params)
@@ -582,17 +608,29 @@ static PyObject *module_fit(PyObject *module, PyObject *args, PyObject *kwds)
     PyObject *result = NULL;
     double g = 60.0;
     if (geometry && geom_kw) {
-        PyErr_SetString(PyExc_TypeError, "fit_roughness() got multiple values for argument 'geometry'");
+        PyErr_Format(PyExc_TypeError, "%s got multiple values for argument 'geometry'", caller);
     } else if (!(geometry || geom_kw) || wenv_py_get_finite(geometry ? geometry : geom_kw, "geometry", &g) == 0) {
         wenv_glossmeter *gm = PyErr_Occurred() ? NULL : standard_meter(g);
         if (gm) {
-            result = do_fit(gm, target, params);
+            result = do_fit(gm, param, target, params);
             wenv_glossmeter_free(gm);
         }
     }
     Py_XDECREF(geom_kw);
     Py_DECREF(params);
     return result;
+}
+
+static PyObject *module_fit_alpha(PyObject *module, PyObject *args, PyObject *kwds)
+{
+    (void)module;
+    return module_fit(args, kwds, WENV_FIT_ALPHA);
+}
+
+static PyObject *module_fit_roughness(PyObject *module, PyObject *args, PyObject *kwds)
+{
+    (void)module;
+    return module_fit(args, kwds, WENV_FIT_ROUGHNESS);
 }
 
 static PyMethodDef glossmeter_functions[] = {
@@ -608,17 +646,22 @@ static PyMethodDef glossmeter_functions[] = {
      "18.1 and 21.9 degrees (offsets from the 20 degree mirror direction), summed, as 100 x / the\n"
      "standard's 20 degree flux (haze units).  aperture: each haze receptor's size (in plane,\n"
      "perpendicular), degrees."},
-    {"fit_roughness", (PyCFunction)(void (*)(void))module_fit, METH_VARARGS | METH_KEYWORDS,
-     "fit_roughness(target_gu, geometry=60, /, **material_params)\n--\n\n"
+    {"fit_alpha", (PyCFunction)(void (*)(void))module_fit_alpha, METH_VARARGS | METH_KEYWORDS,
+     "fit_alpha(target_gu, geometry=60, /, **material_params)\n--\n\n"
      "Keyword options: bracket=(1e-4, 2.0), tol=0.05, max_evals=4000000 (geometry may also be a keyword).\n"
-     "material=wenv.Principled(...) instead of material_params fits the node's Roughness (Blender's, in\n"
-     "bracket=(1e-3, 1.0) by default), every other input kept.\n"
-     "Roughness m of wenv.CookTorrance(diffuse=..., lobes=[dict(roughness=m, specular=..., ior=...)],\n"
-     "distribution=..., shadowing=...) (material_params: diffuse, specular, ior, distribution, shadowing;\n"
-     "defaults as in CookTorrance) that reads target_gu at the geometry.  The reading falls monotonically\n"
-     "with m; the root is bracketed in ln m over `bracket` and refined until the reading is within tol/2.\n"
-     "ValueError naming target_gu when it lies outside the readings at the bracket's ends (the message\n"
-     "gives them and the smooth-surface limit)."},
+     "The lobe's alpha (Beckmann's RMS slope m or GGX's alpha) of wenv.CookTorrance(diffuse=...,\n"
+     "lobes=[dict(alpha=..., specular=..., ior=...)], distribution=..., shadowing=...) that reads target_gu\n"
+     "at the geometry (material_params: diffuse, specular, ior, distribution, shadowing; defaults as in\n"
+     "CookTorrance); or material=wenv.CookTorrance(...), every lobe set to the same alpha.  The reading falls\n"
+     "monotonically with alpha; the root is bracketed in ln alpha over `bracket` and refined until the\n"
+     "reading is within tol/2.  ValueError naming target_gu when it lies outside the readings at the\n"
+     "bracket's ends (the message gives them and the smooth-surface limit)."},
+    {"fit_roughness", (PyCFunction)(void (*)(void))module_fit_roughness, METH_VARARGS | METH_KEYWORDS,
+     "fit_roughness(target_gu, geometry=60, /, *, material, bracket=(1e-3, 1.0), tol=0.05, max_evals=4000000)\n"
+     "--\n\n"
+     "Blender's roughness r (the Principled BSDF's Roughness, alpha = r**2) of material=wenv.Principled(...)\n"
+     "that reads target_gu at the geometry, every other input kept; searched as fit_alpha searches.  A\n"
+     "Cook-Torrance lobe's parameter is alpha: fit_alpha."},
     {NULL, NULL, 0, NULL},
 };
 

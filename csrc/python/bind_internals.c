@@ -1,5 +1,6 @@
-/* Private hooks (wenv._name) that let the tests reach the numerical building blocks directly: the
- * octahedral maps, the Haar transform and the spherical harmonics.  Not part of the API. */
+/* Private hooks (wenv._name), every one of them, that let the tests reach the numerical building
+ * blocks directly: the octahedral maps, the Haar transform, the spherical harmonics, the microfacet
+ * lobe's terms and a material's C evaluation paths.  Not part of the API. */
 #include "python/module.h"
 
 #include <omp.h>
@@ -9,6 +10,8 @@
 #include "math/maps.h"
 #include "math/spherical_harmonics.h"
 #include "python/bind_envmap.h"
+#include "python/bind_material.h"
+#include "scene/material.h"
 #include "scene/envmap_octahedral.h"
 
 
@@ -299,6 +302,197 @@ static PyObject *py_work_threads(PyObject *self, PyObject *unused)
     return PyLong_FromLong(threads);
 }
 
+/* ---------------------------------------------------------------- the microfacet lobe's terms */
+
+typedef double (*unary_fn)(double x, const void *ctx);
+
+/* Applies fn to a number (returns float) or to anything numpy turns into a float64 array (returns
+ * an array of the same shape). */
+static PyObject *map_unary(PyObject *obj, const char *name, unary_fn fn, const void *ctx)
+{
+    if (PyFloat_Check(obj) || PyLong_Check(obj)) {
+        double x;
+        if (wenv_py_get_finite(obj, name, &x) < 0)
+            return NULL;
+        return PyFloat_FromDouble(fn(x, ctx));
+    }
+    PyObject *numpy = PyImport_ImportModule("numpy");
+    if (!numpy)
+        return NULL;
+    PyObject *arr = PyObject_CallMethod(numpy, "ascontiguousarray", "Os", obj, "float64");
+    Py_DECREF(numpy);
+    if (!arr)
+        return NULL;
+    Py_buffer in;
+    if (PyObject_GetBuffer(arr, &in, PyBUF_C_CONTIGUOUS | PyBUF_ND) < 0) {
+        Py_DECREF(arr);
+        return NULL;
+    }
+    double *out;
+    PyObject *result = wenv_py_new_array(in.ndim, in.shape ? in.shape : (Py_ssize_t[]){1}, "float64", (void **)&out);
+    if (result) {
+        const double *x = in.buf;
+        size_t count = (size_t)(in.len / (Py_ssize_t)sizeof(double));
+        for (size_t i = 0; i < count; i++) {
+            if (!isfinite(x[i])) {
+                Py_CLEAR(result);
+                PyErr_Format(PyExc_ValueError, "%s must be finite", name);
+                break;
+            }
+            out[i] = fn(x[i], ctx);
+        }
+    }
+    PyBuffer_Release(&in);
+    Py_DECREF(arr);
+    return result;
+}
+
+typedef struct {
+    wenv_distribution dist;
+    double param; /* alpha or ior */
+} unary_ctx;
+
+static double fresnel_fn(double x, const void *ctx) { return wenv_fresnel_dielectric(x, ((const unary_ctx *)ctx)->param); }
+
+static double ndf_fn(double x, const void *ctx)
+{
+    const unary_ctx *c = ctx;
+    return wenv_ndf(c->dist, c->param, x);
+}
+
+static double lambda_fn(double x, const void *ctx)
+{
+    const unary_ctx *c = ctx;
+    return wenv_smith_lambda(c->dist, c->param, x);
+}
+
+static int check_range(double v, const char *name, double lo, int lo_open, double hi)
+{
+    if ((lo_open ? !(v > lo) : !(v >= lo)) || v > hi) {
+        wenv_py_errorf(PyExc_ValueError, "%s must be in %s%g, %g], got %g", name, lo_open ? "(" : "[", lo, hi, v);
+        return -1;
+    }
+    return 0;
+}
+
+static PyObject *py_fresnel(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *x, *ior_obj;
+    unary_ctx c = {WENV_NDF_BECKMANN, 0.0};
+    if (!PyArg_ParseTuple(args, "OO:_fresnel", &x, &ior_obj) || wenv_py_get_finite(ior_obj, "ior", &c.param) < 0 ||
+        check_range(c.param, "ior", 1.0, 1, WENV_IOR_MAX) < 0)
+        return NULL;
+    return map_unary(x, "cos_i", fresnel_fn, &c);
+}
+
+static PyObject *dist_helper(PyObject *args, const char *fmt, const char *xname, unary_fn fn)
+{
+    PyObject *dist_obj, *m_obj, *x;
+    if (!PyArg_ParseTuple(args, fmt, &dist_obj, &m_obj, &x))
+        return NULL;
+    int dist;
+    unary_ctx c;
+    if (wenv_py_parse_choice(dist_obj, "distribution", wenv_py_distribution_names, 2, &dist) < 0 ||
+        wenv_py_get_finite(m_obj, "alpha", &c.param) < 0 ||
+        check_range(c.param, "alpha", WENV_ALPHA_MIN, 0, WENV_ALPHA_MAX) < 0)
+        return NULL;
+    c.dist = (wenv_distribution)dist;
+    return map_unary(x, xname, fn, &c);
+}
+
+static PyObject *py_ndf(PyObject *self, PyObject *args)
+{
+    (void)self;
+    return dist_helper(args, "OOO:_ndf", "cos_h", ndf_fn);
+}
+
+static PyObject *py_smith_lambda(PyObject *self, PyObject *args)
+{
+    (void)self;
+    return dist_helper(args, "OOO:_smith_lambda", "cos_theta", lambda_fn);
+}
+
+static PyObject *py_lobe_albedo(PyObject *self, PyObject *args, PyObject *kwds)
+{
+    (void)self;
+    static char *kwlist[] = {"wo", "alpha", "distribution", "shadowing", "ior", "fresnel", "samples", NULL};
+    PyObject *wo_obj, *m_obj, *dist_obj = NULL, *shadow_obj = NULL, *ior_obj = NULL, *samples_obj = NULL;
+    int fresnel = 0;
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "OO|OOOpO:_lobe_albedo", kwlist, &wo_obj, &m_obj, &dist_obj,
+                                     &shadow_obj, &ior_obj, &fresnel, &samples_obj))
+        return NULL;
+    wenv_lobe lobe = {{1.0, 1.0, 1.0}, 0.0, 1.5, WENV_NDF_BECKMANN};
+    int dist = WENV_NDF_BECKMANN, shadowing = WENV_SHADOW_SMITH;
+    size_t samples;
+    if (wenv_py_get_finite(m_obj, "alpha", &lobe.alpha) < 0 ||
+        (dist_obj && wenv_py_parse_choice(dist_obj, "distribution", wenv_py_distribution_names, 2, &dist) < 0) ||
+        (shadow_obj && wenv_py_parse_choice(shadow_obj, "shadowing", wenv_py_shadowing_names, 2, &shadowing) < 0) ||
+        (ior_obj && wenv_py_get_finite(ior_obj, "ior", &lobe.ior) < 0) || wenv_py_parse_samples(samples_obj, &samples) < 0)
+        return NULL;
+    lobe.distribution = (wenv_distribution)dist;
+    /* Validate the lobe through the core's own rules. */
+    wenv_material *probe;
+    wenv_error err = {0};
+    double zero[3] = {0.0, 0.0, 0.0};
+    if (wenv_cook_torrance_create(&probe, zero, &lobe, 1, (wenv_shadowing)shadowing, &err) != WENV_OK)
+        return wenv_py_raise(&err);
+    wenv_material_free(probe);
+    Py_buffer view;
+    size_t n;
+    if (wenv_py_get_vec3_array(wo_obj, "wo", 1, &view, &n, NULL) < 0)
+        return NULL;
+    if (n != 1) {
+        PyBuffer_Release(&view);
+        PyErr_SetString(PyExc_ValueError, "wo must be a single direction");
+        return NULL;
+    }
+    double *wo = wenv_py_normalised_rows(&view, 1);
+    PyBuffer_Release(&view);
+    if (!wo)
+        return NULL;
+    double albedo = 0.0;
+    wenv_status st;
+    WENV_BEGIN_WORK
+    st = wenv_lobe_albedo(&lobe, (wenv_shadowing)shadowing, wo, samples, fresnel, &albedo, &err);
+    WENV_END_WORK
+    PyMem_Free(wo);
+    if (st != WENV_OK)
+        return wenv_py_raise(&err);
+    return PyFloat_FromDouble(albedo);
+}
+
+/* ---------------------------------------------------------------- a material's C paths */
+
+static PyObject *py_specular(PyObject *self, PyObject *args, PyObject *kwds, wenv_py_eval_mode mode)
+{
+    (void)self;
+    Py_ssize_t n = PyTuple_GET_SIZE(args);
+    if (n < 1) {
+        PyErr_SetString(PyExc_TypeError, "expected (material, wi, wo)");
+        return NULL;
+    }
+    PyObject *rest = PyTuple_GetSlice(args, 1, n);
+    if (!rest)
+        return NULL;
+    PyObject *r = wenv_py_material_eval(PyTuple_GET_ITEM(args, 0), rest, kwds, mode);
+    Py_DECREF(rest);
+    return r;
+}
+
+static PyObject *py_specular_double(PyObject *self, PyObject *args, PyObject *kwds)
+{
+    return py_specular(self, args, kwds, WENV_PY_EVAL_SPECULAR);
+}
+static PyObject *py_specular_batch(PyObject *self, PyObject *args, PyObject *kwds)
+{
+    return py_specular(self, args, kwds, WENV_PY_EVAL_SPECULAR_BATCH);
+}
+static PyObject *py_specular_float(PyObject *self, PyObject *args, PyObject *kwds)
+{
+    return py_specular(self, args, kwds, WENV_PY_EVAL_SPECULAR_FLOAT);
+}
+
 static PyMethodDef internal_functions[] = {
     {"_work_threads", py_work_threads, METH_NOARGS, NULL},
     {"_oct_encode", py_oct_encode, METH_VARARGS, NULL},
@@ -311,6 +505,19 @@ static PyMethodDef internal_functions[] = {
     {"_haar2d", (PyCFunction)(void (*)(void))py_haar2d, METH_VARARGS | METH_KEYWORDS, NULL},
     {"_sh_basis", py_sh_basis, METH_VARARGS, NULL},
     {"_sh_rotate", py_sh_rotate, METH_VARARGS, NULL},
+    {"_fresnel", py_fresnel, METH_VARARGS, "_fresnel(cos_i, ior)\n--\n\nUnpolarised dielectric Fresnel."},
+    {"_ndf", py_ndf, METH_VARARGS, "_ndf(distribution, alpha, cos_h)\n--\n\nMicrofacet distribution D."},
+    {"_smith_lambda", py_smith_lambda, METH_VARARGS, "_smith_lambda(distribution, alpha, cos_theta)\n--\n\nSmith Lambda."},
+    {"_lobe_albedo", (PyCFunction)(void (*)(void))py_lobe_albedo, METH_VARARGS | METH_KEYWORDS,
+     "_lobe_albedo(wo, alpha, distribution='beckmann', shadowing='smith', ior=1.5, fresnel=False, "
+     "samples=128)\n--\n\nAlbedo of one white lobe; fresnel=False sets F = 1 (white-furnace test)."},
+    {"_specular", (PyCFunction)(void (*)(void))py_specular_double, METH_VARARGS | METH_KEYWORDS,
+     "_specular(material, wi, wo)\n--\n\nThe lobes only, times cos_i, through the double evaluation."},
+    {"_specular_batch", (PyCFunction)(void (*)(void))py_specular_batch, METH_VARARGS | METH_KEYWORDS,
+     "_specular_batch(material, wi, wo)\n--\n\nAs _specular through the one-view batch; wo must be single."},
+    {"_specular_float", (PyCFunction)(void (*)(void))py_specular_float, METH_VARARGS | METH_KEYWORDS,
+     "_specular_float(material, wi, wo)\n--\n\nAs _specular through the float path the exact lights use "
+     "(0 if the model's view terms do not fit)."},
     {NULL, NULL, 0, NULL},
 };
 

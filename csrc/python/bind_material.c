@@ -22,13 +22,13 @@ static PyTypeObject TabulatedType;
 #define WENV_STR_(x) #x
 #define WENV_STR(x) WENV_STR_(x)
 
-static const char *const distribution_names[] = {"beckmann", "ggx"};
-static const char *const shadowing_names[] = {"smith", "vcavity"};
+const char *const wenv_py_distribution_names[2] = {"beckmann", "ggx"};
+const char *const wenv_py_shadowing_names[2] = {"smith", "vcavity"};
 
 /* ---------------------------------------------------------------- small helpers */
 
 /* Reads one of `names` (exact, lower case) from a str; TypeError / ValueError naming `name`. */
-static int parse_choice(PyObject *obj, const char *name, const char *const *names, int count, int *out)
+int wenv_py_parse_choice(PyObject *obj, const char *name, const char *const *names, int count, int *out)
 {
     if (!PyUnicode_Check(obj)) {
         PyErr_Format(PyExc_TypeError, "%s must be a str, got %.100s", name, Py_TYPE(obj)->tp_name);
@@ -60,7 +60,7 @@ static PyObject *new_double_array(int ndim, const Py_ssize_t *shape, double **da
 /* Copies a float32 (n, 3) buffer to doubles, normalising each row (rows are nonzero: checked).  Rows
  * already unit to float precision are kept as they are, so every C path (scalar or the float batch)
  * sees bit-identical directions. */
-static double *normalised_rows(const Py_buffer *view, size_t n)
+double *wenv_py_normalised_rows(const Py_buffer *view, size_t n)
 {
     double *out = PyMem_Malloc(n * 3 * sizeof *out + 1);
     if (!out) {
@@ -114,9 +114,7 @@ static PyObject *wrap_material(PyTypeObject *type, wenv_material *mat, wenv_dist
 /* Room for a model's per-view float terms in _specular_float (the exact lights allow 32). */
 #define WENV_PY_VIEW_TERMS_MAX 32
 
-typedef enum { EVAL_FULL, EVAL_SPECULAR, EVAL_SPECULAR_BATCH, EVAL_SPECULAR_FLOAT } eval_mode;
-
-static PyObject *material_eval_impl(PyObject *self, PyObject *args, PyObject *kwds, eval_mode mode)
+PyObject *wenv_py_material_eval(PyObject *self, PyObject *args, PyObject *kwds, wenv_py_eval_mode mode)
 {
     static char *kwlist[] = {"wi", "wo", NULL};
     PyObject *wi_obj, *wo_obj;
@@ -137,7 +135,7 @@ static PyObject *material_eval_impl(PyObject *self, PyObject *args, PyObject *kw
     PyObject *result = NULL;
     double *wi = NULL, *wo = NULL;
     float *fwi = NULL;
-    if (mode == EVAL_SPECULAR_BATCH && no != 1) {
+    if (mode == WENV_PY_EVAL_SPECULAR_BATCH && no != 1) {
         PyErr_SetString(PyExc_ValueError, "wo must be a single direction for the batch path");
         goto done;
     }
@@ -150,8 +148,8 @@ static PyObject *material_eval_impl(PyObject *self, PyObject *args, PyObject *kw
     size_t n = ni > no ? ni : no;
     if (ni == 0 || no == 0)
         n = 0;
-    wi = normalised_rows(&wi_view, ni);
-    wo = normalised_rows(&wo_view, no);
+    wi = wenv_py_normalised_rows(&wi_view, ni);
+    wo = wenv_py_normalised_rows(&wo_view, no);
     if (!wi || !wo)
         goto done;
     float *out;
@@ -160,7 +158,7 @@ static PyObject *material_eval_impl(PyObject *self, PyObject *args, PyObject *kw
     result = single ? wenv_py_new_float_array(1, shape + 1, &out) : wenv_py_new_float_array(2, shape, &out);
     if (!result)
         goto done;
-    if (mode == EVAL_SPECULAR_BATCH) {
+    if (mode == WENV_PY_EVAL_SPECULAR_BATCH) {
         fwi = PyMem_Malloc(ni * 3 * sizeof *fwi + 1);
         if (!fwi) {
             Py_CLEAR(result);
@@ -181,7 +179,7 @@ static PyObject *material_eval_impl(PyObject *self, PyObject *args, PyObject *kw
     for (ptrdiff_t k = 0; k < count; k++) {
         double rgb[3];
         const double *a = wi + (size_t)k * si, *b = wo + (size_t)k * so;
-        if (mode == EVAL_SPECULAR_FLOAT) {
+        if (mode == WENV_PY_EVAL_SPECULAR_FLOAT) {
             float af[3] = {(float)a[0], (float)a[1], (float)a[2]}, bf[3] = {(float)b[0], (float)b[1], (float)b[2]};
             float terms[WENV_PY_VIEW_TERMS_MAX], rgbf[3] = {0.0f, 0.0f, 0.0f};
             if (wenv_material_view_terms(mat) <= WENV_PY_VIEW_TERMS_MAX) {
@@ -194,7 +192,7 @@ static PyObject *material_eval_impl(PyObject *self, PyObject *args, PyObject *kw
             out[3 * k + 2] = rgbf[2];
             continue;
         }
-        if (mode == EVAL_FULL)
+        if (mode == WENV_PY_EVAL_FULL)
             wenv_material_eval_cos(mat, a, b, rgb);
         else
             wenv_material_specular_cos(mat, a, b, rgb);
@@ -214,25 +212,10 @@ done:
 
 static PyObject *material_eval(PyObject *self, PyObject *args, PyObject *kwds)
 {
-    return material_eval_impl(self, args, kwds, EVAL_FULL);
+    return wenv_py_material_eval(self, args, kwds, WENV_PY_EVAL_FULL);
 }
 
-static PyObject *material_specular(PyObject *self, PyObject *args, PyObject *kwds)
-{
-    return material_eval_impl(self, args, kwds, EVAL_SPECULAR);
-}
-
-static PyObject *material_specular_batch(PyObject *self, PyObject *args, PyObject *kwds)
-{
-    return material_eval_impl(self, args, kwds, EVAL_SPECULAR_BATCH);
-}
-
-static PyObject *material_specular_float(PyObject *self, PyObject *args, PyObject *kwds)
-{
-    return material_eval_impl(self, args, kwds, EVAL_SPECULAR_FLOAT);
-}
-
-static int parse_samples(PyObject *obj, size_t *out)
+int wenv_py_parse_samples(PyObject *obj, size_t *out)
 {
     if (!obj) {
         *out = ALBEDO_DEFAULT_SAMPLES;
@@ -262,7 +245,7 @@ static PyObject *material_albedo(PyObject *self, PyObject *args, PyObject *kwds)
         return NULL;
     const wenv_material *mat = wenv_py_material(self, "self");
     size_t samples;
-    if (!mat || parse_samples(samples_obj, &samples) < 0)
+    if (!mat || wenv_py_parse_samples(samples_obj, &samples) < 0)
         return NULL;
     Py_buffer view;
     size_t n;
@@ -270,7 +253,7 @@ static PyObject *material_albedo(PyObject *self, PyObject *args, PyObject *kwds)
     if (wenv_py_get_vec3_array(wo_obj, "wo", 1, &view, &n, &single) < 0)
         return NULL;
     PyObject *result = NULL;
-    double *wo = normalised_rows(&view, n);
+    double *wo = wenv_py_normalised_rows(&view, n);
     if (!wo)
         goto done;
     double *out;
@@ -316,7 +299,7 @@ static PyObject *material_richcompare(PyObject *a, PyObject *b, int op)
                 memcmp(wenv_material_diffuse(x->mat), wenv_material_diffuse(y->mat), 3 * sizeof(double)) == 0;
     for (size_t i = 0; equal && i < wenv_material_lobe_count(x->mat); i++) {
         const wenv_lobe *p = wenv_material_lobe(x->mat, i), *q = wenv_material_lobe(y->mat, i);
-        equal = p->roughness == q->roughness && p->ior == q->ior && p->distribution == q->distribution &&
+        equal = p->alpha == q->alpha && p->ior == q->ior && p->distribution == q->distribution &&
                 p->specular[0] == q->specular[0] && p->specular[1] == q->specular[1] &&
                 p->specular[2] == q->specular[2];
     }
@@ -346,13 +329,6 @@ static PyMethodDef material_methods[] = {
      "albedo(wo, samples=128)\n--\n\nDirectional albedo, integral of f(wi, wo) cos_i over wi, as float64 RGB "
      "for view(s) wo (float32 (n, 3) or (3,)).  Deterministic quadrature following the microfacet "
      "distribution (samples x 2*samples nodes per lobe, samples in [8, 4096]); the diffuse part is exact."},
-    {"_specular", (PyCFunction)(void (*)(void))material_specular, METH_VARARGS | METH_KEYWORDS,
-     "_specular(wi, wo)\n--\n\nSpecular lobes only, times cos_i (scalar C path; for tests)."},
-    {"_specular_batch", (PyCFunction)(void (*)(void))material_specular_batch, METH_VARARGS | METH_KEYWORDS,
-     "_specular_batch(wi, wo)\n--\n\nAs _specular through the one-view batch C path; wo must be single."},
-    {"_specular_float", (PyCFunction)(void (*)(void))material_specular_float, METH_VARARGS | METH_KEYWORDS,
-     "_specular_float(wi, wo)\n--\n\nAs _specular through the float path the exact lights use (0 if the "
-     "model's view terms do not fit; for tests)."},
     {NULL, NULL, 0, NULL},
 };
 
@@ -447,7 +423,7 @@ static PyTypeObject LambertType = {
 
 /* ---------------------------------------------------------------- wenv.CookTorrance */
 
-static const char *const lobe_keys[] = {"specular", "roughness", "ior", "distribution"};
+static const char *const lobe_keys[] = {"specular", "alpha", "ior", "distribution"};
 #define N_LOBE_KEYS 4
 #define LOBE_DEFAULT_IOR 1.5
 
@@ -468,9 +444,16 @@ static int parse_lobe(PyObject *d, Py_ssize_t index, wenv_distribution dist, wen
             return -1;
         for (int i = 0; k && i < N_LOBE_KEYS; i++)
             known |= strcmp(k, lobe_keys[i]) == 0;
+        if (k && strcmp(k, "roughness") == 0) { /* the key until the lobe's parameter took its own name */
+            PyErr_Format(PyExc_ValueError,
+                         "lobes[%zd]: a lobe takes 'alpha' (Beckmann's RMS slope or GGX's alpha), not 'roughness', "
+                         "which is Blender's roughness r (alpha = r**2: wenv.alpha_from_roughness(r))",
+                         index);
+            return -1;
+        }
         if (!known) {
             PyErr_Format(PyExc_ValueError,
-                         "lobes[%zd] has unknown key %R (known: 'specular', 'roughness', 'ior', 'distribution')",
+                         "lobes[%zd] has unknown key %R (known: 'specular', 'alpha', 'ior', 'distribution')",
                          index, key);
             return -1;
         }
@@ -482,12 +465,12 @@ static int parse_lobe(PyObject *d, Py_ssize_t index, wenv_distribution dist, wen
     if ((v = PyDict_GetItemString(d, "specular")) && wenv_py_get_rgb(v, name, lobe->specular) < 0)
         return -1;
 
-    snprintf(name, sizeof name, "lobes[%zd].roughness", index);
-    if (!(v = PyDict_GetItemString(d, "roughness"))) {
+    snprintf(name, sizeof name, "lobes[%zd].alpha", index);
+    if (!(v = PyDict_GetItemString(d, "alpha"))) {
         PyErr_Format(PyExc_ValueError, "%s is required", name);
         return -1;
     }
-    if (wenv_py_get_finite(v, name, &lobe->roughness) < 0)
+    if (wenv_py_get_finite(v, name, &lobe->alpha) < 0)
         return -1;
 
     snprintf(name, sizeof name, "lobes[%zd].ior", index);
@@ -497,7 +480,7 @@ static int parse_lobe(PyObject *d, Py_ssize_t index, wenv_distribution dist, wen
 
     snprintf(name, sizeof name, "lobes[%zd].distribution", index);
     int choice = (int)dist;
-    if ((v = PyDict_GetItemString(d, "distribution")) && parse_choice(v, name, distribution_names, 2, &choice) < 0)
+    if ((v = PyDict_GetItemString(d, "distribution")) && wenv_py_parse_choice(v, name, wenv_py_distribution_names, 2, &choice) < 0)
         return -1;
     lobe->distribution = (wenv_distribution)choice;
     return 0;
@@ -515,8 +498,8 @@ wenv_material *wenv_py_one_lobe_material(PyObject *params, const char *caller)
             PyErr_Format(PyExc_TypeError, "%s keyword names must be strings", caller);
             return NULL;
         }
-        if (strcmp(k, "roughness") == 0) {
-            PyErr_Format(PyExc_TypeError, "%s solves for roughness: do not pass it", caller);
+        if (strcmp(k, "alpha") == 0 || strcmp(k, "roughness") == 0) {
+            PyErr_Format(PyExc_TypeError, "%s solves for the lobe's alpha: do not pass %s", caller, k);
             return NULL;
         }
         int known = 0;
@@ -536,12 +519,12 @@ wenv_material *wenv_py_one_lobe_material(PyObject *params, const char *caller)
     if (params && (v = PyDict_GetItemString(params, "diffuse")) && wenv_py_get_rgb(v, "diffuse", diffuse) < 0)
         return NULL;
     if (params && (v = PyDict_GetItemString(params, "distribution")) &&
-        parse_choice(v, "distribution", distribution_names, 2, &dist) < 0)
+        wenv_py_parse_choice(v, "distribution", wenv_py_distribution_names, 2, &dist) < 0)
         return NULL;
     if (params && (v = PyDict_GetItemString(params, "shadowing")) &&
-        parse_choice(v, "shadowing", shadowing_names, 2, &shadowing) < 0)
+        wenv_py_parse_choice(v, "shadowing", wenv_py_shadowing_names, 2, &shadowing) < 0)
         return NULL;
-    wenv_lobe lobe = {.specular = {1.0, 1.0, 1.0}, .roughness = 0.1, .ior = LOBE_DEFAULT_IOR,
+    wenv_lobe lobe = {.specular = {1.0, 1.0, 1.0}, .alpha = 0.1, .ior = LOBE_DEFAULT_IOR,
                       .distribution = (wenv_distribution)dist};
     if (params && (v = PyDict_GetItemString(params, "specular")) && wenv_py_get_rgb(v, "specular", lobe.specular) < 0)
         return NULL;
@@ -567,9 +550,9 @@ static PyObject *cook_torrance_new(PyTypeObject *type, PyObject *args, PyObject 
     if (diffuse_obj && wenv_py_get_rgb(diffuse_obj, "diffuse", diffuse) < 0)
         return NULL;
     int dist = WENV_NDF_BECKMANN, shadowing = WENV_SHADOW_SMITH;
-    if (dist_obj && parse_choice(dist_obj, "distribution", distribution_names, 2, &dist) < 0)
+    if (dist_obj && wenv_py_parse_choice(dist_obj, "distribution", wenv_py_distribution_names, 2, &dist) < 0)
         return NULL;
-    if (shadow_obj && parse_choice(shadow_obj, "shadowing", shadowing_names, 2, &shadowing) < 0)
+    if (shadow_obj && wenv_py_parse_choice(shadow_obj, "shadowing", wenv_py_shadowing_names, 2, &shadowing) < 0)
         return NULL;
 
     PyObject *seq = NULL;
@@ -629,8 +612,8 @@ static PyObject *ct_lobes(PyObject *self, void *closure)
     for (size_t i = 0; i < wenv_material_lobe_count(mat); i++) {
         const wenv_lobe *l = wenv_material_lobe(mat, i);
         PyObject *d = Py_BuildValue("{s:(ddd),s:d,s:d,s:s}", "specular", l->specular[0], l->specular[1],
-                                    l->specular[2], "roughness", l->roughness, "ior", l->ior, "distribution",
-                                    distribution_names[l->distribution]);
+                                    l->specular[2], "alpha", l->alpha, "ior", l->ior, "distribution",
+                                    wenv_py_distribution_names[l->distribution]);
         if (!d) {
             Py_DECREF(list);
             return NULL;
@@ -643,13 +626,13 @@ static PyObject *ct_lobes(PyObject *self, void *closure)
 static PyObject *ct_distribution(PyObject *self, void *closure)
 {
     (void)closure;
-    return PyUnicode_FromString(distribution_names[((MaterialObject *)self)->distribution]);
+    return PyUnicode_FromString(wenv_py_distribution_names[((MaterialObject *)self)->distribution]);
 }
 
 static PyObject *ct_shadowing(PyObject *self, void *closure)
 {
     (void)closure;
-    return PyUnicode_FromString(shadowing_names[wenv_material_shadowing(((MaterialObject *)self)->mat)]);
+    return PyUnicode_FromString(wenv_py_shadowing_names[wenv_material_shadowing(((MaterialObject *)self)->mat)]);
 }
 
 /* (diffuse, lobes, distribution, shadowing): the constructor's arguments, for repr and pickling. */
@@ -680,23 +663,32 @@ static PyObject *ct_reduce(PyObject *self, PyObject *unused)
     return Py_BuildValue("(ON)", (PyObject *)Py_TYPE(self), a);
 }
 
-static PyObject *ct_with_roughness(PyObject *self, PyObject *arg)
+static PyObject *ct_with_alpha(PyObject *self, PyObject *arg)
 {
-    double m;
-    if (wenv_py_get_finite(arg, "roughness", &m) < 0)
+    double alpha;
+    if (wenv_py_get_finite(arg, "alpha", &alpha) < 0)
         return NULL;
     const MaterialObject *obj = (const MaterialObject *)self;
     wenv_material *mat;
     wenv_error err = {0};
-    if (wenv_material_with_roughness(&mat, obj->mat, m, &err) != WENV_OK)
+    if (wenv_material_with_alpha(&mat, obj->mat, alpha, &err) != WENV_OK)
         return wenv_py_raise(&err);
     return wrap_material(Py_TYPE(self), mat, obj->distribution);
+}
+
+/* The method's old name, which took alpha: an error that names the new one, never a silent change. */
+static PyObject *ct_with_roughness(PyObject *self, PyObject *arg)
+{
+    (void)self, (void)arg;
+    PyErr_SetString(PyExc_TypeError, "CookTorrance.with_roughness() is now with_alpha(alpha): a lobe's parameter is "
+                                     "alpha; for Blender's roughness r, with_alpha(wenv.alpha_from_roughness(r))");
+    return NULL;
 }
 
 static PyGetSetDef ct_getset[] = {
     {"diffuse", ct_diffuse, NULL, "Lambertian albedo (r, g, b).", NULL},
     {"lobes", ct_lobes, NULL,
-     "Specular lobes: a new list of dicts with every key filled in (specular, roughness, ior, distribution).", NULL},
+     "Specular lobes: a new list of dicts with every key filled in (specular, alpha, ior, distribution).", NULL},
     {"distribution", ct_distribution, NULL, "Default microfacet distribution of the lobes: 'beckmann' or 'ggx'.",
      NULL},
     {"shadowing", ct_shadowing, NULL, "Shadowing-masking term: 'smith' (height-correlated) or 'vcavity'.", NULL},
@@ -705,8 +697,10 @@ static PyGetSetDef ct_getset[] = {
 
 static PyMethodDef ct_methods[] = {
     {"__reduce__", ct_reduce, METH_NOARGS, NULL},
+    {"with_alpha", ct_with_alpha, METH_O,
+     "with_alpha(alpha)\n--\n\nA new CookTorrance equal to this one with every lobe's alpha set to alpha."},
     {"with_roughness", ct_with_roughness, METH_O,
-     "with_roughness(m)\n--\n\nA new CookTorrance equal to this one with every lobe's roughness set to m."},
+     "with_roughness(r)\n--\n\nRenamed: with_alpha(alpha) (a TypeError that says so)."},
     {NULL, NULL, 0, NULL},
 };
 
@@ -718,8 +712,9 @@ static PyTypeObject CookTorranceType = {
     .tp_doc =
         "CookTorrance(diffuse=0.0, lobes=(), distribution='beckmann', shadowing='smith')\n--\n\n"
         "Lambertian diffuse plus specular microfacet lobes, f = diffuse/pi + sum specular F D G / (4 cos_i cos_o).\n"
-        "diffuse: grey or (r, g, b) in [0, 1].  lobes: list of dicts with keys 'roughness' (required, "
-        "in [" WENV_STR(WENV_ROUGHNESS_MIN) ", " WENV_STR(WENV_ROUGHNESS_MAX) "]: Beckmann RMS slope or GGX alpha), 'specular' (grey or RGB >= 0, default 1), "
+        "diffuse: grey or (r, g, b) in [0, 1].  lobes: list of dicts with keys 'alpha' (required, "
+        "in [" WENV_STR(WENV_ALPHA_MIN) ", " WENV_STR(WENV_ALPHA_MAX) "]: Beckmann RMS slope or GGX alpha; Blender's "
+        "roughness r gives alpha = r**2, wenv.alpha_from_roughness), 'specular' (grey or RGB >= 0, default 1), "
         "'ior' (in (1, 10], default 1.5) and 'distribution' (default: the material's).  distribution: "
         "'beckmann' or 'ggx'.  shadowing: 'smith' (exact Lambda, height-correlated) or 'vcavity'.  Immutable.",
     .tp_base = &MaterialType,
@@ -916,166 +911,6 @@ static PyObject *py_load_brdf(PyObject *self, PyObject *arg)
     return result;
 }
 
-/* ---------------------------------------------------------------- private test helpers */
-
-typedef double (*unary_fn)(double x, const void *ctx);
-
-/* Applies fn to a number (returns float) or to anything numpy turns into a float64 array (returns
- * an array of the same shape). */
-static PyObject *map_unary(PyObject *obj, const char *name, unary_fn fn, const void *ctx)
-{
-    if (PyFloat_Check(obj) || PyLong_Check(obj)) {
-        double x;
-        if (wenv_py_get_finite(obj, name, &x) < 0)
-            return NULL;
-        return PyFloat_FromDouble(fn(x, ctx));
-    }
-    PyObject *numpy = PyImport_ImportModule("numpy");
-    if (!numpy)
-        return NULL;
-    PyObject *arr = PyObject_CallMethod(numpy, "ascontiguousarray", "Os", obj, "float64");
-    Py_DECREF(numpy);
-    if (!arr)
-        return NULL;
-    Py_buffer in;
-    if (PyObject_GetBuffer(arr, &in, PyBUF_C_CONTIGUOUS | PyBUF_ND) < 0) {
-        Py_DECREF(arr);
-        return NULL;
-    }
-    double *out;
-    PyObject *result = new_double_array(in.ndim, in.shape ? in.shape : (Py_ssize_t[]){1}, &out);
-    if (result) {
-        const double *x = in.buf;
-        size_t count = (size_t)(in.len / (Py_ssize_t)sizeof(double));
-        for (size_t i = 0; i < count; i++) {
-            if (!isfinite(x[i])) {
-                Py_CLEAR(result);
-                PyErr_Format(PyExc_ValueError, "%s must be finite", name);
-                break;
-            }
-            out[i] = fn(x[i], ctx);
-        }
-    }
-    PyBuffer_Release(&in);
-    Py_DECREF(arr);
-    return result;
-}
-
-typedef struct {
-    wenv_distribution dist;
-    double param; /* roughness or ior */
-} unary_ctx;
-
-static double fresnel_fn(double x, const void *ctx) { return wenv_fresnel_dielectric(x, ((const unary_ctx *)ctx)->param); }
-
-static double ndf_fn(double x, const void *ctx)
-{
-    const unary_ctx *c = ctx;
-    return wenv_ndf(c->dist, c->param, x);
-}
-
-static double lambda_fn(double x, const void *ctx)
-{
-    const unary_ctx *c = ctx;
-    return wenv_smith_lambda(c->dist, c->param, x);
-}
-
-static int check_range(double v, const char *name, double lo, int lo_open, double hi)
-{
-    if ((lo_open ? !(v > lo) : !(v >= lo)) || v > hi) {
-        wenv_py_errorf(PyExc_ValueError, "%s must be in %s%g, %g], got %g", name, lo_open ? "(" : "[", lo, hi, v);
-        return -1;
-    }
-    return 0;
-}
-
-static PyObject *py_fresnel(PyObject *self, PyObject *args)
-{
-    (void)self;
-    PyObject *x, *ior_obj;
-    unary_ctx c = {WENV_NDF_BECKMANN, 0.0};
-    if (!PyArg_ParseTuple(args, "OO:_fresnel", &x, &ior_obj) || wenv_py_get_finite(ior_obj, "ior", &c.param) < 0 ||
-        check_range(c.param, "ior", 1.0, 1, WENV_IOR_MAX) < 0)
-        return NULL;
-    return map_unary(x, "cos_i", fresnel_fn, &c);
-}
-
-static PyObject *dist_helper(PyObject *args, const char *fmt, const char *xname, unary_fn fn)
-{
-    PyObject *dist_obj, *m_obj, *x;
-    if (!PyArg_ParseTuple(args, fmt, &dist_obj, &m_obj, &x))
-        return NULL;
-    int dist;
-    unary_ctx c;
-    if (parse_choice(dist_obj, "distribution", distribution_names, 2, &dist) < 0 ||
-        wenv_py_get_finite(m_obj, "roughness", &c.param) < 0 ||
-        check_range(c.param, "roughness", WENV_ROUGHNESS_MIN, 0, WENV_ROUGHNESS_MAX) < 0)
-        return NULL;
-    c.dist = (wenv_distribution)dist;
-    return map_unary(x, xname, fn, &c);
-}
-
-static PyObject *py_ndf(PyObject *self, PyObject *args)
-{
-    (void)self;
-    return dist_helper(args, "OOO:_ndf", "cos_h", ndf_fn);
-}
-
-static PyObject *py_smith_lambda(PyObject *self, PyObject *args)
-{
-    (void)self;
-    return dist_helper(args, "OOO:_smith_lambda", "cos_theta", lambda_fn);
-}
-
-static PyObject *py_lobe_albedo(PyObject *self, PyObject *args, PyObject *kwds)
-{
-    (void)self;
-    static char *kwlist[] = {"wo", "roughness", "distribution", "shadowing", "ior", "fresnel", "samples", NULL};
-    PyObject *wo_obj, *m_obj, *dist_obj = NULL, *shadow_obj = NULL, *ior_obj = NULL, *samples_obj = NULL;
-    int fresnel = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwds, "OO|OOOpO:_lobe_albedo", kwlist, &wo_obj, &m_obj, &dist_obj,
-                                     &shadow_obj, &ior_obj, &fresnel, &samples_obj))
-        return NULL;
-    wenv_lobe lobe = {{1.0, 1.0, 1.0}, 0.0, 1.5, WENV_NDF_BECKMANN};
-    int dist = WENV_NDF_BECKMANN, shadowing = WENV_SHADOW_SMITH;
-    size_t samples;
-    if (wenv_py_get_finite(m_obj, "roughness", &lobe.roughness) < 0 ||
-        (dist_obj && parse_choice(dist_obj, "distribution", distribution_names, 2, &dist) < 0) ||
-        (shadow_obj && parse_choice(shadow_obj, "shadowing", shadowing_names, 2, &shadowing) < 0) ||
-        (ior_obj && wenv_py_get_finite(ior_obj, "ior", &lobe.ior) < 0) || parse_samples(samples_obj, &samples) < 0)
-        return NULL;
-    lobe.distribution = (wenv_distribution)dist;
-    /* Validate the lobe through the core's own rules. */
-    wenv_material *probe;
-    wenv_error err = {0};
-    double zero[3] = {0.0, 0.0, 0.0};
-    if (wenv_cook_torrance_create(&probe, zero, &lobe, 1, (wenv_shadowing)shadowing, &err) != WENV_OK)
-        return wenv_py_raise(&err);
-    wenv_material_free(probe);
-    Py_buffer view;
-    size_t n;
-    if (wenv_py_get_vec3_array(wo_obj, "wo", 1, &view, &n, NULL) < 0)
-        return NULL;
-    if (n != 1) {
-        PyBuffer_Release(&view);
-        PyErr_SetString(PyExc_ValueError, "wo must be a single direction");
-        return NULL;
-    }
-    double *wo = normalised_rows(&view, 1);
-    PyBuffer_Release(&view);
-    if (!wo)
-        return NULL;
-    double albedo = 0.0;
-    wenv_status st;
-    WENV_BEGIN_WORK
-    st = wenv_lobe_albedo(&lobe, (wenv_shadowing)shadowing, wo, samples, fresnel, &albedo, &err);
-    WENV_END_WORK
-    PyMem_Free(wo);
-    if (st != WENV_OK)
-        return wenv_py_raise(&err);
-    return PyFloat_FromDouble(albedo);
-}
-
 static PyObject *py_alpha_from_roughness(PyObject *self, PyObject *arg)
 {
     (void)self;
@@ -1096,16 +931,9 @@ static PyMethodDef material_functions[] = {
      "Samples stored negative (not measured) take the nearest measured theta_d at the same theta_h and phi_d.  "
      "OSError naming the file when it is missing, truncated, the wrong size for its dimensions, or holds NaN."},
     {"alpha_from_roughness", py_alpha_from_roughness, METH_O,
-     "alpha_from_roughness(roughness)\n--\n\nThe distribution's alpha (CookTorrance lobe 'roughness') for Blender's "
-     "perceptual roughness, as Cycles converts it: roughness**2, floored at " WENV_STR(WENV_ALPHA_FROM_ROUGHNESS_MIN)
-     " (a perfect mirror has no lobe width to shade)."},
-    {"_fresnel", py_fresnel, METH_VARARGS, "_fresnel(cos_i, ior)\n--\n\nUnpolarised dielectric Fresnel (tests)."},
-    {"_ndf", py_ndf, METH_VARARGS, "_ndf(distribution, roughness, cos_h)\n--\n\nMicrofacet distribution D (tests)."},
-    {"_smith_lambda", py_smith_lambda, METH_VARARGS,
-     "_smith_lambda(distribution, roughness, cos_theta)\n--\n\nSmith Lambda (tests)."},
-    {"_lobe_albedo", (PyCFunction)(void (*)(void))py_lobe_albedo, METH_VARARGS | METH_KEYWORDS,
-     "_lobe_albedo(wo, roughness, distribution='beckmann', shadowing='smith', ior=1.5, fresnel=False, "
-     "samples=128)\n--\n\nAlbedo of one white lobe; fresnel=False sets F = 1 (white-furnace test)."},
+     "alpha_from_roughness(roughness)\n--\n\nThe distribution's alpha (a CookTorrance lobe's 'alpha') for Blender's "
+     "perceptual roughness r, as Cycles converts it: r**2, floored at " WENV_STR(WENV_ALPHA_FROM_ROUGHNESS_MIN)
+     " (a perfect mirror has no lobe width to shade).  The one conversion: wenv's 'roughness' is always r."},
     {NULL, NULL, 0, NULL},
 };
 
@@ -1128,9 +956,9 @@ int wenv_register_material(PyObject *module)
     if (PyModule_AddFunctions(module, material_functions) < 0)
         return -1;
     /* The accepted ranges, for callers that offer them to a user (the add-on's properties). */
-    PyObject *roughness = Py_BuildValue("(dd)", WENV_ROUGHNESS_MIN, WENV_ROUGHNESS_MAX);
-    if (PyModule_AddObject(module, "ROUGHNESS_RANGE", roughness) < 0) {
-        Py_XDECREF(roughness);
+    PyObject *alpha = Py_BuildValue("(dd)", WENV_ALPHA_MIN, WENV_ALPHA_MAX);
+    if (PyModule_AddObject(module, "ALPHA_RANGE", alpha) < 0) {
+        Py_XDECREF(alpha);
         return -1;
     }
     PyObject *ior = Py_BuildValue("(dd)", 1.0, WENV_IOR_MAX);

@@ -8,27 +8,6 @@
 
 #include "scene/material.h"
 
-/* The node's inputs by their Python names: offset of a double (n = 1) or a colour (n = 3). */
-typedef struct {
-    const char *name;
-    size_t offset;
-    int n;
-} input_field;
-
-#define FIELD(name, n) {#name, offsetof(wenv_principled_inputs, name), n}
-static const input_field FIELDS[] = {
-    FIELD(base_color, 3),          FIELD(metallic, 1),         FIELD(roughness, 1),
-    FIELD(ior, 1),                 FIELD(alpha, 1),            FIELD(specular_ior_level, 1),
-    FIELD(specular_tint, 3),       FIELD(anisotropic, 1),      FIELD(anisotropic_rotation, 1),
-    FIELD(coat_weight, 1),         FIELD(coat_roughness, 1),   FIELD(coat_ior, 1),
-    FIELD(coat_tint, 3),           FIELD(sheen_weight, 1),     FIELD(sheen_roughness, 1),
-    FIELD(sheen_tint, 3),          FIELD(subsurface_weight, 1), FIELD(transmission_weight, 1),
-    FIELD(diffuse_roughness, 1),   FIELD(emission_color, 3),   FIELD(emission_strength, 1),
-    FIELD(thin_film_thickness, 1), FIELD(thin_film_ior, 1),
-};
-#undef FIELD
-#define N_FIELDS (sizeof FIELDS / sizeof FIELDS[0])
-
 static const char *const DISTRIBUTIONS[] = {"ggx", "multiscatter_ggx"}; /* index = multiscatter */
 
 static PyTypeObject PrincipledType;
@@ -63,15 +42,16 @@ static int set_input(wenv_principled_inputs *in, PyObject *key, PyObject *value)
         PyErr_Format(PyExc_ValueError, "distribution must be 'multiscatter_ggx' or 'ggx', got %R", value);
         return -1;
     }
-    for (size_t f = 0; f < N_FIELDS; f++) {
-        if (strcmp(name, FIELDS[f].name) != 0)
+    for (size_t r = 0; r < wenv_principled_input_count; r++) {
+        const wenv_principled_input *row = &wenv_principled_input_list[r];
+        if (strcmp(name, row->name) != 0)
             continue;
-        double *v = (double *)((char *)in + FIELDS[f].offset);
-        return FIELDS[f].n == 3 ? get_colour(value, name, v) : wenv_py_get_finite(value, name, v);
+        double *v = wenv_principled_field(in, row);
+        return row->n == 3 ? get_colour(value, name, v) : wenv_py_get_finite(value, name, v);
     }
     PyErr_Format(PyExc_TypeError,
                  "Principled got an unexpected keyword argument '%s' (the Principled BSDF node's inputs in snake "
-                 "case: base_color, metallic, roughness, ior, ..., or distribution)",
+                 "case, as wenv.Principled.INPUTS lists them, or distribution)",
                  name);
     return -1;
 }
@@ -82,13 +62,13 @@ static PyObject *inputs_dict(const wenv_principled_inputs *in, int only_changed)
     wenv_principled_inputs defaults;
     wenv_principled_defaults(&defaults);
     PyObject *d = PyDict_New();
-    for (size_t f = 0; d && f < N_FIELDS; f++) {
-        const double *v = (const double *)((const char *)in + FIELDS[f].offset);
-        const double *w = (const double *)((const char *)&defaults + FIELDS[f].offset);
-        if (only_changed && memcmp(v, w, (size_t)FIELDS[f].n * sizeof *v) == 0)
+    for (size_t r = 0; d && r < wenv_principled_input_count; r++) {
+        const wenv_principled_input *row = &wenv_principled_input_list[r];
+        const double *v = wenv_principled_field_c(in, row), *w = wenv_principled_field_c(&defaults, row);
+        if (only_changed && memcmp(v, w, (size_t)row->n * sizeof *v) == 0)
             continue;
-        PyObject *value = FIELDS[f].n == 3 ? Py_BuildValue("(ddd)", v[0], v[1], v[2]) : PyFloat_FromDouble(v[0]);
-        if (!value || PyDict_SetItemString(d, FIELDS[f].name, value) < 0)
+        PyObject *value = row->n == 3 ? Py_BuildValue("(ddd)", v[0], v[1], v[2]) : PyFloat_FromDouble(v[0]);
+        if (!value || PyDict_SetItemString(d, row->name, value) < 0)
             Py_CLEAR(d);
         Py_XDECREF(value);
     }
@@ -103,8 +83,9 @@ static PyObject *inputs_dict(const wenv_principled_inputs *in, int only_changed)
 
 static PyObject *unhonoured_tuple(const wenv_principled_inputs *in)
 {
-    const char *names[16];
-    size_t n = wenv_principled_unhonoured(in, names, 16);
+    const char *names[64];
+    size_t n = wenv_principled_unhonoured(in, names, 64);
+    n = n < 64 ? n : 64;
     PyObject *t = PyTuple_New((Py_ssize_t)n);
     for (size_t i = 0; t && i < n; i++) {
         PyObject *s = PyUnicode_FromString(names[i]);
@@ -257,9 +238,9 @@ static PyGetSetDef principled_getset[] = {
     {"inputs", principled_inputs, NULL,
      "{name: value} of every input as evaluated (clamped as Cycles clamps them), and 'distribution'.", NULL},
     {"unhonoured", principled_unhonoured, NULL,
-     "Names of the inputs set to something wenv does not shade: transmission_weight, subsurface_weight (shaded "
-     "as diffuse), emission_strength, alpha (the see-through part), sheen_weight, anisotropic, "
-     "thin_film_thickness, diffuse_roughness.",
+     "Names of the inputs set to something wenv does not shade, or shades in part (subsurface scattering as "
+     "diffuse, Alpha's see-through part left out, a Coat Tint above 1 as 1); wenv.Principled.INPUTS gives each "
+     "one's note.",
      NULL},
     {NULL, NULL, NULL, NULL, NULL},
 };
@@ -278,11 +259,9 @@ static PyTypeObject PrincipledType = {
     .tp_basicsize = sizeof(MaterialObject),
     .tp_flags = Py_TPFLAGS_DEFAULT,
     .tp_doc = "Principled(**inputs)\n--\n\nBlender's Principled BSDF, evaluated as Cycles (Blender 4.x/5.x) "
-              "evaluates it: the node's inputs by name in snake case (base_color, metallic, roughness, ior, alpha, "
-              "specular_ior_level, specular_tint, anisotropic, anisotropic_rotation, coat_weight, coat_roughness, "
-              "coat_ior, coat_tint, sheen_weight, sheen_roughness, sheen_tint, subsurface_weight, "
-              "transmission_weight, diffuse_roughness, emission_color, emission_strength, thin_film_thickness, "
-              "thin_film_ior) with Blender's defaults for the rest, and distribution='multiscatter_ggx' (Blender's "
+              "evaluates it: the node's inputs by name in snake case (wenv.Principled.INPUTS lists each with its "
+              "socket, size, default and whether wenv shades it) with Blender's defaults for the rest, and "
+              "distribution='multiscatter_ggx' (Blender's "
               "default) or 'ggx'.  Colours are a grey number, (r, g, b) or Blender's (r, g, b, a).  Roughness is "
               "Blender's (alpha = roughness^2).  Values are clamped as Cycles' kernel clamps them; non-finite ones, "
               "and inputs that scale the reflection past 1e6, are a ValueError.  Reflection only: `unhonoured` "
@@ -293,11 +272,41 @@ static PyTypeObject PrincipledType = {
     .tp_methods = principled_methods,
 };
 
+/* Principled.INPUTS: the list of inputs (scene/principled_inputs.h) as a tuple of dicts, from which
+ * callers such as the add-on map sockets and draw panels. */
+static PyObject *inputs_table(void)
+{
+    static const char *const SHADING[] = {"yes", "partly", "no"};
+    PyObject *t = PyTuple_New((Py_ssize_t)wenv_principled_input_count);
+    for (size_t r = 0; t && r < wenv_principled_input_count; r++) {
+        const wenv_principled_input *row = &wenv_principled_input_list[r];
+        PyObject *fallback = row->n == 3 ? Py_BuildValue("(ddd)", row->fallback[0], row->fallback[1], row->fallback[2])
+                                         : PyFloat_FromDouble(row->fallback[0]);
+        PyObject *d = fallback ? Py_BuildValue("{s:s,s:s,s:i,s:N,s:s,s:s}", "name", row->name, "socket", row->socket,
+                                               "size", row->n, "default", fallback, "shaded", SHADING[row->shading],
+                                               "note", row->note)
+                               : NULL;
+        if (!d) {
+            Py_CLEAR(t);
+            break;
+        }
+        PyTuple_SET_ITEM(t, (Py_ssize_t)r, d);
+    }
+    return t;
+}
+
 int wenv_register_principled(PyObject *module)
 {
     PrincipledType.tp_base = wenv_py_material_type();
     if (PyType_Ready(&PrincipledType) < 0)
         return -1;
+    PyObject *table = inputs_table();
+    if (!table || PyDict_SetItemString(PrincipledType.tp_dict, "INPUTS", table) < 0) {
+        Py_XDECREF(table);
+        return -1;
+    }
+    Py_DECREF(table);
+    PyType_Modified(&PrincipledType);
     Py_INCREF(&PrincipledType);
     if (PyModule_AddObject(module, "Principled", (PyObject *)&PrincipledType) < 0) {
         Py_DECREF(&PrincipledType);

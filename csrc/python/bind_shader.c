@@ -458,6 +458,35 @@ static int shade_visible(ShaderObject *self, const float *normals, const float *
     return 0;
 }
 
+/* wenv.EyeAtVertexError for the `count` positions (n of them) at the eye, with their indices as
+ * `vertices` (int64), so a caller can leave them black and shade the rest. */
+static void raise_eye_at_vertex(const float *p, const double eye[3], size_t n, size_t count)
+{
+    Py_ssize_t shape[1] = {(Py_ssize_t)count};
+    void *data;
+    PyObject *index = wenv_py_new_array(1, shape, "int64", &data);
+    if (!index)
+        return;
+    int64_t *ix = data;
+    size_t k = 0;
+    for (size_t i = 0; i < n && k < count; i++) {
+        double d[3] = {eye[0] - p[3 * i], eye[1] - p[3 * i + 1], eye[2] - p[3 * i + 2]};
+        if (d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < 1e-24)
+            ix[k++] = (int64_t)i;
+    }
+    PyObject *type = wenv_py_eye_at_vertex_error();
+    PyObject *exc = PyObject_CallFunction(type, "N",
+                                          PyUnicode_FromFormat("eye coincides with positions[%zd]%s: a vertex at the "
+                                                               "eye has no view direction (the exception's "
+                                                               "`vertices` lists all %zu)",
+                                                               (Py_ssize_t)ix[0], count > 1 ? " and others" : "",
+                                                               count));
+    if (exc && PyObject_SetAttrString(exc, "vertices", index) == 0)
+        PyErr_SetObject(type, exc);
+    Py_XDECREF(exc);
+    Py_DECREF(index);
+}
+
 static PyObject *Shader_shade_mesh(ShaderObject *self, PyObject *args, PyObject *kwargs)
 {
     static char *kwlist[] = {"positions", "normals", "eye", "cull", "view_projection", "out", "first", "budget", NULL};
@@ -529,14 +558,16 @@ static PyObject *Shader_shade_mesh(ShaderObject *self, PyObject *args, PyObject 
         goto fail;
     }
     const float *p = pb.buf;
+    size_t at_eye = 0;
     for (size_t i = 0; i < np; i++) {
         double d[3] = {eye[0] - p[3 * i], eye[1] - p[3 * i + 1], eye[2] - p[3 * i + 2]};
-        if (d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < 1e-24) {
-            PyErr_Format(PyExc_ValueError, "eye coincides with positions[%zu]", i);
-            goto fail;
-        }
+        at_eye += d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < 1e-24;
         for (int c = 0; c < 3; c++)
             views[3 * i + c] = (float)d[c];
+    }
+    if (at_eye) {
+        raise_eye_at_vertex(pb.buf, eye, np, at_eye);
+        goto fail;
     }
     size_t count = np, next;
     if (cull)
@@ -816,7 +847,45 @@ static PyObject *py_visible_vertices(PyObject *module, PyObject *args, PyObject 
     return result;
 }
 
+/* The method wenv.Shader runs a wavelet quality with when none is named (the core's choice). */
+static PyObject *py_method_for(PyObject *self, PyObject *args, PyObject *kwargs)
+{
+    (void)self;
+    static char *kwlist[] = {"quality", "cache_dir", "memory_budget_mb", NULL};
+    PyObject *quality_obj, *cache_obj = Py_None;
+    double budget_mb = 1024.0;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "O|Od:method_for", kwlist, &quality_obj, &cache_obj, &budget_mb))
+        return NULL;
+    if (!(budget_mb > 0.0 && budget_mb < 1e9)) {
+        wenv_py_errorf(PyExc_ValueError, "memory_budget_mb must be positive, got %g", budget_mb);
+        return NULL;
+    }
+    if (PyUnicode_Check(quality_obj) && PyUnicode_CompareWithASCIIString(quality_obj, "auto") == 0)
+        return PyUnicode_FromString(WENV_METHOD_SLICING.name); /* auto's ladder slices */
+    const wenv_method *method = wenv_method_default();
+    void *quality = PyMem_Malloc(method->quality_size);
+    if (!quality)
+        return PyErr_NoMemory();
+    PyObject *cache_bytes = NULL, *result = NULL;
+    wenv_method_setup setup = {0};
+    if (parse_quality(method, quality_obj, quality) == 0 && parse_cache(cache_obj, &setup, &cache_bytes) == 0) {
+        setup.memory_budget = (size_t)(budget_mb * 1048576.0);
+        const wenv_method *chosen;
+        WENV_BEGIN_WORK
+        chosen = wenv_method_choose_default(quality, &setup);
+        WENV_END_WORK
+        result = PyUnicode_FromString(chosen->name);
+    }
+    Py_XDECREF(cache_bytes);
+    PyMem_Free(quality);
+    return result;
+}
+
 static PyMethodDef shader_functions[] = {
+    {"method_for", (PyCFunction)(void (*)(void))py_method_for, METH_VARARGS | METH_KEYWORDS,
+     "method_for(quality, cache_dir=None, memory_budget_mb=1024)\n--\n\nThe method wenv.Shader runs `quality` "
+     "with when no method is named: 'rotation' (precomputed matrices: built on first use, or read from the cache) "
+     "or 'slicing' (nothing to precompute; the lighting is resampled for each new environment).  'auto' slices."},
     {"visible_vertices", (PyCFunction)(void (*)(void))py_visible_vertices, METH_VARARGS | METH_KEYWORDS,
      "visible_vertices(positions, normals, eye, view_projection=None)\n--\n\nWhich vertices an eye sees "
      "(bool, n): those whose normal faces it and, given view_projection (4 x 4 world-to-clip, row-major), "

@@ -20,6 +20,8 @@ PyObject *wenv_py_errorf(PyObject *type, const char *fmt, ...);
 
 /* wenv.CancelledError (set up by module.c). */
 PyObject *wenv_py_cancelled_error(void);
+/* wenv.EyeAtVertexError: a ValueError whose `vertices` lists the vertices at the eye (module.c). */
+PyObject *wenv_py_eye_at_vertex_error(void);
 
 /* Gets a read-only float32, C-contiguous buffer of shape (n, 3) from `obj`; `name` is used in the
  * exception.  Also accepts a single 3-vector (shape (3,)), reported as n = 1 with *single = 1.
@@ -45,7 +47,7 @@ int wenv_py_get_size(PyObject *obj, const char *name, size_t *out);
 /* Reads a finite float; ValueError naming `name` otherwise. */
 int wenv_py_get_finite(PyObject *obj, const char *name, double *out);
 
-/* New numpy array of the given shape and dtype ("float32", "float64", "bool"); *data points at its storage. */
+/* New numpy array of the given shape and dtype ("float32", "float64", "int64", "bool"); *data points at its storage. */
 PyObject *wenv_py_new_array(int ndim, const Py_ssize_t *shape, const char *dtype, void **data);
 
 /* New numpy float32 array of the given shape (numpy.empty); *data points at its storage. */

@@ -72,9 +72,9 @@ wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, con
     }
     size_t count = wenv_envmap_samples(env, dirs, flux, NULL);
     size_t n_lobes = wenv_material_lobe_count(mat), n_narrow = 0;
-    double narrow_roughness = WENV_NARROW_LOBE_PIXELS * wenv_envmap_pixel_angle(env);
+    double narrow_alpha = WENV_NARROW_LOBE_PIXELS * wenv_envmap_pixel_angle(env);
     for (size_t l = 0; l < n_lobes; l++)
-        n_narrow += wenv_material_lobe(mat, l)->roughness < narrow_roughness;
+        n_narrow += wenv_material_lobe(mat, l)->alpha < narrow_alpha;
     atomic_int failed = 0, cancelled = 0;
     atomic_size_t done = 0;
 #pragma omp parallel
@@ -134,7 +134,7 @@ wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, con
             double diffuse[3];
             wenv_material_diffuse_at(mat, wo[2], diffuse);
             for (size_t l = 0; n_narrow && wo[2] > 0.0 && l < n_lobes; l++)
-                if (wenv_material_lobe(mat, l)->roughness < narrow_roughness &&
+                if (wenv_material_lobe(mat, l)->alpha < narrow_alpha &&
                     narrow_lobe(env, mat, l, f, wo, dirs, flux, count, nodes, spec, &lobe_err))
                     atomic_store(&failed, 1);
             for (int c = 0; c < 3; c++)

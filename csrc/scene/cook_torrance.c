@@ -69,7 +69,7 @@ static void ct_specular_cos_f_many(const wenv_material *mat, const float wo[3], 
     int smith = mat->shadowing == WENV_SHADOW_SMITH;
     for (size_t l = 0; l < mat->n_lobes; l++) {
         const wenv_lobe *lobe = &mat->lobes[l];
-        float m = (float)lobe->roughness, ior = (float)lobe->ior, ko = k_o[l];
+        float m = (float)lobe->alpha, ior = (float)lobe->ior, ko = k_o[l];
         float s0 = (float)lobe->specular[0], s1 = (float)lobe->specular[1], s2 = (float)lobe->specular[2];
         int ggx = lobe->distribution == WENV_NDF_GGX;
 #pragma omp simd
@@ -98,7 +98,7 @@ static void ct_prepare_view_f(const wenv_material *mat, const float wo[3], float
     float s = sqrtf(wo[0] * wo[0] + wo[1] * wo[1]);
     for (size_t l = 0; l < mat->n_lobes; l++)
         k_o[l] = mat->shadowing == WENV_SHADOW_SMITH
-                     ? wenv_smith_k_f(mat->lobes[l].distribution == WENV_NDF_GGX, (float)mat->lobes[l].roughness,
+                     ? wenv_smith_k_f(mat->lobes[l].distribution == WENV_NDF_GGX, (float)mat->lobes[l].alpha,
                                       wo[2], s)
                      : 0.0f;
 }
@@ -163,27 +163,11 @@ static wenv_status ct_lobe_cells(const wenv_material *mat, size_t i, const doubl
     return WENV_OK;
 }
 
-static wenv_status ct_with_roughness(wenv_material **out, const wenv_material *src, double roughness,
-                                     wenv_error *err)
-{
-    if (wenv_material_copy(out, src, err))
-        return err->status;
-    for (size_t i = 0; i < (*out)->n_lobes; i++)
-        (*out)->lobes[i].roughness = roughness;
-    return WENV_OK;
-}
-
-static int ct_lobes_follow_shapes(const wenv_material *mat)
-{
-    (void)mat;
-    return 1;
-}
-
 static const wenv_material_kind COOK_TORRANCE = {
     .name = "cook_torrance",
     .mirror_symmetric = 1, /* isotropic microfacet lobes: dot products with the normal and each other */
     .smooth_limit = 1,
-    .lobes_follow_shapes = ct_lobes_follow_shapes,
+    .lobes_are_shapes = 1,
     .lobe_value = ct_lobe_value,
     /* accelerators: the view's terms once per batch and lobe, a vectorised float loop, and the
      * lobe's own rules (exact colour weights, no re-weighting) */
@@ -195,7 +179,6 @@ static const wenv_material_kind COOK_TORRANCE = {
     .lobe_albedo = ct_lobe_albedo,
     .lobe_nodes = ct_lobe_nodes,
     .lobe_cells = ct_lobe_cells,
-    .with_roughness = ct_with_roughness,
 };
 
 /* Mixtures fitted to measurements use a handful of lobes; each costs every method per vertex and per

@@ -70,7 +70,7 @@ int wenv_material_same(const wenv_material *a, const wenv_material *b)
         return 0;
     for (size_t i = 0; i < a->n_lobes; i++) {
         const wenv_lobe *x = &a->lobes[i], *y = &b->lobes[i];
-        if (memcmp(x->specular, y->specular, sizeof x->specular) != 0 || x->roughness != y->roughness ||
+        if (memcmp(x->specular, y->specular, sizeof x->specular) != 0 || x->alpha != y->alpha ||
             x->ior != y->ior || x->distribution != y->distribution)
             return 0;
     }
@@ -87,18 +87,34 @@ void wenv_material_free(wenv_material *mat)
     free(mat);
 }
 
+wenv_status wenv_material_with_alpha(wenv_material **out, const wenv_material *src, double alpha, wenv_error *err)
+{
+    *out = NULL;
+    if (!isfinite(alpha) || alpha < WENV_ALPHA_MIN || alpha > WENV_ALPHA_MAX)
+        return wenv_error_set(err, WENV_ERR_VALUE, "alpha must be finite in [%g, %g], got %g", WENV_ALPHA_MIN,
+                              WENV_ALPHA_MAX, alpha);
+    if (src->n_lobes > 0 && !src->kind->lobes_are_shapes)
+        return wenv_error_set(err, WENV_ERR_VALUE, "a %s material's lobes are not set by alpha%s", src->kind->name,
+                              src->kind->with_roughness ? ": set its roughness (Blender's)" : "");
+    if (wenv_material_copy(out, src, err))
+        return err->status;
+    for (size_t i = 0; i < (*out)->n_lobes; i++)
+        (*out)->lobes[i].alpha = alpha;
+    return WENV_OK;
+}
+
 wenv_status wenv_material_with_roughness(wenv_material **out, const wenv_material *src, double roughness,
                                          wenv_error *err)
 {
     *out = NULL;
-    if (!isfinite(roughness) || roughness < WENV_ROUGHNESS_MIN || roughness > WENV_ROUGHNESS_MAX)
-        return wenv_error_set(err, WENV_ERR_VALUE, "roughness must be finite in [%g, %g], got %g", WENV_ROUGHNESS_MIN,
-                              WENV_ROUGHNESS_MAX, roughness);
+    if (!isfinite(roughness) || roughness < 0.0)
+        return wenv_error_set(err, WENV_ERR_VALUE, "roughness must be finite and >= 0, got %g", roughness);
     if (src->kind->with_roughness)
         return src->kind->with_roughness(out, src, roughness, err);
     if (src->n_lobes == 0) /* nothing to set: the same material */
         return wenv_material_copy(out, src, err);
-    return wenv_error_set(err, WENV_ERR_VALUE, "a %s material has no roughness to set", src->kind->name);
+    return wenv_error_set(err, WENV_ERR_VALUE, "a %s material has no roughness to set%s", src->kind->name,
+                          src->kind->lobes_are_shapes ? ": its lobes are set by alpha" : "");
 }
 
 const char *wenv_material_kind_name(const wenv_material *mat) { return mat->kind->name; }
@@ -110,7 +126,7 @@ int wenv_material_mirror_symmetric(const wenv_material *mat) { return mat->kind-
 
 int wenv_material_lobes_follow_shapes(const wenv_material *mat)
 {
-    return mat->kind->lobes_follow_shapes ? mat->kind->lobes_follow_shapes(mat) : 0;
+    return mat->kind->lobes_follow_shapes ? mat->kind->lobes_follow_shapes(mat) : mat->kind->lobes_are_shapes;
 }
 
 void wenv_material_diffuse_at(const wenv_material *mat, double cos_v, double rgb[3])
@@ -152,7 +168,7 @@ double wenv_material_lobe_width(const wenv_material *mat)
     for (size_t k = 0; k < mat->n_lobes; k++) {
         const wenv_lobe *lobe = &mat->lobes[k];
         if (lobe->specular[0] > 0.0 || lobe->specular[1] > 0.0 || lobe->specular[2] > 0.0)
-            width = fmin(width, lobe->roughness);
+            width = fmin(width, lobe->alpha);
     }
     return width;
 }
@@ -265,7 +281,7 @@ void wenv_material_derived_lobe_over_ndf(const wenv_material *mat, size_t i, con
     double h[3] = {wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]};
     double len = sqrt(h[0] * h[0] + h[1] * h[1] + h[2] * h[2]);
     const wenv_lobe *shape = &mat->lobes[i];
-    double d = len > 0.0 ? wenv_ndf(shape->distribution, shape->roughness, h[2] / len) : 0.0;
+    double d = len > 0.0 ? wenv_ndf(shape->distribution, shape->alpha, h[2] / len) : 0.0;
     if (!(d > 0.0))
         return;
     mat->kind->lobe_value(mat, i, wi, wo, rgb);

@@ -4,7 +4,7 @@
  * by all of them without edits.
  *
  * A material is a Lambertian part (its albedo, f_d = diffuse / pi) plus a glossy part described by
- * lobes.  Each lobe has a microfacet shape (scene/microfacet.h: distribution, roughness alpha,
+ * lobes.  Each lobe has a microfacet shape (scene/microfacet.h: distribution, alpha,
  * index, colour): for Cook-Torrance it is the lobe itself; for other models it is the microfacet
  * lobe closest to it, which places quadrature nodes, warps the glossmeter's integrals, sizes the
  * maps and prefilters (split-sum's assumption), while every value -- and where a lobe can reflect
@@ -22,6 +22,7 @@
 
 #include "base/error.h"
 #include "scene/microfacet.h"
+#include "scene/principled_inputs.h"
 
 /* The struct tag lets the bindings forward-declare `struct wenv_material`. */
 typedef struct wenv_material wenv_material;
@@ -32,7 +33,7 @@ typedef struct wenv_material wenv_material;
 wenv_status wenv_lambert_create(wenv_material **out, const double albedo[3], wenv_error *err);
 
 /* Lambertian diffuse plus n_lobes Cook-Torrance lobes sharing one shadowing form.  Validates and
- * copies; WENV_ERR_VALUE naming the offending field ("diffuse", "lobes[1].roughness"...): diffuse as
+ * copies; WENV_ERR_VALUE naming the offending field ("diffuse", "lobes[1].alpha"...): diffuse as
  * Lambert's albedo, each lobe as wenv_lobe_check, known shadowing.  n_lobes = 0 (lobes may be NULL)
  * gives a Cook-Torrance material without lobes, which reflects as Lambert does. */
 wenv_status wenv_cook_torrance_create(wenv_material **out, const double diffuse[3], const wenv_lobe *lobes,
@@ -45,20 +46,8 @@ wenv_status wenv_cook_torrance_create(wenv_material **out, const double diffuse[
  * Lambertian part (diffuse = pi x that, per channel), the rest one glossy lobe. */
 wenv_status wenv_tabulated_create(wenv_material **out, const float *rgb, const size_t dims[3], wenv_error *err);
 
-/* Blender's Principled BSDF node's inputs (Blender 4.x/5.x names in snake case), as Cycles reads
- * them; wenv_principled_defaults gives the node's defaults. */
-typedef struct {
-    double base_color[3], metallic, roughness, ior, alpha;
-    double specular_ior_level, specular_tint[3];
-    double anisotropic, anisotropic_rotation;
-    double coat_weight, coat_roughness, coat_ior, coat_tint[3];
-    double sheen_weight, sheen_roughness, sheen_tint[3];
-    double subsurface_weight, transmission_weight, diffuse_roughness;
-    double emission_color[3], emission_strength;
-    double thin_film_thickness, thin_film_ior;
-    int multiscatter; /* the node's distribution: "Multiscatter GGX" (1, Blender's default) or "GGX" */
-} wenv_principled_inputs;
-
+/* Blender's Principled BSDF node's inputs (scene/principled_inputs.h: the one list of them);
+ * wenv_principled_defaults gives the node's defaults. */
 void wenv_principled_defaults(wenv_principled_inputs *in);
 
 /* The Principled BSDF's reflection as Cycles evaluates it (scene/principled.c): every input finite
@@ -70,9 +59,8 @@ wenv_status wenv_principled_create(wenv_material **out, const wenv_principled_in
 /* A Principled material's inputs (clamped), NULL for other models. */
 const wenv_principled_inputs *wenv_principled_inputs_of(const wenv_material *mat);
 
-/* The names of the inputs set to something wenv does not shade (transmission, subsurface scattering
- * -- shaded as diffuse --, emission, the see-through part of alpha, sheen, anisotropy, thin film,
- * diffuse roughness): up to max of them into names; returns how many there are. */
+/* The names of the inputs set to something wenv does not shade (the list's rule column, in its
+ * order): up to max of them into names; returns how many there are. */
 size_t wenv_principled_unhonoured(const wenv_principled_inputs *in, const char **names, size_t max);
 
 /* A tabulated material's table, dims filled; NULL for other models. */
@@ -86,9 +74,13 @@ void wenv_material_free(wenv_material *mat);
  * Principled BSDF's inputs compare by a 64-bit fingerprint. */
 int wenv_material_same(const wenv_material *a, const wenv_material *b);
 
-/* A new material equal to `src` except that every lobe's roughness is `roughness` (validated, error
- * naming "roughness"); a copy for a material without lobes.  The glossmeter's one-parameter inverse
- * (find the roughness that reads a gloss).  WENV_ERR_VALUE for a model whose lobes cannot be set. */
+/* A new material equal to `src` but for how wide its lobes are, as the glossmeter's one-parameter
+ * inverse varies it; a copy for a material without lobes.  with_alpha sets every lobe's alpha (for
+ * a model whose lobes are their shapes: Cook-Torrance), validated against WENV_ALPHA_MIN..MAX;
+ * with_roughness sets Blender's roughness r (for a model that takes it: the Principled BSDF's
+ * Roughness, clamped to [0, 1] as Cycles clamps it), finite and >= 0.  WENV_ERR_VALUE, naming the
+ * other, for a model that takes the other, and for a model that takes neither (a measured table). */
+wenv_status wenv_material_with_alpha(wenv_material **out, const wenv_material *src, double alpha, wenv_error *err);
 wenv_status wenv_material_with_roughness(wenv_material **out, const wenv_material *src, double roughness,
                                          wenv_error *err);
 
@@ -151,7 +143,7 @@ int wenv_material_mirror_centred(const wenv_material *mat);
 /* The masking-shadowing form the lobes' shapes assume (Smith for models that do not say). */
 wenv_shadowing wenv_material_shadowing(const wenv_material *mat);
 
-/* The width of the narrowest lobe that reflects anything, as a microfacet roughness alpha (its
+/* The width of the narrowest lobe that reflects anything, as a microfacet alpha (its
  * reflected lobe is about 2 alpha radians wide at normal incidence, narrower in azimuth towards
  * grazing); INFINITY when no lobe reflects.  Every consumer that sizes something by the lobes
  * (sub-sampling, the grazing path, the lights' cluster levels, auto) reads this one number. */

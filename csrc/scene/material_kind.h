@@ -27,6 +27,8 @@ typedef struct wenv_material_kind {
                            * the normal, to the model's own rounding (wenv_material_mirror_symmetric) */
     int smooth_limit; /* its lobes become Fresnel mirrors of their shape's colour and index as they
                        * narrow (a microfacet model); 0 for a measured table, which has no such limit */
+    int lobes_are_shapes; /* each lobe is exactly its microfacet shape times its colour (Cook-Torrance):
+                           * wenv_material_with_alpha sets it, and it follows its shape */
 
     /* Required for a model with lobes: lobe i's f(wi, wo), RGB, no cosine (material.h). */
     wenv_lobe_rgb_fn lobe_value;
@@ -58,10 +60,10 @@ typedef struct wenv_material_kind {
      * default always. */
     int (*mirror_centred)(const wenv_material *mat);
     /* Whether each lobe is its shape's D times factors that vary slowly over it
-     * (wenv_material_lobes_follow_shapes); default never. */
+     * (wenv_material_lobes_follow_shapes); default lobes_are_shapes. */
     int (*lobes_follow_shapes)(const wenv_material *mat);
-    /* A copy with every lobe at `roughness` (already validated); default: a copy for a material
-     * without lobes, an error for one with lobes. */
+    /* A copy at Blender's roughness r (finite, >= 0), for a model that takes it
+     * (wenv_material_with_roughness); default: a copy for a material without lobes, else an error. */
     wenv_status (*with_roughness)(wenv_material **out, const wenv_material *src, double roughness, wenv_error *err);
 } wenv_material_kind;
 

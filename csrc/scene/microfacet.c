@@ -75,9 +75,9 @@ double wenv_lobe_cos_h_min(const wenv_lobe *lobe)
     enum { STEPS = 4096 };
     double peak = 0.0;
     for (int i = 0; i <= STEPS; i++)
-        peak = fmax(peak, wenv_ndf(lobe->distribution, lobe->roughness, cos(0.5 * M_PI * i / STEPS)));
+        peak = fmax(peak, wenv_ndf(lobe->distribution, lobe->alpha, cos(0.5 * M_PI * i / STEPS)));
     int i = STEPS;
-    while (i > 0 && wenv_ndf(lobe->distribution, lobe->roughness, cos(0.5 * M_PI * i / STEPS)) < 1e-7 * peak)
+    while (i > 0 && wenv_ndf(lobe->distribution, lobe->alpha, cos(0.5 * M_PI * i / STEPS)) < 1e-7 * peak)
         i--;
     i = i < STEPS ? i + 1 : STEPS;
     return i >= STEPS ? -1.0 : cos(0.5 * M_PI * i / STEPS);
@@ -97,9 +97,9 @@ wenv_status wenv_lobe_check(const wenv_lobe *lobe, size_t i, wenv_error *err)
             return wenv_error_set(err, WENV_ERR_VALUE, "lobes[%zu].specular must be finite and >= 0, got %g", i,
                                   lobe->specular[c]);
     }
-    if (!isfinite(lobe->roughness) || lobe->roughness < WENV_ROUGHNESS_MIN || lobe->roughness > WENV_ROUGHNESS_MAX)
-        return wenv_error_set(err, WENV_ERR_VALUE, "lobes[%zu].roughness must be finite in [%g, %g], got %g", i,
-                              WENV_ROUGHNESS_MIN, WENV_ROUGHNESS_MAX, lobe->roughness);
+    if (!isfinite(lobe->alpha) || lobe->alpha < WENV_ALPHA_MIN || lobe->alpha > WENV_ALPHA_MAX)
+        return wenv_error_set(err, WENV_ERR_VALUE, "lobes[%zu].alpha must be finite in [%g, %g], got %g", i,
+                              WENV_ALPHA_MIN, WENV_ALPHA_MAX, lobe->alpha);
     if (!isfinite(lobe->ior) || !(lobe->ior > 1.0) || lobe->ior > WENV_IOR_MAX)
         return wenv_error_set(err, WENV_ERR_VALUE, "lobes[%zu].ior must be finite in (1, %g], got %g", i, WENV_IOR_MAX,
                               lobe->ior);
@@ -169,13 +169,13 @@ static double lobe_rule_nodes(const wenv_lobe *lobe, wenv_shadowing shadowing, c
         double t_max = tan_max * tan_max;
         /* xi_max and 1 - xi_max, each without cancellation. */
         double xi_max, rest;
-        wenv_ndf_cdf(lobe->distribution, lobe->roughness, t_max, &xi_max, &rest);
+        wenv_ndf_cdf(lobe->distribution, lobe->alpha, t_max, &xi_max, &rest);
         double ring = 0.0;
         for (size_t i = 0; i < rt.n; i++) {
             double r = 1.0 - rt.x[i], r3 = r * r * r;
             double xi = xi_max * (1.0 - r3 * r);
             double one_minus_xi = rest + xi_max * r3 * r;
-            double t = wenv_ndf_tan2_at(lobe->distribution, lobe->roughness, xi, one_minus_xi);
+            double t = wenv_ndf_tan2_at(lobe->distribution, lobe->alpha, xi, one_minus_xi);
             double ch = 1.0 / sqrt(1.0 + t), sh = sqrt(t) * ch;
             double h[3] = {sh * cp, sh * sp, ch};
             double oh = wo[0] * h[0] + wo[1] * h[1] + wo[2] * h[2];
@@ -193,7 +193,7 @@ static double lobe_rule_nodes(const wenv_lobe *lobe, wenv_shadowing shadowing, c
                 if (node_omega) {
                     /* d wi = 4 (wo.h) d wh and D cos_h d wh = d xi d phi / (2 pi), per unit of the
                      * rule's variables (the ring's factors follow below) */
-                    double d = wenv_ndf(lobe->distribution, lobe->roughness, ch);
+                    double d = wenv_ndf(lobe->distribution, lobe->alpha, ch);
                     node_omega[recorded] = d > 0.0 ? rt.w[i] * 4.0 * r3 * 4.0 * fabs(oh) / (d * ch) : 0.0;
                 }
                 node_weight[recorded++] = term;
@@ -385,7 +385,7 @@ wenv_status wenv_lobe_slope_cells(const wenv_lobe *lobe, const double wo[3], siz
         return wenv_error_set(err, WENV_ERR_VALUE, "cell counts must be in [1, %d], got %zu x %zu",
                               ALBEDO_SAMPLES_MAX, n_x, n_y);
     int ggx = lobe->distribution == WENV_NDF_GGX;
-    double a = lobe->roughness, so = sqrt(wo[0] * wo[0] + wo[1] * wo[1]), co = wo[2];
+    double a = lobe->alpha, so = sqrt(wo[0] * wo[0] + wo[1] * wo[1]), co = wo[2];
     /* work with the view in the xz plane, turn the nodes back at the end */
     double cp = so > 0.0 ? wo[0] / so : 1.0, sp = so > 0.0 ? wo[1] / so : 0.0, w[3] = {so, 0.0, co};
     size_t n = 0;

@@ -17,7 +17,7 @@
  * V-cavity: G = min(1, 2 cos_h cos_o / (wo.h), 2 cos_h cos_i / (wi.h)) (Cook & Torrance 1982).
  *
  * Numerics: every function returns finite values for valid inputs, including directions exactly at
- * the normal or the horizon, cos_h -> 0 and roughness from WENV_ROUGHNESS_MIN to WENV_ROUGHNESS_MAX.
+ * the normal or the horizon, cos_h -> 0 and roughness from WENV_ALPHA_MIN to WENV_ALPHA_MAX.
  * Evaluation never skips work for negligible D (exactness first). */
 #ifndef WENV_MICROFACET_H
 #define WENV_MICROFACET_H
@@ -34,7 +34,7 @@ typedef enum { WENV_SHADOW_SMITH = 0, WENV_SHADOW_VCAVITY = 1 } wenv_shadowing;
 
 typedef struct {
     double specular[3];   /* RGB scale of the lobe, each >= 0 */
-    double roughness;     /* alpha: Beckmann's RMS slope or GGX's alpha, > 0 */
+    double alpha;         /* Beckmann's RMS slope m or GGX's alpha, > 0 (not Blender's roughness r: alpha = r^2) */
     double ior;           /* n > 1 */
     wenv_distribution distribution;
 } wenv_lobe;
@@ -42,8 +42,8 @@ typedef struct {
 /* The accepted ranges, here and nowhere else (the bindings and the add-on read them from here).
  * Roughness has a tiny positive floor rather than 0: below it the lobe is a mirror whose peak value
  * overflows float32 (D(n) = 1/(pi m^2)), and no quadrature or float32 direction resolves it anyway. */
-#define WENV_ROUGHNESS_MIN 1e-6
-#define WENV_ROUGHNESS_MAX 10.0
+#define WENV_ALPHA_MIN 1e-6
+#define WENV_ALPHA_MAX 10.0
 #define WENV_IOR_MAX 10.0
 
 /* The one roughness conversion: Blender's (the Principled BSDF's) perceptual roughness r to a
@@ -55,7 +55,7 @@ double wenv_alpha_from_roughness(double roughness);
 /* cos(89.9 deg): the lowest view that shading tabulates a lobe for; views beyond read its limit. */
 #define WENV_GRAZING_Z 0.0017453283658983088
 
-/* WENV_ERR_VALUE naming the field ("lobes[1].roughness") unless the lobe is within the ranges. */
+/* WENV_ERR_VALUE naming the field ("lobes[1].alpha") unless the lobe is within the ranges. */
 wenv_status wenv_lobe_check(const wenv_lobe *lobe, size_t index, wenv_error *err);
 
 /* Microfacet distribution D(h) for cos_h = n . h; 0 for cos_h <= 0. */
@@ -140,16 +140,6 @@ wenv_status wenv_lobe_slope_cells(const wenv_lobe *lobe, const double wo[3], siz
 #define WENV_MF_TAN2_CAP 1e150 /* tan^2 beyond this: Beckmann D is exactly 0, GGX D its limit */
 #define WENV_MF_A_CAP WENV_BECKMANN_A_CAP
 #include "scene/microfacet_terms.inc"
-#undef WENV_MF_T
-#undef WENV_MF
-#undef WENV_MF_C
-#undef WENV_MF_SQRT
-#undef WENV_MF_EXP
-#undef WENV_MF_ERF
-#undef WENV_MF_OVER
-#undef WENV_MF_TINY
-#undef WENV_MF_TAN2_CAP
-#undef WENV_MF_A_CAP
 
 /* float: exp and erf without library calls (math/vector_math.h), so loops over directions run
  * several lanes per instruction; caps at float's range */
@@ -164,16 +154,6 @@ wenv_status wenv_lobe_slope_cells(const wenv_lobe *lobe, const double wo[3], siz
 #define WENV_MF_TAN2_CAP 1e30f
 #define WENV_MF_A_CAP 10.0f /* erff(10) = 1, expf(-100) ~ 4e-44: Lambda is 0 in float */
 #include "scene/microfacet_terms.inc"
-#undef WENV_MF_T
-#undef WENV_MF
-#undef WENV_MF_C
-#undef WENV_MF_SQRT
-#undef WENV_MF_EXP
-#undef WENV_MF_ERF
-#undef WENV_MF_OVER
-#undef WENV_MF_TINY
-#undef WENV_MF_TAN2_CAP
-#undef WENV_MF_A_CAP
 
 /* ---- one lobe of a material, from those terms (double) ---- */
 
@@ -183,7 +163,7 @@ static inline double wenv_lobe_view_k(const wenv_lobe *lobe, wenv_shadowing shad
     if (shadowing != WENV_SHADOW_SMITH)
         return 0.0;
     double s = sqrt(wo[0] * wo[0] + wo[1] * wo[1]);
-    return wenv_smith_k(lobe->distribution == WENV_NDF_GGX, lobe->roughness, wo[2], s);
+    return wenv_smith_k(lobe->distribution == WENV_NDF_GGX, lobe->alpha, wo[2], s);
 }
 
 /* V = G / (4 cos_i cos_o) for cos_i, cos_o > 0 (the caller checks), k_o = wenv_lobe_view_k(wo). */
@@ -192,7 +172,7 @@ static inline double wenv_lobe_vis(const wenv_lobe *lobe, wenv_shadowing shadowi
 {
     if (shadowing == WENV_SHADOW_SMITH) {
         double si = sqrt(wi[0] * wi[0] + wi[1] * wi[1]);
-        double k_i = wenv_smith_k(lobe->distribution == WENV_NDF_GGX, lobe->roughness, wi[2], si);
+        double k_i = wenv_smith_k(lobe->distribution == WENV_NDF_GGX, lobe->alpha, wi[2], si);
         return wenv_vis_smith(wi[2], wo[2], k_i, k_o);
     }
     return wenv_vis_vcavity(wi[2], wo[2], h);
@@ -205,7 +185,7 @@ static inline double wenv_lobe_value(const wenv_lobe *lobe, wenv_shadowing shado
     wenv_half_vector h = wenv_half_vector_of(wi, wo);
     double v = wenv_lobe_vis(lobe, shadowing, wi, wo, k_o, h);
     return wenv_fresnel_dielectric(h.cos_d, lobe->ior) * wenv_ndf_tan2(lobe->distribution == WENV_NDF_GGX,
-                                                                        lobe->roughness, h.tan2) * v;
+                                                                        lobe->alpha, h.tan2) * v;
 }
 
 #endif

@@ -41,7 +41,6 @@
 #include "scene/principled_tables.h"
 #include "scene/sheen_table.h"
 
-#define WEIGHT_CUTOFF 1e-5 /* Cycles drops closures whose mean weight is below this */
 
 typedef enum { LOBE_SHEEN, LOBE_COAT, LOBE_METAL, LOBE_SPECULAR, LOBE_DIFFUSE } lobe_role;
 
@@ -176,7 +175,7 @@ static void weights_for_view(const principled *p, double mu, view_weights *vw)
             double a = read2(wenv_sheen_ltc, 32, 32, mu, l->rough);
             double b = read2(wenv_sheen_ltc + 32 * 32, 32, 32, mu, l->rough);
             double r = read2(wenv_sheen_ltc + 2 * 32 * 32, 32, 32, mu, l->rough);
-            int kept = fabs(a) >= WEIGHT_CUTOFF && r >= WEIGHT_CUTOFF; /* Cycles drops it otherwise */
+            int kept = fabs(a) >= WENV_PRINCIPLED_WEIGHT_CUTOFF && r >= WENV_PRINCIPLED_WEIGHT_CUTOFF; /* Cycles drops it otherwise */
             double largest = 0.0;
             for (int k = 0; k < 3; k++) {
                 vw->lobe[i][k] = kept ? p->in.sheen_weight * p->in.sheen_tint[k] * w[k] * r : 0.0;
@@ -271,7 +270,7 @@ static void lobe_f(const principled *p, const wenv_lobe *shape, size_t i, const 
     }
     wenv_half_vector h = wenv_half_vector_of(wi, wo);
     double k_o = wenv_lobe_view_k(shape, WENV_SHADOW_SMITH, wo);
-    double v = wenv_lobe_vis(shape, WENV_SHADOW_SMITH, wi, wo, k_o, h) * wenv_ndf_tan2(1, shape->roughness, h.tan2);
+    double v = wenv_lobe_vis(shape, WENV_SHADOW_SMITH, wi, wo, k_o, h) * wenv_ndf_tan2(1, shape->alpha, h.tan2);
     double f[3];
     lobe_fresnel(p, &p->lobe[i], h.cos_d, f);
     for (int k = 0; k < 3; k++)
@@ -362,7 +361,7 @@ static void specular_cos_f(const principled *p, const wenv_lobe *shapes, const f
                 rgb[k] += terms[4 * i + (size_t)k] * q * q * (float)WENV_INV_PI * ci;
             continue;
         }
-        float m = (float)shapes[i].roughness;
+        float m = (float)shapes[i].alpha;
         float vis = wenv_vis_smith_f(ci, co, wenv_smith_k_f(1, m, ci, si), terms[4 * i + 3]);
         float d = wenv_ndf_tan2_f(1, m, h.tan2);
         double f[3];
@@ -405,7 +404,7 @@ static void pr_lobe_over_ndf(const wenv_material *mat, size_t i, const double wi
     view_weights vw;
     weights_for_view(p, co, &vw);
     if (p->lobe[i].role == LOBE_SHEEN || p->lobe[i].role == LOBE_DIFFUSE) { /* f 4 ci co over the shape's D */
-        double f[3], d = wenv_ndf(shape->distribution, shape->roughness, s[2] / len);
+        double f[3], d = wenv_ndf(shape->distribution, shape->alpha, s[2] / len);
         lobe_f(p, shape, i, &vw, wi, wo, f);
         for (int k = 0; k < 3; k++)
             rgb[k] = d > 0.0 ? f[k] * 4.0 * ci * co / d : 0.0;
@@ -516,109 +515,41 @@ static const wenv_material_kind PRINCIPLED = {
 
 void wenv_principled_defaults(wenv_principled_inputs *in)
 {
-    /* Blender's node defaults (node_shader_bsdf_principled.cc) */
-    *in = (wenv_principled_inputs){
-        .base_color = {0.8, 0.8, 0.8},
-        .metallic = 0.0,
-        .roughness = 0.5,
-        .ior = 1.5,
-        .alpha = 1.0,
-        .specular_ior_level = 0.5,
-        .specular_tint = {1.0, 1.0, 1.0},
-        .anisotropic = 0.0,
-        .anisotropic_rotation = 0.0,
-        .coat_weight = 0.0,
-        .coat_roughness = 0.03,
-        .coat_ior = 1.5,
-        .coat_tint = {1.0, 1.0, 1.0},
-        .sheen_weight = 0.0,
-        .sheen_roughness = 0.5,
-        .sheen_tint = {1.0, 1.0, 1.0},
-        .subsurface_weight = 0.0,
-        .transmission_weight = 0.0,
-        .diffuse_roughness = 0.0,
-        .emission_color = {1.0, 1.0, 1.0},
-        .emission_strength = 0.0,
-        .thin_film_thickness = 0.0,
-        .thin_film_ior = 1.33,
-        .multiscatter = 1,
-    };
+    memset(in, 0, sizeof *in);
+    for (size_t r = 0; r < wenv_principled_input_count; r++) {
+        const wenv_principled_input *row = &wenv_principled_input_list[r];
+        memcpy(wenv_principled_field(in, row), row->fallback, (size_t)row->n * sizeof(double));
+    }
+    in->multiscatter = 1; /* the node's default distribution, Multiscatter GGX */
 }
-
-/* Inputs that scale what is reflected, and the most each may be: Cycles takes any value, but one
- * near float's largest (Blender's sockets hold up to 3.4e38) times the lighting overflows to
- * infinity.  A million keeps every product finite under the brightest lighting a World may give. */
-#define WENV_PRINCIPLED_SCALE_MAX 1e6
 
 /* Every input finite, and those that scale the reflection at most WENV_PRINCIPLED_SCALE_MAX; the
  * error names the first that is not. */
 static wenv_status check_inputs(const wenv_principled_inputs *in, wenv_error *err)
 {
-    struct {
-        const char *name;
-        const double *v;
-        int n;
-        int scales; /* multiplies what is reflected */
-    } fields[] = {
-        {"base_color", in->base_color, 3, 1},
-        {"metallic", &in->metallic, 1, 0},
-        {"roughness", &in->roughness, 1, 0},
-        {"ior", &in->ior, 1, 0},
-        {"alpha", &in->alpha, 1, 0},
-        {"specular_ior_level", &in->specular_ior_level, 1, 1},
-        {"specular_tint", in->specular_tint, 3, 1},
-        {"anisotropic", &in->anisotropic, 1, 0},
-        {"anisotropic_rotation", &in->anisotropic_rotation, 1, 0},
-        {"coat_weight", &in->coat_weight, 1, 1},
-        {"coat_roughness", &in->coat_roughness, 1, 0},
-        {"coat_ior", &in->coat_ior, 1, 0},
-        {"coat_tint", in->coat_tint, 3, 0}, /* read at most 1 */
-        {"sheen_weight", &in->sheen_weight, 1, 1},
-        {"sheen_roughness", &in->sheen_roughness, 1, 0},
-        {"sheen_tint", in->sheen_tint, 3, 1},
-        {"subsurface_weight", &in->subsurface_weight, 1, 0},
-        {"transmission_weight", &in->transmission_weight, 1, 0},
-        {"diffuse_roughness", &in->diffuse_roughness, 1, 0},
-        {"emission_color", in->emission_color, 3, 0},
-        {"emission_strength", &in->emission_strength, 1, 0},
-        {"thin_film_thickness", &in->thin_film_thickness, 1, 0},
-        {"thin_film_ior", &in->thin_film_ior, 1, 0},
-    };
-    for (size_t f = 0; f < sizeof fields / sizeof fields[0]; f++)
-        for (int k = 0; k < fields[f].n; k++) {
-            double v = fields[f].v[k];
-            if (!isfinite(v))
-                return wenv_error_set(err, WENV_ERR_VALUE, "%s must be finite, got %g", fields[f].name, v);
-            if (fields[f].scales && v > WENV_PRINCIPLED_SCALE_MAX)
-                return wenv_error_set(err, WENV_ERR_VALUE, "%s must be at most %g, got %g", fields[f].name,
-                                      WENV_PRINCIPLED_SCALE_MAX, v);
+    for (size_t r = 0; r < wenv_principled_input_count; r++) {
+        const wenv_principled_input *row = &wenv_principled_input_list[r];
+        const double *v = wenv_principled_field_c(in, row);
+        for (int k = 0; k < row->n; k++) {
+            if (!isfinite(v[k]))
+                return wenv_error_set(err, WENV_ERR_VALUE, "%s must be finite, got %g", row->name, v[k]);
+            if (row->scales && v[k] > WENV_PRINCIPLED_SCALE_MAX)
+                return wenv_error_set(err, WENV_ERR_VALUE, "%s must be at most %g, got %g", row->name,
+                                      WENV_PRINCIPLED_SCALE_MAX, v[k]);
         }
+    }
     return WENV_OK;
 }
 
 /* The inputs clamped as Cycles' kernel clamps them (svm/closure.h). */
 static void clamp_inputs(wenv_principled_inputs *in)
 {
-    for (int k = 0; k < 3; k++) {
-        in->base_color[k] = fmax(in->base_color[k], 0.0);
-        in->specular_tint[k] = fmax(in->specular_tint[k], 0.0);
-        in->coat_tint[k] = fmax(in->coat_tint[k], 0.0);
-        in->sheen_tint[k] = fmax(in->sheen_tint[k], 0.0);
+    for (size_t r = 0; r < wenv_principled_input_count; r++) {
+        const wenv_principled_input *row = &wenv_principled_input_list[r];
+        double *v = wenv_principled_field(in, row);
+        for (int k = 0; k < row->n; k++)
+            v[k] = fmin(fmax(v[k], row->lo), row->hi);
     }
-    in->metallic = clamp01(in->metallic);
-    in->roughness = clamp01(in->roughness);
-    in->ior = fmax(in->ior, 1e-5);
-    in->alpha = clamp01(in->alpha);
-    in->specular_ior_level = fmax(in->specular_ior_level, 0.0);
-    in->anisotropic = clamp01(in->anisotropic);
-    in->coat_weight = fmax(in->coat_weight, 0.0);
-    in->coat_roughness = clamp01(in->coat_roughness);
-    in->coat_ior = fmax(in->coat_ior, 1.0);
-    in->sheen_weight = fmax(in->sheen_weight, 0.0);
-    in->sheen_roughness = clamp01(in->sheen_roughness);
-    in->subsurface_weight = clamp01(in->subsurface_weight);
-    in->transmission_weight = clamp01(in->transmission_weight);
-    in->diffuse_roughness = clamp01(in->diffuse_roughness);
 }
 
 /* A GGX lobe's model and shape; the shape's index only places the rules' Fresnel, the lobe's own
@@ -631,7 +562,7 @@ static void add_lobe(principled *p, wenv_lobe *shapes, lobe_role role, double ro
     l->alpha = wenv_alpha_from_roughness(roughness);
     l->rough = sqrt(l->alpha);
     l->compensate = compensate;
-    shapes[p->n] = (wenv_lobe){.specular = {colour[0], colour[1], colour[2]}, .roughness = l->alpha,
+    shapes[p->n] = (wenv_lobe){.specular = {colour[0], colour[1], colour[2]}, .alpha = l->alpha,
                                .ior = 1.5, .distribution = WENV_NDF_GGX};
     p->n++;
 }
@@ -639,15 +570,11 @@ static void add_lobe(principled *p, wenv_lobe *shapes, lobe_role role, double ro
 /* The inputs field by field (the struct's padding is not data). */
 static uint64_t inputs_fingerprint(const wenv_principled_inputs *in)
 {
-    const double fields[] = {in->base_color[0], in->base_color[1], in->base_color[2], in->metallic, in->roughness,
-                             in->ior, in->alpha, in->specular_ior_level, in->specular_tint[0], in->specular_tint[1],
-                             in->specular_tint[2], in->anisotropic, in->anisotropic_rotation, in->coat_weight,
-                             in->coat_roughness, in->coat_ior, in->coat_tint[0], in->coat_tint[1], in->coat_tint[2],
-                             in->sheen_weight, in->sheen_roughness, in->sheen_tint[0], in->sheen_tint[1],
-                             in->sheen_tint[2], in->subsurface_weight, in->transmission_weight,
-                             in->diffuse_roughness, in->emission_color[0], in->emission_color[1],
-                             in->emission_color[2], in->emission_strength, in->thin_film_thickness, in->thin_film_ior};
-    uint64_t h = wenv_fingerprint_doubles(WENV_FINGERPRINT_START, fields, sizeof fields / sizeof fields[0]);
+    uint64_t h = WENV_FINGERPRINT_START;
+    for (size_t r = 0; r < wenv_principled_input_count; r++) {
+        const wenv_principled_input *row = &wenv_principled_input_list[r];
+        h = wenv_fingerprint_doubles(h, wenv_principled_field_c(in, row), (size_t)row->n);
+    }
     return wenv_fingerprint_word(h, (uint64_t)in->multiscatter);
 }
 
@@ -669,7 +596,7 @@ wenv_status wenv_principled_create(wenv_material **out, const wenv_principled_in
         p->base[k] = fmin(in->base_color[k], 1.0);
     wenv_lobe shapes[MAX_LOBES];
 
-    if (in->sheen_weight > WEIGHT_CUTOFF) {
+    if (in->sheen_weight > WENV_PRINCIPLED_WEIGHT_CUTOFF) {
         /* the table is read at the Sheen Roughness (clamped as Cycles does); the shape only places
          * the rules' nodes: a broad GGX */
         lobe_model *l = &p->lobe[p->n];
@@ -677,11 +604,11 @@ wenv_status wenv_principled_create(wenv_material **out, const wenv_principled_in
         l->rough = fmin(fmax(in->sheen_roughness, 1e-3), 1.0);
         l->alpha = 1.0;
         shapes[p->n] = (wenv_lobe){.specular = {in->sheen_tint[0], in->sheen_tint[1], in->sheen_tint[2]},
-                                   .roughness = 1.0, .ior = 1.5, .distribution = WENV_NDF_GGX};
+                                   .alpha = 1.0, .ior = 1.5, .distribution = WENV_NDF_GGX};
         p->n++;
     }
 
-    if (in->coat_weight > WEIGHT_CUTOFF) {
+    if (in->coat_weight > WENV_PRINCIPLED_WEIGHT_CUTOFF) {
         lobe_model *l = &p->lobe[p->n];
         double one[3] = {1.0, 1.0, 1.0};
         add_lobe(p, shapes, LOBE_COAT, in->coat_roughness, 1, one);
@@ -694,7 +621,7 @@ wenv_status wenv_principled_create(wenv_material **out, const wenv_principled_in
         l->z = sqrt(fabs((in->coat_ior - 1.0) / (in->coat_ior + 1.0)));
         shapes[p->n - 1].ior = fmin(fmax(in->coat_ior, 1.0 + 1e-4), WENV_IOR_MAX);
     }
-    if (in->metallic > WEIGHT_CUTOFF) {
+    if (in->metallic > WENV_PRINCIPLED_WEIGHT_CUTOFF) {
         lobe_model *l = &p->lobe[p->n];
         const double f6_7 = 6.0 / 7.0, f5 = pow(f6_7, 5.0);
         int white = 1;
@@ -754,7 +681,7 @@ wenv_status wenv_principled_create(wenv_material **out, const wenv_principled_in
         l->role = LOBE_DIFFUSE;
         l->alpha = 1.0;
         l->rough = 1.0;
-        shapes[p->n] = (wenv_lobe){.specular = {p->base[0], p->base[1], p->base[2]}, .roughness = 1.0, .ior = 1.5,
+        shapes[p->n] = (wenv_lobe){.specular = {p->base[0], p->base[1], p->base[2]}, .alpha = 1.0, .ior = 1.5,
                                    .distribution = WENV_NDF_GGX};
         p->n++;
     }
@@ -778,27 +705,43 @@ const wenv_principled_inputs *wenv_principled_inputs_of(const wenv_material *mat
     return mat->kind == &PRINCIPLED ? &model_of(mat)->in : NULL;
 }
 
+/* Whether some channel of the row's value meets its rule. */
+static int breaks_rule(const wenv_principled_input *row, const double *v)
+{
+    for (int k = 0; k < row->n; k++)
+        if ((row->rule == WENV_ABOVE && v[k] > row->threshold) || (row->rule == WENV_BELOW && v[k] < row->threshold) ||
+            (row->rule == WENV_NONZERO && fabs(v[k]) > row->threshold))
+            return 1;
+    return 0;
+}
+
+static const wenv_principled_input *row_named(const char *name)
+{
+    for (size_t r = 0; r < wenv_principled_input_count; r++)
+        if (strcmp(wenv_principled_input_list[r].name, name) == 0)
+            return &wenv_principled_input_list[r];
+    return NULL;
+}
+
 size_t wenv_principled_unhonoured(const wenv_principled_inputs *in, const char **names, size_t max)
 {
-    const char *found[8];
     size_t n = 0;
-    if (in->transmission_weight > WEIGHT_CUTOFF)
-        found[n++] = "transmission_weight";
-    if (in->subsurface_weight > WEIGHT_CUTOFF)
-        found[n++] = "subsurface_weight";
-    if (in->emission_strength != 0.0 && (in->emission_color[0] > 0.0 || in->emission_color[1] > 0.0 ||
-                                         in->emission_color[2] > 0.0))
-        found[n++] = "emission_strength";
-    if (in->alpha < 1.0)
-        found[n++] = "alpha";
-    if (in->anisotropic > 0.0)
-        found[n++] = "anisotropic";
-    if (in->thin_film_thickness > 0.1)
-        found[n++] = "thin_film_thickness";
-    if (in->coat_weight > WEIGHT_CUTOFF &&
-        (in->coat_tint[0] > 1.0 || in->coat_tint[1] > 1.0 || in->coat_tint[2] > 1.0))
-        found[n++] = "coat_tint";
-    for (size_t i = 0; i < n && i < max; i++)
-        names[i] = found[i];
+    for (size_t r = 0; r < wenv_principled_input_count; r++) {
+        const wenv_principled_input *row = &wenv_principled_input_list[r];
+        if (row->rule == WENV_NEVER || !breaks_rule(row, wenv_principled_field_c(in, row)))
+            continue;
+        const wenv_principled_input *partner = row->partner[0] ? row_named(row->partner) : NULL;
+        if (partner) {
+            const double *p = wenv_principled_field_c(in, partner);
+            int present = 0;
+            for (int k = 0; k < partner->n; k++)
+                present |= p[k] > WENV_PRINCIPLED_WEIGHT_CUTOFF;
+            if (!present)
+                continue;
+        }
+        if (n < max)
+            names[n] = row->name;
+        n++;
+    }
     return n;
 }

@@ -255,7 +255,7 @@ static wenv_status mixed_rule(const wenv_material *mat, size_t lobe, const doubl
         if (len > 0.0 && w[2] > 0.0 && wo[2] > 0.0) {
             double ch = h[2] / len, oh = (wo[0] * h[0] + wo[1] * h[1] + wo[2] * h[2]) / len;
             if (ch > 0.0 && oh > 0.0)
-                shape_density = (double)n_shape * wenv_ndf(shape->distribution, shape->roughness, ch) * ch /
+                shape_density = (double)n_shape * wenv_ndf(shape->distribution, shape->alpha, ch) * ch /
                                 (4.0 * oh);
         }
         double total = shape_density + uniform_density;
@@ -385,7 +385,7 @@ static double lobe_luma(const table *t, size_t s)
  * coloured so that it matches the lobe's peak (see the top comment). */
 static wenv_lobe fit_shape(const table *t)
 {
-    wenv_lobe shape = {.specular = {1.0, 1.0, 1.0}, .roughness = 1.0, .ior = 1.5, .distribution = WENV_NDF_BECKMANN};
+    wenv_lobe shape = {.specular = {1.0, 1.0, 1.0}, .alpha = 1.0, .ior = 1.5, .distribution = WENV_NDF_BECKMANN};
     double luma0 = lobe_luma(t, 0);
     if (!(luma0 > 0.0))
         return shape;
@@ -396,12 +396,12 @@ static wenv_lobe fit_shape(const table *t)
             double prev = lobe_luma(t, slab * (i - 1));
             double x = (double)(i - 1) + (prev - 0.5 * luma0) / fmax(prev - luma, 1e-300);
             double q = x / (double)t->n[0], theta = q * q * 0.5 * M_PI;
-            shape.roughness = fmin(1.0, fmax(1e-3, tan(theta) / sqrt(log(2.0))));
+            shape.alpha = fmin(1.0, fmax(1e-3, tan(theta) / sqrt(log(2.0))));
             break;
         }
     }
     /* a unit-coloured shape's f at the mirror of a normal view: F(1) D(0) / 4 (G = 1 there) */
-    double unit = wenv_fresnel_dielectric(1.0, shape.ior) / (M_PI * shape.roughness * shape.roughness * 4.0);
+    double unit = wenv_fresnel_dielectric(1.0, shape.ior) / (M_PI * shape.alpha * shape.alpha * 4.0);
     for (int c = 0; c < 3; c++)
         shape.specular[c] = fmax(0.0, t->rgb[c] - t->floor[c]) / unit;
     return shape;

@@ -49,8 +49,8 @@ static void check_materials(void)
     wenv_error err = {0};
     const double grey[3] = {0.5, 0.25, 1.0}, black[3] = {0.0, 0.0, 0.0};
     wenv_material *lambert = NULL, *ct = NULL;
-    wenv_lobe lobes[2] = {{.specular = {1, 1, 1}, .roughness = 0.3, .ior = 1.5, .distribution = WENV_NDF_GGX},
-                          {.specular = {0.5, 0.5, 0.5}, .roughness = 0.05, .ior = 1.5, .distribution = WENV_NDF_BECKMANN}};
+    wenv_lobe lobes[2] = {{.specular = {1, 1, 1}, .alpha = 0.3, .ior = 1.5, .distribution = WENV_NDF_GGX},
+                          {.specular = {0.5, 0.5, 0.5}, .alpha = 0.05, .ior = 1.5, .distribution = WENV_NDF_BECKMANN}};
     if (wenv_lambert_create(&lambert, grey, &err) || wenv_cook_torrance_create(&ct, black, lobes, 2, WENV_SHADOW_SMITH, &err)) {
         check(0, err.message, 0, 0);
         return;
@@ -92,7 +92,7 @@ static void check_materials(void)
     double h[3] = {0.0, 0.0, 1.0}; /* the half vector of this mirror pair */
     const wenv_lobe *shape = wenv_material_lobe(ct, 0);
     wenv_material_lobe_over_ndf(ct, 0, wi, wo, over);
-    double back = over[0] * wenv_ndf(shape->distribution, shape->roughness, h[2]) / (4.0 * wi[2] * wo[2]);
+    double back = over[0] * wenv_ndf(shape->distribution, shape->alpha, h[2]) / (4.0 * wi[2] * wo[2]);
     check(near(back, lobe0[0], 1e-12), "a lobe over its shape's D gives the lobe back", back, lobe0[0]);
     double cut = wenv_material_lobe_cos_h_min(ct, 1);
     check(cut > 0.0 && cut < 1.0, "a narrow lobe has a cone for the exact lights", cut, 1.0);
@@ -210,8 +210,8 @@ static void check_models(void)
 {
     wenv_error err = {0};
     const double black[3] = {0.0, 0.0, 0.0};
-    wenv_lobe lobes[2] = {{.specular = {1, 0.8, 0.6}, .roughness = 0.3, .ior = 1.5, .distribution = WENV_NDF_GGX},
-                          {.specular = {0.5, 0.5, 0.5}, .roughness = 0.1, .ior = 1.7, .distribution = WENV_NDF_BECKMANN}};
+    wenv_lobe lobes[2] = {{.specular = {1, 0.8, 0.6}, .alpha = 0.3, .ior = 1.5, .distribution = WENV_NDF_GGX},
+                          {.specular = {0.5, 0.5, 0.5}, .alpha = 0.1, .ior = 1.7, .distribution = WENV_NDF_BECKMANN}};
     wenv_material *ct = NULL, *cavity = NULL, *coated = NULL, *sheen = NULL, *table = NULL;
     wenv_principled_inputs in;
     wenv_principled_defaults(&in);

@@ -265,7 +265,7 @@ class AddonFuzzer(Draws):
             self.assign(st, "diffuse", self.colour())
             for _ in range(int(self.pick([0, 1, 1, 2, 3]))):
                 lobe = st.lobes.add()
-                self.assign(lobe, "roughness", self.number(0.2, 0.3))
+                self.assign(lobe, "alpha", self.number(0.2, 0.3))
                 self.assign(lobe, "ior", self.number(1.5, 0.3))
                 self.assign(lobe, "specular", self.colour())
                 self.assign(lobe, "distribution", self.pick(["GGX", "BECKMANN"]))
@@ -364,7 +364,7 @@ class AddonFuzzer(Draws):
         if node is not None and self.chance(0.5):
             self.assign(node.inputs["Roughness"], "default_value", self.number(0.3, 0.3))
         elif mat.wenv.lobes:
-            self.assign(mat.wenv.lobes[0], "blender_roughness", self.number(0.3, 0.3))
+            self.assign(mat.wenv.lobes[0], "roughness", self.number(0.3, 0.3))
         else:
             self.assign(mat.wenv, "model", self.pick(["PRINCIPLED", "COOK_TORRANCE", "LAMBERT"]))
 

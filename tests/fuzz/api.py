@@ -117,11 +117,11 @@ class Fuzzer(Draws):
 
     def lobe(self):
         lobe = {}
-        valid = {"roughness": float(self.pick([0.01, 0.05, 0.1, 0.3, 1.0, 1e-6, 10.0])),
+        valid = {"alpha": float(self.pick([0.01, 0.05, 0.1, 0.3, 1.0, 1e-6, 10.0])),
                  "specular": self.pick([1.0, (0.9, 0.5, 0.2), 0.0]), "ior": float(self.pick([1.5, 1.01, 10.0, 3.0])),
                  "distribution": self.pick(["ggx", "beckmann"])}
         for key in valid:
-            if key == "roughness" or self.chance(0.5):
+            if key == "alpha" or self.chance(0.5):
                 lobe[key] = self.odd(valid[key], 0.1)
         if self.chance(0.05):
             lobe["bogus"] = 1

@@ -93,7 +93,7 @@ def matrix_cache_seeds(out):
     import wenv
 
     env = wenv.Environment(np.random.default_rng(4).uniform(0, 1, (8, 16, 3)).astype(np.float32))
-    mat = wenv.CookTorrance(diffuse=(0.2, 0.2, 0.2), lobes=[{"specular": (1, 1, 1), "roughness": 0.3, "ior": 1.5}])
+    mat = wenv.CookTorrance(diffuse=(0.2, 0.2, 0.2), lobes=[{"specular": (1, 1, 1), "alpha": 0.3, "ior": 1.5}])
     settings = [dict(normals=2, matrix_epsilon=1e-3), dict(normals=4, matrix_epsilon=0.0),
                 dict(normals=2, matrix_epsilon=0.5), {"global": 8, "local": 8, "normals": 2, "coefficients": 64}]
     with tempfile.TemporaryDirectory() as cache:

@@ -147,12 +147,12 @@ static size_t prefilter_samples(const wenv_lobe *lobe, size_t count, size_t base
     size_t kept = 0;
     for (size_t k = 0; k < count; k++) {
         double u1 = ((double)k + 0.5) / (double)count, phi = 2.0 * M_PI * radical_inverse2((uint32_t)k);
-        double t = wenv_ndf_tan2_at(lobe->distribution, lobe->roughness, u1, 1.0 - u1);
+        double t = wenv_ndf_tan2_at(lobe->distribution, lobe->alpha, u1, 1.0 - u1);
         double ch = 1.0 / sqrt(1.0 + t), sh = sqrt(t) * ch;
         double nl = 2.0 * ch * ch - 1.0;
         if (!(nl > 0.0))
             continue;
-        double pdf = 0.25 * wenv_ndf(lobe->distribution, lobe->roughness, ch);
+        double pdf = 0.25 * wenv_ndf(lobe->distribution, lobe->alpha, ch);
         double lod = pdf > 0.0 ? 0.5 * log2(1.0 / ((double)count * pdf * texel_omega)) + 1.0 : 1e9;
         prefilter_sample *s = out + kept++;
         s->h[0] = sh * cos(phi);
@@ -179,7 +179,7 @@ static wenv_status prefilter_all(const wenv_splitsum *ss, const pyramid *src, co
         float *map = out + l * nt * 3;
         size_t same = l;
         for (size_t e = 0; e < l; e++)
-            if (lobes[e].distribution == lobes[l].distribution && lobes[e].roughness == lobes[l].roughness)
+            if (lobes[e].distribution == lobes[l].distribution && lobes[e].alpha == lobes[l].alpha)
                 same = e;
         if (same != l) {
             memcpy(map, out + same * nt * 3, nt * 3 * sizeof(float));

@@ -597,9 +597,9 @@ static float table_view(const wenv_material *mat, size_t i, specular_view *sv, f
     return sqrtf(dot3(up, up));
 }
 
-void wenv_lights_peak_table(const wenv_material *mat, double roughness, float peak[WENV_LIGHT_PEAK_SAMPLES + 1])
+void wenv_lights_peak_table(const wenv_material *mat, double alpha, float peak[WENV_LIGHT_PEAK_SAMPLES + 1])
 {
-    float m = (float)roughness;
+    float m = (float)alpha;
     for (size_t i = 0; i <= WENV_LIGHT_PEAK_SAMPLES; i++) {
         specular_view sv;
         float r[3], up[3];
@@ -687,7 +687,7 @@ void wenv_lights_specular(const wenv_lights *lights, const wenv_material *mat, c
     lobe_axes ax = {.centred = lobe->modelled};
     /* across the mirror direction a lobe of roughness m is about 2 m cos(theta_v) wide, squeezed
      * against the horizon (to about m^2 / 4 at it), and 2 m along it */
-    float m = (float)lobe->roughness, w_across = 2.0f * m * cos_v + 0.25f * m * m, w_along = 2.0f * m;
+    float m = (float)lobe->alpha, w_across = 2.0f * m * cos_v + 0.25f * m * m, w_along = 2.0f * m;
     if (lobe->narrow && 2.0f * SUBPIXELS_PER_WIDTH * pixels->reach > w_across) {
         /* pixels wider than the lobe: their extents are read, and a pixel whose centre is off the
          * lobe by less than its reach may still meet it.  Near the mirror direction n.h moves by

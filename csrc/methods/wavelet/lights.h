@@ -45,7 +45,7 @@ void wenv_lights_irradiance(const wenv_lights *lights, const float n[3], float t
 
 /* What the walk over the clusters needs to know of a material's lobes. */
 typedef struct {
-    double roughness;   /* the narrowest lobe's alpha (its width: wenv_material_lobe_width) */
+    double alpha;       /* the narrowest lobe's alpha (its width: wenv_material_lobe_width) */
     double cone_cos;    /* cosine of the half-angle about the mirror direction outside which every
                          * lobe is negligible (-1: none) */
     int modelled;       /* the lobes lie about the mirror direction and follow their shapes
@@ -60,9 +60,9 @@ typedef struct {
 /* The lobes' largest f cos (RGB summed) about the mirror direction, with a margin, at
  * WENV_LIGHT_PEAK_SAMPLES + 1 views uniform in sqrt(cos(theta_v)) from 0 to 1: it bounds what a
  * cluster can add, and depends on the view's angle alone (isotropic lobes), so it is made once per
- * material rather than per vertex.  roughness: wenv_lights_lobe's. */
+ * material rather than per vertex.  alpha: wenv_lights_lobe's. */
 #define WENV_LIGHT_PEAK_SAMPLES 64
-void wenv_lights_peak_table(const wenv_material *mat, double roughness, float peak[WENV_LIGHT_PEAK_SAMPLES + 1]);
+void wenv_lights_peak_table(const wenv_material *mat, double alpha, float peak[WENV_LIGHT_PEAK_SAMPLES + 1]);
 
 /* For lobes not modelled (tables), what bounds a cluster instead of the shape: the lobes' largest
  * f cos (RGB summed) over light directions at least WENV_LIGHT_ENVELOPE_ANGLE(j) from the mirror

@@ -192,10 +192,10 @@ static void shade_vertex(const wenv_wavelet *wavelet, const vertex_taps *tp, flo
             wenv_lights_irradiance(wavelet->lights, tp->n, (float)wavelet->q.light_tolerance * scale, e);
         }
         if (wavelet->m->has_lobes) {
-            wenv_lights_lobe lobe = {.roughness = wavelet->m->lobe_m_min,
+            wenv_lights_lobe lobe = {.alpha = wavelet->m->lobe_m_min,
                                      .cone_cos = wavelet->m->light_cone_cos,
                                      .modelled = wavelet->m->lobes_modelled,
-                                     .narrow = wavelet->m->lobe_m_min < wavelet->narrow_roughness,
+                                     .narrow = wavelet->m->lobe_m_min < wavelet->narrow_alpha,
                                      .peak = wavelet->m->lobe_peak,
                                      .envelope = wavelet->m->lobes_modelled ? NULL : wavelet->m->lobe_envelope};
             /* the error allowed per cluster is against the vertex's radiance without the lights plus

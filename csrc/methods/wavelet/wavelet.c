@@ -213,7 +213,7 @@ wenv_status wenv_wavelet_set_environment(wenv_wavelet *wavelet, const wenv_envma
     npixels = wenv_envmap_brightest(env, npixels, wavelet->q.light_threshold, bright);
     if ((st = wenv_lights_create(&lights, bright, npixels, err)))
         goto done;
-    wavelet->narrow_roughness = WENV_NARROW_LOBE_PIXELS * wenv_envmap_pixel_angle(env);
+    wavelet->narrow_alpha = WENV_NARROW_LOBE_PIXELS * wenv_envmap_pixel_angle(env);
     wavelet->mean_radiance = (float)(wenv_envmap_flux(env) / (4.0 * M_PI));
     for (size_t i = 0; i < npixels; i++)
         excluded[i] = bright[i].pixel;

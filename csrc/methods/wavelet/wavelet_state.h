@@ -69,7 +69,7 @@ struct wenv_wavelet {
     float radiance_max[3];   /* brightest texel of the lighting the slices see (lights out) */
     wenv_lights *lights;     /* pixels taken out as exact directional lights (lights.h) */
     float mean_radiance;     /* the environment's, lights included (channels averaged) */
-    double narrow_roughness; /* lobes narrower than this integrate the lights' pixel areas (envmap.h) */
+    double narrow_alpha; /* lobes narrower than this integrate the lights' pixel areas (envmap.h) */
     unsigned char *slice_ready, *slice_need; /* ready: 0 stale, READY, or USED (see READY) */
     wenv_grazing_light *grazing_light; /* made while the current material reads it (NULL otherwise) */
     wenv_envmap *image;      /* the lighting's image (shared with the caller's, not copied) and the */

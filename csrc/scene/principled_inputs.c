@@ -1,0 +1,11 @@
+/* The Principled BSDF's inputs as rows (principled_inputs.h), from the one list. */
+#include "scene/principled_inputs.h"
+
+#define WENV_PRINCIPLED_ROW(name_, n_, socket_, r, g, b, lo_, hi_, scales_, shading_, rule_, threshold_, partner_,   \
+                            note_)                                                                                 \
+    {.name = #name_, .socket = socket_, .offset = offsetof(wenv_principled_inputs, name_), .n = n_,                \
+     .fallback = {r, g, b}, .lo = lo_, .hi = hi_, .scales = scales_, .shading = shading_, .rule = rule_,           \
+     .threshold = threshold_, .partner = partner_, .note = note_},
+
+const wenv_principled_input wenv_principled_input_list[] = {WENV_PRINCIPLED_INPUTS(WENV_PRINCIPLED_ROW)};
+const size_t wenv_principled_input_count = sizeof wenv_principled_input_list / sizeof wenv_principled_input_list[0];

@@ -1,0 +1,123 @@
+/* Blender's Principled BSDF node's inputs, defined once.  Every row below is one socket; from this
+ * list follow the C struct (wenv_principled_inputs), the node's defaults, what is checked and how
+ * Cycles clamps it, the material's fingerprint, what wenv does not shade (with the words a user
+ * reads), the Python keywords of wenv.Principled and wenv.Principled.INPUTS, from which the add-on
+ * maps sockets and draws its panel.  A new Blender input is one new row (docs/ARCHITECTURE.md §2).
+ *
+ * Columns: X(name, n, socket, default r, g, b (n = 1: the first), lo, hi, scales, shading, rule,
+ * threshold, partner, note)
+ *   name      the Python keyword: the socket's name in snake case
+ *   n         1 for a value, 3 for a colour
+ *   socket    the node's socket name (Blender 4.x/5.x)
+ *   default   the node's default (node_shader_bsdf_principled.cc)
+ *   lo, hi    the range Cycles' kernel clamps it to (svm/closure.h; -INF/INF: none)
+ *   scales    1 when it multiplies what is reflected: at most WENV_PRINCIPLED_SCALE_MAX (a value near
+ *             float's largest, which Blender's sockets hold, would overflow the lighting)
+ *   shading   WENV_SHADED, WENV_SHADED_PARTLY (shaded in part: the note says how), WENV_NOT_SHADED
+ *   rule      when a value is named by wenv_principled_unhonoured: WENV_NEVER, WENV_ABOVE or
+ *   threshold WENV_BELOW the threshold, or WENV_NONZERO (|value| above it), in any channel of a colour,
+ *   partner   and only while `partner` (an input's name, or "") is above WENV_PRINCIPLED_WEIGHT_CUTOFF in
+ *             some channel
+ *   note      what a user reads when it is named */
+#ifndef WENV_PRINCIPLED_INPUTS_H
+#define WENV_PRINCIPLED_INPUTS_H
+
+#include <math.h>
+#include <stddef.h>
+
+#define WENV_PRINCIPLED_INPUTS(X)                                                                                  \
+    X(base_color, 3, "Base Color", 0.8, 0.8, 0.8, 0.0, INFINITY, 1, WENV_SHADED, WENV_NEVER, 0.0, "", "")          \
+    X(metallic, 1, "Metallic", 0.0, 0.0, 0.0, 0.0, 1.0, 0, WENV_SHADED, WENV_NEVER, 0.0, "", "")                    \
+    X(roughness, 1, "Roughness", 0.5, 0.0, 0.0, 0.0, 1.0, 0, WENV_SHADED, WENV_NEVER, 0.0, "", "")                  \
+    X(ior, 1, "IOR", 1.5, 0.0, 0.0, 1e-5, INFINITY, 0, WENV_SHADED, WENV_NEVER, 0.0, "", "")                        \
+    X(alpha, 1, "Alpha", 1.0, 0.0, 0.0, 0.0, 1.0, 0, WENV_SHADED_PARTLY, WENV_BELOW, 1.0, "",                        \
+      "Alpha below 1: the see-through part is not shaded (the reflection is scaled by Alpha)")                     \
+    X(specular_ior_level, 1, "Specular IOR Level", 0.5, 0.0, 0.0, 0.0, INFINITY, 1, WENV_SHADED, WENV_NEVER, 0.0,  \
+      "", "")                                                                                                      \
+    X(specular_tint, 3, "Specular Tint", 1.0, 1.0, 1.0, 0.0, INFINITY, 1, WENV_SHADED, WENV_NEVER, 0.0, "", "")    \
+    X(anisotropic, 1, "Anisotropic", 0.0, 0.0, 0.0, 0.0, 1.0, 0, WENV_NOT_SHADED, WENV_ABOVE, 0.0, "",               \
+      "Anisotropy is not shaded (the lobes are isotropic)")                                                        \
+    X(anisotropic_rotation, 1, "Anisotropic Rotation", 0.0, 0.0, 0.0, -INFINITY, INFINITY, 0, WENV_NOT_SHADED,     \
+      WENV_NEVER, 0.0, "", "")                                                                                     \
+    X(coat_weight, 1, "Coat Weight", 0.0, 0.0, 0.0, 0.0, INFINITY, 1, WENV_SHADED, WENV_NEVER, 0.0, "", "")        \
+    X(coat_roughness, 1, "Coat Roughness", 0.03, 0.0, 0.0, 0.0, 1.0, 0, WENV_SHADED, WENV_NEVER, 0.0, "", "")      \
+    X(coat_ior, 1, "Coat IOR", 1.5, 0.0, 0.0, 1.0, INFINITY, 0, WENV_SHADED, WENV_NEVER, 0.0, "", "")              \
+    X(coat_tint, 3, "Coat Tint", 1.0, 1.0, 1.0, 0.0, INFINITY, 0, WENV_SHADED_PARTLY, WENV_ABOVE, 1.0,              \
+      "coat_weight",                                                                                               \
+      "Coat Tint above 1 is shaded as 1 (a coat that adds light grows without bound towards grazing)")             \
+    X(sheen_weight, 1, "Sheen Weight", 0.0, 0.0, 0.0, 0.0, INFINITY, 1, WENV_SHADED, WENV_NEVER, 0.0, "", "")      \
+    X(sheen_roughness, 1, "Sheen Roughness", 0.5, 0.0, 0.0, 0.0, 1.0, 0, WENV_SHADED, WENV_NEVER, 0.0, "", "")     \
+    X(sheen_tint, 3, "Sheen Tint", 1.0, 1.0, 1.0, 0.0, INFINITY, 1, WENV_SHADED, WENV_NEVER, 0.0, "", "")          \
+    X(subsurface_weight, 1, "Subsurface Weight", 0.0, 0.0, 0.0, 0.0, 1.0, 0, WENV_SHADED_PARTLY, WENV_ABOVE,        \
+      WENV_PRINCIPLED_WEIGHT_CUTOFF, "", "Subsurface scattering is shaded as diffuse reflection")                  \
+    X(subsurface_radius, 3, "Subsurface Radius", 1.0, 0.2, 0.1, -INFINITY, INFINITY, 0, WENV_NOT_SHADED,            \
+      WENV_NEVER, 0.0, "", "")                                                                                     \
+    X(subsurface_scale, 1, "Subsurface Scale", 0.05, 0.0, 0.0, -INFINITY, INFINITY, 0, WENV_NOT_SHADED, WENV_NEVER, \
+      0.0, "", "")                                                                                                 \
+    X(subsurface_ior, 1, "Subsurface IOR", 1.4, 0.0, 0.0, -INFINITY, INFINITY, 0, WENV_NOT_SHADED, WENV_NEVER, 0.0,  \
+      "", "")                                                                                                      \
+    X(subsurface_anisotropy, 1, "Subsurface Anisotropy", 0.0, 0.0, 0.0, -INFINITY, INFINITY, 0, WENV_NOT_SHADED,   \
+      WENV_NEVER, 0.0, "", "")                                                                                     \
+    X(transmission_weight, 1, "Transmission Weight", 0.0, 0.0, 0.0, 0.0, 1.0, 0, WENV_NOT_SHADED, WENV_ABOVE,       \
+      WENV_PRINCIPLED_WEIGHT_CUTOFF, "",                                                                           \
+      "Transmission is not shaded (wenv shades reflection: the light through the object is left out)")             \
+    X(diffuse_roughness, 1, "Diffuse Roughness", 0.0, 0.0, 0.0, 0.0, 1.0, 0, WENV_SHADED, WENV_NEVER, 0.0, "", "") \
+    X(emission_color, 3, "Emission Color", 1.0, 1.0, 1.0, -INFINITY, INFINITY, 0, WENV_NOT_SHADED, WENV_NEVER,     \
+      0.0, "", "")                                                                                                 \
+    X(emission_strength, 1, "Emission Strength", 0.0, 0.0, 0.0, -INFINITY, INFINITY, 0, WENV_NOT_SHADED,           \
+      WENV_NONZERO, 0.0, "emission_color", "Emission is not shaded")                                                 \
+    X(thin_film_thickness, 1, "Thin Film Thickness", 0.0, 0.0, 0.0, -INFINITY, INFINITY, 0, WENV_NOT_SHADED,       \
+      WENV_ABOVE, 0.1, "", "Thin film is not shaded")                                                              \
+    X(thin_film_ior, 1, "Thin Film IOR", 1.33, 0.0, 0.0, -INFINITY, INFINITY, 0, WENV_NOT_SHADED, WENV_NEVER, 0.0, \
+      "", "")
+
+/* Cycles drops a closure whose mean weight is below this; an input that only weighs something
+ * counts from here. */
+#define WENV_PRINCIPLED_WEIGHT_CUTOFF 1e-5
+/* The most an input that scales the reflection may be: a million keeps every product finite under
+ * the brightest lighting a World may give. */
+#define WENV_PRINCIPLED_SCALE_MAX 1e6
+
+typedef enum { WENV_SHADED, WENV_SHADED_PARTLY, WENV_NOT_SHADED } wenv_principled_shading;
+typedef enum { WENV_NEVER, WENV_ABOVE, WENV_BELOW, WENV_NONZERO } wenv_principled_rule;
+
+#define WENV_PRINCIPLED_FIELD_1(name) double name;
+#define WENV_PRINCIPLED_FIELD_3(name) double name[3];
+#define WENV_PRINCIPLED_FIELD(name, n, ...) WENV_PRINCIPLED_FIELD_##n(name)
+
+/* The node's inputs (Blender 4.x/5.x names in snake case), as Cycles reads them; the node's
+ * distribution, "Multiscatter GGX" (multiscatter 1, Blender's default) or "GGX", is a property of
+ * the node rather than a socket. */
+typedef struct {
+    WENV_PRINCIPLED_INPUTS(WENV_PRINCIPLED_FIELD)
+    int multiscatter;
+} wenv_principled_inputs;
+
+/* One row of the list, for loops over the inputs. */
+typedef struct {
+    const char *name, *socket;
+    size_t offset; /* of the field in wenv_principled_inputs */
+    int n;
+    double fallback[3]; /* the node's default */
+    double lo, hi;
+    int scales;
+    wenv_principled_shading shading;
+    wenv_principled_rule rule;
+    double threshold;
+    const char *partner, *note;
+} wenv_principled_input;
+
+extern const wenv_principled_input wenv_principled_input_list[];
+extern const size_t wenv_principled_input_count;
+
+/* The field of `in` a row describes (n doubles). */
+static inline double *wenv_principled_field(wenv_principled_inputs *in, const wenv_principled_input *row)
+{
+    return (double *)((char *)in + row->offset);
+}
+static inline const double *wenv_principled_field_c(const wenv_principled_inputs *in, const wenv_principled_input *row)
+{
+    return (const double *)((const char *)in + row->offset);
+}
+
+#endif
