@@ -1,7 +1,7 @@
 """Accuracy of every preset on tabulated BRDFs, as tests/test_accuracy.py measures it for Cook-Torrance:
 under each of Blender's eight bundled HDRIs, over the same 2000 random (normal, view) pairs, against
 wenv.reference of the same table.  The tables are 90 x 90 x 180 (MERL's resolution) of numpy BRDFs
-(benchmarks/merl_files.py, table_of): the Cook-Torrance lobes of test_accuracy.py (m = 0.05..0.5,
+(tests/helpers/merl_files.py, table_of): the Cook-Torrance lobes of test_accuracy.py (m = 0.05..0.5,
 white, index 1.5), a paint (m = 0.2 over a coloured diffuse floor, which the table splits off as a
 Lambertian part), a retro-reflective lobe and a lobe whose colour shifts with theta_d.
 
@@ -18,7 +18,7 @@ import pytest
 import wenv
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-from benchmarks import merl_files as M  # noqa: E402
+from tests.helpers import merl_files as M  # noqa: E402
 import test_accuracy  # noqa: E402  (the Cook-Torrance figures, computed once per session)
 
 DATA = os.path.join(os.path.dirname(__file__), "data", "accuracy_reference_tables.npz")

@@ -11,7 +11,7 @@ import wenv
 from conftest import WAVELET_BASE, random_pairs
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-from benchmarks import merl_files  # noqa: E402
+from tests.helpers import merl_files  # noqa: E402
 
 QUALITY = {**WAVELET_BASE, "global": 32, "local": 16, "normals": 16, "views": 8, "coefficients": 0,
            "lights": 4096, "light_threshold": 1.0}

@@ -1,6 +1,6 @@
 """Tabulated (measured) BRDFs: wenv.Tabulated and wenv.load_brdf (MERL .binary).
 
-Tables are made from analytic BRDFs (benchmarks/merl_files.py) at MERL's sample positions, written in
+Tables are made from analytic BRDFs (tests/helpers/merl_files.py) at MERL's sample positions, written in
 MERL's format where a file is needed, and read back; the expected values come from the numpy model
 of the specification in merl_files (interpolate, fill_unmeasured), never from wenv itself."""
 import math
@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-from benchmarks import merl_files as M  # noqa: E402
+from tests.helpers import merl_files as M  # noqa: E402
 import wenv  # noqa: E402
 from conftest import WAVELET_BASE  # noqa: E402
 

@@ -19,7 +19,7 @@ import tempfile
 
 import numpy as np
 
-from measure import bundled_hdri
+from tests.helpers.measure import bundled_hdri
 
 # Principled BSDF node inputs by wenv.Principled's names
 SOCKETS = {
