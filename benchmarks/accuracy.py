@@ -23,9 +23,10 @@ import time
 
 import numpy as np
 
-import merl_files
 import wenv
-from measure import OUT, ROOT, bundled_hdri, random_pairs, relative_rmse
+from measure import OUT, ROOT
+from tests.helpers import merl_files
+from tests.helpers.measure import bundled_hdri, random_pairs, relative_rmse
 
 DATA = os.path.join(ROOT, "tests", "data", "accuracy_reference.npz")
 # 6000 further pairs (another seed) for benchmarks/auto_quality.py.  Over 2000 pairs a few grazing
@@ -42,7 +43,7 @@ MATERIALS = {
     **{f"m{m}": {"diffuse": [0.0, 0.0, 0.0], "lobes": [{"specular": [1.0, 1.0, 1.0], "alpha": m, "ior": 1.5}]}
        for m in (0.05, 0.1, 0.2, 0.5)},
 }
-# Tabulated BRDFs at MERL's resolution (benchmarks/merl_files.py makes them from numpy BRDFs): the
+# Tabulated BRDFs at MERL's resolution (tests/helpers/merl_files.py makes them from numpy BRDFs): the
 # Cook-Torrance lobes above as tables, a paint (that lobe over a coloured diffuse floor, which the
 # table splits off as a Lambertian part), a retro-reflective lobe and a lobe whose colour shifts with
 # theta_d (neither is a Cook-Torrance lobe).  Their reference is wenv.reference of the table itself,

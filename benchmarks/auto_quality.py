@@ -33,7 +33,8 @@ import numpy as np
 import wenv
 from accuracy import HDRIS, MATERIALS, load_reference, material
 from bench_shade import orbit_eye, suzanne
-from measure import OUT, bundled_hdri, estimated_error, mirror_weighted_pairs, relative_rmse
+from measure import OUT
+from tests.helpers.measure import bundled_hdri, estimated_error, mirror_weighted_pairs, relative_rmse
 
 
 def first_view_ms(env, mat, quality, pos, nrm, repeats, method="slicing"):

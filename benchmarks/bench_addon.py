@@ -31,7 +31,8 @@ import wenv  # noqa: E402
 
 import addon  # noqa: E402
 from addon import engine, materials, meshes, shading, views  # noqa: E402
-from measure import OUT, bundled_hdri  # noqa: E402
+from measure import OUT  # noqa: E402
+from tests.helpers.measure import bundled_hdri  # noqa: E402
 
 
 def build_scene(levels, quality, material="cook_torrance"):

@@ -27,7 +27,8 @@ import wenv  # noqa: E402
 import addon  # noqa: E402
 from addon import engine, live  # noqa: E402
 from bench_addon import build_scene  # noqa: E402
-from measure import OUT, bundled_hdri  # noqa: E402
+from measure import OUT  # noqa: E402
+from tests.helpers.measure import bundled_hdri  # noqa: E402
 
 
 def settle(session, chosen, timeout=120.0):

@@ -18,7 +18,8 @@ import numpy as np
 
 import wenv
 from bench_shade import orbit_eye, suzanne
-from measure import OUT, bundled_hdri, random_pairs, relative_rmse
+from measure import OUT
+from tests.helpers.measure import bundled_hdri, random_pairs, relative_rmse
 
 CONFIGS = [
     ("rotation", "draft"), ("slicing", "default"),

@@ -17,7 +17,8 @@ import time
 import numpy as np
 
 import wenv
-from measure import OUT, bundled_hdri
+from measure import OUT
+from tests.helpers.measure import bundled_hdri
 
 
 def suzanne(levels):

@@ -20,10 +20,11 @@ import time
 
 import numpy as np
 
-import merl_files
 import wenv
 from bench_shade import orbit_eye, suzanne
-from measure import OUT, bundled_hdri
+from measure import OUT
+from tests.helpers import merl_files
+from tests.helpers.measure import bundled_hdri
 
 ROUGHNESS = (0.05, 0.2, 0.5)
 DIFFUSE = 0.2

@@ -15,7 +15,8 @@ import os
 import numpy as np
 
 import wenv
-from measure import OUT, bundled_hdri, relative_rmse
+from measure import OUT
+from tests.helpers.measure import bundled_hdri, relative_rmse
 
 HIGH = wenv.QUALITY_PRESETS["high"]
 COUNT = 150

@@ -14,8 +14,9 @@ import os
 import numpy as np
 
 import wenv
-from cycles_sphere import SphereScene
-from measure import OUT, ROOT, bundled_hdri, relative_rmse
+from measure import OUT, ROOT
+from tests.helpers.cycles_sphere import SphereScene
+from tests.helpers.measure import bundled_hdri, relative_rmse
 
 MATERIALS = {
     "paint\n(roughness 0.3)": dict(base_color=(0.6, 0.15, 0.08), roughness=0.3),

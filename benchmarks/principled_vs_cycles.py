@@ -1,6 +1,6 @@
 """wenv.reference of Principled BSDF materials against Cycles' render of them (through bpy): a grid of
 dielectrics, metals, coated paints, sheens and a rough diffuse at several roughnesses and colours, each on an unoccluded
-sphere under bundled HDRIs (benchmarks/cycles_sphere.py), rendered twice with different seeds so
+sphere under bundled HDRIs (tests/helpers/cycles_sphere.py), rendered twice with different seeds so
 that Cycles' own noise is measured beside the difference.  docs/principled.md's Cycles table.
 
     .venv/bin/python benchmarks/principled_vs_cycles.py [--hdris sunset,forest,studio] [--size 48] [--samples 512]
@@ -16,8 +16,8 @@ import time
 import numpy as np
 
 import wenv
-from cycles_sphere import SphereScene
 from measure import OUT
+from tests.helpers.cycles_sphere import SphereScene
 
 GRID = {
     "paint r0.1": dict(base_color=(0.6, 0.15, 0.08), roughness=0.1),

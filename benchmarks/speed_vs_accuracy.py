@@ -7,7 +7,7 @@ variate, its difference from each setting read on 50000 pairs drawn about the li
 reflections (weighted back to the uniform law), the reference's correction on the 8000 stored pairs
 of benchmarks/accuracy.py.  Over the stored pairs alone a narrow lobe under a sun is a lottery.
 Writes docs/speed_vs_accuracy.{json,csv,png}: a log-log chart with each method's Pareto front.
-Each setting's peak memory is measured too, in a fresh process (benchmarks/memory.py: the growth of
+Each setting's peak memory is measured too, in a fresh process (tests/helpers/memory.py: the growth of
 peak resident memory while the shader is built and shades one view, under the first HDRI at m = 0.2,
 rotation matrices loaded from the cache the timing run filled), and drawn against the time per view
 change in docs/memory_vs_time.png.
@@ -35,8 +35,9 @@ import numpy as np
 import wenv
 from accuracy import MATERIALS, load_reference, material
 from bench_shade import orbit_eye, suzanne
-from measure import OUT, ROOT, bundled_hdri, estimated_error, mirror_weighted_pairs, relative_rmse
-from memory import peak_memory
+from measure import OUT, ROOT
+from tests.helpers.measure import bundled_hdri, estimated_error, mirror_weighted_pairs, relative_rmse
+from tests.helpers.memory import peak_memory
 
 DOCS = os.path.join(ROOT, "docs")
 ROUGHNESS = ["m0.05", "m0.2", "m0.5"]
@@ -103,10 +104,10 @@ MEMORY_MATERIAL = "m0.2"
 
 
 def measure_memory(rows, hdri, pos, mesh_nrm):
-    """Each row's peak memory in a fresh process (see memory.py), stored as row["memory"]."""
+    """Each row's peak memory in a fresh process (see tests/helpers/memory.py), stored as row["memory"]."""
     for row in rows:
         mem = peak_memory(row["method"], row["quality"], pos, mesh_nrm, hdri=hdri,
-                          material_key=MEMORY_MATERIAL, eye=orbit_eye(100))
+                          material=MATERIALS[MEMORY_MATERIAL], eye=orbit_eye(100))
         row["memory"] = {k: mem[k] for k in ("increment_mb", "peak_mb", "baseline_mb", "held_mb", "model_mb",
                                              "cache", "exact")}
         row.pop("memory_mb", None)  # an older, in-process estimate

@@ -18,7 +18,8 @@ import time
 import numpy as np
 
 import wenv
-from measure import OUT, ROOT, bundled_hdri
+from measure import OUT, ROOT
+from tests.helpers.measure import bundled_hdri
 
 DOCS = os.path.join(ROOT, "docs")
 CONFIGS = [

@@ -15,9 +15,10 @@ import time
 
 import numpy as np
 
-import merl_files
 import wenv
-from measure import OUT, ROOT, bundled_hdri, relative_rmse, sphere_image, tone_map
+from measure import OUT, ROOT, sphere_image, tone_map
+from tests.helpers import merl_files
+from tests.helpers.measure import bundled_hdri, relative_rmse
 
 ROWS = {
     "paint: m = 0.2 lobe\nover a diffuse floor": {"brdf": "cook_torrance", "roughness": 0.2,

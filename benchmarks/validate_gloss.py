@@ -12,9 +12,13 @@
     python benchmarks/validate_gloss.py
 """
 import math
+import os
+import sys
 
-import merl_files
 import wenv
+
+sys.path.append(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # after PYTHONPATH
+from tests.helpers import merl_files  # noqa: E402
 
 TABLE_ROUGHNESS = (0.01, 0.02, 0.05, 0.1, 0.2, 0.5)
 

@@ -28,7 +28,7 @@ import sys
 import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, os.path.join(ROOT, "benchmarks"))
+sys.path.append(ROOT)  # after PYTHONPATH: the tests' helpers, tests.helpers
 OUT = os.path.join(ROOT, "csrc", "scene", "sheen_table.c")
 N = 32
 SUNS = [(-0.3, -1.0, 0.4), (0.9, -0.6, 0.2), (-0.9, 0.3, 0.5), (0.0, 0.8, 0.6), (0.2, 1.0, -0.3),
@@ -122,7 +122,7 @@ def fit(mu, o, value, start):
 
 def main():
     import bpy
-    from cycles_sphere import SphereScene
+    from tests.helpers.cycles_sphere import SphereScene
     scene = SphereScene("sunset", size=128, samples=2)
     sc = scene.scene
     sc.world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.0

@@ -1,7 +1,7 @@
 """Accuracy of every preset on tabulated BRDFs, as tests/test_accuracy.py measures it for Cook-Torrance:
 under each of Blender's eight bundled HDRIs, over the same 2000 random (normal, view) pairs, against
 wenv.reference of the same table.  The tables are 90 x 90 x 180 (MERL's resolution) of numpy BRDFs
-(benchmarks/merl_files.py, table_of): the Cook-Torrance lobes of test_accuracy.py (m = 0.05..0.5,
+(tests/helpers/merl_files.py, table_of): the Cook-Torrance lobes of test_accuracy.py (m = 0.05..0.5,
 white, index 1.5), a paint (m = 0.2 over a coloured diffuse floor, which the table splits off as a
 Lambertian part), a retro-reflective lobe and a lobe whose colour shifts with theta_d.
 
@@ -18,18 +18,21 @@ import pytest
 import wenv
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-from benchmarks import merl_files as M  # noqa: E402
+from tests.helpers import merl_files as M  # noqa: E402
 import test_accuracy  # noqa: E402  (the Cook-Torrance figures, computed once per session)
 
 DATA = os.path.join(os.path.dirname(__file__), "data", "accuracy_reference_tables.npz")
 
 # Worst relative RMSE over the eight HDRIs per preset and table: the measured worst case
-# (benchmarks/accuracy.py --tables prints the full table) with 10 % headroom.
+# (benchmarks/accuracy.py --tables prints the full table) with 10 % headroom.  With the samples at
+# the bins' centres (the tables' last theta_d sample at 89.5 degrees, where the lobes rise steeply,
+# instead of 89) views past 84 degrees err more on t0.05, t0.1 and t0.5 (high: 0.57 -> 0.78 % at
+# t0.1, 1.11 -> 1.33 % at t0.5); every other band of views is unchanged.
 BOUNDS = {
     "draft": {"t0.05": 0.897, "t0.1": 0.822, "t0.2": 0.68, "t0.5": 0.285, "paint": 0.59, "retro": 0.179, "tinted": 0.493},
-    "default": {"t0.05": 0.0508, "t0.1": 0.0288, "t0.2": 0.0180, "t0.5": 0.0276, "paint": 0.0108, "retro": 0.0124,
+    "default": {"t0.05": 0.0528, "t0.1": 0.0300, "t0.2": 0.0180, "t0.5": 0.0301, "paint": 0.0108, "retro": 0.0124,
                 "tinted": 0.0189},
-    "high": {"t0.05": 0.0146, "t0.1": 0.00631, "t0.2": 0.0112, "t0.5": 0.0122, "paint": 0.00652, "retro": 0.0086,
+    "high": {"t0.05": 0.0146, "t0.1": 0.00861, "t0.2": 0.0112, "t0.5": 0.0147, "paint": 0.00652, "retro": 0.0086,
              "tinted": 0.0102},
 }
 METHOD = test_accuracy.METHOD
@@ -75,13 +78,15 @@ def test_relative_rmse_within_preset_bounds(preset, data, tables):
 def test_a_table_shades_as_accurately_as_its_lobe(preset, data, tables):
     """The BRDF enters the methods only through its slices, lights and rules: the table of a
     Cook-Torrance lobe errs as that lobe does at the same preset (median over the HDRIs within
-    1.25x + 0.1 point, worst within 1.5x + 0.2 points)."""
+    1.35x + 0.1 point, worst within 1.5x + 0.2 points).  (The median was within 1.25x while the
+    samples sat at the bins' starts; t0.5's is now 1.34x its lobe's at default, 1.66 against
+    1.24 %, and 1.53x at high, 0.65 against 0.42 %, from views past 84 degrees: see BOUNDS.)"""
     mine = preset_errors(preset, data, tables)
     ct = test_accuracy.preset_errors(preset, np.load(test_accuracy.DATA))
     for m in ("0.05", "0.1", "0.2", "0.5"):
         a = [mine[(h, f"t{m}")] for h in json.loads(str(data["hdris"]))]
         b = [ct[(h, f"m{m}")] for h in json.loads(str(data["hdris"]))]
-        assert np.median(a) <= 1.25 * np.median(b) + 0.001, (preset, m, np.median(a), np.median(b))
+        assert np.median(a) <= 1.35 * np.median(b) + 0.001, (preset, m, np.median(a), np.median(b))
         assert max(a) <= 1.5 * max(b) + 0.002, (preset, m, max(a), max(b))
 
 

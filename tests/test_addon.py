@@ -917,7 +917,7 @@ def measured_material(obj, path):
 
 def write_paint_brdf(path):
     """A small MERL file: a Cook-Torrance lobe (m = 0.2) over a coloured diffuse floor."""
-    from benchmarks import merl_files as M
+    from tests.helpers import merl_files as M
     return M.write_merl(path, M.table_of({"brdf": "cook_torrance", "roughness": 0.2, "diffuse": [0.4, 0.2, 0.1]},
                                          (16, 16, 32)))
 

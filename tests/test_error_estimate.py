@@ -1,4 +1,4 @@
-"""benchmarks/measure.py's mirror_weighted_pairs and estimated_error, which
+"""tests/helpers/measure.py's mirror_weighted_pairs and estimated_error, which
 benchmarks/auto_quality.py judges auto with and benchmarks/speed_vs_accuracy.py charts the methods
 with: the weighted pairs give the means of random_pairs' law (normals uniform on the sphere, views
 uniform on their hemisphere), and far steadier ones where a narrow lobe reflects a small bright source; the control-variate estimate
@@ -12,7 +12,7 @@ import pytest
 import wenv
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-from benchmarks.measure import estimated_error, mirror_weighted_pairs, random_pairs, relative_rmse  # noqa: E402
+from tests.helpers.measure import estimated_error, mirror_weighted_pairs, random_pairs, relative_rmse  # noqa: E402
 
 SUN = np.array([0.3, 0.4, 0.5]) / np.linalg.norm([0.3, 0.4, 0.5])
 

@@ -11,7 +11,7 @@ import wenv
 from conftest import WAVELET_BASE, random_pairs
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-from benchmarks import merl_files  # noqa: E402
+from tests.helpers import merl_files  # noqa: E402
 
 QUALITY = {**WAVELET_BASE, "global": 32, "local": 16, "normals": 16, "views": 8, "coefficients": 0,
            "lights": 4096, "light_threshold": 1.0}
@@ -92,6 +92,6 @@ def test_a_tables_lights_alone_match_the_reference(spec):
     out, ref = shader.shade(nrm, v), wenv.reference(env, mat, nrm, v)
     assert shader.stats["direct_lights"] == 604
     err = float(np.sqrt(np.mean((out - ref) ** 2) / np.mean(ref ** 2)))
-    # measured 0.05 % (t0.05), 0.0001-0.001 % for the rest
+    # measured 0.036 % (t0.05), 0.006-0.04 % for the rest
     assert err < 0.002, err
     assert np.abs(out - ref).max() < 0.01 * ref.max()

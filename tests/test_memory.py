@@ -1,4 +1,4 @@
-"""benchmarks/memory.py measures a setting's peak memory in a fresh process: positive, growing with
+"""tests/helpers/memory.py measures a setting's peak memory in a fresh process: positive, growing with
 the setting, and what the shader holds afterwards matches its own count of its arrays (shader.stats).
 Rotation's matrices are built here without a cache and the mesh is a small sphere, so it runs in
 about two seconds."""
@@ -8,7 +8,7 @@ import sys
 import pytest
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-from benchmarks.memory import peak_memory, sphere_mesh  # noqa: E402
+from tests.helpers.memory import peak_memory, sphere_mesh  # noqa: E402
 from conftest import WAVELET_BASE  # noqa: E402
 
 SMALL = {**WAVELET_BASE, "global": 16, "local": 8, "normals": 8, "views": 4, "coefficients": 32}

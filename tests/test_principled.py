@@ -17,7 +17,7 @@ import pytest
 import wenv
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, os.path.join(ROOT, "benchmarks"))
+sys.path.insert(0, ROOT)
 sys.path.insert(0, os.path.join(ROOT, "scripts"))
 from conftest import random_pairs, unit  # noqa: E402
 from test_measured_brdf import _pairs, smooth_env  # noqa: E402  (the same smooth lighting and pairs)
@@ -311,7 +311,7 @@ def test_sheen_table_reproduces_cycles_under_a_sun_it_was_not_measured_with():
     pixels are exact values of f cos) equals wenv's f cos at every pixel to float precision."""
     import bpy
 
-    from cycles_sphere import SphereScene
+    from tests.helpers.cycles_sphere import SphereScene
     scene = SphereScene("sunset", size=48, samples=1)
     scene.scene.world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.0
     sun_data = bpy.data.lights.new("test-sun", "SUN")
@@ -357,7 +357,7 @@ def test_glossmeter_reads_principled():
 
 @pytest.fixture(scope="module")
 def cycles_scene():
-    from cycles_sphere import SphereScene
+    from tests.helpers.cycles_sphere import SphereScene
     return SphereScene("sunset", size=48, samples=384)
 
 

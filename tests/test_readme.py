@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
-from benchmarks import merl_files  # noqa: E402
+from tests.helpers import merl_files  # noqa: E402
 import wenv  # noqa: E402
 import conftest  # noqa: E402
 from conftest import (bundled_hdri_dir, fenced_blocks, markdown_files, python_blocks, random_pairs,  # noqa: E402

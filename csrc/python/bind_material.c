@@ -24,6 +24,7 @@ static PyTypeObject TabulatedType;
 
 const char *const wenv_py_distribution_names[2] = {"beckmann", "ggx"};
 const char *const wenv_py_shadowing_names[2] = {"smith", "vcavity"};
+static const char *const sample_position_names[] = {"centres", "starts"}; /* by wenv_sample_position */
 
 /* ---------------------------------------------------------------- small helpers */
 
@@ -289,8 +290,10 @@ static PyObject *material_richcompare(PyObject *a, PyObject *b, int op)
         int same = xp && yp && memcmp(xp, yp, sizeof *xp) == 0;
         return PyBool_FromLong(op == Py_EQ ? same : !same);
     }
-    if (xt || yt) { /* tables: equal when their samples are */
-        int same = xt && yt && memcmp(xd, yd, sizeof xd) == 0 && memcmp(xt, yt, 3 * xd[0] * xd[1] * xd[2] * sizeof *xt) == 0;
+    if (xt || yt) { /* tables: equal when their samples and where they sit are */
+        int same = xt && yt && memcmp(xd, yd, sizeof xd) == 0 &&
+                   wenv_tabulated_samples_at(x->mat) == wenv_tabulated_samples_at(y->mat) &&
+                   memcmp(xt, yt, 3 * xd[0] * xd[1] * xd[2] * sizeof *xt) == 0;
         return PyBool_FromLong(op == Py_EQ ? same : !same);
     }
     int equal = x->mat && y->mat && x->distribution == y->distribution &&
@@ -765,9 +768,12 @@ static PyObject *wrap_tabulated(PyTypeObject *type, wenv_material *mat, const ch
 
 static PyObject *tabulated_new(PyTypeObject *type, PyObject *args, PyObject *kwds)
 {
-    static char *kwlist[] = {"table", NULL};
-    PyObject *table_obj;
-    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O:Tabulated", kwlist, &table_obj))
+    static char *kwlist[] = {"table", "samples_at", NULL};
+    PyObject *table_obj, *at_obj = NULL;
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O|O:Tabulated", kwlist, &table_obj, &at_obj))
+        return NULL;
+    int at = WENV_SAMPLES_AT_CENTRES;
+    if (at_obj && wenv_py_parse_choice(at_obj, "samples_at", sample_position_names, 2, &at) < 0)
         return NULL;
     /* float32 C-contiguous, converted by numpy from any real array */
     PyObject *numpy = PyImport_ImportModule("numpy");
@@ -802,7 +808,7 @@ static PyObject *tabulated_new(PyTypeObject *type, PyObject *args, PyObject *kwd
         }
     wenv_material *mat;
     wenv_error err = {0};
-    if (wenv_tabulated_create(&mat, v, dims, &err) != WENV_OK) {
+    if (wenv_tabulated_create(&mat, v, dims, (wenv_sample_position)at, &err) != WENV_OK) {
         wenv_py_raise(&err);
         goto done;
     }
@@ -834,23 +840,34 @@ static PyObject *tabulated_table(PyObject *self, void *closure)
     return array;
 }
 
+static PyObject *tabulated_samples_at(PyObject *self, void *closure)
+{
+    (void)closure;
+    return PyUnicode_FromString(sample_position_names[wenv_tabulated_samples_at(((MaterialObject *)self)->mat)]);
+}
+
 static PyObject *tabulated_repr(PyObject *self)
 {
     size_t d[3];
-    wenv_tabulated_table(((MaterialObject *)self)->mat, d);
-    return PyUnicode_FromFormat("wenv.Tabulated(<%zu x %zu x %zu x 3 table>)", d[0], d[1], d[2]);
+    const wenv_material *mat = ((MaterialObject *)self)->mat;
+    wenv_tabulated_table(mat, d);
+    return PyUnicode_FromFormat("wenv.Tabulated(<%zu x %zu x %zu x 3 table>, samples_at='%s')", d[0], d[1], d[2],
+                                sample_position_names[wenv_tabulated_samples_at(mat)]);
 }
 
 static PyObject *tabulated_reduce(PyObject *self, PyObject *unused)
 {
     (void)unused;
     PyObject *table = tabulated_table(self, NULL);
-    return table ? Py_BuildValue("(O(N))", (PyObject *)Py_TYPE(self), table) : NULL;
+    const char *at = sample_position_names[wenv_tabulated_samples_at(((MaterialObject *)self)->mat)];
+    return table ? Py_BuildValue("(O(Ns))", (PyObject *)Py_TYPE(self), table, at) : NULL;
 }
 
 static PyGetSetDef tabulated_getset[] = {
     {"shape", tabulated_shape, NULL, "(n_theta_h, n_theta_d, n_phi_d): the table's samples.", NULL},
     {"table", tabulated_table, NULL, "A float32 copy of the table, (n_theta_h, n_theta_d, n_phi_d, 3).", NULL},
+    {"samples_at", tabulated_samples_at, NULL,
+     "Where the samples sit: 'centres' of their bins (MERL files) or 'starts' (see the class docstring).", NULL},
     {"diffuse", ct_diffuse, NULL,
      "The Lambertian part split off the table: pi times its smallest value above the horizon, per channel "
      "(shaded as a Lambertian reflector; the rest is the glossy lobe).", NULL},
@@ -867,13 +884,18 @@ static PyTypeObject TabulatedType = {
     .tp_name = "wenv.Tabulated",
     .tp_basicsize = sizeof(MaterialObject),
     .tp_flags = Py_TPFLAGS_DEFAULT,
-    .tp_doc = "Tabulated(table)\n--\n\nAn isotropic BRDF given as a table of f (RGB, 1/sr) over Rusinkiewicz's half "
-              "and difference angles, in MERL's layout: table[i, j, k] at theta_h = (i / n_theta_h)**2 * 90 degrees, "
-              "theta_d = j / n_theta_d * 90 degrees, phi_d = k / n_phi_d * 180 degrees (phi_d folded by reciprocity). "
-              "Interpolated trilinearly in (sqrt(theta_h), theta_d, phi_d) index coordinates, phi_d periodic, the "
-              "last theta samples held beyond.  Entries finite and >= 0; a RuntimeWarning when the table reflects "
-              "more than it receives.  The table is copied once and shared by every shader that uses the material. "
-              "Immutable.",
+    .tp_doc = "Tabulated(table, samples_at='centres')\n--\n\nAn isotropic BRDF given as a table of f (RGB, 1/sr) "
+              "over Rusinkiewicz's half and difference angles, in MERL's layout: table[i, j, k] stands for the bin "
+              "[i, i + 1) x [j, j + 1) x [k, k + 1) of the index coordinates (sqrt(theta_h / 90 degrees) * n_theta_h, "
+              "theta_d / 90 degrees * n_theta_d, phi_d / 180 degrees * n_phi_d), phi_d folded into [0, 180) degrees "
+              "by reciprocity.  samples_at says where in its bin the sample was taken: 'centres' (the default, as "
+              "in a MERL file, whose reader looks a sample up by the floor of the index coordinate): at "
+              "(i + 0.5, j + 0.5, k + 0.5), so theta_h = ((i + 0.5) / n_theta_h)**2 * 90 degrees, theta_d = "
+              "(j + 0.5) / n_theta_d * 90 degrees, phi_d = (k + 0.5) / n_phi_d * 180 degrees; 'starts': at (i, j, k), "
+              "theta_h = (i / n_theta_h)**2 * 90 degrees and so on.  Interpolated trilinearly between the samples' "
+              "positions, phi_d periodic, theta_h and theta_d held at their first and last samples outside them.  "
+              "Entries finite and >= 0; a RuntimeWarning when the table reflects more than it receives.  The table "
+              "is copied once and shared by every shader that uses the material.  Immutable.",
     .tp_base = &MaterialType,
     .tp_new = tabulated_new,
     .tp_repr = tabulated_repr,
@@ -896,7 +918,7 @@ static PyObject *py_load_brdf(PyObject *self, PyObject *arg)
     WENV_BEGIN_WORK
     st = wenv_read_merl(path, &rgb, dims, &err);
     if (!st)
-        st = wenv_tabulated_create(&mat, rgb, dims, &err);
+        st = wenv_tabulated_create(&mat, rgb, dims, WENV_SAMPLES_AT_CENTRES, &err);
     WENV_END_WORK
     free(rgb);
     PyObject *result = NULL;
@@ -928,6 +950,7 @@ static PyMethodDef material_functions[] = {
     {"load_brdf", py_load_brdf, METH_O,
      "load_brdf(path)\n--\n\nA measured BRDF from a MERL .binary file, as a wenv.Tabulated: three int32 dimensions "
      "(90, 90, 180), then the doubles channel after channel, scaled by 1/1500, 1.15/1500 and 1.66/1500 (R, G, B).  "
+     "Each sample is read at the centre of its bin (samples_at='centres'), as MERL's own reader looks it up.  "
      "Samples stored negative (not measured) take the nearest measured theta_d at the same theta_h and phi_d.  "
      "OSError naming the file when it is missing, truncated, the wrong size for its dimensions, or holds NaN."},
     {"alpha_from_roughness", py_alpha_from_roughness, METH_O,

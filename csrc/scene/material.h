@@ -39,12 +39,20 @@ wenv_status wenv_lambert_create(wenv_material **out, const double albedo[3], wen
 wenv_status wenv_cook_torrance_create(wenv_material **out, const double diffuse[3], const wenv_lobe *lobes,
                                       size_t n_lobes, wenv_shadowing shadowing, wenv_error *err);
 
+/* Where a table's sample (i, j, k) sits in the index coordinates (sqrt(theta_h / 90) n_h,
+ * theta_d / 90 n_d, phi_d / 180 n_p): at the centre of its bin, (i + 1/2, j + 1/2, k + 1/2), as in a
+ * MERL file (MERL's reader, like pbrt's, looks a sample up by the floor of the index coordinate), or
+ * at the start of its bin, (i, j, k). */
+typedef enum { WENV_SAMPLES_AT_CENTRES = 0, WENV_SAMPLES_AT_STARTS = 1 } wenv_sample_position;
+
 /* An isotropic BRDF tabulated over Rusinkiewicz's half and difference angles in MERL's layout
  * (scene/tabulated.c: sample positions and trilinear interpolation): rgb is n_h x n_d x n_p x 3
- * floats of f (1/sr), finite and >= 0; dims in [2, 4096].  Copied once and shared by the material's
- * copies (a shader's copy costs no copy of the table).  Its smallest value above the horizon is the
- * Lambertian part (diffuse = pi x that, per channel), the rest one glossy lobe. */
-wenv_status wenv_tabulated_create(wenv_material **out, const float *rgb, const size_t dims[3], wenv_error *err);
+ * floats of f (1/sr), finite and >= 0; dims in [2, 4096]; samples_at says where the samples sit
+ * (WENV_ERR_VALUE naming "samples_at" for another value).  Copied once and shared by the
+ * material's copies (a shader's copy costs no copy of the table).  Its smallest value above the
+ * horizon is the Lambertian part (diffuse = pi x that, per channel), the rest one glossy lobe. */
+wenv_status wenv_tabulated_create(wenv_material **out, const float *rgb, const size_t dims[3],
+                                  wenv_sample_position samples_at, wenv_error *err);
 
 /* Blender's Principled BSDF node's inputs (scene/principled_inputs.h: the one list of them);
  * wenv_principled_defaults gives the node's defaults. */
@@ -65,6 +73,9 @@ size_t wenv_principled_unhonoured(const wenv_principled_inputs *in, const char *
 
 /* A tabulated material's table, dims filled; NULL for other models. */
 const float *wenv_tabulated_table(const wenv_material *mat, size_t dims[3]);
+
+/* Where a tabulated material's samples sit (WENV_SAMPLES_AT_CENTRES for other models). */
+wenv_sample_position wenv_tabulated_samples_at(const wenv_material *mat);
 
 wenv_status wenv_material_copy(wenv_material **out, const wenv_material *src, wenv_error *err);
 void wenv_material_free(wenv_material *mat);

@@ -1,17 +1,19 @@
 /* An isotropic BRDF tabulated over Rusinkiewicz's half and difference angles (material.h,
  * wenv_tabulated_create), measured or made from numpy.
  *
- * Layout (MERL's): theta_h sample i at (i / n_h)^2 90 degrees (dense near the mirror direction,
- * where measured BRDFs change fastest), theta_d sample j at j / n_d 90 degrees, phi_d sample k at
- * k / n_p 180 degrees (phi_d folded into [0, 180) by reciprocity); value (i, j, k) at
- * 3 (k + n_p (j + n_d i)), RGB f in 1/sr.  Between samples the table is interpolated trilinearly in
- * the index coordinates (sqrt(theta_h / 90) n_h, theta_d / 90 n_d, phi_d / 180 n_p), phi_d
- * periodic, theta_h and theta_d held at their last sample beyond it.
+ * Layout (MERL's): the index coordinates are (sqrt(theta_h / 90) n_h, theta_d / 90 n_d,
+ * phi_d / 180 n_p), theta_h's dense near the mirror direction, where measured BRDFs change fastest,
+ * phi_d folded into [0, 180) by reciprocity; value (i, j, k) at 3 (k + n_p (j + n_d i)), RGB f in
+ * 1/sr.  Sample (i, j, k) sits at (i, j, k) + o: o = 1/2, the centre of the bin [i, i + 1) x ...,
+ * for a MERL file (its reader looks a sample up by the floor of the index coordinate, so a sample
+ * stands for its bin), or o = 0 for a table sampled at the bins' starts (samples_at).  Between
+ * samples the table is interpolated trilinearly, phi_d periodic (period n_p), theta_h and theta_d
+ * held at their first and last sample outside them.
  *
  * The table is split into a Lambertian part, its smallest value above the horizon per channel (a
  * measured BRDF's diffuse reflection; exact, since the interpolation's weights sum to one), and one
  * glossy lobe, the rest.  The lobe's microfacet shape, which only places quadrature nodes, is a
- * Beckmann lobe whose width is the lobe's half-maximum width in theta_h at theta_d = 0
+ * Beckmann lobe whose width is the lobe's half-maximum width in theta_h at the first theta_d sample
  * (tan(theta_half) / sqrt(ln 2)), coloured to match its peak.  Integrals use two rules together:
  * cells that follow the shape (equal in its distribution's CDF, fine near the mirror direction) and
  * cells uniform over the hemisphere (for what lies away from it: a retro-reflective lobe, a broad
@@ -36,6 +38,8 @@ typedef struct {
     float *rgb;      /* n[0] n[1] n[2] x 3 */
     unsigned char *above; /* per sample: both its directions lie above the horizon */
     unsigned char *cell_above; /* per sample: so do the 8 samples of the cell it is the lowest corner of */
+    wenv_sample_position samples_at;
+    double offset;        /* o: where sample 0 sits on each axis of the index coordinates */
     double floor[3];      /* the smallest f above the horizon: the Lambertian part, pi floor = diffuse */
     double cos_h_min;     /* n.h below which the lobe (table - floor) holds under 1e-7 of its peak (-1: none) */
     int shape_rule;       /* the shape's cells alone integrate the lobe (see decide_rule) */
@@ -125,9 +129,10 @@ static void lobe_at(const table *t, const double x[3], double rgb[3])
 {
     size_t i[2], j[2], k[2];
     double fi, fj, fk;
-    axis_taps(x[0], t->n[0], 0, &i[0], &i[1], &fi);
-    axis_taps(x[1], t->n[1], 0, &j[0], &j[1], &fj);
-    axis_taps(x[2], t->n[2], 1, &k[0], &k[1], &fk);
+    /* in units of samples from sample 0, which sits at o */
+    axis_taps(x[0] - t->offset, t->n[0], 0, &i[0], &i[1], &fi);
+    axis_taps(x[1] - t->offset, t->n[1], 0, &j[0], &j[1], &fj);
+    axis_taps(x[2] - t->offset, t->n[2], 1, &k[0], &k[1], &fk);
     size_t s[8];
     for (int a = 0; a < 8; a++)
         s[a] = k[a & 1] + t->n[2] * (j[(a >> 1) & 1] + t->n[1] * i[a >> 2]);
@@ -381,8 +386,9 @@ static double lobe_luma(const table *t, size_t s)
            0.0722 * fmax(0.0, v[2] - t->floor[2]);
 }
 
-/* The shape: Beckmann, as wide as the lobe's half maximum in theta_h at theta_d = 0, phi_d = 0,
- * coloured so that it matches the lobe's peak (see the top comment). */
+/* The shape: Beckmann, as wide as the lobe's half maximum in theta_h along the first theta_d and
+ * phi_d samples (theta_d = 0, or half a bin from it), coloured so that it matches the lobe's peak
+ * (see the top comment). */
 static wenv_lobe fit_shape(const table *t)
 {
     wenv_lobe shape = {.specular = {1.0, 1.0, 1.0}, .alpha = 1.0, .ior = 1.5, .distribution = WENV_NDF_BECKMANN};
@@ -395,7 +401,7 @@ static wenv_lobe fit_shape(const table *t)
         if (luma < 0.5 * luma0) {
             double prev = lobe_luma(t, slab * (i - 1));
             double x = (double)(i - 1) + (prev - 0.5 * luma0) / fmax(prev - luma, 1e-300);
-            double q = x / (double)t->n[0], theta = q * q * 0.5 * M_PI;
+            double q = (x + t->offset) / (double)t->n[0], theta = q * q * 0.5 * M_PI;
             shape.alpha = fmin(1.0, fmax(1e-3, tan(theta) / sqrt(log(2.0))));
             break;
         }
@@ -407,9 +413,13 @@ static wenv_lobe fit_shape(const table *t)
     return shape;
 }
 
-wenv_status wenv_tabulated_create(wenv_material **out, const float *rgb, const size_t dims[3], wenv_error *err)
+wenv_status wenv_tabulated_create(wenv_material **out, const float *rgb, const size_t dims[3],
+                                  wenv_sample_position samples_at, wenv_error *err)
 {
     *out = NULL;
+    if (samples_at != WENV_SAMPLES_AT_CENTRES && samples_at != WENV_SAMPLES_AT_STARTS)
+        return wenv_error_set(err, WENV_ERR_VALUE, "samples_at must be the bins' centres or starts, got %d",
+                              (int)samples_at);
     size_t n = 1;
     for (int d = 0; d < 3; d++) {
         if (dims[d] < 2 || dims[d] > 4096)
@@ -432,17 +442,22 @@ wenv_status wenv_tabulated_create(wenv_material **out, const float *rgb, const s
     memcpy(copy, rgb, 3 * n * sizeof *copy);
     memcpy(t->n, dims, sizeof t->n);
     t->rgb = copy;
+    t->samples_at = samples_at;
+    t->offset = samples_at == WENV_SAMPLES_AT_CENTRES ? 0.5 : 0.0;
     t->above = malloc(n);
     if (!t->above) {
         table_destroy(&t->shared);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for a table");
     }
-    /* with phi_h = 0: wi.z = cos th cos td - sin th sin td cos pd, wo.z = 2 cos td cos th - wi.z */
+    /* at each sample's position, with phi_h = 0: wi.z = cos th cos td - sin th sin td cos pd,
+     * wo.z = 2 cos td cos th - wi.z */
+    const double o = t->offset;
     for (size_t i = 0; i < dims[0]; i++)
         for (size_t j = 0; j < dims[1]; j++)
             for (size_t k = 0; k < dims[2]; k++) {
-                double q = (double)i / (double)dims[0], th = q * q * 0.5 * M_PI;
-                double td = (double)j / (double)dims[1] * 0.5 * M_PI, pd = (double)k / (double)dims[2] * M_PI;
+                double q = ((double)i + o) / (double)dims[0], th = q * q * 0.5 * M_PI;
+                double td = ((double)j + o) / (double)dims[1] * 0.5 * M_PI;
+                double pd = ((double)k + o) / (double)dims[2] * M_PI;
                 double zi = cos(th) * cos(td) - sin(th) * sin(td) * cos(pd), zo = 2.0 * cos(td) * cos(th) - zi;
                 t->above[k + dims[2] * (j + dims[1] * i)] = zi > 0.0 && zo > 0.0;
             }
@@ -463,9 +478,12 @@ wenv_status wenv_tabulated_create(wenv_material **out, const float *rgb, const s
             }
     atomic_init(&t->shared.refs, 1);
     t->shared.destroy = table_destroy;
-    t->shared.fingerprint = wenv_fingerprint_floats(
-        wenv_fingerprint_word(wenv_fingerprint_word(wenv_fingerprint_word(WENV_FINGERPRINT_START, dims[0]), dims[1]), dims[2]),
-        copy, 3 * n);
+    /* where the samples sit is part of what the table is: the same values elsewhere reflect otherwise */
+    uint64_t h = WENV_FINGERPRINT_START;
+    for (int d = 0; d < 3; d++)
+        h = wenv_fingerprint_word(h, dims[d]);
+    h = wenv_fingerprint_word(h, (uint64_t)samples_at);
+    t->shared.fingerprint = wenv_fingerprint_floats(h, copy, 3 * n);
     /* The Lambertian floor: the smallest value above the horizon per channel (a measured BRDF's
      * diffuse reflection, a tabulated diffuse + glossy material's diffuse term), capped at albedo 1.
      * Shading it as a Lambertian part is exact (the interpolation's weights sum to one) and lets the
@@ -478,8 +496,9 @@ wenv_status wenv_tabulated_create(wenv_material **out, const float *rgb, const s
         t->floor[c] = isfinite(diffuse[c]) ? fmin(diffuse[c], 1.0 / M_PI) : 0.0;
         diffuse[c] = M_PI * t->floor[c];
     }
-    /* the exact lights' cone: past the sample after the last theta_h slab where the lobe holds 1e-7
-     * of its peak anywhere (beyond it every tap the interpolation reads holds less), or none */
+    /* the exact lights' cone: past the position of the sample after the last theta_h slab where the
+     * lobe holds 1e-7 of its peak anywhere (beyond it every tap the interpolation reads holds less),
+     * or none */
     double peak = 0.0;
     for (size_t s = 0; s < n; s++)
         if (t->above[s])
@@ -490,7 +509,7 @@ wenv_status wenv_tabulated_create(wenv_material **out, const float *rgb, const s
         for (int c = 0; t->above[s] && c < 3; c++)
             if (copy[3 * s + (size_t)c] - t->floor[c] >= 1e-7 * peak && s / slab > last)
                 last = s / slab;
-    double q = (double)(last + 1) / (double)dims[0];
+    double q = ((double)(last + 1) + o) / (double)dims[0];
     t->cos_h_min = last + 1 < dims[0] ? cos(q * q * 0.5 * M_PI) : -1.0;
     wenv_lobe shape = fit_shape(t);
     if (wenv_material_alloc(out, &TABULATED, diffuse, &shape, 1, WENV_SHADOW_SMITH, err)) {
@@ -512,4 +531,9 @@ const float *wenv_tabulated_table(const wenv_material *mat, size_t dims[3])
         return NULL;
     memcpy(dims, table_of(mat)->n, 3 * sizeof *dims);
     return table_of(mat)->rgb;
+}
+
+wenv_sample_position wenv_tabulated_samples_at(const wenv_material *mat)
+{
+    return mat->kind == &TABULATED ? table_of(mat)->samples_at : WENV_SAMPLES_AT_CENTRES;
 }

@@ -234,7 +234,7 @@ static void check_models(void)
     if (!rgb || wenv_cook_torrance_create(&ct, black, lobes, 2, WENV_SHADOW_SMITH, &err) ||
         wenv_cook_torrance_create(&cavity, black, lobes, 1, WENV_SHADOW_VCAVITY, &err) ||
         wenv_principled_create(&coated, &in, &err) || wenv_principled_create(&sheen, &soft, &err) ||
-        wenv_tabulated_create(&table, rgb, dims, &err)) {
+        wenv_tabulated_create(&table, rgb, dims, WENV_SAMPLES_AT_CENTRES, &err)) {
         check(0, err.message[0] ? err.message : "out of memory", 0, 0);
     } else {
         check_accelerators("Cook-Torrance", ct);

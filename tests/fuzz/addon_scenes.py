@@ -36,7 +36,7 @@ import bpy  # noqa: E402
 
 import addon  # noqa: E402
 from addon import engine, live, meshes, ui  # noqa: E402
-from benchmarks import merl_files  # noqa: E402
+from tests.helpers import merl_files  # noqa: E402
 from draws import Draws, arguments, report  # noqa: E402  (tests/fuzz, the script's folder)
 
 HDRIS = sorted(glob.glob(os.path.join(bpy.utils.system_resource("DATAFILES", path="studiolights/world"), "*.exr")))

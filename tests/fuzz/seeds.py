@@ -72,7 +72,7 @@ def rgbe_seeds(out):
 
 
 def merl_seeds(out):
-    from benchmarks.merl_files import merl_bytes
+    from tests.helpers.merl_files import merl_bytes
 
     rng = np.random.default_rng(3)
     shapes = [(2, 2, 2), (3, 4, 5), (4, 2, 6)]
@@ -135,7 +135,7 @@ def exr_regressions(out):
 
 
 def merl_regressions(out):
-    from benchmarks.merl_files import merl_bytes
+    from tests.helpers.merl_files import merl_bytes
 
     table = np.full((2, 3, 4, 3), 0.01)
     table[1, 2, 3, 1] = 1e300  # finite as a double, infinite as a float

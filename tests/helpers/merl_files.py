@@ -4,10 +4,14 @@ interpolated, and analytic BRDFs (numpy) to tabulate.
 
 Conventions (MERL's, Matusik et al. 2003, and the specification of wenv.Tabulated):
 
-* theta_h sample i at (i / n_th)^2 * 90 degrees, theta_d sample j at j / n_td * 90 degrees,
-  phi_d sample k at k / n_pd * 180 degrees (phi_d folded into [0, 180) by reciprocity);
-* trilinear interpolation in the index coordinates (sqrt(theta_h / 90deg) n_th, theta_d / 90deg n_td,
-  phi_d / 180deg n_pd), phi_d periodic (period n_pd), theta_h and theta_d held at their last sample;
+* index coordinates (sqrt(theta_h / 90deg) n_th, theta_d / 90deg n_td, phi_d / 180deg n_pd), phi_d
+  folded into [0, 180) by reciprocity; sample (i, j, k) stands for the bin [i, i + 1) x [j, j + 1) x
+  [k, k + 1) (MERL's reader looks a sample up by the floor of the index coordinate) and sits at its
+  centre, (i, j, k) + 1/2 (samples_at="centres", MERL files), or at its start, (i, j, k)
+  (samples_at="starts"): theta_h sample i at ((i + o) / n_th)^2 * 90 degrees, theta_d sample j at
+  (j + o) / n_td * 90 degrees, phi_d sample k at (k + o) / n_pd * 180 degrees, o = 1/2 or 0;
+* trilinear interpolation between the samples' positions, phi_d periodic (period n_pd), theta_h and
+  theta_d held at their first and last sample outside them;
 * file: three little-endian int32 (n_th, n_td, n_pd), then 3 n float64, channel after channel, each in
   the order k + n_pd (j + n_td i); the file stores value / scale with scales 1/1500, 1.15/1500, 1.66/1500.
 
@@ -33,11 +37,23 @@ def erf(x):
 
 # ------------------------------------------------------------------ Rusinkiewicz's coordinates
 
-def rusinkiewicz_samples(n_th, n_td, n_pd):
-    """theta_h, theta_d, phi_d (radians) of the samples, each of shape (n_th, n_td, n_pd)."""
-    th = (np.arange(n_th) / n_th) ** 2 * HALF_PI
-    td = np.arange(n_td) / n_td * HALF_PI
-    pd = np.arange(n_pd) / n_pd * math.pi
+# Where sample 0 sits on each axis of the index coordinates (wenv.Tabulated's samples_at).
+OFFSETS = {"centres": 0.5, "starts": 0.0}
+
+
+def offset(samples_at):
+    if samples_at not in OFFSETS:
+        raise ValueError(f"samples_at must be 'centres' or 'starts', got {samples_at!r}")
+    return OFFSETS[samples_at]
+
+
+def rusinkiewicz_samples(n_th, n_td, n_pd, samples_at="centres"):
+    """theta_h, theta_d, phi_d (radians) of the samples, each of shape (n_th, n_td, n_pd), at the
+    centres of their bins (a MERL file's) or at their starts."""
+    o = offset(samples_at)
+    th = ((np.arange(n_th) + o) / n_th) ** 2 * HALF_PI
+    td = (np.arange(n_td) + o) / n_td * HALF_PI
+    pd = (np.arange(n_pd) + o) / n_pd * math.pi
     return np.meshgrid(th, td, pd, indexing="ij")
 
 
@@ -94,22 +110,24 @@ def _taps(x, n, periodic):
     return a, b, f
 
 
-def above_horizon(n_th, n_td, n_pd):
+def above_horizon(n_th, n_td, n_pd, samples_at="centres"):
     """Which samples have both their directions above the horizon (with phi_h = 0:
     wi.z = cos th cos td - sin th sin td cos pd, wo.z = 2 cos td cos th - wi.z)."""
-    th, td, pd = rusinkiewicz_samples(n_th, n_td, n_pd)
+    th, td, pd = rusinkiewicz_samples(n_th, n_td, n_pd, samples_at)
     zi = np.cos(th) * np.cos(td) - np.sin(th) * np.sin(td) * np.cos(pd)
     return (zi > 0) & (2 * np.cos(td) * np.cos(th) - zi > 0)
 
 
-def interpolate(table, wi, wo):
-    """The specification's f(wi, wo) of a table (n_th, n_td, n_pd, 3) at local-frame directions
-    (N, 3) (normalised here, in float64): trilinear in the index coordinates over the neighbours
-    whose own directions lie above the horizon, their weights renormalised (plain trilinear when
-    none does), 0 at or below the horizon.  Returns float64 (N, 3)."""
+def interpolate(table, wi, wo, samples_at="centres"):
+    """The specification's f(wi, wo) of a table (n_th, n_td, n_pd, 3) whose samples sit at
+    `samples_at`, at local-frame directions (N, 3) (normalised here, in float64): trilinear between
+    the samples' positions over the neighbours whose own directions lie above the horizon, their
+    weights renormalised (plain trilinear when none does), 0 at or below the horizon.  Returns
+    float64 (N, 3)."""
     table = np.asarray(table, np.float64)
     n_th, n_td, n_pd = table.shape[:3]
-    above = above_horizon(n_th, n_td, n_pd)
+    o = offset(samples_at)
+    above = above_horizon(n_th, n_td, n_pd, samples_at)
     wi, wo = normalised(np.atleast_2d(wi)), normalised(np.atleast_2d(wo))
     wi, wo = np.broadcast_arrays(wi, wo)
     up = (wi[:, 2] > 0) & (wo[:, 2] > 0)
@@ -117,9 +135,9 @@ def interpolate(table, wi, wo):
     if not np.any(up):
         return out
     th, td, pd = half_diff(wi[up], wo[up])
-    i0, i1, fi = _taps(np.sqrt(th / HALF_PI) * n_th, n_th, False)
-    j0, j1, fj = _taps(td / HALF_PI * n_td, n_td, False)
-    k0, k1, fk = _taps(pd / math.pi * n_pd, n_pd, True)
+    i0, i1, fi = _taps(np.sqrt(th / HALF_PI) * n_th - o, n_th, False)
+    j0, j1, fj = _taps(td / HALF_PI * n_td - o, n_td, False)
+    k0, k1, fk = _taps(pd / math.pi * n_pd - o, n_pd, True)
     kept_acc, plain_acc = np.zeros((len(th), 3)), np.zeros((len(th), 3))
     total, kept = np.zeros(len(th)), np.zeros(len(th))
     for i, wi_ in ((i0, 1 - fi), (i1, fi)):
@@ -136,10 +154,10 @@ def interpolate(table, wi, wo):
     return out
 
 
-def tabulate(f, n_th, n_td, n_pd):
-    """float64 table (n_th, n_td, n_pd, 3) of f at the sample positions (0 where a direction of the
-    sample is at or below the horizon)."""
-    wi, wo = directions(*rusinkiewicz_samples(n_th, n_td, n_pd))
+def tabulate(f, n_th, n_td, n_pd, samples_at="centres"):
+    """float64 table (n_th, n_td, n_pd, 3) of f at the sample positions (the bins' centres, as in a
+    MERL file, or their starts; 0 where a direction of the sample is at or below the horizon)."""
+    wi, wo = directions(*rusinkiewicz_samples(n_th, n_td, n_pd, samples_at))
     wi, wo = wi.reshape(-1, 3), wo.reshape(-1, 3)
     v = np.zeros((len(wi), 3))
     up = (wi[:, 2] > 0) & (wo[:, 2] > 0)
@@ -327,12 +345,12 @@ def tinted(m):
     return f
 
 
-def table_of(spec, shape=(90, 90, 180)):
+def table_of(spec, shape=(90, 90, 180), samples_at="centres"):
     """The table (shape + (3,), float64) of a BRDF named by a JSON-able spec: {"brdf": "cook_torrance",
     "roughness": m} (white, index 1.5), {"brdf": "retro", "width": w} or {"brdf": "tinted",
     "roughness": m}, with an optional "diffuse": [r, g, b] albedo added above the horizon as a
-    Lambertian floor.  What benchmarks/accuracy.py's TABLES and the tests that read their stored
-    references are made from."""
+    Lambertian floor, sampled at `samples_at`.  What benchmarks/accuracy.py's TABLES and the tests
+    that read their stored references are made from."""
     if spec["brdf"] == "cook_torrance":
         f = cook_torrance(spec["roughness"])
     elif spec["brdf"] == "retro":
@@ -341,9 +359,9 @@ def table_of(spec, shape=(90, 90, 180)):
         f = tinted(spec["roughness"])
     else:
         raise ValueError(f"unknown brdf {spec['brdf']!r}")
-    table = tabulate(f, *shape)
+    table = tabulate(f, *shape, samples_at)
     if "diffuse" in spec:
-        table += np.asarray(spec["diffuse"], np.float64) / math.pi * above_horizon(*shape)[..., None]
+        table += np.asarray(spec["diffuse"], np.float64) / math.pi * above_horizon(*shape, samples_at)[..., None]
     return table
 
 

@@ -20,7 +20,7 @@ import tempfile
 import numpy as np
 import wenv
 
-from measure import bundled_hdri
+from tests.helpers.measure import bundled_hdri
 
 # Principled BSDF node inputs by wenv.Principled's names: the core's one list of them
 SOCKETS = {row["name"]: row["socket"] for row in wenv.Principled.INPUTS}

@@ -42,19 +42,26 @@ def sphere_mesh(n):
     return pos, pos.copy()
 
 
-def peak_memory(method, quality, positions, normals, hdri="sunset", material_key="m0.2",
+# The material measured unless told otherwise: a specular Cook-Torrance lobe, m = 0.2 (the "m0.2" of
+# benchmarks/accuracy.py's MATERIALS).
+GLOSSY = {"diffuse": [0.0, 0.0, 0.0], "lobes": [{"specular": [1.0, 1.0, 1.0], "alpha": 0.2, "ior": 1.5}]}
+
+
+def peak_memory(method, quality, positions, normals, hdri="sunset", material=GLOSSY,
                 eye=(0.0, -4.0, 1.0), views=1, cache_dir=None, threads=2, timeout=1800):
     """Memory of one setting (see the module's docstring): a dict with peak_mb, baseline_mb,
     increment_mb, held_mb, model_mb, stats, cache, vertices and exact.  The first view is seen
-    from eye, the others from eye turned about +Z by 20 degrees each.  cache_dir as wenv.Shader's:
-    None for the usual folder, False for none, or a folder."""
+    from eye, the others from eye turned about +Z by 20 degrees each.  material: {"diffuse": rgb,
+    "lobes": [...]} as benchmarks/accuracy.py's MATERIALS (wenv.CookTorrance's keywords; a
+    wenv.Lambert when lobes is empty).  cache_dir as wenv.Shader's: None for the usual folder, False
+    for none, or a folder."""
     import wenv
 
     wenv_dir = os.path.dirname(os.path.abspath(wenv.__file__))
     with tempfile.TemporaryDirectory() as tmp:
         np.save(os.path.join(tmp, "positions.npy"), np.ascontiguousarray(positions, np.float32))
         np.save(os.path.join(tmp, "normals.npy"), np.ascontiguousarray(normals, np.float32))
-        spec = {"method": method, "quality": quality, "hdri": hdri, "material": material_key,
+        spec = {"method": method, "quality": quality, "hdri": hdri, "material": material,
                 "eye": [float(c) for c in eye], "views": views, "cache_dir": cache_dir, "threads": threads,
                 "folder": tmp}
         # The child imports the same wenv as this process, whichever build that is.
@@ -98,15 +105,17 @@ def _release_free_memory():
 
 
 def _child(spec):
-    # Run as a script, so benchmarks/ is sys.path[0] whether the caller imported this module as
-    # `memory` (a benchmark script) or as `benchmarks.memory` (the tests).
+    # Run as a script, so tests/helpers/ is sys.path[0] and its measure.py imports by plain name.
     import wenv
-    from accuracy import MATERIALS, material
     from measure import bundled_hdri
 
     wenv.set_num_threads(spec["threads"])
     env = wenv.load_environment(bundled_hdri(spec["hdri"]))
-    mat = material(MATERIALS[spec["material"]])
+    m = spec["material"]
+    if m["lobes"]:
+        mat = wenv.CookTorrance(diffuse=tuple(m["diffuse"]), lobes=m["lobes"])
+    else:
+        mat = wenv.Lambert(tuple(m["diffuse"]))
     pos = np.load(os.path.join(spec["folder"], "positions.npy"))
     nrm = np.load(os.path.join(spec["folder"], "normals.npy"))
     # Freed memory the allocator still holds would be reused by the shader unseen: give it back.
