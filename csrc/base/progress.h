@@ -3,6 +3,7 @@
 #define WENV_PROGRESS_H
 
 #include <omp.h>
+#include <stdatomic.h>
 #include <stddef.h>
 
 /* `report` is called from one thread only with a fraction in [0, 1]; it returns nonzero to ask the
@@ -18,6 +19,14 @@ typedef struct {
 static inline int wenv_progress_step(const wenv_progress *p, size_t done, size_t total)
 {
     return omp_get_thread_num() == 0 && p && p->report && p->report(p->ctx, (double)done / (double)total);
+}
+
+/* The same for one more finished item of a parallel loop: counts it in `done` and sets `cancelled`
+ * when the report asks to stop. */
+static inline void wenv_progress_item(const wenv_progress *p, atomic_size_t *done, size_t total, atomic_int *cancelled)
+{
+    if (wenv_progress_step(p, atomic_fetch_add(done, 1) + 1, total))
+        atomic_store(cancelled, 1);
 }
 
 /* After the loop, from the calling thread: the last report.  A dynamic schedule may give thread 0

@@ -7,6 +7,7 @@
 #include <string.h>
 
 #include "math/frame.h"
+#include "math/unit_pair.h"
 
 #define BLOCK 2048
 /* A lobe narrower than WENV_NARROW_LOBE_PIXELS pixels (2 alpha against twice the pixel's angle) is
@@ -90,14 +91,8 @@ wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, con
         for (size_t i = 0; i < n; i++) {
             if (atomic_load(&failed) || atomic_load(&cancelled))
                 continue;
-            double nn[3] = {normals[3 * i], normals[3 * i + 1], normals[3 * i + 2]};
-            double vv[3] = {views[3 * i], views[3 * i + 1], views[3 * i + 2]};
-            double ln = sqrt(nn[0] * nn[0] + nn[1] * nn[1] + nn[2] * nn[2]);
-            double lv = sqrt(vv[0] * vv[0] + vv[1] * vv[1] + vv[2] * vv[2]);
-            for (int c = 0; c < 3; c++) {
-                nn[c] /= ln;
-                vv[c] /= lv;
-            }
+            double nn[3], vv[3];
+            wenv_unit_pair(normals, views, i, nn, vv);
             double f[9];
             wenv_frame(nn, f);
             double wo[3] = {f[0] * vv[0] + f[1] * vv[1] + f[2] * vv[2], f[3] * vv[0] + f[4] * vv[1] + f[5] * vv[2],
@@ -139,9 +134,7 @@ wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, con
                     atomic_store(&failed, 1);
             for (int c = 0; c < 3; c++)
                 out[3 * i + c] = (float)(spec[c] + irr[c] * diffuse[c] / M_PI);
-            size_t d = atomic_fetch_add(&done, 1) + 1;
-            if (wenv_progress_step(progress, d, n))
-                atomic_store(&cancelled, 1);
+            wenv_progress_item(progress, &done, n, &cancelled);
         }
         free(wi);
         free(fl);

@@ -101,8 +101,7 @@ wenv_status wenv_sh_project_envmap_blocks(const wenv_envmap *env, size_t order, 
                 if (atomic_load(&failed) || atomic_load(&cancelled))
                     break;
                 project_strip(env, order, block, s, cells, &t, partial + g * count * 3);
-                if (wenv_progress_step(progress, atomic_fetch_add(&done, 1) + 1, strips))
-                    atomic_store(&cancelled, 1);
+                wenv_progress_item(progress, &done, strips, &cancelled);
             }
         }
         free(t.y);

@@ -10,6 +10,7 @@
 #include "base/clock.h"
 #include "math/maps.h"
 #include "math/spherical_harmonics.h"
+#include "math/unit_pair.h"
 #include "scene/envmap_sh.h"
 #include "methods/method.h"
 #include "methods/presets.h"
@@ -204,9 +205,7 @@ static wenv_status set_material(void *state, const wenv_material *mat, const wen
                         }
                     }
                 }
-                size_t d = atomic_fetch_add(&done, 1) + 1;
-                if (wenv_progress_step(progress, d, V))
-                    atomic_store(&cancelled, 1);
+                wenv_progress_item(progress, &done, V, &cancelled);
             }
             free(wi);
             free(weight);
@@ -297,14 +296,8 @@ static wenv_status shade(void *state, const float *normals, const float *views, 
             float *o = out + 3 * i;
             if (atomic_load(&failed))
                 continue;
-            double nr[3] = {normals[3 * i], normals[3 * i + 1], normals[3 * i + 2]};
-            double v[3] = {views[3 * i], views[3 * i + 1], views[3 * i + 2]};
-            double ln = sqrt(nr[0] * nr[0] + nr[1] * nr[1] + nr[2] * nr[2]);
-            double lv = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-            for (int c = 0; c < 3; c++) {
-                nr[c] /= ln;
-                v[c] /= lv;
-            }
+            double nr[3], v[3];
+            wenv_unit_pair(normals, views, (size_t)i, nr, v);
             double mu = nr[0] * v[0] + nr[1] * v[1] + nr[2] * v[2];
             if (!(mu > 0.0)) {
                 o[0] = o[1] = o[2] = 0.0f;

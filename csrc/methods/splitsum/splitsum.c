@@ -13,6 +13,7 @@
 #include "math/maps.h"
 #include "scene/envmap_octahedral.h"
 #include "math/spherical_harmonics.h"
+#include "math/unit_pair.h"
 #include "scene/envmap_sh.h"
 #include "methods/method.h"
 #include "methods/presets.h"
@@ -371,14 +372,8 @@ static wenv_status shade(void *state, const float *normals, const float *views, 
     long long nn = (long long)n;
 #pragma omp parallel for schedule(static)
     for (long long i = 0; i < nn; i++) {
-        double nv3[3] = {normals[3 * i], normals[3 * i + 1], normals[3 * i + 2]};
-        double v[3] = {views[3 * i], views[3 * i + 1], views[3 * i + 2]};
-        double ln = sqrt(nv3[0] * nv3[0] + nv3[1] * nv3[1] + nv3[2] * nv3[2]);
-        double lv = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-        for (int c = 0; c < 3; c++) {
-            nv3[c] /= ln;
-            v[c] /= lv;
-        }
+        double nv3[3], v[3];
+        wenv_unit_pair(normals, views, (size_t)i, nv3, v);
         float *o = out + 3 * i;
         double mu = nv3[0] * v[0] + nv3[1] * v[1] + nv3[2] * v[2];
         if (!(mu > 0.0)) {

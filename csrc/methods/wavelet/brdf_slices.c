@@ -451,9 +451,7 @@ wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material
                     counts[j] = truncated_slice(turned, L, keep, scratch, mag, work, all_idx + j * keep,
                                                 all_rgb + j * keep * 3);
                     /* a slice costs its lobes' evaluations: many lobes make this long enough to report */
-                    size_t d = atomic_fetch_add(&done, 1) + 1;
-                    if (wenv_progress_step(progress, d, nv))
-                        atomic_store(&cancelled, 1);
+                    wenv_progress_item(progress, &done, nv, &cancelled);
                 }
             }
             free(slice);

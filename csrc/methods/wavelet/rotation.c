@@ -125,20 +125,25 @@ typedef struct {
     size_t count, cap;
 } triplets;
 
+/* `p` reallocated to n items of `size` bytes; on failure `p` unchanged (still owned) and *failed set,
+ * so that several arrays grow together and a failure frees nothing twice. */
+static void *grown(void *p, size_t n, size_t size, int *failed)
+{
+    void *q = realloc(p, n * size);
+    if (!q)
+        *failed = 1;
+    return q ? q : p;
+}
+
 static int triplets_push(triplets *tr, uint32_t u, uint32_t j, float v)
 {
     if (tr->count == tr->cap) {
         size_t cap = tr->cap ? 2 * tr->cap : 4096;
-        uint32_t *nu = realloc(tr->u, cap * sizeof *nu);
-        if (nu)
-            tr->u = nu;
-        uint32_t *nj = realloc(tr->j, cap * sizeof *nj);
-        if (nj)
-            tr->j = nj;
-        float *nv = realloc(tr->v, cap * sizeof *nv);
-        if (nv)
-            tr->v = nv;
-        if (!nu || !nj || !nv)
+        int failed = 0;
+        tr->u = grown(tr->u, cap, sizeof *tr->u, &failed);
+        tr->j = grown(tr->j, cap, sizeof *tr->j, &failed);
+        tr->v = grown(tr->v, cap, sizeof *tr->v, &failed);
+        if (failed)
             return -1;
         tr->cap = cap;
     }
@@ -258,13 +263,10 @@ static int group_by_local(build_ws *ws, size_t nl)
 {
     size_t np = ws->p.count;
     if (np > ws->col_room) {
-        uint32_t *u = realloc(ws->col_u, np * sizeof *u);
-        if (u)
-            ws->col_u = u;
-        float *v = realloc(ws->col_v, np * sizeof *v);
-        if (v)
-            ws->col_v = v;
-        if (!u || !v)
+        int failed = 0;
+        ws->col_u = grown(ws->col_u, np, sizeof *ws->col_u, &failed);
+        ws->col_v = grown(ws->col_v, np, sizeof *ws->col_v, &failed);
+        if (failed)
             return -1;
         ws->col_room = np;
     }
@@ -460,9 +462,7 @@ wenv_status wenv_rotation_build(wenv_rotation **out, size_t global_n, size_t loc
             wenv_frame(n, f);
             if (build_matrix(rs, f, threshold, &ws, &mats[s]) < 0)
                 atomic_store(&failed, 1);
-            size_t d = atomic_fetch_add(&done, 1) + 1;
-            if (wenv_progress_step(progress, d, ns))
-                atomic_store(&cancelled, 1);
+            wenv_progress_item(progress, &done, ns, &cancelled);
         }
         ws_free(&ws);
     }
