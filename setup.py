@@ -47,6 +47,9 @@ setup(
         Extension(
             "wenv",
             sources=sorted(glob.glob("csrc/**/*.c", recursive=True)),
+            # a changed header (or the lobe's terms, included twice) rebuilds the sources, which
+            # setuptools otherwise would not see as changed
+            depends=sorted(glob.glob("csrc/**/*.h", recursive=True) + glob.glob("csrc/**/*.inc", recursive=True)),
             include_dirs=["csrc"] + include_dirs,
             libraries=exr_libs + ["cubature", "z", "m"],
             extra_compile_args=extra_compile_args,
