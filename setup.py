@@ -1,6 +1,7 @@
 """Build the `wenv` C extension (sources in csrc/, one folder per layer: docs/ARCHITECTURE.md).
 
-System libraries (Debian names): libopenexr-dev (OpenEXRCore), zlib1g-dev, libcubature-dev.
+System libraries (Debian names): libopenexr-dev (OpenEXRCore), zlib1g-dev, libcubature-dev, libembree-dev
+(Embree 3: the ray casts of occlusion).
 scripts/setup.sh installs them.  Flags stay portable: no -march=native; hot loops dispatch on
 CPU features at run time instead.
 """
@@ -51,7 +52,7 @@ setup(
             # setuptools otherwise would not see as changed
             depends=sorted(glob.glob("csrc/**/*.h", recursive=True) + glob.glob("csrc/**/*.inc", recursive=True)),
             include_dirs=["csrc"] + include_dirs,
-            libraries=exr_libs + ["cubature", "z", "m"],
+            libraries=exr_libs + ["cubature", "embree3", "z", "m"],
             extra_compile_args=extra_compile_args,
             extra_link_args=extra_link_args,
         )

@@ -8,7 +8,7 @@ cd "$(dirname "$0")/.."
 need_apt=()
 # clang, its sanitizer and libFuzzer runtimes (libclang-rt-dev) and its OpenMP (libomp-dev) build
 # the fuzz targets (tests/fuzz/run.py); gcc builds the extension
-for pkg in libopenexr-dev zlib1g-dev libcubature-dev pkg-config gcc clang libclang-rt-dev libomp-dev; do
+for pkg in libopenexr-dev zlib1g-dev libcubature-dev libembree-dev pkg-config gcc clang libclang-rt-dev libomp-dev; do
     dpkg -s "$pkg" >/dev/null 2>&1 || need_apt+=("$pkg")
 done
 if [ ${#need_apt[@]} -gt 0 ]; then

@@ -56,7 +56,7 @@ def test_core_without_python(tmp_path, sanitized):
                 "-fno-omit-frame-pointer"] if sanitized else []
     cmd = ["gcc", "-std=c11", "-D_DEFAULT_SOURCE", "-O1", *sanitize, "-fopenmp", "-Wall", "-Wextra", "-Werror", "-I" + CSRC,
            *exr, os.path.join(ROOT, "tests", "c", "core_check.c"), *numerical_sources(), "-o", str(exe),
-           "-lOpenEXRCore", "-lcubature", "-lz", "-lm"]
+           "-lOpenEXRCore", "-lcubature", "-lembree3", "-lz", "-lm"]
     build = subprocess.run(cmd, capture_output=True, text=True)
     assert build.returncode == 0, build.stderr[-4000:]
     run = subprocess.run([str(exe)], capture_output=True, text=True, timeout=300,

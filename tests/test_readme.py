@@ -30,6 +30,7 @@ AUTO = 'shader = wenv.Shader(env, mat, quality="auto"'
 PRINCIPLED = "paint = wenv.Principled("
 TABULATED = "mat = wenv.load_brdf("
 GLOSSMETER = "import wenv\n\npaint = "
+OCCLUDERS = "occluders = wenv.Occluders("
 
 
 def leading_literal(comment):
@@ -196,6 +197,20 @@ def test_glossmeter_block_shows_true_readings():
     assert run_checked(readme_block(GLOSSMETER), {}, "docs/glossmeter.md") == 5
 
 
+def test_occluders_block_runs():
+    """docs/python.md's occluders block on a ground square under a roof: the vertex under it is
+    blocked overhead, and its reference darker than the open one's."""
+    ns = {"wenv": wenv, "env": wenv.Environment(np.ones((32, 64, 3), np.float32)), "mat": wenv.Lambert(0.5),
+          "scene_positions": np.float32([[-1, -1, 1], [1, -1, 1], [1, 1, 1], [-1, 1, 1]]),
+          "scene_triangles": np.array([[0, 1, 2], [0, 2, 3]]),
+          "positions": np.float32([[0, 0, 0], [5, 0, 0]]), "normals": np.float32([[0, 0, 1], [0, 0, 1]]),
+          "view_dirs": np.float32([[0, 0.3, 1], [0, 0.3, 1]])}
+    ns.update(origins=ns["positions"], directions=ns["normals"])
+    run_checked(readme_block(OCCLUDERS), ns, "docs/python.md")
+    assert ns["occlusion"].visible.shape == (2, 8, 8) and ns["occlusion"].blocked_vertices == 2
+    assert ns["truth"][0, 0] < ns["truth"][1, 0] < 0.5 * 1.01  # (white sky: 0.5 in the open, to the pixels)
+
+
 def test_every_python_block_is_run():
     """A Python block added to README.md or a docs/*.md gets a test: these are the blocks run here,
     each in the file it is in, the Blender scripting ones (tests/test_addon.py) and the extension's
@@ -203,7 +218,7 @@ def test_every_python_block_is_run():
     run = {
         "README.md": [QUICK_START, "import bpy\nbpy.ops.extensions.package_install_files(",
                       "import bpy\nscene = bpy.context.scene"],
-        "docs/python.md": [API],
+        "docs/python.md": [API, OCCLUDERS],
         "docs/performance.md": [AUTO],
         "docs/principled.md": [PRINCIPLED],
         "docs/measured_brdfs.md": [TABULATED],

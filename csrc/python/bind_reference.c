@@ -3,16 +3,24 @@
 
 #include "python/bind_envmap.h"
 #include "python/bind_material.h"
+#include "python/bind_occlusion.h"
 #include "reference/reference.h"
 
 static PyObject *py_reference(PyObject *self, PyObject *args, PyObject *kwargs)
 {
     (void)self;
-    static char *kwlist[] = {"env", "material", "normals", "view_dirs", "progress", NULL};
-    PyObject *env_obj, *mat_obj, *nobj, *vobj, *progress_obj = Py_None;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOO|O:reference", kwlist, &env_obj, &mat_obj, &nobj, &vobj,
-                                     &progress_obj))
+    static char *kwlist[] = {"env", "material", "normals", "view_dirs", "progress", "positions", "occluders", NULL};
+    PyObject *env_obj, *mat_obj, *nobj, *vobj, *progress_obj = Py_None, *pobj = Py_None, *occ_obj = Py_None;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOO|OOO:reference", kwlist, &env_obj, &mat_obj, &nobj, &vobj,
+                                     &progress_obj, &pobj, &occ_obj))
         return NULL;
+    const struct wenv_occluders *occ = NULL;
+    if (occ_obj != Py_None && !(occ = wenv_py_occluders(occ_obj, "occluders")))
+        return NULL;
+    if ((occ_obj == Py_None) != (pobj == Py_None)) {
+        PyErr_SetString(PyExc_ValueError, "occluders and positions go together: the rays start at the positions");
+        return NULL;
+    }
     const struct wenv_envmap *env = wenv_py_envmap(env_obj, "env");
     if (!env)
         return NULL;
@@ -32,8 +40,13 @@ static PyObject *py_reference(PyObject *self, PyObject *args, PyObject *kwargs)
         return NULL;
     }
     PyObject *result = NULL;
-    if (nv != n) {
-        PyErr_Format(PyExc_ValueError, "view_dirs has %zu rows but normals has %zu", nv, n);
+    Py_buffer pb = {0};
+    size_t np = n;
+    if (occ && wenv_py_get_vec3_array(pobj, "positions", 0, &pb, &np, NULL) < 0)
+        goto done;
+    if (nv != n || np != n) {
+        PyErr_Format(PyExc_ValueError, "view_dirs has %zu rows and positions %zu, but normals has %zu", nv,
+                     occ ? np : n, n);
         goto done;
     }
     Py_ssize_t shape[2] = {(Py_ssize_t)n, 3};
@@ -46,7 +59,7 @@ static PyObject *py_reference(PyObject *self, PyObject *args, PyObject *kwargs)
     wenv_error err = {0};
     wenv_status st;
     WENV_BEGIN_WORK
-    st = wenv_reference(env, mat, nb.buf, vb.buf, n, out, &progress, &err);
+    st = wenv_reference(env, mat, nb.buf, vb.buf, n, occ, occ ? pb.buf : NULL, out, &progress, &err);
     WENV_END_WORK
     if (st) {
         Py_CLEAR(result);
@@ -54,6 +67,8 @@ static PyObject *py_reference(PyObject *self, PyObject *args, PyObject *kwargs)
             wenv_py_raise(&err);
     }
 done:
+    if (pb.obj)
+        PyBuffer_Release(&pb);
     PyBuffer_Release(&nb);
     PyBuffer_Release(&vb);
     return result;
@@ -61,8 +76,10 @@ done:
 
 static PyMethodDef reference_functions[] = {
     {"reference", (PyCFunction)(void (*)(void))py_reference, METH_VARARGS | METH_KEYWORDS,
-     "reference(env, material, normals, view_dirs, progress=None)\n--\n\nGround truth: the reflection "
-     "equation summed over every environment pixel (exact solid angles), in the units of Shader.shade."},
+     "reference(env, material, normals, view_dirs, progress=None, positions=None, occluders=None)\n--\n\n"
+     "Ground truth: the reflection equation summed over every environment pixel (exact solid angles), in the "
+     "units of Shader.shade.  With occluders (a wenv.Occluders) and the vertices' positions, each pixel's ray "
+     "from the vertex is cast exactly and a blocked one brings nothing: shadows from the direct light only."},
     {NULL, NULL, 0, NULL},
 };
 

@@ -823,17 +823,11 @@ static PyObject *py_visible_vertices(PyObject *module, PyObject *args, PyObject 
     if (parse_eye(eobj, eye) < 0 || (vp_obj != Py_None && wenv_py_get_matrix(vp_obj, "view_projection", 4, 16, vp) < 0))
         return NULL;
     Py_buffer pb, nb;
-    size_t np, nn;
-    if (wenv_py_get_vec3_array(pobj, "positions", 0, &pb, &np, NULL) < 0)
+    size_t np;
+    if (wenv_py_get_vec3_pair(pobj, "positions", nobj, "normals", 0, &pb, &nb, &np) < 0)
         return NULL;
-    if (wenv_py_get_vec3_array(nobj, "normals", 0, &nb, &nn, NULL) < 0) {
-        PyBuffer_Release(&pb);
-        return NULL;
-    }
     PyObject *result = NULL;
-    if (np != nn) {
-        PyErr_Format(PyExc_ValueError, "positions has %zu rows but normals has %zu", np, nn);
-    } else {
+    {
         Py_ssize_t shape[1] = {(Py_ssize_t)np};
         void *data;
         if ((result = wenv_py_new_array(1, shape, "bool", &data))) {

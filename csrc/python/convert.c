@@ -90,6 +90,26 @@ int wenv_py_get_vec3_array(PyObject *obj, const char *name, int require_nonzero,
     return 0;
 }
 
+int wenv_py_get_vec3_pair(PyObject *a, const char *a_name, PyObject *b, const char *b_name, int b_nonzero,
+                          Py_buffer *a_view, Py_buffer *b_view, size_t *n)
+{
+    size_t na, nb;
+    if (wenv_py_get_vec3_array(a, a_name, 0, a_view, &na, NULL) < 0)
+        return -1;
+    if (wenv_py_get_vec3_array(b, b_name, b_nonzero, b_view, &nb, NULL) < 0) {
+        PyBuffer_Release(a_view);
+        return -1;
+    }
+    if (na != nb) {
+        PyErr_Format(PyExc_ValueError, "%s has %zu rows but %s has %zu", a_name, na, b_name, nb);
+        PyBuffer_Release(a_view);
+        PyBuffer_Release(b_view);
+        return -1;
+    }
+    *n = na;
+    return 0;
+}
+
 int wenv_py_get_writable_vec3_array(PyObject *obj, const char *name, size_t n, Py_buffer *view)
 {
     if (PyObject_GetBuffer(obj, view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | PyBUF_WRITABLE) < 0) {

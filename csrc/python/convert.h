@@ -30,6 +30,11 @@ PyObject *wenv_py_eye_at_vertex_error(void);
 int wenv_py_get_vec3_array(PyObject *obj, const char *name, int require_nonzero, Py_buffer *view,
                            size_t *n, int *single);
 
+/* Two such arrays of as many rows (names a_name, b_name; zero rows refused in b when b_nonzero):
+ * ValueError naming both when their rows differ.  On success the caller releases both views. */
+int wenv_py_get_vec3_pair(PyObject *a, const char *a_name, PyObject *b, const char *b_name, int b_nonzero,
+                          Py_buffer *a_view, Py_buffer *b_view, size_t *n);
+
 /* Gets a writable float32, C-contiguous buffer of shape (n, 3) -- exactly n rows -- from `obj`,
  * for results written in place.  On success the caller must PyBuffer_Release(view). */
 int wenv_py_get_writable_vec3_array(PyObject *obj, const char *name, size_t n, Py_buffer *view);

@@ -11,6 +11,7 @@ int wenv_register_principled(PyObject *module); /* bind_principled.c: Principled
 int wenv_register_shader(PyObject *module);     /* bind_shader.c: Shader, the presets */
 int wenv_register_reference(PyObject *module);  /* bind_reference.c: reference */
 int wenv_register_glossmeter(PyObject *module); /* bind_glossmeter.c: Glossmeter, gloss, haze, fit_roughness */
+int wenv_register_occlusion(PyObject *module);  /* bind_occlusion.c: Occluders, Occlusion */
 int wenv_register_internals(PyObject *module);  /* bind_internals.c: private hooks for the tests */
 
 #endif

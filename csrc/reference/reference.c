@@ -19,11 +19,29 @@
  * about a pixel, which a lobe a few pixels wide reflecting a sun of a few pixels tells apart). */
 #define NARROW_SAMPLES 192 /* the rule's divisions: 2 x 192^2 nodes over a lobe a few pixels wide */
 
+/* What blocks the lighting, if anything: the scene and the ray's start (the vertex, lifted). */
+typedef struct {
+    const wenv_occluders *occ;
+    float origin[3];
+} blocker;
+
+/* Whether the direction d (world, unit) is blocked. */
+static int blocked_one(const blocker *b, const double d[3])
+{
+    if (!b->occ)
+        return 0;
+    float fd[3] = {(float)d[0], (float)d[1], (float)d[2]};
+    unsigned char hit;
+    wenv_occluders_test(b->occ, b->origin, fd, 1, INFINITY, &hit);
+    return hit;
+}
+
 /* Lobe i's reflected radiance at view wo (frame f) by its node rule over the lighting, minus
- * what the pixel sum gave it (the pixels whose half vector lies inside its cone), into acc. */
+ * what the pixel sum gave it (the pixels whose half vector lies inside its cone), into acc.  With
+ * occluders, a blocked node or pixel brings nothing, in both. */
 static wenv_status narrow_lobe(const wenv_envmap *env, const wenv_material *mat, size_t i, const double f[9],
                                const double wo[3], const float *dirs, const float *flux, size_t count, double *nodes,
-                               double acc[3], wenv_error *err)
+                               const blocker *b, double acc[3], wenv_error *err)
 {
     size_t max = 2 * NARROW_SAMPLES * NARROW_SAMPLES, n = 0;
     double *weights = nodes + 3 * max;
@@ -33,6 +51,8 @@ static wenv_status narrow_lobe(const wenv_envmap *env, const wenv_material *mat,
         const double *l = nodes + 3 * k;
         double d[3] = {f[0] * l[0] + f[3] * l[1] + f[6] * l[2], f[1] * l[0] + f[4] * l[1] + f[7] * l[2],
                        f[2] * l[0] + f[5] * l[1] + f[8] * l[2]};
+        if (blocked_one(b, d))
+            continue;
         float L[3];
         wenv_envmap_lookup_nearest(env, d, L);
         for (int c = 0; c < 3; c++)
@@ -50,6 +70,9 @@ static wenv_status narrow_lobe(const wenv_envmap *env, const wenv_material *mat,
         double len = sqrt(h[0] * h[0] + h[1] * h[1] + h[2] * h[2]);
         if (!(len > 0.0) || h[2] / len < cut)
             continue;
+        double dw[3] = {d[0], d[1], d[2]};
+        if (blocked_one(b, dw))
+            continue;
         double v[3];
         value(mat, i, wi, wo, v);
         for (int c = 0; c < 3; c++)
@@ -59,9 +82,14 @@ static wenv_status narrow_lobe(const wenv_envmap *env, const wenv_material *mat,
 }
 
 wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, const float *normals,
-                           const float *views, size_t n, float *out, const wenv_progress *progress,
-                           wenv_error *err)
+                           const float *views, size_t n, const wenv_occluders *occ, const float *positions,
+                           float *out, const wenv_progress *progress, wenv_error *err)
 {
+    if (occ && !positions)
+        return wenv_error_set(err, WENV_ERR_VALUE, "occluders need the vertices' positions");
+    for (size_t i = 0; occ && i < n; i++)
+        if (!isfinite(positions[3 * i]) || !isfinite(positions[3 * i + 1]) || !isfinite(positions[3 * i + 2]))
+            return wenv_error_set(err, WENV_ERR_VALUE, "positions[%zu] is not finite", i);
     int has_lobes = wenv_material_lobe_count(mat) > 0;
     size_t npix = wenv_envmap_width(env) * wenv_envmap_height(env);
     float *dirs = malloc(npix * 3 * sizeof(float));
@@ -83,8 +111,10 @@ wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, con
         float *wi = malloc(BLOCK * 3 * sizeof(float));
         float *fl = malloc(BLOCK * 3 * sizeof(float));
         float *fcos = malloc(BLOCK * 3 * sizeof(float));
+        float *wd = occ ? malloc(BLOCK * 3 * sizeof(float)) : NULL;
+        unsigned char *hit = occ ? malloc(BLOCK) : NULL;
         double *nodes = n_narrow ? malloc(2 * NARROW_SAMPLES * NARROW_SAMPLES * 6 * sizeof(double)) : NULL;
-        if (!wi || !fl || !fcos || (n_narrow && !nodes))
+        if (!wi || !fl || !fcos || (n_narrow && !nodes) || (occ && (!wd || !hit)))
             atomic_store(&failed, 1);
         wenv_error lobe_err = {0};
 #pragma omp for schedule(dynamic, 1)
@@ -98,6 +128,12 @@ wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, con
             double wo[3] = {f[0] * vv[0] + f[1] * vv[1] + f[2] * vv[2], f[3] * vv[0] + f[4] * vv[1] + f[5] * vv[2],
                             f[6] * vv[0] + f[7] * vv[1] + f[8] * vv[2]};
             double spec[3] = {0, 0, 0}, irr[3] = {0, 0, 0};
+            blocker b = {.occ = occ};
+            if (occ) {
+                float lift = wenv_occluders_offset(occ);
+                for (int c = 0; c < 3; c++)
+                    b.origin[c] = positions[3 * i + (size_t)c] + lift * (float)nn[c];
+            }
             if (wo[2] > 0.0) {
                 size_t fill = 0;
                 for (size_t p = 0; p <= count; p++) {
@@ -111,12 +147,20 @@ wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, con
                         w[1] = (float)f[3] * d[0] + (float)f[4] * d[1] + (float)f[5] * d[2];
                         w[2] = z;
                         memcpy(fl + 3 * fill, flux + 3 * p, 3 * sizeof(float));
-                        irr[0] += (double)z * flux[3 * p];
-                        irr[1] += (double)z * flux[3 * p + 1];
-                        irr[2] += (double)z * flux[3 * p + 2];
+                        if (occ)
+                            memcpy(wd + 3 * fill, d, 3 * sizeof(float));
                         if (++fill < BLOCK)
                             continue;
                     }
+                    if (fill && occ) { /* direct light only: what the scene blocks brings nothing */
+                        wenv_occluders_test(occ, b.origin, wd, fill, INFINITY, hit);
+                        for (size_t q = 0; q < fill; q++)
+                            if (hit[q])
+                                memset(fl + 3 * q, 0, 3 * sizeof(float));
+                    }
+                    for (size_t q = 0; q < fill; q++)
+                        for (int c = 0; c < 3; c++)
+                            irr[c] += (double)wi[3 * q + 2] * fl[3 * q + (size_t)c];
                     if (fill && has_lobes) {
                         wenv_material_specular_cos_batch(mat, wo, wi, fill, fcos);
                         for (size_t q = 0; q < fill; q++)
@@ -130,7 +174,7 @@ wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, con
             wenv_material_diffuse_at(mat, wo[2], diffuse);
             for (size_t l = 0; n_narrow && wo[2] > 0.0 && l < n_lobes; l++)
                 if (wenv_material_lobe(mat, l)->alpha < narrow_alpha &&
-                    narrow_lobe(env, mat, l, f, wo, dirs, flux, count, nodes, spec, &lobe_err))
+                    narrow_lobe(env, mat, l, f, wo, dirs, flux, count, nodes, &b, spec, &lobe_err))
                     atomic_store(&failed, 1);
             for (int c = 0; c < 3; c++)
                 out[3 * i + c] = (float)(spec[c] + irr[c] * diffuse[c] / M_PI);
@@ -139,6 +183,8 @@ wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, con
         free(wi);
         free(fl);
         free(fcos);
+        free(wd);
+        free(hit);
         free(nodes);
     }
     free(dirs);

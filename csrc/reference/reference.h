@@ -1,5 +1,8 @@
 /* Ground truth: the reflection equation summed over every environment pixel, each a point
- * source of flux radiance x exact pixel solid angle, with the exact BRDF.  Same units as shading. */
+ * source of flux radiance x exact pixel solid angle, with the exact BRDF.  Same units as shading.
+ * With occluders (positions then required), each pixel's ray from the vertex (lifted off the
+ * surface by WENV_OCCLUDER_OFFSET of the scene's size) is cast exactly, and a blocked one brings
+ * nothing: direct light only, the scene's own light not counted.  occ NULL: unshadowed. */
 #ifndef WENV_REFERENCE_H
 #define WENV_REFERENCE_H
 
@@ -9,9 +12,10 @@
 #include "base/progress.h"
 #include "scene/envmap.h"
 #include "scene/material.h"
+#include "scene/occluders.h"
 
 wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, const float *normals,
-                           const float *views, size_t n, float *out, const wenv_progress *progress,
-                           wenv_error *err);
+                           const float *views, size_t n, const wenv_occluders *occ, const float *positions,
+                           float *out, const wenv_progress *progress, wenv_error *err);
 
 #endif

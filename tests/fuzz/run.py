@@ -37,7 +37,7 @@ CFLAGS = ["-std=c11", "-D_DEFAULT_SOURCE", "-O1", "-g", "-fno-omit-frame-pointer
           "-DWENV_IMAGE_MAX_PIXELS=((size_t)1<<20)",
           # at -O1 clang does not vectorise the loops marked `omp simd` and says so; speed is gcc's concern
           "-Wno-pass-failed"]
-LIBS = ["-lOpenEXRCore", "-lcubature", "-lz", "-lm"]
+LIBS = ["-lOpenEXRCore", "-lcubature", "-lembree3", "-lz", "-lm"]
 
 
 def pkg_config(*args):

@@ -1,0 +1,390 @@
+/* wenv.Occluders and wenv.Occlusion: what stands between the vertices and their sky (scene/occluders.h,
+ * scene/occlusion.h). */
+#include "python/bind_occlusion.h"
+
+#include <math.h>
+#include <string.h>
+
+#include "math/maps.h"
+#include "python/module.h"
+#include "scene/occlusion.h"
+
+typedef struct {
+    PyObject_HEAD
+    wenv_occluders *occ;
+} OccludersObject;
+
+typedef struct {
+    PyObject_HEAD
+    wenv_occlusion o;
+} OcclusionObject;
+
+static PyTypeObject OccludersType, OcclusionType;
+
+const struct wenv_occluders *wenv_py_occluders(PyObject *obj, const char *name)
+{
+    if (!PyObject_TypeCheck(obj, &OccludersType) || !((OccludersObject *)obj)->occ) {
+        PyErr_Format(PyExc_TypeError, "%s must be a wenv.Occluders, got %.100s", name, Py_TYPE(obj)->tp_name);
+        return NULL;
+    }
+    return ((OccludersObject *)obj)->occ;
+}
+
+/* A C-contiguous uint32 copy of an integer array of shape (m, 3), every entry in [0, 2^32); *m rows. */
+static PyObject *triangle_array(PyObject *obj, size_t *m)
+{
+    PyObject *numpy = PyImport_ImportModule("numpy");
+    PyObject *arr = numpy ? PyObject_CallMethod(numpy, "asarray", "O", obj) : NULL;
+    PyObject *result = NULL;
+    if (!arr)
+        goto done;
+    PyObject *kind = PyObject_GetAttrString(arr, "dtype");
+    PyObject *k = kind ? PyObject_GetAttrString(kind, "kind") : NULL;
+    int integer = k && PyUnicode_Check(k) &&
+                  (PyUnicode_CompareWithASCIIString(k, "i") == 0 || PyUnicode_CompareWithASCIIString(k, "u") == 0);
+    Py_XDECREF(kind);
+    Py_XDECREF(k);
+    PyObject *shape = PyObject_GetAttrString(arr, "shape");
+    int ok = shape && PyTuple_Check(shape) && PyTuple_GET_SIZE(shape) == 2 &&
+             PyLong_AsSsize_t(PyTuple_GET_ITEM(shape, 1)) == 3;
+    Py_ssize_t rows = ok ? PyLong_AsSsize_t(PyTuple_GET_ITEM(shape, 0)) : 0;
+    Py_XDECREF(shape);
+    if (PyErr_Occurred())
+        goto done;
+    if (!integer || !ok) {
+        PyErr_SetString(PyExc_TypeError, "triangles must be an integer array of shape (m, 3)");
+        goto done;
+    }
+    if (rows > 0) {
+        PyObject *lo = PyObject_CallMethod(arr, "min", NULL), *hi = PyObject_CallMethod(arr, "max", NULL);
+        PyObject *zero = PyLong_FromLong(0), *limit = PyLong_FromUnsignedLongLong(UINT32_MAX);
+        int neg = lo && zero ? PyObject_RichCompareBool(lo, zero, Py_LT) : -1;
+        int big = hi && limit ? PyObject_RichCompareBool(hi, limit, Py_GT) : -1;
+        Py_XDECREF(lo);
+        Py_XDECREF(hi);
+        Py_XDECREF(zero);
+        Py_XDECREF(limit);
+        if (neg < 0 || big < 0)
+            goto done;
+        if (neg || big) {
+            PyErr_SetString(PyExc_ValueError, "triangles must index positions: every entry in [0, 2^32)");
+            goto done;
+        }
+    }
+    result = PyObject_CallMethod(numpy, "ascontiguousarray", "Os", arr, "uint32");
+    *m = (size_t)rows;
+done:
+    Py_XDECREF(numpy);
+    Py_XDECREF(arr);
+    return result;
+}
+
+/* ---------------------------------------------------------------- wenv.Occluders */
+
+static int occluders_init(OccludersObject *self, PyObject *args, PyObject *kwargs)
+{
+    static char *kwlist[] = {"positions", "triangles", "memory_budget_mb", NULL};
+    PyObject *pobj, *tobj;
+    double budget_mb = 1024.0;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|d:Occluders", kwlist, &pobj, &tobj, &budget_mb))
+        return -1;
+    if (self->occ) {
+        PyErr_SetString(PyExc_RuntimeError, "Occluders is already initialised");
+        return -1;
+    }
+    if (!(budget_mb > 0.0 && budget_mb < 1e9)) {
+        wenv_py_errorf(PyExc_ValueError, "memory_budget_mb must be positive, got %g", budget_mb);
+        return -1;
+    }
+    Py_buffer pb, tb;
+    size_t np, nt = 0;
+    if (wenv_py_get_vec3_array(pobj, "positions", 0, &pb, &np, NULL) < 0)
+        return -1;
+    PyObject *tri = triangle_array(tobj, &nt);
+    if (!tri || PyObject_GetBuffer(tri, &tb, PyBUF_C_CONTIGUOUS) < 0) {
+        Py_XDECREF(tri);
+        PyBuffer_Release(&pb);
+        return -1;
+    }
+    wenv_error err = {0};
+    wenv_status st;
+    wenv_occluders *occ = NULL;
+    WENV_BEGIN_WORK
+    st = wenv_occluders_create(&occ, pb.buf, np, tb.buf, nt, (size_t)(budget_mb * 1048576.0), &err);
+    WENV_END_WORK
+    PyBuffer_Release(&tb);
+    Py_DECREF(tri);
+    PyBuffer_Release(&pb);
+    if (st) {
+        wenv_py_raise(&err);
+        return -1;
+    }
+    self->occ = occ;
+    return 0;
+}
+
+static void occluders_dealloc(OccludersObject *self)
+{
+    wenv_occluders_free(self->occ);
+    Py_TYPE(self)->tp_free((PyObject *)self);
+}
+
+static int ready(OccludersObject *self)
+{
+    if (!self->occ) {
+        PyErr_SetString(PyExc_RuntimeError, "Occluders is not initialised");
+        return -1;
+    }
+    return 0;
+}
+
+/* occluded(origins, directions, tfar=inf): bool per ray. */
+static PyObject *occluders_occluded(OccludersObject *self, PyObject *args, PyObject *kwargs)
+{
+    static char *kwlist[] = {"origins", "directions", "tfar", NULL};
+    PyObject *oobj, *dobj;
+    double tfar = INFINITY;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|d:occluded", kwlist, &oobj, &dobj, &tfar) || ready(self) < 0)
+        return NULL;
+    if (!(tfar > 0.0)) {
+        wenv_py_errorf(PyExc_ValueError, "tfar must be positive, got %g", tfar);
+        return NULL;
+    }
+    Py_buffer ob, db;
+    size_t no, nd;
+    if (wenv_py_get_vec3_array(oobj, "origins", 0, &ob, &no, NULL) < 0)
+        return NULL;
+    if (wenv_py_get_vec3_array(dobj, "directions", 1, &db, &nd, NULL) < 0) {
+        PyBuffer_Release(&ob);
+        return NULL;
+    }
+    PyObject *result = NULL;
+    if (no != nd && no != 1) {
+        PyErr_Format(PyExc_ValueError, "origins has %zu rows but directions has %zu (or give one origin)", no, nd);
+        goto done;
+    }
+    Py_ssize_t shape[1] = {(Py_ssize_t)nd};
+    void *data;
+    float *unit = PyMem_Malloc(nd * 3 * sizeof(float) + 1);
+    if (!unit) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    const float *d = db.buf;
+    for (size_t k = 0; k < nd; k++) {
+        float len = sqrtf(d[3 * k] * d[3 * k] + d[3 * k + 1] * d[3 * k + 1] + d[3 * k + 2] * d[3 * k + 2]);
+        for (int c = 0; c < 3; c++)
+            unit[3 * k + (size_t)c] = d[3 * k + (size_t)c] / len;
+    }
+    if ((result = wenv_py_new_array(1, shape, "bool", &data))) {
+        const float *o = ob.buf;
+        WENV_BEGIN_WORK
+        if (no == 1)
+            wenv_occluders_test(self->occ, o, unit, nd, (float)tfar, data);
+        else
+            wenv_occluders_test_rays(self->occ, o, unit, nd, (float)tfar, data);
+        WENV_END_WORK
+    }
+    PyMem_Free(unit);
+done:
+    PyBuffer_Release(&ob);
+    PyBuffer_Release(&db);
+    return result;
+}
+
+/* occlusion(positions, normals, resolution=8, progress=None) -> wenv.Occlusion */
+static PyObject *occluders_occlusion(OccludersObject *self, PyObject *args, PyObject *kwargs)
+{
+    static char *kwlist[] = {"positions", "normals", "resolution", "progress", NULL};
+    PyObject *pobj, *nobj, *res_obj = NULL, *progress_obj = Py_None;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|OO:occlusion", kwlist, &pobj, &nobj, &res_obj, &progress_obj) ||
+        ready(self) < 0)
+        return NULL;
+    size_t resolution = 8;
+    if (res_obj && wenv_py_get_size(res_obj, "resolution", &resolution) < 0)
+        return NULL;
+    if (progress_obj != Py_None && !PyCallable_Check(progress_obj)) {
+        PyErr_SetString(PyExc_TypeError, "progress must be callable or None");
+        return NULL;
+    }
+    Py_buffer pb, nb;
+    size_t np;
+    if (wenv_py_get_vec3_pair(pobj, "positions", nobj, "normals", 1, &pb, &nb, &np) < 0)
+        return NULL;
+    OcclusionObject *out = PyObject_New(OcclusionObject, &OcclusionType);
+    if (!out)
+        goto done;
+    memset(&out->o, 0, sizeof out->o);
+    wenv_py_progress_bridge bridge = {progress_obj, 0};
+    wenv_progress progress = wenv_py_progress(&bridge);
+    wenv_error err = {0};
+    wenv_status st;
+    WENV_BEGIN_WORK
+    st = wenv_occlusion_make(&out->o, self->occ, pb.buf, nb.buf, np, resolution, &progress, &err);
+    WENV_END_WORK
+    if (st) {
+        Py_CLEAR(out);
+        if (!(bridge.raised && PyErr_Occurred()))
+            wenv_py_raise(&err);
+    }
+done:
+    PyBuffer_Release(&pb);
+    PyBuffer_Release(&nb);
+    return (PyObject *)out;
+}
+
+static PyObject *occluders_triangles(OccludersObject *self, void *closure)
+{
+    (void)closure;
+    return ready(self) < 0 ? NULL : PyLong_FromSize_t(wenv_occluders_triangle_count(self->occ));
+}
+
+static PyObject *occluders_size(OccludersObject *self, void *closure)
+{
+    (void)closure;
+    return ready(self) < 0 ? NULL : PyFloat_FromDouble(wenv_occluders_size(self->occ));
+}
+
+static PyMethodDef occluders_methods[] = {
+    {"occluded", (PyCFunction)(void (*)(void))occluders_occluded, METH_VARARGS | METH_KEYWORDS,
+     "occluded(origins, directions, tfar=inf)\n--\n\nWhether anything blocks each ray (bool, n): origins float32 "
+     "(n, 3) or one (3,), directions float32 (n, 3) (normalised here), up to distance tfar."},
+    {"occlusion", (PyCFunction)(void (*)(void))occluders_occlusion, METH_VARARGS | METH_KEYWORDS,
+     "occlusion(positions, normals, resolution=8, progress=None)\n--\n\nWhich directions of each vertex's "
+     "hemisphere the scene blocks, as a wenv.Occlusion: a ray from the vertex (lifted off the surface by 1e-4 of "
+     "the scene's size) through the centre of each texel of a resolution x resolution hemi-octahedral map in "
+     "the vertex's frame (resolution 4 to 16).  progress(fraction) may return True to cancel."},
+    {NULL, NULL, 0, NULL},
+};
+
+static PyGetSetDef occluders_getset[] = {
+    {"triangles", (getter)occluders_triangles, NULL, "Number of triangles.", NULL},
+    {"size", (getter)occluders_size, NULL, "Diagonal of the scene's bounding box.", NULL},
+    {NULL, NULL, NULL, NULL, NULL},
+};
+
+static PyTypeObject OccludersType = {
+    PyVarObject_HEAD_INIT(NULL, 0)
+    .tp_name = "wenv.Occluders",
+    .tp_basicsize = sizeof(OccludersObject),
+    .tp_dealloc = (destructor)occluders_dealloc,
+    .tp_flags = Py_TPFLAGS_DEFAULT,
+    .tp_doc = "Occluders(positions, triangles, memory_budget_mb=1024)\n--\n\nWhat stands between surfaces and "
+              "their sky: triangles (an integer array (m, 3) indexing positions, float32 (n, 3), world space) in "
+              "an Embree scene.  A position not finite, an index past the positions or a triangle of zero area is "
+              "a ValueError naming it; so is a scene estimated to need more than memory_budget_mb.  Immutable.",
+    .tp_new = PyType_GenericNew,
+    .tp_init = (initproc)occluders_init,
+    .tp_methods = occluders_methods,
+    .tp_getset = occluders_getset,
+};
+
+/* ---------------------------------------------------------------- wenv.Occlusion */
+
+static void occlusion_dealloc(OcclusionObject *self)
+{
+    wenv_occlusion_free(&self->o);
+    Py_TYPE(self)->tp_free((PyObject *)self);
+}
+
+static PyObject *occlusion_visible(OcclusionObject *self, void *closure)
+{
+    (void)closure;
+    size_t r = self->o.resolution, n = self->o.n_vertices;
+    Py_ssize_t shape[3] = {(Py_ssize_t)n, (Py_ssize_t)r, (Py_ssize_t)r};
+    void *data;
+    PyObject *a = wenv_py_new_array(3, shape, "bool", &data);
+    unsigned char *v = data;
+    for (size_t i = 0; a && i < n; i++)
+        for (size_t t = 0; t < r * r; t++)
+            v[i * r * r + t] = (unsigned char)wenv_occlusion_visible(&self->o, i, t);
+    return a;
+}
+
+/* Each vertex's visible share of its hemisphere, by solid angle. */
+static PyObject *occlusion_open(OcclusionObject *self, void *closure)
+{
+    (void)closure;
+    size_t r = self->o.resolution, n = self->o.n_vertices;
+    Py_ssize_t shape[1] = {(Py_ssize_t)n};
+    void *data;
+    PyObject *a = wenv_py_new_array(1, shape, "float64", &data);
+    if (!a)
+        return NULL;
+    double *open = data;
+    for (size_t i = 0; i < n; i++) {
+        double s = 0.0;
+        for (size_t t = 0; t < r * r; t++)
+            if (wenv_occlusion_visible(&self->o, i, t))
+                s += wenv_hemi_texel_solid_angle(r, t % r, t / r);
+        open[i] = s / (2.0 * M_PI);
+    }
+    return a;
+}
+
+static PyObject *occlusion_directions(OcclusionObject *self, void *closure)
+{
+    (void)closure;
+    size_t r = self->o.resolution;
+    Py_ssize_t shape[3] = {(Py_ssize_t)r, (Py_ssize_t)r, 3};
+    void *data;
+    PyObject *a = wenv_py_new_array(3, shape, "float64", &data);
+    for (size_t t = 0; a && t < r * r; t++)
+        wenv_occlusion_texel_direction(r, t, (double *)data + 3 * t);
+    return a;
+}
+
+static PyObject *occlusion_size(OcclusionObject *self, void *closure)
+{
+    size_t which = (size_t)(uintptr_t)closure;
+    const wenv_occlusion *o = &self->o;
+    size_t v = which == 0 ? o->resolution
+                          : which == 1 ? o->n_vertices
+                                       : which == 2 ? o->n_masks
+                                                    : o->n_vertices * sizeof *o->slot + o->n_masks * o->words * 8;
+    return PyLong_FromSize_t(v);
+}
+
+static PyGetSetDef occlusion_getset[] = {
+    {"resolution", (getter)occlusion_size, NULL, "The maps' side.", (void *)0},
+    {"vertices", (getter)occlusion_size, NULL, "Number of vertices.", (void *)1},
+    {"blocked_vertices", (getter)occlusion_size, NULL,
+     "Vertices some direction of whose hemisphere is blocked (the others hold no mask).", (void *)2},
+    {"nbytes", (getter)occlusion_size, NULL, "Bytes held.", (void *)3},
+    {"visible", (getter)occlusion_visible, NULL,
+     "bool (n, resolution, resolution): texel (row, column) of a vertex's map reaches the sky.", NULL},
+    {"open_fraction", (getter)occlusion_open, NULL,
+     "float64 (n,): each vertex's visible share of its hemisphere, by solid angle.", NULL},
+    {"directions", (getter)occlusion_directions, NULL,
+     "float64 (resolution, resolution, 3): each texel's direction in a vertex's frame (+Z the normal; the "
+     "tangents of wenv's one frame).", NULL},
+    {NULL, NULL, NULL, NULL, NULL},
+};
+
+static PyTypeObject OcclusionType = {
+    PyVarObject_HEAD_INIT(NULL, 0)
+    .tp_name = "wenv.Occlusion",
+    .tp_basicsize = sizeof(OcclusionObject),
+    .tp_dealloc = (destructor)occlusion_dealloc,
+    .tp_flags = Py_TPFLAGS_DEFAULT,
+    .tp_doc = "Which directions of each vertex's hemisphere a scene blocks (Occluders.occlusion makes it): one bit "
+              "per texel of a hemi-octahedral map in the vertex's frame; a vertex that sees its whole hemisphere "
+              "holds none.  Immutable.",
+    .tp_getset = occlusion_getset,
+};
+
+int wenv_register_occlusion(PyObject *module)
+{
+    if (PyType_Ready(&OccludersType) < 0 || PyType_Ready(&OcclusionType) < 0)
+        return -1;
+    PyTypeObject *types[] = {&OccludersType, &OcclusionType};
+    const char *names[] = {"Occluders", "Occlusion"};
+    for (int i = 0; i < 2; i++) {
+        Py_INCREF(types[i]);
+        if (PyModule_AddObject(module, names[i], (PyObject *)types[i]) < 0) {
+            Py_DECREF(types[i]);
+            return -1;
+        }
+    }
+    return 0;
+}

@@ -1,0 +1,41 @@
+/* What stands between a surface and its sky: triangle meshes in an Embree scene (the ray tracer
+ * Cycles uses on CPUs), tested ray by ray.  Built once per mesh state; immutable afterwards, so any
+ * number of threads may test rays at once. */
+#ifndef WENV_OCCLUDERS_H
+#define WENV_OCCLUDERS_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "base/error.h"
+
+typedef struct wenv_occluders wenv_occluders;
+
+/* The scene of n_triangles triangles (three indices each into n_positions xyz float positions).
+ * WENV_ERR_VALUE naming the first bad entry: a position not finite ("positions[i]"), an index past
+ * the positions ("triangles[i]"), a triangle of zero area ("triangles[i] is degenerate"); or when the
+ * scene would take more than memory_budget bytes (estimated before anything is built).  The data is
+ * copied. */
+wenv_status wenv_occluders_create(wenv_occluders **out, const float *positions, size_t n_positions,
+                                  const uint32_t *triangles, size_t n_triangles, size_t memory_budget,
+                                  wenv_error *err);
+void wenv_occluders_free(wenv_occluders *occ);
+
+size_t wenv_occluders_triangle_count(const wenv_occluders *occ);
+/* The diagonal of the scene's bounding box: what a ray's start is lifted off a surface by a
+ * fraction of (wenv_occluders_offset), so that it does not hit the face it starts on. */
+double wenv_occluders_size(const wenv_occluders *occ);
+/* The lift: WENV_OCCLUDER_OFFSET times the size. */
+#define WENV_OCCLUDER_OFFSET 1e-4
+float wenv_occluders_offset(const wenv_occluders *occ);
+
+/* Whether anything blocks each of n rays from `origin` along the unit directions `dirs` (xyz floats)
+ * before distance tfar (INFINITY: anywhere): blocked[k] = 1 or 0.  Thread-safe, no allocation. */
+void wenv_occluders_test(const wenv_occluders *occ, const float origin[3], const float *dirs, size_t n, float tfar,
+                         unsigned char *blocked);
+
+/* The same for n rays of their own origins (xyz floats each), on every thread. */
+void wenv_occluders_test_rays(const wenv_occluders *occ, const float *origins, const float *dirs, size_t n, float tfar,
+                              unsigned char *blocked);
+
+#endif

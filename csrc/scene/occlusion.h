@@ -1,0 +1,48 @@
+/* Which directions of each vertex's hemisphere the scene blocks: one bit per texel of an r x r
+ * hemi-octahedral map in the vertex's frame (math/frame.h, math/maps.h), set where a ray from the
+ * vertex through the texel's centre reaches the sky.  A vertex that sees its whole hemisphere holds
+ * no mask at all, so a scene that blocks nothing (a convex mesh alone) costs one index a vertex.
+ * Depends on the mesh state only: a new World, view or material needs none made again. */
+#ifndef WENV_OCCLUSION_H
+#define WENV_OCCLUSION_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "base/error.h"
+#include "base/progress.h"
+#include "scene/occluders.h"
+
+/* The map's side r: 4 (16 directions, about 22 degrees a texel) to 16 (256, about 6 degrees). */
+#define WENV_OCCLUSION_RESOLUTION_MIN 4
+#define WENV_OCCLUSION_RESOLUTION_MAX 16
+
+typedef struct {
+    size_t resolution;  /* r */
+    size_t n_vertices;
+    size_t words;       /* 64-bit words per mask: ceil(r^2 / 64) */
+    int32_t *slot;      /* per vertex: its mask's index, or -1 when it sees its whole hemisphere */
+    uint64_t *masks;    /* n_masks x words; bit t (row-major texel) set: visible */
+    size_t n_masks;
+} wenv_occlusion;
+
+/* The masks of n vertices (positions and normals as xyz floats; normals non-zero) against `occ`.
+ * Rays start WENV_OCCLUDER_OFFSET of the scene's size off the surface along the normal.  Progress
+ * and cancel as base/progress.h.  WENV_ERR_VALUE for a resolution out of range or a normal that is
+ * zero or not finite (naming "normals[i]"), or a position not finite ("positions[i]"). */
+wenv_status wenv_occlusion_make(wenv_occlusion *out, const wenv_occluders *occ, const float *positions,
+                                const float *normals, size_t n, size_t resolution, const wenv_progress *progress,
+                                wenv_error *err);
+void wenv_occlusion_free(wenv_occlusion *o);
+
+/* Whether texel t (row-major, 0 .. r^2 - 1) of vertex i's map is visible. */
+static inline int wenv_occlusion_visible(const wenv_occlusion *o, size_t i, size_t t)
+{
+    int32_t s = o->slot[i];
+    return s < 0 || (int)((o->masks[(size_t)s * o->words + t / 64] >> (t % 64)) & 1u);
+}
+
+/* The unit direction, in the vertex's local frame (+Z the normal), through texel t's centre. */
+void wenv_occlusion_texel_direction(size_t resolution, size_t t, double d[3]);
+
+#endif

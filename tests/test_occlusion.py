@@ -1,0 +1,229 @@
+"""What stands between a vertex and its sky: wenv.Occluders (an Embree scene), the per-vertex
+occlusion masks it makes, and the reference that casts every pixel's ray.  Truth here is outside the
+code under test: a ray-triangle intersection written in numpy, and closed-form view factors."""
+import math
+
+import numpy as np
+import pytest
+
+import wenv
+
+
+def box(lo, hi):
+    """Corners (8, 3) and triangles (12, 3) of an axis-aligned box, faces outward."""
+    c = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])], np.float32)
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    tris = [t for a, b, c_, d in quads for t in ((a, b, c_), (a, c_, d))]
+    return c, np.array(tris)
+
+
+def square(half, z, x=0.0, y=0.0):
+    """A square of half-side `half` centred on (x, y) at height z (two triangles)."""
+    p = np.array([[x - half, y - half, z], [x + half, y - half, z], [x + half, y + half, z], [x - half, y + half, z]],
+                 np.float32)
+    return p, np.array([[0, 1, 2], [0, 2, 3]])
+
+
+def merged(*parts):
+    positions, triangles, base = [], [], 0
+    for p, t in parts:
+        positions.append(p)
+        triangles.append(t + base)
+        base += len(p)
+    return np.vstack(positions).astype(np.float32), np.vstack(triangles)
+
+
+def uv_sphere(rings=24, segments=48, radius=1.0):
+    """A closed UV sphere: positions (also its normals) and triangles."""
+    v = [[0.0, 0.0, 1.0]]
+    for r in range(1, rings):
+        t = math.pi * r / rings
+        v += [[math.sin(t) * math.cos(2 * math.pi * s / segments), math.sin(t) * math.sin(2 * math.pi * s / segments),
+               math.cos(t)] for s in range(segments)]
+    v.append([0.0, 0.0, -1.0])
+    f = [[0, 1 + s, 1 + (s + 1) % segments] for s in range(segments)]
+    for r in range(rings - 2):
+        for s in range(segments):
+            a, b = 1 + r * segments + s, 1 + r * segments + (s + 1) % segments
+            f += [[a, a + segments, b + segments], [a, b + segments, b]]
+    last = len(v) - 1
+    f += [[last, 1 + (rings - 2) * segments + (s + 1) % segments, 1 + (rings - 2) * segments + s]
+          for s in range(segments)]
+    return np.array(v, np.float32) * radius, np.array(f)
+
+
+def numpy_blocked(positions, triangles, origin, dirs, eps=1e-9):
+    """Möller-Trumbore in float64 for every ray against every triangle: True where any hit lies ahead."""
+    p = positions.astype(np.float64)
+    a, b, c = p[triangles[:, 0]], p[triangles[:, 1]], p[triangles[:, 2]]
+    e1, e2 = b - a, c - a
+    hit = np.zeros(len(dirs), bool)
+    for k, d in enumerate(dirs.astype(np.float64)):
+        h = np.cross(d, e2)
+        det = np.einsum("ij,ij->i", e1, h)
+        ok = np.abs(det) > eps
+        inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+        s = origin - a
+        u = inv * np.einsum("ij,ij->i", s, h)
+        q = np.cross(s, e1)
+        v = inv * (q @ d)
+        t = inv * np.einsum("ij,ij->i", e2, q)
+        hit[k] = np.any(ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0))
+    return hit
+
+
+def frame(n):
+    """wenv's one tangent frame (docs/ARCHITECTURE.md §3.1): rows tangent, bitangent, normal."""
+    a = 1.0 / (1.0 + n[2])
+    b = -n[0] * n[1] * a
+    return np.array([[1 - n[0] * n[0] * a, b, -n[0]], [b, 1 - n[1] * n[1] * a, -n[1]], n])
+
+
+@pytest.fixture(scope="module")
+def yard():
+    """A ground square with a box standing on it and a roof floating over one corner."""
+    return merged(square(3.0, 0.0), box((-0.5, -0.5, 0.0), (0.5, 0.5, 1.2)), square(0.6, 1.5, 1.5, 1.5))
+
+
+def test_masks_match_a_ray_cast_written_apart(yard):
+    positions, triangles = yard
+    occ = wenv.Occluders(positions, triangles)
+    rng = np.random.default_rng(4)
+    pts = np.column_stack([rng.uniform(-2.5, 2.5, 40), rng.uniform(-2.5, 2.5, 40), np.zeros(40)]).astype(np.float32)
+    pts = pts[np.maximum(np.abs(pts[:, 0]), np.abs(pts[:, 1])) > 0.55]  # not inside the box
+    normals = np.tile(np.float32([0, 0, 1]), (len(pts), 1))
+    o = occ.occlusion(pts, normals, resolution=8)
+    local = o.directions.reshape(-1, 3)
+    lift = 1e-4 * occ.size
+    mismatches = 0
+    for i, p in enumerate(pts):
+        world = local @ frame(np.array([0.0, 0.0, 1.0]))
+        want = ~numpy_blocked(positions, triangles, p + lift * np.array([0, 0, 1.0]), world)
+        got = o.visible[i].reshape(-1)
+        mismatches += int(np.sum(got != want))
+    assert mismatches == 0
+    assert 0 < o.blocked_vertices <= len(pts)
+    assert np.all(o.open_fraction <= 1.0) and np.any(o.open_fraction < 0.9)
+
+
+def test_a_convex_mesh_blocks_nothing():
+    """A convex mesh alone: every vertex sees its whole hemisphere, holds no mask, costs one index."""
+    v, f = uv_sphere()
+    occ = wenv.Occluders(v, f)
+    o = occ.occlusion(v, v, resolution=16)
+    assert o.blocked_vertices == 0 and o.nbytes == 4 * len(v)
+    assert np.all(o.visible) and np.all(o.open_fraction == pytest.approx(1.0, abs=1e-12))
+
+
+def test_open_fraction_is_the_view_factor_under_a_roof():
+    """A point under the centre of a square roof sees the sky but for the roof's solid angle."""
+    roof = wenv.Occluders(*square(1.0, 1.0))
+    o = roof.occlusion(np.float32([[0, 0, 0]]), np.float32([[0, 0, 1]]), resolution=16)
+    # a rectangle of half-sides a, b at distance d, seen from below its centre: 4 asin(ab / sqrt((a^2+d^2)(b^2+d^2)))
+    solid = 4 * math.asin(1.0 / 2.0)
+    assert o.open_fraction[0] == pytest.approx(1 - solid / (2 * math.pi), abs=0.03)
+    assert not o.visible[0][7:9, 7:9].any() and o.visible[0][0, 0]  # the zenith blocked, the horizon open
+
+
+def constant_environment(value=1.0, width=512):
+    return wenv.Environment(np.full((width // 2, width, 3), value, np.float32))
+
+
+def test_shadowed_reference_is_the_view_factor():
+    """Lambertian white under a white sky: radiance albedo (1 - F), F the view factor of a square roof
+    of half-side a at height h over the point, (4/pi) A/sqrt(1+A^2) atan(A/sqrt(1+A^2)), A = a/h."""
+    env = constant_environment()
+    mat = wenv.Lambert(0.8)
+    roof = wenv.Occluders(*square(1.0, 1.0))
+    n = np.float32([[0, 0, 1]])
+    v = np.float32([[0.3, 0, 1]])
+    got = wenv.reference(env, mat, n, v, positions=np.float32([[0, 0, 0]]), occluders=roof)[0]
+    a = 1.0
+    s = a / math.sqrt(1 + a * a)
+    F = 4 / math.pi * s * math.atan(s)
+    np.testing.assert_allclose(got, 0.8 * (1 - F), rtol=0.01)
+
+
+def test_shadowed_reference_is_unchanged_where_nothing_blocks():
+    """Occluders that block none of the pixels leave the reference as it was, to the bit; a glossy
+    lobe under a real HDRI, a narrow one included."""
+    from conftest import hdri_path
+    env = wenv.load_environment(hdri_path("sunset"))
+    mat = wenv.CookTorrance(diffuse=0.2, lobes=[{"alpha": 0.2}, {"alpha": 0.002, "specular": 0.5}])
+    far = wenv.Occluders(*square(0.5, -50.0))  # far below every vertex
+    rng = np.random.default_rng(3)
+    n = rng.normal(size=(6, 3)).astype(np.float32)
+    n[:, 2] = np.abs(n[:, 2]) + 0.5
+    v = rng.normal(size=(6, 3)).astype(np.float32)
+    v[:, 2] = np.abs(v[:, 2]) + 0.3
+    p = rng.uniform(-1, 1, (6, 3)).astype(np.float32)
+    plain = wenv.reference(env, mat, n, v)
+    shadowed = wenv.reference(env, mat, n, v, positions=p, occluders=far)
+    np.testing.assert_array_equal(plain, shadowed)
+
+
+def test_shadowed_reference_darkens_what_is_covered(yard):
+    """Nothing is brighter for what blocks it; under the roof (a sixth of the sky's cosine-weighted
+    view) the light falls clearly, in the open hardly."""
+    from conftest import hdri_path
+    env = wenv.load_environment(hdri_path("forest"))
+    occ = wenv.Occluders(*yard)
+    mat = wenv.Lambert(0.5)
+    p = np.float32([[1.5, 1.5, 0.0], [-2.5, -2.5, 0.0]])  # under the roof, in the open
+    n = np.float32([[0, 0, 1]] * 2)
+    v = np.float32([[0, 0.5, 1]] * 2)
+    shadowed = wenv.reference(env, mat, n, v, positions=p, occluders=occ)
+    plain = wenv.reference(env, mat, n, v)
+    assert np.all(shadowed <= plain + 1e-6)
+    assert np.all(shadowed[0] < 0.95 * plain[0])
+    assert np.all(shadowed[1] > 0.85 * plain[1])
+
+
+BAD = [
+    (lambda: wenv.Occluders(np.float32([[0, 0, 0], [1, 0, 0], [0, math.nan, 0]]), [[0, 1, 2]]), ValueError,
+     "positions[2]"),
+    (lambda: wenv.Occluders(np.float32([[0, 0, 0], [1, 0, 0], [0, 1, 0]]), [[0, 1, 3]]), ValueError, "triangles[0]"),
+    (lambda: wenv.Occluders(np.float32([[0, 0, 0], [1, 0, 0], [2, 0, 0]]), [[0, 1, 2]]), ValueError, "degenerate"),
+    (lambda: wenv.Occluders(np.float32([[0, 0, 0], [1, 0, 0], [0, 1, 0]]), [[0, 1, -1]]), ValueError, "triangles"),
+    (lambda: wenv.Occluders(np.float32([[0, 0, 0], [1, 0, 0], [0, 1, 0]]), [[0.0, 1.0, 2.0]]), TypeError,
+     "integer"),
+    (lambda: wenv.Occluders(np.float32([[0, 0, 0], [1, 0, 0], [0, 1, 0]]), np.zeros((0, 3), int)), ValueError,
+     "at least one triangle"),
+    (lambda: wenv.Occluders(np.zeros((10_000_000, 3), np.float32), np.zeros((20_000_000, 3), np.uint32)),
+     ValueError, "memory budget"),
+]
+
+
+@pytest.mark.parametrize("i", range(len(BAD)))
+def test_bad_scenes_are_named(i):
+    fn, exc, text = BAD[i]
+    with pytest.raises(exc) as info:
+        fn()
+    assert text in str(info.value)
+
+
+def test_bad_occlusion_arguments_are_named():
+    occ = wenv.Occluders(*square(1.0, 1.0))
+    p, n = np.float32([[0, 0, 0]]), np.float32([[0, 0, 1]])
+    with pytest.raises(ValueError, match="resolution"):
+        occ.occlusion(p, n, resolution=2)
+    with pytest.raises(ValueError, match="normals"):
+        occ.occlusion(p, np.float32([[0, 0, 0]]))
+    with pytest.raises(ValueError, match="positions"):
+        occ.occlusion(np.float32([[math.inf, 0, 0]]), n)
+    with pytest.raises(ValueError, match="rows"):
+        occ.occlusion(np.float32([[0, 0, 0], [1, 1, 1]]), n)
+    with pytest.raises(ValueError, match="go together"):
+        wenv.reference(constant_environment(1.0, 64), wenv.Lambert(0.5), n, n, occluders=occ)
+    with pytest.raises(TypeError, match="occluders"):
+        wenv.reference(constant_environment(1.0, 64), wenv.Lambert(0.5), n, n, positions=p, occluders="roof")
+    with pytest.raises(wenv.CancelledError):
+        occ.occlusion(np.zeros((5000, 3), np.float32), np.tile(n, (5000, 1)), progress=lambda f: True)
+
+
+def test_occluded_tests_single_rays():
+    occ = wenv.Occluders(*square(1.0, 1.0))
+    up, side = np.float32([0, 0, 1]), np.float32([1, 0, 0])
+    assert occ.occluded(np.float32([0, 0, 0]), np.stack([up, side, -up])).tolist() == [True, False, False]
+    assert occ.occluded(np.float32([[0, 0, 0], [5, 0, 0]]), np.stack([up, up])).tolist() == [True, False]
+    assert occ.occluded(np.float32([0, 0, 0]), up[None], tfar=0.5).tolist() == [False]  # the roof is further
