@@ -95,9 +95,9 @@ def test_masks_match_a_ray_cast_written_apart(yard):
     o = occ.occlusion(pts, normals, resolution=8)
     local = o.directions.reshape(-1, 3)
     lift = 1e-4 * occ.size
+    world = local @ frame(np.array([0.0, 0.0, 1.0]))  # every vertex here faces +z: one frame
     mismatches = 0
     for i, p in enumerate(pts):
-        world = local @ frame(np.array([0.0, 0.0, 1.0]))
         want = ~numpy_blocked(positions, triangles, p + lift * np.array([0, 0, 1.0]), world)
         got = o.visible[i].reshape(-1)
         mismatches += int(np.sum(got != want))
