@@ -198,17 +198,19 @@ def test_glossmeter_block_shows_true_readings():
 
 
 def test_occluders_block_runs():
-    """docs/python.md's occluders block on a ground square under a roof: the vertex under it is
-    blocked overhead, and its reference darker than the open one's."""
+    """docs/python.md's shadows block on a roof and two ground points (one under the roof), all of
+    them shaded: the point under the roof is blocked overhead, and both the shading and the reference
+    are darker there than in the open."""
+    roof = [[-1, -1, 1], [1, -1, 1], [1, 1, 1], [-1, 1, 1]]
     ns = {"wenv": wenv, "env": wenv.Environment(np.ones((32, 64, 3), np.float32)), "mat": wenv.Lambert(0.5),
-          "scene_positions": np.float32([[-1, -1, 1], [1, -1, 1], [1, 1, 1], [-1, 1, 1]]),
-          "scene_triangles": np.array([[0, 1, 2], [0, 2, 3]]),
-          "positions": np.float32([[0, 0, 0], [5, 0, 0]]), "normals": np.float32([[0, 0, 1], [0, 0, 1]]),
-          "view_dirs": np.float32([[0, 0.3, 1], [0, 0.3, 1]])}
-    ns.update(origins=ns["positions"], directions=ns["normals"])
+          "scene_positions": np.float32(roof + [[0, 0, 0], [5, 0, 0]]), "scene_triangles": np.array([[0, 1, 2], [0, 2, 3]]),
+          "normals": np.float32([[0, 0, 1]] * 6), "view_dirs": np.float32([[0, 0.3, 1]] * 6)}
+    ns.update(positions=ns["scene_positions"], origins=ns["scene_positions"], directions=ns["normals"])
+    ns["shader"] = wenv.Shader(ns["env"], ns["mat"], quality="draft")
     run_checked(readme_block(OCCLUDERS), ns, "docs/python.md")
-    assert ns["occlusion"].visible.shape == (2, 8, 8) and ns["occlusion"].blocked_vertices == 2
-    assert ns["truth"][0, 0] < ns["truth"][1, 0] < 0.5 * 1.01  # (white sky: 0.5 in the open, to the pixels)
+    assert ns["occlusion"].visible.shape == (6, 8, 8) and ns["occlusion"].blocked_vertices == 2
+    assert ns["truth"][4, 0] < ns["truth"][5, 0] < 0.5 * 1.01  # (white sky: 0.5 in the open, to the pixels)
+    assert ns["rgb"][4, 0] < ns["rgb"][5, 0] and abs(ns["rgb"][4, 0] - ns["truth"][4, 0]) < 0.05
 
 
 def test_every_python_block_is_run():

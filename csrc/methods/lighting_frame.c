@@ -1,5 +1,7 @@
 #include "methods/lighting_frame.h"
 
+#include "base/fingerprint.h"
+
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -64,21 +66,52 @@ static void turn_all(const float t[9], const float *in, size_t n, float *out)
     }
 }
 
-wenv_status wenv_lighting_frame_shade(const wenv_lighting_frame *frame, const wenv_method *method, void *state,
-                                      const float *normals, const float *views, size_t n, float *out,
-                                      wenv_error *err)
+/* method->shade, or method->shade_shadowed with `scene`, or with views NULL method->diffuse_light,
+ * under the frame. */
+static wenv_status run(const wenv_method *method, void *state, const float *normals,
+                       const float *views, size_t n, const wenv_shadow_scene *scene, float *out, wenv_error *err)
 {
-    if (frame->identity || n == 0)
+    if (views && !scene)
         return method->shade(state, normals, views, n, out, err);
+    if (!views)
+        return method->diffuse_light(state, normals, n, scene, out, err);
+    return method->shade_shadowed(state, normals, views, n, scene, out, err);
+}
+
+wenv_status wenv_lighting_frame_shade_scene(const wenv_lighting_frame *frame, const wenv_method *method, void *state,
+                                            const float *normals, const float *views, size_t n,
+                                            const wenv_shadow_scene *scene, float *out, wenv_error *err)
+{
+    wenv_shadow_scene held;
+    if (scene) {
+        /* the masks and rays stay in the world: the method turns between them and its frame */
+        held = *scene;
+        for (int k = 0; k < 9; k++)
+            held.turn[k] = frame->identity ? (float)(k % 4 == 0) : frame->turn[k];
+        held.bounce_scale = frame->identity ? 1.0f : (frame->scale > 0.0f ? 1.0f / frame->scale : 0.0f);
+        held.key = wenv_fingerprint_floats(wenv_fingerprint_word(scene->key, 0x7475726eu), held.turn, 9);
+        held.key = wenv_fingerprint_floats(held.key, &held.bounce_scale, 1);
+        scene = &held;
+    }
+    if (frame->identity || n == 0)
+        return run(method, state, normals, views, n, scene, out, err);
     float *turned = malloc(n * 6 * sizeof(float));
     if (!turned)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory turning %zu normals and views", n);
     turn_all(frame->turn, normals, n, turned);
-    turn_all(frame->turn, views, n, turned + 3 * n);
-    wenv_status st = method->shade(state, turned, turned + 3 * n, n, out, err);
+    if (views)
+        turn_all(frame->turn, views, n, turned + 3 * n);
+    wenv_status st = run(method, state, turned, views ? turned + 3 * n : NULL, n, scene, out, err);
     free(turned);
     if (!st && frame->scale != 1.0f)
         for (size_t i = 0; i < 3 * n; i++)
             out[i] *= frame->scale;
     return st;
+}
+
+wenv_status wenv_lighting_frame_shade(const wenv_lighting_frame *frame, const wenv_method *method, void *state,
+                                      const float *normals, const float *views, size_t n, float *out,
+                                      wenv_error *err)
+{
+    return wenv_lighting_frame_shade_scene(frame, method, state, normals, views, n, NULL, out, err);
 }

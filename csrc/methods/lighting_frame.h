@@ -42,4 +42,11 @@ wenv_status wenv_lighting_frame_shade(const wenv_lighting_frame *frame, const we
                                       const float *normals, const float *views, size_t n, float *out,
                                       wenv_error *err);
 
+/* The same with the scene in the way (method->shade_shadowed; its turn and bounce_scale are set
+ * here), or with views NULL the diffuse light leaving each vertex (method->diffuse_light; scene may
+ * then be NULL).  The method must provide them. */
+wenv_status wenv_lighting_frame_shade_scene(const wenv_lighting_frame *frame, const wenv_method *method, void *state,
+                                            const float *normals, const float *views, size_t n,
+                                            const wenv_shadow_scene *scene, float *out, wenv_error *err);
+
 #endif

@@ -18,6 +18,31 @@
 #include "base/progress.h"
 #include "scene/envmap.h"
 #include "scene/material.h"
+#include "scene/occlusion.h"
+
+/* What stands in a shaded mesh's way (shading with shadows): the masks and hits of the vertices
+ * shaded (rows below), the scene they were cast against (the
+ * exact lights' rays), and what the blockers send back through the blocked directions: bounce,
+ * one RGB radiance per occluder vertex (its diffuse light: wenv_method.diffuse_light), or
+ * bounce_self when the occluders' vertices are the shaded vertices, whose own diffuse light is then
+ * used; neither: blocked directions are black.  `key` changes whenever any of it does: what a
+ * method keeps for it (per-vertex sums over the blocked texels) is kept while the key and the
+ * lighting hold. */
+typedef struct {
+    const wenv_occlusion *occlusion;
+    const wenv_occluders *occluders;
+    const float *bounce;
+    int bounce_self;
+    uint64_t key;
+    /* which of the occlusion's vertices row k of the shaded arrays is: rows[k], or offset + k when
+     * rows is NULL (a block of a larger call, or a culled subset) */
+    const uint32_t *rows;
+    size_t offset;
+    /* set by the lighting's frame (lighting_frame.h): a world direction into the frame the method
+     * shades in (row-major), and what the bounce's radiance is scaled by there */
+    float turn[9];
+    float bounce_scale;
+} wenv_shadow_scene;
 
 /* One quality key: its name, its type and where it sits in the method's quality struct. */
 typedef enum { WENV_PARAM_SIZE, WENV_PARAM_REAL } wenv_param_type;
@@ -80,6 +105,14 @@ typedef struct wenv_method {
      * unit; out: n x 3 linear RGB radiance.  Needs an environment and a material set. */
     wenv_status (*shade)(void *state, const float *normals, const float *views, size_t n, float *out,
                          wenv_error *err);
+    /* shade with the scene in the way (NULL for methods that model no shadows: they say so). */
+    wenv_status (*shade_shadowed)(void *state, const float *normals, const float *views, size_t n,
+                                  const wenv_shadow_scene *scene, float *out, wenv_error *err);
+    /* The diffuse light leaving each of n vertices (normals as for shade; scene NULL: unshadowed), RGB:
+     * what the Lambertian part sends out head-on, the blockers' bounce for other meshes.  NULL as
+     * above. */
+    wenv_status (*diffuse_light)(void *state, const float *normals, size_t n, const wenv_shadow_scene *scene,
+                                 float *out, wenv_error *err);
     /* Fills at most WENV_STATS_MAX entries; returns how many. */
     size_t (*stats)(const void *state, wenv_stat *out);
 } wenv_method;

@@ -11,7 +11,8 @@
 #define LARGEST_BLOCK 65536
 
 wenv_status wenv_shade_for(const wenv_lighting_frame *frame, const wenv_method *method, void *state,
-                           const float *normals, const float *views, size_t n, size_t first, double budget, float *out, size_t *next, wenv_error *err)
+                           const float *normals, const float *views, size_t n, const wenv_shadow_scene *scene,
+                           size_t first, double budget, float *out, size_t *next, wenv_error *err)
 {
     *next = first < n ? first : n;
     if (!(budget >= 0.0))
@@ -23,7 +24,16 @@ wenv_status wenv_shade_for(const wenv_lighting_frame *frame, const wenv_method *
     while (at < n) {
         size_t count = n - at < block ? n - at : block;
         double t0 = wenv_now_seconds();
-        if (wenv_lighting_frame_shade(frame, method, state, normals + 3 * at, views + 3 * at, count, out + 3 * at, err))
+        wenv_shadow_scene block_scene;
+        if (scene) { /* the block's rows are the scene's from `at` on */
+            block_scene = *scene;
+            if (scene->rows)
+                block_scene.rows = scene->rows + at;
+            else
+                block_scene.offset = scene->offset + at;
+        }
+        if (wenv_lighting_frame_shade_scene(frame, method, state, normals + 3 * at, views + 3 * at, count,
+                                            scene ? &block_scene : NULL, out + 3 * at, err))
             return err->status;
         at += count;
         *next = at;

@@ -17,9 +17,24 @@ typedef struct {
 typedef struct {
     PyObject_HEAD
     wenv_occlusion o;
+    PyObject *occluders; /* what it was cast against: the lights' rays and the bounce's triangles */
 } OcclusionObject;
 
 static PyTypeObject OccludersType, OcclusionType;
+
+int wenv_py_occlusion(PyObject *obj, const char *name, const wenv_occlusion **occlusion,
+                      const wenv_occluders **occluders)
+{
+    if (!PyObject_TypeCheck(obj, &OcclusionType)) {
+        PyErr_Format(PyExc_TypeError, "%s must be a wenv.Occlusion (Occluders.occlusion), got %.100s", name,
+                     Py_TYPE(obj)->tp_name);
+        return -1;
+    }
+    OcclusionObject *o = (OcclusionObject *)obj;
+    *occlusion = &o->o;
+    *occluders = ((OccludersObject *)o->occluders)->occ;
+    return 0;
+}
 
 const struct wenv_occluders *wenv_py_occluders(PyObject *obj, const char *name)
 {
@@ -215,6 +230,7 @@ static PyObject *occluders_occlusion(OccludersObject *self, PyObject *args, PyOb
     if (!out)
         goto done;
     memset(&out->o, 0, sizeof out->o);
+    out->occluders = Py_NewRef((PyObject *)self);
     wenv_py_progress_bridge bridge = {progress_obj, 0};
     wenv_progress progress = wenv_py_progress(&bridge);
     wenv_error err = {0};
@@ -284,6 +300,7 @@ static PyTypeObject OccludersType = {
 static void occlusion_dealloc(OcclusionObject *self)
 {
     wenv_occlusion_free(&self->o);
+    Py_XDECREF(self->occluders);
     Py_TYPE(self)->tp_free((PyObject *)self);
 }
 
@@ -341,7 +358,7 @@ static PyObject *occlusion_size(OcclusionObject *self, void *closure)
     size_t v = which == 0 ? o->resolution
                           : which == 1 ? o->n_vertices
                                        : which == 2 ? o->n_masks
-                                                    : o->n_vertices * sizeof *o->slot + o->n_masks * o->words * 8;
+                                                    : wenv_occlusion_bytes(o);
     return PyLong_FromSize_t(v);
 }
 

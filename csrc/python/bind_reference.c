@@ -9,11 +9,17 @@
 static PyObject *py_reference(PyObject *self, PyObject *args, PyObject *kwargs)
 {
     (void)self;
-    static char *kwlist[] = {"env", "material", "normals", "view_dirs", "progress", "positions", "occluders", NULL};
+    static char *kwlist[] = {"env",      "material",  "normals", "view_dirs", "progress",
+                             "positions", "occluders", "bounce",  NULL};
     PyObject *env_obj, *mat_obj, *nobj, *vobj, *progress_obj = Py_None, *pobj = Py_None, *occ_obj = Py_None;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOO|OOO:reference", kwlist, &env_obj, &mat_obj, &nobj, &vobj,
-                                     &progress_obj, &pobj, &occ_obj))
+    PyObject *bounce_obj = Py_None;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOO|OOOO:reference", kwlist, &env_obj, &mat_obj, &nobj, &vobj,
+                                     &progress_obj, &pobj, &occ_obj, &bounce_obj))
         return NULL;
+    if (bounce_obj != Py_None && occ_obj == Py_None) {
+        PyErr_SetString(PyExc_ValueError, "bounce is read only with occluders (what blocks the light it fills in)");
+        return NULL;
+    }
     const struct wenv_occluders *occ = NULL;
     if (occ_obj != Py_None && !(occ = wenv_py_occluders(occ_obj, "occluders")))
         return NULL;
@@ -40,10 +46,19 @@ static PyObject *py_reference(PyObject *self, PyObject *args, PyObject *kwargs)
         return NULL;
     }
     PyObject *result = NULL;
-    Py_buffer pb = {0};
-    size_t np = n;
+    Py_buffer pb = {0}, bb = {0};
+    size_t np = n, nb_rows;
     if (occ && wenv_py_get_vec3_array(pobj, "positions", 0, &pb, &np, NULL) < 0)
         goto done;
+    if (bounce_obj != Py_None) {
+        if (wenv_py_get_vec3_array(bounce_obj, "bounce", 0, &bb, &nb_rows, NULL) < 0)
+            goto done;
+        if (nb_rows != wenv_occluders_vertex_count(occ)) {
+            PyErr_Format(PyExc_ValueError, "bounce has %zu rows, one per occluder vertex (%zu)", nb_rows,
+                         wenv_occluders_vertex_count(occ));
+            goto done;
+        }
+    }
     if (nv != n || np != n) {
         PyErr_Format(PyExc_ValueError, "view_dirs has %zu rows and positions %zu, but normals has %zu", nv,
                      occ ? np : n, n);
@@ -59,7 +74,8 @@ static PyObject *py_reference(PyObject *self, PyObject *args, PyObject *kwargs)
     wenv_error err = {0};
     wenv_status st;
     WENV_BEGIN_WORK
-    st = wenv_reference(env, mat, nb.buf, vb.buf, n, occ, occ ? pb.buf : NULL, out, &progress, &err);
+    st = wenv_reference(env, mat, nb.buf, vb.buf, n, occ, occ ? pb.buf : NULL, bb.obj ? bb.buf : NULL, out, &progress,
+                        &err);
     WENV_END_WORK
     if (st) {
         Py_CLEAR(result);
@@ -69,6 +85,8 @@ static PyObject *py_reference(PyObject *self, PyObject *args, PyObject *kwargs)
 done:
     if (pb.obj)
         PyBuffer_Release(&pb);
+    if (bb.obj)
+        PyBuffer_Release(&bb);
     PyBuffer_Release(&nb);
     PyBuffer_Release(&vb);
     return result;
@@ -76,10 +94,13 @@ done:
 
 static PyMethodDef reference_functions[] = {
     {"reference", (PyCFunction)(void (*)(void))py_reference, METH_VARARGS | METH_KEYWORDS,
-     "reference(env, material, normals, view_dirs, progress=None, positions=None, occluders=None)\n--\n\n"
+     "reference(env, material, normals, view_dirs, progress=None, positions=None, occluders=None, bounce=None)"
+     "\n--\n\n"
      "Ground truth: the reflection equation summed over every environment pixel (exact solid angles), in the "
      "units of Shader.shade.  With occluders (a wenv.Occluders) and the vertices' positions, each pixel's ray "
-     "from the vertex is cast exactly and a blocked one brings nothing: shadows from the direct light only."},
+     "from the vertex is cast exactly, and a blocked one brings the blocker's light where it is hit: bounce "
+     "(occluder vertices, 3), each occluder vertex's radiance interpolated over the hit triangle, or nothing "
+     "when bounce is None (direct light only)."},
     {NULL, NULL, 0, NULL},
 };
 

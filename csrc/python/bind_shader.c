@@ -8,6 +8,7 @@
 #include <string.h>
 
 #include "auto/autoquality.h"
+#include "base/fingerprint.h"
 #include "methods/method.h"
 #include "methods/presets.h"
 #include "methods/lighting_frame.h"
@@ -15,6 +16,7 @@
 #include "methods/visibility.h"
 #include "python/bind_envmap.h"
 #include "python/bind_material.h"
+#include "python/bind_occlusion.h"
 
 typedef struct {
     PyObject_HEAD
@@ -328,7 +330,62 @@ static void Shader_dealloc(ShaderObject *self)
     Py_TYPE(self)->tp_free((PyObject *)self);
 }
 
-static PyObject *shade_arrays(ShaderObject *self, const float *normals, const float *views, size_t n)
+/* The scene of `occlusion` and `bounce` for n shaded vertices into *scene (bounce's buffer in *bb,
+ * released by the caller when bb->obj is set).  -1 with the error set. */
+static int parse_scene(ShaderObject *self, PyObject *occlusion, PyObject *bounce, size_t n, wenv_shadow_scene *scene,
+                       Py_buffer *bb)
+{
+    memset(scene, 0, sizeof *scene);
+    if (!self->method->shade_shadowed) {
+        PyErr_Format(PyExc_ValueError,
+                     "method '%s' shades without shadows: occlusion is for the wavelet methods (rotation, slicing)",
+                     self->method->name);
+        return -1;
+    }
+    if (wenv_py_occlusion(occlusion, "occlusion", &scene->occlusion, &scene->occluders) < 0)
+        return -1;
+    if (scene->occlusion->n_vertices != n) {
+        PyErr_Format(PyExc_ValueError, "occlusion was made for %zu vertices, shading %zu", scene->occlusion->n_vertices,
+                     n);
+        return -1;
+    }
+    uint64_t key = wenv_fingerprint_word(WENV_FINGERPRINT_START, scene->occlusion->fingerprint);
+    size_t nv = wenv_occluders_vertex_count(scene->occluders);
+    if (PyUnicode_Check(bounce) && PyUnicode_CompareWithASCIIString(bounce, "self") == 0) {
+        if (nv != n) {
+            PyErr_Format(PyExc_ValueError,
+                         "bounce='self' reads the shaded mesh's own light, but the occluders have %zu vertices and "
+                         "%zu are shaded: give bounce as each occluder vertex's light (Shader.diffuse_light), or "
+                         "None",
+                         nv, n);
+            return -1;
+        }
+        scene->bounce_self = 1;
+        key = wenv_fingerprint_word(key, 1);
+    } else if (bounce != Py_None) {
+        size_t rows;
+        if (wenv_py_get_vec3_array(bounce, "bounce", 0, bb, &rows, NULL) < 0)
+            return -1;
+        if (rows != nv) {
+            PyErr_Format(PyExc_ValueError, "bounce has %zu rows, one per occluder vertex (%zu)", rows, nv);
+            return -1;
+        }
+        const float *b = bb->buf;
+        for (size_t i = 0; i < 3 * rows; i++)
+            if (b[i] < 0.0f) {
+                PyErr_Format(PyExc_ValueError, "bounce[%zu] is negative: it is light (radiance)", i / 3);
+                return -1;
+            }
+        scene->bounce = b;
+        key = wenv_fingerprint_floats(wenv_fingerprint_word(key, 2), b, 3 * rows);
+    }
+    scene->key = key;
+    return 0;
+}
+
+/* views NULL: the diffuse light leaving each vertex; scene NULL: unshadowed. */
+static PyObject *shade_arrays(ShaderObject *self, const float *normals, const float *views, size_t n,
+                              const wenv_shadow_scene *scene)
 {
     Py_ssize_t shape[2] = {(Py_ssize_t)n, 3};
     float *out;
@@ -338,7 +395,7 @@ static PyObject *shade_arrays(ShaderObject *self, const float *normals, const fl
     wenv_error err = {0};
     wenv_status st;
     WENV_BEGIN_WORK
-    st = wenv_lighting_frame_shade(&self->frame, self->method, self->state, normals, views, n, out, &err);
+    st = wenv_lighting_frame_shade_scene(&self->frame, self->method, self->state, normals, views, n, scene, out, &err);
     WENV_END_WORK
     if (st) {
         Py_DECREF(result);
@@ -349,11 +406,11 @@ static PyObject *shade_arrays(ShaderObject *self, const float *normals, const fl
 
 static PyObject *Shader_shade(ShaderObject *self, PyObject *args, PyObject *kwargs)
 {
-    static char *kwlist[] = {"normals", "view_dirs", NULL};
-    PyObject *nobj, *vobj;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO:shade", kwlist, &nobj, &vobj))
+    static char *kwlist[] = {"normals", "view_dirs", "occlusion", "bounce", NULL};
+    PyObject *nobj, *vobj, *occ_obj = Py_None, *bounce_obj = NULL;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|$OO:shade", kwlist, &nobj, &vobj, &occ_obj, &bounce_obj))
         return NULL;
-    Py_buffer nb, vb;
+    Py_buffer nb, vb, bb = {0};
     size_t n, nvw;
     int single_n, single_v;
     if (wenv_py_get_vec3_array(nobj, "normals", 1, &nb, &n, &single_n) < 0)
@@ -365,6 +422,7 @@ static PyObject *Shader_shade(ShaderObject *self, PyObject *args, PyObject *kwar
     PyObject *result = NULL;
     float *expanded = NULL;
     const float *views = vb.buf;
+    wenv_shadow_scene scene;
     if (single_v && !single_n) {
         /* one view direction for all (orthographic camera) */
         expanded = PyMem_Malloc((n ? n : 1) * 3 * sizeof(float));
@@ -379,14 +437,57 @@ static PyObject *Shader_shade(ShaderObject *self, PyObject *args, PyObject *kwar
         PyErr_Format(PyExc_ValueError, "view_dirs has %zu rows but normals has %zu", nvw, n);
         goto done;
     }
+    if (occ_obj == Py_None && bounce_obj) {
+        PyErr_SetString(PyExc_ValueError, "bounce is read only with occlusion (what blocks the light it fills in)");
+        goto done;
+    }
+    PyObject *self_str = NULL;
+    if (occ_obj != Py_None) {
+        if (!bounce_obj && !(bounce_obj = self_str = PyUnicode_FromString("self")))
+            goto done;
+        int bad = parse_scene(self, occ_obj, bounce_obj, n, &scene, &bb) < 0;
+        Py_XDECREF(self_str);
+        if (bad)
+            goto done;
+    }
     if (claim(self) < 0)
         goto done;
-    result = shade_arrays(self, nb.buf, views, n);
+    result = shade_arrays(self, nb.buf, views, n, occ_obj != Py_None ? &scene : NULL);
     self->busy = 0;
 done:
     PyMem_Free(expanded);
+    if (bb.obj)
+        PyBuffer_Release(&bb);
     PyBuffer_Release(&nb);
     PyBuffer_Release(&vb);
+    return result;
+}
+
+static PyObject *Shader_diffuse_light(ShaderObject *self, PyObject *args, PyObject *kwargs)
+{
+    static char *kwlist[] = {"normals", "occlusion", NULL};
+    PyObject *nobj, *occ_obj = Py_None;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "O|$O:diffuse_light", kwlist, &nobj, &occ_obj))
+        return NULL;
+    if (!self->method->diffuse_light) {
+        PyErr_Format(PyExc_ValueError, "method '%s' does not give the diffuse light: use a wavelet method",
+                     self->method->name);
+        return NULL;
+    }
+    Py_buffer nb, bb = {0};
+    size_t n;
+    if (wenv_py_get_vec3_array(nobj, "normals", 1, &nb, &n, NULL) < 0)
+        return NULL;
+    PyObject *result = NULL;
+    wenv_shadow_scene scene;
+    if (occ_obj != Py_None && parse_scene(self, occ_obj, Py_None, n, &scene, &bb) < 0)
+        goto done;
+    if (claim(self) < 0)
+        goto done;
+    result = shade_arrays(self, nb.buf, NULL, n, occ_obj != Py_None ? &scene : NULL);
+    self->busy = 0;
+done:
+    PyBuffer_Release(&nb);
     return result;
 }
 
@@ -415,13 +516,18 @@ static int parse_eye(PyObject *obj, double eye[3])
 /* Shades the vertices to shade (the `count` visible ones, or all n) from the first-th of them on, within
  * `budget` seconds (wenv_shade_for); *next gets the first left. */
 static int shade_visible(ShaderObject *self, const float *normals, const float *views, size_t n,
-                         const unsigned char *visible, size_t count, size_t first, double budget, float *out,
-                         size_t *next)
+                         const unsigned char *visible, size_t count, const wenv_shadow_scene *scene, size_t first,
+                         double budget, float *out, size_t *next)
 {
     float *gathered = NULL, *shaded = out;
+    uint32_t *rows = NULL;
+    wenv_shadow_scene culled;
     if (visible) {
         gathered = PyMem_Malloc((count ? count : 1) * 9 * sizeof(float)); /* normals, views, radiance */
-        if (!gathered) {
+        rows = scene ? PyMem_Malloc((count ? count : 1) * sizeof *rows) : NULL;
+        if (!gathered || (scene && !rows)) {
+            PyMem_Free(gathered);
+            PyMem_Free(rows);
             PyErr_NoMemory();
             return -1;
         }
@@ -429,8 +535,15 @@ static int shade_visible(ShaderObject *self, const float *normals, const float *
             if (visible[i]) {
                 memcpy(gathered + 3 * k, normals + 3 * i, 3 * sizeof(float));
                 memcpy(gathered + 3 * (count + k), views + 3 * i, 3 * sizeof(float));
+                if (rows)
+                    rows[k] = (uint32_t)i;
                 k++;
             }
+        if (scene) { /* the gathered rows are these vertices of the occlusion */
+            culled = *scene;
+            culled.rows = rows;
+            scene = &culled;
+        }
         normals = gathered;
         views = gathered + 3 * count;
         shaded = gathered + 6 * count;
@@ -440,7 +553,8 @@ static int shade_visible(ShaderObject *self, const float *normals, const float *
     *next = first;
     if (first < count) {
         WENV_BEGIN_WORK
-        st = wenv_shade_for(&self->frame, self->method, self->state, normals, views, count, first, budget, shaded, next, &err);
+        st = wenv_shade_for(&self->frame, self->method, self->state, normals, views, count, scene, first, budget,
+                            shaded, next, &err);
         WENV_END_WORK
     }
     if (!st && visible)
@@ -451,6 +565,7 @@ static int shade_visible(ShaderObject *self, const float *normals, const float *
                 k++;
             }
     PyMem_Free(gathered);
+    PyMem_Free(rows);
     if (st) {
         wenv_py_raise(&err);
         return -1;
@@ -489,13 +604,19 @@ static void raise_eye_at_vertex(const float *p, const double eye[3], size_t n, s
 
 static PyObject *Shader_shade_mesh(ShaderObject *self, PyObject *args, PyObject *kwargs)
 {
-    static char *kwlist[] = {"positions", "normals", "eye", "cull", "view_projection", "out", "first", "budget", NULL};
+    static char *kwlist[] = {"positions", "normals", "eye",    "cull",      "view_projection", "out",
+                             "first",     "budget",  "occlusion", "bounce", NULL};
     PyObject *pobj, *nobj, *eobj, *vp_obj = Py_None, *out_obj = Py_None, *budget_obj = Py_None, *first_obj = NULL;
+    PyObject *occ_obj = Py_None, *bounce_obj = NULL;
     int cull = 0;
     size_t first = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO|$pOOOO:shade_mesh", kwlist, &pobj, &nobj, &eobj, &cull, &vp_obj,
-                                     &out_obj, &first_obj, &budget_obj))
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO|$pOOOOOO:shade_mesh", kwlist, &pobj, &nobj, &eobj, &cull,
+                                     &vp_obj, &out_obj, &first_obj, &budget_obj, &occ_obj, &bounce_obj))
         return NULL;
+    if (occ_obj == Py_None && bounce_obj) {
+        PyErr_SetString(PyExc_ValueError, "bounce is read only with occlusion (what blocks the light it fills in)");
+        return NULL;
+    }
     if (first_obj && wenv_py_get_size(first_obj, "first", &first) < 0)
         return NULL;
     double budget = INFINITY;
@@ -523,8 +644,9 @@ static PyObject *Shader_shade_mesh(ShaderObject *self, PyObject *args, PyObject 
     }
     if (vp_obj != Py_None && wenv_py_get_matrix(vp_obj, "view_projection", 4, 16, vp) < 0)
         return NULL;
-    Py_buffer pb, nb, ob = {0};
+    Py_buffer pb, nb, ob = {0}, bb = {0};
     size_t np, nn;
+    wenv_shadow_scene scene;
     if (wenv_py_get_vec3_array(pobj, "positions", 0, &pb, &np, NULL) < 0)
         return NULL;
     if (wenv_py_get_vec3_array(nobj, "normals", 1, &nb, &nn, NULL) < 0) {
@@ -538,6 +660,15 @@ static PyObject *Shader_shade_mesh(ShaderObject *self, PyObject *args, PyObject 
     if (np != nn) {
         PyErr_Format(PyExc_ValueError, "positions has %zu rows but normals has %zu", np, nn);
         goto done;
+    }
+    if (occ_obj != Py_None) {
+        PyObject *self_str = NULL;
+        if (!bounce_obj && !(bounce_obj = self_str = PyUnicode_FromString("self")))
+            goto done;
+        int bad = parse_scene(self, occ_obj, bounce_obj, np, &scene, &bb) < 0;
+        Py_XDECREF(self_str);
+        if (bad)
+            goto done;
     }
     float *out;
     if (out_obj == Py_None) {
@@ -579,7 +710,8 @@ static PyObject *Shader_shade_mesh(ShaderObject *self, PyObject *args, PyObject 
     if (claim(self) < 0)
         goto fail;
     claimed = 1;
-    if (shade_visible(self, nb.buf, views, np, visible, count, first, budget, out, &next) < 0)
+    if (shade_visible(self, nb.buf, views, np, visible, count, occ_obj != Py_None ? &scene : NULL, first, budget, out,
+                      &next) < 0)
         goto fail;
     self->visible = cull ? (Py_ssize_t)count : -1;
     self->next_vertex = (Py_ssize_t)next;
@@ -593,6 +725,8 @@ done:
     PyMem_Free(visible);
     if (ob.obj)
         PyBuffer_Release(&ob);
+    if (bb.obj)
+        PyBuffer_Release(&bb);
     PyBuffer_Release(&pb);
     PyBuffer_Release(&nb);
     return result;
@@ -716,10 +850,20 @@ static PyObject *Shader_get_stats(ShaderObject *self, void *closure)
 
 static PyMethodDef Shader_methods[] = {
     {"shade", (PyCFunction)(void (*)(void))Shader_shade, METH_VARARGS | METH_KEYWORDS,
-     "shade(normals, view_dirs)\n--\n\nLinear RGB radiance (float32, n x 3) for world-space normals and "
-     "view directions (surface towards eye), float32 (n, 3); view_dirs may be one (3,) vector for all."},
+     "shade(normals, view_dirs, *, occlusion=None, bounce='self')\n--\n\nLinear RGB radiance (float32, n x 3) for "
+     "world-space normals and view directions (surface towards eye), float32 (n, 3); view_dirs may be one (3,) "
+     "vector for all.  occlusion (a wenv.Occlusion made for these vertices) shades with the scene in the way: "
+     "its blocked directions hide the environment, the exact lights are tested along their own rays, and the "
+     "blockers send their light back -- bounce='self' (the occluders are this mesh: its own diffuse light), an "
+     "array (occluder vertices, 3) of each occluder vertex's light (Shader.diffuse_light), or None (black).  "
+     "Wavelet methods only."},
+    {"diffuse_light", (PyCFunction)(void (*)(void))Shader_diffuse_light, METH_VARARGS | METH_KEYWORDS,
+     "diffuse_light(normals, *, occlusion=None)\n--\n\nThe light (radiance, float32 n x 3) each vertex's "
+     "Lambertian part sends out, head-on, with its shadows when occlusion is given: what it gives back to "
+     "the surfaces it blocks (shade's bounce).  Wavelet methods only."},
     {"shade_mesh", (PyCFunction)(void (*)(void))Shader_shade_mesh, METH_VARARGS | METH_KEYWORDS,
-     "shade_mesh(positions, normals, eye, *, cull=False, view_projection=None, out=None, first=0, budget=None)\n--\n\n"
+     "shade_mesh(positions, normals, eye, *, cull=False, view_projection=None, out=None, first=0, budget=None, "
+     "occlusion=None, bounce='self')\n--\n\n"
      "Shade vertices seen from a perspective eye position.  cull=True shades only what the eye sees: "
      "vertices whose normal faces it and, given view_projection (the viewport's 4 x 4 world-to-clip "
      "matrix, row-major: Blender's region_3d.perspective_matrix), those inside its frustum; the rows of "
@@ -731,7 +875,9 @@ static PyMethodDef Shader_methods[] = {
      "stats['next_vertex'] is where the next step starts (the number to shade once all are done), and "
      "rows not reached keep what `out` held.  So a view that rests is refined by an accurate Shader "
      "over a fast one's result: out = fast.shade_mesh(...); then accurate.shade_mesh(..., out=out, "
-     "first=k, budget=0.05) until k reaches the count."},
+     "first=k, budget=0.05) until k reaches the count.\n\n"
+     "occlusion and bounce shade with the scene in the way, as shade's (the occlusion made for these "
+     "positions and normals)."},
     {"set_environment", (PyCFunction)Shader_set_environment, METH_O,
      "set_environment(env)\n--\n\nNew lighting; rotation matrices are kept."},
     {"set_material", (PyCFunction)Shader_set_material, METH_O,

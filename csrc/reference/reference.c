@@ -22,26 +22,43 @@
 /* What blocks the lighting, if anything: the scene and the ray's start (the vertex, lifted). */
 typedef struct {
     const wenv_occluders *occ;
+    const float *bounce; /* per occluder vertex, the light it sends (NULL: none) */
     float origin[3];
 } blocker;
 
-/* Whether the direction d (world, unit) is blocked. */
-static int blocked_one(const blocker *b, const double d[3])
+/* The blocker's light where the ray along d from the vertex meets it (black without a bounce). */
+static void blocker_light(const blocker *b, uint32_t tri, const float *uv, float rgb[3])
+{
+    rgb[0] = rgb[1] = rgb[2] = 0.0f;
+    if (!b->bounce)
+        return;
+    const uint32_t *v = wenv_occluders_triangles(b->occ) + 3 * (size_t)tri;
+    float w[3] = {1.0f - uv[0] - uv[1], uv[0], uv[1]};
+    for (int k = 0; k < 3; k++)
+        for (int c = 0; c < 3; c++)
+            rgb[c] += w[k] * b->bounce[3 * (size_t)v[k] + (size_t)c];
+}
+
+/* Whether the direction d (world, unit) is blocked; if so, what the blocker sends back into rgb. */
+static int blocked_one(const blocker *b, const double d[3], float rgb[3])
 {
     if (!b->occ)
         return 0;
-    float fd[3] = {(float)d[0], (float)d[1], (float)d[2]};
-    unsigned char hit;
-    wenv_occluders_test(b->occ, b->origin, fd, 1, INFINITY, &hit);
-    return hit;
+    float fd[3] = {(float)d[0], (float)d[1], (float)d[2]}, uv[2];
+    uint32_t tri;
+    wenv_occluders_hit(b->occ, b->origin, fd, 1, &tri, uv);
+    if (tri == UINT32_MAX)
+        return 0;
+    blocker_light(b, tri, uv, rgb);
+    return 1;
 }
 
 /* Lobe i's reflected radiance at view wo (frame f) by its node rule over the lighting, minus
  * what the pixel sum gave it (the pixels whose half vector lies inside its cone), into acc.  With
- * occluders, a blocked node or pixel brings nothing, in both. */
+ * occluders, a blocked node or pixel brings the blocker's light, in both. */
 static wenv_status narrow_lobe(const wenv_envmap *env, const wenv_material *mat, size_t i, const double f[9],
-                               const double wo[3], const float *dirs, const float *flux, size_t count, double *nodes,
-                               const blocker *b, double acc[3], wenv_error *err)
+                               const double wo[3], const float *dirs, const float *flux, const float *omega,
+                               size_t count, double *nodes, const blocker *b, double acc[3], wenv_error *err)
 {
     size_t max = 2 * NARROW_SAMPLES * NARROW_SAMPLES, n = 0;
     double *weights = nodes + 3 * max;
@@ -51,10 +68,9 @@ static wenv_status narrow_lobe(const wenv_envmap *env, const wenv_material *mat,
         const double *l = nodes + 3 * k;
         double d[3] = {f[0] * l[0] + f[3] * l[1] + f[6] * l[2], f[1] * l[0] + f[4] * l[1] + f[7] * l[2],
                        f[2] * l[0] + f[5] * l[1] + f[8] * l[2]};
-        if (blocked_one(b, d))
-            continue;
         float L[3];
-        wenv_envmap_lookup_nearest(env, d, L);
+        if (!blocked_one(b, d, L))
+            wenv_envmap_lookup_nearest(env, d, L);
         for (int c = 0; c < 3; c++)
             acc[c] += weights[3 * k + (size_t)c] * L[c];
     }
@@ -70,20 +86,19 @@ static wenv_status narrow_lobe(const wenv_envmap *env, const wenv_material *mat,
         double len = sqrt(h[0] * h[0] + h[1] * h[1] + h[2] * h[2]);
         if (!(len > 0.0) || h[2] / len < cut)
             continue;
-        double dw[3] = {d[0], d[1], d[2]};
-        if (blocked_one(b, dw))
-            continue;
-        double v[3];
+        double dw[3] = {d[0], d[1], d[2]}, v[3];
+        float back[3];
+        int blocked = blocked_one(b, dw, back);
         value(mat, i, wi, wo, v);
         for (int c = 0; c < 3; c++)
-            acc[c] -= v[c] * wi[2] * flux[3 * p + (size_t)c];
+            acc[c] -= v[c] * wi[2] * (blocked ? back[c] * omega[p] : flux[3 * p + (size_t)c]);
     }
     return WENV_OK;
 }
 
 wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, const float *normals,
                            const float *views, size_t n, const wenv_occluders *occ, const float *positions,
-                           float *out, const wenv_progress *progress, wenv_error *err)
+                           const float *bounce, float *out, const wenv_progress *progress, wenv_error *err)
 {
     if (occ && !positions)
         return wenv_error_set(err, WENV_ERR_VALUE, "occluders need the vertices' positions");
@@ -94,12 +109,14 @@ wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, con
     size_t npix = wenv_envmap_width(env) * wenv_envmap_height(env);
     float *dirs = malloc(npix * 3 * sizeof(float));
     float *flux = malloc(npix * 3 * sizeof(float));
-    if (!dirs || !flux) {
+    float *omega = malloc(npix * sizeof(float));
+    if (!dirs || !flux || !omega) {
         free(dirs);
         free(flux);
+        free(omega);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the reference");
     }
-    size_t count = wenv_envmap_samples(env, dirs, flux, NULL);
+    size_t count = wenv_envmap_samples(env, dirs, flux, omega);
     size_t n_lobes = wenv_material_lobe_count(mat), n_narrow = 0;
     double narrow_alpha = WENV_NARROW_LOBE_PIXELS * wenv_envmap_pixel_angle(env);
     for (size_t l = 0; l < n_lobes; l++)
@@ -111,10 +128,11 @@ wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, con
         float *wi = malloc(BLOCK * 3 * sizeof(float));
         float *fl = malloc(BLOCK * 3 * sizeof(float));
         float *fcos = malloc(BLOCK * 3 * sizeof(float));
-        float *wd = occ ? malloc(BLOCK * 3 * sizeof(float)) : NULL;
-        unsigned char *hit = occ ? malloc(BLOCK) : NULL;
+        float *wd = occ ? malloc(BLOCK * 3 * sizeof(float)) : NULL, *om = occ ? malloc(BLOCK * sizeof(float)) : NULL;
+        float *uv = occ ? malloc(BLOCK * 2 * sizeof(float)) : NULL;
+        uint32_t *tri = occ ? malloc(BLOCK * sizeof(uint32_t)) : NULL;
         double *nodes = n_narrow ? malloc(2 * NARROW_SAMPLES * NARROW_SAMPLES * 6 * sizeof(double)) : NULL;
-        if (!wi || !fl || !fcos || (n_narrow && !nodes) || (occ && (!wd || !hit)))
+        if (!wi || !fl || !fcos || (n_narrow && !nodes) || (occ && (!wd || !om || !uv || !tri)))
             atomic_store(&failed, 1);
         wenv_error lobe_err = {0};
 #pragma omp for schedule(dynamic, 1)
@@ -128,7 +146,7 @@ wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, con
             double wo[3] = {f[0] * vv[0] + f[1] * vv[1] + f[2] * vv[2], f[3] * vv[0] + f[4] * vv[1] + f[5] * vv[2],
                             f[6] * vv[0] + f[7] * vv[1] + f[8] * vv[2]};
             double spec[3] = {0, 0, 0}, irr[3] = {0, 0, 0};
-            blocker b = {.occ = occ};
+            blocker b = {.occ = occ, .bounce = bounce};
             if (occ) {
                 float lift = wenv_occluders_offset(occ);
                 for (int c = 0; c < 3; c++)
@@ -147,16 +165,22 @@ wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, con
                         w[1] = (float)f[3] * d[0] + (float)f[4] * d[1] + (float)f[5] * d[2];
                         w[2] = z;
                         memcpy(fl + 3 * fill, flux + 3 * p, 3 * sizeof(float));
-                        if (occ)
+                        if (occ) {
                             memcpy(wd + 3 * fill, d, 3 * sizeof(float));
+                            om[fill] = omega[p];
+                        }
                         if (++fill < BLOCK)
                             continue;
                     }
-                    if (fill && occ) { /* direct light only: what the scene blocks brings nothing */
-                        wenv_occluders_test(occ, b.origin, wd, fill, INFINITY, hit);
+                    if (fill && occ) { /* what the scene blocks brings the blocker's light instead */
+                        wenv_occluders_hit(occ, b.origin, wd, fill, tri, uv);
                         for (size_t q = 0; q < fill; q++)
-                            if (hit[q])
-                                memset(fl + 3 * q, 0, 3 * sizeof(float));
+                            if (tri[q] != UINT32_MAX) {
+                                float back[3];
+                                blocker_light(&b, tri[q], uv + 2 * q, back);
+                                for (int c = 0; c < 3; c++)
+                                    fl[3 * q + (size_t)c] = back[c] * om[q];
+                            }
                     }
                     for (size_t q = 0; q < fill; q++)
                         for (int c = 0; c < 3; c++)
@@ -174,7 +198,7 @@ wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, con
             wenv_material_diffuse_at(mat, wo[2], diffuse);
             for (size_t l = 0; n_narrow && wo[2] > 0.0 && l < n_lobes; l++)
                 if (wenv_material_lobe(mat, l)->alpha < narrow_alpha &&
-                    narrow_lobe(env, mat, l, f, wo, dirs, flux, count, nodes, &b, spec, &lobe_err))
+                    narrow_lobe(env, mat, l, f, wo, dirs, flux, omega, count, nodes, &b, spec, &lobe_err))
                     atomic_store(&failed, 1);
             for (int c = 0; c < 3; c++)
                 out[3 * i + c] = (float)(spec[c] + irr[c] * diffuse[c] / M_PI);
@@ -184,11 +208,14 @@ wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, con
         free(fl);
         free(fcos);
         free(wd);
-        free(hit);
+        free(om);
+        free(uv);
+        free(tri);
         free(nodes);
     }
     free(dirs);
     free(flux);
+    free(omega);
     if (failed)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the reference");
     if (cancelled || wenv_progress_finish(progress))

@@ -2,7 +2,9 @@
  * source of flux radiance x exact pixel solid angle, with the exact BRDF.  Same units as shading.
  * With occluders (positions then required), each pixel's ray from the vertex (lifted off the
  * surface by WENV_OCCLUDER_OFFSET of the scene's size) is cast exactly, and a blocked one brings
- * nothing: direct light only, the scene's own light not counted.  occ NULL: unshadowed. */
+ * the light of the blocker where it is hit: bounce (per occluder vertex, RGB radiance, interpolated
+ * over the hit triangle) times the pixel's solid angle, or nothing when bounce is NULL (direct light
+ * only).  occ NULL: unshadowed. */
 #ifndef WENV_REFERENCE_H
 #define WENV_REFERENCE_H
 
@@ -16,6 +18,6 @@
 
 wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, const float *normals,
                            const float *views, size_t n, const wenv_occluders *occ, const float *positions,
-                           float *out, const wenv_progress *progress, wenv_error *err);
+                           const float *bounce, float *out, const wenv_progress *progress, wenv_error *err);
 
 #endif

@@ -9,7 +9,8 @@
 struct wenv_occluders {
     RTCDevice device;
     RTCScene scene;
-    size_t n_triangles;
+    size_t n_triangles, n_positions;
+    const uint32_t *triangles; /* Embree's index buffer, alive with the scene */
     double size;
 };
 
@@ -68,6 +69,7 @@ wenv_status wenv_occluders_create(wenv_occluders **out, const float *positions, 
     if (!occ)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for occluders");
     occ->n_triangles = n_triangles;
+    occ->n_positions = n_positions;
     double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
     for (size_t i = 0; i < n_positions; i++)
         for (int k = 0; k < 3; k++) {
@@ -94,6 +96,7 @@ wenv_status wenv_occluders_create(wenv_occluders **out, const float *positions, 
     if (vb && ib) {
         memcpy(vb, positions, n_positions * 3 * sizeof(float));
         memcpy(ib, triangles, n_triangles * 3 * sizeof(uint32_t));
+        occ->triangles = ib;
         rtcCommitGeometry(geom);
         rtcAttachGeometry(occ->scene, geom);
         rtcSetSceneBuildQuality(occ->scene, RTC_BUILD_QUALITY_HIGH); /* built once, tested millions of times */
@@ -124,6 +127,8 @@ void wenv_occluders_free(wenv_occluders *occ)
 }
 
 size_t wenv_occluders_triangle_count(const wenv_occluders *occ) { return occ->n_triangles; }
+size_t wenv_occluders_vertex_count(const wenv_occluders *occ) { return occ->n_positions; }
+const uint32_t *wenv_occluders_triangles(const wenv_occluders *occ) { return occ->triangles; }
 double wenv_occluders_size(const wenv_occluders *occ) { return occ->size; }
 float wenv_occluders_offset(const wenv_occluders *occ) { return (float)(WENV_OCCLUDER_OFFSET * occ->size); }
 
@@ -156,5 +161,32 @@ void wenv_occluders_test(const wenv_occluders *occ, const float origin[3], const
         rtcOccluded1M(occ->scene, &context, rays, (unsigned)m, sizeof rays[0]);
         for (size_t k = 0; k < m; k++)
             blocked[start + k] = rays[k].tfar < 0.0f; /* Embree marks an occluded ray with tfar = -inf */
+    }
+}
+
+void wenv_occluders_hit(const wenv_occluders *occ, const float origin[3], const float *dirs, size_t n, uint32_t *tri,
+                        float *uv)
+{
+    struct RTCRayHit rays[STREAM];
+    struct RTCIntersectContext context;
+    for (size_t start = 0; start < n; start += STREAM) {
+        size_t m = n - start < STREAM ? n - start : STREAM;
+        for (size_t k = 0; k < m; k++) {
+            const float *d = dirs + 3 * (start + k);
+            rays[k].ray = (struct RTCRay){.org_x = origin[0], .org_y = origin[1], .org_z = origin[2], .tnear = 0.0f,
+                                          .dir_x = d[0], .dir_y = d[1], .dir_z = d[2], .time = 0.0f, .tfar = INFINITY,
+                                          .mask = UINT32_MAX, .id = (unsigned)k, .flags = 0};
+            rays[k].hit.geomID = RTC_INVALID_GEOMETRY_ID;
+            rays[k].hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+        }
+        rtcInitIntersectContext(&context);
+        context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+        rtcIntersect1M(occ->scene, &context, rays, (unsigned)m, sizeof rays[0]);
+        for (size_t k = 0; k < m; k++) {
+            int hit = rays[k].hit.geomID != RTC_INVALID_GEOMETRY_ID;
+            tri[start + k] = hit ? rays[k].hit.primID : UINT32_MAX;
+            uv[2 * (start + k)] = hit ? rays[k].hit.u : 0.0f;
+            uv[2 * (start + k) + 1] = hit ? rays[k].hit.v : 0.0f;
+        }
     }
 }

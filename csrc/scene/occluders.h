@@ -22,6 +22,9 @@ wenv_status wenv_occluders_create(wenv_occluders **out, const float *positions, 
 void wenv_occluders_free(wenv_occluders *occ);
 
 size_t wenv_occluders_triangle_count(const wenv_occluders *occ);
+/* The positions the triangles index, and the triangles (3 indices each) as the scene holds them. */
+size_t wenv_occluders_vertex_count(const wenv_occluders *occ);
+const uint32_t *wenv_occluders_triangles(const wenv_occluders *occ);
 /* The diagonal of the scene's bounding box: what a ray's start is lifted off a surface by a
  * fraction of (wenv_occluders_offset), so that it does not hit the face it starts on. */
 double wenv_occluders_size(const wenv_occluders *occ);
@@ -33,6 +36,12 @@ float wenv_occluders_offset(const wenv_occluders *occ);
  * before distance tfar (INFINITY: anywhere): blocked[k] = 1 or 0.  Thread-safe, no allocation. */
 void wenv_occluders_test(const wenv_occluders *occ, const float origin[3], const float *dirs, size_t n, float tfar,
                          unsigned char *blocked);
+
+/* The nearest surface along each of n rays from `origin` (directions as wenv_occluders_test, no far
+ * limit): tri[k] its triangle, or UINT32_MAX where the ray reaches the sky, and uv[2k], uv[2k + 1]
+ * the hit's barycentric weights of the triangle's second and third vertices.  Thread-safe. */
+void wenv_occluders_hit(const wenv_occluders *occ, const float origin[3], const float *dirs, size_t n, uint32_t *tri,
+                        float *uv);
 
 /* The same for n rays of their own origins (xyz floats each), on every thread. */
 void wenv_occluders_test_rays(const wenv_occluders *occ, const float *origins, const float *dirs, size_t n, float tfar,

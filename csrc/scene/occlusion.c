@@ -7,6 +7,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "base/fingerprint.h"
 #include "math/frame.h"
 #include "math/maps.h"
 
@@ -20,10 +21,39 @@ void wenv_occlusion_free(wenv_occlusion *o)
 {
     free(o->slot);
     free(o->masks);
+    free(o->hit_start);
+    free(o->hits);
+    free(o->positions);
+    free(o->normals);
     memset(o, 0, sizeof *o);
 }
 
+size_t wenv_occlusion_bytes(const wenv_occlusion *o)
+{
+    return o->n_vertices * (sizeof *o->slot + 6 * sizeof(float)) + o->n_masks * (o->words * 8 + sizeof(size_t)) +
+           (o->n_masks ? o->hit_start[o->n_masks] : 0) * sizeof *o->hits;
+}
+
 static int finite3(const float *v) { return isfinite(v[0]) && isfinite(v[1]) && isfinite(v[2]); }
+
+/* Vertices cast per block: their hits are gathered in a block-sized buffer, then compacted. */
+#define BLOCK_VERTICES 2048
+
+/* Appends `count` hits to the growing array. */
+static int append_hits(wenv_occlusion *o, size_t *cap, const wenv_occlusion_hit *h, size_t count)
+{
+    size_t used = o->hit_start[o->n_masks];
+    if (used + count > *cap) {
+        size_t grown = (used + count) * 3 / 2 + 1024;
+        wenv_occlusion_hit *more = realloc(o->hits, grown * sizeof *more);
+        if (!more)
+            return -1;
+        o->hits = more;
+        *cap = grown;
+    }
+    memcpy(o->hits + used, h, count * sizeof *h);
+    return 0;
+}
 
 wenv_status wenv_occlusion_make(wenv_occlusion *out, const wenv_occluders *occ, const float *positions,
                                 const float *normals, size_t n, size_t resolution, const wenv_progress *progress,
@@ -40,17 +70,32 @@ wenv_status wenv_occlusion_make(wenv_occlusion *out, const wenv_occluders *occ, 
         if (!finite3(m) || !(m[0] * m[0] + m[1] * m[1] + m[2] * m[2] > 0.0f))
             return wenv_error_set(err, WENV_ERR_VALUE, "normals[%zu] must be finite and non-zero", i);
     }
+    if (n > (size_t)INT32_MAX)
+        return wenv_error_set(err, WENV_ERR_VALUE, "too many vertices (%zu)", n);
     size_t texels = resolution * resolution, words = (texels + 63) / 64;
-    /* each vertex's mask where its own slot would be, compacted to the vertices that need one after */
-    uint64_t *all = n ? calloc(n * words, sizeof *all) : NULL;
-    int32_t *slot = malloc((n ? n : 1) * sizeof *slot);
+    size_t block = n < BLOCK_VERTICES ? (n ? n : 1) : BLOCK_VERTICES;
+    wenv_occlusion o = {.resolution = resolution, .n_vertices = n, .words = words};
+    o.slot = malloc((n ? n : 1) * sizeof *o.slot);
+    o.masks = malloc((n ? n : 1) * words * sizeof *o.masks); /* shrunk to the masks kept after */
+    o.hit_start = malloc(((n ? n : 1) + 1) * sizeof *o.hit_start);
+    o.positions = malloc((n ? n : 1) * 3 * sizeof *o.positions);
+    o.normals = malloc((n ? n : 1) * 3 * sizeof *o.normals);
+    wenv_occlusion_hit *block_hits = malloc(block * texels * sizeof *block_hits);
+    unsigned short *block_count = malloc(block * sizeof *block_count);
+    uint64_t *block_masks = malloc(block * words * sizeof *block_masks);
     float *local = malloc(texels * 3 * sizeof *local);
-    if ((n && !all) || !slot || !local || n > (size_t)INT32_MAX) {
-        free(all);
-        free(slot);
+    if (!o.slot || !o.masks || !o.hit_start || !o.positions || !o.normals || !block_hits || !block_count ||
+        !block_masks || !local) {
+        free(block_hits);
+        free(block_count);
+        free(block_masks);
         free(local);
+        wenv_occlusion_free(&o);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the occlusion of %zu vertices", n);
     }
+    if (n)
+        memcpy(o.positions, positions, n * 3 * sizeof(float));
+    o.hit_start[0] = 0;
     for (size_t t = 0; t < texels; t++) {
         double d[3];
         wenv_occlusion_texel_direction(resolution, t, d);
@@ -58,62 +103,98 @@ wenv_status wenv_occlusion_make(wenv_occlusion *out, const wenv_occluders *occ, 
             local[3 * t + (size_t)k] = (float)d[k];
     }
     float lift = wenv_occluders_offset(occ);
+    size_t cap = 0;
     atomic_int failed = 0, cancelled = 0;
     atomic_size_t done = 0;
+    for (size_t first = 0; first < n && !failed && !cancelled; first += block) {
+        size_t count = n - first < block ? n - first : block;
 #pragma omp parallel
-    {
-        float *dirs = malloc(texels * 3 * sizeof *dirs);
-        unsigned char *blocked = malloc(texels);
-        if (!dirs || !blocked)
-            atomic_store(&failed, 1);
+        {
+            float *dirs = malloc(texels * 3 * sizeof *dirs), *uv = malloc(texels * 2 * sizeof *uv);
+            uint32_t *tri = malloc(texels * sizeof *tri);
+            if (!dirs || !uv || !tri)
+                atomic_store(&failed, 1);
 #pragma omp for schedule(dynamic, 64)
-        for (size_t i = 0; i < n; i++) {
-            if (atomic_load(&failed) || atomic_load(&cancelled))
-                continue;
-            const float *p = positions + 3 * i, *m = normals + 3 * i;
-            float len = sqrtf(m[0] * m[0] + m[1] * m[1] + m[2] * m[2]);
-            double nn[3] = {m[0] / len, m[1] / len, m[2] / len}, f[9];
-            wenv_frame(nn, f);
-            for (size_t t = 0; t < texels; t++) { /* local (x, y, z) -> world: rows of f are the axes */
-                const float *l = local + 3 * t;
+            for (size_t b = 0; b < count; b++) {
+                if (atomic_load(&failed) || atomic_load(&cancelled))
+                    continue;
+                size_t i = first + b;
+                const float *p = positions + 3 * i, *m = normals + 3 * i;
+                float len = sqrtf(m[0] * m[0] + m[1] * m[1] + m[2] * m[2]);
+                double nn[3] = {m[0] / len, m[1] / len, m[2] / len}, f[9];
                 for (int k = 0; k < 3; k++)
-                    dirs[3 * t + (size_t)k] = (float)(f[k] * l[0] + f[3 + k] * l[1] + f[6 + k] * l[2]);
+                    o.normals[3 * i + (size_t)k] = (float)nn[k];
+                wenv_frame(nn, f);
+                for (size_t t = 0; t < texels; t++) { /* local (x, y, z) -> world: rows of f are the axes */
+                    const float *l = local + 3 * t;
+                    for (int k = 0; k < 3; k++)
+                        dirs[3 * t + (size_t)k] = (float)(f[k] * l[0] + f[3 + k] * l[1] + f[6 + k] * l[2]);
+                }
+                float origin[3] = {p[0] + lift * (float)nn[0], p[1] + lift * (float)nn[1], p[2] + lift * (float)nn[2]};
+                wenv_occluders_hit(occ, origin, dirs, texels, tri, uv);
+                uint64_t *mask = block_masks + b * words;
+                memset(mask, 0, words * sizeof *mask);
+                wenv_occlusion_hit *h = block_hits + b * texels;
+                unsigned short nh = 0;
+                for (size_t t = 0; t < texels; t++) {
+                    if (tri[t] == UINT32_MAX) {
+                        mask[t / 64] |= (uint64_t)1 << (t % 64);
+                        continue;
+                    }
+                    float u = uv[2 * t] < 0.0f ? 0.0f : (uv[2 * t] > 1.0f ? 1.0f : uv[2 * t]);
+                    float v = uv[2 * t + 1] < 0.0f ? 0.0f : (uv[2 * t + 1] > 1.0f - u ? 1.0f - u : uv[2 * t + 1]);
+                    h[nh++] = (wenv_occlusion_hit){.triangle = tri[t], .u = (uint16_t)lrintf(u * 65535.0f),
+                                                   .v = (uint16_t)lrintf(v * 65535.0f)};
+                }
+                block_count[b] = nh;
+                wenv_progress_item(progress, &done, n, &cancelled);
             }
-            float origin[3] = {p[0] + lift * (float)nn[0], p[1] + lift * (float)nn[1], p[2] + lift * (float)nn[2]};
-            wenv_occluders_test(occ, origin, dirs, texels, INFINITY, blocked);
-            int any = 0;
-            uint64_t *mask = all + i * words;
-            for (size_t t = 0; t < texels; t++) {
-                any |= blocked[t];
-                if (!blocked[t])
-                    mask[t / 64] |= (uint64_t)1 << (t % 64);
-            }
-            slot[i] = any ? 0 : -1; /* numbered below */
-            wenv_progress_item(progress, &done, n, &cancelled);
+            free(dirs);
+            free(uv);
+            free(tri);
         }
-        free(dirs);
-        free(blocked);
+        /* kept in vertex order: a vertex with no blocked texel keeps no mask */
+        for (size_t b = 0; b < count && !failed; b++) {
+            size_t i = first + b;
+            if (!block_count[b]) {
+                o.slot[i] = -1;
+                continue;
+            }
+            if (append_hits(&o, &cap, block_hits + b * texels, block_count[b]) < 0) {
+                atomic_store(&failed, 1);
+                break;
+            }
+            memcpy(o.masks + o.n_masks * words, block_masks + b * words, words * sizeof *o.masks);
+            o.slot[i] = (int32_t)o.n_masks;
+            o.hit_start[o.n_masks + 1] = o.hit_start[o.n_masks] + block_count[b];
+            o.n_masks++;
+        }
     }
+    free(block_hits);
+    free(block_count);
+    free(block_masks);
     free(local);
     if (failed || cancelled || wenv_progress_finish(progress)) {
-        free(all);
-        free(slot);
-        return failed ? wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the occlusion")
-                      : wenv_error_set(err, WENV_ERR_CANCELLED, "occlusion cancelled");
+        int nomem = failed;
+        wenv_occlusion_free(&o);
+        return nomem ? wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the occlusion")
+                     : wenv_error_set(err, WENV_ERR_CANCELLED, "occlusion cancelled");
     }
-    size_t kept = 0;
-    for (size_t i = 0; i < n; i++)
-        if (slot[i] >= 0) {
-            if (kept != i)
-                memmove(all + kept * words, all + i * words, words * sizeof *all);
-            slot[i] = (int32_t)kept++;
-        }
-    uint64_t *masks = kept ? realloc(all, kept * words * sizeof *all) : NULL;
-    if (kept && !masks)
-        masks = all; /* shrinking failed: keep the larger block */
-    else if (!kept)
-        free(all);
-    *out = (wenv_occlusion){.resolution = resolution, .n_vertices = n, .words = words, .slot = slot,
-                            .masks = masks, .n_masks = kept};
+    /* the blocks were sized for every vertex: give back what the kept masks do not use */
+    uint64_t *masks = realloc(o.masks, (o.n_masks ? o.n_masks : 1) * words * sizeof *o.masks);
+    if (masks)
+        o.masks = masks;
+    size_t *starts = realloc(o.hit_start, (o.n_masks + 1) * sizeof *o.hit_start);
+    if (starts)
+        o.hit_start = starts;
+    uint64_t h = wenv_fingerprint_word(WENV_FINGERPRINT_START, resolution);
+    h = wenv_fingerprint_word(wenv_fingerprint_word(h, n), wenv_occluders_triangle_count(occ));
+    for (size_t k = 0; k < o.n_masks * words; k++)
+        h = wenv_fingerprint_word(h, o.masks[k]);
+    for (size_t k = 0; k < o.hit_start[o.n_masks]; k++)
+        h = wenv_fingerprint_word(h, ((uint64_t)o.hits[k].triangle << 32) | ((uint64_t)o.hits[k].u << 16) | o.hits[k].v);
+    h = wenv_fingerprint_floats(h, o.positions, 3 * n);
+    o.fingerprint = wenv_fingerprint_floats(h, o.normals, 3 * n);
+    *out = o;
     return WENV_OK;
 }

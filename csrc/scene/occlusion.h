@@ -17,6 +17,14 @@
 #define WENV_OCCLUSION_RESOLUTION_MIN 4
 #define WENV_OCCLUSION_RESOLUTION_MAX 16
 
+/* Where a blocked texel's ray meets the scene: the occluders' triangle and the hit's barycentric
+ * weights of its second and third vertices in units of 1/65535, so that the light the blocker sends
+ * (its vertices' bounce light) can be read there. */
+typedef struct {
+    uint32_t triangle;
+    uint16_t u, v;
+} wenv_occlusion_hit;
+
 typedef struct {
     size_t resolution;  /* r */
     size_t n_vertices;
@@ -24,6 +32,11 @@ typedef struct {
     int32_t *slot;      /* per vertex: its mask's index, or -1 when it sees its whole hemisphere */
     uint64_t *masks;    /* n_masks x words; bit t (row-major texel) set: visible */
     size_t n_masks;
+    size_t *hit_start;  /* n_masks + 1: mask k's blocked texels' hits are hits[hit_start[k] ..), texel order */
+    wenv_occlusion_hit *hits;
+    float *positions;   /* n x 3: the vertices the masks are for, as given */
+    float *normals;     /* n x 3: their unit normals (the masks' frames) */
+    uint64_t fingerprint; /* of all the above: what tells one occlusion from another */
 } wenv_occlusion;
 
 /* The masks of n vertices (positions and normals as xyz floats; normals non-zero) against `occ`.
@@ -34,6 +47,16 @@ wenv_status wenv_occlusion_make(wenv_occlusion *out, const wenv_occluders *occ, 
                                 const float *normals, size_t n, size_t resolution, const wenv_progress *progress,
                                 wenv_error *err);
 void wenv_occlusion_free(wenv_occlusion *o);
+/* The bytes it holds. */
+size_t wenv_occlusion_bytes(const wenv_occlusion *o);
+
+/* The triangle vertices' weights of a hit. */
+static inline void wenv_occlusion_hit_weights(const wenv_occlusion_hit *h, float w[3])
+{
+    w[1] = (float)h->u * (1.0f / 65535.0f);
+    w[2] = (float)h->v * (1.0f / 65535.0f);
+    w[0] = 1.0f - w[1] - w[2];
+}
 
 /* Whether texel t (row-major, 0 .. r^2 - 1) of vertex i's map is visible. */
 static inline int wenv_occlusion_visible(const wenv_occlusion *o, size_t i, size_t t)

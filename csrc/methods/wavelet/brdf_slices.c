@@ -33,6 +33,7 @@ void wenv_wavelet_material_free(wenv_wavelet_material *m)
     free(m->table);
     free(m->row_ready);
     free(m->row_need);
+    wenv_texel_reflection_free(&m->texel_reflection);
     free(m);
 }
 
@@ -471,6 +472,8 @@ wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material
     }
     /* the new material's part, made whole before it replaces anything */
     m = calloc(1, sizeof *m);
+    if (m)
+        m->serial = ++wavelet->material_serial;
     if (m) {
         m->brdf_start = calloc(nv + 1, sizeof(size_t));
         m->table = malloc(wavelet->ns * nv * 3 * sizeof(float));

@@ -27,6 +27,8 @@ void wenv_grazing_light_free(wenv_grazing_light *light)
     free(light);
 }
 
+const wenv_node_pyramid *wenv_grazing_light_pyramid(const wenv_grazing_light *light) { return &light->nodes; }
+
 size_t wenv_grazing_light_bytes(const wenv_grazing_light *light)
 {
     return light ? light->bytes : 0;

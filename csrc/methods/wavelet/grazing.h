@@ -21,6 +21,7 @@
 #include <stddef.h>
 
 #include "base/error.h"
+#include "methods/wavelet/grazing_nodes.h"
 #include "scene/envmap.h"
 #include "scene/material.h"
 
@@ -33,6 +34,8 @@ wenv_status wenv_grazing_light_create(wenv_grazing_light **out, const wenv_envma
                                       size_t n_excluded, size_t also_side, float *also_texels, wenv_error *err);
 void wenv_grazing_light_free(wenv_grazing_light *light);
 size_t wenv_grazing_light_bytes(const wenv_grazing_light *light);
+/* Its pyramid, as the nodes read it (grazing_nodes.h). */
+const wenv_node_pyramid *wenv_grazing_light_pyramid(const wenv_grazing_light *light);
 
 /* The tabulated rules of a material's lobes. */
 typedef struct wenv_grazing_rule wenv_grazing_rule;

@@ -35,26 +35,39 @@ static inline void level_read(const wenv_node_pyramid *p, int32_t level, float u
     }
 }
 
+/* The lighting in world direction (d0, d1, d2) at level lod (before clamping), into sum. */
+static inline void read_direction(const wenv_node_pyramid *p, float d0, float d1, float d2, float lod, float sum[3])
+{
+    float top = (float)p->top;
+    /* octahedral encoding (wenv_oct_encode_f) */
+    float l1 = 1.0f / (fabsf(d0) + fabsf(d1) + fabsf(d2) + 1e-30f);
+    float pu = d0 * l1, pv = d1 * l1;
+    float u = d2 < 0.0f ? copysignf(1.0f - fabsf(pv), pu) : pu, v = d2 < 0.0f ? copysignf(1.0f - fabsf(pu), pv) : pv;
+    lod = lod < 0.0f ? 0.0f : (lod > top ? top : lod);
+    int32_t l0 = (int32_t)lod, l1v = l0 + 1 < p->top ? l0 + 1 : p->top;
+    float fl = lod - (float)l0;
+    level_read(p, l0, u, v, 1.0f - fl, sum);
+    level_read(p, l1v, u, v, fl, sum);
+}
+
+void wenv_node_pyramid_read(const wenv_node_pyramid *p, const float d[3], float log2_footprint, float rgb[3])
+{
+    rgb[0] = rgb[1] = rgb[2] = 0.0f;
+    read_direction(p, d[0], d[1], d[2], log2_footprint + p->lod_offset, rgb);
+}
+
 void wenv_grazing_nodes_portable(const float *a, const float *b, size_t stride, size_t n, float g, float f,
                                  const float x[3], const float y[3], const float z[3], const wenv_node_pyramid *p,
                                  float rgb[3])
 {
-    float acc[3] = {0.0f, 0.0f, 0.0f}, top = (float)p->top;
+    float acc[3] = {0.0f, 0.0f, 0.0f};
     for (size_t k = 0; k < n; k++) {
         float lx = g * a[k] + f * b[k], ly = g * a[stride + k] + f * b[stride + k];
         float lz = g * a[2 * stride + k] + f * b[2 * stride + k];
         float d0 = lx * x[0] + ly * y[0] + lz * z[0], d1 = lx * x[1] + ly * y[1] + lz * z[1];
         float d2 = lx * x[2] + ly * y[2] + lz * z[2];
-        /* octahedral encoding (wenv_oct_encode_f) */
-        float l1 = 1.0f / (fabsf(d0) + fabsf(d1) + fabsf(d2) + 1e-30f);
-        float pu = d0 * l1, pv = d1 * l1;
-        float u = d2 < 0.0f ? copysignf(1.0f - fabsf(pv), pu) : pu, v = d2 < 0.0f ? copysignf(1.0f - fabsf(pu), pv) : pv;
-        float lod = g * a[6 * stride + k] + f * b[6 * stride + k] + p->lod_offset;
-        lod = lod < 0.0f ? 0.0f : (lod > top ? top : lod);
-        int32_t l0 = (int32_t)lod, l1v = l0 + 1 < p->top ? l0 + 1 : p->top;
-        float fl = lod - (float)l0, sum[3] = {0.0f, 0.0f, 0.0f};
-        level_read(p, l0, u, v, 1.0f - fl, sum);
-        level_read(p, l1v, u, v, fl, sum);
+        float sum[3] = {0.0f, 0.0f, 0.0f};
+        read_direction(p, d0, d1, d2, g * a[6 * stride + k] + f * b[6 * stride + k] + p->lod_offset, sum);
         for (int c = 0; c < 3; c++)
             acc[c] += (g * a[(3 + (size_t)c) * stride + k] + f * b[(3 + (size_t)c) * stride + k]) * sum[c];
     }

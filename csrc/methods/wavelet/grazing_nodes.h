@@ -17,6 +17,10 @@ typedef struct {
     float lod_offset; /* level = log2 of a node's footprint (radians) + this */
 } wenv_node_pyramid;
 
+/* The lighting in world unit direction d, read over a footprint of 2^log2_footprint radians
+ * (trilinear, as the nodes read it). */
+void wenv_node_pyramid_read(const wenv_node_pyramid *p, const float d[3], float log2_footprint, float rgb[3]);
+
 /* Sum over the n nodes (a multiple of 16) of weight x lighting, the nodes being entry a and the next
  * entry b of a rule mixed g : f.  An entry holds 7 arrays of `stride` floats: local x y z, weight
  * r g b, log2 footprint.  (x, y, z) is the vertex's frame (z the normal).  Bilinear taps as

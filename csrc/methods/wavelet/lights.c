@@ -260,7 +260,8 @@ typedef struct {
     uint32_t next, end;
 } tree_range;
 
-void wenv_lights_irradiance(const wenv_lights *lights, const float n[3], float tolerance, float e[3])
+void wenv_lights_irradiance(const wenv_lights *lights, const float n[3], float tolerance,
+                            const wenv_light_visibility *vis, float e[3])
 {
     const int top = WENV_LIGHT_LEVELS - 1;
     tree_range stack[WENV_LIGHT_LEVELS];
@@ -280,11 +281,13 @@ void wenv_lights_irradiance(const wenv_lights *lights, const float n[3], float t
             continue;
         /* across the horizon (|n.centre| < sin radius) a light's n.l is within 2 sin radius of 0:
          * those below subtract, or those above are missed, at most that x their flux */
-        if (ci >= sr || r->level == 0 || 2.0f * (flux[0] + flux[1] + flux[2]) * sr <= tolerance) {
-            if (ci > 0.0f) {
-                e[0] += max_f(0.0f, dot3(n, vec));
-                e[1] += max_f(0.0f, dot3(n, vec + 3));
-                e[2] += max_f(0.0f, dot3(n, vec + 6));
+        int whole = ci >= sr || r->level == 0 || 2.0f * (flux[0] + flux[1] + flux[2]) * sr <= tolerance;
+        if (whole && (!vis || r->level == 0 || (sr <= vis->sin_radius_max && !(ci > -sr && vis->at_edge(vis, l))))) {
+            float seen = ci > 0.0f && vis ? vis->visible(vis, l) : 1.0f;
+            if (ci > 0.0f && seen > 0.0f) {
+                e[0] += seen * max_f(0.0f, dot3(n, vec));
+                e[1] += seen * max_f(0.0f, dot3(n, vec + 3));
+                e[2] += seen * max_f(0.0f, dot3(n, vec + 6));
             }
             continue;
         }
@@ -304,6 +307,7 @@ typedef struct {
     float terms[MAX_VIEW_TERMS]; /* the material's, for this view */
     int have_terms;              /* terms and the one below are set */
     int use_float;               /* the terms fit: the float path (else the double one, rare) */
+    const wenv_light_visibility *vis; /* what the scene lets through (NULL: everything) */
 } specular_view;
 
 static inline int near_a_lobe(const specular_view *sv, float ch, float slack)
@@ -402,10 +406,13 @@ static void flush_batch(specular_view *sv, light_batch *lb, float s[3])
     lb->n = 0;
 }
 
-/* Queues light direction l (n.l = ci > 0, l.v = lv_dot) with `flux` x weight. */
-static inline void push_light(specular_view *sv, light_batch *lb, float ci, float lv_dot, const float flux[3],
-                              float weight, float s[3])
+/* Queues light direction l (world; n.l = ci > 0, l.v = lv_dot) with `flux` x weight x how much of
+ * it the scene lets through. */
+static inline void push_light(specular_view *sv, light_batch *lb, const float l[3], float ci, float lv_dot,
+                              const float flux[3], float weight, float s[3])
 {
+    if (sv->vis && !((weight *= sv->vis->visible(sv->vis, l)) > 0.0f))
+        return;
     float wi[3];
     view_frame_dir(sv, ci, lv_dot, wi);
     size_t k = lb->n++;
@@ -447,7 +454,7 @@ static inline int add_pixel_area(specular_view *sv, light_batch *lb, const float
             float ci = n[0] * p[0] + n[1] * p[1] + n[2] * p[2], lv_dot;
             if (!(ci > 0.0f) || !near_a_lobe(sv, cos_half(sv, p, ci, &lv_dot), 0.0f))
                 continue;
-            push_light(sv, lb, ci, lv_dot, flux, weight, s);
+            push_light(sv, lb, p, ci, lv_dot, flux, weight, s);
         }
     }
     return 1;
@@ -468,7 +475,7 @@ static inline void specular_pixel(const light_level *lv, size_t i, specular_view
         return;
     if (!(ci > 0.0f) || !near_a_lobe(sv, ch, 0.0f))
         return;
-    push_light(sv, lb, ci, lv_dot, flux, 1.0f, s);
+    push_light(sv, lb, l, ci, lv_dot, flux, 1.0f, s);
 }
 
 /* A cluster is read at its flux-weighted centre, which is exact to first order; the second-order
@@ -556,7 +563,12 @@ static void walk_clusters(const wenv_lights *lights, specular_view *sv, const lo
             float lv_dot;
             float ch = cos_half(sv, l, ci, &lv_dot);
             if (ci > 0.0f && near_a_lobe(sv, ch, 0.0f))
-                push_light(sv, &lb, ci, lv_dot, flux, 1.0f, s);
+                push_light(sv, &lb, l, ci, lv_dot, flux, 1.0f, s);
+            continue;
+        }
+        if (sv->vis && (lv->sin_radius[i] > sv->vis->sin_radius_max || sv->vis->at_edge(sv->vis, l))) {
+            /* one that matters, wider than the masks resolve or where a shadow's edge may cross it */
+            stack[depth++] = (tree_range){k - 1, lv->child[i], lv->child[i + 1]};
             continue;
         }
         /* A cluster a fraction of the lobe's width across is read whole where its second-order
@@ -568,7 +580,7 @@ static void walk_clusters(const wenv_lights *lights, specular_view *sv, const lo
         if (bounded && ci >= sr && sr <= CLUSTER_WIDTH_FRACTION * ax->w_across) {
             float x = sr * ax->inv_across;
             if (bound * x * x * (1.0f + 2.0f * q) <= tolerance) {
-                push_light(sv, &lb, ci, dot3(l, sv->v), flux, 1.0f, s);
+                push_light(sv, &lb, l, ci, dot3(l, sv->v), flux, 1.0f, s);
                 continue;
             }
         }
@@ -672,9 +684,10 @@ void wenv_lights_envelope_table(const wenv_material *mat,
 
 void wenv_lights_specular(const wenv_lights *lights, const wenv_material *mat, const float *cos_h_min,
                           const wenv_lights_lobe *lobe, const float n[3], const float v[3], float cos_v,
-                          float tolerance, float s[3])
+                          float tolerance, const wenv_light_visibility *vis, float s[3])
 {
-    specular_view sv = {.mat = mat, .n_lobes = wenv_material_lobe_count(mat), .cos_h_min = cos_h_min, .co = cos_v};
+    specular_view sv = {.mat = mat, .n_lobes = wenv_material_lobe_count(mat), .cos_h_min = cos_h_min, .co = cos_v,
+                        .vis = vis};
     memcpy(sv.n, n, sizeof sv.n);
     memcpy(sv.v, v, sizeof sv.v);
     /* any frame with +Z the normal will do: the lobes are isotropic */

@@ -37,11 +37,23 @@ void wenv_lights_free(wenv_lights *lights);
 /* Lights at a level (level 0: the pixels). */
 size_t wenv_lights_count(const wenv_lights *lights, int level);
 
+/* What the scene lets through to a vertex (methods/wavelet/shadows.c): `visible` says how much of a
+ * light in direction l reaches it (0 or 1), and `at_edge` whether a shadow's edge may pass near l, so
+ * that a cluster there is read by its parts down to the pixels, each with its own answer, as the
+ * reference reads them; a cluster whose radius's sine exceeds sin_radius_max is read by its parts
+ * too, so that no edge hides inside it.  NULL everywhere: nothing blocks. */
+typedef struct wenv_light_visibility {
+    float (*visible)(const struct wenv_light_visibility *vis, const float l[3]);
+    int (*at_edge)(const struct wenv_light_visibility *vis, const float l[3]);
+    float sin_radius_max;
+} wenv_light_visibility;
+
 /* Irradiance at unit normal n, added to e.  Clusters wholly above the horizon are exact as their
  * flux vectors (the cosine is linear in the direction); one across it is read whole when what its
  * lights below the horizon could add, its flux x its radius, is within `tolerance` (RGB summed),
  * else from its parts, down to the pixels' centres as the reference reads them. */
-void wenv_lights_irradiance(const wenv_lights *lights, const float n[3], float tolerance, float e[3]);
+void wenv_lights_irradiance(const wenv_lights *lights, const float n[3], float tolerance,
+                            const wenv_light_visibility *vis, float e[3]);
 
 /* What the walk over the clusters needs to know of a material's lobes. */
 typedef struct {
@@ -80,6 +92,6 @@ void wenv_lights_envelope_table(const wenv_material *mat,
  * estimated error (RGB summed) is within `tolerance`, else their parts, down to the pixels. */
 void wenv_lights_specular(const wenv_lights *lights, const wenv_material *mat, const float *cos_h_min,
                           const wenv_lights_lobe *lobe, const float n[3], const float v[3], float cos_v,
-                          float tolerance, float s[3]);
+                          float tolerance, const wenv_light_visibility *vis, float s[3]);
 
 #endif

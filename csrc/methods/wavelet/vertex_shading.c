@@ -147,15 +147,42 @@ static int compute_slices(wenv_wavelet *wavelet, const size_t *samples, size_t k
     return 0;
 }
 
-static void shade_vertex(const wenv_wavelet *wavelet, const vertex_taps *tp, float *o)
+/* What a vertex with blocked texels shades with (NULL for one that sees its whole hemisphere). */
+typedef struct {
+    wenv_vertex_shadow vs;
+    const float *hidden;   /* its blocked texels' hidden lighting less the blocker's light */
+    const float *e_hidden; /* their cosine-weighted sum */
+} vertex_shadow;
+
+/* The irradiance the normal samples interpolate at the vertex, less what its blocked texels hide. */
+static void sampled_irradiance(const wenv_wavelet *wavelet, const uint32_t sample[4], const float sample_w[4],
+                               const vertex_shadow *sh, float e[3])
 {
-    float e[3] = {0, 0, 0}, m[3] = {0, 0, 0}, s[3] = {0, 0, 0};
+    e[0] = e[1] = e[2] = 0.0f;
     for (int k = 0; k < 4; k++) {
-        const float *ir = wavelet->irradiance + 3 * (size_t)tp->sample[k];
-        e[0] += tp->sample_w[k] * ir[0];
-        e[1] += tp->sample_w[k] * ir[1];
-        e[2] += tp->sample_w[k] * ir[2];
+        const float *ir = wavelet->irradiance + 3 * (size_t)sample[k];
+        e[0] += sample_w[k] * ir[0];
+        e[1] += sample_w[k] * ir[1];
+        e[2] += sample_w[k] * ir[2];
     }
+    if (sh)
+        for (int c = 0; c < 3; c++)
+            e[c] = e[c] - sh->e_hidden[c] > 0.0f ? e[c] - sh->e_hidden[c] : 0.0f;
+}
+
+/* The exact lights' irradiance at unit normal n, added to e. */
+static void lights_irradiance(const wenv_wavelet *wavelet, const float n[3], const vertex_shadow *sh, float e[3])
+{
+    /* as for the lobes below: against the rest's irradiance plus a uniform mean's */
+    float scale = e[0] + e[1] + e[2] + 3.0f * (float)M_PI * wavelet->mean_radiance;
+    wenv_lights_irradiance(wavelet->lights, n, (float)wavelet->q.light_tolerance * scale, sh ? &sh->vs.lights : NULL,
+                           e);
+}
+
+static void shade_vertex(const wenv_wavelet *wavelet, const vertex_taps *tp, const vertex_shadow *sh, float *o)
+{
+    float e[3], m[3] = {0, 0, 0}, s[3] = {0, 0, 0};
+    sampled_irradiance(wavelet, tp->sample, tp->sample_w, sh, e);
     /* table entries are mean radiances under the lobe (see albedo_tables) */
     for (int k = 0; k < 16 && wavelet->m->brdf_terms; k++) {
         const float *t = wavelet->m->table + 3 * (size_t)tp->pair[k];
@@ -185,12 +212,11 @@ static void shade_vertex(const wenv_wavelet *wavelet, const vertex_taps *tp, flo
         for (int c = 0; c < 3; c++)
             s[c] += blend * g[c];
     }
+    if (sh && wavelet->m->texel_reflection.specular && wavelet->m->albedo)
+        wenv_shadow_specular(&sh->vs, &wavelet->m->texel_reflection, sh->hidden, tp->v, a, s);
     if (wenv_lights_count(wavelet->lights, 0)) {
-        if (wavelet->m->has_diffuse) {
-            /* as for the lobes below: against the rest's irradiance plus a uniform mean's */
-            float scale = e[0] + e[1] + e[2] + 3.0f * (float)M_PI * wavelet->mean_radiance;
-            wenv_lights_irradiance(wavelet->lights, tp->n, (float)wavelet->q.light_tolerance * scale, e);
-        }
+        if (wavelet->m->has_diffuse)
+            lights_irradiance(wavelet, tp->n, sh, e);
         if (wavelet->m->has_lobes) {
             wenv_lights_lobe lobe = {.alpha = wavelet->m->lobe_m_min,
                                      .cone_cos = wavelet->m->light_cone_cos,
@@ -203,7 +229,7 @@ static void shade_vertex(const wenv_wavelet *wavelet, const vertex_taps *tp, flo
              * sees little of the rest still reads its lights to a tolerance the image notices) */
             float scale = s[0] + s[1] + s[2] + wavelet->mean_radiance * (a[0] + a[1] + a[2]);
             wenv_lights_specular(wavelet->lights, wavelet->m->mat, wavelet->m->lobe_cos_h_min, &lobe, tp->n, tp->v,
-                                 tp->cos_v, (float)wavelet->q.light_tolerance * scale, s);
+                                 tp->cos_v, (float)wavelet->q.light_tolerance * scale, sh ? &sh->vs.lights : NULL, s);
         }
     }
     float d[3];
@@ -351,13 +377,25 @@ static wenv_status fill_needed(wenv_wavelet *wavelet, wenv_error *err)
     return st;
 }
 
-wenv_status wenv_wavelet_shade(wenv_wavelet *wavelet, const float *normals, const float *views, size_t n,
-                              float *out, wenv_error *err)
+/* Vertex i's part of the scene: NULL when it sees its whole hemisphere. */
+static const vertex_shadow *vertex_shadow_at(const wenv_wavelet *wavelet, const wenv_shadow_scene *scene, size_t row,
+                                             vertex_shadow *sh)
 {
-    if (!wavelet->have_env || !wavelet->m)
-        return wenv_error_set(err, WENV_ERR_VALUE, "the shader needs an environment and a material");
-    if (wenv_wavelet_ensure_grazing(wavelet, err)) /* not made when memory ran out before */
-        return err->status;
+    if (!scene)
+        return NULL;
+    size_t i = scene->rows ? scene->rows[row] : scene->offset + row;
+    if (scene->occlusion->slot[i] < 0)
+        return NULL;
+    size_t slot = (size_t)scene->occlusion->slot[i];
+    wenv_vertex_shadow_init(&sh->vs, scene, i);
+    sh->hidden = wavelet->shadow_hidden + 3 * scene->occlusion->hit_start[slot];
+    sh->e_hidden = wavelet->shadow_e_hidden + 3 * slot;
+    return sh;
+}
+
+static wenv_status shade_all(wenv_wavelet *wavelet, const float *normals, const float *views, size_t n,
+                             const wenv_shadow_scene *scene, float *out, wenv_error *err)
+{
     /* One pass shades every vertex whose table rows exist (all of them once its normals were seen,
      * whatever the view) and flags what the others need; those are shaded after the missing rows
      * are made. */
@@ -380,7 +418,8 @@ wenv_status wenv_wavelet_shade(wenv_wavelet *wavelet, const float *normals, cons
             continue;
         }
         if (read_taps(wavelet, &tp)) {
-            shade_vertex(wavelet, &tp, o);
+            vertex_shadow sh;
+            shade_vertex(wavelet, &tp, vertex_shadow_at(wavelet, scene, (size_t)i, &sh), o);
             continue;
         }
         flag_taps(&tp, wavelet->slice_need, wavelet->m->row_need);
@@ -395,11 +434,182 @@ wenv_status wenv_wavelet_shade(wenv_wavelet *wavelet, const float *normals, cons
 #pragma omp parallel for schedule(static)
         for (size_t e = 0; e < np; e++) {
             vertex_taps tp;
+            vertex_shadow sh;
             size_t i = pending[e];
             compute_taps(wavelet, normals + 3 * i, views + 3 * i, &tp);
-            shade_vertex(wavelet, &tp, out + 3 * i);
+            shade_vertex(wavelet, &tp, vertex_shadow_at(wavelet, scene, i, &sh), out + 3 * i);
         }
     }
     free(pending);
+    return WENV_OK;
+}
+
+wenv_status wenv_wavelet_shade(wenv_wavelet *wavelet, const float *normals, const float *views, size_t n,
+                              float *out, wenv_error *err)
+{
+    if (!wavelet->have_env || !wavelet->m)
+        return wenv_error_set(err, WENV_ERR_VALUE, "the shader needs an environment and a material");
+    if (wenv_wavelet_ensure_grazing(wavelet, err)) /* not made when memory ran out before */
+        return err->status;
+    return shade_all(wavelet, normals, views, n, NULL, out, err);
+}
+
+/* ---- with the scene in the way ------------------------------------------------------------------ */
+
+/* The diffuse light leaving each of n vertices head-on: the Lambertian part's albedo / pi at a view
+ * along the normal times the irradiance (less what the blocked texels hide: the shadow cache's sums
+ * of the hidden lighting alone, before any bounce, with the lights tested). */
+static void diffuse_light(const wenv_wavelet *wavelet, const float *normals, size_t n, const wenv_shadow_scene *scene,
+                          float *out)
+{
+    float head_on[3];
+    wenv_diffuse_table_at(&wavelet->m->diffuse, 1.0f, head_on);
+    long long nn = (long long)n;
+#pragma omp parallel for schedule(static)
+    for (long long i = 0; i < nn; i++) {
+        const float *m = normals + 3 * i;
+        float inv = 1.0f / sqrtf(m[0] * m[0] + m[1] * m[1] + m[2] * m[2]), nrm[3] = {m[0] * inv, m[1] * inv, m[2] * inv};
+        float ou, ov, w[4], e[3];
+        uint32_t sample[4];
+        wenv_oct_encode_f(nrm, &ou, &ov);
+        wenv_oct_bilinear_f((long)wavelet->q.normal_n, ou, ov, sample, w);
+        vertex_shadow sh;
+        const vertex_shadow *shp = vertex_shadow_at(wavelet, scene, (size_t)i, &sh);
+        sampled_irradiance(wavelet, sample, w, shp, e);
+        if (wenv_lights_count(wavelet->lights, 0))
+            lights_irradiance(wavelet, nrm, shp, e);
+        for (int c = 0; c < 3; c++)
+            out[3 * i + c] = head_on[c] * e[c];
+    }
+}
+
+static wenv_status check_scene(const wenv_shadow_scene *scene, size_t n, wenv_error *err)
+{
+    size_t nv = scene->occlusion->n_vertices;
+    if (!scene->rows && scene->offset + n > nv)
+        return wenv_error_set(err, WENV_ERR_VALUE, "occlusion was made for %zu vertices, shading %zu from %zu", nv, n,
+                              scene->offset);
+    for (size_t k = 0; scene->rows && k < n; k++)
+        if (scene->rows[k] >= nv)
+            return wenv_error_set(err, WENV_ERR_VALUE, "row %zu is vertex %u of an occlusion of %zu", k,
+                                  (unsigned)scene->rows[k], nv);
+    if (scene->bounce_self && wenv_occluders_vertex_count(scene->occluders) != nv)
+        return wenv_error_set(err, WENV_ERR_VALUE,
+                              "a mesh's own bounce needs its vertices to be the occluders' (%zu), the occlusion's %zu",
+                              wenv_occluders_vertex_count(scene->occluders), nv);
+    return WENV_OK;
+}
+
+/* The occlusion's unit normals turned into the method's frame, every vertex in order. */
+static float *occlusion_normals(const wenv_shadow_scene *scene)
+{
+    const wenv_occlusion *o = scene->occlusion;
+    float *out = malloc((o->n_vertices ? o->n_vertices : 1) * 3 * sizeof(float));
+    const float *t = scene->turn;
+    for (size_t i = 0; out && i < o->n_vertices; i++) {
+        const float *a = o->normals + 3 * i;
+        for (int r = 0; r < 3; r++)
+            out[3 * i + (size_t)r] = t[3 * r] * a[0] + t[3 * r + 1] * a[1] + t[3 * r + 2] * a[2];
+    }
+    return out;
+}
+
+/* Makes what shading with `scene` keeps, unless it holds: the pyramid, the material's texel
+ * reflection at the masks' resolution, and the hidden lighting of every blocked texel. */
+static wenv_status ensure_shadows(wenv_wavelet *wavelet, const wenv_shadow_scene *scene, wenv_error *err)
+{
+    wavelet->shadowing = 1;
+    if (wenv_wavelet_ensure_grazing(wavelet, err) || wenv_wavelet_ensure_pyramid(wavelet, err))
+        return err->status;
+    const wenv_occlusion *o = scene->occlusion;
+    wenv_wavelet_material *m = wavelet->m;
+    if (m->texel_reflection.resolution != o->resolution) {
+        wenv_texel_reflection_free(&m->texel_reflection);
+        if (wenv_texel_reflection_make(&m->texel_reflection, m->mat, o->resolution, err))
+            return err->status;
+    }
+    size_t own = scene->bounce_self ? m->serial : 0;
+    if (wavelet->shadow_valid && wavelet->shadow_key == scene->key && wavelet->shadow_material == own)
+        return WENV_OK;
+    wavelet->shadow_valid = 0;
+    size_t n = o->n_vertices, hits = o->n_masks ? o->hit_start[o->n_masks] : 0;
+    float *hidden = malloc((hits ? hits : 1) * 3 * sizeof(float));
+    float *e_hidden = malloc((o->n_masks ? o->n_masks : 1) * 3 * sizeof(float));
+    float *own_light = scene->bounce_self ? malloc((n ? n : 1) * 3 * sizeof(float)) : NULL;
+    float *normals = scene->bounce_self ? occlusion_normals(scene) : NULL;
+    if (!hidden || !e_hidden || (scene->bounce_self && (!own_light || !normals))) {
+        free(hidden);
+        free(e_hidden);
+        free(own_light);
+        free(normals);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the shadows of %zu vertices", n);
+    }
+    free(wavelet->shadow_hidden);
+    free(wavelet->shadow_e_hidden);
+    wavelet->shadow_hidden = hidden;
+    wavelet->shadow_e_hidden = e_hidden;
+    const wenv_node_pyramid *pyramid = wenv_grazing_light_pyramid(wavelet->grazing_light);
+    const float *cosine = m->texel_reflection.cosine;
+    long long nn = (long long)n;
+#pragma omp parallel for schedule(dynamic, 256)
+    for (long long i = 0; i < nn; i++) {
+        if (o->slot[i] < 0)
+            continue;
+        size_t slot = (size_t)o->slot[i];
+        wenv_vertex_shadow vs;
+        wenv_vertex_shadow_init(&vs, scene, (size_t)i);
+        wenv_shadow_hidden_light(&vs, pyramid, cosine, hidden + 3 * o->hit_start[slot], e_hidden + 3 * slot);
+    }
+    /* a given bounce is in the world's units; a mesh's own light is in the method's already */
+    wenv_shadow_scene sending = *scene;
+    sending.rows = NULL; /* every vertex of the occlusion, in order */
+    sending.offset = 0;
+    if (scene->bounce_self) {
+        diffuse_light(wavelet, normals, n, &sending, own_light);
+        sending.bounce = own_light;
+        sending.bounce_scale = 1.0f;
+    }
+    if (sending.bounce) {
+        long long nm = (long long)o->n_masks;
+#pragma omp parallel for schedule(dynamic, 256)
+        for (long long k = 0; k < nm; k++)
+            wenv_shadow_bounce(&sending, (size_t)k, sending.bounce, cosine, hidden + 3 * o->hit_start[k],
+                               e_hidden + 3 * k);
+    }
+    free(own_light);
+    free(normals);
+    wavelet->shadow_key = scene->key;
+    wavelet->shadow_material = own;
+    wavelet->shadow_valid = 1;
+    return WENV_OK;
+}
+
+wenv_status wenv_wavelet_shade_shadowed(wenv_wavelet *wavelet, const float *normals, const float *views, size_t n,
+                                        const wenv_shadow_scene *scene, float *out, wenv_error *err)
+{
+    if (!wavelet->have_env || !wavelet->m)
+        return wenv_error_set(err, WENV_ERR_VALUE, "the shader needs an environment and a material");
+    if (check_scene(scene, n, err) || ensure_shadows(wavelet, scene, err))
+        return err->status;
+    return shade_all(wavelet, normals, views, n, scene, out, err);
+}
+
+wenv_status wenv_wavelet_diffuse_light(wenv_wavelet *wavelet, const float *normals, size_t n,
+                                       const wenv_shadow_scene *scene, float *out, wenv_error *err)
+{
+    if (!wavelet->have_env || !wavelet->m)
+        return wenv_error_set(err, WENV_ERR_VALUE, "the shader needs an environment and a material");
+    if (scene) {
+        if (check_scene(scene, n, err))
+            return err->status;
+        /* the hidden lighting alone: a bounce asked of this mesh is what it sends, not what it gets */
+        wenv_shadow_scene alone = *scene;
+        alone.bounce = NULL;
+        alone.bounce_self = 0;
+        alone.key = ~scene->key;
+        if (ensure_shadows(wavelet, &alone, err))
+            return err->status;
+    }
+    diffuse_light(wavelet, normals, n, scene, out);
     return WENV_OK;
 }

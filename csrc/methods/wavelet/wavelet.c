@@ -69,6 +69,8 @@ void wenv_wavelet_free(wenv_wavelet *wavelet)
     wenv_grazing_light_free(wavelet->grazing_light);
     wenv_envmap_free(wavelet->image);
     free(wavelet->excluded);
+    free(wavelet->shadow_hidden);
+    free(wavelet->shadow_e_hidden);
     free(wavelet->slice_ready);
     free(wavelet->slice_need);
     wenv_wavelet_free_quadrature(wavelet);
@@ -218,8 +220,8 @@ wenv_status wenv_wavelet_set_environment(wenv_wavelet *wavelet, const wenv_envma
     for (size_t i = 0; i < npixels; i++)
         excluded[i] = bright[i].pixel;
     qsort(excluded, npixels, sizeof *excluded, compare_size);
-    if (wavelet->m && wavelet->m->grazing_rule) {
-        /* the grazing path's pyramid and the global map in one pass over the image */
+    if ((wavelet->m && wavelet->m->grazing_rule) || wavelet->shadowing) {
+        /* the grazing path's (and the shadows') pyramid and the global map in one pass over the image */
         if ((st = wenv_grazing_light_create(&grazing, env, excluded, npixels, G, texels, err)))
             goto done;
     } else if ((st = wenv_oct_from_envmap(env, G, texels, excluded, npixels, err))) {
@@ -286,6 +288,7 @@ wenv_status wenv_wavelet_set_environment(wenv_wavelet *wavelet, const wenv_envma
     wavelet->n_excluded = npixels;
     excluded = NULL;
     wavelet->have_env = 1;
+    wavelet->shadow_valid = 0;
     st = wenv_wavelet_remake_ready(wavelet, 1, err);
 done:
     free(texels);
@@ -301,6 +304,14 @@ done:
     wenv_grazing_light_free(grazing);
     wenv_envmap_free(image);
     return st;
+}
+
+wenv_status wenv_wavelet_ensure_pyramid(wenv_wavelet *wavelet, wenv_error *err)
+{
+    if (!wavelet->have_env || wavelet->grazing_light)
+        return WENV_OK;
+    return wenv_grazing_light_create(&wavelet->grazing_light, wavelet->image, wavelet->excluded, wavelet->n_excluded,
+                                     0, NULL, err);
 }
 
 wenv_status wenv_wavelet_ensure_grazing(wenv_wavelet *wavelet, wenv_error *err)

@@ -111,6 +111,12 @@ wenv_status wenv_wavelet_set_material(wenv_wavelet *sh, const wenv_material *mat
  * non-zero and finite (the bindings check).  out is n x 3 linear RGB radiance. */
 wenv_status wenv_wavelet_shade(wenv_wavelet *sh, const float *normals, const float *views, size_t n,
                               float *out, wenv_error *err);
+/* The same with the scene in the way (methods/wavelet/shadows.h; method.h's shade_shadowed). */
+wenv_status wenv_wavelet_shade_shadowed(wenv_wavelet *sh, const float *normals, const float *views, size_t n,
+                                        const wenv_shadow_scene *scene, float *out, wenv_error *err);
+/* The diffuse light leaving each vertex (method.h's diffuse_light). */
+wenv_status wenv_wavelet_diffuse_light(wenv_wavelet *sh, const float *normals, size_t n,
+                                       const wenv_shadow_scene *scene, float *out, wenv_error *err);
 
 void wenv_wavelet_get_stats(const wenv_wavelet *sh, wenv_wavelet_stats *stats);
 

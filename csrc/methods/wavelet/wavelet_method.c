@@ -104,6 +104,18 @@ static wenv_status shade(void *state, const float *normals, const float *views, 
     return wenv_wavelet_shade(state, normals, views, n, out, err);
 }
 
+static wenv_status shade_shadowed(void *state, const float *normals, const float *views, size_t n,
+                                  const wenv_shadow_scene *scene, float *out, wenv_error *err)
+{
+    return wenv_wavelet_shade_shadowed(state, normals, views, n, scene, out, err);
+}
+
+static wenv_status diffuse_light(void *state, const float *normals, size_t n, const wenv_shadow_scene *scene,
+                                 float *out, wenv_error *err)
+{
+    return wenv_wavelet_diffuse_light(state, normals, n, scene, out, err);
+}
+
 static size_t stats(const void *state, wenv_stat *out)
 {
     static const char *const CACHE_USE[] = {"none", "loaded", "built", "built (save failed)"};
@@ -135,7 +147,8 @@ static size_t stats(const void *state, wenv_stat *out)
         .params = PARAMS, .n_params = sizeof PARAMS / sizeof PARAMS[0],                                        \
         .presets = {&WENV_WAVELET_PRESETS[0], &WENV_WAVELET_PRESETS[1], &WENV_WAVELET_PRESETS[2]},              \
         .check_quality = check_quality, .create = create_fn, .destroy = destroy,                               \
-        .set_environment = set_environment, .set_material = set_material, .shade = shade, .stats = stats,      \
+        .set_environment = set_environment, .set_material = set_material, .shade = shade,                      \
+        .shade_shadowed = shade_shadowed, .diffuse_light = diffuse_light, .stats = stats,                      \
     }
 
 const wenv_method WENV_METHOD_ROTATION = WAVELET_METHOD(

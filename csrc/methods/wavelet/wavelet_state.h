@@ -10,6 +10,7 @@
 #include "methods/wavelet/irradiance.h"
 #include "methods/wavelet/lights.h"
 #include "methods/wavelet/rotation.h"
+#include "methods/wavelet/shadows.h"
 #include "methods/wavelet/slice_operators.h"
 #include "methods/wavelet/wavelet.h"
 
@@ -19,6 +20,7 @@
  * shaded in turn each make their slices once while the lighting holds. */
 typedef struct {
     wenv_material *mat;      /* for the direct lights, and to recognise the material set again */
+    size_t serial;           /* the shader's count of materials made, at this one's making */
     float *lobe_cos_h_min;   /* per lobe: below this n.h its D is negligible (< 1e-7 of its peak) */
     double light_cone_cos;   /* lights farther than this from the mirror direction miss every lobe */
     double lobe_m_min;       /* the narrowest lobe's roughness (how finely the lights are read) */
@@ -36,6 +38,7 @@ typedef struct {
     float *brdf_rgb;
     size_t brdf_terms;
     float *table;            /* ns x nv x 3 */
+    wenv_texel_reflection texel_reflection; /* shading with shadows: made for the masks' resolution */
     unsigned char *row_ready, *row_need; /* per normal sample, as slice_ready and slice_need */
 } wenv_wavelet_material;
 
@@ -81,6 +84,17 @@ struct wenv_wavelet {
      * (brdf_slices.c) */
     wenv_texel_rule quad, fine, fine_coarse;
     float *texel_centre;     /* nl x 3: each local texel's centre direction */
+
+    /* shading with shadows (shadows.h): per blocked texel the hidden lighting less the blocker's
+     * light, and per mask its cosine-weighted sum, kept while the lighting and the scene's key hold
+     * (and, when a mesh's own diffuse light is its bounce, the material) */
+    int shadowing;            /* shaded with shadows since made: a new lighting makes the pyramid too */
+    int shadow_valid;
+    uint64_t shadow_key;
+    size_t shadow_material;   /* the serial of the material whose diffuse light the bounce is (0: none) */
+    size_t material_serial;
+    float *shadow_hidden;     /* hits x 3 */
+    float *shadow_e_hidden;   /* masks x 3 */
 
     /* materials: the current one first, then those set before it, most recent first */
     wenv_wavelet_material *kept[WENV_WAVELET_KEPT_MATERIALS];
@@ -136,5 +150,7 @@ wenv_status wenv_wavelet_remake_ready(wenv_wavelet *wavelet, int lighting, wenv_
  * it is not made: a diffuse material never pays for it, and one with lobes made current later
  * does. */
 wenv_status wenv_wavelet_ensure_grazing(wenv_wavelet *wavelet, wenv_error *err);
+/* ... and whatever the material, for the shadows' hidden lighting. */
+wenv_status wenv_wavelet_ensure_pyramid(wenv_wavelet *wavelet, wenv_error *err);
 
 #endif

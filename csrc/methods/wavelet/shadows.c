@@ -1,0 +1,286 @@
+/* Shading with the scene in the way (shadows.h). */
+#include "methods/wavelet/shadows.h"
+
+#include <math.h>
+#include <stdatomic.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "math/frame.h"
+#include "math/maps.h"
+
+/* Each texel's cosine integral is summed over SUBTEXELS^2 exact sub-texel solid angles; each view's
+ * lobes are binned from their node rules of NODE_SAMPLES divisions (2 x 32^2 nodes a lobe). */
+#define SUBTEXELS 8
+#define NODE_SAMPLES 32
+
+void wenv_texel_reflection_free(wenv_texel_reflection *t)
+{
+    free(t->specular);
+    free(t->cosine);
+    memset(t, 0, sizeof *t);
+}
+
+/* The texel of an r x r hemi-octahedral map that local direction d (z > 0) falls in. */
+static inline size_t texel_of(const float d[3], size_t r)
+{
+    float u, v;
+    wenv_hemi_encode_f(d, &u, &v);
+    long n = (long)r, i = (long)((u + 1.0f) * 0.5f * (float)n), j = (long)((v + 1.0f) * 0.5f * (float)n);
+    i = i < 0 ? 0 : (i > n - 1 ? n - 1 : i);
+    j = j < 0 ? 0 : (j > n - 1 ? n - 1 : j);
+    return (size_t)(j * n + i);
+}
+
+wenv_status wenv_texel_reflection_make(wenv_texel_reflection *out, const wenv_material *mat, size_t resolution,
+                                       wenv_error *err)
+{
+    memset(out, 0, sizeof *out);
+    size_t r = resolution, texels = r * r, views = WENV_TEXEL_REFLECTION_VIEWS, n_lobes = wenv_material_lobe_count(mat);
+    out->resolution = r;
+    out->views = views;
+    out->cosine = calloc(texels, sizeof *out->cosine);
+    out->specular = calloc(views * views * texels * 3, sizeof *out->specular);
+    if (!out->cosine || !out->specular) {
+        wenv_texel_reflection_free(out);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the shadows' texel reflection");
+    }
+    size_t fine = r * SUBTEXELS;
+    for (size_t fj = 0; fj < fine; fj++)
+        for (size_t fi = 0; fi < fine; fi++) {
+            double d[3];
+            wenv_hemi_decode(wenv_map_texel_center(fine, fi), wenv_map_texel_center(fine, fj), d);
+            out->cosine[(fj / SUBTEXELS) * r + fi / SUBTEXELS] +=
+                (float)(wenv_hemi_texel_solid_angle(fine, fi, fj) * (d[2] > 0.0 ? d[2] : 0.0));
+        }
+    if (!n_lobes) {
+        free(out->specular);
+        out->specular = NULL;
+        return WENV_OK;
+    }
+    atomic_int failed = 0;
+    wenv_error first = {0};
+    long long nv = (long long)(views * views);
+#pragma omp parallel
+    {
+        size_t max = 2 * NODE_SAMPLES * NODE_SAMPLES;
+        double *wi = malloc(max * 3 * sizeof *wi), *weight = malloc(max * 3 * sizeof *weight);
+        wenv_error local = {0};
+        if (!wi || !weight)
+            atomic_store(&failed, 1);
+#pragma omp for schedule(dynamic, 4)
+        for (long long q = 0; q < nv; q++) {
+            if (atomic_load(&failed))
+                continue;
+            double wo[3];
+            wenv_hemi_decode(wenv_map_texel_center(views, (size_t)q % views), wenv_map_texel_center(views, (size_t)q / views),
+                             wo);
+            float *row = out->specular + (size_t)q * texels * 3;
+            for (size_t l = 0; l < n_lobes; l++) {
+                size_t count = 0;
+                if (wenv_material_lobe_nodes(mat, l, wo, NODE_SAMPLES, wi, weight, &count, &local)) {
+#pragma omp critical(wenv_texel_reflection_error)
+                    if (first.status == WENV_OK)
+                        first = local;
+                    atomic_store(&failed, 1);
+                    break;
+                }
+                for (size_t k = 0; k < count; k++) {
+                    float d[3] = {(float)wi[3 * k], (float)wi[3 * k + 1], (float)wi[3 * k + 2]};
+                    if (!(d[2] > 0.0f))
+                        continue;
+                    float *t = row + 3 * texel_of(d, r);
+                    for (int c = 0; c < 3; c++)
+                        t[c] += (float)weight[3 * k + (size_t)c];
+                }
+            }
+            /* as shares of the albedo: the vertex's own albedo scales them, exact in its view where
+             * the grid's is not (towards grazing the albedo climbs faster than views interpolate) */
+            double sum[3] = {0.0, 0.0, 0.0};
+            for (size_t t = 0; t < texels; t++)
+                for (int c = 0; c < 3; c++)
+                    sum[c] += row[3 * t + (size_t)c];
+            for (size_t t = 0; t < texels; t++)
+                for (int c = 0; c < 3; c++)
+                    row[3 * t + (size_t)c] = sum[c] > 0.0 ? (float)(row[3 * t + (size_t)c] / sum[c]) : 0.0f;
+        }
+        free(wi);
+        free(weight);
+    }
+    if (failed) {
+        wenv_texel_reflection_free(out);
+        if (first.status != WENV_OK)
+            return wenv_error_set(err, first.status, "%s", first.message);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the shadows' texel reflection");
+    }
+    return WENV_OK;
+}
+
+/* ---- one vertex -------------------------------------------------------------------------------- */
+
+/* The mask's bits of the blocked texels, word w (the last word's unused bits cleared). */
+static inline uint64_t blocked_bits(const wenv_vertex_shadow *vs, size_t w, size_t texels)
+{
+    uint64_t bits = ~vs->mask[w];
+    size_t left = texels - 64 * w;
+    return left >= 64 ? bits : bits & (((uint64_t)1 << left) - 1);
+}
+
+/* Calls body(t, k) for each blocked texel t, k counting them from 0. */
+#define FOR_EACH_BLOCKED(vs, texels, body)                                            \
+    do {                                                                              \
+        size_t k_ = 0;                                                                \
+        for (size_t w_ = 0; 64 * w_ < (texels); w_++)                                 \
+            for (uint64_t b_ = blocked_bits((vs), w_, (texels)); b_; b_ &= b_ - 1) {  \
+                size_t t = 64 * w_ + (size_t)__builtin_ctzll(b_), k = k_++;           \
+                body;                                                                 \
+            }                                                                         \
+    } while (0)
+
+static inline int texel_open(const wenv_vertex_shadow *vs, size_t t)
+{
+    return (int)((vs->mask[t / 64] >> (t % 64)) & 1u);
+}
+
+/* How many of the mask's texels about direction l (in the method's frame) are open and blocked: its
+ * texel and the eight around it.  0 and 0 below the horizon. */
+static void texels_about(const wenv_vertex_shadow *vs, const float l[3], int *open, int *shut)
+{
+    const float *f = vs->frame;
+    float d[3] = {f[0] * l[0] + f[1] * l[1] + f[2] * l[2], f[3] * l[0] + f[4] * l[1] + f[5] * l[2],
+                  f[6] * l[0] + f[7] * l[1] + f[8] * l[2]};
+    *open = *shut = 0;
+    if (!(d[2] > 0.0f))
+        return;
+    long n = (long)vs->resolution;
+    size_t at = texel_of(d, vs->resolution);
+    long i = (long)at % n, j = (long)at / n;
+    for (long b = j - 1; b <= j + 1; b++)
+        for (long a = i - 1; a <= i + 1; a++) {
+            if (a < 0 || b < 0 || a >= n || b >= n)
+                continue;
+            if (texel_open(vs, (size_t)(b * n + a)))
+                (*open)++;
+            else
+                (*shut)++;
+        }
+}
+
+static int light_at_edge(const wenv_light_visibility *vis, const float l[3])
+{
+    int open, shut;
+    texels_about((const wenv_vertex_shadow *)vis, l, &open, &shut);
+    return open && shut;
+}
+
+/* A light in direction l: what the mask says where its texels about l agree, else a ray. */
+static float light_visible(const wenv_light_visibility *vis, const float l[3])
+{
+    const wenv_vertex_shadow *vs = (const wenv_vertex_shadow *)vis;
+    int open, shut;
+    texels_about(vs, l, &open, &shut);
+    if (!shut)
+        return open ? 1.0f : 0.0f; /* below the horizon it brings nothing anyway */
+    if (!open)
+        return 0.0f;
+    const float *t = vs->turn; /* the ray is cast in the world */
+    float world[3] = {t[0] * l[0] + t[3] * l[1] + t[6] * l[2], t[1] * l[0] + t[4] * l[1] + t[7] * l[2],
+                      t[2] * l[0] + t[5] * l[1] + t[8] * l[2]};
+    unsigned char hit;
+    wenv_occluders_test(vs->occluders, vs->origin, world, 1, INFINITY, &hit);
+    return hit ? 0.0f : 1.0f;
+}
+
+void wenv_vertex_shadow_init(wenv_vertex_shadow *vs, const wenv_shadow_scene *scene, size_t i)
+{
+    const wenv_occlusion *o = scene->occlusion;
+    const float *nf = o->normals + 3 * i, *p = o->positions + 3 * i;
+    double nn[3] = {nf[0], nf[1], nf[2]}, f[9];
+    wenv_frame(nn, f);
+    /* local = F w for a world direction w, and w = T' h for h in the method's frame: local = F T' h */
+    const float *t = scene->turn;
+    for (int r = 0; r < 3; r++)
+        for (int c = 0; c < 3; c++)
+            vs->frame[3 * r + c] = (float)(f[3 * r] * t[3 * c] + f[3 * r + 1] * t[3 * c + 1] + f[3 * r + 2] * t[3 * c + 2]);
+    vs->turn = t;
+    vs->mask = o->masks + (size_t)o->slot[i] * o->words;
+    vs->resolution = o->resolution;
+    vs->occluders = scene->occluders;
+    float lift = wenv_occluders_offset(scene->occluders);
+    for (int k = 0; k < 3; k++)
+        vs->origin[k] = p[k] + lift * nf[k];
+    vs->lights.visible = light_visible;
+    vs->lights.at_edge = light_at_edge;
+    /* a cluster wider than half a texel may straddle a shadow's edge the mask cannot place */
+    vs->lights.sin_radius_max = sinf((float)M_PI / (4.0f * (float)o->resolution));
+}
+
+void wenv_shadow_specular(const wenv_vertex_shadow *vs, const wenv_texel_reflection *tr, const float *blocked,
+                          const float v[3], const float albedo[3], float s[3])
+{
+    const float *f = vs->frame;
+    float d[3] = {f[0] * v[0] + f[1] * v[1] + f[2] * v[2], f[3] * v[0] + f[4] * v[1] + f[5] * v[2],
+                  f[6] * v[0] + f[7] * v[1] + f[8] * v[2]};
+    float u, w;
+    wenv_hemi_encode_f(d, &u, &w);
+    uint32_t idx[4];
+    float wt[4];
+    wenv_hemi_bilinear_f((long)tr->views, u, w, idx, wt);
+    size_t texels = tr->resolution * tr->resolution;
+    const float *row[4];
+    for (int q = 0; q < 4; q++)
+        row[q] = tr->specular + (size_t)idx[q] * texels * 3;
+    float acc[3] = {0.0f, 0.0f, 0.0f};
+    FOR_EACH_BLOCKED(vs, texels, {
+        const float *x = blocked + 3 * k;
+        for (int c = 0; c < 3; c++) {
+            size_t e = 3 * t + (size_t)c;
+            acc[c] += x[c] * (wt[0] * row[0][e] + wt[1] * row[1][e] + wt[2] * row[2][e] + wt[3] * row[3][e]);
+        }
+    });
+    for (int c = 0; c < 3; c++)
+        s[c] -= albedo[c] * acc[c];
+}
+
+void wenv_shadow_hidden_light(const wenv_vertex_shadow *vs, const wenv_node_pyramid *pyramid, const float *cosine,
+                              float *lbar, float e_hidden[3])
+{
+    size_t r = vs->resolution, texels = r * r;
+    const float *f = vs->frame;
+    e_hidden[0] = e_hidden[1] = e_hidden[2] = 0.0f;
+    FOR_EACH_BLOCKED(vs, texels, {
+        double l[3];
+        wenv_hemi_decode(wenv_map_texel_center(r, t % r), wenv_map_texel_center(r, t / r), l);
+        float d[3];
+        for (int c = 0; c < 3; c++)
+            d[c] = (float)(f[c] * l[0] + f[3 + c] * l[1] + f[6 + c] * l[2]);
+        /* read over the texel: a footprint of the square root of its solid angle */
+        float footprint = 0.5f * log2f((float)wenv_hemi_texel_solid_angle(r, t % r, t / r));
+        float *x = lbar + 3 * k;
+        wenv_node_pyramid_read(pyramid, d, footprint, x);
+        for (int c = 0; c < 3; c++)
+            e_hidden[c] += x[c] * cosine[t];
+    });
+}
+
+void wenv_shadow_bounce(const wenv_shadow_scene *scene, size_t slot, const float *bounce, const float *cosine,
+                        float *lbar, float e_hidden[3])
+{
+    const wenv_occlusion *o = scene->occlusion;
+    const wenv_occlusion_hit *hit = o->hits + o->hit_start[slot];
+    const uint32_t *triangles = wenv_occluders_triangles(scene->occluders);
+    wenv_vertex_shadow vs = {.mask = o->masks + slot * o->words, .resolution = o->resolution};
+    size_t texels = o->resolution * o->resolution;
+    float scale = scene->bounce_scale;
+    FOR_EACH_BLOCKED(&vs, texels, {
+        const uint32_t *tri = triangles + 3 * (size_t)hit[k].triangle;
+        float w[3];
+        wenv_occlusion_hit_weights(&hit[k], w);
+        for (int c = 0; c < 3; c++) {
+            float b = scale * (w[0] * bounce[3 * (size_t)tri[0] + (size_t)c] +
+                               w[1] * bounce[3 * (size_t)tri[1] + (size_t)c] + w[2] * bounce[3 * (size_t)tri[2] + (size_t)c]);
+            lbar[3 * k + (size_t)c] -= b;
+            e_hidden[c] -= b * cosine[t];
+        }
+    });
+}
