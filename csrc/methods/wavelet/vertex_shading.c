@@ -2,6 +2,8 @@
  * sample) radiance table made as vertices need it, the exact lights and the grazing path. */
 #include "methods/wavelet/wavelet_state.h"
 
+#include "base/fingerprint.h"
+
 #include <math.h>
 #include <stdatomic.h>
 #include <stdlib.h>
@@ -378,8 +380,9 @@ static wenv_status fill_needed(wenv_wavelet *wavelet, wenv_error *err)
 }
 
 /* Vertex i's part of the scene: NULL when it sees its whole hemisphere. */
+/* env_only: the hidden lighting alone, before any bounce. */
 static const vertex_shadow *vertex_shadow_at(const wenv_wavelet *wavelet, const wenv_shadow_scene *scene, size_t row,
-                                             vertex_shadow *sh)
+                                             int env_only, vertex_shadow *sh)
 {
     if (!scene)
         return NULL;
@@ -388,8 +391,8 @@ static const vertex_shadow *vertex_shadow_at(const wenv_wavelet *wavelet, const 
         return NULL;
     size_t slot = (size_t)scene->occlusion->slot[i];
     wenv_vertex_shadow_init(&sh->vs, scene, i);
-    sh->hidden = wavelet->shadow_hidden + 3 * scene->occlusion->hit_start[slot];
-    sh->e_hidden = wavelet->shadow_e_hidden + 3 * slot;
+    sh->hidden = (env_only ? wavelet->shadow_lbar : wavelet->shadow_hidden) + 3 * scene->occlusion->hit_start[slot];
+    sh->e_hidden = (env_only ? wavelet->shadow_e_env : wavelet->shadow_e_hidden) + 3 * slot;
     return sh;
 }
 
@@ -419,7 +422,7 @@ static wenv_status shade_all(wenv_wavelet *wavelet, const float *normals, const 
         }
         if (read_taps(wavelet, &tp)) {
             vertex_shadow sh;
-            shade_vertex(wavelet, &tp, vertex_shadow_at(wavelet, scene, (size_t)i, &sh), o);
+            shade_vertex(wavelet, &tp, vertex_shadow_at(wavelet, scene, (size_t)i, 0, &sh), o);
             continue;
         }
         flag_taps(&tp, wavelet->slice_need, wavelet->m->row_need);
@@ -437,7 +440,7 @@ static wenv_status shade_all(wenv_wavelet *wavelet, const float *normals, const 
             vertex_shadow sh;
             size_t i = pending[e];
             compute_taps(wavelet, normals + 3 * i, views + 3 * i, &tp);
-            shade_vertex(wavelet, &tp, vertex_shadow_at(wavelet, scene, i, &sh), out + 3 * i);
+            shade_vertex(wavelet, &tp, vertex_shadow_at(wavelet, scene, i, 0, &sh), out + 3 * i);
         }
     }
     free(pending);
@@ -457,8 +460,8 @@ wenv_status wenv_wavelet_shade(wenv_wavelet *wavelet, const float *normals, cons
 /* ---- with the scene in the way ------------------------------------------------------------------ */
 
 /* The diffuse light leaving each of n vertices head-on: the Lambertian part's albedo / pi at a view
- * along the normal times the irradiance (less what the blocked texels hide: the shadow cache's sums
- * of the hidden lighting alone, before any bounce, with the lights tested). */
+ * along the normal times the irradiance (less what the blocked texels hide: the hidden lighting
+ * alone, before any bounce, with the lights tested). */
 static void diffuse_light(const wenv_wavelet *wavelet, const float *normals, size_t n, const wenv_shadow_scene *scene,
                           float *out)
 {
@@ -474,7 +477,7 @@ static void diffuse_light(const wenv_wavelet *wavelet, const float *normals, siz
         wenv_oct_encode_f(nrm, &ou, &ov);
         wenv_oct_bilinear_f((long)wavelet->q.normal_n, ou, ov, sample, w);
         vertex_shadow sh;
-        const vertex_shadow *shp = vertex_shadow_at(wavelet, scene, (size_t)i, &sh);
+        const vertex_shadow *shp = vertex_shadow_at(wavelet, scene, (size_t)i, 1, &sh);
         sampled_irradiance(wavelet, sample, w, shp, e);
         if (wenv_lights_count(wavelet->lights, 0))
             lights_irradiance(wavelet, nrm, shp, e);
@@ -514,9 +517,58 @@ static float *occlusion_normals(const wenv_shadow_scene *scene)
     return out;
 }
 
+/* Replaces *a and *b by blocks of na and nb RGB triples (at least one each); -1 when out of memory,
+ * with both kept. */
+static int renew_pair(float **a, size_t na, float **b, size_t nb)
+{
+    float *x = malloc((na ? na : 1) * 3 * sizeof(float)), *y = malloc((nb ? nb : 1) * 3 * sizeof(float));
+    if (!x || !y) {
+        free(x);
+        free(y);
+        return -1;
+    }
+    free(*a);
+    free(*b);
+    *a = x;
+    *b = y;
+    return 0;
+}
+
+/* The hidden lighting of every blocked texel and its sums, unless kept for this occlusion under this
+ * lighting and frame. */
+static wenv_status ensure_hidden_light(wenv_wavelet *wavelet, const wenv_shadow_scene *scene, wenv_error *err)
+{
+    const wenv_occlusion *o = scene->occlusion;
+    uint64_t key = wenv_fingerprint_floats(wenv_fingerprint_word(WENV_FINGERPRINT_START, o->fingerprint), scene->turn, 9);
+    if (wavelet->shadow_env_valid && wavelet->shadow_env_key == key)
+        return WENV_OK;
+    wavelet->shadow_env_valid = wavelet->shadow_valid = 0;
+    size_t hits = o->n_masks ? o->hit_start[o->n_masks] : 0;
+    if (renew_pair(&wavelet->shadow_lbar, hits, &wavelet->shadow_e_env, o->n_masks) < 0)
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the shadows of %zu vertices", o->n_vertices);
+    const wenv_node_pyramid *pyramid = wenv_grazing_light_pyramid(wavelet->grazing_light);
+    const float *cosine = wavelet->m->texel_reflection.cosine;
+    float *lbar = wavelet->shadow_lbar, *e_env = wavelet->shadow_e_env;
+    long long nn = (long long)o->n_vertices;
+#pragma omp parallel for schedule(dynamic, 256)
+    for (long long i = 0; i < nn; i++) {
+        if (o->slot[i] < 0)
+            continue;
+        size_t slot = (size_t)o->slot[i];
+        wenv_vertex_shadow vs;
+        wenv_vertex_shadow_init(&vs, scene, (size_t)i);
+        wenv_shadow_hidden_light(&vs, pyramid, cosine, lbar + 3 * o->hit_start[slot], e_env + 3 * slot);
+    }
+    wavelet->shadow_env_key = key;
+    wavelet->shadow_env_valid = 1;
+    return WENV_OK;
+}
+
 /* Makes what shading with `scene` keeps, unless it holds: the pyramid, the material's texel
- * reflection at the masks' resolution, and the hidden lighting of every blocked texel. */
-static wenv_status ensure_shadows(wenv_wavelet *wavelet, const wenv_shadow_scene *scene, wenv_error *err)
+ * reflection at the masks' resolution, the hidden lighting, and the same less the blocker's light.
+ * with_bounce 0: the hidden lighting alone. */
+static wenv_status ensure_shadows(wenv_wavelet *wavelet, const wenv_shadow_scene *scene, int with_bounce,
+                                  wenv_error *err)
 {
     wavelet->shadowing = 1;
     if (wenv_wavelet_ensure_grazing(wavelet, err) || wenv_wavelet_ensure_pyramid(wavelet, err))
@@ -528,38 +580,23 @@ static wenv_status ensure_shadows(wenv_wavelet *wavelet, const wenv_shadow_scene
         if (wenv_texel_reflection_make(&m->texel_reflection, m->mat, o->resolution, err))
             return err->status;
     }
+    if (ensure_hidden_light(wavelet, scene, err) || !with_bounce)
+        return err->status;
     size_t own = scene->bounce_self ? m->serial : 0;
     if (wavelet->shadow_valid && wavelet->shadow_key == scene->key && wavelet->shadow_material == own)
         return WENV_OK;
     wavelet->shadow_valid = 0;
     size_t n = o->n_vertices, hits = o->n_masks ? o->hit_start[o->n_masks] : 0;
-    float *hidden = malloc((hits ? hits : 1) * 3 * sizeof(float));
-    float *e_hidden = malloc((o->n_masks ? o->n_masks : 1) * 3 * sizeof(float));
     float *own_light = scene->bounce_self ? malloc((n ? n : 1) * 3 * sizeof(float)) : NULL;
     float *normals = scene->bounce_self ? occlusion_normals(scene) : NULL;
-    if (!hidden || !e_hidden || (scene->bounce_self && (!own_light || !normals))) {
-        free(hidden);
-        free(e_hidden);
+    if ((scene->bounce_self && (!own_light || !normals)) ||
+        renew_pair(&wavelet->shadow_hidden, hits, &wavelet->shadow_e_hidden, o->n_masks) < 0) {
         free(own_light);
         free(normals);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the shadows of %zu vertices", n);
     }
-    free(wavelet->shadow_hidden);
-    free(wavelet->shadow_e_hidden);
-    wavelet->shadow_hidden = hidden;
-    wavelet->shadow_e_hidden = e_hidden;
-    const wenv_node_pyramid *pyramid = wenv_grazing_light_pyramid(wavelet->grazing_light);
-    const float *cosine = m->texel_reflection.cosine;
-    long long nn = (long long)n;
-#pragma omp parallel for schedule(dynamic, 256)
-    for (long long i = 0; i < nn; i++) {
-        if (o->slot[i] < 0)
-            continue;
-        size_t slot = (size_t)o->slot[i];
-        wenv_vertex_shadow vs;
-        wenv_vertex_shadow_init(&vs, scene, (size_t)i);
-        wenv_shadow_hidden_light(&vs, pyramid, cosine, hidden + 3 * o->hit_start[slot], e_hidden + 3 * slot);
-    }
+    memcpy(wavelet->shadow_hidden, wavelet->shadow_lbar, hits * 3 * sizeof(float));
+    memcpy(wavelet->shadow_e_hidden, wavelet->shadow_e_env, o->n_masks * 3 * sizeof(float));
     /* a given bounce is in the world's units; a mesh's own light is in the method's already */
     wenv_shadow_scene sending = *scene;
     sending.rows = NULL; /* every vertex of the occlusion, in order */
@@ -570,6 +607,8 @@ static wenv_status ensure_shadows(wenv_wavelet *wavelet, const wenv_shadow_scene
         sending.bounce_scale = 1.0f;
     }
     if (sending.bounce) {
+        const float *cosine = m->texel_reflection.cosine;
+        float *hidden = wavelet->shadow_hidden, *e_hidden = wavelet->shadow_e_hidden;
         long long nm = (long long)o->n_masks;
 #pragma omp parallel for schedule(dynamic, 256)
         for (long long k = 0; k < nm; k++)
@@ -589,7 +628,7 @@ wenv_status wenv_wavelet_shade_shadowed(wenv_wavelet *wavelet, const float *norm
 {
     if (!wavelet->have_env || !wavelet->m)
         return wenv_error_set(err, WENV_ERR_VALUE, "the shader needs an environment and a material");
-    if (check_scene(scene, n, err) || ensure_shadows(wavelet, scene, err))
+    if (check_scene(scene, n, err) || ensure_shadows(wavelet, scene, 1, err))
         return err->status;
     return shade_all(wavelet, normals, views, n, scene, out, err);
 }
@@ -603,11 +642,7 @@ wenv_status wenv_wavelet_diffuse_light(wenv_wavelet *wavelet, const float *norma
         if (check_scene(scene, n, err))
             return err->status;
         /* the hidden lighting alone: a bounce asked of this mesh is what it sends, not what it gets */
-        wenv_shadow_scene alone = *scene;
-        alone.bounce = NULL;
-        alone.bounce_self = 0;
-        alone.key = ~scene->key;
-        if (ensure_shadows(wavelet, &alone, err))
+        if (ensure_shadows(wavelet, scene, 0, err))
             return err->status;
     }
     diffuse_light(wavelet, normals, n, scene, out);

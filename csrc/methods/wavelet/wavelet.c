@@ -71,6 +71,8 @@ void wenv_wavelet_free(wenv_wavelet *wavelet)
     free(wavelet->excluded);
     free(wavelet->shadow_hidden);
     free(wavelet->shadow_e_hidden);
+    free(wavelet->shadow_lbar);
+    free(wavelet->shadow_e_env);
     free(wavelet->slice_ready);
     free(wavelet->slice_need);
     wenv_wavelet_free_quadrature(wavelet);
@@ -288,7 +290,7 @@ wenv_status wenv_wavelet_set_environment(wenv_wavelet *wavelet, const wenv_envma
     wavelet->n_excluded = npixels;
     excluded = NULL;
     wavelet->have_env = 1;
-    wavelet->shadow_valid = 0;
+    wavelet->shadow_valid = wavelet->shadow_env_valid = 0;
     st = wenv_wavelet_remake_ready(wavelet, 1, err);
 done:
     free(texels);

@@ -85,10 +85,15 @@ struct wenv_wavelet {
     wenv_texel_rule quad, fine, fine_coarse;
     float *texel_centre;     /* nl x 3: each local texel's centre direction */
 
-    /* shading with shadows (shadows.h): per blocked texel the hidden lighting less the blocker's
-     * light, and per mask its cosine-weighted sum, kept while the lighting and the scene's key hold
-     * (and, when a mesh's own diffuse light is its bounce, the material) */
+    /* shading with shadows (shadows.h): per blocked texel the hidden lighting, and per mask its
+     * cosine-weighted sum, kept while the lighting and the occlusion hold; the same less the
+     * blocker's light, kept while the scene's key holds too (and, when a mesh's own diffuse light is
+     * its bounce, the material) */
     int shadowing;            /* shaded with shadows since made: a new lighting makes the pyramid too */
+    int shadow_env_valid;
+    uint64_t shadow_env_key;
+    float *shadow_lbar;       /* hits x 3 */
+    float *shadow_e_env;      /* masks x 3 */
     int shadow_valid;
     uint64_t shadow_key;
     size_t shadow_material;   /* the serial of the material whose diffuse light the bounce is (0: none) */
