@@ -35,3 +35,4 @@ def unregister():
     for module in reversed(_modules):
         module.unregister()
     engine.shaders.clear()
+    engine.shadows.clear()

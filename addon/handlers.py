@@ -83,6 +83,7 @@ def load_post(*_args):
     # of the new file may reuse names).  The shaders' rotation matrices stay (they are data-free).
     LiveState.reset()
     engine.shaders.forget_data()
+    engine.shadows.clear()
     properties.migrate(bpy.data)
 
 

@@ -9,9 +9,9 @@ class MeshData:
     with the material slot of each element; `unplaced` (bool, or None) marks the elements whose
     position is not finite, which are left black."""
 
-    __slots__ = ("domain", "positions", "normals", "slots", "count", "notes", "unplaced")
+    __slots__ = ("domain", "positions", "normals", "slots", "count", "notes", "unplaced", "triangles")
 
-    def __init__(self, domain, positions, normals, slots, notes=(), unplaced=None):
+    def __init__(self, domain, positions, normals, slots, notes=(), unplaced=None, triangles=None):
         self.domain = domain
         self.positions = positions
         self.normals = normals
@@ -19,6 +19,7 @@ class MeshData:
         self.count = len(positions)
         self.notes = list(notes)
         self.unplaced = unplaced
+        self.triangles = triangles  # (m, 3) int32 indices into positions (what casts shadows), or None
 
 
 def _read(collection, attr, count, width, dtype=np.float32):
@@ -95,7 +96,10 @@ def read_mesh(obj, depsgraph):
         what = "vertices" if domain == "POINT" else "face corners"
         notes.append(f"'{obj.name}': {int(unplaced.sum())} {what} at no finite position (NaN or infinite) "
                      "left black")
-    return MeshData(domain, world_pos, world_nrm, slots, notes, unplaced)
+    # the triangles, indexing the points or the corners shaded: what the mesh blocks its sky with
+    tris = mesh.loop_triangles
+    triangles = _read(tris, "vertices" if domain == "POINT" else "loops", len(tris), 3, np.int32)
+    return MeshData(domain, world_pos, world_nrm, slots, notes, unplaced, triangles.reshape(-1, 3))
 
 
 def write_colors(mesh, domain, rgb, seen=None):

@@ -146,6 +146,10 @@ class WENV_SceneSettings(bpy.types.PropertyGroup):
                                              "materials stay still, refine the colours in the background to "
                                              "High (within 1 % of the reference for roughness 0.1 and up); any "
                                              "change shows the quality set at once and drops the refinement")
+    shadows: BoolProperty(name="Shadows and Bounce Light", default=True,
+                          description="The scene's meshes block each vertex's sky (rays cast once per mesh state) "
+                                      "and send their diffuse light back into what they shadow.  A convex mesh "
+                                      "alone is shaded as without: it blocks nothing")
     preview_changes: BoolProperty(name="Draft While Remaking", default=True,
                                   description="In live mode at Default, High or Auto, a change that makes the "
                                               "setting remake its slices (a new World image, a material edit) "
@@ -160,6 +164,12 @@ class WENV_SceneSettings(bpy.types.PropertyGroup):
     # (handlers.undo_post).
     shaded_frame: IntProperty(name="Shaded Frame", default=shading.NO_FRAME, options={"HIDDEN"},
                               description="The frame at which colours were last written")
+
+
+class WENV_ObjectSettings(bpy.types.PropertyGroup):
+    casts_shadows: BoolProperty(name="Casts Shadows", default=True,
+                                description="This mesh blocks the sky of the meshes wenv shades (itself included) "
+                                            "when the scene's Shadows and Bounce Light is on")
 
 
 class WENV_ViewportBackup(bpy.types.PropertyGroup):
@@ -192,7 +202,8 @@ class WENV_WindowSettings(bpy.types.PropertyGroup):
                                                 "attribute colours); off sets each viewport back as it was")
 
 
-classes = (WENV_LobeSettings, WENV_MaterialSettings, WENV_SceneSettings, WENV_ViewportBackup, WENV_WindowSettings)
+classes = (WENV_LobeSettings, WENV_MaterialSettings, WENV_SceneSettings, WENV_ObjectSettings, WENV_ViewportBackup,
+           WENV_WindowSettings)
 
 
 # Settings a .blend may hold under an earlier name: (collection of the settings, old key, new property).
@@ -222,6 +233,7 @@ def register():
         bpy.utils.register_class(cls)
     bpy.types.Scene.wenv = PointerProperty(type=WENV_SceneSettings)
     bpy.types.Material.wenv = PointerProperty(type=WENV_MaterialSettings)
+    bpy.types.Object.wenv = PointerProperty(type=WENV_ObjectSettings)
     bpy.types.View3DShading.wenv = PointerProperty(type=WENV_ViewportBackup)
     bpy.types.WindowManager.wenv = PointerProperty(type=WENV_WindowSettings)
 
@@ -229,6 +241,7 @@ def register():
 def unregister():
     del bpy.types.WindowManager.wenv
     del bpy.types.View3DShading.wenv
+    del bpy.types.Object.wenv
     del bpy.types.Material.wenv
     del bpy.types.Scene.wenv
     for cls in reversed(classes):

@@ -28,7 +28,7 @@ class ShadingPlan:
     the colours back on the main thread, by object name."""
 
     def __init__(self, quality, spec, environment, view, tone, l_max, target_error=0.01, memory_budget_mb=1024,
-                 cull=False):
+                 cull=False, shadows=False):
         self.quality = quality  # what compute() shades at
         self.chosen = quality  # the scene's setting: quality is PREVIEW_QUALITY while this one is made
         self.cull = cull  # shade only the vertices a viewport sees (engine.shade_arrays)
@@ -40,6 +40,9 @@ class ShadingPlan:
         self.tone = tone
         self.l_max = l_max
         self.items = []  # (object name, MeshData, material keys per slot)
+        self.shadows = shadows  # shade with the scene in the way (engine.shadows)
+        self.casts = []  # per item: whether it blocks light (the object's Casts Shadows)
+        self.blockers = []  # (positions, triangles) of the other meshes that block light
         self.notes = []
         self.results = None
         self.auto_choices = {}  # (object name, material key) -> stats["auto"] of the shader used
@@ -110,12 +113,34 @@ class ShadingPlan:
     def _results(self, rgbs, seens):
         return [self._result(name, data, rgb, seen) for (name, data, _), rgb, seen in zip(self.items, rgbs, seens)]
 
+    def _scenes(self, quality, work, cancelled=None):
+        """Per part of `work`, the keywords of shading it with the scene in the way: its occlusion
+        against every blocking mesh, and as bounce the light every occluder vertex sends back (the
+        shaded parts' diffuse light; black for the blockers not shaded).  None without shadows."""
+        if not self.shadows:
+            return [None] * len(work)
+        meshes_in = [(data.positions, engine.shadow_triangles(data.positions, data.triangles)[0] if cast
+                      else np.zeros((0, 3), np.int32)) for (_, data, _), cast in zip(self.items, self.casts)]
+        meshes_in += self.blockers
+        if not any(len(t) for _, t in meshes_in):
+            return [None] * len(work)
+        with engine.shadows.lock:
+            occluders, offsets = engine.shadows.occluders(meshes_in, self.memory_budget_mb)
+            occlusions = [engine.shadows.occlusion(occluders, part.positions, part.normals)
+                          for _, _, _, _, part in work]
+        bounce = np.zeros((offsets[-1], 3), np.float32)
+        for (i, name, key, sel, part), occlusion in zip(work, occlusions):
+            shader = self._shader(quality, name, key, part.normals, cancelled)
+            bounce[offsets[i] + np.flatnonzero(sel)] = engine.diffuse_light(shader, part, occlusion)
+        return [dict(occlusion=o, bounce=bounce) for o in occlusions]
+
     def compute(self):
         rgbs, seens = self._buffers()
         with engine.shaders.lock:
-            for i, name, key, sel, part in self._ordered_parts(self.quality):
+            work = self._ordered_parts(self.quality)
+            for (i, name, key, sel, part), scene in zip(work, self._scenes(self.quality, work)):
                 shader = self._shader(self.quality, name, key, part.normals)
-                rgbs[i][sel], part_seen = engine.shade_arrays(shader, part, self.view, self.cull)
+                rgbs[i][sel], part_seen = engine.shade_arrays(shader, part, self.view, self.cull, scene)
                 if seens[i] is not None and part_seen is not None:
                     seens[i][sel] = part_seen
         self.results = self._results(rgbs, seens)
@@ -129,7 +154,13 @@ class ShadingPlan:
         rgbs, seens = self._buffers()
         total = sum(data.count for _, data, _ in self.items)
         done = 0
-        for i, name, key, sel, part in self._ordered_parts(quality):
+        work = self._ordered_parts(quality)
+        with engine.shaders.lock:
+            try:
+                scenes = self._scenes(quality, work, cancelled)
+            except engine.CancelledError:
+                return None
+        for (i, name, key, sel, part), scene in zip(work, scenes):
             out = np.zeros((part.count, 3), np.float32)
             first, count = 0, None
             while count is None or first < count:
@@ -140,7 +171,8 @@ class ShadingPlan:
                         shader = self._shader(quality, name, key, part.normals, cancelled)
                     except engine.CancelledError:
                         return None
-                    first, count = engine.shade_step(shader, part, self.view, self.cull, out, first, step_seconds)
+                    first, count = engine.shade_step(shader, part, self.view, self.cull, out, first, step_seconds,
+                                                     scene)
                 report((done + part.count * (first / count if count else 1.0)) / total)
             rgbs[i][sel] = out
             done += part.count
@@ -191,7 +223,7 @@ def plan_shading(scene, depsgraph, objects, view, images, progress=None, preview
         raise SetupError("Leave Edit Mode to shade" if editing else
                          "No mesh objects to shade: select at least one mesh")
     plan = ShadingPlan(quality, spec, world.environment(spec, images), view, st.tone_mapping, st.max_luminance,
-                       st.target_error / 100.0, st.memory_budget, cull=st.shade_only_seen)
+                       st.target_error / 100.0, st.memory_budget, cull=st.shade_only_seen, shadows=st.shadows)
     if st.shade_only_seen and view.view_projection is None and st.view_source == "VIEWPORT" and not view.perspective:
         notes.append("Shade Only What Is Seen applies to perspective viewports: this orthographic view shades "
                      "every vertex")
@@ -206,7 +238,20 @@ def plan_shading(scene, depsgraph, objects, view, images, progress=None, preview
             notes.append(f"'{obj.name}' has no vertices")
             continue
         plan.items.append((obj.name, data, materials.slot_material_keys(obj)))
+        plan.casts.append(obj.wenv.casts_shadows)
         notes += [n for n in materials.slot_notes(obj) if n not in notes]
+    if st.shadows:
+        shaded = {o.name for o in mesh_objects}
+        for obj in scene.objects:
+            if (obj.type == "MESH" and obj.name not in shaded and obj.wenv.casts_shadows and obj.visible_get()
+                    and obj.mode != "EDIT"):
+                data = meshes.read_mesh(obj, depsgraph)
+                if data.count:
+                    plan.blockers.append((data.positions, engine.shadow_triangles(data.positions, data.triangles)[0]))
+        dropped = sum(engine.shadow_triangles(d.positions, d.triangles)[1] for (_, d, _), c in
+                      zip(plan.items, plan.casts) if c)
+        if dropped:
+            notes.append(f"{dropped} degenerate face(s) (no area) cast no shadow")
     if preview and st.preview_changes:
         plan.preview_if_slow()
     if plan.quality != engine.AUTO:

@@ -41,6 +41,10 @@ class WENV_PT_shading(_SidebarPanel, bpy.types.Panel):
         sub = col.column()
         sub.active = st.view_source == "VIEWPORT"
         sub.prop(st, "shade_only_seen")
+        col.prop(st, "shadows")
+        obj = context.active_object
+        if st.shadows and obj is not None and obj.type == "MESH":
+            col.prop(obj.wenv, "casts_shadows", text=f"'{obj.name}' Casts Shadows")
         col.prop(st, "tone_mapping")
         sub = col.column()
         sub.active = st.tone_mapping == "LOG"

@@ -39,12 +39,14 @@ def registered(tmp_path_factory):
 @pytest.fixture
 def scene():
     """Blender's factory start-up scene (cube, camera, light, grey World), draft quality, live mode
-    not refining at rest (the tests of refinement turn it on)."""
+    not refining at rest (the tests of refinement turn it on), shadows off (their tests turn them
+    on: the start-up cube would otherwise stand in every object's sky)."""
     bpy.ops.wm.read_homefile(use_factory_startup=True)
     sc = bpy.context.scene
     sc.wenv.quality = "DRAFT"
-    assert sc.wenv.refine_at_rest  # on for users
+    assert sc.wenv.refine_at_rest and sc.wenv.shadows  # on for users
     sc.wenv.refine_at_rest = False
+    sc.wenv.shadows = False
     return sc
 
 
@@ -1842,3 +1844,78 @@ def test_cached_shaders_do_not_keep_an_operator_s_progress_callback():
                          progress=lambda f: calls.append(f))
     direct.set_material(many)
     assert len(calls) > built
+
+
+# ---------------------------------------------------------------------------------------------
+# Shadows and bounce light
+
+
+def mesh_triangles(obj):
+    me = obj.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
+    t = np.empty(len(me.loop_triangles) * 3, np.int32)
+    me.loop_triangles.foreach_get("vertices", t)
+    return t.reshape(-1, 3)
+
+
+def test_shadows_equal_the_core_with_occlusion(scene):
+    """Suzanne alone with Shadows and Bounce Light: the colours are the core's shading with her
+    occlusion (at the add-on's resolution for her size) and her own diffuse light as the bounce,
+    and differ from the unshadowed ones where she blocks her own sky."""
+    bpy.data.objects.remove(bpy.data.objects["Cube"])
+    env_world(scene, "forest")
+    obj = add_monkey(subdivisions=1)
+    mat = set_material(obj, lobes=((0.2, 1.5, "GGX"),))
+    scene.wenv.shadows = True
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    _, rgb = attribute(obj)
+    p, n = world_arrays(obj, corner=False)
+    occlusion = wenv.Occluders(p, mesh_triangles(obj)).occlusion(p, n, resolution=engine.occlusion_resolution(len(p)))
+    assert occlusion.resolution == 16 and occlusion.blocked_vertices > len(p) // 3
+    shader = core_shader(wenv.load_environment(hdri_path("forest")), wenv_material(mat))
+    eye = tuple(scene.camera.matrix_world.translation)
+    want = shader.shade_mesh(p, n, eye, occlusion=occlusion, bounce=shader.diffuse_light(n, occlusion=occlusion))
+    close = np.all(np.abs(rgb - want) <= 1e-3 * np.abs(want) + 1e-5, axis=1)
+    assert close.mean() > 0.99  # (the add-on's normals are not unit: a ray at a texel's edge may flip)
+    plain = shader.shade_mesh(p, n, eye)
+    assert np.mean(np.abs(rgb - plain)) > 0.02 * np.mean(plain)
+
+
+def test_a_convex_mesh_alone_shades_as_without_shadows(scene):
+    """The start-up cube alone blocks nothing: the same colours to the bit with shadows on and off."""
+    env_world(scene, "city")
+    cube = bpy.data.objects["Cube"]
+    set_material(cube)
+    select_only(cube)
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    _, without = attribute(cube)
+    scene.wenv.shadows = True
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    _, with_shadows = attribute(cube)
+    assert np.array_equal(with_shadows, without)
+
+
+def test_another_mesh_casts_shadows_unless_told_not_to(scene):
+    """A plane under the start-up cube (not shaded): darker beneath it with shadows on; the same as
+    without once the cube's Casts Shadows is off."""
+    env_world(scene, "sunset")
+    bpy.ops.mesh.primitive_plane_add(size=8.0, location=(0.0, 0.0, -1.5))
+    plane = bpy.context.object
+    bpy.ops.object.modifier_add(type="SUBSURF")
+    plane.modifiers[-1].subdivision_type = "SIMPLE"
+    plane.modifiers[-1].levels = 4
+    bpy.ops.object.modifier_apply(modifier=plane.modifiers[-1].name)
+    plane.data.shade_smooth()
+    set_material(plane, model="LAMBERT", diffuse=(0.6, 0.6, 0.6), lobes=())
+    select_only(plane)
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    _, plain = attribute(plane)
+    scene.wenv.shadows = True
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    _, shadowed = attribute(plane)
+    p, _ = world_arrays(plane, corner=False)
+    under = np.hypot(p[:, 0], p[:, 1]) < 0.5
+    assert under.any() and np.all(shadowed[under].sum(1) < 0.8 * plain[under].sum(1))
+    bpy.data.objects["Cube"].wenv.casts_shadows = False
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    _, again = attribute(plane)
+    assert np.array_equal(again, plain)
