@@ -1,15 +1,15 @@
 """The main job, on an embedded default (no downloads): what a Blender user came for.  A bpy scene --
 Suzanne with a Principled BSDF paint under Blender's bundled "sunset" HDRI, a camera -- is shaded by
-the wenv add-on (registered from this checkout) into its colour attribute; the colours are rendered
-to an image (Workbench, flat attribute colours) beside Cycles' render of the same scene; the gloss of
-the material is read as a glossmeter would.  Writes out/demo.png (wenv | Cycles | difference x 4)
-and prints the timings, the difference and the readings.
+the wenv add-on (registered from this checkout) into its colour attribute, with her shadows and the
+light she bounces into them; the colours are rendered to an image (Workbench, flat attribute
+colours) beside Cycles' and EEVEE's renders of the same scene; the gloss of the material is read as
+a glossmeter would.  Writes out/demo.png (wenv | Cycles | EEVEE | wenv's difference x 4) and prints
+the timings, the differences and the readings.
 
     .venv/bin/python examples/demo.py [--hdri sunset] [--quality default] [--size 320] [--samples 64] [--out out/demo.png]
 
-Cycles renders what wenv leaves out -- Suzanne shadowing and lighting herself (her eyes, ears and
-mouth) -- so the two differ most in her hollows; on an unoccluded sphere wenv's reference matches
-Cycles within the render's noise (tests/test_principled.py, benchmarks/principled_vs_cycles.py)."""
+benchmarks/shadows_vs_cycles.py measures the same over the eight HDRIs, three materials and two
+scenes, against Cycles with and without bounces and with Cycles' noise stated."""
 import argparse
 import math
 import os
@@ -114,23 +114,32 @@ def main():
     mesh.color_attributes.active_color_name = meshes.ATTRIBUTE
     scene.cycles.samples = args.samples
     scene.cycles.use_denoising = False
+    engines = bpy.types.RenderSettings.bl_rna.properties["engine"].enum_items.keys()
+    eevee = "BLENDER_EEVEE_NEXT" if "BLENDER_EEVEE_NEXT" in engines else "BLENDER_EEVEE"
     with tempfile.TemporaryDirectory(prefix="wenv-demo-") as folder:
         wenv_img = render(scene, "BLENDER_WORKBENCH", folder)
         t0 = time.perf_counter()
         cycles_img = render(scene, "CYCLES", folder)
         t_cycles = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        eevee_img = render(scene, eevee, folder)
+        t_eevee = time.perf_counter() - t0
 
-    mask = (wenv_img[..., 3] > 0.99) & (cycles_img[..., 3] > 0.99)  # Workbench keeps alpha at half precision
+    # Workbench keeps alpha at half precision
+    mask = (wenv_img[..., 3] > 0.99) & (cycles_img[..., 3] > 0.99) & (eevee_img[..., 3] > 0.99)
     a, b = wenv_img[..., :3][mask].astype(np.float64), cycles_img[..., :3][mask].astype(np.float64)
+    e = eevee_img[..., :3][mask].astype(np.float64)
     rel = math.sqrt(float(np.mean((a - b) ** 2)) / float(np.mean(b ** 2)))
+    rel_eevee = math.sqrt(float(np.mean((e - b) ** 2)) / float(np.mean(b ** 2)))
     st = mat.wenv
     print(f"Suzanne ({vertices} vertices), Principled paint (base {PAINT['Base Color'][:3]}, roughness "
           f"{PAINT['Roughness']}), {args.hdri} HDRI, quality {args.quality}")
     print(f"  wenv, first shade (matrices built or loaded, lighting, material): {t_first:8.2f} s")
     print(f"  wenv, a new view:                                                  {1e3 * t_view:8.1f} ms")
     print(f"  Cycles, {args.samples} samples per pixel:                                 {t_cycles:8.2f} s")
-    print(f"  wenv against Cycles over Suzanne's pixels: relative RMSE {100 * rel:.1f} % (Cycles adds her "
-          f"self-shadowing and inter-reflection), mean radiance ratio {a.mean() / b.mean():.3f}")
+    print(f"  EEVEE (Blender's real-time engine, default settings, headless):   {t_eevee:8.2f} s")
+    print(f"  against Cycles over Suzanne's pixels (relative RMSE, with Cycles' own noise): wenv {100 * rel:.1f} % "
+          f"(mean radiance ratio {a.mean() / b.mean():.3f}), EEVEE {100 * rel_eevee:.1f} %")
     print(f"  gloss: {st.gloss_20:.2f} GU at 20 deg, {st.gloss_60:.2f} GU at 60 deg, {st.gloss_85:.2f} GU at 85 deg; "
           f"haze {st.haze:.2f} HU")
 
@@ -138,12 +147,13 @@ def main():
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 3, figsize=(10.5, 3.8))
+    fig, axes = plt.subplots(1, 4, figsize=(14, 3.8))
     diff = np.zeros_like(wenv_img[..., :3])
     diff[mask] = np.abs(a - b) * 4
-    for ax, img, title in zip(axes, (wenv_img[..., :3], cycles_img[..., :3], diff),
+    for ax, img, title in zip(axes, (wenv_img[..., :3], cycles_img[..., :3], eevee_img[..., :3], diff),
                               (f"wenv add-on ({args.quality}, {1e3 * t_view:.0f} ms a view)",
-                               f"Cycles ({args.samples} spp, {t_cycles:.0f} s)", "|difference| x 4")):
+                               f"Cycles ({args.samples} spp, {t_cycles:.0f} s)",
+                               f"EEVEE ({100 * rel_eevee:.1f} % from Cycles)", "wenv |difference| x 4")):
         ax.imshow(display(img))
         ax.set_title(title, fontsize=10)
         ax.axis("off")

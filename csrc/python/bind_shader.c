@@ -854,13 +854,15 @@ static PyMethodDef Shader_methods[] = {
      "world-space normals and view directions (surface towards eye), float32 (n, 3); view_dirs may be one (3,) "
      "vector for all.  occlusion (a wenv.Occlusion made for these vertices) shades with the scene in the way: "
      "its blocked directions hide the environment, the exact lights are tested along their own rays, and the "
-     "blockers send their light back -- bounce='self' (the occluders are this mesh: its own diffuse light), an "
+     "blockers send their light back -- bounce='self' (the occluders are this mesh: its own light, as "
+     "diffuse_light gives it), an "
      "array (occluder vertices, 3) of each occluder vertex's light (Shader.diffuse_light), or None (black).  "
      "Wavelet methods only."},
     {"diffuse_light", (PyCFunction)(void (*)(void))Shader_diffuse_light, METH_VARARGS | METH_KEYWORDS,
-     "diffuse_light(normals, *, occlusion=None)\n--\n\nThe light (radiance, float32 n x 3) each vertex's "
-     "Lambertian part sends out, head-on, with its shadows when occlusion is given: what it gives back to "
-     "the surfaces it blocks (shade's bounce).  Wavelet methods only."},
+     "diffuse_light(normals, *, occlusion=None)\n--\n\nThe light (radiance, float32 n x 3) each vertex sends "
+     "back to the surfaces it blocks (shade's bounce), as if diffuse: its albedo head-on (the Lambertian "
+     "part's and the lobes') over pi times its irradiance, with its shadows when occlusion is given.  "
+     "Wavelet methods only."},
     {"shade_mesh", (PyCFunction)(void (*)(void))Shader_shade_mesh, METH_VARARGS | METH_KEYWORDS,
      "shade_mesh(positions, normals, eye, *, cull=False, view_projection=None, out=None, first=0, budget=None, "
      "occlusion=None, bounce='self')\n--\n\n"

@@ -282,7 +282,8 @@ void wenv_lights_irradiance(const wenv_lights *lights, const float n[3], float t
         /* across the horizon (|n.centre| < sin radius) a light's n.l is within 2 sin radius of 0:
          * those below subtract, or those above are missed, at most that x their flux */
         int whole = ci >= sr || r->level == 0 || 2.0f * (flux[0] + flux[1] + flux[2]) * sr <= tolerance;
-        if (whole && (!vis || r->level == 0 || (sr <= vis->sin_radius_max && !(ci > -sr && vis->at_edge(vis, l))))) {
+        if (whole && (!vis || r->level == 0 ||
+                      (sr <= vis->sin_radius_max && (sr <= vis->sin_radius_edge || !(ci > -sr && vis->at_edge(vis, l)))))) {
             float seen = ci > 0.0f && vis ? vis->visible(vis, l) : 1.0f;
             if (ci > 0.0f && seen > 0.0f) {
                 e[0] += seen * max_f(0.0f, dot3(n, vec));
@@ -566,7 +567,8 @@ static void walk_clusters(const wenv_lights *lights, specular_view *sv, const lo
                 push_light(sv, &lb, l, ci, lv_dot, flux, 1.0f, s);
             continue;
         }
-        if (sv->vis && (lv->sin_radius[i] > sv->vis->sin_radius_max || sv->vis->at_edge(sv->vis, l))) {
+        if (sv->vis && (lv->sin_radius[i] > sv->vis->sin_radius_max ||
+                        (lv->sin_radius[i] > sv->vis->sin_radius_edge && sv->vis->at_edge(sv->vis, l)))) {
             /* one that matters, wider than the masks resolve or where a shadow's edge may cross it */
             stack[depth++] = (tree_range){k - 1, lv->child[i], lv->child[i + 1]};
             continue;

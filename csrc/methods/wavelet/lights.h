@@ -39,13 +39,15 @@ size_t wenv_lights_count(const wenv_lights *lights, int level);
 
 /* What the scene lets through to a vertex (methods/wavelet/shadows.c): `visible` says how much of a
  * light in direction l reaches it (0 or 1), and `at_edge` whether a shadow's edge may pass near l, so
- * that a cluster there is read by its parts down to the pixels, each with its own answer, as the
- * reference reads them; a cluster whose radius's sine exceeds sin_radius_max is read by its parts
- * too, so that no edge hides inside it.  NULL everywhere: nothing blocks. */
+ * that a cluster there is read by its parts down to sin_radius_edge, each with its own answer (a
+ * shadow's edge as sharp as that: a sun's disk is one ray, a softbox's pixels a few); a cluster
+ * whose radius's sine exceeds sin_radius_max is read by its parts anywhere, so that no edge hides
+ * inside it.  NULL everywhere: nothing blocks. */
 typedef struct wenv_light_visibility {
     float (*visible)(const struct wenv_light_visibility *vis, const float l[3]);
     int (*at_edge)(const struct wenv_light_visibility *vis, const float l[3]);
     float sin_radius_max;
+    float sin_radius_edge; /* at an edge, clusters down to this radius are read by their parts */
 } wenv_light_visibility;
 
 /* Irradiance at unit normal n, added to e.  Clusters wholly above the horizon are exact as their

@@ -191,6 +191,50 @@ static float light_visible(const wenv_light_visibility *vis, const float l[3])
     return hit ? 0.0f : 1.0f;
 }
 
+int wenv_shadow_lobes_narrow(double alpha_max, size_t resolution)
+{
+    /* a lobe about 4 alpha across within half a texel (pi / r across) */
+    return alpha_max < M_PI / (8.0 * (double)resolution);
+}
+
+/* How many blocked texels come before texel t in texel order. */
+static size_t blocked_before(const wenv_vertex_shadow *vs, size_t t)
+{
+    size_t count = 0;
+    for (size_t w = 0; w < t / 64; w++)
+        count += (size_t)__builtin_popcountll(~vs->mask[w]);
+    uint64_t below = t % 64 ? (((uint64_t)1 << (t % 64)) - 1) : 0;
+    return count + (size_t)__builtin_popcountll(~vs->mask[t / 64] & below);
+}
+
+void wenv_shadow_narrow_specular(const wenv_vertex_shadow *vs, const float *lbar, const float *hidden,
+                                 const float r[3], const float albedo[3], float s[3])
+{
+    const float *f = vs->frame;
+    float d[3] = {f[0] * r[0] + f[1] * r[1] + f[2] * r[2], f[3] * r[0] + f[4] * r[1] + f[5] * r[2],
+                  f[6] * r[0] + f[7] * r[1] + f[8] * r[2]};
+    if (!(d[2] > 0.0f) || light_visible(&vs->lights, r) > 0.0f)
+        return;
+    /* the blocker's light through the mirror direction's texel, or the mean of the blocked ones about it */
+    long n = (long)vs->resolution;
+    size_t at = texel_of(d, vs->resolution);
+    long i = (long)at % n, j = (long)at / n;
+    float back[3] = {0.0f, 0.0f, 0.0f};
+    int count = 0;
+    for (int ring = 0; ring <= 1 && !count; ring++)
+        for (long b = j - ring; b <= j + ring; b++)
+            for (long a = i - ring; a <= i + ring; a++) {
+                if (a < 0 || b < 0 || a >= n || b >= n || texel_open(vs, (size_t)(b * n + a)))
+                    continue;
+                size_t k = blocked_before(vs, (size_t)(b * n + a));
+                for (int c = 0; c < 3; c++)
+                    back[c] += lbar[3 * k + (size_t)c] - hidden[3 * k + (size_t)c];
+                count++;
+            }
+    for (int c = 0; c < 3; c++)
+        s[c] = count ? albedo[c] * back[c] / (float)count : 0.0f;
+}
+
 void wenv_vertex_shadow_init(wenv_vertex_shadow *vs, const wenv_shadow_scene *scene, size_t i)
 {
     const wenv_occlusion *o = scene->occlusion;
@@ -213,6 +257,8 @@ void wenv_vertex_shadow_init(wenv_vertex_shadow *vs, const wenv_shadow_scene *sc
     vs->lights.at_edge = light_at_edge;
     /* a cluster wider than half a texel may straddle a shadow's edge the mask cannot place */
     vs->lights.sin_radius_max = sinf((float)M_PI / (4.0f * (float)o->resolution));
+    /* at an edge, a sixteenth of a texel: 1.4 degrees at 8 x 8 */
+    vs->lights.sin_radius_edge = sinf((float)M_PI / (16.0f * (float)o->resolution));
 }
 
 void wenv_shadow_specular(const wenv_vertex_shadow *vs, const wenv_texel_reflection *tr, const float *blocked,

@@ -71,6 +71,17 @@ void wenv_vertex_shadow_init(wenv_vertex_shadow *vs, const wenv_shadow_scene *sc
 void wenv_shadow_specular(const wenv_vertex_shadow *vs, const wenv_texel_reflection *tr, const float *blocked,
                           const float v[3], const float albedo[3], float s[3]);
 
+/* Whether lobes no wider than alpha_max (their alpha) are narrow against the masks' texels at
+ * `resolution`: then their visibility is their mirror direction's (wenv_shadow_narrow_specular). */
+int wenv_shadow_lobes_narrow(double alpha_max, size_t resolution);
+
+/* For lobes narrow against a texel: what the lobes reflect, s, is kept where the mirror direction r
+ * (unit, in the method's frame) reaches the sky -- the mask where its texels about r agree, else a
+ * ray -- and is the albedo times the blocker's light there where it does not (lbar and hidden as the
+ * vertex's blocked texels hold them: the blocker's light is their difference). */
+void wenv_shadow_narrow_specular(const wenv_vertex_shadow *vs, const float *lbar, const float *hidden,
+                                 const float r[3], const float albedo[3], float s[3]);
+
 /* For each blocked texel of vertex vs (texel order), the environment read over its solid angle into
  * lbar (3 floats each); returns sum of lbar x the texel's cosine integral into e_hidden. */
 void wenv_shadow_hidden_light(const wenv_vertex_shadow *vs, const wenv_node_pyramid *pyramid, const float *cosine,

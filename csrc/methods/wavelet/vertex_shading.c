@@ -154,6 +154,7 @@ typedef struct {
     wenv_vertex_shadow vs;
     const float *hidden;   /* its blocked texels' hidden lighting less the blocker's light */
     const float *e_hidden; /* their cosine-weighted sum */
+    const float *lbar;     /* its blocked texels' hidden lighting alone */
 } vertex_shadow;
 
 /* The irradiance the normal samples interpolate at the vertex, less what its blocked texels hide. */
@@ -214,8 +215,16 @@ static void shade_vertex(const wenv_wavelet *wavelet, const vertex_taps *tp, con
         for (int c = 0; c < 3; c++)
             s[c] += blend * g[c];
     }
-    if (sh && wavelet->m->texel_reflection.specular && wavelet->m->albedo)
-        wenv_shadow_specular(&sh->vs, &wavelet->m->texel_reflection, sh->hidden, tp->v, a, s);
+    if (sh && wavelet->m->texel_reflection.specular && wavelet->m->albedo) {
+        if (wavelet->m->lobes_narrow) {
+            float r[3];
+            for (int c = 0; c < 3; c++)
+                r[c] = 2.0f * tp->cos_v * tp->n[c] - tp->v[c];
+            wenv_shadow_narrow_specular(&sh->vs, sh->lbar, sh->hidden, r, a, s);
+        } else {
+            wenv_shadow_specular(&sh->vs, &wavelet->m->texel_reflection, sh->hidden, tp->v, a, s);
+        }
+    }
     if (wenv_lights_count(wavelet->lights, 0)) {
         if (wavelet->m->has_diffuse)
             lights_irradiance(wavelet, tp->n, sh, e);
@@ -392,6 +401,7 @@ static const vertex_shadow *vertex_shadow_at(const wenv_wavelet *wavelet, const 
     size_t slot = (size_t)scene->occlusion->slot[i];
     wenv_vertex_shadow_init(&sh->vs, scene, i);
     sh->hidden = (env_only ? wavelet->shadow_lbar : wavelet->shadow_hidden) + 3 * scene->occlusion->hit_start[slot];
+    sh->lbar = wavelet->shadow_lbar + 3 * scene->occlusion->hit_start[slot];
     sh->e_hidden = (env_only ? wavelet->shadow_e_env : wavelet->shadow_e_hidden) + 3 * slot;
     return sh;
 }
@@ -459,14 +469,19 @@ wenv_status wenv_wavelet_shade(wenv_wavelet *wavelet, const float *normals, cons
 
 /* ---- with the scene in the way ------------------------------------------------------------------ */
 
-/* The diffuse light leaving each of n vertices head-on: the Lambertian part's albedo / pi at a view
- * along the normal times the irradiance (less what the blocked texels hide: the hidden lighting
- * alone, before any bounce, with the lights tested). */
+/* The light each of n vertices sends back to what it blocks, as if diffuse: its albedo head-on (the
+ * Lambertian part's and the lobes', so that a metal returns what it reflects rather than nothing)
+ * over pi, times the irradiance (less what the blocked texels hide: the hidden lighting alone,
+ * before any bounce, with the lights tested). */
 static void diffuse_light(const wenv_wavelet *wavelet, const float *normals, size_t n, const wenv_shadow_scene *scene,
                           float *out)
 {
-    float head_on[3];
+    float head_on[3], lobes[3] = {0.0f, 0.0f, 0.0f};
     wenv_diffuse_table_at(&wavelet->m->diffuse, 1.0f, head_on);
+    if (wavelet->m->albedo)
+        wenv_wavelet_albedo_at(wavelet->m->albedo, 1.0f, lobes);
+    for (int c = 0; c < 3; c++)
+        head_on[c] += lobes[c] * (float)(1.0 / M_PI);
     long long nn = (long long)n;
 #pragma omp parallel for schedule(static)
     for (long long i = 0; i < nn; i++) {
@@ -579,6 +594,10 @@ static wenv_status ensure_shadows(wenv_wavelet *wavelet, const wenv_shadow_scene
         wenv_texel_reflection_free(&m->texel_reflection);
         if (wenv_texel_reflection_make(&m->texel_reflection, m->mat, o->resolution, err))
             return err->status;
+        double alpha_max = 0.0;
+        for (size_t k = 0; k < wenv_material_lobe_count(m->mat); k++)
+            alpha_max = fmax(alpha_max, wenv_material_lobe(m->mat, k)->alpha);
+        m->lobes_narrow = wenv_material_mirror_centred(m->mat) && wenv_shadow_lobes_narrow(alpha_max, o->resolution);
     }
     if (ensure_hidden_light(wavelet, scene, err) || !with_bounce)
         return err->status;

@@ -39,6 +39,7 @@ typedef struct {
     size_t brdf_terms;
     float *table;            /* ns x nv x 3 */
     wenv_texel_reflection texel_reflection; /* shading with shadows: made for the masks' resolution */
+    int lobes_narrow;        /* ... and whether its lobes are narrow against the masks' texels */
     unsigned char *row_ready, *row_need; /* per normal sample, as slice_ready and slice_need */
 } wenv_wavelet_material;
 

@@ -1,0 +1,205 @@
+"""wenv's shadows against Cycles and EEVEE, over the pixels of two scenes a Blender user shades:
+Suzanne subdivided 3 times (31,658 vertices) and a sphere resting on a plane (a contact shadow),
+under Blender's eight bundled HDRIs, for a Principled paint, metal and gloss.
+
+For each case the scene is rendered
+  - by Cycles with direct light only (Max Bounces 0: the World through every shadow ray) and with
+    its default bounces, each at two seeds (their mean is the truth; half their difference's RMSE
+    is the noise of that mean);
+  - by EEVEE (Blender's real-time engine, default settings);
+  - flat (Workbench, the vertex colours) from wenv's vertex colours: `default`, shadows with no
+    bounce (against direct Cycles), shadows with the mesh's own diffuse light as the bounce
+    (against full Cycles), and without shadows.
+Prints relative RMSEs (RMSE over the mean, over the pixels both cover) and writes
+out/shadows_vs_cycles.json.  Long: a few minutes per scene and HDRI.
+
+    python benchmarks/shadows_vs_cycles.py [--scenes suzanne plane] [--hdris sunset ...] [--size 256] [--samples 128]
+"""
+import argparse
+import json
+import math
+import os
+import platform
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+import bpy  # noqa: E402
+import wenv  # noqa: E402
+
+from addon import meshes  # noqa: E402
+from tests.conftest import HDRI_NAMES, hdri_path  # noqa: E402
+
+MATERIALS = {
+    "paint": {"Base Color": (0.6, 0.15, 0.08, 1.0), "Roughness": 0.3},
+    "metal": {"Base Color": (0.9, 0.6, 0.3, 1.0), "Metallic": 1.0, "Roughness": 0.3},
+    "gloss": {"Base Color": (0.1, 0.3, 0.6, 1.0), "Roughness": 0.1},
+}
+
+
+def build(scene_name, size):
+    bpy.ops.wm.read_homefile(use_factory_startup=True)
+    for name in ("Cube", "Light"):
+        bpy.data.objects.remove(bpy.data.objects[name])
+    scene = bpy.context.scene
+    objs = []
+    if scene_name == "suzanne":
+        bpy.ops.mesh.primitive_monkey_add()
+        obj = bpy.context.object
+        obj.modifiers.new("subdivision", "SUBSURF").levels = 3
+        with bpy.context.temp_override(object=obj):
+            bpy.ops.object.modifier_apply(modifier="subdivision")
+        obj.data.shade_smooth()
+        objs.append(obj)
+        scene.camera.location = (0.0, -4.2, 0.5)
+        scene.camera.rotation_euler = (math.radians(84), 0.0, 0.0)
+    else:
+        bpy.ops.mesh.primitive_uv_sphere_add(segments=128, ring_count=64, radius=1.0, location=(0.0, 0.0, 1.0))
+        sphere = bpy.context.object
+        sphere.data.shade_smooth()
+        bpy.ops.mesh.primitive_grid_add(x_subdivisions=160, y_subdivisions=160, size=10.0)
+        plane = bpy.context.object
+        plane.data.shade_smooth()
+        objs += [sphere, plane]
+        scene.camera.location = (0.0, -6.5, 3.5)
+        scene.camera.rotation_euler = (math.radians(65), 0.0, 0.0)
+    scene.render.resolution_x = scene.render.resolution_y = size
+    scene.render.film_transparent = True
+    scene.view_settings.view_transform = "Standard"
+    scene.render.image_settings.file_format = "OPEN_EXR"
+    scene.render.image_settings.color_depth = "32"
+    scene.cycles.use_denoising = False
+    scene.display.shading.light = "FLAT"
+    scene.display.shading.color_type = "VERTEX"
+    return scene, objs
+
+
+def set_world(scene, hdri):
+    tree = scene.world.node_tree
+    env = tree.nodes.get("wenv_env") or tree.nodes.new("ShaderNodeTexEnvironment")
+    env.name = "wenv_env"
+    env.image = bpy.data.images.load(hdri_path(hdri), check_existing=True)
+    tree.links.new(env.outputs["Color"], tree.nodes["Background"].inputs["Color"])
+
+
+def set_material(objs, inputs):
+    mat = bpy.data.materials.new("m")
+    node = next(n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled")
+    for socket, value in inputs.items():
+        node.inputs[socket].default_value = value
+    for obj in objs:
+        obj.data.materials.clear()
+        obj.data.materials.append(mat)
+    return mat
+
+
+def render(scene, engine, folder, seed=0):
+    scene.render.engine = engine
+    scene.cycles.seed = seed
+    scene.render.filepath = os.path.join(folder, f"{engine}-{seed}.exr")
+    bpy.ops.render.render(write_still=True)
+    img = bpy.data.images.load(scene.render.filepath)
+    px = np.array(img.pixels[:], np.float32).reshape(img.size[1], img.size[0], 4)[::-1]
+    bpy.data.images.remove(img)
+    return px
+
+
+def eevee_engine():
+    items = bpy.types.RenderSettings.bl_rna.properties["engine"].enum_items.keys()
+    return "BLENDER_EEVEE_NEXT" if "BLENDER_EEVEE_NEXT" in items else "BLENDER_EEVEE"
+
+
+def arrays(objs):
+    dg = bpy.context.evaluated_depsgraph_get()
+    data = [meshes.read_mesh(o, dg) for o in objs]
+    p = np.vstack([d.positions for d in data])
+    n = np.vstack([d.normals for d in data])
+    offsets = np.cumsum([0] + [d.count for d in data])
+    t = np.vstack([d.triangles + o for d, o in zip(data, offsets)])
+    return data, p, n, t, offsets
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenes", nargs="*", default=["suzanne", "plane"])
+    ap.add_argument("--hdris", nargs="*", default=HDRI_NAMES)
+    ap.add_argument("--materials", nargs="*", default=list(MATERIALS))
+    ap.add_argument("--size", type=int, default=256)
+    ap.add_argument("--samples", type=int, default=128)
+    ap.add_argument("--resolution", type=int, default=0, help="occlusion side (0: the add-on's choice)")
+    ap.add_argument("--out", default=os.path.join(ROOT, "out", "shadows_vs_cycles.json"))
+    args = ap.parse_args()
+    rows = []
+    eevee = eevee_engine()
+    print(f"{'scene':8s} {'HDRI':10s} {'material':8s} | {'noise':>6s} {'direct':>7s} {'unshad':>7s} | "
+          f"{'noise':>6s} {'full':>7s} {'unshad':>7s} {'EEVEE':>7s}")
+    for scene_name in args.scenes:
+        scene, objs = build(scene_name, args.size)
+        scene.cycles.samples = args.samples
+        data, p, n, t, offsets = arrays(objs)
+        occluders = wenv.Occluders(p, t)
+        res = args.resolution or (16 if len(p) < 40000 else 8)
+        start = time.perf_counter()
+        occlusion = occluders.occlusion(p, n, resolution=res)
+        t_occ = time.perf_counter() - start
+        eye = tuple(scene.camera.matrix_world.translation)
+        for hdri in args.hdris:
+            set_world(scene, hdri)
+            env = wenv.load_environment(hdri_path(hdri))
+            for mname in args.materials:
+                mat = set_material(objs, MATERIALS[mname])
+                pr = wenv.Principled(base_color=MATERIALS[mname]["Base Color"][:3],
+                                     metallic=MATERIALS[mname].get("Metallic", 0.0),
+                                     roughness=MATERIALS[mname]["Roughness"])
+                shader = wenv.Shader(env, pr, quality="default")
+                light = shader.diffuse_light(n, occlusion=occlusion)
+                shaded = {
+                    "direct": shader.shade_mesh(p, n, eye, occlusion=occlusion, bounce=None),
+                    "full": shader.shade_mesh(p, n, eye, occlusion=occlusion, bounce=light),
+                    "unshadowed": shader.shade_mesh(p, n, eye),
+                }
+                with tempfile.TemporaryDirectory(prefix="wenv-shadows-") as folder:
+                    imgs = {}
+                    for key, rgb in shaded.items():
+                        for obj, d, o in zip(objs, data, offsets):
+                            meshes.write_colors(obj.data, d.domain, rgb[o:o + d.count])
+                        imgs[key] = render(scene, "BLENDER_WORKBENCH", folder)
+                    imgs["eevee"] = render(scene, eevee, folder)
+                    scene.cycles.max_bounces = 0
+                    direct = [render(scene, "CYCLES", folder, seed) for seed in (1, 2)]
+                    scene.cycles.max_bounces = 12
+                    full = [render(scene, "CYCLES", folder, seed) for seed in (1, 2)]
+                mask = np.ones(imgs["direct"].shape[:2], bool)
+                for img in list(imgs.values()) + direct + full:
+                    mask &= img[..., 3] > 0.99
+
+                def rel(a, b):
+                    a, b = a[..., :3][mask].astype(np.float64), b[..., :3][mask].astype(np.float64)
+                    return float(np.sqrt(np.mean((a - b) ** 2)) / np.mean(b))
+
+                d_mean, f_mean = (direct[0] + direct[1]) / 2, (full[0] + full[1]) / 2
+                row = dict(scene=scene_name, hdri=hdri, material=mname, vertices=len(p), pixels=int(mask.sum()),
+                           noise_direct=rel(direct[0], direct[1]) / 2,
+                           direct=rel(imgs["direct"], d_mean), unshadowed_vs_direct=rel(imgs["unshadowed"], d_mean),
+                           noise_full=rel(full[0], full[1]) / 2, full=rel(imgs["full"], f_mean),
+                           unshadowed_vs_full=rel(imgs["unshadowed"], f_mean), eevee_vs_full=rel(imgs["eevee"], f_mean))
+                rows.append(row)
+                print(f"{scene_name:8s} {hdri:10s} {mname:8s} | {100 * row['noise_direct']:5.1f}% "
+                      f"{100 * row['direct']:6.1f}% {100 * row['unshadowed_vs_direct']:6.1f}% | "
+                      f"{100 * row['noise_full']:5.1f}% {100 * row['full']:6.1f}% "
+                      f"{100 * row['unshadowed_vs_full']:6.1f}% {100 * row['eevee_vs_full']:6.1f}%", flush=True)
+                bpy.data.materials.remove(mat)
+        print(f"{scene_name}: {len(p)} vertices, occlusion {res}x{res} in {t_occ:.2f} s")
+    os.makedirs(os.path.dirname(args.out), exist_ok=True)
+    with open(args.out, "w") as f:
+        json.dump(dict(command="python benchmarks/shadows_vs_cycles.py " + " ".join(sys.argv[1:]),
+                       machine=platform.machine(), samples=args.samples, size=args.size, rows=rows), f, indent=1)
+    print("wrote", args.out)
+
+
+if __name__ == "__main__":
+    main()
