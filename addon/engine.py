@@ -252,6 +252,7 @@ class ShadowCache:
         self._scene_key = None
         self._occluders = None
         self._occlusions = {}  # fingerprint of a part's positions and normals -> wenv.Occlusion
+        self._lights = {}  # (id of an occlusion kept above, what lit and made the part) -> its light
 
     def occluders(self, meshes, memory_budget_mb=1024):
         """wenv.Occluders of `meshes` ((positions, triangles) each, in order) and where each one's
@@ -264,6 +265,7 @@ class ShadowCache:
             self._occluders = (wenv.Occluders(positions, triangles, memory_budget_mb=memory_budget_mb), offsets)
             self._scene_key = key
             self._occlusions = {}  # cast against the scene before
+            self._lights = {}
         return self._occluders
 
     def occlusion(self, occluders, positions, normals, progress=None):
@@ -274,8 +276,24 @@ class ShadowCache:
                 len(positions)), progress=progress)
         return self._occlusions[key]
 
+    def light(self, occlusion, key, make):
+        """The light a part sends back (make() when not kept): it depends on its occlusion and on
+        `key`, what lights it and what it is made of (World, material, quality), not on the view."""
+        full = (id(occlusion), key)
+        if full not in self._lights:
+            self._lights[full] = make()
+        return self._lights[full]
+
 
 shadows = ShadowCache()
+
+
+# The methods that shade with shadows (the wavelet ones); Auto may choose another, which says so.
+SHADOW_METHODS = ("rotation", "slicing")
+
+
+def models_shadows(shader):
+    return shader.method in SHADOW_METHODS
 
 
 def diffuse_light(shader, data, occlusion):

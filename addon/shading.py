@@ -119,8 +119,8 @@ class ShadingPlan:
         shaded parts' diffuse light; black for the blockers not shaded).  None without shadows."""
         if not self.shadows:
             return [None] * len(work)
-        meshes_in = [(data.positions, engine.shadow_triangles(data.positions, data.triangles)[0] if cast
-                      else np.zeros((0, 3), np.int32)) for (_, data, _), cast in zip(self.items, self.casts)]
+        meshes_in = [(data.positions, data.triangles if cast else np.zeros((0, 3), np.int32))
+                     for (_, data, _), cast in zip(self.items, self.casts)]
         meshes_in += self.blockers
         if not any(len(t) for _, t in meshes_in):
             return [None] * len(work)
@@ -129,10 +129,22 @@ class ShadingPlan:
             occlusions = [engine.shadows.occlusion(occluders, part.positions, part.normals)
                           for _, _, _, _, part in work]
         bounce = np.zeros((offsets[-1], 3), np.float32)
+        scenes = []
         for (i, name, key, sel, part), occlusion in zip(work, occlusions):
             shader = self._shader(quality, name, key, part.normals, cancelled)
-            bounce[offsets[i] + np.flatnonzero(sel)] = engine.diffuse_light(shader, part, occlusion)
-        return [dict(occlusion=o, bounce=bounce) for o in occlusions]
+            if not engine.models_shadows(shader):  # Auto's choice for this part: it sends back no light
+                note = (f"'{name}': shaded without shadows by {shader.method} (Auto's choice; the wavelet "
+                        "qualities shade them)")
+                if note not in self.notes:
+                    self.notes.append(note)
+                scenes.append(None)
+                continue
+            made_by = (quality, self.world.signature, key, self.target_error, self.memory_budget_mb)
+            with engine.shadows.lock:
+                bounce[offsets[i] + np.flatnonzero(sel)] = engine.shadows.light(
+                    occlusion, made_by, lambda: engine.diffuse_light(shader, part, occlusion))
+            scenes.append(occlusion)
+        return [dict(occlusion=o, bounce=bounce) if o is not None else None for o in scenes]
 
     def compute(self):
         rgbs, seens = self._buffers()
@@ -248,8 +260,11 @@ def plan_shading(scene, depsgraph, objects, view, images, progress=None, preview
                 data = meshes.read_mesh(obj, depsgraph)
                 if data.count:
                     plan.blockers.append((data.positions, engine.shadow_triangles(data.positions, data.triangles)[0]))
-        dropped = sum(engine.shadow_triangles(d.positions, d.triangles)[1] for (_, d, _), c in
-                      zip(plan.items, plan.casts) if c)
+        dropped = 0
+        for (_, data, _), cast in zip(plan.items, plan.casts):
+            if cast:
+                data.triangles, n = engine.shadow_triangles(data.positions, data.triangles)
+                dropped += n
         if dropped:
             notes.append(f"{dropped} degenerate face(s) (no area) cast no shadow")
     if preview and st.preview_changes:

@@ -330,8 +330,8 @@ static void Shader_dealloc(ShaderObject *self)
     Py_TYPE(self)->tp_free((PyObject *)self);
 }
 
-/* The scene of `occlusion` and `bounce` for n shaded vertices into *scene (bounce's buffer in *bb,
- * released by the caller when bb->obj is set).  -1 with the error set. */
+/* The scene of `occlusion` and `bounce` (NULL: not given, 'self') for n shaded vertices into *scene
+ * (bounce's buffer in *bb, released by the caller when bb->obj is set).  -1 with the error set. */
 static int parse_scene(ShaderObject *self, PyObject *occlusion, PyObject *bounce, size_t n, wenv_shadow_scene *scene,
                        Py_buffer *bb)
 {
@@ -351,7 +351,7 @@ static int parse_scene(ShaderObject *self, PyObject *occlusion, PyObject *bounce
     }
     uint64_t key = wenv_fingerprint_word(WENV_FINGERPRINT_START, scene->occlusion->fingerprint);
     size_t nv = wenv_occluders_vertex_count(scene->occluders);
-    if (PyUnicode_Check(bounce) && PyUnicode_CompareWithASCIIString(bounce, "self") == 0) {
+    if (!bounce || (PyUnicode_Check(bounce) && PyUnicode_CompareWithASCIIString(bounce, "self") == 0)) {
         if (nv != n) {
             PyErr_Format(PyExc_ValueError,
                          "bounce='self' reads the shaded mesh's own light, but the occluders have %zu vertices and "
@@ -441,15 +441,8 @@ static PyObject *Shader_shade(ShaderObject *self, PyObject *args, PyObject *kwar
         PyErr_SetString(PyExc_ValueError, "bounce is read only with occlusion (what blocks the light it fills in)");
         goto done;
     }
-    PyObject *self_str = NULL;
-    if (occ_obj != Py_None) {
-        if (!bounce_obj && !(bounce_obj = self_str = PyUnicode_FromString("self")))
-            goto done;
-        int bad = parse_scene(self, occ_obj, bounce_obj, n, &scene, &bb) < 0;
-        Py_XDECREF(self_str);
-        if (bad)
-            goto done;
-    }
+    if (occ_obj != Py_None && parse_scene(self, occ_obj, bounce_obj, n, &scene, &bb) < 0)
+        goto done;
     if (claim(self) < 0)
         goto done;
     result = shade_arrays(self, nb.buf, views, n, occ_obj != Py_None ? &scene : NULL);
@@ -661,15 +654,8 @@ static PyObject *Shader_shade_mesh(ShaderObject *self, PyObject *args, PyObject 
         PyErr_Format(PyExc_ValueError, "positions has %zu rows but normals has %zu", np, nn);
         goto done;
     }
-    if (occ_obj != Py_None) {
-        PyObject *self_str = NULL;
-        if (!bounce_obj && !(bounce_obj = self_str = PyUnicode_FromString("self")))
-            goto done;
-        int bad = parse_scene(self, occ_obj, bounce_obj, np, &scene, &bb) < 0;
-        Py_XDECREF(self_str);
-        if (bad)
-            goto done;
-    }
+    if (occ_obj != Py_None && parse_scene(self, occ_obj, bounce_obj, np, &scene, &bb) < 0)
+        goto done;
     float *out;
     if (out_obj == Py_None) {
         Py_ssize_t shape[2] = {(Py_ssize_t)np, 3};

@@ -12,6 +12,7 @@ struct wenv_occluders {
     size_t n_triangles, n_positions;
     const uint32_t *triangles; /* Embree's index buffer, alive with the scene */
     double size;
+    size_t memory_budget;      /* also what each occlusion cast against it may take */
 };
 
 /* Embree's bytes per triangle for a static scene (the BVH and its triangle data, measured: about
@@ -70,6 +71,7 @@ wenv_status wenv_occluders_create(wenv_occluders **out, const float *positions, 
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for occluders");
     occ->n_triangles = n_triangles;
     occ->n_positions = n_positions;
+    occ->memory_budget = memory_budget;
     double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
     for (size_t i = 0; i < n_positions; i++)
         for (int k = 0; k < 3; k++) {
@@ -128,6 +130,7 @@ void wenv_occluders_free(wenv_occluders *occ)
 
 size_t wenv_occluders_triangle_count(const wenv_occluders *occ) { return occ->n_triangles; }
 size_t wenv_occluders_vertex_count(const wenv_occluders *occ) { return occ->n_positions; }
+size_t wenv_occluders_memory_budget(const wenv_occluders *occ) { return occ->memory_budget; }
 const uint32_t *wenv_occluders_triangles(const wenv_occluders *occ) { return occ->triangles; }
 double wenv_occluders_size(const wenv_occluders *occ) { return occ->size; }
 float wenv_occluders_offset(const wenv_occluders *occ) { return (float)(WENV_OCCLUDER_OFFSET * occ->size); }

@@ -39,10 +39,12 @@ static int finite3(const float *v) { return isfinite(v[0]) && isfinite(v[1]) && 
 /* Vertices cast per block: their hits are gathered in a block-sized buffer, then compacted. */
 #define BLOCK_VERTICES 2048
 
-/* Appends `count` hits to the growing array. */
-static int append_hits(wenv_occlusion *o, size_t *cap, const wenv_occlusion_hit *h, size_t count)
+/* Appends `count` hits to the growing array; -1 out of memory, -2 over `budget` hits. */
+static int append_hits(wenv_occlusion *o, size_t *cap, const wenv_occlusion_hit *h, size_t count, size_t budget)
 {
     size_t used = o->hit_start[o->n_masks];
+    if (used + count > budget)
+        return -2;
     if (used + count > *cap) {
         size_t grown = (used + count) * 3 / 2 + 1024;
         wenv_occlusion_hit *more = realloc(o->hits, grown * sizeof *more);
@@ -74,6 +76,16 @@ wenv_status wenv_occlusion_make(wenv_occlusion *out, const wenv_occluders *occ, 
         return wenv_error_set(err, WENV_ERR_VALUE, "too many vertices (%zu)", n);
     size_t texels = resolution * resolution, words = (texels + 63) / 64;
     size_t block = n < BLOCK_VERTICES ? (n ? n : 1) : BLOCK_VERTICES;
+    /* what every vertex holds whatever it sees, and the hits (those of the blocked texels) the rest
+     * of the budget leaves room for */
+    double fixed = (double)n * (sizeof(int32_t) + 6 * sizeof(float) + sizeof(size_t) + words * 8) +
+                   (double)block * texels * (sizeof(wenv_occlusion_hit) + 1);
+    double budget = (double)wenv_occluders_memory_budget(occ);
+    if (fixed > budget)
+        return wenv_error_set(err, WENV_ERR_VALUE,
+                              "the occlusion of %zu vertices needs at least %.0f MB, over the memory budget of %.0f MB",
+                              n, fixed / 1048576.0, budget / 1048576.0);
+    size_t hit_budget = (size_t)((budget - fixed) / sizeof(wenv_occlusion_hit));
     wenv_occlusion o = {.resolution = resolution, .n_vertices = n, .words = words};
     o.slot = malloc((n ? n : 1) * sizeof *o.slot);
     o.masks = malloc((n ? n : 1) * words * sizeof *o.masks); /* shrunk to the masks kept after */
@@ -106,6 +118,7 @@ wenv_status wenv_occlusion_make(wenv_occlusion *out, const wenv_occluders *occ, 
     size_t cap = 0;
     atomic_int failed = 0, cancelled = 0;
     atomic_size_t done = 0;
+    int over = 0;
     for (size_t first = 0; first < n && !failed && !cancelled; first += block) {
         size_t count = n - first < block ? n - first : block;
 #pragma omp parallel
@@ -160,7 +173,9 @@ wenv_status wenv_occlusion_make(wenv_occlusion *out, const wenv_occluders *occ, 
                 o.slot[i] = -1;
                 continue;
             }
-            if (append_hits(&o, &cap, block_hits + b * texels, block_count[b]) < 0) {
+            int appended = append_hits(&o, &cap, block_hits + b * texels, block_count[b], hit_budget);
+            if (appended < 0) {
+                over = appended == -2;
                 atomic_store(&failed, 1);
                 break;
             }
@@ -177,6 +192,11 @@ wenv_status wenv_occlusion_make(wenv_occlusion *out, const wenv_occluders *occ, 
     if (failed || cancelled || wenv_progress_finish(progress)) {
         int nomem = failed;
         wenv_occlusion_free(&o);
+        if (over)
+            return wenv_error_set(err, WENV_ERR_VALUE,
+                                  "the occlusion of %zu vertices outgrew the memory budget of %.0f MB (its blocked "
+                                  "texels' hits): raise memory_budget_mb or lower the resolution",
+                                  n, budget / 1048576.0);
         return nomem ? wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the occlusion")
                      : wenv_error_set(err, WENV_ERR_CANCELLED, "occlusion cancelled");
     }

@@ -39,7 +39,8 @@ typedef struct {
     uint64_t fingerprint; /* of all the above: what tells one occlusion from another */
 } wenv_occlusion;
 
-/* The masks of n vertices (positions and normals as xyz floats; normals non-zero) against `occ`.
+/* The masks of n vertices (positions and normals as xyz floats; normals non-zero) against `occ`,
+ * within the memory budget `occ` was made with (WENV_ERR_VALUE saying so when it would not fit).
  * Rays start WENV_OCCLUDER_OFFSET of the scene's size off the surface along the normal.  Progress
  * and cancel as base/progress.h.  WENV_ERR_VALUE for a resolution out of range or a normal that is
  * zero or not finite (naming "normals[i]"), or a position not finite ("positions[i]"). */

@@ -12,7 +12,13 @@ sampling, a pixel filter 0.01 pixels wide (every sample at the pixel's centre, s
 radiance).  The sphere is convex, so every ray that leaves it sees the World: one bounce is exact.
 
 Each pixel's normal is Cycles' own shading normal, rendered as the colour of an emission shader
-(Geometry > Normal), and the view is -Y (towards the camera)."""
+(Geometry > Normal), and the view is -Y (towards the camera).
+
+With `ground`, a square under the sphere touching it shadows its lower half (seen edge-on, it covers
+no pixel of its own): each pixel's position is rendered as well (Geometry > Position), and Cycles
+with Max Bounces 0 (direct light through every shadow ray) is compared with wenv.reference casting
+every pixel's ray against the same triangles.  `image` (float32 (H, W, 3), row 0 the top) lights
+the scene instead of a bundled HDRI: a small one keeps that reference fast."""
 import math
 import os
 import tempfile
@@ -29,10 +35,11 @@ SOCKETS = {row["name"]: row["socket"] for row in wenv.Principled.INPUTS}
 class SphereScene:
     """The scene above, built in the current bpy session (it replaces whatever is loaded)."""
 
-    def __init__(self, hdri="sunset", size=64, samples=256):
+    def __init__(self, hdri="sunset", size=64, samples=256, image=None, ground=False):
         import bpy
         self.bpy = bpy
         self.hdri = hdri
+        self.image = image
         bpy.ops.wm.read_factory_settings(use_empty=True)
         sc = bpy.context.scene
         self.scene = sc
@@ -56,12 +63,25 @@ class SphereScene:
             world.use_nodes = True
         nt = world.node_tree
         env = nt.nodes.new("ShaderNodeTexEnvironment")
-        env.image = bpy.data.images.load(bundled_hdri(hdri))
+        if image is None:
+            env.image = bpy.data.images.load(bundled_hdri(hdri))
+        else:
+            h, w = image.shape[:2]
+            img = bpy.data.images.new("wenv-sky", w, h, float_buffer=True)
+            rgba = np.ones((h, w, 4), np.float32)
+            rgba[..., :3] = image[::-1]  # Blender's rows start at the bottom
+            img.pixels.foreach_set(rgba.ravel())
+            img.pack()
+            env.image = img
         env.interpolation = "Closest"
         nt.links.new(env.outputs["Color"], nt.nodes["Background"].inputs["Color"])
         bpy.ops.mesh.primitive_uv_sphere_add(segments=256, ring_count=128, radius=1.0)
         self.sphere = bpy.context.active_object
         self.sphere.data.shade_smooth()
+        self.ground = None
+        if ground:
+            bpy.ops.mesh.primitive_plane_add(size=6.0, location=(0.0, 0.0, -1.0))
+            self.ground = bpy.context.active_object
         cam_data = bpy.data.cameras.new("wenv-cycles")
         cam_data.type = "ORTHO"
         cam_data.ortho_scale = 2.1
@@ -71,9 +91,14 @@ class SphereScene:
         cam.location = (0.0, -5.0, 0.0)
         cam.rotation_euler = (math.pi / 2, 0.0, 0.0)
         self.folder = tempfile.mkdtemp(prefix="wenv-cycles-")
-        self._use(self._normal_material())
+        self._use(self._geometry_material("Normal"))
         normals = self.render(seed=0)
         self.mask = np.abs(np.linalg.norm(normals, axis=2) - 1.0) < 1e-3
+        if ground:
+            self._use(self._geometry_material("Position"))
+            positions = self.render(seed=0)
+            self.mask &= np.abs(np.linalg.norm(positions, axis=2) - 1.0) < 2e-2  # the sphere's pixels
+            self.positions = np.ascontiguousarray(positions[self.mask], np.float32)
         self.normals = np.ascontiguousarray(normals[self.mask], np.float32)
         self.views = np.tile(np.float32([0.0, -1.0, 0.0]), (len(self.normals), 1))
 
@@ -81,8 +106,9 @@ class SphereScene:
         self.sphere.data.materials.clear()
         self.sphere.data.materials.append(material)
 
-    def _normal_material(self):
-        mat = self.bpy.data.materials.new("wenv-normals")
+    def _geometry_material(self, output):
+        """An emission shader whose colour is the shading point's Geometry `output` (Normal, Position)."""
+        mat = self.bpy.data.materials.new("wenv-" + output.lower())
         if self.bpy.app.version < (5, 0, 0):  # nodes are always on from 5.0
             mat.use_nodes = True
         nt = mat.node_tree
@@ -90,7 +116,7 @@ class SphereScene:
             if n.bl_idname != "ShaderNodeOutputMaterial":
                 nt.nodes.remove(n)
         geo, em = nt.nodes.new("ShaderNodeNewGeometry"), nt.nodes.new("ShaderNodeEmission")
-        nt.links.new(geo.outputs["Normal"], em.inputs["Color"])
+        nt.links.new(geo.outputs[output], em.inputs["Color"])
         nt.links.new(em.outputs["Emission"], nt.nodes["Material Output"].inputs["Surface"])
         return mat
 
@@ -123,6 +149,35 @@ class SphereScene:
         bpy.data.images.remove(img)
         os.remove(path)
         return px
+
+    def occluders(self):
+        """The sphere and the ground as Cycles holds them (world space), a wenv.Occluders."""
+        parts, base = [], 0
+        for obj in (self.sphere, self.ground):
+            me = obj.data
+            me.calc_loop_triangles()
+            p = np.empty(len(me.vertices) * 3, np.float32)
+            me.vertices.foreach_get("co", p)
+            p = p.reshape(-1, 3) + np.float32(obj.location)
+            t = np.empty(len(me.loop_triangles) * 3, np.int64)
+            me.loop_triangles.foreach_get("vertices", t)
+            parts.append((p, t.reshape(-1, 3) + base))
+            base += len(p)
+        return wenv.Occluders(np.vstack([p for p, _ in parts]), np.vstack([t for _, t in parts]))
+
+    def compare_shadowed(self, material, seeds=(1, 2)):
+        """With the ground: Cycles with Max Bounces 0 (two seeds) against wenv.reference casting every
+        pixel's ray against the sphere and the ground; as compare()."""
+        env = wenv.Environment(self.image) if self.image is not None else wenv.load_environment(bundled_hdri(self.hdri))
+        self.scene.cycles.max_bounces = 0
+        a, b = (self.render(seed)[self.mask].astype(np.float64) for seed in seeds)
+        ref = wenv.reference(env, material, self.normals, self.views, positions=self.positions,
+                             occluders=self.occluders()).astype(np.float64)
+        scale = math.sqrt(float(np.mean(ref ** 2)))
+        noise = math.sqrt(float(np.mean((a - b) ** 2)) / 2) / scale
+        error = math.sqrt(float(np.mean(((a + b) / 2 - ref) ** 2))) / scale
+        return {"noise": noise, "noise_of_mean": noise / math.sqrt(2), "error": error, "cycles": (a + b) / 2,
+                "reference": ref}
 
     def compare(self, material, seeds=(1, 2)):
         """Cycles' render of the sphere (two seeds) against wenv.reference of `material` on the same
