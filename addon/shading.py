@@ -126,7 +126,9 @@ class ShadingPlan:
             return [None] * len(work)
         with engine.shadows.lock:
             occluders, offsets = engine.shadows.occluders(meshes_in, self.memory_budget_mb)
-            occlusions = [engine.shadows.occlusion(occluders, part.positions, part.normals)
+            # a refinement's rays stop when it is cancelled (CancelledError, which refine() catches)
+            stop = (lambda _fraction: cancelled.is_set()) if cancelled is not None else None
+            occlusions = [engine.shadows.occlusion(occluders, part.positions, part.normals, stop)
                           for _, _, _, _, part in work]
         bounce = np.zeros((offsets[-1], 3), np.float32)
         scenes = []

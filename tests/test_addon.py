@@ -1919,3 +1919,22 @@ def test_another_mesh_casts_shadows_unless_told_not_to(scene):
     assert shade_op(view="CAMERA") == {"FINISHED"}
     _, again = attribute(plane)
     assert np.array_equal(again, plain)
+
+
+def test_a_cancelled_refinement_stops_its_rays(scene):
+    """A refinement cancelled while the occlusion is cast stops there: refine() returns None and the
+    occlusion is not kept half made; the next pass casts it whole."""
+    import threading
+    bpy.data.objects.remove(bpy.data.objects["Cube"])
+    env_world(scene, "forest")
+    obj = add_monkey(subdivisions=1)
+    set_material(obj)
+    scene.wenv.shadows = True
+    engine.shadows.clear()
+    plan = shading.plan_shading(scene, bpy.context.evaluated_depsgraph_get(), [obj], views.camera_view(scene),
+                                bpy.data.images)
+    cancelled = threading.Event()
+    cancelled.set()
+    assert plan.refine("draft", 0.05, lambda fraction: None, cancelled) is None
+    assert not engine.shadows._occlusions
+    assert shade_op(view="CAMERA") == {"FINISHED"} and len(engine.shadows._occlusions) == 1
