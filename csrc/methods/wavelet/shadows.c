@@ -309,9 +309,10 @@ void wenv_shadow_hidden_light(const wenv_vertex_shadow *vs, const wenv_node_pyra
     });
 }
 
-void wenv_shadow_bounce(const wenv_shadow_scene *scene, size_t slot, const float *bounce, const float *cosine,
-                        float *lbar, float e_hidden[3])
+void wenv_shadow_bounce(const wenv_shadow_scene *scene, size_t slot, const float *cosine, float *lbar,
+                        float e_hidden[3])
 {
+    const float *bounce = scene->bounce;
     const wenv_occlusion *o = scene->occlusion;
     const wenv_occlusion_hit *hit = o->hits + o->hit_start[slot];
     const uint32_t *triangles = wenv_occluders_triangles(scene->occluders);

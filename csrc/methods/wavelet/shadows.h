@@ -87,10 +87,10 @@ void wenv_shadow_narrow_specular(const wenv_vertex_shadow *vs, const float *lbar
 void wenv_shadow_hidden_light(const wenv_vertex_shadow *vs, const wenv_node_pyramid *pyramid, const float *cosine,
                               float *lbar, float e_hidden[3]);
 
-/* The blocker's light B through each blocked texel of mask slot k (hits in texel order): bounce
- * per occluder vertex interpolated at the hit; subtracted from lbar (in place), and sum of the
- * change x the texels' cosine integrals added to e_hidden. */
-void wenv_shadow_bounce(const wenv_shadow_scene *scene, size_t slot, const float *bounce, const float *cosine,
-                        float *lbar, float e_hidden[3]);
+/* The blocker's light B through each blocked texel of mask slot k (hits in texel order): the
+ * scene's bounce per occluder vertex interpolated at the hit; subtracted from lbar (in place), and
+ * sum of the change x the texels' cosine integrals added to e_hidden. */
+void wenv_shadow_bounce(const wenv_shadow_scene *scene, size_t slot, const float *cosine, float *lbar,
+                        float e_hidden[3]);
 
 #endif

@@ -631,8 +631,7 @@ static wenv_status ensure_shadows(wenv_wavelet *wavelet, const wenv_shadow_scene
         long long nm = (long long)o->n_masks;
 #pragma omp parallel for schedule(dynamic, 256)
         for (long long k = 0; k < nm; k++)
-            wenv_shadow_bounce(&sending, (size_t)k, sending.bounce, cosine, hidden + 3 * o->hit_start[k],
-                               e_hidden + 3 * k);
+            wenv_shadow_bounce(&sending, (size_t)k, cosine, hidden + 3 * o->hit_start[k], e_hidden + 3 * k);
     }
     free(own_light);
     free(normals);
