@@ -158,6 +158,24 @@ def test_a_new_scene_or_bounce_is_not_read_from_the_last(scene):
                                                                                  bounce=glow))
 
 
+def test_the_lights_rays_kept_from_one_view_answer_the_next(scene):
+    """The lights' rays are asked once per vertex and kept while the lighting and the scene hold: a
+    view shaded after others gives to the bit what a fresh shader gives, and so does a new lighting
+    (what was kept for the last one is not read)."""
+    positions, normals, views, occluders, occlusion, _, _ = scene
+    mat = MATERIALS["glossy"]
+    eye = np.array([-4.0, 3.0, 2.5], np.float32)
+    other = ((eye - positions) / np.linalg.norm(eye - positions, axis=1)[:, None]).astype(np.float32)
+    shader = wenv.Shader(sky((30.0, 35.0)), mat, quality="default")
+    shader.shade(normals, views, occlusion=occlusion)
+    fresh = wenv.Shader(sky((30.0, 35.0)), mat, quality="default").shade(normals, other, occlusion=occlusion)
+    np.testing.assert_array_equal(shader.shade(normals, other, occlusion=occlusion), fresh)
+    shader.set_environment(sky((120.0, 25.0)))
+    np.testing.assert_array_equal(
+        shader.shade(normals, other, occlusion=occlusion),
+        wenv.Shader(sky((120.0, 25.0)), mat, quality="default").shade(normals, other, occlusion=occlusion))
+
+
 def test_methods_without_shadows_say_so(scene):
     _, normals, views, _, occlusion, _, _ = scene
     for method in ("split_sum", "sh"):

@@ -6,6 +6,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "base/fingerprint.h"
+
 struct wenv_occluders {
     RTCDevice device;
     RTCScene scene;
@@ -13,6 +15,7 @@ struct wenv_occluders {
     const uint32_t *triangles; /* Embree's index buffer, alive with the scene */
     double size;
     size_t memory_budget;      /* also what each occlusion cast against it may take */
+    uint64_t fingerprint;      /* of the positions and triangles */
 };
 
 /* Embree's bytes per triangle for a static scene (the BVH and its triangle data, measured: about
@@ -72,6 +75,10 @@ wenv_status wenv_occluders_create(wenv_occluders **out, const float *positions, 
     occ->n_triangles = n_triangles;
     occ->n_positions = n_positions;
     occ->memory_budget = memory_budget;
+    occ->fingerprint = wenv_fingerprint_floats(wenv_fingerprint_word(WENV_FINGERPRINT_START, n_positions), positions,
+                                               3 * n_positions);
+    for (size_t i = 0; i < 3 * n_triangles; i++)
+        occ->fingerprint = wenv_fingerprint_word(occ->fingerprint, triangles[i]);
     double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
     for (size_t i = 0; i < n_positions; i++)
         for (int k = 0; k < 3; k++) {
@@ -131,6 +138,7 @@ void wenv_occluders_free(wenv_occluders *occ)
 size_t wenv_occluders_triangle_count(const wenv_occluders *occ) { return occ->n_triangles; }
 size_t wenv_occluders_vertex_count(const wenv_occluders *occ) { return occ->n_positions; }
 size_t wenv_occluders_memory_budget(const wenv_occluders *occ) { return occ->memory_budget; }
+uint64_t wenv_occluders_fingerprint(const wenv_occluders *occ) { return occ->fingerprint; }
 const uint32_t *wenv_occluders_triangles(const wenv_occluders *occ) { return occ->triangles; }
 double wenv_occluders_size(const wenv_occluders *occ) { return occ->size; }
 float wenv_occluders_offset(const wenv_occluders *occ) { return (float)(WENV_OCCLUDER_OFFSET * occ->size); }

@@ -27,6 +27,8 @@ size_t wenv_occluders_vertex_count(const wenv_occluders *occ);
 const uint32_t *wenv_occluders_triangles(const wenv_occluders *occ);
 /* The memory budget it was made with, which each occlusion cast against it keeps to as well. */
 size_t wenv_occluders_memory_budget(const wenv_occluders *occ);
+/* Of its content (positions and triangles): what tells one scene from another. */
+uint64_t wenv_occluders_fingerprint(const wenv_occluders *occ);
 /* The diagonal of the scene's bounding box: what a ray's start is lifted off a surface by a
  * fraction of (wenv_occluders_offset), so that it does not hit the face it starts on. */
 double wenv_occluders_size(const wenv_occluders *occ);

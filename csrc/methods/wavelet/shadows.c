@@ -183,11 +183,16 @@ static float light_visible(const wenv_light_visibility *vis, const float l[3])
         return open ? 1.0f : 0.0f; /* below the horizon it brings nothing anyway */
     if (!open)
         return 0.0f;
+    int known = vs->memo_slot ? wenv_light_memo_find(vs->memo_slot, l) : -1;
+    if (known >= 0)
+        return (float)known;
     const float *t = vs->turn; /* the ray is cast in the world */
     float world[3] = {t[0] * l[0] + t[3] * l[1] + t[6] * l[2], t[1] * l[0] + t[4] * l[1] + t[7] * l[2],
                       t[2] * l[0] + t[5] * l[1] + t[8] * l[2]};
     unsigned char hit;
     wenv_occluders_test(vs->occluders, vs->origin, world, 1, INFINITY, &hit);
+    if (vs->memo_slot)
+        wenv_light_memo_put(vs->memo, vs->memo_slot, l, !hit);
     return hit ? 0.0f : 1.0f;
 }
 
@@ -235,7 +240,7 @@ void wenv_shadow_narrow_specular(const wenv_vertex_shadow *vs, const float *lbar
         s[c] = count ? albedo[c] * back[c] / (float)count : 0.0f;
 }
 
-void wenv_vertex_shadow_init(wenv_vertex_shadow *vs, const wenv_shadow_scene *scene, size_t i)
+void wenv_vertex_shadow_init(wenv_vertex_shadow *vs, const wenv_shadow_scene *scene, size_t i, wenv_light_memo *memo)
 {
     const wenv_occlusion *o = scene->occlusion;
     const float *nf = o->normals + 3 * i, *p = o->positions + 3 * i;
@@ -248,6 +253,8 @@ void wenv_vertex_shadow_init(wenv_vertex_shadow *vs, const wenv_shadow_scene *sc
             vs->frame[3 * r + c] = (float)(f[3 * r] * t[3 * c] + f[3 * r + 1] * t[3 * c + 1] + f[3 * r + 2] * t[3 * c + 2]);
     vs->turn = t;
     vs->mask = o->masks + (size_t)o->slot[i] * o->words;
+    vs->memo = memo;
+    vs->memo_slot = memo ? memo->slots + o->slot[i] : NULL;
     vs->resolution = o->resolution;
     vs->occluders = scene->occluders;
     float lift = wenv_occluders_offset(scene->occluders);

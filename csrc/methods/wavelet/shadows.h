@@ -31,6 +31,7 @@
 #include "base/error.h"
 #include "methods/method.h"
 #include "methods/wavelet/grazing_nodes.h"
+#include "methods/wavelet/light_memo.h"
 #include "methods/wavelet/lights.h"
 #include "scene/material.h"
 
@@ -60,10 +61,13 @@ typedef struct {
     size_t resolution;
     const wenv_occluders *occluders;
     float origin[3];
+    wenv_light_memo *memo;         /* where the lights' rays' answers are kept (NULL: nowhere) */
+    wenv_light_memo_slot *memo_slot; /* this vertex's */
 } wenv_vertex_shadow;
 
-/* Sets vs for vertex i of scene's occlusion, which must hold a mask for it (slot >= 0). */
-void wenv_vertex_shadow_init(wenv_vertex_shadow *vs, const wenv_shadow_scene *scene, size_t i);
+/* Sets vs for vertex i of scene's occlusion, which must hold a mask for it (slot >= 0); its lights'
+ * rays are kept in memo's slot for it, if memo is given. */
+void wenv_vertex_shadow_init(wenv_vertex_shadow *vs, const wenv_shadow_scene *scene, size_t i, wenv_light_memo *memo);
 
 /* Subtracts from s the lobes' share of what vertex vs's blocked texels hide: sum over them of
  * blocked[k] (RGB, one per blocked texel in texel order) x R_t(v), v the unit view (in the method's

@@ -399,7 +399,7 @@ static const vertex_shadow *vertex_shadow_at(const wenv_wavelet *wavelet, const 
     if (scene->occlusion->slot[i] < 0)
         return NULL;
     size_t slot = (size_t)scene->occlusion->slot[i];
-    wenv_vertex_shadow_init(&sh->vs, scene, i);
+    wenv_vertex_shadow_init(&sh->vs, scene, i, wavelet->shadow_lights);
     sh->hidden = (env_only ? wavelet->shadow_lbar : wavelet->shadow_hidden) + 3 * scene->occlusion->hit_start[slot];
     sh->lbar = wavelet->shadow_lbar + 3 * scene->occlusion->hit_start[slot];
     sh->e_hidden = (env_only ? wavelet->shadow_e_env : wavelet->shadow_e_hidden) + 3 * slot;
@@ -554,11 +554,19 @@ static int renew_pair(float **a, size_t na, float **b, size_t nb)
 static wenv_status ensure_hidden_light(wenv_wavelet *wavelet, const wenv_shadow_scene *scene, wenv_error *err)
 {
     const wenv_occlusion *o = scene->occlusion;
-    uint64_t key = wenv_fingerprint_floats(wenv_fingerprint_word(WENV_FINGERPRINT_START, o->fingerprint), scene->turn, 9);
+    uint64_t key = wenv_fingerprint_word(wenv_fingerprint_word(WENV_FINGERPRINT_START, o->fingerprint),
+                                         wenv_occluders_fingerprint(scene->occluders));
+    key = wenv_fingerprint_floats(key, scene->turn, 9);
     if (wavelet->shadow_env_valid && wavelet->shadow_env_key == key)
         return WENV_OK;
     wavelet->shadow_env_valid = wavelet->shadow_valid = 0;
     size_t hits = o->n_masks ? o->hit_start[o->n_masks] : 0;
+    /* the lights' rays are kept for a quarter of what the occluders may take */
+    if (!wavelet->shadow_lights && !(wavelet->shadow_lights = calloc(1, sizeof *wavelet->shadow_lights)))
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the shadows of %zu vertices", o->n_vertices);
+    if (wenv_light_memo_reset(wavelet->shadow_lights, o->n_masks, wenv_occluders_memory_budget(scene->occluders) / 4,
+                              err))
+        return err->status;
     if (renew_pair(&wavelet->shadow_lbar, hits, &wavelet->shadow_e_env, o->n_masks) < 0)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the shadows of %zu vertices", o->n_vertices);
     const wenv_node_pyramid *pyramid = wenv_grazing_light_pyramid(wavelet->grazing_light);
@@ -571,7 +579,7 @@ static wenv_status ensure_hidden_light(wenv_wavelet *wavelet, const wenv_shadow_
             continue;
         size_t slot = (size_t)o->slot[i];
         wenv_vertex_shadow vs;
-        wenv_vertex_shadow_init(&vs, scene, (size_t)i);
+        wenv_vertex_shadow_init(&vs, scene, (size_t)i, NULL);
         wenv_shadow_hidden_light(&vs, pyramid, cosine, lbar + 3 * o->hit_start[slot], e_env + 3 * slot);
     }
     wavelet->shadow_env_key = key;

@@ -73,6 +73,9 @@ void wenv_wavelet_free(wenv_wavelet *wavelet)
     free(wavelet->shadow_e_hidden);
     free(wavelet->shadow_lbar);
     free(wavelet->shadow_e_env);
+    if (wavelet->shadow_lights)
+        wenv_light_memo_free(wavelet->shadow_lights);
+    free(wavelet->shadow_lights);
     free(wavelet->slice_ready);
     free(wavelet->slice_need);
     wenv_wavelet_free_quadrature(wavelet);

@@ -95,6 +95,8 @@ struct wenv_wavelet {
     uint64_t shadow_env_key;
     float *shadow_lbar;       /* hits x 3 */
     float *shadow_e_env;      /* masks x 3 */
+    wenv_light_memo *shadow_lights; /* the lights' rays' answers (written while shading), kept with the
+                                     * hidden lighting */
     int shadow_valid;
     uint64_t shadow_key;
     size_t shadow_material;   /* the serial of the material whose diffuse light the bounce is (0: none) */
