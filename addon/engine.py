@@ -241,39 +241,55 @@ def shadow_triangles(positions, triangles):
 class ShadowCache:
     """The scene's occluders (an Embree scene of every blocking mesh, world space) and each shaded
     part's occlusion, kept while the meshes' positions and triangles are unchanged (by content: a
-    new view, World or material casts no ray; a moved or edited mesh casts its own again).  Holds
-    no Blender data."""
+    new view, World or material casts no ray).  When meshes change (moved, deformed, edited, added
+    or removed), a part that did not change is made from its occlusion before, casting again only
+    the vertices whose rays met the changed meshes or meet them now.  Holds no Blender data."""
 
     def __init__(self):
         self.lock = threading.Lock()
         self.clear()
 
     def clear(self):
-        self._scene_key = None
+        self._mesh_keys = None  # fingerprint of each mesh of the occluders, in order
+        self._triangle_counts = None
         self._occluders = None
         self._occlusions = {}  # fingerprint of a part's positions and normals -> wenv.Occlusion
+        self._before = {}  # the same, cast against the occluders before the last change
+        self._changed = None  # (first, count): the triangles of those occluders that changed
         self._lights = {}  # (id of an occlusion kept above, what lit and made the part) -> its light
 
     def occluders(self, meshes, memory_budget_mb=1024):
         """wenv.Occluders of `meshes` ((positions, triangles) each, in order) and where each one's
         vertices start among its positions; the same object while the meshes are unchanged."""
-        key = _fingerprint(*[a for m in meshes for a in m])
-        if key != self._scene_key:
+        keys = [_fingerprint(p, t) for p, t in meshes]
+        if keys != self._mesh_keys:
             positions = np.ascontiguousarray(np.vstack([p for p, _ in meshes]), np.float32)
             offsets = np.cumsum([0] + [len(p) for p, _ in meshes])
             triangles = np.vstack([t + o for (_, t), o in zip(meshes, offsets)]).astype(np.int64)
-            self._occluders = (wenv.Occluders(positions, triangles, memory_budget_mb=memory_budget_mb), offsets)
-            self._scene_key = key
-            self._occlusions = {}  # cast against the scene before
+            occluders = wenv.Occluders(positions, triangles, memory_budget_mb=memory_budget_mb)
+            self._changed = None if self._mesh_keys is None else _changed_triangles(
+                self._mesh_keys, keys, self._triangle_counts, [len(t) for _, t in meshes])
+            self._before = self._occlusions if self._changed is not None else {}
+            self._occluders = (occluders, offsets)
+            self._mesh_keys, self._triangle_counts = keys, [len(t) for _, t in meshes]
+            self._occlusions = {}
             self._lights = {}
         return self._occluders
 
     def occlusion(self, occluders, positions, normals, progress=None):
-        """The occlusion of one part (its world positions and normals) against `occluders`."""
+        """The occlusion of one part (its world positions and normals) against `occluders`: kept,
+        made from the one before the last change when the part itself did not change, or cast."""
         key = _fingerprint(positions, normals)
         if key not in self._occlusions:
-            self._occlusions[key] = occluders.occlusion(positions, normals, resolution=occlusion_resolution(
-                len(positions)), progress=progress)
+            before = self._before.get(key)  # kept until made: a cancelled pass may come back for it
+            if before is not None:
+                made = occluders.occlusion(positions, normals, progress=progress, previous=before,
+                                           changed=self._changed)
+                del self._before[key]
+            else:
+                made = occluders.occlusion(positions, normals, resolution=occlusion_resolution(len(positions)),
+                                           progress=progress)
+            self._occlusions[key] = made
         return self._occlusions[key]
 
     def light(self, occlusion, key, make):
@@ -283,6 +299,20 @@ class ShadowCache:
         if full not in self._lights:
             self._lights[full] = make()
         return self._lights[full]
+
+
+def _changed_triangles(keys_before, keys, counts_before, counts):
+    """(first, count) of the triangles before that changed between two lists of meshes (their
+    fingerprints): those between the meshes both lists start and end with."""
+    head = 0
+    while head < min(len(keys), len(keys_before)) and keys[head] == keys_before[head]:
+        head += 1
+    tail = 0
+    while (tail < min(len(keys), len(keys_before)) - head and
+           keys[len(keys) - 1 - tail] == keys_before[len(keys_before) - 1 - tail]):
+        tail += 1
+    first = sum(counts_before[:head])
+    return first, sum(counts_before[head:len(keys_before) - tail])
 
 
 shadows = ShadowCache()

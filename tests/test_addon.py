@@ -1894,10 +1894,8 @@ def test_a_convex_mesh_alone_shades_as_without_shadows(scene):
     assert np.array_equal(with_shadows, without)
 
 
-def test_another_mesh_casts_shadows_unless_told_not_to(scene):
-    """A plane under the start-up cube (not shaded): darker beneath it with shadows on; the same as
-    without once the cube's Casts Shadows is off."""
-    env_world(scene, "sunset")
+def add_plane_under_cube():
+    """A Lambertian plane of 17 x 17 vertices under the start-up cube, selected alone."""
     bpy.ops.mesh.primitive_plane_add(size=8.0, location=(0.0, 0.0, -1.5))
     plane = bpy.context.object
     bpy.ops.object.modifier_add(type="SUBSURF")
@@ -1907,6 +1905,14 @@ def test_another_mesh_casts_shadows_unless_told_not_to(scene):
     plane.data.shade_smooth()
     set_material(plane, model="LAMBERT", diffuse=(0.6, 0.6, 0.6), lobes=())
     select_only(plane)
+    return plane
+
+
+def test_another_mesh_casts_shadows_unless_told_not_to(scene):
+    """A plane under the start-up cube (not shaded): darker beneath it with shadows on; the same as
+    without once the cube's Casts Shadows is off."""
+    env_world(scene, "sunset")
+    plane = add_plane_under_cube()
     assert shade_op(view="CAMERA") == {"FINISHED"}
     _, plain = attribute(plane)
     scene.wenv.shadows = True
@@ -1919,6 +1925,28 @@ def test_another_mesh_casts_shadows_unless_told_not_to(scene):
     assert shade_op(view="CAMERA") == {"FINISHED"}
     _, again = attribute(plane)
     assert np.array_equal(again, plain)
+
+
+def test_a_moved_object_recasts_only_what_sees_it(scene):
+    """The cube moved over the plane, beside a wall: the plane's occlusion is made from the one
+    before, casting only the vertices whose rays met the cube or meet it now (not those behind the
+    wall), and the colours are those of casting everything anew."""
+    env_world(scene, "sunset")
+    bpy.ops.mesh.primitive_cube_add(location=(-1.2, 0.0, 0.75), scale=(0.1, 4.0, 2.25))
+    plane = add_plane_under_cube()
+    scene.wenv.shadows = True
+    engine.shadows.clear()
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    bpy.data.objects["Cube"].location.x += 1.5
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    (occlusion,) = engine.shadows._occlusions.values()
+    assert 0 < occlusion.cast_vertices < occlusion.vertices
+    _, moved = attribute(plane)
+    engine.shadows.clear()
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    (again,) = engine.shadows._occlusions.values()
+    assert again.cast_vertices == again.vertices
+    np.testing.assert_array_equal(attribute(plane)[1], moved)
 
 
 def test_a_cancelled_refinement_stops_its_rays(scene):

@@ -176,6 +176,76 @@ def test_the_lights_rays_kept_from_one_view_answer_the_next(scene):
         wenv.Shader(sky((120.0, 25.0)), mat, quality="default").shade(normals, other, occlusion=occlusion))
 
 
+def wall_and_cube_on_plane(cube):
+    """A plane (41 x 41 vertices) split by a wall, with `cube` ((positions, triangles), triangles 12 to
+    12 + its count) on one side: the plane's positions and normals, and the occluders."""
+    g = np.linspace(-3.0, 3.0, 41, dtype=np.float32)
+    x, y = np.meshgrid(g, g)
+    plane = np.stack([x.ravel(), y.ravel(), np.zeros(x.size, np.float32)], 1)
+    faces = [(j * 41 + i, j * 41 + i + 1, (j + 1) * 41 + i + 1) for j in range(40) for i in range(40)]
+    faces += [(j * 41 + i, (j + 1) * 41 + i + 1, (j + 1) * 41 + i) for j in range(40) for i in range(40)]
+    parts = [box((-0.1, -3.0, 0.0), (0.1, 3.0, 2.0))] + ([cube] if cube else []) + [(plane, np.array(faces))]
+    normals = np.tile(np.float32([0.0, 0.0, 1.0]), (len(plane), 1))
+    return plane, normals, wenv.Occluders(*merged(*parts))
+
+
+def test_a_moved_object_recasts_exactly_the_vertices_that_see_it():
+    """A cube moved beside a wall: the occlusion made from the previous one casts again exactly the
+    plane's vertices whose rays met the cube before or meet it now (not those behind the wall), and
+    equals a new cast -- masks, triangles and the bounce read at the hits, to the bit."""
+    plane, normals, before_occ = wall_and_cube_on_plane(box((1.3, -0.2, 0.0), (1.7, 0.2, 0.4)))
+    _, _, after_occ = wall_and_cube_on_plane(box((1.8, 0.3, 0.0), (2.2, 0.7, 0.4)))
+    before = before_occ.occlusion(plane, normals)
+    fresh = after_occ.occlusion(plane, normals)
+    refreshed = after_occ.occlusion(plane, normals, previous=before, changed=(12, 12))
+
+    def sees_cube(o):
+        return np.any((o.triangles >= 12) & (o.triangles < 24), axis=(1, 2))
+
+    affected = sees_cube(before) | sees_cube(fresh)
+    assert 0 < affected.sum() < 0.5 * len(plane)
+    assert refreshed.cast_vertices == affected.sum() and fresh.cast_vertices == len(plane)
+    np.testing.assert_array_equal(refreshed.triangles, fresh.triangles)
+    glow = np.random.default_rng(3).uniform(0.0, 2.0, (len(plane) + 16, 3)).astype(np.float32)
+    views = np.tile(np.float32([0.3, -0.5, 0.8]), (len(plane), 1))
+    shader = wenv.Shader(sky((30.0, 35.0)), MATERIALS["glossy"], quality="draft")
+    np.testing.assert_array_equal(shader.shade(normals, views, occlusion=refreshed, bounce=glow),
+                                  shader.shade(normals, views, occlusion=fresh, bounce=glow))
+
+
+@pytest.mark.parametrize("cube", ["replaced", "removed"])
+def test_a_replaced_or_removed_object_shifts_the_rest(cube):
+    """The changed triangles may become any number (a sphere of 144 for the cube's 12, or none): the
+    triangles after them are renumbered, and the result is a new cast's."""
+    plane, normals, before_occ = wall_and_cube_on_plane(box((1.3, -0.2, 0.0), (1.7, 0.2, 0.4)))
+    v, f = uv_sphere(6, 12, 0.3)
+    _, _, after_occ = wall_and_cube_on_plane((v + np.float32([2.0, 0.0, 0.3]), f) if cube == "replaced" else None)
+    refreshed = after_occ.occlusion(plane, normals, previous=before_occ.occlusion(plane, normals), changed=(12, 12))
+    np.testing.assert_array_equal(refreshed.triangles, after_occ.occlusion(plane, normals).triangles)
+
+
+def test_a_previous_occlusion_that_does_not_fit_is_named():
+    plane, normals, before_occ = wall_and_cube_on_plane(box((1.3, -0.2, 0.0), (1.7, 0.2, 0.4)))
+    _, _, after_occ = wall_and_cube_on_plane(box((1.8, 0.3, 0.0), (2.2, 0.7, 0.4)))
+    before = before_occ.occlusion(plane, normals)
+    with pytest.raises(ValueError, match="triangle 12 before is not triangle 12 now"):
+        after_occ.occlusion(plane, normals, previous=before, changed=(0, 12))   # the wall said changed, not the cube
+    with pytest.raises(ValueError, match="other positions"):
+        after_occ.occlusion(plane + np.float32([0.0, 0.0, 0.1]), normals, previous=before, changed=(12, 12))
+    with pytest.raises(ValueError, match="other normals"):
+        after_occ.occlusion(plane, normals + np.float32([0.1, 0.0, 0.0]), previous=before, changed=(12, 12))
+    with pytest.raises(ValueError, match="not among"):
+        after_occ.occlusion(plane, normals, previous=before, changed=(12, 10**6))
+    with pytest.raises(ValueError, match="resolution 16 is not previous's"):
+        after_occ.occlusion(plane, normals, resolution=16, previous=before, changed=(12, 12))
+    with pytest.raises(ValueError, match="changed needs previous"):
+        after_occ.occlusion(plane, normals, changed=(12, 12))
+    with pytest.raises(TypeError, match="changed must be"):
+        after_occ.occlusion(plane, normals, previous=before, changed=12)
+    with pytest.raises(TypeError, match="previous must be a wenv.Occlusion"):
+        after_occ.occlusion(plane, normals, previous="before", changed=(12, 12))
+
+
 def test_methods_without_shadows_say_so(scene):
     _, normals, views, _, occlusion, _, _ = scene
     for method in ("split_sum", "sh"):

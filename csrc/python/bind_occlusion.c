@@ -207,21 +207,60 @@ done:
     return result;
 }
 
-/* occlusion(positions, normals, resolution=8, progress=None) -> wenv.Occlusion */
+/* The previous occlusion and the changed triangles of a refresh: previous None (and changed None)
+ * for a new cast.  -1 + an exception naming the argument. */
+static int refresh_args(PyObject *previous, PyObject *changed, size_t *resolution, int resolution_given,
+                        const OcclusionObject **before, size_t *first, size_t *count)
+{
+    *before = NULL;
+    if (previous == Py_None) {
+        if (changed != Py_None) {
+            PyErr_SetString(PyExc_ValueError, "changed needs previous: the occlusion cast before the change");
+            return -1;
+        }
+        return 0;
+    }
+    if (!PyObject_TypeCheck(previous, &OcclusionType)) {
+        PyErr_Format(PyExc_TypeError, "previous must be a wenv.Occlusion, got %.80s", Py_TYPE(previous)->tp_name);
+        return -1;
+    }
+    const OcclusionObject *b = (const OcclusionObject *)previous;
+    if (resolution_given && *resolution != b->o.resolution) {
+        PyErr_Format(PyExc_ValueError, "resolution %zu is not previous's (%zu)", *resolution, b->o.resolution);
+        return -1;
+    }
+    *resolution = b->o.resolution;
+    if (!PyTuple_Check(changed) || PyTuple_GET_SIZE(changed) != 2 ||
+        wenv_py_get_size(PyTuple_GET_ITEM(changed, 0), "changed[0]", first) < 0 ||
+        wenv_py_get_size(PyTuple_GET_ITEM(changed, 1), "changed[1]", count) < 0) {
+        if (!PyErr_Occurred())
+            PyErr_SetString(PyExc_TypeError,
+                            "changed must be (first, count): the triangles of previous's occluders that changed");
+        return -1;
+    }
+    *before = b;
+    return 0;
+}
+
+/* occlusion(positions, normals, resolution=8, progress=None, previous=None, changed=None) -> wenv.Occlusion */
 static PyObject *occluders_occlusion(OccludersObject *self, PyObject *args, PyObject *kwargs)
 {
-    static char *kwlist[] = {"positions", "normals", "resolution", "progress", NULL};
-    PyObject *pobj, *nobj, *res_obj = NULL, *progress_obj = Py_None;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|OO:occlusion", kwlist, &pobj, &nobj, &res_obj, &progress_obj) ||
+    static char *kwlist[] = {"positions", "normals", "resolution", "progress", "previous", "changed", NULL};
+    PyObject *pobj, *nobj, *res_obj = NULL, *progress_obj = Py_None, *previous = Py_None, *changed = Py_None;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|OOOO:occlusion", kwlist, &pobj, &nobj, &res_obj, &progress_obj,
+                                     &previous, &changed) ||
         ready(self) < 0)
         return NULL;
-    size_t resolution = 8;
+    size_t resolution = 8, first = 0, count = 0;
     if (res_obj && wenv_py_get_size(res_obj, "resolution", &resolution) < 0)
         return NULL;
     if (progress_obj != Py_None && !PyCallable_Check(progress_obj)) {
         PyErr_SetString(PyExc_TypeError, "progress must be callable or None");
         return NULL;
     }
+    const OcclusionObject *before;
+    if (refresh_args(previous, changed, &resolution, res_obj != NULL, &before, &first, &count) < 0)
+        return NULL;
     Py_buffer pb, nb;
     size_t np;
     if (wenv_py_get_vec3_pair(pobj, "positions", nobj, "normals", 1, &pb, &nb, &np) < 0)
@@ -236,7 +275,11 @@ static PyObject *occluders_occlusion(OccludersObject *self, PyObject *args, PyOb
     wenv_error err = {0};
     wenv_status st;
     WENV_BEGIN_WORK
-    st = wenv_occlusion_make(&out->o, self->occ, pb.buf, nb.buf, np, resolution, &progress, &err);
+    if (before)
+        st = wenv_occlusion_refresh(&out->o, &before->o, ((OccludersObject *)before->occluders)->occ, self->occ,
+                                    pb.buf, nb.buf, np, first, count, &progress, &err);
+    else
+        st = wenv_occlusion_make(&out->o, self->occ, pb.buf, nb.buf, np, resolution, &progress, &err);
     WENV_END_WORK
     if (st) {
         Py_CLEAR(out);
@@ -266,10 +309,15 @@ static PyMethodDef occluders_methods[] = {
      "occluded(origins, directions, tfar=inf)\n--\n\nWhether anything blocks each ray (bool, n): origins float32 "
      "(n, 3) or one (3,), directions float32 (n, 3) (normalised here), up to distance tfar."},
     {"occlusion", (PyCFunction)(void (*)(void))occluders_occlusion, METH_VARARGS | METH_KEYWORDS,
-     "occlusion(positions, normals, resolution=8, progress=None)\n--\n\nWhich directions of each vertex's "
-     "hemisphere the scene blocks, as a wenv.Occlusion: a ray from the vertex (lifted off the surface by 1e-4 of "
-     "the scene's size) through the centre of each texel of a resolution x resolution hemi-octahedral map in "
-     "the vertex's frame (resolution 4 to 16).  progress(fraction) may return True to cancel."},
+     "occlusion(positions, normals, resolution=8, progress=None, previous=None, changed=None)\n--\n\nWhich "
+     "directions of each vertex's hemisphere the scene blocks, as a wenv.Occlusion: a ray from the vertex (lifted "
+     "off the surface by 1e-4 of the scene's size) through the centre of each texel of a resolution x resolution "
+     "hemi-octahedral map in the vertex's frame (resolution 4 to 16).  progress(fraction) may return True to "
+     "cancel.\n\nAfter a change (an object moved, deformed, edited or removed), previous (the occlusion of the "
+     "same positions and normals before) and changed=(first, count) (the triangles of previous's occluders that "
+     "changed, every other one here in the same order, the new ones in their place) cast only the vertices whose "
+     "rays met the changed triangles or meet them now; the result is what a new cast gives, and cast_vertices "
+     "says how many were cast."},
     {NULL, NULL, 0, NULL},
 };
 
@@ -318,6 +366,24 @@ static PyObject *occlusion_visible(OcclusionObject *self, void *closure)
     return a;
 }
 
+/* Which triangle each texel's ray meets first: -1 where it reaches the sky. */
+static PyObject *occlusion_triangles(OcclusionObject *self, void *closure)
+{
+    (void)closure;
+    const wenv_occlusion *o = &self->o;
+    size_t r = o->resolution, n = o->n_vertices, texels = r * r;
+    Py_ssize_t shape[3] = {(Py_ssize_t)n, (Py_ssize_t)r, (Py_ssize_t)r};
+    void *data;
+    PyObject *a = wenv_py_new_array(3, shape, "int64", &data);
+    int64_t *tri = data;
+    for (size_t i = 0; a && i < n; i++) {
+        const wenv_occlusion_hit *h = o->slot[i] >= 0 ? o->hits + o->hit_start[o->slot[i]] : NULL;
+        for (size_t t = 0; t < texels; t++)
+            tri[i * texels + t] = wenv_occlusion_visible(o, i, t) ? -1 : (int64_t)(h++)->triangle;
+    }
+    return a;
+}
+
 /* Each vertex's visible share of its hemisphere, by solid angle. */
 static PyObject *occlusion_open(OcclusionObject *self, void *closure)
 {
@@ -358,7 +424,8 @@ static PyObject *occlusion_size(OcclusionObject *self, void *closure)
     size_t v = which == 0 ? o->resolution
                           : which == 1 ? o->n_vertices
                                        : which == 2 ? o->n_masks
-                                                    : wenv_occlusion_bytes(o);
+                                                    : which == 3 ? wenv_occlusion_bytes(o)
+                                                                 : o->cast_vertices;
     return PyLong_FromSize_t(v);
 }
 
@@ -368,8 +435,13 @@ static PyGetSetDef occlusion_getset[] = {
     {"blocked_vertices", (getter)occlusion_size, NULL,
      "Vertices some direction of whose hemisphere is blocked (the others hold no mask).", (void *)2},
     {"nbytes", (getter)occlusion_size, NULL, "Bytes held.", (void *)3},
+    {"cast_vertices", (getter)occlusion_size, NULL,
+     "How many vertices' rays were cast to make it: all of them, unless made from a previous occlusion.", (void *)4},
     {"visible", (getter)occlusion_visible, NULL,
      "bool (n, resolution, resolution): texel (row, column) of a vertex's map reaches the sky.", NULL},
+    {"triangles", (getter)occlusion_triangles, NULL,
+     "int64 (n, resolution, resolution): the occluders' triangle each texel's ray meets first, -1 where it reaches "
+     "the sky.", NULL},
     {"open_fraction", (getter)occlusion_open, NULL,
      "float64 (n,): each vertex's visible share of its hemisphere, by solid angle.", NULL},
     {"directions", (getter)occlusion_directions, NULL,

@@ -13,6 +13,7 @@ struct wenv_occluders {
     RTCScene scene;
     size_t n_triangles, n_positions;
     const uint32_t *triangles; /* Embree's index buffer, alive with the scene */
+    const float *positions;    /* and its vertex buffer */
     double size;
     size_t memory_budget;      /* also what each occlusion cast against it may take */
     uint64_t fingerprint;      /* of the positions and triangles */
@@ -106,9 +107,13 @@ wenv_status wenv_occluders_create(wenv_occluders **out, const float *positions, 
         memcpy(vb, positions, n_positions * 3 * sizeof(float));
         memcpy(ib, triangles, n_triangles * 3 * sizeof(uint32_t));
         occ->triangles = ib;
+        occ->positions = vb;
         rtcCommitGeometry(geom);
         rtcAttachGeometry(occ->scene, geom);
         rtcSetSceneBuildQuality(occ->scene, RTC_BUILD_QUALITY_HIGH); /* built once, tested millions of times */
+        /* conservative box tests: what a ray meets does not depend on how the tree was built, so
+         * an occlusion made from the one before (another scene's tree) is a new cast's to the bit */
+        rtcSetSceneFlags(occ->scene, RTC_SCENE_FLAG_ROBUST);
         rtcCommitScene(occ->scene);
     }
     if (geom)
@@ -140,6 +145,7 @@ size_t wenv_occluders_vertex_count(const wenv_occluders *occ) { return occ->n_po
 size_t wenv_occluders_memory_budget(const wenv_occluders *occ) { return occ->memory_budget; }
 uint64_t wenv_occluders_fingerprint(const wenv_occluders *occ) { return occ->fingerprint; }
 const uint32_t *wenv_occluders_triangles(const wenv_occluders *occ) { return occ->triangles; }
+const float *wenv_occluders_positions(const wenv_occluders *occ) { return occ->positions; }
 double wenv_occluders_size(const wenv_occluders *occ) { return occ->size; }
 float wenv_occluders_offset(const wenv_occluders *occ) { return (float)(WENV_OCCLUDER_OFFSET * occ->size); }
 

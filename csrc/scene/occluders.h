@@ -25,6 +25,7 @@ size_t wenv_occluders_triangle_count(const wenv_occluders *occ);
 /* The positions the triangles index, and the triangles (3 indices each) as the scene holds them. */
 size_t wenv_occluders_vertex_count(const wenv_occluders *occ);
 const uint32_t *wenv_occluders_triangles(const wenv_occluders *occ);
+const float *wenv_occluders_positions(const wenv_occluders *occ);
 /* The memory budget it was made with, which each occlusion cast against it keeps to as well. */
 size_t wenv_occluders_memory_budget(const wenv_occluders *occ);
 /* Of its content (positions and triangles): what tells one scene from another. */

@@ -57,9 +57,94 @@ static int append_hits(wenv_occlusion *o, size_t *cap, const wenv_occlusion_hit 
     return 0;
 }
 
-wenv_status wenv_occlusion_make(wenv_occlusion *out, const wenv_occluders *occ, const float *positions,
-                                const float *normals, size_t n, size_t resolution, const wenv_progress *progress,
-                                wenv_error *err)
+/* What remaking an occlusion after some triangles changed knows: the occlusion before, the changed
+ * triangles' ids then, the changed triangles alone as they are now, and the bounds of both. */
+typedef struct {
+    const wenv_occlusion *before;
+    const wenv_occluders *occluders_before;
+    const wenv_occluders *changed; /* the changed triangles as they are now (NULL: none are left) */
+    size_t first, end_before;      /* the changed triangles' ids before: [first, end_before) */
+    long long shift;               /* added to the ids of those after them */
+    float lo[3], hi[3];            /* the changed triangles' bounds, before and now */
+} refresh_plan;
+
+/* Whether any point of the box lo..hi lies above the plane through `origin` normal to n. */
+static int box_above(const float lo[3], const float hi[3], const float origin[3], const double n[3])
+{
+    double reach = 0.0; /* the largest n.(x - origin) over the box: at the corner n points to */
+    for (int k = 0; k < 3; k++)
+        reach += n[k] * ((n[k] > 0.0 ? hi[k] : lo[k]) - origin[k]);
+    return reach > 0.0;
+}
+
+/* How far from `origin` a hit before lies: its triangle's point at its (rounded) weights. */
+static float hit_distance(const wenv_occluders *occ, const wenv_occlusion_hit *h, const float origin[3])
+{
+    const float *p = wenv_occluders_positions(occ);
+    const uint32_t *tri = wenv_occluders_triangles(occ) + 3 * (size_t)h->triangle;
+    float w[3], d2 = 0.0f;
+    wenv_occlusion_hit_weights(h, w);
+    for (int k = 0; k < 3; k++) {
+        float x = w[0] * p[3 * (size_t)tri[0] + (size_t)k] + w[1] * p[3 * (size_t)tri[1] + (size_t)k] +
+                  w[2] * p[3 * (size_t)tri[2] + (size_t)k] - origin[k];
+        d2 += x * x;
+    }
+    return sqrtf(d2);
+}
+
+/* Whether vertex i's rays may see a change: one of its hits was on a changed triangle, or one of its
+ * rays meets a changed triangle as it is now before what it met then.  Those nearly tied with their
+ * hit before are counted in (a far limit 0.1 % long), so what is kept is what a new cast gives. */
+static int sees_a_change(const refresh_plan *rp, size_t i, const float origin[3], const double n[3], const float *dirs,
+                         size_t texels, float lift)
+{
+    const wenv_occlusion *b = rp->before;
+    int32_t s = b->slot[i];
+    const wenv_occlusion_hit *h = s >= 0 ? b->hits + b->hit_start[s] : NULL;
+    size_t nh = s >= 0 ? b->hit_start[s + 1] - b->hit_start[s] : 0;
+    for (size_t k = 0; k < nh; k++)
+        if (h[k].triangle >= rp->first && h[k].triangle < rp->end_before)
+            return 1;
+    if (!rp->changed || !box_above(rp->lo, rp->hi, origin, n))
+        return 0;
+    const uint64_t *mask = s >= 0 ? b->masks + (size_t)s * b->words : NULL;
+    size_t k = 0;
+    for (size_t t = 0; t < texels; t++) {
+        float tfar = INFINITY;
+        if (mask && !((mask[t / 64] >> (t % 64)) & 1u))
+            tfar = hit_distance(rp->occluders_before, &h[k++], origin) * 1.001f + lift;
+        unsigned char blocked;
+        wenv_occluders_test(rp->changed, origin, dirs + 3 * t, 1, tfar, &blocked);
+        if (blocked)
+            return 1;
+    }
+    return 0;
+}
+
+/* Vertex i's mask and hits as they were, the ids after the changed ones shifted; returns the hits. */
+static unsigned short keep_vertex(const refresh_plan *rp, size_t i, uint64_t *mask, wenv_occlusion_hit *out)
+{
+    const wenv_occlusion *b = rp->before;
+    int32_t s = b->slot[i];
+    if (s < 0) {
+        for (size_t w = 0; w < b->words; w++)
+            mask[w] = ~(uint64_t)0;
+        return 0;
+    }
+    memcpy(mask, b->masks + (size_t)s * b->words, b->words * sizeof *mask);
+    size_t nh = b->hit_start[s + 1] - b->hit_start[s];
+    for (size_t k = 0; k < nh; k++) {
+        out[k] = b->hits[b->hit_start[s] + k];
+        if (out[k].triangle >= rp->end_before)
+            out[k].triangle = (uint32_t)((long long)out[k].triangle + rp->shift);
+    }
+    return (unsigned short)nh;
+}
+
+/* Casts (or, refreshing, keeps where nothing it sees changed) every vertex's mask. */
+static wenv_status cast(wenv_occlusion *out, const wenv_occluders *occ, const float *positions, const float *normals,
+                        size_t n, size_t resolution, const refresh_plan *refresh, const wenv_progress *progress,
+                        wenv_error *err)
 {
     memset(out, 0, sizeof *out);
     if (resolution < WENV_OCCLUSION_RESOLUTION_MIN || resolution > WENV_OCCLUSION_RESOLUTION_MAX)
@@ -117,7 +202,7 @@ wenv_status wenv_occlusion_make(wenv_occlusion *out, const wenv_occluders *occ, 
     float lift = wenv_occluders_offset(occ);
     size_t cap = 0;
     atomic_int failed = 0, cancelled = 0;
-    atomic_size_t done = 0;
+    atomic_size_t done = 0, recast = 0;
     int over = 0;
     for (size_t first = 0; first < n && !failed && !cancelled; first += block) {
         size_t count = n - first < block ? n - first : block;
@@ -144,10 +229,16 @@ wenv_status wenv_occlusion_make(wenv_occlusion *out, const wenv_occluders *occ, 
                         dirs[3 * t + (size_t)k] = (float)(f[k] * l[0] + f[3 + k] * l[1] + f[6 + k] * l[2]);
                 }
                 float origin[3] = {p[0] + lift * (float)nn[0], p[1] + lift * (float)nn[1], p[2] + lift * (float)nn[2]};
-                wenv_occluders_hit(occ, origin, dirs, texels, tri, uv);
                 uint64_t *mask = block_masks + b * words;
-                memset(mask, 0, words * sizeof *mask);
                 wenv_occlusion_hit *h = block_hits + b * texels;
+                if (refresh && !sees_a_change(refresh, i, origin, nn, dirs, texels, lift)) {
+                    block_count[b] = keep_vertex(refresh, i, mask, h);
+                    wenv_progress_item(progress, &done, n, &cancelled);
+                    continue;
+                }
+                atomic_fetch_add(&recast, 1);
+                wenv_occluders_hit(occ, origin, dirs, texels, tri, uv);
+                memset(mask, 0, words * sizeof *mask);
                 unsigned short nh = 0;
                 for (size_t t = 0; t < texels; t++) {
                     if (tri[t] == UINT32_MAX) {
@@ -215,6 +306,92 @@ wenv_status wenv_occlusion_make(wenv_occlusion *out, const wenv_occluders *occ, 
         h = wenv_fingerprint_word(h, ((uint64_t)o.hits[k].triangle << 32) | ((uint64_t)o.hits[k].u << 16) | o.hits[k].v);
     h = wenv_fingerprint_floats(h, o.positions, 3 * n);
     o.fingerprint = wenv_fingerprint_floats(h, o.normals, 3 * n);
+    o.cast_vertices = atomic_load(&recast);
     *out = o;
     return WENV_OK;
+}
+
+wenv_status wenv_occlusion_make(wenv_occlusion *out, const wenv_occluders *occ, const float *positions,
+                                const float *normals, size_t n, size_t resolution, const wenv_progress *progress,
+                                wenv_error *err)
+{
+    return cast(out, occ, positions, normals, n, resolution, NULL, progress, err);
+}
+
+/* Grows lo..hi to hold triangles [first, first + count) of occ. */
+static void add_bounds(const wenv_occluders *occ, size_t first, size_t count, float lo[3], float hi[3])
+{
+    const float *p = wenv_occluders_positions(occ);
+    const uint32_t *t = wenv_occluders_triangles(occ) + 3 * first;
+    for (size_t k = 0; k < 3 * count; k++)
+        for (int c = 0; c < 3; c++) {
+            float x = p[3 * (size_t)t[k] + (size_t)c];
+            lo[c] = x < lo[c] ? x : lo[c];
+            hi[c] = x > hi[c] ? x : hi[c];
+        }
+}
+
+/* Whether triangle a of occ_a and b of occ_b have the same corners (bit for bit). */
+static int same_triangle(const wenv_occluders *occ_a, size_t a, const wenv_occluders *occ_b, size_t b)
+{
+    const float *pa = wenv_occluders_positions(occ_a), *pb = wenv_occluders_positions(occ_b);
+    const uint32_t *ta = wenv_occluders_triangles(occ_a) + 3 * a, *tb = wenv_occluders_triangles(occ_b) + 3 * b;
+    for (int k = 0; k < 3; k++)
+        if (memcmp(pa + 3 * (size_t)ta[k], pb + 3 * (size_t)tb[k], 3 * sizeof(float)))
+            return 0;
+    return 1;
+}
+
+wenv_status wenv_occlusion_refresh(wenv_occlusion *out, const wenv_occlusion *before,
+                                   const wenv_occluders *occluders_before, const wenv_occluders *occ,
+                                   const float *positions, const float *normals, size_t n, size_t first,
+                                   size_t count, const wenv_progress *progress, wenv_error *err)
+{
+    memset(out, 0, sizeof *out);
+    size_t total_before = wenv_occluders_triangle_count(occluders_before), total = wenv_occluders_triangle_count(occ);
+    if (first > total_before || count > total_before - first)
+        return wenv_error_set(err, WENV_ERR_VALUE, "changed triangles [%zu, %zu) are not among the %zu before", first,
+                              first + count, total_before);
+    if (total + count < total_before)
+        return wenv_error_set(err, WENV_ERR_VALUE,
+                              "the occluders have %zu triangles: fewer than the %zu outside the changed ones", total,
+                              total_before - count);
+    if (before->n_vertices != n || memcmp(before->positions, positions, n * 3 * sizeof(float)))
+        return wenv_error_set(err, WENV_ERR_VALUE, "previous was made for other positions: cast the occlusion anew");
+    for (size_t i = 0; i < n; i++) {
+        const float *m = normals + 3 * i, *u = before->normals + 3 * i;
+        float len = sqrtf(m[0] * m[0] + m[1] * m[1] + m[2] * m[2]);
+        if (!(len > 0.0f) || (float)(m[0] / len) != u[0] || (float)(m[1] / len) != u[1] || (float)(m[2] / len) != u[2])
+            return wenv_error_set(err, WENV_ERR_VALUE, "previous was made for other normals (normals[%zu]): cast the "
+                                                       "occlusion anew", i);
+    }
+    size_t count_now = total + count - total_before, end_before = first + count;
+    for (size_t k = 0; k < total_before; k++) {
+        if (k == first)
+            k = end_before;
+        if (k >= total_before)
+            break;
+        size_t now = k < first ? k : k - count + count_now;
+        if (!same_triangle(occluders_before, k, occ, now))
+            return wenv_error_set(err, WENV_ERR_VALUE,
+                                  "triangle %zu before is not triangle %zu now, and is outside the changed ones [%zu, "
+                                  "%zu): cast the occlusion anew", k, now, first, end_before);
+    }
+    refresh_plan plan = {.before = before, .occluders_before = occluders_before, .first = first,
+                         .end_before = end_before, .shift = (long long)count_now - (long long)count,
+                         .lo = {INFINITY, INFINITY, INFINITY}, .hi = {-INFINITY, -INFINITY, -INFINITY}};
+    add_bounds(occluders_before, first, count, plan.lo, plan.hi);
+    add_bounds(occ, first, count_now, plan.lo, plan.hi);
+    wenv_occluders *changed = NULL;
+    if (count_now) {
+        /* the changed triangles alone, to test each ray against them only */
+        if (wenv_occluders_create(&changed, wenv_occluders_positions(occ), wenv_occluders_vertex_count(occ),
+                                  wenv_occluders_triangles(occ) + 3 * first, count_now,
+                                  wenv_occluders_memory_budget(occ), err))
+            return err->status;
+        plan.changed = changed;
+    }
+    wenv_status st = cast(out, occ, positions, normals, n, before->resolution, &plan, progress, err);
+    wenv_occluders_free(changed);
+    return st;
 }

@@ -37,6 +37,7 @@ typedef struct {
     float *positions;   /* n x 3: the vertices the masks are for, as given */
     float *normals;     /* n x 3: their unit normals (the masks' frames) */
     uint64_t fingerprint; /* of all the above: what tells one occlusion from another */
+    size_t cast_vertices; /* how many vertices' rays were cast to make it (all of them, unless refreshed) */
 } wenv_occlusion;
 
 /* The masks of n vertices (positions and normals as xyz floats; normals non-zero) against `occ`,
@@ -47,6 +48,20 @@ typedef struct {
 wenv_status wenv_occlusion_make(wenv_occlusion *out, const wenv_occluders *occ, const float *positions,
                                 const float *normals, size_t n, size_t resolution, const wenv_progress *progress,
                                 wenv_error *err);
+
+/* The same after some triangles changed (an object moved, deformed, edited or removed), casting only
+ * what the change can reach: `before` is the occlusion of these positions and normals against
+ * `occluders_before`, whose triangles [first, first + count) changed; `occ` holds every other one of
+ * them, in the same order with the same corners, and in their place those that are there now (any
+ * number).  A vertex is cast again when one of its hits was on a changed triangle or one of its rays
+ * meets a changed triangle as it is now before what it met (the changed triangles' bounds decide
+ * most without a ray); the others keep their masks and hits.  The result is what
+ * wenv_occlusion_make would give, with `cast_vertices` telling how many were cast.  WENV_ERR_VALUE
+ * when `before` is of other positions or normals, or a triangle outside the changed ones differs. */
+wenv_status wenv_occlusion_refresh(wenv_occlusion *out, const wenv_occlusion *before,
+                                   const wenv_occluders *occluders_before, const wenv_occluders *occ,
+                                   const float *positions, const float *normals, size_t n, size_t first,
+                                   size_t count, const wenv_progress *progress, wenv_error *err);
 void wenv_occlusion_free(wenv_occlusion *o);
 /* The bytes it holds. */
 size_t wenv_occlusion_bytes(const wenv_occlusion *o);
