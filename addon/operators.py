@@ -55,16 +55,18 @@ class _Precomputing:
 
 
 def _progress_reporter(wm, what="precomputing"):
-    """Progress into Blender's progress indicator, and, in background runs and scripts, printed every
-    10 % (there is no indicator to see)."""
-    wm.progress_begin(0.0, 1.0)
-    printed = [-1]
+    """Progress into Blender's progress indicator (begun at the first report), and, in background
+    runs and scripts, printed every 10 % (there is no indicator to see)."""
+    state = {"begun": False, "printed": -1}
 
     def report(fraction):
+        if not state["begun"]:
+            wm.progress_begin(0.0, 1.0)
+            state["begun"] = True
         wm.progress_update(fraction)
         step = int(fraction * 10)
-        if bpy.app.background and step > printed[0]:
-            printed[0] = step
+        if bpy.app.background and step > state["printed"]:
+            state["printed"] = step
             print(f"wenv: {what}: {100 * fraction:.0f} %", flush=True)
         return False
     return report
@@ -133,10 +135,11 @@ class WENV_OT_shade(_Precomputing, bpy.types.Operator):
         quality = _quality(context)
         progress = (None if engine.shaders.has(quality)
                     else _progress_reporter(wm, engine.preparing(quality)))
+        rays = _progress_reporter(wm, "casting shadow rays") if scene.wenv.shadows else None
         try:
             view = resolve_view(context, self.view, self.view_matrix, self.perspective)
             done, notes = shading.shade_objects(scene, context.evaluated_depsgraph_get(), objects, view,
-                                                context.blend_data, progress)
+                                                context.blend_data, progress, rays)
         except engine.SetupError as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
@@ -144,7 +147,7 @@ class WENV_OT_shade(_Precomputing, bpy.types.Operator):
             self.report({"WARNING"}, "Precomputation cancelled")
             return {"CANCELLED"}
         finally:
-            if progress is not None:
+            if progress is not None or rays is not None:
                 wm.progress_end()
         for note in notes:
             self.report({"WARNING"}, note)

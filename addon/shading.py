@@ -113,10 +113,11 @@ class ShadingPlan:
     def _results(self, rgbs, seens):
         return [self._result(name, data, rgb, seen) for (name, data, _), rgb, seen in zip(self.items, rgbs, seens)]
 
-    def _scenes(self, quality, work, cancelled=None):
+    def _scenes(self, quality, work, cancelled=None, report=None):
         """Per part of `work`, the keywords of shading it with the scene in the way: its occlusion
         against every blocking mesh, and as bounce the light every occluder vertex sends back (the
-        shaded parts' diffuse light; black for the blockers not shaded).  None without shadows."""
+        shaded parts' diffuse light; black for the blockers not shaded).  None without shadows.
+        report(fraction) as the occlusions are cast; `cancelled` (a threading.Event) stops them."""
         if not self.shadows:
             return [None] * len(work)
         meshes_in = [(data.positions, data.triangles if cast else np.zeros((0, 3), np.int32))
@@ -126,10 +127,9 @@ class ShadingPlan:
             return [None] * len(work)
         with engine.shadows.lock:
             occluders, offsets = engine.shadows.occluders(meshes_in, self.memory_budget_mb)
-            # a refinement's rays stop when it is cancelled (CancelledError, which refine() catches)
-            stop = (lambda _fraction: cancelled.is_set()) if cancelled is not None else None
-            occlusions = [engine.shadows.occlusion(occluders, part.positions, part.normals, stop)
-                          for _, _, _, _, part in work]
+            occlusions = [engine.shadows.occlusion(occluders, part.positions, part.normals,
+                                                   _ray_progress(k, len(work), report, cancelled))
+                          for k, (_, _, _, _, part) in enumerate(work)]
         bounce = np.zeros((offsets[-1], 3), np.float32)
         scenes = []
         for (i, name, key, sel, part), occlusion in zip(work, occlusions):
@@ -148,11 +148,12 @@ class ShadingPlan:
             scenes.append(occlusion)
         return [dict(occlusion=o, bounce=bounce) if o is not None else None for o in scenes]
 
-    def compute(self):
+    def compute(self, rays=None):
+        """Shades every part; rays(fraction), if given, while their occlusions are cast."""
         rgbs, seens = self._buffers()
         with engine.shaders.lock:
             work = self._ordered_parts(self.quality)
-            for (i, name, key, sel, part), scene in zip(work, self._scenes(self.quality, work)):
+            for (i, name, key, sel, part), scene in zip(work, self._scenes(self.quality, work, report=rays)):
                 shader = self._shader(self.quality, name, key, part.normals)
                 rgbs[i][sel], part_seen = engine.shade_arrays(shader, part, self.view, self.cull, scene)
                 if seens[i] is not None and part_seen is not None:
@@ -210,6 +211,20 @@ class ShadingPlan:
         if done and scene.wenv.shaded_frame != scene.frame_current:
             scene.wenv.shaded_frame = scene.frame_current
         return done
+
+
+def _ray_progress(k, parts, report, cancelled):
+    """The progress callback of part k's occlusion among `parts`: its share of report(fraction),
+    and True to stop once `cancelled` is set (a refinement's rays stop when it is cancelled: the
+    core raises CancelledError, which refine() catches).  None when neither is asked for."""
+    if report is None and cancelled is None:
+        return None
+
+    def progress(fraction):
+        if report is not None:
+            report((k + fraction) / parts)
+        return cancelled is not None and cancelled.is_set()
+    return progress
 
 
 def plan_shading(scene, depsgraph, objects, view, images, progress=None, preview=False):
@@ -276,11 +291,12 @@ def plan_shading(scene, depsgraph, objects, view, images, progress=None, preview
     return plan
 
 
-def shade_objects(scene, depsgraph, objects, view, blend_data, progress=None):
-    """Shades every mesh in `objects` for `view` with the scene's wenv settings, synchronously.
-    Returns (shaded names, notes)."""
+def shade_objects(scene, depsgraph, objects, view, blend_data, progress=None, rays=None):
+    """Shades every mesh in `objects` for `view` with the scene's wenv settings, synchronously;
+    progress(fraction) while a shader is made, rays(fraction) while shadow rays are cast.  Returns
+    (shaded names, notes)."""
     plan = plan_shading(scene, depsgraph, objects, view, blend_data.images, progress)
-    plan.compute()
+    plan.compute(rays)
     for (name, _key), choice in plan.auto_choices.items():
         plan.notes.append(f"'{name}': Auto chose {engine.describe_auto_choice(choice)} "
                           f"(predicted error {100 * choice['predicted_error']:.2g} %"

@@ -1869,7 +1869,7 @@ def test_shadows_equal_the_core_with_occlusion(scene):
     assert shade_op(view="CAMERA") == {"FINISHED"}
     _, rgb = attribute(obj)
     p, n = world_arrays(obj, corner=False)
-    occlusion = wenv.Occluders(p, mesh_triangles(obj)).occlusion(p, n, resolution=engine.occlusion_resolution(len(p)))
+    occlusion = wenv.Occluders(p, mesh_triangles(obj)).occlusion(p, n, resolution="auto")
     assert occlusion.resolution == 16 and occlusion.blocked_vertices > len(p) // 3
     shader = core_shader(wenv.load_environment(hdri_path("forest")), wenv_material(mat))
     eye = tuple(scene.camera.matrix_world.translation)
@@ -1947,6 +1947,21 @@ def test_a_moved_object_recasts_only_what_sees_it(scene):
     (again,) = engine.shadows._occlusions.values()
     assert again.cast_vertices == again.vertices
     np.testing.assert_array_equal(attribute(plane)[1], moved)
+
+
+def test_the_shade_operator_reports_its_shadow_rays(scene, capfd):
+    """Casting the occlusion is progress the operator shows (printed in a background run), and a
+    pass that casts no new ray shows none."""
+    bpy.data.objects.remove(bpy.data.objects["Cube"])
+    env_world(scene, "forest")
+    set_material(add_monkey(subdivisions=1))
+    scene.wenv.shadows = True
+    engine.shadows.clear()
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    printed = capfd.readouterr().out
+    assert "wenv: casting shadow rays: 0 %" in printed and "wenv: casting shadow rays: 100 %" in printed
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    assert "casting shadow rays" not in capfd.readouterr().out
 
 
 def test_a_cancelled_refinement_stops_its_rays(scene):

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import wenv
-from tests.helpers.meshes import box, merged, uv_sphere
+from tests.helpers.meshes import box, merged, square, uv_sphere
 
 
 def relative_rmse(a, b):
@@ -244,6 +244,18 @@ def test_a_previous_occlusion_that_does_not_fit_is_named():
         after_occ.occlusion(plane, normals, previous=before, changed=12)
     with pytest.raises(TypeError, match="previous must be a wenv.Occlusion"):
         after_occ.occlusion(plane, normals, previous="before", changed=(12, 12))
+
+
+def test_auto_picks_the_finest_resolution_within_its_rays():
+    """resolution='auto': 16 x 16 for a small mesh; for 100,000 vertices the finest whose rays stay
+    within 2^23 (9: 8.1 M rays, where 10 would cast 10 M)."""
+    v, f = uv_sphere(12, 24)
+    assert wenv.Occluders(v, f).occlusion(v, v, resolution="auto").resolution == 16
+    far = wenv.Occluders(*square(0.5, 50.0))
+    points = np.random.default_rng(2).uniform(-1.0, 1.0, (100_000, 3)).astype(np.float32)
+    assert far.occlusion(points, np.tile(np.float32([0, 0, 1]), (len(points), 1)), resolution="auto").resolution == 9
+    with pytest.raises(ValueError, match="4 to 16 or 'auto'"):
+        far.occlusion(v, v, resolution="fine")
 
 
 def test_methods_without_shadows_say_so(scene):

@@ -69,7 +69,7 @@ static PyObject *py_reference(PyObject *self, PyObject *args, PyObject *kwargs)
     result = wenv_py_new_float_array(2, shape, &out);
     if (!result || n == 0)
         goto done;
-    wenv_py_progress_bridge bridge = {progress_obj, 0};
+    wenv_py_progress_bridge bridge = {.callback = progress_obj};
     wenv_progress progress = wenv_py_progress(&bridge);
     wenv_error err = {0};
     wenv_status st;

@@ -173,7 +173,7 @@ static int do_set(ShaderObject *self, PyObject *obj, int material)
     const void *arg = material ? (const void *)wenv_py_material(obj, "material") : (const void *)wenv_py_envmap(obj, "env");
     if (!arg)
         return -1;
-    wenv_py_progress_bridge bridge = {self->progress, 0};
+    wenv_py_progress_bridge bridge = {.callback = self->progress};
     wenv_progress progress = wenv_py_progress(&bridge);
     wenv_error err = {0};
     wenv_status st;
@@ -296,7 +296,7 @@ static int Shader_init(ShaderObject *self, PyObject *args, PyObject *kwargs)
     PyObject *cache_bytes;
     if (parse_cache(cache_obj, &setup, &cache_bytes) < 0)
         return -1;
-    wenv_py_progress_bridge bridge = {self->progress, 0};
+    wenv_py_progress_bridge bridge = {.callback = self->progress};
     wenv_progress progress = wenv_py_progress(&bridge);
     setup.progress = &progress;
     setup.memory_budget = (size_t)(self->memory_budget_mb * 1048576.0);

@@ -284,6 +284,9 @@ static int progress_trampoline(void *ctx, double fraction)
         return 0;
     if (bridge->raised)
         return 1;
+    if (fraction < 1.0 && fraction - bridge->reported < WENV_PY_PROGRESS_STEP)
+        return 0;
+    bridge->reported = fraction;
     PyGILState_STATE gil = PyGILState_Ensure();
     int stop = 0;
     PyObject *result = PyObject_CallFunction(bridge->callback, "d", fraction);

@@ -68,10 +68,14 @@ void wenv_py_use_num_threads(void);
 #define WENV_END_WORK Py_END_ALLOW_THREADS
 
 /* Bridges a Python progress callback to wenv_progress.  The callback is called as
- * callback(fraction) with the GIL held; a true return value (or an exception) stops the work. */
+ * callback(fraction) with the GIL held, at most every WENV_PY_PROGRESS_STEP of the work (a loop
+ * over vertices reports each one, and a callback that updates Blender's indicator is not free) and
+ * at the end; a true return value (or an exception) stops the work. */
+#define WENV_PY_PROGRESS_STEP 0.002
 typedef struct {
     PyObject *callback; /* borrowed; may be NULL or None */
     int raised;         /* set when the callback raised: the exception is pending */
+    double reported;    /* the last fraction passed on (0 to start) */
 } wenv_py_progress_bridge;
 
 wenv_progress wenv_py_progress(wenv_py_progress_bridge *bridge);

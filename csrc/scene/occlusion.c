@@ -17,6 +17,14 @@ void wenv_occlusion_texel_direction(size_t resolution, size_t t, double d[3])
                      d);
 }
 
+size_t wenv_occlusion_auto_resolution(size_t n)
+{
+    size_t r = WENV_OCCLUSION_RESOLUTION_MAX;
+    while (r > WENV_OCCLUSION_RESOLUTION_MIN && n * r * r > WENV_OCCLUSION_AUTO_RAYS)
+        r--;
+    return r;
+}
+
 void wenv_occlusion_free(wenv_occlusion *o)
 {
     free(o->slot);
