@@ -206,9 +206,14 @@ def test_occluders_block_runs():
           "scene_positions": np.float32(roof + [[0, 0, 0], [5, 0, 0]]), "scene_triangles": np.array([[0, 1, 2], [0, 2, 3]]),
           "normals": np.float32([[0, 0, 1]] * 6), "view_dirs": np.float32([[0, 0.3, 1]] * 6)}
     ns.update(positions=ns["scene_positions"], origins=ns["scene_positions"], directions=ns["normals"])
+    # the roof moved sideways: its two triangles changed
+    ns.update(new_scene_positions=ns["scene_positions"] + np.float32([[0.3, 0, 0]] * 4 + [[0, 0, 0]] * 2),
+              new_scene_triangles=ns["scene_triangles"], first=0, count=2)
     ns["shader"] = wenv.Shader(ns["env"], ns["mat"], quality="draft")
     run_checked(readme_block(OCCLUDERS), ns, "docs/python.md")
-    assert ns["occlusion"].visible.shape == (6, 8, 8) and ns["occlusion"].blocked_vertices == 2
+    # after the move, the far point's last texel clears the roof; only the two ground points saw it
+    assert ns["occlusion"].visible.shape == (6, 8, 8) and ns["occlusion"].blocked_vertices == 1
+    assert ns["occlusion"].cast_vertices == 2
     assert ns["truth"][4, 0] < ns["truth"][5, 0] < 0.5 * 1.01  # (white sky: 0.5 in the open, to the pixels)
     assert ns["rgb"][4, 0] < ns["rgb"][5, 0] and abs(ns["rgb"][4, 0] - ns["truth"][4, 0]) < 0.05
 
