@@ -68,19 +68,37 @@ static void turn_all(const float t[9], const float *in, size_t n, float *out)
 
 /* method->shade, or method->shade_shadowed with `scene`, or with views NULL method->diffuse_light,
  * under the frame. */
-static wenv_status run(const wenv_method *method, void *state, const float *normals,
-                       const float *views, size_t n, const wenv_shadow_scene *scene, float *out, wenv_error *err)
+static wenv_status run_split(const wenv_method *method, void *state, const float *normals, const float *views,
+                             size_t n, const wenv_shadow_scene *scene, float *out, float *irradiance,
+                             wenv_error *err)
 {
     if (views && !scene)
-        return method->shade(state, normals, views, n, out, err);
+        return method->shade(state, normals, views, n, out, irradiance, err);
     if (!views)
-        return method->diffuse_light(state, normals, n, scene, out, err);
-    return method->shade_shadowed(state, normals, views, n, scene, out, err);
+        return method->diffuse_light(state, normals, n, scene, out, irradiance, err);
+    return method->shade_shadowed(state, normals, views, n, scene, out, irradiance, err);
+}
+
+/* The same, each vertex given its colour when `colour` is set. */
+static wenv_status run(const wenv_method *method, void *state, const float *normals, const float *views, size_t n,
+                       const wenv_shadow_scene *scene, const wenv_vertex_colour *colour, float *out, wenv_error *err)
+{
+    if (!colour)
+        return run_split(method, state, normals, views, n, scene, out, NULL, err);
+    float *irradiance = malloc(n * 3 * sizeof(float));
+    if (!irradiance)
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the irradiance of %zu vertices", n);
+    wenv_status st = run_split(method, state, normals, views, n, scene, out, irradiance, err);
+    if (!st)
+        wenv_vertex_colour_apply(colour, normals, views, n, irradiance, out);
+    free(irradiance);
+    return st;
 }
 
 wenv_status wenv_lighting_frame_shade_scene(const wenv_lighting_frame *frame, const wenv_method *method, void *state,
                                             const float *normals, const float *views, size_t n,
-                                            const wenv_shadow_scene *scene, float *out, wenv_error *err)
+                                            const wenv_shadow_scene *scene, const wenv_vertex_colour *colour,
+                                            float *out, wenv_error *err)
 {
     wenv_shadow_scene held;
     if (scene) {
@@ -94,14 +112,14 @@ wenv_status wenv_lighting_frame_shade_scene(const wenv_lighting_frame *frame, co
         scene = &held;
     }
     if (frame->identity || n == 0)
-        return run(method, state, normals, views, n, scene, out, err);
+        return run(method, state, normals, views, n, scene, colour, out, err);
     float *turned = malloc(n * 6 * sizeof(float));
     if (!turned)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory turning %zu normals and views", n);
     turn_all(frame->turn, normals, n, turned);
     if (views)
         turn_all(frame->turn, views, n, turned + 3 * n);
-    wenv_status st = run(method, state, turned, views ? turned + 3 * n : NULL, n, scene, out, err);
+    wenv_status st = run(method, state, turned, views ? turned + 3 * n : NULL, n, scene, colour, out, err);
     free(turned);
     if (!st && frame->scale != 1.0f)
         for (size_t i = 0; i < 3 * n; i++)
@@ -113,5 +131,5 @@ wenv_status wenv_lighting_frame_shade(const wenv_lighting_frame *frame, const we
                                       const float *normals, const float *views, size_t n, float *out,
                                       wenv_error *err)
 {
-    return wenv_lighting_frame_shade_scene(frame, method, state, normals, views, n, NULL, out, err);
+    return wenv_lighting_frame_shade_scene(frame, method, state, normals, views, n, NULL, NULL, out, err);
 }

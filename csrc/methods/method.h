@@ -102,17 +102,21 @@ typedef struct wenv_method {
     wenv_status (*set_material)(void *state, const wenv_material *mat, const wenv_progress *progress,
                                 wenv_error *err);
     /* normals and views (surface towards eye): n x 3 floats, non-zero and finite, not necessarily
-     * unit; out: n x 3 linear RGB radiance.  Needs an environment and a material set. */
+     * unit; out: n x 3 linear RGB radiance.  Needs an environment and a material set.
+     * irradiance NULL: out is all of it.  Else out is all but the material's Lambertian part (not
+     * clamped at 0) and irradiance (n x 3) the light that part reflects -- what arrives, cosine
+     * weighted, with the shadows and the bounce -- so that a caller multiplies it by a colour of
+     * its own per vertex (wenv_material_diffuse_per_colour_table). */
     wenv_status (*shade)(void *state, const float *normals, const float *views, size_t n, float *out,
-                         wenv_error *err);
+                         float *irradiance, wenv_error *err);
     /* shade with the scene in the way (NULL for methods that model no shadows: they say so). */
     wenv_status (*shade_shadowed)(void *state, const float *normals, const float *views, size_t n,
-                                  const wenv_shadow_scene *scene, float *out, wenv_error *err);
+                                  const wenv_shadow_scene *scene, float *out, float *irradiance, wenv_error *err);
     /* The diffuse light leaving each of n vertices (normals as for shade; scene NULL: unshadowed), RGB:
-     * what the Lambertian part sends out head-on, the blockers' bounce for other meshes.  NULL as
-     * above. */
+     * what the Lambertian part sends out head-on, the blockers' bounce for other meshes; irradiance
+     * as for shade (the Lambertian part head-on left out).  NULL as above. */
     wenv_status (*diffuse_light)(void *state, const float *normals, size_t n, const wenv_shadow_scene *scene,
-                                 float *out, wenv_error *err);
+                                 float *out, float *irradiance, wenv_error *err);
     /* Fills at most WENV_STATS_MAX entries; returns how many. */
     size_t (*stats)(const void *state, wenv_stat *out);
 } wenv_method;

@@ -12,7 +12,8 @@
 
 wenv_status wenv_shade_for(const wenv_lighting_frame *frame, const wenv_method *method, void *state,
                            const float *normals, const float *views, size_t n, const wenv_shadow_scene *scene,
-                           size_t first, double budget, float *out, size_t *next, wenv_error *err)
+                           const wenv_vertex_colour *colour, size_t first, double budget, float *out, size_t *next,
+                           wenv_error *err)
 {
     *next = first < n ? first : n;
     if (!(budget >= 0.0))
@@ -32,8 +33,14 @@ wenv_status wenv_shade_for(const wenv_lighting_frame *frame, const wenv_method *
             else
                 block_scene.offset = scene->offset + at;
         }
+        wenv_vertex_colour block_colour;
+        if (colour) {
+            block_colour = *colour;
+            block_colour.rgb = colour->rgb + 3 * at;
+        }
         if (wenv_lighting_frame_shade_scene(frame, method, state, normals + 3 * at, views + 3 * at, count,
-                                            scene ? &block_scene : NULL, out + 3 * at, err))
+                                            scene ? &block_scene : NULL, colour ? &block_colour : NULL,
+                                            out + 3 * at, err))
             return err->status;
         at += count;
         *next = at;

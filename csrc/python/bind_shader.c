@@ -383,9 +383,62 @@ static int parse_scene(ShaderObject *self, PyObject *occlusion, PyObject *bounce
     return 0;
 }
 
-/* views NULL: the diffuse light leaving each vertex; scene NULL: unshadowed. */
+/* A colour per vertex (base_color, n rows) for the shader's material, into *colour (its table in
+ * *table, its rows in *rgb: wenv_py_base_colours, PyMem_Free'd by the caller).  Not given (NULL or
+ * None): *rgb NULL.  -1 with the error set. */
+static int parse_colour(ShaderObject *self, PyObject *obj, size_t n, wenv_diffuse_table *table,
+                        wenv_vertex_colour *colour, float **rgb)
+{
+    *rgb = NULL;
+    if (!obj || obj == Py_None)
+        return 0;
+    wenv_error err = {0};
+    if (wenv_material_diffuse_per_colour_table(wenv_py_material(self->material, "material"), table, &err)) {
+        wenv_py_raise(&err);
+        return -1;
+    }
+    if (!(*rgb = wenv_py_base_colours(obj, n)))
+        return -1;
+    colour->per_colour = table;
+    colour->rgb = *rgb;
+    return 0;
+}
+
+/* With a colour per vertex, a mesh's own bounce (bounce='self') is its light with those colours: it
+ * is made here, for every vertex of the occlusion (normals: all n of them), and given as the scene's
+ * bounce (*light, PyMem_Free'd by the caller).  -1 with the error set. */
+static int own_bounce(ShaderObject *self, const float *normals, size_t n, wenv_shadow_scene *scene,
+                      const wenv_vertex_colour *colour, float **light)
+{
+    *light = NULL;
+    if (!colour || !scene->bounce_self)
+        return 0;
+    if (!(*light = PyMem_Malloc((n ? n : 1) * 3 * sizeof(float)))) {
+        PyErr_NoMemory();
+        return -1;
+    }
+    wenv_shadow_scene sending = *scene;
+    sending.bounce_self = 0;
+    wenv_error err = {0};
+    wenv_status st;
+    WENV_BEGIN_WORK
+    st = wenv_lighting_frame_shade_scene(&self->frame, self->method, self->state, normals, NULL, n, &sending, colour,
+                                         *light, &err);
+    WENV_END_WORK
+    if (st) {
+        wenv_py_raise(&err);
+        return -1;
+    }
+    scene->bounce_self = 0;
+    scene->bounce = *light;
+    scene->key = wenv_fingerprint_floats(wenv_fingerprint_word(scene->key, 3), *light, 3 * n);
+    return 0;
+}
+
+/* views NULL: the diffuse light leaving each vertex; scene NULL: unshadowed; colour NULL: the
+ * material's own. */
 static PyObject *shade_arrays(ShaderObject *self, const float *normals, const float *views, size_t n,
-                              const wenv_shadow_scene *scene)
+                              const wenv_shadow_scene *scene, const wenv_vertex_colour *colour)
 {
     Py_ssize_t shape[2] = {(Py_ssize_t)n, 3};
     float *out;
@@ -395,7 +448,8 @@ static PyObject *shade_arrays(ShaderObject *self, const float *normals, const fl
     wenv_error err = {0};
     wenv_status st;
     WENV_BEGIN_WORK
-    st = wenv_lighting_frame_shade_scene(&self->frame, self->method, self->state, normals, views, n, scene, out, &err);
+    st = wenv_lighting_frame_shade_scene(&self->frame, self->method, self->state, normals, views, n, scene, colour,
+                                         out, &err);
     WENV_END_WORK
     if (st) {
         Py_DECREF(result);
@@ -406,9 +460,10 @@ static PyObject *shade_arrays(ShaderObject *self, const float *normals, const fl
 
 static PyObject *Shader_shade(ShaderObject *self, PyObject *args, PyObject *kwargs)
 {
-    static char *kwlist[] = {"normals", "view_dirs", "occlusion", "bounce", NULL};
-    PyObject *nobj, *vobj, *occ_obj = Py_None, *bounce_obj = NULL;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|$OO:shade", kwlist, &nobj, &vobj, &occ_obj, &bounce_obj))
+    static char *kwlist[] = {"normals", "view_dirs", "occlusion", "bounce", "base_color", NULL};
+    PyObject *nobj, *vobj, *occ_obj = Py_None, *bounce_obj = NULL, *colour_obj = NULL;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|$OOO:shade", kwlist, &nobj, &vobj, &occ_obj, &bounce_obj,
+                                     &colour_obj))
         return NULL;
     Py_buffer nb, vb, bb = {0};
     size_t n, nvw;
@@ -420,9 +475,11 @@ static PyObject *Shader_shade(ShaderObject *self, PyObject *args, PyObject *kwar
         return NULL;
     }
     PyObject *result = NULL;
-    float *expanded = NULL;
+    float *expanded = NULL, *rgb = NULL, *light = NULL;
     const float *views = vb.buf;
     wenv_shadow_scene scene;
+    wenv_diffuse_table table;
+    wenv_vertex_colour colour;
     if (single_v && !single_n) {
         /* one view direction for all (orthographic camera) */
         expanded = PyMem_Malloc((n ? n : 1) * 3 * sizeof(float));
@@ -443,12 +500,15 @@ static PyObject *Shader_shade(ShaderObject *self, PyObject *args, PyObject *kwar
     }
     if (occ_obj != Py_None && parse_scene(self, occ_obj, bounce_obj, n, &scene, &bb) < 0)
         goto done;
-    if (claim(self) < 0)
+    if (parse_colour(self, colour_obj, n, &table, &colour, &rgb) < 0 || claim(self) < 0)
         goto done;
-    result = shade_arrays(self, nb.buf, views, n, occ_obj != Py_None ? &scene : NULL);
+    if (occ_obj == Py_None || own_bounce(self, nb.buf, n, &scene, rgb ? &colour : NULL, &light) == 0)
+        result = shade_arrays(self, nb.buf, views, n, occ_obj != Py_None ? &scene : NULL, rgb ? &colour : NULL);
     self->busy = 0;
 done:
     PyMem_Free(expanded);
+    PyMem_Free(rgb);
+    PyMem_Free(light);
     if (bb.obj)
         PyBuffer_Release(&bb);
     PyBuffer_Release(&nb);
@@ -458,9 +518,9 @@ done:
 
 static PyObject *Shader_diffuse_light(ShaderObject *self, PyObject *args, PyObject *kwargs)
 {
-    static char *kwlist[] = {"normals", "occlusion", NULL};
-    PyObject *nobj, *occ_obj = Py_None;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "O|$O:diffuse_light", kwlist, &nobj, &occ_obj))
+    static char *kwlist[] = {"normals", "occlusion", "base_color", NULL};
+    PyObject *nobj, *occ_obj = Py_None, *colour_obj = NULL;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "O|$OO:diffuse_light", kwlist, &nobj, &occ_obj, &colour_obj))
         return NULL;
     if (!self->method->diffuse_light) {
         PyErr_Format(PyExc_ValueError, "method '%s' does not give the diffuse light: use a wavelet method",
@@ -473,13 +533,17 @@ static PyObject *Shader_diffuse_light(ShaderObject *self, PyObject *args, PyObje
         return NULL;
     PyObject *result = NULL;
     wenv_shadow_scene scene;
+    wenv_diffuse_table table;
+    wenv_vertex_colour colour;
+    float *rgb = NULL;
     if (occ_obj != Py_None && parse_scene(self, occ_obj, Py_None, n, &scene, &bb) < 0)
         goto done;
-    if (claim(self) < 0)
+    if (parse_colour(self, colour_obj, n, &table, &colour, &rgb) < 0 || claim(self) < 0)
         goto done;
-    result = shade_arrays(self, nb.buf, NULL, n, occ_obj != Py_None ? &scene : NULL);
+    result = shade_arrays(self, nb.buf, NULL, n, occ_obj != Py_None ? &scene : NULL, rgb ? &colour : NULL);
     self->busy = 0;
 done:
+    PyMem_Free(rgb);
     PyBuffer_Release(&nb);
     return result;
 }
@@ -509,14 +573,16 @@ static int parse_eye(PyObject *obj, double eye[3])
 /* Shades the vertices to shade (the `count` visible ones, or all n) from the first-th of them on, within
  * `budget` seconds (wenv_shade_for); *next gets the first left. */
 static int shade_visible(ShaderObject *self, const float *normals, const float *views, size_t n,
-                         const unsigned char *visible, size_t count, const wenv_shadow_scene *scene, size_t first,
-                         double budget, float *out, size_t *next)
+                         const unsigned char *visible, size_t count, const wenv_shadow_scene *scene,
+                         const wenv_vertex_colour *colour, size_t first, double budget, float *out, size_t *next)
 {
     float *gathered = NULL, *shaded = out;
     uint32_t *rows = NULL;
     wenv_shadow_scene culled;
+    wenv_vertex_colour culled_colour;
     if (visible) {
-        gathered = PyMem_Malloc((count ? count : 1) * 9 * sizeof(float)); /* normals, views, radiance */
+        /* normals, views, radiance and colours */
+        gathered = PyMem_Malloc((count ? count : 1) * 12 * sizeof(float));
         rows = scene ? PyMem_Malloc((count ? count : 1) * sizeof *rows) : NULL;
         if (!gathered || (scene && !rows)) {
             PyMem_Free(gathered);
@@ -528,6 +594,8 @@ static int shade_visible(ShaderObject *self, const float *normals, const float *
             if (visible[i]) {
                 memcpy(gathered + 3 * k, normals + 3 * i, 3 * sizeof(float));
                 memcpy(gathered + 3 * (count + k), views + 3 * i, 3 * sizeof(float));
+                if (colour)
+                    memcpy(gathered + 3 * (3 * count + k), colour->rgb + 3 * i, 3 * sizeof(float));
                 if (rows)
                     rows[k] = (uint32_t)i;
                 k++;
@@ -536,6 +604,11 @@ static int shade_visible(ShaderObject *self, const float *normals, const float *
             culled = *scene;
             culled.rows = rows;
             scene = &culled;
+        }
+        if (colour) {
+            culled_colour = *colour;
+            culled_colour.rgb = gathered + 9 * count;
+            colour = &culled_colour;
         }
         normals = gathered;
         views = gathered + 3 * count;
@@ -546,8 +619,8 @@ static int shade_visible(ShaderObject *self, const float *normals, const float *
     *next = first;
     if (first < count) {
         WENV_BEGIN_WORK
-        st = wenv_shade_for(&self->frame, self->method, self->state, normals, views, count, scene, first, budget,
-                            shaded, next, &err);
+        st = wenv_shade_for(&self->frame, self->method, self->state, normals, views, count, scene, colour, first,
+                            budget, shaded, next, &err);
         WENV_END_WORK
     }
     if (!st && visible)
@@ -598,13 +671,13 @@ static void raise_eye_at_vertex(const float *p, const double eye[3], size_t n, s
 static PyObject *Shader_shade_mesh(ShaderObject *self, PyObject *args, PyObject *kwargs)
 {
     static char *kwlist[] = {"positions", "normals", "eye",    "cull",      "view_projection", "out",
-                             "first",     "budget",  "occlusion", "bounce", NULL};
+                             "first",     "budget",  "occlusion", "bounce", "base_color", NULL};
     PyObject *pobj, *nobj, *eobj, *vp_obj = Py_None, *out_obj = Py_None, *budget_obj = Py_None, *first_obj = NULL;
-    PyObject *occ_obj = Py_None, *bounce_obj = NULL;
+    PyObject *occ_obj = Py_None, *bounce_obj = NULL, *colour_obj = NULL;
     int cull = 0;
     size_t first = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO|$pOOOOOO:shade_mesh", kwlist, &pobj, &nobj, &eobj, &cull,
-                                     &vp_obj, &out_obj, &first_obj, &budget_obj, &occ_obj, &bounce_obj))
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO|$pOOOOOOO:shade_mesh", kwlist, &pobj, &nobj, &eobj, &cull,
+                                     &vp_obj, &out_obj, &first_obj, &budget_obj, &occ_obj, &bounce_obj, &colour_obj))
         return NULL;
     if (occ_obj == Py_None && bounce_obj) {
         PyErr_SetString(PyExc_ValueError, "bounce is read only with occlusion (what blocks the light it fills in)");
@@ -647,14 +720,18 @@ static PyObject *Shader_shade_mesh(ShaderObject *self, PyObject *args, PyObject 
         return NULL;
     }
     PyObject *result = NULL;
-    float *views = NULL;
+    float *views = NULL, *rgb = NULL, *light = NULL;
     unsigned char *visible = NULL;
     int claimed = 0;
+    wenv_diffuse_table table;
+    wenv_vertex_colour colour;
     if (np != nn) {
         PyErr_Format(PyExc_ValueError, "positions has %zu rows but normals has %zu", np, nn);
         goto done;
     }
     if (occ_obj != Py_None && parse_scene(self, occ_obj, bounce_obj, np, &scene, &bb) < 0)
+        goto done;
+    if (parse_colour(self, colour_obj, np, &table, &colour, &rgb) < 0)
         goto done;
     float *out;
     if (out_obj == Py_None) {
@@ -696,8 +773,10 @@ static PyObject *Shader_shade_mesh(ShaderObject *self, PyObject *args, PyObject 
     if (claim(self) < 0)
         goto fail;
     claimed = 1;
-    if (shade_visible(self, nb.buf, views, np, visible, count, occ_obj != Py_None ? &scene : NULL, first, budget, out,
-                      &next) < 0)
+    if (occ_obj != Py_None && own_bounce(self, nb.buf, np, &scene, rgb ? &colour : NULL, &light) < 0)
+        goto fail;
+    if (shade_visible(self, nb.buf, views, np, visible, count, occ_obj != Py_None ? &scene : NULL,
+                      rgb ? &colour : NULL, first, budget, out, &next) < 0)
         goto fail;
     self->visible = cull ? (Py_ssize_t)count : -1;
     self->next_vertex = (Py_ssize_t)next;
@@ -708,6 +787,8 @@ done:
     if (claimed)
         self->busy = 0;
     PyMem_Free(views);
+    PyMem_Free(rgb);
+    PyMem_Free(light);
     PyMem_Free(visible);
     if (ob.obj)
         PyBuffer_Release(&ob);
@@ -836,22 +917,26 @@ static PyObject *Shader_get_stats(ShaderObject *self, void *closure)
 
 static PyMethodDef Shader_methods[] = {
     {"shade", (PyCFunction)(void (*)(void))Shader_shade, METH_VARARGS | METH_KEYWORDS,
-     "shade(normals, view_dirs, *, occlusion=None, bounce='self')\n--\n\nLinear RGB radiance (float32, n x 3) for "
+     "shade(normals, view_dirs, *, occlusion=None, bounce='self', base_color=None)\n--\n\nLinear RGB radiance (float32, n x 3) for "
      "world-space normals and view directions (surface towards eye), float32 (n, 3); view_dirs may be one (3,) "
      "vector for all.  occlusion (a wenv.Occlusion made for these vertices) shades with the scene in the way: "
      "its blocked directions hide the environment, the exact lights are tested along their own rays, and the "
      "blockers send their light back -- bounce='self' (the occluders are this mesh: its own light, as "
      "diffuse_light gives it), an "
      "array (occluder vertices, 3) of each occluder vertex's light (Shader.diffuse_light), or None (black).  "
-     "Wavelet methods only."},
+     "Wavelet methods only.\n\nbase_color (float32 (n, 3), linear RGB, clamped to [0, 1] as the material's own "
+     "is): each vertex's colour in place of the material's -- a Principled BSDF's Base Color, a Lambert's or "
+     "Cook-Torrance's diffuse albedo -- at the cost of a multiply-add a vertex (it scales the Lambertian part "
+     "alone); a ValueError says why for a material whose colour also enters its lobes (a metal, a rough "
+     "diffuse) or that has none (a measured table).  Every method."},
     {"diffuse_light", (PyCFunction)(void (*)(void))Shader_diffuse_light, METH_VARARGS | METH_KEYWORDS,
-     "diffuse_light(normals, *, occlusion=None)\n--\n\nThe light (radiance, float32 n x 3) each vertex sends "
+     "diffuse_light(normals, *, occlusion=None, base_color=None)\n--\n\nThe light (radiance, float32 n x 3) each vertex sends "
      "back to the surfaces it blocks (shade's bounce), as if diffuse: its albedo head-on (the Lambertian "
      "part's and the lobes') over pi times its irradiance, with its shadows when occlusion is given.  "
      "Wavelet methods only."},
     {"shade_mesh", (PyCFunction)(void (*)(void))Shader_shade_mesh, METH_VARARGS | METH_KEYWORDS,
      "shade_mesh(positions, normals, eye, *, cull=False, view_projection=None, out=None, first=0, budget=None, "
-     "occlusion=None, bounce='self')\n--\n\n"
+     "occlusion=None, bounce='self', base_color=None)\n--\n\n"
      "Shade vertices seen from a perspective eye position.  cull=True shades only what the eye sees: "
      "vertices whose normal faces it and, given view_projection (the viewport's 4 x 4 world-to-clip "
      "matrix, row-major: Blender's region_3d.perspective_matrix), those inside its frustum; the rows of "

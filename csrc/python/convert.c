@@ -306,6 +306,34 @@ static int progress_trampoline(void *ctx, double fraction)
     return stop;
 }
 
+float *wenv_py_base_colours(PyObject *obj, size_t n)
+{
+    Py_buffer cb;
+    size_t rows;
+    if (wenv_py_get_vec3_array(obj, "base_color", 0, &cb, &rows, NULL) < 0)
+        return NULL;
+    float *rgb = NULL;
+    const float *c = cb.buf;
+    if (rows != n) {
+        PyErr_Format(PyExc_ValueError, "base_color has %zu rows, one per vertex (%zu)", rows, n);
+        goto done;
+    }
+    for (size_t i = 0; i < 3 * n; i++)
+        if (!(c[i] >= 0.0f) || !isfinite(c[i])) {
+            PyErr_Format(PyExc_ValueError, "base_color[%zu] must be finite and non-negative (linear RGB)", i / 3);
+            goto done;
+        }
+    if (!(rgb = PyMem_Malloc((n ? n : 1) * 3 * sizeof(float)))) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    for (size_t i = 0; i < 3 * n; i++)
+        rgb[i] = c[i] < 1.0f ? c[i] : 1.0f;
+done:
+    PyBuffer_Release(&cb);
+    return rgb;
+}
+
 wenv_progress wenv_py_progress(wenv_py_progress_bridge *bridge)
 {
     wenv_progress p = {NULL, NULL};

@@ -80,4 +80,9 @@ typedef struct {
 
 wenv_progress wenv_py_progress(wenv_py_progress_bridge *bridge);
 
+/* base_color: one linear RGB colour per vertex (n rows), finite and non-negative, copied clamped to
+ * [0, 1] as a material clamps its own (PyMem_Free it).  NULL with a ValueError or TypeError naming
+ * base_color. */
+float *wenv_py_base_colours(PyObject *obj, size_t n);
+
 #endif

@@ -98,10 +98,14 @@ static wenv_status narrow_lobe(const wenv_envmap *env, const wenv_material *mat,
 
 wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, const float *normals,
                            const float *views, size_t n, const wenv_occluders *occ, const float *positions,
-                           const float *bounce, float *out, const wenv_progress *progress, wenv_error *err)
+                           const float *bounce, const float *base_color, float *out, const wenv_progress *progress,
+                           wenv_error *err)
 {
     if (occ && !positions)
         return wenv_error_set(err, WENV_ERR_VALUE, "occluders need the vertices' positions");
+    double per_colour[3];
+    if (base_color && wenv_material_diffuse_per_colour_at(mat, 1.0, per_colour, err))
+        return err->status;
     for (size_t i = 0; occ && i < n; i++)
         if (!isfinite(positions[3 * i]) || !isfinite(positions[3 * i + 1]) || !isfinite(positions[3 * i + 2]))
             return wenv_error_set(err, WENV_ERR_VALUE, "positions[%zu] is not finite", i);
@@ -195,7 +199,13 @@ wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, con
                 }
             }
             double diffuse[3];
-            wenv_material_diffuse_at(mat, wo[2], diffuse);
+            if (base_color) { /* checked above: it cannot fail */
+                wenv_material_diffuse_per_colour_at(mat, wo[2], diffuse, NULL);
+                for (int c = 0; c < 3; c++)
+                    diffuse[c] *= base_color[3 * i + (size_t)c];
+            } else {
+                wenv_material_diffuse_at(mat, wo[2], diffuse);
+            }
             for (size_t l = 0; n_narrow && wo[2] > 0.0 && l < n_lobes; l++)
                 if (wenv_material_lobe(mat, l)->alpha < narrow_alpha &&
                     narrow_lobe(env, mat, l, f, wo, dirs, flux, omega, count, nodes, &b, spec, &lobe_err))

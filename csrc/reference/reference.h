@@ -16,8 +16,11 @@
 #include "scene/material.h"
 #include "scene/occluders.h"
 
+/* base_color (NULL: the material's): each vertex's colour in [0, 1] in place of the material's, in
+ * its Lambertian part (wenv_material_diffuse_per_colour_at; WENV_ERR_VALUE where it cannot vary). */
 wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, const float *normals,
                            const float *views, size_t n, const wenv_occluders *occ, const float *positions,
-                           const float *bounce, float *out, const wenv_progress *progress, wenv_error *err);
+                           const float *bounce, const float *base_color, float *out, const wenv_progress *progress,
+                           wenv_error *err);
 
 #endif

@@ -148,6 +148,34 @@ void wenv_material_diffuse_table(const wenv_material *mat, wenv_diffuse_table *t
     }
 }
 
+wenv_status wenv_material_diffuse_per_colour_at(const wenv_material *mat, double cos_v, double rgb[3],
+                                                wenv_error *err)
+{
+    if (mat->kind->no_colour)
+        return wenv_error_set(err, WENV_ERR_VALUE, "a %s material has no colour to vary per vertex",
+                              mat->kind->name);
+    rgb[0] = rgb[1] = rgb[2] = 1.0;
+    const char *why = mat->kind->diffuse_per_colour ? mat->kind->diffuse_per_colour(mat, cos_v, rgb) : NULL;
+    if (why)
+        return wenv_error_set(err, WENV_ERR_VALUE, "the colour cannot vary per vertex: %s", why);
+    return WENV_OK;
+}
+
+wenv_status wenv_material_diffuse_per_colour_table(const wenv_material *mat, wenv_diffuse_table *table,
+                                                   wenv_error *err)
+{
+    table->n = mat->kind->diffuse_per_colour ? WENV_DIFFUSE_TABLE_N : 1;
+    for (size_t i = 0; i < table->n; i++) {
+        double rgb[3];
+        if (wenv_material_diffuse_per_colour_at(mat, table->n > 1 ? (double)i / (double)(table->n - 1) : 1.0, rgb,
+                                                err))
+            return err->status;
+        for (int c = 0; c < 3; c++)
+            table->over_pi[3 * i + (size_t)c] = (float)(rgb[c] / M_PI);
+    }
+    return WENV_OK;
+}
+
 int wenv_diffuse_table_any(const wenv_diffuse_table *t)
 {
     for (size_t k = 0; k < 3 * t->n; k++)

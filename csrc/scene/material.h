@@ -127,6 +127,17 @@ static inline void wenv_diffuse_table_at(const wenv_diffuse_table *t, float cos_
 /* Whether any entry is non-zero. */
 int wenv_diffuse_table_any(const wenv_diffuse_table *t);
 
+/* The Lambertian part per unit of the material's colour -- a Principled BSDF's Base Color, a
+ * Lambert's or Cook-Torrance's diffuse albedo -- tabulated as above: what a colour that varies per
+ * vertex multiplies, the rest of the material being free of it.  WENV_ERR_VALUE saying why when the
+ * colour enters elsewhere too (a metal's Fresnel, a rough diffuse lobe) or the material has no
+ * colour (a measured table). */
+wenv_status wenv_material_diffuse_per_colour_table(const wenv_material *mat, wenv_diffuse_table *table,
+                                                   wenv_error *err);
+/* The same for one view (the albedo, not over pi). */
+wenv_status wenv_material_diffuse_per_colour_at(const wenv_material *mat, double cos_v, double rgb[3],
+                                                wenv_error *err);
+
 /* The glossy lobes: how many, and each one's microfacet shape (see above). */
 size_t wenv_material_lobe_count(const wenv_material *mat);
 const wenv_lobe *wenv_material_lobe(const wenv_material *mat, size_t i);

@@ -56,6 +56,12 @@ typedef struct wenv_material_kind {
     /* The Lambertian part's albedo for a view (wenv_material_diffuse_at); default the constant
      * `diffuse`. */
     void (*diffuse_at)(const wenv_material *mat, double cos_v, double rgb[3]);
+    /* The same per unit of the material's colour for a view, into rgb, returning NULL; or why the
+     * colour cannot vary alone (it enters the lobes too).  NULL: the colour is the constant albedo
+     * (`diffuse`), the lobes free of it. */
+    const char *(*diffuse_per_colour)(const wenv_material *mat, double cos_v, double rgb[3]);
+    /* Set for a model with no colour input (a measured table): no per-vertex colour. */
+    int no_colour;
     /* Whether the glossy part reflects about the mirror direction (wenv_material_mirror_centred);
      * default always. */
     int (*mirror_centred)(const wenv_material *mat);

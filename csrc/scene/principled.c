@@ -141,6 +141,7 @@ typedef struct {
     double sheen_a, sheen_b;   /* the sheen's transformed cosine for this view */
     double eon_ms[3];          /* the Oren-Nayar diffuse's multiple scattering for this view */
     double diffuse[3]; /* the Lambertian albedo */
+    double diffuse_per_colour[3]; /* the same per unit of Base Color: what the layers above leave */
 } view_weights;
 
 /* The Oren-Nayar diffuse's G and directional albedo E at cos mu (OpenPBR's EON). */
@@ -228,8 +229,10 @@ static void weights_for_view(const principled *p, double mu, view_weights *vw)
             }
         }
     }
-    for (int k = 0; k < 3; k++)
+    for (int k = 0; k < 3; k++) {
         vw->diffuse[k] = p->base[k] * w[k];
+        vw->diffuse_per_colour[k] = w[k];
+    }
 }
 
 /* ---------------------------------------------------------------- evaluation */
@@ -473,6 +476,23 @@ static void pr_diffuse_at(const wenv_material *mat, double cos_v, double rgb[3])
     memcpy(rgb, vw.diffuse, 3 * sizeof *rgb);
 }
 
+/* Base Color is in the Lambertian part alone (W(mu) of it) unless a metal's Fresnel or the rough
+ * diffuse lobe holds it too. */
+static const char *pr_diffuse_per_colour(const wenv_material *mat, double cos_v, double rgb[3])
+{
+    const principled *p = model_of(mat);
+    for (size_t i = 0; i < p->n; i++) {
+        if (p->lobe[i].role == LOBE_METAL)
+            return "a Principled BSDF's Base Color is also a metal's Fresnel colour (Metallic > 0)";
+        if (p->lobe[i].role == LOBE_DIFFUSE)
+            return "a Principled BSDF's Base Color is also its rough diffuse lobe's (Diffuse Roughness > 0)";
+    }
+    view_weights vw;
+    weights_for_view(p, cos_v, &vw);
+    memcpy(rgb, vw.diffuse_per_colour, 3 * sizeof *rgb);
+    return NULL;
+}
+
 /* The node's Roughness (Blender's, alpha = roughness^2) set to `roughness`, clamped to [0, 1] as Cycles
  * clamps it; the coat keeps its own.  What the glossmeter's fit varies. */
 static wenv_status pr_with_roughness(wenv_material **out, const wenv_material *src, double roughness, wenv_error *err)
@@ -507,6 +527,7 @@ static const wenv_material_kind PRINCIPLED = {
     .lobe_cells = pr_lobe_cells,
     .lobe_cos_h_min = pr_lobe_cos_h_min,
     .diffuse_at = pr_diffuse_at,
+    .diffuse_per_colour = pr_diffuse_per_colour,
     .with_roughness = pr_with_roughness,
     .lobes_follow_shapes = pr_lobes_follow_shapes,
 };

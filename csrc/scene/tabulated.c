@@ -364,6 +364,7 @@ static wenv_status decide_rule(const wenv_material *mat, table *t, wenv_error *e
 
 static const wenv_material_kind TABULATED = {
     .name = "tabulated",
+    .no_colour = 1,
     .mirror_symmetric = 0, /* phi_d folds into [0, 180) by reciprocity: a mirror reads 180 - phi_d */
     .smooth_limit = 0,
     .lobe_value = tab_lobe_value,

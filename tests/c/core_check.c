@@ -274,7 +274,7 @@ static void check_methods(const wenv_envmap *env)
         snprintf(what, sizeof what, "%s: a white environment reflects the albedo", m->name);
         if (!quality || m->check_quality(quality, &err) || m->create(&state, quality, &setup, &err) ||
             m->set_environment(state, env, NULL, &err) || m->set_material(state, mat, NULL, &err) ||
-            m->shade(state, normals, views, 4, out, &err)) {
+            m->shade(state, normals, views, 4, out, NULL, &err)) {
             check(0, err.message[0] ? err.message : what, 0, 0);
         } else {
             double worst = 0.0;

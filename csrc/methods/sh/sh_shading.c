@@ -232,19 +232,21 @@ static wenv_status set_material(void *state, const wenv_material *mat, const wen
 
 /* A material without lobes: irradiance times albedo / pi. */
 static wenv_status shade_lambert(const wenv_sh_shading *sr, const float *normals, const float *views, size_t n,
-                                 float *out)
+                                 float *out, float *irradiance)
 {
     const float *low = sr->low, *map = sr->irr_map;
     long long nn = (long long)n;
 #pragma omp parallel for schedule(static)
     for (long long i = 0; i < nn; i++) {
         const float *nr = normals + 3 * i, *v = views + 3 * i;
-        float *o = out + 3 * i;
+        float *o = out + 3 * i, *e_out = irradiance ? irradiance + 3 * i : NULL;
         float len = sqrtf(nr[0] * nr[0] + nr[1] * nr[1] + nr[2] * nr[2]);
         float d[3] = {nr[0] / len, nr[1] / len, nr[2] / len};
         float lv = sqrtf(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]), mu = (d[0] * v[0] + d[1] * v[1] + d[2] * v[2]) / lv;
         if (!(mu > 0.0f)) {
             o[0] = o[1] = o[2] = 0.0f;
+            if (e_out)
+                e_out[0] = e_out[1] = e_out[2] = 0.0f;
             continue;
         }
         float k[3];
@@ -267,20 +269,23 @@ static wenv_status shade_lambert(const wenv_sh_shading *sr, const float *normals
                 e[c] += wt[0] * map[3 * idx[0] + c] + wt[1] * map[3 * idx[1] + c] + wt[2] * map[3 * idx[2] + c] +
                         wt[3] * map[3 * idx[3] + c];
         }
-        for (int c = 0; c < 3; c++)
-            o[c] = e[c] > 0.0f ? k[c] * e[c] : 0.0f;
+        for (int c = 0; c < 3; c++) {
+            o[c] = e[c] > 0.0f && !e_out ? k[c] * e[c] : 0.0f;
+            if (e_out)
+                e_out[c] = e[c] > 0.0f ? e[c] : 0.0f;
+        }
     }
     return WENV_OK;
 }
 
 static wenv_status shade(void *state, const float *normals, const float *views, size_t n,
-                                float *out, wenv_error *err)
+                                float *out, float *irradiance, wenv_error *err)
 {
     const wenv_sh_shading *sr = state;
     if (!sr->have_env || !sr->have_mat)
         return wenv_error_set(err, WENV_ERR_VALUE, "the shader needs an environment and a material");
     if (sr->lambert)
-        return shade_lambert(sr, normals, views, n, out);
+        return shade_lambert(sr, normals, views, n, out, irradiance);
     size_t L = sr->q.order, count = sr->count, V = sr->q.views;
     double view_scale = (double)(V - 1) / max_view_theta();
     atomic_int failed = 0;
@@ -293,7 +298,7 @@ static wenv_status shade(void *state, const float *normals, const float *views, 
             atomic_store(&failed, 1);
 #pragma omp for schedule(static)
         for (long long i = 0; i < nn; i++) {
-            float *o = out + 3 * i;
+            float *o = out + 3 * i, *e_out = irradiance ? irradiance + 3 * i : NULL;
             if (atomic_load(&failed))
                 continue;
             double nr[3], v[3];
@@ -301,6 +306,8 @@ static wenv_status shade(void *state, const float *normals, const float *views, 
             double mu = nr[0] * v[0] + nr[1] * v[1] + nr[2] * v[2];
             if (!(mu > 0.0)) {
                 o[0] = o[1] = o[2] = 0.0f;
+                if (e_out)
+                    e_out[0] = e_out[1] = e_out[2] = 0.0f;
                 continue;
             }
             /* frame: Rz(alpha) Ry(beta) takes z to the normal; gamma turns x towards the view */
@@ -316,10 +323,14 @@ static wenv_status shade(void *state, const float *normals, const float *views, 
                 for (int k = 0; k < 3; k++)
                     irr[k] += a * c[k];
             }
-            float dk[3];
-            wenv_diffuse_table_at(&sr->diffuse, (float)mu, dk);
-            for (int k = 0; k < 3; k++)
+            float dk[3] = {0.0f, 0.0f, 0.0f};
+            if (!e_out) /* else the Lambertian part is the caller's */
+                wenv_diffuse_table_at(&sr->diffuse, (float)mu, dk);
+            for (int k = 0; k < 3; k++) {
                 rgb[k] = dk[k] * fmax(irr[k], 0.0);
+                if (e_out)
+                    e_out[k] = (float)fmax(irr[k], 0.0);
+            }
             if (sr->n_lobes) {
                 double x = acos(fmin(1.0, mu)) * view_scale;
                 size_t j = x >= (double)(V - 1) ? V - 2 : (size_t)x;
@@ -336,7 +347,7 @@ static wenv_status shade(void *state, const float *normals, const float *views, 
                     }
             }
             for (int k = 0; k < 3; k++)
-                o[k] = rgb[k] > 0.0 ? (float)rgb[k] : 0.0f;
+                o[k] = rgb[k] > 0.0 || e_out ? (float)rgb[k] : 0.0f;
         }
         free(local);
         free(work);

@@ -363,7 +363,7 @@ static inline void lut_lookup(const float *table, size_t N, double mu, double rg
 }
 
 static wenv_status shade(void *state, const float *normals, const float *views, size_t n,
-                                float *out, wenv_error *err)
+                                float *out, float *irradiance, wenv_error *err)
 {
     const wenv_splitsum *ss = state;
     if (!ss->have_env || !ss->have_mat)
@@ -374,18 +374,24 @@ static wenv_status shade(void *state, const float *normals, const float *views, 
     for (long long i = 0; i < nn; i++) {
         double nv3[3], v[3];
         wenv_unit_pair(normals, views, (size_t)i, nv3, v);
-        float *o = out + 3 * i;
+        float *o = out + 3 * i, *e_out = irradiance ? irradiance + 3 * i : NULL;
         double mu = nv3[0] * v[0] + nv3[1] * v[1] + nv3[2] * v[2];
         if (!(mu > 0.0)) {
             o[0] = o[1] = o[2] = 0.0f;
+            if (e_out)
+                e_out[0] = e_out[1] = e_out[2] = 0.0f;
             continue;
         }
         double irr[3], rgb[3];
-        float d[3];
+        float d[3] = {0.0f, 0.0f, 0.0f};
         wenv_sh_irradiance(2, ss->irradiance_sh, nv3, irr);
-        wenv_diffuse_table_at(&ss->diffuse, (float)mu, d);
-        for (int c = 0; c < 3; c++)
+        if (!e_out) /* else the Lambertian part is the caller's */
+            wenv_diffuse_table_at(&ss->diffuse, (float)mu, d);
+        for (int c = 0; c < 3; c++) {
             rgb[c] = d[c] * fmax(irr[c], 0.0);
+            if (e_out)
+                e_out[c] = (float)fmax(irr[c], 0.0);
+        }
         if (ss->n_lobes) {
             double r[3] = {2.0 * mu * nv3[0] - v[0], 2.0 * mu * nv3[1] - v[1], 2.0 * mu * nv3[2] - v[2]}, u, w;
             wenv_oct_encode(r, &u, &w);
@@ -399,7 +405,7 @@ static wenv_status shade(void *state, const float *normals, const float *views, 
             }
         }
         for (int c = 0; c < 3; c++)
-            o[c] = rgb[c] > 0.0 ? (float)rgb[c] : 0.0f;
+            o[c] = rgb[c] > 0.0 || e_out ? (float)rgb[c] : 0.0f;
     }
     return WENV_OK;
 }

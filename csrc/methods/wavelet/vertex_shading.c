@@ -182,7 +182,9 @@ static void lights_irradiance(const wenv_wavelet *wavelet, const float n[3], con
                            e);
 }
 
-static void shade_vertex(const wenv_wavelet *wavelet, const vertex_taps *tp, const vertex_shadow *sh, float *o)
+/* o: the radiance; with irr, o all but the Lambertian part and irr the light it reflects (method.h). */
+static void shade_vertex(const wenv_wavelet *wavelet, const vertex_taps *tp, const vertex_shadow *sh, float *o,
+                         float *irr)
 {
     float e[3], m[3] = {0, 0, 0}, s[3] = {0, 0, 0};
     sampled_irradiance(wavelet, tp->sample, tp->sample_w, sh, e);
@@ -242,6 +244,13 @@ static void shade_vertex(const wenv_wavelet *wavelet, const vertex_taps *tp, con
             wenv_lights_specular(wavelet->lights, wavelet->m->mat, wavelet->m->lobe_cos_h_min, &lobe, tp->n, tp->v,
                                  tp->cos_v, (float)wavelet->q.light_tolerance * scale, sh ? &sh->vs.lights : NULL, s);
         }
+    }
+    if (irr) {
+        for (int c = 0; c < 3; c++) {
+            o[c] = s[c];
+            irr[c] = e[c] > 0.0f ? e[c] : 0.0f;
+        }
+        return;
     }
     float d[3];
     wenv_diffuse_table_at(&wavelet->m->diffuse, tp->cos_v, d);
@@ -407,7 +416,7 @@ static const vertex_shadow *vertex_shadow_at(const wenv_wavelet *wavelet, const 
 }
 
 static wenv_status shade_all(wenv_wavelet *wavelet, const float *normals, const float *views, size_t n,
-                             const wenv_shadow_scene *scene, float *out, wenv_error *err)
+                             const wenv_shadow_scene *scene, float *out, float *irradiance, wenv_error *err)
 {
     /* One pass shades every vertex whose table rows exist (all of them once its normals were seen,
      * whatever the view) and flags what the others need; those are shaded after the missing rows
@@ -425,14 +434,16 @@ static wenv_status shade_all(wenv_wavelet *wavelet, const float *normals, const 
 #pragma omp parallel for schedule(static)
     for (long long i = 0; i < nn; i++) {
         vertex_taps tp;
-        float *o = out + 3 * i;
+        float *o = out + 3 * i, *irr = irradiance ? irradiance + 3 * i : NULL;
         if (!compute_taps(wavelet, normals + 3 * i, views + 3 * i, &tp)) {
             o[0] = o[1] = o[2] = 0.0f;
+            if (irr)
+                irr[0] = irr[1] = irr[2] = 0.0f;
             continue;
         }
         if (read_taps(wavelet, &tp)) {
             vertex_shadow sh;
-            shade_vertex(wavelet, &tp, vertex_shadow_at(wavelet, scene, (size_t)i, 0, &sh), o);
+            shade_vertex(wavelet, &tp, vertex_shadow_at(wavelet, scene, (size_t)i, 0, &sh), o, irr);
             continue;
         }
         flag_taps(&tp, wavelet->slice_need, wavelet->m->row_need);
@@ -450,7 +461,8 @@ static wenv_status shade_all(wenv_wavelet *wavelet, const float *normals, const 
             vertex_shadow sh;
             size_t i = pending[e];
             compute_taps(wavelet, normals + 3 * i, views + 3 * i, &tp);
-            shade_vertex(wavelet, &tp, vertex_shadow_at(wavelet, scene, i, 0, &sh), out + 3 * i);
+            shade_vertex(wavelet, &tp, vertex_shadow_at(wavelet, scene, i, 0, &sh), out + 3 * i,
+                         irradiance ? irradiance + 3 * i : NULL);
         }
     }
     free(pending);
@@ -458,13 +470,13 @@ static wenv_status shade_all(wenv_wavelet *wavelet, const float *normals, const 
 }
 
 wenv_status wenv_wavelet_shade(wenv_wavelet *wavelet, const float *normals, const float *views, size_t n,
-                              float *out, wenv_error *err)
+                              float *out, float *irradiance, wenv_error *err)
 {
     if (!wavelet->have_env || !wavelet->m)
         return wenv_error_set(err, WENV_ERR_VALUE, "the shader needs an environment and a material");
     if (wenv_wavelet_ensure_grazing(wavelet, err)) /* not made when memory ran out before */
         return err->status;
-    return shade_all(wavelet, normals, views, n, NULL, out, err);
+    return shade_all(wavelet, normals, views, n, NULL, out, irradiance, err);
 }
 
 /* ---- with the scene in the way ------------------------------------------------------------------ */
@@ -474,10 +486,11 @@ wenv_status wenv_wavelet_shade(wenv_wavelet *wavelet, const float *normals, cons
  * over pi, times the irradiance (less what the blocked texels hide: the hidden lighting alone,
  * before any bounce, with the lights tested). */
 static void diffuse_light(const wenv_wavelet *wavelet, const float *normals, size_t n, const wenv_shadow_scene *scene,
-                          float *out)
+                          float *out, float *irradiance)
 {
-    float head_on[3], lobes[3] = {0.0f, 0.0f, 0.0f};
-    wenv_diffuse_table_at(&wavelet->m->diffuse, 1.0f, head_on);
+    float head_on[3] = {0.0f, 0.0f, 0.0f}, lobes[3] = {0.0f, 0.0f, 0.0f};
+    if (!irradiance) /* else the Lambertian part is the caller's */
+        wenv_diffuse_table_at(&wavelet->m->diffuse, 1.0f, head_on);
     if (wavelet->m->albedo)
         wenv_wavelet_albedo_at(wavelet->m->albedo, 1.0f, lobes);
     for (int c = 0; c < 3; c++)
@@ -496,8 +509,11 @@ static void diffuse_light(const wenv_wavelet *wavelet, const float *normals, siz
         sampled_irradiance(wavelet, sample, w, shp, e);
         if (wenv_lights_count(wavelet->lights, 0))
             lights_irradiance(wavelet, nrm, shp, e);
-        for (int c = 0; c < 3; c++)
+        for (int c = 0; c < 3; c++) {
             out[3 * i + c] = head_on[c] * e[c];
+            if (irradiance)
+                irradiance[3 * i + c] = e[c];
+        }
     }
 }
 
@@ -629,7 +645,7 @@ static wenv_status ensure_shadows(wenv_wavelet *wavelet, const wenv_shadow_scene
     sending.rows = NULL; /* every vertex of the occlusion, in order */
     sending.offset = 0;
     if (scene->bounce_self) {
-        diffuse_light(wavelet, normals, n, &sending, own_light);
+        diffuse_light(wavelet, normals, n, &sending, own_light, NULL);
         sending.bounce = own_light;
         sending.bounce_scale = 1.0f;
     }
@@ -650,17 +666,19 @@ static wenv_status ensure_shadows(wenv_wavelet *wavelet, const wenv_shadow_scene
 }
 
 wenv_status wenv_wavelet_shade_shadowed(wenv_wavelet *wavelet, const float *normals, const float *views, size_t n,
-                                        const wenv_shadow_scene *scene, float *out, wenv_error *err)
+                                        const wenv_shadow_scene *scene, float *out, float *irradiance,
+                                        wenv_error *err)
 {
     if (!wavelet->have_env || !wavelet->m)
         return wenv_error_set(err, WENV_ERR_VALUE, "the shader needs an environment and a material");
     if (check_scene(scene, n, err) || ensure_shadows(wavelet, scene, 1, err))
         return err->status;
-    return shade_all(wavelet, normals, views, n, scene, out, err);
+    return shade_all(wavelet, normals, views, n, scene, out, irradiance, err);
 }
 
 wenv_status wenv_wavelet_diffuse_light(wenv_wavelet *wavelet, const float *normals, size_t n,
-                                       const wenv_shadow_scene *scene, float *out, wenv_error *err)
+                                       const wenv_shadow_scene *scene, float *out, float *irradiance,
+                                       wenv_error *err)
 {
     if (!wavelet->have_env || !wavelet->m)
         return wenv_error_set(err, WENV_ERR_VALUE, "the shader needs an environment and a material");
@@ -671,6 +689,6 @@ wenv_status wenv_wavelet_diffuse_light(wenv_wavelet *wavelet, const float *norma
         if (ensure_shadows(wavelet, scene, 0, err))
             return err->status;
     }
-    diffuse_light(wavelet, normals, n, scene, out);
+    diffuse_light(wavelet, normals, n, scene, out, irradiance);
     return WENV_OK;
 }

@@ -108,15 +108,18 @@ wenv_status wenv_wavelet_set_material(wenv_wavelet *sh, const wenv_material *mat
                                       wenv_error *err);
 
 /* normals and views (surface towards eye) are n x 3; need not be unit length but must be
- * non-zero and finite (the bindings check).  out is n x 3 linear RGB radiance. */
+ * non-zero and finite (the bindings check).  out is n x 3 linear RGB radiance; with irradiance
+ * (n x 3, else NULL), all but the Lambertian part, which irradiance gets the light of (method.h). */
 wenv_status wenv_wavelet_shade(wenv_wavelet *sh, const float *normals, const float *views, size_t n,
-                              float *out, wenv_error *err);
+                              float *out, float *irradiance, wenv_error *err);
 /* The same with the scene in the way (methods/wavelet/shadows.h; method.h's shade_shadowed). */
 wenv_status wenv_wavelet_shade_shadowed(wenv_wavelet *sh, const float *normals, const float *views, size_t n,
-                                        const wenv_shadow_scene *scene, float *out, wenv_error *err);
+                                        const wenv_shadow_scene *scene, float *out, float *irradiance,
+                                        wenv_error *err);
 /* The diffuse light leaving each vertex (method.h's diffuse_light). */
 wenv_status wenv_wavelet_diffuse_light(wenv_wavelet *sh, const float *normals, size_t n,
-                                       const wenv_shadow_scene *scene, float *out, wenv_error *err);
+                                       const wenv_shadow_scene *scene, float *out, float *irradiance,
+                                       wenv_error *err);
 
 void wenv_wavelet_get_stats(const wenv_wavelet *sh, wenv_wavelet_stats *stats);
 

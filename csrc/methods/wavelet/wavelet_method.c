@@ -99,21 +99,21 @@ static wenv_status set_material(void *state, const wenv_material *mat, const wen
 }
 
 static wenv_status shade(void *state, const float *normals, const float *views, size_t n, float *out,
-                         wenv_error *err)
+                         float *irradiance, wenv_error *err)
 {
-    return wenv_wavelet_shade(state, normals, views, n, out, err);
+    return wenv_wavelet_shade(state, normals, views, n, out, irradiance, err);
 }
 
 static wenv_status shade_shadowed(void *state, const float *normals, const float *views, size_t n,
-                                  const wenv_shadow_scene *scene, float *out, wenv_error *err)
+                                  const wenv_shadow_scene *scene, float *out, float *irradiance, wenv_error *err)
 {
-    return wenv_wavelet_shade_shadowed(state, normals, views, n, scene, out, err);
+    return wenv_wavelet_shade_shadowed(state, normals, views, n, scene, out, irradiance, err);
 }
 
 static wenv_status diffuse_light(void *state, const float *normals, size_t n, const wenv_shadow_scene *scene,
-                                 float *out, wenv_error *err)
+                                 float *out, float *irradiance, wenv_error *err)
 {
-    return wenv_wavelet_diffuse_light(state, normals, n, scene, out, err);
+    return wenv_wavelet_diffuse_light(state, normals, n, scene, out, irradiance, err);
 }
 
 static size_t stats(const void *state, wenv_stat *out)
