@@ -208,6 +208,11 @@ def describe_auto_choice(choice):
 # ---------------------------------------------------------------------------------------------
 # Shadows: the scene's meshes as occluders, and each shaded part's occlusion, kept per mesh state
 
+def fingerprint(*arrays):
+    """What tells arrays apart by content (a cache key)."""
+    return _fingerprint(*arrays)
+
+
 def _fingerprint(*arrays):
     h = hashlib.blake2b(digest_size=16)
     for a in arrays:
@@ -318,8 +323,13 @@ def models_shadows(shader):
 
 def diffuse_light(shader, data, occlusion):
     """The light each vertex of `data` sends back to what it blocks: its Lambertian part's, head-on,
-    with its shadows."""
-    return shader.diffuse_light(data.normals, occlusion=occlusion)
+    with its shadows (and its own colour, read from a texture)."""
+    return shader.diffuse_light(data.normals, occlusion=occlusion, **_colour(data))
+
+
+def _colour(data):
+    """The keywords giving the core each vertex's colour (a textured Base Color), if any."""
+    return {} if data.base_color is None else {"base_color": data.base_color}
 
 
 # ---------------------------------------------------------------------------------------------
@@ -509,14 +519,14 @@ def shade_step(shader, data, view, cull, out, first, budget, scene=None):
     next step starts and how many there are to shade.  An orthographic view is shaded whole."""
     if view.perspective:
         kw = {"cull": True, "view_projection": view.view_projection} if cull and view.view_projection is not None else {}
-        kw.update(scene or {})
+        kw.update(scene or {}, **_colour(data))
         _, at_eye = _sparing_the_eye(lambda p: shader.shade_mesh(p, data.normals, view.eye, out=out, first=first,
                                                                  budget=budget, **kw), data, view.eye)
         if at_eye is not None:
             out[at_eye] = 0.0
         stats = shader.stats
         return stats["next_vertex"], stats.get("visible_vertices", data.count)
-    out[:] = shader.shade(data.normals, view.direction, **(scene or {}))
+    out[:] = shader.shade(data.normals, view.direction, **(scene or {}), **_colour(data))
     return data.count, data.count
 
 
@@ -531,9 +541,9 @@ def shade_arrays(shader, data, view, cull=False, scene=None):
     the eye and on screen (the rest are black), else all (None).  A vertex at the eye is black.
     `scene`: the keywords of shading with shadows (occlusion, bounce), or None."""
     if not view.perspective:
-        return shader.shade(data.normals, view.direction, **(scene or {})), None
+        return shader.shade(data.normals, view.direction, **(scene or {}), **_colour(data)), None
     seen = None
-    kw = dict(scene or {})
+    kw = dict(scene or {}, **_colour(data))
     if cull and view.view_projection is not None:
         seen = visible_vertices(data, view)
         kw.update(cull=True, view_projection=view.view_projection)

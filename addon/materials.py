@@ -197,6 +197,11 @@ def _value_text(value):
     return f"{value:.3g}"
 
 
+def _texture_source(node):
+    from . import textures  # (textures reads this module's principled_node)
+    return textures.base_color_source(node)
+
+
 def principled_notes(material):
     """What wenv does not shade of the material as it is set up now, one sentence each: for the
     Principled model, linked inputs (textures: their unlinked value is used; normal maps), inputs
@@ -213,6 +218,11 @@ def principled_notes(material):
     for socket in linked:
         if socket in GEOMETRY_SOCKETS:
             notes.append(f"'{socket}' is linked (a normal or bump map): not used, the mesh's normals are")
+        elif socket == "Base Color" and _texture_source(node)[0] is not None:
+            notes += _texture_source(node)[1]  # read at the vertices: what of it is read otherwise
+        elif socket == "Base Color":
+            notes.append(f"'{socket}' is linked ({_texture_source(node)[1]}): its unlinked value "
+                         f"{_value_text(inputs['base_color'])} is used")
         else:
             value = inputs[by_socket[socket]]
             notes.append(f"'{socket}' is linked (a texture or node): its unlinked value {_value_text(value)} is used")

@@ -9,9 +9,10 @@ class MeshData:
     with the material slot of each element; `unplaced` (bool, or None) marks the elements whose
     position is not finite, which are left black."""
 
-    __slots__ = ("domain", "positions", "normals", "slots", "count", "notes", "unplaced", "triangles")
+    __slots__ = ("domain", "positions", "normals", "slots", "count", "notes", "unplaced", "triangles", "base_color",
+                 "textured")
 
-    def __init__(self, domain, positions, normals, slots, notes=(), unplaced=None, triangles=None):
+    def __init__(self, domain, positions, normals, slots, notes=(), unplaced=None, triangles=None, base_color=None):
         self.domain = domain
         self.positions = positions
         self.normals = normals
@@ -20,6 +21,10 @@ class MeshData:
         self.notes = list(notes)
         self.unplaced = unplaced
         self.triangles = triangles  # (m, 3) int32 indices into positions (what casts shadows), or None
+        # (n, 3) float32 linear Base Color of each element read from a texture, for the material
+        # slots in `textured` (textures.py), or None
+        self.base_color = base_color
+        self.textured = set()
 
 
 def _read(collection, attr, count, width, dtype=np.float32):
@@ -28,19 +33,31 @@ def _read(collection, attr, count, width, dtype=np.float32):
     return buf.reshape(count, width) if width > 1 else buf
 
 
-def read_mesh(obj, depsgraph):
-    """MeshData of an object's evaluated mesh (modifiers applied).  When modifiers change the
-    topology, the attribute could not be written back to the original mesh element by element, so
-    the base mesh is shaded instead and `note` says so."""
-    ob_eval = obj.evaluated_get(depsgraph)
-    mesh = ob_eval.data
-    base = obj.data
-    notes = []
+def shaded_mesh(obj, depsgraph):
+    """The mesh read_mesh shades: the evaluated one (modifiers applied), or the base mesh when
+    modifiers change the topology (the attribute could not be written back to the original mesh
+    element by element), with a note saying so."""
+    mesh, base = obj.evaluated_get(depsgraph).data, obj.data
     if (len(mesh.vertices), len(mesh.loops), len(mesh.polygons)) != (len(base.vertices), len(base.loops),
                                                                        len(base.polygons)):
-        mesh = base
-        notes.append(f"'{obj.name}': modifiers change the topology; shaded the base mesh (its colours are "
-                     "interpolated)")
+        return base, [f"'{obj.name}': modifiers change the topology; shaded the base mesh (its colours are "
+                      "interpolated)"]
+    return mesh, []
+
+
+def corner_vertices(mesh):
+    """The vertex of each face corner (int32, one per loop)."""
+    nl = len(mesh.loops)
+    corner_attr = mesh.attributes.get(".corner_vert")
+    if corner_attr is not None:
+        return _read(corner_attr.data, "value", nl, 1, np.int32)
+    return _read(mesh.loops, "vertex_index", nl, 1, np.int32)
+
+
+def read_mesh(obj, depsgraph):
+    """MeshData of an object's mesh as shaded_mesh picks it."""
+    ob_eval = obj.evaluated_get(depsgraph)
+    mesh, notes = shaded_mesh(obj, depsgraph)
     nv, nl, npoly = len(mesh.vertices), len(mesh.loops), len(mesh.polygons)
     if nv == 0:
         return MeshData("POINT", np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32),
@@ -60,11 +77,7 @@ def read_mesh(obj, depsgraph):
         slots = np.full(nv, slots_face[0] if npoly else 0, np.int32)
     else:
         # Flat or split normals (or several materials): one value per face corner.
-        corner_attr = mesh.attributes.get(".corner_vert")
-        if corner_attr is not None:
-            corner_vert = _read(corner_attr.data, "value", nl, 1, np.int32)
-        else:
-            corner_vert = _read(mesh.loops, "vertex_index", nl, 1, np.int32)
+        corner_vert = corner_vertices(mesh)
         nrm = _read(mesh.corner_normals, "vector", nl, 3)
         pos = pos[corner_vert]
         if multi:

@@ -3,7 +3,7 @@ import math
 
 import numpy as np
 
-from . import engine, materials, meshes, world
+from . import engine, materials, meshes, textures, world
 from .engine import SetupError
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722], np.float32)
@@ -55,8 +55,13 @@ class ShadingPlan:
             parts = []
             for s in np.unique(slots):
                 sel = slots == s
-                part = data if sel.all() else meshes.MeshData(
-                    data.domain, np.ascontiguousarray(data.positions[sel]), np.ascontiguousarray(data.normals[sel]), None)
+                colour = data.base_color if s in data.textured else None
+                if sel.all() and colour is data.base_color:
+                    part = data
+                else:
+                    part = meshes.MeshData(data.domain, np.ascontiguousarray(data.positions[sel]),
+                                           np.ascontiguousarray(data.normals[sel]), None,
+                                           base_color=None if colour is None else np.ascontiguousarray(colour[sel]))
                 parts.append((s, sel, part))
             yield name, data, keys, parts
 
@@ -141,7 +146,8 @@ class ShadingPlan:
                     self.notes.append(note)
                 scenes.append(None)
                 continue
-            made_by = (quality, self.world.signature, key, self.target_error, self.memory_budget_mb)
+            made_by = (quality, self.world.signature, key, self.target_error, self.memory_budget_mb,
+                       None if part.base_color is None else engine.fingerprint(part.base_color))
             with engine.shadows.lock:
                 bounce[offsets[i] + np.flatnonzero(sel)] = engine.shadows.light(
                     occlusion, made_by, lambda: engine.diffuse_light(shader, part, occlusion))
@@ -266,6 +272,7 @@ def plan_shading(scene, depsgraph, objects, view, images, progress=None, preview
         if data.count == 0:
             notes.append(f"'{obj.name}' has no vertices")
             continue
+        notes.extend(textures.read_base_colours(obj, depsgraph, data))
         plan.items.append((obj.name, data, materials.slot_material_keys(obj)))
         plan.casts.append(obj.wenv.casts_shadows)
         notes += [n for n in materials.slot_notes(obj) if n not in notes]

@@ -127,12 +127,12 @@ def _srgb_to_linear(x):
     return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4).astype(np.float32)
 
 
-def image_pixels(image):
+def image_pixels(image, what="World image"):
     """RGBA float32 (H, W, 4), row 0 the top, linear: one bulk copy out of Blender."""
     w, h = image.size  # reading the size loads the image
     if w == 0 or h == 0:
         where = image.filepath_raw or "(no file)"
-        raise SetupError(f"World image '{image.name}' could not be loaded: {where}")
+        raise SetupError(f"{what} '{image.name}' could not be loaded: {where}")
     channels = image.channels
     buf = np.empty(w * h * channels, np.float32)
     image.pixels.foreach_get(buf)

@@ -805,6 +805,116 @@ def test_principled_node_is_the_source_of_truth(scene):
     assert 0.0 < node.inputs["Roughness"].default_value < 1.0 and mat.wenv.gloss_60 == pytest.approx(30.0, abs=0.05)
 
 
+def textured_plane(image, interpolation="Linear", cuts=8):
+    """A smooth grid of (cuts + 2)^2 vertices, UVs over [0, 1]^2, with a Principled paint whose Base
+    Color is `image` through an Image Texture node; selected alone."""
+    bpy.ops.mesh.primitive_grid_add(x_subdivisions=cuts + 1, y_subdivisions=cuts + 1, size=4.0)
+    plane = bpy.context.object
+    plane.data.shade_smooth()
+    mat = principled_material("textured paint", roughness=0.4)
+    tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
+    tex.image = image
+    tex.interpolation = interpolation
+    mat.node_tree.links.new(tex.outputs["Color"], mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"])
+    plane.data.materials.append(mat)
+    select_only(plane)
+    return plane, mat
+
+
+def plan_of(scene, obj):
+    from addon import shading, views
+    return shading.plan_shading(scene, bpy.context.evaluated_depsgraph_get(), [obj], views.camera_view(scene),
+                                bpy.data.images)
+
+
+def test_a_textured_base_color_is_read_at_each_vertex(scene):
+    """An image of one colour reads as a material of that colour; an image of two halves (Closest)
+    gives each vertex its half's colour, and the add-on's colours are the core's shading with them."""
+    env_world(scene, "sunset")
+    flat = bpy.data.images.new("flat", 8, 8, float_buffer=True)
+    flat.pixels.foreach_set(np.tile(np.float32([0.2, 0.5, 0.7, 1.0]), 64))  # linear, as a float image holds them
+    plane, _ = textured_plane(flat)
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    p, n = world_arrays(plane, corner=False)
+    eye = tuple(scene.camera.matrix_world.translation)
+    env = wenv.load_environment(hdri_path("sunset"))
+    ior = plane.active_material.node_tree.nodes["Principled BSDF"].inputs["IOR"].default_value
+    want = core_shader(env, wenv.Principled(base_color=(0.2, 0.5, 0.7), roughness=0.4, ior=ior)).shade_mesh(p, n, eye)
+    np.testing.assert_allclose(attribute(plane)[1], want, rtol=1e-4, atol=1e-5)
+    assert not any("Base Color" in note for note in materials.principled_notes(plane.active_material))
+
+    halves = bpy.data.images.new("halves", 64, 64, float_buffer=True)
+    px = np.zeros((64, 64, 4), np.float32)
+    px[:, :32] = (0.9, 0.1, 0.1, 1.0)
+    px[:, 32:] = (0.1, 0.7, 0.2, 1.0)
+    halves.pixels.foreach_set(px.ravel())
+    plane.active_material.node_tree.nodes["Image Texture"].image = halves
+    plane.active_material.node_tree.nodes["Image Texture"].interpolation = "Closest"
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    uv = np.empty(len(plane.data.loops) * 2, np.float32)
+    plane.data.uv_layers.active.uv.foreach_get("vector", uv)
+    u = np.zeros(len(plane.data.vertices), np.float32)
+    u[[l.vertex_index for l in plane.data.loops]] = uv[0::2]
+    left = np.floor(u * 64).astype(int) % 64 < 32  # u = 1 repeats to the first texel, as in Cycles
+    colours = np.where(left[:, None], np.float32([0.9, 0.1, 0.1]), np.float32([0.1, 0.7, 0.2]))
+    want = core_shader(env, wenv.Principled(base_color=(0.8, 0.2, 0.1), roughness=0.4, ior=ior)).shade_mesh(
+        p, n, eye, base_color=colours.astype(np.float32))
+    np.testing.assert_allclose(attribute(plane)[1], want, rtol=1e-4, atol=1e-5)
+
+
+def test_a_texture_finer_than_the_mesh_averages(scene):
+    """A checker of single texels (256 x 256) on a grid of 10 x 10 vertices: each vertex reads the
+    mip level of its share of the image, grey, where a point sample would read black or white."""
+    env_world(scene, "sunset")
+    checker = bpy.data.images.new("checker", 256, 256, float_buffer=True)
+    ii, jj = np.meshgrid(np.arange(256), np.arange(256))
+    px = np.ones((256, 256, 4), np.float32)
+    px[..., :3] = ((ii + jj) % 2)[..., None]
+    checker.pixels.foreach_set(px.ravel())
+    plane, _ = textured_plane(checker)
+    plan = plan_of(scene, plane)
+    colours = plan.items[0][1].base_color
+    assert colours is not None and np.all(np.abs(colours - 0.5) < 0.1), colours.min()
+    plane.active_material.node_tree.nodes["Image Texture"].interpolation = "Closest"
+    colours = plan_of(scene, plane).items[0][1].base_color
+    assert set(np.unique(colours)) <= {0.0, 1.0}  # the texel under each vertex, as Cycles' Closest
+
+
+def test_a_texture_wenv_cannot_read_is_named_with_the_value_used(scene):
+    """A Base Color through a Mapping node, or a UV map the mesh lacks: the report says so and the
+    unlinked value is used."""
+    env_world(scene, "sunset")
+    image = bpy.data.images.new("flat", 8, 8, float_buffer=True)
+    plane, mat = textured_plane(image)
+    tree = mat.node_tree
+    uv_node = tree.nodes.new("ShaderNodeUVMap")
+    uv_node.uv_map = "no such map"
+    tree.links.new(uv_node.outputs["UV"], tree.nodes["Image Texture"].inputs["Vector"])
+    plan = plan_of(scene, plane)
+    assert plan.items[0][1].base_color is None
+    assert any("no UV map 'no such map'" in note and "unlinked value is used" in note for note in plan.notes)
+    mapping = tree.nodes.new("ShaderNodeMapping")
+    tree.links.new(mapping.outputs["Vector"], tree.nodes["Image Texture"].inputs["Vector"])
+    notes = materials.principled_notes(mat)
+    assert any("'Base Color' is linked" in n and "'Mapping'" in n and "(0.8, 0.2, 0.1) is used" in n
+               for n in notes), notes
+
+
+def test_texture_sampling_wraps_as_the_node_extends():
+    """Repeat, extend, clip and mirror past the image's edge, as Cycles' Image Texture does."""
+    from addon import textures
+    image = np.float32([[[0.0] * 3, [1.0] * 3]])  # 1 row, 2 texels: black, white
+    levels = textures._pyramid(image)
+    uv = np.float32([[1.3, 0.5], [-0.2, 0.5]])  # 1.3: the second copy's first texel; -0.2: left of 0
+    got = {ext: textures.sample(levels, uv, np.ones(2, np.float32), "Closest", ext)[:, 0]
+           for ext in textures.EXTENSIONS}
+    assert got["REPEAT"].tolist() == [0.0, 1.0] and got["EXTEND"].tolist() == [1.0, 0.0]
+    assert got["CLIP"].tolist() == [0.0, 0.0] and got["MIRROR"].tolist() == [1.0, 0.0]
+    # linear: half way between the texel centres is their mean
+    mid = textures.sample(levels, np.float32([[0.5, 0.5]]), np.ones(1, np.float32), "Linear", "EXTEND")
+    assert mid[0, 0] == pytest.approx(0.5)
+
+
 def test_what_wenv_does_not_shade_is_reported(scene):
     """Linked inputs (a texture: its unlinked value is used; a normal map: not used), inputs wenv does
     not shade, a node tree with more than the Principled BSDF and the scene's Light objects are named

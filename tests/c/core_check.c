@@ -282,6 +282,22 @@ static void check_methods(const wenv_envmap *env)
                 for (int c = 0; c < 3; c++)
                     worst = fmax(worst, fabs(out[3 * k + c] - albedo[c]) / albedo[c]);
             check(worst < 0.02, what, worst, 0.0);
+            /* the Lambertian part's light given apart, times the colour per unit, is the whole */
+            float rest[4 * 3], irradiance[4 * 3];
+            wenv_diffuse_table per_colour;
+            snprintf(what, sizeof what, "%s: the Lambertian part's light apart, coloured, is the whole", m->name);
+            if (m->shade(state, normals, views, 4, rest, irradiance, &err) ||
+                wenv_material_diffuse_per_colour_table(mat, &per_colour, &err)) {
+                check(0, err.message, 0, 0);
+            } else {
+                double apart = 0.0;
+                for (int k = 0; k < 4; k++)
+                    for (int c = 0; c < 3; c++) {
+                        double whole = rest[3 * k + c] + albedo[c] * per_colour.over_pi[c] * irradiance[3 * k + c];
+                        apart = fmax(apart, fabs(whole - out[3 * k + c]) / albedo[c]);
+                    }
+                check(apart < 1e-5, what, apart, 0.0);
+            }
             wenv_stat stats[WENV_STATS_MAX];
             size_t n = m->stats(state, stats);
             snprintf(what, sizeof what, "%s: reports stats", m->name);
@@ -293,7 +309,7 @@ static void check_methods(const wenv_envmap *env)
     }
     check(wenv_method_named("no such method") == NULL, "unknown methods are not found", 0, 0);
     float ref[4 * 3];
-    if (wenv_reference(env, mat, normals, views, 4, NULL, NULL, NULL, ref, NULL, &err) == WENV_OK)
+    if (wenv_reference(env, mat, normals, views, 4, NULL, NULL, NULL, NULL, ref, NULL, &err) == WENV_OK)
         check(near(ref[0], albedo[0], 2e-3), "the reference reflects the albedo (pixel sums, 64 x 32)", ref[0], albedo[0]);
     wenv_material_free(mat);
 }

@@ -1,0 +1,230 @@
+"""Textures: a Principled BSDF's Base Color read from its Image Texture node at each shaded vertex --
+through the node's UV map, in the image's colour space, with its interpolation and extension -- and
+filtered over the vertex's share of the image (mip-mapped), so that a texture finer than the mesh
+averages rather than aliases.  The core then shades each vertex with its colour at the cost of a
+multiply-add (Shader.shade(..., base_color=)).  What is not read yet is named, never used silently."""
+import hashlib
+
+import numpy as np
+
+from . import materials, meshes, world
+
+# The Image Texture settings read as Cycles reads them; the others are read as Linear (named).
+INTERPOLATIONS = ("Linear", "Closest")
+EXTENSIONS = ("REPEAT", "EXTEND", "CLIP", "MIRROR")
+
+
+class Source:
+    """Where a Base Color comes from: an Image Texture node and the UV map it reads (None: the
+    mesh's active render UV map, as Cycles reads an unlinked Vector)."""
+
+    __slots__ = ("node", "uv_map")
+
+    def __init__(self, node, uv_map):
+        self.node = node
+        self.uv_map = uv_map
+
+
+def base_color_source(principled):
+    """(Source, notes) of the Image Texture feeding a Principled BSDF's Base Color directly (through
+    reroutes), notes naming what of it is read otherwise than Cycles reads it; or (None, reason)
+    with why it is not read (the socket's unlinked value is then used), reason None when the socket
+    is unlinked."""
+    sock = principled.inputs["Base Color"]
+    if not sock.is_linked:
+        return None, None
+    node = world.source_node(sock)
+    if node is None:
+        return None, "a muted link"
+    if node.bl_idname != "ShaderNodeTexImage":
+        return None, f"'{node.name}', a node wenv does not evaluate yet"
+    output = sock.links[0].from_socket.name
+    if output != "Color":
+        return None, f"'{node.name}''s {output} output"
+    image = node.image
+    if image is None:
+        return None, f"'{node.name}', which has no image"
+    if image.source not in ("FILE", "GENERATED"):
+        return None, f"'{node.name}', whose {image.source.lower()} image wenv does not read yet"
+    if node.projection != "FLAT":
+        return None, f"'{node.name}', whose {node.projection.lower()} projection wenv does not read yet"
+    uv_map = None
+    vector = world.source_node(node.inputs["Vector"])
+    if vector is not None:
+        if vector.bl_idname == "ShaderNodeUVMap":
+            uv_map = vector.uv_map or None
+        elif not (vector.bl_idname == "ShaderNodeTexCoord" and node.inputs["Vector"].links[0].from_socket.name == "UV"):
+            return None, f"'{node.name}', whose Vector comes from '{vector.name}', a node wenv does not evaluate yet"
+    notes = []
+    if node.interpolation not in INTERPOLATIONS:
+        notes.append(f"'{node.name}': {node.interpolation} interpolation is read as Linear")
+    space = image.colorspace_settings.name
+    if not image.is_float and space not in world.SRGB_SPACES and space not in world.LINEAR_SPACES:
+        notes.append(f"'{node.name}': 8-bit colour space '{space}' is not decoded: its values are read as linear")
+    return Source(node, uv_map), notes
+
+
+# ---------------------------------------------------------------------------------------------
+# Images, linear and mip-mapped, read once per content
+
+
+class ImageCache:
+    """Each image's mip pyramid (linear RGB, level 0 the image, each next a 2 x 2 box of the last,
+    to 1 x 1), kept while its pixels are the same.  Holds no Blender data."""
+
+    def __init__(self):
+        self._pyramids = {}  # image name -> (fingerprint of its pixels and settings, levels)
+
+    def clear(self):
+        self._pyramids.clear()
+
+    def levels(self, image):
+        rgba = world.image_pixels(image, "Texture image")[::-1]  # row 0 the bottom, as v = 0 is
+        key = hashlib.blake2b(rgba.tobytes(), digest_size=16).digest() + image.colorspace_settings.name.encode()
+        held = self._pyramids.get(image.name_full)
+        if held is None or held[0] != key:
+            held = (key, _pyramid(np.ascontiguousarray(rgba[..., :3])))
+            self._pyramids[image.name_full] = held
+        return held[1]
+
+
+def _pyramid(rgb):
+    levels = [rgb]
+    while max(levels[-1].shape[:2]) > 1:
+        a = levels[-1]
+        h, w = a.shape[:2]
+        # an odd side keeps its last row or column in the last box
+        a = a[:h - h % 2 or h, :w - w % 2 or w] if min(h, w) > 1 else a
+        if a.shape[0] > 1 and a.shape[1] > 1:
+            a = 0.25 * (a[0::2, 0::2] + a[1::2, 0::2] + a[0::2, 1::2] + a[1::2, 1::2])
+        elif a.shape[0] > 1:
+            a = 0.5 * (a[0::2] + a[1::2])
+        else:
+            a = 0.5 * (a[:, 0::2] + a[:, 1::2])
+        levels.append(np.ascontiguousarray(a, np.float32))
+    return levels
+
+
+images = ImageCache()
+
+
+# ---------------------------------------------------------------------------------------------
+# Sampling
+
+
+def _wrap(i, n, extension):
+    """Texel indices i (int) of a side of n under the node's extension; -1 outside for CLIP."""
+    if extension == "REPEAT":
+        return np.mod(i, n)
+    if extension == "MIRROR":
+        period = np.mod(i, 2 * n)
+        return np.where(period < n, period, 2 * n - 1 - period)
+    inside = (i >= 0) & (i < n)
+    clamped = np.clip(i, 0, n - 1)
+    return clamped if extension == "EXTEND" else np.where(inside, clamped, -1)
+
+
+def _bilinear(level, uv, extension):
+    h, w = level.shape[:2]
+    x = uv[:, 0] * w - 0.5  # texel centres at (i + 0.5) / w, as Cycles places them
+    y = uv[:, 1] * h - 0.5
+    x0, y0 = np.floor(x).astype(np.int64), np.floor(y).astype(np.int64)
+    fx, fy = (x - x0)[:, None].astype(np.float32), (y - y0)[:, None].astype(np.float32)
+    out = np.zeros((len(uv), 3), np.float32)
+    for dx, dy, wgt in ((0, 0, (1 - fx) * (1 - fy)), (1, 0, fx * (1 - fy)), (0, 1, (1 - fx) * fy), (1, 1, fx * fy)):
+        i, j = _wrap(x0 + dx, w, extension), _wrap(y0 + dy, h, extension)
+        inside = (i >= 0) & (j >= 0)
+        out += np.where(inside[:, None], wgt * level[np.maximum(j, 0), np.maximum(i, 0)], 0.0)
+    return out
+
+
+def sample(levels, uv, footprint, interpolation, extension):
+    """Linear RGB (n, 3) at UVs (n, 2): Closest reads the nearest texel of the image; otherwise
+    bilinear between the two mip levels about each point's footprint (its side in texels of the
+    image, n), blended by where it falls between them."""
+    base = levels[0]
+    h, w = base.shape[:2]
+    if interpolation == "Closest":
+        i = _wrap(np.floor(uv[:, 0] * w).astype(np.int64), w, extension)
+        j = _wrap(np.floor(uv[:, 1] * h).astype(np.int64), h, extension)
+        inside = (i >= 0) & (j >= 0)
+        return np.where(inside[:, None], base[np.maximum(j, 0), np.maximum(i, 0)], 0.0).astype(np.float32)
+    lod = np.clip(np.log2(np.maximum(footprint, 1.0)), 0.0, len(levels) - 1)
+    lo = np.floor(lod).astype(np.int64)
+    out = np.zeros((len(uv), 3), np.float32)
+    for k in np.unique(lo):
+        rows = lo == k
+        t = (lod[rows] - k)[:, None].astype(np.float32)
+        near = _bilinear(levels[k], uv[rows], extension)
+        far = _bilinear(levels[min(k + 1, len(levels) - 1)], uv[rows], extension)
+        out[rows] = (1 - t) * near + t * far
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# A mesh's UVs
+
+
+def uv_rows(mesh, uv_map, domain, corner_vert):
+    """(uv, footprint, corner rows) of a mesh's UV map (None: the active render one) for its shaded
+    rows: per corner -- with each corner's row (itself, or its vertex for the POINT domain) -- and
+    each corner's share of UV space, the area of the UV triangles about its vertex over three (its
+    side, in UV units, is the footprint's).  None when the mesh has no such UV map."""
+    layers = mesh.uv_layers
+    layer = layers.get(uv_map) if uv_map else next((l for l in layers if l.active_render), None)
+    if layer is None:
+        return None
+    nl = len(mesh.loops)
+    uv = np.empty(nl * 2, np.float32)
+    layer.uv.foreach_get("vector", uv)
+    uv = uv.reshape(nl, 2)
+    tris = mesh.loop_triangles
+    loops = np.empty(len(tris) * 3, np.int32)
+    tris.foreach_get("loops", loops)
+    loops = loops.reshape(-1, 3)
+    a, b, c = uv[loops[:, 0]], uv[loops[:, 1]], uv[loops[:, 2]]
+    area = 0.5 * np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1]))
+    share = np.zeros(len(mesh.vertices), np.float64)
+    np.add.at(share, corner_vert[loops].ravel(), np.repeat(area / 3.0, 3))
+    rows = corner_vert if domain == "POINT" else np.arange(nl)
+    return uv, np.sqrt(share[corner_vert]).astype(np.float32), rows
+
+
+def colours_at_rows(levels, source, uv, footprint, rows, n_rows):
+    """The Base Color of each shaded row: its corners' samples, averaged where a vertex has several
+    (a UV seam)."""
+    h, w = levels[0].shape[:2]
+    rgb = sample(levels, uv, footprint * np.sqrt(w * h), source.node.interpolation, source.node.extension)
+    total = np.zeros((n_rows, 3), np.float64)
+    count = np.zeros(n_rows, np.float64)
+    np.add.at(total, rows, rgb)
+    np.add.at(count, rows, 1.0)
+    return (total / np.maximum(count, 1.0)[:, None]).astype(np.float32)
+
+
+def read_base_colours(obj, depsgraph, data):
+    """Sets data.base_color (meshes.MeshData) for the rows of the material slots whose Principled
+    BSDF takes its Base Color from an Image Texture (data.textured: those slots).  Returns notes:
+    a missing UV map (that slot keeps the unlinked value)."""
+    notes, mesh, corner_vert = [], None, None
+    for s, slot in enumerate(obj.material_slots):
+        mat = slot.material
+        node = materials.principled_node(mat) if mat is not None and mat.wenv.model == "PRINCIPLED" else None
+        source = base_color_source(node)[0] if node is not None else None  # notes: materials.principled_notes
+        if source is None:
+            continue
+        if mesh is None:
+            mesh = meshes.shaded_mesh(obj, depsgraph)[0]
+            corner_vert = meshes.corner_vertices(mesh)
+        got = uv_rows(mesh, source.uv_map, data.domain, corner_vert)
+        if got is None:
+            notes.append(f"'{obj.name}' has no UV map {repr(source.uv_map) if source.uv_map else 'to render with'} for "
+                         f"'{source.node.name}' ('{mat.name}'): its Base Color's unlinked value is used")
+            continue
+        colours = colours_at_rows(images.levels(source.node.image), source, *got, data.count)
+        if data.base_color is None:
+            data.base_color = np.zeros((data.count, 3), np.float32)
+        rows = np.clip(data.slots, 0, len(obj.material_slots) - 1) == s
+        data.base_color[rows] = colours[rows]
+        data.textured.add(s)
+    return notes
