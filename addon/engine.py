@@ -324,7 +324,12 @@ def models_shadows(shader):
 def diffuse_light(shader, data, occlusion):
     """The light each vertex of `data` sends back to what it blocks: its Lambertian part's, head-on,
     with its shadows (and its own colour, read from a texture)."""
-    return shader.diffuse_light(data.normals, occlusion=occlusion, **_colour(data))
+    return shader.diffuse_light(_shading_normals(data), occlusion=occlusion, **_colour(data))
+
+
+def _shading_normals(data):
+    """The normals shading reads: a normal map's where there is one, else the mesh's."""
+    return data.normals if data.shading_normals is None else data.shading_normals
 
 
 def _colour(data):
@@ -520,13 +525,13 @@ def shade_step(shader, data, view, cull, out, first, budget, scene=None):
     if view.perspective:
         kw = {"cull": True, "view_projection": view.view_projection} if cull and view.view_projection is not None else {}
         kw.update(scene or {}, **_colour(data))
-        _, at_eye = _sparing_the_eye(lambda p: shader.shade_mesh(p, data.normals, view.eye, out=out, first=first,
-                                                                 budget=budget, **kw), data, view.eye)
+        _, at_eye = _sparing_the_eye(lambda p: shader.shade_mesh(p, _shading_normals(data), view.eye, out=out,
+                                                                 first=first, budget=budget, **kw), data, view.eye)
         if at_eye is not None:
             out[at_eye] = 0.0
         stats = shader.stats
         return stats["next_vertex"], stats.get("visible_vertices", data.count)
-    out[:] = shader.shade(data.normals, view.direction, **(scene or {}), **_colour(data))
+    out[:] = shader.shade(_shading_normals(data), view.direction, **(scene or {}), **_colour(data))
     return data.count, data.count
 
 
@@ -541,13 +546,14 @@ def shade_arrays(shader, data, view, cull=False, scene=None):
     the eye and on screen (the rest are black), else all (None).  A vertex at the eye is black.
     `scene`: the keywords of shading with shadows (occlusion, bounce), or None."""
     if not view.perspective:
-        return shader.shade(data.normals, view.direction, **(scene or {}), **_colour(data)), None
+        return shader.shade(_shading_normals(data), view.direction, **(scene or {}), **_colour(data)), None
     seen = None
     kw = dict(scene or {}, **_colour(data))
     if cull and view.view_projection is not None:
         seen = visible_vertices(data, view)
         kw.update(cull=True, view_projection=view.view_projection)
-    rgb, at_eye = _sparing_the_eye(lambda p: shader.shade_mesh(p, data.normals, view.eye, **kw), data, view.eye)
+    rgb, at_eye = _sparing_the_eye(lambda p: shader.shade_mesh(p, _shading_normals(data), view.eye, **kw), data,
+                                   view.eye)
     if at_eye is not None:
         rgb[at_eye] = 0.0
         if seen is not None:

@@ -202,6 +202,11 @@ def _texture_source(node):
     return textures.base_color_source(node)
 
 
+def _normal_map_source(node):
+    from . import textures
+    return textures.normal_map_source(node)
+
+
 def principled_notes(material):
     """What wenv does not shade of the material as it is set up now, one sentence each: for the
     Principled model, linked inputs (textures: their unlinked value is used; normal maps), inputs
@@ -216,7 +221,11 @@ def principled_notes(material):
     inputs, linked = principled_inputs(node)
     by_socket = {socket: name for name, socket in PRINCIPLED_SOCKETS.items()}
     for socket in linked:
-        if socket in GEOMETRY_SOCKETS:
+        if socket == "Normal" and _normal_map_source(node)[0] is not None:
+            notes.append("'Normal' from a normal map is read at the vertices: detail finer than the mesh is lost")
+        elif socket == "Normal":
+            notes.append(f"'Normal' is linked ({_normal_map_source(node)[1]}): not used, the mesh's normals are")
+        elif socket in GEOMETRY_SOCKETS:
             notes.append(f"'{socket}' is linked (a normal or bump map): not used, the mesh's normals are")
         elif socket == "Base Color" and _texture_source(node)[0] is not None:
             notes += _texture_source(node)[1]  # read at the vertices: what of it is read otherwise

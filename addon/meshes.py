@@ -10,7 +10,7 @@ class MeshData:
     position is not finite, which are left black."""
 
     __slots__ = ("domain", "positions", "normals", "slots", "count", "notes", "unplaced", "triangles", "base_color",
-                 "textured")
+                 "textured", "shading_normals")
 
     def __init__(self, domain, positions, normals, slots, notes=(), unplaced=None, triangles=None, base_color=None):
         self.domain = domain
@@ -25,6 +25,9 @@ class MeshData:
         # slots in `textured` (textures.py), or None
         self.base_color = base_color
         self.textured = set()
+        # (n, 3) float32 world normals a normal map bends the shading to (textures.py), or None: the
+        # mesh's, which the shadows' rays keep
+        self.shading_normals = None
 
 
 def _read(collection, attr, count, width, dtype=np.float32):

@@ -62,6 +62,8 @@ class ShadingPlan:
                     part = meshes.MeshData(data.domain, np.ascontiguousarray(data.positions[sel]),
                                            np.ascontiguousarray(data.normals[sel]), None,
                                            base_color=None if colour is None else np.ascontiguousarray(colour[sel]))
+                    if data.shading_normals is not None:
+                        part.shading_normals = np.ascontiguousarray(data.shading_normals[sel])
                 parts.append((s, sel, part))
             yield name, data, keys, parts
 
@@ -273,6 +275,7 @@ def plan_shading(scene, depsgraph, objects, view, images, progress=None, preview
             notes.append(f"'{obj.name}' has no vertices")
             continue
         notes.extend(textures.read_base_colours(obj, depsgraph, data))
+        notes.extend(textures.read_shading_normals(obj, depsgraph, data))
         plan.items.append((obj.name, data, materials.slot_material_keys(obj)))
         plan.casts.append(obj.wenv.casts_shadows)
         notes += [n for n in materials.slot_notes(obj) if n not in notes]

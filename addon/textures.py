@@ -83,6 +83,10 @@ class ImageCache:
         key = hashlib.blake2b(rgba.tobytes(), digest_size=16).digest() + image.colorspace_settings.name.encode()
         held = self._pyramids.get(image.name_full)
         if held is None or held[0] != key:
+            if not np.isfinite(rgba[..., :3]).all():
+                bad = np.argwhere(~np.isfinite(rgba[..., :3]).all(axis=2))[0]
+                raise world.SetupError(f"Texture image '{image.name}' has a texel that is not finite (NaN or "
+                                       f"infinite) at column {bad[1]}, row {bad[0]}: fix or replace the image")
             held = (key, _pyramid(np.ascontiguousarray(rgba[..., :3])))
             self._pyramids[image.name_full] = held
         return held[1]
@@ -178,6 +182,10 @@ def uv_rows(mesh, uv_map, domain, corner_vert):
     uv = np.empty(nl * 2, np.float32)
     layer.uv.foreach_get("vector", uv)
     uv = uv.reshape(nl, 2)
+    if not np.isfinite(uv).all():
+        corner = int(np.argwhere(~np.isfinite(uv).all(axis=1))[0, 0])
+        raise world.SetupError(f"UV map '{layer.name}' of mesh '{mesh.name}' has a coordinate that is not finite "
+                               f"(NaN or infinite) at face corner {corner}")
     tris = mesh.loop_triangles
     loops = np.empty(len(tris) * 3, np.int32)
     tris.foreach_get("loops", loops)
@@ -227,4 +235,87 @@ def read_base_colours(obj, depsgraph, data):
         rows = np.clip(data.slots, 0, len(obj.material_slots) - 1) == s
         data.base_color[rows] = colours[rows]
         data.textured.add(s)
+    return notes
+
+
+# ---------------------------------------------------------------------------------------------
+# Normal maps, at the vertices
+
+
+def normal_map_source(principled):
+    """(Source, strength) of a tangent-space Normal Map node fed by an Image Texture's Color and
+    feeding a Principled BSDF's Normal, the UV map the Normal Map node names (None: the active render
+    one); or (None, reason) with why it is not read, reason None when Normal is unlinked."""
+    sock = principled.inputs["Normal"]
+    if not sock.is_linked:
+        return None, None
+    node = world.source_node(sock)
+    if node is None or node.bl_idname != "ShaderNodeNormalMap":
+        return None, f"'{node.name}', a node wenv does not evaluate yet" if node is not None else "a muted link"
+    if node.space != "TANGENT":
+        return None, f"'{node.name}' in {node.space.lower().replace('_', ' ')} space, which wenv does not read yet"
+    if node.inputs["Strength"].is_linked:
+        return None, f"'{node.name}', whose Strength is linked"
+    tex = world.source_node(node.inputs["Color"])
+    if tex is None or tex.bl_idname != "ShaderNodeTexImage" or tex.image is None or tex.projection != "FLAT":
+        return None, f"'{node.name}', whose Color is not an Image Texture wenv reads"
+    if world.source_node(tex.inputs["Vector"]) is not None or tex.image.source not in ("FILE", "GENERATED"):
+        return None, f"'{tex.name}', whose Vector or image source wenv does not read yet"
+    return Source(tex, node.uv_map or None), max(float(node.inputs["Strength"].default_value), 0.0)
+
+
+def _unit_rows(v):
+    length = np.linalg.norm(v, axis=1, keepdims=True)
+    return np.where(length > 1e-20, v / np.maximum(length, 1e-20), 0.0).astype(np.float32)
+
+
+def read_shading_normals(obj, depsgraph, data):
+    """Sets data.shading_normals (world space, per shaded row) for the material slots whose
+    Principled BSDF's Normal comes from a tangent-space normal map, as Cycles' Normal Map node makes
+    them: 2 x colour - 1 in the UV map's tangent frame (MikkTSpace), blended towards the mesh's
+    normal by Strength.  Read at the vertices: detail finer than the mesh is lost.  Returns notes."""
+    notes, mesh, corner_vert = [], None, None
+    for s, slot in enumerate(obj.material_slots):
+        mat = slot.material
+        node = materials.principled_node(mat) if mat is not None and mat.wenv.model == "PRINCIPLED" else None
+        source, strength = normal_map_source(node) if node is not None else (None, None)
+        if source is None:
+            continue
+        if mesh is None:
+            mesh = meshes.shaded_mesh(obj, depsgraph)[0]
+            corner_vert = meshes.corner_vertices(mesh)
+        got = uv_rows(mesh, source.uv_map, "CORNER", corner_vert)
+        layer = mesh.uv_layers.get(source.uv_map) if source.uv_map else next(
+            (l for l in mesh.uv_layers if l.active_render), None)
+        if got is None or layer is None:
+            notes.append(f"'{obj.name}' has no UV map {repr(source.uv_map) if source.uv_map else 'to render with'} for "
+                         f"the normal map of '{mat.name}': the mesh's normals are used")
+            continue
+        mesh.calc_tangents(uvmap=layer.name)  # runtime data only, nothing the file keeps
+        nl = len(mesh.loops)
+        tangent = np.empty(nl * 3, np.float32)
+        sign = np.empty(nl, np.float32)
+        normal = np.empty(nl * 3, np.float32)
+        mesh.loops.foreach_get("tangent", tangent)
+        mesh.loops.foreach_get("bitangent_sign", sign)
+        mesh.corner_normals.foreach_get("vector", normal)
+        tangent, normal = tangent.reshape(nl, 3), normal.reshape(nl, 3)
+        levels = images.levels(source.node.image)
+        h, w = levels[0].shape[:2]
+        colour = sample(levels, got[0], got[1] * np.sqrt(w * h), source.node.interpolation, source.node.extension)
+        c = 2.0 * colour - 1.0
+        bitangent = sign[:, None] * np.cross(normal, tangent)
+        mapped = _unit_rows(c[:, :1] * tangent + c[:, 1:2] * bitangent + c[:, 2:3] * normal)
+        if strength != 1.0:
+            mapped = _unit_rows(normal + (mapped - normal) * strength)
+        # into the world by the inverse transpose, as read_mesh turns the normals
+        m = obj.evaluated_get(depsgraph).matrix_world
+        world_n = mapped @ np.array(m.to_3x3().inverted_safe(), np.float32)
+        rows = corner_vert if data.domain == "POINT" else np.arange(nl)
+        total = np.zeros((data.count, 3), np.float64)
+        np.add.at(total, rows, world_n)
+        if data.shading_normals is None:
+            data.shading_normals = data.normals.copy()
+        mine = np.clip(data.slots, 0, len(obj.material_slots) - 1) == s
+        data.shading_normals[mine] = _unit_rows(total)[mine]
     return notes

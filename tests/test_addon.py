@@ -900,6 +900,71 @@ def test_a_texture_wenv_cannot_read_is_named_with_the_value_used(scene):
                for n in notes), notes
 
 
+def test_a_broken_texture_or_uv_map_is_a_named_error(scene):
+    """A NaN texel, NaN UV coordinates or an image that cannot be loaded stop the pass with an error
+    naming them, and the colours shaded before are kept."""
+    env_world(scene, "sunset")
+    image = bpy.data.images.new("flat", 8, 8, float_buffer=True)
+    plane, mat = textured_plane(image)
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    before = attribute(plane)[1].copy()
+    px = np.ones(8 * 8 * 4, np.float32)
+    px[4 * 10] = np.nan
+    image.pixels.foreach_set(px)
+    with pytest.raises(RuntimeError, match="Texture image 'flat' has a texel that is not finite"):
+        shade_op(view="CAMERA")
+    image.pixels.foreach_set(np.ones(8 * 8 * 4, np.float32))
+    uv = np.zeros(len(plane.data.loops) * 2, np.float32)
+    uv[7] = np.inf
+    plane.data.uv_layers.active.uv.foreach_set("vector", uv)
+    with pytest.raises(RuntimeError, match="UV map 'UVMap' of mesh '.*' has a coordinate that is not finite"):
+        shade_op(view="CAMERA")
+    uv[7] = 0.0
+    plane.data.uv_layers.active.uv.foreach_set("vector", uv)
+    missing = bpy.data.images.load(hdri_path("sunset"))
+    missing.filepath = "//no such file.png"
+    missing.reload()
+    mat.node_tree.nodes["Image Texture"].image = missing
+    with pytest.raises(RuntimeError, match="Texture image .* could not be loaded"):
+        shade_op(view="CAMERA")
+    np.testing.assert_array_equal(attribute(plane)[1], before)
+
+
+def test_a_normal_map_bends_the_shading_normals(scene):
+    """A tangent-space Normal Map of one tilt (0.3 along the UV map's u, which runs along +X here) on
+    a grid: the add-on shades each vertex as the core does at that bent normal; at Strength 0, at
+    the mesh's own.  The report says a normal map is read at the vertices."""
+    env_world(scene, "sunset")
+    tilt = bpy.data.images.new("tilt", 4, 4, float_buffer=True)
+    bent = np.float32([0.3, 0.0, np.sqrt(1.0 - 0.09)])
+    tilt.pixels.foreach_set(np.tile(np.append(0.5 * bent + 0.5, 1.0).astype(np.float32), 16))
+    bpy.ops.mesh.primitive_grid_add(x_subdivisions=9, y_subdivisions=9, size=4.0)
+    plane = bpy.context.object
+    plane.data.shade_smooth()
+    mat = principled_material("bumpy", roughness=0.4)
+    tree = mat.node_tree
+    tex = tree.nodes.new("ShaderNodeTexImage")
+    tex.image = tilt
+    normal_map = tree.nodes.new("ShaderNodeNormalMap")
+    tree.links.new(tex.outputs["Color"], normal_map.inputs["Color"])
+    tree.links.new(normal_map.outputs["Normal"], tree.nodes["Principled BSDF"].inputs["Normal"])
+    plane.data.materials.append(mat)
+    select_only(plane)
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    p, n = world_arrays(plane, corner=False)
+    eye = tuple(scene.camera.matrix_world.translation)
+    ior = tree.nodes["Principled BSDF"].inputs["IOR"].default_value
+    shader = core_shader(wenv.load_environment(hdri_path("sunset")),
+                         wenv.Principled(base_color=(0.8, 0.2, 0.1), roughness=0.4, ior=ior))
+    np.testing.assert_allclose(attribute(plane)[1], shader.shade_mesh(p, np.tile(bent, (len(p), 1)), eye),
+                               rtol=1e-4, atol=1e-5)
+    assert any("'Normal' from a normal map is read at the vertices" in note for note in
+               materials.principled_notes(mat))
+    normal_map.inputs["Strength"].default_value = 0.0
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    np.testing.assert_allclose(attribute(plane)[1], shader.shade_mesh(p, n, eye), rtol=1e-4, atol=1e-5)
+
+
 def test_texture_sampling_wraps_as_the_node_extends():
     """Repeat, extend, clip and mirror past the image's edge, as Cycles' Image Texture does."""
     from addon import textures
