@@ -44,7 +44,7 @@ class WENV_LobeSettings(bpy.types.PropertyGroup):
 
 def _gloss_getter(geometry):
     def get(self):
-        r = gloss.gloss_readings(materials.material_key(self))
+        r = gloss.gloss_readings(gloss.reading_key(self.id_data)[0])
         return r[geometry] if isinstance(r, dict) else math.nan
     return get
 

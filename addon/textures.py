@@ -74,9 +74,24 @@ class ImageCache:
 
     def __init__(self):
         self._pyramids = {}  # image name -> (fingerprint of its pixels and settings, levels)
+        self._means = {}  # a state Image.mean checks -> the mean colour
 
     def clear(self):
         self._pyramids.clear()
+        self._means = {}
+
+    def mean(self, image):
+        """The image's mean linear colour (its pyramid's last level), read once per state a panel
+        can check cheaply at each redraw -- its name, size, file, packing and whether it has unsaved
+        edits -- rather than by its pixels."""
+        state = (image.name_full, tuple(image.size), image.filepath_raw, image.packed_file is not None,
+                 image.is_dirty, image.colorspace_settings.name)
+        means = self._means
+        if state not in means:
+            if len(means) > 64:
+                means.clear()
+            means[state] = tuple(float(c) for c in self.levels(image)[-1][0, 0])
+        return means[state]
 
     def levels(self, image):
         rgba = world.image_pixels(image, "Texture image")[::-1]  # row 0 the bottom, as v = 0 is

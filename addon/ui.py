@@ -192,7 +192,10 @@ class WENV_PT_gloss(_SidebarPanel, bpy.types.Panel):
     def draw(self, context):
         layout = self.layout
         st = _active_material(context).wenv
-        readings = gloss.gloss_readings(materials.material_key(st))
+        key, texture_note = gloss.reading_key(_active_material(context))
+        readings = gloss.gloss_readings(key)
+        if texture_note:
+            layout.label(text=texture_note, icon="TEXTURE")
         if isinstance(readings, str):
             layout.alert = True
             layout.label(text=readings, icon="ERROR")

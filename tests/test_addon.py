@@ -965,6 +965,27 @@ def test_a_normal_map_bends_the_shading_normals(scene):
     np.testing.assert_allclose(attribute(plane)[1], shader.shade_mesh(p, n, eye), rtol=1e-4, atol=1e-5)
 
 
+def test_the_glossmeter_reads_a_textured_base_color_at_its_mean(scene):
+    """Base Color from a texture of two halves: the glossmeter panel reads the material at the
+    texture's mean colour and says so; the reading is the core's at that colour."""
+    from addon import gloss, ui
+    halves = bpy.data.images.new("halves", 4, 4, float_buffer=True)
+    px = np.zeros((4, 4, 4), np.float32)
+    px[:, :2] = (0.9, 0.1, 0.1, 1.0)
+    px[:, 2:] = (0.1, 0.7, 0.3, 1.0)
+    halves.pixels.foreach_set(px.ravel())
+    plane, mat = textured_plane(halves)
+    plane.active_material = mat
+    key, note = gloss.reading_key(mat)
+    assert note == "Base Color: the mean of 'halves'"
+    assert dict(key[1])["base_color"] == pytest.approx((0.5, 0.4, 0.2))
+    ior = mat.node_tree.nodes["Principled BSDF"].inputs["IOR"].default_value
+    want = wenv.gloss(wenv.Principled(base_color=(0.5, 0.4, 0.2), roughness=0.4, ior=ior), [60])[0]
+    assert mat.wenv.gloss_60 == pytest.approx(want, rel=1e-6)
+    panel = [l[1] for l in draw_panel(ui.WENV_PT_gloss) if l[0] == "label"]
+    assert note in panel
+
+
 def test_texture_sampling_wraps_as_the_node_extends():
     """Repeat, extend, clip and mirror past the image's edge, as Cycles' Image Texture does."""
     from addon import textures
