@@ -986,6 +986,38 @@ def test_the_glossmeter_reads_a_textured_base_color_at_its_mean(scene):
     assert note in panel
 
 
+def test_a_texture_change_reshades_without_remaking_the_material(scene, monkeypatch):
+    """New pixels in a Base Color's image: the next pass shades the new colours (the core's shading
+    with them) and sets no material anew: the shader keeps the one it holds."""
+    env_world(scene, "sunset")
+    image = bpy.data.images.new("paint", 4, 4, float_buffer=True)
+    image.pixels.foreach_set(np.tile(np.float32([0.2, 0.5, 0.7, 1.0]), 16))
+    plane, mat = textured_plane(image)
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    calls = []
+
+    class Counting:  # the shader, its set_material counted
+        def __init__(self, shader):
+            self.shader = shader
+
+        def set_material(self, material):
+            calls.append(material)
+            return self.shader.set_material(material)
+
+        def __getattr__(self, name):
+            return getattr(self.shader, name)
+
+    monkeypatch.setitem(engine.shaders._shaders, "draft", Counting(engine.shaders.get("draft")))
+    image.pixels.foreach_set(np.tile(np.float32([0.7, 0.3, 0.1, 1.0]), 16))
+    assert shade_op(view="CAMERA") == {"FINISHED"} and calls == []
+    p, n = world_arrays(plane, corner=False)
+    ior = mat.node_tree.nodes["Principled BSDF"].inputs["IOR"].default_value
+    want = core_shader(wenv.load_environment(hdri_path("sunset")),
+                       wenv.Principled(base_color=(0.7, 0.3, 0.1), roughness=0.4, ior=ior)).shade_mesh(
+        p, n, tuple(scene.camera.matrix_world.translation))
+    np.testing.assert_allclose(attribute(plane)[1], want, rtol=1e-4, atol=1e-5)
+
+
 def test_texture_sampling_wraps_as_the_node_extends():
     """Repeat, extend, clip and mirror past the image's edge, as Cycles' Image Texture does."""
     from addon import textures
