@@ -52,7 +52,8 @@ def test_masks_match_a_ray_cast_written_apart(yard):
     normals = np.tile(np.float32([0, 0, 1]), (len(pts), 1))
     o = occ.occlusion(pts, normals, resolution=8)
     local = o.directions.reshape(-1, 3)
-    lift = 1e-4 * occ.size
+    lift = occ.offset
+    assert 1e-4 * occ.size <= lift < 2e-4 * occ.size
     world = local @ frame(np.array([0.0, 0.0, 1.0]))  # every vertex here faces +z: one frame
     mismatches = 0
     for i, p in enumerate(pts):

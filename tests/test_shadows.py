@@ -224,6 +224,22 @@ def test_a_replaced_or_removed_object_shifts_the_rest(cube):
     np.testing.assert_array_equal(refreshed.triangles, after_occ.occlusion(plane, normals).triangles)
 
 
+def test_a_change_of_the_scenes_size_casts_every_vertex():
+    """The cube moved far out doubles the scene's size, and with it how far every ray starts off its
+    surface: every vertex is cast, and the result is still a new cast's.  Moved a little past the
+    plane's edge, the size grows but the start does not move: only what sees the cube is cast."""
+    plane, normals, before_occ = wall_and_cube_on_plane(box((1.3, -0.2, 0.0), (1.7, 0.2, 0.4)))
+    _, _, near = wall_and_cube_on_plane(box((2.9, -0.2, 0.0), (3.3, 0.2, 0.4)))
+    assert near.size > before_occ.size and near.offset == before_occ.offset
+    before = before_occ.occlusion(plane, normals)
+    assert near.occlusion(plane, normals, previous=before, changed=(12, 12)).cast_vertices < len(plane)
+    _, _, after_occ = wall_and_cube_on_plane(box((20.0, -0.2, 0.0), (20.4, 0.2, 0.4)))
+    assert after_occ.offset > before_occ.offset
+    refreshed = after_occ.occlusion(plane, normals, previous=before, changed=(12, 12))
+    assert refreshed.cast_vertices == len(plane)
+    np.testing.assert_array_equal(refreshed.triangles, after_occ.occlusion(plane, normals).triangles)
+
+
 def test_a_previous_occlusion_that_does_not_fit_is_named():
     plane, normals, before_occ = wall_and_cube_on_plane(box((1.3, -0.2, 0.0), (1.7, 0.2, 0.4)))
     _, _, after_occ = wall_and_cube_on_plane(box((1.8, 0.3, 0.0), (2.2, 0.7, 0.4)))

@@ -311,6 +311,12 @@ static PyObject *occluders_size(OccludersObject *self, void *closure)
     return ready(self) < 0 ? NULL : PyFloat_FromDouble(wenv_occluders_size(self->occ));
 }
 
+static PyObject *occluders_offset(OccludersObject *self, void *closure)
+{
+    (void)closure;
+    return ready(self) < 0 ? NULL : PyFloat_FromDouble(wenv_occluders_offset(self->occ));
+}
+
 static PyMethodDef occluders_methods[] = {
     {"occluded", (PyCFunction)(void (*)(void))occluders_occluded, METH_VARARGS | METH_KEYWORDS,
      "occluded(origins, directions, tfar=inf)\n--\n\nWhether anything blocks each ray (bool, n): origins float32 "
@@ -318,7 +324,7 @@ static PyMethodDef occluders_methods[] = {
     {"occlusion", (PyCFunction)(void (*)(void))occluders_occlusion, METH_VARARGS | METH_KEYWORDS,
      "occlusion(positions, normals, resolution=8, progress=None, previous=None, changed=None)\n--\n\nWhich "
      "directions of each vertex's hemisphere the scene blocks, as a wenv.Occlusion: a ray from the vertex (lifted "
-     "off the surface by 1e-4 of the scene's size) through the centre of each texel of a resolution x resolution "
+     "off the surface by Occluders.offset) through the centre of each texel of a resolution x resolution "
      "hemi-octahedral map in the vertex's frame (resolution 4 to 16, or 'auto': the finest whose rays, "
      "vertices x resolution^2, stay within 2^23, about 1.7 s on 2 cores).  progress(fraction) may return True to "
      "cancel.\n\nAfter a change (an object moved, deformed, edited or removed), previous (the occlusion of the "
@@ -332,6 +338,8 @@ static PyMethodDef occluders_methods[] = {
 static PyGetSetDef occluders_getset[] = {
     {"triangles", (getter)occluders_triangles, NULL, "Number of triangles.", NULL},
     {"size", (getter)occluders_size, NULL, "Diagonal of the scene's bounding box.", NULL},
+    {"offset", (getter)occluders_offset, NULL,
+     "How far rays start off a surface, along its normal: 1e-4 of the size rounded up to a power of two.", NULL},
     {NULL, NULL, NULL, NULL, NULL},
 };
 

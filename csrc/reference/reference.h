@@ -1,7 +1,7 @@
 /* Ground truth: the reflection equation summed over every environment pixel, each a point
  * source of flux radiance x exact pixel solid angle, with the exact BRDF.  Same units as shading.
  * With occluders (positions then required), each pixel's ray from the vertex (lifted off the
- * surface by WENV_OCCLUDER_OFFSET of the scene's size) is cast exactly, and a blocked one brings
+ * surface by wenv_occluders_offset) is cast exactly, and a blocked one brings
  * the light of the blocker where it is hit: bounce (per occluder vertex, RGB radiance, interpolated
  * over the hit triangle) times the pixel's solid angle, or nothing when bounce is NULL (direct light
  * only).  occ NULL: unshadowed. */

@@ -147,7 +147,10 @@ uint64_t wenv_occluders_fingerprint(const wenv_occluders *occ) { return occ->fin
 const uint32_t *wenv_occluders_triangles(const wenv_occluders *occ) { return occ->triangles; }
 const float *wenv_occluders_positions(const wenv_occluders *occ) { return occ->positions; }
 double wenv_occluders_size(const wenv_occluders *occ) { return occ->size; }
-float wenv_occluders_offset(const wenv_occluders *occ) { return (float)(WENV_OCCLUDER_OFFSET * occ->size); }
+float wenv_occluders_offset(const wenv_occluders *occ)
+{
+    return (float)(WENV_OCCLUDER_OFFSET * (occ->size > 0.0 ? exp2(ceil(log2(occ->size))) : 1.0));
+}
 
 void wenv_occluders_test_rays(const wenv_occluders *occ, const float *origins, const float *dirs, size_t n, float tfar,
                               unsigned char *blocked)

@@ -33,7 +33,9 @@ uint64_t wenv_occluders_fingerprint(const wenv_occluders *occ);
 /* The diagonal of the scene's bounding box: what a ray's start is lifted off a surface by a
  * fraction of (wenv_occluders_offset), so that it does not hit the face it starts on. */
 double wenv_occluders_size(const wenv_occluders *occ);
-/* The lift: WENV_OCCLUDER_OFFSET times the size. */
+/* The lift: WENV_OCCLUDER_OFFSET times the size rounded up to a power of two, so that an object
+ * moved within about the same bounds leaves every ray's start where it was (an occlusion made from
+ * the one before then equals a new cast: occlusion.h). */
 #define WENV_OCCLUDER_OFFSET 1e-4
 float wenv_occluders_offset(const wenv_occluders *occ);
 

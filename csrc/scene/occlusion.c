@@ -385,6 +385,10 @@ wenv_status wenv_occlusion_refresh(wenv_occlusion *out, const wenv_occlusion *be
                                   "triangle %zu before is not triangle %zu now, and is outside the changed ones [%zu, "
                                   "%zu): cast the occlusion anew", k, now, first, end_before);
     }
+    /* rays start off the surface by a fraction of the scene's size: another size moves every start,
+     * and only a new cast gives what a new cast gives */
+    if (wenv_occluders_offset(occ) != wenv_occluders_offset(occluders_before))
+        return cast(out, occ, positions, normals, n, before->resolution, NULL, progress, err);
     refresh_plan plan = {.before = before, .occluders_before = occluders_before, .first = first,
                          .end_before = end_before, .shift = (long long)count_now - (long long)count,
                          .lo = {INFINITY, INFINITY, INFINITY}, .hi = {-INFINITY, -INFINITY, -INFINITY}};

@@ -49,7 +49,7 @@ typedef struct {
 
 /* The masks of n vertices (positions and normals as xyz floats; normals non-zero) against `occ`,
  * within the memory budget `occ` was made with (WENV_ERR_VALUE saying so when it would not fit).
- * Rays start WENV_OCCLUDER_OFFSET of the scene's size off the surface along the normal.  Progress
+ * Rays start wenv_occluders_offset off the surface along the normal.  Progress
  * and cancel as base/progress.h.  WENV_ERR_VALUE for a resolution out of range or a normal that is
  * zero or not finite (naming "normals[i]"), or a position not finite ("positions[i]"). */
 wenv_status wenv_occlusion_make(wenv_occlusion *out, const wenv_occluders *occ, const float *positions,
@@ -63,7 +63,8 @@ wenv_status wenv_occlusion_make(wenv_occlusion *out, const wenv_occluders *occ, 
  * number).  A vertex is cast again when one of its hits was on a changed triangle or one of its rays
  * meets a changed triangle as it is now before what it met (the changed triangles' bounds decide
  * most without a ray); the others keep their masks and hits.  The result is what
- * wenv_occlusion_make would give, with `cast_vertices` telling how many were cast.  WENV_ERR_VALUE
+ * wenv_occlusion_make would give, with `cast_vertices` telling how many were cast (all of them when
+ * the scene's lift changed, which moves every ray's start: wenv_occluders_offset).  WENV_ERR_VALUE
  * when `before` is of other positions or normals, or a triangle outside the changed ones differs. */
 wenv_status wenv_occlusion_refresh(wenv_occlusion *out, const wenv_occlusion *before,
                                    const wenv_occluders *occluders_before, const wenv_occluders *occ,
