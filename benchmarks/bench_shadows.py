@@ -59,6 +59,18 @@ def moved_blocker(positions, normals, triangles, resolution):
     return dict(new_cast_seconds=new_cast, refresh_seconds=refresh, cast_vertices=refreshed.cast_vertices)
 
 
+def side_by_side(first, second, repeat):
+    """Median times of two calls made in turn, round by round, so that a busy spell of a shared
+    machine falls on both."""
+    times = ([], [])
+    for _ in range(repeat):
+        for fn, out in zip((first, second), times):
+            start = time.perf_counter()
+            fn()
+            out.append(time.perf_counter() - start)
+    return statistics.median(times[0]), statistics.median(times[1])
+
+
 def median_time(fn, repeat):
     times = []
     for _ in range(repeat):
@@ -105,8 +117,8 @@ def main():
             shader = wenv.Shader(env, mat, quality="default")
             plain = shader.shade(normals, views)
             shaded = shader.shade(normals, views, occlusion=occlusion)
-            t_plain = median_time(lambda: shader.shade(normals, views), args.repeat)
-            t_shadow = median_time(lambda: shader.shade(normals, views, occlusion=occlusion), args.repeat)
+            t_plain, t_shadow = side_by_side(lambda: shader.shade(normals, views),
+                                             lambda: shader.shade(normals, views, occlusion=occlusion), args.repeat)
             light = shader.diffuse_light(normals, occlusion=occlusion)
             truth = wenv.reference(env, mat, normals[pick], views[pick], positions=positions[pick],
                                    occluders=occluders, bounce=light)
