@@ -73,7 +73,7 @@ class ImageCache:
     to 1 x 1), kept while its pixels are the same.  Holds no Blender data."""
 
     def __init__(self):
-        self._pyramids = {}  # image name -> (fingerprint of its pixels and settings, levels)
+        self._pyramids = {}  # image name -> (fingerprint of its pixels and settings, levels, state)
         self._means = {}  # a state Image.mean checks -> the mean colour
 
     def clear(self):
@@ -94,15 +94,25 @@ class ImageCache:
         return means[state]
 
     def levels(self, image):
+        """The image's pyramid.  An image with no unsaved edits (a file or packed image as loaded)
+        is known by its name, size, file and colour space, and its pixels are not read again; one
+        with edits (painted, or set by a script) is read and known by its pixels."""
+        state = (tuple(image.size), image.filepath_raw, image.packed_file is not None, image.source,
+                 image.colorspace_settings.name)
+        held = self._pyramids.get(image.name_full)
+        if held is not None and not image.is_dirty and held[2] == state:
+            return held[1]
         rgba = world.image_pixels(image, "Texture image")[::-1]  # row 0 the bottom, as v = 0 is
         key = hashlib.blake2b(rgba.tobytes(), digest_size=16).digest() + image.colorspace_settings.name.encode()
-        held = self._pyramids.get(image.name_full)
         if held is None or held[0] != key:
             if not np.isfinite(rgba[..., :3]).all():
                 bad = np.argwhere(~np.isfinite(rgba[..., :3]).all(axis=2))[0]
                 raise world.SetupError(f"Texture image '{image.name}' has a texel that is not finite (NaN or "
                                        f"infinite) at column {bad[1]}, row {bad[0]}: fix or replace the image")
-            held = (key, _pyramid(np.ascontiguousarray(rgba[..., :3])))
+            held = (key, _pyramid(np.ascontiguousarray(rgba[..., :3])), state)
+            self._pyramids[image.name_full] = held
+        elif held[2] != state:
+            held = (held[0], held[1], state)
             self._pyramids[image.name_full] = held
         return held[1]
 
@@ -207,8 +217,7 @@ def uv_rows(mesh, uv_map, domain, corner_vert):
     loops = loops.reshape(-1, 3)
     a, b, c = uv[loops[:, 0]], uv[loops[:, 1]], uv[loops[:, 2]]
     area = 0.5 * np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1]))
-    share = np.zeros(len(mesh.vertices), np.float64)
-    np.add.at(share, corner_vert[loops].ravel(), np.repeat(area / 3.0, 3))
+    share = np.bincount(corner_vert[loops].ravel(), weights=np.repeat(area / 3.0, 3), minlength=len(mesh.vertices))
     rows = corner_vert if domain == "POINT" else np.arange(nl)
     return uv, np.sqrt(share[corner_vert]).astype(np.float32), rows
 
@@ -218,11 +227,30 @@ def colours_at_rows(levels, source, uv, footprint, rows, n_rows):
     (a UV seam)."""
     h, w = levels[0].shape[:2]
     rgb = sample(levels, uv, footprint * np.sqrt(w * h), source.node.interpolation, source.node.extension)
-    total = np.zeros((n_rows, 3), np.float64)
-    count = np.zeros(n_rows, np.float64)
-    np.add.at(total, rows, rgb)
-    np.add.at(count, rows, 1.0)
+    count = np.bincount(rows, minlength=n_rows).astype(np.float64)
+    total = np.stack([np.bincount(rows, weights=rgb[:, c], minlength=n_rows) for c in range(3)], axis=1)
     return (total / np.maximum(count, 1.0)[:, None]).astype(np.float32)
+
+
+# (object name, slot) -> (what the colours were read from, the colours, the pyramid they were read
+# from: held, so that its id in the key is not another's)
+_colours_kept = {}
+
+
+def _colours_memo(name, slot, levels, source, got, n_rows):
+    """colours_at_rows, kept while the image's pyramid, the node's settings and the UVs are the same:
+    a new view samples nothing."""
+    h = hashlib.blake2b(digest_size=16)
+    for a in got:
+        h.update(np.ascontiguousarray(a).view(np.uint8).ravel())
+    key = (id(levels), source.node.interpolation, source.node.extension, n_rows, h.digest())
+    held = _colours_kept.get((name, slot))
+    if held is None or held[0] != key:
+        if len(_colours_kept) > 256:
+            _colours_kept.clear()
+        held = (key, colours_at_rows(levels, source, *got, n_rows), levels)
+        _colours_kept[(name, slot)] = held
+    return held[1]
 
 
 def read_base_colours(obj, depsgraph, data):
@@ -244,7 +272,7 @@ def read_base_colours(obj, depsgraph, data):
             notes.append(f"'{obj.name}' has no UV map {repr(source.uv_map) if source.uv_map else 'to render with'} for "
                          f"'{source.node.name}' ('{mat.name}'): its Base Color's unlinked value is used")
             continue
-        colours = colours_at_rows(images.levels(source.node.image), source, *got, data.count)
+        colours = _colours_memo(obj.name, s, images.levels(source.node.image), source, got, data.count)
         if data.base_color is None:
             data.base_color = np.zeros((data.count, 3), np.float32)
         rows = np.clip(data.slots, 0, len(obj.material_slots) - 1) == s
@@ -327,8 +355,7 @@ def read_shading_normals(obj, depsgraph, data):
         m = obj.evaluated_get(depsgraph).matrix_world
         world_n = mapped @ np.array(m.to_3x3().inverted_safe(), np.float32)
         rows = corner_vert if data.domain == "POINT" else np.arange(nl)
-        total = np.zeros((data.count, 3), np.float64)
-        np.add.at(total, rows, world_n)
+        total = np.stack([np.bincount(rows, weights=world_n[:, c], minlength=data.count) for c in range(3)], axis=1)
         if data.shading_normals is None:
             data.shading_normals = data.normals.copy()
         mine = np.clip(data.slots, 0, len(obj.material_slots) - 1) == s

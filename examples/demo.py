@@ -1,5 +1,6 @@
 """The main job, on an embedded default (no downloads): what a Blender user came for.  A bpy scene --
-Suzanne with a Principled BSDF paint under Blender's bundled "sunset" HDRI, a camera -- is shaded by
+Suzanne with a Principled BSDF paint whose Base Color is a striped image texture (two paints, through
+her UV map) under Blender's bundled "sunset" HDRI, a camera -- is shaded by
 the wenv add-on (registered from this checkout) into its colour attribute, with her shadows and the
 light she bounces into them; the colours are rendered to an image (Workbench, flat attribute
 colours) beside Cycles' and EEVEE's renders of the same scene; the gloss of the material is read as
@@ -28,6 +29,20 @@ import addon  # noqa: E402
 from addon import meshes  # noqa: E402
 
 PAINT = {"Base Color": (0.6, 0.15, 0.08, 1.0), "Roughness": 0.3}
+# The texture's two paints, in stripes across her UV map (linear RGB): the red above and a cream
+STRIPES = ((0.6, 0.15, 0.08), (0.8, 0.7, 0.45))
+
+
+def striped_image(stripes=6, side=64):
+    """A float image of vertical stripes of the two paints, made here (nothing to download)."""
+    image = bpy.data.images.new("paint stripes", side, side, float_buffer=True)
+    u = (np.arange(side) + 0.5) / side
+    cream = (np.floor(u * stripes) % 2).astype(bool)
+    px = np.ones((side, side, 4), np.float32)
+    px[:, :, :3] = np.where(cream[None, :, None], np.float32(STRIPES[1]), np.float32(STRIPES[0]))
+    image.pixels.foreach_set(px.ravel())
+    image.pack()  # kept in the .blend, as an image a user painted would be
+    return image
 
 
 def bundled_hdri(name):
@@ -55,6 +70,9 @@ def build_scene(hdri, size):
     node = next(n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled")
     for socket, value in PAINT.items():
         node.inputs[socket].default_value = value
+    texture = mat.node_tree.nodes.new("ShaderNodeTexImage")
+    texture.image = striped_image()
+    mat.node_tree.links.new(texture.outputs["Color"], node.inputs["Base Color"])
     obj.data.materials.append(mat)
     scene.camera.location = (0.0, -4.2, 0.5)
     scene.camera.rotation_euler = (math.radians(84), 0.0, 0.0)
@@ -132,8 +150,8 @@ def main():
     rel = math.sqrt(float(np.mean((a - b) ** 2)) / float(np.mean(b ** 2)))
     rel_eevee = math.sqrt(float(np.mean((e - b) ** 2)) / float(np.mean(b ** 2)))
     st = mat.wenv
-    print(f"Suzanne ({vertices} vertices), Principled paint (base {PAINT['Base Color'][:3]}, roughness "
-          f"{PAINT['Roughness']}), {args.hdri} HDRI, quality {args.quality}")
+    print(f"Suzanne ({vertices} vertices), Principled paint (Base Color: stripes of {STRIPES[0]} and "
+          f"{STRIPES[1]} through her UV map; roughness {PAINT['Roughness']}), {args.hdri} HDRI, quality {args.quality}")
     print(f"  wenv, first shade (matrices built or loaded, lighting, material): {t_first:8.2f} s")
     print(f"  wenv, a new view:                                                  {1e3 * t_view:8.1f} ms")
     print(f"  Cycles, {args.samples} samples per pixel:                                 {t_cycles:8.2f} s")
@@ -157,7 +175,7 @@ def main():
         ax.imshow(display(img))
         ax.set_title(title, fontsize=10)
         ax.axis("off")
-    fig.suptitle(f"Principled paint under {args.hdri}: 60 deg gloss {st.gloss_60:.1f} GU, relative RMSE "
+    fig.suptitle(f"Striped Principled paint under {args.hdri}: 60 deg gloss {st.gloss_60:.1f} GU, relative RMSE "
                  f"{100 * rel:.1f} %", fontsize=11)
     os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
     fig.savefig(args.out, dpi=90, bbox_inches="tight")
