@@ -173,17 +173,18 @@ static int light_at_edge(const wenv_light_visibility *vis, const float l[3])
     return open && shut;
 }
 
-/* A light in direction l: what the mask says where its texels about l agree, else a ray. */
-static float light_visible(const wenv_light_visibility *vis, const float l[3])
+/* Direction l: what the mask says where its texels about l agree, else a ray, whose answer is kept
+ * in the vertex's memo if `keep` (a light's direction, the same at every view; not a mirror
+ * direction, which each view moves). */
+static float visible_along(const wenv_vertex_shadow *vs, const float l[3], int keep)
 {
-    const wenv_vertex_shadow *vs = (const wenv_vertex_shadow *)vis;
     int open, shut;
     texels_about(vs, l, &open, &shut);
     if (!shut)
         return open ? 1.0f : 0.0f; /* below the horizon it brings nothing anyway */
     if (!open)
         return 0.0f;
-    int known = vs->memo_slot ? wenv_light_memo_find(vs->memo_slot, l) : -1;
+    int known = keep && vs->memo_slot ? wenv_light_memo_find(vs->memo_slot, l) : -1;
     if (known >= 0)
         return (float)known;
     const float *t = vs->turn; /* the ray is cast in the world */
@@ -191,9 +192,15 @@ static float light_visible(const wenv_light_visibility *vis, const float l[3])
                       t[2] * l[0] + t[5] * l[1] + t[8] * l[2]};
     unsigned char hit;
     wenv_occluders_test(vs->occluders, vs->origin, world, 1, INFINITY, &hit);
-    if (vs->memo_slot)
+    if (keep && vs->memo_slot)
         wenv_light_memo_put(vs->memo, vs->memo_slot, l, !hit);
     return hit ? 0.0f : 1.0f;
+}
+
+/* A light in direction l (the lights' walk). */
+static float light_visible(const wenv_light_visibility *vis, const float l[3])
+{
+    return visible_along((const wenv_vertex_shadow *)vis, l, 1);
 }
 
 int wenv_shadow_lobes_narrow(double alpha_max, size_t resolution)
@@ -218,7 +225,7 @@ void wenv_shadow_narrow_specular(const wenv_vertex_shadow *vs, const float *lbar
     const float *f = vs->frame;
     float d[3] = {f[0] * r[0] + f[1] * r[1] + f[2] * r[2], f[3] * r[0] + f[4] * r[1] + f[5] * r[2],
                   f[6] * r[0] + f[7] * r[1] + f[8] * r[2]};
-    if (!(d[2] > 0.0f) || light_visible(&vs->lights, r) > 0.0f)
+    if (!(d[2] > 0.0f) || visible_along(vs, r, 0) > 0.0f)
         return;
     /* the blocker's light through the mirror direction's texel, or the mean of the blocked ones about it */
     long n = (long)vs->resolution;
