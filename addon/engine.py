@@ -210,10 +210,6 @@ def describe_auto_choice(choice):
 
 def fingerprint(*arrays):
     """What tells arrays apart by content (a cache key)."""
-    return _fingerprint(*arrays)
-
-
-def _fingerprint(*arrays):
     h = hashlib.blake2b(digest_size=16)
     for a in arrays:
         h.update(np.ascontiguousarray(a).view(np.uint8).ravel())
@@ -256,7 +252,7 @@ class ShadowCache:
     def occluders(self, meshes, memory_budget_mb=1024):
         """wenv.Occluders of `meshes` ((positions, triangles) each, in order) and where each one's
         vertices start among its positions; the same object while the meshes are unchanged."""
-        keys = [_fingerprint(p, t) for p, t in meshes]
+        keys = [fingerprint(p, t) for p, t in meshes]
         if keys != self._mesh_keys:
             positions = np.ascontiguousarray(np.vstack([p for p, _ in meshes]), np.float32)
             offsets = np.cumsum([0] + [len(p) for p, _ in meshes])
@@ -274,7 +270,7 @@ class ShadowCache:
     def occlusion(self, occluders, positions, normals, progress=None):
         """The occlusion of one part (its world positions and normals) against `occluders`: kept,
         made from the one before the last change when the part itself did not change, or cast."""
-        key = _fingerprint(positions, normals)
+        key = fingerprint(positions, normals)
         if key not in self._occlusions:
             before = self._before.get(key)  # kept until made: a cancelled pass may come back for it
             if before is not None:

@@ -221,17 +221,19 @@ def principled_notes(material):
     inputs, linked = principled_inputs(node)
     by_socket = {socket: name for name, socket in PRINCIPLED_SOCKETS.items()}
     for socket in linked:
-        if socket == "Normal" and _normal_map_source(node)[0] is not None:
-            notes.append("'Normal' from a normal map is read at the vertices: detail finer than the mesh is lost")
-        elif socket == "Normal":
-            notes.append(f"'Normal' is linked ({_normal_map_source(node)[1]}): not used, the mesh's normals are")
+        if socket == "Normal":
+            source, why = _normal_map_source(node)
+            notes.append("'Normal' from a normal map is read at the vertices: detail finer than the mesh is lost"
+                         if source is not None else f"'Normal' is linked ({why}): not used, the mesh's normals are")
         elif socket in GEOMETRY_SOCKETS:
             notes.append(f"'{socket}' is linked (a normal or bump map): not used, the mesh's normals are")
-        elif socket == "Base Color" and _texture_source(node)[0] is not None:
-            notes += _texture_source(node)[1]  # read at the vertices: what of it is read otherwise
         elif socket == "Base Color":
-            notes.append(f"'{socket}' is linked ({_texture_source(node)[1]}): its unlinked value "
-                         f"{_value_text(inputs['base_color'])} is used")
+            source, said = _texture_source(node)
+            if source is not None:
+                notes += said  # read at the vertices: what of it is read otherwise than Cycles reads it
+            else:
+                notes.append(f"'{socket}' is linked ({said}): its unlinked value {_value_text(inputs['base_color'])} "
+                             "is used")
         else:
             value = inputs[by_socket[socket]]
             notes.append(f"'{socket}' is linked (a texture or node): its unlinked value {_value_text(value)} is used")

@@ -3,11 +3,9 @@ through the node's UV map, in the image's colour space, with its interpolation a
 filtered over the vertex's share of the image (mip-mapped), so that a texture finer than the mesh
 averages rather than aliases.  The core then shades each vertex with its colour at the cost of a
 multiply-add (Shader.shade(..., base_color=)).  What is not read yet is named, never used silently."""
-import hashlib
-
 import numpy as np
 
-from . import materials, meshes, world
+from . import engine, materials, meshes, world
 
 # The Image Texture settings read as Cycles reads them; the others are read as Linear (named).
 INTERPOLATIONS = ("Linear", "Closest")
@@ -103,7 +101,7 @@ class ImageCache:
         if held is not None and not image.is_dirty and held[2] == state:
             return held[1]
         rgba = world.image_pixels(image, "Texture image")[::-1]  # row 0 the bottom, as v = 0 is
-        key = hashlib.blake2b(rgba.tobytes(), digest_size=16).digest() + image.colorspace_settings.name.encode()
+        key = (engine.fingerprint(rgba), image.colorspace_settings.name)
         if held is None or held[0] != key:
             if not np.isfinite(rgba[..., :3]).all():
                 bad = np.argwhere(~np.isfinite(rgba[..., :3]).all(axis=2))[0]
@@ -194,13 +192,19 @@ def sample(levels, uv, footprint, interpolation, extension):
 # A mesh's UVs
 
 
+def uv_layer(mesh, uv_map):
+    """The mesh's UV map named uv_map, or with None its active render one (Cycles' default); None
+    when it has no such map."""
+    layers = mesh.uv_layers
+    return layers.get(uv_map) if uv_map else next((l for l in layers if l.active_render), None)
+
+
 def uv_rows(mesh, uv_map, domain, corner_vert):
     """(uv, footprint, corner rows) of a mesh's UV map (None: the active render one) for its shaded
     rows: per corner -- with each corner's row (itself, or its vertex for the POINT domain) -- and
     each corner's share of UV space, the area of the UV triangles about its vertex over three (its
     side, in UV units, is the footprint's).  None when the mesh has no such UV map."""
-    layers = mesh.uv_layers
-    layer = layers.get(uv_map) if uv_map else next((l for l in layers if l.active_render), None)
+    layer = uv_layer(mesh, uv_map)
     if layer is None:
         return None
     nl = len(mesh.loops)
@@ -240,10 +244,7 @@ _colours_kept = {}
 def _colours_memo(name, slot, levels, source, got, n_rows):
     """colours_at_rows, kept while the image's pyramid, the node's settings and the UVs are the same:
     a new view samples nothing."""
-    h = hashlib.blake2b(digest_size=16)
-    for a in got:
-        h.update(np.ascontiguousarray(a).view(np.uint8).ravel())
-    key = (id(levels), source.node.interpolation, source.node.extension, n_rows, h.digest())
+    key = (id(levels), source.node.interpolation, source.node.extension, n_rows, engine.fingerprint(*got))
     held = _colours_kept.get((name, slot))
     if held is None or held[0] != key:
         if len(_colours_kept) > 256:
@@ -253,29 +254,48 @@ def _colours_memo(name, slot, levels, source, got, n_rows):
     return held[1]
 
 
-def read_base_colours(obj, depsgraph, data):
-    """Sets data.base_color (meshes.MeshData) for the rows of the material slots whose Principled
-    BSDF takes its Base Color from an Image Texture (data.textured: those slots).  Returns notes:
-    a missing UV map (that slot keeps the unlinked value)."""
-    notes, mesh, corner_vert = [], None, None
+def _principled_slots(obj, depsgraph, find):
+    """(slot, material, what find(Principled BSDF node) gives, mesh, corner vertices) for each of
+    obj's material slots of the Principled model for which find's first value is not None; the
+    mesh (meshes.shaded_mesh) read once, at the first."""
+    mesh = corner_vert = None
     for s, slot in enumerate(obj.material_slots):
         mat = slot.material
         node = materials.principled_node(mat) if mat is not None and mat.wenv.model == "PRINCIPLED" else None
-        source = base_color_source(node)[0] if node is not None else None  # notes: materials.principled_notes
-        if source is None:
+        found = find(node) if node is not None else (None, None)
+        if found[0] is None:
             continue
         if mesh is None:
             mesh = meshes.shaded_mesh(obj, depsgraph)[0]
             corner_vert = meshes.corner_vertices(mesh)
+        yield s, mat, found, mesh, corner_vert
+
+
+def _no_uv_map(obj, uv_map, what, instead):
+    return (f"'{obj.name}' has no UV map {repr(uv_map) if uv_map else 'to render with'} for {what}: {instead}")
+
+
+def _slot_rows(obj, data, s):
+    """Which of data's rows belong to material slot s (the slots past the last read as the last)."""
+    return np.clip(data.slots, 0, len(obj.material_slots) - 1) == s
+
+
+def read_base_colours(obj, depsgraph, data):
+    """Sets data.base_color (meshes.MeshData) for the rows of the material slots whose Principled
+    BSDF takes its Base Color from an Image Texture (data.textured: those slots).  Returns notes:
+    a missing UV map (that slot keeps the unlinked value).  What base_color_source says of a
+    texture is materials.principled_notes'."""
+    notes = []
+    for s, mat, (source, _), mesh, corner_vert in _principled_slots(obj, depsgraph, base_color_source):
         got = uv_rows(mesh, source.uv_map, data.domain, corner_vert)
         if got is None:
-            notes.append(f"'{obj.name}' has no UV map {repr(source.uv_map) if source.uv_map else 'to render with'} for "
-                         f"'{source.node.name}' ('{mat.name}'): its Base Color's unlinked value is used")
+            notes.append(_no_uv_map(obj, source.uv_map, f"'{source.node.name}' ('{mat.name}')",
+                                    "its Base Color's unlinked value is used"))
             continue
         colours = _colours_memo(obj.name, s, images.levels(source.node.image), source, got, data.count)
         if data.base_color is None:
             data.base_color = np.zeros((data.count, 3), np.float32)
-        rows = np.clip(data.slots, 0, len(obj.material_slots) - 1) == s
+        rows = _slot_rows(obj, data, s)
         data.base_color[rows] = colours[rows]
         data.textured.add(s)
     return notes
@@ -317,23 +337,14 @@ def read_shading_normals(obj, depsgraph, data):
     Principled BSDF's Normal comes from a tangent-space normal map, as Cycles' Normal Map node makes
     them: 2 x colour - 1 in the UV map's tangent frame (MikkTSpace), blended towards the mesh's
     normal by Strength.  Read at the vertices: detail finer than the mesh is lost.  Returns notes."""
-    notes, mesh, corner_vert = [], None, None
-    for s, slot in enumerate(obj.material_slots):
-        mat = slot.material
-        node = materials.principled_node(mat) if mat is not None and mat.wenv.model == "PRINCIPLED" else None
-        source, strength = normal_map_source(node) if node is not None else (None, None)
-        if source is None:
-            continue
-        if mesh is None:
-            mesh = meshes.shaded_mesh(obj, depsgraph)[0]
-            corner_vert = meshes.corner_vertices(mesh)
+    notes = []
+    for s, mat, (source, strength), mesh, corner_vert in _principled_slots(obj, depsgraph, normal_map_source):
         got = uv_rows(mesh, source.uv_map, "CORNER", corner_vert)
-        layer = mesh.uv_layers.get(source.uv_map) if source.uv_map else next(
-            (l for l in mesh.uv_layers if l.active_render), None)
-        if got is None or layer is None:
-            notes.append(f"'{obj.name}' has no UV map {repr(source.uv_map) if source.uv_map else 'to render with'} for "
-                         f"the normal map of '{mat.name}': the mesh's normals are used")
+        if got is None:
+            notes.append(_no_uv_map(obj, source.uv_map, f"the normal map of '{mat.name}'",
+                                    "the mesh's normals are used"))
             continue
+        layer = uv_layer(mesh, source.uv_map)
         mesh.calc_tangents(uvmap=layer.name)  # runtime data only, nothing the file keeps
         nl = len(mesh.loops)
         tangent = np.empty(nl * 3, np.float32)
@@ -358,6 +369,6 @@ def read_shading_normals(obj, depsgraph, data):
         total = np.stack([np.bincount(rows, weights=world_n[:, c], minlength=data.count) for c in range(3)], axis=1)
         if data.shading_normals is None:
             data.shading_normals = data.normals.copy()
-        mine = np.clip(data.slots, 0, len(obj.material_slots) - 1) == s
+        mine = _slot_rows(obj, data, s)
         data.shading_normals[mine] = _unit_rows(total)[mine]
     return notes
