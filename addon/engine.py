@@ -317,20 +317,23 @@ def models_shadows(shader):
     return shader.method in SHADOW_METHODS
 
 
+# The inputs the core shades per vertex through a family of materials (the wavelet methods only)
+VERTEX_MATERIAL_INPUTS = ("roughness", "metallic")
+
+
+def takes_vertex_materials(shader):
+    return shader.method in SHADOW_METHODS
+
+
 def diffuse_light(shader, data, occlusion):
     """The light each vertex of `data` sends back to what it blocks: its Lambertian part's, head-on,
-    with its shadows (and its own colour, read from a texture)."""
-    return shader.diffuse_light(_shading_normals(data), occlusion=occlusion, **_colour(data))
+    with its shadows (and its own inputs, read from textures: data.inputs)."""
+    return shader.diffuse_light(_shading_normals(data), occlusion=occlusion, **data.inputs)
 
 
 def _shading_normals(data):
     """The normals shading reads: a normal map's where there is one, else the mesh's."""
     return data.normals if data.shading_normals is None else data.shading_normals
-
-
-def _colour(data):
-    """The keywords giving the core each vertex's colour (a textured Base Color), if any."""
-    return {} if data.base_color is None else {"base_color": data.base_color}
 
 
 # ---------------------------------------------------------------------------------------------
@@ -520,14 +523,14 @@ def shade_step(shader, data, view, cull, out, first, budget, scene=None):
     next step starts and how many there are to shade.  An orthographic view is shaded whole."""
     if view.perspective:
         kw = {"cull": True, "view_projection": view.view_projection} if cull and view.view_projection is not None else {}
-        kw.update(scene or {}, **_colour(data))
+        kw.update(scene or {}, **data.inputs)
         _, at_eye = _sparing_the_eye(lambda p: shader.shade_mesh(p, _shading_normals(data), view.eye, out=out,
                                                                  first=first, budget=budget, **kw), data, view.eye)
         if at_eye is not None:
             out[at_eye] = 0.0
         stats = shader.stats
         return stats["next_vertex"], stats.get("visible_vertices", data.count)
-    out[:] = shader.shade(_shading_normals(data), view.direction, **(scene or {}), **_colour(data))
+    out[:] = shader.shade(_shading_normals(data), view.direction, **(scene or {}), **data.inputs)
     return data.count, data.count
 
 
@@ -542,9 +545,9 @@ def shade_arrays(shader, data, view, cull=False, scene=None):
     the eye and on screen (the rest are black), else all (None).  A vertex at the eye is black.
     `scene`: the keywords of shading with shadows (occlusion, bounce), or None."""
     if not view.perspective:
-        return shader.shade(_shading_normals(data), view.direction, **(scene or {}), **_colour(data)), None
+        return shader.shade(_shading_normals(data), view.direction, **(scene or {}), **data.inputs), None
     seen = None
-    kw = dict(scene or {}, **_colour(data))
+    kw = dict(scene or {}, **data.inputs)
     if cull and view.view_projection is not None:
         seen = visible_vertices(data, view)
         kw.update(cull=True, view_projection=view.view_projection)

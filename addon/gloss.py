@@ -24,22 +24,33 @@ def gloss_readings(key):
 
 
 def reading_key(material):
-    """(material_key the glossmeter reads, what it reads of a texture or None): a Principled BSDF
-    whose Base Color comes from an Image Texture is read at the texture's mean colour (a reading
-    of the whole surface, as an instrument's aperture would average a fine pattern); other linked
-    inputs at their unlinked values, which the Material panel names."""
+    """(material_key the glossmeter reads, what it reads of textures or None): a Principled BSDF whose
+    Base Color, Roughness or Metallic comes from Image Textures (through nodes wenv evaluates) is read
+    with each texture at its image's mean, the nodes between applied to it (a reading of the whole
+    surface, as an instrument's aperture would average a fine pattern); other linked inputs at their
+    unlinked values, which the Material panel names."""
     key = materials.material_key(material.wenv)
     node = materials.principled_node(material) if material.wenv.model == "PRINCIPLED" else None
-    source = textures.base_color_source(node)[0] if node is not None else None
-    if source is None:
+    if node is None:
         return key, None
-    try:
-        mean = textures.images.mean(source.node.image)
-    except SetupError as exc:
-        return key, f"Base Color's texture cannot be read ({exc}): its unlinked value is read"
-    inputs = dict(key[1])
-    inputs["base_color"] = tuple(min(max(c, 0.0), 1.0) for c in mean)
-    return (key[0], tuple(sorted(inputs.items()))), f"Base Color: the mean of '{source.node.image.name}'"
+    inputs, said = dict(key[1]), []
+    for socket, keyword in textures.TEXTURED_SOCKETS.items():
+        try:
+            got = textures.socket_at_means(node, socket)
+        except SetupError as exc:
+            said.append(f"{socket}'s texture cannot be read ({exc}): its unlinked value is read")
+            continue
+        if got is None:
+            continue
+        value, names = got
+        if keyword == "base_color":
+            inputs[keyword] = tuple(min(max(float(c), 0.0), 1.0) for c in value)
+        else:
+            inputs[keyword] = min(max(float(value), 0.0), 1.0)
+        said.append(f"{socket}: the mean of {', '.join(repr(n) for n in names)}")
+    if not said:
+        return key, None
+    return (key[0], tuple(sorted(inputs.items()))), "; ".join(said)
 
 
 def instrument_geometry(gloss60):
@@ -58,7 +69,7 @@ def fit_principled_roughness(material, target, geometry):
         raise SetupError(f"'{material.name}' has no Principled BSDF whose Roughness could be set")
     if node.inputs["Roughness"].is_linked:
         raise SetupError("The Principled BSDF's Roughness is linked (a texture or node): set it there")
-    inputs = dict(reading_key(material)[0][1])  # a textured Base Color at its mean, as the panel reads it
+    inputs = dict(reading_key(material)[0][1])  # textured inputs at their means, as the panel reads them
     try:
         return engine.fit_principled_roughness(inputs, target, geometry)
     except ValueError as exc:

@@ -197,9 +197,14 @@ def _value_text(value):
     return f"{value:.3g}"
 
 
-def _texture_source(node):
+def _textured_sockets():
     from . import textures  # (textures reads this module's principled_node)
-    return textures.base_color_source(node)
+    return textures.TEXTURED_SOCKETS
+
+
+def _socket_textures(node, socket):
+    from . import textures
+    return textures.socket_textures(node, socket)
 
 
 def _normal_map_source(node):
@@ -227,13 +232,13 @@ def principled_notes(material):
                          if source is not None else f"'Normal' is linked ({why}): not used, the mesh's normals are")
         elif socket in GEOMETRY_SOCKETS:
             notes.append(f"'{socket}' is linked (a normal or bump map): not used, the mesh's normals are")
-        elif socket == "Base Color":
-            source, said = _texture_source(node)
-            if source is not None:
+        elif socket in _textured_sockets():
+            read, said = _socket_textures(node, socket)
+            if read is not None:
                 notes += said  # read at the vertices: what of it is read otherwise than Cycles reads it
             else:
-                notes.append(f"'{socket}' is linked ({said}): its unlinked value {_value_text(inputs['base_color'])} "
-                             "is used")
+                value = _value_text(inputs[by_socket[socket]])
+                notes.append(f"'{socket}' is linked ({said}): its unlinked value {value} is used")
         else:
             value = inputs[by_socket[socket]]
             notes.append(f"'{socket}' is linked (a texture or node): its unlinked value {_value_text(value)} is used")

@@ -9,10 +9,10 @@ class MeshData:
     with the material slot of each element; `unplaced` (bool, or None) marks the elements whose
     position is not finite, which are left black."""
 
-    __slots__ = ("domain", "positions", "normals", "slots", "count", "notes", "unplaced", "triangles", "base_color",
+    __slots__ = ("domain", "positions", "normals", "slots", "count", "notes", "unplaced", "triangles", "inputs",
                  "textured", "shading_normals")
 
-    def __init__(self, domain, positions, normals, slots, notes=(), unplaced=None, triangles=None, base_color=None):
+    def __init__(self, domain, positions, normals, slots, notes=(), unplaced=None, triangles=None, inputs=None):
         self.domain = domain
         self.positions = positions
         self.normals = normals
@@ -21,10 +21,11 @@ class MeshData:
         self.notes = list(notes)
         self.unplaced = unplaced
         self.triangles = triangles  # (m, 3) int32 indices into positions (what casts shadows), or None
-        # (n, 3) float32 linear Base Color of each element read from a texture, for the material
-        # slots in `textured` (textures.py), or None
-        self.base_color = base_color
-        self.textured = set()
+        # Principled inputs read from textures (textures.py), by the core's keyword: "base_color"
+        # (n, 3) linear, "roughness" and "metallic" (n,), float32, for the material slots in
+        # textured[keyword]
+        self.inputs = dict(inputs or {})
+        self.textured = {}
         # (n, 3) float32 world normals a normal map bends the shading to (textures.py), or None: the
         # mesh's, which the shadows' rays keep
         self.shading_normals = None

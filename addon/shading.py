@@ -55,13 +55,13 @@ class ShadingPlan:
             parts = []
             for s in np.unique(slots):
                 sel = slots == s
-                colour = data.base_color if s in data.textured else None
-                if sel.all() and colour is data.base_color:
+                mine = {k: a for k, a in data.inputs.items() if s in data.textured[k]}
+                if sel.all() and len(mine) == len(data.inputs):
                     part = data
                 else:
                     part = meshes.MeshData(data.domain, np.ascontiguousarray(data.positions[sel]),
                                            np.ascontiguousarray(data.normals[sel]), None,
-                                           base_color=None if colour is None else np.ascontiguousarray(colour[sel]))
+                                           inputs={k: np.ascontiguousarray(a[sel]) for k, a in mine.items()})
                     if data.shading_normals is not None:
                         part.shading_normals = np.ascontiguousarray(data.shading_normals[sel])
                 parts.append((s, sel, part))
@@ -96,6 +96,22 @@ class ShadingPlan:
         engine.shaders.get(quality)
         engine.shaders.use_environment(quality, self.world.signature, self.environment)
         return engine.shaders.use_material(quality, key, cancelled)
+
+    def _takes(self, shader, name, part):
+        """part, or a copy without its per-vertex Roughness and Metallic when the shader's method does
+        not shade them (Auto's choice of a peer), which is then noted: the material's own values are
+        used."""
+        dropped = [k for k in engine.VERTEX_MATERIAL_INPUTS if k in part.inputs]
+        if not dropped or engine.takes_vertex_materials(shader):
+            return part
+        note = (f"'{name}': textured {' and '.join(k.title() for k in dropped)} shaded at the unlinked value by "
+                f"{shader.method} (Auto's choice; the wavelet qualities read the texture)")
+        if note not in self.notes:
+            self.notes.append(note)
+        copy = meshes.MeshData(part.domain, part.positions, part.normals, None,
+                               inputs={k: a for k, a in part.inputs.items() if k not in dropped})
+        copy.shading_normals = part.shading_normals
+        return copy
 
     def _ordered_parts(self, quality):
         """(object index, name, material key, selection, part) of every part of the pass, those of
@@ -149,10 +165,12 @@ class ShadingPlan:
                 scenes.append(None)
                 continue
             made_by = (quality, self.world.signature, key, self.target_error, self.memory_budget_mb,
-                       None if part.base_color is None else engine.fingerprint(part.base_color))
+                       engine.fingerprint(*(part.inputs[k] for k in sorted(part.inputs))) if part.inputs else None,
+                       tuple(sorted(part.inputs)))
+            taken = self._takes(shader, name, part)
             with engine.shadows.lock:
                 bounce[offsets[i] + np.flatnonzero(sel)] = engine.shadows.light(
-                    occlusion, made_by, lambda: engine.diffuse_light(shader, part, occlusion))
+                    occlusion, made_by, lambda: engine.diffuse_light(shader, taken, occlusion))
             scenes.append(occlusion)
         return [dict(occlusion=o, bounce=bounce) if o is not None else None for o in scenes]
 
@@ -163,7 +181,8 @@ class ShadingPlan:
             work = self._ordered_parts(self.quality)
             for (i, name, key, sel, part), scene in zip(work, self._scenes(self.quality, work, report=rays)):
                 shader = self._shader(self.quality, name, key, part.normals)
-                rgbs[i][sel], part_seen = engine.shade_arrays(shader, part, self.view, self.cull, scene)
+                rgbs[i][sel], part_seen = engine.shade_arrays(shader, self._takes(shader, name, part), self.view,
+                                                              self.cull, scene)
                 if seens[i] is not None and part_seen is not None:
                     seens[i][sel] = part_seen
         self.results = self._results(rgbs, seens)
@@ -194,8 +213,8 @@ class ShadingPlan:
                         shader = self._shader(quality, name, key, part.normals, cancelled)
                     except engine.CancelledError:
                         return None
-                    first, count = engine.shade_step(shader, part, self.view, self.cull, out, first, step_seconds,
-                                                     scene)
+                    first, count = engine.shade_step(shader, self._takes(shader, name, part), self.view, self.cull,
+                                                     out, first, step_seconds, scene)
                 report((done + part.count * (first / count if count else 1.0)) / total)
             rgbs[i][sel] = out
             done += part.count
@@ -274,7 +293,7 @@ def plan_shading(scene, depsgraph, objects, view, images, progress=None, preview
         if data.count == 0:
             notes.append(f"'{obj.name}' has no vertices")
             continue
-        notes.extend(textures.read_base_colours(obj, depsgraph, data))
+        notes.extend(textures.read_inputs(obj, depsgraph, data))
         notes.extend(textures.read_shading_normals(obj, depsgraph, data))
         plan.items.append((obj.name, data, materials.slot_material_keys(obj)))
         plan.casts.append(obj.wenv.casts_shadows)

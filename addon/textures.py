@@ -1,19 +1,23 @@
-"""Textures: a Principled BSDF's Base Color read from its Image Texture node at each shaded vertex --
-through the node's UV map, in the image's colour space, with its interpolation and extension -- and
-filtered over the vertex's share of the image (mip-mapped), so that a texture finer than the mesh
-averages rather than aliases.  The core then shades each vertex with its colour at the cost of a
-multiply-add (Shader.shade(..., base_color=)).  What is not read yet is named, never used silently."""
+"""Textures: a Principled BSDF's Base Color, Roughness and Metallic read from their Image Texture nodes
+at each shaded vertex -- through the node's UV map, in the image's colour space, with its
+interpolation and extension -- and filtered over the vertex's share of the image (mip-mapped), so
+that a texture finer than the mesh averages rather than aliases.  The core then shades each vertex
+with its own values (Shader.shade(..., base_color=, roughness=, metallic=)): a colour at the cost of a
+multiply-add, a Roughness or Metallic through a family of materials.  What is not read yet is named,
+never used silently."""
 import numpy as np
 
-from . import engine, materials, meshes, world
+from . import engine, materials, meshes, nodes, world
 
-# The Image Texture settings read as Cycles reads them; the others are read as Linear (named).
-INTERPOLATIONS = ("Linear", "Closest")
+# The sockets read from textures and the nodes between (nodes.py), by the core's keyword.  A colour
+# into a value socket is its luminance, as Cycles converts it.
+TEXTURED_SOCKETS = {"Base Color": "base_color", "Roughness": "roughness", "Metallic": "metallic"}
+# An Image Texture's extensions, each read as Cycles reads it (_wrap)
 EXTENSIONS = ("REPEAT", "EXTEND", "CLIP", "MIRROR")
 
 
 class Source:
-    """Where a Base Color comes from: an Image Texture node and the UV map it reads (None: the
+    """Where an input comes from: an Image Texture node and the UV map it reads (None: the
     mesh's active render UV map, as Cycles reads an unlinked Vector)."""
 
     __slots__ = ("node", "uv_map")
@@ -23,43 +27,35 @@ class Source:
         self.uv_map = uv_map
 
 
-def base_color_source(principled):
-    """(Source, notes) of the Image Texture feeding a Principled BSDF's Base Color directly (through
-    reroutes), notes naming what of it is read otherwise than Cycles reads it; or (None, reason)
-    with why it is not read (the socket's unlinked value is then used), reason None when the socket
-    is unlinked."""
-    sock = principled.inputs["Base Color"]
+def socket_textures(principled, socket):
+    """(Image Texture nodes, notes) feeding a Principled BSDF's `socket` through nodes wenv evaluates
+    (nodes.py), notes naming what of them is read otherwise than Cycles reads it; or (None, reason)
+    with why the socket is not read (its unlinked value is then used), reason None when it is
+    unlinked."""
+    sock = principled.inputs[socket]
     if not sock.is_linked:
         return None, None
-    node = world.source_node(sock)
-    if node is None:
-        return None, "a muted link"
-    if node.bl_idname != "ShaderNodeTexImage":
-        return None, f"'{node.name}', a node wenv does not evaluate yet"
-    output = sock.links[0].from_socket.name
-    if output != "Color":
-        return None, f"'{node.name}''s {output} output"
-    image = node.image
-    if image is None:
-        return None, f"'{node.name}', which has no image"
-    if image.source not in ("FILE", "GENERATED"):
-        return None, f"'{node.name}', whose {image.source.lower()} image wenv does not read yet"
-    if node.projection != "FLAT":
-        return None, f"'{node.name}', whose {node.projection.lower()} projection wenv does not read yet"
-    uv_map = None
-    vector = world.source_node(node.inputs["Vector"])
-    if vector is not None:
-        if vector.bl_idname == "ShaderNodeUVMap":
-            uv_map = vector.uv_map or None
-        elif not (vector.bl_idname == "ShaderNodeTexCoord" and node.inputs["Vector"].links[0].from_socket.name == "UV"):
-            return None, f"'{node.name}', whose Vector comes from '{vector.name}', a node wenv does not evaluate yet"
-    notes = []
-    if node.interpolation not in INTERPOLATIONS:
-        notes.append(f"'{node.name}': {node.interpolation} interpolation is read as Linear")
-    space = image.colorspace_settings.name
-    if not image.is_float and space not in world.SRGB_SPACES and space not in world.LINEAR_SPACES:
-        notes.append(f"'{node.name}': 8-bit colour space '{space}' is not decoded: its values are read as linear")
-    return Source(node, uv_map), notes
+    ok, said = nodes.check(sock)
+    if not ok:
+        return None, said
+    ev = nodes.Evaluator(1, lambda uv_map: (np.zeros((1, 2), np.float32), np.ones(1, np.float32),
+                                            np.zeros(1, np.int64)),
+                         lambda node, uv, footprint, rows: np.zeros((1, 3), np.float32), checking=True)
+    ev.evaluate(sock)
+    return ev.textures, said
+
+
+def socket_at_means(principled, socket):
+    """The value a Principled socket takes when each texture feeding it reads its image's mean (the
+    nodes between applied to it), and the images read; None when the socket is not read."""
+    sock = principled.inputs[socket]
+    if not sock.is_linked or not nodes.check(sock)[0]:
+        return None
+    ev = nodes.Evaluator(1, lambda uv_map: (np.zeros((1, 2), np.float32), np.ones(1, np.float32),
+                                            np.zeros(1, np.int64)),
+                         lambda node, uv, footprint, rows: np.float32([images.mean(node.image)]))
+    out = ev.colour(sock) if TEXTURED_SOCKETS[socket] == "base_color" else ev.value(sock)
+    return out[0], [t.image.name for t in ev.textures]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -236,21 +232,21 @@ def colours_at_rows(levels, source, uv, footprint, rows, n_rows):
     return (total / np.maximum(count, 1.0)[:, None]).astype(np.float32)
 
 
-# (object name, slot) -> (what the colours were read from, the colours, the pyramid they were read
-# from: held, so that its id in the key is not another's)
+# (object name, slot, socket) -> (what the colours were read from, the colours, the pyramid they were
+# read from: held, so that its id in the key is not another's)
 _colours_kept = {}
 
 
-def _colours_memo(name, slot, levels, source, got, n_rows):
+def _colours_memo(key, levels, source, got, n_rows):
     """colours_at_rows, kept while the image's pyramid, the node's settings and the UVs are the same:
     a new view samples nothing."""
-    key = (id(levels), source.node.interpolation, source.node.extension, n_rows, engine.fingerprint(*got))
-    held = _colours_kept.get((name, slot))
-    if held is None or held[0] != key:
+    made_of = (id(levels), source.node.interpolation, source.node.extension, n_rows, engine.fingerprint(*got))
+    held = _colours_kept.get(key)
+    if held is None or held[0] != made_of:
         if len(_colours_kept) > 256:
             _colours_kept.clear()
-        held = (key, colours_at_rows(levels, source, *got, n_rows), levels)
-        _colours_kept[(name, slot)] = held
+        held = (made_of, colours_at_rows(levels, source, *got, n_rows), levels)
+        _colours_kept[key] = held
     return held[1]
 
 
@@ -280,24 +276,44 @@ def _slot_rows(obj, data, s):
     return np.clip(data.slots, 0, len(obj.material_slots) - 1) == s
 
 
-def read_base_colours(obj, depsgraph, data):
-    """Sets data.base_color (meshes.MeshData) for the rows of the material slots whose Principled
-    BSDF takes its Base Color from an Image Texture (data.textured: those slots).  Returns notes:
-    a missing UV map (that slot keeps the unlinked value).  What base_color_source says of a
-    texture is materials.principled_notes'."""
+def _textured(node):
+    """What _principled_slots finds of a Principled BSDF some of whose TEXTURED_SOCKETS are linked."""
+    return (node, None) if any(node.inputs[s].is_linked for s in TEXTURED_SOCKETS) else (None, None)
+
+
+def read_inputs(obj, depsgraph, data):
+    """Sets data.inputs (meshes.MeshData) for the rows of the material slots whose Principled BSDF
+    takes an input of TEXTURED_SOCKETS from Image Textures through nodes wenv evaluates
+    (data.textured[keyword]: those slots): Base Color as linear RGB, Roughness and Metallic as
+    values (a colour's luminance).  Returns notes: a missing UV map (that slot keeps the unlinked
+    value).  What a chain wenv does not evaluate is materials.principled_notes' to name."""
     notes = []
-    for s, mat, (source, _), mesh, corner_vert in _principled_slots(obj, depsgraph, base_color_source):
-        got = uv_rows(mesh, source.uv_map, data.domain, corner_vert)
-        if got is None:
-            notes.append(_no_uv_map(obj, source.uv_map, f"'{source.node.name}' ('{mat.name}')",
-                                    "its Base Color's unlinked value is used"))
-            continue
-        colours = _colours_memo(obj.name, s, images.levels(source.node.image), source, got, data.count)
-        if data.base_color is None:
-            data.base_color = np.zeros((data.count, 3), np.float32)
-        rows = _slot_rows(obj, data, s)
-        data.base_color[rows] = colours[rows]
-        data.textured.add(s)
+    for s, mat, (node, _), mesh, corner_vert in _principled_slots(obj, depsgraph, _textured):
+        for socket, keyword in TEXTURED_SOCKETS.items():
+            sock = node.inputs[socket]
+            if not sock.is_linked or not nodes.check(sock)[0]:
+                continue
+            ev = nodes.Evaluator(
+                data.count, lambda uv_map: uv_rows(mesh, uv_map, data.domain, corner_vert),
+                lambda tex, uv, footprint, rows, s=s: _colours_memo((obj.name, s, tex.name),
+                                                                   images.levels(tex.image), Source(tex, None),
+                                                                   (uv, footprint, rows), data.count))
+            try:
+                values = ev.colour(sock) if keyword == "base_color" else ev.value(sock)
+            except nodes.MissingUV as exc:
+                notes.append(_no_uv_map(obj, exc.uv_map, f"'{socket}' ('{mat.name}')",
+                                        f"its {socket}'s unlinked value is used"))
+                continue
+            if not np.isfinite(values).all():
+                row = int(np.argwhere(~np.isfinite(values.reshape(len(values), -1)).all(axis=1))[0, 0])
+                raise world.SetupError(f"Material '{mat.name}': its nodes give '{socket}' a value that is not "
+                                       f"finite (NaN or infinite) at element {row} of '{obj.name}'")
+            if keyword not in data.inputs:
+                data.inputs[keyword] = np.zeros((data.count, 3) if keyword == "base_color" else data.count, np.float32)
+                data.textured[keyword] = set()
+            rows = _slot_rows(obj, data, s)
+            data.inputs[keyword][rows] = values[rows]
+            data.textured[keyword].add(s)
     return notes
 
 

@@ -873,15 +873,15 @@ def test_a_texture_finer_than_the_mesh_averages(scene):
     checker.pixels.foreach_set(px.ravel())
     plane, _ = textured_plane(checker)
     plan = plan_of(scene, plane)
-    colours = plan.items[0][1].base_color
-    assert colours is not None and np.all(np.abs(colours - 0.5) < 0.1), colours.min()
+    colours = plan.items[0][1].inputs["base_color"]
+    assert np.all(np.abs(colours - 0.5) < 0.1), colours.min()
     plane.active_material.node_tree.nodes["Image Texture"].interpolation = "Closest"
-    colours = plan_of(scene, plane).items[0][1].base_color
+    colours = plan_of(scene, plane).items[0][1].inputs["base_color"]
     assert set(np.unique(colours)) <= {0.0, 1.0}  # the texel under each vertex, as Cycles' Closest
 
 
 def test_a_texture_wenv_cannot_read_is_named_with_the_value_used(scene):
-    """A Base Color through a Mapping node, or a UV map the mesh lacks: the report says so and the
+    """A Base Color through object coordinates, or a UV map the mesh lacks: the report says so and the
     unlinked value is used."""
     env_world(scene, "sunset")
     image = bpy.data.images.new("flat", 8, 8, float_buffer=True)
@@ -891,13 +891,13 @@ def test_a_texture_wenv_cannot_read_is_named_with_the_value_used(scene):
     uv_node.uv_map = "no such map"
     tree.links.new(uv_node.outputs["UV"], tree.nodes["Image Texture"].inputs["Vector"])
     plan = plan_of(scene, plane)
-    assert plan.items[0][1].base_color is None
+    assert "base_color" not in plan.items[0][1].inputs
     assert any("no UV map 'no such map'" in note and "unlinked value is used" in note for note in plan.notes)
-    mapping = tree.nodes.new("ShaderNodeMapping")
-    tree.links.new(mapping.outputs["Vector"], tree.nodes["Image Texture"].inputs["Vector"])
+    coords = tree.nodes.new("ShaderNodeTexCoord")
+    tree.links.new(coords.outputs["Object"], tree.nodes["Image Texture"].inputs["Vector"])
     notes = materials.principled_notes(mat)
-    assert any("'Base Color' is linked" in n and "'Mapping'" in n and "(0.8, 0.2, 0.1) is used" in n
-               for n in notes), notes
+    assert any("'Base Color' is linked" in n and "'Texture Coordinate''s Object" in n and "(0.8, 0.2, 0.1) is used"
+               in n for n in notes), notes
 
 
 def test_a_broken_texture_or_uv_map_is_a_named_error(scene):
@@ -984,6 +984,209 @@ def test_the_glossmeter_reads_a_textured_base_color_at_its_mean(scene):
     assert mat.wenv.gloss_60 == pytest.approx(want, rel=1e-6)
     panel = [l[1] for l in draw_panel(ui.WENV_PT_gloss) if l[0] == "label"]
     assert note in panel
+
+
+def value_image(name, pixels):
+    """A float image of Non-Color data holding `pixels` (h, w, 4), set after the colour space (setting
+    it regenerates a generated image's buffer)."""
+    image = bpy.data.images.new(name, pixels.shape[1], pixels.shape[0], float_buffer=True)
+    image.colorspace_settings.name = "Non-Color"
+    image.pixels.foreach_set(np.ascontiguousarray(pixels, np.float32).ravel())
+    return image
+
+
+def value_texture(mat, socket, image):
+    """An Image Texture of `image` feeding the material's Principled `socket`."""
+    tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
+    tex.image = image
+    tex.interpolation = "Closest"
+    mat.node_tree.links.new(tex.outputs["Color"], mat.node_tree.nodes["Principled BSDF"].inputs[socket])
+    return tex
+
+
+def test_textured_roughness_and_metallic_are_read_at_each_vertex(scene):
+    """Roughness from an image of two halves (0.15 and 0.6) and Metallic from one of halves the other
+    way (0 and 1), over a Base Color texture: the add-on gives each vertex its texel's values (a
+    colour's luminance, as Cycles converts it) and its colours are the core's shading with them; the
+    report names none of them, and the glossmeter reads the textures' means and says so."""
+    from addon import gloss
+    env_world(scene, "sunset")
+    flat = bpy.data.images.new("flat paint", 4, 4, float_buffer=True)
+    flat.pixels.foreach_set(np.tile(np.float32([0.6, 0.15, 0.08, 1.0]), 16))
+    plane, mat = textured_plane(flat)
+    px = np.ones((64, 64, 4), np.float32)
+    px[:, :32, :3] = 0.15
+    px[:, 32:, :3] = (0.5, 0.6, 0.8)  # a colour: its luminance is read
+    value_texture(mat, "Roughness", value_image("rough halves", px))
+    px = np.ones((64, 64, 4), np.float32)
+    px[:32, :, :3] = 0.0
+    value_texture(mat, "Metallic", value_image("metal halves", px))
+    mat.node_tree.nodes["Image Texture"].interpolation = "Closest"
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    assert not any(s in note for note in materials.principled_notes(mat) for s in ("Roughness", "Metallic"))
+    uv = np.empty(len(plane.data.loops) * 2, np.float32)
+    plane.data.uv_layers.active.uv.foreach_get("vector", uv)
+    u = np.zeros(len(plane.data.vertices), np.float32)
+    w = np.zeros(len(plane.data.vertices), np.float32)
+    u[[l.vertex_index for l in plane.data.loops]] = uv[0::2]
+    w[[l.vertex_index for l in plane.data.loops]] = uv[1::2]
+    luminance = np.float32((0.2126729 * 0.5 + 0.7151522 * 0.6 + 0.0721750 * 0.8) / 1.0000001)
+    roughness = np.where(np.floor(u * 64).astype(int) % 64 < 32, np.float32(0.15), luminance).astype(np.float32)
+    metallic = np.where(np.floor(w * 64).astype(int) % 64 < 32, 0.0, 1.0).astype(np.float32)
+    plan = plan_of(scene, plane)
+    np.testing.assert_allclose(plan.items[0][1].inputs["roughness"], roughness, rtol=1e-6)
+    np.testing.assert_array_equal(plan.items[0][1].inputs["metallic"], metallic)
+    p, n = world_arrays(plane, corner=False)
+    eye = tuple(scene.camera.matrix_world.translation)
+    ior = mat.node_tree.nodes["Principled BSDF"].inputs["IOR"].default_value
+    want = core_shader(wenv.load_environment(hdri_path("sunset")),
+                       wenv.Principled(base_color=(0.6, 0.15, 0.08), roughness=0.4, ior=ior)).shade_mesh(
+        p, n, eye, base_color=np.tile(np.float32([0.6, 0.15, 0.08]), (len(p), 1)), roughness=roughness,
+        metallic=metallic)
+    np.testing.assert_allclose(attribute(plane)[1], want, rtol=1e-4, atol=1e-5)
+    plane.active_material = mat
+    key, note = gloss.reading_key(mat)
+    assert note == ("Base Color: the mean of 'flat paint'; Roughness: the mean of 'rough halves'; "
+                    "Metallic: the mean of 'metal halves'")
+    assert dict(key[1])["roughness"] == pytest.approx((0.15 + luminance) / 2, rel=1e-5)
+    assert dict(key[1])["metallic"] == pytest.approx(0.5)
+
+
+def corner_uv_rows(plane):
+    """Each vertex's UV (the grid's vertices have one each)."""
+    uv = np.empty(len(plane.data.loops) * 2, np.float32)
+    plane.data.uv_layers.active.uv.foreach_get("vector", uv)
+    per_vertex = np.zeros((len(plane.data.vertices), 2), np.float32)
+    per_vertex[[l.vertex_index for l in plane.data.loops]] = uv.reshape(-1, 2)
+    return per_vertex
+
+
+def test_nodes_between_textures_and_sockets_are_evaluated(scene):
+    """Base Color = Mix (Multiply, factor 0.5) of a two-halves texture, read through a Mapping node that
+    scales its UVs by 2, and an RGB node; Roughness = a ColorRamp (linear, 0.1 to 0.7) of a gradient
+    texture's luminance; Metallic = a Math node (x 0.5) of a flat texture: each vertex gets the values
+    Cycles' nodes give, the core shades them, the report names none, and the glossmeter reads the
+    textures' means through the nodes."""
+    from addon import gloss
+    env_world(scene, "sunset")
+    px = np.ones((64, 64, 4), np.float32)
+    px[:, :32, :3] = (0.9, 0.2, 0.1)
+    px[:, 32:, :3] = (0.2, 0.6, 0.9)
+    halves = bpy.data.images.new("halves", 64, 64, float_buffer=True)
+    halves.pixels.foreach_set(px.ravel())
+    plane, mat = textured_plane(halves, interpolation="Closest")
+    tree = mat.node_tree
+    bsdf = tree.nodes["Principled BSDF"]
+    mapping = tree.nodes.new("ShaderNodeMapping")
+    mapping.inputs["Scale"].default_value = (2.0, 2.0, 1.0)
+    coords = tree.nodes.new("ShaderNodeTexCoord")
+    tree.links.new(coords.outputs["UV"], mapping.inputs["Vector"])
+    tree.links.new(mapping.outputs["Vector"], tree.nodes["Image Texture"].inputs["Vector"])
+    mix = tree.nodes.new("ShaderNodeMix")
+    mix.data_type = "RGBA"
+    mix.blend_type = "MULTIPLY"
+    mix.inputs["Factor"].default_value = 0.5
+    rgb = tree.nodes.new("ShaderNodeRGB")
+    rgb.outputs[0].default_value = (0.5, 1.0, 1.0, 1.0)
+    tree.links.new(tree.nodes["Image Texture"].outputs["Color"], next(s for s in mix.inputs if s.identifier == "A_Color"))
+    tree.links.new(rgb.outputs[0], next(s for s in mix.inputs if s.identifier == "B_Color"))
+    tree.links.new(next(s for s in mix.outputs if s.identifier == "Result_Color"), bsdf.inputs["Base Color"])
+    ramp_px = np.ones((4, 64, 4), np.float32)
+    ramp_px[..., :3] = (np.arange(64)[None, :, None] + 0.5) / 64
+    gradient = value_image("gradient", ramp_px)
+    ramp_tex = value_texture(mat, "Roughness", gradient)
+    ramp = tree.nodes.new("ShaderNodeValToRGB")
+    ramp.color_ramp.elements[0].color = (0.1, 0.1, 0.1, 1.0)
+    ramp.color_ramp.elements[1].color = (0.7, 0.7, 0.7, 1.0)
+    tree.links.new(ramp_tex.outputs["Color"], ramp.inputs["Fac"])
+    tree.links.new(ramp.outputs["Color"], bsdf.inputs["Roughness"])
+    metal_tex = value_texture(mat, "Metallic", value_image("flat metal", np.full((4, 4, 4), 0.6, np.float32)))
+    math_node = tree.nodes.new("ShaderNodeMath")
+    math_node.operation = "MULTIPLY"
+    math_node.inputs[1].default_value = 0.5
+    tree.links.new(metal_tex.outputs["Color"], math_node.inputs[0])
+    tree.links.new(math_node.outputs[0], bsdf.inputs["Metallic"])
+    assert not any(s in note for note in materials.principled_notes(mat)
+                   for s in ("Base Color", "Roughness", "Metallic")), materials.principled_notes(mat)
+    uv = corner_uv_rows(plane)
+    texel = np.floor(uv * 2.0 * 64).astype(int) % 64  # Closest, repeated past 1
+    colour = np.where((texel[:, 0] < 32)[:, None], [0.9, 0.2, 0.1], [0.2, 0.6, 0.9]) * [0.75, 1.0, 1.0]
+    plan = plan_of(scene, plane)
+    got = plan.items[0][1].inputs
+    np.testing.assert_allclose(got["base_color"], colour, rtol=1e-5)
+    assert got["metallic"] == pytest.approx(np.full(len(uv), 0.3), rel=1e-5)
+    # the gradient is read linearly at each vertex (mip-filtered over its share): the ramp maps it
+    # onto 0.1 .. 0.7
+    gradient_at = got["roughness"]
+    assert np.all((gradient_at >= 0.1 - 1e-6) & (gradient_at <= 0.7 + 1e-6)) and np.ptp(gradient_at) > 0.4
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    p, n = world_arrays(plane, corner=False)
+    eye = tuple(scene.camera.matrix_world.translation)
+    ior = bsdf.inputs["IOR"].default_value
+    want = core_shader(wenv.load_environment(hdri_path("sunset")),
+                       wenv.Principled(base_color=(0.8, 0.2, 0.1), roughness=0.4, ior=ior)).shade_mesh(
+        p, n, eye, base_color=got["base_color"], roughness=got["roughness"], metallic=got["metallic"])
+    np.testing.assert_allclose(attribute(plane)[1], want, rtol=1e-4, atol=1e-5)
+    key, note = gloss.reading_key(mat)
+    assert note == ("Base Color: the mean of 'halves'; Roughness: the mean of 'gradient'; "
+                    "Metallic: the mean of 'flat metal'")
+    inputs = dict(key[1])
+    assert inputs["metallic"] == pytest.approx(0.3, rel=1e-5)
+    assert inputs["roughness"] == pytest.approx(0.4, abs=0.01)  # the ramp at the gradient's mean, 0.5
+    assert inputs["base_color"] == pytest.approx((0.55 * 0.75, 0.4, 0.5), rel=1e-4)
+
+
+def test_hue_saturation_converts_as_colorsys_does():
+    """The Hue/Saturation/Value node's conversions against Python's colorsys (the same HSV model as
+    Cycles' rgb_to_hsv and hsv_to_rgb), over random colours and the greys."""
+    import colorsys
+    from addon import nodes
+    rgb = np.vstack([np.random.default_rng(4).uniform(0.0, 1.0, (200, 3)), [[0.3, 0.3, 0.3], [0.0, 0.0, 0.0]]])
+    h, s, v = nodes._rgb_to_hsv(rgb)
+    want = np.array([colorsys.rgb_to_hsv(*c) for c in rgb])
+    np.testing.assert_allclose(np.stack([h, s, v], 1), want, atol=1e-12)
+    np.testing.assert_allclose(nodes._hsv_to_rgb(h, s, v), rgb, atol=1e-12)
+
+
+def test_a_node_wenv_does_not_evaluate_is_named_and_the_value_used(scene):
+    """A Noise Texture into Roughness, or a loop of links: the report names it, the socket's unlinked
+    value is used, and the pass goes on."""
+    env_world(scene, "sunset")
+    plane, mat = textured_plane(bpy.data.images.new("flat", 4, 4, float_buffer=True))
+    tree = mat.node_tree
+    noise = tree.nodes.new("ShaderNodeTexNoise")
+    tree.links.new(noise.outputs["Fac"], tree.nodes["Principled BSDF"].inputs["Roughness"])
+    notes = materials.principled_notes(mat)
+    assert any("'Roughness' is linked ('Noise Texture', a node wenv does not evaluate yet): its unlinked value 0.4 "
+               "is used" in n for n in notes), notes
+    assert "roughness" not in plan_of(scene, plane).items[0][1].inputs
+    a, b = tree.nodes.new("ShaderNodeMath"), tree.nodes.new("ShaderNodeMath")
+    tree.links.new(a.outputs[0], b.inputs[0])
+    tree.links.new(b.outputs[0], a.inputs[0])
+    tree.links.new(a.outputs[0], tree.nodes["Principled BSDF"].inputs["Metallic"])
+    notes = materials.principled_notes(mat)
+    assert any(n.startswith("'Metallic' is linked (") for n in notes), notes
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+
+
+def test_a_peer_method_names_the_roughness_texture_it_does_not_read(scene):
+    """Auto may shade with a peer method, which takes no roughness per vertex: the report says the
+    texture is shaded at its unlinked value, and the pass does not fail."""
+    from addon import shading
+    env_world(scene, "sunset")
+    flat = bpy.data.images.new("flat paint", 4, 4, float_buffer=True)
+    plane, mat = textured_plane(flat)
+    value_texture(mat, "Roughness", value_image("rough", np.full((4, 4, 4), 0.5, np.float32)))
+    plan = plan_of(scene, plane)
+
+    class Peer:
+        method = "split_sum"
+
+    part = plan.items[0][1]
+    taken = plan._takes(Peer(), plane.name, part)
+    assert "roughness" not in taken.inputs and "base_color" in taken.inputs
+    assert any("textured Roughness shaded at the unlinked value by split_sum" in n for n in plan.notes)
+    assert shading.ShadingPlan._takes(plan, type("Wavelet", (), {"method": "slicing"})(), plane.name, part) is part
 
 
 def test_a_texture_change_reshades_without_remaking_the_material(scene, monkeypatch):

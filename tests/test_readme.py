@@ -153,7 +153,10 @@ def api_namespace():
     proj = np.array([[f, 0, 0, 0], [0, f, 0, 0], [0, 0, (far + near) / (near - far), 2 * far * near / (near - far)],
                      [0, 0, -1, 0]])
     ns = {"normals": normals, "view_dirs": view_dirs, "positions": normals.copy(), "eye": eye, "vp": proj @ view,
-          "other_material": wenv.Lambert((0.5, 0.5, 0.5))}
+          "other_material": wenv.Lambert((0.5, 0.5, 0.5)),
+          "colours": np.full((len(normals), 3), 0.5, np.float32),  # textures read at the vertices
+          "r": np.linspace(0.1, 0.7, len(normals), dtype=np.float32),
+          "m": np.linspace(0.0, 1.0, len(normals), dtype=np.float32)}
     with pytest.MonkeyPatch.context() as mp:
         mp.chdir(bundled_hdri_dir())
         checked = run_checked(readme_block(API), ns, "docs/python.md")
@@ -169,6 +172,7 @@ def test_api_block_runs_and_shows_true_values(api_namespace):
     assert ns["rgb"].shape == (n, 3) and np.isfinite(ns["rgb"]).all()
     assert ns["k"] == n  # the refinement loop reached every vertex
     assert ns["truth"].shape == (n, 3) and (ns["truth"] > 0).any()
+    assert ns["textured"].shape == (n, 3) and np.isfinite(ns["textured"]).all()
 
 
 def test_auto_block_shows_true_values(api_namespace):

@@ -124,14 +124,19 @@ def test_colours_that_cannot_vary_alone_are_refused_with_the_reason(sphere):
     v, views, _ = sphere
     env = wenv.load_environment(hdri_path("city"))
     colours = np.full((len(v), 3), 0.5, np.float32)
-    for mat, reason in ((wenv.Principled(metallic=1.0), "metal's Fresnel colour"),
+    for mat, reason in ((wenv.Principled(metallic=1.0, coat_weight=1.0), "a coat or sheen over a metal"),
                         (wenv.Principled(diffuse_roughness=0.5), "rough diffuse lobe"),
                         (wenv.Tabulated(np.full((16, 16, 32, 3), 0.05)), "tabulated material has no colour")):
         shader = wenv.Shader(env, mat, quality="draft")
         with pytest.raises(ValueError, match=reason):
             shader.shade(v, views, base_color=colours)
-        with pytest.raises(ValueError, match=reason):
-            wenv.reference(env, mat, v[:3], views[:3], base_color=colours[:3])
+        if not (isinstance(mat, wenv.Principled) and mat.inputs["metallic"] > 0.0):  # the reference: each colour its own metal
+            with pytest.raises(ValueError, match=reason):
+                wenv.reference(env, mat, v[:3], views[:3], base_color=colours[:3])
+    # a metal's colour per vertex is shaded by the wavelet methods (tests/test_vertex_material.py)
+    peer = wenv.Shader(env, wenv.Principled(metallic=1.0), quality="default", method="split_sum")
+    with pytest.raises(ValueError, match="use a wavelet method"):
+        peer.shade(v, views, base_color=colours)
     shader = wenv.Shader(env, MAKERS["lambert"]((0.5, 0.5, 0.5)), quality="draft")
     with pytest.raises(ValueError, match="base_color has 3 rows, one per vertex"):
         shader.shade(v, views, base_color=colours[:3])

@@ -79,10 +79,14 @@ static wenv_status run_split(const wenv_method *method, void *state, const float
     return method->shade_shadowed(state, normals, views, n, scene, out, irradiance, err);
 }
 
-/* The same, each vertex given its colour when `colour` is set. */
+/* The same, each vertex given its colour when `colour` is set, its material when `family` is. */
 static wenv_status run(const wenv_method *method, void *state, const float *normals, const float *views, size_t n,
-                       const wenv_shadow_scene *scene, const wenv_vertex_colour *colour, float *out, wenv_error *err)
+                       const wenv_shadow_scene *scene, const wenv_vertex_colour *colour,
+                       const wenv_family_rows *family, float *out, wenv_error *err)
 {
+    if (family)
+        return wenv_material_family_shade(family, method, state, normals, views, n, scene, colour ? colour->rgb : NULL,
+                                          out, err);
     if (!colour)
         return run_split(method, state, normals, views, n, scene, out, NULL, err);
     float *irradiance = malloc(n * 3 * sizeof(float));
@@ -98,7 +102,7 @@ static wenv_status run(const wenv_method *method, void *state, const float *norm
 wenv_status wenv_lighting_frame_shade_scene(const wenv_lighting_frame *frame, const wenv_method *method, void *state,
                                             const float *normals, const float *views, size_t n,
                                             const wenv_shadow_scene *scene, const wenv_vertex_colour *colour,
-                                            float *out, wenv_error *err)
+                                            const wenv_family_rows *family, float *out, wenv_error *err)
 {
     wenv_shadow_scene held;
     if (scene) {
@@ -112,14 +116,14 @@ wenv_status wenv_lighting_frame_shade_scene(const wenv_lighting_frame *frame, co
         scene = &held;
     }
     if (frame->identity || n == 0)
-        return run(method, state, normals, views, n, scene, colour, out, err);
+        return run(method, state, normals, views, n, scene, colour, family, out, err);
     float *turned = malloc(n * 6 * sizeof(float));
     if (!turned)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory turning %zu normals and views", n);
     turn_all(frame->turn, normals, n, turned);
     if (views)
         turn_all(frame->turn, views, n, turned + 3 * n);
-    wenv_status st = run(method, state, turned, views ? turned + 3 * n : NULL, n, scene, colour, out, err);
+    wenv_status st = run(method, state, turned, views ? turned + 3 * n : NULL, n, scene, colour, family, out, err);
     free(turned);
     if (!st && frame->scale != 1.0f)
         for (size_t i = 0; i < 3 * n; i++)
@@ -131,5 +135,5 @@ wenv_status wenv_lighting_frame_shade(const wenv_lighting_frame *frame, const we
                                       const float *normals, const float *views, size_t n, float *out,
                                       wenv_error *err)
 {
-    return wenv_lighting_frame_shade_scene(frame, method, state, normals, views, n, NULL, NULL, out, err);
+    return wenv_lighting_frame_shade_scene(frame, method, state, normals, views, n, NULL, NULL, NULL, out, err);
 }

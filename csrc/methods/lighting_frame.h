@@ -16,6 +16,7 @@
 
 #include "base/error.h"
 #include "base/progress.h"
+#include "methods/material_family.h"
 #include "methods/method.h"
 #include "methods/vertex_colour.h"
 #include "scene/envmap.h"
@@ -46,10 +47,11 @@ wenv_status wenv_lighting_frame_shade(const wenv_lighting_frame *frame, const we
 /* The same with the scene in the way (method->shade_shadowed; its turn and bounce_scale are set
  * here), or with views NULL the diffuse light leaving each vertex (method->diffuse_light; scene may
  * then be NULL).  The method must provide them.  colour (NULL: the material's own) gives each
- * vertex its colour. */
+ * vertex its colour, family (NULL: the method's material) its Roughness and Metallic
+ * (material_family.h; colour's per_colour table is then the family's members'). */
 wenv_status wenv_lighting_frame_shade_scene(const wenv_lighting_frame *frame, const wenv_method *method, void *state,
                                             const float *normals, const float *views, size_t n,
                                             const wenv_shadow_scene *scene, const wenv_vertex_colour *colour,
-                                            float *out, wenv_error *err);
+                                            const wenv_family_rows *family, float *out, wenv_error *err);
 
 #endif

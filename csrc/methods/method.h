@@ -44,6 +44,20 @@ typedef struct {
     float bounce_scale;
 } wenv_shadow_scene;
 
+/* Each vertex's own materials for what a method shades per vertex with the BRDF itself (a material
+ * that varies per vertex, methods/material_family.h): vertex k is lit through the materials
+ * palette[pick[WENV_VERTEX_LIGHTS_PICKS k + j]], each weighted per channel by
+ * weight[3 (WENV_VERTEX_LIGHTS_PICKS k + j) + c] (0: not read).  palette_key changes whenever the
+ * palette does, so a method may keep what it makes of each entry. */
+#define WENV_VERTEX_LIGHTS_PICKS 3
+typedef struct {
+    const wenv_material *const *palette;
+    size_t n_palette;
+    uint64_t palette_key;
+    const uint32_t *pick;
+    const float *weight;
+} wenv_vertex_lights;
+
 /* One quality key: its name, its type and where it sits in the method's quality struct. */
 typedef enum { WENV_PARAM_SIZE, WENV_PARAM_REAL } wenv_param_type;
 typedef struct {
@@ -89,6 +103,10 @@ typedef struct wenv_method {
     const wenv_param *params;
     size_t n_params;
     const void *presets[WENV_PRESET_COUNT]; /* quality structs, WENV_PRESET_NAMES order */
+    /* Whether set_material keeps what it made of the last materials set, so that shading a material
+     * that varies per vertex (methods/material_family.h), which sets each member in turn, makes
+     * nothing again at a new view. */
+    int keeps_materials;
 
     /* WENV_ERR_VALUE naming the key ("quality['order'] ...") unless the settings are usable. */
     wenv_status (*check_quality)(const void *quality, wenv_error *err);
@@ -117,6 +135,15 @@ typedef struct wenv_method {
      * as for shade (the Lambertian part head-on left out).  NULL as above. */
     wenv_status (*diffuse_light)(void *state, const float *normals, size_t n, const wenv_shadow_scene *scene,
                                  float *out, float *irradiance, wenv_error *err);
+    /* What a method shades per vertex with the material's own BRDF rather than through what it made of
+     * it (the wavelet methods' exact lights), for a material that varies per vertex: with
+     * set_lights_apart(state, 1), shade and shade_shadowed leave it out (they are then asked for
+     * irradiance), and shade_lights adds it to out and irradiance (as shade's with irradiance), each
+     * vertex lit through its own materials.  NULL for a method without such a part. */
+    void (*set_lights_apart)(void *state, int apart);
+    wenv_status (*shade_lights)(void *state, const float *normals, const float *views, size_t n,
+                                const wenv_shadow_scene *scene, const wenv_vertex_lights *lights, float *out,
+                                float *irradiance, wenv_error *err);
     /* Fills at most WENV_STATS_MAX entries; returns how many. */
     size_t (*stats)(const void *state, wenv_stat *out);
 } wenv_method;

@@ -9,12 +9,13 @@
 static PyObject *py_reference(PyObject *self, PyObject *args, PyObject *kwargs)
 {
     (void)self;
-    static char *kwlist[] = {"env",       "material",  "normals", "view_dirs",  "progress",
-                             "positions", "occluders", "bounce",  "base_color", NULL};
+    static char *kwlist[] = {"env",       "material",  "normals", "view_dirs",  "progress", "positions",
+                             "occluders", "bounce",    "base_color", "roughness", "metallic", NULL};
     PyObject *env_obj, *mat_obj, *nobj, *vobj, *progress_obj = Py_None, *pobj = Py_None, *occ_obj = Py_None;
-    PyObject *bounce_obj = Py_None, *colour_obj = Py_None;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOO|OOOOO:reference", kwlist, &env_obj, &mat_obj, &nobj, &vobj,
-                                     &progress_obj, &pobj, &occ_obj, &bounce_obj, &colour_obj))
+    PyObject *bounce_obj = Py_None, *colour_obj = Py_None, *rough_obj = Py_None, *metal_obj = Py_None;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOO|OOOOO$OO:reference", kwlist, &env_obj, &mat_obj, &nobj,
+                                     &vobj, &progress_obj, &pobj, &occ_obj, &bounce_obj, &colour_obj, &rough_obj,
+                                     &metal_obj))
         return NULL;
     if (bounce_obj != Py_None && occ_obj == Py_None) {
         PyErr_SetString(PyExc_ValueError, "bounce is read only with occluders (what blocks the light it fills in)");
@@ -46,7 +47,7 @@ static PyObject *py_reference(PyObject *self, PyObject *args, PyObject *kwargs)
         return NULL;
     }
     PyObject *result = NULL;
-    Py_buffer pb = {0}, bb = {0};
+    Py_buffer pb = {0}, bb = {0}, rb = {0}, mb = {0};
     float *rgb = NULL;
     size_t np = n, nb_rows;
     if (occ && wenv_py_get_vec3_array(pobj, "positions", 0, &pb, &np, NULL) < 0)
@@ -67,6 +68,9 @@ static PyObject *py_reference(PyObject *self, PyObject *args, PyObject *kwargs)
     }
     if (colour_obj != Py_None && !(rgb = wenv_py_base_colours(colour_obj, n)))
         goto done;
+    if ((rough_obj != Py_None && wenv_py_get_vertex_values(rough_obj, "roughness", n, &rb) < 0) ||
+        (metal_obj != Py_None && wenv_py_get_vertex_values(metal_obj, "metallic", n, &mb) < 0))
+        goto done;
     Py_ssize_t shape[2] = {(Py_ssize_t)n, 3};
     float *out;
     result = wenv_py_new_float_array(2, shape, &out);
@@ -77,8 +81,8 @@ static PyObject *py_reference(PyObject *self, PyObject *args, PyObject *kwargs)
     wenv_error err = {0};
     wenv_status st;
     WENV_BEGIN_WORK
-    st = wenv_reference(env, mat, nb.buf, vb.buf, n, occ, occ ? pb.buf : NULL, bb.obj ? bb.buf : NULL, rgb, out,
-                        &progress, &err);
+    st = wenv_reference_per_vertex(env, mat, nb.buf, vb.buf, n, occ, occ ? pb.buf : NULL, bb.obj ? bb.buf : NULL, rgb,
+                                   rb.obj ? rb.buf : NULL, mb.obj ? mb.buf : NULL, out, &progress, &err);
     WENV_END_WORK
     if (st) {
         Py_CLEAR(result);
@@ -91,6 +95,10 @@ done:
         PyBuffer_Release(&pb);
     if (bb.obj)
         PyBuffer_Release(&bb);
+    if (rb.obj)
+        PyBuffer_Release(&rb);
+    if (mb.obj)
+        PyBuffer_Release(&mb);
     PyBuffer_Release(&nb);
     PyBuffer_Release(&vb);
     return result;
@@ -99,13 +107,14 @@ done:
 static PyMethodDef reference_functions[] = {
     {"reference", (PyCFunction)(void (*)(void))py_reference, METH_VARARGS | METH_KEYWORDS,
      "reference(env, material, normals, view_dirs, progress=None, positions=None, occluders=None, bounce=None, "
-     "base_color=None)\n--\n\n"
+     "base_color=None, *, roughness=None, metallic=None)\n--\n\n"
      "Ground truth: the reflection equation summed over every environment pixel (exact solid angles), in the "
      "units of Shader.shade.  With occluders (a wenv.Occluders) and the vertices' positions, each pixel's ray "
      "from the vertex is cast exactly, and a blocked one brings the blocker's light where it is hit: bounce "
      "(occluder vertices, 3), each occluder vertex's radiance interpolated over the hit triangle, or nothing "
      "when bounce is None (direct light only).  base_color (n, 3): each vertex's colour in place of the "
-     "material's, as Shader.shade takes it."},
+     "material's, as Shader.shade takes it.  roughness, metallic (n,) float32: each vertex's Roughness and "
+     "Metallic in place of a Principled material's, each distinct value shaded with its own material, exactly."},
     {NULL, NULL, 0, NULL},
 };
 

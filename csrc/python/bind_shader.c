@@ -9,6 +9,7 @@
 
 #include "auto/autoquality.h"
 #include "base/fingerprint.h"
+#include "methods/material_family.h"
 #include "methods/method.h"
 #include "methods/presets.h"
 #include "methods/lighting_frame.h"
@@ -32,6 +33,7 @@ typedef struct {
     double target_error, memory_budget_mb;
     Py_ssize_t visible; /* vertices the last shade_mesh(cull=True) shaded; -1 if it shaded all */
     Py_ssize_t next_vertex; /* the first of them the last shade_mesh left unshaded (its budget); -1 before one */
+    wenv_material_family *family; /* the latest Roughness and Metallic per vertex, kept for the next view */
 } ShaderObject;
 
 /* ---- quality dicts, read and written through the method's parameter table ---- */
@@ -323,6 +325,7 @@ static void Shader_dealloc(ShaderObject *self)
 {
     if (self->state)
         self->method->destroy(self->state);
+    wenv_material_family_free(self->family);
     PyMem_Free(self->quality);
     Py_XDECREF(self->environment);
     Py_XDECREF(self->material);
@@ -386,14 +389,17 @@ static int parse_scene(ShaderObject *self, PyObject *occlusion, PyObject *bounce
 /* A colour per vertex (base_color, n rows) for the shader's material, into *colour (its table in
  * *table, its rows in *rgb: wenv_py_base_colours, PyMem_Free'd by the caller).  Not given (NULL or
  * None): *rgb NULL.  -1 with the error set. */
-static int parse_colour(ShaderObject *self, PyObject *obj, size_t n, wenv_diffuse_table *table,
+static int parse_colour(ShaderObject *self, PyObject *obj, size_t n, int per_vertex_material, wenv_diffuse_table *table,
                         wenv_vertex_colour *colour, float **rgb)
 {
     *rgb = NULL;
     if (!obj || obj == Py_None)
         return 0;
     wenv_error err = {0};
-    if (wenv_material_diffuse_per_colour_table(wenv_py_material(self->material, "material"), table, &err)) {
+    /* with a material per vertex, its members' tables are read (material_family.h) */
+    if (per_vertex_material)
+        wenv_material_diffuse_table(wenv_py_material(self->material, "material"), table);
+    else if (wenv_material_diffuse_per_colour_table(wenv_py_material(self->material, "material"), table, &err)) {
         wenv_py_raise(&err);
         return -1;
     }
@@ -404,14 +410,61 @@ static int parse_colour(ShaderObject *self, PyObject *obj, size_t n, wenv_diffus
     return 0;
 }
 
+/* Whether Roughness or Metallic per vertex were given (not None). */
+static int given(PyObject *obj) { return obj && obj != Py_None; }
+
+/* Whether the shader's material shades as a family (material_family.h) with these per-vertex
+ * inputs: a Roughness or Metallic per vertex, or a colour per vertex on a metal. */
+static int per_vertex_material(ShaderObject *self, PyObject *colour, PyObject *roughness, PyObject *metallic)
+{
+    return given(roughness) || given(metallic) ||
+           (given(colour) && wenv_material_family_needed_for_colour(wenv_py_material(self->material, "material")));
+}
+
+/* Roughness and Metallic per vertex (either may be NULL or None) for n vertices, and whether a colour
+ * per vertex is given: the shader's family made for them, unless it was, into *rows (NULL when no
+ * family is needed: per_vertex_material).  Called with the shader claimed.  -1 with the error set. */
+static int ensure_family(ShaderObject *self, PyObject *colour, PyObject *roughness, PyObject *metallic, size_t n,
+                         wenv_family_rows *rows, const wenv_family_rows **out)
+{
+    *out = NULL;
+    if (!per_vertex_material(self, colour, roughness, metallic))
+        return 0;
+    Py_buffer rb = {0}, mb = {0};
+    if ((given(roughness) && wenv_py_get_vertex_values(roughness, "roughness", n, &rb) < 0) ||
+        (given(metallic) && wenv_py_get_vertex_values(metallic, "metallic", n, &mb) < 0)) {
+        if (rb.obj)
+            PyBuffer_Release(&rb);
+        return -1;
+    }
+    wenv_error err = {0};
+    wenv_status st;
+    const struct wenv_material *base = wenv_py_material(self->material, "material");
+    WENV_BEGIN_WORK
+    st = wenv_material_family_ensure(&self->family, base, rb.obj ? rb.buf : NULL, mb.obj ? mb.buf : NULL, n,
+                                     given(colour), &err);
+    WENV_END_WORK
+    if (rb.obj)
+        PyBuffer_Release(&rb);
+    if (mb.obj)
+        PyBuffer_Release(&mb);
+    if (st) {
+        wenv_py_raise(&err);
+        return -1;
+    }
+    *rows = (wenv_family_rows){self->family, NULL, 0};
+    *out = rows;
+    return 0;
+}
+
 /* With a colour per vertex, a mesh's own bounce (bounce='self') is its light with those colours: it
  * is made here, for every vertex of the occlusion (normals: all n of them), and given as the scene's
  * bounce (*light, PyMem_Free'd by the caller).  -1 with the error set. */
 static int own_bounce(ShaderObject *self, const float *normals, size_t n, wenv_shadow_scene *scene,
-                      const wenv_vertex_colour *colour, float **light)
+                      const wenv_vertex_colour *colour, const wenv_family_rows *family, float **light)
 {
     *light = NULL;
-    if (!colour || !scene->bounce_self)
+    if ((!colour && !family) || !scene->bounce_self)
         return 0;
     if (!(*light = PyMem_Malloc((n ? n : 1) * 3 * sizeof(float)))) {
         PyErr_NoMemory();
@@ -423,7 +476,7 @@ static int own_bounce(ShaderObject *self, const float *normals, size_t n, wenv_s
     wenv_status st;
     WENV_BEGIN_WORK
     st = wenv_lighting_frame_shade_scene(&self->frame, self->method, self->state, normals, NULL, n, &sending, colour,
-                                         *light, &err);
+                                         family, *light, &err);
     WENV_END_WORK
     if (st) {
         wenv_py_raise(&err);
@@ -438,7 +491,8 @@ static int own_bounce(ShaderObject *self, const float *normals, size_t n, wenv_s
 /* views NULL: the diffuse light leaving each vertex; scene NULL: unshadowed; colour NULL: the
  * material's own. */
 static PyObject *shade_arrays(ShaderObject *self, const float *normals, const float *views, size_t n,
-                              const wenv_shadow_scene *scene, const wenv_vertex_colour *colour)
+                              const wenv_shadow_scene *scene, const wenv_vertex_colour *colour,
+                              const wenv_family_rows *family)
 {
     Py_ssize_t shape[2] = {(Py_ssize_t)n, 3};
     float *out;
@@ -449,7 +503,7 @@ static PyObject *shade_arrays(ShaderObject *self, const float *normals, const fl
     wenv_status st;
     WENV_BEGIN_WORK
     st = wenv_lighting_frame_shade_scene(&self->frame, self->method, self->state, normals, views, n, scene, colour,
-                                         out, &err);
+                                         family, out, &err);
     WENV_END_WORK
     if (st) {
         Py_DECREF(result);
@@ -460,10 +514,11 @@ static PyObject *shade_arrays(ShaderObject *self, const float *normals, const fl
 
 static PyObject *Shader_shade(ShaderObject *self, PyObject *args, PyObject *kwargs)
 {
-    static char *kwlist[] = {"normals", "view_dirs", "occlusion", "bounce", "base_color", NULL};
-    PyObject *nobj, *vobj, *occ_obj = Py_None, *bounce_obj = NULL, *colour_obj = NULL;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|$OOO:shade", kwlist, &nobj, &vobj, &occ_obj, &bounce_obj,
-                                     &colour_obj))
+    static char *kwlist[] = {"normals", "view_dirs", "occlusion", "bounce", "base_color", "roughness", "metallic", NULL};
+    PyObject *nobj, *vobj, *occ_obj = Py_None, *bounce_obj = NULL, *colour_obj = NULL, *rough_obj = NULL;
+    PyObject *metal_obj = NULL;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|$OOOOO:shade", kwlist, &nobj, &vobj, &occ_obj, &bounce_obj,
+                                     &colour_obj, &rough_obj, &metal_obj))
         return NULL;
     Py_buffer nb, vb, bb = {0};
     size_t n, nvw;
@@ -480,6 +535,9 @@ static PyObject *Shader_shade(ShaderObject *self, PyObject *args, PyObject *kwar
     wenv_shadow_scene scene;
     wenv_diffuse_table table;
     wenv_vertex_colour colour;
+    wenv_family_rows family_rows;
+    const wenv_family_rows *family = NULL;
+    int claimed = 0;
     if (single_v && !single_n) {
         /* one view direction for all (orthographic camera) */
         expanded = PyMem_Malloc((n ? n : 1) * 3 * sizeof(float));
@@ -500,12 +558,19 @@ static PyObject *Shader_shade(ShaderObject *self, PyObject *args, PyObject *kwar
     }
     if (occ_obj != Py_None && parse_scene(self, occ_obj, bounce_obj, n, &scene, &bb) < 0)
         goto done;
-    if (parse_colour(self, colour_obj, n, &table, &colour, &rgb) < 0 || claim(self) < 0)
+    if (parse_colour(self, colour_obj, n, per_vertex_material(self, colour_obj, rough_obj, metal_obj), &table,
+                     &colour, &rgb) < 0 ||
+        claim(self) < 0)
         goto done;
-    if (occ_obj == Py_None || own_bounce(self, nb.buf, n, &scene, rgb ? &colour : NULL, &light) == 0)
-        result = shade_arrays(self, nb.buf, views, n, occ_obj != Py_None ? &scene : NULL, rgb ? &colour : NULL);
-    self->busy = 0;
+    claimed = 1;
+    if (ensure_family(self, colour_obj, rough_obj, metal_obj, n, &family_rows, &family) < 0)
+        goto done;
+    if (occ_obj == Py_None || own_bounce(self, nb.buf, n, &scene, rgb ? &colour : NULL, family, &light) == 0)
+        result = shade_arrays(self, nb.buf, views, n, occ_obj != Py_None ? &scene : NULL, rgb ? &colour : NULL,
+                              family);
 done:
+    if (claimed)
+        self->busy = 0;
     PyMem_Free(expanded);
     PyMem_Free(rgb);
     PyMem_Free(light);
@@ -518,9 +583,10 @@ done:
 
 static PyObject *Shader_diffuse_light(ShaderObject *self, PyObject *args, PyObject *kwargs)
 {
-    static char *kwlist[] = {"normals", "occlusion", "base_color", NULL};
-    PyObject *nobj, *occ_obj = Py_None, *colour_obj = NULL;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "O|$OO:diffuse_light", kwlist, &nobj, &occ_obj, &colour_obj))
+    static char *kwlist[] = {"normals", "occlusion", "base_color", "roughness", "metallic", NULL};
+    PyObject *nobj, *occ_obj = Py_None, *colour_obj = NULL, *rough_obj = NULL, *metal_obj = NULL;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "O|$OOOO:diffuse_light", kwlist, &nobj, &occ_obj, &colour_obj,
+                                     &rough_obj, &metal_obj))
         return NULL;
     if (!self->method->diffuse_light) {
         PyErr_Format(PyExc_ValueError, "method '%s' does not give the diffuse light: use a wavelet method",
@@ -536,13 +602,22 @@ static PyObject *Shader_diffuse_light(ShaderObject *self, PyObject *args, PyObje
     wenv_diffuse_table table;
     wenv_vertex_colour colour;
     float *rgb = NULL;
+    wenv_family_rows family_rows;
+    const wenv_family_rows *family = NULL;
+    int claimed = 0;
     if (occ_obj != Py_None && parse_scene(self, occ_obj, Py_None, n, &scene, &bb) < 0)
         goto done;
-    if (parse_colour(self, colour_obj, n, &table, &colour, &rgb) < 0 || claim(self) < 0)
+    if (parse_colour(self, colour_obj, n, per_vertex_material(self, colour_obj, rough_obj, metal_obj), &table,
+                     &colour, &rgb) < 0 ||
+        claim(self) < 0)
         goto done;
-    result = shade_arrays(self, nb.buf, NULL, n, occ_obj != Py_None ? &scene : NULL, rgb ? &colour : NULL);
-    self->busy = 0;
+    claimed = 1;
+    if (ensure_family(self, colour_obj, rough_obj, metal_obj, n, &family_rows, &family) == 0)
+        result = shade_arrays(self, nb.buf, NULL, n, occ_obj != Py_None ? &scene : NULL, rgb ? &colour : NULL,
+                              family);
 done:
+    if (claimed)
+        self->busy = 0;
     PyMem_Free(rgb);
     PyBuffer_Release(&nb);
     return result;
@@ -574,17 +649,19 @@ static int parse_eye(PyObject *obj, double eye[3])
  * `budget` seconds (wenv_shade_for); *next gets the first left. */
 static int shade_visible(ShaderObject *self, const float *normals, const float *views, size_t n,
                          const unsigned char *visible, size_t count, const wenv_shadow_scene *scene,
-                         const wenv_vertex_colour *colour, size_t first, double budget, float *out, size_t *next)
+                         const wenv_vertex_colour *colour, const wenv_family_rows *family, size_t first,
+                         double budget, float *out, size_t *next)
 {
     float *gathered = NULL, *shaded = out;
     uint32_t *rows = NULL;
     wenv_shadow_scene culled;
     wenv_vertex_colour culled_colour;
+    wenv_family_rows culled_family;
     if (visible) {
         /* normals, views, radiance and colours */
         gathered = PyMem_Malloc((count ? count : 1) * 12 * sizeof(float));
-        rows = scene ? PyMem_Malloc((count ? count : 1) * sizeof *rows) : NULL;
-        if (!gathered || (scene && !rows)) {
+        rows = scene || family ? PyMem_Malloc((count ? count : 1) * sizeof *rows) : NULL;
+        if (!gathered || ((scene || family) && !rows)) {
             PyMem_Free(gathered);
             PyMem_Free(rows);
             PyErr_NoMemory();
@@ -610,6 +687,10 @@ static int shade_visible(ShaderObject *self, const float *normals, const float *
             culled_colour.rgb = gathered + 9 * count;
             colour = &culled_colour;
         }
+        if (family) { /* and of the family */
+            culled_family = (wenv_family_rows){family->family, rows, 0};
+            family = &culled_family;
+        }
         normals = gathered;
         views = gathered + 3 * count;
         shaded = gathered + 6 * count;
@@ -619,8 +700,8 @@ static int shade_visible(ShaderObject *self, const float *normals, const float *
     *next = first;
     if (first < count) {
         WENV_BEGIN_WORK
-        st = wenv_shade_for(&self->frame, self->method, self->state, normals, views, count, scene, colour, first,
-                            budget, shaded, next, &err);
+        st = wenv_shade_for(&self->frame, self->method, self->state, normals, views, count, scene, colour, family,
+                            first, budget, shaded, next, &err);
         WENV_END_WORK
     }
     if (!st && visible)
@@ -671,13 +752,15 @@ static void raise_eye_at_vertex(const float *p, const double eye[3], size_t n, s
 static PyObject *Shader_shade_mesh(ShaderObject *self, PyObject *args, PyObject *kwargs)
 {
     static char *kwlist[] = {"positions", "normals", "eye",    "cull",      "view_projection", "out",
-                             "first",     "budget",  "occlusion", "bounce", "base_color", NULL};
+                             "first",     "budget",  "occlusion", "bounce", "base_color", "roughness",
+                             "metallic",  NULL};
     PyObject *pobj, *nobj, *eobj, *vp_obj = Py_None, *out_obj = Py_None, *budget_obj = Py_None, *first_obj = NULL;
-    PyObject *occ_obj = Py_None, *bounce_obj = NULL, *colour_obj = NULL;
+    PyObject *occ_obj = Py_None, *bounce_obj = NULL, *colour_obj = NULL, *rough_obj = NULL, *metal_obj = NULL;
     int cull = 0;
     size_t first = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO|$pOOOOOOO:shade_mesh", kwlist, &pobj, &nobj, &eobj, &cull,
-                                     &vp_obj, &out_obj, &first_obj, &budget_obj, &occ_obj, &bounce_obj, &colour_obj))
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO|$pOOOOOOOOO:shade_mesh", kwlist, &pobj, &nobj, &eobj, &cull,
+                                     &vp_obj, &out_obj, &first_obj, &budget_obj, &occ_obj, &bounce_obj, &colour_obj,
+                                     &rough_obj, &metal_obj))
         return NULL;
     if (occ_obj == Py_None && bounce_obj) {
         PyErr_SetString(PyExc_ValueError, "bounce is read only with occlusion (what blocks the light it fills in)");
@@ -731,7 +814,8 @@ static PyObject *Shader_shade_mesh(ShaderObject *self, PyObject *args, PyObject 
     }
     if (occ_obj != Py_None && parse_scene(self, occ_obj, bounce_obj, np, &scene, &bb) < 0)
         goto done;
-    if (parse_colour(self, colour_obj, np, &table, &colour, &rgb) < 0)
+    if (parse_colour(self, colour_obj, np, per_vertex_material(self, colour_obj, rough_obj, metal_obj), &table,
+                     &colour, &rgb) < 0)
         goto done;
     float *out;
     if (out_obj == Py_None) {
@@ -773,10 +857,14 @@ static PyObject *Shader_shade_mesh(ShaderObject *self, PyObject *args, PyObject 
     if (claim(self) < 0)
         goto fail;
     claimed = 1;
-    if (occ_obj != Py_None && own_bounce(self, nb.buf, np, &scene, rgb ? &colour : NULL, &light) < 0)
+    wenv_family_rows family_rows;
+    const wenv_family_rows *family;
+    if (ensure_family(self, colour_obj, rough_obj, metal_obj, np, &family_rows, &family) < 0)
+        goto fail;
+    if (occ_obj != Py_None && own_bounce(self, nb.buf, np, &scene, rgb ? &colour : NULL, family, &light) < 0)
         goto fail;
     if (shade_visible(self, nb.buf, views, np, visible, count, occ_obj != Py_None ? &scene : NULL,
-                      rgb ? &colour : NULL, first, budget, out, &next) < 0)
+                      rgb ? &colour : NULL, family, first, budget, out, &next) < 0)
         goto fail;
     self->visible = cull ? (Py_ssize_t)count : -1;
     self->next_vertex = (Py_ssize_t)next;
@@ -917,7 +1005,8 @@ static PyObject *Shader_get_stats(ShaderObject *self, void *closure)
 
 static PyMethodDef Shader_methods[] = {
     {"shade", (PyCFunction)(void (*)(void))Shader_shade, METH_VARARGS | METH_KEYWORDS,
-     "shade(normals, view_dirs, *, occlusion=None, bounce='self', base_color=None)\n--\n\nLinear RGB radiance (float32, n x 3) for "
+     "shade(normals, view_dirs, *, occlusion=None, bounce='self', base_color=None, roughness=None, metallic=None)"
+     "\n--\n\nLinear RGB radiance (float32, n x 3) for "
      "world-space normals and view directions (surface towards eye), float32 (n, 3); view_dirs may be one (3,) "
      "vector for all.  occlusion (a wenv.Occlusion made for these vertices) shades with the scene in the way: "
      "its blocked directions hide the environment, the exact lights are tested along their own rays, and the "
@@ -928,15 +1017,20 @@ static PyMethodDef Shader_methods[] = {
      "is): each vertex's colour in place of the material's -- a Principled BSDF's Base Color, a Lambert's or "
      "Cook-Torrance's diffuse albedo -- at the cost of a multiply-add a vertex (it scales the Lambertian part "
      "alone); a ValueError says why for a material whose colour also enters its lobes (a metal, a rough "
-     "diffuse) or that has none (a measured table).  Every method."},
+     "diffuse) or that has none (a measured table).  Every method.\n\nroughness, metallic (float32 (n,), clamped to "
+     "[0, 1] as Cycles clamps them): each vertex's Roughness and Metallic in place of a Principled material's "
+     "(a texture's values).  Metallic is exact (Cycles mixes the metal in linearly); a roughness of at most 8 "
+     "values is exact, a smoother one mixes materials at roughness levels 1/24 apart, the exact lights read "
+     "at each vertex's own roughness (within 1 % of each vertex's own material).  The members are made "
+     "once and kept: a new view costs each vertex two members' reads.  Wavelet methods only."},
     {"diffuse_light", (PyCFunction)(void (*)(void))Shader_diffuse_light, METH_VARARGS | METH_KEYWORDS,
-     "diffuse_light(normals, *, occlusion=None, base_color=None)\n--\n\nThe light (radiance, float32 n x 3) each vertex sends "
+     "diffuse_light(normals, *, occlusion=None, base_color=None, roughness=None, metallic=None)\n--\n\nThe light (radiance, float32 n x 3) each vertex sends "
      "back to the surfaces it blocks (shade's bounce), as if diffuse: its albedo head-on (the Lambertian "
      "part's and the lobes') over pi times its irradiance, with its shadows when occlusion is given.  "
-     "Wavelet methods only."},
+     "Wavelet methods only; base_color, roughness and metallic as shade's."},
     {"shade_mesh", (PyCFunction)(void (*)(void))Shader_shade_mesh, METH_VARARGS | METH_KEYWORDS,
      "shade_mesh(positions, normals, eye, *, cull=False, view_projection=None, out=None, first=0, budget=None, "
-     "occlusion=None, bounce='self', base_color=None)\n--\n\n"
+     "occlusion=None, bounce='self', base_color=None, roughness=None, metallic=None)\n--\n\n"
      "Shade vertices seen from a perspective eye position.  cull=True shades only what the eye sees: "
      "vertices whose normal faces it and, given view_projection (the viewport's 4 x 4 world-to-clip "
      "matrix, row-major: Blender's region_3d.perspective_matrix), those inside its frustum; the rows of "
@@ -950,12 +1044,13 @@ static PyMethodDef Shader_methods[] = {
      "over a fast one's result: out = fast.shade_mesh(...); then accurate.shade_mesh(..., out=out, "
      "first=k, budget=0.05) until k reaches the count.\n\n"
      "occlusion and bounce shade with the scene in the way, as shade's (the occlusion made for these "
-     "positions and normals)."},
+     "positions and normals); base_color, roughness and metallic as shade's."},
     {"set_environment", (PyCFunction)Shader_set_environment, METH_O,
      "set_environment(env)\n--\n\nNew lighting; rotation matrices are kept."},
     {"set_material", (PyCFunction)Shader_set_material, METH_O,
      "set_material(material)\n--\n\nNew BRDF; rotation matrices and lighting slices are kept.  The wavelet methods "
-     "keep the last four materials set: one of them set again (equal in every value) makes nothing anew."},
+     "keep the last materials set (up to 40 within 768 MB): one of them set again (equal in every value) makes "
+     "nothing anew."},
     {NULL, NULL, 0, NULL},
 };
 

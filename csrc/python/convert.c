@@ -45,13 +45,14 @@ PyObject *wenv_py_raise(const wenv_error *err)
     return NULL;
 }
 
-int wenv_py_get_vec3_array(PyObject *obj, const char *name, int require_nonzero, Py_buffer *view,
-                           size_t *n, int *single)
+/* A C-contiguous float32 buffer of `obj` into *view (released by the caller), or -1 with a TypeError
+ * naming `name` and the shape it should have. */
+static int get_float32_buffer(PyObject *obj, const char *name, const char *shape, Py_buffer *view)
 {
     if (PyObject_GetBuffer(obj, view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0) {
         PyErr_Clear();
-        PyErr_Format(PyExc_TypeError, "%s must be a C-contiguous float32 array of shape (n, 3), got %.100s",
-                     name, Py_TYPE(obj)->tp_name);
+        PyErr_Format(PyExc_TypeError, "%s must be a C-contiguous float32 array of shape %s, got %.100s", name, shape,
+                     Py_TYPE(obj)->tp_name);
         return -1;
     }
     const char *fmt = view->format ? view->format : "B";
@@ -63,6 +64,14 @@ int wenv_py_get_vec3_array(PyObject *obj, const char *name, int require_nonzero,
         PyBuffer_Release(view);
         return -1;
     }
+    return 0;
+}
+
+int wenv_py_get_vec3_array(PyObject *obj, const char *name, int require_nonzero, Py_buffer *view,
+                           size_t *n, int *single)
+{
+    if (get_float32_buffer(obj, name, "(n, 3)", view) < 0)
+        return -1;
     int is_single = view->ndim == 1 && view->shape[0] == 3;
     if (!is_single && !(view->ndim == 2 && view->shape[1] == 3)) {
         PyErr_Format(PyExc_ValueError, "%s must have shape (n, 3)", name);
@@ -332,6 +341,18 @@ float *wenv_py_base_colours(PyObject *obj, size_t n)
 done:
     PyBuffer_Release(&cb);
     return rgb;
+}
+
+int wenv_py_get_vertex_values(PyObject *obj, const char *name, size_t n, Py_buffer *view)
+{
+    if (get_float32_buffer(obj, name, "(n,)", view) < 0)
+        return -1;
+    if (view->ndim != 1 || (size_t)view->shape[0] != n) {
+        PyErr_Format(PyExc_ValueError, "%s must have shape (%zu,): one value per vertex", name, n);
+        PyBuffer_Release(view);
+        return -1;
+    }
+    return 0;
 }
 
 wenv_progress wenv_py_progress(wenv_py_progress_bridge *bridge)

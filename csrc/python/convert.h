@@ -84,5 +84,8 @@ wenv_progress wenv_py_progress(wenv_py_progress_bridge *bridge);
  * [0, 1] as a material clamps its own (PyMem_Free it).  NULL with a ValueError or TypeError naming
  * base_color. */
 float *wenv_py_base_colours(PyObject *obj, size_t n);
+/* One float32 value per vertex (1-D, n of them) from `obj` named `name`: a view of its buffer into
+ * *view (released by the caller), or -1 with TypeError/ValueError set. */
+int wenv_py_get_vertex_values(PyObject *obj, const char *name, size_t n, Py_buffer *view);
 
 #endif

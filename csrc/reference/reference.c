@@ -232,3 +232,112 @@ wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, con
         return wenv_error_set(err, WENV_ERR_CANCELLED, "reference cancelled");
     return WENV_OK;
 }
+
+/* ---- a material per vertex ---- */
+
+/* A vertex's material: roughness, metallic and, where the colour enters its metal, its colour. */
+typedef struct {
+    float v[5];
+    size_t i;
+} vertex_key;
+
+static int compare_keys(const void *a, const void *b)
+{
+    const vertex_key *x = a, *y = b;
+    for (int k = 0; k < 5; k++)
+        if (x->v[k] != y->v[k])
+            return x->v[k] < y->v[k] ? -1 : 1;
+    return (x->i > y->i) - (x->i < y->i);
+}
+
+static int same_material(const vertex_key *a, const vertex_key *b) { return memcmp(a->v, b->v, sizeof a->v) == 0; }
+
+/* One group's progress as a share of the whole. */
+typedef struct {
+    const wenv_progress *outer;
+    double before, share;
+} group_progress;
+
+static int report_group(void *ctx, double fraction)
+{
+    const group_progress *g = ctx;
+    return g->outer->report(g->outer->ctx, g->before + g->share * fraction);
+}
+
+static float clamp01f(float x) { return x < 0.0f ? 0.0f : (x > 1.0f ? 1.0f : x); }
+
+wenv_status wenv_reference_per_vertex(const wenv_envmap *env, const wenv_material *mat, const float *normals,
+                                      const float *views, size_t n, const wenv_occluders *occ, const float *positions,
+                                      const float *bounce, const float *base_color, const float *roughness,
+                                      const float *metallic, float *out, const wenv_progress *progress,
+                                      wenv_error *err)
+{
+    const wenv_principled_inputs *in = wenv_principled_inputs_of(mat);
+    /* a metal's colour is its Fresnel's: each colour its own material */
+    int colour_in_metal = base_color && in && (in->metallic > 0.0 || metallic);
+    if (!roughness && !metallic && !colour_in_metal)
+        return wenv_reference(env, mat, normals, views, n, occ, positions, bounce, base_color, out, progress, err);
+    if (!in)
+        return wenv_error_set(err, WENV_ERR_VALUE,
+                              "a Roughness or Metallic per vertex needs a Principled material (wenv.Principled), not %s",
+                              wenv_material_kind_name(mat));
+    for (size_t i = 0; i < n; i++) {
+        if (roughness && !isfinite(roughness[i]))
+            return wenv_error_set(err, WENV_ERR_VALUE, "roughness[%zu] is %g: a vertex's roughness must be finite", i,
+                                  (double)roughness[i]);
+        if (metallic && !isfinite(metallic[i]))
+            return wenv_error_set(err, WENV_ERR_VALUE, "metallic[%zu] is %g: a vertex's metallic must be finite", i,
+                                  (double)metallic[i]);
+    }
+    vertex_key *key = malloc((n ? n : 1) * sizeof *key);
+    /* a group's normals, views, positions, colours and radiance */
+    float *work = malloc((n ? n : 1) * 15 * sizeof(float));
+    if (!key || !work) {
+        free(key);
+        free(work);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the reference");
+    }
+    for (size_t i = 0; i < n; i++) {
+        key[i] = (vertex_key){{roughness ? clamp01f(roughness[i]) : (float)in->roughness,
+                               metallic ? clamp01f(metallic[i]) : (float)in->metallic, 0.0f, 0.0f, 0.0f},
+                              i};
+        for (int c = 0; colour_in_metal && c < 3; c++)
+            key[i].v[2 + c] = clamp01f(base_color[3 * i + (size_t)c]);
+    }
+    qsort(key, n, sizeof *key, compare_keys);
+    wenv_status st = WENV_OK;
+    for (size_t a = 0, b; a < n && !st; a = b) {
+        for (b = a + 1; b < n && same_material(&key[a], &key[b]);)
+            b++;
+        size_t count = b - a;
+        float *nrm = work, *vw = work + 3 * count, *pos = work + 6 * count, *rgb = work + 9 * count;
+        float *o = work + 12 * count;
+        for (size_t k = 0; k < count; k++) {
+            size_t i = key[a + k].i;
+            memcpy(nrm + 3 * k, normals + 3 * i, 3 * sizeof(float));
+            memcpy(vw + 3 * k, views + 3 * i, 3 * sizeof(float));
+            if (positions)
+                memcpy(pos + 3 * k, positions + 3 * i, 3 * sizeof(float));
+            if (base_color)
+                memcpy(rgb + 3 * k, base_color + 3 * i, 3 * sizeof(float));
+        }
+        wenv_principled_inputs at = *in;
+        at.roughness = key[a].v[0];
+        at.metallic = key[a].v[1];
+        for (int c = 0; colour_in_metal && c < 3; c++)
+            at.base_color[c] = key[a].v[2 + c];
+        wenv_material *group_mat;
+        if ((st = wenv_principled_create(&group_mat, &at, err)))
+            break;
+        group_progress gp = {progress, (double)a / (double)n, (double)count / (double)n};
+        wenv_progress inner = {progress && progress->report ? report_group : NULL, &gp};
+        st = wenv_reference(env, group_mat, nrm, vw, count, occ, positions ? pos : NULL, bounce,
+                            base_color && !colour_in_metal ? rgb : NULL, o, &inner, err);
+        wenv_material_free(group_mat);
+        for (size_t k = 0; !st && k < count; k++)
+            memcpy(out + 3 * key[a + k].i, o + 3 * k, 3 * sizeof(float));
+    }
+    free(key);
+    free(work);
+    return st;
+}

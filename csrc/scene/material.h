@@ -138,6 +138,14 @@ wenv_status wenv_material_diffuse_per_colour_table(const wenv_material *mat, wen
 wenv_status wenv_material_diffuse_per_colour_at(const wenv_material *mat, double cos_v, double rgb[3],
                                                 wenv_error *err);
 
+/* A metal's colour as a mix of itself in black and in white: for a Principled BSDF at Metallic 1 with no
+ * coat or sheen over it, the weights per channel (w_black, w_white) that make it at Base Color
+ * `colour` (clamped to [0, 1]) from the same material at Base Color 0 and at 1, for a view at cos_v.
+ * Exact (to the Fresnel's clamp at 0): its F82-tint Fresnel is linear in the colour, and its energy
+ * compensation a factor of the colour and the view alone.  0 (nothing written) for other materials. */
+int wenv_material_metal_colour(const wenv_material *mat, double cos_v, const double colour[3], double w_black[3],
+                               double w_white[3]);
+
 /* The glossy lobes: how many, and each one's microfacet shape (see above). */
 size_t wenv_material_lobe_count(const wenv_material *mat);
 const wenv_lobe *wenv_material_lobe(const wenv_material *mat, size_t i);

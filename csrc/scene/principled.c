@@ -659,7 +659,12 @@ wenv_status wenv_principled_create(wenv_material **out, const wenv_principled_in
             l->fss[k] = p->f0_metal[k] + (1.0 - p->f0_metal[k]) / 21.0 - p->b_metal[k] / 126.0;
             l->f0_est[k] = p->f0_metal[k];
         }
-        add_lobe(p, shapes, LOBE_METAL, in->roughness, in->multiscatter, p->base);
+        /* the shape's colour says what the lobe reflects: a black metal still reflects its Fresnel's
+         * rim (its mean, Fss), so that what sizes and keeps lobes by it does not drop it */
+        double shape_colour[3];
+        for (int k = 0; k < 3; k++)
+            shape_colour[k] = fmax(p->base[k], l->fss[k]);
+        add_lobe(p, shapes, LOBE_METAL, in->roughness, in->multiscatter, shape_colour);
         l->ior_table = 0;
         l->z = 0.5; /* Cycles' estimate reads the Schlick table there (exponent about 5) */
     }
@@ -719,6 +724,49 @@ wenv_status wenv_principled_create(wenv_material **out, const wenv_principled_in
     }
     (*out)->shared = &p->shared;
     return WENV_OK;
+}
+
+/* The metal's Fresnel mean (Kulla & Conty's Fss) at F0 = f0 with F82 tint `tint`. */
+static double metal_fss(double f0, double tint)
+{
+    /* per vertex and channel: (6/7)^5 multiplied out rather than a pow() call */
+    const double f6_7 = 6.0 / 7.0, f5 = f6_7 * f6_7 * f6_7 * f6_7 * f6_7;
+    double b = tint >= 1.0 ? 0.0 : (f0 + (1.0 - f0) * f5) * (7.0 / (f5 * f6_7)) * (1.0 - tint);
+    return f0 + (1.0 - f0) / 21.0 - b / 126.0;
+}
+
+int wenv_material_metal_colour(const wenv_material *mat, double cos_v, const double colour[3], double w_black[3],
+                               double w_white[3])
+{
+    if (mat->kind != &PRINCIPLED)
+        return 0;
+    const principled *p = model_of(mat);
+    const lobe_model *metal = NULL;
+    for (size_t i = 0; i < p->n; i++) {
+        if (p->lobe[i].role == LOBE_METAL)
+            metal = &p->lobe[i];
+        else if (p->lobe[i].role == LOBE_SHEEN || p->lobe[i].role == LOBE_COAT)
+            return 0; /* a layer over the metal takes no part in its colour */
+    }
+    if (!metal || p->in.metallic < 1.0)
+        return 0;
+    double mu = clamp01(cos_v), missing = 0.0, eavg = 1.0;
+    if (metal->compensate) {
+        double e = fmax(read2(wenv_ggx_E, 32, 32, metal->rough, mu), 1e-6);
+        missing = (1.0 - e) / e;
+        eavg = read1(wenv_ggx_Eavg, 32, metal->rough, 1);
+    }
+    for (int k = 0; k < 3; k++) {
+        double tint = fmin(p->in.specular_tint[k], 1.0), f0 = clamp01(colour[k]);
+        double c[3], at[3] = {0.0, 1.0, f0};
+        for (int j = 0; j < 3; j++) { /* the compensation at F0 = 0, 1 and the colour */
+            double fss = metal_fss(at[j], tint);
+            c[j] = 1.0 + fss * eavg / (1.0 - fss * (1.0 - eavg)) * missing;
+        }
+        w_black[k] = (1.0 - f0) * c[2] / c[0];
+        w_white[k] = f0 * c[2] / c[1];
+    }
+    return 1;
 }
 
 const wenv_principled_inputs *wenv_principled_inputs_of(const wenv_material *mat)

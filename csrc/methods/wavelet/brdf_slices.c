@@ -23,7 +23,7 @@ void wenv_wavelet_material_free(wenv_wavelet_material *m)
     if (!m)
         return;
     wenv_material_free(m->mat);
-    free(m->lobe_cos_h_min);
+    wenv_light_lobes_free(&m->light);
     free(m->albedo);
     free(m->view_inv_albedo);
     wenv_grazing_rule_free(m->grazing_rule);
@@ -223,31 +223,6 @@ static void brdf_slice(const wenv_wavelet *wavelet, const wenv_material *mat, in
             ;
         integrate_texels(mat, wo, near ? &wavelet->fine : &wavelet->fine_coarse, t, end, fcos, cap, slice);
     }
-}
-
-/* Per lobe, the n.h below which it reflects nothing visible (wenv_material_lobe_cos_h_min): a direct
- * light there adds nothing, and skipping it keeps the lights cheap per vertex. */
-static wenv_status lobe_cutoffs(wenv_wavelet_material *m, const wenv_material *mat, wenv_error *err)
-{
-    size_t n_lobes = wenv_material_lobe_count(mat);
-    m->lobe_cos_h_min = malloc((n_lobes ? n_lobes : 1) * sizeof(float));
-    if (!m->lobe_cos_h_min)
-        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the material");
-    for (size_t k = 0; k < n_lobes; k++)
-        m->lobe_cos_h_min[k] = (float)wenv_material_lobe_cos_h_min(mat, k);
-    /* A half-vector theta_h from the normal turns the mirror direction by at most 2 theta_h. */
-    double theta_h = 0.0;
-    for (size_t k = 0; k < n_lobes; k++)
-        theta_h = fmax(theta_h, acos(fmax(-1.0, fmin(1.0, (double)m->lobe_cos_h_min[k]))));
-    m->lobe_m_min = fmin(1.0, wenv_material_lobe_width(mat));
-    m->mirror_centred = wenv_material_mirror_centred(mat);
-    m->lobes_modelled = m->mirror_centred && wenv_material_lobes_follow_shapes(mat);
-    m->light_cone_cos = 2.0 * theta_h >= M_PI ? -1.0 : cos(2.0 * theta_h);
-    if (m->lobes_modelled)
-        wenv_lights_peak_table(mat, m->lobe_m_min, m->lobe_peak);
-    else if (n_lobes)
-        wenv_lights_envelope_table(mat, m->lobe_envelope);
-    return WENV_OK;
 }
 
 /* The specular lobes' directional albedo over cos(view), and its inverse at each view sample.
@@ -502,7 +477,8 @@ wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material
         memcpy(m->brdf_idx + m->brdf_start[j], all_idx + j * keep, counts[j] * sizeof(uint32_t));
         memcpy(m->brdf_rgb + 3 * m->brdf_start[j], all_rgb + j * keep * 3, counts[j] * 3 * sizeof(float));
     }
-    if (wenv_material_copy(&m->mat, mat, err) || lobe_cutoffs(m, mat, err) || albedo_tables(wavelet, m, mat, err)) {
+    if (wenv_material_copy(&m->mat, mat, err) || wenv_light_lobes_make(&m->light, m->mat, err) ||
+        albedo_tables(wavelet, m, mat, err)) {
         st = err->status;
         goto fail;
     }
@@ -513,6 +489,7 @@ wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material
     wenv_material_diffuse_table(mat, &m->diffuse);
     m->has_diffuse = wenv_diffuse_table_any(&m->diffuse);
     m->has_lobes = wenv_material_lobe_count(mat) > 0;
+    m->mirror_centred = wenv_material_mirror_centred(mat);
     carry_used_rows(wavelet->ns, wavelet->m, m);
     /* kept at the front, ahead of the others; the oldest go past the count or the bytes */
     if (wavelet->n_kept == WENV_WAVELET_KEPT_MATERIALS)

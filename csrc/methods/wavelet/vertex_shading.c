@@ -227,21 +227,17 @@ static void shade_vertex(const wenv_wavelet *wavelet, const vertex_taps *tp, con
             wenv_shadow_specular(&sh->vs, &wavelet->m->texel_reflection, sh->hidden, tp->v, a, s);
         }
     }
-    if (wenv_lights_count(wavelet->lights, 0)) {
-        if (wavelet->m->has_diffuse)
+    if (wenv_lights_count(wavelet->lights, 0) && !wavelet->lights_apart) {
+        /* the irradiance asked for is the light arriving, whatever this material reflects of it */
+        if (wavelet->m->has_diffuse || irr)
             lights_irradiance(wavelet, tp->n, sh, e);
         if (wavelet->m->has_lobes) {
-            wenv_lights_lobe lobe = {.alpha = wavelet->m->lobe_m_min,
-                                     .cone_cos = wavelet->m->light_cone_cos,
-                                     .modelled = wavelet->m->lobes_modelled,
-                                     .narrow = wavelet->m->lobe_m_min < wavelet->narrow_alpha,
-                                     .peak = wavelet->m->lobe_peak,
-                                     .envelope = wavelet->m->lobes_modelled ? NULL : wavelet->m->lobe_envelope};
+            wenv_lights_lobe lobe = wenv_light_lobes_walk(&wavelet->m->light, wavelet->narrow_alpha);
             /* the error allowed per cluster is against the vertex's radiance without the lights plus
              * what a uniform environment of the mean radiance would reflect (so that a vertex that
              * sees little of the rest still reads its lights to a tolerance the image notices) */
             float scale = s[0] + s[1] + s[2] + wavelet->mean_radiance * (a[0] + a[1] + a[2]);
-            wenv_lights_specular(wavelet->lights, wavelet->m->mat, wavelet->m->lobe_cos_h_min, &lobe, tp->n, tp->v,
+            wenv_lights_specular(wavelet->lights, wavelet->m->mat, wavelet->m->light.cos_h_min, &lobe, tp->n, tp->v,
                                  tp->cos_v, (float)wavelet->q.light_tolerance * scale, sh ? &sh->vs.lights : NULL, s);
         }
     }
@@ -690,5 +686,138 @@ wenv_status wenv_wavelet_diffuse_light(wenv_wavelet *wavelet, const float *norma
             return err->status;
     }
     diffuse_light(wavelet, normals, n, scene, out, irradiance);
+    return WENV_OK;
+}
+
+/* ---- each vertex lit through its own materials (method.h's shade_lights) ---------------------- */
+
+void wenv_wavelet_set_lights_apart(wenv_wavelet *wavelet, int apart) { wavelet->lights_apart = apart != 0; }
+
+void wenv_wavelet_palette_free(wenv_wavelet *wavelet)
+{
+    for (size_t i = 0; i < wavelet->n_palette; i++) {
+        if (wavelet->palette_made && wavelet->palette_made[i])
+            wenv_light_lobes_free(&wavelet->palette[i]);
+        if (wavelet->palette_mat)
+            wenv_material_free(wavelet->palette_mat[i]);
+    }
+    free(wavelet->palette_mat);
+    free(wavelet->palette);
+    free(wavelet->palette_made);
+    wavelet->palette_mat = NULL;
+    wavelet->palette = NULL;
+    wavelet->palette_made = NULL;
+    wavelet->n_palette = 0;
+}
+
+/* What the lights read of every palette entry a vertex reads (copies of the materials, kept while
+ * the palette's key holds). */
+static wenv_status ensure_palette(wenv_wavelet *wavelet, const wenv_vertex_lights *vl, size_t n, wenv_error *err)
+{
+    if (wavelet->palette && wavelet->palette_key != vl->palette_key)
+        wenv_wavelet_palette_free(wavelet);
+    if (!wavelet->palette) {
+        size_t np = vl->n_palette ? vl->n_palette : 1;
+        wavelet->palette_mat = calloc(np, sizeof *wavelet->palette_mat);
+        wavelet->palette = calloc(np, sizeof *wavelet->palette);
+        wavelet->palette_made = calloc(np, 1);
+        wavelet->n_palette = vl->n_palette;
+        wavelet->palette_key = vl->palette_key;
+        if (!wavelet->palette_mat || !wavelet->palette || !wavelet->palette_made) {
+            wenv_wavelet_palette_free(wavelet);
+            return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for %zu light materials", vl->n_palette);
+        }
+    }
+    size_t *todo = malloc((wavelet->n_palette ? wavelet->n_palette : 1) * sizeof *todo), ntodo = 0;
+    unsigned char *wanted = calloc(wavelet->n_palette ? wavelet->n_palette : 1, 1);
+    if (!todo || !wanted) {
+        free(todo);
+        free(wanted);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for %zu light materials", vl->n_palette);
+    }
+    for (size_t k = 0; k < WENV_VERTEX_LIGHTS_PICKS * n; k++) {
+        uint32_t p = vl->pick[k];
+        const float *w = vl->weight + 3 * k;
+        if ((w[0] != 0.0f || w[1] != 0.0f || w[2] != 0.0f) && !wavelet->palette_made[p] && !wanted[p]) {
+            wanted[p] = 1;
+            todo[ntodo++] = p;
+        }
+    }
+    free(wanted);
+    atomic_int failed = 0;
+    long long nt = (long long)ntodo;
+#pragma omp parallel for schedule(dynamic, 8)
+    for (long long e = 0; e < nt; e++) {
+        size_t p = todo[e];
+        wenv_error one = {0};
+        if (wenv_material_copy(&wavelet->palette_mat[p], vl->palette[p], &one) ||
+            wenv_light_lobes_make(&wavelet->palette[p], wavelet->palette_mat[p], &one)) {
+            atomic_store(&failed, 1);
+            continue;
+        }
+        wavelet->palette_made[p] = 1;
+    }
+    free(todo);
+    if (failed)
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for %zu light materials", vl->n_palette);
+    return WENV_OK;
+}
+
+static wenv_status check_lights(const wenv_vertex_lights *vl, size_t n, wenv_error *err)
+{
+    for (size_t k = 0; k < WENV_VERTEX_LIGHTS_PICKS * n; k++) {
+        if (vl->pick[k] >= vl->n_palette)
+            return wenv_error_set(err, WENV_ERR_VALUE, "vertex %zu picks a light material past the %zu made",
+                                  k / WENV_VERTEX_LIGHTS_PICKS, vl->n_palette);
+        for (int c = 0; c < 3; c++)
+            if (!isfinite(vl->weight[3 * k + (size_t)c]))
+                return wenv_error_set(err, WENV_ERR_VALUE, "vertex %zu weighs a light material by %g",
+                                      k / WENV_VERTEX_LIGHTS_PICKS, (double)vl->weight[3 * k + (size_t)c]);
+    }
+    return WENV_OK;
+}
+
+wenv_status wenv_wavelet_shade_lights(wenv_wavelet *wavelet, const float *normals, const float *views, size_t n,
+                                      const wenv_shadow_scene *scene, const wenv_vertex_lights *vl, float *out,
+                                      float *irradiance, wenv_error *err)
+{
+    if (!wavelet->have_env || !wavelet->m)
+        return wenv_error_set(err, WENV_ERR_VALUE, "the shader needs an environment and a material");
+    if (!wenv_lights_count(wavelet->lights, 0) || n == 0)
+        return WENV_OK;
+    if (check_lights(vl, n, err) || (scene && (check_scene(scene, n, err) || ensure_shadows(wavelet, scene, 1, err))) ||
+        ensure_palette(wavelet, vl, n, err))
+        return err->status;
+    float tolerance = (float)wavelet->q.light_tolerance;
+    long long nn = (long long)n;
+#pragma omp parallel for schedule(dynamic, 256)
+    for (long long i = 0; i < nn; i++) {
+        const float *a = normals + 3 * i, *b = views + 3 * i;
+        float in = 1.0f / sqrtf(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
+        float iv = 1.0f / sqrtf(b[0] * b[0] + b[1] * b[1] + b[2] * b[2]);
+        float nrm[3] = {a[0] * in, a[1] * in, a[2] * in}, v[3] = {b[0] * iv, b[1] * iv, b[2] * iv};
+        float cos_v = nrm[0] * v[0] + nrm[1] * v[1] + nrm[2] * v[2];
+        if (!(cos_v > 0.0f))
+            continue; /* black, as shade left it */
+        vertex_shadow sh;
+        const vertex_shadow *shp = vertex_shadow_at(wavelet, scene, (size_t)i, 0, &sh);
+        float *e = irradiance + 3 * i, *o = out + 3 * i;
+        lights_irradiance(wavelet, nrm, shp, e);
+        float rest = o[0] + o[1] + o[2];
+        for (int j = 0; j < WENV_VERTEX_LIGHTS_PICKS; j++) {
+            size_t at = WENV_VERTEX_LIGHTS_PICKS * (size_t)i + (size_t)j;
+            const float *w = vl->weight + 3 * at;
+            const wenv_light_lobes *lobes = &wavelet->palette[vl->pick[at]];
+            if ((w[0] == 0.0f && w[1] == 0.0f && w[2] == 0.0f) || !lobes->has_lobes)
+                continue;
+            wenv_lights_lobe walk = wenv_light_lobes_walk(lobes, wavelet->narrow_alpha);
+            /* against the rest and a uniform mean's reflection, as shade_vertex reads them */
+            float scale = rest + wavelet->mean_radiance * wenv_light_lobes_albedo_sum(lobes, cos_v), s[3] = {0, 0, 0};
+            wenv_lights_specular(wavelet->lights, lobes->mat, lobes->cos_h_min, &walk, nrm, v, cos_v, tolerance * scale,
+                                 shp ? &shp->vs.lights : NULL, s);
+            for (int c = 0; c < 3; c++)
+                o[c] += w[c] * s[c];
+        }
+    }
     return WENV_OK;
 }

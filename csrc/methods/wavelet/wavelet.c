@@ -78,6 +78,7 @@ void wenv_wavelet_free(wenv_wavelet *wavelet)
     free(wavelet->shadow_lights);
     free(wavelet->slice_ready);
     free(wavelet->slice_need);
+    wenv_wavelet_palette_free(wavelet);
     wenv_wavelet_free_quadrature(wavelet);
     for (size_t i = 0; i < wavelet->n_kept; i++)
         wenv_wavelet_material_free(wavelet->kept[i]);

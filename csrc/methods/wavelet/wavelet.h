@@ -65,8 +65,8 @@ typedef struct {
  * most WENV_WAVELET_KEPT_BYTES between them: setting one of them again (meshes of a few materials
  * shaded in turn) costs nothing while the lighting holds, and its table rows as they are needed
  * after a new lighting. */
-#define WENV_WAVELET_KEPT_MATERIALS 4
-#define WENV_WAVELET_KEPT_BYTES ((size_t)256 << 20)
+#define WENV_WAVELET_KEPT_MATERIALS 40
+#define WENV_WAVELET_KEPT_BYTES ((size_t)768 << 20)
 
 /* Slicing keeps its resampling operators (slice_operators.h) while they take at most this and an
  * eighth of the shader's memory budget: all of `default`'s (47 MB), 70 % of `high`'s (~185 MB). */
@@ -116,6 +116,11 @@ wenv_status wenv_wavelet_shade(wenv_wavelet *sh, const float *normals, const flo
 wenv_status wenv_wavelet_shade_shadowed(wenv_wavelet *sh, const float *normals, const float *views, size_t n,
                                         const wenv_shadow_scene *scene, float *out, float *irradiance,
                                         wenv_error *err);
+/* method.h's set_lights_apart and shade_lights. */
+void wenv_wavelet_set_lights_apart(wenv_wavelet *sh, int apart);
+wenv_status wenv_wavelet_shade_lights(wenv_wavelet *sh, const float *normals, const float *views, size_t n,
+                                      const wenv_shadow_scene *scene, const wenv_vertex_lights *lights, float *out,
+                                      float *irradiance, wenv_error *err);
 /* The diffuse light leaving each vertex (method.h's diffuse_light). */
 wenv_status wenv_wavelet_diffuse_light(wenv_wavelet *sh, const float *normals, size_t n,
                                        const wenv_shadow_scene *scene, float *out, float *irradiance,

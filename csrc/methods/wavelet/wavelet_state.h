@@ -8,6 +8,7 @@
 
 #include "methods/wavelet/grazing.h"
 #include "methods/wavelet/irradiance.h"
+#include "methods/wavelet/light_lobes.h"
 #include "methods/wavelet/lights.h"
 #include "methods/wavelet/rotation.h"
 #include "methods/wavelet/shadows.h"
@@ -21,13 +22,8 @@
 typedef struct {
     wenv_material *mat;      /* for the direct lights, and to recognise the material set again */
     size_t serial;           /* the shader's count of materials made, at this one's making */
-    float *lobe_cos_h_min;   /* per lobe: below this n.h its D is negligible (< 1e-7 of its peak) */
-    double light_cone_cos;   /* lights farther than this from the mirror direction miss every lobe */
-    double lobe_m_min;       /* the narrowest lobe's roughness (how finely the lights are read) */
     int mirror_centred;      /* normal samples keep the vertex's mirror direction (else its view) */
-    int lobes_modelled;      /* mirror-centred lobes that follow their shapes (lights.h) */
-    float lobe_peak[WENV_LIGHT_PEAK_SAMPLES + 1]; /* modelled lobes: wenv_lights_peak_table */
-    float lobe_envelope[(WENV_LIGHT_PEAK_SAMPLES + 1) * WENV_LIGHT_ENVELOPE_BINS]; /* the others' bound */
+    wenv_light_lobes light;  /* what the exact lights read of it */
     float *albedo;           /* ALBEDO_N x 3: specular albedo at cos(view) = WENV_GRAZING_Z .. 1 */
     float *view_inv_albedo;  /* nv x 3: 1 / albedo of each view sample (0 where the albedo is 0) */
     wenv_diffuse_table diffuse; /* the Lambertian part's albedo / pi over the view's cosine */
@@ -104,6 +100,15 @@ struct wenv_wavelet {
     float *shadow_hidden;     /* hits x 3 */
     float *shadow_e_hidden;   /* masks x 3 */
 
+    /* a material that varies per vertex (method.h's shade_lights): whether shade leaves the lights
+     * out, and what the lights read of each vertex's materials, kept while the palette's key holds */
+    int lights_apart;
+    wenv_material **palette_mat; /* copies */
+    wenv_light_lobes *palette;
+    unsigned char *palette_made;
+    size_t n_palette;
+    uint64_t palette_key;
+
     /* materials: the current one first, then those set before it, most recent first */
     wenv_wavelet_material *kept[WENV_WAVELET_KEPT_MATERIALS];
     size_t n_kept;
@@ -153,6 +158,9 @@ static inline size_t wenv_wavelet_table_bytes(const wenv_wavelet *wavelet)
 /* table_rows.c: the table rows of the n normal samples rows[] (their lighting slices made). */
 wenv_status wenv_wavelet_fill_rows(wenv_wavelet *wavelet, const size_t *rows, size_t n, wenv_error *err);
 wenv_status wenv_wavelet_remake_ready(wenv_wavelet *wavelet, int lighting, wenv_error *err);
+
+/* vertex_shading.c: frees what the lights keep of a palette. */
+void wenv_wavelet_palette_free(wenv_wavelet *wavelet);
 
 /* wavelet.c: makes the grazing path's pyramid of the lighting if the current material reads it and
  * it is not made: a diffuse material never pays for it, and one with lobes made current later

@@ -1,0 +1,394 @@
+"""Shader nodes between Image Textures and a Principled BSDF's input, evaluated at each shaded vertex as
+Cycles' SVM evaluates them (intern/cycles/kernel/svm/): Image Texture, RGB and Value, Mix (and the
+older MixRGB) with its common blend modes, Math, Invert, ColorRamp, RGB Curves, Hue/Saturation/Value,
+Gamma, Brightness/Contrast, Separate and Combine Color (RGB), and on the way to a texture's Vector the
+Texture Coordinate's and UV Map's UVs through Mapping and Vector Math.  Colours are (n, 3) float32,
+values (n,), at the shaded rows; a texture's UVs are read at the face corners and its samples averaged
+to the rows.  Any other node, output or mode raises Unsupported naming it, so that the caller uses the
+socket's unlinked value and says so: nothing is used silently."""
+import math
+
+import numpy as np
+
+from . import world
+
+# How deep a chain may go: a loop of links (which Blender marks invalid, but a script may leave) ends
+# here rather than in Python's recursion limit.
+MAX_DEPTH = 64
+
+# Blender's scene-linear (Rec.709) luminance, summing to 1 so that white reads 1
+LUMINANCE = np.array([0.2126729, 0.7151522, 0.0721750]) / 1.0000001
+
+# The Image Texture settings read as Cycles reads them; the others are read as Linear (noted).
+INTERPOLATIONS = ("Linear", "Closest")
+
+class Unsupported(Exception):
+    """A node, output or setting the evaluation does not read (its message says which)."""
+
+
+def luminance(rgb):
+    """A colour's luminance (float32), as Cycles converts a colour into a value."""
+    return (np.asarray(rgb, np.float64) @ LUMINANCE).astype(np.float32)
+
+
+def source(socket):
+    """(node, output socket) feeding `socket` through reroutes, or None when unlinked or muted."""
+    while socket.is_linked:
+        link = socket.links[0]
+        if not link.is_valid or link.is_muted:
+            return None
+        if link.from_node.bl_idname != "NodeReroute":
+            return link.from_node, link.from_socket
+        socket = link.from_node.inputs[0]
+    return None
+
+
+def _fed(socket, depth):
+    """source(socket) for a chain `depth` nodes deep; None when unlinked (its own value is read)."""
+    if depth > MAX_DEPTH:
+        raise Unsupported("nodes in a cycle (or a chain deeper than 64)")
+    fed = source(socket)
+    if fed is None and socket.is_linked:
+        raise Unsupported("a muted or invalid link")
+    return fed
+
+
+def _input(node, identifier):
+    return next(s for s in node.inputs if s.identifier == identifier)
+
+
+class Evaluator:
+    """Evaluates sockets for one object's shaded rows.  `texture(node, uv, footprint)` samples an
+    Image Texture node at the corners (textures.py gives it); `uv(uv_map)` gives (uv, footprint,
+    rows) of the mesh's UV map (None: the active render one), or None without one."""
+
+    def __init__(self, count, uv, texture, checking=False):
+        self.count = count
+        self._uv = uv
+        self._texture = texture
+        self.checking = checking  # only whether every node is read: no tables made, no texel read
+        self.textures = []  # the Image Texture nodes read
+        self.notes = []  # what of them is read otherwise than Cycles reads it
+
+    # -- conversions at sockets, as Cycles converts
+    def colour(self, socket, depth=0):
+        out = self.evaluate(socket, depth)
+        return out if out.ndim == 2 else np.repeat(out[:, None], 3, axis=1)
+
+    def value(self, socket, depth=0):
+        out = self.evaluate(socket, depth)
+        return luminance(out) if out.ndim == 2 else out
+
+    def evaluate(self, socket, depth=0):
+        """The socket's value at every row: its node's output, or its own (unlinked) value."""
+        fed = _fed(socket, depth)
+        if fed is None:
+            value = socket.default_value
+            if isinstance(value, float):
+                return np.full(self.count, value, np.float32)
+            return np.tile(np.float32(tuple(value)[:3]), (self.count, 1))
+        node, output = fed
+        method = getattr(self, "_" + node.bl_idname, None)
+        if method is None:
+            raise Unsupported(f"'{node.name}', a node wenv does not evaluate yet")
+        return method(node, output, depth + 1)
+
+    # -- sources
+    def _ShaderNodeTexImage(self, node, output, depth):
+        if output.name != "Color":
+            raise Unsupported(f"'{node.name}''s {output.name} output")
+        image = node.image
+        if image is None:
+            raise Unsupported(f"'{node.name}', which has no image")
+        if image.source not in ("FILE", "GENERATED"):
+            raise Unsupported(f"'{node.name}', whose {image.source.lower()} image wenv does not read yet")
+        if node.projection != "FLAT":
+            raise Unsupported(f"'{node.name}', whose {node.projection.lower()} projection wenv does not read yet")
+        uv, footprint, rows = self.vector(node.inputs["Vector"], depth)
+        self.textures.append(node)
+        if node.interpolation not in INTERPOLATIONS:
+            self.notes.append(f"'{node.name}': {node.interpolation} interpolation is read as Linear")
+        space = image.colorspace_settings.name
+        if not image.is_float and space not in world.SRGB_SPACES and space not in world.LINEAR_SPACES:
+            self.notes.append(f"'{node.name}': 8-bit colour space '{space}' is not decoded: its values are read as "
+                              "linear")
+        return self._texture(node, uv, footprint, rows)
+
+    def _ShaderNodeRGB(self, node, output, depth):
+        return np.tile(np.float32(tuple(output.default_value)[:3]), (self.count, 1))
+
+    def _ShaderNodeValue(self, node, output, depth):
+        return np.full(self.count, output.default_value, np.float32)
+
+    # -- colour and value operations
+    def _ShaderNodeMix(self, node, output, depth):
+        if node.data_type not in ("FLOAT", "RGBA"):
+            raise Unsupported(f"'{node.name}' mixing {node.data_type.lower()}s")
+        t = self.value(_input(node, "Factor_Float"), depth)
+        if node.clamp_factor:
+            t = np.clip(t, 0.0, 1.0)
+        if node.data_type == "FLOAT":
+            a, b = self.value(_input(node, "A_Float"), depth), self.value(_input(node, "B_Float"), depth)
+            return (a + t * (b - a)).astype(np.float32)
+        a, b = self.colour(_input(node, "A_Color"), depth), self.colour(_input(node, "B_Color"), depth)
+        out = _blend(node.name, node.blend_type, t[:, None], a, b)
+        return np.clip(out, 0.0, 1.0) if node.clamp_result else out
+
+    def _ShaderNodeMixRGB(self, node, output, depth):
+        t = np.clip(self.value(node.inputs["Fac"], depth), 0.0, 1.0)[:, None]
+        out = _blend(node.name, node.blend_type, t, self.colour(node.inputs["Color1"], depth),
+                     self.colour(node.inputs["Color2"], depth))
+        return np.clip(out, 0.0, 1.0) if node.use_clamp else out
+
+    def _ShaderNodeMath(self, node, output, depth):
+        args = [self.value(s, depth) for s in node.inputs[:3] if s.enabled]
+        out = _math(node.name, node.operation, *args)
+        return np.clip(out, 0.0, 1.0).astype(np.float32) if node.use_clamp else out.astype(np.float32)
+
+    def _ShaderNodeInvert(self, node, output, depth):
+        t = self.value(node.inputs["Fac"], depth)[:, None]
+        c = self.colour(node.inputs["Color"], depth)
+        return (c + t * ((1.0 - c) - c)).astype(np.float32)
+
+    def _ShaderNodeGamma(self, node, output, depth):
+        c = self.colour(node.inputs["Color"], depth)
+        g = self.value(node.inputs["Gamma"], depth)[:, None]
+        return np.where(c > 0.0, np.power(np.maximum(c, 0.0), g), c).astype(np.float32)
+
+    def _ShaderNodeBrightContrast(self, node, output, depth):
+        c = self.colour(node.inputs["Color"], depth)
+        bright = self.value(node.inputs["Bright"], depth)[:, None]
+        contrast = self.value(node.inputs["Contrast"], depth)[:, None]
+        return np.maximum((1.0 + contrast) * c + (bright - 0.5 * contrast), 0.0).astype(np.float32)
+
+    def _ShaderNodeHueSaturation(self, node, output, depth):
+        c = self.colour(node.inputs["Color"], depth)
+        hue, sat, val, fac = (self.value(node.inputs[k], depth) for k in ("Hue", "Saturation", "Value", "Fac"))
+        h, s, v = _rgb_to_hsv(c)
+        h = np.mod(h + hue + 0.5, 1.0)
+        s = np.clip(s * sat, 0.0, 1.0)
+        shifted = _hsv_to_rgb(h, s, v * val)
+        return np.maximum(c + fac[:, None] * (shifted - c), 0.0).astype(np.float32)
+
+    def _ShaderNodeValToRGB(self, node, output, depth):
+        t = np.clip(self.value(node.inputs["Fac"], depth), 0.0, 1.0)
+        if self.checking:
+            return np.zeros((self.count, 3) if output.name == "Color" else self.count, np.float32)
+        # the ramp read through Blender's own evaluation on a fine table, as Cycles bakes it to one
+        ramp = node.color_ramp
+        x = np.linspace(0.0, 1.0, 1025)
+        table = np.array([ramp.evaluate(float(p)) for p in x], np.float32)
+        column = range(3) if output.name == "Color" else (3,)
+        out = np.stack([np.interp(t, x, table[:, k]) for k in column], axis=1).astype(np.float32)
+        return out if output.name == "Color" else out[:, 0]
+
+    def _ShaderNodeRGBCurve(self, node, output, depth):
+        c = self.colour(node.inputs["Color"], depth)
+        fac = self.value(node.inputs["Fac"], depth)[:, None]
+        if self.checking:
+            return c
+        mapping = node.mapping
+        mapping.initialize()
+        lo, hi = -1.0, 2.0  # Cycles' table spans the curves' range; values outside extrapolate flat
+        x = np.linspace(lo, hi, 3073)
+        combined = np.array([mapping.evaluate(mapping.curves[3], float(p)) for p in x], np.float32)
+        out = np.empty_like(c)
+        for k in range(3):
+            curve = np.array([mapping.evaluate(mapping.curves[k], float(p)) for p in x], np.float32)
+            out[:, k] = np.interp(np.interp(c[:, k], x, combined), x, curve)
+        return (c + fac * (out - c)).astype(np.float32)
+
+    def _ShaderNodeSeparateColor(self, node, output, depth):
+        if node.mode != "RGB":
+            raise Unsupported(f"'{node.name}' separating {node.mode}")
+        return self.colour(node.inputs["Color"], depth)[:, ("Red", "Green", "Blue").index(output.name)].copy()
+
+    def _ShaderNodeSeparateRGB(self, node, output, depth):
+        return self.colour(node.inputs["Image"], depth)[:, ("R", "G", "B").index(output.name)].copy()
+
+    def _ShaderNodeCombineColor(self, node, output, depth):
+        if node.mode != "RGB":
+            raise Unsupported(f"'{node.name}' combining {node.mode}")
+        return np.stack([self.value(node.inputs[k], depth) for k in ("Red", "Green", "Blue")], axis=1)
+
+    def _ShaderNodeCombineRGB(self, node, output, depth):
+        return np.stack([self.value(node.inputs[k], depth) for k in ("R", "G", "B")], axis=1)
+
+    # -- a texture's Vector: UVs at the face corners, and what scales their footprint
+    def vector(self, socket, depth):
+        """(uv (corners, 2), footprint (corners,), rows) of a Vector input: the UV map a Texture
+        Coordinate's UV or a UV Map node names (unlinked: the active render one), through Mapping and
+        Vector Math nodes."""
+        fed = _fed(socket, depth)
+        if fed is None:
+            return self._uvs(None)
+        node, output = fed
+        if node.bl_idname == "ShaderNodeTexCoord" and output.name == "UV":
+            return self._uvs(None)
+        if node.bl_idname == "ShaderNodeUVMap":
+            return self._uvs(node.uv_map or None)
+        if node.bl_idname == "ShaderNodeMapping":
+            return self._mapping(node, depth)
+        if node.bl_idname == "ShaderNodeVectorMath":
+            return self._vector_math(node, depth)
+        what = f"'{node.name}''s {output.name}" if node.bl_idname == "ShaderNodeTexCoord" else f"'{node.name}'"
+        raise Unsupported(f"a texture's Vector from {what}, which wenv does not evaluate yet")
+
+    def _uvs(self, uv_map):
+        got = self._uv(uv_map)
+        if got is None:
+            raise MissingUV(uv_map)
+        uv, footprint, rows = got
+        return uv, footprint, rows
+
+    def _constant_vector(self, socket, what):
+        if socket.is_linked:
+            raise Unsupported(f"{what}, linked")
+        return np.array(tuple(socket.default_value), np.float64)
+
+    def _mapping(self, node, depth):
+        if node.vector_type not in ("POINT", "TEXTURE"):
+            raise Unsupported(f"'{node.name}' of type {node.vector_type.lower()}")
+        uv, footprint, rows = self.vector(node.inputs["Vector"], depth + 1)
+        loc = self._constant_vector(node.inputs["Location"], f"'{node.name}''s Location")
+        rot = self._constant_vector(node.inputs["Rotation"], f"'{node.name}''s Rotation")
+        scale = self._constant_vector(node.inputs["Scale"], f"'{node.name}''s Scale")
+        m = _euler_xyz(rot)
+        p = np.column_stack([uv.astype(np.float64), np.zeros(len(uv))])
+        if node.vector_type == "POINT":  # scale, rotate, then move
+            out = (p * scale) @ m.T + loc
+            stretch = math.sqrt(abs(scale[0] * scale[1]))
+        else:  # the inverse: the texture is moved, turned and scaled
+            out = ((p - loc) @ m) / np.where(scale == 0.0, 1.0, scale)
+            stretch = 1.0 / math.sqrt(abs(scale[0] * scale[1])) if scale[0] * scale[1] != 0.0 else 1.0
+        return out[:, :2].astype(np.float32), (footprint * stretch).astype(np.float32), rows
+
+    def _vector_math(self, node, depth):
+        ops = {"ADD": lambda a, b: a + b, "SUBTRACT": lambda a, b: a - b, "MULTIPLY": lambda a, b: a * b,
+               "DIVIDE": lambda a, b: np.where(b != 0.0, a / np.where(b != 0.0, b, 1.0), 0.0)}
+        if node.operation not in ops and node.operation != "SCALE":
+            raise Unsupported(f"'{node.name}' ({node.operation.lower()})")
+        uv, footprint, rows = self.vector(node.inputs[0], depth + 1)
+        if node.operation == "SCALE":
+            s = node.inputs["Scale"]
+            if s.is_linked:
+                raise Unsupported(f"'{node.name}''s Scale, linked")
+            return uv * s.default_value, footprint * abs(s.default_value), rows
+        b = self._constant_vector(node.inputs[1], f"'{node.name}''s second vector")[:2]
+        out = ops[node.operation](uv.astype(np.float64), b)
+        stretch = math.sqrt(abs(b[0] * b[1])) if node.operation == "MULTIPLY" else (
+            1.0 / math.sqrt(abs(b[0] * b[1])) if node.operation == "DIVIDE" and b[0] * b[1] != 0.0 else 1.0)
+        return out.astype(np.float32), (footprint * stretch).astype(np.float32), rows
+
+
+class MissingUV(Unsupported):
+    """The mesh has no UV map of that name (None: no render UV map)."""
+
+    def __init__(self, uv_map):
+        super().__init__(uv_map)
+        self.uv_map = uv_map
+
+
+def _euler_xyz(r):
+    """Blender's XYZ Euler rotation matrix (radians)."""
+    cx, cy, cz = np.cos(r)
+    sx, sy, sz = np.sin(r)
+    rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+    ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+    rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+    return rz @ ry @ rx
+
+
+def _blend(name, mode, t, a, b):
+    """Cycles' svm_mix for the blend modes it shares with most painting programs."""
+    if mode == "MIX":
+        out = a + t * (b - a)
+    elif mode == "ADD":
+        out = a + t * b
+    elif mode == "MULTIPLY":
+        out = a * (1.0 - t + t * b)
+    elif mode == "SUBTRACT":
+        out = a - t * b
+    elif mode == "SCREEN":
+        out = 1.0 - (1.0 - t + t * (1.0 - b)) * (1.0 - a)
+    elif mode == "DIVIDE":
+        out = np.where(b != 0.0, (1.0 - t) * a + t * a / np.where(b != 0.0, b, 1.0), a)
+    elif mode == "DIFFERENCE":
+        out = a + t * (np.abs(a - b) - a)
+    elif mode == "DARKEN":
+        out = a + t * (np.minimum(a, b) - a)
+    elif mode == "LIGHTEN":
+        out = a + t * (np.maximum(a, b) - a)
+    elif mode == "OVERLAY":
+        out = np.where(a < 0.5, a * (1.0 - t + 2.0 * t * b), 1.0 - (1.0 - t + 2.0 * t * (1.0 - b)) * (1.0 - a))
+    else:
+        raise Unsupported(f"'{name}' blending by {mode.lower().replace('_', ' ')}")
+    return out.astype(np.float32)
+
+
+def _safe_divide(a, b):
+    return np.where(b != 0.0, a / np.where(b != 0.0, b, 1.0), 0.0)
+
+
+def _math(name, op, a, b=None, c=None):
+    """Cycles' svm_math for its common operations (safe division and power as Cycles makes them)."""
+    simple = {
+        "ADD": lambda: a + b, "SUBTRACT": lambda: a - b, "MULTIPLY": lambda: a * b,
+        "DIVIDE": lambda: _safe_divide(a, b), "MULTIPLY_ADD": lambda: a * b + c,
+        "MINIMUM": lambda: np.minimum(a, b), "MAXIMUM": lambda: np.maximum(a, b),
+        "LESS_THAN": lambda: (a < b).astype(np.float32), "GREATER_THAN": lambda: (a > b).astype(np.float32),
+        "ABSOLUTE": lambda: np.abs(a), "SQRT": lambda: np.where(a > 0.0, np.sqrt(np.maximum(a, 0.0)), 0.0),
+        "ROUND": lambda: np.floor(a + 0.5), "FLOOR": lambda: np.floor(a), "CEIL": lambda: np.ceil(a),
+        "FRACT": lambda: a - np.floor(a), "SINE": lambda: np.sin(a), "COSINE": lambda: np.cos(a),
+        "SNAP": lambda: np.where(b != 0.0, np.floor(_safe_divide(a, b)) * b, 0.0),
+        "POWER": lambda: _power(a, b),
+    }
+    if op not in simple:
+        raise Unsupported(f"'{name}' ({op.lower().replace('_', ' ')})")
+    with np.errstate(all="ignore"):
+        return np.asarray(simple[op](), np.float32)
+
+
+def _power(a, b):
+    """Cycles' safe_powf: a negative base only to an integer power, else 0."""
+    whole = b == np.floor(b)
+    out = np.where(a >= 0.0, np.power(np.abs(a), b), np.where(whole, np.power(np.abs(a), b) * np.where(
+        np.mod(b, 2.0) == 1.0, -1.0, 1.0), 0.0))
+    return np.where(np.isfinite(out), out, 0.0)
+
+
+def _rgb_to_hsv(c):
+    r, g, b = c[:, 0], c[:, 1], c[:, 2]
+    v = np.max(c, axis=1)
+    delta = v - np.min(c, axis=1)
+    s = np.where(v != 0.0, delta / np.where(v != 0.0, v, 1.0), 0.0)
+    safe = np.where(delta != 0.0, delta, 1.0)
+    cr, cg, cb = (v - r) / safe, (v - g) / safe, (v - b) / safe
+    h = np.where(r == v, cb - cg, np.where(g == v, 2.0 + cr - cb, 4.0 + cg - cr)) / 6.0
+    h = np.where(h < 0.0, h + 1.0, h)
+    return np.where(s != 0.0, h, 0.0), s, v
+
+
+def _hsv_to_rgb(h, s, v):
+    h6 = np.where(h == 1.0, 0.0, h) * 6.0
+    i = np.floor(h6)
+    f = h6 - i
+    p, q, t = v * (1.0 - s), v * (1.0 - s * f), v * (1.0 - s * (1.0 - f))
+    i = i.astype(np.int64) % 6
+    r = np.choose(i, [v, q, p, p, t, v])
+    g = np.choose(i, [t, v, v, q, p, p])
+    b = np.choose(i, [p, p, t, v, v, q])
+    grey = s == 0.0
+    return np.stack([np.where(grey, v, r), np.where(grey, v, g), np.where(grey, v, b)], axis=1)
+
+
+def check(principled_socket):
+    """(True, notes) when every node feeding a Principled socket is evaluated (notes: what of its
+    textures is read otherwise than Cycles reads it), or (False, why not)."""
+    ev = Evaluator(1, lambda uv_map: (np.zeros((1, 2), np.float32), np.ones(1, np.float32), np.zeros(1, np.int64)),
+                   lambda node, uv, footprint, rows: np.zeros((1, 3), np.float32), checking=True)
+    try:
+        ev.evaluate(principled_socket)
+    except Unsupported as exc:
+        return False, str(exc)
+    return True, ev.notes

@@ -1,0 +1,88 @@
+/* A material whose Roughness and Metallic vary per vertex: a Principled BSDF read through textures.
+ *
+ * How (docs/python.md, "Roughness and Metallic per vertex"):
+ *  - Metallic enters a Principled BSDF linearly (Cycles weighs the metal by Metallic and what lies
+ *    under it by 1 - Metallic), so a vertex is exactly its mix of the material at Metallic 0 and at 1.
+ *  - Roughness changes the lobes' shape.  Where it takes a few values, each has its own member,
+ *    exactly.  Otherwise a vertex mixes the two members at the roughness levels around its own
+ *    (1 / WENV_FAMILY_FINEST apart), linearly.  A sun's highlight would blur that way (two highlights
+ *    of other widths are not one of the width between), so the part a method shades per vertex with
+ *    the BRDF itself (the wavelet methods' exact lights) is shaded apart, each vertex with a material
+ *    at its own roughness (to 1 / WENV_FAMILY_LIGHT_STEPS): only the rest of the lighting, smooth
+ *    against the levels' spacing, is interpolated.
+ *  - The Lambertian part is the members' mixed, applied once per vertex with a colour per vertex when
+ *    there is one (vertex_colour.h's irradiance).  A metal's colour is its Fresnel colour: a metal of a
+ *    colour per vertex is its mix, per channel and view, of the metal in black and in white
+ *    (wenv_material_metal_colour), exactly.
+ * Each member is an ordinary material the method keeps made (its slices and table rows), so a new view
+ * costs each vertex its two members' reads and one set of lights. */
+#ifndef WENV_MATERIAL_FAMILY_H
+#define WENV_MATERIAL_FAMILY_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "base/error.h"
+#include "methods/method.h"
+#include "scene/material.h"
+
+/* Roughness levels 0, 1/24, ..., 1: the interpolation stays within 1 % of each vertex's own material
+ * (0.05-0.88 % over the bundled HDRIs: docs/performance.md, "Roughness and Metallic per vertex")... */
+#define WENV_FAMILY_FINEST 24
+/* ... unless the levels a roughness spans, times the metallic sides, would be more members than this:
+ * the wavelet shader keeps 40 materials (WENV_WAVELET_KEPT_MATERIALS), and a family must fit whole or
+ * be made again at every view.  The levels are then 1/16, 1/12, 1/8 or 1/4 apart. */
+#define WENV_FAMILY_MAX_MEMBERS 36
+/* A Roughness of at most this many distinct values (a texture of a few flat regions) has a member at
+ * each, exactly, and no interpolation. */
+#define WENV_FAMILY_EXACT_LEVELS 8
+/* The lights' materials: Roughness to 1/8192 (a GGX peak at roughness 0.05 moves by 0.5 %). */
+#define WENV_FAMILY_LIGHT_STEPS 8192
+
+typedef struct wenv_material_family wenv_material_family;
+
+/* base: a Principled material (WENV_ERR_VALUE otherwise); roughness and metallic: n values each, or
+ * NULL for the material's own; finite (WENV_ERR_VALUE naming the first vertex that is not), clamped to
+ * [0, 1] as Cycles clamps them.  colour: whether the calls give a colour per vertex too (a metal then
+ * has members in black and in white).  Makes every member and light material the vertices read. */
+wenv_status wenv_material_family_create(wenv_material_family **out, const wenv_material *base, const float *roughness,
+                                        const float *metallic, size_t n, int colour, wenv_error *err);
+/* Whether a colour per vertex on `base` needs a family even with its own Roughness and Metallic: a
+ * Principled BSDF with Metallic above 0. */
+int wenv_material_family_needed_for_colour(const wenv_material *base);
+void wenv_material_family_free(wenv_material_family *family);
+/* *family made for these values, unless it was made for them already (wenv_material_family_key):
+ * what a caller keeps between views, so that a new view makes nothing.  The one it replaces is freed;
+ * on failure *family is kept. */
+wenv_status wenv_material_family_ensure(wenv_material_family **family, const wenv_material *base,
+                                        const float *roughness, const float *metallic, size_t n, int colour,
+                                        wenv_error *err);
+
+size_t wenv_material_family_vertices(const wenv_material_family *family);
+/* Of the values it was made from (the material and every vertex's), for recognising them again. */
+uint64_t wenv_material_family_key(const wenv_material_family *family);
+/* Members made (materials the method shades), and the lights' materials. */
+size_t wenv_material_family_members(const wenv_material_family *family);
+size_t wenv_material_family_light_materials(const wenv_material_family *family);
+/* The material the family was made from. */
+const wenv_material *wenv_material_family_base(const wenv_material_family *family);
+
+/* Which of the family's vertices a call shades: vertex k of the call is rows[k], or offset + k when
+ * rows is NULL (as wenv_shadow_scene's rows). */
+typedef struct {
+    const wenv_material_family *family;
+    const uint32_t *rows;
+    size_t offset;
+} wenv_family_rows;
+
+/* Shades n (normal, view) pairs in the method's frame as method->shade / shade_shadowed (scene set)
+ * would with each vertex's own material, or with views NULL its diffuse light (method.h), into out;
+ * rgb (n x 3, or NULL; given only to a family made for a colour) a colour per vertex as
+ * vertex_colour.h's.  The scene's own bounce must be given
+ * (bounce_self 0: a mesh's light with its materials is this function's with views NULL).  Sets the
+ * members as the method's material in turn and the family's base material last. */
+wenv_status wenv_material_family_shade(const wenv_family_rows *rows, const wenv_method *method, void *state,
+                                       const float *normals, const float *views, size_t n,
+                                       const wenv_shadow_scene *scene, const float *rgb, float *out, wenv_error *err);
+
+#endif
