@@ -610,12 +610,13 @@ def test_radiance_beyond_float32_shading_is_refused_and_below_it_shades_right():
 
 @pytest.mark.parametrize("method", ["rotation", "slicing"])
 def test_a_shader_keeps_the_materials_set_before_it(method, tmp_path):
-    """Meshes of a few materials shaded in turn: a material among the last four set (made again
-    from the same values counts) is set again without making anything, and shades exactly as a
-    shader made for it; a fifth puts out the oldest; a new lighting keeps them, their table rows
-    made again for it; one value apart is another material."""
+    """Meshes of a few materials shaded in turn: a material among the last 40 set (made again from the
+    same values counts) is set again without making anything, and shades exactly as a shader made
+    for it; one more puts out the oldest; a new lighting keeps them, their table rows made again for
+    it; one value apart is another material."""
+    kept = 40  # the wavelet shader's (docs/python.md, "Cache, progress and kept materials")
     env, dusk = gradient_env(), wenv.Environment(gradient_env().pixels[:, ::-1].copy())
-    made = [dict(diffuse=0.1 * k, lobes=[{"alpha": 0.2 + 0.1 * k}]) for k in range(5)]
+    made = [dict(diffuse=0.01 * k, lobes=[{"alpha": 0.2 + 0.01 * k}]) for k in range(kept + 1)]
     mats = [wenv.CookTorrance(**m) for m in made]
     nrm, v = random_pairs(300, 5)
 
@@ -623,22 +624,22 @@ def test_a_shader_keeps_the_materials_set_before_it(method, tmp_path):
         return wenv.Shader(lighting, mats[k], quality="draft", method=method, cache_dir=tmp_path).shade(nrm, v)
 
     shader = wenv.Shader(env, mats[0], quality="draft", method=method, cache_dir=tmp_path)
-    for k in (1, 2, 3):
+    for k in range(1, kept):
         shader.set_material(mats[k])
-    assert (shader.stats["materials_kept"], shader.stats["materials_reused"]) == (4, 0)
+    assert (shader.stats["materials_kept"], shader.stats["materials_reused"]) == (kept, 0)
     for k in (0, 2, 1, 3):
         shader.set_material(wenv.CookTorrance(**made[k]))
         assert np.array_equal(shader.shade(nrm, v), own(env, k))
     assert shader.stats["materials_reused"] == 4
-    shader.set_material(mats[4])  # 0 goes
-    shader.set_material(mats[0])  # made again; 2 goes
-    assert (shader.stats["materials_kept"], shader.stats["materials_reused"]) == (4, 4)
+    shader.set_material(mats[kept])  # the oldest, 4, goes
+    shader.set_material(mats[4])  # made again; 5 goes
+    assert (shader.stats["materials_kept"], shader.stats["materials_reused"]) == (kept, 4)
     shader.set_environment(dusk)
-    for k in (3, 4, 1):
+    for k in (3, kept, 1):
         shader.set_material(mats[k])
         assert np.array_equal(shader.shade(nrm, v), own(dusk, k))
     assert shader.stats["materials_reused"] == 7
-    shader.set_material(wenv.CookTorrance(diffuse=0.3, lobes=[{"alpha": 0.5 + 1e-9}]))
+    shader.set_material(wenv.CookTorrance(diffuse=0.03, lobes=[{"alpha": 0.23 + 1e-9}]))
     assert shader.stats["materials_reused"] == 7 and not np.array_equal(shader.shade(nrm, v), own(dusk, 3))
 
 

@@ -273,6 +273,23 @@ def test_culled_and_budgeted_steps_and_the_diffuse_light(sphere):
         np.testing.assert_allclose(got[two == r], plain.diffuse_light(v)[two == r], rtol=3e-5, atol=1e-6)
 
 
+@pytest.mark.parametrize("quality", ["default", "high"])
+def test_a_family_fits_what_the_shader_keeps(sphere, quality):
+    """A roughness over most of [0, 1] with a Metallic map and a colour (three sides), at `default` and at
+    `high` (7x larger tables): the family's levels are spaced so that its members fit among the
+    materials the shader keeps, so a second view makes none again (every member set is found kept)."""
+    v, views, _ = sphere
+    env = wenv.load_environment(hdri_path("forest"))
+    shader = wenv.Shader(env, wenv.Principled(**PAINT, roughness=0.3), quality=quality, method="slicing")
+    kw = dict(roughness=((v[:, 2] + 1.0) / 2.0).astype(np.float32),
+              metallic=np.clip(v[:, 0] + 0.5, 0.0, 1.0).astype(np.float32),
+              base_color=np.full((len(v), 3), 0.5, np.float32))
+    first = shader.shade(v, views, **kw)
+    before = shader.stats["materials_reused"]
+    np.testing.assert_array_equal(shader.shade(v, views, **kw), first)
+    assert shader.stats["materials_reused"] - before == shader.stats["materials_kept"] > 3
+
+
 def test_bad_input_is_named(sphere):
     v, views, _ = sphere
     env = wenv.load_environment(hdri_path("city"))

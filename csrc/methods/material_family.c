@@ -120,10 +120,10 @@ static size_t level_of(const double *level, size_t count, double x)
 }
 
 /* The finest of the levels' spacings (WENV_FAMILY_FINEST, then coarser) at which the levels the
- * roughness spans, times the sides, make at most WENV_FAMILY_MAX_MEMBERS members. */
-static size_t level_spacing(const float *roughness, size_t n, size_t sides)
+ * roughness spans, times the sides, make at most max_members members. */
+static size_t level_spacing(const float *roughness, size_t n, size_t sides, size_t max_members)
 {
-    static const size_t SPACINGS[] = {WENV_FAMILY_FINEST, 16, 12, 8, 4};
+    static const size_t SPACINGS[] = {WENV_FAMILY_FINEST, 16, 12, 8, 4, 2, 1};
     double lo = 1.0, hi = 0.0;
     for (size_t i = 0; i < n; i++) {
         lo = fmin(lo, clamp01(roughness[i]));
@@ -132,7 +132,7 @@ static size_t level_spacing(const float *roughness, size_t n, size_t sides)
     size_t k = 0;
     while (k + 1 < sizeof SPACINGS / sizeof SPACINGS[0] &&
            ((size_t)ceil(hi * (double)SPACINGS[k]) - (size_t)floor(lo * (double)SPACINGS[k]) + 1) * sides >
-               WENV_FAMILY_MAX_MEMBERS)
+               max_members)
         k++;
     return SPACINGS[k];
 }
@@ -251,9 +251,10 @@ static wenv_status make_palette(wenv_material_family *f, const wenv_principled_i
 }
 
 static uint64_t family_key(const wenv_principled_inputs *in, const float *roughness, const float *metallic, size_t n,
-                           int colour)
+                           int colour, size_t max_members)
 {
     uint64_t key = wenv_fingerprint_word(wenv_fingerprint_word(WENV_FINGERPRINT_START, n), (uint64_t)colour);
+    key = wenv_fingerprint_word(key, max_members);
     for (size_t r = 0; r < wenv_principled_input_count; r++) {
         const wenv_principled_input *row = &wenv_principled_input_list[r];
         key = wenv_fingerprint_doubles(key, wenv_principled_field_c(in, row), (size_t)row->n);
@@ -273,7 +274,8 @@ int wenv_material_family_needed_for_colour(const wenv_material *base)
 }
 
 wenv_status wenv_material_family_create(wenv_material_family **out, const wenv_material *base, const float *roughness,
-                                        const float *metallic, size_t n, int colour, wenv_error *err)
+                                        const float *metallic, size_t n, int colour, size_t max_members,
+                                        wenv_error *err)
 {
     *out = NULL;
     const wenv_principled_inputs *in = wenv_principled_inputs_of(base);
@@ -316,7 +318,7 @@ wenv_status wenv_material_family_create(wenv_material_family **out, const wenv_m
     }
     f->n_r = exact ? (size_t)exact : 1;
     if (interpolated) {
-        f->spacing = level_spacing(roughness, n, f->n_m);
+        f->spacing = level_spacing(roughness, n, f->n_m, max_members);
         f->n_r = f->spacing + 1;
     }
     for (size_t k = 0; !exact && k < f->n_r; k++)
@@ -356,20 +358,20 @@ wenv_status wenv_material_family_create(wenv_material_family **out, const wenv_m
         wenv_material_family_free(f);
         return err->status;
     }
-    f->key = family_key(in, roughness, metallic, n, f->colour);
+    f->key = family_key(in, roughness, metallic, n, f->colour, max_members);
     *out = f;
     return WENV_OK;
 }
 
 wenv_status wenv_material_family_ensure(wenv_material_family **family, const wenv_material *base,
                                         const float *roughness, const float *metallic, size_t n, int colour,
-                                        wenv_error *err)
+                                        size_t max_members, wenv_error *err)
 {
     const wenv_principled_inputs *in = wenv_principled_inputs_of(base);
-    if (*family && in && (*family)->key == family_key(in, roughness, metallic, n, colour != 0))
+    if (*family && in && (*family)->key == family_key(in, roughness, metallic, n, colour != 0, max_members))
         return WENV_OK;
     wenv_material_family *made;
-    if (wenv_material_family_create(&made, base, roughness, metallic, n, colour, err))
+    if (wenv_material_family_create(&made, base, roughness, metallic, n, colour, max_members, err))
         return err->status;
     wenv_material_family_free(*family);
     *family = made;
@@ -547,7 +549,7 @@ wenv_status wenv_material_family_shade(const wenv_family_rows *fr, const wenv_me
         return wenv_error_set(err, WENV_ERR_VALUE,
                               "a mesh's own bounce with a material per vertex is its diffuse light with those "
                               "materials: give it as the bounce");
-    if (!method->keeps_materials)
+    if (!method->materials_kept)
         return wenv_error_set(err, WENV_ERR_VALUE,
                               "method '%s' does not shade a Roughness or Metallic per vertex (it would make its "
                               "tables again for each member at every view): use a wavelet method",

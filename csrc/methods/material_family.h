@@ -29,10 +29,10 @@
 /* Roughness levels 0, 1/24, ..., 1: the interpolation stays within 1 % of each vertex's own material
  * (0.05-0.88 % over the bundled HDRIs: docs/performance.md, "Roughness and Metallic per vertex")... */
 #define WENV_FAMILY_FINEST 24
-/* ... unless the levels a roughness spans, times the metallic sides, would be more members than this:
- * the wavelet shader keeps 40 materials (WENV_WAVELET_KEPT_MATERIALS), and a family must fit whole or
- * be made again at every view.  The levels are then 1/16, 1/12, 1/8 or 1/4 apart. */
-#define WENV_FAMILY_MAX_MEMBERS 36
+/* ... unless the levels a roughness spans, times the metallic sides, would be more members than the
+ * method keeps (less a few: method.h's materials_kept, WENV_FAMILY_SPARE_KEPT), for a family must fit
+ * whole or be made again at every view: the levels are then 1/16, 1/12, 1/8, 1/4, 1/2 or 1 apart. */
+#define WENV_FAMILY_SPARE_KEPT 4
 /* A Roughness of at most this many distinct values (a texture of a few flat regions) has a member at
  * each, exactly, and no interpolation. */
 #define WENV_FAMILY_EXACT_LEVELS 8
@@ -44,9 +44,12 @@ typedef struct wenv_material_family wenv_material_family;
 /* base: a Principled material (WENV_ERR_VALUE otherwise); roughness and metallic: n values each, or
  * NULL for the material's own; finite (WENV_ERR_VALUE naming the first vertex that is not), clamped to
  * [0, 1] as Cycles clamps them.  colour: whether the calls give a colour per vertex too (a metal then
- * has members in black and in white).  Makes every member and light material the vertices read. */
+ * has members in black and in white).  max_members: the most members the levels may make (the
+ * method's materials_kept less WENV_FAMILY_SPARE_KEPT).  Makes every member and light material the
+ * vertices read. */
 wenv_status wenv_material_family_create(wenv_material_family **out, const wenv_material *base, const float *roughness,
-                                        const float *metallic, size_t n, int colour, wenv_error *err);
+                                        const float *metallic, size_t n, int colour, size_t max_members,
+                                        wenv_error *err);
 /* Whether a colour per vertex on `base` needs a family even with its own Roughness and Metallic: a
  * Principled BSDF with Metallic above 0. */
 int wenv_material_family_needed_for_colour(const wenv_material *base);
@@ -56,7 +59,7 @@ void wenv_material_family_free(wenv_material_family *family);
  * on failure *family is kept. */
 wenv_status wenv_material_family_ensure(wenv_material_family **family, const wenv_material *base,
                                         const float *roughness, const float *metallic, size_t n, int colour,
-                                        wenv_error *err);
+                                        size_t max_members, wenv_error *err);
 
 size_t wenv_material_family_vertices(const wenv_material_family *family);
 /* Of the values it was made from (the material and every vertex's), for recognising them again. */

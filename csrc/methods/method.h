@@ -103,10 +103,6 @@ typedef struct wenv_method {
     const wenv_param *params;
     size_t n_params;
     const void *presets[WENV_PRESET_COUNT]; /* quality structs, WENV_PRESET_NAMES order */
-    /* Whether set_material keeps what it made of the last materials set, so that shading a material
-     * that varies per vertex (methods/material_family.h), which sets each member in turn, makes
-     * nothing again at a new view. */
-    int keeps_materials;
 
     /* WENV_ERR_VALUE naming the key ("quality['order'] ...") unless the settings are usable. */
     wenv_status (*check_quality)(const void *quality, wenv_error *err);
@@ -141,6 +137,10 @@ typedef struct wenv_method {
      * irradiance), and shade_lights adds it to out and irradiance (as shade's with irradiance), each
      * vertex lit through its own materials.  NULL for a method without such a part. */
     void (*set_lights_apart)(void *state, int apart);
+    /* How many materials of the current one's size set_material keeps made (the current one among
+     * them), so that a material that varies per vertex, which sets each member in turn, makes
+     * nothing again at a new view when its members fit.  NULL for a method that keeps none. */
+    size_t (*materials_kept)(const void *state);
     wenv_status (*shade_lights)(void *state, const float *normals, const float *views, size_t n,
                                 const wenv_shadow_scene *scene, const wenv_vertex_lights *lights, float *out,
                                 float *irradiance, wenv_error *err);

@@ -441,8 +441,11 @@ static int ensure_family(ShaderObject *self, PyObject *colour, PyObject *roughne
     wenv_status st;
     const struct wenv_material *base = wenv_py_material(self->material, "material");
     WENV_BEGIN_WORK
+    /* the members must fit among the materials the method keeps (it refuses the family if it keeps none) */
+    size_t kept = self->method->materials_kept ? self->method->materials_kept(self->state) : 0;
+    size_t room = kept > WENV_FAMILY_SPARE_KEPT ? kept - WENV_FAMILY_SPARE_KEPT : 1;
     st = wenv_material_family_ensure(&self->family, base, rb.obj ? rb.buf : NULL, mb.obj ? mb.buf : NULL, n,
-                                     given(colour), &err);
+                                     given(colour), room, &err);
     WENV_END_WORK
     if (rb.obj)
         PyBuffer_Release(&rb);

@@ -37,6 +37,14 @@ void wenv_wavelet_material_free(wenv_wavelet_material *m)
     free(m);
 }
 
+size_t wenv_wavelet_materials_kept(const wenv_wavelet *wavelet)
+{
+    if (!wavelet->m)
+        return 1;
+    size_t bytes = wenv_wavelet_material_bytes(wavelet, wavelet->m), fit = 1 + WENV_WAVELET_KEPT_BYTES / (bytes ? bytes : 1);
+    return fit < WENV_WAVELET_KEPT_MATERIALS ? fit : WENV_WAVELET_KEPT_MATERIALS;
+}
+
 size_t wenv_wavelet_material_bytes(const wenv_wavelet *wavelet, const wenv_wavelet_material *m)
 {
     return wenv_wavelet_table_bytes(wavelet) + m->brdf_terms * 4 * sizeof(float) +

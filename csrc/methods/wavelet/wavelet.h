@@ -116,6 +116,9 @@ wenv_status wenv_wavelet_shade(wenv_wavelet *sh, const float *normals, const flo
 wenv_status wenv_wavelet_shade_shadowed(wenv_wavelet *sh, const float *normals, const float *views, size_t n,
                                         const wenv_shadow_scene *scene, float *out, float *irradiance,
                                         wenv_error *err);
+/* method.h's materials_kept: WENV_WAVELET_KEPT_MATERIALS, or fewer where materials of the current
+ * one's size pass WENV_WAVELET_KEPT_BYTES (1 before a material is set). */
+size_t wenv_wavelet_materials_kept(const wenv_wavelet *sh);
 /* method.h's set_lights_apart and shade_lights. */
 void wenv_wavelet_set_lights_apart(wenv_wavelet *sh, int apart);
 wenv_status wenv_wavelet_shade_lights(wenv_wavelet *sh, const float *normals, const float *views, size_t n,

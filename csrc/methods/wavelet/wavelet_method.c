@@ -118,6 +118,8 @@ static wenv_status diffuse_light(void *state, const float *normals, size_t n, co
 
 static void set_lights_apart(void *state, int apart) { wenv_wavelet_set_lights_apart(state, apart); }
 
+static size_t materials_kept(const void *state) { return wenv_wavelet_materials_kept(state); }
+
 static wenv_status shade_lights(void *state, const float *normals, const float *views, size_t n,
                                 const wenv_shadow_scene *scene, const wenv_vertex_lights *lights, float *out,
                                 float *irradiance, wenv_error *err)
@@ -155,10 +157,10 @@ static size_t stats(const void *state, wenv_stat *out)
         .name = method_name, .summary = method_summary, .quality_size = sizeof(wenv_wavelet_quality),          \
         .params = PARAMS, .n_params = sizeof PARAMS / sizeof PARAMS[0],                                        \
         .presets = {&WENV_WAVELET_PRESETS[0], &WENV_WAVELET_PRESETS[1], &WENV_WAVELET_PRESETS[2]},              \
-        .keeps_materials = 1,                                                                                  \
         .check_quality = check_quality, .create = create_fn, .destroy = destroy,                               \
         .set_environment = set_environment, .set_material = set_material, .shade = shade,                      \
         .shade_shadowed = shade_shadowed, .diffuse_light = diffuse_light, .set_lights_apart = set_lights_apart,     \
+        .materials_kept = materials_kept,                                                                      \
         .shade_lights = shade_lights, .stats = stats,                                                          \
     }
 
