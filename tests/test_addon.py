@@ -1258,7 +1258,7 @@ def test_what_wenv_does_not_shade_is_reported(scene):
     notes = materials.principled_notes(mat)
     assert any("'Base Color' is linked" in n and "(0.8, 0.2, 0.1)" in n for n in notes), notes
     assert any("'Normal' is linked" in n for n in notes) and any("Transmission" in n for n in notes)
-    assert any("Emission" in n for n in notes)
+    assert not any("Emission" in n for n in notes)  # emission is shaded
     from addon import shading, views
     view = views.camera_view(bpy.context.scene)
     _, report = shading.shade_objects(bpy.context.scene, bpy.context.evaluated_depsgraph_get(), [obj], view,

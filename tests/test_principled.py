@@ -72,17 +72,15 @@ def test_one_row_per_input_drives_unhonoured_and_its_notes():
     with its row's note, in the list's order."""
     rows = {r["name"]: r for r in wenv.Principled.INPUTS}
     odd = dict(alpha=0.5, anisotropic=0.5, coat_weight=1.0, coat_tint=(2.0, 1.0, 1.0), subsurface_weight=0.5,
-               transmission_weight=0.5, emission_strength=3.0, thin_film_thickness=500.0)
+               transmission_weight=0.5, thin_film_thickness=500.0)
     with pytest.warns(UserWarning, match="does not shade"):
         named = wenv.Principled(**odd).unhonoured
     assert list(named) == [n for n in rows if n in named]  # the list's order
     assert set(named) == set(odd) - {"coat_weight"}
     assert all(rows[n]["note"] and rows[n]["shaded"] != "yes" for n in named)
-    # the partner rules: a coat tint without a coat, emission without colour, are not named
+    # the partner rule: a coat tint without a coat is not named; emission is shaded
     assert wenv.Principled(coat_tint=(2.0, 1.0, 1.0)).unhonoured == ()
-    with pytest.warns(UserWarning):
-        assert "emission_strength" in wenv.Principled(emission_strength=1.0).unhonoured
-    assert wenv.Principled(emission_strength=1.0, emission_color=0.0).unhonoured == ()
+    assert wenv.Principled(emission_strength=1.0).unhonoured == ()
 
 
 def test_bad_inputs_are_named():
@@ -116,9 +114,9 @@ def test_what_is_not_shaded_is_named():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert wenv.Principled(base_color=(0.5, 0.2, 0.1), coat_weight=1.0).unhonoured == ()
-    with pytest.warns(UserWarning, match="alpha, subsurface_weight, transmission_weight, emission_strength"):
+    with pytest.warns(UserWarning, match="alpha, subsurface_weight, transmission_weight"):
         m = wenv.Principled(transmission_weight=0.5, subsurface_weight=0.2, emission_strength=2.0, alpha=0.5)
-    assert m.unhonoured == ("alpha", "subsurface_weight", "transmission_weight", "emission_strength")  # the node's order
+    assert m.unhonoured == ("alpha", "subsurface_weight", "transmission_weight")  # the node's order
     with pytest.warns(UserWarning):
         assert wenv.Principled(anisotropic=0.3, thin_film_thickness=300.0).unhonoured == \
             ("anisotropic", "thin_film_thickness")

@@ -21,4 +21,14 @@ static inline void wenv_unit_pair(const float *normals, const float *views, size
     }
 }
 
+/* The cosine between a normal n and a view v (float triples of any non-zero length), in float for
+ * the per-vertex passes after shading; 1 (head-on) without a view. */
+static inline float wenv_view_cosine(const float *n, const float *v)
+{
+    if (!v)
+        return 1.0f;
+    float len = sqrtf((n[0] * n[0] + n[1] * n[1] + n[2] * n[2]) * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]));
+    return len > 0.0f ? (n[0] * v[0] + n[1] * v[1] + n[2] * v[2]) / len : 0.0f;
+}
+
 #endif

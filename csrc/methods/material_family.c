@@ -7,6 +7,7 @@
 #include <string.h>
 
 #include "base/fingerprint.h"
+#include "math/unit_pair.h"
 
 /* What a member is on the metallic axis: the material at a Metallic, or a metal in black or in white
  * (a metal whose colour varies per vertex: wenv_material_metal_colour). */
@@ -394,16 +395,6 @@ typedef struct {
     const float *rgb; /* a colour per call vertex, or NULL */
 } call;
 
-/* The cosine between a normal and a view, not necessarily unit (1 without a view: head-on). */
-static float cos_between(const float *a, const float *b)
-{
-    if (!b)
-        return 1.0f;
-    float ab = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-    float len = sqrtf((a[0] * a[0] + a[1] * a[1] + a[2] * a[2]) * (b[0] * b[0] + b[1] * b[1] + b[2] * b[2]));
-    return len > 0.0f ? ab / len : 0.0f;
-}
-
 /* What of a metal in black (or white) a vertex of colour rgb seen at cos_v takes, per channel. */
 static void metal_share(const wenv_material *metal, side_kind side, float cos_v, const float *rgb, float share[3])
 {
@@ -453,7 +444,7 @@ static wenv_status shade_member(const call *c, const wenv_material *member, side
     for (long long k = 0; k < nc; k++) {
         float share[3] = {1.0f, 1.0f, 1.0f};
         if (side != SIDE_AS_IS)
-            metal_share(member, side, cos_between(nrm + 3 * k, c->views ? vw + 3 * k : NULL), c->rgb + 3 * at[k],
+            metal_share(member, side, wenv_view_cosine(nrm + 3 * k, c->views ? vw + 3 * k : NULL), c->rgb + 3 * at[k],
                         share);
         for (int ch = 0; ch < 3; ch++) {
             out[3 * at[k] + ch] += w[k] * share[ch] * o[3 * k + ch];
@@ -471,7 +462,7 @@ static void lights_of(const wenv_material_family *f, const size_t *fv, const flo
     long long nn = (long long)n;
 #pragma omp parallel for schedule(static)
     for (long long k = 0; k < nn; k++) {
-        float cos_v = cos_between(normals + 3 * k, views + 3 * k);
+        float cos_v = wenv_view_cosine(normals + 3 * k, views + 3 * k);
         for (size_t m = 0; m < WENV_VERTEX_LIGHTS_PICKS; m++) {
             size_t at = WENV_VERTEX_LIGHTS_PICKS * (size_t)k + m;
             float *w = weight + 3 * at, share[3] = {1.0f, 1.0f, 1.0f};
@@ -493,7 +484,7 @@ static void apply_diffuse(const wenv_material_family *f, const size_t *fv, const
     long long nn = (long long)n;
 #pragma omp parallel for schedule(static)
     for (long long i = 0; i < nn; i++) {
-        float cos_v = cos_between(normals + 3 * i, views ? views + 3 * i : NULL);
+        float cos_v = wenv_view_cosine(normals + 3 * i, views ? views + 3 * i : NULL);
         float t[3] = {0.0f, 0.0f, 0.0f};
         for (size_t e = 0; e < ENTRIES; e++) {
             float w = f->weight[ENTRIES * fv[i] + e], d[3];

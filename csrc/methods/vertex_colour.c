@@ -3,19 +3,15 @@
 
 #include <math.h>
 
+#include "math/unit_pair.h"
+
 void wenv_vertex_colour_apply(const wenv_vertex_colour *colour, const float *normals, const float *views, size_t n,
                               const float *irradiance, float *out)
 {
     long long nn = (long long)n;
 #pragma omp parallel for schedule(static)
     for (long long i = 0; i < nn; i++) {
-        float cos_v = 1.0f;
-        if (views) {
-            const float *a = normals + 3 * i, *b = views + 3 * i;
-            float ab = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-            float len = sqrtf((a[0] * a[0] + a[1] * a[1] + a[2] * a[2]) * (b[0] * b[0] + b[1] * b[1] + b[2] * b[2]));
-            cos_v = len > 0.0f ? ab / len : 0.0f;
-        }
+        float cos_v = wenv_view_cosine(normals + 3 * i, views ? views + 3 * i : NULL);
         float d[3];
         wenv_diffuse_table_at(colour->per_colour, cos_v, d);
         const float *c = colour->rgb + 3 * i, *e = irradiance + 3 * i;

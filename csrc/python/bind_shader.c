@@ -460,14 +460,17 @@ static int ensure_family(ShaderObject *self, PyObject *colour, PyObject *roughne
     return 0;
 }
 
-/* With a colour per vertex, a mesh's own bounce (bounce='self') is its light with those colours: it
- * is made here, for every vertex of the occlusion (normals: all n of them), and given as the scene's
+/* With a colour or material per vertex, or a material that emits, a mesh's own bounce
+ * (bounce='self') is its light with those colours and materials, its emission included: it is made
+ * here, for every vertex of the occlusion (normals: all n of them), and given as the scene's
  * bounce (*light, PyMem_Free'd by the caller).  -1 with the error set. */
 static int own_bounce(ShaderObject *self, const float *normals, size_t n, wenv_shadow_scene *scene,
                       const wenv_vertex_colour *colour, const wenv_family_rows *family, float **light)
 {
     *light = NULL;
-    if ((!colour && !family) || !scene->bounce_self)
+    /* a material that emits sends its own light too, which the method's own bounce leaves out */
+    if ((!colour && !family && !wenv_material_emits(wenv_py_material(self->material, "material"))) ||
+        !scene->bounce_self)
         return 0;
     if (!(*light = PyMem_Malloc((n ? n : 1) * 3 * sizeof(float)))) {
         PyErr_NoMemory();
@@ -479,7 +482,7 @@ static int own_bounce(ShaderObject *self, const float *normals, size_t n, wenv_s
     wenv_status st;
     WENV_BEGIN_WORK
     st = wenv_lighting_frame_shade_scene(&self->frame, self->method, self->state, normals, NULL, n, &sending, colour,
-                                         family, *light, &err);
+                                         family, wenv_py_material(self->material, "material"), *light, &err);
     WENV_END_WORK
     if (st) {
         wenv_py_raise(&err);
@@ -506,7 +509,7 @@ static PyObject *shade_arrays(ShaderObject *self, const float *normals, const fl
     wenv_status st;
     WENV_BEGIN_WORK
     st = wenv_lighting_frame_shade_scene(&self->frame, self->method, self->state, normals, views, n, scene, colour,
-                                         family, out, &err);
+                                         family, wenv_py_material(self->material, "material"), out, &err);
     WENV_END_WORK
     if (st) {
         Py_DECREF(result);
@@ -704,7 +707,7 @@ static int shade_visible(ShaderObject *self, const float *normals, const float *
     if (first < count) {
         WENV_BEGIN_WORK
         st = wenv_shade_for(&self->frame, self->method, self->state, normals, views, count, scene, colour, family,
-                            first, budget, shaded, next, &err);
+                            wenv_py_material(self->material, "material"), first, budget, shaded, next, &err);
         WENV_END_WORK
     }
     if (!st && visible)

@@ -210,8 +210,11 @@ wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, con
                 if (wenv_material_lobe(mat, l)->alpha < narrow_alpha &&
                     narrow_lobe(env, mat, l, f, wo, dirs, flux, omega, count, nodes, &b, spec, &lobe_err))
                     atomic_store(&failed, 1);
+            double emitted[3] = {0.0, 0.0, 0.0};
+            if (wo[2] > 0.0)
+                wenv_material_emission_at(mat, wo[2], emitted);
             for (int c = 0; c < 3; c++)
-                out[3 * i + c] = (float)(spec[c] + irr[c] * diffuse[c] / M_PI);
+                out[3 * i + c] = (float)fmax(0.0, spec[c] + irr[c] * diffuse[c] / M_PI + emitted[c]);
             wenv_progress_item(progress, &done, n, &cancelled);
         }
         free(wi);

@@ -1,5 +1,6 @@
 /* Ground truth: the reflection equation summed over every environment pixel, each a point
- * source of flux radiance x exact pixel solid angle, with the exact BRDF.  Same units as shading.
+ * source of flux radiance x exact pixel solid angle, with the exact BRDF, plus what the material
+ * emits (wenv_material_emission_at).  Same units as shading.
  * With occluders (positions then required), each pixel's ray from the vertex (lifted off the
  * surface by wenv_occluders_offset) is cast exactly, and a blocked one brings
  * the light of the blocker where it is hit: bounce (per occluder vertex, RGB radiance, interpolated

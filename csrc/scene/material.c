@@ -190,6 +190,15 @@ int wenv_material_mirror_centred(const wenv_material *mat)
 }
 wenv_shadowing wenv_material_shadowing(const wenv_material *mat) { return mat->shadowing; }
 
+int wenv_material_emits(const wenv_material *mat) { return mat->kind->emits && mat->kind->emits(mat); }
+
+void wenv_material_emission_at(const wenv_material *mat, double cos_v, double rgb[3])
+{
+    rgb[0] = rgb[1] = rgb[2] = 0.0;
+    if (wenv_material_emits(mat))
+        mat->kind->emission_at(mat, cos_v, rgb);
+}
+
 double wenv_material_lobe_width(const wenv_material *mat)
 {
     double width = INFINITY;

@@ -146,6 +146,12 @@ wenv_status wenv_material_diffuse_per_colour_at(const wenv_material *mat, double
 int wenv_material_metal_colour(const wenv_material *mat, double cos_v, const double colour[3], double w_black[3],
                                double w_white[3]);
 
+/* Light a material emits of its own (a Principled BSDF's Emission), added to what it reflects:
+ * whether it emits any, and its radiance towards a view at cos_v to the normal (RGB; 0 for a model
+ * without emission). */
+int wenv_material_emits(const wenv_material *mat);
+void wenv_material_emission_at(const wenv_material *mat, double cos_v, double rgb[3]);
+
 /* The glossy lobes: how many, and each one's microfacet shape (see above). */
 size_t wenv_material_lobe_count(const wenv_material *mat);
 const wenv_lobe *wenv_material_lobe(const wenv_material *mat, size_t i);

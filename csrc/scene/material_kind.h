@@ -60,6 +60,10 @@ typedef struct wenv_material_kind {
      * colour cannot vary alone (it enters the lobes too).  NULL: the colour is the constant albedo
      * (`diffuse`), the lobes free of it. */
     const char *(*diffuse_per_colour)(const wenv_material *mat, double cos_v, double rgb[3]);
+    /* Whether it emits light of its own, and the radiance it emits towards a view at cos_v (RGB, not
+     * lit by anything: wenv_material_emission_at); NULL: it emits nothing. */
+    int (*emits)(const wenv_material *mat);
+    void (*emission_at)(const wenv_material *mat, double cos_v, double rgb[3]);
     /* Set for a model with no colour input (a measured table): no per-vertex colour. */
     int no_colour;
     /* Whether the glossy part reflects about the mirror direction (wenv_material_mirror_centred);

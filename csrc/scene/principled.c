@@ -27,8 +27,11 @@
  * tables (E, Eavg, s) are principled_tables.c, computed from their definitions; a lookup is linear
  * between nodes at i / (n - 1), clamped, as Cycles reads them.
  *
- * What Cycles adds that reflection does not have -- transmission, subsurface scattering, emission,
- * the see-through part of Alpha, thin film, anisotropy -- is not shaded, nor a Coat Tint above 1
+ * Emission (Emission Color x Strength) is emitted through the layers above the metal, as Cycles sets it
+ * up after the coat: its weight is W there, so a coat or sheen dims it towards grazing
+ * (wenv_material_emission_at).
+ * What Cycles adds that reflection does not have -- transmission, subsurface scattering, the
+ * see-through part of Alpha, thin film, anisotropy -- is not shaded, nor a Coat Tint above 1
  * (read as 1); wenv_principled_unhonoured names each input set to something that needs it.
  * Subsurface scattering is shaded as the diffuse reflection it turns into on a smooth convex surface
  * (Base Color as albedo). */
@@ -141,6 +144,7 @@ typedef struct {
     double sheen_a, sheen_b;   /* the sheen's transformed cosine for this view */
     double eon_ms[3];          /* the Oren-Nayar diffuse's multiple scattering for this view */
     double diffuse[3]; /* the Lambertian albedo */
+    double emission[3]; /* the radiance emitted: Emission Color x Strength x W after sheen and coat */
     double diffuse_per_colour[3]; /* the same per unit of Base Color: what the layers above leave */
 } view_weights;
 
@@ -161,7 +165,16 @@ static void weights_for_view(const principled *p, double mu, view_weights *vw)
     double w[3] = {p->in.alpha, p->in.alpha, p->in.alpha};
     vw->sheen_a = 1.0;
     vw->sheen_b = 0.0;
-    for (size_t i = 0; i < p->n; i++) {
+    int emitted = 0;
+    for (size_t i = 0; i <= p->n; i++) {
+        /* the layers above the metal are done: emission goes out through them */
+        if (!emitted && (i == p->n || (p->lobe[i].role != LOBE_SHEEN && p->lobe[i].role != LOBE_COAT))) {
+            for (int k = 0; k < 3; k++)
+                vw->emission[k] = p->in.emission_color[k] * p->in.emission_strength * w[k];
+            emitted = 1;
+        }
+        if (i == p->n)
+            break;
         const lobe_model *l = &p->lobe[i];
         if (l->role == LOBE_DIFFUSE) { /* the last: what the layers above leave, Base Color W */
             double loss = 1.0 - eon_e(p, mu);
@@ -478,6 +491,21 @@ static void pr_diffuse_at(const wenv_material *mat, double cos_v, double rgb[3])
 
 /* Base Color is in the Lambertian part alone (W(mu) of it) unless a metal's Fresnel or the rough
  * diffuse lobe holds it too. */
+static void pr_emission_at(const wenv_material *mat, double cos_v, double rgb[3])
+{
+    view_weights vw;
+    weights_for_view(model_of(mat), cos_v, &vw);
+    for (int k = 0; k < 3; k++)
+        rgb[k] = vw.emission[k];
+}
+
+static int pr_emits(const wenv_material *mat)
+{
+    const wenv_principled_inputs *in = &model_of(mat)->in;
+    return in->emission_strength != 0.0 &&
+           (in->emission_color[0] != 0.0 || in->emission_color[1] != 0.0 || in->emission_color[2] != 0.0);
+}
+
 static const char *pr_diffuse_per_colour(const wenv_material *mat, double cos_v, double rgb[3])
 {
     const principled *p = model_of(mat);
@@ -528,6 +556,8 @@ static const wenv_material_kind PRINCIPLED = {
     .lobe_cos_h_min = pr_lobe_cos_h_min,
     .diffuse_at = pr_diffuse_at,
     .diffuse_per_colour = pr_diffuse_per_colour,
+    .emits = pr_emits,
+    .emission_at = pr_emission_at,
     .with_roughness = pr_with_roughness,
     .lobes_follow_shapes = pr_lobes_follow_shapes,
 };

@@ -62,10 +62,10 @@
       WENV_PRINCIPLED_WEIGHT_CUTOFF, "",                                                                           \
       "Transmission is not shaded (wenv shades reflection: the light through the object is left out)")             \
     X(diffuse_roughness, 1, "Diffuse Roughness", 0.0, 0.0, 0.0, 0.0, 1.0, 0, WENV_SHADED, WENV_NEVER, 0.0, "", "") \
-    X(emission_color, 3, "Emission Color", 1.0, 1.0, 1.0, -INFINITY, INFINITY, 0, WENV_NOT_SHADED, WENV_NEVER,     \
+    X(emission_color, 3, "Emission Color", 1.0, 1.0, 1.0, -INFINITY, INFINITY, 1, WENV_SHADED, WENV_NEVER, 0.0, "", \
+      "")                                                                                                          \
+    X(emission_strength, 1, "Emission Strength", 0.0, 0.0, 0.0, -INFINITY, INFINITY, 1, WENV_SHADED, WENV_NEVER,    \
       0.0, "", "")                                                                                                 \
-    X(emission_strength, 1, "Emission Strength", 0.0, 0.0, 0.0, -INFINITY, INFINITY, 0, WENV_NOT_SHADED,           \
-      WENV_NONZERO, 0.0, "emission_color", "Emission is not shaded")                                                 \
     X(thin_film_thickness, 1, "Thin Film Thickness", 0.0, 0.0, 0.0, -INFINITY, INFINITY, 0, WENV_NOT_SHADED,       \
       WENV_ABOVE, 0.1, "", "Thin film is not shaded")                                                              \
     X(thin_film_ior, 1, "Thin Film IOR", 1.33, 0.0, 0.0, -INFINITY, INFINITY, 0, WENV_NOT_SHADED, WENV_NEVER, 0.0, \
