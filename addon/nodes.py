@@ -382,13 +382,19 @@ def _hsv_to_rgb(h, s, v):
     return np.stack([np.where(grey, v, r), np.where(grey, v, g), np.where(grey, v, b)], axis=1)
 
 
+def one_point(texture, checking=False):
+    """An Evaluator of a single point at UV (0, 0): texture(node) gives each Image Texture's (1, 3)
+    colour there (what a socket reads without a mesh: the panel's checks, the glossmeter's means)."""
+    return Evaluator(1, lambda uv_map: (np.zeros((1, 2), np.float32), np.ones(1, np.float32), np.zeros(1, np.int64)),
+                     lambda node, uv, footprint, rows: texture(node), checking)
+
+
 def check(principled_socket):
-    """(True, notes) when every node feeding a Principled socket is evaluated (notes: what of its
-    textures is read otherwise than Cycles reads it), or (False, why not)."""
-    ev = Evaluator(1, lambda uv_map: (np.zeros((1, 2), np.float32), np.ones(1, np.float32), np.zeros(1, np.int64)),
-                   lambda node, uv, footprint, rows: np.zeros((1, 3), np.float32), checking=True)
+    """(textures, notes) when every node feeding a Principled socket is evaluated -- the Image Texture
+    nodes read, and what of them is read otherwise than Cycles reads it -- or (None, why not)."""
+    ev = one_point(lambda node: np.zeros((1, 3), np.float32), checking=True)
     try:
         ev.evaluate(principled_socket)
     except Unsupported as exc:
-        return False, str(exc)
-    return True, ev.notes
+        return None, str(exc)
+    return ev.textures, ev.notes

@@ -33,28 +33,20 @@ def socket_textures(principled, socket):
     with why the socket is not read (its unlinked value is then used), reason None when it is
     unlinked."""
     sock = principled.inputs[socket]
-    if not sock.is_linked:
-        return None, None
-    ok, said = nodes.check(sock)
-    if not ok:
-        return None, said
-    ev = nodes.Evaluator(1, lambda uv_map: (np.zeros((1, 2), np.float32), np.ones(1, np.float32),
-                                            np.zeros(1, np.int64)),
-                         lambda node, uv, footprint, rows: np.zeros((1, 3), np.float32), checking=True)
-    ev.evaluate(sock)
-    return ev.textures, said
+    return nodes.check(sock) if sock.is_linked else (None, None)
 
 
 def socket_at_means(principled, socket):
     """The value a Principled socket takes when each texture feeding it reads its image's mean (the
     nodes between applied to it), and the images read; None when the socket is not read."""
     sock = principled.inputs[socket]
-    if not sock.is_linked or not nodes.check(sock)[0]:
+    if not sock.is_linked:
         return None
-    ev = nodes.Evaluator(1, lambda uv_map: (np.zeros((1, 2), np.float32), np.ones(1, np.float32),
-                                            np.zeros(1, np.int64)),
-                         lambda node, uv, footprint, rows: np.float32([images.mean(node.image)]))
-    out = ev.colour(sock) if TEXTURED_SOCKETS[socket] == "base_color" else ev.value(sock)
+    ev = nodes.one_point(lambda node: np.float32([images.mean(node.image)]))
+    try:
+        out = ev.colour(sock) if TEXTURED_SOCKETS[socket] == "base_color" else ev.value(sock)
+    except nodes.Unsupported:
+        return None
     return out[0], [t.image.name for t in ev.textures]
 
 
@@ -291,7 +283,7 @@ def read_inputs(obj, depsgraph, data):
     for s, mat, (node, _), mesh, corner_vert in _principled_slots(obj, depsgraph, _textured):
         for socket, keyword in TEXTURED_SOCKETS.items():
             sock = node.inputs[socket]
-            if not sock.is_linked or not nodes.check(sock)[0]:
+            if not sock.is_linked:
                 continue
             ev = nodes.Evaluator(
                 data.count, lambda uv_map: uv_rows(mesh, uv_map, data.domain, corner_vert),
@@ -304,6 +296,8 @@ def read_inputs(obj, depsgraph, data):
                 notes.append(_no_uv_map(obj, exc.uv_map, f"'{socket}' ('{mat.name}')",
                                         f"its {socket}'s unlinked value is used"))
                 continue
+            except nodes.Unsupported:
+                continue  # named by materials.principled_notes, the unlinked value used
             if not np.isfinite(values).all():
                 row = int(np.argwhere(~np.isfinite(values.reshape(len(values), -1)).all(axis=1))[0, 0])
                 raise world.SetupError(f"Material '{mat.name}': its nodes give '{socket}' a value that is not "

@@ -17,6 +17,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 import wenv  # noqa: E402
+from measure import side_by_side  # noqa: E402
 from tests.conftest import HDRI_NAMES, hdri_path  # noqa: E402
 
 MATERIALS = {
@@ -57,18 +58,6 @@ def moved_blocker(positions, normals, triangles, resolution):
     refresh = median_time(lambda: scenes[1].occlusion(positions, normals, previous=before, changed=changed), 3)
     refreshed = scenes[1].occlusion(positions, normals, previous=before, changed=changed)
     return dict(new_cast_seconds=new_cast, refresh_seconds=refresh, cast_vertices=refreshed.cast_vertices)
-
-
-def side_by_side(first, second, repeat):
-    """Median times of two calls made in turn, round by round, so that a busy spell of a shared
-    machine falls on both."""
-    times = ([], [])
-    for _ in range(repeat):
-        for fn, out in zip((first, second), times):
-            start = time.perf_counter()
-            fn()
-            out.append(time.perf_counter() - start)
-    return statistics.median(times[0]), statistics.median(times[1])
 
 
 def median_time(fn, repeat):

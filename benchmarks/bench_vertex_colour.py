@@ -9,14 +9,13 @@ import argparse
 import json
 import os
 import platform
-import statistics
 import sys
-import time
 
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 import wenv  # noqa: E402
+from measure import side_by_side  # noqa: E402
 from tests.conftest import hdri_path  # noqa: E402
 from tests.helpers.meshes import uv_sphere  # noqa: E402
 
@@ -44,16 +43,9 @@ def main():
         shader = wenv.Shader(env, material, quality=quality, method=method)
         shader.shade(v, views)
         shader.shade(v, views, base_color=colours)
-        own, per_vertex = [], []
-        for _ in range(args.repeat):  # side by side, alternating
-            start = time.perf_counter()
-            shader.shade(v, views)
-            own.append(time.perf_counter() - start)
-            start = time.perf_counter()
-            shader.shade(v, views, base_color=colours)
-            per_vertex.append(time.perf_counter() - start)
-        row = dict(method=method, quality=quality, own_ms=1e3 * statistics.median(own),
-                   per_vertex_ms=1e3 * statistics.median(per_vertex))
+        own, per_vertex = side_by_side(lambda: shader.shade(v, views),
+                                       lambda: shader.shade(v, views, base_color=colours), args.repeat)
+        row = dict(method=method, quality=quality, own_ms=1e3 * own, per_vertex_ms=1e3 * per_vertex)
         row["ratio"] = row["per_vertex_ms"] / row["own_ms"]
         rows.append(row)
         print(f"{method:10s} {quality:8s} {row['own_ms']:8.1f} {row['per_vertex_ms']:14.1f} {row['ratio']:6.2f}")

@@ -23,14 +23,13 @@ import argparse
 import json
 import os
 import platform
-import statistics
 import sys
-import time
 
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 import wenv  # noqa: E402
+from measure import side_by_side  # noqa: E402
 from tests.conftest import hdri_path  # noqa: E402
 from tests.helpers.measure import relative_rmse  # noqa: E402
 from tests.helpers.meshes import uv_sphere  # noqa: E402
@@ -123,16 +122,10 @@ def cost(args):
         plain_shader = wenv.Shader(env, wenv.Principled(**{**PAINT, **mean}), quality=args.quality, method="slicing")
         shader.shade(v, views, **kw)
         plain_shader.shade(v, views)
-        plain, textured = [], []
-        for _ in range(args.repeat):  # side by side, alternating
-            start = time.perf_counter()
-            plain_shader.shade(v, views)
-            plain.append(time.perf_counter() - start)
-            start = time.perf_counter()
-            shader.shade(v, views, **kw)
-            textured.append(time.perf_counter() - start)
-        row = dict(textures=name, plain_ms=1e3 * statistics.median(plain),
-                   per_vertex_ms=1e3 * statistics.median(textured), members=shader.stats.get("materials_kept"))
+        plain, textured = side_by_side(lambda: plain_shader.shade(v, views),
+                                       lambda: shader.shade(v, views, **kw), args.repeat)  # noqa: B023
+        row = dict(textures=name, plain_ms=1e3 * plain, per_vertex_ms=1e3 * textured,
+                   members=shader.stats.get("materials_kept"))
         row["ratio"] = row["per_vertex_ms"] / row["plain_ms"]
         rows.append(row)
         print(f"{name:32s} {row['plain_ms']:9.1f} {row['per_vertex_ms']:14.1f} {row['ratio']:6.2f}", flush=True)

@@ -6,7 +6,9 @@ The scripts run as scripts (benchmarks/ first on sys.path) and import the tests'
 tests.helpers: importing this module puts the checkout on sys.path, last, so that a wenv named by
 PYTHONPATH (another build, a sanitized one) is still the one imported."""
 import os
+import statistics
 import sys
+import time
 
 import numpy as np
 
@@ -33,3 +35,15 @@ def tone_map(rgb, l_max):
     ld = np.log10(1 + lw) / np.log10(1 + l_max)
     scale = np.where(lw > 0, ld / np.maximum(lw, 1e-12), 0)
     return np.clip(rgb * scale[..., None], 0, 1)
+
+
+def side_by_side(first, second, repeat):
+    """Median times (seconds) of two calls made in turn, round by round, so that a busy spell of a
+    shared machine falls on both."""
+    times = ([], [])
+    for _ in range(repeat):
+        for fn, out in zip((first, second), times):
+            start = time.perf_counter()
+            fn()
+            out.append(time.perf_counter() - start)
+    return statistics.median(times[0]), statistics.median(times[1])
