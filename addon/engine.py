@@ -325,10 +325,24 @@ def takes_vertex_materials(shader):
     return shader.method in SHADOW_METHODS
 
 
-def diffuse_light(shader, data, occlusion):
+def diffuse_light(shader, data, occlusion, lamps=None):
     """The light each vertex of `data` sends back to what it blocks: its Lambertian part's, head-on,
-    with its shadows (and its own inputs, read from textures: data.inputs)."""
-    return shader.diffuse_light(_shading_normals(data), occlusion=occlusion, **data.inputs)
+    with its shadows (and its own inputs, read from textures: data.inputs), the lamps' included."""
+    kw = dict(lamps=lamps, positions=data.positions) if lamps else {}
+    return shader.diffuse_light(_shading_normals(data), occlusion=occlusion, **kw, **data.inputs)
+
+
+def make_lamps(settings):
+    """wenv.Lamp for each of lamps.read_lamps' settings; SetupError naming the light whose setting the
+    core refuses (a negative or infinite power a script set, say)."""
+    made = []
+    for s in settings:
+        kw = {k: v for k, v in s.items() if k not in ("type", "matrix", "name")}
+        try:
+            made.append(wenv.Lamp(s["type"], s["matrix"], **kw))
+        except ValueError as exc:
+            raise SetupError(f"Light '{s['name']}': {exc}") from None
+    return made
 
 
 def _shading_normals(data):
@@ -530,8 +544,16 @@ def shade_step(shader, data, view, cull, out, first, budget, scene=None):
             out[at_eye] = 0.0
         stats = shader.stats
         return stats["next_vertex"], stats.get("visible_vertices", data.count)
-    out[:] = shader.shade(_shading_normals(data), view.direction, **(scene or {}), **data.inputs)
+    out[:] = shader.shade(_shading_normals(data), view.direction, **_with_positions(scene, data), **data.inputs)
     return data.count, data.count
+
+
+def _with_positions(scene, data):
+    """The keywords of shading `data` orthographically: scene's, and the positions lamps need."""
+    kw = dict(scene or {})
+    if kw.get("lamps"):
+        kw["positions"] = data.positions
+    return kw
 
 
 def visible_vertices(data, view):
@@ -543,9 +565,10 @@ def shade_arrays(shader, data, view, cull=False, scene=None):
     """Radiance (n, 3) for world-space `data` (meshes.MeshData) seen from `view` (views.View), and
     which vertices were shaded: with `cull` and a viewport's perspective view, only those facing
     the eye and on screen (the rest are black), else all (None).  A vertex at the eye is black.
-    `scene`: the keywords of shading with shadows (occlusion, bounce), or None."""
+    `scene`: the keywords of shading with shadows (occlusion, bounce) and lamps, or None."""
     if not view.perspective:
-        return shader.shade(_shading_normals(data), view.direction, **(scene or {}), **data.inputs), None
+        return shader.shade(_shading_normals(data), view.direction, **_with_positions(scene, data),
+                            **data.inputs), None
     seen = None
     kw = dict(scene or {}, **data.inputs)
     if cull and view.view_projection is not None:

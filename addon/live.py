@@ -2,7 +2,7 @@
 drives these from modal timers, tests drive them directly)."""
 import threading
 
-from . import engine, materials, shading, views, world
+from . import engine, lamps, materials, shading, views, world
 
 
 class _WorkerJob:
@@ -143,7 +143,7 @@ class LiveSession:
         for obj in self.objects(scene):
             mats = tuple(materials.material_key(s.material.wenv if s.material else None) for s in obj.material_slots)
             objs.append((obj.name, _matrix_tuple(obj.matrix_world), len(obj.data.vertices), mats))
-        return (view.signature, world_sig, tuple(objs), st.quality, st.tone_mapping, st.max_luminance, st.target_error,
+        return (view.signature, world_sig, tuple(objs), lamps.signature(scene), st.quality, st.tone_mapping, st.max_luminance, st.target_error,
                 st.memory_budget, st.shade_only_seen, st.refine_at_rest, st.preview_changes)
 
     @property

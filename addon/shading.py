@@ -3,7 +3,7 @@ import math
 
 import numpy as np
 
-from . import engine, materials, meshes, textures, world
+from . import engine, lamps, materials, meshes, textures, world
 from .engine import SetupError
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722], np.float32)
@@ -43,6 +43,8 @@ class ShadingPlan:
         self.shadows = shadows  # shade with the scene in the way (engine.shadows)
         self.casts = []  # per item: whether it blocks light (the object's Casts Shadows)
         self.blockers = []  # (positions, triangles) of the other meshes that block light
+        self.lamps = []  # the scene's lamps (wenv.Lamp: no Blender data)
+        self.lamps_key = ()  # what tells this pass's lamps from another's (the bounce made with them)
         self.notes = []
         self.results = None
         self.auto_choices = {}  # (object name, material key) -> stats["auto"] of the shader used
@@ -141,13 +143,14 @@ class ShadingPlan:
         against every blocking mesh, and as bounce the light every occluder vertex sends back (the
         shaded parts' diffuse light; black for the blockers not shaded).  None without shadows.
         report(fraction) as the occlusions are cast; `cancelled` (a threading.Event) stops them."""
+        lit = {"lamps": self.lamps} if self.lamps else None
         if not self.shadows:
-            return [None] * len(work)
+            return [lit] * len(work)
         meshes_in = [(data.positions, data.triangles if cast else np.zeros((0, 3), np.int32))
                      for (_, data, _), cast in zip(self.items, self.casts)]
         meshes_in += self.blockers
         if not any(len(t) for _, t in meshes_in):
-            return [None] * len(work)
+            return [lit] * len(work)
         with engine.shadows.lock:
             occluders, offsets = engine.shadows.occluders(meshes_in, self.memory_budget_mb)
             occlusions = [engine.shadows.occlusion(occluders, part.positions, part.normals,
@@ -166,13 +169,13 @@ class ShadingPlan:
                 continue
             made_by = (quality, self.world.signature, key, self.target_error, self.memory_budget_mb,
                        engine.fingerprint(*(part.inputs[k] for k in sorted(part.inputs))) if part.inputs else None,
-                       tuple(sorted(part.inputs)))
+                       tuple(sorted(part.inputs)), self.lamps_key)
             taken = self._takes(shader, name, part)
             with engine.shadows.lock:
                 bounce[offsets[i] + np.flatnonzero(sel)] = engine.shadows.light(
-                    occlusion, made_by, lambda: engine.diffuse_light(shader, taken, occlusion))
+                    occlusion, made_by, lambda: engine.diffuse_light(shader, taken, occlusion, self.lamps))
             scenes.append(occlusion)
-        return [dict(occlusion=o, bounce=bounce) if o is not None else None for o in scenes]
+        return [dict(occlusion=o, bounce=bounce, **(lit or {})) if o is not None else lit for o in scenes]
 
     def compute(self, rays=None):
         """Shades every part; rays(fraction), if given, while their occlusions are cast."""
@@ -283,9 +286,13 @@ def plan_shading(scene, depsgraph, objects, view, images, progress=None, preview
     if st.shade_only_seen and view.view_projection is None and st.view_source == "VIEWPORT" and not view.perspective:
         notes.append("Shade Only What Is Seen applies to perspective viewports: this orthographic view shades "
                      "every vertex")
-    for note in (world.scene_lights_note(scene), world.image_note(spec, images)):
-        if note:
-            notes.append(note)
+    note = world.image_note(spec, images)
+    if note:
+        notes.append(note)
+    lamp_settings, lamp_notes = lamps.read_lamps(scene)
+    notes.extend(lamp_notes)
+    plan.lamps = engine.make_lamps(lamp_settings)
+    plan.lamps_key = lamps.signature(scene)
     plan.notes = notes
     for obj in mesh_objects:
         data = meshes.read_mesh(obj, depsgraph)

@@ -3,7 +3,7 @@ import math
 
 import bpy
 
-from . import engine, gloss, handlers, materials, world
+from . import engine, gloss, handlers, lamps, materials, world
 from .live import LiveState
 
 
@@ -85,7 +85,7 @@ class WENV_PT_shading(_SidebarPanel, bpy.types.Panel):
         except engine.SetupError as exc:
             box.alert = True
             box.label(text=str(exc), icon="ERROR")
-        lights = world.scene_lights_note(context.scene)
+        lights = lamps.summary(context.scene)
         if lights:
             box.label(text=lights, icon="LIGHT")
         problems = [p for p in ((LiveState.session.last_error if live else None), handlers.last_error()) if p]

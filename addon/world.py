@@ -196,13 +196,3 @@ def environment(spec, images):
                                           lambda: environment_from_spec(untransformed, images))
     except ValueError as exc:  # lighting the core refuses (a Strength beyond what it can shade)
         raise SetupError(f"World: {exc}") from None
-
-
-def scene_lights_note(scene):
-    """A sentence naming the scene's Light objects that render (wenv shades the World's lighting only),
-    or None when there are none."""
-    lights = [o.name for o in scene.objects if o.type == "LIGHT" and not o.hide_render]
-    if not lights:
-        return None
-    shown = ", ".join(f"'{n}'" for n in lights[:3]) + (f" and {len(lights) - 3} more" if len(lights) > 3 else "")
-    return f"{len(lights)} Light object(s) ({shown}) not shaded: wenv shades the World's lighting only"

@@ -40,9 +40,11 @@ def registered(tmp_path_factory):
 def scene():
     """Blender's factory start-up scene (cube, camera, light, grey World), draft quality, live mode
     not refining at rest (the tests of refinement turn it on), shadows off (their tests turn them
-    on: the start-up cube would otherwise stand in every object's sky)."""
+    on: the start-up cube would otherwise stand in every object's sky), and its Light hidden from
+    renders (the lamps' tests show it again: the others compare with the World's light alone)."""
     bpy.ops.wm.read_homefile(use_factory_startup=True)
     sc = bpy.context.scene
+    bpy.data.objects["Light"].hide_render = True
     sc.wenv.quality = "DRAFT"
     assert sc.wenv.refine_at_rest and sc.wenv.shadows  # on for users
     sc.wenv.refine_at_rest = False
@@ -226,6 +228,62 @@ def test_operator_equals_core_shade(scene):
     want = core_shader(env, wenv_material(mat)).shade_mesh(p, n, eye)
     assert rgb.max() > 0.05
     np.testing.assert_allclose(rgb, want, rtol=1e-4, atol=1e-5)
+
+
+def test_lamps_are_shaded_as_the_core_shades_them(scene):
+    """The start-up Light (a 1000 W point lamp), an area lamp of a temperature and a spot shine on
+    Suzanne: the operator's colours are the core's with the lamps as addon/lamps.py reads them, in
+    Cycles' units; a light a script gave a negative power is named; moving a lamp re-shades the live
+    mode."""
+    from addon import engine as addon_engine, lamps as addon_lamps
+    env_world(scene, "forest", strength=0.3)
+    obj = add_monkey()
+    mat = set_material(obj, lobes=((0.2, 1.5, "GGX"),))
+    point = bpy.data.objects["Light"]
+    point.hide_render = False
+    area = bpy.data.objects.new("area", bpy.data.lights.new("area", "AREA"))
+    scene.collection.objects.link(area)
+    area.location, area.rotation_euler = (0.0, -3.0, 1.0), (1.2, 0.0, 0.0)
+    area.data.energy, area.data.size = 300.0, 1.5
+    area.data.use_temperature, area.data.temperature = True, 3200.0
+    spot = bpy.data.objects.new("spot", bpy.data.lights.new("spot", "SPOT"))
+    scene.collection.objects.link(spot)
+    spot.location, spot.rotation_euler = (2.0, -2.0, 2.0), (0.8, 0.0, 0.8)
+    spot.data.energy, spot.data.spot_size = 500.0, 0.8
+    bpy.context.view_layer.update()
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    _, rgb = attribute(obj)
+    settings, notes = addon_lamps.read_lamps(scene)
+    assert sorted(s["name"] for s in settings) == ["Light", "area", "spot"] and notes == []
+    warm = next(s for s in settings if s["name"] == "area")["color"]
+    assert warm[0] > warm[1] > warm[2]  # 3200 K: Blender's own colour of it
+    p, n = world_arrays(obj, corner=False)
+    env = wenv.load_environment(hdri_path("forest"), strength=0.3)
+    eye = tuple(scene.camera.matrix_world.translation)
+    shader = core_shader(env, wenv_material(mat))
+    want = shader.shade_mesh(p, n, eye, lamps=addon_engine.make_lamps(settings))
+    world_only = shader.shade_mesh(p, n, eye)
+    assert np.mean(want) > 2 * np.mean(world_only)  # the lamps carry most of the light here
+    np.testing.assert_allclose(rgb, want, rtol=1e-4, atol=1e-5)
+
+    spot.data.energy = -5.0  # a script may set what the UI would not
+    with pytest.raises(addon_engine.SetupError, match="Light 'spot'.*energy"):
+        addon_engine.make_lamps(addon_lamps.read_lamps(scene)[0])
+    spot.data.energy = 500.0
+
+    scene.wenv.view_source = "CAMERA"
+    session = live.LiveSession([obj.name])
+    session.tick(bpy.context)
+    session.wait(60)
+    session.tick(bpy.context)
+    before = attribute(obj)[1].copy()
+    area.location = (0.0, -3.0, 0.2)
+    bpy.context.view_layer.update()
+    session.tick(bpy.context)
+    session.wait(60)
+    assert session.tick(bpy.context)  # the moved lamp is a change
+    assert not np.allclose(attribute(obj)[1], before)
+    session.stop()
 
 
 @pytest.mark.parametrize("perspective", [True, False])
@@ -1238,8 +1296,8 @@ def test_texture_sampling_wraps_as_the_node_extends():
 
 def test_what_wenv_does_not_shade_is_reported(scene):
     """Linked inputs (a texture: its unlinked value is used; a normal map: not used), inputs wenv does
-    not shade, a node tree with more than the Principled BSDF and the scene's Light objects are named
-    in the shading report and in the Material panel, never dropped silently."""
+    not shade, a node tree with more than the Principled BSDF and a lamp's light linking are named in
+    the shading report and in the Material panel, never dropped silently."""
     from addon import ui
     env_world(scene, "sunset")
     obj = add_monkey()
@@ -1260,10 +1318,13 @@ def test_what_wenv_does_not_shade_is_reported(scene):
     assert any("'Normal' is linked" in n for n in notes) and any("Transmission" in n for n in notes)
     assert not any("Emission" in n for n in notes)  # emission is shaded
     from addon import shading, views
+    receivers = bpy.data.collections.new("lit-only")
+    bpy.data.objects["Light"].hide_render = False
+    bpy.data.objects["Light"].light_linking.receiver_collection = receivers
     view = views.camera_view(bpy.context.scene)
     _, report = shading.shade_objects(bpy.context.scene, bpy.context.evaluated_depsgraph_get(), [obj], view,
                                       bpy.data)
-    assert any("Light object(s) ('Light')" in n for n in report), report
+    assert any("Light 'Light': light linking is not honoured" in n for n in report), report
     assert all(f"'textured': {n}" in report for n in notes), report
     panel = [l[1] for l in draw_panel(ui.WENV_PT_material) if l[0] == "label"]
     assert all(n in panel for n in notes)

@@ -173,7 +173,7 @@ def test_bad_occlusion_arguments_are_named():
         occ.occlusion(np.float32([[math.inf, 0, 0]]), n)
     with pytest.raises(ValueError, match="rows"):
         occ.occlusion(np.float32([[0, 0, 0], [1, 1, 1]]), n)
-    with pytest.raises(ValueError, match="go together"):
+    with pytest.raises(ValueError, match="occluders need positions"):
         wenv.reference(constant_environment(1.0, 64), wenv.Lambert(0.5), n, n, occluders=occ)
     with pytest.raises(TypeError, match="occluders"):
         wenv.reference(constant_environment(1.0, 64), wenv.Lambert(0.5), n, n, positions=p, occluders="roof")

@@ -1,5 +1,6 @@
 #include "methods/lighting_frame.h"
 
+#include "methods/lamps/lamp_shading.h"
 #include "methods/emission.h"
 
 #include "base/fingerprint.h"
@@ -104,8 +105,8 @@ static wenv_status run(const wenv_method *method, void *state, const float *norm
 wenv_status wenv_lighting_frame_shade_scene(const wenv_lighting_frame *frame, const wenv_method *method, void *state,
                                             const float *normals, const float *views, size_t n,
                                             const wenv_shadow_scene *scene, const wenv_vertex_colour *colour,
-                                            const wenv_family_rows *family, const wenv_material *emitting,
-                                            float *out, wenv_error *err)
+                                            const wenv_family_rows *family, const wenv_material *material,
+                                            const wenv_lamp_rows *lamps, float *out, wenv_error *err)
 {
     wenv_shadow_scene held;
     if (scene) {
@@ -118,25 +119,27 @@ wenv_status wenv_lighting_frame_shade_scene(const wenv_lighting_frame *frame, co
         held.key = wenv_fingerprint_floats(held.key, &held.bounce_scale, 1);
         scene = &held;
     }
+    wenv_status st;
     if (frame->identity || n == 0) {
-        wenv_status st = run(method, state, normals, views, n, scene, colour, family, out, err);
-        if (!st && emitting)
-            wenv_emission_add(emitting, normals, views, n, out);
-        return st;
+        st = run(method, state, normals, views, n, scene, colour, family, out, err);
+    } else {
+        float *turned = malloc(n * 6 * sizeof(float));
+        if (!turned)
+            return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory turning %zu normals and views", n);
+        turn_all(frame->turn, normals, n, turned);
+        if (views)
+            turn_all(frame->turn, views, n, turned + 3 * n);
+        st = run(method, state, turned, views ? turned + 3 * n : NULL, n, scene, colour, family, out, err);
+        free(turned);
+        if (!st && frame->scale != 1.0f)
+            for (size_t i = 0; i < 3 * n; i++)
+                out[i] *= frame->scale;
     }
-    float *turned = malloc(n * 6 * sizeof(float));
-    if (!turned)
-        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory turning %zu normals and views", n);
-    turn_all(frame->turn, normals, n, turned);
-    if (views)
-        turn_all(frame->turn, views, n, turned + 3 * n);
-    wenv_status st = run(method, state, turned, views ? turned + 3 * n : NULL, n, scene, colour, family, out, err);
-    free(turned);
-    if (!st && frame->scale != 1.0f)
-        for (size_t i = 0; i < 3 * n; i++)
-            out[i] *= frame->scale;
-    if (!st && emitting) /* the frame turns both normal and view: their cosine is the world's */
-        wenv_emission_add(emitting, normals, views, n, out);
+    /* lamps and emission in the world: the frame turns both normal and view, but not the lamps */
+    if (!st && lamps && material)
+        st = wenv_lamps_add(lamps, material, colour, family, normals, views, n, out, err);
+    if (!st && material)
+        wenv_emission_add(material, normals, views, n, out);
     return st;
 }
 
@@ -144,5 +147,6 @@ wenv_status wenv_lighting_frame_shade(const wenv_lighting_frame *frame, const we
                                       const float *normals, const float *views, size_t n, float *out,
                                       wenv_error *err)
 {
-    return wenv_lighting_frame_shade_scene(frame, method, state, normals, views, n, NULL, NULL, NULL, NULL, out, err);
+    return wenv_lighting_frame_shade_scene(frame, method, state, normals, views, n, NULL, NULL, NULL, NULL, NULL, out,
+                                           err);
 }

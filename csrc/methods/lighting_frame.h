@@ -16,6 +16,7 @@
 
 #include "base/error.h"
 #include "base/progress.h"
+#include "methods/lamps/lamp_light.h"
 #include "methods/material_family.h"
 #include "methods/method.h"
 #include "methods/vertex_colour.h"
@@ -48,12 +49,13 @@ wenv_status wenv_lighting_frame_shade(const wenv_lighting_frame *frame, const we
  * here), or with views NULL the diffuse light leaving each vertex (method->diffuse_light; scene may
  * then be NULL).  The method must provide them.  colour (NULL: the material's own) gives each
  * vertex its colour, family (NULL: the method's material) its Roughness and Metallic
- * (material_family.h; colour's per_colour table is then the family's members').  emitting (NULL:
- * none) is the material whose own light is added, unscaled by the World's strength (emission.h). */
+ * (material_family.h; colour's per_colour table is then the family's members').  material is the
+ * shader's: its own light is added, unscaled by the World's strength (emission.h), and so is the
+ * light of the scene's lamps (lamps: NULL for none; lamps/lamp_shading.h), in the world's frame. */
 wenv_status wenv_lighting_frame_shade_scene(const wenv_lighting_frame *frame, const wenv_method *method, void *state,
                                             const float *normals, const float *views, size_t n,
                                             const wenv_shadow_scene *scene, const wenv_vertex_colour *colour,
-                                            const wenv_family_rows *family, const wenv_material *emitting,
-                                            float *out, wenv_error *err);
+                                            const wenv_family_rows *family, const wenv_material *material,
+                                            const wenv_lamp_rows *lamps, float *out, wenv_error *err);
 
 #endif

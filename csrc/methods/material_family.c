@@ -617,3 +617,87 @@ done:
     free(light_w);
     return st;
 }
+
+/* The call's vertices' rows of the family, checked. */
+static wenv_status family_vertices(const wenv_family_rows *fr, size_t n, size_t **fv, wenv_error *err)
+{
+    if (!(*fv = malloc((n ? n : 1) * sizeof **fv)))
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory shading %zu vertices", n);
+    for (size_t k = 0; k < n; k++) {
+        (*fv)[k] = fr->rows ? fr->rows[k] : fr->offset + k;
+        if ((*fv)[k] >= fr->family->n) {
+            wenv_status st = wenv_error_set(err, WENV_ERR_VALUE, "the material per vertex was made for %zu vertices, "
+                                            "not %zu", fr->family->n, (*fv)[k] + 1);
+            free(*fv);
+            *fv = NULL;
+            return st;
+        }
+    }
+    return WENV_OK;
+}
+
+wenv_status wenv_material_family_own(const wenv_family_rows *fr, const float *normals, const float *views, size_t n,
+                                     const float *rgb, uint32_t *pick, float *weight, wenv_vertex_lights *out,
+                                     wenv_error *err)
+{
+    const wenv_material_family *f = fr->family;
+    size_t *fv;
+    if (family_vertices(fr, n, &fv, err))
+        return err->status;
+    if (f->lights_apart) {
+        if (views) {
+            lights_of(f, fv, normals, views, n, rgb, pick, weight);
+        } else { /* head-on */
+            for (size_t k = 0; k < n; k++)
+                for (size_t m = 0; m < WENV_VERTEX_LIGHTS_PICKS; m++) {
+                    size_t at = WENV_VERTEX_LIGHTS_PICKS * k + m;
+                    float side_w = m < f->n_m ? f->side_w[SIDES * fv[k] + m] : 0.0f, share[3] = {1.0f, 1.0f, 1.0f};
+                    pick[at] = m < f->n_m ? f->pick[SIDES * fv[k] + m] : 0;
+                    if (side_w > 0.0f && f->side[m] != SIDE_AS_IS)
+                        metal_share(f->palette[pick[at]], f->side[m], 1.0f, rgb + 3 * k, share);
+                    for (int c = 0; c < 3; c++)
+                        weight[3 * at + (size_t)c] = side_w * share[c];
+                }
+        }
+        *out = (wenv_vertex_lights){(const wenv_material *const *)f->palette, f->n_palette, f->key, pick, weight};
+        free(fv);
+        return WENV_OK;
+    }
+    /* exact levels: one level a vertex, so its entries with weight are its sides */
+    for (size_t k = 0; k < n; k++) {
+        float cos_v = wenv_view_cosine(normals + 3 * k, views ? views + 3 * k : NULL);
+        size_t m = 0;
+        for (size_t e = 0; e < ENTRIES && m < WENV_VERTEX_LIGHTS_PICKS; e++) {
+            float w = f->weight[ENTRIES * fv[k] + e];
+            if (!(w > 0.0f))
+                continue;
+            size_t at = WENV_VERTEX_LIGHTS_PICKS * k + m++, j = f->member_of[ENTRIES * fv[k] + e];
+            float share[3] = {1.0f, 1.0f, 1.0f};
+            if (f->side[j % f->n_m] != SIDE_AS_IS)
+                metal_share(f->member[j], f->side[j % f->n_m], cos_v, rgb + 3 * k, share);
+            pick[at] = (uint32_t)j;
+            for (int c = 0; c < 3; c++)
+                weight[3 * at + (size_t)c] = w * share[c];
+        }
+        for (; m < WENV_VERTEX_LIGHTS_PICKS; m++) {
+            size_t at = WENV_VERTEX_LIGHTS_PICKS * k + m;
+            pick[at] = 0;
+            weight[3 * at] = weight[3 * at + 1] = weight[3 * at + 2] = 0.0f;
+        }
+    }
+    *out = (wenv_vertex_lights){(const wenv_material *const *)f->member, f->n_r * f->n_m, f->key, pick, weight};
+    free(fv);
+    return WENV_OK;
+}
+
+wenv_status wenv_material_family_add_diffuse(const wenv_family_rows *fr, const float *normals, const float *views,
+                                             size_t n, const float *rgb, const float *irradiance, float *out,
+                                             wenv_error *err)
+{
+    size_t *fv;
+    if (family_vertices(fr, n, &fv, err))
+        return err->status;
+    apply_diffuse(fr->family, fv, normals, views, n, rgb, irradiance, out);
+    free(fv);
+    return WENV_OK;
+}

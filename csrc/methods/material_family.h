@@ -78,6 +78,22 @@ typedef struct {
     size_t offset;
 } wenv_family_rows;
 
+/* Each call vertex's own materials, for what is shaded per vertex with the BRDF itself (the scene's
+ * lamps, lamps/lamp_light.h): its Roughness exactly (the lights' palette where the levels are
+ * interpolated, else its members) on each metallic side, weighted per channel as method.h's
+ * wenv_vertex_lights (a metal's by its share of the vertex's colour, rgb; NULL without).  pick and
+ * weight: room for WENV_VERTEX_LIGHTS_PICKS (x 3) per vertex; *out points into them and the family.
+ * WENV_ERR_VALUE for a row past the family's vertices. */
+wenv_status wenv_material_family_own(const wenv_family_rows *rows, const float *normals, const float *views, size_t n,
+                                     const float *rgb, uint32_t *pick, float *weight, wenv_vertex_lights *out,
+                                     wenv_error *err);
+
+/* out[i] += each call vertex's Lambertian part (its members' mixed, times its colour rgb where given)
+ * times irradiance[i], clamped at 0, for a view at normal i . view i (views NULL: head-on). */
+wenv_status wenv_material_family_add_diffuse(const wenv_family_rows *rows, const float *normals, const float *views,
+                                             size_t n, const float *rgb, const float *irradiance, float *out,
+                                             wenv_error *err);
+
 /* Shades n (normal, view) pairs in the method's frame as method->shade / shade_shadowed (scene set)
  * would with each vertex's own material, or with views NULL its diffuse light (method.h), into out;
  * rgb (n x 3, or NULL; given only to a family made for a colour) a colour per vertex as

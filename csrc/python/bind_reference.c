@@ -2,6 +2,7 @@
 #include "python/module.h"
 
 #include "python/bind_envmap.h"
+#include "python/bind_lamp.h"
 #include "python/bind_material.h"
 #include "python/bind_occlusion.h"
 #include "reference/reference.h"
@@ -10,12 +11,13 @@ static PyObject *py_reference(PyObject *self, PyObject *args, PyObject *kwargs)
 {
     (void)self;
     static char *kwlist[] = {"env",       "material",  "normals", "view_dirs",  "progress", "positions",
-                             "occluders", "bounce",    "base_color", "roughness", "metallic", NULL};
+                             "occluders", "bounce",    "base_color", "roughness", "metallic", "lamps", NULL};
     PyObject *env_obj, *mat_obj, *nobj, *vobj, *progress_obj = Py_None, *pobj = Py_None, *occ_obj = Py_None;
     PyObject *bounce_obj = Py_None, *colour_obj = Py_None, *rough_obj = Py_None, *metal_obj = Py_None;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOO|OOOOO$OO:reference", kwlist, &env_obj, &mat_obj, &nobj,
+    PyObject *lamps_obj = Py_None;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOO|OOOOO$OOO:reference", kwlist, &env_obj, &mat_obj, &nobj,
                                      &vobj, &progress_obj, &pobj, &occ_obj, &bounce_obj, &colour_obj, &rough_obj,
-                                     &metal_obj))
+                                     &metal_obj, &lamps_obj))
         return NULL;
     if (bounce_obj != Py_None && occ_obj == Py_None) {
         PyErr_SetString(PyExc_ValueError, "bounce is read only with occluders (what blocks the light it fills in)");
@@ -24,8 +26,16 @@ static PyObject *py_reference(PyObject *self, PyObject *args, PyObject *kwargs)
     const struct wenv_occluders *occ = NULL;
     if (occ_obj != Py_None && !(occ = wenv_py_occluders(occ_obj, "occluders")))
         return NULL;
-    if ((occ_obj == Py_None) != (pobj == Py_None)) {
-        PyErr_SetString(PyExc_ValueError, "occluders and positions go together: the rays start at the positions");
+    if (occ_obj != Py_None && pobj == Py_None) {
+        PyErr_SetString(PyExc_ValueError, "occluders need positions: the rays start at the positions");
+        return NULL;
+    }
+    if (lamps_obj != Py_None && pobj == Py_None) {
+        PyErr_SetString(PyExc_ValueError, "lamps need the vertices' positions (positions=)");
+        return NULL;
+    }
+    if (pobj != Py_None && occ_obj == Py_None && lamps_obj == Py_None) {
+        PyErr_SetString(PyExc_ValueError, "positions are read only with occluders or lamps");
         return NULL;
     }
     const struct wenv_envmap *env = wenv_py_envmap(env_obj, "env");
@@ -49,8 +59,11 @@ static PyObject *py_reference(PyObject *self, PyObject *args, PyObject *kwargs)
     PyObject *result = NULL;
     Py_buffer pb = {0}, bb = {0}, rb = {0}, mb = {0};
     float *rgb = NULL;
-    size_t np = n, nb_rows;
-    if (occ && wenv_py_get_vec3_array(pobj, "positions", 0, &pb, &np, NULL) < 0)
+    wenv_lamp *lamps = NULL;
+    size_t np = n, nb_rows, n_lamps = 0;
+    if (pobj != Py_None && wenv_py_get_vec3_array(pobj, "positions", 0, &pb, &np, NULL) < 0)
+        goto done;
+    if (wenv_py_lamps(lamps_obj, "lamps", &lamps, &n_lamps) < 0)
         goto done;
     if (bounce_obj != Py_None) {
         if (wenv_py_get_vec3_array(bounce_obj, "bounce", 0, &bb, &nb_rows, NULL) < 0)
@@ -63,7 +76,7 @@ static PyObject *py_reference(PyObject *self, PyObject *args, PyObject *kwargs)
     }
     if (nv != n || np != n) {
         PyErr_Format(PyExc_ValueError, "view_dirs has %zu rows and positions %zu, but normals has %zu", nv,
-                     occ ? np : n, n);
+                     np, n);
         goto done;
     }
     if (colour_obj != Py_None && !(rgb = wenv_py_base_colours(colour_obj, n)))
@@ -81,8 +94,9 @@ static PyObject *py_reference(PyObject *self, PyObject *args, PyObject *kwargs)
     wenv_error err = {0};
     wenv_status st;
     WENV_BEGIN_WORK
-    st = wenv_reference_per_vertex(env, mat, nb.buf, vb.buf, n, occ, occ ? pb.buf : NULL, bb.obj ? bb.buf : NULL, rgb,
-                                   rb.obj ? rb.buf : NULL, mb.obj ? mb.buf : NULL, out, &progress, &err);
+    st = wenv_reference_per_vertex(env, mat, nb.buf, vb.buf, n, occ, pb.obj ? pb.buf : NULL, bb.obj ? bb.buf : NULL, rgb,
+                                   rb.obj ? rb.buf : NULL, mb.obj ? mb.buf : NULL, lamps, n_lamps, out, &progress,
+                                   &err);
     WENV_END_WORK
     if (st) {
         Py_CLEAR(result);
@@ -91,6 +105,7 @@ static PyObject *py_reference(PyObject *self, PyObject *args, PyObject *kwargs)
     }
 done:
     PyMem_Free(rgb);
+    PyMem_Free(lamps);
     if (pb.obj)
         PyBuffer_Release(&pb);
     if (bb.obj)
@@ -107,14 +122,16 @@ done:
 static PyMethodDef reference_functions[] = {
     {"reference", (PyCFunction)(void (*)(void))py_reference, METH_VARARGS | METH_KEYWORDS,
      "reference(env, material, normals, view_dirs, progress=None, positions=None, occluders=None, bounce=None, "
-     "base_color=None, *, roughness=None, metallic=None)\n--\n\n"
+     "base_color=None, *, roughness=None, metallic=None, lamps=None)\n--\n\n"
      "Ground truth: the reflection equation summed over every environment pixel (exact solid angles), in the "
      "units of Shader.shade.  With occluders (a wenv.Occluders) and the vertices' positions, each pixel's ray "
      "from the vertex is cast exactly, and a blocked one brings the blocker's light where it is hit: bounce "
      "(occluder vertices, 3), each occluder vertex's radiance interpolated over the hit triangle, or nothing "
      "when bounce is None (direct light only).  base_color (n, 3): each vertex's colour in place of the "
      "material's, as Shader.shade takes it.  roughness, metallic (n,) float32: each vertex's Roughness and "
-     "Metallic in place of a Principled material's, each distinct value shaded with its own material, exactly."},
+     "Metallic in place of a Principled material's, each distinct value shaded with its own material, exactly.  "
+     "lamps (a sequence of wenv.Lamp, with positions): each lamp's light summed over a fine grid of its surface "
+     "(or its cone of directions), each point with the exact BRDF and, with occluders, its own ray."},
     {NULL, NULL, 0, NULL},
 };
 

@@ -17,6 +17,7 @@
 #include "methods/visibility.h"
 #include "python/bind_envmap.h"
 #include "python/bind_material.h"
+#include "python/bind_lamp.h"
 #include "python/bind_occlusion.h"
 
 typedef struct {
@@ -34,6 +35,7 @@ typedef struct {
     Py_ssize_t visible; /* vertices the last shade_mesh(cull=True) shaded; -1 if it shaded all */
     Py_ssize_t next_vertex; /* the first of them the last shade_mesh left unshaded (its budget); -1 before one */
     wenv_material_family *family; /* the latest Roughness and Metallic per vertex, kept for the next view */
+    wenv_lamp_light *lamp_light;  /* the latest lamps' light at the latest vertices, kept for the next view */
 } ShaderObject;
 
 /* ---- quality dicts, read and written through the method's parameter table ---- */
@@ -326,6 +328,7 @@ static void Shader_dealloc(ShaderObject *self)
     if (self->state)
         self->method->destroy(self->state);
     wenv_material_family_free(self->family);
+    wenv_lamp_light_free(self->lamp_light);
     PyMem_Free(self->quality);
     Py_XDECREF(self->environment);
     Py_XDECREF(self->material);
@@ -460,16 +463,56 @@ static int ensure_family(ShaderObject *self, PyObject *colour, PyObject *roughne
     return 0;
 }
 
+/* The lamps (a sequence of wenv.Lamp; NULL or None: none) at n vertices (positions: NULL when not
+ * given): the shader's lamps' light made for them, unless it was, shadowed by the scene's occluders
+ * when scene is set, into *rows (*out NULL without lamps).  Called with the shader claimed; the
+ * shadows' rays report to the shader's progress.  -1 with the error set. */
+static int ensure_lamps(ShaderObject *self, PyObject *lamps_obj, const float *positions, const float *normals,
+                        size_t n, const wenv_shadow_scene *scene, wenv_lamp_rows *rows, const wenv_lamp_rows **out)
+{
+    *out = NULL;
+    wenv_lamp *lamps;
+    size_t n_lamps;
+    if (wenv_py_lamps(lamps_obj, "lamps", &lamps, &n_lamps) < 0)
+        return -1;
+    if (!lamps_obj || lamps_obj == Py_None)
+        return 0;
+    if (!positions) {
+        PyMem_Free(lamps);
+        PyErr_SetString(PyExc_ValueError, "lamps need the vertices' positions (positions=)");
+        return -1;
+    }
+    wenv_py_progress_bridge bridge = {.callback = self->progress};
+    wenv_progress progress = wenv_py_progress(&bridge);
+    wenv_error err = {0};
+    wenv_status st;
+    WENV_BEGIN_WORK
+    st = wenv_lamp_light_ensure(&self->lamp_light, lamps, n_lamps, positions, normals, n,
+                                scene ? scene->occluders : NULL, &progress, &err);
+    WENV_END_WORK
+    PyMem_Free(lamps);
+    if (st) {
+        if (!(bridge.raised && PyErr_Occurred()))
+            wenv_py_raise(&err);
+        return -1;
+    }
+    *rows = (wenv_lamp_rows){self->lamp_light, NULL, 0};
+    *out = rows;
+    return 0;
+}
+
 /* With a colour or material per vertex, or a material that emits, a mesh's own bounce
  * (bounce='self') is its light with those colours and materials, its emission included: it is made
  * here, for every vertex of the occlusion (normals: all n of them), and given as the scene's
  * bounce (*light, PyMem_Free'd by the caller).  -1 with the error set. */
 static int own_bounce(ShaderObject *self, const float *normals, size_t n, wenv_shadow_scene *scene,
-                      const wenv_vertex_colour *colour, const wenv_family_rows *family, float **light)
+                      const wenv_vertex_colour *colour, const wenv_family_rows *family, const wenv_lamp_rows *lamps,
+                      float **light)
 {
     *light = NULL;
-    /* a material that emits sends its own light too, which the method's own bounce leaves out */
-    if ((!colour && !family && !wenv_material_emits(wenv_py_material(self->material, "material"))) ||
+    /* a material that emits sends its own light too, and lamps theirs, which the method's own bounce
+     * leaves out */
+    if ((!colour && !family && !lamps && !wenv_material_emits(wenv_py_material(self->material, "material"))) ||
         !scene->bounce_self)
         return 0;
     if (!(*light = PyMem_Malloc((n ? n : 1) * 3 * sizeof(float)))) {
@@ -482,7 +525,7 @@ static int own_bounce(ShaderObject *self, const float *normals, size_t n, wenv_s
     wenv_status st;
     WENV_BEGIN_WORK
     st = wenv_lighting_frame_shade_scene(&self->frame, self->method, self->state, normals, NULL, n, &sending, colour,
-                                         family, wenv_py_material(self->material, "material"), *light, &err);
+                                         family, wenv_py_material(self->material, "material"), lamps, *light, &err);
     WENV_END_WORK
     if (st) {
         wenv_py_raise(&err);
@@ -498,7 +541,7 @@ static int own_bounce(ShaderObject *self, const float *normals, size_t n, wenv_s
  * material's own. */
 static PyObject *shade_arrays(ShaderObject *self, const float *normals, const float *views, size_t n,
                               const wenv_shadow_scene *scene, const wenv_vertex_colour *colour,
-                              const wenv_family_rows *family)
+                              const wenv_family_rows *family, const wenv_lamp_rows *lamps)
 {
     Py_ssize_t shape[2] = {(Py_ssize_t)n, 3};
     float *out;
@@ -509,7 +552,7 @@ static PyObject *shade_arrays(ShaderObject *self, const float *normals, const fl
     wenv_status st;
     WENV_BEGIN_WORK
     st = wenv_lighting_frame_shade_scene(&self->frame, self->method, self->state, normals, views, n, scene, colour,
-                                         family, wenv_py_material(self->material, "material"), out, &err);
+                                         family, wenv_py_material(self->material, "material"), lamps, out, &err);
     WENV_END_WORK
     if (st) {
         Py_DECREF(result);
@@ -518,15 +561,32 @@ static PyObject *shade_arrays(ShaderObject *self, const float *normals, const fl
     return result;
 }
 
+/* positions (n rows of xyz floats) for the lamps, into pb (released by the caller).  -1 with the
+ * error set. */
+static int positions_for(PyObject *obj, size_t n, Py_buffer *pb)
+{
+    size_t np;
+    if (wenv_py_get_vec3_array(obj, "positions", 0, pb, &np, NULL) < 0)
+        return -1;
+    if (np != n) {
+        PyErr_Format(PyExc_ValueError, "positions has %zu rows but normals has %zu", np, n);
+        PyBuffer_Release(pb);
+        pb->obj = NULL;
+        return -1;
+    }
+    return 0;
+}
+
 static PyObject *Shader_shade(ShaderObject *self, PyObject *args, PyObject *kwargs)
 {
-    static char *kwlist[] = {"normals", "view_dirs", "occlusion", "bounce", "base_color", "roughness", "metallic", NULL};
+    static char *kwlist[] = {"normals",  "view_dirs", "occlusion", "bounce", "base_color",
+                             "roughness", "metallic", "positions", "lamps", NULL};
     PyObject *nobj, *vobj, *occ_obj = Py_None, *bounce_obj = NULL, *colour_obj = NULL, *rough_obj = NULL;
-    PyObject *metal_obj = NULL;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|$OOOOO:shade", kwlist, &nobj, &vobj, &occ_obj, &bounce_obj,
-                                     &colour_obj, &rough_obj, &metal_obj))
+    PyObject *metal_obj = NULL, *pos_obj = Py_None, *lamps_obj = Py_None;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|$OOOOOOO:shade", kwlist, &nobj, &vobj, &occ_obj, &bounce_obj,
+                                     &colour_obj, &rough_obj, &metal_obj, &pos_obj, &lamps_obj))
         return NULL;
-    Py_buffer nb, vb, bb = {0};
+    Py_buffer nb, vb, bb = {0}, pb = {0};
     size_t n, nvw;
     int single_n, single_v;
     if (wenv_py_get_vec3_array(nobj, "normals", 1, &nb, &n, &single_n) < 0)
@@ -543,7 +603,11 @@ static PyObject *Shader_shade(ShaderObject *self, PyObject *args, PyObject *kwar
     wenv_vertex_colour colour;
     wenv_family_rows family_rows;
     const wenv_family_rows *family = NULL;
+    wenv_lamp_rows lamp_rows;
+    const wenv_lamp_rows *lamps = NULL;
     int claimed = 0;
+    if (pos_obj != Py_None && positions_for(pos_obj, n, &pb) < 0)
+        goto done;
     if (single_v && !single_n) {
         /* one view direction for all (orthographic camera) */
         expanded = PyMem_Malloc((n ? n : 1) * 3 * sizeof(float));
@@ -569,14 +633,18 @@ static PyObject *Shader_shade(ShaderObject *self, PyObject *args, PyObject *kwar
         claim(self) < 0)
         goto done;
     claimed = 1;
-    if (ensure_family(self, colour_obj, rough_obj, metal_obj, n, &family_rows, &family) < 0)
+    if (ensure_family(self, colour_obj, rough_obj, metal_obj, n, &family_rows, &family) < 0 ||
+        ensure_lamps(self, lamps_obj, pb.obj ? pb.buf : NULL, nb.buf, n, occ_obj != Py_None ? &scene : NULL,
+                     &lamp_rows, &lamps) < 0)
         goto done;
-    if (occ_obj == Py_None || own_bounce(self, nb.buf, n, &scene, rgb ? &colour : NULL, family, &light) == 0)
+    if (occ_obj == Py_None || own_bounce(self, nb.buf, n, &scene, rgb ? &colour : NULL, family, lamps, &light) == 0)
         result = shade_arrays(self, nb.buf, views, n, occ_obj != Py_None ? &scene : NULL, rgb ? &colour : NULL,
-                              family);
+                              family, lamps);
 done:
     if (claimed)
         self->busy = 0;
+    if (pb.obj)
+        PyBuffer_Release(&pb);
     PyMem_Free(expanded);
     PyMem_Free(rgb);
     PyMem_Free(light);
@@ -589,17 +657,18 @@ done:
 
 static PyObject *Shader_diffuse_light(ShaderObject *self, PyObject *args, PyObject *kwargs)
 {
-    static char *kwlist[] = {"normals", "occlusion", "base_color", "roughness", "metallic", NULL};
+    static char *kwlist[] = {"normals", "occlusion", "base_color", "roughness", "metallic", "positions", "lamps", NULL};
     PyObject *nobj, *occ_obj = Py_None, *colour_obj = NULL, *rough_obj = NULL, *metal_obj = NULL;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "O|$OOOO:diffuse_light", kwlist, &nobj, &occ_obj, &colour_obj,
-                                     &rough_obj, &metal_obj))
+    PyObject *pos_obj = Py_None, *lamps_obj = Py_None;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "O|$OOOOOO:diffuse_light", kwlist, &nobj, &occ_obj, &colour_obj,
+                                     &rough_obj, &metal_obj, &pos_obj, &lamps_obj))
         return NULL;
     if (!self->method->diffuse_light) {
         PyErr_Format(PyExc_ValueError, "method '%s' does not give the diffuse light: use a wavelet method",
                      self->method->name);
         return NULL;
     }
-    Py_buffer nb, bb = {0};
+    Py_buffer nb, bb = {0}, pb = {0};
     size_t n;
     if (wenv_py_get_vec3_array(nobj, "normals", 1, &nb, &n, NULL) < 0)
         return NULL;
@@ -610,7 +679,11 @@ static PyObject *Shader_diffuse_light(ShaderObject *self, PyObject *args, PyObje
     float *rgb = NULL;
     wenv_family_rows family_rows;
     const wenv_family_rows *family = NULL;
+    wenv_lamp_rows lamp_rows;
+    const wenv_lamp_rows *lamps = NULL;
     int claimed = 0;
+    if (pos_obj != Py_None && positions_for(pos_obj, n, &pb) < 0)
+        goto done;
     if (occ_obj != Py_None && parse_scene(self, occ_obj, Py_None, n, &scene, &bb) < 0)
         goto done;
     if (parse_colour(self, colour_obj, n, per_vertex_material(self, colour_obj, rough_obj, metal_obj), &table,
@@ -618,12 +691,16 @@ static PyObject *Shader_diffuse_light(ShaderObject *self, PyObject *args, PyObje
         claim(self) < 0)
         goto done;
     claimed = 1;
-    if (ensure_family(self, colour_obj, rough_obj, metal_obj, n, &family_rows, &family) == 0)
+    if (ensure_family(self, colour_obj, rough_obj, metal_obj, n, &family_rows, &family) == 0 &&
+        ensure_lamps(self, lamps_obj, pb.obj ? pb.buf : NULL, nb.buf, n, occ_obj != Py_None ? &scene : NULL,
+                     &lamp_rows, &lamps) == 0)
         result = shade_arrays(self, nb.buf, NULL, n, occ_obj != Py_None ? &scene : NULL, rgb ? &colour : NULL,
-                              family);
+                              family, lamps);
 done:
     if (claimed)
         self->busy = 0;
+    if (pb.obj)
+        PyBuffer_Release(&pb);
     PyMem_Free(rgb);
     PyBuffer_Release(&nb);
     return result;
@@ -655,19 +732,20 @@ static int parse_eye(PyObject *obj, double eye[3])
  * `budget` seconds (wenv_shade_for); *next gets the first left. */
 static int shade_visible(ShaderObject *self, const float *normals, const float *views, size_t n,
                          const unsigned char *visible, size_t count, const wenv_shadow_scene *scene,
-                         const wenv_vertex_colour *colour, const wenv_family_rows *family, size_t first,
-                         double budget, float *out, size_t *next)
+                         const wenv_vertex_colour *colour, const wenv_family_rows *family,
+                         const wenv_lamp_rows *lamps, size_t first, double budget, float *out, size_t *next)
 {
     float *gathered = NULL, *shaded = out;
     uint32_t *rows = NULL;
     wenv_shadow_scene culled;
     wenv_vertex_colour culled_colour;
     wenv_family_rows culled_family;
+    wenv_lamp_rows culled_lamps;
     if (visible) {
         /* normals, views, radiance and colours */
         gathered = PyMem_Malloc((count ? count : 1) * 12 * sizeof(float));
-        rows = scene || family ? PyMem_Malloc((count ? count : 1) * sizeof *rows) : NULL;
-        if (!gathered || ((scene || family) && !rows)) {
+        rows = scene || family || lamps ? PyMem_Malloc((count ? count : 1) * sizeof *rows) : NULL;
+        if (!gathered || ((scene || family || lamps) && !rows)) {
             PyMem_Free(gathered);
             PyMem_Free(rows);
             PyErr_NoMemory();
@@ -697,6 +775,10 @@ static int shade_visible(ShaderObject *self, const float *normals, const float *
             culled_family = (wenv_family_rows){family->family, rows, 0};
             family = &culled_family;
         }
+        if (lamps) { /* and of the lamps' light */
+            culled_lamps = (wenv_lamp_rows){lamps->light, rows, 0};
+            lamps = &culled_lamps;
+        }
         normals = gathered;
         views = gathered + 3 * count;
         shaded = gathered + 6 * count;
@@ -707,7 +789,7 @@ static int shade_visible(ShaderObject *self, const float *normals, const float *
     if (first < count) {
         WENV_BEGIN_WORK
         st = wenv_shade_for(&self->frame, self->method, self->state, normals, views, count, scene, colour, family,
-                            wenv_py_material(self->material, "material"), first, budget, shaded, next, &err);
+                            wenv_py_material(self->material, "material"), lamps, first, budget, shaded, next, &err);
         WENV_END_WORK
     }
     if (!st && visible)
@@ -759,14 +841,15 @@ static PyObject *Shader_shade_mesh(ShaderObject *self, PyObject *args, PyObject 
 {
     static char *kwlist[] = {"positions", "normals", "eye",    "cull",      "view_projection", "out",
                              "first",     "budget",  "occlusion", "bounce", "base_color", "roughness",
-                             "metallic",  NULL};
+                             "metallic",  "lamps",  NULL};
     PyObject *pobj, *nobj, *eobj, *vp_obj = Py_None, *out_obj = Py_None, *budget_obj = Py_None, *first_obj = NULL;
     PyObject *occ_obj = Py_None, *bounce_obj = NULL, *colour_obj = NULL, *rough_obj = NULL, *metal_obj = NULL;
+    PyObject *lamps_obj = Py_None;
     int cull = 0;
     size_t first = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO|$pOOOOOOOOO:shade_mesh", kwlist, &pobj, &nobj, &eobj, &cull,
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO|$pOOOOOOOOOO:shade_mesh", kwlist, &pobj, &nobj, &eobj, &cull,
                                      &vp_obj, &out_obj, &first_obj, &budget_obj, &occ_obj, &bounce_obj, &colour_obj,
-                                     &rough_obj, &metal_obj))
+                                     &rough_obj, &metal_obj, &lamps_obj))
         return NULL;
     if (occ_obj == Py_None && bounce_obj) {
         PyErr_SetString(PyExc_ValueError, "bounce is read only with occlusion (what blocks the light it fills in)");
@@ -865,12 +948,15 @@ static PyObject *Shader_shade_mesh(ShaderObject *self, PyObject *args, PyObject 
     claimed = 1;
     wenv_family_rows family_rows;
     const wenv_family_rows *family;
-    if (ensure_family(self, colour_obj, rough_obj, metal_obj, np, &family_rows, &family) < 0)
+    wenv_lamp_rows lamp_rows;
+    const wenv_lamp_rows *lamps;
+    if (ensure_family(self, colour_obj, rough_obj, metal_obj, np, &family_rows, &family) < 0 ||
+        ensure_lamps(self, lamps_obj, pb.buf, nb.buf, np, occ_obj != Py_None ? &scene : NULL, &lamp_rows, &lamps) < 0)
         goto fail;
-    if (occ_obj != Py_None && own_bounce(self, nb.buf, np, &scene, rgb ? &colour : NULL, family, &light) < 0)
+    if (occ_obj != Py_None && own_bounce(self, nb.buf, np, &scene, rgb ? &colour : NULL, family, lamps, &light) < 0)
         goto fail;
     if (shade_visible(self, nb.buf, views, np, visible, count, occ_obj != Py_None ? &scene : NULL,
-                      rgb ? &colour : NULL, family, first, budget, out, &next) < 0)
+                      rgb ? &colour : NULL, family, lamps, first, budget, out, &next) < 0)
         goto fail;
     self->visible = cull ? (Py_ssize_t)count : -1;
     self->next_vertex = (Py_ssize_t)next;
@@ -963,6 +1049,12 @@ static PyObject *Shader_get_stats(ShaderObject *self, void *closure)
     if (d && self->visible >= 0) {
         PyObject *v = PyLong_FromSsize_t(self->visible);
         if (!v || PyDict_SetItemString(d, "visible_vertices", v) < 0)
+            Py_CLEAR(d);
+        Py_XDECREF(v);
+    }
+    if (d && self->lamp_light) {
+        PyObject *v = PyLong_FromSize_t(wenv_lamp_light_made(self->lamp_light));
+        if (!v || PyDict_SetItemString(d, "lamp_light_made", v) < 0)
             Py_CLEAR(d);
         Py_XDECREF(v);
     }

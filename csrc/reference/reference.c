@@ -1,4 +1,5 @@
 #include "reference/reference.h"
+#include "reference/lamps_reference.h"
 
 #include <math.h>
 #include <omp.h>
@@ -98,15 +99,17 @@ static wenv_status narrow_lobe(const wenv_envmap *env, const wenv_material *mat,
 
 wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, const float *normals,
                            const float *views, size_t n, const wenv_occluders *occ, const float *positions,
-                           const float *bounce, const float *base_color, float *out, const wenv_progress *progress,
-                           wenv_error *err)
+                           const float *bounce, const float *base_color, const wenv_lamp *lamps, size_t n_lamps,
+                           float *out, const wenv_progress *progress, wenv_error *err)
 {
     if (occ && !positions)
         return wenv_error_set(err, WENV_ERR_VALUE, "occluders need the vertices' positions");
+    if (n_lamps && !positions)
+        return wenv_error_set(err, WENV_ERR_VALUE, "lamps need the vertices' positions");
     double per_colour[3];
     if (base_color && wenv_material_diffuse_per_colour_at(mat, 1.0, per_colour, err))
         return err->status;
-    for (size_t i = 0; occ && i < n; i++)
+    for (size_t i = 0; (occ || n_lamps) && i < n; i++)
         if (!isfinite(positions[3 * i]) || !isfinite(positions[3 * i + 1]) || !isfinite(positions[3 * i + 2]))
             return wenv_error_set(err, WENV_ERR_VALUE, "positions[%zu] is not finite", i);
     int has_lobes = wenv_material_lobe_count(mat) > 0;
@@ -151,8 +154,8 @@ wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, con
                             f[6] * vv[0] + f[7] * vv[1] + f[8] * vv[2]};
             double spec[3] = {0, 0, 0}, irr[3] = {0, 0, 0};
             blocker b = {.occ = occ, .bounce = bounce};
-            if (occ) {
-                float lift = wenv_occluders_offset(occ);
+            if (occ || n_lamps) {
+                float lift = occ ? wenv_occluders_offset(occ) : 0.0f;
                 for (int c = 0; c < 3; c++)
                     b.origin[c] = positions[3 * i + (size_t)c] + lift * (float)nn[c];
             }
@@ -210,6 +213,10 @@ wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, con
                 if (wenv_material_lobe(mat, l)->alpha < narrow_alpha &&
                     narrow_lobe(env, mat, l, f, wo, dirs, flux, omega, count, nodes, &b, spec, &lobe_err))
                     atomic_store(&failed, 1);
+            if (n_lamps && wo[2] > 0.0) {
+                double p[3] = {positions[3 * i], positions[3 * i + 1], positions[3 * i + 2]};
+                wenv_reference_lamps_at(lamps, n_lamps, mat, p, nn, f, wo, occ, b.origin, spec, irr);
+            }
             double emitted[3] = {0.0, 0.0, 0.0};
             if (wo[2] > 0.0)
                 wenv_material_emission_at(mat, wo[2], emitted);
@@ -272,14 +279,15 @@ static float clamp01f(float x) { return x < 0.0f ? 0.0f : (x > 1.0f ? 1.0f : x);
 wenv_status wenv_reference_per_vertex(const wenv_envmap *env, const wenv_material *mat, const float *normals,
                                       const float *views, size_t n, const wenv_occluders *occ, const float *positions,
                                       const float *bounce, const float *base_color, const float *roughness,
-                                      const float *metallic, float *out, const wenv_progress *progress,
-                                      wenv_error *err)
+                                      const float *metallic, const wenv_lamp *lamps, size_t n_lamps, float *out,
+                                      const wenv_progress *progress, wenv_error *err)
 {
     const wenv_principled_inputs *in = wenv_principled_inputs_of(mat);
     /* a metal's colour is its Fresnel's: each colour its own material */
     int colour_in_metal = base_color && in && (in->metallic > 0.0 || metallic);
     if (!roughness && !metallic && !colour_in_metal)
-        return wenv_reference(env, mat, normals, views, n, occ, positions, bounce, base_color, out, progress, err);
+        return wenv_reference(env, mat, normals, views, n, occ, positions, bounce, base_color, lamps, n_lamps, out,
+                              progress, err);
     if (!in)
         return wenv_error_set(err, WENV_ERR_VALUE,
                               "a Roughness or Metallic per vertex needs a Principled material (wenv.Principled), not %s",
@@ -335,7 +343,7 @@ wenv_status wenv_reference_per_vertex(const wenv_envmap *env, const wenv_materia
         group_progress gp = {progress, (double)a / (double)n, (double)count / (double)n};
         wenv_progress inner = {progress && progress->report ? report_group : NULL, &gp};
         st = wenv_reference(env, group_mat, nrm, vw, count, occ, positions ? pos : NULL, bounce,
-                            base_color && !colour_in_metal ? rgb : NULL, o, &inner, err);
+                            base_color && !colour_in_metal ? rgb : NULL, lamps, n_lamps, o, &inner, err);
         wenv_material_free(group_mat);
         for (size_t k = 0; !st && k < count; k++)
             memcpy(out + 3 * key[a + k].i, o + 3 * k, 3 * sizeof(float));

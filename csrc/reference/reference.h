@@ -5,7 +5,8 @@
  * surface by wenv_occluders_offset) is cast exactly, and a blocked one brings
  * the light of the blocker where it is hit: bounce (per occluder vertex, RGB radiance, interpolated
  * over the hit triangle) times the pixel's solid angle, or nothing when bounce is NULL (direct light
- * only).  occ NULL: unshadowed. */
+ * only).  occ NULL: unshadowed.  The scene's lamps (n_lamps of them; positions then required) are
+ * added as reference/lamps_reference.h sums them, shadowed by occ, unscaled by the World. */
 #ifndef WENV_REFERENCE_H
 #define WENV_REFERENCE_H
 
@@ -14,6 +15,7 @@
 #include "base/error.h"
 #include "base/progress.h"
 #include "scene/envmap.h"
+#include "scene/lamp.h"
 #include "scene/material.h"
 #include "scene/occluders.h"
 
@@ -21,8 +23,8 @@
  * its Lambertian part (wenv_material_diffuse_per_colour_at; WENV_ERR_VALUE where it cannot vary). */
 wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, const float *normals,
                            const float *views, size_t n, const wenv_occluders *occ, const float *positions,
-                           const float *bounce, const float *base_color, float *out, const wenv_progress *progress,
-                           wenv_error *err);
+                           const float *bounce, const float *base_color, const wenv_lamp *lamps, size_t n_lamps,
+                           float *out, const wenv_progress *progress, wenv_error *err);
 
 /* The same with each vertex's Roughness and Metallic (n values each; either NULL: the material's own),
  * for a Principled material (WENV_ERR_VALUE otherwise): the vertices of one (roughness, metallic) pair,
@@ -32,7 +34,7 @@ wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, con
 wenv_status wenv_reference_per_vertex(const wenv_envmap *env, const wenv_material *mat, const float *normals,
                                       const float *views, size_t n, const wenv_occluders *occ, const float *positions,
                                       const float *bounce, const float *base_color, const float *roughness,
-                                      const float *metallic, float *out, const wenv_progress *progress,
-                                      wenv_error *err);
+                                      const float *metallic, const wenv_lamp *lamps, size_t n_lamps, float *out,
+                                      const wenv_progress *progress, wenv_error *err);
 
 #endif

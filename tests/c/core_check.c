@@ -8,6 +8,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "methods/lamps/lamp_shading.h"
 #include "methods/method.h"
 #include "methods/wavelet/grazing_nodes.h"
 #include "reference/reference.h"
@@ -309,7 +310,7 @@ static void check_methods(const wenv_envmap *env)
     }
     check(wenv_method_named("no such method") == NULL, "unknown methods are not found", 0, 0);
     float ref[4 * 3];
-    if (wenv_reference(env, mat, normals, views, 4, NULL, NULL, NULL, NULL, ref, NULL, &err) == WENV_OK)
+    if (wenv_reference(env, mat, normals, views, 4, NULL, NULL, NULL, NULL, NULL, 0, ref, NULL, &err) == WENV_OK)
         check(near(ref[0], albedo[0], 2e-3), "the reference reflects the albedo (pixel sums, 64 x 32)", ref[0], albedo[0]);
     wenv_material_free(mat);
 }
@@ -360,8 +361,36 @@ static void check_grazing_nodes(void)
     free(a);
 }
 
+/* A point lamp of radius 0 over a Lambertian floor: P / (4 pi d^2) cos, times albedo / pi. */
+static void check_lamps(void)
+{
+    wenv_lamp_settings settings;
+    wenv_lamp_settings_defaults(&settings, WENV_LAMP_POINT);
+    settings.energy = 100.0;
+    settings.matrix[3] = 1.0; /* at (1, 0, 2) */
+    settings.matrix[11] = 2.0;
+    wenv_lamp lamp;
+    wenv_error err = {0};
+    wenv_material *mat = NULL;
+    wenv_lamp_light *light = NULL;
+    const float position[3] = {0.0f, 0.0f, 0.0f}, normal[3] = {0.0f, 0.0f, 1.0f};
+    float out[3] = {0.0f, 0.0f, 0.0f};
+    if (wenv_lamp_make(&lamp, &settings, "lamp", &err) || wenv_lambert_create(&mat, (double[3]){0.5, 0.5, 0.5}, &err) ||
+        wenv_lamp_light_ensure(&light, &lamp, 1, position, normal, 1, NULL, NULL, &err)) {
+        check(0, err.message, 0.0, 0.0);
+    } else {
+        wenv_lamp_rows rows = {light, NULL, 0};
+        wenv_lamps_add(&rows, mat, NULL, NULL, normal, normal, 1, out, &err);
+        double d2 = 5.0, want = 100.0 / (4.0 * M_PI * d2) * (2.0 / sqrt(d2)) * 0.5 / M_PI;
+        check(near(out[0], want, 1e-5), "a point lamp over a Lambertian floor", out[0], want);
+    }
+    wenv_lamp_light_free(light);
+    wenv_material_free(mat);
+}
+
 int main(void)
 {
+    check_lamps();
     check_grazing_nodes();
     check_materials();
     check_models();

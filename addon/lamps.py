@@ -1,0 +1,107 @@
+"""The scene's lamps: each Light object that renders, read into the settings the core's wenv.Lamp takes
+(Cycles' units and conventions: docs/lamps.md), with a note for each setting Cycles would honour and
+wenv does not.  Reads Blender data only; engine.make_lamps makes the core's lamps from the result."""
+import math
+
+# Cycles' emission shader when a light has no node tree: Emission of Color 1 and Strength 1
+_PLAIN_EMISSION = ((1.0, 1.0, 1.0), 1.0)
+
+
+def _matrix(obj):
+    return tuple(tuple(float(x) for x in row) for row in obj.matrix_world)
+
+
+def _emission(light, name):
+    """The light's node tree's Emission colour and strength, as Cycles multiplies them into the
+    light's, and a note when the tree does more than one Emission node with unlinked inputs."""
+    if not getattr(light, "use_nodes", False) or light.node_tree is None:
+        return _PLAIN_EMISSION, None
+    tree = light.node_tree
+    output = next((n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputLight" and n.is_active_output), None)
+    surface = output.inputs.get("Surface") if output else None
+    if surface is None or not surface.is_linked:
+        return ((0.0, 0.0, 0.0), 0.0), None  # nothing into its output: Cycles emits nothing
+    node = surface.links[0].from_node
+    if node.bl_idname == "ShaderNodeEmission":
+        color, strength = node.inputs["Color"], node.inputs["Strength"]
+        if not color.is_linked and not strength.is_linked:
+            return (tuple(color.default_value[:3]), float(strength.default_value)), None
+    return _PLAIN_EMISSION, (f"Light '{name}': its node tree is not read (a plain Emission node of unlinked inputs "
+                             "is): shaded as its colour and power alone")
+
+
+def _cast_shadow(light):
+    cycles = getattr(light, "cycles", None)
+    if cycles is not None and hasattr(cycles, "cast_shadow"):  # Blender 4.2 keeps Cycles' own
+        return bool(cycles.cast_shadow)
+    return bool(light.use_shadow)
+
+
+def lamp_settings(obj):
+    """The settings of a Light object as wenv.Lamp's keywords (with 'type' and 'matrix'), or None
+    when it emits nothing Cycles would shade (a portal); and the notes on what is not honoured."""
+    light = obj.data
+    notes = []
+    cycles = getattr(light, "cycles", None)
+    if light.type == "AREA" and cycles is not None and getattr(cycles, "is_portal", False):
+        return None, notes  # a portal guides sampling and emits nothing
+    (node_color, node_strength), note = _emission(light, obj.name)
+    if note:
+        notes.append(note)
+    color = [float(c) * n for c, n in zip(light.color, node_color)]
+    if getattr(light, "use_temperature", False):  # Blender 4.5+
+        color = [c * float(t) for c, t in zip(color, light.temperature_color)]
+    s = {"type": light.type, "matrix": _matrix(obj), "color": tuple(color),
+         "energy": float(light.energy) * node_strength, "exposure": float(getattr(light, "exposure", 0.0)),
+         "normalize": bool(getattr(light, "normalize", True)), "cast_shadow": _cast_shadow(light),
+         "diffuse": bool(obj.visible_diffuse), "glossy": bool(obj.visible_glossy)}
+    if light.type == "SUN":
+        s["angle"] = float(light.angle)
+    elif light.type in ("POINT", "SPOT"):
+        s["radius"] = float(light.shadow_soft_size)
+        s["soft_falloff"] = bool(getattr(light, "use_soft_falloff", True))
+        if light.type == "SPOT":
+            s["spot_size"], s["spot_blend"] = float(light.spot_size), float(light.spot_blend)
+            if getattr(light, "use_square", False):
+                notes.append(f"Light '{obj.name}': a square spot's cone is shaded round")
+    elif light.type == "AREA":
+        s.update(shape=light.shape, size=float(light.size), size_y=float(light.size_y), spread=float(light.spread))
+        if s["spread"] < 1e-3:
+            notes.append(f"Light '{obj.name}': a spread of {math.degrees(s['spread']):.2g} degrees is a beam, "
+                         "not shaded")
+            return None, notes
+    links = getattr(obj, "light_linking", None)
+    if links is not None and (links.receiver_collection is not None or links.blocker_collection is not None):
+        notes.append(f"Light '{obj.name}': light linking is not honoured: it lights, and is blocked by, every "
+                     "object")
+    return s, notes
+
+
+def read_lamps(scene):
+    """Every Light object of the scene that renders: (settings for wenv.Lamp, each with its object's
+    'name'; notes).  Light groups only split Cycles' render passes, whose sum is what is shaded."""
+    found, notes = [], []
+    for obj in scene.objects:
+        if obj.type != "LIGHT" or obj.hide_render or not obj.visible_get():
+            continue
+        s, more = lamp_settings(obj)
+        notes.extend(more)
+        if s is not None:
+            s["name"] = obj.name
+            found.append(s)
+    return found, notes
+
+
+def summary(scene):
+    """One line for the panel: the lamps shaded, or None without any."""
+    names = [o.name for o in scene.objects if o.type == "LIGHT" and not o.hide_render and o.visible_get()]
+    if not names:
+        return None
+    shown = ", ".join(f"'{n}'" for n in names[:3]) + (f" and {len(names) - 3} more" if len(names) > 3 else "")
+    return f"{len(names)} lamp(s) shaded as Cycles emits them: {shown}"
+
+
+def signature(scene):
+    """What tells the scene's lamps from what they were: a moved lamp or a new power changes it."""
+    found, _ = read_lamps(scene)
+    return tuple(tuple(sorted((k, repr(v)) for k, v in s.items())) for s in found)

@@ -1,0 +1,66 @@
+"""Lamps against Cycles: a sphere resting on a square, lit by a sun, a soft-falloff point lamp, a spot
+and an area lamp under a black World, rendered by Cycles with direct light only (Max Bounces 0), and
+shaded by wenv from the Light objects as the add-on reads them (addon/lamps.py): the reference and the
+shader, both with the sphere's and the square's shadows, within Cycles' noise."""
+import math
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+import wenv  # noqa: E402
+from addon import engine, lamps  # noqa: E402
+from tests.helpers.cycles_sphere import SphereScene  # noqa: E402
+
+
+def add_light(scene, kind, name, location, rotation=(0.0, 0.0, 0.0), **settings):
+    data = bpy.data.lights.new(name, kind)
+    for key, value in settings.items():
+        setattr(data, key, value)
+    obj = bpy.data.objects.new(name, data)
+    scene.collection.objects.link(obj)
+    obj.location, obj.rotation_euler = location, rotation
+    return obj
+
+
+@pytest.fixture(scope="module")
+def lit_scene():
+    scene = SphereScene(size=40, samples=256, image=np.zeros((8, 16, 3), np.float32), ground=True)
+    sc = scene.scene
+    add_light(sc, "SUN", "sun", (0, 0, 5), (0.6, 0.0, 0.9), energy=1.5, angle=0.15)
+    add_light(sc, "POINT", "point", (-1.6, -2.0, 1.2), energy=150.0, shadow_soft_size=0.3)
+    add_light(sc, "SPOT", "spot", (1.8, -2.2, 1.8), (1.0, 0.0, 0.7), energy=400.0, shadow_soft_size=0.15,
+              spot_size=0.9, spot_blend=0.4)
+    add_light(sc, "AREA", "area", (0.0, -1.5, 2.4), (0.6, 0.0, 0.0), energy=120.0, shape="RECTANGLE", size=1.2,
+              size_y=0.6)
+    bpy.context.view_layer.update()
+    sc.cycles.max_bounces = 0
+    return scene
+
+
+@pytest.mark.parametrize("material", [dict(base_color=(0.7, 0.5, 0.3), roughness=0.5),
+                                      dict(base_color=(0.9, 0.7, 0.4), metallic=1.0, roughness=0.35)])
+def test_lamps_match_cycles_within_its_noise(lit_scene, material):
+    scene = lit_scene
+    scene.principled(**material)
+    settings, notes = lamps.read_lamps(scene.scene)
+    assert len(settings) == 4 and not notes
+    lit = engine.make_lamps(settings)
+    a, b = (scene.render(seed)[scene.mask].astype(np.float64) for seed in (1, 2))
+    mat = wenv.Principled(**material)
+    black = wenv.Environment(np.zeros((8, 16, 3), np.float32))
+    occluders = scene.occluders()
+    ref = wenv.reference(black, mat, scene.normals, scene.views, positions=scene.positions, occluders=occluders,
+                         lamps=lit).astype(np.float64)
+    occlusion = occluders.occlusion(scene.positions, scene.normals)
+    fast = wenv.Shader(black, mat, quality="draft").shade(scene.normals, scene.views, occlusion=occlusion, bounce=None,
+                                                         positions=scene.positions, lamps=lit).astype(np.float64)
+    scale = math.sqrt(float(np.mean(ref ** 2)))
+    noise_of_mean = math.sqrt(float(np.mean((a - b) ** 2)) / 2) / scale / math.sqrt(2)
+    cycles = (a + b) / 2
+    for shaded in (ref, fast):
+        error = math.sqrt(float(np.mean((cycles - shaded) ** 2))) / scale
+        # the mean's own noise, with room for the noise's own spread and the mesh's facets
+        assert error < 1.5 * noise_of_mean + 0.01, (error, noise_of_mean)
+    assert abs(cycles.mean() / ref.mean() - 1.0) < 0.02
