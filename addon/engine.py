@@ -28,6 +28,10 @@ DEFAULT_GREY = (0.8, 0.8, 0.8)  # Blender's default material: what a mesh withou
 CancelledError = wenv.CancelledError  # raised when a progress callback asks to stop
 
 
+# Rec. 709 luminance, as the glossmeter weighs a colour
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+
+
 class SetupError(Exception):
     """A scene set-up the add-on cannot shade; the message is shown to the user as it is.  Defined
     here, at the bottom of the add-on's imports, so every module can raise it."""
@@ -124,9 +128,17 @@ def measured_brdf(signature, shown_path):
     return table
 
 
+def term_keys(key):
+    """The keys of the core materials a material_key is shaded with: its own, or a mixture's terms'."""
+    return [k for k, _ in key[1]] if key[0] == "MIXTURE" else [key]
+
+
 def material_from_key(key):
     """wenv material for a materials.material_key(); a missing material is Blender's default
-    grey, Lambertian.  SetupError for a measured BRDF whose file is missing or unreadable."""
+    grey, Lambertian.  SetupError for a measured BRDF whose file is missing or unreadable; a mixture
+    of shader nodes is shaded term by term (term_keys)."""
+    if key[0] == "MIXTURE":
+        raise SetupError("a mixture of shader nodes is shaded term by term")
     if key[0] == "default":
         return wenv.Lambert(DEFAULT_GREY)
     if key[0] == "MEASURED":
@@ -164,7 +176,13 @@ def fit_principled_roughness(inputs, target, geometry):
 def gloss(key, geometries):
     """Glossmeter readings (GU) of a material_key at each geometry, then its haze (HU, ASTM E430 with
     the 20 degree instrument); ValueError or RuntimeError if the core cannot read it, SetupError if
-    its BRDF file cannot be read."""
+    its BRDF file cannot be read.  A mixture of shader nodes reads as the sum of its terms' readings,
+    each by its weight's luminance (the instrument's flux is linear in the BRDF)."""
+    if key[0] == "MIXTURE":
+        total = np.zeros(len(geometries) + 1)
+        for term_key, weight in key[1]:
+            total += float(np.float32(weight) @ LUMINANCE) * np.array(gloss(term_key, geometries))
+        return tuple(float(x) for x in total)
     mat = material_from_key(key)
     return tuple(wenv.gloss(mat, geometries)) + (wenv.haze(mat),)
 
@@ -272,6 +290,8 @@ class ShadowCache:
         made from the one before the last change when the part itself did not change, or cast."""
         key = fingerprint(positions, normals)
         if key not in self._occlusions:
+            if progress is not None:  # rays are cast from here: the start, whenever the core's first report comes
+                progress(0.0)
             before = self._before.get(key)  # kept until made: a cancelled pass may come back for it
             if before is not None:
                 made = occluders.occlusion(positions, normals, progress=progress, previous=before,

@@ -1,6 +1,6 @@
 """Glossmeter readings of a material (memoised on its values), and the roughness (a Principled BSDF's)
 or alpha (a Cook-Torrance lobe's) for a target gloss."""
-from . import engine, materials, textures
+from . import closures, engine, materials, textures
 from .engine import SetupError
 
 GEOMETRIES = (20, 60, 85)  # ISO 2813's geometries, degrees
@@ -30,6 +30,11 @@ def reading_key(material):
     surface, as an instrument's aperture would average a fine pattern); other linked inputs at their
     unlinked values, which the Material panel names."""
     key = materials.material_key(material.wenv)
+    if material.wenv.model == "PRINCIPLED" and key[0] == "LAMBERT":
+        return key, "no shader node wenv reads: the reading is of a stand-in, Lambertian in the viewport colour"
+    if key[0] == "MIXTURE":
+        return key, (f"a mix of {len(key[1])} shader nodes: each read apart and summed by its weight (a textured "
+                     "Mix Shader factor at its images' mean)")
     node = materials.principled_node(material) if material.wenv.model == "PRINCIPLED" else None
     if node is None:
         return key, None
@@ -65,8 +70,8 @@ def instrument_geometry(gloss60):
 def fit_principled_roughness(material, target, geometry):
     """The Principled BSDF's Roughness (Blender's) reading `target` GU, its other inputs as they are."""
     node = materials.principled_node(material)
-    if node is None:
-        raise SetupError(f"'{material.name}' has no Principled BSDF whose Roughness could be set")
+    if node is None or not closures.is_one_principled(material):
+        raise SetupError(f"'{material.name}' is not one Principled BSDF whose Roughness could be set")
     if node.inputs["Roughness"].is_linked:
         raise SetupError("The Principled BSDF's Roughness is linked (a texture or node): set it there")
     inputs = dict(reading_key(material)[0][1])  # textured inputs at their means, as the panel reads them

@@ -5,7 +5,7 @@ import math
 
 import bpy
 
-from . import engine, world
+from . import closures, engine
 
 
 def _unit(x):
@@ -57,10 +57,15 @@ def material_key(settings):
     if settings is None:
         return ("default",)
     if settings.model == "PRINCIPLED":
-        node = principled_node(settings.id_data)
-        if node is None:  # no Principled BSDF to read: Lambertian with the viewport colour
+        found, _ = closures.terms(settings.id_data) if settings.id_data.node_tree is not None else (None, [])
+        if found is None:  # no shader node wenv reads: Lambertian with the viewport colour
             return ("LAMBERT", tuple(_unit(c) for c in settings.id_data.diffuse_color[:3]), "SMITH", ())
-        return ("PRINCIPLED", tuple(sorted(principled_inputs(node)[0].items())))
+        if len(found) == 1 and found[0].node is not None and found[0].colour == closures.WHITE and \
+                not found[0].factors:
+            return found[0].key()
+        # the mean weight stands for a textured factor here (the glossmeter's reading): the shading
+        # reads each vertex's (closures.vertex_weights)
+        return ("MIXTURE", tuple((t.key(), closures.mean_weight(t)) for t in found))
     if settings.model == "MEASURED":
         return ("MEASURED", settings.brdf_path, engine.file_signature(brdf_file(settings)))
     lobes = tuple((tuple(l.specular), l.alpha, l.ior, l.distribution) for l in settings.lobes)
@@ -129,15 +134,15 @@ def principled_lobes(base, metallic, roughness, ior, spec_level=0.5, spec_tint=(
 
 
 def principled_node(material):
+    """The material's Principled BSDF whose inputs are read (its textures, its normal map, the
+    roughness the glossmeter sets): the one its output shows alone (in a node group too), else the
+    first in its tree."""
     tree = material.node_tree
     if tree is None:
         return None
-    out = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
-    out = [n for n in out if n.is_active_output] or out
-    if out:
-        node = world.source_node(out[0].inputs["Surface"])
-        if node is not None and node.bl_idname == "ShaderNodeBsdfPrincipled":
-            return node
+    found, _ = closures.terms(material)
+    if found is not None and len(found) == 1 and found[0].node is not None:
+        return found[0].node
     return next((n for n in tree.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled"), None)
 
 
@@ -219,9 +224,15 @@ def principled_notes(material):
     own models."""
     if material is None or material.wenv.model != "PRINCIPLED":
         return []
+    found, closure_notes = closures.terms(material) if material.node_tree is not None else (None, [])
+    if found is None:
+        return closure_notes + ["no shader node wenv reads: shaded as Lambertian with its viewport colour"]
+    if not closures.is_one_principled(material):
+        textured = [t.label for t in found if t.node is not None and
+                    any(t.node.inputs[s].is_linked for s in PRINCIPLED_SOCKETS.values() if t.node.inputs.get(s))]
+        return closure_notes + closures.factor_notes(material) + [
+            f"'{n}': linked inputs of a BSDF mixed with others are read at their unlinked value" for n in textured]
     node = principled_node(material)
-    if node is None:
-        return ["no Principled BSDF: shaded as Lambertian with its viewport colour"]
     notes = []
     inputs, linked = principled_inputs(node)
     by_socket = {socket: name for name, socket in PRINCIPLED_SOCKETS.items()}
@@ -246,12 +257,7 @@ def principled_notes(material):
         notes += [NOT_SHADED[name] for name in engine.principled_unhonoured(inputs)]
     except ValueError as exc:  # a value the core refuses (NaN, or past what it can shade)
         notes.append(f"cannot be shaded: {exc}")
-    tree = material.node_tree
-    out = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
-    out = [n for n in out if n.is_active_output] or out
-    if out and world.source_node(out[0].inputs["Surface"]) != node:  # bpy wrappers: compare, not identity
-        notes.append(f"the material output is not the Principled BSDF alone: only '{node.name}' is shaded")
-    return notes
+    return closure_notes + notes
 
 
 def slot_notes(obj):
@@ -275,7 +281,8 @@ def slot_material_keys(obj):
         key = material_key(mat.wenv if mat is not None else None)
         if key[0] != "default":
             try:
-                engine.material_from_key(key)
+                for term in engine.term_keys(key):
+                    engine.material_from_key(term)
             except (engine.SetupError, ValueError) as exc:
                 raise engine.SetupError(f"Material '{mat.name}': {exc}") from None
         keys.append(key)

@@ -10,7 +10,7 @@ class MeshData:
     position is not finite, which are left black."""
 
     __slots__ = ("domain", "positions", "normals", "slots", "count", "notes", "unplaced", "triangles", "inputs",
-                 "textured", "shading_normals")
+                 "textured", "shading_normals", "term_weights")
 
     def __init__(self, domain, positions, normals, slots, notes=(), unplaced=None, triangles=None, inputs=None):
         self.domain = domain
@@ -29,6 +29,9 @@ class MeshData:
         # (n, 3) float32 world normals a normal map bends the shading to (textures.py), or None: the
         # mesh's, which the shadows' rays keep
         self.shading_normals = None
+        # per material slot of a mixture of shader nodes: each term's weight, (3,) or (n, 3)
+        # (textures.read_term_weights)
+        self.term_weights = {}
 
 
 def _read(collection, attr, count, width, dtype=np.float32):

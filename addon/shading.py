@@ -77,7 +77,8 @@ class ShadingPlan:
         return name, data.domain, tone_map(rgb, self.l_max) if self.tone == "LOG" else rgb, seen
 
     def material_keys(self):
-        return {keys[s] for _, data, keys in self.items for s in np.unique(np.clip(data.slots, 0, len(keys) - 1))}
+        return {t for _, data, keys in self.items for s in np.unique(np.clip(data.slots, 0, len(keys) - 1))
+                for t in engine.term_keys(keys[s])}
 
     def preview_if_slow(self):
         """Shade at engine.PREVIEW_QUALITY instead when the setting chosen would first remake its
@@ -116,17 +117,23 @@ class ShadingPlan:
         return copy
 
     def _ordered_parts(self, quality):
-        """(object index, name, material key, selection, part) of every part of the pass, those of
-        one material together, the materials the shader at `quality` keeps first (the current one
+        """(object index, name, material key, selection, part, weight) of every part of the pass, those
+        of one material together, the materials the shader at `quality` keeps first (the current one
         first of all): a shader holds one material at a time and keeps the last few, so each
         material's BRDF slices are made at most once per pass (~0.3-0.7 s at `default`) and a kept
-        one's not at all."""
+        one's not at all.  A mixture of shader nodes is a work item per term (closures.py), weighted
+        by its weight over the part's rows ((3,) or (rows, 3)); weight None: 1."""
         kept = engine.shaders.kept_materials(quality)
         work, order = [], {}
-        for i, (name, _data, keys, parts) in enumerate(self._parts()):
+        for i, (name, data, keys, parts) in enumerate(self._parts()):
             for s, sel, part in parts:
-                order.setdefault(keys[s], len(order))
-                work.append((i, name, keys[s], sel, part))
+                if keys[s][0] != "MIXTURE":
+                    order.setdefault(keys[s], len(order))
+                    work.append((i, name, keys[s], sel, part, None))
+                    continue
+                for (term_key, _mean), weight in zip(keys[s][1], data.term_weights.get(s, ())):
+                    order.setdefault(term_key, len(order))
+                    work.append((i, name, term_key, sel, part, weight if weight.ndim == 1 else weight[sel]))
         # stable: meshes in order within a material
         work.sort(key=lambda w: (kept.index(w[2]) if w[2] in kept else len(kept), order[w[2]]))
         return work
@@ -155,10 +162,10 @@ class ShadingPlan:
             occluders, offsets = engine.shadows.occluders(meshes_in, self.memory_budget_mb)
             occlusions = [engine.shadows.occlusion(occluders, part.positions, part.normals,
                                                    _ray_progress(k, len(work), report, cancelled))
-                          for k, (_, _, _, _, part) in enumerate(work)]
+                          for k, (_, _, _, _, part, _) in enumerate(work)]
         bounce = np.zeros((offsets[-1], 3), np.float32)
         scenes = []
-        for (i, name, key, sel, part), occlusion in zip(work, occlusions):
+        for (i, name, key, sel, part, weight), occlusion in zip(work, occlusions):
             shader = self._shader(quality, name, key, part.normals, cancelled)
             if not engine.models_shadows(shader):  # Auto's choice for this part: it sends back no light
                 note = (f"'{name}': shaded without shadows by {shader.method} (Auto's choice; the wavelet "
@@ -172,8 +179,9 @@ class ShadingPlan:
                        tuple(sorted(part.inputs)), self.lamps_key)
             taken = self._takes(shader, name, part)
             with engine.shadows.lock:
-                bounce[offsets[i] + np.flatnonzero(sel)] = engine.shadows.light(
-                    occlusion, made_by, lambda: engine.diffuse_light(shader, taken, occlusion, self.lamps))
+                light = engine.shadows.light(occlusion, made_by,
+                                             lambda: engine.diffuse_light(shader, taken, occlusion, self.lamps))
+            bounce[offsets[i] + np.flatnonzero(sel)] += light if weight is None else weight * light
             scenes.append(occlusion)
         return [dict(occlusion=o, bounce=bounce, **(lit or {})) if o is not None else lit for o in scenes]
 
@@ -182,10 +190,11 @@ class ShadingPlan:
         rgbs, seens = self._buffers()
         with engine.shaders.lock:
             work = self._ordered_parts(self.quality)
-            for (i, name, key, sel, part), scene in zip(work, self._scenes(self.quality, work, report=rays)):
+            for (i, name, key, sel, part, weight), scene in zip(work, self._scenes(self.quality, work, report=rays)):
                 shader = self._shader(self.quality, name, key, part.normals)
-                rgbs[i][sel], part_seen = engine.shade_arrays(shader, self._takes(shader, name, part), self.view,
-                                                              self.cull, scene)
+                rgb, part_seen = engine.shade_arrays(shader, self._takes(shader, name, part), self.view, self.cull,
+                                                     scene)
+                rgbs[i][sel] += rgb if weight is None else weight * rgb
                 if seens[i] is not None and part_seen is not None:
                     seens[i][sel] = part_seen
         self.results = self._results(rgbs, seens)
@@ -205,7 +214,7 @@ class ShadingPlan:
                 scenes = self._scenes(quality, work, cancelled)
             except engine.CancelledError:
                 return None
-        for (i, name, key, sel, part), scene in zip(work, scenes):
+        for (i, name, key, sel, part, weight), scene in zip(work, scenes):
             out = np.zeros((part.count, 3), np.float32)
             first, count = 0, None
             while count is None or first < count:
@@ -219,7 +228,7 @@ class ShadingPlan:
                     first, count = engine.shade_step(shader, self._takes(shader, name, part), self.view, self.cull,
                                                      out, first, step_seconds, scene)
                 report((done + part.count * (first / count if count else 1.0)) / total)
-            rgbs[i][sel] = out
+            rgbs[i][sel] += out if weight is None else weight * out
             done += part.count
             if seens[i] is not None and self.view.perspective and self.view.view_projection is not None:
                 seens[i][sel] = engine.visible_vertices(part, self.view)
@@ -301,6 +310,7 @@ def plan_shading(scene, depsgraph, objects, view, images, progress=None, preview
             notes.append(f"'{obj.name}' has no vertices")
             continue
         notes.extend(textures.read_inputs(obj, depsgraph, data))
+        notes.extend(textures.read_term_weights(obj, depsgraph, data))
         notes.extend(textures.read_shading_normals(obj, depsgraph, data))
         plan.items.append((obj.name, data, materials.slot_material_keys(obj)))
         plan.casts.append(obj.wenv.casts_shadows)

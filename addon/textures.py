@@ -7,7 +7,7 @@ multiply-add, a Roughness or Metallic through a family of materials.  What is no
 never used silently."""
 import numpy as np
 
-from . import engine, materials, meshes, nodes, world
+from . import closures, engine, materials, meshes, nodes, world
 
 # The sockets read from textures and the nodes between (nodes.py), by the core's keyword.  A colour
 # into a value socket is its luminance, as Cycles converts it.
@@ -18,13 +18,15 @@ EXTENSIONS = ("REPEAT", "EXTEND", "CLIP", "MIRROR")
 
 class Source:
     """Where an input comes from: an Image Texture node and the UV map it reads (None: the
-    mesh's active render UV map, as Cycles reads an unlinked Vector)."""
+    mesh's active render UV map, as Cycles reads an unlinked Vector); for a normal map, the space
+    its Normal Map node reads the colour in."""
 
-    __slots__ = ("node", "uv_map")
+    __slots__ = ("node", "uv_map", "space")
 
-    def __init__(self, node, uv_map):
+    def __init__(self, node, uv_map, space="TANGENT"):
         self.node = node
         self.uv_map = uv_map
+        self.space = space
 
 
 def socket_textures(principled, socket):
@@ -249,7 +251,9 @@ def _principled_slots(obj, depsgraph, find):
     mesh = corner_vert = None
     for s, slot in enumerate(obj.material_slots):
         mat = slot.material
-        node = materials.principled_node(mat) if mat is not None and mat.wenv.model == "PRINCIPLED" else None
+        # a Principled BSDF mixed with other nodes is read at its unlinked values (closures.py)
+        one = mat is not None and mat.wenv.model == "PRINCIPLED" and closures.is_one_principled(mat)
+        node = materials.principled_node(mat) if one else None
         found = find(node) if node is not None else (None, None)
         if found[0] is None:
             continue
@@ -315,17 +319,22 @@ def read_inputs(obj, depsgraph, data):
 # Normal maps, at the vertices
 
 
+# The Normal Map node's spaces, as Cycles' svm_node_normal_map reads them
+NORMAL_MAP_SPACES = ("TANGENT", "OBJECT", "WORLD", "BLENDER_OBJECT", "BLENDER_WORLD")
+
+
 def normal_map_source(principled):
-    """(Source, strength) of a tangent-space Normal Map node fed by an Image Texture's Color and
-    feeding a Principled BSDF's Normal, the UV map the Normal Map node names (None: the active render
-    one); or (None, reason) with why it is not read, reason None when Normal is unlinked."""
+    """(Source, strength) of a Normal Map node (any of NORMAL_MAP_SPACES) fed by an Image Texture's
+    Color and feeding a Principled BSDF's Normal, the UV map the Normal Map node names (None: the
+    active render one); or (None, reason) with why it is not read, reason None when Normal is
+    unlinked."""
     sock = principled.inputs["Normal"]
     if not sock.is_linked:
         return None, None
     node = world.source_node(sock)
     if node is None or node.bl_idname != "ShaderNodeNormalMap":
         return None, f"'{node.name}', a node wenv does not evaluate yet" if node is not None else "a muted link"
-    if node.space != "TANGENT":
+    if node.space not in NORMAL_MAP_SPACES:
         return None, f"'{node.name}' in {node.space.lower().replace('_', ' ')} space, which wenv does not read yet"
     if node.inputs["Strength"].is_linked:
         return None, f"'{node.name}', whose Strength is linked"
@@ -334,7 +343,7 @@ def normal_map_source(principled):
         return None, f"'{node.name}', whose Color is not an Image Texture wenv reads"
     if world.source_node(tex.inputs["Vector"]) is not None or tex.image.source not in ("FILE", "GENERATED"):
         return None, f"'{tex.name}', whose Vector or image source wenv does not read yet"
-    return Source(tex, node.uv_map or None), max(float(node.inputs["Strength"].default_value), 0.0)
+    return Source(tex, node.uv_map or None, node.space), max(float(node.inputs["Strength"].default_value), 0.0)
 
 
 def _unit_rows(v):
@@ -344,9 +353,10 @@ def _unit_rows(v):
 
 def read_shading_normals(obj, depsgraph, data):
     """Sets data.shading_normals (world space, per shaded row) for the material slots whose
-    Principled BSDF's Normal comes from a tangent-space normal map, as Cycles' Normal Map node makes
-    them: 2 x colour - 1 in the UV map's tangent frame (MikkTSpace), blended towards the mesh's
-    normal by Strength.  Read at the vertices: detail finer than the mesh is lost.  Returns notes."""
+    Principled BSDF's Normal comes from a normal map, as Cycles' Normal Map node makes them:
+    2 x colour - 1 in the UV map's tangent frame (MikkTSpace), in the object's space or the world's
+    (Blender's own object and world spaces with Y and Z flipped), blended towards the mesh's normal
+    by Strength.  Read at the vertices: detail finer than the mesh is lost.  Returns notes."""
     notes = []
     for s, mat, (source, strength), mesh, corner_vert in _principled_slots(obj, depsgraph, normal_map_source):
         got = uv_rows(mesh, source.uv_map, "CORNER", corner_vert)
@@ -354,31 +364,88 @@ def read_shading_normals(obj, depsgraph, data):
             notes.append(_no_uv_map(obj, source.uv_map, f"the normal map of '{mat.name}'",
                                     "the mesh's normals are used"))
             continue
-        layer = uv_layer(mesh, source.uv_map)
-        mesh.calc_tangents(uvmap=layer.name)  # runtime data only, nothing the file keeps
         nl = len(mesh.loops)
-        tangent = np.empty(nl * 3, np.float32)
-        sign = np.empty(nl, np.float32)
         normal = np.empty(nl * 3, np.float32)
-        mesh.loops.foreach_get("tangent", tangent)
-        mesh.loops.foreach_get("bitangent_sign", sign)
         mesh.corner_normals.foreach_get("vector", normal)
-        tangent, normal = tangent.reshape(nl, 3), normal.reshape(nl, 3)
+        normal = normal.reshape(nl, 3)
         levels = images.levels(source.node.image)
         h, w = levels[0].shape[:2]
         colour = sample(levels, got[0], got[1] * np.sqrt(w * h), source.node.interpolation, source.node.extension)
         c = 2.0 * colour - 1.0
-        bitangent = sign[:, None] * np.cross(normal, tangent)
-        mapped = _unit_rows(c[:, :1] * tangent + c[:, 1:2] * bitangent + c[:, 2:3] * normal)
-        if strength != 1.0:
-            mapped = _unit_rows(normal + (mapped - normal) * strength)
-        # into the world by the inverse transpose, as read_mesh turns the normals
+        space = source.space
+        if space == "TANGENT":
+            layer = uv_layer(mesh, source.uv_map)
+            mesh.calc_tangents(uvmap=layer.name)  # runtime data only, nothing the file keeps
+            tangent = np.empty(nl * 3, np.float32)
+            sign = np.empty(nl, np.float32)
+            mesh.loops.foreach_get("tangent", tangent)
+            mesh.loops.foreach_get("bitangent_sign", sign)
+            tangent = tangent.reshape(nl, 3)
+            bitangent = sign[:, None] * np.cross(normal, tangent)
+            mapped = _unit_rows(c[:, :1] * tangent + c[:, 1:2] * bitangent + c[:, 2:3] * normal)
+        else:
+            if space.startswith("BLENDER_"):  # Blender's own convention: Y and Z flipped
+                c = c * np.float32([1.0, -1.0, -1.0])
+            mapped = _unit_rows(c)
+        # into the world by the inverse transpose, as read_mesh turns the normals, and blended there
+        # towards the mesh's normal by Strength, as Cycles blends them
         m = obj.evaluated_get(depsgraph).matrix_world
-        world_n = mapped @ np.array(m.to_3x3().inverted_safe(), np.float32)
+        to_world = np.array(m.to_3x3().inverted_safe(), np.float32)
+        normal = _unit_rows(normal @ to_world)
+        if space not in ("WORLD", "BLENDER_WORLD"):
+            mapped = _unit_rows(mapped @ to_world)
+        world_n = mapped if strength == 1.0 else _unit_rows(normal + (mapped - normal) * strength)
         rows = corner_vert if data.domain == "POINT" else np.arange(nl)
-        total = np.stack([np.bincount(rows, weights=world_n[:, c], minlength=data.count) for c in range(3)], axis=1)
+        total = np.stack([np.bincount(rows, weights=world_n[:, k], minlength=data.count) for k in range(3)], axis=1)
         if data.shading_normals is None:
             data.shading_normals = data.normals.copy()
         mine = _slot_rows(obj, data, s)
         data.shading_normals[mine] = _unit_rows(total)[mine]
+    return notes
+
+
+# ---------------------------------------------------------------------------------------------
+# A mixture's weights per vertex
+
+
+def read_term_weights(obj, depsgraph, data):
+    """Sets data.term_weights[slot] for the material slots whose shader nodes are a mixture
+    (closures.py): each term's weight, (3,) where it is constant, else (n, 3) over data's rows, its
+    textured Mix Shader factors read at each vertex.  Returns notes: a missing UV map (that factor's
+    unlinked value is used)."""
+    notes = []
+    mesh = corner_vert = None
+    for s, slot in enumerate(obj.material_slots):
+        mat = slot.material
+        if mat is None or mat.wenv.model != "PRINCIPLED" or mat.node_tree is None:
+            continue
+        found, _ = closures.terms(mat)
+        if found is None or closures.is_one_principled(mat):
+            continue
+        weights = []
+        for term in found:
+            colour = np.float32(term.colour)
+            if not term.factors:
+                weights.append(colour)
+                continue
+            if mesh is None:
+                mesh = meshes.shaded_mesh(obj, depsgraph)[0]
+                corner_vert = meshes.corner_vertices(mesh)
+            ev = nodes.Evaluator(
+                data.count, lambda uv_map: uv_rows(mesh, uv_map, data.domain, corner_vert),
+                lambda tex, uv, footprint, rows, s=s: _colours_memo((obj.name, s, tex.name), images.levels(tex.image),
+                                                                   Source(tex, None), (uv, footprint, rows),
+                                                                   data.count))
+            try:
+                fac = closures._factor_values(ev, term.factors)
+            except nodes.MissingUV as exc:
+                notes.append(_no_uv_map(obj, exc.uv_map, f"a Mix Shader's Fac ('{mat.name}')",
+                                        "its unlinked value is used"))
+                fac = closures._factor_values(nodes.one_point(lambda node: np.zeros((1, 3), np.float32)),
+                                              term.factors)[0] * np.ones(data.count, np.float32)
+            if not np.isfinite(fac).all():
+                raise world.SetupError(f"Material '{mat.name}': a Mix Shader's Fac is not finite (NaN or infinite) "
+                                       f"on '{obj.name}'")
+            weights.append(fac[:, None] * colour[None, :])
+        data.term_weights[s] = weights
     return notes

@@ -1023,6 +1023,46 @@ def test_a_normal_map_bends_the_shading_normals(scene):
     np.testing.assert_allclose(attribute(plane)[1], shader.shade_mesh(p, n, eye), rtol=1e-4, atol=1e-5)
 
 
+@pytest.mark.parametrize("space", ["OBJECT", "WORLD", "BLENDER_OBJECT", "BLENDER_WORLD"])
+def test_object_and_world_space_normal_maps(scene, space):
+    """A Normal Map in object or world space (Blender's own with Y and Z flipped, as Cycles reads
+    them) on a turned grid: object space turns with the object, world space does not; Strength 0.5
+    blends towards the mesh's normal as Cycles does."""
+    env_world(scene, "sunset")
+    want = np.float32([0.4, -0.2, 0.0])
+    want[2] = np.sqrt(1.0 - want[0] ** 2 - want[1] ** 2)
+    stored = want * (np.float32([1, -1, -1]) if space.startswith("BLENDER_") else 1.0)
+    image = bpy.data.images.new("map", 4, 4, float_buffer=True)
+    image.colorspace_settings.name = "Non-Color"
+    image.pixels.foreach_set(np.tile(np.append(0.5 * stored + 0.5, 1.0).astype(np.float32), 16))
+    bpy.ops.mesh.primitive_grid_add(x_subdivisions=5, y_subdivisions=5, size=4.0)
+    plane = bpy.context.object
+    plane.rotation_euler = (0.3, 0.0, 0.5)
+    plane.data.shade_smooth()
+    mat = principled_material("mapped", roughness=0.4)
+    tree = mat.node_tree
+    tex = tree.nodes.new("ShaderNodeTexImage")
+    tex.image = image
+    normal_map = tree.nodes.new("ShaderNodeNormalMap")
+    normal_map.space = space
+    normal_map.inputs["Strength"].default_value = 0.5
+    tree.links.new(tex.outputs["Color"], normal_map.inputs["Color"])
+    tree.links.new(normal_map.outputs["Normal"], tree.nodes["Principled BSDF"].inputs["Normal"])
+    plane.data.materials.append(mat)
+    select_only(plane)
+    bpy.context.view_layer.update()
+    plan = plan_of(scene, plane)
+    data = plan.items[0][1]
+    rot = np.array(plane.matrix_world.to_3x3(), np.float64)
+    mapped = rot @ want if space.endswith("OBJECT") else np.float64(want)
+    mapped /= np.linalg.norm(mapped)
+    mesh_n = rot @ np.float64([0.0, 0.0, 1.0])
+    blended = mesh_n + (mapped - mesh_n) * 0.5
+    blended /= np.linalg.norm(blended)
+    np.testing.assert_allclose(data.shading_normals, np.tile(blended, (data.count, 1)), atol=2e-4)
+    assert not any("not used" in n for n in materials.principled_notes(mat))
+
+
 def test_the_glossmeter_reads_a_textured_base_color_at_its_mean(scene):
     """Base Color from a texture of two halves: the glossmeter panel reads the material at the
     texture's mean colour and says so; the reading is the core's at that colour."""
@@ -1060,6 +1100,77 @@ def value_texture(mat, socket, image):
     tex.interpolation = "Closest"
     mat.node_tree.links.new(tex.outputs["Color"], mat.node_tree.nodes["Principled BSDF"].inputs[socket])
     return tex
+
+
+def test_a_mix_of_shader_nodes_with_a_textured_factor(scene):
+    """A Mix Shader of a Diffuse BSDF and a coloured Glossy BSDF whose Fac is an image of two halves
+    (0.2 and 0.9), inside a node group, added to a Glass BSDF: each vertex is the core's shading of
+    each term (Principled materials: addon/closures.py) weighted by its texel's factor; the Glass
+    BSDF is named as not shaded; the glossmeter reads the terms summed at the factor's mean and says
+    so, and not the Lambertian stand-in."""
+    from addon import closures, gloss
+    env_world(scene, "sunset")
+    plane, mat = textured_plane(bpy.data.images.new("unused", 4, 4, float_buffer=True))
+    tree = mat.node_tree
+    for n in [n for n in tree.nodes if n.bl_idname != "ShaderNodeOutputMaterial"]:
+        tree.nodes.remove(n)
+    group = bpy.data.node_groups.new("mixed", "ShaderNodeTree")
+    group.interface.new_socket("Shader", in_out="OUTPUT", socket_type="NodeSocketShader")
+    group.interface.new_socket("Fac", in_out="INPUT", socket_type="NodeSocketFloat")
+    g_in, g_out = group.nodes.new("NodeGroupInput"), group.nodes.new("NodeGroupOutput")
+    diffuse, glossy = group.nodes.new("ShaderNodeBsdfDiffuse"), group.nodes.new("ShaderNodeBsdfGlossy")
+    diffuse.inputs["Color"].default_value = (0.6, 0.3, 0.1, 1.0)
+    glossy.inputs["Color"].default_value = (0.9, 0.8, 0.6, 1.0)
+    glossy.inputs["Roughness"].default_value = 0.3
+    glossy.distribution = "GGX"
+    mix_node = group.nodes.new("ShaderNodeMixShader")
+    group.links.new(g_in.outputs[0], mix_node.inputs[0])
+    group.links.new(diffuse.outputs[0], mix_node.inputs[1])
+    group.links.new(glossy.outputs[0], mix_node.inputs[2])
+    group.links.new(mix_node.outputs[0], g_out.inputs[0])
+    node = tree.nodes.new("ShaderNodeGroup")
+    node.node_tree = group
+    px = np.ones((64, 64, 4), np.float32)
+    px[:, :32, :3], px[:, 32:, :3] = 0.2, 0.9
+    tex = tree.nodes.new("ShaderNodeTexImage")
+    tex.image, tex.interpolation = value_image("fac halves", px), "Closest"
+    tree.links.new(tex.outputs["Color"], node.inputs[0])
+    add = tree.nodes.new("ShaderNodeAddShader")
+    glass = tree.nodes.new("ShaderNodeBsdfGlass")
+    tree.links.new(node.outputs[0], add.inputs[0])
+    tree.links.new(glass.outputs[0], add.inputs[1])
+    tree.links.new(add.outputs[0], tree.nodes["Material Output"].inputs["Surface"])
+    mat.wenv.model = "PRINCIPLED"
+
+    found, notes = closures.terms(mat)
+    assert [t.label for t in found] == ["Diffuse BSDF", "Glossy BSDF"]
+    assert any("'Glass BSDF'" in n and "not shaded" in n for n in materials.principled_notes(mat))
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    _, rgb = attribute(plane)
+    uv = np.empty(len(plane.data.loops) * 2, np.float32)
+    plane.data.uv_layers.active.uv.foreach_get("vector", uv)
+    u = np.zeros(len(plane.data.vertices), np.float32)
+    u[[l.vertex_index for l in plane.data.loops]] = uv[0::2]
+    fac = np.where(np.floor(u * 64).astype(int) % 64 < 32, 0.2, 0.9).astype(np.float32)
+    p, n = world_arrays(plane, corner=False)
+    env = wenv.load_environment(hdri_path("sunset"))
+    eye = tuple(scene.camera.matrix_world.translation)
+    want = np.zeros_like(rgb)
+    for term, w in zip(found, ((1 - fac)[:, None], fac[:, None])):
+        shaded = core_shader(env, engine.principled(term.inputs)).shade_mesh(p, n, eye)
+        want += w * np.float32(term.colour) * shaded
+    np.testing.assert_allclose(rgb, want, rtol=1e-4, atol=1e-5)
+
+    key, said = gloss.reading_key(mat)
+    assert key[0] == "MIXTURE" and "mix of 2 shader nodes" in said
+    readings = gloss.gloss_readings(key)
+    lum = np.array([0.2126, 0.7152, 0.0722])
+    glossy_term = gloss.gloss_readings(found[1].key())
+    diffuse_term = gloss.gloss_readings(found[0].key())
+    mean_fac = 0.55
+    expected = (1 - mean_fac) * diffuse_term[60] + mean_fac * float(np.float32(found[1].colour) @ lum) * glossy_term[60]
+    assert readings[60] == pytest.approx(expected, rel=1e-3)
+    assert readings[60] > 10 * gloss.gloss_readings(("LAMBERT", (0.8, 0.8, 0.8), "SMITH", ()))[60]
 
 
 def test_textured_roughness_and_metallic_are_read_at_each_vertex(scene):

@@ -11,31 +11,15 @@ bpy = pytest.importorskip("bpy")
 
 import wenv  # noqa: E402
 from addon import engine, lamps  # noqa: E402
-from tests.helpers.cycles_sphere import SphereScene  # noqa: E402
-
-
-def add_light(scene, kind, name, location, rotation=(0.0, 0.0, 0.0), **settings):
-    data = bpy.data.lights.new(name, kind)
-    for key, value in settings.items():
-        setattr(data, key, value)
-    obj = bpy.data.objects.new(name, data)
-    scene.collection.objects.link(obj)
-    obj.location, obj.rotation_euler = location, rotation
-    return obj
+from tests.helpers.cycles_sphere import LAMP_SETUPS, SphereScene  # noqa: E402
 
 
 @pytest.fixture(scope="module")
 def lit_scene():
     scene = SphereScene(size=40, samples=256, image=np.zeros((8, 16, 3), np.float32), ground=True)
-    sc = scene.scene
-    add_light(sc, "SUN", "sun", (0, 0, 5), (0.6, 0.0, 0.9), energy=1.5, angle=0.15)
-    add_light(sc, "POINT", "point", (-1.6, -2.0, 1.2), energy=150.0, shadow_soft_size=0.3)
-    add_light(sc, "SPOT", "spot", (1.8, -2.2, 1.8), (1.0, 0.0, 0.7), energy=400.0, shadow_soft_size=0.15,
-              spot_size=0.9, spot_blend=0.4)
-    add_light(sc, "AREA", "area", (0.0, -1.5, 2.4), (0.6, 0.0, 0.0), energy=120.0, shape="RECTANGLE", size=1.2,
-              size_y=0.6)
+    LAMP_SETUPS["four lamps"](scene)
     bpy.context.view_layer.update()
-    sc.cycles.max_bounces = 0
+    scene.scene.cycles.max_bounces = 0
     return scene
 
 

@@ -17,6 +17,7 @@ import pytest
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 from tests.helpers import merl_files  # noqa: E402
+from tests.helpers.meshes import uv_sphere  # noqa: E402
 import wenv  # noqa: E402
 import conftest  # noqa: E402
 from conftest import (bundled_hdri_dir, fenced_blocks, markdown_files, python_blocks, random_pairs,  # noqa: E402
@@ -31,6 +32,7 @@ PRINCIPLED = "paint = wenv.Principled("
 TABULATED = "mat = wenv.load_brdf("
 GLOSSMETER = "import wenv\n\npaint = "
 OCCLUDERS = "occluders = wenv.Occluders("
+LAMPS = "import numpy as np, wenv\n\nm = np.eye(4)"
 
 
 def leading_literal(comment):
@@ -222,6 +224,24 @@ def test_occluders_block_runs():
     assert ns["rgb"][4, 0] < ns["rgb"][5, 0] and abs(ns["rgb"][4, 0] - ns["truth"][4, 0]) < 0.05
 
 
+def test_lamps_block_runs():
+    """docs/lamps.md's block on a sphere of normals under a dim sky, with its occlusion: the lamps
+    brighten the shading, the reference agrees, and the shadowed call is no brighter."""
+    v, f = uv_sphere(12, 24)
+    n = np.ascontiguousarray(v, np.float32)
+    env = wenv.Environment(np.full((16, 32, 3), 0.1, np.float32))
+    mat = wenv.Principled(base_color=(0.6, 0.3, 0.2), roughness=0.4)
+    ns = {"shader": wenv.Shader(env, mat, quality="draft"), "env": env, "material": mat, "normals": n,
+          "views": n.copy(), "positions": n, "eye": (0.0, -4.0, 1.0),
+          "occlusion": wenv.Occluders(n, f).occlusion(n, n)}
+    plain = ns["shader"].shade(n, n)
+    run_checked(readme_block(LAMPS), ns, "docs/lamps.md")
+    lit = ns["shader"].shade(n, n, positions=n, lamps=ns["lamps"])
+    assert lit.mean() > 2 * plain.mean()
+    assert abs(lit.mean() - ns["ref"].mean()) < 0.02 * ns["ref"].mean()
+    assert ns["rgb"].shape == n.shape and np.isfinite(ns["rgb"]).all()
+
+
 def test_every_python_block_is_run():
     """A Python block added to README.md or a docs/*.md gets a test: these are the blocks run here,
     each in the file it is in, the Blender scripting ones (tests/test_addon.py) and the extension's
@@ -235,6 +255,7 @@ def test_every_python_block_is_run():
         "docs/measured_brdfs.md": [TABULATED],
         "docs/glossmeter.md": [GLOSSMETER],
         "docs/addon.md": ['import bpy\nmat = bpy.data.materials["paint"]'],
+        "docs/lamps.md": [LAMPS],
     }
     found = {}
     for path, text in python_blocks():

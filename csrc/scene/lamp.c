@@ -124,6 +124,14 @@ wenv_status wenv_lamp_make(wenv_lamp *out, const wenv_lamp_settings *given, cons
                                       "%s.matrix is singular: a spot's cone is shaped by its scale", index);
             out->spot_cos = cos(0.5 * s->spot_size);
             out->spot_band = (1.0 - out->spot_cos) * s->spot_blend;
+            double longest = 0.0, shortest = INFINITY;
+            for (int c = 0; c < 3; c++) {
+                double axis[3];
+                column(s->matrix, c, axis);
+                longest = fmax(longest, length(axis));
+                shortest = fmin(shortest, length(axis));
+            }
+            out->spot_stretch = longest / shortest;
         }
         break;
     }
@@ -199,6 +207,22 @@ double wenv_lamp_factor(const wenv_lamp *l, const double w[3], int within_sphere
 int wenv_lamp_factor_varies(const wenv_lamp *l)
 {
     return l->settings.kind == WENV_LAMP_SPOT || (l->settings.kind == WENV_LAMP_AREA && l->settings.spread < M_PI);
+}
+
+int wenv_lamp_factor_even(const wenv_lamp *l, const double w[3], double angle, int within_sphere)
+{
+    if (l->settings.kind == WENV_LAMP_AREA)
+        return l->settings.spread >= M_PI;
+    if (l->settings.kind != WENV_LAMP_SPOT || within_sphere)
+        return 1;
+    const double *m = l->spot_local;
+    double local[3] = {m[0] * w[0] + m[1] * w[1] + m[2] * w[2], m[3] * w[0] + m[4] * w[1] + m[5] * w[2],
+                       m[6] * w[0] + m[7] * w[1] + m[8] * w[2]};
+    double len = length(local);
+    double at = acos(fmax(-1.0, fmin(1.0, len > 0.0 ? -local[2] / len : -1.0)));
+    double reach = l->spot_stretch * angle, outer = acos(l->spot_cos);
+    double inner = acos(fmin(1.0, l->spot_cos + l->spot_band));
+    return at + reach < inner || at - reach > outer;
 }
 
 uint64_t wenv_lamp_geometry_key(const wenv_lamp *l, uint64_t h)

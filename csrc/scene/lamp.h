@@ -67,6 +67,7 @@ typedef struct {
     double sun_tan;          /* sun: tan of the disk's half-angle */
     double spot_local[9];    /* spot: a world direction into the object's scaled frame (row-major) */
     double spot_cos, spot_band; /* spot: cos of the half-angle, and the blend's width in cos */
+    double spot_stretch;     /* spot: how much its scale may widen an angle (the longest axis over the shortest) */
     double spread_tan, spread_norm; /* area: tan h and 1 / (tan h - h); spread_tan 0: no spread */
     double radiance[3];      /* of the emitting surface; a point: its intensity; a direction: irradiance */
 } wenv_lamp;
@@ -81,8 +82,12 @@ wenv_status wenv_lamp_make(wenv_lamp *out, const wenv_lamp_settings *settings, c
  * otherwise.  within_sphere: the shaded point is inside a spot's sphere (no cone there). */
 double wenv_lamp_factor(const wenv_lamp *lamp, const double toward_vertex[3], int within_sphere);
 
-/* Whether the factor varies over the lamp as one point sees it (a spot's cone, a partial spread). */
+/* Whether the factor may vary over the lamp as one point sees it (a spot's cone, a partial spread). */
 int wenv_lamp_factor_varies(const wenv_lamp *lamp);
+
+/* Whether it is the same for every direction within `angle` radians of toward_vertex: a spot's cone
+ * edge and blend well away from them (what lets a lamp that looks wide be read at its centre). */
+int wenv_lamp_factor_even(const wenv_lamp *lamp, const double toward_vertex[3], double angle, int within_sphere);
 
 /* Of what decides where its light falls and what blocks it (not its colour or power): what a
  * cache of its shadows is kept against. */

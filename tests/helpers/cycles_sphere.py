@@ -102,6 +102,16 @@ class SphereScene:
         self.normals = np.ascontiguousarray(normals[self.mask], np.float32)
         self.views = np.tile(np.float32([0.0, -1.0, 0.0]), (len(self.normals), 1))
 
+    def add_light(self, kind, name, location, rotation=(0.0, 0.0, 0.0), **settings):
+        """A Light object of `kind` with these Light settings (Blender's names), placed and turned."""
+        data = self.bpy.data.lights.new(name, kind)
+        for key, value in settings.items():
+            setattr(data, key, value)
+        obj = self.bpy.data.objects.new(name, data)
+        self.scene.collection.objects.link(obj)
+        obj.location, obj.rotation_euler = location, rotation
+        return obj
+
     def _use(self, material):
         self.sphere.data.materials.clear()
         self.sphere.data.materials.append(material)
@@ -193,3 +203,19 @@ class SphereScene:
         error = math.sqrt(float(np.mean(((a + b) / 2 - ref) ** 2))) / scale
         return {"noise": noise, "noise_of_mean": noise / math.sqrt(2), "error": error,
                 "ratio": ((a + b) / 2).mean(axis=0) / ref.mean(axis=0), "cycles": (a + b) / 2, "reference": ref}
+
+
+# Light objects set up in a SphereScene (tests/test_lamps_cycles.py, benchmarks/lamps_vs_cycles.py)
+LAMP_SETUPS = {
+    "four lamps": lambda sc: [
+        sc.add_light("SUN", "sun", (0, 0, 5), (0.6, 0.0, 0.9), energy=1.5, angle=0.15),
+        sc.add_light("POINT", "point", (-1.6, -2.0, 1.2), energy=150.0, shadow_soft_size=0.3),
+        sc.add_light("SPOT", "spot", (1.8, -2.2, 1.8), (1.0, 0.0, 0.7), energy=400.0, shadow_soft_size=0.15,
+                     spot_size=0.9, spot_blend=0.4),
+        sc.add_light("AREA", "area", (0.0, -1.5, 2.4), (0.6, 0.0, 0.0), energy=120.0, shape="RECTANGLE", size=1.2,
+                     size_y=0.6)],
+    "close point lamp": lambda sc: [sc.add_light("POINT", "close", (0.6, -1.1, 0.5), energy=20.0,
+                                                 shadow_soft_size=0.25)],
+    "large area lamp": lambda sc: [sc.add_light("AREA", "large", (0.0, -0.8, 2.2), (0.35, 0.0, 0.0), energy=150.0,
+                                                size=3.0)],
+}

@@ -99,6 +99,16 @@ static double delta_weight(const wenv_lamp *lamp, const double w[3], double dist
     return wenv_lamp_factor(lamp, back, 0) / (dist * dist);
 }
 
+/* Whether the lamp's factor is one value over the whole patch, and that value (at its centre). */
+static int factor_even(const wenv_lamp *lamp, const wenv_lamp_patch *pa, double *value)
+{
+    double d = sqrt(dot3(pa->centre, pa->centre));
+    double back[3] = {-pa->centre[0] / d, -pa->centre[1] / d, -pa->centre[2] / d};
+    *value = wenv_lamp_factor_varies(lamp) ? wenv_lamp_factor(lamp, back, pa->within_sphere) : 1.0;
+    return !wenv_lamp_factor_varies(lamp) ||
+           wenv_lamp_factor_even(lamp, back, wenv_lamp_patch_angle(pa), pa->within_sphere);
+}
+
 /* Vertex i's share of lamp j and the cells it sees. */
 static void prepare_one(const wenv_lamp_light *L, const wenv_lamp *lamp, const wenv_occluders *occ, size_t i,
                         float *share, uint16_t *seen)
@@ -131,20 +141,23 @@ static void prepare_one(const wenv_lamp_light *L, const wenv_lamp *lamp, const w
     if (!(whole > 0.0))
         return;
     size_t k = cells_of(&pa);
-    int varies = wenv_lamp_factor_varies(lamp), alike = !varies;
+    double even;
+    int varies = !factor_even(lamp, &pa, &even), alike = !varies;
+    if (!varies && !(even > 0.0))
+        return; /* outside a spot's cone */
     double factor[WENV_LAMP_CELLS * WENV_LAMP_CELLS], h = 2.0 / (double)k;
     for (size_t c = 0; c < k * k; c++) {
         double x[3];
         wenv_lamp_patch_point(&pa, -1.0 + h * ((double)(c % k) + 0.5), -1.0 + h * ((double)(c / k) + 0.5), x);
         double t = sqrt(dot3(x, x)), w[3] = {x[0] / t, x[1] / t, x[2] / t}, back[3] = {-w[0], -w[1], -w[2]};
-        factor[c] = varies ? wenv_lamp_factor(lamp, back, pa.within_sphere) : 1.0;
+        factor[c] = varies ? wenv_lamp_factor(lamp, back, pa.within_sphere) : even;
         if (reaches(blockers, origin, w, pa.infinite ? INFINITY : t))
             *seen |= (uint16_t)(1u << c);
         else
             alike = 0;
     }
     if (alike) { /* all of it seen, equally bright: the closed form alone */
-        *share = (float)whole;
+        *share = (float)(whole * even);
         return;
     }
     if (k == 1) {
@@ -252,11 +265,10 @@ typedef struct {
 
 /* The glossy light of `count` points (local directions and weights) through material m, times rgb
  * weights mw, added to acc. */
-static void glossy_sum(glossy_work *gw, const wenv_material *m, const float wo[3], size_t count, const float mw[3],
-                       double acc[3])
+static void glossy_sum(glossy_work *gw, const wenv_material *m, const float wo[3], const float *terms, size_t count,
+                       const float mw[3], double acc[3])
 {
-    wenv_material_prepare_view_f(m, wo, gw->terms);
-    wenv_material_specular_cos_f_many(m, wo, gw->terms, count, gw->x, gw->y, gw->z, gw->r, gw->g, gw->b);
+    wenv_material_specular_cos_f_many(m, wo, terms, count, gw->x, gw->y, gw->z, gw->r, gw->g, gw->b);
     double s[3] = {0.0, 0.0, 0.0};
     for (size_t q = 0; q < count; q++) {
         s[0] += (double)(gw->w[q] * gw->r[q]);
@@ -295,6 +307,14 @@ static double narrowest(const wenv_material *const *mats, size_t count)
     return a;
 }
 
+/* Whether a part of a lamp `half` radians across whose centre is `off` radians from the mirror
+ * direction sees only the lobes' tails, which fall as a power of the angle: well away from the peak
+ * and small against its distance from it, so that a few points read it. */
+static int tail_only(double off, double half, double alpha)
+{
+    return off - half > WENV_LAMP_PEAK * alpha && off > 6.0 * half;
+}
+
 /* A patch's glossy points being gathered into a glossy_work. */
 typedef struct {
     const wenv_lamp *lamp;
@@ -302,6 +322,7 @@ typedef struct {
     size_t cells;
     uint16_t seen;
     int varies;
+    double even; /* the factor where it does not vary */
     const double *frame, *mirror;
     double cone_cos;
     glossy_work *gw;
@@ -328,7 +349,7 @@ static void add_points(glossy_points *g, double s0, double t0, double side, size
             if (!(cos_l > 0.0) || dot3(w, g->mirror) < g->cone_cos)
                 continue;
             double back[3] = {-w[0], -w[1], -w[2]};
-            double fac = g->varies ? wenv_lamp_factor(g->lamp, back, g->pa->within_sphere) : 1.0;
+            double fac = g->varies ? wenv_lamp_factor(g->lamp, back, g->pa->within_sphere) : g->even;
             if (!(fac > 0.0))
                 continue;
             size_t q = g->count++;
@@ -360,7 +381,7 @@ wenv_status wenv_lamp_light_shade(const wenv_lamp_rows *rows, const wenv_materia
 #pragma omp parallel
     {
         glossy_work *gw = malloc(sizeof *gw);
-        if (gw && !(gw->terms = malloc((terms ? terms : 1) * sizeof(float)))) {
+        if (gw && !(gw->terms = malloc(WENV_VERTEX_LIGHTS_PICKS * (terms ? terms : 1) * sizeof(float)))) {
             free(gw);
             gw = NULL;
         }
@@ -407,6 +428,8 @@ wenv_status wenv_lamp_light_shade(const wenv_lamp_rows *rows, const wenv_materia
                 continue; /* seen from behind: nothing of the lamps, as nothing of the sky */
             int glossy_view = views && isfinite(alpha);
             /* (a vertex's own materials are not culled: their cones would cost more than they save) */
+            for (size_t m = 0; glossy_view && m < n_mats; m++) /* what the view alone sets, once a vertex */
+                wenv_material_prepare_view_f(mats[m], wo, gw->terms + m * (terms ? terms : 1));
             double cone_cos = glossy_view && !own ? mat_cone_cos : -1.0, mirror[3];
             for (int c = 0; c < 3; c++)
                 mirror[c] = 2.0 * dot3(nrm, v) * nrm[c] - v[c];
@@ -438,20 +461,27 @@ wenv_status wenv_lamp_light_shade(const wenv_lamp_rows *rows, const wenv_materia
                         continue;
                     size_t cells = cells_of(&pa);
                     double angle = wenv_lamp_patch_angle(&pa);
-                    if (cone_cos > -1.0) { /* the whole lamp outside the lobes' cone: no highlight */
-                        double dc = sqrt(dot3(pa.centre, pa.centre));
-                        double off = acos(fmax(-1.0, fmin(1.0, dot3(pa.centre, mirror) / dc)));
-                        if (off - angle > acos(cone_cos))
-                            continue;
-                    }
-                    size_t grid = (size_t)ceil(fmin(4.0 * angle / alpha, (double)WENV_LAMP_GLOSSY_GRID));
+                    double dc = sqrt(dot3(pa.centre, pa.centre));
+                    double off = acos(fmax(-1.0, fmin(1.0, dot3(pa.centre, mirror) / dc)));
+                    if (cone_cos > -1.0 && off - angle > acos(cone_cos))
+                        continue; /* the whole lamp outside the lobes' cone: no highlight */
+                    size_t grid = (size_t)ceil(fmin(2.0 * angle / (WENV_LAMP_GLOSSY_SPACING * alpha),
+                                                    (double)WENV_LAMP_GLOSSY_GRID));
+                    double even;
+                    int varies = !factor_even(lamp, &pa, &even);
+                    if (!varies && !(even > 0.0))
+                        continue;
+                    if (tail_only(off, angle, alpha) && grid > 2 && !varies)
+                        grid = 2; /* only the lobes' tails reach it: smooth across it */
                     if (grid < 1)
                         grid = 1;
+                    /* a cone's or a spread's edge across a wide lamp is read on the coarse grid at least */
+                    if (varies && angle > WENV_LAMP_WIDE && grid < WENV_LAMP_GLOSSY_COARSE)
+                        grid = WENV_LAMP_GLOSSY_COARSE;
                     /* a lamp partly hidden is read at least as finely as its cells */
                     if (seen != (uint16_t)((1u << (cells * cells)) - 1u) && grid < cells)
                         grid = cells;
-                    glossy_points pts = {lamp, &pa, cells, seen, wenv_lamp_factor_varies(lamp), f, mirror, cone_cos,
-                                         gw, 0};
+                    glossy_points pts = {lamp, &pa, cells, seen, varies, even, f, mirror, cone_cos, gw, 0};
                     if (grid <= WENV_LAMP_GLOSSY_COARSE) {
                         add_points(&pts, -1.0, -1.0, 2.0, grid);
                     } else {
@@ -463,14 +493,14 @@ wenv_status wenv_lamp_light_shade(const wenv_lamp_rows *rows, const wenv_materia
                             for (size_t a = 0; a < coarse; a++) {
                                 double s0 = -1.0 + h * (double)a, t0 = -1.0 + h * (double)b, x[3];
                                 wenv_lamp_patch_point(&pa, s0 + 0.5 * h, t0 + 0.5 * h, x);
-                                double off = acos(fmax(-1.0, fmin(1.0, dot3(x, mirror) / sqrt(dot3(x, x)))));
-                                add_points(&pts, s0, t0, h, off - half_angle < WENV_LAMP_PEAK * alpha ? split : 1);
+                                double cell_off = acos(fmax(-1.0, fmin(1.0, dot3(x, mirror) / sqrt(dot3(x, x)))));
+                                add_points(&pts, s0, t0, h, tail_only(cell_off, half_angle, alpha) ? 1 : split);
                             }
                     }
                     count = pts.count;
                 }
                 for (size_t m = 0; count && m < n_mats; m++)
-                    glossy_sum(gw, mats[m], wo, count, mw[m], lamp_spec);
+                    glossy_sum(gw, mats[m], wo, gw->terms + m * (terms ? terms : 1), count, mw[m], lamp_spec);
                 for (int c = 0; c < 3; c++)
                     spec[c] += lamp_spec[c] * lamp->radiance[c];
             }

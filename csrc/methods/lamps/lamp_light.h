@@ -28,12 +28,14 @@
 /* A lamp wider than this (radians across, as seen) has its shadows read over 4 x 4 cells. */
 #define WENV_LAMP_WIDE 0.02
 #define WENV_LAMP_CELLS 4
-/* The glossy grid's side: ceil(4 x the lamp's angle / the narrowest lobe's alpha), at most this.
- * A finer grid than WENV_LAMP_GLOSSY_COARSE is made only where the lobes' peak may fall: coarse
- * cells within WENV_LAMP_PEAK alphas of the mirror direction are split, the others read once. */
+/* The glossy grid: points WENV_LAMP_GLOSSY_SPACING x the narrowest lobe's alpha apart across the
+ * lamp, at most WENV_LAMP_GLOSSY_GRID a side.  Where the lobes' peak (WENV_LAMP_PEAK alphas about
+ * the mirror direction) misses the lamp, 2 a side read the smooth tails; otherwise a finer grid
+ * than WENV_LAMP_GLOSSY_COARSE is made only in the coarse cells the peak may fall on. */
+#define WENV_LAMP_GLOSSY_SPACING 0.5
 #define WENV_LAMP_GLOSSY_GRID 32
-#define WENV_LAMP_GLOSSY_COARSE 8
-#define WENV_LAMP_PEAK 8.0
+#define WENV_LAMP_GLOSSY_COARSE 4
+#define WENV_LAMP_PEAK 6.0
 
 typedef struct wenv_lamp_light wenv_lamp_light;
 
