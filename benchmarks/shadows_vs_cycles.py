@@ -108,6 +108,15 @@ def render(scene, engine, folder, seed=0):
     return px
 
 
+def cycles_direct_and_full(scene, folder):
+    """Cycles at two seeds with direct light only (Max Bounces 0, the World through every shadow ray)
+    and with its default bounces: (direct, full), two images each."""
+    scene.cycles.max_bounces = 0
+    direct = [render(scene, "CYCLES", folder, seed) for seed in (1, 2)]
+    scene.cycles.max_bounces = 12
+    return direct, [render(scene, "CYCLES", folder, seed) for seed in (1, 2)]
+
+
 def eevee_engine():
     items = bpy.types.RenderSettings.bl_rna.properties["engine"].enum_items.keys()
     return "BLENDER_EEVEE_NEXT" if "BLENDER_EEVEE_NEXT" in items else "BLENDER_EEVEE"
@@ -169,10 +178,7 @@ def main():
                             meshes.write_colors(obj.data, d.domain, rgb[o:o + d.count])
                         imgs[key] = render(scene, "BLENDER_WORKBENCH", folder)
                     imgs["eevee"] = render(scene, eevee, folder)
-                    scene.cycles.max_bounces = 0
-                    direct = [render(scene, "CYCLES", folder, seed) for seed in (1, 2)]
-                    scene.cycles.max_bounces = 12
-                    full = [render(scene, "CYCLES", folder, seed) for seed in (1, 2)]
+                    direct, full = cycles_direct_and_full(scene, folder)
                 mask = np.ones(imgs["direct"].shape[:2], bool)
                 for img in list(imgs.values()) + direct + full:
                     mask &= img[..., 3] > 0.99
