@@ -269,6 +269,22 @@ def test_a_new_power_makes_nothing_again(contact):
     assert shader.stats["lamp_light_made"] == made + 1
 
 
+def test_a_moved_lamp_is_made_alone_and_right(contact):
+    """Of two lamps, one moved: only its part is made again, and the result is a fresh shader's."""
+    positions, normals, views, _, occlusion = contact
+    sun = wenv.Lamp("SUN", placed((0, 0, 0), shine=(0.5, 0.3, -1.0)), energy=3.0, angle=0.1)
+
+    def area(z):
+        return wenv.Lamp("AREA", placed((-1, 1, z), shine=(0.3, -0.3, -1.0)), energy=400.0, size=1.2)
+    kept = wenv.Shader(BLACK, MATERIALS["paint"](), quality="draft")
+    kw = dict(occlusion=occlusion, bounce=None, positions=positions)
+    kept.shade(normals, views, lamps=[sun, area(3.0)], **kw)
+    moved = kept.shade(normals, views, lamps=[sun, area(2.5)], **kw)
+    fresh = wenv.Shader(BLACK, MATERIALS["paint"](), quality="draft").shade(normals, views, lamps=[sun, area(2.5)],
+                                                                           **kw)
+    assert np.array_equal(moved, fresh)
+
+
 def test_shade_mesh_culled_and_in_steps_agrees(contact):
     """The lamps' rows follow culling and budgeted steps."""
     positions, normals, _, _, occlusion = contact

@@ -21,7 +21,8 @@ struct wenv_lamp_light {
     uint16_t *seen;             /* n x n_lamps: which cells of the lamp the vertex sees (bit j k + i) */
     const wenv_occluders *occ;  /* what it was cast against: only its fingerprint is read later */
     float lift;
-    uint64_t key;
+    uint64_t key;               /* of the vertices and what blocks the lamps */
+    uint64_t *lamp_keys;        /* of each lamp's placement and shape: a lamp moved alone is made alone */
 };
 
 void wenv_lamp_light_free(wenv_lamp_light *l)
@@ -33,6 +34,7 @@ void wenv_lamp_light_free(wenv_lamp_light *l)
     free(l->normals);
     free(l->share);
     free(l->seen);
+    free(l->lamp_keys);
     free(l);
 }
 
@@ -42,16 +44,12 @@ size_t wenv_lamp_light_made(const wenv_lamp_light *l) { return l->made; }
 
 static double dot3(const double a[3], const double b[3]) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 
-static uint64_t light_key(const wenv_lamp *lamps, size_t n_lamps, const float *positions, const float *normals,
-                          size_t n, const wenv_occluders *occ)
+static uint64_t mesh_key(const float *positions, const float *normals, size_t n, const wenv_occluders *occ)
 {
-    uint64_t h = wenv_fingerprint_word(wenv_fingerprint_word(WENV_FINGERPRINT_START, n), n_lamps);
+    uint64_t h = wenv_fingerprint_word(WENV_FINGERPRINT_START, n);
     h = wenv_fingerprint_floats(h, positions, 3 * n);
     h = wenv_fingerprint_floats(h, normals, 3 * n);
-    h = wenv_fingerprint_word(h, occ ? wenv_occluders_fingerprint(occ) : 0);
-    for (size_t j = 0; j < n_lamps; j++)
-        h = wenv_lamp_geometry_key(&lamps[j], h);
-    return h;
+    return wenv_fingerprint_word(h, occ ? wenv_occluders_fingerprint(occ) : 0);
 }
 
 /* Whether a ray from `origin` along unit d reaches distance t (INFINITY: the sky) unblocked. */
@@ -200,30 +198,45 @@ wenv_status wenv_lamp_light_ensure(wenv_lamp_light **light, const wenv_lamp *lam
         if (!isfinite(m[0]) || !isfinite(m[1]) || !isfinite(m[2]) || m[0] * m[0] + m[1] * m[1] + m[2] * m[2] <= 0.0f)
             return wenv_error_set(err, WENV_ERR_VALUE, "normals[%zu] is zero or not finite", i);
     }
-    uint64_t key = light_key(lamps, n_lamps, positions, normals, n, occ);
-    wenv_lamp_light *l = *light;
-    if (l && l->key == key && l->n == n && l->n_lamps == n_lamps) {
-        memcpy(l->lamps, lamps, n_lamps * sizeof *lamps); /* colours, powers, flags: read at each shade */
-        return WENV_OK;
-    }
-    size_t made_before = l ? l->made : 0;
-    l = calloc(1, sizeof *l);
-    size_t cells = (n ? n : 1) * (n_lamps ? n_lamps : 1);
+    uint64_t key = mesh_key(positions, normals, n, occ);
+    wenv_lamp_light *before = *light;
+    /* the same vertices and blockers with as many lamps: only the lamps moved or reshaped are made */
+    int keep = before && before->key == key && before->n == n && before->n_lamps == n_lamps;
+    unsigned char *redo = malloc(n_lamps ? n_lamps : 1);
+    size_t cells = (n ? n : 1) * (n_lamps ? n_lamps : 1), n_redo = 0;
+    wenv_lamp_light *l = redo ? calloc(1, sizeof *l) : NULL;
     if (l) {
         l->lamps = malloc((n_lamps ? n_lamps : 1) * sizeof *lamps);
+        l->lamp_keys = malloc((n_lamps ? n_lamps : 1) * sizeof *l->lamp_keys);
         l->positions = malloc((n ? n : 1) * 3 * sizeof(float));
         l->normals = malloc((n ? n : 1) * 3 * sizeof(float));
         l->share = malloc(cells * sizeof(float));
         l->seen = malloc(cells * sizeof(uint16_t));
     }
-    if (!l || !l->lamps || !l->positions || !l->normals || !l->share || !l->seen) {
+    if (!l || !l->lamps || !l->lamp_keys || !l->positions || !l->normals || !l->share || !l->seen) {
+        free(redo);
         wenv_lamp_light_free(l);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the lamps' light at %zu vertices", n);
+    }
+    for (size_t j = 0; j < n_lamps; j++) {
+        l->lamp_keys[j] = wenv_lamp_geometry_key(&lamps[j], WENV_FINGERPRINT_START);
+        redo[j] = !keep || l->lamp_keys[j] != before->lamp_keys[j];
+        n_redo += redo[j];
+    }
+    if (keep && n_redo == 0) { /* colours, powers, flags: read at each shade */
+        memcpy(before->lamps, lamps, n_lamps * sizeof *lamps);
+        free(redo);
+        wenv_lamp_light_free(l);
+        return WENV_OK;
+    }
+    if (keep) {
+        memcpy(l->share, before->share, n * n_lamps * sizeof(float));
+        memcpy(l->seen, before->seen, n * n_lamps * sizeof(uint16_t));
     }
     l->n = n;
     l->n_lamps = n_lamps;
     l->key = key;
-    l->made = made_before + 1;
+    l->made = (before ? before->made : 0) + 1;
     l->lift = occ ? wenv_occluders_offset(occ) : 0.0f;
     memcpy(l->lamps, lamps, n_lamps * sizeof *lamps);
     memcpy(l->positions, positions, 3 * n * sizeof(float));
@@ -241,16 +254,18 @@ wenv_status wenv_lamp_light_ensure(wenv_lamp_light **light, const wenv_lamp *lam
         if (atomic_load(&cancelled))
             continue;
         for (size_t j = 0; j < n_lamps; j++)
-            prepare_one(l, &lamps[j], occ, (size_t)i, &l->share[(size_t)i * n_lamps + j],
-                        &l->seen[(size_t)i * n_lamps + j]);
+            if (redo[j])
+                prepare_one(l, &lamps[j], occ, (size_t)i, &l->share[(size_t)i * n_lamps + j],
+                            &l->seen[(size_t)i * n_lamps + j]);
         if ((i & 255) == 255)
             wenv_progress_item(progress, &done, (n + 255) / 256, &cancelled);
     }
+    free(redo);
     if (atomic_load(&cancelled) || wenv_progress_finish(progress)) {
         wenv_lamp_light_free(l);
         return wenv_error_set(err, WENV_ERR_CANCELLED, "the lamps' shadows were cancelled");
     }
-    wenv_lamp_light_free(*light);
+    wenv_lamp_light_free(before);
     *light = l;
     return WENV_OK;
 }

@@ -32,6 +32,7 @@ int wenv_lamp_patch_at(const wenv_lamp *l, const double p[3], wenv_lamp_patch *p
     pa->infinite = 0;
     pa->within_sphere = 0;
     pa->ellipse = 1;
+    pa->facing = 1;
     switch (l->settings.kind) {
     case WENV_LAMP_SUN:
         for (int c = 0; c < 3; c++) {
@@ -75,6 +76,7 @@ int wenv_lamp_patch_at(const wenv_lamp *l, const double p[3], wenv_lamp_patch *p
             pa->normal[c] = l->emit_dir[c];
         }
         pa->ellipse = l->ellipse;
+        pa->facing = 0;
         break;
     }
     }
@@ -110,6 +112,12 @@ double wenv_lamp_patch_angle(const wenv_lamp_patch *pa)
 
 double wenv_lamp_patch_psa(const wenv_lamp_patch *pa, const double normal[3])
 {
+    if (pa->facing) { /* a cap wholly above the horizon: pi sin^2 of its radius times the cosine */
+        double d2 = dot3(pa->centre, pa->centre), r2 = dot3(pa->u, pa->u);
+        double sin2 = r2 / (r2 + d2), cos_c = dot3(pa->centre, normal) / sqrt(d2);
+        if (cos_c > 0.0 && cos_c * cos_c > sin2)
+            return M_PI * sin2 * cos_c;
+    }
     double corners[3 * ELLIPSE_CORNERS];
     size_t n;
     if (pa->ellipse) {

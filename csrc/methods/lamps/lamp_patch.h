@@ -15,6 +15,7 @@ typedef struct {
     double u[3], v[3];  /* half axes */
     double normal[3];   /* unit, facing the shaded point's side */
     int ellipse;
+    int facing;         /* a circle square to the line from the point: its directions are a cap */
     int infinite;       /* a sun's: rays to it have no end */
     int within_sphere;  /* the point is within a point or spot lamp's radius (a spot's cone is not applied) */
     double area;
