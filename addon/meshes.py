@@ -22,8 +22,8 @@ class MeshData:
         self.unplaced = unplaced
         self.triangles = triangles  # (m, 3) int32 indices into positions (what casts shadows), or None
         # Principled inputs read from textures (textures.py), by the core's keyword: "base_color"
-        # (n, 3) linear, "roughness" and "metallic" (n,), float32, for the material slots in
-        # textured[keyword]
+        # and "emission_color" (n, 3) linear, "roughness" and "metallic" (n,), float32, for the
+        # material slots in textured[keyword]
         self.inputs = dict(inputs or {})
         self.textured = {}
         # (n, 3) float32 world normals a normal map bends the shading to (textures.py), or None: the

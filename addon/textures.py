@@ -1,9 +1,10 @@
-"""Textures: a Principled BSDF's Base Color, Roughness and Metallic read from their Image Texture nodes
+"""Textures: a Principled BSDF's Base Color, Roughness, Metallic and Emission Color read from their
+Image Texture nodes
 at each shaded vertex -- through the node's UV map, in the image's colour space, with its
 interpolation and extension -- and filtered over the vertex's share of the image (mip-mapped), so
 that a texture finer than the mesh averages rather than aliases.  The core then shades each vertex
-with its own values (Shader.shade(..., base_color=, roughness=, metallic=)): a colour at the cost of a
-multiply-add, a Roughness or Metallic through a family of materials.  What is not read yet is named,
+with its own values (Shader.shade(..., base_color=, roughness=, metallic=, emission_color=)): a colour
+at the cost of a multiply-add, a Roughness or Metallic through a family of materials.  What is not read yet is named,
 never used silently."""
 import numpy as np
 
@@ -11,7 +12,10 @@ from . import closures, engine, materials, meshes, nodes, world
 
 # The sockets read from textures and the nodes between (nodes.py), by the core's keyword.  A colour
 # into a value socket is its luminance, as Cycles converts it.
-TEXTURED_SOCKETS = {"Base Color": "base_color", "Roughness": "roughness", "Metallic": "metallic"}
+TEXTURED_SOCKETS = {"Base Color": "base_color", "Roughness": "roughness", "Metallic": "metallic",
+                    "Emission Color": "emission_color"}
+# those read as colours (the rest as values)
+COLOUR_KEYWORDS = ("base_color", "emission_color")
 # An Image Texture's extensions, each read as Cycles reads it (_wrap)
 EXTENSIONS = ("REPEAT", "EXTEND", "CLIP", "MIRROR")
 
@@ -46,7 +50,7 @@ def socket_at_means(principled, socket):
         return None
     ev = nodes.one_point(lambda node: np.float32([images.mean(node.image)]))
     try:
-        out = ev.colour(sock) if TEXTURED_SOCKETS[socket] == "base_color" else ev.value(sock)
+        out = ev.colour(sock) if TEXTURED_SOCKETS[socket] in COLOUR_KEYWORDS else ev.value(sock)
     except nodes.Unsupported:
         return None
     return out[0], [t.image.name for t in ev.textures]
@@ -295,7 +299,7 @@ def read_inputs(obj, depsgraph, data):
                                                                    images.levels(tex.image), Source(tex, None),
                                                                    (uv, footprint, rows), data.count))
             try:
-                values = ev.colour(sock) if keyword == "base_color" else ev.value(sock)
+                values = ev.colour(sock) if keyword in COLOUR_KEYWORDS else ev.value(sock)
             except nodes.MissingUV as exc:
                 notes.append(_no_uv_map(obj, exc.uv_map, f"'{socket}' ('{mat.name}')",
                                         f"its {socket}'s unlinked value is used"))
@@ -307,7 +311,8 @@ def read_inputs(obj, depsgraph, data):
                 raise world.SetupError(f"Material '{mat.name}': its nodes give '{socket}' a value that is not "
                                        f"finite (NaN or infinite) at element {row} of '{obj.name}'")
             if keyword not in data.inputs:
-                data.inputs[keyword] = np.zeros((data.count, 3) if keyword == "base_color" else data.count, np.float32)
+                data.inputs[keyword] = np.zeros((data.count, 3) if keyword in COLOUR_KEYWORDS else data.count,
+                                                np.float32)
                 data.textured[keyword] = set()
             rows = _slot_rows(obj, data, s)
             data.inputs[keyword][rows] = values[rows]

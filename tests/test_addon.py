@@ -1102,6 +1102,40 @@ def value_texture(mat, socket, image):
     return tex
 
 
+def test_a_textured_emission_color_is_read_at_each_vertex(scene):
+    """Emission Color from an image of two halves (Closest), Strength 2: each vertex emits its half's
+    colour, as the core shades it given them (emission_color=)."""
+    env_world(scene, "sunset")
+    plane, mat = textured_plane(bpy.data.images.new("unused", 4, 4, float_buffer=True))
+    tree = mat.node_tree
+    node = tree.nodes["Principled BSDF"]
+    tree.links.remove(node.inputs["Base Color"].links[0])
+    node.inputs["Emission Strength"].default_value = 2.0
+    px = np.ones((64, 64, 4), np.float32)
+    px[:, :32, :3], px[:, 32:, :3] = (1.0, 0.5, 0.1), (0.1, 0.4, 1.0)
+    halves = bpy.data.images.new("glow halves", 64, 64, float_buffer=True)
+    halves.pixels.foreach_set(px.ravel())
+    tex = tree.nodes.new("ShaderNodeTexImage")
+    tex.image, tex.interpolation = halves, "Closest"
+    tree.links.new(tex.outputs["Color"], node.inputs["Emission Color"])
+    assert not any("Emission" in n for n in materials.principled_notes(mat))
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    _, rgb = attribute(plane)
+    uv = np.empty(len(plane.data.loops) * 2, np.float32)
+    plane.data.uv_layers.active.uv.foreach_get("vector", uv)
+    u = np.zeros(len(plane.data.vertices), np.float32)
+    u[[l.vertex_index for l in plane.data.loops]] = uv[0::2]
+    glow = np.where((np.floor(u * 64).astype(int) % 64 < 32)[:, None], np.float32([1.0, 0.5, 0.1]),
+                    np.float32([0.1, 0.4, 1.0])).astype(np.float32)
+    p, n = world_arrays(plane, corner=False)
+    eye = tuple(scene.camera.matrix_world.translation)
+    inputs, _ = materials.principled_inputs(node)
+    want = core_shader(wenv.load_environment(hdri_path("sunset")), engine.principled(inputs)).shade_mesh(
+        p, n, eye, emission_color=glow)
+    np.testing.assert_allclose(rgb, want, rtol=1e-4, atol=1e-5)
+    assert rgb.max() > 1.5  # the emission shows
+
+
 def test_a_mix_of_shader_nodes_with_a_textured_factor(scene):
     """A Mix Shader of a Diffuse BSDF and a coloured Glossy BSDF whose Fac is an image of two halves
     (0.2 and 0.9), inside a node group, added to a Glass BSDF: each vertex is the core's shading of

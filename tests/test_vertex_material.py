@@ -363,3 +363,53 @@ def test_emission_shines_through_a_coat_and_lights_what_it_faces():
     none = glowing.shade(nrm, vd, occlusion=occlusion, bounce=None)
     plane = positions[:, 2] == 0.0
     assert np.all(own[plane] >= none[plane] - 1e-6) and (own[plane] - none[plane]).max() > 0.01
+
+
+@pytest.mark.parametrize("method", ["slicing", "split_sum"])
+def test_an_emission_color_per_vertex(sphere, method):
+    """emission_color: each vertex's Emission Color in place of the material's (a texture's), through
+    its coat and sheen as its own material would emit it, in every method and the reference; the
+    culled and budgeted steps and the mesh's own bounce carry it; bad colours are named."""
+    v, views, eye = sphere
+    rng = np.random.default_rng(11)
+    colours = rng.uniform(0.0, 2.0, (len(v), 3)).astype(np.float32)
+    inputs = dict(PAINT, roughness=0.4, coat_weight=0.6, sheen_weight=0.4, emission_strength=1.5)
+    env = wenv.load_environment(hdri_path("sunset"))
+    shader = wenv.Shader(env, wenv.Principled(**inputs), quality="default", method=method)
+    got = shader.shade(v, views, emission_color=colours)
+    reflected = wenv.Shader(env, wenv.Principled(**{**inputs, "emission_strength": 0.0}), quality="default",
+                            method=method).shade(v, views)
+    white = wenv.Shader(env, wenv.Principled(**inputs, emission_color=(1.0, 1.0, 1.0)), quality="default",
+                        method=method).shade(v, views)
+    assert (white - reflected).max() > 0.5  # it emits
+    np.testing.assert_allclose(got, reflected + colours * (white - reflected), rtol=1e-4, atol=1e-4)
+    some = np.arange(0, len(v), 97)
+    for i in some[:6]:
+        own = wenv.Principled(**inputs, emission_color=tuple(float(c) for c in colours[i]))
+        np.testing.assert_allclose(wenv.reference(env, wenv.Principled(**inputs), v[i:i + 1], views[i:i + 1],
+                                                  emission_color=colours[i:i + 1]),
+                                   wenv.reference(env, own, v[i:i + 1], views[i:i + 1]), rtol=1e-6, atol=1e-7)
+    whole = shader.shade_mesh(v, v, eye, emission_color=colours)
+    culled = shader.shade_mesh(v, v, eye, cull=True, emission_color=colours)
+    seen = wenv.visible_vertices(v, v, eye)
+    np.testing.assert_allclose(culled[seen], whole[seen], rtol=1e-6, atol=1e-7)
+    with pytest.raises(ValueError, match=r"emission_color\[2\]"):
+        bad = colours.copy()
+        bad[2, 1] = -1.0
+        shader.shade(v, views, emission_color=bad)
+    with pytest.raises(ValueError, match="emission_color has"):
+        shader.shade(v, views, emission_color=colours[:5])
+
+
+def test_an_emission_color_per_vertex_lights_what_it_faces():
+    """With shadows, the mesh's own bounce carries each vertex's emission."""
+    env = wenv.Environment(np.zeros((32, 64, 3), np.float32))
+    positions, triangles, nrm = sphere_on_plane()
+    occlusion = wenv.Occluders(positions, triangles).occlusion(positions, nrm, resolution=8)
+    vd = (np.float32([0.5, -6.0, 4.0]) - positions).astype(np.float32)
+    shader = wenv.Shader(env, wenv.Principled(**PAINT, emission_strength=2.0), quality="default", method="slicing")
+    sphere_glows = np.where((positions[:, 2] > 0.0)[:, None], np.float32([1.0, 0.8, 0.2]), 0.0).astype(np.float32)
+    own = shader.shade(nrm, vd, occlusion=occlusion, emission_color=sphere_glows)
+    none = shader.shade(nrm, vd, occlusion=occlusion, bounce=None, emission_color=sphere_glows)
+    plane = positions[:, 2] == 0.0
+    assert np.all(own[plane] >= none[plane] - 1e-6) and (own[plane] - none[plane]).max() > 0.01

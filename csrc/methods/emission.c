@@ -9,10 +9,24 @@
  * of 257 cosines, linear between them, serves every vertex. */
 #define TABLE_N 257
 
-void wenv_emission_add(const wenv_material *mat, const float *normals, const float *views, size_t n, float *out)
+wenv_status wenv_emission_add(const wenv_material *mat, const float *colours, const float *normals,
+                              const float *views, size_t n, float *out, wenv_error *err)
 {
-    if (!wenv_material_emits(mat))
-        return;
+    wenv_material *white = NULL;
+    if (colours) { /* the emission per unit of Emission Color: the material emitting white */
+        const wenv_principled_inputs *in = wenv_principled_inputs_of(mat);
+        if (!in || in->emission_strength == 0.0)
+            return WENV_OK;
+        wenv_principled_inputs own = *in;
+        own.emission_color[0] = own.emission_color[1] = own.emission_color[2] = 1.0;
+        if (wenv_principled_create(&white, &own, err))
+            return err->status;
+        mat = white;
+    }
+    if (!wenv_material_emits(mat)) {
+        wenv_material_free(white);
+        return WENV_OK;
+    }
     float table[3 * TABLE_N];
     for (size_t i = 0; i < TABLE_N; i++) {
         double rgb[3];
@@ -20,6 +34,7 @@ void wenv_emission_add(const wenv_material *mat, const float *normals, const flo
         for (int c = 0; c < 3; c++)
             table[3 * i + (size_t)c] = (float)rgb[c];
     }
+    wenv_material_free(white);
     long long nn = (long long)n;
 #pragma omp parallel for schedule(static)
     for (long long i = 0; i < nn; i++) {
@@ -31,8 +46,9 @@ void wenv_emission_add(const wenv_material *mat, const float *normals, const flo
         float f = x - (float)k;
         for (int c = 0; c < 3; c++) {
             float e = (1.0f - f) * table[3 * k + (size_t)c] + f * table[3 * (k + 1) + (size_t)c];
-            float v = out[3 * i + c] + e;
+            float v = out[3 * i + c] + e * (colours ? colours[3 * i + c] : 1.0f);
             out[3 * i + c] = v > 0.0f ? v : 0.0f;
         }
     }
+    return WENV_OK;
 }

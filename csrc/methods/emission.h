@@ -8,10 +8,14 @@
 
 #include <stddef.h>
 
+#include "base/error.h"
 #include "scene/material.h"
 
 /* out[i] = max(0, out[i] + emission of mat towards view i) for n vertices (views NULL: head-on, the
- * light sent to what the vertex blocks); nothing when mat emits nothing. */
-void wenv_emission_add(const wenv_material *mat, const float *normals, const float *views, size_t n, float *out);
+ * light sent to what the vertex blocks); nothing when mat emits nothing.  colours (n x 3, or NULL:
+ * the material's own): each vertex's Emission Color in place of a Principled BSDF's (a texture's),
+ * its Strength and the layers it shines through the material's.  WENV_ERR_NOMEM only. */
+wenv_status wenv_emission_add(const wenv_material *mat, const float *colours, const float *normals,
+                              const float *views, size_t n, float *out, wenv_error *err);
 
 #endif

@@ -106,7 +106,8 @@ wenv_status wenv_lighting_frame_shade_scene(const wenv_lighting_frame *frame, co
                                             const float *normals, const float *views, size_t n,
                                             const wenv_shadow_scene *scene, const wenv_vertex_colour *colour,
                                             const wenv_family_rows *family, const wenv_material *material,
-                                            const wenv_lamp_rows *lamps, float *out, wenv_error *err)
+                                            const float *emission, const wenv_lamp_rows *lamps, float *out,
+                                            wenv_error *err)
 {
     wenv_shadow_scene held;
     if (scene) {
@@ -139,7 +140,7 @@ wenv_status wenv_lighting_frame_shade_scene(const wenv_lighting_frame *frame, co
     if (!st && lamps && material)
         st = wenv_lamps_add(lamps, material, colour, family, normals, views, n, out, err);
     if (!st && material)
-        wenv_emission_add(material, normals, views, n, out);
+        st = wenv_emission_add(material, emission, normals, views, n, out, err);
     return st;
 }
 
@@ -147,6 +148,6 @@ wenv_status wenv_lighting_frame_shade(const wenv_lighting_frame *frame, const we
                                       const float *normals, const float *views, size_t n, float *out,
                                       wenv_error *err)
 {
-    return wenv_lighting_frame_shade_scene(frame, method, state, normals, views, n, NULL, NULL, NULL, NULL, NULL, out,
-                                           err);
+    return wenv_lighting_frame_shade_scene(frame, method, state, normals, views, n, NULL, NULL, NULL, NULL, NULL, NULL,
+                                           out, err);
 }

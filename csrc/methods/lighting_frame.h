@@ -50,12 +50,14 @@ wenv_status wenv_lighting_frame_shade(const wenv_lighting_frame *frame, const we
  * then be NULL).  The method must provide them.  colour (NULL: the material's own) gives each
  * vertex its colour, family (NULL: the method's material) its Roughness and Metallic
  * (material_family.h; colour's per_colour table is then the family's members').  material is the
- * shader's: its own light is added, unscaled by the World's strength (emission.h), and so is the
- * light of the scene's lamps (lamps: NULL for none; lamps/lamp_shading.h), in the world's frame. */
+ * shader's: its own light is added, unscaled by the World's strength (emission.h; emission, one RGB
+ * per vertex or NULL: each vertex's Emission Color), and so is the light of the scene's lamps
+ * (lamps: NULL for none; lamps/lamp_shading.h), in the world's frame. */
 wenv_status wenv_lighting_frame_shade_scene(const wenv_lighting_frame *frame, const wenv_method *method, void *state,
                                             const float *normals, const float *views, size_t n,
                                             const wenv_shadow_scene *scene, const wenv_vertex_colour *colour,
                                             const wenv_family_rows *family, const wenv_material *material,
-                                            const wenv_lamp_rows *lamps, float *out, wenv_error *err);
+                                            const float *emission, const wenv_lamp_rows *lamps, float *out,
+                                            wenv_error *err);
 
 #endif

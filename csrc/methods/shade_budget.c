@@ -13,8 +13,8 @@
 wenv_status wenv_shade_for(const wenv_lighting_frame *frame, const wenv_method *method, void *state,
                            const float *normals, const float *views, size_t n, const wenv_shadow_scene *scene,
                            const wenv_vertex_colour *colour, const wenv_family_rows *family,
-                           const wenv_material *material, const wenv_lamp_rows *lamps, size_t first, double budget,
-                           float *out, size_t *next, wenv_error *err)
+                           const wenv_material *material, const float *emission, const wenv_lamp_rows *lamps,
+                           size_t first, double budget, float *out, size_t *next, wenv_error *err)
 {
     *next = first < n ? first : n;
     if (!(budget >= 0.0))
@@ -57,7 +57,8 @@ wenv_status wenv_shade_for(const wenv_lighting_frame *frame, const wenv_method *
         }
         if (wenv_lighting_frame_shade_scene(frame, method, state, normals + 3 * at, views + 3 * at, count,
                                             scene ? &block_scene : NULL, colour ? &block_colour : NULL,
-                                            family ? &block_family : NULL, material, lamps ? &block_lamps : NULL,
+                                            family ? &block_family : NULL, material,
+                                            emission ? emission + 3 * at : NULL, lamps ? &block_lamps : NULL,
                                             out + 3 * at, err))
             return err->status;
         at += count;

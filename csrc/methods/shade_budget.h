@@ -9,7 +9,8 @@
 #include "methods/method.h"
 
 /* Shades pairs first .. n - 1 of normals and views into out (as method->shade, or with `scene` as
- * method->shade_shadowed; scene may be NULL; colour, one per pair, family, material and lamps may be NULL) in
+ * method->shade_shadowed; scene may be NULL; colour and emission, one per pair, family, material and
+ * lamps may be NULL) in
  * blocks, in order,
  * until `budget` seconds have passed -- at least one block, whatever the budget -- and sets *next to
  * the first pair left unshaded (n when none is), under `frame` (wenv_lighting_frame_shade).  Pairs before `first` and after *next are not
@@ -17,7 +18,7 @@
 wenv_status wenv_shade_for(const wenv_lighting_frame *frame, const wenv_method *method, void *state,
                            const float *normals, const float *views, size_t n, const wenv_shadow_scene *scene,
                            const wenv_vertex_colour *colour, const wenv_family_rows *family,
-                           const wenv_material *material, const wenv_lamp_rows *lamps, size_t first, double budget,
-                           float *out, size_t *next, wenv_error *err);
+                           const wenv_material *material, const float *emission, const wenv_lamp_rows *lamps,
+                           size_t first, double budget, float *out, size_t *next, wenv_error *err);
 
 #endif

@@ -11,13 +11,14 @@ static PyObject *py_reference(PyObject *self, PyObject *args, PyObject *kwargs)
 {
     (void)self;
     static char *kwlist[] = {"env",       "material",  "normals", "view_dirs",  "progress", "positions",
-                             "occluders", "bounce",    "base_color", "roughness", "metallic", "lamps", NULL};
+                             "occluders", "bounce",    "base_color", "roughness", "metallic", "lamps",
+                             "emission_color", NULL};
     PyObject *env_obj, *mat_obj, *nobj, *vobj, *progress_obj = Py_None, *pobj = Py_None, *occ_obj = Py_None;
     PyObject *bounce_obj = Py_None, *colour_obj = Py_None, *rough_obj = Py_None, *metal_obj = Py_None;
-    PyObject *lamps_obj = Py_None;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOO|OOOOO$OOO:reference", kwlist, &env_obj, &mat_obj, &nobj,
+    PyObject *lamps_obj = Py_None, *emit_obj = Py_None;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOO|OOOOO$OOOO:reference", kwlist, &env_obj, &mat_obj, &nobj,
                                      &vobj, &progress_obj, &pobj, &occ_obj, &bounce_obj, &colour_obj, &rough_obj,
-                                     &metal_obj, &lamps_obj))
+                                     &metal_obj, &lamps_obj, &emit_obj))
         return NULL;
     if (bounce_obj != Py_None && occ_obj == Py_None) {
         PyErr_SetString(PyExc_ValueError, "bounce is read only with occluders (what blocks the light it fills in)");
@@ -58,7 +59,7 @@ static PyObject *py_reference(PyObject *self, PyObject *args, PyObject *kwargs)
     }
     PyObject *result = NULL;
     Py_buffer pb = {0}, bb = {0}, rb = {0}, mb = {0};
-    float *rgb = NULL;
+    float *rgb = NULL, *emission = NULL;
     wenv_lamp *lamps = NULL;
     size_t np = n, nb_rows, n_lamps = 0;
     if (pobj != Py_None && wenv_py_get_vec3_array(pobj, "positions", 0, &pb, &np, NULL) < 0)
@@ -81,6 +82,8 @@ static PyObject *py_reference(PyObject *self, PyObject *args, PyObject *kwargs)
     }
     if (colour_obj != Py_None && !(rgb = wenv_py_base_colours(colour_obj, n)))
         goto done;
+    if (emit_obj != Py_None && !(emission = wenv_py_vertex_colours(emit_obj, "emission_color", n, 0)))
+        goto done;
     if ((rough_obj != Py_None && wenv_py_get_vertex_values(rough_obj, "roughness", n, &rb) < 0) ||
         (metal_obj != Py_None && wenv_py_get_vertex_values(metal_obj, "metallic", n, &mb) < 0))
         goto done;
@@ -95,8 +98,8 @@ static PyObject *py_reference(PyObject *self, PyObject *args, PyObject *kwargs)
     wenv_status st;
     WENV_BEGIN_WORK
     st = wenv_reference_per_vertex(env, mat, nb.buf, vb.buf, n, occ, pb.obj ? pb.buf : NULL, bb.obj ? bb.buf : NULL, rgb,
-                                   rb.obj ? rb.buf : NULL, mb.obj ? mb.buf : NULL, lamps, n_lamps, out, &progress,
-                                   &err);
+                                   rb.obj ? rb.buf : NULL, mb.obj ? mb.buf : NULL, lamps, n_lamps, emission, out,
+                                   &progress, &err);
     WENV_END_WORK
     if (st) {
         Py_CLEAR(result);
@@ -105,6 +108,7 @@ static PyObject *py_reference(PyObject *self, PyObject *args, PyObject *kwargs)
     }
 done:
     PyMem_Free(rgb);
+    PyMem_Free(emission);
     PyMem_Free(lamps);
     if (pb.obj)
         PyBuffer_Release(&pb);
@@ -122,7 +126,7 @@ done:
 static PyMethodDef reference_functions[] = {
     {"reference", (PyCFunction)(void (*)(void))py_reference, METH_VARARGS | METH_KEYWORDS,
      "reference(env, material, normals, view_dirs, progress=None, positions=None, occluders=None, bounce=None, "
-     "base_color=None, *, roughness=None, metallic=None, lamps=None)\n--\n\n"
+     "base_color=None, *, roughness=None, metallic=None, lamps=None, emission_color=None)\n--\n\n"
      "Ground truth: the reflection equation summed over every environment pixel (exact solid angles), in the "
      "units of Shader.shade.  With occluders (a wenv.Occluders) and the vertices' positions, each pixel's ray "
      "from the vertex is cast exactly, and a blocked one brings the blocker's light where it is hit: bounce "
@@ -131,7 +135,8 @@ static PyMethodDef reference_functions[] = {
      "material's, as Shader.shade takes it.  roughness, metallic (n,) float32: each vertex's Roughness and "
      "Metallic in place of a Principled material's, each distinct value shaded with its own material, exactly.  "
      "lamps (a sequence of wenv.Lamp, with positions): each lamp's light summed over a fine grid of its surface "
-     "(or its cone of directions), each point with the exact BRDF and, with occluders, its own ray."},
+     "(or its cone of directions), each point with the exact BRDF and, with occluders, its own ray.  "
+     "emission_color (n, 3): each vertex's Emission Color in place of a Principled material's."},
     {NULL, NULL, 0, NULL},
 };
 

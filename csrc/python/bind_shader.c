@@ -506,13 +506,14 @@ static int ensure_lamps(ShaderObject *self, PyObject *lamps_obj, const float *po
  * here, for every vertex of the occlusion (normals: all n of them), and given as the scene's
  * bounce (*light, PyMem_Free'd by the caller).  -1 with the error set. */
 static int own_bounce(ShaderObject *self, const float *normals, size_t n, wenv_shadow_scene *scene,
-                      const wenv_vertex_colour *colour, const wenv_family_rows *family, const wenv_lamp_rows *lamps,
-                      float **light)
+                      const wenv_vertex_colour *colour, const wenv_family_rows *family, const float *emission,
+                      const wenv_lamp_rows *lamps, float **light)
 {
     *light = NULL;
     /* a material that emits sends its own light too, and lamps theirs, which the method's own bounce
      * leaves out */
-    if ((!colour && !family && !lamps && !wenv_material_emits(wenv_py_material(self->material, "material"))) ||
+    if ((!colour && !family && !lamps && !emission &&
+         !wenv_material_emits(wenv_py_material(self->material, "material"))) ||
         !scene->bounce_self)
         return 0;
     if (!(*light = PyMem_Malloc((n ? n : 1) * 3 * sizeof(float)))) {
@@ -525,7 +526,8 @@ static int own_bounce(ShaderObject *self, const float *normals, size_t n, wenv_s
     wenv_status st;
     WENV_BEGIN_WORK
     st = wenv_lighting_frame_shade_scene(&self->frame, self->method, self->state, normals, NULL, n, &sending, colour,
-                                         family, wenv_py_material(self->material, "material"), lamps, *light, &err);
+                                         family, wenv_py_material(self->material, "material"), emission, lamps, *light,
+                                         &err);
     WENV_END_WORK
     if (st) {
         wenv_py_raise(&err);
@@ -541,7 +543,7 @@ static int own_bounce(ShaderObject *self, const float *normals, size_t n, wenv_s
  * material's own. */
 static PyObject *shade_arrays(ShaderObject *self, const float *normals, const float *views, size_t n,
                               const wenv_shadow_scene *scene, const wenv_vertex_colour *colour,
-                              const wenv_family_rows *family, const wenv_lamp_rows *lamps)
+                              const wenv_family_rows *family, const float *emission, const wenv_lamp_rows *lamps)
 {
     Py_ssize_t shape[2] = {(Py_ssize_t)n, 3};
     float *out;
@@ -552,7 +554,8 @@ static PyObject *shade_arrays(ShaderObject *self, const float *normals, const fl
     wenv_status st;
     WENV_BEGIN_WORK
     st = wenv_lighting_frame_shade_scene(&self->frame, self->method, self->state, normals, views, n, scene, colour,
-                                         family, wenv_py_material(self->material, "material"), lamps, out, &err);
+                                         family, wenv_py_material(self->material, "material"), emission, lamps, out,
+                                         &err);
     WENV_END_WORK
     if (st) {
         Py_DECREF(result);
@@ -579,12 +582,12 @@ static int positions_for(PyObject *obj, size_t n, Py_buffer *pb)
 
 static PyObject *Shader_shade(ShaderObject *self, PyObject *args, PyObject *kwargs)
 {
-    static char *kwlist[] = {"normals",  "view_dirs", "occlusion", "bounce", "base_color",
-                             "roughness", "metallic", "positions", "lamps", NULL};
+    static char *kwlist[] = {"normals",   "view_dirs", "occlusion", "bounce",         "base_color",
+                             "roughness", "metallic",  "positions", "lamps", "emission_color", NULL};
     PyObject *nobj, *vobj, *occ_obj = Py_None, *bounce_obj = NULL, *colour_obj = NULL, *rough_obj = NULL;
-    PyObject *metal_obj = NULL, *pos_obj = Py_None, *lamps_obj = Py_None;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|$OOOOOOO:shade", kwlist, &nobj, &vobj, &occ_obj, &bounce_obj,
-                                     &colour_obj, &rough_obj, &metal_obj, &pos_obj, &lamps_obj))
+    PyObject *metal_obj = NULL, *pos_obj = Py_None, *lamps_obj = Py_None, *emit_obj = Py_None;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|$OOOOOOOO:shade", kwlist, &nobj, &vobj, &occ_obj, &bounce_obj,
+                                     &colour_obj, &rough_obj, &metal_obj, &pos_obj, &lamps_obj, &emit_obj))
         return NULL;
     Py_buffer nb, vb, bb = {0}, pb = {0};
     size_t n, nvw;
@@ -596,7 +599,7 @@ static PyObject *Shader_shade(ShaderObject *self, PyObject *args, PyObject *kwar
         return NULL;
     }
     PyObject *result = NULL;
-    float *expanded = NULL, *rgb = NULL, *light = NULL;
+    float *expanded = NULL, *rgb = NULL, *light = NULL, *emission = NULL;
     const float *views = vb.buf;
     wenv_shadow_scene scene;
     wenv_diffuse_table table;
@@ -607,6 +610,8 @@ static PyObject *Shader_shade(ShaderObject *self, PyObject *args, PyObject *kwar
     const wenv_lamp_rows *lamps = NULL;
     int claimed = 0;
     if (pos_obj != Py_None && positions_for(pos_obj, n, &pb) < 0)
+        goto done;
+    if (emit_obj != Py_None && !(emission = wenv_py_vertex_colours(emit_obj, "emission_color", n, 0)))
         goto done;
     if (single_v && !single_n) {
         /* one view direction for all (orthographic camera) */
@@ -637,14 +642,16 @@ static PyObject *Shader_shade(ShaderObject *self, PyObject *args, PyObject *kwar
         ensure_lamps(self, lamps_obj, pb.obj ? pb.buf : NULL, nb.buf, n, occ_obj != Py_None ? &scene : NULL,
                      &lamp_rows, &lamps) < 0)
         goto done;
-    if (occ_obj == Py_None || own_bounce(self, nb.buf, n, &scene, rgb ? &colour : NULL, family, lamps, &light) == 0)
+    if (occ_obj == Py_None ||
+        own_bounce(self, nb.buf, n, &scene, rgb ? &colour : NULL, family, emission, lamps, &light) == 0)
         result = shade_arrays(self, nb.buf, views, n, occ_obj != Py_None ? &scene : NULL, rgb ? &colour : NULL,
-                              family, lamps);
+                              family, emission, lamps);
 done:
     if (claimed)
         self->busy = 0;
     if (pb.obj)
         PyBuffer_Release(&pb);
+    PyMem_Free(emission);
     PyMem_Free(expanded);
     PyMem_Free(rgb);
     PyMem_Free(light);
@@ -657,11 +664,12 @@ done:
 
 static PyObject *Shader_diffuse_light(ShaderObject *self, PyObject *args, PyObject *kwargs)
 {
-    static char *kwlist[] = {"normals", "occlusion", "base_color", "roughness", "metallic", "positions", "lamps", NULL};
+    static char *kwlist[] = {"normals",   "occlusion", "base_color",     "roughness", "metallic",
+                             "positions", "lamps",     "emission_color", NULL};
     PyObject *nobj, *occ_obj = Py_None, *colour_obj = NULL, *rough_obj = NULL, *metal_obj = NULL;
-    PyObject *pos_obj = Py_None, *lamps_obj = Py_None;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "O|$OOOOOO:diffuse_light", kwlist, &nobj, &occ_obj, &colour_obj,
-                                     &rough_obj, &metal_obj, &pos_obj, &lamps_obj))
+    PyObject *pos_obj = Py_None, *lamps_obj = Py_None, *emit_obj = Py_None;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "O|$OOOOOOO:diffuse_light", kwlist, &nobj, &occ_obj, &colour_obj,
+                                     &rough_obj, &metal_obj, &pos_obj, &lamps_obj, &emit_obj))
         return NULL;
     if (!self->method->diffuse_light) {
         PyErr_Format(PyExc_ValueError, "method '%s' does not give the diffuse light: use a wavelet method",
@@ -676,13 +684,15 @@ static PyObject *Shader_diffuse_light(ShaderObject *self, PyObject *args, PyObje
     wenv_shadow_scene scene;
     wenv_diffuse_table table;
     wenv_vertex_colour colour;
-    float *rgb = NULL;
+    float *rgb = NULL, *emission = NULL;
     wenv_family_rows family_rows;
     const wenv_family_rows *family = NULL;
     wenv_lamp_rows lamp_rows;
     const wenv_lamp_rows *lamps = NULL;
     int claimed = 0;
     if (pos_obj != Py_None && positions_for(pos_obj, n, &pb) < 0)
+        goto done;
+    if (emit_obj != Py_None && !(emission = wenv_py_vertex_colours(emit_obj, "emission_color", n, 0)))
         goto done;
     if (occ_obj != Py_None && parse_scene(self, occ_obj, Py_None, n, &scene, &bb) < 0)
         goto done;
@@ -695,12 +705,13 @@ static PyObject *Shader_diffuse_light(ShaderObject *self, PyObject *args, PyObje
         ensure_lamps(self, lamps_obj, pb.obj ? pb.buf : NULL, nb.buf, n, occ_obj != Py_None ? &scene : NULL,
                      &lamp_rows, &lamps) == 0)
         result = shade_arrays(self, nb.buf, NULL, n, occ_obj != Py_None ? &scene : NULL, rgb ? &colour : NULL,
-                              family, lamps);
+                              family, emission, lamps);
 done:
     if (claimed)
         self->busy = 0;
     if (pb.obj)
         PyBuffer_Release(&pb);
+    PyMem_Free(emission);
     PyMem_Free(rgb);
     PyBuffer_Release(&nb);
     return result;
@@ -732,7 +743,7 @@ static int parse_eye(PyObject *obj, double eye[3])
  * `budget` seconds (wenv_shade_for); *next gets the first left. */
 static int shade_visible(ShaderObject *self, const float *normals, const float *views, size_t n,
                          const unsigned char *visible, size_t count, const wenv_shadow_scene *scene,
-                         const wenv_vertex_colour *colour, const wenv_family_rows *family,
+                         const wenv_vertex_colour *colour, const wenv_family_rows *family, const float *emission,
                          const wenv_lamp_rows *lamps, size_t first, double budget, float *out, size_t *next)
 {
     float *gathered = NULL, *shaded = out;
@@ -742,8 +753,8 @@ static int shade_visible(ShaderObject *self, const float *normals, const float *
     wenv_family_rows culled_family;
     wenv_lamp_rows culled_lamps;
     if (visible) {
-        /* normals, views, radiance and colours */
-        gathered = PyMem_Malloc((count ? count : 1) * 12 * sizeof(float));
+        /* normals, views, radiance, colours and emission colours */
+        gathered = PyMem_Malloc((count ? count : 1) * 15 * sizeof(float));
         rows = scene || family || lamps ? PyMem_Malloc((count ? count : 1) * sizeof *rows) : NULL;
         if (!gathered || ((scene || family || lamps) && !rows)) {
             PyMem_Free(gathered);
@@ -757,6 +768,8 @@ static int shade_visible(ShaderObject *self, const float *normals, const float *
                 memcpy(gathered + 3 * (count + k), views + 3 * i, 3 * sizeof(float));
                 if (colour)
                     memcpy(gathered + 3 * (3 * count + k), colour->rgb + 3 * i, 3 * sizeof(float));
+                if (emission)
+                    memcpy(gathered + 3 * (4 * count + k), emission + 3 * i, 3 * sizeof(float));
                 if (rows)
                     rows[k] = (uint32_t)i;
                 k++;
@@ -782,6 +795,8 @@ static int shade_visible(ShaderObject *self, const float *normals, const float *
         normals = gathered;
         views = gathered + 3 * count;
         shaded = gathered + 6 * count;
+        if (emission)
+            emission = gathered + 12 * count;
     }
     wenv_error err = {0};
     wenv_status st = WENV_OK;
@@ -789,7 +804,8 @@ static int shade_visible(ShaderObject *self, const float *normals, const float *
     if (first < count) {
         WENV_BEGIN_WORK
         st = wenv_shade_for(&self->frame, self->method, self->state, normals, views, count, scene, colour, family,
-                            wenv_py_material(self->material, "material"), lamps, first, budget, shaded, next, &err);
+                            wenv_py_material(self->material, "material"), emission, lamps, first, budget, shaded,
+                            next, &err);
         WENV_END_WORK
     }
     if (!st && visible)
@@ -841,15 +857,15 @@ static PyObject *Shader_shade_mesh(ShaderObject *self, PyObject *args, PyObject 
 {
     static char *kwlist[] = {"positions", "normals", "eye",    "cull",      "view_projection", "out",
                              "first",     "budget",  "occlusion", "bounce", "base_color", "roughness",
-                             "metallic",  "lamps",  NULL};
+                             "metallic",  "lamps",  "emission_color", NULL};
     PyObject *pobj, *nobj, *eobj, *vp_obj = Py_None, *out_obj = Py_None, *budget_obj = Py_None, *first_obj = NULL;
     PyObject *occ_obj = Py_None, *bounce_obj = NULL, *colour_obj = NULL, *rough_obj = NULL, *metal_obj = NULL;
-    PyObject *lamps_obj = Py_None;
+    PyObject *lamps_obj = Py_None, *emit_obj = Py_None;
     int cull = 0;
     size_t first = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO|$pOOOOOOOOOO:shade_mesh", kwlist, &pobj, &nobj, &eobj, &cull,
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO|$pOOOOOOOOOOO:shade_mesh", kwlist, &pobj, &nobj, &eobj, &cull,
                                      &vp_obj, &out_obj, &first_obj, &budget_obj, &occ_obj, &bounce_obj, &colour_obj,
-                                     &rough_obj, &metal_obj, &lamps_obj))
+                                     &rough_obj, &metal_obj, &lamps_obj, &emit_obj))
         return NULL;
     if (occ_obj == Py_None && bounce_obj) {
         PyErr_SetString(PyExc_ValueError, "bounce is read only with occlusion (what blocks the light it fills in)");
@@ -892,7 +908,7 @@ static PyObject *Shader_shade_mesh(ShaderObject *self, PyObject *args, PyObject 
         return NULL;
     }
     PyObject *result = NULL;
-    float *views = NULL, *rgb = NULL, *light = NULL;
+    float *views = NULL, *rgb = NULL, *light = NULL, *emission = NULL;
     unsigned char *visible = NULL;
     int claimed = 0;
     wenv_diffuse_table table;
@@ -905,6 +921,8 @@ static PyObject *Shader_shade_mesh(ShaderObject *self, PyObject *args, PyObject 
         goto done;
     if (parse_colour(self, colour_obj, np, per_vertex_material(self, colour_obj, rough_obj, metal_obj), &table,
                      &colour, &rgb) < 0)
+        goto done;
+    if (emit_obj != Py_None && !(emission = wenv_py_vertex_colours(emit_obj, "emission_color", np, 0)))
         goto done;
     float *out;
     if (out_obj == Py_None) {
@@ -953,10 +971,11 @@ static PyObject *Shader_shade_mesh(ShaderObject *self, PyObject *args, PyObject 
     if (ensure_family(self, colour_obj, rough_obj, metal_obj, np, &family_rows, &family) < 0 ||
         ensure_lamps(self, lamps_obj, pb.buf, nb.buf, np, occ_obj != Py_None ? &scene : NULL, &lamp_rows, &lamps) < 0)
         goto fail;
-    if (occ_obj != Py_None && own_bounce(self, nb.buf, np, &scene, rgb ? &colour : NULL, family, lamps, &light) < 0)
+    if (occ_obj != Py_None &&
+        own_bounce(self, nb.buf, np, &scene, rgb ? &colour : NULL, family, emission, lamps, &light) < 0)
         goto fail;
     if (shade_visible(self, nb.buf, views, np, visible, count, occ_obj != Py_None ? &scene : NULL,
-                      rgb ? &colour : NULL, family, lamps, first, budget, out, &next) < 0)
+                      rgb ? &colour : NULL, family, emission, lamps, first, budget, out, &next) < 0)
         goto fail;
     self->visible = cull ? (Py_ssize_t)count : -1;
     self->next_vertex = (Py_ssize_t)next;
@@ -968,6 +987,7 @@ done:
         self->busy = 0;
     PyMem_Free(views);
     PyMem_Free(rgb);
+    PyMem_Free(emission);
     PyMem_Free(light);
     PyMem_Free(visible);
     if (ob.obj)
@@ -1103,7 +1123,8 @@ static PyObject *Shader_get_stats(ShaderObject *self, void *closure)
 
 static PyMethodDef Shader_methods[] = {
     {"shade", (PyCFunction)(void (*)(void))Shader_shade, METH_VARARGS | METH_KEYWORDS,
-     "shade(normals, view_dirs, *, occlusion=None, bounce='self', base_color=None, roughness=None, metallic=None)"
+     "shade(normals, view_dirs, *, occlusion=None, bounce='self', base_color=None, roughness=None, metallic=None, "
+     "positions=None, lamps=None, emission_color=None)"
      "\n--\n\nLinear RGB radiance (float32, n x 3) for "
      "world-space normals and view directions (surface towards eye), float32 (n, 3); view_dirs may be one (3,) "
      "vector for all.  occlusion (a wenv.Occlusion made for these vertices) shades with the scene in the way: "
@@ -1117,19 +1138,24 @@ static PyMethodDef Shader_methods[] = {
      "alone); a ValueError says why for a material whose colour also enters its lobes (a metal, a rough "
      "diffuse) or that has none (a measured table).  Every method.\n\nroughness, metallic (float32 (n,), clamped to "
      "[0, 1] as Cycles clamps them): each vertex's Roughness and Metallic in place of a Principled material's "
-     "(a texture's values).  Metallic is exact (Cycles mixes the metal in linearly); a roughness of at most 8 "
+     "(a texture's values); emission_color (float32 (n, 3), linear, >= 0): each vertex's Emission Color in "
+     "place of a Principled material's, its Strength and layers the material's (every method).  Metallic is "
+     "exact (Cycles mixes the metal in linearly); a roughness of at most 8 "
      "values is exact, a smoother one mixes materials at roughness levels 1/24 apart, the exact lights read "
      "at each vertex's own roughness (within 1 % of each vertex's own material).  The members are made "
-     "once and kept: a new view costs each vertex two members' reads.  Wavelet methods only."},
+     "once and kept: a new view costs each vertex two members' reads.  Wavelet methods only.\n\n"
+     "positions (float32 (n, 3), world) and lamps (a sequence of wenv.Lamp): the scene's lamps added as Cycles "
+     "emits them, with the shadows of occlusion's scene (docs/lamps.md).  Every method."},
     {"diffuse_light", (PyCFunction)(void (*)(void))Shader_diffuse_light, METH_VARARGS | METH_KEYWORDS,
-     "diffuse_light(normals, *, occlusion=None, base_color=None, roughness=None, metallic=None)\n--\n\nThe light (radiance, float32 n x 3) each vertex sends "
+     "diffuse_light(normals, *, occlusion=None, base_color=None, roughness=None, metallic=None, positions=None, "
+     "lamps=None, emission_color=None)\n--\n\nThe light (radiance, float32 n x 3) each vertex sends "
      "back to the surfaces it blocks (shade's bounce), as if diffuse: its albedo head-on (the Lambertian "
      "part's and the lobes') over pi times its irradiance, with its shadows when occlusion is given.  "
-     "Wavelet methods only; base_color, roughness and metallic as shade's."},
+     "Wavelet methods only; base_color, roughness, metallic, emission_color, positions and lamps as shade's."},
     {"shade_mesh", (PyCFunction)(void (*)(void))Shader_shade_mesh, METH_VARARGS | METH_KEYWORDS,
      "shade_mesh(positions, normals, eye, *, cull=False, view_projection=None, out=None, first=0, budget=None, "
-     "occlusion=None, bounce='self', base_color=None, roughness=None, metallic=None)\n--\n\n"
-     "Shade vertices seen from a perspective eye position.  cull=True shades only what the eye sees: "
+     "occlusion=None, bounce='self', base_color=None, roughness=None, metallic=None, lamps=None, "
+     "emission_color=None)\n--\n\nShade vertices seen from a perspective eye position.  cull=True shades only what the eye sees: "
      "vertices whose normal faces it and, given view_projection (the viewport's 4 x 4 world-to-clip "
      "matrix, row-major: Blender's region_3d.perspective_matrix), those inside its frustum; the rows of "
      "the others are left as they were in `out` (a float32 (n, 3) array written in place and returned) "
@@ -1142,7 +1168,8 @@ static PyMethodDef Shader_methods[] = {
      "over a fast one's result: out = fast.shade_mesh(...); then accurate.shade_mesh(..., out=out, "
      "first=k, budget=0.05) until k reaches the count.\n\n"
      "occlusion and bounce shade with the scene in the way, as shade's (the occlusion made for these "
-     "positions and normals); base_color, roughness and metallic as shade's."},
+     "positions and normals); base_color, roughness, metallic and emission_color as shade's; lamps (a "
+     "sequence of wenv.Lamp) add the scene's lamps, as Cycles emits them (docs/lamps.md)."},
     {"set_environment", (PyCFunction)Shader_set_environment, METH_O,
      "set_environment(env)\n--\n\nNew lighting; rotation matrices are kept."},
     {"set_material", (PyCFunction)Shader_set_material, METH_O,

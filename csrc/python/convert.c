@@ -315,21 +315,21 @@ static int progress_trampoline(void *ctx, double fraction)
     return stop;
 }
 
-float *wenv_py_base_colours(PyObject *obj, size_t n)
+float *wenv_py_vertex_colours(PyObject *obj, const char *name, size_t n, int up_to_one)
 {
     Py_buffer cb;
     size_t rows;
-    if (wenv_py_get_vec3_array(obj, "base_color", 0, &cb, &rows, NULL) < 0)
+    if (wenv_py_get_vec3_array(obj, name, 0, &cb, &rows, NULL) < 0)
         return NULL;
     float *rgb = NULL;
     const float *c = cb.buf;
     if (rows != n) {
-        PyErr_Format(PyExc_ValueError, "base_color has %zu rows, one per vertex (%zu)", rows, n);
+        PyErr_Format(PyExc_ValueError, "%s has %zu rows, one per vertex (%zu)", name, rows, n);
         goto done;
     }
     for (size_t i = 0; i < 3 * n; i++)
         if (!(c[i] >= 0.0f) || !isfinite(c[i])) {
-            PyErr_Format(PyExc_ValueError, "base_color[%zu] must be finite and non-negative (linear RGB)", i / 3);
+            PyErr_Format(PyExc_ValueError, "%s[%zu] must be finite and non-negative (linear RGB)", name, i / 3);
             goto done;
         }
     if (!(rgb = PyMem_Malloc((n ? n : 1) * 3 * sizeof(float)))) {
@@ -337,11 +337,13 @@ float *wenv_py_base_colours(PyObject *obj, size_t n)
         goto done;
     }
     for (size_t i = 0; i < 3 * n; i++)
-        rgb[i] = c[i] < 1.0f ? c[i] : 1.0f;
+        rgb[i] = up_to_one && c[i] > 1.0f ? 1.0f : c[i];
 done:
     PyBuffer_Release(&cb);
     return rgb;
 }
+
+float *wenv_py_base_colours(PyObject *obj, size_t n) { return wenv_py_vertex_colours(obj, "base_color", n, 1); }
 
 int wenv_py_get_vertex_values(PyObject *obj, const char *name, size_t n, Py_buffer *view)
 {

@@ -83,6 +83,9 @@ wenv_progress wenv_py_progress(wenv_py_progress_bridge *bridge);
 /* base_color: one linear RGB colour per vertex (n rows), finite and non-negative, copied clamped to
  * [0, 1] as a material clamps its own (PyMem_Free it).  NULL with a ValueError or TypeError naming
  * base_color. */
+/* Colours per vertex (n rows of RGB, finite and >= 0, float32-convertible) named `name`, copied (clamped
+ * to 1 where up_to_one), PyMem_Free'd by the caller; NULL with the error set. */
+float *wenv_py_vertex_colours(PyObject *obj, const char *name, size_t n, int up_to_one);
 float *wenv_py_base_colours(PyObject *obj, size_t n);
 /* One float32 value per vertex (1-D, n of them) from `obj` named `name`: a view of its buffer into
  * *view (released by the caller), or -1 with TypeError/ValueError set. */

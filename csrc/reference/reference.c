@@ -97,10 +97,41 @@ static wenv_status narrow_lobe(const wenv_envmap *env, const wenv_material *mat,
     return WENV_OK;
 }
 
+static wenv_status reference_one(const wenv_envmap *env, const wenv_material *mat, const wenv_material *emitter,
+                                 const float *normals, const float *views, size_t n, const wenv_occluders *occ,
+                                 const float *positions, const float *bounce, const float *base_color,
+                                 const wenv_lamp *lamps, size_t n_lamps, const float *emission, float *out,
+                                 const wenv_progress *progress, wenv_error *err);
+
 wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, const float *normals,
                            const float *views, size_t n, const wenv_occluders *occ, const float *positions,
                            const float *bounce, const float *base_color, const wenv_lamp *lamps, size_t n_lamps,
-                           float *out, const wenv_progress *progress, wenv_error *err)
+                           const float *emission, float *out, const wenv_progress *progress, wenv_error *err)
+{
+    /* each vertex's Emission Color: the material emitting white, times it */
+    const wenv_material *emitter = mat;
+    wenv_material *white = NULL;
+    if (emission) {
+        const wenv_principled_inputs *in = wenv_principled_inputs_of(mat);
+        if (!in)
+            return wenv_error_set(err, WENV_ERR_VALUE, "an Emission Color per vertex needs a Principled material");
+        wenv_principled_inputs own = *in;
+        own.emission_color[0] = own.emission_color[1] = own.emission_color[2] = 1.0;
+        if (wenv_principled_create(&white, &own, err))
+            return err->status;
+        emitter = white;
+    }
+    wenv_status st = reference_one(env, mat, emitter, normals, views, n, occ, positions, bounce, base_color, lamps,
+                                   n_lamps, emission, out, progress, err);
+    wenv_material_free(white);
+    return st;
+}
+
+static wenv_status reference_one(const wenv_envmap *env, const wenv_material *mat, const wenv_material *emitter,
+                                 const float *normals, const float *views, size_t n, const wenv_occluders *occ,
+                                 const float *positions, const float *bounce, const float *base_color,
+                                 const wenv_lamp *lamps, size_t n_lamps, const float *emission, float *out,
+                                 const wenv_progress *progress, wenv_error *err)
 {
     if (occ && !positions)
         return wenv_error_set(err, WENV_ERR_VALUE, "occluders need the vertices' positions");
@@ -219,7 +250,9 @@ wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, con
             }
             double emitted[3] = {0.0, 0.0, 0.0};
             if (wo[2] > 0.0)
-                wenv_material_emission_at(mat, wo[2], emitted);
+                wenv_material_emission_at(emitter, wo[2], emitted);
+            for (int c = 0; emission && c < 3; c++)
+                emitted[c] *= emission[3 * i + (size_t)c];
             for (int c = 0; c < 3; c++)
                 out[3 * i + c] = (float)fmax(0.0, spec[c] + irr[c] * diffuse[c] / M_PI + emitted[c]);
             wenv_progress_item(progress, &done, n, &cancelled);
@@ -279,15 +312,16 @@ static float clamp01f(float x) { return x < 0.0f ? 0.0f : (x > 1.0f ? 1.0f : x);
 wenv_status wenv_reference_per_vertex(const wenv_envmap *env, const wenv_material *mat, const float *normals,
                                       const float *views, size_t n, const wenv_occluders *occ, const float *positions,
                                       const float *bounce, const float *base_color, const float *roughness,
-                                      const float *metallic, const wenv_lamp *lamps, size_t n_lamps, float *out,
-                                      const wenv_progress *progress, wenv_error *err)
+                                      const float *metallic, const wenv_lamp *lamps, size_t n_lamps,
+                                      const float *emission, float *out, const wenv_progress *progress,
+                                      wenv_error *err)
 {
     const wenv_principled_inputs *in = wenv_principled_inputs_of(mat);
     /* a metal's colour is its Fresnel's: each colour its own material */
     int colour_in_metal = base_color && in && (in->metallic > 0.0 || metallic);
     if (!roughness && !metallic && !colour_in_metal)
-        return wenv_reference(env, mat, normals, views, n, occ, positions, bounce, base_color, lamps, n_lamps, out,
-                              progress, err);
+        return wenv_reference(env, mat, normals, views, n, occ, positions, bounce, base_color, lamps, n_lamps,
+                              emission, out, progress, err);
     if (!in)
         return wenv_error_set(err, WENV_ERR_VALUE,
                               "a Roughness or Metallic per vertex needs a Principled material (wenv.Principled), not %s",
@@ -301,8 +335,8 @@ wenv_status wenv_reference_per_vertex(const wenv_envmap *env, const wenv_materia
                                   (double)metallic[i]);
     }
     vertex_key *key = malloc((n ? n : 1) * sizeof *key);
-    /* a group's normals, views, positions, colours and radiance */
-    float *work = malloc((n ? n : 1) * 15 * sizeof(float));
+    /* a group's normals, views, positions, colours, emission colours and radiance */
+    float *work = malloc((n ? n : 1) * 18 * sizeof(float));
     if (!key || !work) {
         free(key);
         free(work);
@@ -322,7 +356,7 @@ wenv_status wenv_reference_per_vertex(const wenv_envmap *env, const wenv_materia
             b++;
         size_t count = b - a;
         float *nrm = work, *vw = work + 3 * count, *pos = work + 6 * count, *rgb = work + 9 * count;
-        float *o = work + 12 * count;
+        float *o = work + 12 * count, *em = work + 15 * count;
         for (size_t k = 0; k < count; k++) {
             size_t i = key[a + k].i;
             memcpy(nrm + 3 * k, normals + 3 * i, 3 * sizeof(float));
@@ -331,6 +365,8 @@ wenv_status wenv_reference_per_vertex(const wenv_envmap *env, const wenv_materia
                 memcpy(pos + 3 * k, positions + 3 * i, 3 * sizeof(float));
             if (base_color)
                 memcpy(rgb + 3 * k, base_color + 3 * i, 3 * sizeof(float));
+            if (emission)
+                memcpy(em + 3 * k, emission + 3 * i, 3 * sizeof(float));
         }
         wenv_principled_inputs at = *in;
         at.roughness = key[a].v[0];
@@ -343,7 +379,8 @@ wenv_status wenv_reference_per_vertex(const wenv_envmap *env, const wenv_materia
         group_progress gp = {progress, (double)a / (double)n, (double)count / (double)n};
         wenv_progress inner = {progress && progress->report ? report_group : NULL, &gp};
         st = wenv_reference(env, group_mat, nrm, vw, count, occ, positions ? pos : NULL, bounce,
-                            base_color && !colour_in_metal ? rgb : NULL, lamps, n_lamps, o, &inner, err);
+                            base_color && !colour_in_metal ? rgb : NULL, lamps, n_lamps, emission ? em : NULL, o,
+                            &inner, err);
         wenv_material_free(group_mat);
         for (size_t k = 0; !st && k < count; k++)
             memcpy(out + 3 * key[a + k].i, o + 3 * k, 3 * sizeof(float));

@@ -6,7 +6,8 @@
  * the light of the blocker where it is hit: bounce (per occluder vertex, RGB radiance, interpolated
  * over the hit triangle) times the pixel's solid angle, or nothing when bounce is NULL (direct light
  * only).  occ NULL: unshadowed.  The scene's lamps (n_lamps of them; positions then required) are
- * added as reference/lamps_reference.h sums them, shadowed by occ, unscaled by the World. */
+ * added as reference/lamps_reference.h sums them, shadowed by occ, unscaled by the World.  emission
+ * (n x 3, or NULL: the material's own): each vertex's Emission Color (a Principled material's). */
 #ifndef WENV_REFERENCE_H
 #define WENV_REFERENCE_H
 
@@ -24,7 +25,7 @@
 wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, const float *normals,
                            const float *views, size_t n, const wenv_occluders *occ, const float *positions,
                            const float *bounce, const float *base_color, const wenv_lamp *lamps, size_t n_lamps,
-                           float *out, const wenv_progress *progress, wenv_error *err);
+                           const float *emission, float *out, const wenv_progress *progress, wenv_error *err);
 
 /* The same with each vertex's Roughness and Metallic (n values each; either NULL: the material's own),
  * for a Principled material (WENV_ERR_VALUE otherwise): the vertices of one (roughness, metallic) pair,
@@ -34,7 +35,8 @@ wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, con
 wenv_status wenv_reference_per_vertex(const wenv_envmap *env, const wenv_material *mat, const float *normals,
                                       const float *views, size_t n, const wenv_occluders *occ, const float *positions,
                                       const float *bounce, const float *base_color, const float *roughness,
-                                      const float *metallic, const wenv_lamp *lamps, size_t n_lamps, float *out,
-                                      const wenv_progress *progress, wenv_error *err);
+                                      const float *metallic, const wenv_lamp *lamps, size_t n_lamps,
+                                      const float *emission, float *out, const wenv_progress *progress,
+                                      wenv_error *err);
 
 #endif

@@ -310,7 +310,7 @@ static void check_methods(const wenv_envmap *env)
     }
     check(wenv_method_named("no such method") == NULL, "unknown methods are not found", 0, 0);
     float ref[4 * 3];
-    if (wenv_reference(env, mat, normals, views, 4, NULL, NULL, NULL, NULL, NULL, 0, ref, NULL, &err) == WENV_OK)
+    if (wenv_reference(env, mat, normals, views, 4, NULL, NULL, NULL, NULL, NULL, 0, NULL, ref, NULL, &err) == WENV_OK)
         check(near(ref[0], albedo[0], 2e-3), "the reference reflects the albedo (pixel sums, 64 x 32)", ref[0], albedo[0]);
     wenv_material_free(mat);
 }
