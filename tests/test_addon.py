@@ -1121,10 +1121,7 @@ def test_a_textured_emission_color_is_read_at_each_vertex(scene):
     assert not any("Emission" in n for n in materials.principled_notes(mat))
     assert shade_op(view="CAMERA") == {"FINISHED"}
     _, rgb = attribute(plane)
-    uv = np.empty(len(plane.data.loops) * 2, np.float32)
-    plane.data.uv_layers.active.uv.foreach_get("vector", uv)
-    u = np.zeros(len(plane.data.vertices), np.float32)
-    u[[l.vertex_index for l in plane.data.loops]] = uv[0::2]
+    u = corner_uv_rows(plane)[:, 0]
     glow = np.where((np.floor(u * 64).astype(int) % 64 < 32)[:, None], np.float32([1.0, 0.5, 0.1]),
                     np.float32([0.1, 0.4, 1.0])).astype(np.float32)
     p, n = world_arrays(plane, corner=False)
@@ -1181,10 +1178,7 @@ def test_a_mix_of_shader_nodes_with_a_textured_factor(scene):
     assert any("'Glass BSDF'" in n and "not shaded" in n for n in materials.principled_notes(mat))
     assert shade_op(view="CAMERA") == {"FINISHED"}
     _, rgb = attribute(plane)
-    uv = np.empty(len(plane.data.loops) * 2, np.float32)
-    plane.data.uv_layers.active.uv.foreach_get("vector", uv)
-    u = np.zeros(len(plane.data.vertices), np.float32)
-    u[[l.vertex_index for l in plane.data.loops]] = uv[0::2]
+    u = corner_uv_rows(plane)[:, 0]
     fac = np.where(np.floor(u * 64).astype(int) % 64 < 32, 0.2, 0.9).astype(np.float32)
     p, n = world_arrays(plane, corner=False)
     env = wenv.load_environment(hdri_path("sunset"))
