@@ -212,12 +212,15 @@ def terms(material):
     return (found or None), notes
 
 
+def one_principled(found):
+    """Whether terms are one Principled BSDF at weight 1: the add-on's Principled model of a single
+    node, whose textured inputs are read per vertex."""
+    return found is not None and len(found) == 1 and found[0].node is not None and found[0].colour == WHITE and \
+        not found[0].factors
+
+
 def is_one_principled(material):
-    """Whether the material's Surface is one Principled BSDF at weight 1: the add-on's Principled
-    model of a single node, whose textured inputs are read per vertex."""
-    got, _ = terms(material)
-    return got is not None and len(got) == 1 and got[0].node is not None and got[0].colour == WHITE and \
-        not got[0].factors
+    return one_principled(terms(material)[0])
 
 
 def _factor_values(evaluator, factors):

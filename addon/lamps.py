@@ -101,7 +101,11 @@ def summary(scene):
     return f"{len(names)} lamp(s) shaded as Cycles emits them: {shown}"
 
 
+def key_of(settings):
+    """What tells lamps (read_lamps' settings) from others: a moved lamp or a new power changes it."""
+    return tuple(tuple(sorted((k, repr(v)) for k, v in s.items())) for s in settings)
+
+
 def signature(scene):
-    """What tells the scene's lamps from what they were: a moved lamp or a new power changes it."""
-    found, _ = read_lamps(scene)
-    return tuple(tuple(sorted((k, repr(v)) for k, v in s.items())) for s in found)
+    """key_of the scene's lamps as they are now."""
+    return key_of(read_lamps(scene)[0])

@@ -60,8 +60,7 @@ def material_key(settings):
         found, _ = closures.terms(settings.id_data) if settings.id_data.node_tree is not None else (None, [])
         if found is None:  # no shader node wenv reads: Lambertian with the viewport colour
             return ("LAMBERT", tuple(_unit(c) for c in settings.id_data.diffuse_color[:3]), "SMITH", ())
-        if len(found) == 1 and found[0].node is not None and found[0].colour == closures.WHITE and \
-                not found[0].factors:
+        if closures.one_principled(found):
             return found[0].key()
         # the mean weight stands for a textured factor here (the glossmeter's reading): the shading
         # reads each vertex's (closures.vertex_weights)
@@ -227,7 +226,7 @@ def principled_notes(material):
     found, closure_notes = closures.terms(material) if material.node_tree is not None else (None, [])
     if found is None:
         return closure_notes + ["no shader node wenv reads: shaded as Lambertian with its viewport colour"]
-    if not closures.is_one_principled(material):
+    if not closures.one_principled(found):
         textured = [t.label for t in found if t.node is not None and
                     any(t.node.inputs[s].is_linked for s in PRINCIPLED_SOCKETS.values() if t.node.inputs.get(s))]
         return closure_notes + closures.factor_notes(material) + [

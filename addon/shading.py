@@ -301,7 +301,7 @@ def plan_shading(scene, depsgraph, objects, view, images, progress=None, preview
     lamp_settings, lamp_notes = lamps.read_lamps(scene)
     notes.extend(lamp_notes)
     plan.lamps = engine.make_lamps(lamp_settings)
-    plan.lamps_key = lamps.signature(scene)
+    plan.lamps_key = lamps.key_of(lamp_settings)
     plan.notes = notes
     for obj in mesh_objects:
         data = meshes.read_mesh(obj, depsgraph)

@@ -425,7 +425,7 @@ def read_term_weights(obj, depsgraph, data):
         if mat is None or mat.wenv.model != "PRINCIPLED" or mat.node_tree is None:
             continue
         found, _ = closures.terms(mat)
-        if found is None or closures.is_one_principled(mat):
+        if found is None or closures.one_principled(found):
             continue
         weights = []
         for term in found:

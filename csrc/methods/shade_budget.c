@@ -10,6 +10,15 @@
 #define FIRST_BLOCK 256
 #define LARGEST_BLOCK 65536
 
+/* Rows of a larger call (rows, or offset + k when rows is NULL) from its at-th on. */
+static void advance_rows(const uint32_t **rows, size_t *offset, size_t at)
+{
+    if (*rows)
+        *rows += at;
+    else
+        *offset += at;
+}
+
 wenv_status wenv_shade_for(const wenv_lighting_frame *frame, const wenv_method *method, void *state,
                            const float *normals, const float *views, size_t n, const wenv_shadow_scene *scene,
                            const wenv_vertex_colour *colour, const wenv_family_rows *family,
@@ -29,10 +38,7 @@ wenv_status wenv_shade_for(const wenv_lighting_frame *frame, const wenv_method *
         wenv_shadow_scene block_scene;
         if (scene) { /* the block's rows are the scene's from `at` on */
             block_scene = *scene;
-            if (scene->rows)
-                block_scene.rows = scene->rows + at;
-            else
-                block_scene.offset = scene->offset + at;
+            advance_rows(&block_scene.rows, &block_scene.offset, at);
         }
         wenv_vertex_colour block_colour;
         if (colour) {
@@ -42,18 +48,12 @@ wenv_status wenv_shade_for(const wenv_lighting_frame *frame, const wenv_method *
         wenv_family_rows block_family;
         if (family) {
             block_family = *family;
-            if (family->rows)
-                block_family.rows = family->rows + at;
-            else
-                block_family.offset = family->offset + at;
+            advance_rows(&block_family.rows, &block_family.offset, at);
         }
         wenv_lamp_rows block_lamps;
         if (lamps) {
             block_lamps = *lamps;
-            if (lamps->rows)
-                block_lamps.rows = lamps->rows + at;
-            else
-                block_lamps.offset = lamps->offset + at;
+            advance_rows(&block_lamps.rows, &block_lamps.offset, at);
         }
         if (wenv_lighting_frame_shade_scene(frame, method, state, normals + 3 * at, views + 3 * at, count,
                                             scene ? &block_scene : NULL, colour ? &block_colour : NULL,
