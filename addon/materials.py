@@ -211,9 +211,9 @@ def _socket_textures(node, socket):
     return textures.socket_textures(node, socket)
 
 
-def _normal_map_source(node):
+def _normal_source(node):
     from . import textures
-    return textures.normal_map_source(node)
+    return textures.normal_source(node)
 
 
 def principled_notes(material):
@@ -237,9 +237,9 @@ def principled_notes(material):
     by_socket = {socket: name for name, socket in PRINCIPLED_SOCKETS.items()}
     for socket in linked:
         if socket == "Normal":
-            source, why = _normal_map_source(node)
-            notes.append("'Normal' from a normal map is read at the vertices: detail finer than the mesh is lost"
-                         if source is not None else f"'Normal' is linked ({why}): not used, the mesh's normals are")
+            chain, why = _normal_source(node)
+            notes.append(chain.note() if chain is not None else
+                         f"'Normal' is linked ({why}): not used, the mesh's normals are")
         elif socket in GEOMETRY_SOCKETS:
             notes.append(f"'{socket}' is linked (a normal or bump map): not used, the mesh's normals are")
         elif socket in _textured_sockets():

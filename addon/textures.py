@@ -328,27 +328,80 @@ def read_inputs(obj, depsgraph, data):
 NORMAL_MAP_SPACES = ("TANGENT", "OBJECT", "WORLD", "BLENDER_OBJECT", "BLENDER_WORLD")
 
 
-def normal_map_source(principled):
-    """(Source, strength) of a Normal Map node (any of NORMAL_MAP_SPACES) fed by an Image Texture's
-    Color and feeding a Principled BSDF's Normal, the UV map the Normal Map node names (None: the
-    active render one); or (None, reason) with why it is not read, reason None when Normal is
-    unlinked."""
+class NormalChain:
+    """What bends a Principled BSDF's Normal, as wenv reads it: a Normal Map node (`map`, a Source,
+    with `map_strength`) and/or a Bump node over it (`bump`, the node, with its unlinked Strength
+    and Distance, Distance negated when inverted)."""
+
+    __slots__ = ("map", "map_strength", "bump", "bump_strength", "distance")
+
+    def __init__(self):
+        self.map = self.bump = None
+        self.map_strength = self.bump_strength = self.distance = 0.0
+
+    def note(self):
+        what = " over ".join(w for w, on in (("a Bump node", self.bump), ("a normal map", self.map)) if on is not None)
+        return f"'Normal' from {what} is read at the vertices: detail finer than the mesh is lost"
+
+
+def _normal_map(node, chain):
+    """Reads a Normal Map node into chain; None, or why it is not read."""
+    if node.space not in NORMAL_MAP_SPACES:
+        return f"'{node.name}' in {node.space.lower().replace('_', ' ')} space, which wenv does not read yet"
+    if node.inputs["Strength"].is_linked:
+        return f"'{node.name}', whose Strength is linked"
+    tex = world.source_node(node.inputs["Color"])
+    if tex is None or tex.bl_idname != "ShaderNodeTexImage" or tex.image is None or tex.projection != "FLAT":
+        return f"'{node.name}', whose Color is not an Image Texture wenv reads"
+    if world.source_node(tex.inputs["Vector"]) is not None or tex.image.source not in ("FILE", "GENERATED"):
+        return f"'{tex.name}', whose Vector or image source wenv does not read yet"
+    chain.map = Source(tex, node.uv_map or None, node.space)
+    chain.map_strength = max(float(node.inputs["Strength"].default_value), 0.0)
+    return None
+
+
+def _bump(node, chain):
+    """Reads a Bump node (and a Normal Map feeding its Normal) into chain; None, or why not."""
+    linked = [name for name in ("Strength", "Distance") if node.inputs[name].is_linked]
+    if linked:
+        return f"'{node.name}', whose {linked[0]} is linked"
+    if node.inputs["Height"].is_linked:
+        read, why = nodes.check(node.inputs["Height"])
+        if read is None:
+            return f"'{node.name}', whose Height comes from {why}"
+    below = node.inputs["Normal"]
+    if below.is_linked:
+        inner = world.source_node(below)
+        if inner is None or inner.bl_idname != "ShaderNodeNormalMap":
+            return f"'{node.name}', whose Normal is not a Normal Map node"
+        why = _normal_map(inner, chain)
+        if why is not None:
+            return why
+    chain.bump = node
+    chain.bump_strength = max(float(node.inputs["Strength"].default_value), 0.0)
+    chain.distance = float(node.inputs["Distance"].default_value) * (-1.0 if node.invert else 1.0)
+    return None
+
+
+def normal_source(principled):
+    """(NormalChain, None) when a Principled BSDF's Normal comes from a Normal Map node (any of
+    NORMAL_MAP_SPACES, its Color an Image Texture) or a Bump node (its Height from nodes wenv
+    evaluates, its Normal unlinked or such a Normal Map); else (None, reason) with why it is not read,
+    reason None when Normal is unlinked."""
     sock = principled.inputs["Normal"]
     if not sock.is_linked:
         return None, None
     node = world.source_node(sock)
-    if node is None or node.bl_idname != "ShaderNodeNormalMap":
-        return None, f"'{node.name}', a node wenv does not evaluate yet" if node is not None else "a muted link"
-    if node.space not in NORMAL_MAP_SPACES:
-        return None, f"'{node.name}' in {node.space.lower().replace('_', ' ')} space, which wenv does not read yet"
-    if node.inputs["Strength"].is_linked:
-        return None, f"'{node.name}', whose Strength is linked"
-    tex = world.source_node(node.inputs["Color"])
-    if tex is None or tex.bl_idname != "ShaderNodeTexImage" or tex.image is None or tex.projection != "FLAT":
-        return None, f"'{node.name}', whose Color is not an Image Texture wenv reads"
-    if world.source_node(tex.inputs["Vector"]) is not None or tex.image.source not in ("FILE", "GENERATED"):
-        return None, f"'{tex.name}', whose Vector or image source wenv does not read yet"
-    return Source(tex, node.uv_map or None, node.space), max(float(node.inputs["Strength"].default_value), 0.0)
+    chain = NormalChain()
+    if node is None:
+        why = "a muted link"
+    elif node.bl_idname == "ShaderNodeNormalMap":
+        why = _normal_map(node, chain)
+    elif node.bl_idname == "ShaderNodeBump":
+        why = _bump(node, chain)
+    else:
+        why = f"'{node.name}', a node wenv does not evaluate yet"
+    return (chain, None) if why is None else (None, why)
 
 
 def _unit_rows(v):
@@ -356,50 +409,124 @@ def _unit_rows(v):
     return np.where(length > 1e-20, v / np.maximum(length, 1e-20), 0.0).astype(np.float32)
 
 
+def _mapped_normals(mesh, source, strength, object_n, normal, to_world):
+    """Each corner's normal from a normal map (world space, blended towards the mesh's `normal` by
+    strength; object_n the mesh's in object space), or None without its UV map."""
+    got = uv_rows(mesh, source.uv_map, "CORNER", meshes.corner_vertices(mesh))
+    if got is None:
+        return None
+    nl = len(mesh.loops)
+    levels = images.levels(source.node.image)
+    h, w = levels[0].shape[:2]
+    colour = sample(levels, got[0], got[1] * np.sqrt(w * h), source.node.interpolation, source.node.extension)
+    c = 2.0 * colour - 1.0
+    space = source.space
+    if space == "TANGENT":
+        layer = uv_layer(mesh, source.uv_map)
+        mesh.calc_tangents(uvmap=layer.name)  # runtime data only, nothing the file keeps
+        tangent = np.empty(nl * 3, np.float32)
+        sign = np.empty(nl, np.float32)
+        mesh.loops.foreach_get("tangent", tangent)
+        mesh.loops.foreach_get("bitangent_sign", sign)
+        tangent = tangent.reshape(nl, 3)
+        bitangent = sign[:, None] * np.cross(object_n, tangent)
+        mapped = _unit_rows(c[:, :1] * tangent + c[:, 1:2] * bitangent + c[:, 2:3] * object_n)
+    else:
+        if space.startswith("BLENDER_"):  # Blender's own convention: Y and Z flipped
+            c = c * np.float32([1.0, -1.0, -1.0])
+        mapped = _unit_rows(c)
+    if space not in ("WORLD", "BLENDER_WORLD"):
+        mapped = _unit_rows(mapped @ to_world)
+    # blended in the world towards the mesh's normal by Strength, as Cycles blends them
+    return mapped if strength == 1.0 else _unit_rows(normal + (mapped - normal) * strength)
+
+
+def height_gradients(points, corner_vert, tri_loops, height, n_vertices):
+    """Each vertex's gradient of a height given at the face corners: over each triangle the height
+    is linear between its corners' values (so a UV seam's two sides each count their own), and a
+    vertex takes its triangles' gradients weighted by their areas."""
+    v = corner_vert[tri_loops]
+    p0, p1, p2 = points[v[:, 0]], points[v[:, 1]], points[v[:, 2]]
+    h = height[tri_loops].astype(np.float64)
+    n = np.cross(p1 - p0, p2 - p0)
+    twice_area = np.linalg.norm(n, axis=1)
+    ok = twice_area > 1e-30
+    unit = n / np.where(ok, twice_area, 1.0)[:, None]
+    # the gradient of a corner's barycentric weight is the unit normal x its opposite edge / (2 area)
+    grad = (h[:, :1] * np.cross(unit, p2 - p1) + h[:, 1:2] * np.cross(unit, p0 - p2) +
+            h[:, 2:3] * np.cross(unit, p1 - p0)) / np.where(ok, twice_area, 1.0)[:, None]
+    weight = np.where(ok, 0.5 * twice_area, 0.0)
+    total = np.zeros((n_vertices, 3))
+    area = np.bincount(v.ravel(), weights=np.repeat(weight, 3), minlength=n_vertices)
+    for k in range(3):
+        total[:, k] = np.bincount(v.ravel(), weights=np.repeat(weight * grad[:, k], 3), minlength=n_vertices)
+    return total / np.maximum(area, 1e-300)[:, None]
+
+
+def bumped_normals(normal, gradient, distance, strength):
+    """Cycles' Bump node at a point whose height has the world-space `gradient`: the normal tilted
+    against the height's gradient along the surface, normalize(N - Distance x grad), then blended
+    towards N by Strength (Cycles' surface gradient over its determinant is that gradient)."""
+    along = gradient - np.sum(gradient * normal, axis=1, keepdims=True) * normal
+    out = _unit_rows(normal - distance * along)
+    return out if strength == 1.0 else _unit_rows(strength * out + (1.0 - strength) * normal)
+
+
 def read_shading_normals(obj, depsgraph, data):
     """Sets data.shading_normals (world space, per shaded row) for the material slots whose
-    Principled BSDF's Normal comes from a normal map, as Cycles' Normal Map node makes them:
-    2 x colour - 1 in the UV map's tangent frame (MikkTSpace), in the object's space or the world's
-    (Blender's own object and world spaces with Y and Z flipped), blended towards the mesh's normal
-    by Strength.  Read at the vertices: detail finer than the mesh is lost.  Returns notes."""
+    Principled BSDF's Normal comes from a normal map or a Bump node, as Cycles makes them: a Normal
+    Map's 2 x colour - 1 in the UV map's tangent frame (MikkTSpace), in the object's space or the
+    world's (Blender's own object and world spaces with Y and Z flipped), blended towards the mesh's
+    normal by Strength; a Bump node's normal tilted against its Height's gradient over the surface
+    (bumped_normals), the height linear between the corners.  Read at the vertices: detail finer than
+    the mesh is lost.  Returns notes."""
     notes = []
-    for s, mat, (source, strength), mesh, corner_vert in _principled_slots(obj, depsgraph, normal_map_source):
-        got = uv_rows(mesh, source.uv_map, "CORNER", corner_vert)
-        if got is None:
-            notes.append(_no_uv_map(obj, source.uv_map, f"the normal map of '{mat.name}'",
-                                    "the mesh's normals are used"))
-            continue
+    ob_eval = obj.evaluated_get(depsgraph)
+    for s, mat, (chain, _), mesh, corner_vert in _principled_slots(obj, depsgraph, normal_source):
         nl = len(mesh.loops)
         normal = np.empty(nl * 3, np.float32)
         mesh.corner_normals.foreach_get("vector", normal)
         normal = normal.reshape(nl, 3)
-        levels = images.levels(source.node.image)
-        h, w = levels[0].shape[:2]
-        colour = sample(levels, got[0], got[1] * np.sqrt(w * h), source.node.interpolation, source.node.extension)
-        c = 2.0 * colour - 1.0
-        space = source.space
-        if space == "TANGENT":
-            layer = uv_layer(mesh, source.uv_map)
-            mesh.calc_tangents(uvmap=layer.name)  # runtime data only, nothing the file keeps
-            tangent = np.empty(nl * 3, np.float32)
-            sign = np.empty(nl, np.float32)
-            mesh.loops.foreach_get("tangent", tangent)
-            mesh.loops.foreach_get("bitangent_sign", sign)
-            tangent = tangent.reshape(nl, 3)
-            bitangent = sign[:, None] * np.cross(normal, tangent)
-            mapped = _unit_rows(c[:, :1] * tangent + c[:, 1:2] * bitangent + c[:, 2:3] * normal)
-        else:
-            if space.startswith("BLENDER_"):  # Blender's own convention: Y and Z flipped
-                c = c * np.float32([1.0, -1.0, -1.0])
-            mapped = _unit_rows(c)
-        # into the world by the inverse transpose, as read_mesh turns the normals, and blended there
-        # towards the mesh's normal by Strength, as Cycles blends them
-        m = obj.evaluated_get(depsgraph).matrix_world
+        # into the world by the inverse transpose, as read_mesh turns the normals
+        m = ob_eval.matrix_world
         to_world = np.array(m.to_3x3().inverted_safe(), np.float32)
-        normal = _unit_rows(normal @ to_world)
-        if space not in ("WORLD", "BLENDER_WORLD"):
-            mapped = _unit_rows(mapped @ to_world)
-        world_n = mapped if strength == 1.0 else _unit_rows(normal + (mapped - normal) * strength)
+        world_n = _unit_rows(normal @ to_world)
+        bent = False
+        if chain.map is not None:
+            mapped = _mapped_normals(mesh, chain.map, chain.map_strength, normal, world_n, to_world)
+            if mapped is None:
+                notes.append(_no_uv_map(obj, chain.map.uv_map, f"the normal map of '{mat.name}'",
+                                        "the mesh's normals are used"))
+            else:
+                world_n, bent = mapped, True
+        if chain.bump is not None and chain.bump.inputs["Height"].is_linked:
+            ev = nodes.Evaluator(
+                nl, lambda uv_map: uv_rows(mesh, uv_map, "CORNER", corner_vert),
+                lambda tex, uv, footprint, rows, s=s: _colours_memo((obj.name, s, "height", tex.name),
+                                                                   images.levels(tex.image), Source(tex, None),
+                                                                   (uv, footprint, rows), nl))
+            try:
+                height = ev.value(chain.bump.inputs["Height"])
+            except nodes.MissingUV as exc:
+                notes.append(_no_uv_map(obj, exc.uv_map, f"the Bump node of '{mat.name}'", "it is not used"))
+                height = None
+            if height is not None:
+                if not np.isfinite(height).all():
+                    raise world.SetupError(f"Material '{mat.name}': its Bump node's Height is not finite (NaN or "
+                                           f"infinite) on '{obj.name}'")
+                nv = len(mesh.vertices)
+                co = np.empty(nv * 3, np.float32)
+                mesh.vertices.foreach_get("co", co)
+                points = co.reshape(nv, 3).astype(np.float64) @ np.array(m, np.float64)[:3, :3].T + \
+                    np.array(m, np.float64)[:3, 3]
+                tris = mesh.loop_triangles
+                tri_loops = np.empty(len(tris) * 3, np.int32)
+                tris.foreach_get("loops", tri_loops)
+                gradient = height_gradients(points, corner_vert, tri_loops.reshape(-1, 3), height, nv)
+                world_n = bumped_normals(world_n, gradient[corner_vert], chain.distance, chain.bump_strength)
+                bent = True
+        if not bent:
+            continue
         rows = corner_vert if data.domain == "POINT" else np.arange(nl)
         total = np.stack([np.bincount(rows, weights=world_n[:, k], minlength=data.count) for k in range(3)], axis=1)
         if data.shading_normals is None:

@@ -1063,6 +1063,94 @@ def test_object_and_world_space_normal_maps(scene, space):
     assert not any("not used" in n for n in materials.principled_notes(mat))
 
 
+@pytest.mark.parametrize("invert", [False, True])
+def test_a_bump_node_tilts_the_normals_against_its_heights_gradient(scene, invert):
+    """A Bump node whose Height is an image ramping along u (through a Math node) on a turned grid:
+    each interior vertex's normal is Cycles' bump of that gradient, normalize(N - Distance x grad h)
+    (towards the ramp's descent; inverted, the other way), blended towards N by Strength."""
+    env_world(scene, "sunset")
+    width = 64
+    ramp = bpy.data.images.new("ramp", width, 1, float_buffer=True)
+    ramp.colorspace_settings.name = "Non-Color"
+    u = (np.arange(width, dtype=np.float32) + 0.5) / width
+    ramp.pixels.foreach_set(np.stack([u, u, u, np.ones_like(u)], axis=1).ravel())
+    bpy.ops.mesh.primitive_grid_add(x_subdivisions=9, y_subdivisions=9, size=4.0)
+    plane = bpy.context.object
+    plane.rotation_euler = (0.3, 0.0, 0.5)
+    mat = principled_material("bumped", roughness=0.4)
+    tree = mat.node_tree
+    tex = tree.nodes.new("ShaderNodeTexImage")
+    tex.image = ramp
+    tex.extension = "EXTEND"
+    times = tree.nodes.new("ShaderNodeMath")
+    times.operation = "MULTIPLY"
+    times.inputs[1].default_value = 3.0
+    bump = tree.nodes.new("ShaderNodeBump")
+    bump.invert = invert
+    bump.inputs["Distance"].default_value = 0.5
+    bump.inputs["Strength"].default_value = 0.7
+    tree.links.new(tex.outputs["Color"], times.inputs[0])
+    tree.links.new(times.outputs["Value"], bump.inputs["Height"])
+    tree.links.new(bump.outputs["Normal"], tree.nodes["Principled BSDF"].inputs["Normal"])
+    plane.data.materials.append(mat)
+    select_only(plane)
+    bpy.context.view_layer.update()
+    data = plan_of(scene, plane).items[0][1]
+    rot = np.array(plane.matrix_world.to_3x3(), np.float64)
+    n = rot @ np.float64([0.0, 0.0, 1.0])
+    # h = 3u and u runs over the grid's 4 units of x: a gradient of 3/4 along the object's x
+    grad = rot @ np.float64([0.75, 0.0, 0.0])
+    tilted = n - (-0.5 if invert else 0.5) * grad
+    tilted /= np.linalg.norm(tilted)
+    want = 0.7 * tilted + 0.3 * n
+    want /= np.linalg.norm(want)
+    local = np.asarray(data.positions, np.float64) - np.array(plane.matrix_world.translation)
+    inside = np.all(np.abs(local @ rot)[:, :2] < 1.5, axis=1)  # away from the ramp's clamped ends
+    assert inside.sum() > 20
+    np.testing.assert_allclose(data.shading_normals[inside], np.tile(want, (int(inside.sum()), 1)), atol=1e-3)
+    assert "'Normal' from a Bump node is read at the vertices: detail finer than the mesh is lost" in \
+        materials.principled_notes(mat)
+    bump.inputs["Strength"].default_value = 0.0
+    data = plan_of(scene, plane).items[0][1]
+    np.testing.assert_allclose(data.shading_normals, np.tile(n, (data.count, 1)), atol=1e-5)
+
+
+def test_a_bump_node_over_a_normal_map_and_what_it_does_not_read(scene):
+    """A Bump node whose Normal is a Normal Map bends the mapped normal; one whose Height comes from a
+    node wenv does not evaluate is named, and the mesh's normals are used."""
+    env_world(scene, "sunset")
+    bpy.ops.mesh.primitive_grid_add(x_subdivisions=5, y_subdivisions=5, size=4.0)
+    plane = bpy.context.object
+    image = bpy.data.images.new("map", 4, 4, float_buffer=True)
+    image.colorspace_settings.name = "Non-Color"
+    want = np.float32([0.3, 0.0, np.sqrt(1.0 - 0.09)])
+    image.pixels.foreach_set(np.tile(np.append(0.5 * want + 0.5, 1.0).astype(np.float32), 16))
+    mat = principled_material("mapped and bumped", roughness=0.4)
+    tree = mat.node_tree
+    tex = tree.nodes.new("ShaderNodeTexImage")
+    tex.image = image
+    normal_map = tree.nodes.new("ShaderNodeNormalMap")
+    normal_map.space = "OBJECT"
+    bump = tree.nodes.new("ShaderNodeBump")
+    tree.links.new(tex.outputs["Color"], normal_map.inputs["Color"])
+    tree.links.new(normal_map.outputs["Normal"], bump.inputs["Normal"])
+    tree.links.new(bump.outputs["Normal"], tree.nodes["Principled BSDF"].inputs["Normal"])
+    plane.data.materials.append(mat)
+    select_only(plane)
+    bpy.context.view_layer.update()
+    # a Height left unlinked: a flat height, the mapped normal as it is
+    data = plan_of(scene, plane).items[0][1]
+    np.testing.assert_allclose(data.shading_normals, np.tile(want, (data.count, 1)), atol=2e-4)
+    assert "'Normal' from a Bump node over a normal map is read at the vertices: detail finer than the mesh " \
+        "is lost" in materials.principled_notes(mat)
+    noise = tree.nodes.new("ShaderNodeTexNoise")
+    tree.links.new(noise.outputs["Fac"], bump.inputs["Height"])
+    notes = materials.principled_notes(mat)
+    assert any("'Normal' is linked" in n and "Height comes from" in n and "Noise Texture" in n for n in notes), notes
+    data = plan_of(scene, plane).items[0][1]
+    assert data.shading_normals is None
+
+
 def test_the_glossmeter_reads_a_textured_base_color_at_its_mean(scene):
     """Base Color from a texture of two halves: the glossmeter panel reads the material at the
     texture's mean colour and says so; the reading is the core's at that colour."""
@@ -1449,6 +1537,7 @@ def test_what_wenv_does_not_shade_is_reported(scene):
     tex = tree.nodes.new("ShaderNodeTexNoise")
     tree.links.new(tex.outputs["Color"], node.inputs["Base Color"])
     bump = tree.nodes.new("ShaderNodeBump")
+    tree.links.new(tex.outputs["Fac"], bump.inputs["Height"])
     tree.links.new(bump.outputs["Normal"], node.inputs["Normal"])
     node.inputs["Transmission Weight"].default_value = 0.5
     node.inputs["Emission Strength"].default_value = 2.0
