@@ -308,7 +308,7 @@ def test_bad_input_is_named(sphere):
     with pytest.raises(ValueError, match=r"roughness\[7\] is nan"):
         wenv.reference(env, wenv.Principled(**PAINT), v, views, roughness=bad)
     lambert = wenv.Shader(env, wenv.Lambert(0.5), quality="draft", method="slicing")
-    with pytest.raises(ValueError, match="needs a Principled material"):
+    with pytest.raises(ValueError, match="need a Principled material"):
         lambert.shade(v, views, roughness=r)
     peer = wenv.Shader(env, wenv.Principled(**PAINT), quality="default", method="split_sum")
     with pytest.raises(ValueError, match="use a wavelet method"):

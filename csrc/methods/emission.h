@@ -18,4 +18,19 @@
 wenv_status wenv_emission_add(const wenv_material *mat, const float *colours, const float *normals,
                               const float *views, size_t n, float *out, wenv_error *err);
 
+/* The emission's view dependence is smooth (the layers' albedo over the view's cosine): a table of
+ * WENV_EMISSION_TABLE_N cosines, linear between them, serves every vertex. */
+#define WENV_EMISSION_TABLE_N 257
+typedef struct {
+    int emits; /* 0: the table is black */
+    float rgb[3 * WENV_EMISSION_TABLE_N];
+} wenv_emission_table;
+
+/* mat's emission over the view's cosine; per_colour: per unit of Emission Color (the material
+ * emitting white), for a colour per vertex.  WENV_ERR_NOMEM only. */
+wenv_status wenv_emission_table_make(const wenv_material *mat, int per_colour, wenv_emission_table *table,
+                                     wenv_error *err);
+/* The table at cos_v (clamped to [0, 1]). */
+void wenv_emission_table_at(const wenv_emission_table *table, float cos_v, float rgb[3]);
+
 #endif

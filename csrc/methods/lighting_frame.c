@@ -139,7 +139,10 @@ wenv_status wenv_lighting_frame_shade_scene(const wenv_lighting_frame *frame, co
     /* lamps and emission in the world: the frame turns both normal and view, but not the lamps */
     if (!st && lamps && material)
         st = wenv_lamps_add(lamps, material, colour, family, normals, views, n, out, err);
-    if (!st && material)
+    /* a material per vertex emits through each vertex's own layers */
+    if (!st && family)
+        st = wenv_material_family_add_emission(family, normals, views, n, emission, out, err);
+    else if (!st && material)
         st = wenv_emission_add(material, emission, normals, views, n, out, err);
     return st;
 }

@@ -1,39 +1,48 @@
-/* A material whose Roughness and Metallic vary per vertex (material_family.h). */
+/* A material whose inputs vary per vertex (material_family.h). */
 #include "methods/material_family.h"
 
 #include <math.h>
 #include <stdatomic.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "base/fingerprint.h"
 #include "math/unit_pair.h"
+#include "methods/emission.h"
 
 /* What a member is on the metallic axis: the material at a Metallic, or a metal in black or in white
  * (a metal whose colour varies per vertex: wenv_material_metal_colour). */
 typedef enum { SIDE_AS_IS, SIDE_BLACK, SIDE_WHITE } side_kind;
 #define SIDES 3
 _Static_assert(SIDES == WENV_VERTEX_LIGHTS_PICKS, "a vertex's lights are read through each of its sides");
-/* Per vertex: at most two roughness levels times the sides. */
-#define ENTRIES (2 * SIDES)
+
+/* A coordinate of the members' grid: one channel of a per-vertex input that changes the lobes
+ * (every input of WENV_VERTEX_INPUTS but Metallic, the sides, and Alpha, a scale). */
+#define COORDS (WENV_VERTEX_INPUT_CHANNELS - 2)
+typedef struct {
+    int input, channel;
+} coord;
 
 struct wenv_material_family {
     wenv_material *base;
     size_t n;
     int colour; /* made for a colour per vertex */
-    /* members: n_r roughness levels x n_m sides, member (ir, im) at ir n_m + im (NULL where no vertex
-     * reads it) */
-    size_t n_r, n_m, made;
-    size_t spacing; /* interpolated roughness: levels k / spacing */
-    double r_level[WENV_FAMILY_FINEST + 1], m_level[SIDES];
+    /* members: point p (COORDS values) on side m at p n_m + m (NULL where no vertex reads it) */
+    size_t n_points, n_m, made;
+    double *point;
+    double m_level[SIDES];
     side_kind side[SIDES];
     wenv_material **member;
     wenv_diffuse_table *diffuse;    /* per member: its Lambertian part over pi */
     wenv_diffuse_table *per_colour; /* ... per unit of colour, where the colour varies alone */
+    wenv_emission_table *emission;  /* per member (only if the material emits): its own, and per unit of colour */
     wenv_error colour_why;          /* why a colour per vertex cannot be shaded (status 0: it can) */
-    uint32_t *member_of;            /* ENTRIES per vertex */
-    float *weight;                  /* ENTRIES per vertex, 0 for an entry not read */
-    /* the lights' materials (roughness interpolated only): each vertex's own roughness, per side */
+    size_t entries;                 /* per vertex: the corners of its grid cell times the sides */
+    uint32_t *member_of;            /* entries per vertex */
+    float *weight;                  /* entries per vertex, 0 for an entry not read */
+    float *alpha;                   /* per vertex, or NULL: scales all it reflects and emits */
+    /* the lights' materials (grid interpolated only): each vertex's own values, per side */
     int lights_apart;
     wenv_material **palette;
     size_t n_palette;
@@ -47,15 +56,18 @@ void wenv_material_family_free(wenv_material_family *f)
     if (!f)
         return;
     wenv_material_free(f->base);
-    for (size_t j = 0; f->member && j < f->n_r * f->n_m; j++)
+    for (size_t j = 0; f->member && j < f->n_points * f->n_m; j++)
         wenv_material_free(f->member[j]);
     for (size_t p = 0; f->palette && p < f->n_palette; p++)
         wenv_material_free(f->palette[p]);
+    free(f->point);
     free(f->member);
     free(f->diffuse);
     free(f->per_colour);
+    free(f->emission);
     free(f->member_of);
     free(f->weight);
+    free(f->alpha);
     free(f->palette);
     free(f->pick);
     free(f->side_w);
@@ -64,86 +76,210 @@ void wenv_material_family_free(wenv_material_family *f)
 
 static double clamp01(double x) { return x < 0.0 ? 0.0 : (x > 1.0 ? 1.0 : x); }
 
-/* Finite values (the name and vertex of the first that is not), and whether they are all one value. */
-static wenv_status check_values(const float *x, size_t n, const char *name, int *uniform, wenv_error *err)
+/* What the family is made from: the material, the per-vertex values and the coordinates they vary. */
+typedef struct {
+    const wenv_principled_inputs *in;
+    const wenv_vertex_inputs *vi;
+    size_t n;
+    coord coords[COORDS];
+    double lo[COORDS], hi[COORDS]; /* the values' range */
+    size_t axis[COORDS], n_axes;   /* the coordinates that vary */
+} build;
+
+/* Vertex i's value of coordinate c, clamped as Cycles clamps it (the material's own where not given). */
+static double value_at(const build *b, size_t i, size_t c)
 {
-    *uniform = 1;
-    for (size_t i = 0; i < n; i++) {
-        if (!isfinite(x[i]))
-            return wenv_error_set(err, WENV_ERR_VALUE, "%s[%zu] is %g: a vertex's %s must be finite", name, i,
-                                  (double)x[i], name);
-        *uniform &= clamp01(x[i]) == clamp01(x[0]);
+    const coord *k = &b->coords[c];
+    const wenv_vertex_input *in = &wenv_vertex_input_list[k->input];
+    const float *v = b->vi ? b->vi->value[k->input] : NULL;
+    if (v)
+        return wenv_vertex_input_clamp(in, v[(size_t)in->n * i + (size_t)k->channel]);
+    return wenv_principled_field_c(b->in, in->row)[k->channel];
+}
+
+/* A vertex's Metallic and Alpha. */
+static double scalar_at(const build *b, size_t i, int input)
+{
+    const wenv_vertex_input *in = &wenv_vertex_input_list[input];
+    const float *v = b->vi ? b->vi->value[input] : NULL;
+    return v ? wenv_vertex_input_clamp(in, v[i]) : wenv_principled_field_c(b->in, in->row)[0];
+}
+
+static wenv_status check_values(const wenv_vertex_inputs *vi, size_t n, wenv_error *err)
+{
+    for (int k = 0; vi && k < WENV_VERTEX_INPUT_COUNT; k++) {
+        const float *v = vi->value[k];
+        size_t count = (size_t)wenv_vertex_input_list[k].n * n;
+        for (size_t j = 0; v && j < count; j++)
+            if (!isfinite(v[j]))
+                return wenv_error_set(err, WENV_ERR_VALUE, "%s[%zu] is %g: a vertex's %s must be finite",
+                                      wenv_vertex_input_list[k].name, j / (size_t)wenv_vertex_input_list[k].n,
+                                      (double)v[j], wenv_vertex_input_list[k].name);
     }
     return WENV_OK;
 }
 
-static int compare_double(const void *a, const void *b)
+static void set_coords(build *b)
 {
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
+    size_t c = 0;
+    for (int k = 0; k < WENV_VERTEX_INPUT_COUNT; k++) {
+        if (k == WENV_VERTEX_metallic || k == WENV_VERTEX_alpha)
+            continue;
+        for (int ch = 0; ch < wenv_vertex_input_list[k].n; ch++)
+            b->coords[c++] = (coord){k, ch};
+    }
+    b->n_axes = 0;
+    for (c = 0; c < COORDS; c++) {
+        b->lo[c] = b->hi[c] = value_at(b, 0, c);
+        for (size_t i = 1; i < b->n; i++) {
+            double x = value_at(b, i, c);
+            b->lo[c] = fmin(b->lo[c], x);
+            b->hi[c] = fmax(b->hi[c], x);
+        }
+        if (b->hi[c] > b->lo[c])
+            b->axis[b->n_axes++] = c;
+    }
 }
 
-/* The distinct values of x (clamped) into level[], ascending, when there are at most
- * WENV_FAMILY_EXACT_LEVELS of them: their count, else 0 (-1 out of memory). */
-static long distinct_levels(const float *x, size_t n, double *level)
+static int is_roughness(const build *b, size_t c) { return b->coords[c].input == WENV_VERTEX_roughness; }
+
+/* The distinct points (the varying coordinates' values) of the vertices, into point[] (COORDS each)
+ * with each vertex's in which[], when there are at most WENV_FAMILY_EXACT_LEVELS: their count, else 0. */
+static size_t distinct_points(const build *b, double *point, uint32_t *which)
 {
-    double *v = malloc((n ? n : 1) * sizeof *v);
-    if (!v)
-        return -1;
-    for (size_t i = 0; i < n; i++)
-        v[i] = clamp01(x[i]);
-    qsort(v, n, sizeof *v, compare_double);
-    long count = 0;
-    for (size_t i = 0; i < n; i++)
-        if (i == 0 || v[i] != v[i - 1]) {
-            if (count == WENV_FAMILY_EXACT_LEVELS) {
-                free(v);
+    size_t count = 0;
+    double here[COORDS];
+    for (size_t i = 0; i < b->n; i++) {
+        for (size_t c = 0; c < COORDS; c++)
+            here[c] = value_at(b, i, c);
+        size_t p = 0;
+        while (p < count && memcmp(point + COORDS * p, here, sizeof here) != 0)
+            p++;
+        if (p == count) {
+            if (count == WENV_FAMILY_EXACT_LEVELS)
                 return 0;
-            }
-            level[count++] = v[i];
+            memcpy(point + COORDS * count++, here, sizeof here);
         }
-    free(v);
+        which[i] = (uint32_t)p;
+    }
     return count;
 }
 
-/* The level equal to x in level[0 .. count). */
-static size_t level_of(const double *level, size_t count, double x)
+/* The grid's levels: Roughness at k / step (0 to 1), every other axis at lo + k (hi - lo) / step. */
+typedef struct {
+    size_t levels[WENV_FAMILY_MAX_AXES], step[WENV_FAMILY_MAX_AXES]; /* per axis */
+} grid;
+
+/* Specular IOR Level's levels are even in its square root: the index it sets rises from 1 as the
+ * root of the level, and the reflection with it, fast near 0. */
+static int warped(const build *b, size_t c) { return b->coords[c].input == WENV_VERTEX_specular_ior_level; }
+static double warp(const build *b, size_t c, double x) { return warped(b, c) ? sqrt(x) : x; }
+
+static double level_value(const build *b, const grid *g, size_t a, size_t k)
 {
-    size_t lo = 0, hi = count - 1;
-    while (lo < hi) {
-        size_t mid = (lo + hi) / 2;
-        if (level[mid] < x)
-            lo = mid + 1;
-        else
-            hi = mid;
-    }
-    return lo;
+    size_t c = b->axis[a];
+    if (is_roughness(b, c))
+        return (double)k / (double)g->step[a];
+    double lo = warp(b, c, b->lo[c]), hi = warp(b, c, b->hi[c]);
+    double x = lo + (hi - lo) * (double)k / (double)g->step[a];
+    return warped(b, c) ? x * x : x;
 }
 
-/* The finest of the levels' spacings (WENV_FAMILY_FINEST, then coarser) at which the levels the
- * roughness spans, times the sides, make at most max_members members. */
-static size_t level_spacing(const float *roughness, size_t n, size_t sides, size_t max_members)
+/* Where vertex value x falls on axis a: the level below it and the share of the one above. */
+static size_t cell_of(const build *b, const grid *g, size_t a, double x, float *t)
 {
-    static const size_t SPACINGS[] = {WENV_FAMILY_FINEST, 16, 12, 8, 4, 2, 1};
-    double lo = 1.0, hi = 0.0;
-    for (size_t i = 0; i < n; i++) {
-        lo = fmin(lo, clamp01(roughness[i]));
-        hi = fmax(hi, clamp01(roughness[i]));
-    }
-    size_t k = 0;
-    while (k + 1 < sizeof SPACINGS / sizeof SPACINGS[0] &&
-           ((size_t)ceil(hi * (double)SPACINGS[k]) - (size_t)floor(lo * (double)SPACINGS[k]) + 1) * sides >
-               max_members)
-        k++;
-    return SPACINGS[k];
+    size_t c = b->axis[a], top = g->levels[a] - 1;
+    double lo = warp(b, c, b->lo[c]), hi = warp(b, c, b->hi[c]);
+    double at = is_roughness(b, c) ? x * (double)g->step[a] : (warp(b, c, x) - lo) / (hi - lo) * (double)g->step[a];
+    size_t k = at <= 0.0 ? 0 : ((size_t)at < top ? (size_t)at : top - 1);
+    *t = (float)fmin(fmax(at - (double)k, 0.0), 1.0);
+    return k;
 }
 
-static wenv_status principled_at(wenv_material **out, const wenv_principled_inputs *in, double roughness,
-                                 double metallic, side_kind side, wenv_error *err)
+/* How finely each input's axis may be cut, finest last: Roughness's spacings over [0, 1] and the
+ * others' steps over their range.  The weights and tints enter linearly (exactly: their two ends
+ * suffice), Specular IOR Level nearly so, the roughnesses change the lobes' shape.  A weight enters
+ * linearly only while a Coat Tint is 1 and Sheen Weight at most 1 (Cycles' layering clamps above). */
+static const size_t SHAPE_OPTIONS[] = {1, 2, 4, 8, 12, 16, WENV_FAMILY_FINEST};
+static const size_t LEVEL_OPTIONS[] = {1, 2, 4};
+static const size_t WEIGHT_OPTIONS[] = {1, 2, 4};
+static const size_t LINEAR_OPTIONS[] = {1};
+
+/* Each axis is first cut no finer than this (Roughness to 1/16, Specular IOR Level to 2 steps), so
+ * that two axes share the members fairly; then as fine as the rest leaves room for. */
+#define FIRST_ROUGHNESS 16
+#define FIRST_OTHER 2
+
+static size_t axis_options(const build *b, size_t c, const size_t **options)
 {
-    wenv_principled_inputs at = *in;
-    at.roughness = roughness;
+    int input = b->coords[c].input;
+#define OPTIONS(list) (*options = list, sizeof list / sizeof list[0])
+    if (input == WENV_VERTEX_roughness || input == WENV_VERTEX_coat_roughness || input == WENV_VERTEX_sheen_roughness)
+        return OPTIONS(SHAPE_OPTIONS);
+    if (input == WENV_VERTEX_specular_ior_level)
+        return OPTIONS(LEVEL_OPTIONS);
+    if ((input == WENV_VERTEX_coat_weight && (b->in->coat_tint[0] != 1.0 || b->in->coat_tint[1] != 1.0 ||
+                                              b->in->coat_tint[2] != 1.0)) ||
+        (input == WENV_VERTEX_sheen_weight && b->hi[c] > 1.0))
+        return OPTIONS(WEIGHT_OPTIONS);
+    return OPTIONS(LINEAR_OPTIONS);
+#undef OPTIONS
+}
+
+/* The levels axis a spans at option value x (Roughness: those its values span). */
+static size_t spanned(const build *b, size_t a, size_t x)
+{
+    size_t c = b->axis[a];
+    if (!is_roughness(b, c))
+        return x + 1;
+    return (size_t)ceil(b->hi[c] * (double)x) - (size_t)floor(b->lo[c] * (double)x) + 1;
+}
+
+/* The grid whose members fit max_members: every axis at its coarsest, then each in turn (the
+ * roughnesses first) cut finer while the members, counted over the levels the values span, fit.
+ * 0 when even the coarsest does not fit. */
+static int choose_grid(const build *b, size_t sides, size_t max_members, grid *g)
+{
+    size_t at[WENV_FAMILY_MAX_AXES] = {0}, count[WENV_FAMILY_MAX_AXES];
+    const size_t *options[WENV_FAMILY_MAX_AXES];
+    for (size_t a = 0; a < b->n_axes; a++)
+        count[a] = axis_options(b, b->axis[a], &options[a]);
+    for (int pass = 0; pass < 2; pass++)
+        for (int changed = 1; changed;) {
+            changed = 0;
+            for (size_t a = 0; a < b->n_axes; a++)
+                for (size_t next = at[a] + 1; next < count[a]; next++) {
+                    size_t first = is_roughness(b, b->axis[a]) ? FIRST_ROUGHNESS : FIRST_OTHER;
+                    if (pass == 0 && options[a][next] > first)
+                        break;
+                    size_t members = sides;
+                    for (size_t x = 0; x < b->n_axes; x++)
+                        members *= spanned(b, x, options[x][x == a ? next : at[x]]);
+                    if (members <= max_members) {
+                        at[a] = next;
+                        changed = 1;
+                        break;
+                    }
+                }
+        }
+    size_t members = sides;
+    for (size_t a = 0; a < b->n_axes; a++) {
+        size_t x = options[a][at[a]];
+        members *= spanned(b, a, x);
+        g->step[a] = x;
+        g->levels[a] = x + 1;
+    }
+    return members <= max_members;
+}
+
+static wenv_status principled_at(wenv_material **out, const build *b, const double *point, double metallic,
+                                 side_kind side, wenv_error *err)
+{
+    wenv_principled_inputs at = *b->in;
+    for (size_t c = 0; c < COORDS; c++)
+        wenv_principled_field(&at, wenv_vertex_input_list[b->coords[c].input].row)[b->coords[c].channel] = point[c];
     at.metallic = metallic;
+    at.alpha = 1.0; /* a vertex's Alpha scales what it reflects and emits (f->alpha) */
     if (side != SIDE_AS_IS)
         for (int c = 0; c < 3; c++)
             at.base_color[c] = side == SIDE_WHITE ? 1.0 : 0.0;
@@ -151,29 +287,32 @@ static wenv_status principled_at(wenv_material **out, const wenv_principled_inpu
 }
 
 /* The members the vertices read, with their tables. */
-static wenv_status make_members(wenv_material_family *f, const wenv_principled_inputs *in, wenv_error *err)
+static wenv_status make_members(wenv_material_family *f, const build *b, wenv_error *err)
 {
-    size_t nm = f->n_r * f->n_m;
+    size_t nm = f->n_points * f->n_m;
+    int emits = b->in->emission_strength != 0.0;
     unsigned char *read = calloc(nm, 1);
     f->member = calloc(nm, sizeof *f->member);
     f->diffuse = calloc(nm, sizeof *f->diffuse);
     f->per_colour = calloc(nm, sizeof *f->per_colour);
-    if (!read || !f->member || !f->diffuse || !f->per_colour) {
+    f->emission = emits ? calloc(2 * nm, sizeof *f->emission) : NULL;
+    if (!read || !f->member || !f->diffuse || !f->per_colour || (emits && !f->emission)) {
         free(read);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for a material per vertex");
     }
-    for (size_t e = 0; e < ENTRIES * f->n; e++)
+    for (size_t e = 0; e < f->entries * f->n; e++)
         read[f->member_of[e]] |= f->weight[e] > 0.0f;
     for (size_t j = 0; j < nm; j++) {
         if (!read[j])
             continue;
-        if (principled_at(&f->member[j], in, f->r_level[j / f->n_m], f->m_level[j % f->n_m], f->side[j % f->n_m],
-                          err)) {
-            free(read);
-            return err->status;
-        }
+        if (principled_at(&f->member[j], b, f->point + COORDS * (j / f->n_m), f->m_level[j % f->n_m],
+                          f->side[j % f->n_m], err))
+            break;
         f->made++;
         wenv_material_diffuse_table(f->member[j], &f->diffuse[j]);
+        if (emits && (wenv_emission_table_make(f->member[j], 0, &f->emission[2 * j], err) ||
+                      wenv_emission_table_make(f->member[j], 1, &f->emission[2 * j + 1], err)))
+            break;
         if (f->side[j % f->n_m] != SIDE_AS_IS) { /* a metal: no Lambertian part, its colour mixed in */
             double w[3];
             f->per_colour[j] = f->diffuse[j];
@@ -190,35 +329,93 @@ static wenv_status make_members(wenv_material_family *f, const wenv_principled_i
             f->colour_why = why;
     }
     free(read);
-    return WENV_OK;
+    return err->status;
 }
 
-/* Each vertex's light materials: its own roughness (to 1 / WENV_FAMILY_LIGHT_STEPS) on each side it
- * reads. */
-static wenv_status make_palette(wenv_material_family *f, const wenv_principled_inputs *in, const float *roughness,
-                                wenv_error *err)
+/* A vertex's own values quantized for the lights' palette: Roughness to 1 / (WENV_FAMILY_LIGHT_STEPS >>
+ * coarse), the other axes to 1 / (1024 >> coarse) of their range. */
+#define PALETTE_FINEST_OTHER 1024
+typedef struct {
+    uint32_t q[WENV_FAMILY_MAX_AXES];
+    uint32_t i;
+} quantized;
+
+static int compare_quantized(const void *x, const void *y)
 {
-    size_t slots = (WENV_FAMILY_LIGHT_STEPS + 1) * f->n_m;
-    int32_t *index = malloc(slots * sizeof *index);
-    f->pick = calloc(SIDES * f->n, sizeof *f->pick);
-    f->side_w = calloc(SIDES * f->n, sizeof *f->side_w);
-    f->palette = calloc(slots, sizeof *f->palette);
-    uint32_t *slot_of = malloc(slots * sizeof *slot_of);
-    if (!index || !f->pick || !f->side_w || !f->palette || !slot_of) {
+    const quantized *a = x, *b = y;
+    int d = memcmp(a->q, b->q, sizeof a->q);
+    return d ? d : (a->i > b->i) - (a->i < b->i);
+}
+
+static size_t quantize(const build *b, int coarse, quantized *qv, uint32_t *steps)
+{
+    for (size_t a = 0; a < b->n_axes; a++)
+        steps[a] = (is_roughness(b, b->axis[a]) ? WENV_FAMILY_LIGHT_STEPS : PALETTE_FINEST_OTHER) >> coarse;
+    for (size_t i = 0; i < b->n; i++) {
+        memset(qv[i].q, 0, sizeof qv[i].q);
+        for (size_t a = 0; a < b->n_axes; a++) {
+            size_t c = b->axis[a];
+            double x = value_at(b, i, c), t = is_roughness(b, c) ? x : (x - b->lo[c]) / (b->hi[c] - b->lo[c]);
+            qv[i].q[a] = (uint32_t)lround(clamp01(t) * (double)(steps[a] ? steps[a] : 1));
+        }
+        qv[i].i = (uint32_t)i;
+    }
+    qsort(qv, b->n, sizeof *qv, compare_quantized);
+    size_t distinct = 0;
+    for (size_t k = 0; k < b->n; k++)
+        distinct += k == 0 || memcmp(qv[k].q, qv[k - 1].q, sizeof qv[k].q) != 0;
+    return distinct;
+}
+
+/* Each vertex's light materials: its own values (quantized: at most WENV_FAMILY_LIGHT_STEPS + 1
+ * points) on each side it reads. */
+static wenv_status make_palette(wenv_material_family *f, const build *b, wenv_error *err)
+{
+    quantized *qv = malloc((b->n ? b->n : 1) * sizeof *qv);
+    uint32_t steps[WENV_FAMILY_MAX_AXES];
+    if (!qv)
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for a material per vertex");
+    size_t distinct;
+    for (int coarse = 0;; coarse++)
+        if ((distinct = quantize(b, coarse, qv, steps)) <= WENV_FAMILY_LIGHT_STEPS + 1 || coarse == 13)
+            break;
+    size_t slots = distinct * f->n_m;
+    int32_t *index = malloc((slots ? slots : 1) * sizeof *index);
+    double *points = malloc((distinct ? distinct : 1) * COORDS * sizeof *points);
+    uint32_t *slot_of = malloc((slots ? slots : 1) * sizeof *slot_of);
+    f->pick = calloc(SIDES * (b->n ? b->n : 1), sizeof *f->pick);
+    f->side_w = calloc(SIDES * (b->n ? b->n : 1), sizeof *f->side_w);
+    f->palette = calloc(slots ? slots : 1, sizeof *f->palette);
+    if (!index || !points || !slot_of || !f->pick || !f->side_w || !f->palette) {
+        free(qv);
         free(index);
+        free(points);
         free(slot_of);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for a material per vertex");
     }
     for (size_t s = 0; s < slots; s++)
         index[s] = -1;
-    for (size_t i = 0; i < f->n; i++) {
-        size_t q = (size_t)lround(clamp01(roughness[i]) * WENV_FAMILY_LIGHT_STEPS);
-        /* the sides' weights are the entries' summed over the roughness levels */
+    size_t p = 0;
+    for (size_t k = 0; k < b->n; k++) {
+        int first = k == 0 || memcmp(qv[k].q, qv[k - 1].q, sizeof qv[k].q) != 0;
+        p += first && k > 0;
+        size_t i = qv[k].i;
+        if (first) {
+            double *pt = points + COORDS * p;
+            for (size_t c = 0; c < COORDS; c++)
+                pt[c] = value_at(b, 0, c); /* the coordinates that do not vary */
+            for (size_t a = 0; a < b->n_axes; a++) {
+                size_t c = b->axis[a];
+                double t = (double)qv[k].q[a] / (double)(steps[a] ? steps[a] : 1);
+                pt[c] = is_roughness(b, c) ? t : b->lo[c] + (b->hi[c] - b->lo[c]) * t;
+            }
+        }
+        /* the sides' weights are the entries' summed over the grid's corners */
         float *side = f->side_w + SIDES * i;
-        for (size_t e = 0; e < ENTRIES; e++)
-            side[f->member_of[ENTRIES * i + e] % f->n_m] += f->weight[ENTRIES * i + e];
+        for (size_t e = 0; e < f->entries; e++)
+            side[f->member_of[f->entries * i + e] % f->n_m] += f->weight[f->entries * i + e];
         for (size_t m = 0; m < f->n_m; m++) {
-            size_t s = q * f->n_m + m;
+            size_t s = p * f->n_m + m;
             if (side[m] > 0.0f && index[s] < 0) {
                 index[s] = (int32_t)f->n_palette;
                 slot_of[f->n_palette++] = (uint32_t)s;
@@ -227,15 +424,16 @@ static wenv_status make_palette(wenv_material_family *f, const wenv_principled_i
             f->pick[SIDES * i + m] = (uint32_t)(index[s] >= 0 ? index[s] : 0);
         }
     }
+    free(qv);
     free(index);
     atomic_int failed = 0;
     long long np = (long long)f->n_palette;
     wenv_error first = {0};
 #pragma omp parallel for schedule(dynamic, 16)
-    for (long long p = 0; p < np; p++) {
-        size_t s = slot_of[p];
+    for (long long q = 0; q < np; q++) {
+        size_t s = slot_of[q];
         wenv_error one = {0};
-        if (principled_at(&f->palette[p], in, (double)(s / f->n_m) / WENV_FAMILY_LIGHT_STEPS, f->m_level[s % f->n_m],
+        if (principled_at(&f->palette[q], b, points + COORDS * (s / f->n_m), f->m_level[s % f->n_m],
                           f->side[s % f->n_m], &one)) {
 #pragma omp critical(wenv_family_palette)
             if (!atomic_load(&failed))
@@ -244,6 +442,7 @@ static wenv_status make_palette(wenv_material_family *f, const wenv_principled_i
         }
     }
     free(slot_of);
+    free(points);
     if (failed) {
         *err = first;
         return err->status;
@@ -251,8 +450,8 @@ static wenv_status make_palette(wenv_material_family *f, const wenv_principled_i
     return WENV_OK;
 }
 
-static uint64_t family_key(const wenv_principled_inputs *in, const float *roughness, const float *metallic, size_t n,
-                           int colour, size_t max_members)
+static uint64_t family_key(const wenv_principled_inputs *in, const wenv_vertex_inputs *vi, size_t n, int colour,
+                           size_t max_members)
 {
     uint64_t key = wenv_fingerprint_word(wenv_fingerprint_word(WENV_FINGERPRINT_START, n), (uint64_t)colour);
     key = wenv_fingerprint_word(key, max_members);
@@ -261,10 +460,10 @@ static uint64_t family_key(const wenv_principled_inputs *in, const float *roughn
         key = wenv_fingerprint_doubles(key, wenv_principled_field_c(in, row), (size_t)row->n);
     }
     key = wenv_fingerprint_word(key, (uint64_t)in->multiscatter);
-    if (roughness)
-        key = wenv_fingerprint_floats(wenv_fingerprint_word(key, 1), roughness, n);
-    if (metallic)
-        key = wenv_fingerprint_floats(wenv_fingerprint_word(key, 2), metallic, n);
+    for (int k = 0; vi && k < WENV_VERTEX_INPUT_COUNT; k++)
+        if (vi->value[k])
+            key = wenv_fingerprint_floats(wenv_fingerprint_word(key, (uint64_t)k + 1), vi->value[k],
+                                          (size_t)wenv_vertex_input_list[k].n * n);
     return key;
 }
 
@@ -274,105 +473,178 @@ int wenv_material_family_needed_for_colour(const wenv_material *base)
     return in && in->metallic > 0.0;
 }
 
-wenv_status wenv_material_family_create(wenv_material_family **out, const wenv_material *base, const float *roughness,
-                                        const float *metallic, size_t n, int colour, size_t max_members,
+/* The sides: the material at its one Metallic, or mixed from 0 and 1 (exactly); with a colour per
+ * vertex, the metal in black and in white. */
+static void set_sides(wenv_material_family *f, const build *b)
+{
+    int varies = 0;
+    double m0 = scalar_at(b, 0, WENV_VERTEX_metallic);
+    for (size_t i = 1; i < b->n && !varies; i++)
+        varies = scalar_at(b, i, WENV_VERTEX_metallic) != m0;
+    if (!(f->colour && (varies || m0 > 0.0))) {
+        f->n_m = varies ? 2 : 1;
+        f->m_level[0] = varies ? 0.0 : m0;
+        f->m_level[1] = 1.0;
+        return;
+    }
+    if (varies || m0 < 1.0)
+        f->m_level[f->n_m++] = 0.0;
+    f->side[f->n_m] = SIDE_BLACK;
+    f->m_level[f->n_m++] = 1.0;
+    f->side[f->n_m] = SIDE_WHITE;
+    f->m_level[f->n_m++] = 1.0;
+}
+
+/* Vertex i's entries for its corners (point index and weight each) times the sides: a side at
+ * Metallic 0 weighs 1 - m, one at 1 m (a metal in black and in white each: their colour splits it
+ * per channel when shaded). */
+static void set_entries(wenv_material_family *f, const build *b, size_t i, const size_t *corner_point,
+                        const float *corner_w, size_t corners)
+{
+    float mv = (float)scalar_at(b, i, WENV_VERTEX_metallic);
+    for (size_t k = 0; k < corners; k++)
+        for (size_t m = 0; m < f->n_m; m++) {
+            size_t e = f->entries * i + SIDES * k + m;
+            float side_w = f->n_m == 1 ? 1.0f : (f->m_level[m] == 0.0 ? 1.0f - mv : mv);
+            f->member_of[e] = (uint32_t)(corner_point[k] * f->n_m + m);
+            f->weight[e] = corner_w[k] * side_w;
+        }
+}
+
+wenv_status wenv_material_family_create(wenv_material_family **out, const wenv_material *base,
+                                        const wenv_vertex_inputs *vi, size_t n, int colour, size_t max_members,
                                         wenv_error *err)
 {
     *out = NULL;
     const wenv_principled_inputs *in = wenv_principled_inputs_of(base);
     if (!in)
         return wenv_error_set(err, WENV_ERR_VALUE,
-                              "a Roughness or Metallic per vertex needs a Principled material (wenv.Principled), not "
-                              "%s",
+                              "inputs per vertex (Roughness, Metallic...) need a Principled material (wenv.Principled), "
+                              "not %s",
                               wenv_material_kind_name(base));
-    int r_uniform = 1, m_uniform = 1; /* a roughness's distinct values are counted below */
-    if ((roughness && check_values(roughness, n, "roughness", &r_uniform, err)) ||
-        (metallic && check_values(metallic, n, "metallic", &m_uniform, err)))
+    if (check_values(vi, n, err))
         return err->status;
+    build b = {in, vi, n, {{0}}, {0}, {0}, {0}, 0};
     wenv_material_family *f = calloc(1, sizeof *f);
     if (!f)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for a material per vertex");
     f->n = n;
     f->colour = colour != 0;
-    /* a roughness of a few values is those values, exactly; of more, the levels interpolated */
-    long exact = roughness ? distinct_levels(roughness, n, f->r_level) : 0;
-    if (exact < 0) {
-        free(f);
-        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for a material per vertex");
-    }
-    int interpolated = roughness && !exact;
-    /* the metallic axis: the material at its one Metallic, or mixed from 0 and 1 (exactly); with a
-     * colour per vertex, the metal in black and in white */
-    int varies = metallic && !m_uniform;
-    double m0 = metallic && n ? clamp01(metallic[0]) : in->metallic;
-    if (!(f->colour && (varies || m0 > 0.0))) {
-        f->n_m = varies ? 2 : 1;
-        f->m_level[0] = varies ? 0.0 : m0;
-        f->m_level[1] = 1.0;
-    } else {
-        if (varies || m0 < 1.0)
-            f->m_level[f->n_m++] = 0.0;
-        f->side[f->n_m] = SIDE_BLACK;
-        f->m_level[f->n_m++] = 1.0;
-        f->side[f->n_m] = SIDE_WHITE;
-        f->m_level[f->n_m++] = 1.0;
-    }
-    f->n_r = exact ? (size_t)exact : 1;
-    if (interpolated) {
-        f->spacing = level_spacing(roughness, n, f->n_m, max_members);
-        f->n_r = f->spacing + 1;
-    }
-    for (size_t k = 0; !exact && k < f->n_r; k++)
-        f->r_level[k] = interpolated ? (double)k / (double)f->spacing : in->roughness;
-    f->lights_apart = interpolated;
-    f->member_of = calloc(ENTRIES * (n ? n : 1), sizeof *f->member_of);
-    f->weight = calloc(ENTRIES * (n ? n : 1), sizeof *f->weight);
-    if (wenv_material_copy(&f->base, base, err) || !f->member_of || !f->weight) {
-        wenv_material_family_free(f);
-        return err->status ? err->status : wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for a material per vertex");
-    }
-    for (size_t i = 0; i < n; i++) {
-        size_t ir[2] = {0, 0};
-        float wr[2] = {1.0f, 0.0f};
-        if (exact) {
-            ir[0] = level_of(f->r_level, f->n_r, clamp01(roughness[i]));
-        } else if (interpolated) {
-            double x = clamp01(roughness[i]) * (double)f->spacing;
-            size_t k = (size_t)x < f->spacing ? (size_t)x : f->spacing - 1;
-            ir[0] = k;
-            ir[1] = k + 1;
-            wr[1] = (float)(x - (double)k);
-            wr[0] = 1.0f - wr[1];
-        }
-        /* a side at Metallic 0 weighs 1 - m, one at 1 m (a metal in black and in white each: their
-         * colour splits it per channel when shaded) */
-        float mv = (float)(varies ? clamp01(metallic[i]) : m0);
-        for (size_t a = 0; a < 2; a++)
-            for (size_t b = 0; b < f->n_m; b++) {
-                size_t e = ENTRIES * i + SIDES * a + b;
-                float side_w = f->n_m == 1 ? 1.0f : (f->m_level[b] == 0.0 ? 1.0f - mv : mv);
-                f->member_of[e] = (uint32_t)(ir[a] * f->n_m + b);
-                f->weight[e] = wr[a] * side_w;
-            }
-    }
-    if (make_members(f, in, err) || (f->lights_apart && make_palette(f, in, roughness, err))) {
+    if (wenv_material_copy(&f->base, base, err)) {
         wenv_material_family_free(f);
         return err->status;
     }
-    f->key = family_key(in, roughness, metallic, n, f->colour, max_members);
+    if (n > 0)
+        set_coords(&b);
+    set_sides(f, &b);
+    /* values of a few distinct points are those points, exactly; of more, a grid interpolated */
+    uint32_t *which = malloc((n ? n : 1) * sizeof *which);
+    f->point = malloc((WENV_FAMILY_EXACT_LEVELS > 1 ? WENV_FAMILY_EXACT_LEVELS : 1) * COORDS * sizeof *f->point);
+    if (!which || !f->point) {
+        free(which);
+        wenv_material_family_free(f);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for a material per vertex");
+    }
+    size_t exact = n ? distinct_points(&b, f->point, which) : 1;
+    if (n == 0)
+        for (size_t c = 0; c < COORDS; c++)
+            f->point[c] = 0.0;
+    grid g = {{0}, {0}};
+    if (!exact) {
+        free(which);
+        which = NULL;
+        if (b.n_axes > WENV_FAMILY_MAX_AXES || !choose_grid(&b, f->n_m, max_members, &g)) {
+            char names[256] = "";
+            for (size_t a = 0; a < b.n_axes; a++) {
+                const coord *k = &b.coords[b.axis[a]];
+                size_t len = strlen(names);
+                if (a == 0 || strcmp(wenv_vertex_input_list[k->input].name,
+                                     wenv_vertex_input_list[b.coords[b.axis[a - 1]].input].name) != 0)
+                    snprintf(names + len, sizeof names - len, "%s%s", len ? ", " : "", wenv_vertex_input_list[k->input].name);
+            }
+            wenv_material_family_free(f);
+            return wenv_error_set(err, WENV_ERR_VALUE,
+                                  "too many inputs vary smoothly per vertex (%s: %zu values a vertex, at most %d, in "
+                                  "at most %zu materials): give fewer, or values of at most %d distinct materials",
+                                  names, b.n_axes, WENV_FAMILY_MAX_AXES, max_members, WENV_FAMILY_EXACT_LEVELS);
+        }
+    }
+    size_t corners = exact ? 1 : (size_t)1 << b.n_axes;
+    f->entries = corners * SIDES;
+    if (exact) {
+        f->n_points = exact;
+    } else {
+        f->n_points = 1;
+        for (size_t a = 0; a < b.n_axes; a++)
+            f->n_points *= g.levels[a];
+        free(f->point);
+        f->point = malloc(f->n_points * COORDS * sizeof *f->point);
+    }
+    f->member_of = calloc(f->entries * (n ? n : 1), sizeof *f->member_of);
+    f->weight = calloc(f->entries * (n ? n : 1), sizeof *f->weight);
+    int scaled = (vi && vi->value[WENV_VERTEX_alpha]) || in->alpha != 1.0;
+    f->alpha = scaled ? malloc((n ? n : 1) * sizeof *f->alpha) : NULL;
+    if (!f->point || !f->member_of || !f->weight || (scaled && !f->alpha)) {
+        free(which);
+        wenv_material_family_free(f);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for a material per vertex");
+    }
+    if (!exact) /* the grid's points: mixed radix over the axes, the first fastest */
+        for (size_t p = 0; p < f->n_points; p++) {
+            double *pt = f->point + COORDS * p;
+            for (size_t c = 0; c < COORDS; c++)
+                pt[c] = value_at(&b, 0, c);
+            for (size_t a = 0, rest = p; a < b.n_axes; rest /= g.levels[a], a++)
+                pt[b.axis[a]] = level_value(&b, &g, a, rest % g.levels[a]);
+        }
+    for (size_t i = 0; i < n; i++) {
+        size_t corner_point[1u << WENV_FAMILY_MAX_AXES] = {0};
+        float corner_w[1u << WENV_FAMILY_MAX_AXES] = {1.0f};
+        if (!exact) {
+            size_t k[WENV_FAMILY_MAX_AXES], stride[WENV_FAMILY_MAX_AXES];
+            float t[WENV_FAMILY_MAX_AXES];
+            for (size_t a = 0, st = 1; a < b.n_axes; st *= g.levels[a], a++) {
+                k[a] = cell_of(&b, &g, a, value_at(&b, i, b.axis[a]), &t[a]);
+                stride[a] = st;
+            }
+            for (size_t m = 0; m < corners; m++) {
+                size_t p = 0;
+                float w = 1.0f;
+                for (size_t a = 0; a < b.n_axes; a++) {
+                    size_t up = (m >> a) & 1u;
+                    p += (k[a] + up) * stride[a];
+                    w *= up ? t[a] : 1.0f - t[a];
+                }
+                corner_point[m] = p;
+                corner_w[m] = w;
+            }
+        } else {
+            corner_point[0] = which[i];
+        }
+        set_entries(f, &b, i, corner_point, corner_w, corners);
+        if (f->alpha)
+            f->alpha[i] = (float)scalar_at(&b, i, WENV_VERTEX_alpha);
+    }
+    free(which);
+    f->lights_apart = !exact;
+    if (make_members(f, &b, err) || (f->lights_apart && make_palette(f, &b, err))) {
+        wenv_material_family_free(f);
+        return err->status;
+    }
+    f->key = family_key(in, vi, n, f->colour, max_members);
     *out = f;
     return WENV_OK;
 }
 
 wenv_status wenv_material_family_ensure(wenv_material_family **family, const wenv_material *base,
-                                        const float *roughness, const float *metallic, size_t n, int colour,
-                                        size_t max_members, wenv_error *err)
+                                        const wenv_vertex_inputs *vi, size_t n, int colour, size_t max_members,
+                                        wenv_error *err)
 {
     const wenv_principled_inputs *in = wenv_principled_inputs_of(base);
-    if (*family && in && (*family)->key == family_key(in, roughness, metallic, n, colour != 0, max_members))
+    if (*family && in && (*family)->key == family_key(in, vi, n, colour != 0, max_members))
         return WENV_OK;
     wenv_material_family *made;
-    if (wenv_material_family_create(&made, base, roughness, metallic, n, colour, max_members, err))
+    if (wenv_material_family_create(&made, base, vi, n, colour, max_members, err))
         return err->status;
     wenv_material_family_free(*family);
     *family = made;
@@ -478,7 +750,7 @@ static void lights_of(const wenv_material_family *f, const size_t *fv, const flo
 
 /* The vertices' Lambertian part, their members' mixed, times their colour (1 without) and light. */
 static void apply_diffuse(const wenv_material_family *f, const size_t *fv, const float *normals, const float *views,
-                          size_t n, const float *rgb, const float *irradiance, float *out)
+                          size_t n, const float *rgb, const float *irradiance, int with_alpha, float *out)
 {
     const wenv_diffuse_table *tables = rgb ? f->per_colour : f->diffuse;
     long long nn = (long long)n;
@@ -486,17 +758,18 @@ static void apply_diffuse(const wenv_material_family *f, const size_t *fv, const
     for (long long i = 0; i < nn; i++) {
         float cos_v = wenv_view_cosine(normals + 3 * i, views ? views + 3 * i : NULL);
         float t[3] = {0.0f, 0.0f, 0.0f};
-        for (size_t e = 0; e < ENTRIES; e++) {
-            float w = f->weight[ENTRIES * fv[i] + e], d[3];
+        for (size_t e = 0; e < f->entries; e++) {
+            float w = f->weight[f->entries * fv[i] + e], d[3];
             if (!(w > 0.0f))
                 continue;
-            wenv_diffuse_table_at(&tables[f->member_of[ENTRIES * fv[i] + e]], cos_v, d);
+            wenv_diffuse_table_at(&tables[f->member_of[f->entries * fv[i] + e]], cos_v, d);
             for (int c = 0; c < 3; c++)
                 t[c] += w * d[c];
         }
+        float alpha = with_alpha && f->alpha ? f->alpha[fv[i]] : 1.0f;
         for (int c = 0; c < 3; c++) {
             float colour = rgb ? rgb[3 * i + c] : 1.0f;
-            float v = out[3 * i + c] + colour * t[c] * irradiance[3 * i + c];
+            float v = out[3 * i + c] + alpha * colour * t[c] * irradiance[3 * i + c];
             out[3 * i + c] = v > 0.0f ? v : 0.0f;
         }
     }
@@ -506,23 +779,23 @@ static void apply_diffuse(const wenv_material_family *f, const size_t *fv, const
 static int group_by_member(const wenv_material_family *f, const size_t *fv, size_t n, size_t *start, size_t *at,
                            float *w)
 {
-    size_t nm = f->n_r * f->n_m;
+    size_t nm = f->n_points * f->n_m;
     size_t *fill = malloc(nm * sizeof *fill);
     if (!fill)
         return -1;
     memset(start, 0, (nm + 1) * sizeof *start);
     for (size_t k = 0; k < n; k++)
-        for (size_t e = 0; e < ENTRIES; e++)
-            if (f->weight[ENTRIES * fv[k] + e] > 0.0f)
-                start[f->member_of[ENTRIES * fv[k] + e] + 1]++;
+        for (size_t e = 0; e < f->entries; e++)
+            if (f->weight[f->entries * fv[k] + e] > 0.0f)
+                start[f->member_of[f->entries * fv[k] + e] + 1]++;
     for (size_t j = 0; j < nm; j++)
         start[j + 1] += start[j];
     memcpy(fill, start, nm * sizeof *fill);
     for (size_t k = 0; k < n; k++)
-        for (size_t e = 0; e < ENTRIES; e++) {
-            float x = f->weight[ENTRIES * fv[k] + e];
+        for (size_t e = 0; e < f->entries; e++) {
+            float x = f->weight[f->entries * fv[k] + e];
             if (x > 0.0f) {
-                size_t c = fill[f->member_of[ENTRIES * fv[k] + e]]++;
+                size_t c = fill[f->member_of[f->entries * fv[k] + e]]++;
                 at[c] = k;
                 w[c] = x;
             }
@@ -542,8 +815,8 @@ wenv_status wenv_material_family_shade(const wenv_family_rows *fr, const wenv_me
                               "materials: give it as the bounce");
     if (!method->materials_kept)
         return wenv_error_set(err, WENV_ERR_VALUE,
-                              "method '%s' does not shade a Roughness or Metallic per vertex (it would make its "
-                              "tables again for each member at every view): use a wavelet method",
+                              "method '%s' does not shade inputs per vertex (Roughness, Metallic...: it would make "
+                              "its tables again for each member at every view): use a wavelet method",
                               method->name);
     if (rgb && f->colour_why.status) {
         *err = f->colour_why;
@@ -552,7 +825,7 @@ wenv_status wenv_material_family_shade(const wenv_family_rows *fr, const wenv_me
     if (!rgb != !f->colour)
         return wenv_error_set(err, WENV_ERR_VALUE, "the material per vertex was made %s a colour per vertex",
                               f->colour ? "for" : "without");
-    size_t nm = f->n_r * f->n_m, total = ENTRIES * (n ? n : 1);
+    size_t nm = f->n_points * f->n_m, total = f->entries * (n ? n : 1);
     size_t *fv = malloc((n ? n : 1) * sizeof *fv), *start = malloc((nm + 1) * sizeof *start);
     size_t *at = malloc(total * sizeof *at);
     float *w = malloc(total * sizeof *w), *irradiance = calloc(3 * (n ? n : 1), sizeof(float));
@@ -600,7 +873,10 @@ wenv_status wenv_material_family_shade(const wenv_family_rows *fr, const wenv_me
         }
     }
     if (!st)
-        apply_diffuse(f, fv, normals, views, n, rgb, irradiance, out);
+        apply_diffuse(f, fv, normals, views, n, rgb, irradiance, 0, out);
+    for (size_t k = 0; !st && f->alpha && k < n; k++)
+        for (int c = 0; c < 3; c++)
+            out[3 * k + (size_t)c] *= f->alpha[fv[k]];
     /* the shader's material again, whatever happened */
     wenv_error restore = {0};
     if (method->set_material(state, f->base, NULL, &restore) && !st)
@@ -636,6 +912,14 @@ static wenv_status family_vertices(const wenv_family_rows *fr, size_t n, size_t 
     return WENV_OK;
 }
 
+/* The lights' weights (wenv_vertex_lights) times each vertex's Alpha. */
+static void scale_by_alpha(const wenv_material_family *f, const size_t *fv, size_t n, float *weight)
+{
+    for (size_t k = 0; f->alpha && k < n; k++)
+        for (size_t j = 0; j < 3 * WENV_VERTEX_LIGHTS_PICKS; j++)
+            weight[3 * WENV_VERTEX_LIGHTS_PICKS * k + j] *= f->alpha[fv[k]];
+}
+
 wenv_status wenv_material_family_own(const wenv_family_rows *fr, const float *normals, const float *views, size_t n,
                                      const float *rgb, uint32_t *pick, float *weight, wenv_vertex_lights *out,
                                      wenv_error *err)
@@ -659,6 +943,7 @@ wenv_status wenv_material_family_own(const wenv_family_rows *fr, const float *no
                         weight[3 * at + (size_t)c] = side_w * share[c];
                 }
         }
+        scale_by_alpha(f, fv, n, weight);
         *out = (wenv_vertex_lights){(const wenv_material *const *)f->palette, f->n_palette, f->key, pick, weight};
         free(fv);
         return WENV_OK;
@@ -667,11 +952,11 @@ wenv_status wenv_material_family_own(const wenv_family_rows *fr, const float *no
     for (size_t k = 0; k < n; k++) {
         float cos_v = wenv_view_cosine(normals + 3 * k, views ? views + 3 * k : NULL);
         size_t m = 0;
-        for (size_t e = 0; e < ENTRIES && m < WENV_VERTEX_LIGHTS_PICKS; e++) {
-            float w = f->weight[ENTRIES * fv[k] + e];
+        for (size_t e = 0; e < f->entries && m < WENV_VERTEX_LIGHTS_PICKS; e++) {
+            float w = f->weight[f->entries * fv[k] + e];
             if (!(w > 0.0f))
                 continue;
-            size_t at = WENV_VERTEX_LIGHTS_PICKS * k + m++, j = f->member_of[ENTRIES * fv[k] + e];
+            size_t at = WENV_VERTEX_LIGHTS_PICKS * k + m++, j = f->member_of[f->entries * fv[k] + e];
             float share[3] = {1.0f, 1.0f, 1.0f};
             if (f->side[j % f->n_m] != SIDE_AS_IS)
                 metal_share(f->member[j], f->side[j % f->n_m], cos_v, rgb + 3 * k, share);
@@ -685,7 +970,8 @@ wenv_status wenv_material_family_own(const wenv_family_rows *fr, const float *no
             weight[3 * at] = weight[3 * at + 1] = weight[3 * at + 2] = 0.0f;
         }
     }
-    *out = (wenv_vertex_lights){(const wenv_material *const *)f->member, f->n_r * f->n_m, f->key, pick, weight};
+    scale_by_alpha(f, fv, n, weight);
+    *out = (wenv_vertex_lights){(const wenv_material *const *)f->member, f->n_points * f->n_m, f->key, pick, weight};
     free(fv);
     return WENV_OK;
 }
@@ -697,7 +983,43 @@ wenv_status wenv_material_family_add_diffuse(const wenv_family_rows *fr, const f
     size_t *fv;
     if (family_vertices(fr, n, &fv, err))
         return err->status;
-    apply_diffuse(fr->family, fv, normals, views, n, rgb, irradiance, out);
+    apply_diffuse(fr->family, fv, normals, views, n, rgb, irradiance, 1, out);
+    free(fv);
+    return WENV_OK;
+}
+
+wenv_status wenv_material_family_add_emission(const wenv_family_rows *fr, const float *normals, const float *views,
+                                              size_t n, const float *colours, float *out, wenv_error *err)
+{
+    const wenv_material_family *f = fr->family;
+    if (!f->emission)
+        return WENV_OK;
+    size_t *fv;
+    if (family_vertices(fr, n, &fv, err))
+        return err->status;
+    long long nn = (long long)n;
+#pragma omp parallel for schedule(static)
+    for (long long i = 0; i < nn; i++) {
+        float cos_v = wenv_view_cosine(normals + 3 * i, views ? views + 3 * i : NULL);
+        if (!(cos_v > 0.0f))
+            continue; /* seen from behind: black, as the reflection */
+        float t[3] = {0.0f, 0.0f, 0.0f};
+        for (size_t e = 0; e < f->entries; e++) {
+            float w = f->weight[f->entries * fv[i] + e], rgb[3];
+            size_t j = f->member_of[f->entries * fv[i] + e];
+            /* the metal in white shares the light of the metal in black (their weights are both m) */
+            if (!(w > 0.0f) || f->side[j % f->n_m] == SIDE_WHITE || !f->emission[2 * j].emits)
+                continue;
+            wenv_emission_table_at(&f->emission[2 * j + (colours != NULL)], cos_v, rgb);
+            for (int c = 0; c < 3; c++)
+                t[c] += w * rgb[c];
+        }
+        float alpha = f->alpha ? f->alpha[fv[i]] : 1.0f;
+        for (int c = 0; c < 3; c++) {
+            float v = out[3 * i + c] + alpha * t[c] * (colours ? colours[3 * i + c] : 1.0f);
+            out[3 * i + c] = v > 0.0f ? v : 0.0f;
+        }
+    }
     free(fv);
     return WENV_OK;
 }

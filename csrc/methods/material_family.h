@@ -1,15 +1,22 @@
-/* A material whose Roughness and Metallic vary per vertex: a Principled BSDF read through textures.
+/* A material whose inputs vary per vertex: a Principled BSDF read through textures (its Roughness,
+ * Metallic, Specular IOR Level and Tint, Coat Weight and Roughness, Sheen Weight, Roughness and Tint,
+ * Alpha: principled_inputs.h's WENV_VERTEX_INPUTS).
  *
  * How (docs/python.md, "Roughness and Metallic per vertex"):
  *  - Metallic enters a Principled BSDF linearly (Cycles weighs the metal by Metallic and what lies
  *    under it by 1 - Metallic), so a vertex is exactly its mix of the material at Metallic 0 and at 1.
- *  - Roughness changes the lobes' shape.  Where it takes a few values, each has its own member,
- *    exactly.  Otherwise a vertex mixes the two members at the roughness levels around its own
- *    (1 / WENV_FAMILY_FINEST apart), linearly.  A sun's highlight would blur that way (two highlights
+ *  - Alpha scales everything the vertex reflects and emits: it multiplies the vertex's weights.
+ *  - The others change the lobes.  Where the vertices take a few distinct sets of values, each set
+ *    has its own member, exactly.  Otherwise the inputs that vary are the axes of a grid: Roughness
+ *    at levels 1 / WENV_FAMILY_FINEST apart (or coarser, below), each other input at 8, 4, 2 or 1
+ *    steps over the range its values span; a vertex mixes the members at the corners of its cell,
+ *    multilinearly.  A sun's highlight would blur that way (two highlights
  *    of other widths are not one of the width between), so the part a method shades per vertex with
  *    the BRDF itself (the wavelet methods' exact lights) is shaded apart, each vertex with a material
- *    at its own roughness (to 1 / WENV_FAMILY_LIGHT_STEPS): only the rest of the lighting, smooth
- *    against the levels' spacing, is interpolated.
+ *    at its own values (Roughness to 1 / WENV_FAMILY_LIGHT_STEPS, the others to 1/1024 of their range,
+ *    coarser where that would make more than WENV_FAMILY_LIGHT_STEPS + 1 materials): only the rest of
+ *    the lighting, smooth against the levels' spacing, is interpolated.
+ *  - Emission shines through each member's layers (its coat and sheen), mixed as the rest.
  *  - The Lambertian part is the members' mixed, applied once per vertex with a colour per vertex when
  *    there is one (vertex_colour.h's irradiance).  A metal's colour is its Fresnel colour: a metal of a
  *    colour per vertex is its mix, per channel and view, of the metal in black and in white
@@ -25,6 +32,7 @@
 #include "base/error.h"
 #include "methods/method.h"
 #include "scene/material.h"
+#include "scene/principled_inputs.h"
 
 /* Roughness levels 0, 1/24, ..., 1: the interpolation stays within 1 % of each vertex's own material
  * (0.05-0.88 % over the bundled HDRIs: docs/performance.md, "Roughness and Metallic per vertex")... */
@@ -38,17 +46,21 @@
 #define WENV_FAMILY_EXACT_LEVELS 8
 /* The lights' materials: Roughness to 1/8192 (a GGX peak at roughness 0.05 moves by 0.5 %). */
 #define WENV_FAMILY_LIGHT_STEPS 8192
+/* At most this many input channels may vary smoothly at once (a vertex mixes 2^4 corners per side: 48
+ * entries of 8 bytes, 48 MB at 126k vertices); more need values of a few distinct materials. */
+#define WENV_FAMILY_MAX_AXES 4
 
 typedef struct wenv_material_family wenv_material_family;
 
-/* base: a Principled material (WENV_ERR_VALUE otherwise); roughness and metallic: n values each, or
- * NULL for the material's own; finite (WENV_ERR_VALUE naming the first vertex that is not), clamped to
- * [0, 1] as Cycles clamps them.  colour: whether the calls give a colour per vertex too (a metal then
+/* base: a Principled material (WENV_ERR_VALUE otherwise); vi: the values per vertex (n each, x 3 for
+ * a colour; NULL, or a NULL input: the material's own), finite (WENV_ERR_VALUE naming the first
+ * vertex that is not), clamped as Cycles clamps them; more than WENV_FAMILY_MAX_AXES varying smoothly,
+ * or a grid past max_members, is WENV_ERR_VALUE naming them.  colour: whether the calls give a colour per vertex too (a metal then
  * has members in black and in white).  max_members: the most members the levels may make (the
  * method's materials_kept less WENV_FAMILY_SPARE_KEPT).  Makes every member and light material the
  * vertices read. */
-wenv_status wenv_material_family_create(wenv_material_family **out, const wenv_material *base, const float *roughness,
-                                        const float *metallic, size_t n, int colour, size_t max_members,
+wenv_status wenv_material_family_create(wenv_material_family **out, const wenv_material *base,
+                                        const wenv_vertex_inputs *vi, size_t n, int colour, size_t max_members,
                                         wenv_error *err);
 /* Whether a colour per vertex on `base` needs a family even with its own Roughness and Metallic: a
  * Principled BSDF with Metallic above 0. */
@@ -58,8 +70,8 @@ void wenv_material_family_free(wenv_material_family *family);
  * what a caller keeps between views, so that a new view makes nothing.  The one it replaces is freed;
  * on failure *family is kept. */
 wenv_status wenv_material_family_ensure(wenv_material_family **family, const wenv_material *base,
-                                        const float *roughness, const float *metallic, size_t n, int colour,
-                                        size_t max_members, wenv_error *err);
+                                        const wenv_vertex_inputs *vi, size_t n, int colour, size_t max_members,
+                                        wenv_error *err);
 
 size_t wenv_material_family_vertices(const wenv_material_family *family);
 /* Of the values it was made from (the material and every vertex's), for recognising them again. */
@@ -93,6 +105,12 @@ wenv_status wenv_material_family_own(const wenv_family_rows *rows, const float *
 wenv_status wenv_material_family_add_diffuse(const wenv_family_rows *rows, const float *normals, const float *views,
                                              size_t n, const float *rgb, const float *irradiance, float *out,
                                              wenv_error *err);
+
+/* out[i] = max(0, out[i] + each call vertex's emission towards view i through its members' layers)
+ * (views NULL: head-on); colours (n x 3, or NULL: the material's own) each vertex's Emission Color, as
+ * emission.h's. */
+wenv_status wenv_material_family_add_emission(const wenv_family_rows *rows, const float *normals, const float *views,
+                                              size_t n, const float *colours, float *out, wenv_error *err);
 
 /* Shades n (normal, view) pairs in the method's frame as method->shade / shade_shadowed (scene set)
  * would with each vertex's own material, or with views NULL its diffuse light (method.h), into out;

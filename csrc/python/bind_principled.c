@@ -6,6 +6,7 @@
 #include <stddef.h>
 #include <string.h>
 
+#include "methods/material_family.h"
 #include "scene/material.h"
 
 static const char *const DISTRIBUTIONS[] = {"ggx", "multiscatter_ggx"}; /* index = multiscatter */
@@ -282,9 +283,14 @@ static PyObject *inputs_table(void)
         const wenv_principled_input *row = &wenv_principled_input_list[r];
         PyObject *fallback = row->n == 3 ? Py_BuildValue("(ddd)", row->fallback[0], row->fallback[1], row->fallback[2])
                                          : PyFloat_FromDouble(row->fallback[0]);
-        PyObject *d = fallback ? Py_BuildValue("{s:s,s:s,s:i,s:N,s:s,s:s}", "name", row->name, "socket", row->socket,
-                                               "size", row->n, "default", fallback, "shaded", SHADING[row->shading],
-                                               "note", row->note)
+        /* what Shader.shade takes per vertex: the list's inputs, and the colours it takes on their own */
+        int per_vertex = strcmp(row->name, "base_color") == 0 || strcmp(row->name, "emission_color") == 0;
+        for (int k = 0; k < WENV_VERTEX_INPUT_COUNT; k++)
+            per_vertex |= wenv_vertex_input_list[k].row == row;
+        PyObject *d = fallback ? Py_BuildValue("{s:s,s:s,s:i,s:N,s:s,s:s,s:O}", "name", row->name, "socket",
+                                               row->socket, "size", row->n, "default", fallback, "shaded",
+                                               SHADING[row->shading], "note", row->note, "per_vertex",
+                                               per_vertex ? Py_True : Py_False)
                                : NULL;
         if (!d) {
             Py_CLEAR(t);
@@ -306,6 +312,15 @@ int wenv_register_principled(PyObject *module)
         return -1;
     }
     Py_DECREF(table);
+    /* how much may vary per vertex (material_family.h): any values of at most `exact_materials`
+     * distinct materials, or at most `smooth_channels` input channels varying smoothly */
+    PyObject *limits = Py_BuildValue("{s:i,s:i}", "exact_materials", WENV_FAMILY_EXACT_LEVELS, "smooth_channels",
+                                     WENV_FAMILY_MAX_AXES);
+    if (!limits || PyDict_SetItemString(PrincipledType.tp_dict, "PER_VERTEX", limits) < 0) {
+        Py_XDECREF(limits);
+        return -1;
+    }
+    Py_DECREF(limits);
     PyType_Modified(&PrincipledType);
     Py_INCREF(&PrincipledType);
     if (PyModule_AddObject(module, "Principled", (PyObject *)&PrincipledType) < 0) {

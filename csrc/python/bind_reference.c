@@ -7,18 +7,16 @@
 #include "python/bind_occlusion.h"
 #include "reference/reference.h"
 
-static PyObject *py_reference(PyObject *self, PyObject *args, PyObject *kwargs)
+static PyObject *reference_with(PyObject *args, PyObject *kwargs, wenv_py_vertex_inputs *vin)
 {
-    (void)self;
-    static char *kwlist[] = {"env",       "material",  "normals", "view_dirs",  "progress", "positions",
-                             "occluders", "bounce",    "base_color", "roughness", "metallic", "lamps",
-                             "emission_color", NULL};
+    static char *kwlist[] = {"env",       "material", "normals",    "view_dirs", "progress", "positions",
+                             "occluders", "bounce",   "base_color", "lamps",     "emission_color", NULL};
     PyObject *env_obj, *mat_obj, *nobj, *vobj, *progress_obj = Py_None, *pobj = Py_None, *occ_obj = Py_None;
-    PyObject *bounce_obj = Py_None, *colour_obj = Py_None, *rough_obj = Py_None, *metal_obj = Py_None;
+    PyObject *bounce_obj = Py_None, *colour_obj = Py_None;
     PyObject *lamps_obj = Py_None, *emit_obj = Py_None;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOO|OOOOO$OOOO:reference", kwlist, &env_obj, &mat_obj, &nobj,
-                                     &vobj, &progress_obj, &pobj, &occ_obj, &bounce_obj, &colour_obj, &rough_obj,
-                                     &metal_obj, &lamps_obj, &emit_obj))
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOO|OOOOO$OO:reference", kwlist, &env_obj, &mat_obj, &nobj,
+                                     &vobj, &progress_obj, &pobj, &occ_obj, &bounce_obj, &colour_obj, &lamps_obj,
+                                     &emit_obj))
         return NULL;
     if (bounce_obj != Py_None && occ_obj == Py_None) {
         PyErr_SetString(PyExc_ValueError, "bounce is read only with occluders (what blocks the light it fills in)");
@@ -58,7 +56,8 @@ static PyObject *py_reference(PyObject *self, PyObject *args, PyObject *kwargs)
         return NULL;
     }
     PyObject *result = NULL;
-    Py_buffer pb = {0}, bb = {0}, rb = {0}, mb = {0};
+    Py_buffer pb = {0}, bb = {0};
+    wenv_vertex_inputs vi;
     float *rgb = NULL, *emission = NULL;
     wenv_lamp *lamps = NULL;
     size_t np = n, nb_rows, n_lamps = 0;
@@ -84,8 +83,7 @@ static PyObject *py_reference(PyObject *self, PyObject *args, PyObject *kwargs)
         goto done;
     if (emit_obj != Py_None && !(emission = wenv_py_vertex_colours(emit_obj, "emission_color", n, 0)))
         goto done;
-    if ((rough_obj != Py_None && wenv_py_get_vertex_values(rough_obj, "roughness", n, &rb) < 0) ||
-        (metal_obj != Py_None && wenv_py_get_vertex_values(metal_obj, "metallic", n, &mb) < 0))
+    if (wenv_py_vertex_inputs_read(vin, n, &vi) < 0)
         goto done;
     Py_ssize_t shape[2] = {(Py_ssize_t)n, 3};
     float *out;
@@ -98,8 +96,7 @@ static PyObject *py_reference(PyObject *self, PyObject *args, PyObject *kwargs)
     wenv_status st;
     WENV_BEGIN_WORK
     st = wenv_reference_per_vertex(env, mat, nb.buf, vb.buf, n, occ, pb.obj ? pb.buf : NULL, bb.obj ? bb.buf : NULL, rgb,
-                                   rb.obj ? rb.buf : NULL, mb.obj ? mb.buf : NULL, lamps, n_lamps, emission, out,
-                                   &progress, &err);
+                                   &vi, lamps, n_lamps, emission, out, &progress, &err);
     WENV_END_WORK
     if (st) {
         Py_CLEAR(result);
@@ -114,26 +111,36 @@ done:
         PyBuffer_Release(&pb);
     if (bb.obj)
         PyBuffer_Release(&bb);
-    if (rb.obj)
-        PyBuffer_Release(&rb);
-    if (mb.obj)
-        PyBuffer_Release(&mb);
     PyBuffer_Release(&nb);
     PyBuffer_Release(&vb);
+    return result;
+}
+
+/* The inputs per vertex (WENV_VERTEX_INPUTS) are keywords by the one list. */
+static PyObject *py_reference(PyObject *self, PyObject *args, PyObject *kwargs)
+{
+    (void)self;
+    wenv_py_vertex_inputs vin;
+    PyObject *result = wenv_py_take_vertex_inputs(kwargs, &vin) < 0 ? NULL : reference_with(args, vin.rest, &vin);
+    wenv_py_vertex_inputs_release(&vin);
     return result;
 }
 
 static PyMethodDef reference_functions[] = {
     {"reference", (PyCFunction)(void (*)(void))py_reference, METH_VARARGS | METH_KEYWORDS,
      "reference(env, material, normals, view_dirs, progress=None, positions=None, occluders=None, bounce=None, "
-     "base_color=None, *, roughness=None, metallic=None, lamps=None, emission_color=None)\n--\n\n"
+     "base_color=None, *, lamps=None, emission_color=None, roughness=None, metallic=None, specular_ior_level=None, "
+     "specular_tint=None, coat_weight=None, coat_roughness=None, sheen_weight=None, sheen_roughness=None, "
+     "sheen_tint=None, alpha=None)\n--\n\n"
      "Ground truth: the reflection equation summed over every environment pixel (exact solid angles), in the "
      "units of Shader.shade.  With occluders (a wenv.Occluders) and the vertices' positions, each pixel's ray "
      "from the vertex is cast exactly, and a blocked one brings the blocker's light where it is hit: bounce "
      "(occluder vertices, 3), each occluder vertex's radiance interpolated over the hit triangle, or nothing "
      "when bounce is None (direct light only).  base_color (n, 3): each vertex's colour in place of the "
-     "material's, as Shader.shade takes it.  roughness, metallic (n,) float32: each vertex's Roughness and "
-     "Metallic in place of a Principled material's, each distinct value shaded with its own material, exactly.  "
+     "material's, as Shader.shade takes it.  roughness, metallic, specular_ior_level, coat_weight, coat_roughness, "
+     "sheen_weight, sheen_roughness, alpha (n,) and specular_tint, sheen_tint (n, 3) float32: each vertex's "
+     "input in place of a Principled material's, each distinct set of values shaded with its own material, "
+     "exactly.  "
      "lamps (a sequence of wenv.Lamp, with positions): each lamp's light summed over a fine grid of its surface "
      "(or its cone of directions), each point with the exact BRDF and, with occluders, its own ray.  "
      "emission_color (n, 3): each vertex's Emission Color in place of a Principled material's."},

@@ -413,33 +413,27 @@ static int parse_colour(ShaderObject *self, PyObject *obj, size_t n, int per_ver
     return 0;
 }
 
-/* Whether Roughness or Metallic per vertex were given (not None). */
-static int given(PyObject *obj) { return obj && obj != Py_None; }
-
 /* Whether the shader's material shades as a family (material_family.h) with these per-vertex
- * inputs: a Roughness or Metallic per vertex, or a colour per vertex on a metal. */
-static int per_vertex_material(ShaderObject *self, PyObject *colour, PyObject *roughness, PyObject *metallic)
+ * inputs: any of WENV_VERTEX_INPUTS per vertex, or a colour per vertex on a metal. */
+static int per_vertex_material(ShaderObject *self, PyObject *colour, const wenv_py_vertex_inputs *vin)
 {
-    return given(roughness) || given(metallic) ||
-           (given(colour) && wenv_material_family_needed_for_colour(wenv_py_material(self->material, "material")));
+    return wenv_py_vertex_inputs_given(vin) ||
+           (colour && colour != Py_None &&
+            wenv_material_family_needed_for_colour(wenv_py_material(self->material, "material")));
 }
 
-/* Roughness and Metallic per vertex (either may be NULL or None) for n vertices, and whether a colour
- * per vertex is given: the shader's family made for them, unless it was, into *rows (NULL when no
- * family is needed: per_vertex_material).  Called with the shader claimed.  -1 with the error set. */
-static int ensure_family(ShaderObject *self, PyObject *colour, PyObject *roughness, PyObject *metallic, size_t n,
+/* The inputs per vertex for n vertices, and whether a colour per vertex is given: the shader's family
+ * made for them, unless it was, into *rows (NULL when no family is needed: per_vertex_material).
+ * Called with the shader claimed.  -1 with the error set. */
+static int ensure_family(ShaderObject *self, PyObject *colour, wenv_py_vertex_inputs *vin, size_t n,
                          wenv_family_rows *rows, const wenv_family_rows **out)
 {
     *out = NULL;
-    if (!per_vertex_material(self, colour, roughness, metallic))
+    if (!per_vertex_material(self, colour, vin))
         return 0;
-    Py_buffer rb = {0}, mb = {0};
-    if ((given(roughness) && wenv_py_get_vertex_values(roughness, "roughness", n, &rb) < 0) ||
-        (given(metallic) && wenv_py_get_vertex_values(metallic, "metallic", n, &mb) < 0)) {
-        if (rb.obj)
-            PyBuffer_Release(&rb);
+    wenv_vertex_inputs vi;
+    if (wenv_py_vertex_inputs_read(vin, n, &vi) < 0)
         return -1;
-    }
     wenv_error err = {0};
     wenv_status st;
     const struct wenv_material *base = wenv_py_material(self->material, "material");
@@ -447,13 +441,8 @@ static int ensure_family(ShaderObject *self, PyObject *colour, PyObject *roughne
     /* the members must fit among the materials the method keeps (it refuses the family if it keeps none) */
     size_t kept = self->method->materials_kept ? self->method->materials_kept(self->state) : 0;
     size_t room = kept > WENV_FAMILY_SPARE_KEPT ? kept - WENV_FAMILY_SPARE_KEPT : 1;
-    st = wenv_material_family_ensure(&self->family, base, rb.obj ? rb.buf : NULL, mb.obj ? mb.buf : NULL, n,
-                                     given(colour), room, &err);
+    st = wenv_material_family_ensure(&self->family, base, &vi, n, colour && colour != Py_None, room, &err);
     WENV_END_WORK
-    if (rb.obj)
-        PyBuffer_Release(&rb);
-    if (mb.obj)
-        PyBuffer_Release(&mb);
     if (st) {
         wenv_py_raise(&err);
         return -1;
@@ -580,14 +569,14 @@ static int positions_for(PyObject *obj, size_t n, Py_buffer *pb)
     return 0;
 }
 
-static PyObject *Shader_shade(ShaderObject *self, PyObject *args, PyObject *kwargs)
+static PyObject *shade_with(ShaderObject *self, PyObject *args, PyObject *kwargs, wenv_py_vertex_inputs *vin)
 {
-    static char *kwlist[] = {"normals",   "view_dirs", "occlusion", "bounce",         "base_color",
-                             "roughness", "metallic",  "positions", "lamps", "emission_color", NULL};
-    PyObject *nobj, *vobj, *occ_obj = Py_None, *bounce_obj = NULL, *colour_obj = NULL, *rough_obj = NULL;
-    PyObject *metal_obj = NULL, *pos_obj = Py_None, *lamps_obj = Py_None, *emit_obj = Py_None;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|$OOOOOOOO:shade", kwlist, &nobj, &vobj, &occ_obj, &bounce_obj,
-                                     &colour_obj, &rough_obj, &metal_obj, &pos_obj, &lamps_obj, &emit_obj))
+    static char *kwlist[] = {"normals",   "view_dirs", "occlusion", "bounce", "base_color",
+                             "positions", "lamps",     "emission_color", NULL};
+    PyObject *nobj, *vobj, *occ_obj = Py_None, *bounce_obj = NULL, *colour_obj = NULL;
+    PyObject *pos_obj = Py_None, *lamps_obj = Py_None, *emit_obj = Py_None;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|$OOOOOO:shade", kwlist, &nobj, &vobj, &occ_obj, &bounce_obj,
+                                     &colour_obj, &pos_obj, &lamps_obj, &emit_obj))
         return NULL;
     Py_buffer nb, vb, bb = {0}, pb = {0};
     size_t n, nvw;
@@ -633,12 +622,12 @@ static PyObject *Shader_shade(ShaderObject *self, PyObject *args, PyObject *kwar
     }
     if (occ_obj != Py_None && parse_scene(self, occ_obj, bounce_obj, n, &scene, &bb) < 0)
         goto done;
-    if (parse_colour(self, colour_obj, n, per_vertex_material(self, colour_obj, rough_obj, metal_obj), &table,
+    if (parse_colour(self, colour_obj, n, per_vertex_material(self, colour_obj, vin), &table,
                      &colour, &rgb) < 0 ||
         claim(self) < 0)
         goto done;
     claimed = 1;
-    if (ensure_family(self, colour_obj, rough_obj, metal_obj, n, &family_rows, &family) < 0 ||
+    if (ensure_family(self, colour_obj, vin, n, &family_rows, &family) < 0 ||
         ensure_lamps(self, lamps_obj, pb.obj ? pb.buf : NULL, nb.buf, n, occ_obj != Py_None ? &scene : NULL,
                      &lamp_rows, &lamps) < 0)
         goto done;
@@ -662,14 +651,14 @@ done:
     return result;
 }
 
-static PyObject *Shader_diffuse_light(ShaderObject *self, PyObject *args, PyObject *kwargs)
+static PyObject *diffuse_light_with(ShaderObject *self, PyObject *args, PyObject *kwargs,
+                                    wenv_py_vertex_inputs *vin)
 {
-    static char *kwlist[] = {"normals",   "occlusion", "base_color",     "roughness", "metallic",
-                             "positions", "lamps",     "emission_color", NULL};
-    PyObject *nobj, *occ_obj = Py_None, *colour_obj = NULL, *rough_obj = NULL, *metal_obj = NULL;
+    static char *kwlist[] = {"normals", "occlusion", "base_color", "positions", "lamps", "emission_color", NULL};
+    PyObject *nobj, *occ_obj = Py_None, *colour_obj = NULL;
     PyObject *pos_obj = Py_None, *lamps_obj = Py_None, *emit_obj = Py_None;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "O|$OOOOOOO:diffuse_light", kwlist, &nobj, &occ_obj, &colour_obj,
-                                     &rough_obj, &metal_obj, &pos_obj, &lamps_obj, &emit_obj))
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "O|$OOOOO:diffuse_light", kwlist, &nobj, &occ_obj, &colour_obj,
+                                     &pos_obj, &lamps_obj, &emit_obj))
         return NULL;
     if (!self->method->diffuse_light) {
         PyErr_Format(PyExc_ValueError, "method '%s' does not give the diffuse light: use a wavelet method",
@@ -696,12 +685,12 @@ static PyObject *Shader_diffuse_light(ShaderObject *self, PyObject *args, PyObje
         goto done;
     if (occ_obj != Py_None && parse_scene(self, occ_obj, Py_None, n, &scene, &bb) < 0)
         goto done;
-    if (parse_colour(self, colour_obj, n, per_vertex_material(self, colour_obj, rough_obj, metal_obj), &table,
+    if (parse_colour(self, colour_obj, n, per_vertex_material(self, colour_obj, vin), &table,
                      &colour, &rgb) < 0 ||
         claim(self) < 0)
         goto done;
     claimed = 1;
-    if (ensure_family(self, colour_obj, rough_obj, metal_obj, n, &family_rows, &family) == 0 &&
+    if (ensure_family(self, colour_obj, vin, n, &family_rows, &family) == 0 &&
         ensure_lamps(self, lamps_obj, pb.obj ? pb.buf : NULL, nb.buf, n, occ_obj != Py_None ? &scene : NULL,
                      &lamp_rows, &lamps) == 0)
         result = shade_arrays(self, nb.buf, NULL, n, occ_obj != Py_None ? &scene : NULL, rgb ? &colour : NULL,
@@ -853,19 +842,19 @@ static void raise_eye_at_vertex(const float *p, const double eye[3], size_t n, s
     Py_DECREF(index);
 }
 
-static PyObject *Shader_shade_mesh(ShaderObject *self, PyObject *args, PyObject *kwargs)
+static PyObject *shade_mesh_with(ShaderObject *self, PyObject *args, PyObject *kwargs, wenv_py_vertex_inputs *vin)
 {
-    static char *kwlist[] = {"positions", "normals", "eye",    "cull",      "view_projection", "out",
-                             "first",     "budget",  "occlusion", "bounce", "base_color", "roughness",
-                             "metallic",  "lamps",  "emission_color", NULL};
+    static char *kwlist[] = {"positions", "normals",   "eye",    "cull",       "view_projection", "out",
+                             "first",     "budget",    "occlusion", "bounce", "base_color",      "lamps",
+                             "emission_color", NULL};
     PyObject *pobj, *nobj, *eobj, *vp_obj = Py_None, *out_obj = Py_None, *budget_obj = Py_None, *first_obj = NULL;
-    PyObject *occ_obj = Py_None, *bounce_obj = NULL, *colour_obj = NULL, *rough_obj = NULL, *metal_obj = NULL;
+    PyObject *occ_obj = Py_None, *bounce_obj = NULL, *colour_obj = NULL;
     PyObject *lamps_obj = Py_None, *emit_obj = Py_None;
     int cull = 0;
     size_t first = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO|$pOOOOOOOOOOO:shade_mesh", kwlist, &pobj, &nobj, &eobj, &cull,
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO|$pOOOOOOOOO:shade_mesh", kwlist, &pobj, &nobj, &eobj, &cull,
                                      &vp_obj, &out_obj, &first_obj, &budget_obj, &occ_obj, &bounce_obj, &colour_obj,
-                                     &rough_obj, &metal_obj, &lamps_obj, &emit_obj))
+                                     &lamps_obj, &emit_obj))
         return NULL;
     if (occ_obj == Py_None && bounce_obj) {
         PyErr_SetString(PyExc_ValueError, "bounce is read only with occlusion (what blocks the light it fills in)");
@@ -919,7 +908,7 @@ static PyObject *Shader_shade_mesh(ShaderObject *self, PyObject *args, PyObject 
     }
     if (occ_obj != Py_None && parse_scene(self, occ_obj, bounce_obj, np, &scene, &bb) < 0)
         goto done;
-    if (parse_colour(self, colour_obj, np, per_vertex_material(self, colour_obj, rough_obj, metal_obj), &table,
+    if (parse_colour(self, colour_obj, np, per_vertex_material(self, colour_obj, vin), &table,
                      &colour, &rgb) < 0)
         goto done;
     if (emit_obj != Py_None && !(emission = wenv_py_vertex_colours(emit_obj, "emission_color", np, 0)))
@@ -968,7 +957,7 @@ static PyObject *Shader_shade_mesh(ShaderObject *self, PyObject *args, PyObject 
     const wenv_family_rows *family;
     wenv_lamp_rows lamp_rows;
     const wenv_lamp_rows *lamps;
-    if (ensure_family(self, colour_obj, rough_obj, metal_obj, np, &family_rows, &family) < 0 ||
+    if (ensure_family(self, colour_obj, vin, np, &family_rows, &family) < 0 ||
         ensure_lamps(self, lamps_obj, pb.buf, nb.buf, np, occ_obj != Py_None ? &scene : NULL, &lamp_rows, &lamps) < 0)
         goto fail;
     if (occ_obj != Py_None &&
@@ -1120,6 +1109,21 @@ static PyObject *Shader_get_stats(ShaderObject *self, void *closure)
     }
     return d;
 }
+
+/* Shader.shade, diffuse_light and shade_mesh take the inputs per vertex (WENV_VERTEX_INPUTS) as
+ * keywords by the one list, the rest as each declares them. */
+#define WITH_VERTEX_INPUTS(name, with)                                                                             \
+    static PyObject *name(ShaderObject *self, PyObject *args, PyObject *kwargs)                                    \
+    {                                                                                                              \
+        wenv_py_vertex_inputs vin;                                                                                 \
+        PyObject *result =                                                                                         \
+            wenv_py_take_vertex_inputs(kwargs, &vin) < 0 ? NULL : with(self, args, vin.rest, &vin);                \
+        wenv_py_vertex_inputs_release(&vin);                                                                       \
+        return result;                                                                                             \
+    }
+WITH_VERTEX_INPUTS(Shader_shade, shade_with)
+WITH_VERTEX_INPUTS(Shader_diffuse_light, diffuse_light_with)
+WITH_VERTEX_INPUTS(Shader_shade_mesh, shade_mesh_with)
 
 static PyMethodDef Shader_methods[] = {
     {"shade", (PyCFunction)(void (*)(void))Shader_shade, METH_VARARGS | METH_KEYWORDS,

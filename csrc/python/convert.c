@@ -366,3 +366,72 @@ wenv_progress wenv_py_progress(wenv_py_progress_bridge *bridge)
     }
     return p;
 }
+
+int wenv_py_take_vertex_inputs(PyObject *kwargs, wenv_py_vertex_inputs *v)
+{
+    memset(v, 0, sizeof *v);
+    if (!kwargs)
+        return 0;
+    if (!(v->rest = PyDict_Copy(kwargs)))
+        return -1;
+    for (int k = 0; k < WENV_VERTEX_INPUT_COUNT; k++) {
+        PyObject *item = PyDict_GetItemString(v->rest, wenv_vertex_input_list[k].name);
+        if (!item)
+            continue;
+        Py_INCREF(item);
+        v->obj[k] = item;
+        if (PyDict_DelItemString(v->rest, wenv_vertex_input_list[k].name) < 0)
+            return -1;
+    }
+    return 0;
+}
+
+int wenv_py_vertex_inputs_given(const wenv_py_vertex_inputs *v)
+{
+    for (int k = 0; k < WENV_VERTEX_INPUT_COUNT; k++)
+        if (v->obj[k] && v->obj[k] != Py_None)
+            return 1;
+    return 0;
+}
+
+int wenv_py_vertex_inputs_read(wenv_py_vertex_inputs *v, size_t n, wenv_vertex_inputs *out)
+{
+    memset(out, 0, sizeof *out);
+    for (int k = 0; k < WENV_VERTEX_INPUT_COUNT; k++) {
+        const char *name = wenv_vertex_input_list[k].name;
+        size_t width = (size_t)wenv_vertex_input_list[k].n, rows = n;
+        if (!v->obj[k] || v->obj[k] == Py_None)
+            continue;
+        if (!v->values[k]) {
+            Py_buffer view;
+            if (width == 1 ? wenv_py_get_vertex_values(v->obj[k], name, n, &view)
+                           : wenv_py_get_vec3_array(v->obj[k], name, 0, &view, &rows, NULL))
+                return -1;
+            if (rows != n) {
+                PyErr_Format(PyExc_ValueError, "%s has %zu rows, one per vertex (%zu)", name, rows, n);
+                PyBuffer_Release(&view);
+                return -1;
+            }
+            v->values[k] = PyMem_Malloc((n ? n : 1) * width * sizeof(float));
+            if (v->values[k])
+                memcpy(v->values[k], view.buf, n * width * sizeof(float));
+            PyBuffer_Release(&view);
+            if (!v->values[k]) {
+                PyErr_NoMemory();
+                return -1;
+            }
+        }
+        out->value[k] = v->values[k];
+    }
+    return 0;
+}
+
+void wenv_py_vertex_inputs_release(wenv_py_vertex_inputs *v)
+{
+    for (int k = 0; k < WENV_VERTEX_INPUT_COUNT; k++) {
+        Py_XDECREF(v->obj[k]);
+        PyMem_Free(v->values[k]);
+    }
+    Py_XDECREF(v->rest);
+    memset(v, 0, sizeof *v);
+}

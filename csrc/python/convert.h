@@ -8,6 +8,7 @@
 
 #include "base/error.h"
 #include "base/progress.h"
+#include "scene/principled_inputs.h"
 
 /* Raises the Python exception that matches err->status (ValueError, TypeError, OSError,
  * MemoryError, wenv.CancelledError).  Always returns NULL for convenient `return`. */
@@ -90,5 +91,19 @@ float *wenv_py_base_colours(PyObject *obj, size_t n);
 /* One float32 value per vertex (1-D, n of them) from `obj` named `name`: a view of its buffer into
  * *view (released by the caller), or -1 with TypeError/ValueError set. */
 int wenv_py_get_vertex_values(PyObject *obj, const char *name, size_t n, Py_buffer *view);
+
+/* The inputs per vertex (principled_inputs.h's WENV_VERTEX_INPUTS) a call takes as keywords:
+ * wenv_py_take_vertex_inputs takes them out of kwargs (the rest in `rest`, for PyArg_Parse...),
+ * wenv_py_vertex_inputs_read checks and copies them for n vertices (n values each, n x 3 for a
+ * colour), wenv_py_vertex_inputs_release frees what either made. */
+typedef struct {
+    PyObject *obj[WENV_VERTEX_INPUT_COUNT];
+    float *values[WENV_VERTEX_INPUT_COUNT];
+    PyObject *rest;
+} wenv_py_vertex_inputs;
+int wenv_py_take_vertex_inputs(PyObject *kwargs, wenv_py_vertex_inputs *v);
+int wenv_py_vertex_inputs_given(const wenv_py_vertex_inputs *v);
+int wenv_py_vertex_inputs_read(wenv_py_vertex_inputs *v, size_t n, wenv_vertex_inputs *out);
+void wenv_py_vertex_inputs_release(wenv_py_vertex_inputs *v);
 
 #endif

@@ -278,16 +278,18 @@ static wenv_status reference_one(const wenv_envmap *env, const wenv_material *ma
 
 /* ---- a material per vertex ---- */
 
-/* A vertex's material: roughness, metallic and, where the colour enters its metal, its colour. */
+/* A vertex's material: its inputs per vertex (WENV_VERTEX_INPUTS, channel by channel) and, where the
+ * colour enters its metal, its colour. */
+#define KEY_VALUES (WENV_VERTEX_INPUT_CHANNELS + 3)
 typedef struct {
-    float v[5];
+    float v[KEY_VALUES];
     size_t i;
 } vertex_key;
 
 static int compare_keys(const void *a, const void *b)
 {
     const vertex_key *x = a, *y = b;
-    for (int k = 0; k < 5; k++)
+    for (int k = 0; k < KEY_VALUES; k++)
         if (x->v[k] != y->v[k])
             return x->v[k] < y->v[k] ? -1 : 1;
     return (x->i > y->i) - (x->i < y->i);
@@ -309,30 +311,67 @@ static int report_group(void *ctx, double fraction)
 
 static float clamp01f(float x) { return x < 0.0f ? 0.0f : (x > 1.0f ? 1.0f : x); }
 
+/* Vertex i's key: each input's value clamped as Cycles clamps it (the material's own where not given),
+ * then its colour where the colour enters its metal. */
+static void key_of(const wenv_principled_inputs *in, const wenv_vertex_inputs *vi, const float *base_color,
+                   int colour_in_metal, size_t i, vertex_key *key)
+{
+    size_t at = 0;
+    memset(key, 0, sizeof *key);
+    for (int k = 0; k < WENV_VERTEX_INPUT_COUNT; k++) {
+        const wenv_vertex_input *row = &wenv_vertex_input_list[k];
+        for (int c = 0; c < row->n; c++, at++)
+            key->v[at] = vi && vi->value[k]
+                             ? (float)wenv_vertex_input_clamp(row, vi->value[k][(size_t)row->n * i + (size_t)c])
+                             : (float)wenv_principled_field_c(in, row->row)[c];
+    }
+    for (int c = 0; colour_in_metal && c < 3; c++)
+        key->v[at + (size_t)c] = clamp01f(base_color[3 * i + (size_t)c]);
+    key->i = i;
+}
+
+/* The material of a key (key_of). */
+static wenv_status key_material(const wenv_principled_inputs *in, const vertex_key *key, int colour_in_metal,
+                                wenv_material **out, wenv_error *err)
+{
+    wenv_principled_inputs at = *in;
+    size_t j = 0;
+    for (int k = 0; k < WENV_VERTEX_INPUT_COUNT; k++) {
+        const wenv_vertex_input *row = &wenv_vertex_input_list[k];
+        for (int c = 0; c < row->n; c++)
+            wenv_principled_field(&at, row->row)[c] = key->v[j++];
+    }
+    for (int c = 0; colour_in_metal && c < 3; c++)
+        at.base_color[c] = key->v[j + (size_t)c];
+    return wenv_principled_create(out, &at, err);
+}
+
 wenv_status wenv_reference_per_vertex(const wenv_envmap *env, const wenv_material *mat, const float *normals,
                                       const float *views, size_t n, const wenv_occluders *occ, const float *positions,
-                                      const float *bounce, const float *base_color, const float *roughness,
-                                      const float *metallic, const wenv_lamp *lamps, size_t n_lamps,
-                                      const float *emission, float *out, const wenv_progress *progress,
-                                      wenv_error *err)
+                                      const float *bounce, const float *base_color, const wenv_vertex_inputs *vi,
+                                      const wenv_lamp *lamps, size_t n_lamps, const float *emission, float *out,
+                                      const wenv_progress *progress, wenv_error *err)
 {
     const wenv_principled_inputs *in = wenv_principled_inputs_of(mat);
+    int any = wenv_vertex_inputs_any(vi);
     /* a metal's colour is its Fresnel's: each colour its own material */
-    int colour_in_metal = base_color && in && (in->metallic > 0.0 || metallic);
-    if (!roughness && !metallic && !colour_in_metal)
+    int colour_in_metal = base_color && in && (in->metallic > 0.0 || (vi && vi->value[WENV_VERTEX_metallic]));
+    if (!any && !colour_in_metal)
         return wenv_reference(env, mat, normals, views, n, occ, positions, bounce, base_color, lamps, n_lamps,
                               emission, out, progress, err);
     if (!in)
         return wenv_error_set(err, WENV_ERR_VALUE,
-                              "a Roughness or Metallic per vertex needs a Principled material (wenv.Principled), not %s",
+                              "inputs per vertex (Roughness, Metallic...) need a Principled material (wenv.Principled), "
+                              "not %s",
                               wenv_material_kind_name(mat));
-    for (size_t i = 0; i < n; i++) {
-        if (roughness && !isfinite(roughness[i]))
-            return wenv_error_set(err, WENV_ERR_VALUE, "roughness[%zu] is %g: a vertex's roughness must be finite", i,
-                                  (double)roughness[i]);
-        if (metallic && !isfinite(metallic[i]))
-            return wenv_error_set(err, WENV_ERR_VALUE, "metallic[%zu] is %g: a vertex's metallic must be finite", i,
-                                  (double)metallic[i]);
+    for (int k = 0; vi && k < WENV_VERTEX_INPUT_COUNT; k++) {
+        const float *v = vi->value[k];
+        size_t count = (size_t)wenv_vertex_input_list[k].n * n;
+        for (size_t j = 0; v && j < count; j++)
+            if (!isfinite(v[j]))
+                return wenv_error_set(err, WENV_ERR_VALUE, "%s[%zu] is %g: a vertex's %s must be finite",
+                                      wenv_vertex_input_list[k].name, j / (size_t)wenv_vertex_input_list[k].n,
+                                      (double)v[j], wenv_vertex_input_list[k].name);
     }
     vertex_key *key = malloc((n ? n : 1) * sizeof *key);
     /* a group's normals, views, positions, colours, emission colours and radiance */
@@ -342,13 +381,8 @@ wenv_status wenv_reference_per_vertex(const wenv_envmap *env, const wenv_materia
         free(work);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the reference");
     }
-    for (size_t i = 0; i < n; i++) {
-        key[i] = (vertex_key){{roughness ? clamp01f(roughness[i]) : (float)in->roughness,
-                               metallic ? clamp01f(metallic[i]) : (float)in->metallic, 0.0f, 0.0f, 0.0f},
-                              i};
-        for (int c = 0; colour_in_metal && c < 3; c++)
-            key[i].v[2 + c] = clamp01f(base_color[3 * i + (size_t)c]);
-    }
+    for (size_t i = 0; i < n; i++)
+        key_of(in, vi, base_color, colour_in_metal, i, &key[i]);
     qsort(key, n, sizeof *key, compare_keys);
     wenv_status st = WENV_OK;
     for (size_t a = 0, b; a < n && !st; a = b) {
@@ -368,13 +402,8 @@ wenv_status wenv_reference_per_vertex(const wenv_envmap *env, const wenv_materia
             if (emission)
                 memcpy(em + 3 * k, emission + 3 * i, 3 * sizeof(float));
         }
-        wenv_principled_inputs at = *in;
-        at.roughness = key[a].v[0];
-        at.metallic = key[a].v[1];
-        for (int c = 0; colour_in_metal && c < 3; c++)
-            at.base_color[c] = key[a].v[2 + c];
         wenv_material *group_mat;
-        if ((st = wenv_principled_create(&group_mat, &at, err)))
+        if ((st = key_material(in, &key[a], colour_in_metal, &group_mat, err)))
             break;
         group_progress gp = {progress, (double)a / (double)n, (double)count / (double)n};
         wenv_progress inner = {progress && progress->report ? report_group : NULL, &gp};

@@ -14,6 +14,7 @@
 #include <stddef.h>
 
 #include "base/error.h"
+#include "scene/principled_inputs.h"
 #include "base/progress.h"
 #include "scene/envmap.h"
 #include "scene/lamp.h"
@@ -27,16 +28,15 @@ wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, con
                            const float *bounce, const float *base_color, const wenv_lamp *lamps, size_t n_lamps,
                            const float *emission, float *out, const wenv_progress *progress, wenv_error *err);
 
-/* The same with each vertex's Roughness and Metallic (n values each; either NULL: the material's own),
- * for a Principled material (WENV_ERR_VALUE otherwise): the vertices of one (roughness, metallic) pair,
- * clamped to [0, 1] as Cycles clamps them, are shaded with that material, exactly.  With a colour per
+/* The same with each vertex's inputs (vi: principled_inputs.h's WENV_VERTEX_INPUTS, each NULL for the
+ * material's own), for a Principled material (WENV_ERR_VALUE otherwise): the vertices of one set of
+ * values, clamped as Cycles clamps them, are shaded with that material, exactly.  With a colour per
  * vertex on a material with a metal (Metallic above 0, here or per vertex), each colour is its own
  * material too, the metal's Fresnel colour being the Base Color. */
 wenv_status wenv_reference_per_vertex(const wenv_envmap *env, const wenv_material *mat, const float *normals,
                                       const float *views, size_t n, const wenv_occluders *occ, const float *positions,
-                                      const float *bounce, const float *base_color, const float *roughness,
-                                      const float *metallic, const wenv_lamp *lamps, size_t n_lamps,
-                                      const float *emission, float *out, const wenv_progress *progress,
-                                      wenv_error *err);
+                                      const float *bounce, const float *base_color, const wenv_vertex_inputs *vi,
+                                      const wenv_lamp *lamps, size_t n_lamps, const float *emission, float *out,
+                                      const wenv_progress *progress, wenv_error *err);
 
 #endif

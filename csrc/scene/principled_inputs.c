@@ -9,3 +9,11 @@
 
 const wenv_principled_input wenv_principled_input_list[] = {WENV_PRINCIPLED_INPUTS(WENV_PRINCIPLED_ROW)};
 const size_t wenv_principled_input_count = sizeof wenv_principled_input_list / sizeof wenv_principled_input_list[0];
+
+/* The per-vertex inputs' rows, found by name: every one is a row of the list above. */
+#define WENV_VERTEX_INPUT_ROW(name_, n_)                                                                           \
+    {.name = #name_, .n = n_, .row = &wenv_principled_input_list[WENV_PRINCIPLED_ROW_INDEX_##name_]},
+#define WENV_PRINCIPLED_ROW_ENUM(name_, ...) WENV_PRINCIPLED_ROW_INDEX_##name_,
+enum { WENV_PRINCIPLED_INPUTS(WENV_PRINCIPLED_ROW_ENUM) };
+
+const wenv_vertex_input wenv_vertex_input_list[WENV_VERTEX_INPUT_COUNT] = {WENV_VERTEX_INPUTS(WENV_VERTEX_INPUT_ROW)};

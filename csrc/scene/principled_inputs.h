@@ -120,4 +120,55 @@ static inline const double *wenv_principled_field_c(const wenv_principled_inputs
     return (const double *)((const char *)in + row->offset);
 }
 
+/* The inputs that may vary per vertex (Shader.shade's keywords, methods/material_family.h, the
+ * reference), each n float32 values or n x 3 for a colour: X(name, n).  Base Color and Emission
+ * Color vary per vertex on their own, more cheaply (vertex_colour.h, emission.h). */
+#define WENV_VERTEX_INPUTS(X)                                                                                      \
+    X(roughness, 1)                                                                                                \
+    X(metallic, 1)                                                                                                 \
+    X(specular_ior_level, 1)                                                                                       \
+    X(specular_tint, 3)                                                                                            \
+    X(coat_weight, 1)                                                                                              \
+    X(coat_roughness, 1)                                                                                           \
+    X(sheen_weight, 1)                                                                                             \
+    X(sheen_roughness, 1)                                                                                          \
+    X(sheen_tint, 3)                                                                                               \
+    X(alpha, 1)
+
+#define WENV_VERTEX_INPUT_INDEX(name, n) WENV_VERTEX_##name,
+enum { WENV_VERTEX_INPUTS(WENV_VERTEX_INPUT_INDEX) WENV_VERTEX_INPUT_COUNT };
+/* Their values a vertex, channel by channel. */
+#define WENV_VERTEX_INPUT_ADD_CHANNELS(name, n) +n
+enum { WENV_VERTEX_INPUT_CHANNELS = 0 WENV_VERTEX_INPUTS(WENV_VERTEX_INPUT_ADD_CHANNELS) };
+
+/* Each per-vertex input's values (NULL: the material's own), n x its channels. */
+typedef struct {
+    const float *value[WENV_VERTEX_INPUT_COUNT];
+} wenv_vertex_inputs;
+
+/* One per-vertex input: its keyword, channels and the row of wenv_principled_input_list it sets. */
+typedef struct {
+    const char *name;
+    int n;
+    const wenv_principled_input *row;
+} wenv_vertex_input;
+
+extern const wenv_vertex_input wenv_vertex_input_list[WENV_VERTEX_INPUT_COUNT];
+
+/* Whether any of vi's inputs is given. */
+static inline int wenv_vertex_inputs_any(const wenv_vertex_inputs *vi)
+{
+    for (int k = 0; vi && k < WENV_VERTEX_INPUT_COUNT; k++)
+        if (vi->value[k])
+            return 1;
+    return 0;
+}
+
+/* A per-vertex value clamped as Cycles clamps the input (and at WENV_PRINCIPLED_SCALE_MAX), as a double. */
+static inline double wenv_vertex_input_clamp(const wenv_vertex_input *in, float x)
+{
+    double v = (double)x, hi = in->row->hi < WENV_PRINCIPLED_SCALE_MAX ? in->row->hi : WENV_PRINCIPLED_SCALE_MAX;
+    return v < in->row->lo ? in->row->lo : (v > hi ? hi : v);
+}
+
 #endif
