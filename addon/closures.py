@@ -21,16 +21,22 @@ WHITE = (1.0, 1.0, 1.0)
 class Term:
     """One closure: Principled inputs (wenv names), a constant RGB weight, and the Mix Shader factors
     that weigh it per vertex (a tuple of (socket, take): take 'fac' or '1-fac'), and the Principled
-    BSDF node itself where the term is one (whose textured inputs are read), else None."""
+    BSDF node itself where the term is one, else None.  `linked`: {core keyword: socket} of its
+    linked inputs that the core takes per vertex (read from textures where the nodes between are
+    evaluated); `weight_socket`: a linked colour that weighs the term per vertex (a Glossy BSDF's
+    Color), or None."""
 
-    __slots__ = ("inputs", "colour", "factors", "node", "label")
+    __slots__ = ("inputs", "colour", "factors", "node", "label", "linked", "weight_socket", "outer")
 
-    def __init__(self, inputs, colour, factors, node, label):
+    def __init__(self, inputs, colour, factors, node, label, linked=None, weight_socket=None, outer=WHITE):
         self.inputs = inputs
         self.colour = colour
         self.factors = factors
         self.node = node
         self.label = label
+        self.linked = linked or {}
+        self.weight_socket = weight_socket
+        self.outer = outer  # the constant weight of the mixes above it (colour without the node's own)
 
     def key(self):
         return ("PRINCIPLED", tuple(sorted(self.inputs.items())))
@@ -50,10 +56,43 @@ def _linked_note(node, sockets):
     return [f"'{node.name}': '{s}' is linked: its unlinked value is used" for s in linked]
 
 
+# The sockets of each BSDF node that the core takes per vertex, by its keyword (the Principled's own
+# are textures.TEXTURED_SOCKETS); a Glossy BSDF's Color weighs the term instead
+PER_VERTEX_SOCKETS = {
+    "ShaderNodeBsdfDiffuse": {"Color": "base_color"},
+    "ShaderNodeBsdfGlossy": {"Roughness": "roughness"},
+    "ShaderNodeBsdfAnisotropic": {"Roughness": "roughness"},
+    "ShaderNodeBsdfMetallic": {"Base Color": "base_color", "Edge Tint": "specular_tint", "Roughness": "roughness"},
+    "ShaderNodeBsdfSheen": {"Color": "sheen_tint", "Roughness": "sheen_roughness"},
+    "ShaderNodeEmission": {"Color": "emission_color"},
+}
+WEIGHT_SOCKETS = {"ShaderNodeBsdfGlossy": "Color", "ShaderNodeBsdfAnisotropic": "Color"}
+
+
+def linked_sockets(node):
+    """({core keyword: socket} of a BSDF node's linked inputs the core takes per vertex, the linked
+    colour weighing it or None)."""
+    if node.bl_idname == "ShaderNodeBsdfPrincipled":
+        from .textures import TEXTURED_SOCKETS
+        table = TEXTURED_SOCKETS
+    else:
+        table = PER_VERTEX_SOCKETS.get(node.bl_idname, {})
+    linked = {kw: node.inputs[sock] for sock, kw in table.items()
+              if node.inputs.get(sock) is not None and node.inputs[sock].is_linked}
+    weight = WEIGHT_SOCKETS.get(node.bl_idname)
+    return linked, (node.inputs[weight] if weight and node.inputs[weight].is_linked else None)
+
+
+def _unread_note(node, sockets):
+    """_linked_note of the sockets the core does not take per vertex."""
+    read = set(PER_VERTEX_SOCKETS.get(node.bl_idname, {})) | {WEIGHT_SOCKETS.get(node.bl_idname)}
+    return _linked_note(node, [s for s in sockets if s not in read])
+
+
 def _diffuse(node):
     inputs = _defaults() | {"base_color": _value(node.inputs["Color"]), "specular_ior_level": 0.0,
                             "diffuse_roughness": _value(node.inputs["Roughness"])}
-    return inputs, WHITE, _linked_note(node, ("Color", "Roughness", "Normal"))
+    return inputs, WHITE, _unread_note(node, ("Color", "Roughness", "Normal"))
 
 
 def _distribution(node, allowed=("GGX", "MULTI_GGX")):
@@ -70,7 +109,7 @@ def _glossy(node):
     colour = _value(node.inputs["Color"])
     inputs = _defaults() | {"base_color": WHITE, "metallic": 1.0, "specular_tint": WHITE, "distribution": dist,
                             "roughness": _value(node.inputs["Roughness"])}
-    notes = _linked_note(node, ("Color", "Roughness", "Anisotropy", "Normal"))
+    notes = _unread_note(node, ("Color", "Roughness", "Anisotropy", "Normal"))
     if node.inputs.get("Anisotropy") is not None and _value(node.inputs["Anisotropy"]) != 0.0:
         notes.append(f"'{node.name}': anisotropy is not shaded")
     if dist == "multiscatter_ggx" and colour != WHITE:
@@ -87,7 +126,7 @@ def _metallic(node):
     inputs = _defaults() | {"base_color": _value(node.inputs["Base Color"]), "metallic": 1.0,
                             "specular_tint": _value(node.inputs["Edge Tint"]), "distribution": dist,
                             "roughness": _value(node.inputs["Roughness"])}
-    return inputs, WHITE, _linked_note(node, ("Base Color", "Edge Tint", "Roughness", "Anisotropy", "Normal"))
+    return inputs, WHITE, _unread_note(node, ("Base Color", "Edge Tint", "Roughness", "Anisotropy", "Normal"))
 
 
 def _sheen(node):
@@ -97,14 +136,14 @@ def _sheen(node):
     inputs = _defaults() | {"base_color": (0.0, 0.0, 0.0), "specular_ior_level": 0.0, "sheen_weight": 1.0,
                             "sheen_tint": _value(node.inputs["Color"]),
                             "sheen_roughness": _value(node.inputs["Roughness"])}
-    return inputs, WHITE, _linked_note(node, ("Color", "Roughness", "Normal"))
+    return inputs, WHITE, _unread_note(node, ("Color", "Roughness", "Normal"))
 
 
 def _emission(node):
     inputs = _defaults() | {"base_color": (0.0, 0.0, 0.0), "specular_ior_level": 0.0,
                             "emission_color": _value(node.inputs["Color"]),
                             "emission_strength": _value(node.inputs["Strength"])}
-    return inputs, WHITE, _linked_note(node, ("Color", "Strength"))
+    return inputs, WHITE, _unread_note(node, ("Color", "Strength"))
 
 
 CLOSURES = {"ShaderNodeBsdfDiffuse": _diffuse, "ShaderNodeBsdfGlossy": _glossy, "ShaderNodeBsdfAnisotropic": _glossy,
@@ -185,12 +224,13 @@ def terms(material):
         if kind == "ShaderNodeBsdfPrincipled":
             from . import materials
             inputs, _ = materials.principled_inputs(node)
-            found.append(Term(inputs, colour, factors, node, node.name))
+            found.append(Term(inputs, colour, factors, node, node.name, *linked_sockets(node)))
         elif kind in CLOSURES:
             inputs, weight, said = CLOSURES[kind](node)
             notes.extend(said)
             if inputs is not None:
-                found.append(Term(inputs, tuple(a * b for a, b in zip(colour, weight)), factors, None, node.name))
+                found.append(Term(inputs, tuple(a * b for a, b in zip(colour, weight)), factors, None, node.name,
+                                  *linked_sockets(node), outer=colour))
         elif kind == "ShaderNodeMixShader":
             fac, fac_groups = _factor(node.inputs[0], groups)
             shaders = [s for s in node.inputs if s.type == "SHADER"]

@@ -337,8 +337,12 @@ def models_shadows(shader):
     return shader.method in SHADOW_METHODS
 
 
-# The inputs the core shades per vertex through a family of materials (the wavelet methods only)
-VERTEX_MATERIAL_INPUTS = ("roughness", "metallic")
+# The inputs the core shades per vertex through a family of materials (the wavelet methods only): all
+# it takes per vertex but the colours every method takes
+VERTEX_MATERIAL_INPUTS = tuple(row["name"] for row in PRINCIPLED_INPUTS
+                               if row["per_vertex"] and row["name"] not in ("base_color", "emission_color"))
+# how much may vary per vertex at once (the core's limits)
+PER_VERTEX_LIMITS = wenv.Principled.PER_VERTEX
 
 
 def takes_vertex_materials(shader):

@@ -25,7 +25,7 @@ def gloss_readings(key):
 
 def reading_key(material):
     """(material_key the glossmeter reads, what it reads of textures or None): a Principled BSDF whose
-    Base Color, Roughness, Metallic or Emission Color comes from Image Textures (through nodes wenv evaluates) is read
+    inputs come from Image Textures (through nodes wenv evaluates) is read
     with each texture at its image's mean, the nodes between applied to it (a reading of the whole
     surface, as an instrument's aperture would average a fine pattern); other linked inputs at their
     unlinked values, which the Material panel names."""
@@ -48,10 +48,8 @@ def reading_key(material):
         if got is None:
             continue
         value, names = got
-        if keyword in textures.COLOUR_KEYWORDS:
-            inputs[keyword] = tuple(min(max(float(c), 0.0), 1.0) for c in value)
-        else:
-            inputs[keyword] = min(max(float(value), 0.0), 1.0)
+        # (the core clamps each as Cycles does)
+        inputs[keyword] = tuple(float(c) for c in value) if keyword in textures.COLOUR_KEYWORDS else float(value)
         said.append(f"{socket}: the mean of {', '.join(repr(n) for n in names)}")
     if not said:
         return key, None

@@ -5,7 +5,7 @@ import math
 
 import bpy
 
-from . import closures, engine
+from . import closures, engine, nodes
 
 
 def _unit(x):
@@ -216,6 +216,27 @@ def _normal_source(node):
     return textures.normal_source(node)
 
 
+def _term_notes(found):
+    """What of a mixture's terms' linked inputs is read otherwise than Cycles reads it: an input the
+    core takes per vertex whose nodes are not evaluated, and a Principled BSDF's other linked inputs
+    (its unlinked values are used; a normal map in a mixture is not read)."""
+    notes = []
+    for term in found:
+        sockets = list(term.linked.values()) + ([term.weight_socket] if term.weight_socket is not None else [])
+        for socket in sockets:
+            read, said = nodes.check(socket)
+            notes += said if read is not None else [
+                f"'{term.label}': '{socket.name}' is linked ({said}): its unlinked value is used"]
+        if term.node is not None:
+            other = [s for s in PRINCIPLED_SOCKETS.values() if s not in _textured_sockets() and
+                     term.node.inputs.get(s) is not None and term.node.inputs[s].is_linked]
+            other += [s for s in GEOMETRY_SOCKETS if term.node.inputs.get(s) is not None and term.node.inputs[s].is_linked]
+            notes += [f"'{term.label}': '{s}' is linked: its unlinked value is used" if s not in GEOMETRY_SOCKETS else
+                      f"'{term.label}': '{s}' is linked: a BSDF mixed with others is shaded with the mesh's normals"
+                      for s in other]
+    return notes
+
+
 def principled_notes(material):
     """What wenv does not shade of the material as it is set up now, one sentence each: for the
     Principled model, linked inputs (textures: their unlinked value is used; normal maps), inputs
@@ -227,10 +248,7 @@ def principled_notes(material):
     if found is None:
         return closure_notes + ["no shader node wenv reads: shaded as Lambertian with its viewport colour"]
     if not closures.one_principled(found):
-        textured = [t.label for t in found if t.node is not None and
-                    any(t.node.inputs[s].is_linked for s in PRINCIPLED_SOCKETS.values() if t.node.inputs.get(s))]
-        return closure_notes + closures.factor_notes(material) + [
-            f"'{n}': linked inputs of a BSDF mixed with others are read at their unlinked value" for n in textured]
+        return closure_notes + closures.factor_notes(material) + _term_notes(found)
     node = principled_node(material)
     notes = []
     inputs, linked = principled_inputs(node)
@@ -246,6 +264,9 @@ def principled_notes(material):
             read, said = _socket_textures(node, socket)
             if read is not None:
                 notes += said  # read at the vertices: what of it is read otherwise than Cycles reads it
+                partly = NOT_SHADED.get(by_socket[socket])  # what of the input is not shaded, at any value
+                if partly and partly not in notes:
+                    notes.append(partly)
             else:
                 value = _value_text(inputs[by_socket[socket]])
                 notes.append(f"'{socket}' is linked ({said}): its unlinked value {value} is used")
@@ -253,7 +274,7 @@ def principled_notes(material):
             value = inputs[by_socket[socket]]
             notes.append(f"'{socket}' is linked (a texture or node): its unlinked value {_value_text(value)} is used")
     try:
-        notes += [NOT_SHADED[name] for name in engine.principled_unhonoured(inputs)]
+        notes += [NOT_SHADED[name] for name in engine.principled_unhonoured(inputs) if NOT_SHADED[name] not in notes]
     except ValueError as exc:  # a value the core refuses (NaN, or past what it can shade)
         notes.append(f"cannot be shaded: {exc}")
     return closure_notes + notes

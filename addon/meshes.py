@@ -10,7 +10,7 @@ class MeshData:
     position is not finite, which are left black."""
 
     __slots__ = ("domain", "positions", "normals", "slots", "count", "notes", "unplaced", "triangles", "inputs",
-                 "textured", "shading_normals", "term_weights")
+                 "textured", "shading_normals", "term_weights", "term_inputs")
 
     def __init__(self, domain, positions, normals, slots, notes=(), unplaced=None, triangles=None, inputs=None):
         self.domain = domain
@@ -21,17 +21,18 @@ class MeshData:
         self.notes = list(notes)
         self.unplaced = unplaced
         self.triangles = triangles  # (m, 3) int32 indices into positions (what casts shadows), or None
-        # Principled inputs read from textures (textures.py), by the core's keyword: "base_color"
-        # and "emission_color" (n, 3) linear, "roughness" and "metallic" (n,), float32, for the
-        # material slots in textured[keyword]
+        # Principled inputs read from textures (textures.py), by the core's keyword: colours (n, 3)
+        # linear, values (n,), float32, for the material slots in textured[keyword]
         self.inputs = dict(inputs or {})
         self.textured = {}
         # (n, 3) float32 world normals a normal map bends the shading to (textures.py), or None: the
         # mesh's, which the shadows' rays keep
         self.shading_normals = None
         # per material slot of a mixture of shader nodes: each term's weight, (3,) or (n, 3)
-        # (textures.read_term_weights)
+        # (textures.read_term_weights), and each term's inputs read from textures, {keyword: (n,) or
+        # (n, 3)}
         self.term_weights = {}
+        self.term_inputs = {}
 
 
 def _read(collection, attr, count, width, dtype=np.float32):

@@ -21,6 +21,9 @@ LUMINANCE = np.array([0.2126729, 0.7151522, 0.0721750]) / 1.0000001
 
 # The Image Texture settings read as Cycles reads them; the others are read as Linear (noted).
 INTERPOLATIONS = ("Linear", "Closest")
+# The image sources read: a file (packed or not), a generated image and UDIM tiles; a movie or an
+# image sequence is named
+IMAGE_SOURCES = ("FILE", "GENERATED", "TILED")
 
 class Unsupported(Exception):
     """A node, output or setting the evaluation does not read (its message says which)."""
@@ -100,7 +103,7 @@ class Evaluator:
         image = node.image
         if image is None:
             raise Unsupported(f"'{node.name}', which has no image")
-        if image.source not in ("FILE", "GENERATED"):
+        if image.source not in IMAGE_SOURCES:
             raise Unsupported(f"'{node.name}', whose {image.source.lower()} image wenv does not read yet")
         if node.projection != "FLAT":
             raise Unsupported(f"'{node.name}', whose {node.projection.lower()} projection wenv does not read yet")

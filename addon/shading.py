@@ -21,6 +21,14 @@ def tone_map(rgb, l_max):
     return np.clip(rgb * scale[:, None], 0, 1).astype(np.float32)
 
 
+def _with_inputs(part, inputs):
+    """part (meshes.MeshData) with its own inputs per vertex in place of part's."""
+    copy = meshes.MeshData(part.domain, part.positions, part.normals, None,
+                           inputs={k: np.ascontiguousarray(a) for k, a in inputs.items()})
+    copy.shading_normals = part.shading_normals
+    return copy
+
+
 class ShadingPlan:
     """One shading pass.  `plan_shading` fills it from Blender data on the main thread (World
     pixels, meshes as world-space arrays, material values); `compute` touches no Blender data, so
@@ -111,10 +119,7 @@ class ShadingPlan:
                 f"{shader.method} (Auto's choice; the wavelet qualities read the texture)")
         if note not in self.notes:
             self.notes.append(note)
-        copy = meshes.MeshData(part.domain, part.positions, part.normals, None,
-                               inputs={k: a for k, a in part.inputs.items() if k not in dropped})
-        copy.shading_normals = part.shading_normals
-        return copy
+        return _with_inputs(part, {k: a for k, a in part.inputs.items() if k not in dropped})
 
     def _ordered_parts(self, quality):
         """(object index, name, material key, selection, part, weight) of every part of the pass, those
@@ -131,9 +136,12 @@ class ShadingPlan:
                     order.setdefault(keys[s], len(order))
                     work.append((i, name, keys[s], sel, part, None))
                     continue
-                for (term_key, _mean), weight in zip(keys[s][1], data.term_weights.get(s, ())):
+                term_inputs = data.term_inputs.get(s, ())
+                for t, ((term_key, _mean), weight) in enumerate(zip(keys[s][1], data.term_weights.get(s, ()))):
                     order.setdefault(term_key, len(order))
-                    work.append((i, name, term_key, sel, part, weight if weight.ndim == 1 else weight[sel]))
+                    own = term_inputs[t] if t < len(term_inputs) else {}
+                    term_part = part if not own else _with_inputs(part, {k: a[sel] for k, a in own.items()})
+                    work.append((i, name, term_key, sel, term_part, weight if weight.ndim == 1 else weight[sel]))
         # stable: meshes in order within a material
         work.sort(key=lambda w: (kept.index(w[2]) if w[2] in kept else len(kept), order[w[2]]))
         return work

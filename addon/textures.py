@@ -1,21 +1,21 @@
-"""Textures: a Principled BSDF's Base Color, Roughness, Metallic and Emission Color read from their
-Image Texture nodes
-at each shaded vertex -- through the node's UV map, in the image's colour space, with its
-interpolation and extension -- and filtered over the vertex's share of the image (mip-mapped), so
-that a texture finer than the mesh averages rather than aliases.  The core then shades each vertex
-with its own values (Shader.shade(..., base_color=, roughness=, metallic=, emission_color=)): a colour
-at the cost of a multiply-add, a Roughness or Metallic through a family of materials.  What is not read yet is named,
-never used silently."""
+"""Textures: a Principled BSDF's inputs (every one the core shades per vertex: Base Color, Roughness,
+Metallic, Specular IOR Level and Tint, Coat Weight and Roughness, Sheen Weight, Roughness and Tint,
+Alpha, Emission Color) read from their Image Texture nodes at each shaded vertex -- through the
+node's UV map, in the image's colour space, with its interpolation and extension -- and filtered
+over the vertex's share of the image (mip-mapped), so that a texture finer than the mesh averages
+rather than aliases.  The core then shades each vertex with its own values (Shader.shade(...,
+base_color=, roughness=, ...)): a colour at the cost of a multiply-add, the inputs that shape the
+lobes through a family of materials.  What is not read yet is named, never used silently."""
 import numpy as np
 
 from . import closures, engine, materials, meshes, nodes, world
 
-# The sockets read from textures and the nodes between (nodes.py), by the core's keyword.  A colour
-# into a value socket is its luminance, as Cycles converts it.
-TEXTURED_SOCKETS = {"Base Color": "base_color", "Roughness": "roughness", "Metallic": "metallic",
-                    "Emission Color": "emission_color"}
+# The sockets read from textures and the nodes between (nodes.py), by the core's keyword: every input
+# the core shades per vertex (wenv.Principled.INPUTS' per_vertex).  A colour into a value socket is
+# its luminance, as Cycles converts it.
+TEXTURED_SOCKETS = {row["socket"]: row["name"] for row in engine.PRINCIPLED_INPUTS if row["per_vertex"]}
 # those read as colours (the rest as values)
-COLOUR_KEYWORDS = ("base_color", "emission_color")
+COLOUR_KEYWORDS = tuple(row["name"] for row in engine.PRINCIPLED_INPUTS if row["per_vertex"] and row["size"] == 3)
 # An Image Texture's extensions, each read as Cycles reads it (_wrap)
 EXTENSIONS = ("REPEAT", "EXTEND", "CLIP", "MIRROR")
 
@@ -77,12 +77,12 @@ class ImageCache:
         can check cheaply at each redraw -- its name, size, file, packing and whether it has unsaved
         edits -- rather than by its pixels."""
         state = (image.name_full, tuple(image.size), image.filepath_raw, image.packed_file is not None,
-                 image.is_dirty, image.colorspace_settings.name)
+                 image.is_dirty, image.colorspace_settings.name, image.source, tuple(t.number for t in image.tiles))
         means = self._means
         if state not in means:
             if len(means) > 64:
                 means.clear()
-            means[state] = tuple(float(c) for c in self.levels(image)[-1][0, 0])
+            means[state] = tuple(float(c) for c in self.mean_of(image))
         return means[state]
 
     def levels(self, image):
@@ -109,6 +109,74 @@ class ImageCache:
         return held[1]
 
 
+    def tiles(self, image):
+        """A UDIM image's pyramids, {tile number: levels}: its first tile as levels() reads the image
+        (Blender hands out that tile's pixels, unsaved edits included), each other tile from its
+        packed data or its file.  A tile neither packed nor found on disk is a SetupError naming
+        its file; a generated tile past the first is nodes.Unsupported."""
+        numbers = tuple(t.number for t in image.tiles)
+        packed = {p.tile_number: p for p in image.packed_files}
+        state = (numbers, tuple(image.size), image.filepath_raw, tuple(sorted(packed)),
+                 image.colorspace_settings.name)
+        held = self._pyramids.get(("tiles", image.name_full))
+        first = self.levels(image)
+        if held is not None and held[0] == state and held[1].get(numbers[0]) is first:
+            return held[1]
+        out = {numbers[0]: first}
+        for tile in image.tiles[1:]:
+            out[tile.number] = _pyramid(np.ascontiguousarray(
+                _tile_pixels(image, tile, packed.get(tile.number))[::-1][..., :3]))
+        self._pyramids[("tiles", image.name_full)] = (state, out)
+        return out
+
+    def mean_of(self, image):
+        """levels()[-1] of an image, or the tiles' mean for a UDIM image (each tile a unit of UV)."""
+        if image.source == "TILED":
+            return np.mean([levels[-1][0, 0] for levels in self.tiles(image).values()], axis=0)
+        return self.levels(image)[-1][0, 0]
+
+
+def _tile_pixels(image, tile, packed):
+    """RGBA (H, W, 4) linear, row 0 the top, of a UDIM tile past the first, read by Blender's own
+    loader from its packed data or its file (<UDIM> or <UVTILE> in the path), into a datablock removed
+    at once."""
+    import os
+    import tempfile
+
+    import bpy
+
+    u, v = (tile.number - 1001) % 10, (tile.number - 1001) // 10
+    path = bpy.path.abspath(image.filepath_raw.replace("<UDIM>", str(tile.number))
+                            .replace("<UVTILE>", f"u{u + 1}_v{v + 1}"), library=image.library)
+    scratch = None
+    if packed is not None and packed.packed_file is not None:
+        fd, scratch = tempfile.mkstemp(suffix=os.path.splitext(packed.filepath)[1] or ".png")
+        with os.fdopen(fd, "wb") as f:
+            f.write(packed.packed_file.data)
+        path = scratch
+    elif not os.path.isfile(path):
+        if getattr(tile, "is_generated_tile", False) or not image.filepath_raw:
+            raise nodes.Unsupported(f"'{image.name}', whose generated tile {tile.number} wenv does not read")
+        raise world.SetupError(f"Texture image '{image.name}': tile {tile.number} could not be loaded: {path}")
+    loaded = None
+    try:
+        loaded = bpy.data.images.load(path, check_existing=False)
+        loaded.colorspace_settings.name = image.colorspace_settings.name
+        rgba = world.image_pixels(loaded, f"Texture image '{image.name}' tile {tile.number}")
+    except RuntimeError as exc:
+        raise world.SetupError(f"Texture image '{image.name}': tile {tile.number} could not be loaded: {path} "
+                               f"({exc})") from None
+    finally:
+        if loaded is not None:
+            bpy.data.images.remove(loaded)
+        if scratch is not None:
+            os.remove(scratch)
+    if not np.isfinite(rgba[..., :3]).all():
+        raise world.SetupError(f"Texture image '{image.name}' has a texel that is not finite (NaN or infinite) in "
+                               f"tile {tile.number}: fix or replace the image")
+    return rgba
+
+
 def _pyramid(rgb):
     levels = [rgb]
     while max(levels[-1].shape[:2]) > 1:
@@ -127,6 +195,11 @@ def _pyramid(rgb):
 
 
 images = ImageCache()
+
+
+def pyramids(image):
+    """What sample_image reads of an image: its pyramid, or a UDIM image's tiles'."""
+    return images.tiles(image) if image.source == "TILED" else images.levels(image)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -182,6 +255,31 @@ def sample(levels, uv, footprint, interpolation, extension):
     return out
 
 
+def sample_image(pyramids, uv, footprint, interpolation, extension):
+    """sample() of an image's pyramid, or of a UDIM image's tiles ({number: levels}) as Cycles reads
+    them: the tile 1001 + floor(u) + 10 floor(v) (u in [0, 10), v >= 0) at the UVs' offset into it,
+    under the node's extension; a point on no tile reads Cycles' missing-image magenta.  footprint:
+    each point's side in UV units (times the image's texels per unit here)."""
+    if not isinstance(pyramids, dict):
+        h, w = pyramids[0].shape[:2]
+        return sample(pyramids, uv, footprint * np.sqrt(w * h), interpolation, extension)
+    cell = np.floor(uv).astype(np.int64)
+    number = np.where((cell[:, 0] >= 0) & (cell[:, 0] < 10) & (cell[:, 1] >= 0),
+                      1001 + cell[:, 0] + 10 * cell[:, 1], -1)
+    out = np.tile(MISSING_TILE, (len(uv), 1))
+    for tile, levels in pyramids.items():
+        rows = number == tile
+        if rows.any():
+            h, w = levels[0].shape[:2]
+            out[rows] = sample(levels, uv[rows] - cell[rows], footprint[rows] * np.sqrt(w * h), interpolation,
+                               extension)
+    return out
+
+
+# What Cycles reads where an image has no tile: its missing-image colour
+MISSING_TILE = np.float32([1.0, 0.0, 1.0])
+
+
 # ---------------------------------------------------------------------------------------------
 # A mesh's UVs
 
@@ -221,10 +319,9 @@ def uv_rows(mesh, uv_map, domain, corner_vert):
 
 
 def colours_at_rows(levels, source, uv, footprint, rows, n_rows):
-    """The Base Color of each shaded row: its corners' samples, averaged where a vertex has several
-    (a UV seam)."""
-    h, w = levels[0].shape[:2]
-    rgb = sample(levels, uv, footprint * np.sqrt(w * h), source.node.interpolation, source.node.extension)
+    """The colour of each shaded row: its corners' samples of the image's pyramid (or UDIM tiles:
+    pyramids()), averaged where a vertex has several (a UV seam)."""
+    rgb = sample_image(levels, uv, footprint, source.node.interpolation, source.node.extension)
     count = np.bincount(rows, minlength=n_rows).astype(np.float64)
     total = np.stack([np.bincount(rows, weights=rgb[:, c], minlength=n_rows) for c in range(3)], axis=1)
     return (total / np.maximum(count, 1.0)[:, None]).astype(np.float32)
@@ -296,7 +393,7 @@ def read_inputs(obj, depsgraph, data):
             ev = nodes.Evaluator(
                 data.count, lambda uv_map: uv_rows(mesh, uv_map, data.domain, corner_vert),
                 lambda tex, uv, footprint, rows, s=s: _colours_memo((obj.name, s, tex.name),
-                                                                   images.levels(tex.image), Source(tex, None),
+                                                                   pyramids(tex.image), Source(tex, None),
                                                                    (uv, footprint, rows), data.count))
             try:
                 values = ev.colour(sock) if keyword in COLOUR_KEYWORDS else ev.value(sock)
@@ -317,6 +414,41 @@ def read_inputs(obj, depsgraph, data):
             rows = _slot_rows(obj, data, s)
             data.inputs[keyword][rows] = values[rows]
             data.textured[keyword].add(s)
+        mine = {k: a for k, a in data.inputs.items() if s in data.textured[k]}
+        notes += _within_family_limits(mine, _slot_rows(obj, data, s), f"'{mat.name}'")
+    return notes
+
+
+# The inputs read at their mean first when more vary smoothly than a vertex may mix (the core's
+# wenv.Principled.PER_VERTEX): those whose detail shows least first, Roughness last.
+SMOOTH_ORDER = ("roughness", "specular_ior_level", "coat_roughness", "coat_weight", "sheen_roughness",
+                "sheen_weight", "specular_tint", "sheen_tint")
+
+
+def _within_family_limits(inputs, rows, where):
+    """Keeps inputs ({core keyword: array over a mesh's rows}, read at `rows`) within what the core
+    shades per vertex: values of a few distinct materials, or at most PER_VERTEX["smooth_channels"]
+    channels varying smoothly.  Past that, inputs of SMOOTH_ORDER from its end are set to their mean
+    over the rows (in place), each named."""
+    limits = engine.PER_VERTEX_LIMITS
+    mine = [k for k in SMOOTH_ORDER if k in inputs]
+    count = int(rows.sum())
+    if not mine or not count:
+        return []
+    columns = np.column_stack([inputs[k][rows].reshape(count, -1) for k in mine])
+    if len(np.unique(columns, axis=0)) <= limits["exact_materials"]:
+        return []
+    notes = []
+    varying = {k: int(np.count_nonzero(np.ptp(inputs[k][rows].reshape(count, -1), axis=0))) for k in mine}
+    for k in reversed(mine):
+        if sum(varying.values()) <= limits["smooth_channels"]:
+            break
+        if varying[k]:
+            inputs[k][rows] = inputs[k][rows].mean(axis=0)
+            varying[k] = 0
+            socket = next(sock for sock, name in TEXTURED_SOCKETS.items() if name == k)
+            notes.append(f"'{socket}' ({where}) is read at its mean: more inputs vary smoothly per vertex than "
+                         f"wenv mixes at once (at most {limits['smooth_channels']} values a vertex)")
     return notes
 
 
@@ -353,7 +485,7 @@ def _normal_map(node, chain):
     tex = world.source_node(node.inputs["Color"])
     if tex is None or tex.bl_idname != "ShaderNodeTexImage" or tex.image is None or tex.projection != "FLAT":
         return f"'{node.name}', whose Color is not an Image Texture wenv reads"
-    if world.source_node(tex.inputs["Vector"]) is not None or tex.image.source not in ("FILE", "GENERATED"):
+    if world.source_node(tex.inputs["Vector"]) is not None or tex.image.source not in nodes.IMAGE_SOURCES:
         return f"'{tex.name}', whose Vector or image source wenv does not read yet"
     chain.map = Source(tex, node.uv_map or None, node.space)
     chain.map_strength = max(float(node.inputs["Strength"].default_value), 0.0)
@@ -416,9 +548,8 @@ def _mapped_normals(mesh, source, strength, object_n, normal, to_world):
     if got is None:
         return None
     nl = len(mesh.loops)
-    levels = images.levels(source.node.image)
-    h, w = levels[0].shape[:2]
-    colour = sample(levels, got[0], got[1] * np.sqrt(w * h), source.node.interpolation, source.node.extension)
+    colour = sample_image(pyramids(source.node.image), got[0], got[1], source.node.interpolation,
+                          source.node.extension)
     c = 2.0 * colour - 1.0
     space = source.space
     if space == "TANGENT":
@@ -503,7 +634,7 @@ def read_shading_normals(obj, depsgraph, data):
             ev = nodes.Evaluator(
                 nl, lambda uv_map: uv_rows(mesh, uv_map, "CORNER", corner_vert),
                 lambda tex, uv, footprint, rows, s=s: _colours_memo((obj.name, s, "height", tex.name),
-                                                                   images.levels(tex.image), Source(tex, None),
+                                                                   pyramids(tex.image), Source(tex, None),
                                                                    (uv, footprint, rows), nl))
             try:
                 height = ev.value(chain.bump.inputs["Height"])
@@ -543,7 +674,9 @@ def read_shading_normals(obj, depsgraph, data):
 def read_term_weights(obj, depsgraph, data):
     """Sets data.term_weights[slot] for the material slots whose shader nodes are a mixture
     (closures.py): each term's weight, (3,) where it is constant, else (n, 3) over data's rows, its
-    textured Mix Shader factors read at each vertex.  Returns notes: a missing UV map (that factor's
+    textured Mix Shader factors (and a Glossy BSDF's textured Color) read at each vertex; and
+    data.term_inputs[slot]: each term's inputs read from textures, {core keyword: (n,) or (n, 3)}, as
+    read_inputs reads a lone Principled BSDF's.  Returns notes: a missing UV map (that input's
     unlinked value is used)."""
     notes = []
     mesh = corner_vert = None
@@ -554,30 +687,62 @@ def read_term_weights(obj, depsgraph, data):
         found, _ = closures.terms(mat)
         if found is None or closures.one_principled(found):
             continue
-        weights = []
-        for term in found:
+        weights, term_inputs = [], []
+        for t, term in enumerate(found):
             colour = np.float32(term.colour)
-            if not term.factors:
-                weights.append(colour)
-                continue
-            if mesh is None:
+            reads = term.factors or term.weight_socket is not None or term.linked
+            if reads and mesh is None:
                 mesh = meshes.shaded_mesh(obj, depsgraph)[0]
                 corner_vert = meshes.corner_vertices(mesh)
             ev = nodes.Evaluator(
                 data.count, lambda uv_map: uv_rows(mesh, uv_map, data.domain, corner_vert),
-                lambda tex, uv, footprint, rows, s=s: _colours_memo((obj.name, s, tex.name), images.levels(tex.image),
-                                                                   Source(tex, None), (uv, footprint, rows),
-                                                                   data.count))
-            try:
-                fac = closures._factor_values(ev, term.factors)
-            except nodes.MissingUV as exc:
-                notes.append(_no_uv_map(obj, exc.uv_map, f"a Mix Shader's Fac ('{mat.name}')",
-                                        "its unlinked value is used"))
-                fac = closures._factor_values(nodes.one_point(lambda node: np.zeros((1, 3), np.float32)),
-                                              term.factors)[0] * np.ones(data.count, np.float32)
-            if not np.isfinite(fac).all():
-                raise world.SetupError(f"Material '{mat.name}': a Mix Shader's Fac is not finite (NaN or infinite) "
-                                       f"on '{obj.name}'")
-            weights.append(fac[:, None] * colour[None, :])
+                lambda tex, uv, footprint, rows, s=s, t=t: _colours_memo((obj.name, s, t, tex.name), pyramids(tex.image),
+                                                                         Source(tex, None), (uv, footprint, rows),
+                                                                         data.count)) if reads else None
+            weight, fac = colour, np.ones((data.count, 1), np.float32)
+            if term.factors:
+                try:
+                    fac = closures._factor_values(ev, term.factors)
+                except nodes.MissingUV as exc:
+                    notes.append(_no_uv_map(obj, exc.uv_map, f"a Mix Shader's Fac ('{mat.name}')",
+                                            "its unlinked value is used"))
+                    fac = closures._factor_values(nodes.one_point(lambda node: np.zeros((1, 3), np.float32)),
+                                                  term.factors)[0] * np.ones(data.count, np.float32)
+                _check_finite(fac, mat, "a Mix Shader's Fac", obj)
+                fac = fac[:, None]
+                weight = fac * colour[None, :]
+            if term.weight_socket is not None:
+                tint = _term_input(ev, term.weight_socket, True, obj, mat, term.label, notes)
+                if tint is not None:  # in place of the node's unlinked Color in the term's colour
+                    weight = (fac * np.float32(term.outer) * np.maximum(tint, 0.0)).astype(np.float32)
+            weights.append(weight)
+            inputs = {}
+            for keyword, socket in term.linked.items():
+                got = _term_input(ev, socket, keyword in COLOUR_KEYWORDS, obj, mat, term.label, notes)
+                if got is not None:
+                    inputs[keyword] = got
+            notes += _within_family_limits(inputs, np.ones(data.count, bool), f"'{term.label}' in '{mat.name}'")
+            term_inputs.append(inputs)
         data.term_weights[s] = weights
+        data.term_inputs[s] = term_inputs
     return notes
+
+
+def _check_finite(values, mat, what, obj):
+    if not np.isfinite(values).all():
+        raise world.SetupError(f"Material '{mat.name}': {what} is not finite (NaN or infinite) on '{obj.name}'")
+
+
+def _term_input(ev, socket, colour, obj, mat, label, notes):
+    """A mixture term's linked input read at each vertex, or None where the nodes between are not
+    evaluated (materials.principled_notes names them) or the UV map is missing (noted here)."""
+    try:
+        values = ev.colour(socket) if colour else ev.value(socket)
+    except nodes.MissingUV as exc:
+        notes.append(_no_uv_map(obj, exc.uv_map, f"'{socket.name}' of '{label}' ('{mat.name}')",
+                                "its unlinked value is used"))
+        return None
+    except nodes.Unsupported:
+        return None
+    _check_finite(values, mat, f"'{label}''s '{socket.name}'", obj)
+    return np.ascontiguousarray(values, np.float32)

@@ -920,6 +920,65 @@ def test_a_textured_base_color_is_read_at_each_vertex(scene):
     np.testing.assert_allclose(attribute(plane)[1], want, rtol=1e-4, atol=1e-5)
 
 
+def udim_image(folder, colours):
+    """A UDIM image of flat 4 x 4 PNG tiles, {tile number: RGB}, in `folder`, Non-Color."""
+    for number, rgb in colours.items():
+        tile = bpy.data.images.new(f"tile {number}", 4, 4)
+        tile.pixels.foreach_set(np.tile(np.append(np.float32(rgb), np.float32(1.0)), 16))
+        tile.filepath_raw = str(folder / f"paint.{number}.png")
+        tile.file_format = "PNG"
+        tile.save()
+        bpy.data.images.remove(tile)
+    image = bpy.data.images.load(str(folder / f"paint.{min(colours)}.png"))
+    image.source = "TILED"
+    image.filepath = str(folder / "paint.<UDIM>.png")
+    image.colorspace_settings.name = "Non-Color"
+    image.reload()
+    return image
+
+
+def test_udim_tiles_are_read_as_cycles_reads_them(scene, tmp_path):
+    """A Base Color from a UDIM image of two tiles, on a grid whose UVs run over three tiles (u from 0
+    to 3): each vertex reads the tile under it at its offset into it, as Cycles does; the third tile,
+    which the image lacks, reads Cycles' missing-image magenta.  Packed, the tiles read the same."""
+    env_world(scene, "sunset")
+    image = udim_image(tmp_path, {1001: (0.8, 0.2, 0.2), 1002: (0.2, 0.2, 0.8)})
+    plane, mat = textured_plane(image)
+    mat.node_tree.nodes["Image Texture"].interpolation = "Closest"
+    uv = np.empty(len(plane.data.loops) * 2, np.float32)
+    plane.data.uv_layers.active.uv.foreach_get("vector", uv)
+    uv[0::2] = uv[0::2] * 2.999
+    uv[1::2] = uv[1::2] * 0.999  # v = 1 exactly is tile 1011's edge, as in Cycles
+    plane.data.uv_layers.active.uv.foreach_set("vector", uv)
+    u = np.zeros(len(plane.data.vertices), np.float32)
+    u[[l.vertex_index for l in plane.data.loops]] = uv[0::2]
+    want = np.where((u < 1.0)[:, None], np.float32([0.8, 0.2, 0.2]),
+                    np.where((u < 2.0)[:, None], np.float32([0.2, 0.2, 0.8]), np.float32([1.0, 0.0, 1.0])))
+    got = plan_of(scene, plane).items[0][1].inputs["base_color"]
+    np.testing.assert_allclose(got, want, atol=2 / 255)
+    assert not any("Base Color" in n for n in materials.principled_notes(mat))
+    image.pack()
+    for f in tmp_path.iterdir():
+        f.unlink()
+    from addon import textures
+    textures.images.clear()
+    np.testing.assert_allclose(plan_of(scene, plane).items[0][1].inputs["base_color"], want, atol=2 / 255)
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+
+
+def test_a_missing_udim_tile_file_is_named(scene, tmp_path):
+    image = udim_image(tmp_path, {1001: (0.8, 0.2, 0.2), 1002: (0.2, 0.2, 0.8)})
+    plane, mat = textured_plane(image)
+    (tmp_path / "paint.1002.png").unlink()
+    from addon import textures
+    textures.images.clear()
+    before = attribute(plane)[1] if plane.data.color_attributes else None
+    with pytest.raises(RuntimeError, match="tile 1002 could not be loaded"):
+        shade_op(view="CAMERA")
+    if before is not None:
+        np.testing.assert_array_equal(attribute(plane)[1], before)
+
+
 def test_a_texture_finer_than_the_mesh_averages(scene):
     """A checker of single texels (256 x 256) on a grid of 10 x 10 vertices: each vertex reads the
     mip level of its share of the image, grey, where a point sample would read black or white."""
@@ -1289,6 +1348,57 @@ def test_a_mix_of_shader_nodes_with_a_textured_factor(scene):
     assert readings[60] > 10 * gloss.gloss_readings(("LAMBERT", (0.8, 0.8, 0.8), "SMITH", ()))[60]
 
 
+def test_textured_inputs_of_mixed_bsdfs_are_read_at_each_vertex(scene):
+    """A Mix Shader (Fac 0.3) of a Principled BSDF whose Roughness is an image of two halves and a
+    Glossy BSDF whose Color and Roughness are images of halves: each vertex is the core's shading of
+    each term with the term's own inputs at that vertex (the Glossy's colour its weight); an input
+    whose nodes wenv does not evaluate is named with its unlinked value used."""
+    from addon import closures
+    env_world(scene, "sunset")
+    plane, mat = textured_plane(bpy.data.images.new("unused", 4, 4, float_buffer=True))
+    tree = mat.node_tree
+    tree.nodes.remove(tree.nodes["Image Texture"])
+    principled = tree.nodes["Principled BSDF"]
+    glossy = tree.nodes.new("ShaderNodeBsdfGlossy")
+    glossy.distribution = "GGX"
+    mix_node = tree.nodes.new("ShaderNodeMixShader")
+    mix_node.inputs[0].default_value = 0.3
+    tree.links.new(principled.outputs[0], mix_node.inputs[1])
+    tree.links.new(glossy.outputs[0], mix_node.inputs[2])
+    tree.links.new(mix_node.outputs[0], tree.nodes["Material Output"].inputs["Surface"])
+    px = np.ones((64, 64, 4), np.float32)
+    px[:, :32, :3], px[:, 32:, :3] = 0.15, 0.6
+    value_texture(mat, "Roughness", value_image("rough halves", px))
+    tex = tree.nodes.new("ShaderNodeTexImage")
+    tex.image, tex.interpolation = value_image("glossy rough", px[:, ::-1].copy()), "Closest"
+    tree.links.new(tex.outputs["Color"], glossy.inputs["Roughness"])
+    tint = np.ones((64, 64, 4), np.float32)
+    tint[:, :32, :3], tint[:, 32:, :3] = (0.9, 0.5, 0.2), (0.2, 0.6, 0.9)
+    tex = tree.nodes.new("ShaderNodeTexImage")
+    tex.image, tex.interpolation = value_image("glossy tint", tint), "Closest"
+    tree.links.new(tex.outputs["Color"], glossy.inputs["Color"])
+    found, _ = closures.terms(mat)
+    assert [t.label for t in found] == ["Principled BSDF", "Glossy BSDF"]
+    assert not any("is linked" in n for n in materials.principled_notes(mat)), materials.principled_notes(mat)
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    _, rgb = attribute(plane)
+    left = np.floor(corner_uv_rows(plane)[:, 0] * 64).astype(int) % 64 < 32
+    p, n = world_arrays(plane, corner=False)
+    env = wenv.load_environment(hdri_path("sunset"))
+    eye = tuple(scene.camera.matrix_world.translation)
+    principled_rough = np.where(left, 0.15, 0.6).astype(np.float32)
+    glossy_rough = np.where(left, 0.6, 0.15).astype(np.float32)
+    colour = np.where(left[:, None], np.float32([0.9, 0.5, 0.2]), np.float32([0.2, 0.6, 0.9]))
+    want = 0.7 * core_shader(env, engine.principled(found[0].inputs)).shade_mesh(p, n, eye, roughness=principled_rough)
+    want += 0.3 * colour * core_shader(env, engine.principled(found[1].inputs)).shade_mesh(p, n, eye,
+                                                                                       roughness=glossy_rough)
+    np.testing.assert_allclose(rgb, want, rtol=1e-4, atol=1e-5)
+    noise = tree.nodes.new("ShaderNodeTexNoise")
+    tree.links.new(noise.outputs["Fac"], glossy.inputs["Roughness"])
+    assert any("'Glossy BSDF': 'Roughness' is linked (" in n and "unlinked value is used" in n
+               for n in materials.principled_notes(mat))
+
+
 def test_textured_roughness_and_metallic_are_read_at_each_vertex(scene):
     """Roughness from an image of two halves (0.15 and 0.6) and Metallic from one of halves the other
     way (0 and 1), over a Base Color texture: the add-on gives each vertex its texel's values (a
@@ -1331,8 +1441,8 @@ def test_textured_roughness_and_metallic_are_read_at_each_vertex(scene):
     np.testing.assert_allclose(attribute(plane)[1], want, rtol=1e-4, atol=1e-5)
     plane.active_material = mat
     key, note = gloss.reading_key(mat)
-    assert note == ("Base Color: the mean of 'flat paint'; Roughness: the mean of 'rough halves'; "
-                    "Metallic: the mean of 'metal halves'")
+    assert note == ("Base Color: the mean of 'flat paint'; Metallic: the mean of 'metal halves'; "
+                    "Roughness: the mean of 'rough halves'")
     assert dict(key[1])["roughness"] == pytest.approx((0.15 + luminance) / 2, rel=1e-5)
     assert dict(key[1])["metallic"] == pytest.approx(0.5)
 
@@ -1413,8 +1523,8 @@ def test_nodes_between_textures_and_sockets_are_evaluated(scene):
         p, n, eye, base_color=got["base_color"], roughness=got["roughness"], metallic=got["metallic"])
     np.testing.assert_allclose(attribute(plane)[1], want, rtol=1e-4, atol=1e-5)
     key, note = gloss.reading_key(mat)
-    assert note == ("Base Color: the mean of 'halves'; Roughness: the mean of 'gradient'; "
-                    "Metallic: the mean of 'flat metal'")
+    assert note == ("Base Color: the mean of 'halves'; Metallic: the mean of 'flat metal'; "
+                    "Roughness: the mean of 'gradient'")
     inputs = dict(key[1])
     assert inputs["metallic"] == pytest.approx(0.3, rel=1e-5)
     assert inputs["roughness"] == pytest.approx(0.4, abs=0.01)  # the ramp at the gradient's mean, 0.5
@@ -1452,6 +1562,78 @@ def test_a_node_wenv_does_not_evaluate_is_named_and_the_value_used(scene):
     notes = materials.principled_notes(mat)
     assert any(n.startswith("'Metallic' is linked (") for n in notes), notes
     assert shade_op(view="CAMERA") == {"FINISHED"}
+
+
+def test_every_input_the_core_takes_per_vertex_is_read_from_textures(scene):
+    """Specular IOR Level, Specular Tint, Coat Weight and Roughness, Sheen Weight, Roughness and Tint
+    and Alpha, each from an image of two halves: the add-on gives each vertex its texel's value and
+    its colours are the core's shading with them; Alpha's see-through part is named; the glossmeter
+    reads each texture's mean."""
+    from addon import gloss
+    env_world(scene, "sunset")
+    flat = bpy.data.images.new("flat paint", 4, 4, float_buffer=True)
+    flat.pixels.foreach_set(np.tile(np.float32([0.6, 0.15, 0.08, 1.0]), 16))
+    plane, mat = textured_plane(flat)
+    mat.node_tree.nodes["Image Texture"].interpolation = "Closest"
+    halves = {"Specular IOR Level": (0.2, 0.9), "Specular Tint": ((1.0, 0.5, 0.3), (0.4, 1.0, 1.0)),
+              "Coat Weight": (0.0, 1.0), "Coat Roughness": (0.05, 0.4), "Sheen Weight": (0.0, 0.8),
+              "Sheen Roughness": (0.2, 0.7), "Sheen Tint": ((1.0, 0.6, 0.2), (0.3, 0.3, 1.0)), "Alpha": (0.3, 1.0)}
+    for k, (socket, (a, b)) in enumerate(halves.items()):
+        px = np.ones((64, 64, 4), np.float32)
+        px[:, :32, :3] = a
+        px[:, 32:, :3] = b
+        value_texture(mat, socket, value_image(f"halves {k}", px))
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    notes = materials.principled_notes(mat)
+    assert not any("is linked" in note for note in notes), notes
+    assert any("see-through part is not shaded" in note for note in notes), notes
+    uv = np.empty(len(plane.data.loops) * 2, np.float32)
+    plane.data.uv_layers.active.uv.foreach_get("vector", uv)
+    u = np.zeros(len(plane.data.vertices), np.float32)
+    u[[l.vertex_index for l in plane.data.loops]] = uv[0::2]
+    left = np.floor(u * 64).astype(int) % 64 < 32
+    plan = plan_of(scene, plane)
+    inputs = plan.items[0][1].inputs
+    want_inputs = {}
+    for socket, (a, b) in halves.items():
+        keyword = socket.lower().replace(" ", "_")
+        a, b = np.float32(a), np.float32(b)
+        want_inputs[keyword] = np.where(left[:, None] if a.ndim else left, a, b).astype(np.float32)
+        np.testing.assert_allclose(inputs[keyword], want_inputs[keyword], rtol=1e-6, err_msg=socket)
+    p, n = world_arrays(plane, corner=False)
+    eye = tuple(scene.camera.matrix_world.translation)
+    ior = mat.node_tree.nodes["Principled BSDF"].inputs["IOR"].default_value
+    want = core_shader(wenv.load_environment(hdri_path("sunset")),
+                       wenv.Principled(base_color=(0.6, 0.15, 0.08), roughness=0.4, ior=ior)).shade_mesh(
+        p, n, eye, base_color=np.tile(np.float32([0.6, 0.15, 0.08]), (len(p), 1)), **want_inputs)
+    np.testing.assert_allclose(attribute(plane)[1], want, rtol=1e-4, atol=1e-5)
+    key, said = gloss.reading_key(mat)
+    read = dict(key[1])
+    assert read["coat_weight"] == pytest.approx(0.5) and read["specular_tint"] == pytest.approx((0.7, 0.75, 0.65))
+    assert "Sheen Roughness: the mean of 'halves 5'" in said
+
+
+def test_more_smooth_inputs_than_a_vertex_mixes_are_read_at_their_mean(scene):
+    """Roughness, Specular IOR Level, Coat Weight and Sheen Tint (three channels) all ramping across the
+    image: more channels vary smoothly than the core mixes at once, so the last of them are read at
+    their mean over the slot, each named, and the pass shades."""
+    env_world(scene, "sunset")
+    flat = bpy.data.images.new("flat paint", 4, 4, float_buffer=True)
+    flat.pixels.foreach_set(np.tile(np.float32([0.6, 0.15, 0.08, 1.0]), 16))
+    plane, mat = textured_plane(flat)
+    ramp = np.linspace(0.1, 0.9, 64, dtype=np.float32)
+    for k, socket in enumerate(("Roughness", "Specular IOR Level", "Coat Weight", "Sheen Tint")):
+        px = np.ones((64, 64, 4), np.float32)
+        px[..., :3] = (ramp[None, :, None] if k % 2 == 0 else ramp[:, None, None]) * np.float32([1.0, 0.8, 0.6])
+        value_texture(mat, socket, value_image(f"ramp {k}", px)).interpolation = "Linear"
+    mat.node_tree.nodes["Principled BSDF"].inputs["Sheen Weight"].default_value = 0.5
+    plan = plan_of(scene, plane)
+    inputs = plan.items[0][1].inputs
+    assert np.ptp(inputs["sheen_tint"], axis=0).max() == 0.0  # read at its mean
+    assert np.ptp(inputs["roughness"]) > 0.3 and np.ptp(inputs["specular_ior_level"]) > 0.3
+    assert any("'Sheen Tint' ('textured paint') is read at its mean" in note for note in plan.notes), plan.notes
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    assert np.isfinite(attribute(plane)[1]).all()
 
 
 def test_a_peer_method_names_the_roughness_texture_it_does_not_read(scene):

@@ -105,20 +105,6 @@ static double scalar_at(const build *b, size_t i, int input)
     return v ? wenv_vertex_input_clamp(in, v[i]) : wenv_principled_field_c(b->in, in->row)[0];
 }
 
-static wenv_status check_values(const wenv_vertex_inputs *vi, size_t n, wenv_error *err)
-{
-    for (int k = 0; vi && k < WENV_VERTEX_INPUT_COUNT; k++) {
-        const float *v = vi->value[k];
-        size_t count = (size_t)wenv_vertex_input_list[k].n * n;
-        for (size_t j = 0; v && j < count; j++)
-            if (!isfinite(v[j]))
-                return wenv_error_set(err, WENV_ERR_VALUE, "%s[%zu] is %g: a vertex's %s must be finite",
-                                      wenv_vertex_input_list[k].name, j / (size_t)wenv_vertex_input_list[k].n,
-                                      (double)v[j], wenv_vertex_input_list[k].name);
-    }
-    return WENV_OK;
-}
-
 static void set_coords(build *b)
 {
     size_t c = 0;
@@ -522,7 +508,7 @@ wenv_status wenv_material_family_create(wenv_material_family **out, const wenv_m
                               "inputs per vertex (Roughness, Metallic...) need a Principled material (wenv.Principled), "
                               "not %s",
                               wenv_material_kind_name(base));
-    if (check_values(vi, n, err))
+    if (wenv_vertex_inputs_check(vi, n, err))
         return err->status;
     build b = {in, vi, n, {{0}}, {0}, {0}, {0}, 0};
     wenv_material_family *f = calloc(1, sizeof *f);

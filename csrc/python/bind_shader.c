@@ -1127,8 +1127,9 @@ WITH_VERTEX_INPUTS(Shader_shade_mesh, shade_mesh_with)
 
 static PyMethodDef Shader_methods[] = {
     {"shade", (PyCFunction)(void (*)(void))Shader_shade, METH_VARARGS | METH_KEYWORDS,
-     "shade(normals, view_dirs, *, occlusion=None, bounce='self', base_color=None, roughness=None, metallic=None, "
-     "positions=None, lamps=None, emission_color=None)"
+     "shade(normals, view_dirs, *, occlusion=None, bounce='self', base_color=None, positions=None, lamps=None, "
+     "emission_color=None, roughness=None, metallic=None, specular_ior_level=None, specular_tint=None, "
+     "coat_weight=None, coat_roughness=None, sheen_weight=None, sheen_roughness=None, sheen_tint=None, alpha=None)"
      "\n--\n\nLinear RGB radiance (float32, n x 3) for "
      "world-space normals and view directions (surface towards eye), float32 (n, 3); view_dirs may be one (3,) "
      "vector for all.  occlusion (a wenv.Occlusion made for these vertices) shades with the scene in the way: "
@@ -1140,26 +1141,30 @@ static PyMethodDef Shader_methods[] = {
      "is): each vertex's colour in place of the material's -- a Principled BSDF's Base Color, a Lambert's or "
      "Cook-Torrance's diffuse albedo -- at the cost of a multiply-add a vertex (it scales the Lambertian part "
      "alone); a ValueError says why for a material whose colour also enters its lobes (a metal, a rough "
-     "diffuse) or that has none (a measured table).  Every method.\n\nroughness, metallic (float32 (n,), clamped to "
-     "[0, 1] as Cycles clamps them): each vertex's Roughness and Metallic in place of a Principled material's "
-     "(a texture's values); emission_color (float32 (n, 3), linear, >= 0): each vertex's Emission Color in "
-     "place of a Principled material's, its Strength and layers the material's (every method).  Metallic is "
-     "exact (Cycles mixes the metal in linearly); a roughness of at most 8 "
-     "values is exact, a smoother one mixes materials at roughness levels 1/24 apart, the exact lights read "
-     "at each vertex's own roughness (within 1 % of each vertex's own material).  The members are made "
-     "once and kept: a new view costs each vertex two members' reads.  Wavelet methods only.\n\n"
+     "diffuse) or that has none (a measured table).  Every method.  emission_color (float32 (n, 3), linear, >= "
+     "0): each vertex's Emission Color in place of a Principled material's, its Strength and layers the "
+     "material's (every method).\n\nroughness, metallic, specular_ior_level, coat_weight, coat_roughness, "
+     "sheen_weight, sheen_roughness, alpha (float32 (n,)) and specular_tint, sheen_tint (float32 (n, 3)), "
+     "clamped as Cycles clamps them: each vertex's input in place of a Principled material's (a texture's "
+     "values; wenv.Principled.INPUTS marks them per_vertex).  Metallic, Alpha and the weights and tints are "
+     "exact (they enter linearly); values of at most 8 distinct materials are exact; inputs varying more "
+     "smoothly are the axes of a grid of materials a vertex mixes, Roughness 1/24 apart (1/16 beside another "
+     "axis), the exact lights read at each vertex's own values (within 1 % of each vertex's own material for "
+     "one input, 1.1 % for two: docs/python.md); at most 4 channels may vary smoothly at once "
+     "(wenv.Principled.PER_VERTEX).  The members are made once and kept: a new view costs each vertex its "
+     "cell's members' reads.  Wavelet methods only.\n\n"
      "positions (float32 (n, 3), world) and lamps (a sequence of wenv.Lamp): the scene's lamps added as Cycles "
      "emits them, with the shadows of occlusion's scene (docs/lamps.md).  Every method."},
     {"diffuse_light", (PyCFunction)(void (*)(void))Shader_diffuse_light, METH_VARARGS | METH_KEYWORDS,
-     "diffuse_light(normals, *, occlusion=None, base_color=None, roughness=None, metallic=None, positions=None, "
-     "lamps=None, emission_color=None)\n--\n\nThe light (radiance, float32 n x 3) each vertex sends "
+     "diffuse_light(normals, *, occlusion=None, base_color=None, positions=None, lamps=None, emission_color=None, "
+     "roughness=None, metallic=None, ...)\n--\n\nThe light (radiance, float32 n x 3) each vertex sends "
      "back to the surfaces it blocks (shade's bounce), as if diffuse: its albedo head-on (the Lambertian "
      "part's and the lobes') over pi times its irradiance, with its shadows when occlusion is given.  "
-     "Wavelet methods only; base_color, roughness, metallic, emission_color, positions and lamps as shade's."},
+     "Wavelet methods only; base_color, the inputs per vertex, emission_color, positions and lamps as shade's."},
     {"shade_mesh", (PyCFunction)(void (*)(void))Shader_shade_mesh, METH_VARARGS | METH_KEYWORDS,
      "shade_mesh(positions, normals, eye, *, cull=False, view_projection=None, out=None, first=0, budget=None, "
-     "occlusion=None, bounce='self', base_color=None, roughness=None, metallic=None, lamps=None, "
-     "emission_color=None)\n--\n\nShade vertices seen from a perspective eye position.  cull=True shades only what the eye sees: "
+     "occlusion=None, bounce='self', base_color=None, lamps=None, emission_color=None, roughness=None, "
+     "metallic=None, ...)\n--\n\nShade vertices seen from a perspective eye position.  cull=True shades only what the eye sees: "
      "vertices whose normal faces it and, given view_projection (the viewport's 4 x 4 world-to-clip "
      "matrix, row-major: Blender's region_3d.perspective_matrix), those inside its frustum; the rows of "
      "the others are left as they were in `out` (a float32 (n, 3) array written in place and returned) "
@@ -1172,7 +1177,7 @@ static PyMethodDef Shader_methods[] = {
      "over a fast one's result: out = fast.shade_mesh(...); then accurate.shade_mesh(..., out=out, "
      "first=k, budget=0.05) until k reaches the count.\n\n"
      "occlusion and bounce shade with the scene in the way, as shade's (the occlusion made for these "
-     "positions and normals); base_color, roughness, metallic and emission_color as shade's; lamps (a "
+     "positions and normals); base_color, emission_color and the inputs per vertex as shade's; lamps (a "
      "sequence of wenv.Lamp) add the scene's lamps, as Cycles emits them (docs/lamps.md)."},
     {"set_environment", (PyCFunction)Shader_set_environment, METH_O,
      "set_environment(env)\n--\n\nNew lighting; rotation matrices are kept."},

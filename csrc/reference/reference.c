@@ -364,15 +364,8 @@ wenv_status wenv_reference_per_vertex(const wenv_envmap *env, const wenv_materia
                               "inputs per vertex (Roughness, Metallic...) need a Principled material (wenv.Principled), "
                               "not %s",
                               wenv_material_kind_name(mat));
-    for (int k = 0; vi && k < WENV_VERTEX_INPUT_COUNT; k++) {
-        const float *v = vi->value[k];
-        size_t count = (size_t)wenv_vertex_input_list[k].n * n;
-        for (size_t j = 0; v && j < count; j++)
-            if (!isfinite(v[j]))
-                return wenv_error_set(err, WENV_ERR_VALUE, "%s[%zu] is %g: a vertex's %s must be finite",
-                                      wenv_vertex_input_list[k].name, j / (size_t)wenv_vertex_input_list[k].n,
-                                      (double)v[j], wenv_vertex_input_list[k].name);
-    }
+    if (wenv_vertex_inputs_check(vi, n, err))
+        return err->status;
     vertex_key *key = malloc((n ? n : 1) * sizeof *key);
     /* a group's normals, views, positions, colours, emission colours and radiance */
     float *work = malloc((n ? n : 1) * 18 * sizeof(float));

@@ -17,3 +17,17 @@ const size_t wenv_principled_input_count = sizeof wenv_principled_input_list / s
 enum { WENV_PRINCIPLED_INPUTS(WENV_PRINCIPLED_ROW_ENUM) };
 
 const wenv_vertex_input wenv_vertex_input_list[WENV_VERTEX_INPUT_COUNT] = {WENV_VERTEX_INPUTS(WENV_VERTEX_INPUT_ROW)};
+
+wenv_status wenv_vertex_inputs_check(const wenv_vertex_inputs *vi, size_t n, wenv_error *err)
+{
+    for (int k = 0; vi && k < WENV_VERTEX_INPUT_COUNT; k++) {
+        const float *v = vi->value[k];
+        size_t width = (size_t)wenv_vertex_input_list[k].n;
+        for (size_t j = 0; v && j < width * n; j++)
+            if (!isfinite(v[j]))
+                return wenv_error_set(err, WENV_ERR_VALUE, "%s[%zu] is %g: a vertex's %s must be finite",
+                                      wenv_vertex_input_list[k].name, j / width, (double)v[j],
+                                      wenv_vertex_input_list[k].name);
+    }
+    return WENV_OK;
+}

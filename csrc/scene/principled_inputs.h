@@ -25,6 +25,8 @@
 #include <math.h>
 #include <stddef.h>
 
+#include "base/error.h"
+
 #define WENV_PRINCIPLED_INPUTS(X)                                                                                  \
     X(base_color, 3, "Base Color", 0.8, 0.8, 0.8, 0.0, INFINITY, 1, WENV_SHADED, WENV_NEVER, 0.0, "", "")          \
     X(metallic, 1, "Metallic", 0.0, 0.0, 0.0, 0.0, 1.0, 0, WENV_SHADED, WENV_NEVER, 0.0, "", "")                    \
@@ -163,6 +165,9 @@ static inline int wenv_vertex_inputs_any(const wenv_vertex_inputs *vi)
             return 1;
     return 0;
 }
+
+/* Every given value finite: else WENV_ERR_VALUE naming the input and the vertex. */
+wenv_status wenv_vertex_inputs_check(const wenv_vertex_inputs *vi, size_t n, wenv_error *err);
 
 /* A per-vertex value clamped as Cycles clamps the input (and at WENV_PRINCIPLED_SCALE_MAX), as a double. */
 static inline double wenv_vertex_input_clamp(const wenv_vertex_input *in, float x)
