@@ -9,7 +9,7 @@ import os
 
 import bpy
 
-from . import engine, handlers, operators, properties, ui
+from . import compat, engine, handlers, operators, properties, ui
 
 _modules = (properties, operators, ui, handlers)
 
@@ -25,14 +25,27 @@ def _matrix_cache_dir():
         return None
 
 
+_registered = False
+
+
 def register():
+    global _registered
     for module in _modules:
         module.register()
     engine.shaders.cache_dir = _matrix_cache_dir()
+    _registered = True
+    compat.unregister_at_exit(_unregister_at_exit)
 
 
 def unregister():
+    global _registered
     for module in reversed(_modules):
         module.unregister()
     engine.shaders.clear()
     engine.shadows.clear()
+    _registered = False
+
+
+def _unregister_at_exit():
+    if _registered:
+        unregister()

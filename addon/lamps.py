@@ -3,6 +3,8 @@
 wenv does not.  Reads Blender data only; engine.make_lamps makes the core's lamps from the result."""
 import math
 
+from . import compat
+
 # Cycles' emission shader when a light has no node tree: Emission of Color 1 and Strength 1
 _PLAIN_EMISSION = ((1.0, 1.0, 1.0), 1.0)
 
@@ -30,13 +32,6 @@ def _emission(light, name):
                              "is): shaded as its colour and power alone")
 
 
-def _cast_shadow(light):
-    cycles = getattr(light, "cycles", None)
-    if cycles is not None and hasattr(cycles, "cast_shadow"):  # Blender 4.2 keeps Cycles' own
-        return bool(cycles.cast_shadow)
-    return bool(light.use_shadow)
-
-
 def lamp_settings(obj):
     """The settings of a Light object as wenv.Lamp's keywords (with 'type' and 'matrix'), or None
     when it emits nothing Cycles would shade (a portal); and the notes on what is not honoured."""
@@ -48,18 +43,16 @@ def lamp_settings(obj):
     (node_color, node_strength), note = _emission(light, obj.name)
     if note:
         notes.append(note)
-    color = [float(c) * n for c, n in zip(light.color, node_color)]
-    if getattr(light, "use_temperature", False):  # Blender 4.5+
-        color = [c * float(t) for c, t in zip(color, light.temperature_color)]
+    color = [c * n for c, n in zip(compat.light_colour(light), node_color)]
     s = {"type": light.type, "matrix": _matrix(obj), "color": tuple(color),
-         "energy": float(light.energy) * node_strength, "exposure": float(getattr(light, "exposure", 0.0)),
-         "normalize": bool(getattr(light, "normalize", True)), "cast_shadow": _cast_shadow(light),
+         "energy": float(light.energy) * node_strength, "exposure": compat.light_exposure(light),
+         "normalize": compat.light_normalize(light), "cast_shadow": compat.light_cast_shadow(light),
          "diffuse": bool(obj.visible_diffuse), "glossy": bool(obj.visible_glossy)}
     if light.type == "SUN":
         s["angle"] = float(light.angle)
     elif light.type in ("POINT", "SPOT"):
         s["radius"] = float(light.shadow_soft_size)
-        s["soft_falloff"] = bool(getattr(light, "use_soft_falloff", True))
+        s["soft_falloff"] = compat.light_soft_falloff(light)
         if light.type == "SPOT":
             s["spot_size"], s["spot_blend"] = float(light.spot_size), float(light.spot_blend)
             if getattr(light, "use_square", False):

@@ -112,10 +112,15 @@ def cost(args):
     colour = np.random.default_rng(2).uniform(0.05, 0.95, (len(v), 3)).astype(np.float32)
     cases = (("smooth roughness", dict(roughness=smooth)), ("roughness stripes", dict(roughness=stripes)),
              ("smooth roughness, metallic band", dict(roughness=smooth, metallic=band)),
-             ("colour, roughness, metallic band", dict(base_color=colour, roughness=smooth, metallic=band)))
+             ("colour, roughness, metallic band", dict(base_color=colour, roughness=smooth, metallic=band)),
+             ("smooth Specular IOR Level", dict(specular_ior_level=smooth_field(v, 0.0, 1.0))),
+             ("coat mask", dict(coat_weight=np.where(band > 0.5, 1.0, 0.0).astype(np.float32))),
+             ("smooth Coat Roughness, coat 1", dict(coat_weight=np.ones(len(v), np.float32),
+                                                    coat_roughness=smooth_field(v, 0.03, 0.3))),
+             ("smooth roughness and IOR Level", dict(roughness=smooth, specular_ior_level=smooth_field(v, 0.0, 1.0))))
     rows = []
     print(f"\ncost of a view change: {len(v)} vertices, forest, `{args.quality}`, {wenv.get_num_threads()} threads")
-    print(f"{'textures':32s} {'plain ms':>9s} {'per vertex ms':>14s} {'ratio':>6s}")
+    print(f"{'textures':32s} {'plain ms':>9s} {'per vertex ms':>14s} {'ratio':>6s} {'members':>8s}")
     for name, kw in cases:
         mean = {k: float(a.mean()) if a.ndim == 1 else tuple(float(c) for c in a.mean(axis=0)) for k, a in kw.items()}
         shader = wenv.Shader(env, wenv.Principled(**{**PAINT, **mean}), quality=args.quality, method="slicing")
@@ -128,7 +133,8 @@ def cost(args):
                    members=shader.stats.get("materials_kept"))
         row["ratio"] = row["per_vertex_ms"] / row["plain_ms"]
         rows.append(row)
-        print(f"{name:32s} {row['plain_ms']:9.1f} {row['per_vertex_ms']:14.1f} {row['ratio']:6.2f}", flush=True)
+        print(f"{name:32s} {row['plain_ms']:9.1f} {row['per_vertex_ms']:14.1f} {row['ratio']:6.2f} {row['members']:8d}",
+              flush=True)
     return rows
 
 

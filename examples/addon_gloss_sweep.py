@@ -17,7 +17,7 @@ sys.path.insert(0, ROOT)
 import bpy  # noqa: E402
 
 import addon  # noqa: E402
-from addon import gloss, materials  # noqa: E402
+from addon import compat, gloss, materials  # noqa: E402
 
 OUT = os.path.join(ROOT, "out")
 
@@ -29,7 +29,7 @@ def demo_blend(path):
              ("semi-gloss", 0.2, 0.0, 0.0), ("gloss", 0.1, 0.0, 0.0), ("high gloss", 0.03, 0.0, 0.0),
              ("brushed steel", 0.3, 1.0, 0.0), ("car paint", 0.4, 0.0, 1.0)]
     for name, roughness, metallic, coat in specs:
-        mat = bpy.data.materials.new(name)
+        mat = compat.new_node_material(name)
         node = mat.node_tree.nodes["Principled BSDF"]
         node.inputs["Base Color"].default_value = (0.6, 0.6, 0.62, 1) if metallic else (0.4, 0.05, 0.03, 1)
         node.inputs["Roughness"].default_value = roughness

@@ -25,7 +25,7 @@ sys.path.insert(0, ROOT)
 import bpy  # noqa: E402
 
 import addon  # noqa: E402
-from addon import engine, materials, meshes, shading  # noqa: E402
+from addon import compat, engine, materials, meshes, shading  # noqa: E402
 
 OUT = os.path.join(ROOT, "out")
 
@@ -40,7 +40,7 @@ def demo_scene():
     bpy.ops.wm.read_homefile(use_factory_startup=True)
     bpy.data.objects.remove(bpy.data.objects["Cube"])
     scene = bpy.context.scene
-    tree = scene.world.node_tree
+    tree = compat.world_node_tree(scene.world)
     env = tree.nodes.new("ShaderNodeTexEnvironment")
     env.image = bpy.data.images.load(bundled_hdri("sunset"))
     tree.links.new(env.outputs["Color"], tree.nodes["Background"].inputs["Color"])
@@ -50,7 +50,7 @@ def demo_scene():
     with bpy.context.temp_override(object=obj):
         bpy.ops.object.modifier_apply(modifier="sub")
     obj.data.shade_smooth()
-    mat = bpy.data.materials.new("paint")
+    mat = compat.new_node_material("paint")
     mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = (0.5, 0.08, 0.03, 1)
     obj.data.materials.append(mat)
     scene.camera.location = (0.0, -4.5, 0.6)
@@ -60,7 +60,7 @@ def demo_scene():
 
 def mapping_node(world):
     """The World's Mapping node feeding the Environment Texture, added if there is none."""
-    tree = world.node_tree
+    tree = compat.world_node_tree(world)
     env = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeTexEnvironment")
     if env.inputs["Vector"].is_linked:
         return env.inputs["Vector"].links[0].from_node

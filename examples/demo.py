@@ -26,7 +26,7 @@ sys.path.insert(0, ROOT)
 import bpy  # noqa: E402
 
 import addon  # noqa: E402
-from addon import meshes  # noqa: E402
+from addon import compat, meshes  # noqa: E402
 
 PAINT = {"Base Color": (0.6, 0.15, 0.08, 1.0), "Roughness": 0.3}
 # The texture's two paints, in stripes across her UV map (linear RGB): the red above and a cream
@@ -56,7 +56,7 @@ def build_scene(hdri, size):
     for name in ("Cube", "Light"):  # wenv shades the World's light only: no lamp, for a like comparison
         bpy.data.objects.remove(bpy.data.objects[name])
     scene = bpy.context.scene
-    tree = scene.world.node_tree
+    tree = compat.world_node_tree(scene.world)
     env = tree.nodes.new("ShaderNodeTexEnvironment")
     env.image = bpy.data.images.load(bundled_hdri(hdri))
     tree.links.new(env.outputs["Color"], tree.nodes["Background"].inputs["Color"])
@@ -66,7 +66,7 @@ def build_scene(hdri, size):
     with bpy.context.temp_override(object=obj):  # applied: the add-on shades a mesh vertex by vertex
         bpy.ops.object.modifier_apply(modifier="subdivision")
     obj.data.shade_smooth()
-    mat = bpy.data.materials.new("paint")
+    mat = compat.new_node_material("paint")
     node = next(n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled")
     for socket, value in PAINT.items():
         node.inputs[socket].default_value = value

@@ -38,3 +38,5 @@ path = os.path.join(site.getsitepackages()[0], "wenv-dev.pth")
 with open(path, "w") as fp:
     fp.write(os.getcwd() + "\n")
 PY
+# The Blender LTS releases the add-on is also tested on, each in its own environment.
+bash scripts/blender_versions.sh

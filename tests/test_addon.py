@@ -19,6 +19,7 @@ import addon  # noqa: E402
 from addon import engine, gloss, live, materials, meshes, shading, views, world  # noqa: E402
 
 from conftest import hdri_path, readme_block  # noqa: E402
+from tests.helpers.blender_versions import has_diffuse_roughness, has_light_temperature, node_material
 
 ATTR = meshes.ATTRIBUTE
 
@@ -95,7 +96,7 @@ def env_world(scene, name="sunset", rotation=0.0, strength=1.0, projection="EQUI
 
 
 def set_material(obj, model="COOK_TORRANCE", diffuse=(0.3, 0.2, 0.1), lobes=((0.2, 1.5, "GGX"),), name=None):
-    mat = bpy.data.materials.new(name or f"M{len(bpy.data.materials)}")
+    mat = node_material(bpy, name or f"M{len(bpy.data.materials)}")
     st = mat.wenv
     st.model = model
     st.diffuse = diffuse
@@ -245,7 +246,10 @@ def test_lamps_are_shaded_as_the_core_shades_them(scene):
     scene.collection.objects.link(area)
     area.location, area.rotation_euler = (0.0, -3.0, 1.0), (1.2, 0.0, 0.0)
     area.data.energy, area.data.size = 300.0, 1.5
-    area.data.use_temperature, area.data.temperature = True, 3200.0
+    if has_light_temperature(bpy):
+        area.data.use_temperature, area.data.temperature = True, 3200.0
+    else:
+        area.data.color = (1.0, 0.7, 0.4)  # what 3200 K is near, set as a colour before 4.5
     spot = bpy.data.objects.new("spot", bpy.data.lights.new("spot", "SPOT"))
     scene.collection.objects.link(spot)
     spot.location, spot.rotation_euler = (2.0, -2.0, 2.0), (0.8, 0.0, 0.8)
@@ -256,7 +260,7 @@ def test_lamps_are_shaded_as_the_core_shades_them(scene):
     settings, notes = addon_lamps.read_lamps(scene)
     assert sorted(s["name"] for s in settings) == ["Light", "area", "spot"] and notes == []
     warm = next(s for s in settings if s["name"] == "area")["color"]
-    assert warm[0] > warm[1] > warm[2]  # 3200 K: Blender's own colour of it
+    assert warm[0] > warm[1] > warm[2]  # 3200 K: Blender's own colour of it (a warm colour before 4.5)
     p, n = world_arrays(obj, corner=False)
     env = wenv.load_environment(hdri_path("forest"), strength=0.3)
     eye = tuple(scene.camera.matrix_world.translation)
@@ -734,7 +738,7 @@ def test_logarithmic_tone_mapping(scene):
 
 
 def principled_material(name, base=(0.8, 0.2, 0.1), metallic=0.0, roughness=0.4, ior=1.45, coat=0.0):
-    mat = bpy.data.materials.new(name)
+    mat = node_material(bpy, name)
     node = mat.node_tree.nodes["Principled BSDF"]
     node.inputs["Base Color"].default_value = (*base, 1.0)
     node.inputs["Metallic"].default_value = metallic
@@ -788,7 +792,7 @@ def test_from_principled_warns_about_links_and_missing_node(scene):
     cube.active_material = mat
     warnings = materials.fill_from_principled(mat)
     assert any("Base Color" in w for w in warnings)
-    plain = bpy.data.materials.new("plain")
+    plain = node_material(bpy, "plain")
     plain.node_tree.nodes.clear()
     plain.diffuse_color = (0.1, 0.2, 0.3, 1)
     assert any("no Principled BSDF" in w for w in materials.fill_from_principled(plain))
@@ -1812,7 +1816,7 @@ def test_readme_scripting_block_runs_as_written(scene):
 def measured_material(obj, path):
     """A material of model Measured reading `path` (as the user would type it, // relative to the
     .blend), appended to obj's slots."""
-    mat = bpy.data.materials.new(f"Measured{len(bpy.data.materials)}")
+    mat = node_material(bpy, f"Measured{len(bpy.data.materials)}")
     mat.wenv.model = "MEASURED"
     mat.wenv.brdf_path = path
     obj.data.materials.append(mat)
@@ -2512,14 +2516,15 @@ def test_the_panels_follow_the_core(scene):
     assert said == {"DRAFT": ["Rotation matrices: precomputed on first use"], "DEFAULT": []}
     assert engine.preparing("draft") == "precomputing the draft matrices"
     assert engine.preparing("default") == "preparing default shading"
-    mat = bpy.data.materials.new("principled panel")
-    if bpy.app.version < (5, 0, 0):
-        mat.use_nodes = True
+    mat = node_material(bpy, "principled panel")
     mat.wenv.model = "PRINCIPLED"
     cube.active_material = mat
     shown = [l for l in draw_panel(ui.WENV_PT_material) if l == ("prop", "default_value")]
     assert ui.PRINCIPLED_SHOWN == tuple(r["socket"] for r in wenv.Principled.INPUTS if r["shaded"] != "no")
-    assert len(shown) == len(ui.PRINCIPLED_SHOWN) and "Coat Tint" in ui.PRINCIPLED_SHOWN
+    node = mat.node_tree.nodes["Principled BSDF"]
+    assert len(shown) == len([s for s in ui.PRINCIPLED_SHOWN if node.inputs.get(s) is not None])  # this Blender's
+    assert "Coat Tint" in ui.PRINCIPLED_SHOWN
+    assert ("Diffuse Roughness" in node.inputs) == has_diffuse_roughness(bpy)
     assert "Transmission Weight" not in ui.PRINCIPLED_SHOWN
 
 

@@ -14,6 +14,7 @@ import wenv  # noqa: E402
 from addon import closures, engine  # noqa: E402
 from tests.helpers.cycles_sphere import SphereScene  # noqa: E402
 from tests.helpers.measure import bundled_hdri  # noqa: E402
+from tests.helpers.blender_versions import node_material as new_node_material  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -23,9 +24,7 @@ def sphere():
 
 def node_material(build):
     """A material whose output's Surface is what build(tree) returns (an output socket)."""
-    mat = bpy.data.materials.new("wenv-closures")
-    if bpy.app.version < (5, 0, 0):
-        mat.use_nodes = True
+    mat = new_node_material(bpy, "wenv-closures")
     tree = mat.node_tree
     for n in list(tree.nodes):
         if n.bl_idname != "ShaderNodeOutputMaterial":

@@ -21,6 +21,7 @@ sys.path.insert(0, ROOT)
 sys.path.insert(0, os.path.join(ROOT, "scripts"))
 from conftest import random_pairs, unit  # noqa: E402
 from test_measured_brdf import _pairs, smooth_env  # noqa: E402  (the same smooth lighting and pairs)
+from tests.helpers.blender_versions import node_material
 
 
 def view(deg):
@@ -46,9 +47,7 @@ def test_defaults_are_the_nodes():
     and is what wenv.Principled() holds."""
     import bpy
 
-    mat = bpy.data.materials.new("defaults")
-    if bpy.app.version < (5, 0, 0):  # nodes are always on from 5.0
-        mat.use_nodes = True
+    mat = node_material(bpy, "defaults")
     node = next(n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled")
     inputs = wenv.Principled().inputs
     assert node.distribution == "MULTI_GGX" and inputs["distribution"] == "multiscatter_ggx"

@@ -27,6 +27,7 @@ import numpy as np
 import wenv
 
 from tests.helpers.measure import bundled_hdri
+from tests.helpers.blender_versions import node_material, use_world_nodes
 
 # Principled BSDF node inputs by wenv.Principled's names: the core's one list of them
 SOCKETS = {row["name"]: row["socket"] for row in wenv.Principled.INPUTS}
@@ -59,8 +60,7 @@ class SphereScene:
         sc.render.image_settings.color_depth = "32"
         world = bpy.data.worlds.new("wenv-cycles")
         sc.world = world
-        if self.bpy.app.version < (5, 0, 0):  # nodes are always on from 5.0
-            world.use_nodes = True
+        use_world_nodes(self.bpy, world)
         nt = world.node_tree
         env = nt.nodes.new("ShaderNodeTexEnvironment")
         if image is None:
@@ -118,9 +118,7 @@ class SphereScene:
 
     def _geometry_material(self, output):
         """An emission shader whose colour is the shading point's Geometry `output` (Normal, Position)."""
-        mat = self.bpy.data.materials.new("wenv-" + output.lower())
-        if self.bpy.app.version < (5, 0, 0):  # nodes are always on from 5.0
-            mat.use_nodes = True
+        mat = node_material(self.bpy, "wenv-" + output.lower())
         nt = mat.node_tree
         for n in list(nt.nodes):
             if n.bl_idname != "ShaderNodeOutputMaterial":
@@ -133,9 +131,7 @@ class SphereScene:
     def principled(self, **inputs):
         """Gives the sphere a Principled BSDF with these inputs (wenv.Principled's names; the
         distribution keyword sets the node's distribution)."""
-        mat = self.bpy.data.materials.new("wenv-principled")
-        if self.bpy.app.version < (5, 0, 0):  # nodes are always on from 5.0
-            mat.use_nodes = True
+        mat = node_material(self.bpy, "wenv-principled")
         node = next(n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled")
         for key, value in inputs.items():
             if key == "distribution":
