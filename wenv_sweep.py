@@ -130,7 +130,7 @@ def run(jobs, fn, *, executor=None, results=None, retries=1, progress=print_prog
 
     # a pool made here gets fn by value (cloudpickle), so a script's or a notebook's own function will
     # do; an executor passed in ships it its own way (Dask by value too)
-    submit = _by_value(fn) if own else (lambda job, p=None: (p or pool).submit(fn, **job))
+    submit = _by_value(fn) if own else (lambda job, into: into.submit(fn, **job))
     try:
         pending = {submit(job, pool): job for job in todo}
         while pending:

@@ -541,10 +541,10 @@ def _unit_rows(v):
     return np.where(length > 1e-20, v / np.maximum(length, 1e-20), 0.0).astype(np.float32)
 
 
-def _mapped_normals(mesh, source, strength, object_n, normal, to_world):
+def _mapped_normals(mesh, corner_vert, source, strength, object_n, normal, to_world):
     """Each corner's normal from a normal map (world space, blended towards the mesh's `normal` by
     strength; object_n the mesh's in object space), or None without its UV map."""
-    got = uv_rows(mesh, source.uv_map, "CORNER", meshes.corner_vertices(mesh))
+    got = uv_rows(mesh, source.uv_map, "CORNER", corner_vert)
     if got is None:
         return None
     nl = len(mesh.loops)
@@ -624,7 +624,7 @@ def read_shading_normals(obj, depsgraph, data):
         world_n = _unit_rows(normal @ to_world)
         bent = False
         if chain.map is not None:
-            mapped = _mapped_normals(mesh, chain.map, chain.map_strength, normal, world_n, to_world)
+            mapped = _mapped_normals(mesh, corner_vert, chain.map, chain.map_strength, normal, world_n, to_world)
             if mapped is None:
                 notes.append(_no_uv_map(obj, chain.map.uv_map, f"the normal map of '{mat.name}'",
                                         "the mesh's normals are used"))
