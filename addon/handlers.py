@@ -3,7 +3,7 @@ right after an undo or redo; forget per-file state on load."""
 import bpy
 from bpy.app.handlers import persistent
 
-from . import engine, meshes, properties, shading, views
+from . import bake, engine, meshes, properties, shading, views
 from .live import LiveState
 
 _last_error = {"message": None}
@@ -48,14 +48,53 @@ def frame_change_post(scene, depsgraph=None):
         _report_once(f"wenv: {LOCK_NEEDED}")
         return
     objects = meshes.shaded_objects(scene)
-    if not objects:
+    images = [i for i in bpy.data.images if i.wenv.bake_on_frame_change and i.wenv.baked_object in scene.objects]
+    if not objects and not images:
         return
+    depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
     try:
         view = views.camera_view(scene)
-        shading.shade_objects(scene, depsgraph or bpy.context.evaluated_depsgraph_get(), objects, view, bpy.data)
+        if objects:
+            shading.shade_objects(scene, depsgraph, objects, view, bpy.data)
+        for image in images:
+            record = image.wenv
+            bake.bake(scene, depsgraph, scene.objects[record.baked_object], image, view, bpy.data,
+                      uv_map=record.uv_map or None, margin=record.margin, view_source="CAMERA")
         _last_error["message"] = None
     except engine.SetupError as exc:
         _report_once(f"wenv: frame {scene.frame_current}: {exc}")
+
+
+# What a change to a datablock of each type may change of a bake (bake.CHANGES); objects also their
+# mesh, and a Light object or Light the lamps
+_TOUCHES = ((bpy.types.World, ("world",)), (bpy.types.Material, ("materials",)),
+            (bpy.types.ShaderNodeTree, ("materials", "world")), (bpy.types.Light, ("lamps",)),
+            (bpy.types.Image, ("materials", "world")), (bpy.types.Mesh, ("mesh",)),
+            (bpy.types.Scene, ("world", "lamps", "settings")))
+
+
+@persistent
+def depsgraph_update_post(scene, depsgraph):
+    """Marks the bakes a change makes stale (bake.note_changes): only the parts of them the changed
+    datablocks could touch are compared."""
+    if not any(i.wenv.baked_object and not i.wenv.stale for i in bpy.data.images):
+        return
+    parts, objects = set(), set()
+    for update in depsgraph.updates:
+        data = getattr(update.id, "original", update.id)
+        if isinstance(data, bpy.types.Object):
+            objects.add(data.name)
+            parts.add("lamps" if data.type == "LIGHT" else "mesh")
+            continue
+        if isinstance(data, bpy.types.Image) and data.wenv.baked_object:
+            continue  # a bake's own image, written
+        for kind, touched in _TOUCHES:
+            if isinstance(data, kind):
+                parts.update(touched)
+        if isinstance(data, bpy.types.Mesh):
+            objects.update(o.name for o in scene.objects if o.data == data)
+    if parts:
+        bake.note_changes(scene, depsgraph, bpy.data.images, sorted(parts), objects)
 
 
 @persistent
@@ -64,6 +103,7 @@ def undo_post(scene, *_args):
     argument and keep nothing: the data they saw before is freed.)"""
     if LiveState.session is not None:
         LiveState.session.data_replaced()
+    bake.restore_after_undo(bpy.data.images)
     # Frame changes make no undo step of their own (playback would make one per frame), and Blender
     # runs frame handlers after the operator that changed the frame has pushed its step, so a step
     # may hold the colours of the frame before.  Such colours are shaded for the frame restored,
@@ -84,6 +124,7 @@ def load_post(*_args):
     LiveState.reset()
     engine.shaders.forget_data()
     engine.shadows.clear()
+    bake.forget()
     properties.migrate(bpy.data)
 
 
@@ -94,7 +135,7 @@ def last_error():
 HANDLERS = ((bpy.app.handlers.frame_change_post, frame_change_post), (bpy.app.handlers.load_post, load_post),
             (bpy.app.handlers.render_init, render_init), (bpy.app.handlers.render_complete, render_done),
             (bpy.app.handlers.render_cancel, render_done), (bpy.app.handlers.undo_post, undo_post),
-            (bpy.app.handlers.redo_post, undo_post))
+            (bpy.app.handlers.redo_post, undo_post), (bpy.app.handlers.depsgraph_update_post, depsgraph_update_post))
 
 
 def register():

@@ -10,7 +10,7 @@ class MeshData:
     position is not finite, which are left black."""
 
     __slots__ = ("domain", "positions", "normals", "slots", "count", "notes", "unplaced", "triangles", "inputs",
-                 "textured", "shading_normals", "term_weights", "term_inputs")
+                 "textured", "shading_normals", "term_weights", "term_inputs", "sites")
 
     def __init__(self, domain, positions, normals, slots, notes=(), unplaced=None, triangles=None, inputs=None):
         self.domain = domain
@@ -33,6 +33,9 @@ class MeshData:
         # (n, 3)}
         self.term_weights = {}
         self.term_inputs = {}
+        # for a bake's texels (domain "TEXEL"), where each lies on the mesh (bake.TexelSites); None for
+        # vertices and corners
+        self.sites = None
 
 
 def _read(collection, attr, count, width, dtype=np.float32):

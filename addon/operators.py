@@ -2,7 +2,7 @@
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty
 
-from . import engine, gloss, materials, meshes, shading, views
+from . import bake, engine, gloss, materials, meshes, shading, views
 from .live import LiveSession, LiveState, PrecomputeJob
 
 IDENTITY = ((1.0, 0.0, 0.0, 0.0), (0.0, 1.0, 0.0, 0.0), (0.0, 0.0, 1.0, 0.0), (0.0, 0.0, 0.0, 1.0))
@@ -106,20 +106,31 @@ def resolve_view(context, source, view_matrix, perspective):
     return views.region_view(rv3d, context.scene)
 
 
-class WENV_OT_shade(_Precomputing, bpy.types.Operator):
+def _view_choice(scene_setting):
+    """The `view` option of an operator that takes the scene's `scene_setting` by default (with
+    _ViewMatrix's options for MATRIX)."""
+    return EnumProperty(name="View", default="SCENE", items=[
+        ("SCENE", "Scene Setting", f"As the scene's wenv {scene_setting} setting"),
+        ("VIEWPORT", "Viewport", "The active 3D viewport"),
+        ("CAMERA", "Camera", "The scene camera"),
+        ("MATRIX", "Matrix", "The View Matrix and Perspective given here")])
+
+
+class _ViewMatrix:
+    """Mixin: the view an operator's `view` option MATRIX names."""
+
+    view_matrix: FloatVectorProperty(name="View Matrix", size=(4, 4), subtype="MATRIX", default=IDENTITY,
+                                     description="World to view matrix (as RegionView3D.view_matrix)")
+    perspective: BoolProperty(name="Perspective", default=True)
+
+
+class WENV_OT_shade(_Precomputing, _ViewMatrix, bpy.types.Operator):
     """Shade the selected meshes under the World for the current view into the 'wenv_radiance' colour attribute"""
     bl_idname = "wenv.shade"
     bl_label = "Shade"
     bl_options = {"REGISTER", "UNDO"}
 
-    view: EnumProperty(name="View", default="SCENE", items=[
-        ("SCENE", "Scene Setting", "As the scene's wenv View setting"),
-        ("VIEWPORT", "Viewport", "The active 3D viewport"),
-        ("CAMERA", "Camera", "The scene camera"),
-        ("MATRIX", "Matrix", "The View Matrix and Perspective given here")])
-    view_matrix: FloatVectorProperty(name="View Matrix", size=(4, 4), subtype="MATRIX", default=IDENTITY,
-                                     description="World to view matrix (as RegionView3D.view_matrix)")
-    perspective: BoolProperty(name="Perspective", default=True)
+    view: _view_choice("View")
     target: EnumProperty(name="Objects", default="SELECTED", items=[
         ("SELECTED", "Selected", "The selected objects"),
         ("SHADED", "Shaded", "Every mesh in the scene that was shaded before")])
@@ -169,6 +180,71 @@ class WENV_OT_clear(bpy.types.Operator):
     def execute(self, context):
         n = sum(meshes.remove_colors(o.data) for o in context.selected_objects if o.type == "MESH")
         self.report({"INFO"}, f"Removed shading from {n} mesh(es)")
+        return {"FINISHED"}
+
+
+class WENV_OT_bake(_ViewMatrix, bpy.types.Operator):
+    """Shade every texel of the scene's Bake Image (or a new one) through the active mesh's UV map, as its vertices would be shaded, and show it"""
+    bl_idname = "wenv.bake"
+    bl_label = "Bake"
+    bl_options = {"REGISTER", "UNDO"}
+
+    view: _view_choice("Bake View")
+
+    @classmethod
+    def poll(cls, context):
+        return context.scene is not None
+
+    def execute(self, context):
+        scene, st = context.scene, context.scene.wenv
+        obj = context.active_object
+        source = st.bake_view if self.view == "SCENE" else self.view
+        made = None
+        wm = context.window_manager
+        try:
+            if obj is None or obj.type != "MESH":
+                raise engine.SetupError(f"'{obj.name}' is not a mesh: only meshes bake" if obj is not None else
+                                        "No active object to bake: make a mesh active")
+            view = resolve_view(context, source, self.view_matrix, self.perspective)
+            image = st.bake_image
+            if image is None:
+                bake.check_size(st.bake_resolution, st.bake_resolution, st.memory_budget)
+                image = made = bpy.data.images.new(f"{obj.name} wenv bake", st.bake_resolution, st.bake_resolution,
+                                                   alpha=True, float_buffer=st.bake_float)
+            count, notes = bake.bake(scene, context.evaluated_depsgraph_get(), obj, image, view, context.blend_data,
+                                     uv_map=st.bake_uv_map or None, margin=st.bake_margin,
+                                     progress=_progress_reporter(wm, "baking"), view_source=source)
+        except (engine.SetupError, engine.CancelledError) as exc:
+            if made is not None:
+                bpy.data.images.remove(made)
+            cancelled = isinstance(exc, engine.CancelledError)
+            self.report({"WARNING" if cancelled else "ERROR"}, "Bake cancelled" if cancelled else str(exc))
+            return {"CANCELLED"}
+        finally:
+            wm.progress_end()
+        if made is not None:
+            st.bake_image = made
+        if st.bake_show:
+            bake.show_in_materials(obj, image)
+            views.show_attribute_colors(wm, "TEXTURE")
+        for note in notes:
+            self.report({"WARNING"}, note)
+        self.report({"INFO"}, f"Baked {count} texels of '{obj.name}' into '{image.name}'")
+        return {"FINISHED"}
+
+
+class WENV_OT_bake_hide(bpy.types.Operator):
+    """Remove the bake's nodes from the active object's materials (Material Preview and EEVEE show the materials again) and set the viewports back"""
+    bl_idname = "wenv.bake_hide"
+    bl_label = "Hide Bake"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def execute(self, context):
+        obj = context.active_object
+        mats = [slot.material for slot in obj.material_slots] if obj is not None else []
+        n = bake.hide_in_materials(mats)
+        views.restore_viewports(bpy.data.screens)
+        self.report({"INFO"}, f"Bake nodes removed from {n} material(s)")
         return {"FINISHED"}
 
 
@@ -357,7 +433,7 @@ class WENV_OT_fit_roughness(_MaterialOperator, bpy.types.Operator):
         return {"FINISHED"}
 
 
-classes = (WENV_OT_precompute, WENV_OT_shade, WENV_OT_clear, WENV_OT_live, WENV_OT_from_principled,
+classes = (WENV_OT_precompute, WENV_OT_shade, WENV_OT_clear, WENV_OT_bake, WENV_OT_bake_hide, WENV_OT_live, WENV_OT_from_principled,
            WENV_OT_lobe_add, WENV_OT_lobe_remove, WENV_OT_fit_roughness)
 
 

@@ -160,10 +160,50 @@ class WENV_SceneSettings(bpy.types.PropertyGroup):
     shade_on_frame_change: BoolProperty(name="Shade on Frame Change", default=False,
                                         description="Re-shade the shaded objects from the scene camera on every "
                                                     "frame change (animation playback and rendering)")
+    bake_image: PointerProperty(name="Bake Image", type=bpy.types.Image,
+                                description="The image Bake writes into (none: a new one of Bake Resolution)")
+    bake_resolution: IntProperty(name="Bake Resolution", default=1024, min=1, max=65536,
+                                 description="Side in texels of the image Bake makes when no Bake Image is set")
+    bake_float: BoolProperty(name="32-bit Float", default=True,
+                             description="The image Bake makes holds linear floats (radiance above 1 kept); off: "
+                                         "bytes in sRGB, clipped at 1")
+    bake_margin: IntProperty(name="Margin", default=16, min=0, max=256, subtype="PIXEL",
+                             description="Texels by which the UV islands' colours are extended outwards, so that "
+                                         "filtering near an island's edge reads the island")
+    bake_uv_map: StringProperty(name="UV Map", default="",
+                                description="The UV map Bake shades through (empty: the mesh's active render one)")
+    bake_view: EnumProperty(name="Bake View", default="CAMERA", items=[
+        ("CAMERA", "Camera", "The scene camera"),
+        ("VIEWPORT", "Viewport", "The active 3D viewport's view")])
+    bake_show: BoolProperty(name="Show Bake", default=True,
+                            description="After baking, show the image in the object's materials (an Image Texture "
+                                        "node, the active one, for Solid mode's Texture colour; emitted into a "
+                                        "Material Output for EEVEE: Material Preview) and set open viewports to "
+                                        "Solid, Flat, Texture")
     # Undone and saved with the colours, so after an undo or redo the colours' frame is known
     # (handlers.undo_post).
     shaded_frame: IntProperty(name="Shaded Frame", default=shading.NO_FRAME, options={"HIDDEN"},
                               description="The frame at which colours were last written")
+
+
+class WENV_ImageSettings(bpy.types.PropertyGroup):
+    """What an image's last bake was made of (bake.py): the panel reads it, a change to any of it marks
+    the bake stale, a frame change bakes it again.  Undone with the image, so `bake_step` tells which
+    bake's pixels an undo or redo puts back."""
+    baked_object: StringProperty(name="Baked Object", description="The object whose texels the image holds")
+    uv_map: StringProperty(name="UV Map", description="The UV map the bake went through")
+    margin: IntProperty(name="Margin", default=0, min=0)
+    view: StringProperty(name="View", description="Where the bake was seen from: CAMERA, VIEWPORT or MATRIX")
+    view_key: StringProperty(name="View Key", options={"HIDDEN"}, description="The view baked for")
+    state_key: StringProperty(name="State Key", options={"HIDDEN"},
+                              description="The mesh, World, materials and lamps baked with")
+    frame: IntProperty(name="Frame", default=0)
+    texels: IntProperty(name="Texels", default=0, min=0)
+    stale: StringProperty(name="Stale", description="What changed since the bake (empty: nothing)")
+    bake_step: IntProperty(name="Bake Step", default=0, options={"HIDDEN"})
+    bake_on_frame_change: BoolProperty(name="Bake on Frame Change", default=False,
+                                       description="With Shade on Frame Change, bake this image again from the "
+                                                   "scene camera on every frame change (renders of camera moves)")
 
 
 class WENV_ObjectSettings(bpy.types.PropertyGroup):
@@ -202,8 +242,8 @@ class WENV_WindowSettings(bpy.types.PropertyGroup):
                                                 "attribute colours); off sets each viewport back as it was")
 
 
-classes = (WENV_LobeSettings, WENV_MaterialSettings, WENV_SceneSettings, WENV_ObjectSettings, WENV_ViewportBackup,
-           WENV_WindowSettings)
+classes = (WENV_LobeSettings, WENV_MaterialSettings, WENV_SceneSettings, WENV_ImageSettings, WENV_ObjectSettings,
+           WENV_ViewportBackup, WENV_WindowSettings)
 
 
 # Settings a .blend may hold under an earlier name: (collection of the settings, old key, new property).
@@ -234,6 +274,7 @@ def register():
     bpy.types.Scene.wenv = PointerProperty(type=WENV_SceneSettings)
     bpy.types.Material.wenv = PointerProperty(type=WENV_MaterialSettings)
     bpy.types.Object.wenv = PointerProperty(type=WENV_ObjectSettings)
+    bpy.types.Image.wenv = PointerProperty(type=WENV_ImageSettings)
     bpy.types.View3DShading.wenv = PointerProperty(type=WENV_ViewportBackup)
     bpy.types.WindowManager.wenv = PointerProperty(type=WENV_WindowSettings)
 
@@ -241,6 +282,7 @@ def register():
 def unregister():
     del bpy.types.WindowManager.wenv
     del bpy.types.View3DShading.wenv
+    del bpy.types.Image.wenv
     del bpy.types.Object.wenv
     del bpy.types.Material.wenv
     del bpy.types.Scene.wenv

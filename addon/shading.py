@@ -274,6 +274,29 @@ def _ray_progress(k, parts, report, cancelled):
     return progress
 
 
+def new_plan(scene, view, images, cull=None, shadows=None):
+    """A ShadingPlan of the scene's World, lamps and wenv settings, with no meshes yet (main
+    thread); `cull` and `shadows` in place of the scene's settings where given.  Raises SetupError
+    for a set-up that cannot be shaded."""
+    st = scene.wenv
+    # Blender's limits on a float property let NaN through (a script may set it)
+    for label, value in (("Max Luminance", st.max_luminance), ("Target Error", st.target_error)):
+        if not math.isfinite(value):
+            raise SetupError(f"The scene's wenv {label} is {value}: set a number")
+    spec = world.world_spec(scene.world)
+    plan = ShadingPlan(engine.quality_value(st.quality), spec, world.environment(spec, images), view, st.tone_mapping,
+                       st.max_luminance, st.target_error / 100.0, st.memory_budget,
+                       cull=st.shade_only_seen if cull is None else cull, shadows=st.shadows if shadows is None else shadows)
+    note = world.image_note(spec, images)
+    if note:
+        plan.notes.append(note)
+    lamp_settings, lamp_notes = lamps.read_lamps(scene)
+    plan.notes.extend(lamp_notes)
+    plan.lamps = engine.make_lamps(lamp_settings)
+    plan.lamps_key = lamps.key_of(lamp_settings)
+    return plan
+
+
 def plan_shading(scene, depsgraph, objects, view, images, progress=None, preview=False):
     """Reads everything a pass over `objects` needs (main thread); builds the shader it shades
     with first if it is missing.  With `preview` (the live mode) and the scene's Draft While
@@ -281,12 +304,6 @@ def plan_shading(scene, depsgraph, objects, view, images, progress=None, preview
     engine.PREVIEW_QUALITY (plan.chosen keeps the scene's).  Raises SetupError for a set-up that
     cannot be shaded."""
     st = scene.wenv
-    # Blender's limits on a float property let NaN through (a script may set it)
-    for label, value in (("Max Luminance", st.max_luminance), ("Target Error", st.target_error)):
-        if not math.isfinite(value):
-            raise SetupError(f"The scene's wenv {label} is {value}: set a number")
-    spec = world.world_spec(scene.world)
-    quality = engine.quality_value(st.quality)
     notes = []
     editing = [o.name for o in objects if o.type == "MESH" and o.mode == "EDIT"]
     if editing:
@@ -298,18 +315,11 @@ def plan_shading(scene, depsgraph, objects, view, images, progress=None, preview
     if not mesh_objects:
         raise SetupError("Leave Edit Mode to shade" if editing else
                          "No mesh objects to shade: select at least one mesh")
-    plan = ShadingPlan(quality, spec, world.environment(spec, images), view, st.tone_mapping, st.max_luminance,
-                       st.target_error / 100.0, st.memory_budget, cull=st.shade_only_seen, shadows=st.shadows)
+    plan = new_plan(scene, view, images)
     if st.shade_only_seen and view.view_projection is None and st.view_source == "VIEWPORT" and not view.perspective:
         notes.append("Shade Only What Is Seen applies to perspective viewports: this orthographic view shades "
                      "every vertex")
-    note = world.image_note(spec, images)
-    if note:
-        notes.append(note)
-    lamp_settings, lamp_notes = lamps.read_lamps(scene)
-    notes.extend(lamp_notes)
-    plan.lamps = engine.make_lamps(lamp_settings)
-    plan.lamps_key = lamps.key_of(lamp_settings)
+    notes.extend(plan.notes)
     plan.notes = notes
     for obj in mesh_objects:
         data = meshes.read_mesh(obj, depsgraph)

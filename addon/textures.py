@@ -291,14 +291,9 @@ def uv_layer(mesh, uv_map):
     return layers.get(uv_map) if uv_map else next((l for l in layers if l.active_render), None)
 
 
-def uv_rows(mesh, uv_map, domain, corner_vert):
-    """(uv, footprint, corner rows) of a mesh's UV map (None: the active render one) for its shaded
-    rows: per corner -- with each corner's row (itself, or its vertex for the POINT domain) -- and
-    each corner's share of UV space, the area of the UV triangles about its vertex over three (its
-    side, in UV units, is the footprint's).  None when the mesh has no such UV map."""
-    layer = uv_layer(mesh, uv_map)
-    if layer is None:
-        return None
+def corner_uvs(mesh, layer):
+    """(nl, 2) float32 UVs of a mesh's UV layer, one per face corner; SetupError naming the corner
+    of a coordinate that is not finite."""
     nl = len(mesh.loops)
     uv = np.empty(nl * 2, np.float32)
     layer.uv.foreach_get("vector", uv)
@@ -307,15 +302,45 @@ def uv_rows(mesh, uv_map, domain, corner_vert):
         corner = int(np.argwhere(~np.isfinite(uv).all(axis=1))[0, 0])
         raise world.SetupError(f"UV map '{layer.name}' of mesh '{mesh.name}' has a coordinate that is not finite "
                                f"(NaN or infinite) at face corner {corner}")
+    return uv
+
+
+def triangle_corners(mesh):
+    """(m, 3) int32: the face corners of each of the mesh's loop triangles."""
     tris = mesh.loop_triangles
     loops = np.empty(len(tris) * 3, np.int32)
     tris.foreach_get("loops", loops)
-    loops = loops.reshape(-1, 3)
+    return loops.reshape(-1, 3)
+
+
+def uv_rows(mesh, uv_map, domain, corner_vert):
+    """(uv, footprint, corner rows) of a mesh's UV map (None: the active render one) for its shaded
+    rows: per corner -- with each corner's row (itself, or its vertex for the POINT domain) -- and
+    each corner's share of UV space, the area of the UV triangles about its vertex over three (its
+    side, in UV units, is the footprint's).  None when the mesh has no such UV map."""
+    layer = uv_layer(mesh, uv_map)
+    if layer is None:
+        return None
+    uv = corner_uvs(mesh, layer)
+    loops = triangle_corners(mesh)
     a, b, c = uv[loops[:, 0]], uv[loops[:, 1]], uv[loops[:, 2]]
     area = 0.5 * np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1]))
     share = np.bincount(corner_vert[loops].ravel(), weights=np.repeat(area / 3.0, 3), minlength=len(mesh.vertices))
-    rows = corner_vert if domain == "POINT" else np.arange(nl)
+    rows = corner_vert if domain == "POINT" else np.arange(len(uv))
     return uv, np.sqrt(share[corner_vert]).astype(np.float32), rows
+
+
+def data_uv_rows(mesh, uv_map, data, corner_vert):
+    """uv_rows for the rows of `data` (meshes.MeshData): its vertices or corners, or, for a bake's
+    texels (data.sites), the UV map at each texel's centre, each texel its own row, its footprint
+    the texel's side carried into that map."""
+    if data.sites is None:
+        return uv_rows(mesh, uv_map, data.domain, corner_vert)
+    layer = uv_layer(mesh, uv_map)
+    if layer is None:
+        return None
+    uv = corner_uvs(mesh, layer)
+    return data.sites.at(uv), data.sites.footprint_in(uv), np.arange(data.count)
 
 
 def colours_at_rows(levels, source, uv, footprint, rows, n_rows):
@@ -391,8 +416,8 @@ def read_inputs(obj, depsgraph, data):
             if not sock.is_linked:
                 continue
             ev = nodes.Evaluator(
-                data.count, lambda uv_map: uv_rows(mesh, uv_map, data.domain, corner_vert),
-                lambda tex, uv, footprint, rows, s=s: _colours_memo((obj.name, s, tex.name),
+                data.count, lambda uv_map: data_uv_rows(mesh, uv_map, data, corner_vert),
+                lambda tex, uv, footprint, rows, s=s: _colours_memo((obj.name, data.domain, s, tex.name),
                                                                    pyramids(tex.image), Source(tex, None),
                                                                    (uv, footprint, rows), data.count))
             try:
@@ -460,6 +485,10 @@ def _within_family_limits(inputs, rows, where):
 NORMAL_MAP_SPACES = ("TANGENT", "OBJECT", "WORLD", "BLENDER_OBJECT", "BLENDER_WORLD")
 
 
+# How the panel's note on a normal map or Bump node read at the vertices ends (a bake reads them per texel)
+AT_VERTICES = "is read at the vertices: detail finer than the mesh is lost"
+
+
 class NormalChain:
     """What bends a Principled BSDF's Normal, as wenv reads it: a Normal Map node (`map`, a Source,
     with `map_strength`) and/or a Bump node over it (`bump`, the node, with its unlinked Strength
@@ -473,7 +502,7 @@ class NormalChain:
 
     def note(self):
         what = " over ".join(w for w, on in (("a Bump node", self.bump), ("a normal map", self.map)) if on is not None)
-        return f"'Normal' from {what} is read at the vertices: detail finer than the mesh is lost"
+        return f"'Normal' from {what} {AT_VERTICES}"
 
 
 def _normal_map(node, chain):
@@ -541,10 +570,13 @@ def _unit_rows(v):
     return np.where(length > 1e-20, v / np.maximum(length, 1e-20), 0.0).astype(np.float32)
 
 
-def _mapped_normals(mesh, corner_vert, source, strength, object_n, normal, to_world):
-    """Each corner's normal from a normal map (world space, blended towards the mesh's `normal` by
-    strength; object_n the mesh's in object space), or None without its UV map."""
-    got = uv_rows(mesh, source.uv_map, "CORNER", corner_vert)
+def _mapped_normals(mesh, corner_vert, source, strength, object_n, normal, to_world, sites=None):
+    """The normal a normal map gives at each corner, or with `sites` at each baked texel (world
+    space, blended towards the mesh's `normal` by strength; object_n the mesh's in object space, at
+    the same points), or None without its UV map.  At a texel the tangent frame is the corners'
+    interpolated, as Cycles interpolates the tangent attribute."""
+    got = (uv_rows(mesh, source.uv_map, "CORNER", corner_vert) if sites is None
+           else data_uv_rows(mesh, source.uv_map, _SitesOnly(sites), corner_vert))
     if got is None:
         return None
     nl = len(mesh.loops)
@@ -560,6 +592,8 @@ def _mapped_normals(mesh, corner_vert, source, strength, object_n, normal, to_wo
         mesh.loops.foreach_get("tangent", tangent)
         mesh.loops.foreach_get("bitangent_sign", sign)
         tangent = tangent.reshape(nl, 3)
+        if sites is not None:
+            tangent, sign = sites.at(tangent), np.where(sites.at(sign) < 0.0, -1.0, 1.0).astype(np.float32)
         bitangent = sign[:, None] * np.cross(object_n, tangent)
         mapped = _unit_rows(c[:, :1] * tangent + c[:, 1:2] * bitangent + c[:, 2:3] * object_n)
     else:
@@ -572,13 +606,20 @@ def _mapped_normals(mesh, corner_vert, source, strength, object_n, normal, to_wo
     return mapped if strength == 1.0 else _unit_rows(normal + (mapped - normal) * strength)
 
 
-def height_gradients(points, corner_vert, tri_loops, height, n_vertices):
-    """Each vertex's gradient of a height given at the face corners: over each triangle the height
-    is linear between its corners' values (so a UV seam's two sides each count their own), and a
-    vertex takes its triangles' gradients weighted by their areas."""
-    v = corner_vert[tri_loops]
-    p0, p1, p2 = points[v[:, 0]], points[v[:, 1]], points[v[:, 2]]
-    h = height[tri_loops].astype(np.float64)
+class _SitesOnly:
+    """What data_uv_rows reads of a bake's rows: its sites and their count."""
+
+    __slots__ = ("sites", "count")
+
+    def __init__(self, sites):
+        self.sites = sites
+        self.count = sites.count
+
+
+def triangle_gradients(p0, p1, p2, h):
+    """Per triangle, the world-space gradient of a quantity linear over it with values h (m, 3) at
+    its corners p0, p1, p2 (m, 3 each), and the triangle's area (0 for a degenerate one, whose
+    gradient is 0)."""
     n = np.cross(p1 - p0, p2 - p0)
     twice_area = np.linalg.norm(n, axis=1)
     ok = twice_area > 1e-30
@@ -586,7 +627,16 @@ def height_gradients(points, corner_vert, tri_loops, height, n_vertices):
     # the gradient of a corner's barycentric weight is the unit normal x its opposite edge / (2 area)
     grad = (h[:, :1] * np.cross(unit, p2 - p1) + h[:, 1:2] * np.cross(unit, p0 - p2) +
             h[:, 2:3] * np.cross(unit, p1 - p0)) / np.where(ok, twice_area, 1.0)[:, None]
-    weight = np.where(ok, 0.5 * twice_area, 0.0)
+    return grad, np.where(ok, 0.5 * twice_area, 0.0)
+
+
+def height_gradients(points, corner_vert, tri_loops, height, n_vertices):
+    """Each vertex's gradient of a height given at the face corners: over each triangle the height
+    is linear between its corners' values (so a UV seam's two sides each count their own), and a
+    vertex takes its triangles' gradients weighted by their areas."""
+    v = corner_vert[tri_loops]
+    grad, weight = triangle_gradients(points[v[:, 0]], points[v[:, 1]], points[v[:, 2]],
+                                      height[tri_loops].astype(np.float64))
     total = np.zeros((n_vertices, 3))
     area = np.bincount(v.ravel(), weights=np.repeat(weight, 3), minlength=n_vertices)
     for k in range(3):
@@ -603,67 +653,99 @@ def bumped_normals(normal, gradient, distance, strength):
     return out if strength == 1.0 else _unit_rows(strength * out + (1.0 - strength) * normal)
 
 
+def _world_points(mesh, m):
+    nv = len(mesh.vertices)
+    co = np.empty(nv * 3, np.float32)
+    mesh.vertices.foreach_get("co", co)
+    m = np.array(m, np.float64)
+    return co.reshape(nv, 3).astype(np.float64) @ m[:3, :3].T + m[:3, 3]
+
+
+def _height_reader(obj, s, mesh, corner_vert, where, count):
+    """An Evaluator of a Bump node's Height at `where`'s points: the face corners (where None) or
+    a bake's texel sites."""
+    rows = ((lambda uv_map: uv_rows(mesh, uv_map, "CORNER", corner_vert)) if where is None else
+            (lambda uv_map: data_uv_rows(mesh, uv_map, _SitesOnly(where), corner_vert)))
+    tag = ("height", "CORNER") if where is None else ("height", "TEXEL", where.shift)
+    return nodes.Evaluator(count, rows,
+                           lambda tex, uv, footprint, rows_: _colours_memo((obj.name, s) + tag + (tex.name,),
+                                                                           pyramids(tex.image), Source(tex, None),
+                                                                           (uv, footprint, rows_), count))
+
+
+def _bump_gradients(obj, s, mat, chain, mesh, corner_vert, m, sites, notes):
+    """The world gradient of a Bump node's Height at each corner (linear over each triangle,
+    height_gradients) or, with `sites`, at each baked texel: the height read there and one texel
+    along the bake's u and v, through the UV map's own gradients over the triangle.  None without
+    the Height's UV map (noted)."""
+    socket = chain.bump.inputs["Height"]
+    try:
+        if sites is None:
+            height = _height_reader(obj, s, mesh, corner_vert, None, len(mesh.loops)).value(socket)
+            heights = [height]
+        else:
+            heights = [_height_reader(obj, s, mesh, corner_vert, at, sites.count).value(socket)
+                       for at in (sites, sites.shifted(1.0, 0.0), sites.shifted(0.0, 1.0))]
+    except nodes.MissingUV as exc:
+        notes.append(_no_uv_map(obj, exc.uv_map, f"the Bump node of '{mat.name}'", "it is not used"))
+        return None
+    if not all(np.isfinite(h).all() for h in heights):
+        raise world.SetupError(f"Material '{mat.name}': its Bump node's Height is not finite (NaN or "
+                               f"infinite) on '{obj.name}'")
+    points = _world_points(mesh, m)
+    if sites is None:
+        return height_gradients(points, corner_vert, triangle_corners(mesh), heights[0], len(mesh.vertices))[corner_vert]
+    grad_u, grad_v = sites.uv_gradients(points[corner_vert])
+    h, hu, hv = (x.astype(np.float64) for x in heights)
+    return (hu - h)[:, None] * sites.width * grad_u + (hv - h)[:, None] * sites.height * grad_v
+
+
 def read_shading_normals(obj, depsgraph, data):
     """Sets data.shading_normals (world space, per shaded row) for the material slots whose
     Principled BSDF's Normal comes from a normal map or a Bump node, as Cycles makes them: a Normal
     Map's 2 x colour - 1 in the UV map's tangent frame (MikkTSpace), in the object's space or the
     world's (Blender's own object and world spaces with Y and Z flipped), blended towards the mesh's
     normal by Strength; a Bump node's normal tilted against its Height's gradient over the surface
-    (bumped_normals), the height linear between the corners.  Read at the vertices: detail finer than
-    the mesh is lost.  Returns notes."""
+    (bumped_normals).  At the vertices the height is linear between the corners and detail finer than
+    the mesh is lost; a bake (data.sites) reads both at each texel.  Returns notes."""
     notes = []
     ob_eval = obj.evaluated_get(depsgraph)
+    sites = data.sites
     for s, mat, (chain, _), mesh, corner_vert in _principled_slots(obj, depsgraph, normal_source):
         nl = len(mesh.loops)
         normal = np.empty(nl * 3, np.float32)
         mesh.corner_normals.foreach_get("vector", normal)
         normal = normal.reshape(nl, 3)
+        if sites is not None:
+            normal = _unit_rows(sites.at(normal))
         # into the world by the inverse transpose, as read_mesh turns the normals
         m = ob_eval.matrix_world
         to_world = np.array(m.to_3x3().inverted_safe(), np.float32)
         world_n = _unit_rows(normal @ to_world)
         bent = False
         if chain.map is not None:
-            mapped = _mapped_normals(mesh, corner_vert, chain.map, chain.map_strength, normal, world_n, to_world)
+            mapped = _mapped_normals(mesh, corner_vert, chain.map, chain.map_strength, normal, world_n, to_world,
+                                     sites)
             if mapped is None:
                 notes.append(_no_uv_map(obj, chain.map.uv_map, f"the normal map of '{mat.name}'",
                                         "the mesh's normals are used"))
             else:
                 world_n, bent = mapped, True
         if chain.bump is not None and chain.bump.inputs["Height"].is_linked:
-            ev = nodes.Evaluator(
-                nl, lambda uv_map: uv_rows(mesh, uv_map, "CORNER", corner_vert),
-                lambda tex, uv, footprint, rows, s=s: _colours_memo((obj.name, s, "height", tex.name),
-                                                                   pyramids(tex.image), Source(tex, None),
-                                                                   (uv, footprint, rows), nl))
-            try:
-                height = ev.value(chain.bump.inputs["Height"])
-            except nodes.MissingUV as exc:
-                notes.append(_no_uv_map(obj, exc.uv_map, f"the Bump node of '{mat.name}'", "it is not used"))
-                height = None
-            if height is not None:
-                if not np.isfinite(height).all():
-                    raise world.SetupError(f"Material '{mat.name}': its Bump node's Height is not finite (NaN or "
-                                           f"infinite) on '{obj.name}'")
-                nv = len(mesh.vertices)
-                co = np.empty(nv * 3, np.float32)
-                mesh.vertices.foreach_get("co", co)
-                points = co.reshape(nv, 3).astype(np.float64) @ np.array(m, np.float64)[:3, :3].T + \
-                    np.array(m, np.float64)[:3, 3]
-                tris = mesh.loop_triangles
-                tri_loops = np.empty(len(tris) * 3, np.int32)
-                tris.foreach_get("loops", tri_loops)
-                gradient = height_gradients(points, corner_vert, tri_loops.reshape(-1, 3), height, nv)
-                world_n = bumped_normals(world_n, gradient[corner_vert], chain.distance, chain.bump_strength)
+            gradient = _bump_gradients(obj, s, mat, chain, mesh, corner_vert, m, sites, notes)
+            if gradient is not None:
+                world_n = bumped_normals(world_n, gradient, chain.distance, chain.bump_strength)
                 bent = True
         if not bent:
             continue
-        rows = corner_vert if data.domain == "POINT" else np.arange(nl)
-        total = np.stack([np.bincount(rows, weights=world_n[:, k], minlength=data.count) for k in range(3)], axis=1)
+        if sites is None:
+            rows = corner_vert if data.domain == "POINT" else np.arange(nl)
+            world_n = _unit_rows(np.stack([np.bincount(rows, weights=world_n[:, k], minlength=data.count)
+                                           for k in range(3)], axis=1))
         if data.shading_normals is None:
             data.shading_normals = data.normals.copy()
         mine = _slot_rows(obj, data, s)
-        data.shading_normals[mine] = _unit_rows(total)[mine]
+        data.shading_normals[mine] = world_n[mine]
     return notes
 
 
@@ -695,8 +777,9 @@ def read_term_weights(obj, depsgraph, data):
                 mesh = meshes.shaded_mesh(obj, depsgraph)[0]
                 corner_vert = meshes.corner_vertices(mesh)
             ev = nodes.Evaluator(
-                data.count, lambda uv_map: uv_rows(mesh, uv_map, data.domain, corner_vert),
-                lambda tex, uv, footprint, rows, s=s, t=t: _colours_memo((obj.name, s, t, tex.name), pyramids(tex.image),
+                data.count, lambda uv_map: data_uv_rows(mesh, uv_map, data, corner_vert),
+                lambda tex, uv, footprint, rows, s=s, t=t: _colours_memo((obj.name, data.domain, s, t, tex.name),
+                                                                         pyramids(tex.image),
                                                                          Source(tex, None), (uv, footprint, rows),
                                                                          data.count)) if reads else None
             weight, fac = colour, np.ones((data.count, 1), np.float32)

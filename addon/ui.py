@@ -3,7 +3,7 @@ import math
 
 import bpy
 
-from . import engine, gloss, handlers, lamps, materials, world
+from . import bake, engine, gloss, handlers, lamps, materials, world
 from .live import LiveState
 
 
@@ -96,6 +96,52 @@ class WENV_PT_shading(_SidebarPanel, bpy.types.Panel):
         quality = engine.quality_value(st.quality)
         if not engine.shaders.has(quality) and engine.needs_matrices(quality):
             layout.label(text="Rotation matrices: precomputed on first use", icon="INFO")
+
+
+class WENV_PT_bake(_SidebarPanel, bpy.types.Panel):
+    bl_label = "Bake to Image"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        layout = self.layout
+        scene = context.scene
+        st = scene.wenv
+        obj = context.active_object
+        layout.template_ID(st, "bake_image", new="image.new", open="image.open")
+        col = _property_column(layout)
+        image = st.bake_image
+        if image is None:
+            col.prop(st, "bake_resolution")
+            col.prop(st, "bake_float")
+        else:
+            col.label(text=f"{image.size[0]} x {image.size[1]}, {image.colorspace_settings.name}"
+                           + (", float" if image.is_float else ", bytes"))
+        col.prop(st, "bake_margin")
+        if obj is not None and obj.type == "MESH":
+            col.prop_search(st, "bake_uv_map", obj.data, "uv_layers", text="UV Map")
+        col.prop(st, "bake_view")
+        col.prop(st, "bake_show")
+        if image is not None:
+            sub = col.column()
+            sub.active = st.shade_on_frame_change
+            sub.prop(image.wenv, "bake_on_frame_change")
+        row = layout.row(align=True)
+        row.scale_y = 1.3
+        row.operator("wenv.bake", icon="RENDER_STILL")
+        row.operator("wenv.bake_hide", icon="X")
+        if image is None or not image.wenv.baked_object:
+            return
+        record = image.wenv
+        where = {"CAMERA": "the camera", "VIEWPORT": "a viewport", "MATRIX": "a given view"}.get(record.view, "a view")
+        box = layout.box()
+        box.label(text=f"'{record.baked_object}': {record.texels} texels through '{record.uv_map}' from {where}, "
+                       f"frame {record.frame}", icon="IMAGE_DATA")
+        why = bake.staleness(image, scene, context)
+        if why:
+            box.alert = True
+            box.label(text=f"Stale: {why} since the bake", icon="ERROR")
+        else:
+            box.label(text="Current: shows the scene as it is", icon="CHECKMARK")
 
 
 class WENV_UL_lobes(bpy.types.UIList):
@@ -224,7 +270,7 @@ class WENV_PT_gloss(_SidebarPanel, bpy.types.Panel):
             layout.label(text="No reading", icon="ERROR")
 
 
-classes = (WENV_PT_shading, WENV_UL_lobes, WENV_PT_material, WENV_PT_gloss)
+classes = (WENV_PT_shading, WENV_PT_bake, WENV_UL_lobes, WENV_PT_material, WENV_PT_gloss)
 
 
 def register():

@@ -102,22 +102,24 @@ SHOWN = {"type": "SOLID", "light": "FLAT", "color_type": "VERTEX"}
 
 
 def showing_attribute_colors(window_manager):
-    """Whether an open 3D viewport shows the colours (set by show_attribute_colors, not yet set back)."""
+    """Whether an open 3D viewport shows the colours or a bake (set by show_attribute_colors, not yet
+    set back)."""
     return any(shading.wenv.showing for shading in _open_viewports(window_manager))
 
 
-def show_attribute_colors(window_manager):
+def show_attribute_colors(window_manager, color_type="VERTEX"):
     """Every open 3D viewport in solid mode, flat lighting, colours from the active colour attribute
-    (the shaded radiance, shown as the scene's view transform maps it).  Each keeps what it had in
-    its own shading settings (View3DShading.wenv) for restore_viewports; one already showing the
-    colours keeps its first backup."""
+    (the shaded radiance, shown as the scene's view transform maps it), or with color_type "TEXTURE"
+    from the materials' active Image Texture node (a bake).  Each keeps what it had in its own
+    shading settings (View3DShading.wenv) for restore_viewports; one already showing the colours
+    keeps its first backup."""
     for shading in _open_viewports(window_manager):
         backup = shading.wenv
         if not backup.showing:
             for k in SHADING_KEYS:
                 setattr(backup, k, getattr(shading, k))
             backup.showing = True
-        for k, value in SHOWN.items():
+        for k, value in dict(SHOWN, color_type=color_type).items():
             setattr(shading, k, value)
 
 

@@ -67,6 +67,13 @@ def build(scene_name, size):
         objs += [sphere, plane]
         scene.camera.location = (0.0, -6.5, 3.5)
         scene.camera.rotation_euler = (math.radians(65), 0.0, 0.0)
+    render_settings(scene, size)
+    return scene, objs
+
+
+def render_settings(scene, size):
+    """size x size renders, transparent film, Standard view, 32-bit EXR, no denoising; Workbench
+    flat with the vertex colours."""
     scene.render.resolution_x = scene.render.resolution_y = size
     scene.render.film_transparent = True
     scene.view_settings.view_transform = "Standard"
@@ -75,7 +82,6 @@ def build(scene_name, size):
     scene.cycles.use_denoising = False
     scene.display.shading.light = "FLAT"
     scene.display.shading.color_type = "VERTEX"
-    return scene, objs
 
 
 def set_world(scene, hdri):

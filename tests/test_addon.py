@@ -1789,6 +1789,9 @@ def test_readme_scripting_block_runs_as_written(scene):
     try:
         exec(compile(readme_block("import bpy\nscene = bpy.context.scene"), "README.md", "exec"), ns)
         assert bpy.context.window_manager.wenv.show_in_viewports
+        # the bake: a new 512 x 512 image holding Suzanne's texels, shown in her material
+        assert tuple(ns["baked"].size) == (512, 512) and ns["baked"].wenv.texels > 10000
+        assert suzanne.active_material.node_tree.nodes["wenv bake"].image == ns["baked"]
     finally:
         bpy.context.window_manager.wenv.show_in_viewports = False
     exec(compile(readme_block('import bpy\nmat = bpy.data.materials["paint"]'), "docs/addon.md", "exec"), {})

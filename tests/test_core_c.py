@@ -29,8 +29,9 @@ def test_numerical_code_never_includes_python():
 
 
 def test_layers_include_only_layers_below():
-    """base <- math <- scene <- methods, reference, glossmeter <- auto <- python (docs/ARCHITECTURE.md §1)."""
-    rank = {"base": 0, "math": 1, "scene": 2, "methods": 3, "reference": 3, "glossmeter": 3, "auto": 4, "python": 5}
+    """base <- math <- scene, bake <- methods, reference, glossmeter <- auto <- python (docs/ARCHITECTURE.md §1)."""
+    rank = {"base": 0, "math": 1, "scene": 2, "bake": 2, "methods": 3, "reference": 3, "glossmeter": 3, "auto": 4,
+            "python": 5}
     wrong = []
     for path in glob.glob(os.path.join(CSRC, "**", "*.[ch]"), recursive=True):
         layer = os.path.relpath(path, CSRC).split(os.sep)[0]
@@ -66,10 +67,11 @@ def test_core_without_python(tmp_path, sanitized):
     assert run.returncode == 0, run.stdout + run.stderr
     summary = re.search(r"^(\d+) passed, (\d+) failed$", run.stdout, re.M)
     assert summary and summary.group(2) == "0"
-    # a lamp (1), the grazing node loop for this CPU (3), materials (9), each model's accelerators
+    # a lamp (1), the bake's texels and margin (3), the grazing node loop for this CPU (3), materials (9), each
+    # model's accelerators
     # against the defaults derived from its lobe_value (35), then a white furnace, the Lambertian part's
     # light given apart and stats per method, the registry and the reference
-    assert int(summary.group(1)) == 1 + 3 + 9 + 35 + 3 * len(wenv.METHODS) + 2
+    assert int(summary.group(1)) == 1 + 3 + 3 + 9 + 35 + 3 * len(wenv.METHODS) + 2
     assert run.stdout.count("is lobe_value's") == 9 and "its cone for the exact lights is its shape's" in run.stdout
     for method in wenv.METHODS:
         assert f"ok   {method}: a white environment reflects the albedo" in run.stdout

@@ -8,6 +8,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "bake/margin.h"
+#include "bake/texel_raster.h"
 #include "methods/lamps/lamp_shading.h"
 #include "methods/method.h"
 #include "methods/wavelet/grazing_nodes.h"
@@ -388,9 +390,81 @@ static void check_lamps(void)
     wenv_material_free(mat);
 }
 
+/* A 5 x 5 grid of quads over the square, each split one way or the other and every other triangle
+ * wound backwards, on 40 x 30 texels (edges through centres): every centre in exactly one triangle;
+ * then the margin of one texel about a 2 x 2 island reaches its 12 neighbours and no further. */
+static void check_bake(void)
+{
+    enum { Q = 5, W = 40, H = 30 };
+    float uv[2 * (Q + 1) * (Q + 1)];
+    uint32_t tris[3 * 2 * Q * Q];
+    for (int j = 0; j <= Q; j++)
+        for (int i = 0; i <= Q; i++) {
+            uv[2 * (j * (Q + 1) + i)] = (float)i / Q;
+            uv[2 * (j * (Q + 1) + i) + 1] = (float)j / Q;
+        }
+    size_t t = 0;
+    for (int j = 0; j < Q; j++)
+        for (int i = 0; i < Q; i++) {
+            uint32_t a = (uint32_t)(j * (Q + 1) + i), b = a + 1, c = a + Q + 2, d = a + Q + 1;
+            uint32_t quad[2][3] = {{a, b, c}, {a, c, d}};
+            if ((i + j) % 2) {
+                uint32_t other[2][3] = {{a, b, d}, {b, c, d}};
+                memcpy(quad, other, sizeof quad);
+            }
+            for (int k = 0; k < 2; k++, t++)
+                for (int v = 0; v < 3; v++)
+                    tris[3 * t + v] = quad[k][(t % 2) ? 2 - v : v];
+        }
+    int32_t *triangle = malloc(W * H * sizeof *triangle);
+    float *weights = malloc(2 * W * H * sizeof *weights);
+    size_t covered = 0, overlapped = 0;
+    wenv_error err = {0};
+    if (!triangle || !weights || wenv_texel_raster(uv, (Q + 1) * (Q + 1), tris, t, W, H, triangle, weights, &covered,
+                                                   &overlapped, NULL, &err)) {
+        check(0, err.message[0] ? err.message : "texel raster", 0, 0);
+    } else {
+        double worst = 0.0;
+        for (int y = 0; y < H; y++)
+            for (int x = 0; x < W; x++) {
+                size_t at = (size_t)(y * W + x);
+                const uint32_t *c = tris + 3 * (size_t)triangle[at];
+                double wb = weights[2 * at], wc = weights[2 * at + 1], wa = 1.0 - wb - wc;
+                for (int k = 0; k < 2; k++) {
+                    double p = wa * uv[2 * c[0] + k] + wb * uv[2 * c[1] + k] + wc * uv[2 * c[2] + k];
+                    double want = k ? (y + 0.5) / H : (x + 0.5) / W;
+                    worst = fmax(worst, fabs(p - want));
+                }
+            }
+        check(covered == W * H && overlapped == 0, "a tiling covers each texel once", (double)covered, W * H);
+        check(worst < 1e-6, "the weights give each texel centre back", worst, 0.0);
+    }
+    free(triangle);
+    free(weights);
+    float pixels[8 * 8];
+    uint8_t filled[8 * 8] = {0};
+    for (int i = 0; i < 64; i++)
+        pixels[i] = -1.0f;
+    for (int y = 3; y < 5; y++)
+        for (int x = 3; x < 5; x++) {
+            pixels[y * 8 + x] = 2.0f;
+            filled[y * 8 + x] = 1;
+        }
+    size_t added = 0;
+    int ring_ok = !wenv_extend_margin(pixels, filled, 8, 8, 1, 1, &added, &err);
+    for (int y = 0; y < 8; y++)
+        for (int x = 0; x < 8; x++) {
+            int near_island = x >= 2 && x <= 5 && y >= 2 && y <= 5;
+            ring_ok &= near_island ? (filled[y * 8 + x] && pixels[y * 8 + x] == 2.0f)
+                                   : (!filled[y * 8 + x] && pixels[y * 8 + x] == -1.0f);
+        }
+    check(ring_ok && added == 12, "a margin of one texel fills the island's ring and no more", (double)added, 12);
+}
+
 int main(void)
 {
     check_lamps();
+    check_bake();
     check_grazing_nodes();
     check_materials();
     check_models();
