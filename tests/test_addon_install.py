@@ -138,7 +138,7 @@ def test_install_enable_use_disable(extension_zip, tmp_path):
     assert out["model"] == ["PRINCIPLED", 0, "PRINCIPLED"]
     assert out["gloss"] == pytest.approx(out["gloss_core"], abs=1e-3)
     assert all(0 < g < 100 for g in out["gloss"])
-    assert out["panels"] == ["WENV_PT_gloss", "WENV_PT_material", "WENV_PT_shading"]
+    assert out["panels"] == ["WENV_PT_bake", "WENV_PT_gloss", "WENV_PT_material", "WENV_PT_shading"]
     # Precomputed matrices go to the extension's own user folder.
     assert len(out["matrix_cache"]) == 1 and out["matrix_cache"][0].startswith("wenv-rot-")
     assert out["after_disable"] == {"types": [], "scene_prop": False, "material_prop": False, "handlers": []}
