@@ -33,12 +33,12 @@ BYTES_PER_TEXEL = 12 + 16
 
 class TexelSites:
     """Where each baked texel's centre lies on a mesh: texel (flat index into the image, row 0 at
-    v = 0), the loop triangle holding it, its three corners and their barycentric weights.  `uv` are
-    the bake UV map's corner coordinates; `shift` the offset in texels of these sites from the
-    texels' centres (shifted())."""
+    v = 0), the loop triangle holding it, its three corners and their barycentric weights (outside
+    the triangle for the ring about the islands, `inside` False).  `uv` are the bake UV map's corner
+    coordinates; `shift` the offset in texels of these sites from the texels' centres (shifted())."""
 
     __slots__ = ("width", "height", "texels", "triangle", "corners", "weights", "tri_corners", "uv", "area", "count",
-                 "shift")
+                 "shift", "inside")
 
     def __init__(self, width, height, texels, triangle, weights, tri_corners, uv, shift=(0.0, 0.0)):
         self.width, self.height = width, height
@@ -51,6 +51,7 @@ class TexelSites:
         self.area = _uv_areas(uv, tri_corners)  # each triangle's area in the bake map
         self.count = len(texels)
         self.shift = shift
+        self.inside = np.ones(self.count, bool)  # False: a texel of the ring just outside the islands
 
     def at(self, values):
         """Values given per face corner ((nl,) or (nl, k)) at each texel, linear over its triangle."""
@@ -103,18 +104,22 @@ def _uv_areas(uv, tri_corners):
     return 0.5 * np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1]))
 
 
-def texel_sites(uv, tri_corners, width, height, memory_budget_mb, progress=None):
-    """(TexelSites of the texels whose centres lie in the UV triangles, texels two islands both
-    cover)."""
+def texel_sites(uv, tri_corners, width, height, memory_budget_mb, progress=None, border=False):
+    """(TexelSites of the texels whose centres lie in the UV triangles -- with `border`, and the ring
+    just outside the islands, each texel of it on its inside neighbour's triangle continued
+    (sites.inside False) --, texels two islands both cover)."""
     triangle, weights, _covered, overlapped = engine.uv_texels(uv, tri_corners, width, height, memory_budget_mb,
-                                                               progress)
+                                                               progress, border)
     flat = triangle.reshape(-1)
-    texels = np.flatnonzero(flat >= 0)
+    texels = np.flatnonzero(flat != -1)
     w = weights.reshape(-1, 2)[texels]
     full = np.empty((len(texels), 3), np.float32)
     full[:, 1:] = w
     full[:, 0] = 1.0 - w[:, 0] - w[:, 1]
-    return TexelSites(width, height, texels, flat[texels], full, tri_corners, uv), overlapped
+    held = flat[texels]
+    sites = TexelSites(width, height, texels, np.where(held >= 0, held, -2 - held), full, tri_corners, uv)
+    sites.inside = held >= 0
+    return sites, overlapped
 
 
 def texel_data(obj, depsgraph, mesh, sites):
@@ -272,12 +277,15 @@ def bake(scene, depsgraph, obj, image, view, blend_data, uv_map=None, margin=DEF
                          "through: add one (UV > Unwrap)")
     width, height = image.size
     tri_corners = textures.triangle_corners(mesh)
+    # the margin's first ring is shaded as the surface continued past the islands' edges: filtering
+    # across a seam then reads the shading there, not a mean of the island's texels
     sites, overlapped = texel_sites(textures.corner_uvs(mesh, layer), tri_corners, width, height, st.memory_budget,
-                                    stages.reporter("sites"))
+                                    stages.reporter("sites"), border=margin > 0)
+    inside = int(sites.inside.sum())
     if overlapped:
         notes.append(f"UV map '{layer.name}' of '{obj.name}': islands overlap on {overlapped} texels, which show the "
                      "first face's shading (unwrap without overlaps for a bake)")
-    if sites.count == 0:
+    if inside == 0:
         raise SetupError(f"No texel of '{image.name}' lies in a face of UV map '{layer.name}' of '{obj.name}'")
     stages.report("reading")
     data = texel_data(obj, depsgraph, mesh, sites)
@@ -306,12 +314,12 @@ def bake(scene, depsgraph, obj, image, view, blend_data, uv_map=None, margin=DEF
     record = image.wenv
     record.baked_object, record.uv_map, record.margin, record.view = obj.name, layer.name, margin, view_source
     record.view_key, record.state_key = view_key(view), json.dumps(state)
-    record.frame, record.texels, record.stale = scene.frame_current, sites.count, ""
+    record.frame, record.texels, record.stale = scene.frame_current, inside, ""
     if clipped:
         notes.append(f"Image '{image.name}' holds bytes: {clipped} texels brighter than 1 were clipped (a float image "
                      "keeps them)")
     stages.report("writing", 1.0)
-    return sites.count, notes
+    return inside, notes
 
 
 # ---------------------------------------------------------------------------------------------
@@ -490,8 +498,9 @@ def _put(image, px):
 
 
 def write(image, sites, rgb, margin):
-    """Writes the texels' colours (linear) into `image` as it stores them (encode), alpha 1, the
-    margin extended about them; the pixels before are kept for undo.  Returns how many were clipped."""
+    """Writes the texels' colours (linear) into `image` as it stores them (encode), alpha 1, and the
+    margin about them: the sites' ring about the islands, then the rest extended; the pixels before
+    are kept for undo.  Returns how many were clipped."""
     values, clipped = encode(rgb, image)
     before = _pixels(image)
     px = before.copy()
@@ -500,7 +509,7 @@ def write(image, sites, rgb, margin):
     flat[sites.texels, 3] = 1.0
     filled = np.zeros(len(flat), bool)
     filled[sites.texels] = True
-    engine.extend_margin(px, filled.reshape(px.shape[:2]), margin)
+    engine.extend_margin(px, filled.reshape(px.shape[:2]), max(margin - int(not sites.inside.all()), 0))
     held = _steps.get(image.name_full)
     if held is None or held["shown"] != image.wenv.bake_step:
         held = {"steps": {image.wenv.bake_step: before}, "shown": image.wenv.bake_step}

@@ -378,12 +378,14 @@ def _shading_normals(data):
 # Bakes: which texel lies in which UV triangle, and the margin about the islands
 
 
-def uv_texels(uv, triangles, width, height, memory_budget_mb, progress=None):
-    """wenv.uv_texels: (triangle per texel or -1 (height, width), barycentric weights of the second and
-    third corners (height, width, 2), texels covered, texels overlapped); SetupError when the image has
-    no texels or its bake would pass the memory budget."""
+def uv_texels(uv, triangles, width, height, memory_budget_mb, progress=None, border=False):
+    """wenv.uv_texels: (triangle per texel or -1 (height, width), -2 - t for the border ring's with
+    `border`, barycentric weights of the second and third corners (height, width, 2), texels covered,
+    texels overlapped); SetupError when the image has no texels or its bake would pass the memory
+    budget."""
     try:
-        return wenv.uv_texels(uv, triangles, width, height, memory_budget_mb=memory_budget_mb, progress=progress)
+        return wenv.uv_texels(uv, triangles, width, height, memory_budget_mb=memory_budget_mb, progress=progress,
+                              border=border)
     except ValueError as exc:
         raise SetupError(f"Cannot bake: {exc}") from None
 

@@ -57,6 +57,28 @@ def test_uv_texels_cover_every_texel_of_a_tiling_once():
         assert (w > -1e-5).all()
 
 
+def test_uv_texels_border_is_the_ring_outside_on_its_neighbours_triangle():
+    """border=True: the texels just outside an island (8-neighbours of one inside) hold a neighbour's
+    triangle as -2 - t, and their weights in it give their centres back (extrapolated)."""
+    uv = np.float32([[0.3, 0.3], [0.7, 0.3], [0.7, 0.7], [0.3, 0.7]])
+    tris = np.array([[0, 1, 2], [0, 2, 3]])
+    plain = wenv.uv_texels(uv, tris, 20, 20)[0]
+    tri, weights, covered, _ = wenv.uv_texels(uv, tris, 20, 20, border=True)
+    inside = plain >= 0
+    assert np.array_equal(tri[inside], plain[inside]) and covered == inside.sum()
+    ring = np.zeros_like(inside)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            ring |= np.roll(np.roll(inside, dy, 0), dx, 1)
+    ring &= ~inside
+    assert np.array_equal(tri <= -2, ring) and (tri[~inside & ~ring] == -1).all()
+    t = np.where(tri >= 0, tri, -2 - tri)[ring]
+    w = weights[ring]
+    w = np.column_stack([1.0 - w.sum(axis=1), w])
+    np.testing.assert_allclose(np.einsum("kc,kcd->kd", w, uv[tris[t]]), centres(20, 20)[ring], atol=1e-5)
+    assert (w.min(axis=1) < 0).all()
+
+
 def test_uv_texels_count_overlaps_and_name_bad_input():
     """Islands laid over each other: the first keeps each texel, the others are counted.  Bad input
     is a ValueError or TypeError naming it."""
@@ -228,7 +250,8 @@ def test_a_bake_equals_the_core_at_the_texel_centres(scene, shape):
 
 def test_margin_reaches_only_the_margin(scene):
     """UVs in the middle quarter of the image: a margin of 3 changes the texels within 3 of the
-    island and no other."""
+    island and no other; its first ring is the plane continued past the island's edge, shaded
+    there."""
     env_world(scene, "sunset")
     plane = grid(cuts=2)
     for d in plane.data.uv_layers.active.data:
@@ -236,10 +259,18 @@ def test_margin_reaches_only_the_margin(scene):
     image = filled_image("margin", 40, 40)
     count, _ = bake_now(scene, plane, image, margin=3)
     assert count == 20 * 20
-    changed = ~np.all(pixels(image) == SENTINEL, axis=1).reshape(40, 40)
+    got = pixels(image)
+    changed = ~np.all(got == SENTINEL, axis=1).reshape(40, 40)
     ys, xs = np.mgrid[0:40, 0:40]
     distance = np.maximum(np.maximum(10 - ys, ys - 29), np.maximum(10 - xs, xs - 29))
     assert np.array_equal(changed, distance <= 3)
+    ring = (distance == 1).ravel()
+    c = centres(40, 40).reshape(-1, 2)[ring]
+    points = np.column_stack([(c - 0.5) * 8.0, np.zeros(len(c))]).astype(np.float32)  # UV 0.25..0.75 over 4 units
+    eye = tuple(scene.camera.matrix_world.translation)
+    want = draft_shader(principled_of(plane.active_material)).shade_mesh(points, np.tile(np.float32([0, 0, 1]),
+                                                                                         (len(c), 1)), eye)
+    np.testing.assert_allclose(got[ring, :3], want, rtol=2e-4, atol=1e-5)
 
 
 def test_textures_and_normal_maps_are_read_at_each_texel(scene):

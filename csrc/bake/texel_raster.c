@@ -73,8 +73,49 @@ static int prepare(const float *uv, const uint32_t *tri, size_t width, size_t he
     return t->x0 <= t->x1 && t->y0 <= t->y1;
 }
 
+/* The texels outside every triangle that touch one inside (8-neighbours, the first in NEIGHBOURS'
+ * order): each takes that neighbour's triangle, marked -2 - t, with its centre's weights in it
+ * (outside it, so one is negative).  Read from a copy of which texels are inside, so that no thread
+ * reads what another writes. */
+static const int NEIGHBOURS[8][2] = {{-1, 0}, {1, 0}, {0, -1}, {0, 1}, {-1, -1}, {1, -1}, {-1, 1}, {1, 1}};
+
+static wenv_status border_ring(const float *uv, const uint32_t *triangles, size_t width, size_t height,
+                               int32_t *triangle_out, float *weights_out, wenv_error *err)
+{
+    uint8_t *inside = malloc(width * height);
+    if (!inside)
+        return wenv_error_set(err, WENV_ERR_NOMEM, "no memory for the border of a %zu x %zu image", width, height);
+    for (size_t i = 0; i < width * height; i++)
+        inside[i] = triangle_out[i] >= 0;
+#pragma omp parallel for schedule(static)
+    for (size_t y = 0; y < height; y++)
+        for (size_t x = 0; x < width; x++) {
+            size_t at = y * width + x;
+            if (inside[at])
+                continue;
+            for (int k = 0; k < 8; k++) {
+                long nx = (long)x + NEIGHBOURS[k][0], ny = (long)y + NEIGHBOURS[k][1];
+                if (nx < 0 || ny < 0 || nx >= (long)width || ny >= (long)height || !inside[(size_t)ny * width + (size_t)nx])
+                    continue;
+                int32_t t = triangle_out[(size_t)ny * width + (size_t)nx];
+                const uint32_t *c = triangles + 3 * (size_t)t;
+                double ax = uv[2 * c[0]] * (double)width, ay = uv[2 * c[0] + 1] * (double)height;
+                double bx = uv[2 * c[1]] * (double)width, by = uv[2 * c[1] + 1] * (double)height;
+                double cx = uv[2 * c[2]] * (double)width, cy = uv[2 * c[2] + 1] * (double)height;
+                double px = (double)x + 0.5, py = (double)y + 0.5;
+                double area2 = (bx - ax) * (cy - ay) - (cx - ax) * (by - ay);
+                triangle_out[at] = -2 - t;
+                weights_out[2 * at] = (float)(((px - ax) * (cy - ay) - (cx - ax) * (py - ay)) / area2);
+                weights_out[2 * at + 1] = (float)(((bx - ax) * (py - ay) - (px - ax) * (by - ay)) / area2);
+                break;
+            }
+        }
+    free(inside);
+    return WENV_OK;
+}
+
 wenv_status wenv_texel_raster(const float *uv, size_t n_uv, const uint32_t *triangles, size_t n_triangles,
-                              size_t width, size_t height, int32_t *triangle_out, float *weights_out,
+                              size_t width, size_t height, int border, int32_t *triangle_out, float *weights_out,
                               size_t *covered, size_t *overlapped, const wenv_progress *progress, wenv_error *err)
 {
     if (width == 0 || height == 0 || width > INT32_MAX / 2 || height > INT32_MAX / 2)
@@ -172,5 +213,5 @@ wenv_status wenv_texel_raster(const float *uv, size_t n_uv, const uint32_t *tria
         return wenv_error_set(err, WENV_ERR_CANCELLED, "cancelled");
     *covered = total_covered;
     *overlapped = total_overlapped;
-    return WENV_OK;
+    return border ? border_ring(uv, triangles, width, height, triangle_out, weights_out, err) : WENV_OK;
 }

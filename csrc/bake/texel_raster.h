@@ -17,9 +17,12 @@
  * A centre on an edge two triangles share belongs to one of them (the top-left rule, whichever way
  * each is wound); a triangle of no UV area covers nothing.  Where islands overlap, the first
  * triangle keeps the texel and *overlapped counts it; *covered counts the texels with a triangle.
+ * With `border`, each texel outside every triangle that touches one inside (8-neighbours) gets that
+ * neighbour's triangle t as -2 - t, and its centre's weights in it, extrapolated: a bake shades the
+ * islands' first ring as the surface continued, so that filtering across a seam reads it.
  * ValueError for an index past n_uv or a coordinate that is not finite. */
 wenv_status wenv_texel_raster(const float *uv, size_t n_uv, const uint32_t *triangles, size_t n_triangles,
-                              size_t width, size_t height, int32_t *triangle_out, float *weights_out,
+                              size_t width, size_t height, int border, int32_t *triangle_out, float *weights_out,
                               size_t *covered, size_t *overlapped, const wenv_progress *progress, wenv_error *err);
 
 #endif

@@ -41,16 +41,17 @@ static void release(Py_buffer *view, PyObject **held)
     Py_CLEAR(*held);
 }
 
-/* uv_texels(uv, triangles, width, height, memory_budget_mb=1024, progress=None)
+/* uv_texels(uv, triangles, width, height, memory_budget_mb=1024, progress=None, border=False)
  *   -> (triangle (height, width) int32, weights (height, width, 2) float32, covered, overlapped) */
 static PyObject *uv_texels(PyObject *self, PyObject *args, PyObject *kwargs)
 {
     (void)self;
-    static char *kwlist[] = {"uv", "triangles", "width", "height", "memory_budget_mb", "progress", NULL};
+    static char *kwlist[] = {"uv", "triangles", "width", "height", "memory_budget_mb", "progress", "border", NULL};
     PyObject *uv_obj, *tri_obj, *w_obj, *h_obj, *progress_obj = Py_None;
     double budget_mb = 1024.0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOO|dO:uv_texels", kwlist, &uv_obj, &tri_obj, &w_obj, &h_obj,
-                                     &budget_mb, &progress_obj))
+    int border = 0;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOO|dOp:uv_texels", kwlist, &uv_obj, &tri_obj, &w_obj, &h_obj,
+                                     &budget_mb, &progress_obj, &border))
         return NULL;
     size_t width, height;
     if (wenv_py_get_size(w_obj, "width", &width) < 0 || wenv_py_get_size(h_obj, "height", &height) < 0)
@@ -115,8 +116,8 @@ static PyObject *uv_texels(PyObject *self, PyObject *args, PyObject *kwargs)
     wenv_status st;
     size_t covered = 0, overlapped = 0;
     WENV_BEGIN_WORK
-    st = wenv_texel_raster(ub.buf, n_uv, tri, n_tri, width, height, tri_data, weight_data, &covered, &overlapped,
-                           &progress, &err);
+    st = wenv_texel_raster(ub.buf, n_uv, tri, n_tri, width, height, border, tri_data, weight_data, &covered,
+                           &overlapped, &progress, &err);
     WENV_END_WORK
     if (st) {
         if (!(bridge.raised && PyErr_Occurred()))
@@ -173,7 +174,7 @@ done:
 
 static PyMethodDef bake_functions[] = {
     {"uv_texels", (PyCFunction)(void (*)(void))uv_texels, METH_VARARGS | METH_KEYWORDS,
-     "uv_texels(uv, triangles, width, height, memory_budget_mb=1024, progress=None)\n--\n\n"
+     "uv_texels(uv, triangles, width, height, memory_budget_mb=1024, progress=None, border=False)\n--\n\n"
      "Which texel of a width x height image lies in which UV triangle: uv (n, 2) points, triangles (m, 3)\n"
      "indices into them.  Texel (x, y) has its centre at ((x + 0.5) / width, (y + 0.5) / height), row 0\n"
      "at v = 0 (Blender's order of Image.pixels).  Returns (triangle, weights, covered, overlapped):\n"
@@ -181,6 +182,8 @@ static PyMethodDef bake_functions[] = {
      "float32, the barycentric weights of its second and third corners (the first's is 1 minus both);\n"
      "covered, the texels in some triangle; overlapped, the texels a second triangle also holds (where\n"
      "islands overlap the first keeps them).  A centre on an edge two triangles share goes to one.\n"
+     "border=True: each texel outside every triangle that touches one inside (8-neighbours) holds that\n"
+     "neighbour's triangle t as -2 - t, with its centre's (extrapolated) weights in it.\n"
      "ValueError for an image of no texels or one whose bake would pass memory_budget_mb."},
     {"extend_margin", (PyCFunction)(void (*)(void))extend_margin, METH_VARARGS | METH_KEYWORDS,
      "extend_margin(pixels, filled, margin)\n--\n\n"

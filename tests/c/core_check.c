@@ -420,8 +420,8 @@ static void check_bake(void)
     float *weights = malloc(2 * W * H * sizeof *weights);
     size_t covered = 0, overlapped = 0;
     wenv_error err = {0};
-    if (!triangle || !weights || wenv_texel_raster(uv, (Q + 1) * (Q + 1), tris, t, W, H, triangle, weights, &covered,
-                                                   &overlapped, NULL, &err)) {
+    if (!triangle || !weights || wenv_texel_raster(uv, (Q + 1) * (Q + 1), tris, t, W, H, 0, triangle, weights,
+                                                   &covered, &overlapped, NULL, &err)) {
         check(0, err.message[0] ? err.message : "texel raster", 0, 0);
     } else {
         double worst = 0.0;
