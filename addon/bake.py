@@ -127,15 +127,11 @@ def texel_data(obj, depsgraph, mesh, sites):
     each texel's triangle (smooth or flat as the mesh's corner normals are), the material slot of its
     face; texels at no finite position are `unplaced` (left black)."""
     ob_eval = obj.evaluated_get(depsgraph)
-    nv, nl = len(mesh.vertices), len(mesh.loops)
-    co = np.empty(nv * 3, np.float32)
-    mesh.vertices.foreach_get("co", co)
-    corner_vert = meshes.corner_vertices(mesh)
+    nl = len(mesh.loops)
     nrm = np.empty(nl * 3, np.float32)
     mesh.corner_normals.foreach_get("vector", nrm)
-    m = np.array(ob_eval.matrix_world, np.float64)
     with np.errstate(invalid="ignore", over="ignore"):
-        points = sites.at(co.reshape(nv, 3)[corner_vert].astype(np.float64) @ m[:3, :3].T + m[:3, 3])
+        points = sites.at(textures.world_points(mesh, ob_eval.matrix_world)[meshes.corner_vertices(mesh)])
         normals = sites.at(nrm.reshape(nl, 3)) @ np.array(ob_eval.matrix_world.to_3x3().inverted_safe(), np.float32)
         length = np.linalg.norm(normals, axis=1)
     zero = ~(length > 1e-20)
@@ -297,8 +293,6 @@ def bake(scene, depsgraph, obj, image, view, blend_data, uv_map=None, margin=DEF
     notes += [n for n in materials.slot_notes(obj) if n not in notes and not n.endswith(textures.AT_VERTICES)]
     plan.items.append((obj.name, data, materials.slot_material_keys(obj)))
     plan.casts.append(False)
-    if plan.quality != engine.AUTO:
-        engine.shaders.get(plan.quality)
     stages.report("reading", 1.0)
     ratio = _shadow_ratio(scene, depsgraph, obj, view, blend_data, stages, mesh, sites) if st.shadows else None
     rgb = _refined(plan, stages.reporter("shading"), stages.cancelled)

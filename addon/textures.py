@@ -653,7 +653,8 @@ def bumped_normals(normal, gradient, distance, strength):
     return out if strength == 1.0 else _unit_rows(strength * out + (1.0 - strength) * normal)
 
 
-def _world_points(mesh, m):
+def world_points(mesh, m):
+    """The mesh's vertices in the world (float64), `m` the object's matrix_world."""
     nv = len(mesh.vertices)
     co = np.empty(nv * 3, np.float32)
     mesh.vertices.foreach_get("co", co)
@@ -692,7 +693,7 @@ def _bump_gradients(obj, s, mat, chain, mesh, corner_vert, m, sites, notes):
     if not all(np.isfinite(h).all() for h in heights):
         raise world.SetupError(f"Material '{mat.name}': its Bump node's Height is not finite (NaN or "
                                f"infinite) on '{obj.name}'")
-    points = _world_points(mesh, m)
+    points = world_points(mesh, m)
     if sites is None:
         return height_gradients(points, corner_vert, triangle_corners(mesh), heights[0], len(mesh.vertices))[corner_vert]
     grad_u, grad_v = sites.uv_gradients(points[corner_vert])
