@@ -7,14 +7,13 @@
 #include <string.h>
 
 #include "math/maps.h"
-#include "math/vector_math.h"
 #include "methods/wavelet/grazing_nodes.h"
 #include "scene/envmap_octahedral.h"
 
 /* ---- the lighting as an octahedral mip pyramid ------------------------------------------------ */
 
 struct wenv_grazing_light {
-    float *rgbx;             /* the pyramid's texels as r g b and a pad, level after level */
+    uint16_t *halves;        /* the pyramid's texels as r g b and a pad, level after level */
     size_t bytes;
     wenv_node_pyramid nodes; /* the same, as the node loop reads it */
 };
@@ -23,7 +22,7 @@ void wenv_grazing_light_free(wenv_grazing_light *light)
 {
     if (!light)
         return;
-    free(light->rgbx);
+    free(light->halves);
     free(light);
 }
 
@@ -53,21 +52,15 @@ wenv_status wenv_grazing_light_create(wenv_grazing_light **out, const wenv_envma
         return wenv_error_set(err, WENV_ERR_VALUE, "the grazing lighting has %zu levels, at most %d", pyramid.levels,
                               WENV_NODE_LEVELS_MAX);
     }
-    /* the node loop reads a texel's r and g as one 64-bit word (grazing_nodes.h) */
-    size_t texels = wenv_oct_pyramid_bytes(&pyramid) / (3 * sizeof(float));
-    light->rgbx = wenv_rgbx_from_rgb(pyramid.texels[0], texels);
-    if (!light->rgbx) {
+    light->halves = wenv_node_pyramid_make(&light->nodes, (const float *const *)pyramid.texels, pyramid.side,
+                                           pyramid.levels);
+    if (!light->halves) {
         wenv_oct_pyramid_free(&pyramid);
         free(light);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the grazing lighting");
     }
-    light->bytes = texels * 4 * sizeof(float);
-    light->nodes.texels = light->rgbx;
-    for (size_t k = 0; k < pyramid.levels; k++) {
-        light->nodes.side[k] = (int32_t)pyramid.side[k];
-        light->nodes.offset[k] = (int32_t)((pyramid.texels[k] - pyramid.texels[0]) / 3);
-    }
-    light->nodes.top = (int32_t)pyramid.levels - 1;
+    for (size_t k = 0; k < pyramid.levels; k++)
+        light->bytes += (pyramid.side[k] + 2) * (pyramid.side[k] + 2) * 4 * sizeof(uint16_t);
     /* a base texel covers about 4 pi / base^2 */
     light->nodes.lod_offset = (float)(log2((double)pyramid.side[0]) - 0.5 * log2(4.0 * M_PI));
     wenv_oct_pyramid_free(&pyramid);

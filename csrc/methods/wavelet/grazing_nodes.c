@@ -2,10 +2,14 @@
  * and a portable one.  GCC did not vectorise the portable loop (the octahedral edge folds and the
  * two levels' selects stayed branches), which left the path at about 4 ns a node; the versions
  * below read 16 or 8 nodes per instruction.  All three compute the same thing in the same order per
- * node; only the final sum's order differs. */
+ * node from the same halves (their conversion to float is exact); only the final sum's order
+ * differs. */
 #include "methods/wavelet/grazing_nodes.h"
 
 #include <math.h>
+#include <stdlib.h>
+
+#include "math/half.h"
 
 #if defined(__x86_64__) && defined(__GNUC__)
 #include <immintrin.h>
@@ -16,22 +20,20 @@
 
 static inline void level_read(const wenv_node_pyramid *p, int32_t level, float u, float v, float wl, float sum[3])
 {
-    int32_t side = p->side[level], base = p->offset[level];
+    int32_t side = p->side[level], row = side + 2;
     float fx = (u + 1.0f) * 0.5f * (float)side - 0.5f, fy = (v + 1.0f) * 0.5f * (float)side - 0.5f;
     int32_t ix = (int32_t)(fx + 1.0f) - 1, iy = (int32_t)(fy + 1.0f) - 1; /* floor for x >= -1 */
     float tx = fx - (float)ix, ty = fy - (float)iy;
+    /* the border holds what lies past the edges: -1 and side are its columns and rows */
+    ix = ix < -1 ? -1 : (ix > side - 1 ? side - 1 : ix);
+    iy = iy < -1 ? -1 : (iy > side - 1 ? side - 1 : iy);
+    const uint16_t *t0 = p->texels + 4 * (size_t)(p->offset[level] + (iy + 1) * row + ix + 1);
     for (int32_t c = 0; c < 4; c++) {
-        int32_t i = ix + (c & 1), j = iy + (c >> 1);
-        /* crossing an edge of the octahedral square lands on the same edge, mirrored */
-        int32_t out_i = i < 0 || i >= side;
-        int32_t i1 = out_i ? (i < 0 ? 0 : side - 1) : i, j1 = out_i ? side - 1 - j : j;
-        int32_t out_j = j1 < 0 || j1 >= side;
-        int32_t j2 = out_j ? (j1 < 0 ? 0 : side - 1) : j1, i2 = out_j ? side - 1 - i1 : i1;
+        const uint16_t *t = t0 + 4 * ((c & 1) + (c >> 1) * row);
         float wt = wl * ((c & 1) ? tx : 1.0f - tx) * ((c >> 1) ? ty : 1.0f - ty);
-        const float *t = p->texels + 4 * (size_t)(base + j2 * side + i2);
-        sum[0] += wt * t[0];
-        sum[1] += wt * t[1];
-        sum[2] += wt * t[2];
+        sum[0] += wt * wenv_float_from_half(t[0]);
+        sum[1] += wt * wenv_float_from_half(t[1]);
+        sum[2] += wt * wenv_float_from_half(t[2]);
     }
 }
 
@@ -54,6 +56,53 @@ void wenv_node_pyramid_read(const wenv_node_pyramid *p, const float d[3], float 
 {
     rgb[0] = rgb[1] = rgb[2] = 0.0f;
     read_direction(p, d[0], d[1], d[2], log2_footprint + p->lod_offset, rgb);
+    for (int c = 0; c < 3; c++)
+        rgb[c] *= p->scale;
+}
+
+uint16_t *wenv_node_pyramid_make(wenv_node_pyramid *p, const float *const *rgb, const size_t *sides, size_t levels)
+{
+    size_t total = 0;
+    float top = 0.0f;
+    for (size_t k = 0; k < levels; k++) {
+        total += (sides[k] + 2) * (sides[k] + 2);
+        for (size_t i = 0; i < 3 * sides[k] * sides[k]; i++)
+            top = rgb[k][i] > top ? rgb[k][i] : top;
+    }
+    uint16_t *halves = aligned_alloc(8, (total ? total : 1) * 4 * sizeof(uint16_t));
+    if (!halves)
+        return NULL;
+    /* top / scale in (2^13, 2^14] */
+    int e;
+    frexpf(top > 0.0f ? top : 1.0f, &e);
+    p->scale = ldexpf(1.0f, e - 14);
+    float inv = 1.0f / p->scale;
+    size_t at = 0;
+    for (size_t k = 0; k < levels; k++) {
+        int32_t side = (int32_t)sides[k], row = side + 2;
+        p->side[k] = side;
+        p->offset[k] = (int32_t)at;
+#pragma omp parallel for schedule(static) if (side > 128)
+        for (int32_t pj = 0; pj < row; pj++)
+            for (int32_t pi = 0; pi < row; pi++) {
+                /* crossing an edge of the octahedral square lands on the same edge, mirrored; at a
+                 * corner, twice */
+                int32_t i = pi - 1, j = pj - 1;
+                int32_t out_i = i < 0 || i >= side;
+                int32_t i1 = out_i ? (i < 0 ? 0 : side - 1) : i, j1 = out_i ? side - 1 - j : j;
+                int32_t out_j = j1 < 0 || j1 >= side;
+                int32_t j2 = out_j ? (j1 < 0 ? 0 : side - 1) : j1, i2 = out_j ? side - 1 - i1 : i1;
+                const float *src = rgb[k] + 3 * ((size_t)j2 * (size_t)side + (size_t)i2);
+                uint16_t *dst = halves + 4 * (at + (size_t)pj * (size_t)row + (size_t)pi);
+                for (int c = 0; c < 3; c++)
+                    dst[c] = wenv_half_from_float(src[c] * inv);
+                dst[3] = 0;
+            }
+        at += (size_t)row * (size_t)row;
+    }
+    p->top = (int32_t)levels - 1;
+    p->texels = halves;
+    return halves;
 }
 
 void wenv_grazing_nodes_portable(const float *a, const float *b, size_t stride, size_t n, float g, float f,
@@ -71,9 +120,8 @@ void wenv_grazing_nodes_portable(const float *a, const float *b, size_t stride, 
         for (int c = 0; c < 3; c++)
             acc[c] += (g * a[(3 + (size_t)c) * stride + k] + f * b[(3 + (size_t)c) * stride + k]) * sum[c];
     }
-    rgb[0] = acc[0];
-    rgb[1] = acc[1];
-    rgb[2] = acc[2];
+    for (int c = 0; c < 3; c++)
+        rgb[c] = acc[c] * p->scale;
 }
 
 #ifdef WENV_HAVE_X86_NODES
@@ -87,17 +135,13 @@ AVX512 static inline __m512 mix16(const float *a, const float *b, size_t k, __m5
     return _mm512_fmadd_ps(g, _mm512_loadu_ps(a + k), _mm512_mul_ps(f, _mm512_loadu_ps(b + k)));
 }
 
-AVX512 static inline __m512i clamp16(__m512i i, __m512i hi)
-{
-    return _mm512_min_epi32(_mm512_max_epi32(i, _mm512_setzero_si512()), hi);
-}
-
-AVX512 static inline void level_read16(const float *texels, __m512i side, __m512i base, __m512 u, __m512 v, __m512 wl,
-                                       __m512 sum[3])
+AVX512 static inline void level_read16(const uint16_t *texels, __m512i side, __m512i base, __m512 u, __m512 v,
+                                       __m512 wl, __m512 sum[3])
 {
     const __m512 one = _mm512_set1_ps(1.0f), half = _mm512_set1_ps(0.5f);
-    const __m512i ione = _mm512_set1_epi32(1), zero = _mm512_setzero_si512();
-    /* lanes 0-7 of r g pairs from the first 8-lane gather, 8-15 from the second */
+    const __m512i ione = _mm512_set1_epi32(1);
+    /* a texel's word holds r g (low 32 bits) and b pad: lanes 0-7 from the first 8-lane gather, 8-15
+     * from the second */
     const __m512i evens = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24, 26, 28, 30);
     const __m512i odds = _mm512_add_epi32(evens, ione);
     __m512 sf = _mm512_cvtepi32_ps(side);
@@ -107,23 +151,22 @@ AVX512 static inline void level_read16(const float *texels, __m512i side, __m512
     __m512i iy = _mm512_sub_epi32(_mm512_cvttps_epi32(_mm512_add_ps(fy, one)), ione);
     __m512 tx = _mm512_sub_ps(fx, _mm512_cvtepi32_ps(ix)), ty = _mm512_sub_ps(fy, _mm512_cvtepi32_ps(iy));
     __m512 wx[2] = {_mm512_sub_ps(one, tx), tx}, wy[2] = {_mm512_sub_ps(one, ty), ty};
-    __m512i last = _mm512_sub_epi32(side, ione);
+    /* the border's columns and rows are -1 and side; +1 puts them at 0 and side + 1 */
+    __m512i row = _mm512_add_epi32(side, _mm512_set1_epi32(2));
+    ix = _mm512_min_epi32(_mm512_max_epi32(_mm512_add_epi32(ix, ione), _mm512_setzero_si512()), side);
+    iy = _mm512_min_epi32(_mm512_max_epi32(_mm512_add_epi32(iy, ione), _mm512_setzero_si512()), side);
+    __m512i at0 = _mm512_add_epi32(base, _mm512_add_epi32(_mm512_mullo_epi32(iy, row), ix));
     for (int c = 0; c < 4; c++) {
-        __m512i i = _mm512_add_epi32(ix, _mm512_set1_epi32(c & 1)), j = _mm512_add_epi32(iy, _mm512_set1_epi32(c >> 1));
-        __mmask16 out_i = _mm512_cmplt_epi32_mask(i, zero) | _mm512_cmpgt_epi32_mask(i, last);
-        __m512i i1 = _mm512_mask_blend_epi32(out_i, i, clamp16(i, last));
-        __m512i j1 = _mm512_mask_blend_epi32(out_i, j, _mm512_sub_epi32(last, j));
-        __mmask16 out_j = _mm512_cmplt_epi32_mask(j1, zero) | _mm512_cmpgt_epi32_mask(j1, last);
-        __m512i j2 = _mm512_mask_blend_epi32(out_j, j1, clamp16(j1, last));
-        __m512i i2 = _mm512_mask_blend_epi32(out_j, i1, _mm512_sub_epi32(last, i1));
-        __m512i at = _mm512_add_epi32(base, _mm512_add_epi32(_mm512_mullo_epi32(j2, side), i2));
-        __m512i pairs = _mm512_slli_epi32(at, 1); /* in 64-bit words */
-        __m512 rg_lo = _mm512_castpd_ps(_mm512_i32gather_pd(_mm512_castsi512_si256(pairs), texels, 8));
-        __m512 rg_hi = _mm512_castpd_ps(_mm512_i32gather_pd(_mm512_extracti64x4_epi64(pairs, 1), texels, 8));
+        __m512i at = (c & 1) ? _mm512_add_epi32(at0, ione) : at0;
+        if (c >> 1)
+            at = _mm512_add_epi32(at, row);
+        __m512i lo = _mm512_i32gather_epi64(_mm512_castsi512_si256(at), texels, 8);
+        __m512i hi = _mm512_i32gather_epi64(_mm512_extracti64x4_epi64(at, 1), texels, 8);
+        __m512i rg = _mm512_permutex2var_epi32(lo, evens, hi), bx = _mm512_permutex2var_epi32(lo, odds, hi);
         __m512 wt = _mm512_mul_ps(wl, _mm512_mul_ps(wx[c & 1], wy[c >> 1]));
-        sum[0] = _mm512_fmadd_ps(wt, _mm512_permutex2var_ps(rg_lo, evens, rg_hi), sum[0]);
-        sum[1] = _mm512_fmadd_ps(wt, _mm512_permutex2var_ps(rg_lo, odds, rg_hi), sum[1]);
-        sum[2] = _mm512_fmadd_ps(wt, _mm512_i32gather_ps(_mm512_slli_epi32(at, 2), texels + 2, 4), sum[2]);
+        sum[0] = _mm512_fmadd_ps(wt, _mm512_cvtph_ps(_mm512_cvtepi32_epi16(rg)), sum[0]);
+        sum[1] = _mm512_fmadd_ps(wt, _mm512_cvtph_ps(_mm512_cvtepi32_epi16(_mm512_srli_epi32(rg, 16))), sum[1]);
+        sum[2] = _mm512_fmadd_ps(wt, _mm512_cvtph_ps(_mm512_cvtepi32_epi16(bx)), sum[2]);
     }
 }
 
@@ -167,12 +210,12 @@ AVX512 static void nodes_avx512(const float *a, const float *b, size_t stride, s
                                      acc[c]);
     }
     for (int c = 0; c < 3; c++)
-        rgb[c] = _mm512_reduce_add_ps(acc[c]);
+        rgb[c] = _mm512_reduce_add_ps(acc[c]) * p->scale;
 }
 
 /* ---- AVX2: 8 nodes at a time ------------------------------------------------------------------- */
 
-#define AVX2 __attribute__((target("avx2,fma")))
+#define AVX2 __attribute__((target("avx2,fma,f16c")))
 
 AVX2 static inline __m256 mix8(const float *a, const float *b, size_t k, __m256 g, __m256 f)
 {
@@ -181,21 +224,11 @@ AVX2 static inline __m256 mix8(const float *a, const float *b, size_t k, __m256 
 
 AVX2 static inline __m256 abs8(__m256 x) { return _mm256_andnot_ps(_mm256_set1_ps(-0.0f), x); }
 
-AVX2 static inline __m256i outside8(__m256i i, __m256i last)
-{
-    return _mm256_or_si256(_mm256_cmpgt_epi32(_mm256_setzero_si256(), i), _mm256_cmpgt_epi32(i, last));
-}
-
-AVX2 static inline __m256i clamp8(__m256i i, __m256i hi)
-{
-    return _mm256_min_epi32(_mm256_max_epi32(i, _mm256_setzero_si256()), hi);
-}
-
-AVX2 static inline void level_read8(const float *texels, __m256i side, __m256i base, __m256 u, __m256 v, __m256 wl,
+AVX2 static inline void level_read8(const uint16_t *texels, __m256i side, __m256i base, __m256 u, __m256 v, __m256 wl,
                                     __m256 sum[3])
 {
     const __m256 one = _mm256_set1_ps(1.0f), half = _mm256_set1_ps(0.5f);
-    const __m256i ione = _mm256_set1_epi32(1);
+    const __m256i ione = _mm256_set1_epi32(1), low16 = _mm256_set1_epi32(0xffff), zero = _mm256_setzero_si256();
     __m256 sf = _mm256_cvtepi32_ps(side);
     __m256 fx = _mm256_fmsub_ps(_mm256_mul_ps(_mm256_add_ps(u, one), half), sf, half);
     __m256 fy = _mm256_fmsub_ps(_mm256_mul_ps(_mm256_add_ps(v, one), half), sf, half);
@@ -203,20 +236,32 @@ AVX2 static inline void level_read8(const float *texels, __m256i side, __m256i b
     __m256i iy = _mm256_sub_epi32(_mm256_cvttps_epi32(_mm256_add_ps(fy, one)), ione);
     __m256 tx = _mm256_sub_ps(fx, _mm256_cvtepi32_ps(ix)), ty = _mm256_sub_ps(fy, _mm256_cvtepi32_ps(iy));
     __m256 wx[2] = {_mm256_sub_ps(one, tx), tx}, wy[2] = {_mm256_sub_ps(one, ty), ty};
-    __m256i last = _mm256_sub_epi32(side, ione);
+    /* the border's columns and rows are -1 and side; +1 puts them at 0 and side + 1 */
+    __m256i row = _mm256_add_epi32(side, _mm256_set1_epi32(2));
+    ix = _mm256_min_epi32(_mm256_max_epi32(_mm256_add_epi32(ix, ione), zero), side);
+    iy = _mm256_min_epi32(_mm256_max_epi32(_mm256_add_epi32(iy, ione), zero), side);
+    __m256i at0 = _mm256_add_epi32(base, _mm256_add_epi32(_mm256_mullo_epi32(iy, row), ix));
+    const long long *words = (const long long *)(const void *)texels;
     for (int c = 0; c < 4; c++) {
-        __m256i i = _mm256_add_epi32(ix, _mm256_set1_epi32(c & 1)), j = _mm256_add_epi32(iy, _mm256_set1_epi32(c >> 1));
-        __m256i out_i = outside8(i, last);
-        __m256i i1 = _mm256_blendv_epi8(i, clamp8(i, last), out_i);
-        __m256i j1 = _mm256_blendv_epi8(j, _mm256_sub_epi32(last, j), out_i);
-        __m256i out_j = outside8(j1, last);
-        __m256i j2 = _mm256_blendv_epi8(j1, clamp8(j1, last), out_j);
-        __m256i i2 = _mm256_blendv_epi8(i1, _mm256_sub_epi32(last, i1), out_j);
-        __m256i at = _mm256_slli_epi32(_mm256_add_epi32(base, _mm256_add_epi32(_mm256_mullo_epi32(j2, side), i2)), 2);
+        __m256i at = (c & 1) ? _mm256_add_epi32(at0, ione) : at0;
+        if (c >> 1)
+            at = _mm256_add_epi32(at, row);
+        __m256 lo = _mm256_castsi256_ps(_mm256_i32gather_epi64(words, _mm256_castsi256_si128(at), 8));
+        __m256 hi = _mm256_castsi256_ps(_mm256_i32gather_epi64(words, _mm256_extracti128_si256(at, 1), 8));
+        /* each word's r g and b pad halves, in node order: the shuffle leaves nodes 0 1 4 5 | 2 3 6 7 */
+        __m256i rg = _mm256_permute4x64_epi64(_mm256_castps_si256(_mm256_shuffle_ps(lo, hi, _MM_SHUFFLE(2, 0, 2, 0))),
+                                              _MM_SHUFFLE(3, 1, 2, 0));
+        __m256i bx = _mm256_permute4x64_epi64(_mm256_castps_si256(_mm256_shuffle_ps(lo, hi, _MM_SHUFFLE(3, 1, 3, 1))),
+                                              _MM_SHUFFLE(3, 1, 2, 0));
+        /* r0-3 g0-3 | r4-7 g4-7 as 16-bit words, then r0-7 g0-7 */
+        __m256i rgw = _mm256_permute4x64_epi64(_mm256_packus_epi32(_mm256_and_si256(rg, low16), _mm256_srli_epi32(rg, 16)),
+                                               _MM_SHUFFLE(3, 1, 2, 0));
+        __m256i bw = _mm256_permute4x64_epi64(_mm256_packus_epi32(_mm256_and_si256(bx, low16), zero),
+                                              _MM_SHUFFLE(3, 1, 2, 0));
         __m256 wt = _mm256_mul_ps(wl, _mm256_mul_ps(wx[c & 1], wy[c >> 1]));
-        sum[0] = _mm256_fmadd_ps(wt, _mm256_i32gather_ps(texels, at, 4), sum[0]);
-        sum[1] = _mm256_fmadd_ps(wt, _mm256_i32gather_ps(texels + 1, at, 4), sum[1]);
-        sum[2] = _mm256_fmadd_ps(wt, _mm256_i32gather_ps(texels + 2, at, 4), sum[2]);
+        sum[0] = _mm256_fmadd_ps(wt, _mm256_cvtph_ps(_mm256_castsi256_si128(rgw)), sum[0]);
+        sum[1] = _mm256_fmadd_ps(wt, _mm256_cvtph_ps(_mm256_extracti128_si256(rgw, 1)), sum[1]);
+        sum[2] = _mm256_fmadd_ps(wt, _mm256_cvtph_ps(_mm256_castsi256_si128(bw)), sum[2]);
     }
 }
 
@@ -262,19 +307,31 @@ AVX2 static void nodes_avx2(const float *a, const float *b, size_t stride, size_
                                      acc[c]);
     }
     for (int c = 0; c < 3; c++)
-        rgb[c] = sum8(acc[c]);
+        rgb[c] = sum8(acc[c]) * p->scale;
 }
 
 #endif /* WENV_HAVE_X86_NODES */
 
-wenv_grazing_nodes_fn wenv_grazing_nodes_for_cpu(void)
+wenv_grazing_nodes_fn wenv_grazing_nodes_version(int which)
 {
 #ifdef WENV_HAVE_X86_NODES
     __builtin_cpu_init();
-    if (__builtin_cpu_supports("avx512f"))
-        return nodes_avx512;
-    if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma"))
-        return nodes_avx2;
+    if (which == 2)
+        return __builtin_cpu_supports("avx512f") ? nodes_avx512 : NULL;
+    if (which == 1)
+        return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma") && __builtin_cpu_supports("f16c")
+                   ? nodes_avx2
+                   : NULL;
 #endif
+    return which == 0 ? wenv_grazing_nodes_portable : NULL;
+}
+
+wenv_grazing_nodes_fn wenv_grazing_nodes_for_cpu(void)
+{
+    for (int which = 2; which > 0; which--) {
+        wenv_grazing_nodes_fn fn = wenv_grazing_nodes_version(which);
+        if (fn)
+            return fn;
+    }
     return wenv_grazing_nodes_portable;
 }
