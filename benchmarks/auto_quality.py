@@ -18,6 +18,7 @@ the table and writes out/auto_quality.json.
     .venv/bin/python benchmarks/auto_quality.py [--pairs 8000] [--targets 0.01,0.02,0.05] [--repeats 5]
     .venv/bin/python benchmarks/auto_quality.py --calibrate   # the error table auto's model is built on
     .venv/bin/python benchmarks/auto_quality.py --fit         # the environment factor's constants, from the JSON
+    .venv/bin/python benchmarks/auto_quality.py --calibrate-ggx   # GGX_FACTOR: a GGX lobe's error over a Beckmann one's
 """
 import argparse
 import json
@@ -31,9 +32,9 @@ import itertools
 import numpy as np
 
 import wenv
-from accuracy import HDRIS, MATERIALS, load_reference, material
+from accuracy import HDRIS, MATERIALS, PRINCIPLED, load_reference, material
 from bench_shade import orbit_eye, suzanne
-from measure import OUT
+from measure import OUT, ROOT
 from tests.helpers.measure import bundled_hdri, estimated_error, mirror_weighted_pairs, relative_rmse
 
 
@@ -89,9 +90,13 @@ def main():
     ap.add_argument("--calibrate", action="store_true", help="print the per-level median error table from out/auto_quality.json")
     ap.add_argument("--fit", action="store_true", help="fit the environment factor's constants to out/auto_quality.json")
     ap.add_argument("--max-misses", type=int, default=0, help="--fit: cases auto may miss its target in")
+    ap.add_argument("--calibrate-ggx", action="store_true",
+                    help="GGX_FACTOR of csrc/auto/autoquality.c from the Principled metal's stored reference")
     args = ap.parse_args()
     if args.fit:
         return fit(args.max_misses)
+    if args.calibrate_ggx:
+        return calibrate_ggx()
     if args.calibrate:
         return calibrate()
     wenv.set_num_threads(2)
@@ -311,6 +316,45 @@ def calibrate():
     for lv in range(len(d["ladder"])):
         row = [statistics.median(errors[f"{h}/{n}/{lv}"] for h in hdris) for n in ("m0.05", "m0.1", "m0.2", "m0.5", "lambert")]
         print("    {" + ", ".join(f"{e:.5f}" for e in row) + "},")
+
+
+def calibrate_ggx():
+    """GGX_FACTOR and NARROW_FACTOR of csrc/auto/autoquality.c.  GGX_FACTOR: per ladder level, how much
+    more a GGX lobe errs than the Beckmann lobe of the same width that MEDIAN_ERROR was measured on --
+    the Principled metal of benchmarks/accuracy.py (one specular GGX lobe, alpha 0.09) against
+    Cook-Torrance at m = 0.09 (the errors at m = 0.05 and 0.1 interpolated in log m, as auto
+    interpolates MEDIAN_ERROR).  NARROW_FACTOR: how much more a lobe narrower than the calibrated
+    range errs than its prediction at m = 0.05 -- the coated paint (a clear coat of Coat Roughness
+    0.1, alpha 0.01, over a base of roughness 0.5) against Cook-Torrance at m = 0.05 times GGX_FACTOR.
+    Each over the 2000 stored pairs under each bundled HDRI: the median over the HDRIs of the ratio.
+    GGX's heavy tails are what the levels resolve worse: the grazing path's slope cells and the
+    wavelet maps' truncation both lose more of them."""
+    beckmann, ggx = np.load(os.path.join(ROOT, "tests", "data", "accuracy_reference.npz")), \
+        np.load(os.path.join(ROOT, "tests", "data", "accuracy_reference_principled.npz"))
+    alpha = 0.09
+    t = math.log(alpha / 0.05) / math.log(0.1 / 0.05)
+    ggx_rows, narrow_rows = [], []
+    for level, q in enumerate(wenv.AUTO_LADDER):
+        ratios, narrow = [], []
+        for h in HDRIS:
+            env = wenv.load_environment(bundled_hdri(h))
+            sh = wenv.Shader(env, material(MATERIALS["m0.05"]), quality=q, method="slicing")
+            e = {}
+            for name in ("m0.05", "m0.1"):
+                sh.set_material(material(MATERIALS[name]))
+                e[name] = relative_rmse(sh.shade(beckmann["normals"], beckmann["views"]), beckmann[f"{h}/{name}"])
+            for name in ("metal", "coated"):
+                sh.set_material(wenv.Principled(**PRINCIPLED[name]["principled"]))
+                e[name] = relative_rmse(sh.shade(ggx["normals"], ggx["views"]), ggx[f"{h}/{name}"])
+            ratios.append(e["metal"] / math.exp((1 - t) * math.log(e["m0.05"]) + t * math.log(e["m0.1"])))
+            narrow.append(e["coated"] / e["m0.05"])
+        ggx_rows.append(statistics.median(ratios))
+        narrow_rows.append(statistics.median(narrow) / ggx_rows[-1])
+        print(f"level {level}: GGX over Beckmann at m = {alpha}, median over the HDRIs {ggx_rows[-1]:.2f} "
+              f"(from {min(ratios):.2f} to {max(ratios):.2f}); a coat of alpha 0.01 over that at m = 0.05 "
+              f"{narrow_rows[-1]:.2f}", flush=True)
+    print("GGX_FACTOR    " + ", ".join(f"{r:.2f}" for r in ggx_rows))
+    print("NARROW_FACTOR " + ", ".join(f"{r:.2f}" for r in narrow_rows))
 
 
 def fit(max_misses):

@@ -47,3 +47,27 @@ def side_by_side(first, second, repeat):
             fn()
             out.append(time.perf_counter() - start)
     return statistics.median(times[0]), statistics.median(times[1])
+
+
+def gather_limit_data(vertices, terms=128, coefficients=128 * 128, run=64, seed=0):
+    """Inputs of the gather limit: each vertex keeps `terms` of the lighting's `coefficients` Haar
+    coefficients (u16 indices and a float weight each, the thesis's per-vertex transport vectors),
+    coherent as a mesh's are: every run of `run` vertices in mesh order keeps the same terms, with
+    weights of its own.  (index (vertices, terms), weight, lighting rgb (coefficients, 3))."""
+    rng = np.random.default_rng(seed)
+    groups = -(-vertices // run)
+    kept = np.sort(np.stack([rng.choice(coefficients, terms, replace=False) for _ in range(groups)]), axis=1)
+    index = np.ascontiguousarray(np.repeat(kept.astype(np.uint16), run, axis=0)[:vertices])
+    weight = rng.standard_normal((vertices, terms)).astype(np.float32)
+    return index, weight, rng.random((coefficients, 3), dtype=np.float32)
+
+
+def gather_limit_ms(data):
+    """One pass of the gather limit over `data` (gather_limit_data), in ms: every vertex's sparse dot
+    product with the lighting, RGB, on wenv's threads (wenv._sparse_rows_dot).  A view of a mesh
+    cannot cost less than reading each vertex's own coefficients once: the floor the shading's
+    view change is measured against."""
+    import wenv
+    t0 = time.perf_counter()
+    wenv._sparse_rows_dot(*data)
+    return 1e3 * (time.perf_counter() - t0)

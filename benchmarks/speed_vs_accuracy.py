@@ -6,7 +6,10 @@ views uniform on their hemisphere, estimated as benchmarks/auto_quality.py does:
 variate, its difference from each setting read on 50000 pairs drawn about the lighting's bright
 reflections (weighted back to the uniform law), the reference's correction on the 8000 stored pairs
 of benchmarks/accuracy.py.  Over the stored pairs alone a narrow lobe under a sun is a lottery.
-Writes docs/speed_vs_accuracy.{json,csv,png}: a log-log chart with each method's Pareto front.
+Writes docs/speed_vs_accuracy.{json,csv,png}: a log-log chart with each method's Pareto front, and
+the gather limit measured in the same rounds as the views (benchmarks/measure.py: every vertex's
+128 kept RGB terms read once, the thesis's per-vertex sparse dot product), each setting's time over
+it in the CSV.
 Each setting's peak memory is measured too, in a fresh process (tests/helpers/memory.py: the growth of
 peak resident memory while the shader is built and shades one view, under the first HDRI at m = 0.2,
 rotation matrices loaded from the cache the timing run filled), and drawn against the time per view
@@ -35,7 +38,7 @@ import numpy as np
 import wenv
 from accuracy import MATERIALS, load_reference, material
 from bench_shade import orbit_eye, suzanne
-from measure import OUT, ROOT
+from measure import OUT, ROOT, gather_limit_data, gather_limit_ms
 from tests.helpers.measure import bundled_hdri, estimated_error, mirror_weighted_pairs, relative_rmse
 from tests.helpers.memory import peak_memory
 
@@ -55,6 +58,7 @@ CONFIGS = [
     ("rotation", dict(R64, normals=64, views=32, coefficients=512, light_coefficients=0)),
     ("slicing", dict(R64, coefficients=512, light_coefficients=0)),
     ("slicing", "default"),
+    ("slicing", wenv.AUTO_LADDER[5]),  # auto's level 5: default's path, high's maps, bright features as lights
     ("slicing", "high"),
     ("slicing", dict(HIGH, coefficients=2048)),
     ("split_sum", {"prefilter": 32, "samples": 16, "lut": 16}),
@@ -101,6 +105,7 @@ def select_configs(spec):
 
 
 MEMORY_MATERIAL = "m0.2"
+GATHER_TERMS = 128
 
 
 def measure_memory(rows, hdri, pos, mesh_nrm):
@@ -175,6 +180,10 @@ def chart(results, path):
                 for i in front:  # only the front is labelled: the rest would overlap it
                     ax.annotate(rows[i]["short"], pts[i], fontsize=6, xytext=(4, 3), textcoords="offset points",
                                 color=COLOURS[method])
+            if results.get("gather_limit_ms"):
+                limit = results["gather_limit_ms"][name]
+                ax.axvline(limit, c="0.3", ls="--", lw=1, zorder=1,
+                           label=f"gather limit: {results['gather_terms']} RGB terms a vertex ({limit:.1f} ms)")
             ax.set_xscale("log")
             ax.set_yscale("log")
             percent = matplotlib.ticker.FuncFormatter(lambda y, _: f"{100 * y:.3g} %")
@@ -262,14 +271,17 @@ def write_outputs(results, out):
     with open(os.path.join(out, "speed_vs_accuracy.csv"), "w", newline="") as fp:
         w = csv.writer(fp)
         w.writerow(["method", "settings", "roughness", "shade_ms_median"] + [f"rel_rmse_{h}" for h in hdris]
-                   + ["setup_s", "memory_increment_mb", "memory_peak_mb", "memory_held_mb", "memory_model_mb"])
+                   + ["setup_s", "memory_increment_mb", "memory_peak_mb", "memory_held_mb", "memory_model_mb",
+                      "over_gather_limit"])
         for row in results["rows"]:
             mem = row.get("memory")
             mem = [f"{mem[k]:.1f}" for k in ("increment_mb", "peak_mb", "held_mb", "model_mb")] if mem else [""] * 4
             for name in ROUGHNESS:
                 w.writerow([row["method"], row["short"], name[1:], f"{row['shade_ms'][name]:.2f}"]
                            + [f"{row['rel_rmse'][f'{h}/{name}']:.5f}" for h in hdris]
-                           + [f"{row['setup_s'][name]:.2f}"] + mem)
+                           + [f"{row['setup_s'][name]:.2f}"] + mem
+                           + [f"{row['shade_ms'][name] / results['gather_limit_ms'][name]:.2f}"
+                              if results.get("gather_limit_ms") else ""])
     charts(results, out)
     print("wrote", os.path.join(out, "speed_vs_accuracy.{json,csv,png}"))
 
@@ -316,7 +328,10 @@ def main():
     pos, mesh_nrm = suzanne(4)
     results = {"hdris": hdris, "pairs": len(nrm), "control_pairs": args.control_pairs, "vertices": len(pos),
                "threads": wenv.get_num_threads(),
-               "repeats": args.repeats, "timing_hdri": hdris[0], "rows": []}
+               "repeats": args.repeats, "timing_hdri": hdris[0], "rows": [], "gather_limit_ms": {},
+               "gather_terms": GATHER_TERMS}
+    # the floor a view of these vertices could reach: each vertex's 128 kept terms read once
+    gather = gather_limit_data(len(pos), GATHER_TERMS)
     print(f"{len(nrm)} pairs, Suzanne {len(pos)} vertices, {results['threads']} threads", flush=True)
 
     results["rows"] = [{"method": method, "preset": quality if isinstance(quality, str) else None,
@@ -349,12 +364,15 @@ def main():
                 row["rotation_nnz"] = sh.stats.get("rotation_nnz")
             shaders.append(sh)
             print(f"{name}: built {method} {row['short']} in {row['setup_s'][name]:.1f} s", flush=True)
-        times = [[] for _ in shaders]
+        times, limit = [[] for _ in shaders], []
         for i in range(args.repeats):
             for k, sh in enumerate(shaders):
                 t0 = time.perf_counter()
                 sh.shade_mesh(pos, mesh_nrm, orbit_eye(i))
                 times[k].append((time.perf_counter() - t0) * 1e3)
+            limit.append(gather_limit_ms(gather))  # in the same rounds, under the same load
+        results["gather_limit_ms"][name] = statistics.median(limit)
+        print(f"{name}: gather limit {results['gather_limit_ms'][name]:.1f} ms", flush=True)
         for sh, row, t in zip(shaders, results["rows"], times):
             row["shade_ms"][name] = statistics.median(t)
             row["shade_ms_all"][name] = t

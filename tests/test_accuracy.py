@@ -37,7 +37,9 @@ BOUNDS = {
     "default": {"lambert": 0.0052, "m0.05": 0.053, "m0.1": 0.0294, "m0.2": 0.0163, "m0.5": 0.0243},
     "high": {"lambert": 0.00176, "m0.05": 0.0120, "m0.1": 0.0085, "m0.2": 0.0095, "m0.5": 0.0102},
 }
-METHOD = {"draft": "rotation", "default": "slicing", "high": "slicing"}
+METHOD = {"draft": "rotation", "default": "slicing", "high": "slicing", "auto level 5": "slicing"}
+# Settings named here by what they are: auto's ladder level between `default` and `high`.
+SETTINGS = {"auto level 5": wenv.AUTO_LADDER[5]}
 
 
 @pytest.fixture(scope="module")
@@ -67,7 +69,8 @@ def shade_errors(preset, data, materials):
     for h in json.loads(str(data["hdris"])):
         env = wenv.load_environment(hdri_path(h))
         if shader is None:
-            shader = wenv.Shader(env, wenv.Lambert((0.5, 0.5, 0.5)), quality=preset, method=METHOD[preset])
+            shader = wenv.Shader(env, wenv.Lambert((0.5, 0.5, 0.5)), quality=SETTINGS.get(preset, preset),
+                                 method=METHOD[preset])
         else:
             shader.set_environment(env)
         for name, mat in materials.items():
@@ -137,6 +140,21 @@ def test_high_within_one_percent_from_m_0_1(data):
     errors = preset_errors("high", data)
     over = {k: round(100 * e, 2) for k, e in errors.items() if k[1] != "m0.05" and e >= 0.01}
     assert len(errors) == 40 and not over, f"high: relative RMSE (%) at or above 1 %: {over}"
+
+
+def test_auto_level_5_within_one_percent_from_m_0_1(data):
+    """Auto's level 5 -- `default`'s grazing path with `high`'s tables and the bright extended
+    features (above 16x the mean) as exact lights read to 5 % -- is within 1 % of the reference for
+    m >= 0.1 and Lambert under every bundled HDRI (measured worst: 0.16 % Lambert, 0.85 / 0.95 /
+    0.97 % at m = 0.1 / 0.2 / 0.5, courtyard), as `high` is, at a third of high's time per view:
+    what auto takes at a 1 % target for these lobes where `default` is not enough."""
+    errors = preset_errors("auto level 5", data)
+    over = {k: round(100 * e, 2) for k, e in errors.items() if k[1] != "m0.05" and e >= 0.01}
+    assert len(errors) == 40 and not over, f"auto level 5: relative RMSE (%) at or above 1 %: {over}"
+    default, high = preset_errors("default", data), preset_errors("high", data)
+    for name in ("m0.1", "m0.2", "m0.5"):  # between default and high, nearer high
+        worst = [max(e[k] for k in e if k[1] == name) for e in (default, errors, high)]
+        assert worst[1] < worst[0] and worst[1] < 1.2 * worst[2], (name, worst)
 
 
 def test_default_within_three_percent_from_m_0_2(data):

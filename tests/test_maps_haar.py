@@ -172,3 +172,27 @@ def test_maps_do_not_depend_on_the_number_of_threads():
     for threads in (2, 3, 5):
         for a, b in zip(maps[1], maps[threads]):
             assert np.array_equal(a, b)
+
+
+def test_sparse_rows_dot_is_each_rows_terms_against_the_lighting():
+    """wenv._sparse_rows_dot, the per-vertex sparse dot product of kept Haar terms against the
+    lighting's coefficients (the gather limit benchmarks/measure.py times views against): numpy's
+    sum of weight x lighting row per term; an index past the lighting or mismatched shapes are a
+    named ValueError, never a read out of bounds."""
+    rng = np.random.default_rng(4)
+    index = rng.integers(0, 300, size=(1000, 17)).astype(np.uint16)
+    weight = rng.standard_normal((1000, 17)).astype(np.float32)
+    rgb = rng.random((300, 3), dtype=np.float32)
+    want = np.einsum("vk,vkc->vc", weight.astype(np.float64), rgb[index].astype(np.float64))
+    got = wenv._sparse_rows_dot(index, weight, rgb)
+    assert got.shape == (1000, 3) and got.dtype == np.float32
+    assert np.allclose(got, want, rtol=1e-5, atol=1e-5)
+    with pytest.raises(ValueError, match="index holds 300, past rgb's 300 rows"):
+        wenv._sparse_rows_dot(np.full((2, 3), 300, np.uint16), np.ones((2, 3), np.float32), rgb)
+    with pytest.raises(ValueError, match="same shape"):
+        wenv._sparse_rows_dot(index, weight[:, :5], rgb)
+    with pytest.raises(ValueError, match=r"\(m, 3\)"):
+        wenv._sparse_rows_dot(index, weight, rgb[:, :2])
+    with pytest.raises(TypeError, match="index must be an array convertible to uint16"):
+        wenv._sparse_rows_dot("nope", weight, rgb)
+

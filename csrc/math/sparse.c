@@ -93,3 +93,20 @@ void wenv_csc_free(wenv_csc *m)
 }
 
 size_t wenv_csc_nnz(const wenv_csc *m) { return m->colptr ? m->colptr[m->cols] : 0; }
+
+void wenv_sparse_rows_dot(const uint16_t *index, const float *weight, size_t n, size_t k, const float *rgb, float *out)
+{
+#pragma omp parallel for schedule(static)
+    for (size_t r = 0; r < n; r++) {
+        const uint16_t *ix = index + r * k;
+        const float *w = weight + r * k;
+        float sum[3] = {0.0f, 0.0f, 0.0f};
+        for (size_t j = 0; j < k; j++) {
+            const float *t = rgb + 3 * (size_t)ix[j];
+            sum[0] += w[j] * t[0];
+            sum[1] += w[j] * t[1];
+            sum[2] += w[j] * t[2];
+        }
+        memcpy(out + 3 * r, sum, sizeof sum);
+    }
+}

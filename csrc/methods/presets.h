@@ -15,7 +15,7 @@ extern const wenv_splitsum_quality WENV_SPLIT_SUM_PRESETS[WENV_PRESET_COUNT];
 extern const wenv_sh_shading_quality WENV_SH_PRESETS[WENV_PRESET_COUNT];
 
 /* quality="auto" with lobes: method "slicing" at one of these, cheapest first (auto/autoquality.h). */
-#define WENV_AUTO_LEVELS 6
+#define WENV_AUTO_LEVELS 7
 extern const wenv_wavelet_quality WENV_AUTO_LADDER[WENV_AUTO_LEVELS];
 
 /* quality="auto" without lobes: method "sh" at one of these orders (odd bands above 1 carry no

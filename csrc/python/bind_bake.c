@@ -9,38 +9,6 @@
 
 /* numpy.ascontiguousarray(obj, dtype) as a buffer (writable if asked: then obj itself must be
  * that array, so the caller sees what is written).  -1 with TypeError naming `name`. */
-static int get_array(PyObject *obj, const char *name, const char *dtype, int writable, Py_buffer *view,
-                     PyObject **held)
-{
-    PyObject *numpy = PyImport_ImportModule("numpy");
-    *held = numpy ? PyObject_CallMethod(numpy, "ascontiguousarray", "Os", obj, dtype) : NULL;
-    Py_XDECREF(numpy);
-    if (!*held) {
-        if (PyErr_ExceptionMatches(PyExc_ValueError) || PyErr_ExceptionMatches(PyExc_TypeError)) {
-            PyErr_Clear();
-            PyErr_Format(PyExc_TypeError, "%s must be an array convertible to %s", name, dtype);
-        }
-        return -1;
-    }
-    if (writable && *held != obj) {
-        PyErr_Format(PyExc_TypeError, "%s must be a C-contiguous %s numpy array (it is written in place)", name,
-                     dtype);
-        Py_CLEAR(*held);
-        return -1;
-    }
-    if (PyObject_GetBuffer(*held, view, PyBUF_ND | PyBUF_C_CONTIGUOUS | (writable ? PyBUF_WRITABLE : 0)) < 0) {
-        Py_CLEAR(*held);
-        return -1;
-    }
-    return 0;
-}
-
-static void release(Py_buffer *view, PyObject **held)
-{
-    PyBuffer_Release(view);
-    Py_CLEAR(*held);
-}
-
 /* uv_texels(uv, triangles, width, height, memory_budget_mb=1024, progress=None, border=False)
  *   -> (triangle (height, width) int32, weights (height, width, 2) float32, covered, overlapped) */
 static PyObject *uv_texels(PyObject *self, PyObject *args, PyObject *kwargs)
@@ -74,15 +42,15 @@ static PyObject *uv_texels(PyObject *self, PyObject *args, PyObject *kwargs)
     }
     Py_buffer ub, tb;
     PyObject *uv_held, *tri_held;
-    if (get_array(uv_obj, "uv", "float32", 0, &ub, &uv_held) < 0)
+    if (wenv_py_get_typed_array(uv_obj, "uv", "float32", 0, &ub, &uv_held) < 0)
         return NULL;
     if (ub.ndim != 2 || ub.shape[1] != 2) {
-        release(&ub, &uv_held);
+        wenv_py_release_array(&ub, &uv_held);
         PyErr_SetString(PyExc_ValueError, "uv must have shape (n, 2)");
         return NULL;
     }
-    if (get_array(tri_obj, "triangles", "int64", 0, &tb, &tri_held) < 0) {
-        release(&ub, &uv_held);
+    if (wenv_py_get_typed_array(tri_obj, "triangles", "int64", 0, &tb, &tri_held) < 0) {
+        wenv_py_release_array(&ub, &uv_held);
         return NULL;
     }
     PyObject *result = NULL, *tri_out = NULL, *weights_out = NULL;
@@ -129,8 +97,8 @@ done:
     Py_XDECREF(tri_out);
     Py_XDECREF(weights_out);
     PyMem_Free(tri);
-    release(&ub, &uv_held);
-    release(&tb, &tri_held);
+    wenv_py_release_array(&ub, &uv_held);
+    wenv_py_release_array(&tb, &tri_held);
     return result;
 }
 
@@ -147,10 +115,10 @@ static PyObject *extend_margin(PyObject *self, PyObject *args, PyObject *kwargs)
         return NULL;
     Py_buffer pb, fb;
     PyObject *p_held, *f_held;
-    if (get_array(p_obj, "pixels", "float32", 1, &pb, &p_held) < 0)
+    if (wenv_py_get_typed_array(p_obj, "pixels", "float32", 1, &pb, &p_held) < 0)
         return NULL;
-    if (get_array(f_obj, "filled", "bool", 1, &fb, &f_held) < 0) {
-        release(&pb, &p_held);
+    if (wenv_py_get_typed_array(f_obj, "filled", "bool", 1, &fb, &f_held) < 0) {
+        wenv_py_release_array(&pb, &p_held);
         return NULL;
     }
     PyObject *result = NULL;
@@ -167,8 +135,8 @@ static PyObject *extend_margin(PyObject *self, PyObject *args, PyObject *kwargs)
     WENV_END_WORK
     result = st ? wenv_py_raise(&err) : PyLong_FromSize_t(added);
 done:
-    release(&pb, &p_held);
-    release(&fb, &f_held);
+    wenv_py_release_array(&pb, &p_held);
+    wenv_py_release_array(&fb, &f_held);
     return result;
 }
 

@@ -8,6 +8,7 @@
 
 #include "math/haar.h"
 #include "math/maps.h"
+#include "math/sparse.h"
 #include "math/spherical_harmonics.h"
 #include "python/bind_envmap.h"
 #include "python/bind_material.h"
@@ -493,7 +494,55 @@ static PyObject *py_specular_float(PyObject *self, PyObject *args, PyObject *kwd
     return py_specular(self, args, kwds, WENV_PY_EVAL_SPECULAR_FLOAT);
 }
 
+/* _sparse_rows_dot(index (n, k) uint16, weight (n, k) float32, rgb (m, 3) float32) -> (n, 3) float32:
+ * wenv_sparse_rows_dot, the floor benchmarks measure a view's shading against. */
+static PyObject *py_sparse_rows_dot(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *i_obj, *w_obj, *rgb_obj, *i_held = NULL, *w_held = NULL, *rgb_held = NULL, *out = NULL;
+    Py_buffer ib, wb, rb;
+    if (!PyArg_ParseTuple(args, "OOO", &i_obj, &w_obj, &rgb_obj))
+        return NULL;
+    if (wenv_py_get_typed_array(i_obj, "index", "uint16", 0, &ib, &i_held) < 0)
+        return NULL;
+    if (wenv_py_get_typed_array(w_obj, "weight", "float32", 0, &wb, &w_held) < 0) {
+        wenv_py_release_array(&ib, &i_held);
+        return NULL;
+    }
+    if (wenv_py_get_typed_array(rgb_obj, "rgb", "float32", 0, &rb, &rgb_held) < 0) {
+        wenv_py_release_array(&ib, &i_held);
+        wenv_py_release_array(&wb, &w_held);
+        return NULL;
+    }
+    if (ib.ndim != 2 || wb.ndim != 2 || ib.shape[0] != wb.shape[0] || ib.shape[1] != wb.shape[1]) {
+        PyErr_SetString(PyExc_ValueError, "index and weight must be (n, k) arrays of the same shape");
+    } else if (rb.ndim != 2 || rb.shape[1] != 3 || rb.shape[0] < 1) {
+        PyErr_SetString(PyExc_ValueError, "rgb must be an (m, 3) array, m >= 1");
+    } else {
+        const uint16_t *index = ib.buf;
+        size_t n = (size_t)ib.shape[0], k = (size_t)ib.shape[1], m = (size_t)rb.shape[0], top = 0;
+        for (size_t t = 0; t < n * k; t++)
+            top = index[t] > top ? index[t] : top;
+        float *data;
+        Py_ssize_t shape[2] = {(Py_ssize_t)n, 3};
+        if (n > 0 && k > 0 && top >= m)
+            wenv_py_errorf(PyExc_ValueError, "index holds %zu, past rgb's %zu rows", top, m);
+        else if ((out = wenv_py_new_float_array(2, shape, &data))) {
+            Py_BEGIN_ALLOW_THREADS
+            wenv_sparse_rows_dot(index, wb.buf, n, k, rb.buf, data);
+            Py_END_ALLOW_THREADS
+        }
+    }
+    wenv_py_release_array(&ib, &i_held);
+    wenv_py_release_array(&wb, &w_held);
+    wenv_py_release_array(&rb, &rgb_held);
+    return out;
+}
+
 static PyMethodDef internal_functions[] = {
+    {"_sparse_rows_dot", py_sparse_rows_dot, METH_VARARGS,
+     "_sparse_rows_dot(index, weight, rgb)\n--\n\nEach row's (index, weight) terms against rgb's rows: the "
+     "per-vertex sparse dot product, a view's floor."},
     {"_work_threads", py_work_threads, METH_NOARGS, NULL},
     {"_oct_encode", py_oct_encode, METH_VARARGS, NULL},
     {"_oct_decode", py_oct_decode, METH_VARARGS, NULL},

@@ -435,3 +435,35 @@ void wenv_py_vertex_inputs_release(wenv_py_vertex_inputs *v)
     Py_XDECREF(v->rest);
     memset(v, 0, sizeof *v);
 }
+
+int wenv_py_get_typed_array(PyObject *obj, const char *name, const char *dtype, int writable, Py_buffer *view,
+                            PyObject **held)
+{
+    PyObject *numpy = PyImport_ImportModule("numpy");
+    *held = numpy ? PyObject_CallMethod(numpy, "ascontiguousarray", "Os", obj, dtype) : NULL;
+    Py_XDECREF(numpy);
+    if (!*held) {
+        if (PyErr_ExceptionMatches(PyExc_ValueError) || PyErr_ExceptionMatches(PyExc_TypeError)) {
+            PyErr_Clear();
+            PyErr_Format(PyExc_TypeError, "%s must be an array convertible to %s", name, dtype);
+        }
+        return -1;
+    }
+    if (writable && *held != obj) {
+        PyErr_Format(PyExc_TypeError, "%s must be a C-contiguous %s numpy array (it is written in place)", name,
+                     dtype);
+        Py_CLEAR(*held);
+        return -1;
+    }
+    if (PyObject_GetBuffer(*held, view, PyBUF_ND | PyBUF_C_CONTIGUOUS | (writable ? PyBUF_WRITABLE : 0)) < 0) {
+        Py_CLEAR(*held);
+        return -1;
+    }
+    return 0;
+}
+
+void wenv_py_release_array(Py_buffer *view, PyObject **held)
+{
+    PyBuffer_Release(view);
+    Py_CLEAR(*held);
+}

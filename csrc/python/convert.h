@@ -53,6 +53,14 @@ int wenv_py_get_size(PyObject *obj, const char *name, size_t *out);
 /* Reads a finite float; ValueError naming `name` otherwise. */
 int wenv_py_get_finite(PyObject *obj, const char *name, double *out);
 
+/* Gets a C-contiguous buffer of numpy dtype `dtype` ("float32", "int64", "uint16", "bool"...) from
+ * `obj`, converting it when it is not one already (TypeError naming `name` when it cannot be); with
+ * `writable`, `obj` itself must be such an array, as results are written into it.  *held keeps
+ * the array alive: on success the caller ends with wenv_py_release_array(view, held). */
+int wenv_py_get_typed_array(PyObject *obj, const char *name, const char *dtype, int writable, Py_buffer *view,
+                            PyObject **held);
+void wenv_py_release_array(Py_buffer *view, PyObject **held);
+
 /* New numpy array of the given shape and dtype ("float32", "float64", "int64", "bool"); *data points at its storage. */
 PyObject *wenv_py_new_array(int ndim, const Py_ssize_t *shape, const char *dtype, void **data);
 

@@ -42,7 +42,7 @@ typedef void (*wenv_grazing_nodes_fn)(const float *a, const float *b, size_t str
 
 /* The fastest version this CPU runs. */
 wenv_grazing_nodes_fn wenv_grazing_nodes_for_cpu(void);
-/* Version `which` (0 portable, 1 AVX2 with F16C, 2 AVX-512), or NULL where this CPU or build lacks it:
+/* Version `which` (0 portable, 1 AVX2 (with F16C), 2 AVX-512), or NULL where this CPU or build lacks it:
  * for checking each against the portable one. */
 wenv_grazing_nodes_fn wenv_grazing_nodes_version(int which);
 /* The portable version, the others' reference. */
