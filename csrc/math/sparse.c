@@ -94,19 +94,27 @@ void wenv_csc_free(wenv_csc *m)
 
 size_t wenv_csc_nnz(const wenv_csc *m) { return m->colptr ? m->colptr[m->cols] : 0; }
 
-void wenv_sparse_rows_dot(const uint16_t *index, const float *weight, size_t n, size_t k, const float *rgb, float *out)
+typedef float rgbx4 __attribute__((vector_size(4 * sizeof(float))));
+
+void wenv_sparse_rows_dot(const uint16_t *index, const float *weight, size_t n, size_t k, const float *rgbx,
+                          float *out)
 {
+    const rgbx4 *light = (const rgbx4 *)(const void *)rgbx;
 #pragma omp parallel for schedule(static)
     for (size_t r = 0; r < n; r++) {
         const uint16_t *ix = index + r * k;
         const float *w = weight + r * k;
-        float sum[3] = {0.0f, 0.0f, 0.0f};
-        for (size_t j = 0; j < k; j++) {
-            const float *t = rgb + 3 * (size_t)ix[j];
-            sum[0] += w[j] * t[0];
-            sum[1] += w[j] * t[1];
-            sum[2] += w[j] * t[2];
-        }
-        memcpy(out + 3 * r, sum, sizeof sum);
+        /* four sums in turn: one would wait on each multiply-add's latency */
+        rgbx4 part[4] = {{0.0f}};
+        size_t j = 0;
+        for (; j + 4 <= k; j += 4)
+            for (size_t q = 0; q < 4; q++)
+                part[q] += w[j + q] * light[ix[j + q]];
+        for (; j < k; j++)
+            part[0] += w[j] * light[ix[j]];
+        rgbx4 sum = (part[0] + part[1]) + (part[2] + part[3]);
+        out[3 * r] = sum[0];
+        out[3 * r + 1] = sum[1];
+        out[3 * r + 2] = sum[2];
     }
 }

@@ -9,6 +9,7 @@
 #include "math/haar.h"
 #include "math/maps.h"
 #include "math/sparse.h"
+#include "math/vector_math.h"
 #include "math/spherical_harmonics.h"
 #include "python/bind_envmap.h"
 #include "python/bind_material.h"
@@ -528,9 +529,16 @@ static PyObject *py_sparse_rows_dot(PyObject *self, PyObject *args)
         if (n > 0 && k > 0 && top >= m)
             wenv_py_errorf(PyExc_ValueError, "index holds %zu, past rgb's %zu rows", top, m);
         else if ((out = wenv_py_new_float_array(2, shape, &data))) {
-            Py_BEGIN_ALLOW_THREADS
-            wenv_sparse_rows_dot(index, wb.buf, n, k, rb.buf, data);
-            Py_END_ALLOW_THREADS
+            float *rgbx = wenv_rgbx_from_rgb(rb.buf, m);
+            if (!rgbx) {
+                Py_CLEAR(out);
+                PyErr_NoMemory();
+            } else {
+                Py_BEGIN_ALLOW_THREADS
+                wenv_sparse_rows_dot(index, wb.buf, n, k, rgbx, data);
+                Py_END_ALLOW_THREADS
+                free(rgbx);
+            }
         }
     }
     wenv_py_release_array(&ib, &i_held);
