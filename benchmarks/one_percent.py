@@ -16,7 +16,6 @@ the Principled accuracy table.  Prints the table and writes out/one_percent.json
 """
 import argparse
 import json
-import math
 import os
 import statistics
 import sys
@@ -26,6 +25,7 @@ import numpy as np
 
 import wenv
 from accuracy import DATA, HDRIS, MATERIALS, PRINCIPLED, PRINCIPLED_DATA, material
+from bench_interactive import eye, uv_sphere
 from measure import OUT, gather_limit_data, gather_limit_ms
 from tests.helpers.measure import bundled_hdri, relative_rmse
 
@@ -34,26 +34,14 @@ SPECS = {**MATERIALS, **PRINCIPLED}
 TARGET = 0.01
 
 
-def sphere(rings=251, segments=502):
-    t = (np.arange(rings) + 0.5) / rings * math.pi
-    p = np.arange(segments) / segments * 2 * math.pi
-    tt, pp = np.meshgrid(t, p, indexing="ij")
-    return np.stack([np.sin(tt) * np.cos(pp), np.sin(tt) * np.sin(pp), np.cos(tt)], -1).reshape(-1, 3).astype(np.float32)
-
-
-def eye(i, radius=4.2):
-    a = 2 * math.pi * (i % 8) / 8 + 0.3
-    return (radius * math.cos(a), radius * math.sin(a), 0.8 * math.sin(1.7 * a))
-
-
 def view_ms(shader, pos, repeat):
     """Median view change over `repeat` views of the orbit, after one pass over it."""
     for i in range(8):
-        shader.shade_mesh(pos, pos, eye(i))
+        shader.shade_mesh(pos, pos, eye(i % 8, radius=4.2))
     times = []
     for i in range(repeat):
         t0 = time.perf_counter()
-        shader.shade_mesh(pos, pos, eye(i))
+        shader.shade_mesh(pos, pos, eye(i % 8, radius=4.2))
         times.append(1e3 * (time.perf_counter() - t0))
     return statistics.median(times)
 
@@ -67,7 +55,7 @@ def main():
     wenv.set_num_threads(2)
     names = args.materials.split(",")
     refs = {False: np.load(DATA), True: np.load(PRINCIPLED_DATA)}
-    pos = sphere()
+    pos = uv_sphere()
     gather = gather_limit_data(len(pos))
     rows = []
     print(f"{'HDRI':10s} {'material':8s} {'auto':>5s} {'error':>7s} {'view':>8s} {'/limit':>7s} | {'default':>7s} {'view':>8s} | "

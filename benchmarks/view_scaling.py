@@ -33,6 +33,7 @@ sys.path.insert(0, os.path.join(ROOT, "tests"))
 import wenv  # noqa: E402
 
 from conftest import hdri_path  # noqa: E402
+from bench_interactive import uv_sphere  # noqa: E402
 
 # rings x segments: 7,938, 31,752, 126,002 and 501,264 vertices, and a 100-vertex mesh
 SIZES = {"8k": (63, 126), "31k": (126, 252), "126k": (251, 502), "500k": (501, 1001)}
@@ -43,13 +44,6 @@ MATERIALS = {
                                                 distribution="beckmann"),
     "Principled paint": lambda: wenv.Principled(base_color=(0.6, 0.15, 0.08), roughness=0.3),
 }
-
-
-def sphere(rings, segments):
-    t = (np.arange(rings) + 0.5) / rings * math.pi
-    p = np.arange(segments) / segments * 2 * math.pi
-    tt, pp = np.meshgrid(t, p, indexing="ij")
-    return np.stack([np.sin(tt) * np.cos(pp), np.sin(tt) * np.sin(pp), np.cos(tt)], -1).reshape(-1, 3).astype(np.float32)
 
 
 def eye(a, radius=4.2):
@@ -81,8 +75,8 @@ def main():
     ap.add_argument("--hdris", nargs="+", default=["forest", "studio"])
     ap.add_argument("--repeat", type=int, default=7)
     args = ap.parse_args()
-    meshes = {name: sphere(*shape) for name, shape in SIZES.items()}
-    meshes["tiny"] = sphere(*TINY)
+    meshes = {name: uv_sphere(*shape) for name, shape in SIZES.items()}
+    meshes["tiny"] = uv_sphere(*TINY)
     results = []
     for hdri in args.hdris:
         env = wenv.load_environment(hdri_path(hdri))

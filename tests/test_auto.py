@@ -10,6 +10,7 @@ import pytest
 
 import wenv
 from conftest import hdri_path
+from tests.helpers.measure import relative_rmse
 
 
 def unit(a):
@@ -270,8 +271,7 @@ PRINCIPLED_DATA = os.path.join(os.path.dirname(__file__), "data", "accuracy_refe
 
 def stored_error(shader, data, key):
     """Relative RMSE over the stored pairs of benchmarks/accuracy.py --principled."""
-    out, ref = shader.shade(data["normals"], data["views"]), data[key]
-    return float(np.sqrt(np.mean((out - ref) ** 2) / np.mean(ref ** 2)))
+    return relative_rmse(shader.shade(data["normals"], data["views"]), data[key])
 
 
 def test_a_ggx_lobe_is_predicted_as_ggx_lobes_err():

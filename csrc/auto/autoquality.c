@@ -83,21 +83,6 @@ static const double GGX_FACTOR[WENV_AUTO_LEVELS] = {0.79, 0.71, 0.70, 4.23, 0.56
 #define NARROW_ALPHA 0.01
 static const double NARROW_FACTOR[WENV_AUTO_LEVELS] = {1.98, 1.98, 2.28, 0.63, 3.15, 0.50, 2.29};
 
-/* Whether the narrowest lobe that reflects anything is a GGX lobe. */
-static int narrowest_is_ggx(const wenv_material *mat)
-{
-    double width = INFINITY;
-    int ggx = 0;
-    for (size_t k = 0; k < wenv_material_lobe_count(mat); k++) {
-        const wenv_lobe *lobe = wenv_material_lobe(mat, k);
-        if ((lobe->specular[0] > 0.0 || lobe->specular[1] > 0.0 || lobe->specular[2] > 0.0) && lobe->alpha < width) {
-            width = lobe->alpha;
-            ggx = lobe->distribution == WENV_NDF_GGX;
-        }
-    }
-    return ggx;
-}
-
 const wenv_wavelet_quality *wenv_auto_level(size_t i)
 {
     return i < WENV_AUTO_LEVELS ? &WENV_AUTO_LADDER[i] : NULL;
@@ -538,7 +523,7 @@ wenv_status wenv_auto_choose(const wenv_envmap *env, wenv_auto_analysis *analysi
     /* the narrowest lobe's width (Lambert's column, m = 0, when no lobe reflects) */
     double m = wenv_material_lobe_width(mat);
     m = isfinite(m) ? m : 0.0;
-    int ggx = m > 0.0 && narrowest_is_ggx(mat);
+    int ggx = m > 0.0 && wenv_material_narrowest_lobe(mat)->distribution == WENV_NDF_GGX;
     /* how far below the calibrated range, 0 to 1 at NARROW_ALPHA */
     double narrow = m > 0.0 && m < ROUGHNESS[0] ? fmin(1.0, log(ROUGHNESS[0] / m) / log(ROUGHNESS[0] / NARROW_ALPHA)) : 0.0;
     /* the lobe's width within the calibrated range decides which texels the dominance averages */

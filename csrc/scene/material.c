@@ -199,15 +199,22 @@ void wenv_material_emission_at(const wenv_material *mat, double cos_v, double rg
         mat->kind->emission_at(mat, cos_v, rgb);
 }
 
-double wenv_material_lobe_width(const wenv_material *mat)
+const wenv_lobe *wenv_material_narrowest_lobe(const wenv_material *mat)
 {
-    double width = INFINITY;
+    const wenv_lobe *narrowest = NULL;
     for (size_t k = 0; k < mat->n_lobes; k++) {
         const wenv_lobe *lobe = &mat->lobes[k];
-        if (lobe->specular[0] > 0.0 || lobe->specular[1] > 0.0 || lobe->specular[2] > 0.0)
-            width = fmin(width, lobe->alpha);
+        if ((lobe->specular[0] > 0.0 || lobe->specular[1] > 0.0 || lobe->specular[2] > 0.0) &&
+            (!narrowest || lobe->alpha < narrowest->alpha))
+            narrowest = lobe;
     }
-    return width;
+    return narrowest;
+}
+
+double wenv_material_lobe_width(const wenv_material *mat)
+{
+    const wenv_lobe *lobe = wenv_material_narrowest_lobe(mat);
+    return lobe ? lobe->alpha : INFINITY;
 }
 
 /* ---------------------------------------------------------------- evaluation */

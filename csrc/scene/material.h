@@ -184,6 +184,8 @@ wenv_shadowing wenv_material_shadowing(const wenv_material *mat);
  * grazing); INFINITY when no lobe reflects.  Every consumer that sizes something by the lobes
  * (sub-sampling, the grazing path, the lights' cluster levels, auto) reads this one number. */
 double wenv_material_lobe_width(const wenv_material *mat);
+/* That narrowest lobe reflecting anything (its alpha is the width above), or NULL when none does. */
+const wenv_lobe *wenv_material_narrowest_lobe(const wenv_material *mat);
 
 /* ---- evaluation ---- */
 
