@@ -53,39 +53,59 @@ static void ct_specular_cos_batch(const wenv_material *mat, const double wo[3], 
     }
 }
 
+/* One lobe's f cos over arrays of directions, added to r, g, b.  Always inlined with ggx and smith
+ * constant, so that the terms' branches on them fold away (GCC vectorises no loop with control flow
+ * in it), and the arrays restrict rather than `omp simd`, under which GCC 12 left the loop scalar
+ * (its per-lane copy of wi has no vector type). */
+static inline __attribute__((always_inline)) void
+ct_lobe_lanes(const wenv_lobe *lobe, const int ggx, const int smith, const float wo[3], float ko, size_t n,
+              const float *restrict x, const float *restrict y, const float *restrict z, float *restrict r,
+              float *restrict g, float *restrict b)
+{
+    /* a copy: reads through wo, which might alias the outputs, also kept the loop scalar */
+    const float w_o[3] = {wo[0], wo[1], wo[2]};
+    float co = w_o[2], m = (float)lobe->alpha, ior = (float)lobe->ior;
+    float s0 = (float)lobe->specular[0], s1 = (float)lobe->specular[1], s2 = (float)lobe->specular[2];
+    for (size_t k = 0; k < n; k++) {
+        float ci = z[k];
+        /* a safe stand-in where the light is below: its value is 0 */
+        float wi[3] = {x[k], y[k], ci > 0.0f ? ci : 1.0f};
+        wenv_half_vector_f h = wenv_half_vector_of_f(wi, w_o);
+        float si = sqrtf(wi[0] * wi[0] + wi[1] * wi[1]);
+        float vis = smith ? wenv_vis_smith_f(wi[2], co, wenv_smith_k_f(ggx, m, wi[2], si), ko)
+                          : wenv_vis_vcavity_f(wi[2], co, h);
+        float v = wenv_fresnel_dielectric_f(h.cos_d, ior) * wenv_ndf_tan2_f(ggx, m, h.tan2) * vis * ci;
+        v = ci > 0.0f ? v : 0.0f;
+        r[k] += s0 * v;
+        g[k] += s1 * v;
+        b[k] += s2 * v;
+    }
+}
+
 /* The float path over arrays of directions, the lobes' parameters hoisted and every per-direction
  * step branch-free, so the loop runs 8 or 16 lanes per instruction on CPUs that have AVX2 or
- * AVX-512 (WENV_VECTOR_CLONES).  The same formulas as
- * above, with exp and erf from math/vector_math.h. */
+ * AVX-512 (WENV_VECTOR_CLONES).  The same formulas as above, with exp and erf from
+ * math/vector_math.h. */
 WENV_VECTOR_CLONES
 static void ct_specular_cos_f_many(const wenv_material *mat, const float wo[3], const float *k_o, size_t n,
                                    const float *x, const float *y, const float *z, float *r, float *g, float *b)
 {
     for (size_t k = 0; k < n; k++)
         r[k] = g[k] = b[k] = 0.0f;
-    float co = wo[2];
-    if (!(co > 0.0f))
+    if (!(wo[2] > 0.0f))
         return;
     int smith = mat->shadowing == WENV_SHADOW_SMITH;
     for (size_t l = 0; l < mat->n_lobes; l++) {
         const wenv_lobe *lobe = &mat->lobes[l];
-        float m = (float)lobe->alpha, ior = (float)lobe->ior, ko = k_o[l];
-        float s0 = (float)lobe->specular[0], s1 = (float)lobe->specular[1], s2 = (float)lobe->specular[2];
-        int ggx = lobe->distribution == WENV_NDF_GGX;
-#pragma omp simd
-        for (size_t k = 0; k < n; k++) {
-            float ci = z[k];
-            /* a safe stand-in where the light is below: its value is 0 */
-            float wi[3] = {x[k], y[k], ci > 0.0f ? ci : 1.0f};
-            wenv_half_vector_f h = wenv_half_vector_of_f(wi, wo);
-            float si = sqrtf(wi[0] * wi[0] + wi[1] * wi[1]);
-            float vis = smith ? wenv_vis_smith_f(wi[2], co, wenv_smith_k_f(ggx, m, wi[2], si), ko)
-                              : wenv_vis_vcavity_f(wi[2], co, h);
-            float v = wenv_fresnel_dielectric_f(h.cos_d, ior) * wenv_ndf_tan2_f(ggx, m, h.tan2) * vis * ci;
-            v = ci > 0.0f ? v : 0.0f;
-            r[k] += s0 * v;
-            g[k] += s1 * v;
-            b[k] += s2 * v;
+        if (lobe->distribution == WENV_NDF_GGX) {
+            if (smith)
+                ct_lobe_lanes(lobe, 1, 1, wo, k_o[l], n, x, y, z, r, g, b);
+            else
+                ct_lobe_lanes(lobe, 1, 0, wo, k_o[l], n, x, y, z, r, g, b);
+        } else if (smith) {
+            ct_lobe_lanes(lobe, 0, 1, wo, k_o[l], n, x, y, z, r, g, b);
+        } else {
+            ct_lobe_lanes(lobe, 0, 0, wo, k_o[l], n, x, y, z, r, g, b);
         }
     }
 }

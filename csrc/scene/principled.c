@@ -74,7 +74,7 @@ static const principled *model_of(const wenv_material *mat) { return (const prin
 
 static void model_destroy(wenv_shared *shared) { free(shared); }
 
-static double clamp01(double x) { return x < 0.0 ? 0.0 : (x > 1.0 ? 1.0 : x); }
+static inline double clamp01(double x) { return x < 0.0 ? 0.0 : (x > 1.0 ? 1.0 : x); }
 
 /* ---------------------------------------------------------------- tables, as Cycles reads them */
 
@@ -104,7 +104,7 @@ static double read3(const float *t, size_t n, double x, double y, double z)
 
 /* ---------------------------------------------------------------- Fresnel */
 
-static double f0_from_ior(double eta) { return ((eta - 1.0) / (eta + 1.0)) * ((eta - 1.0) / (eta + 1.0)); }
+static inline double f0_from_ior(double eta) { return ((eta - 1.0) / (eta + 1.0)) * ((eta - 1.0) / (eta + 1.0)); }
 
 static double ior_from_f0(double f0)
 {
@@ -120,18 +120,32 @@ static double fresnel_dielectric_fss(double eta)
 }
 
 /* The lobe's Fresnel at c = wi.h, RGB. */
+/* Each role's Fresnel, inline so the float path's per-lobe loops run them in vector lanes. */
+static inline double coat_fresnel(const principled *p, double c) { return wenv_fresnel_dielectric(c, p->in.coat_ior); }
+
+/* F82-tint (Kutz et al., "Novel aspects of the Adobe Standard Material"), channel k */
+static inline double metal_fresnel(const principled *p, double c, int k)
+{
+    double s = clamp01(1.0 - c), s5 = s * s * s * s * s;
+    return clamp01(p->f0_metal[k] + (1.0 - p->f0_metal[k]) * s5 - p->b_metal[k] * c * s5 * s);
+}
+
+/* the dielectric's Fresnel, normalised to 0 at normal incidence: channel k is f0_col + (1 - f0_col) x it */
+static inline double specular_fresnel_s(const principled *p, double c)
+{
+    double f0 = f0_from_ior(p->eta);
+    return clamp01((wenv_fresnel_dielectric(c, p->eta) - f0) / (1.0 - f0));
+}
+
 static void lobe_fresnel(const principled *p, const lobe_model *l, double c, double f[3])
 {
     if (l->role == LOBE_COAT) {
-        f[0] = f[1] = f[2] = wenv_fresnel_dielectric(c, p->in.coat_ior);
+        f[0] = f[1] = f[2] = coat_fresnel(p, c);
     } else if (l->role == LOBE_METAL) {
-        /* F82-tint (Kutz et al., "Novel aspects of the Adobe Standard Material") */
-        double s = clamp01(1.0 - c), s5 = s * s * s * s * s;
         for (int k = 0; k < 3; k++)
-            f[k] = clamp01(p->f0_metal[k] + (1.0 - p->f0_metal[k]) * s5 - p->b_metal[k] * c * s5 * s);
+            f[k] = metal_fresnel(p, c, k);
     } else {
-        double f0 = f0_from_ior(p->eta);
-        double s = clamp01((wenv_fresnel_dielectric(c, p->eta) - f0) / (1.0 - f0));
+        double s = specular_fresnel_s(p, c);
         for (int k = 0; k < 3; k++)
             f[k] = p->f0_col[k] + (1.0 - p->f0_col[k]) * s;
     }
@@ -348,54 +362,125 @@ static void pr_prepare_view_f(const wenv_material *mat, const float wo[3], float
         terms[4 * p->n + 2 + (size_t)k] = (float)vw.eon_ms[k];
 }
 
-static void specular_cos_f(const principled *p, const wenv_lobe *shapes, const float wi[3], const float wo[3],
-                           const float *terms, float rgb[3])
+/* The float path, a lobe at a time over arrays of directions (each adds to r, g, b, lobes in the
+ * model's order, so every sum is the one a direction at a time would make).  The microfacet and sheen
+ * loops are written for the vectoriser: always inlined with the role constant, arrays restrict, the
+ * view copied (as cook_torrance.c's), a light below the horizon computed at a stand-in and its value
+ * selected away. */
+typedef struct {
+    const principled *p;
+    const float *terms; /* pr_prepare_view_f's */
+    float wo[3], co;
+    size_t n;
+} pr_lanes;
+
+/* The Oren-Nayar diffuse lobe i, as lobe_f in float but for E (a library acos: left scalar). */
+static void diffuse_lanes(const pr_lanes *a, size_t i, const float *x, const float *y, const float *z, float *r,
+                          float *g, float *b)
 {
-    rgb[0] = rgb[1] = rgb[2] = 0.0f;
-    float ci = wi[2], co = wo[2];
-    if (!(ci > 0.0f) || !(co > 0.0f))
-        return;
-    wenv_half_vector_f h = wenv_half_vector_of_f(wi, wo);
-    float si = sqrtf(wi[0] * wi[0] + wi[1] * wi[1]);
-    for (size_t i = 0; i < p->n; i++) {
-        if (p->lobe[i].role == LOBE_DIFFUSE) { /* as lobe_f, in float but for E */
-            float t = wi[0] * wo[0] + wi[1] * wo[1];
-            if (t > 0.0f)
-                t /= (ci > co ? ci : co) + FLT_MIN;
-            float single = (float)p->eon_a + (float)p->eon_b * t, loss = (float)(1.0 - eon_e(p, ci));
-            for (int k = 0; k < 3; k++)
-                rgb[k] += terms[4 * i + (size_t)k] * (single + terms[4 * p->n + 2 + (size_t)k] * loss) * ci;
+    const principled *p = a->p;
+    const float *terms = a->terms, *wo = a->wo;
+    float co = a->co, *out[3] = {r, g, b};
+    for (size_t k = 0; k < a->n; k++) {
+        float ci = z[k];
+        if (!(ci > 0.0f))
             continue;
-        }
-        if (p->lobe[i].role == LOBE_SHEEN) {
-            float so = sqrtf(wo[0] * wo[0] + wo[1] * wo[1]);
-            float tx = so > 1e-6f ? wo[0] / so : 1.0f, ty = so > 1e-6f ? wo[1] / so : 0.0f;
-            float ox = tx * wi[0] + ty * wi[1], oy = -ty * wi[0] + tx * wi[1];
-            float a = terms[4 * p->n], b = terms[4 * p->n + 1];
-            float len2s = (a * ox + b * ci) * (a * ox + b * ci) + (a * oy) * (a * oy) + ci * ci, q = a / len2s;
-            for (int k = 0; k < 3; k++)
-                rgb[k] += terms[4 * i + (size_t)k] * q * q * (float)WENV_INV_PI * ci;
-            continue;
-        }
-        float m = (float)shapes[i].alpha;
-        float vis = wenv_vis_smith_f(ci, co, wenv_smith_k_f(1, m, ci, si), terms[4 * i + 3]);
-        float d = wenv_ndf_tan2_f(1, m, h.tan2);
-        double f[3];
-        lobe_fresnel(p, &p->lobe[i], h.cos_d, f);
-        for (int k = 0; k < 3; k++)
-            rgb[k] += terms[4 * i + (size_t)k] * (float)f[k] * d * vis * ci;
+        float t = x[k] * wo[0] + y[k] * wo[1];
+        if (t > 0.0f)
+            t /= (ci > co ? ci : co) + FLT_MIN;
+        float single = (float)p->eon_a + (float)p->eon_b * t, loss = (float)(1.0 - eon_e(p, ci));
+        for (int c = 0; c < 3; c++)
+            out[c][k] += terms[4 * i + (size_t)c] * (single + terms[4 * p->n + 2 + (size_t)c] * loss) * ci;
     }
 }
 
+static inline __attribute__((always_inline)) void sheen_lanes(const pr_lanes *a, size_t i, const float *restrict x,
+                                                              const float *restrict y, const float *restrict z,
+                                                              float *restrict r, float *restrict g, float *restrict b)
+{
+    const principled *p = a->p;
+    const float *terms = a->terms;
+    float so = sqrtf(a->wo[0] * a->wo[0] + a->wo[1] * a->wo[1]);
+    float tx = so > 1e-6f ? a->wo[0] / so : 1.0f, ty = so > 1e-6f ? a->wo[1] / so : 0.0f;
+    float sa = terms[4 * p->n], sb = terms[4 * p->n + 1];
+    float w0 = terms[4 * i], w1 = terms[4 * i + 1], w2 = terms[4 * i + 2];
+    for (size_t k = 0; k < a->n; k++) {
+        float ci = z[k] > 0.0f ? z[k] : 1.0f;
+        float ox = tx * x[k] + ty * y[k], oy = -ty * x[k] + tx * y[k];
+        float len2s = (sa * ox + sb * ci) * (sa * ox + sb * ci) + (sa * oy) * (sa * oy) + ci * ci, q = sa / len2s;
+        float v0 = w0 * q * q * (float)WENV_INV_PI * ci, v1 = w1 * q * q * (float)WENV_INV_PI * ci;
+        float v2 = w2 * q * q * (float)WENV_INV_PI * ci;
+        int above = z[k] > 0.0f;
+        r[k] += above ? v0 : 0.0f;
+        g[k] += above ? v1 : 0.0f;
+        b[k] += above ? v2 : 0.0f;
+    }
+}
+
+/* A GGX lobe with Smith's visibility and the role's Fresnel (role constant where inlined). */
+static inline __attribute__((always_inline)) void ggx_lanes(const pr_lanes *a, size_t i, const lobe_role role, float m,
+                                                            const float *restrict x, const float *restrict y,
+                                                            const float *restrict z, float *restrict r,
+                                                            float *restrict g, float *restrict b)
+{
+    const principled *p = a->p;
+    const float wo[3] = {a->wo[0], a->wo[1], a->wo[2]};
+    float co = a->co, ko = a->terms[4 * i + 3];
+    float w0 = a->terms[4 * i], w1 = a->terms[4 * i + 1], w2 = a->terms[4 * i + 2];
+    for (size_t k = 0; k < a->n; k++) {
+        float wi[3] = {x[k], y[k], z[k] > 0.0f ? z[k] : 1.0f}, ci = wi[2];
+        wenv_half_vector_f h = wenv_half_vector_of_f(wi, wo);
+        float si = sqrtf(wi[0] * wi[0] + wi[1] * wi[1]);
+        float vis = wenv_vis_smith_f(ci, co, wenv_smith_k_f(1, m, ci, si), ko);
+        float d = wenv_ndf_tan2_f(1, m, h.tan2);
+        double c = h.cos_d, f0, f1, f2;
+        if (role == LOBE_COAT) {
+            f0 = f1 = f2 = coat_fresnel(p, c);
+        } else if (role == LOBE_METAL) {
+            f0 = metal_fresnel(p, c, 0);
+            f1 = metal_fresnel(p, c, 1);
+            f2 = metal_fresnel(p, c, 2);
+        } else {
+            double sf = specular_fresnel_s(p, c);
+            f0 = p->f0_col[0] + (1.0 - p->f0_col[0]) * sf;
+            f1 = p->f0_col[1] + (1.0 - p->f0_col[1]) * sf;
+            f2 = p->f0_col[2] + (1.0 - p->f0_col[2]) * sf;
+        }
+        int above = z[k] > 0.0f;
+        r[k] += above ? w0 * (float)f0 * d * vis * ci : 0.0f;
+        g[k] += above ? w1 * (float)f1 * d * vis * ci : 0.0f;
+        b[k] += above ? w2 * (float)f2 * d * vis * ci : 0.0f;
+    }
+}
+
+WENV_VECTOR_CLONES
 static void pr_specular_cos_f_many(const wenv_material *mat, const float wo[3], const float *terms, size_t n,
                                    const float *x, const float *y, const float *z, float *r, float *g, float *b)
 {
-    for (size_t k = 0; k < n; k++) {
-        float wi[3] = {x[k], y[k], z[k]}, rgb[3];
-        specular_cos_f(model_of(mat), mat->lobes, wi, wo, terms, rgb);
-        r[k] = rgb[0];
-        g[k] = rgb[1];
-        b[k] = rgb[2];
+    for (size_t k = 0; k < n; k++)
+        r[k] = g[k] = b[k] = 0.0f;
+    if (!(wo[2] > 0.0f))
+        return;
+    pr_lanes a = {.p = model_of(mat), .terms = terms, .wo = {wo[0], wo[1], wo[2]}, .co = wo[2], .n = n};
+    for (size_t i = 0; i < a.p->n; i++) {
+        float m = (float)mat->lobes[i].alpha;
+        switch (a.p->lobe[i].role) {
+        case LOBE_DIFFUSE:
+            diffuse_lanes(&a, i, x, y, z, r, g, b);
+            break;
+        case LOBE_SHEEN:
+            sheen_lanes(&a, i, x, y, z, r, g, b);
+            break;
+        case LOBE_COAT:
+            ggx_lanes(&a, i, LOBE_COAT, m, x, y, z, r, g, b);
+            break;
+        case LOBE_METAL:
+            ggx_lanes(&a, i, LOBE_METAL, m, x, y, z, r, g, b);
+            break;
+        default:
+            ggx_lanes(&a, i, LOBE_SPECULAR, m, x, y, z, r, g, b);
+            break;
+        }
     }
 }
 

@@ -236,7 +236,7 @@ static wenv_status shade_lambert(const wenv_sh_shading *sr, const float *normals
 {
     const float *low = sr->low, *map = sr->irr_map;
     long long nn = (long long)n;
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(dynamic, 256)
     for (long long i = 0; i < nn; i++) {
         const float *nr = normals + 3 * i, *v = views + 3 * i;
         float *o = out + 3 * i, *e_out = irradiance ? irradiance + 3 * i : NULL;
@@ -296,7 +296,7 @@ static wenv_status shade(void *state, const float *normals, const float *views, 
         double *work = malloc(count * 3 * sizeof(double));
         if (!local || !work)
             atomic_store(&failed, 1);
-#pragma omp for schedule(static)
+#pragma omp for schedule(dynamic, 256)
         for (long long i = 0; i < nn; i++) {
             float *o = out + 3 * i, *e_out = irradiance ? irradiance + 3 * i : NULL;
             if (atomic_load(&failed))

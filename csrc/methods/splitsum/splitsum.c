@@ -370,7 +370,7 @@ static wenv_status shade(void *state, const float *normals, const float *views, 
         return wenv_error_set(err, WENV_ERR_VALUE, "the shader needs an environment and a material");
     size_t P = ss->q.prefilter, N = ss->q.lut;
     long long nn = (long long)n;
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(dynamic, 256)
     for (long long i = 0; i < nn; i++) {
         double nv3[3], v[3];
         wenv_unit_pair(normals, views, (size_t)i, nv3, v);
