@@ -281,7 +281,7 @@ def mean_weight(term):
     if not term.factors:
         return tuple(float(c) for c in term.colour)
     from .textures import images
-    ev = nodes.one_point(lambda node: np.float32([images.mean(node.image)]))
+    ev = nodes.one_point(lambda node: np.float32([images.mean(node)]))
     f = float(_factor_values(ev, term.factors)[0])
     return tuple(float(c) * f for c in term.colour)
 

@@ -48,7 +48,7 @@ def socket_at_means(principled, socket):
     sock = principled.inputs[socket]
     if not sock.is_linked:
         return None
-    ev = nodes.one_point(lambda node: np.float32([images.mean(node.image)]))
+    ev = nodes.one_point(lambda node: np.float32([images.mean(node)]))
     try:
         out = ev.colour(sock) if TEXTURED_SOCKETS[socket] in COLOUR_KEYWORDS else ev.value(sock)
     except nodes.Unsupported:
@@ -72,29 +72,35 @@ class ImageCache:
         self._pyramids.clear()
         self._means = {}
 
-    def mean(self, image):
-        """The image's mean linear colour (its pyramid's last level), read once per state a panel
-        can check cheaply at each redraw -- its name, size, file, packing and whether it has unsaved
-        edits -- rather than by its pixels."""
+    def mean(self, node):
+        """An Image Texture node's image's mean linear colour (its pyramid's last level), read once
+        per state a panel can check cheaply at each redraw -- its name, size, file, packing, whether
+        it has unsaved edits and, for a sequence, the frame's file -- rather than by its pixels."""
+        image, frame_file = node.image, sequence_file(node)
         state = (image.name_full, tuple(image.size), image.filepath_raw, image.packed_file is not None,
-                 image.is_dirty, image.colorspace_settings.name, image.source, tuple(t.number for t in image.tiles))
+                 image.is_dirty, image.colorspace_settings.name, image.source, tuple(t.number for t in image.tiles),
+                 frame_file)
         means = self._means
         if state not in means:
             if len(means) > 64:
                 means.clear()
-            means[state] = tuple(float(c) for c in self.mean_of(image))
+            means[state] = tuple(float(c) for c in self.mean_of(image, frame_file))
         return means[state]
 
-    def levels(self, image):
+    def levels(self, image, frame_file=None):
         """The image's pyramid.  An image with no unsaved edits (a file or packed image as loaded)
         is known by its name, size, file and colour space, and its pixels are not read again; one
-        with edits (painted, or set by a script) is read and known by its pixels."""
+        with edits (painted, or set by a script) is read and known by its pixels.  frame_file: an
+        image sequence's file for the frame shown (sequence_file), read by Blender's own loader."""
         state = (tuple(image.size), image.filepath_raw, image.packed_file is not None, image.source,
-                 image.colorspace_settings.name)
+                 image.colorspace_settings.name, frame_file)
         held = self._pyramids.get(image.name_full)
-        if held is not None and not image.is_dirty and held[2] == state:
+        if held is not None and (frame_file is not None or not image.is_dirty) and held[2] == state:
             return held[1]
-        rgba = world.image_pixels(image, "Texture image")[::-1]  # row 0 the bottom, as v = 0 is
+        if frame_file is not None:
+            rgba = _file_pixels(image, frame_file, "frame")[::-1]
+        else:
+            rgba = world.image_pixels(image, "Texture image")[::-1]  # row 0 the bottom, as v = 0 is
         key = (engine.fingerprint(rgba), image.colorspace_settings.name)
         if held is None or held[0] != key:
             if not np.isfinite(rgba[..., :3]).all():
@@ -107,7 +113,6 @@ class ImageCache:
             held = (held[0], held[1], state)
             self._pyramids[image.name_full] = held
         return held[1]
-
 
     def tiles(self, image):
         """A UDIM image's pyramids, {tile number: levels}: its first tile as levels() reads the image
@@ -129,17 +134,16 @@ class ImageCache:
         self._pyramids[("tiles", image.name_full)] = (state, out)
         return out
 
-    def mean_of(self, image):
+    def mean_of(self, image, frame_file=None):
         """levels()[-1] of an image, or the tiles' mean for a UDIM image (each tile a unit of UV)."""
         if image.source == "TILED":
             return np.mean([levels[-1][0, 0] for levels in self.tiles(image).values()], axis=0)
-        return self.levels(image)[-1][0, 0]
+        return self.levels(image, frame_file)[-1][0, 0]
 
 
 def _tile_pixels(image, tile, packed):
-    """RGBA (H, W, 4) linear, row 0 the top, of a UDIM tile past the first, read by Blender's own
-    loader from its packed data or its file (<UDIM> or <UVTILE> in the path), into a datablock removed
-    at once."""
+    """RGBA (H, W, 4) linear, row 0 the top, of a UDIM tile past the first, from its packed data or
+    its file (<UDIM> or <UVTILE> in the path)."""
     import os
     import tempfile
 
@@ -148,33 +152,96 @@ def _tile_pixels(image, tile, packed):
     u, v = (tile.number - 1001) % 10, (tile.number - 1001) // 10
     path = bpy.path.abspath(image.filepath_raw.replace("<UDIM>", str(tile.number))
                             .replace("<UVTILE>", f"u{u + 1}_v{v + 1}"), library=image.library)
-    scratch = None
+    what = f"tile {tile.number}"
     if packed is not None and packed.packed_file is not None:
         fd, scratch = tempfile.mkstemp(suffix=os.path.splitext(packed.filepath)[1] or ".png")
-        with os.fdopen(fd, "wb") as f:
-            f.write(packed.packed_file.data)
-        path = scratch
-    elif not os.path.isfile(path):
-        if getattr(tile, "is_generated_tile", False) or not image.filepath_raw:
-            raise nodes.Unsupported(f"'{image.name}', whose generated tile {tile.number} wenv does not read")
-        raise world.SetupError(f"Texture image '{image.name}': tile {tile.number} could not be loaded: {path}")
+        try:
+            with os.fdopen(fd, "wb") as f:
+                f.write(packed.packed_file.data)
+            return _file_pixels(image, scratch, what)
+        finally:
+            os.remove(scratch)
+    if not os.path.isfile(path) and (getattr(tile, "is_generated_tile", False) or not image.filepath_raw):
+        raise nodes.Unsupported(f"'{image.name}', whose generated tile {tile.number} wenv does not read")
+    return _file_pixels(image, path, what)
+
+
+def _file_pixels(image, path, what):
+    """RGBA (H, W, 4) linear, row 0 the top, of the file at `path` read for `image` (a UDIM tile, a
+    sequence's frame: `what` names it) by Blender's own loader in the image's colour space, into a
+    datablock removed at once.  A file that is missing, unreadable or holds a texel that is not finite
+    is a SetupError naming it."""
+    import os
+
+    import bpy
+
+    if not os.path.isfile(path):
+        raise world.SetupError(f"Texture image '{image.name}': {what} could not be loaded: {path}")
     loaded = None
     try:
         loaded = bpy.data.images.load(path, check_existing=False)
         loaded.colorspace_settings.name = image.colorspace_settings.name
-        rgba = world.image_pixels(loaded, f"Texture image '{image.name}' tile {tile.number}")
+        rgba = world.image_pixels(loaded, f"Texture image '{image.name}' {what}")
     except RuntimeError as exc:
-        raise world.SetupError(f"Texture image '{image.name}': tile {tile.number} could not be loaded: {path} "
+        raise world.SetupError(f"Texture image '{image.name}': {what} could not be loaded: {path} "
                                f"({exc})") from None
     finally:
         if loaded is not None:
             bpy.data.images.remove(loaded)
-        if scratch is not None:
-            os.remove(scratch)
     if not np.isfinite(rgba[..., :3]).all():
         raise world.SetupError(f"Texture image '{image.name}' has a texel that is not finite (NaN or infinite) in "
-                               f"tile {tile.number}: fix or replace the image")
+                               f"{what}: fix or replace the image")
     return rgba
+
+
+def sequence_frame(user, scene_frame):
+    """The frame of an image sequence an Image Texture's image user shows at the scene's frame, as
+    Blender's BKE_image_user_frame_get computes it (Cycles asks it at every render): counted from the
+    user's Start Frame, cycled over its Frames or held at their ends, then moved by its Offset."""
+    length = user.frame_duration
+    if length == 0:
+        return 0
+    frame = scene_frame - user.frame_start + 1
+    if user.use_cyclic:
+        frame %= length  # Python's modulo is never negative
+        frame = frame or length
+    else:
+        frame = min(max(frame, 0), length)
+    return frame + user.frame_offset
+
+
+def sequence_path(filepath, frame):
+    """The file of a sequence's `frame`: the last run of digits in the file's name (before its
+    extension) replaced by the frame, at least as wide as that run, as Blender's BLI_path_sequence_*
+    do (a name without digits takes the frame before its extension)."""
+    import os
+
+    folder, name = os.path.split(filepath)
+    stem, ext = os.path.splitext(name)
+    end = len(stem)
+    while end and not stem[end - 1].isdigit():
+        end -= 1
+    start = end
+    while start and stem[start - 1].isdigit():
+        start -= 1
+    width = end - start
+    # C's "%.*d": at least `width` digits, a sign before them (none at all for 0 with width 0)
+    digits = f"{abs(frame):0{width}d}" if width else (str(abs(frame)) if frame else "")
+    number = ("-" if frame < 0 else "") + digits
+    return os.path.join(folder, stem[:start] + number + stem[end:] + ext)
+
+
+def sequence_file(node):
+    """The file an Image Texture node's image sequence shows at the current scene frame (absolute),
+    or None for any other image."""
+    image = node.image
+    if image is None or image.source != "SEQUENCE":
+        return None
+    import bpy
+
+    scene = bpy.context.scene
+    frame = sequence_frame(node.image_user, scene.frame_current if scene is not None else 1)
+    return bpy.path.abspath(sequence_path(image.filepath_raw, frame), library=image.library)
 
 
 def _pyramid(rgb):
@@ -197,9 +264,11 @@ def _pyramid(rgb):
 images = ImageCache()
 
 
-def pyramids(image):
-    """What sample_image reads of an image: its pyramid, or a UDIM image's tiles'."""
-    return images.tiles(image) if image.source == "TILED" else images.levels(image)
+def pyramids(node):
+    """What sample_image reads of an Image Texture node's image: its pyramid (an image sequence's at
+    the frame shown), or a UDIM image's tiles'."""
+    image = node.image
+    return images.tiles(image) if image.source == "TILED" else images.levels(image, sequence_file(node))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -418,7 +487,7 @@ def read_inputs(obj, depsgraph, data):
             ev = nodes.Evaluator(
                 data.count, lambda uv_map: data_uv_rows(mesh, uv_map, data, corner_vert),
                 lambda tex, uv, footprint, rows, s=s: _colours_memo((obj.name, data.domain, s, tex.name),
-                                                                   pyramids(tex.image), Source(tex, None),
+                                                                   pyramids(tex), Source(tex, None),
                                                                    (uv, footprint, rows), data.count))
             try:
                 values = ev.colour(sock) if keyword in COLOUR_KEYWORDS else ev.value(sock)
@@ -580,7 +649,7 @@ def _mapped_normals(mesh, corner_vert, source, strength, object_n, normal, to_wo
     if got is None:
         return None
     nl = len(mesh.loops)
-    colour = sample_image(pyramids(source.node.image), got[0], got[1], source.node.interpolation,
+    colour = sample_image(pyramids(source.node), got[0], got[1], source.node.interpolation,
                           source.node.extension)
     c = 2.0 * colour - 1.0
     space = source.space
@@ -670,7 +739,7 @@ def _height_reader(obj, s, mesh, corner_vert, where, count):
     tag = ("height", "CORNER") if where is None else ("height", "TEXEL", where.shift)
     return nodes.Evaluator(count, rows,
                            lambda tex, uv, footprint, rows_: _colours_memo((obj.name, s) + tag + (tex.name,),
-                                                                           pyramids(tex.image), Source(tex, None),
+                                                                           pyramids(tex), Source(tex, None),
                                                                            (uv, footprint, rows_), count))
 
 
@@ -780,7 +849,7 @@ def read_term_weights(obj, depsgraph, data):
             ev = nodes.Evaluator(
                 data.count, lambda uv_map: data_uv_rows(mesh, uv_map, data, corner_vert),
                 lambda tex, uv, footprint, rows, s=s, t=t: _colours_memo((obj.name, data.domain, s, t, tex.name),
-                                                                         pyramids(tex.image),
+                                                                         pyramids(tex),
                                                                          Source(tex, None), (uv, footprint, rows),
                                                                          data.count)) if reads else None
             weight, fac = colour, np.ones((data.count, 1), np.float32)

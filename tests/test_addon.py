@@ -983,6 +983,59 @@ def test_a_missing_udim_tile_file_is_named(scene, tmp_path):
         np.testing.assert_array_equal(attribute(plane)[1], before)
 
 
+def image_sequence(folder, colours):
+    """An image sequence of flat 4 x 4 PNG frames, {frame number: RGB}, in `folder`, Non-Color."""
+    for number, rgb in colours.items():
+        frame = bpy.data.images.new(f"frame {number}", 4, 4)
+        frame.pixels.foreach_set(np.tile(np.append(np.float32(rgb), np.float32(1.0)), 16))
+        frame.filepath_raw = str(folder / f"wood_{number:03d}.png")
+        frame.file_format = "PNG"
+        frame.save()
+        bpy.data.images.remove(frame)
+    image = bpy.data.images.load(str(folder / f"wood_{min(colours):03d}.png"))
+    image.source = "SEQUENCE"
+    image.colorspace_settings.name = "Non-Color"
+    return image
+
+
+def test_an_image_sequence_shows_the_frame_blender_gives(scene, tmp_path):
+    """A Base Color from an image sequence of six flat frames (Frames 4, Start Frame 3, Offset 1),
+    cyclic and not, over scene frames before, in and past its range: every vertex reads the frame
+    Blender's own image user shows -- its evaluated copy's, with Auto Refresh on -- from the file
+    Image.filepath_from_user names; a frame whose file is missing is an error naming it."""
+    from addon import textures
+    env_world(scene, "sunset")
+    colours = {k: (0.1 * k, 0.5, 1.0 - 0.1 * k) for k in range(1, 7)}
+    image = image_sequence(tmp_path, colours)
+    plane, mat = textured_plane(image)
+    tex = mat.node_tree.nodes["Image Texture"]
+    user = tex.image_user
+    user.frame_duration, user.frame_start, user.frame_offset, user.use_auto_refresh = 4, 3, 1, True
+    seen = set()
+    for cyclic in (False, True):
+        user.use_cyclic = cyclic
+        for frame in range(-2, 11):
+            scene.frame_set(frame)
+            evaluated = mat.evaluated_get(bpy.context.evaluated_depsgraph_get()).node_tree.nodes["Image Texture"]
+            shown = evaluated.image_user.frame_current
+            assert textures.sequence_frame(user, frame) == shown, (cyclic, frame)
+            path = image.filepath_from_user(image_user=evaluated.image_user)
+            assert textures.sequence_file(tex) == bpy.path.abspath(path)
+            got = plan_of(scene, plane).items[0][1].inputs["base_color"]
+            np.testing.assert_allclose(got, np.tile(np.float32(colours[shown]), (len(got), 1)), atol=1 / 255)
+            seen.add(shown)
+    assert seen == {1, 2, 3, 4, 5}  # held at 1 and 5 without Cyclic (Offset 1); 2-5 cycled with it
+    assert not any("Base Color" in n for n in materials.principled_notes(mat))
+    assert textures.sequence_path("/a/b.7/tex5.png", 12) == "/a/b.7/tex12.png"
+    assert textures.sequence_path("/a/scan_0042_v2.exr", -3) == "/a/scan_0042_v-3.exr"
+    assert textures.sequence_path("/a/plain.png", 0) == "/a/plain.png"
+    scene.frame_set(4)  # the second frame of the range: file 3 with the offset
+    (tmp_path / "wood_003.png").unlink()
+    textures.images.clear()
+    with pytest.raises(RuntimeError, match="frame could not be loaded: .*wood_003.png"):
+        shade_op(view="CAMERA")
+
+
 def test_a_texture_finer_than_the_mesh_averages(scene):
     """A checker of single texels (256 x 256) on a grid of 10 x 10 vertices: each vertex reads the
     mip level of its share of the image, grey, where a point sample would read black or white."""
