@@ -321,8 +321,11 @@ def bake(scene, depsgraph, obj, image, view, blend_data, uv_map=None, margin=DEF
 
 # What changed, in the panel's words, per part of state_of
 CHANGES = {"mesh": "the object moved or its mesh changed", "materials": "a material changed",
-           "world": "the World changed", "lamps": "a lamp changed", "settings": "the scene's wenv settings changed"}
-CHEAP = ("world", "lamps", "settings")  # read from a few datablocks' settings: the panel compares them at each redraw
+           "world": "the World changed", "lamps": "a lamp changed", "settings": "the scene's wenv settings changed",
+           "sequences": "an image sequence shows another frame"}
+# read from a few datablocks' settings: the panel compares them at each redraw (a frame change need
+# not update the depsgraph)
+CHEAP = ("world", "lamps", "settings", "sequences")
 
 
 def _key(value):
@@ -359,6 +362,8 @@ def state_of(scene, depsgraph, obj, parts=tuple(CHANGES)):
         st = scene.wenv
         out["settings"] = _key((st.quality, st.shadows, st.tone_mapping, round(st.max_luminance, 6),
                                 round(st.target_error, 6)))
+    if "sequences" in parts:
+        out["sequences"] = _key(textures.sequence_files(obj))
     return out
 
 
@@ -387,9 +392,11 @@ def _first_changed(record, scene, depsgraph, obj, parts):
     try:
         before = json.loads(record.state_key)
     except ValueError:
-        before = {}
+        return parts[0]  # nothing readable was recorded: the bake cannot be called current
+    # a part a bake did not record (made before the part was) is not compared
+    parts = [p for p in parts if p in before]
     now = state_of(scene, depsgraph, obj, parts)
-    return next((p for p in parts if now[p] != before.get(p)), None)
+    return next((p for p in parts if now[p] != before[p]), None)
 
 
 def staleness(image, scene, context=None):

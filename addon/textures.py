@@ -244,6 +244,29 @@ def sequence_file(node):
     return bpy.path.abspath(sequence_path(image.filepath_raw, frame), library=image.library)
 
 
+def sequence_files(obj):
+    """(material, node, file) of every Image Texture in obj's materials (node groups included) whose
+    image sequence shows a file at the current frame: what a bake of obj read of its sequences."""
+    out, seen = [], set()
+
+    def walk(tree, owner):
+        if tree is None or tree.name_full in seen:
+            return
+        seen.add(tree.name_full)
+        for node in tree.nodes:
+            if node.bl_idname == "ShaderNodeTexImage":
+                path = sequence_file(node)
+                if path is not None:
+                    out.append((owner, node.name, path))
+            elif node.bl_idname == "ShaderNodeGroup":
+                walk(node.node_tree, owner)
+
+    for slot in obj.material_slots:
+        if slot.material is not None:
+            walk(slot.material.node_tree, slot.material.name)
+    return sorted(out)
+
+
 def _pyramid(rgb):
     levels = [rgb]
     while max(levels[-1].shape[:2]) > 1:

@@ -3,6 +3,8 @@
 The texels a bake must shade are found here independently (each texel centre tested against each
 UV triangle with numpy), their positions and normals interpolated with mathutils' data, and shaded
 by fresh core shaders; the bake's pixels are compared with that."""
+import json
+
 import numpy as np
 import pytest
 
@@ -13,8 +15,8 @@ import bpy  # noqa: E402  (installed by scripts/setup.sh; missing, the tests fai
 from addon import bake, engine, materials, views  # noqa: E402
 
 from conftest import hdri_path  # noqa: E402
-from test_addon import (as_the_interface_runs, animate_camera, env_world, principled_material,  # noqa: E402,F401
-                        registered, scene, select_only)
+from test_addon import (as_the_interface_runs, animate_camera, env_world, image_sequence,  # noqa: E402,F401
+                        principled_material, registered, scene, select_only)
 
 SENTINEL = np.float32([0.123, 0.456, 0.789, 0.5])
 
@@ -451,6 +453,31 @@ def test_a_bake_is_marked_stale_by_what_changes_it(scene):
     assert bpy.ops.wenv.shade(view="CAMERA") == {"FINISHED"}
     bake.show_in_materials(plane, image)
     assert settle() is None
+
+
+def test_a_bake_of_an_image_sequence_is_stale_on_another_frame(scene, tmp_path):
+    """A Base Color from an image sequence (frames 1-3): a frame change that shows another file calls
+    the bake stale, one past the sequence's end (held at its last frame) does not, and a bake made
+    before the add-on recorded sequences is not called stale for lacking the record."""
+    env_world(scene, "sunset")
+    plane = grid(cuts=2)
+    mat = plane.active_material
+    tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
+    tex.image = image_sequence(tmp_path, {1: (0.8, 0.2, 0.2), 2: (0.2, 0.8, 0.2), 3: (0.2, 0.2, 0.8)})
+    tex.image_user.frame_duration = 3
+    mat.node_tree.links.new(tex.outputs["Color"], mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"])
+    image = filled_image("sequenced", 8, 8)
+    scene.frame_set(3)
+    bake_now(scene, plane, image)
+    assert bake.staleness(image, scene) is None
+    scene.frame_set(5)  # held at frame 3: the same file
+    assert bake.staleness(image, scene) is None
+    scene.frame_set(2)
+    assert bake.staleness(image, scene) == "an image sequence shows another frame"
+    record = json.loads(image.wenv.state_key)
+    del record["sequences"]
+    image.wenv.state_key = json.dumps(record)
+    assert bake.staleness(image, scene) is None
 
 
 def test_a_bake_shows_in_solid_mode_and_material_preview(scene):
