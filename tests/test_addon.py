@@ -924,15 +924,20 @@ def test_a_textured_base_color_is_read_at_each_vertex(scene):
     np.testing.assert_allclose(attribute(plane)[1], want, rtol=1e-4, atol=1e-5)
 
 
+def flat_pngs(paths_colours):
+    """Writes a flat 4 x 4 PNG of each RGB at its path, {path: RGB}."""
+    for path, rgb in paths_colours.items():
+        flat = bpy.data.images.new("flat png", 4, 4)
+        flat.pixels.foreach_set(np.tile(np.append(np.float32(rgb), np.float32(1.0)), 16))
+        flat.filepath_raw = str(path)
+        flat.file_format = "PNG"
+        flat.save()
+        bpy.data.images.remove(flat)
+
+
 def udim_image(folder, colours):
     """A UDIM image of flat 4 x 4 PNG tiles, {tile number: RGB}, in `folder`, Non-Color."""
-    for number, rgb in colours.items():
-        tile = bpy.data.images.new(f"tile {number}", 4, 4)
-        tile.pixels.foreach_set(np.tile(np.append(np.float32(rgb), np.float32(1.0)), 16))
-        tile.filepath_raw = str(folder / f"paint.{number}.png")
-        tile.file_format = "PNG"
-        tile.save()
-        bpy.data.images.remove(tile)
+    flat_pngs({folder / f"paint.{number}.png": rgb for number, rgb in colours.items()})
     image = bpy.data.images.load(str(folder / f"paint.{min(colours)}.png"))
     image.source = "TILED"
     image.filepath = str(folder / "paint.<UDIM>.png")
@@ -985,13 +990,7 @@ def test_a_missing_udim_tile_file_is_named(scene, tmp_path):
 
 def image_sequence(folder, colours):
     """An image sequence of flat 4 x 4 PNG frames, {frame number: RGB}, in `folder`, Non-Color."""
-    for number, rgb in colours.items():
-        frame = bpy.data.images.new(f"frame {number}", 4, 4)
-        frame.pixels.foreach_set(np.tile(np.append(np.float32(rgb), np.float32(1.0)), 16))
-        frame.filepath_raw = str(folder / f"wood_{number:03d}.png")
-        frame.file_format = "PNG"
-        frame.save()
-        bpy.data.images.remove(frame)
+    flat_pngs({folder / f"wood_{number:03d}.png": rgb for number, rgb in colours.items()})
     image = bpy.data.images.load(str(folder / f"wood_{min(colours):03d}.png"))
     image.source = "SEQUENCE"
     image.colorspace_settings.name = "Non-Color"
