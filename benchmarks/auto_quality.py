@@ -371,13 +371,15 @@ def fit(max_misses):
     median = {(n, lv): statistics.median(errors[f"{h}/{n}/{lv}"] for h in hdris) for _, n in cases for lv in levels}
 
     def score(env_factor, only):
-        met = within = reach = 0
+        """(reachable, met, within 1.25x, summed time over the cheapest, claims of a target missed)."""
+        met = within = reach = false_claims = 0
         picked_ms = cheapest_ms = 0.0
         for (h, n), t in itertools.product(cases, d["targets"]):
             if h not in only:
                 continue
             pred = [median[n, lv] * env_factor(h, n, lv) for lv in levels]
             pick = next((lv for lv in levels if pred[lv] <= t), levels[-1])
+            false_claims += pred[pick] <= t < errors[f"{h}/{n}/{pick}"]
             ok = [lv for lv in levels if errors[f"{h}/{n}/{lv}"] <= t]
             if not ok:
                 continue
@@ -388,7 +390,7 @@ def fit(max_misses):
             if errors[f"{h}/{n}/{pick}"] <= t:
                 met += 1
                 within += times[f"{n}/{pick}"] <= 1.25 * times[f"{n}/{cheapest}"]
-        return reach, met, within, picked_ms / cheapest_ms if cheapest_ms else 1.0
+        return reach, met, within, picked_ms / cheapest_ms if cheapest_ms else 1.0, false_claims
 
     # The top level (high) is taken when nothing cheaper is predicted to meet the target: its factor
     # only says whether it does, a least-squares fit.  A grazing level below it (default) is picked
@@ -397,21 +399,32 @@ def fit(max_misses):
     top = levels[-1]
     high = fit_grazing(errors, feats, cases, median, top)
     middle = [lv for lv in levels if lv != top and d["ladder"][lv]["grazing"] > 0]
-    middle_grid = [(round(k, 2), p, q) for k in np.arange(0.5, 4.01, 0.05) for p in (0.25, 0.5, 0.75, 1.0)
-                   for q in (0, 0.0625, 0.125, 0.25)]
+    # the middle levels' contrast power at m <= 0.2 and from 0.5 up (GRAZING_FACTOR's wide power;
+    # equal: one power for every width)
+    middle_grid = [(round(k, 2), p, q, w) for k in np.arange(0.5, 4.01, 0.05) for p in (0.25, 0.5, 0.75, 1.0)
+                   for q in (0, 0.0625, 0.125, 0.25) for w in (0.25, 0.375, 0.5, 0.625, 0.75, 1.0) if w <= p]
 
-    def grazing_factor(f, constants):
-        scale, contrast_power, dominance_power = constants
-        return (scale * ((1 - f["lights_share"]) + 10 * f["sun_contrast"]) ** contrast_power /
+    def contrast_power_at(contrast_power, wide_power, n):
+        """autoquality.c's contrast_power_at for material n (m0.05 ... m0.5)."""
+        m = float(n[1:])
+        if m <= 0.2:
+            return contrast_power
+        t = min(1.0, math.log(m / 0.2) / math.log(0.5 / 0.2))
+        return contrast_power + t * (wide_power - contrast_power)
+
+    def grazing_factor(f, constants, n):
+        scale, contrast_power, dominance_power, *wide = constants
+        power = contrast_power_at(contrast_power, wide[0], n) if wide else contrast_power
+        return (scale * ((1 - f["lights_share"]) + 10 * f["sun_contrast"]) ** power /
                 (1 + f["light_dominance"]) ** dominance_power)
 
     def model(scale, slope, power, middle_constants):
         def env_factor(h, n, lv):
             f = feats[f"{h}/{n}"][lv]
             if lv == top:
-                factor = grazing_factor(f, high)
+                factor = grazing_factor(f, high, n)
             elif lv in middle:
-                factor = grazing_factor(f, middle_constants)
+                factor = grazing_factor(f, middle_constants, n)
             else:
                 factor = scale * ((1 - f["lights_share"]) + slope * f["contrast"]) / (1 + f["light_dominance"]) ** power
             return min(8.0, max(0.15, factor))  # ENV_FACTOR_MAX, ENV_FACTOR_MIN
@@ -421,25 +434,26 @@ def fit(max_misses):
             for p in (0, 0.0625, 0.125, 0.1875, 0.25, 0.375, 0.5)]
 
     def choose(candidates, only):
-        """Among constants missing at most max_misses reachable cases: the most within 1.25x, then
-        the most met, the least summed time, the scale nearest 1."""
+        """Among constants missing at most max_misses reachable cases and claiming no missed target
+        (an unreachable one included): the most within 1.25x, then the most met, the least summed
+        time, the scale nearest 1."""
         scored = [(score(model(*g), only), g) for g in candidates]
-        ok = [(r, g) for r, g in scored if r[0] - r[1] <= max_misses] or scored
+        ok = [(r, g) for r, g in scored if r[0] - r[1] <= max_misses and not r[4]] or scored
         return max(ok, key=lambda x: (x[0][2], x[0][1], -x[0][3], -abs(x[1][0] - 1)))
 
     def best(only):
         """The levels' constants and the middle grazing level's, each fitted with the other held
         (twice over), from the most cautious middle constants: a start from which no level's miss
         hides another's."""
-        g = (1.0, 10, 0.0625, (4.0, 0.25, 0.0))
+        g = (1.0, 10, 0.0625, (4.0, 0.25, 0.0, 0.25))
         for _ in range(2):
             _, g = choose([(*c, g[3]) for c in grid], only)
             r, g = choose([(*g[:3], c) for c in middle_grid], only)
         return r, g
 
-    (reach, met, within, ratio), g = best(hdris)
+    (reach, met, within, ratio, _), g = best(hdris)
     print(f"ERROR_SCALE {g[0]}  CONTRAST_SLOPE {g[1]}  DOMINANCE_POWER {g[2]}; levels {middle}: GRAZING_FACTOR "
-          f"{{{g[3][0]}, {g[3][1]}, {g[3][2]}}}: of {reach} reachable cases met {met}, within 1.25x {within}, "
+          f"{{{g[3][0]}, {g[3][1]}, {g[3][2]}, {g[3][3]}}}: of {reach} reachable cases met {met}, within 1.25x {within}, "
           f"summed time {ratio:.2f}x the cheapest sufficient")
     # auto's `met` flag: does the picked level's prediction say the target is met where it is?
     right = wrong_yes = wrong_no = 0

@@ -56,15 +56,29 @@ static const double MEDIAN_ERROR[WENV_AUTO_LEVELS][5] = {
  * to 5 %, do not lower their error as high's do (night's lamps just below the sun threshold err
  * 1.1 % at m = 0.05 beneath a light dominance of 48 under default), hence no dominance term. */
 #define SUN_THRESHOLD 256.0
-/* A level given a factor here (scale > 0) is predicted by it; the others by the levels' formula. */
+/* A level given a factor here (scale > 0) is predicted by it; the others by the levels' formula.
+ * wide_contrast_power (0: contrast_power at every width) is the contrast power from the widest
+ * calibrated lobe (ROUGHNESS[3]) up, reached linearly in log m from contrast_power at ROUGHNESS[2]: a
+ * wide lobe averages what bright features the lights leave over more of the lighting, and one power
+ * for every width over-predicted level 5's error at m = 0.5 1.4-2.5x under forest, studio and
+ * courtyard while it was exact under sunset, whose lighting has almost none. */
 typedef struct {
-    double scale, contrast_power, dominance_power;
+    double scale, contrast_power, dominance_power, wide_contrast_power;
 } grazing_factor;
 static const grazing_factor GRAZING_FACTOR[WENV_AUTO_LEVELS] = {
-    [3] = {1.25, 0.75, 0.0},
-    [5] = {1.25, 0.75, 0.0},
-    [6] = {1.44, 0.75, 0.25},
+    [3] = {1.25, 0.75, 0.0, 0.375},
+    [5] = {1.25, 0.75, 0.0, 0.375},
+    [6] = {1.44, 0.75, 0.25, 0.0},
 };
+
+/* The contrast power of a level's grazing factor for a lobe m wide (see GRAZING_FACTOR). */
+static double contrast_power_at(const grazing_factor *g, double m)
+{
+    if (!(g->wide_contrast_power > 0.0) || !(m > ROUGHNESS[2]))
+        return g->contrast_power;
+    double t = fmin(1.0, log(m / ROUGHNESS[2]) / log(ROUGHNESS[3] / ROUGHNESS[2]));
+    return g->contrast_power + t * (g->wide_contrast_power - g->contrast_power);
+}
 
 /* MEDIAN_ERROR is Beckmann lobes'.  A GGX lobe (Blender's Principled BSDF, the Glossy node's
  * default) of the same width errs this many times as much per level: its heavy tails reach past
@@ -534,7 +548,7 @@ wenv_status wenv_auto_choose(const wenv_envmap *env, wenv_auto_analysis *analysi
         const grazing_factor *g = &GRAZING_FACTOR[i];
         if (g->scale > 0.0)
             e->env_factor = g->scale *
-                            pow((1.0 - e->lights_share) + CONTRAST_SLOPE * e->sun_contrast, g->contrast_power) /
+                            pow((1.0 - e->lights_share) + CONTRAST_SLOPE * e->sun_contrast, contrast_power_at(g, m)) /
                             pow(1.0 + e->light_dominance, g->dominance_power);
         else
             e->env_factor = ERROR_SCALE * ((1.0 - e->lights_share) + CONTRAST_SLOPE * e->contrast) /
