@@ -160,3 +160,27 @@ def test_lobes_the_grazing_path_takes_at_every_view_make_no_slices():
     sh = wenv.Shader(sunset, lobe(0.1), quality="default", method="slicing")
     sh.shade(n, v)
     assert sh.stats["brdf_terms"] > 0 and sh.stats["slices_ready"] > 0
+
+
+def test_a_lobe_of_no_weight_at_any_view_is_not_read():
+    """A Principled BSDF keeps a metal lobe and a dielectric one; a full metal weighs the dielectric
+    one 0 at every view.  The grazing path keeps its live lobe's nodes only: the metal's rule is the
+    size of a one-lobe paint's (it held and read twice the nodes), while a metal with a little
+    dielectric weight keeps both and shades within 1 % of the full one."""
+    env = wenv.load_environment(hdri_path("forest"))
+    metal = wenv.Principled(base_color=(0.9, 0.6, 0.3), metallic=1.0, roughness=0.3)
+    paint = wenv.Principled(base_color=(0.6, 0.15, 0.08), roughness=0.3)
+    n, v = random_pairs(300, 4)
+    sizes = {}
+    for name, mat in (("metal", metal), ("paint", paint)):
+        sh = wenv.Shader(env, mat, quality="high", method="slicing")
+        sh.shade(n, v)
+        sizes[name] = sh.stats["grazing_bytes"]
+    assert sizes["metal"] == sizes["paint"]
+    # a metal of a little dielectric weight keeps both lobes, and moves continuously from the full one
+    almost = wenv.Principled(base_color=(0.9, 0.6, 0.3), metallic=0.999, roughness=0.3)
+    sh = wenv.Shader(env, almost, quality="high", method="slicing")
+    near = sh.shade(n, v)
+    assert sh.stats["grazing_bytes"] > sizes["metal"]
+    full = wenv.Shader(env, metal, quality="high", method="slicing").shade(n, v)
+    assert np.abs(near - full).max() < 0.01 * np.abs(full).max()

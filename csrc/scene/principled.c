@@ -463,6 +463,10 @@ static void pr_specular_cos_f_many(const wenv_material *mat, const float wo[3], 
         return;
     pr_lanes a = {.p = model_of(mat), .terms = terms, .wo = {wo[0], wo[1], wo[2]}, .co = wo[2], .n = n};
     for (size_t i = 0; i < a.p->n; i++) {
+        /* a lobe of no weight at this view (the metal lobe of a dielectric, the dielectric one of a
+         * metal) would add zeros */
+        if (terms[4 * i] == 0.0f && terms[4 * i + 1] == 0.0f && terms[4 * i + 2] == 0.0f)
+            continue;
         float m = (float)mat->lobes[i].alpha;
         switch (a.p->lobe[i].role) {
         case LOBE_DIFFUSE:

@@ -121,6 +121,44 @@ static int lobe_is_black(const wenv_lobe *lobe)
     return !(lobe->specular[0] > 0.0 || lobe->specular[1] > 0.0 || lobe->specular[2] > 0.0);
 }
 
+/* Takes out the lobes whose every node weighs 0 at every view: a Principled BSDF's metal lobe when
+ * it is not metallic, its dielectric one when it is, which the node loop read for nothing (half a
+ * paint's or a metal's grazing path).  Each lobe's nodes are a block of per_lobe (a multiple of
+ * 16), so the lanes of the node loop sum the same nodes in the same order as before. */
+static void drop_weightless_lobes(wenv_grazing_rule *rule, size_t per_lobe)
+{
+    size_t entry = rule->stride * NODE_FLOATS, kept = 0;
+    for (size_t at = 0; at < rule->n_nodes; at += per_lobe) {
+        int weighs = 0;
+        for (size_t e = 0; e < ENTRIES && !weighs; e++) {
+            const float *w = rule->nodes + e * entry + 3 * rule->stride;
+            for (size_t k = at; k < at + per_lobe && !weighs; k++)
+                weighs = w[k] != 0.0f || w[rule->stride + k] != 0.0f || w[2 * rule->stride + k] != 0.0f;
+        }
+        if (!weighs)
+            continue;
+        if (kept != at)
+            for (size_t e = 0; e < ENTRIES; e++)
+                for (size_t f = 0; f < NODE_FLOATS; f++) {
+                    float *row = rule->nodes + e * entry + f * rule->stride;
+                    memmove(row + kept, row + at, per_lobe * sizeof *row);
+                }
+        kept += per_lobe;
+    }
+    if (kept == rule->n_nodes)
+        return;
+    /* the entries closed up to the new stride, in place (each moves to a lower address) */
+    size_t stride = (kept + 15) / 16 * 16;
+    for (size_t e = 0; e < ENTRIES; e++)
+        for (size_t f = 0; f < NODE_FLOATS; f++) {
+            float *from = rule->nodes + e * entry + f * rule->stride, *to = rule->nodes + (e * NODE_FLOATS + f) * stride;
+            memmove(to, from, kept * sizeof *to);
+            memset(to + kept, 0, (stride - kept) * sizeof *to);
+        }
+    rule->n_nodes = kept;
+    rule->stride = stride;
+}
+
 wenv_status wenv_grazing_rule_create(wenv_grazing_rule **out, const wenv_material *mat, size_t local_n,
                                      double threshold, int all_slopes, wenv_error *err)
 {
@@ -222,6 +260,7 @@ wenv_status wenv_grazing_rule_create(wenv_grazing_rule **out, const wenv_materia
         }
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the grazing rules");
     }
+    drop_weightless_lobes(rule, per_lobe);
     *out = rule;
     return WENV_OK;
 }
