@@ -119,37 +119,26 @@ static double fresnel_dielectric_fss(double eta)
                       : 0.997118 + eta * (0.1014 - eta * (0.965241 + eta * 0.130607));
 }
 
-/* The lobe's Fresnel at c = wi.h, RGB. */
-/* Each role's Fresnel, inline so the float path's per-lobe loops run them in vector lanes. */
-static inline double coat_fresnel(const principled *p, double c) { return wenv_fresnel_dielectric(c, p->in.coat_ior); }
-
-/* F82-tint (Kutz et al., "Novel aspects of the Adobe Standard Material"), channel k */
-static inline double metal_fresnel(const principled *p, double c, int k)
+/* Each role's Fresnel at c = wi.h, RGB: inline, so that the float path's per-lobe loops, which pass
+ * the role as a constant, run it in vector lanes. */
+static inline void role_fresnel(const principled *p, lobe_role role, double c, double f[3])
 {
-    double s = clamp01(1.0 - c), s5 = s * s * s * s * s;
-    return clamp01(p->f0_metal[k] + (1.0 - p->f0_metal[k]) * s5 - p->b_metal[k] * c * s5 * s);
-}
-
-/* the dielectric's Fresnel, normalised to 0 at normal incidence: channel k is f0_col + (1 - f0_col) x it */
-static inline double specular_fresnel_s(const principled *p, double c)
-{
-    double f0 = f0_from_ior(p->eta);
-    return clamp01((wenv_fresnel_dielectric(c, p->eta) - f0) / (1.0 - f0));
-}
-
-static void lobe_fresnel(const principled *p, const lobe_model *l, double c, double f[3])
-{
-    if (l->role == LOBE_COAT) {
-        f[0] = f[1] = f[2] = coat_fresnel(p, c);
-    } else if (l->role == LOBE_METAL) {
+    if (role == LOBE_COAT) {
+        f[0] = f[1] = f[2] = wenv_fresnel_dielectric(c, p->in.coat_ior);
+    } else if (role == LOBE_METAL) {
+        /* F82-tint (Kutz et al., "Novel aspects of the Adobe Standard Material") */
+        double s = clamp01(1.0 - c), s5 = s * s * s * s * s;
         for (int k = 0; k < 3; k++)
-            f[k] = metal_fresnel(p, c, k);
+            f[k] = clamp01(p->f0_metal[k] + (1.0 - p->f0_metal[k]) * s5 - p->b_metal[k] * c * s5 * s);
     } else {
-        double s = specular_fresnel_s(p, c);
+        double f0 = f0_from_ior(p->eta);
+        double s = clamp01((wenv_fresnel_dielectric(c, p->eta) - f0) / (1.0 - f0));
         for (int k = 0; k < 3; k++)
             f[k] = p->f0_col[k] + (1.0 - p->f0_col[k]) * s;
     }
 }
+
+static void lobe_fresnel(const principled *p, const lobe_model *l, double c, double f[3]) { role_fresnel(p, l->role, c, f); }
 
 /* ---------------------------------------------------------------- the layers' weights for a view */
 
@@ -433,23 +422,12 @@ static inline __attribute__((always_inline)) void ggx_lanes(const pr_lanes *a, s
         float si = sqrtf(wi[0] * wi[0] + wi[1] * wi[1]);
         float vis = wenv_vis_smith_f(ci, co, wenv_smith_k_f(1, m, ci, si), ko);
         float d = wenv_ndf_tan2_f(1, m, h.tan2);
-        double c = h.cos_d, f0, f1, f2;
-        if (role == LOBE_COAT) {
-            f0 = f1 = f2 = coat_fresnel(p, c);
-        } else if (role == LOBE_METAL) {
-            f0 = metal_fresnel(p, c, 0);
-            f1 = metal_fresnel(p, c, 1);
-            f2 = metal_fresnel(p, c, 2);
-        } else {
-            double sf = specular_fresnel_s(p, c);
-            f0 = p->f0_col[0] + (1.0 - p->f0_col[0]) * sf;
-            f1 = p->f0_col[1] + (1.0 - p->f0_col[1]) * sf;
-            f2 = p->f0_col[2] + (1.0 - p->f0_col[2]) * sf;
-        }
+        double f[3];
+        role_fresnel(p, role, h.cos_d, f);
         int above = z[k] > 0.0f;
-        r[k] += above ? w0 * (float)f0 * d * vis * ci : 0.0f;
-        g[k] += above ? w1 * (float)f1 * d * vis * ci : 0.0f;
-        b[k] += above ? w2 * (float)f2 * d * vis * ci : 0.0f;
+        r[k] += above ? w0 * (float)f[0] * d * vis * ci : 0.0f;
+        g[k] += above ? w1 * (float)f[1] * d * vis * ci : 0.0f;
+        b[k] += above ? w2 * (float)f[2] * d * vis * ci : 0.0f;
     }
 }
 

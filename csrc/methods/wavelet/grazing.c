@@ -121,9 +121,8 @@ static int lobe_is_black(const wenv_lobe *lobe)
     return !(lobe->specular[0] > 0.0 || lobe->specular[1] > 0.0 || lobe->specular[2] > 0.0);
 }
 
-/* Takes out the lobes whose every node weighs 0 at every view: a Principled BSDF's metal lobe when
- * it is not metallic, its dielectric one when it is, which the node loop read for nothing (half a
- * paint's or a metal's grazing path).  Each lobe's nodes are a block of per_lobe (a multiple of
+/* Takes out the lobes whose every node weighs 0 at every view: a full Principled metal's dielectric
+ * lobe, which the node loop read for nothing (half the metal's grazing path).  Each lobe's nodes are a block of per_lobe (a multiple of
  * 16), so the lanes of the node loop sum the same nodes in the same order as before. */
 static void drop_weightless_lobes(wenv_grazing_rule *rule, size_t per_lobe)
 {
