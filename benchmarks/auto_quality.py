@@ -326,7 +326,8 @@ def calibrate_ggx():
     interpolates MEDIAN_ERROR).  NARROW_FACTOR: how much more a lobe narrower than the calibrated
     range errs than its prediction at m = 0.05 -- the coated paint (a clear coat of Coat Roughness
     0.1, alpha 0.01, over a base of roughness 0.5) against Cook-Torrance at m = 0.05 times GGX_FACTOR.
-    Each over the 2000 stored pairs under each bundled HDRI: the median over the HDRIs of the ratio.
+    Each over the 2000 stored pairs under each bundled HDRI: GGX_FACTOR the largest ratio over the
+    HDRIs, NARROW_FACTOR the median.
     GGX's heavy tails are what the levels resolve worse: the grazing path's slope cells and the
     wavelet maps' truncation both lose more of them."""
     beckmann, ggx = np.load(os.path.join(ROOT, "tests", "data", "accuracy_reference.npz")), \
@@ -348,11 +349,13 @@ def calibrate_ggx():
                 e[name] = relative_rmse(sh.shade(ggx["normals"], ggx["views"]), ggx[f"{h}/{name}"])
             ratios.append(e["metal"] / math.exp((1 - t) * math.log(e["m0.05"]) + t * math.log(e["m0.1"])))
             narrow.append(e["coated"] / e["m0.05"])
-        ggx_rows.append(statistics.median(ratios))
+        # the largest ratio, so that a target said to be met is: the median (2.45 at level 5) claimed
+        # 1 % for the metal under sunset, where level 5 errs 1.5 %
+        ggx_rows.append(max(ratios))
         narrow_rows.append(statistics.median(narrow) / ggx_rows[-1])
-        print(f"level {level}: GGX over Beckmann at m = {alpha}, median over the HDRIs {ggx_rows[-1]:.2f} "
-              f"(from {min(ratios):.2f} to {max(ratios):.2f}); a coat of alpha 0.01 over that at m = 0.05 "
-              f"{narrow_rows[-1]:.2f}", flush=True)
+        print(f"level {level}: GGX over Beckmann at m = {alpha}, largest over the HDRIs {ggx_rows[-1]:.2f} "
+              f"(median {statistics.median(ratios):.2f}, from {min(ratios):.2f}); a coat of alpha 0.01 over that "
+              f"at m = 0.05 {narrow_rows[-1]:.2f}", flush=True)
     print("GGX_FACTOR    " + ", ".join(f"{r:.2f}" for r in ggx_rows))
     print("NARROW_FACTOR " + ", ".join(f"{r:.2f}" for r in narrow_rows))
 

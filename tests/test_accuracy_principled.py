@@ -21,7 +21,7 @@ DATA = os.path.join(os.path.dirname(__file__), "data", "accuracy_reference_princ
 # (benchmarks/accuracy.py --principled prints the full table) with 10 % headroom.
 BOUNDS = {
     "draft": {"paint": 0.759, "metal": 0.706, "coated": 1.03, "satin": 0.12},
-    "default": {"paint": 0.0274, "metal": 0.058, "coated": 0.0969, "satin": 0.0065},
+    "default": {"paint": 0.0227, "metal": 0.0298, "coated": 0.0969, "satin": 0.0063},
     "high": {"paint": 0.00484, "metal": 0.0119, "coated": 0.081, "satin": 0.00281},
 }
 

@@ -485,13 +485,23 @@ wenv_status wenv_material_albedo(const wenv_material *mat, const double wo[3], s
 #define SLOPE_SUBCELLS 4
 
 wenv_status wenv_material_lobe_slope_cells(const wenv_material *mat, size_t i, const double wo[3], size_t n_x,
-                                           size_t n_y, double *wi, double *weight, double *size, size_t *count,
-                                           wenv_error *err)
+                                           size_t n_y, wenv_slope_part part, double *wi, double *weight,
+                                           double *size, size_t *count, wenv_error *err)
 {
     *count = 0;
     if (i >= mat->n_lobes)
         return wenv_error_set(err, WENV_ERR_VALUE, "lobe %zu of %zu", i, mat->n_lobes);
-    if (wenv_lobe_slope_cells(&mat->lobes[i], wo, n_x, n_y, wi, weight, size, count, err))
+    const wenv_lobe *lobe = &mat->lobes[i];
+    if (!(part.cut >= 0.0 && part.cut <= 1.0) || (part.cut > 0.0 && lobe->distribution != WENV_NDF_GGX) ||
+        (part.tail && !(part.cut > 0.0)))
+        return wenv_error_set(err, WENV_ERR_VALUE, "a lobe's part must cut a GGX lobe at a scale in (0, 1], got %g",
+                              part.cut);
+    /* the grid: the shape's, its core's, or for the tail the GGX lobe as wide as the tail's narrowest */
+    wenv_lobe grid = *lobe;
+    double grid_cut = part.tail ? 0.0 : part.cut;
+    if (part.tail)
+        grid.alpha = lobe->alpha / sqrt(part.cut);
+    if (wenv_lobe_slope_cells(&grid, grid_cut, wo, n_x, n_y, wi, weight, size, count, err))
         return err->status;
     size_t K = SLOPE_SUBCELLS, fx = n_x * K, fy = n_y * K, nf = fx * fy;
     double *fine = malloc(nf * 5 * sizeof *fine);
@@ -499,12 +509,15 @@ wenv_status wenv_material_lobe_slope_cells(const wenv_material *mat, size_t i, c
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for a lobe's cells");
     double *fwi = fine, *fmass = fine + 3 * nf, *fsize = fine + 4 * nf;
     size_t got;
-    if (wenv_lobe_slope_cells(&mat->lobes[i], wo, fx, fy, fwi, fmass, fsize, &got, err)) {
+    if (wenv_lobe_slope_cells(&grid, grid_cut, wo, fx, fy, fwi, fmass, fsize, &got, err)) {
         free(fine);
         return err->status;
     }
     memset(weight, 0, *count * 3 * sizeof *weight);
     wenv_lobe_rgb_fn over_ndf = wenv_material_lobe_over_ndf_fn(mat);
+    /* the core's grid is e^cut times its share of D: its value over that is the lobe's over D, e^-cut */
+    double core_scale = part.cut > 0.0 && !part.tail ? exp(-part.cut) : 1.0;
+    double a2 = lobe->alpha * lobe->alpha, t2 = grid.alpha * grid.alpha;
     /* fine row r, column c lies in coarse row r / K, column c / K: each fine row splits its own
      * range of columns into fx, so K of them make one coarse column */
     for (size_t r = 0; r < fy; r++)
@@ -512,10 +525,18 @@ wenv_status wenv_material_lobe_slope_cells(const wenv_material *mat, size_t i, c
             size_t f = r * fx + c, k = (r / K) * n_x + c / K;
             if (!(fmass[f] > 0.0))
                 continue;
-            double rgb[3];
+            double rgb[3], scale = core_scale;
             over_ndf(mat, i, fwi + 3 * f, wo, rgb);
+            if (part.tail) {
+                /* the tail's share of the lobe, and the lobe's D over the grid's */
+                double h[3];
+                for (int q = 0; q < 3; q++)
+                    h[q] = fwi[3 * f + (size_t)q] + wo[q];
+                double tan2 = (h[0] * h[0] + h[1] * h[1]) / fmax(h[2] * h[2], DBL_MIN), p = t2 + tan2, q = a2 + tan2;
+                scale = (1.0 - wenv_ggx_core_share(lobe->alpha, part.cut, tan2)) * (a2 * p * p) / (t2 * q * q);
+            }
             for (int q = 0; q < 3; q++)
-                weight[3 * k + (size_t)q] += rgb[q] * fmass[f];
+                weight[3 * k + (size_t)q] += rgb[q] * fmass[f] * scale;
         }
     free(fine);
     return WENV_OK;

@@ -258,11 +258,21 @@ wenv_status wenv_material_lobe_cells(const wenv_material *mat, size_t i, const d
                                      size_t n_phi, double *wi, double *weight, double *solid_angle, size_t *count,
                                      wenv_error *err);
 
-/* Lobe i's rule on its shape's slope grid (wenv_lobe_slope_cells): n_x n_y nodes, wi and RGB weight
- * (3 doubles each) with sum_k weight[k] E(wi[k]) ~ Int E(wi) f_i(wi, wo) cos_i d wi, and each cell's
- * footprint `size` in radians, for a lobe about the mirror direction (wenv_material_mirror_centred). */
+/* Which part of a lobe a slope rule integrates: the whole lobe on its shape's grid (cut 0), or of a
+ * lobe whose shape is GGX the core, f_i times wenv_ggx_core_share at cut, on the core's grid (tail 0),
+ * or the rest, its tail, on the grid of GGX of alpha / sqrt(cut) (tail 1).  Core and tail sum to the
+ * lobe. */
+typedef struct {
+    double cut;
+    int tail;
+} wenv_slope_part;
+
+/* Lobe i's rule on a slope grid (wenv_lobe_slope_cells), of the part `part` says: n_x n_y nodes, wi
+ * and RGB weight (3 doubles each) with sum_k weight[k] E(wi[k]) ~ Int E(wi) f_part(wi, wo) cos_i d wi,
+ * and each cell's footprint `size` in radians, for a lobe about the mirror direction
+ * (wenv_material_mirror_centred).  WENV_ERR_VALUE for a cut outside [0, 1] or on a lobe not GGX. */
 wenv_status wenv_material_lobe_slope_cells(const wenv_material *mat, size_t i, const double wo[3], size_t n_x,
-                                           size_t n_y, double *wi, double *weight, double *size, size_t *count,
-                                           wenv_error *err);
+                                           size_t n_y, wenv_slope_part part, double *wi, double *weight,
+                                           double *size, size_t *count, wenv_error *err);
 
 #endif

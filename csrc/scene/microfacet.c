@@ -305,52 +305,173 @@ wenv_status wenv_lobe_cells(const wenv_lobe *lobe, wenv_shadowing shadowing, con
 /* A half vector's slopes (x, y) = tan(theta_h) (cos phi_h, sin phi_h).  The distribution's slope
  * density P22 (D cos_h per unit slope area) is Beckmann's Gaussian exp(-(x^2 + y^2) / a^2) / (pi a^2)
  * or GGX's a^2 / (pi (a^2 + x^2 + y^2)^2); the cells below are graded in y's marginal CDF and in x's
- * CDF given y, so each holds the mass of D it is credited with. */
-static double slope_marginal_cdf(int ggx, double a, double y)
+ * CDF given y, so each holds the mass of D it is credited with.
+ *
+ * GGX is a mixture of Beckmann lobes: P22 = Int_0^inf e^-t B(a / sqrt(t)) dt, B(m) Beckmann's of RMS
+ * slope m (its slopes are Gaussian over a scale that is Exp(1)).  Its part of scales t >= cut
+ * (normalised; the grid `cut` > 0 gives) has Gaussian tails, 1 - P(cut q) of GGX's far out, with
+ * q = 1 + (x^2 + y^2) / a^2 and P(u) = (1 + u) e^-u: P22 = e^cut P(cut q) GGX's.  Its marginal is in
+ * closed form (the incomplete gamma function of order 3/2); its CDF given y is, over
+ * v = atan(x / (a sqrt(B))) with B = 1 + y^2 / a^2, the integral of g(v) = (cos^2 v + cut B)
+ * exp(-cut B tan^2 v), smooth and negligible past tan^2 v = 64 / (cut B): each row tabulates it on
+ * CUT_PANELS panels of 4 Gauss-Legendre nodes, which a CDF value then completes within its panel. */
+#define CUT_PANELS 128
+typedef struct {
+    int ggx;
+    double a, cut;
+} slope_grid;
+
+typedef struct {
+    double y, b;                   /* the row's slope y and a sqrt(B) = sqrt(a^2 + y^2) */
+    double cb, v_max, dv;          /* cut B; the panels cover [-v_max, v_max] in steps of dv */
+    double sum[CUT_PANELS + 1];    /* the integral of g up to each panel's start */
+} slope_row;
+
+static const double GL4_X[4] = {0.0694318442029737, 0.3300094782075719, 0.6699905217924281, 0.9305681557970263};
+static const double GL4_W[4] = {0.1739274225687269, 0.3260725774312731, 0.3260725774312731, 0.1739274225687269};
+
+static double cut_g(double cb, double v)
 {
-    return ggx ? 0.5 + 0.5 * y / sqrt(a * a + y * y) : 0.5 * erfc(-y / a);
+    double c2 = cos(v) * cos(v);
+    return c2 > 0.0 ? (c2 + cb) * exp(-cb * (1.0 - c2) / c2) : 0.0;
 }
 
-static double slope_marginal_pdf(int ggx, double a, double y)
+static double cut_panel(double cb, double from, double to)
 {
-    if (!ggx)
+    double sum = 0.0, len = to - from;
+    for (int k = 0; k < 4; k++)
+        sum += GL4_W[k] * cut_g(cb, from + len * GL4_X[k]);
+    return sum * len;
+}
+
+/* The row's integral of g from -v_max to v (clamped to the panels). */
+static double cut_integral(const slope_row *row, double v)
+{
+    double at = (v + row->v_max) / row->dv;
+    if (!(at > 0.0))
+        return 0.0;
+    if (at >= CUT_PANELS)
+        return row->sum[CUT_PANELS];
+    size_t k = (size_t)at;
+    double start = -row->v_max + (double)k * row->dv;
+    return row->sum[k] + cut_panel(row->cb, start, v);
+}
+
+static double slope_marginal_cdf(const slope_grid *g, double y)
+{
+    double a = g->a;
+    if (!g->ggx)
+        return 0.5 * erfc(-y / a);
+    if (!(g->cut > 0.0))
+        return 0.5 + 0.5 * y / sqrt(a * a + y * y);
+    double b = fabs(y) / a, r = sqrt(1.0 + b * b), c = g->cut;
+    double v = erf(b * sqrt(c)) + b * exp(c) * erfc(sqrt(c) * r) / r;
+    return 0.5 + copysign(0.5 * v, y);
+}
+
+static double slope_marginal_pdf(const slope_grid *g, double y)
+{
+    double a = g->a;
+    if (!g->ggx)
         return exp(-y * y / (a * a)) / (a * sqrt(M_PI));
-    double q = a * a + y * y;
-    return a * a / (2.0 * q * sqrt(q));
+    if (!(g->cut > 0.0)) {
+        double q = a * a + y * y;
+        return a * a / (2.0 * q * sqrt(q));
+    }
+    double s = 1.0 + y * y / (a * a), z = g->cut * s;
+    double gamma = sqrt(z) * exp(-z) + 0.5 * sqrt(M_PI) * erfc(sqrt(z)); /* Gamma(3/2, z) */
+    return exp(g->cut) * gamma / (a * sqrt(M_PI) * s * sqrt(s));
 }
 
-static double slope_conditional_cdf(int ggx, double a, double y, double x)
+static void make_row(const slope_grid *g, double y, slope_row *row)
 {
-    if (!ggx)
+    row->y = y;
+    row->b = sqrt(g->a * g->a + y * y);
+    row->cb = row->v_max = row->dv = 0.0;
+    if (!(g->ggx && g->cut > 0.0))
+        return;
+    row->cb = g->cut * (1.0 + y * y / (g->a * g->a));
+    row->v_max = atan(8.0 / sqrt(row->cb));
+    row->dv = 2.0 * row->v_max / CUT_PANELS;
+    row->sum[0] = 0.0;
+    for (size_t k = 0; k < CUT_PANELS; k++) {
+        double from = -row->v_max + (double)k * row->dv;
+        row->sum[k + 1] = row->sum[k] + cut_panel(row->cb, from, from + row->dv);
+    }
+}
+
+static double slope_conditional_cdf(const slope_grid *g, const slope_row *row, double x)
+{
+    double a = g->a;
+    if (!g->ggx)
         return 0.5 * erfc(-x / a);
-    double b = sqrt(a * a + y * y);
-    return 0.5 + (b * x / (b * b + x * x) + atan(x / b)) / M_PI;
+    double b = row->b;
+    if (!(g->cut > 0.0))
+        return 0.5 + (b * x / (b * b + x * x) + atan(x / b)) / M_PI;
+    return fmin(1.0, cut_integral(row, atan(x / b)) / row->sum[CUT_PANELS]);
 }
 
-static double slope_conditional_pdf(int ggx, double a, double y, double x)
+static double slope_conditional_pdf(const slope_grid *g, const slope_row *row, double x)
 {
-    if (!ggx)
+    double a = g->a;
+    if (!g->ggx)
         return exp(-x * x / (a * a)) / (a * sqrt(M_PI));
-    double b = sqrt(a * a + y * y), q = b * b + x * x;
-    return 2.0 * b * b * b / (M_PI * q * q);
+    double b = row->b;
+    if (!(g->cut > 0.0)) {
+        double q = b * b + x * x;
+        return 2.0 * b * b * b / (M_PI * q * q);
+    }
+    double v = atan(x / b), c = cos(v);
+    if (!(fabs(v) < row->v_max))
+        return 0.0;
+    return cut_g(row->cb, v) * c * c / (b * row->sum[CUT_PANELS]);
 }
 
-/* The slope at CDF value u (marginal if !conditional): Newton's steps on the CDF from the median,
- * inside a bracket that each step narrows, bisecting where a step would leave it.  A material's
- * grazing rules take tens of thousands of these; bisection alone took 100 CDF evaluations each (half
- * of a material change's time), Newton takes about six. */
-static double slope_inverse(int ggx, double a, double y, double u, int conditional)
+/* A cut row's v at CDF value u: its panel from the table, then Newton's steps on the integral
+ * within it (g is its derivative), one or two from the panel's linear estimate. */
+static double cut_inverse(const slope_row *row, double u)
 {
-    double lo = -1e4 * a - 1.0, hi = 1e4 * a + 1.0, x = 0.0;
+    double target = u * row->sum[CUT_PANELS];
+    size_t k0 = 0, k1 = CUT_PANELS;
+    while (k1 - k0 > 1) {
+        size_t mid = (k0 + k1) / 2;
+        if (row->sum[mid] <= target)
+            k0 = mid;
+        else
+            k1 = mid;
+    }
+    double lo = -row->v_max + (double)k0 * row->dv, hi = lo + row->dv, span = row->sum[k1] - row->sum[k0];
+    double v = lo + (span > 0.0 ? (target - row->sum[k0]) / span : 0.5) * row->dv;
+    for (int it = 0; it < 50; it++) {
+        double gv = cut_g(row->cb, v);
+        if (!(gv > 0.0))
+            break;
+        double next = v - (row->sum[k0] + cut_panel(row->cb, lo, v) - target) / gv;
+        next = next < lo ? lo : (next > hi ? hi : next);
+        int done = fabs(next - v) <= 1e-15 * (1.0 + fabs(v));
+        v = next;
+        if (done)
+            break;
+    }
+    return v;
+}
+
+/* The slope at CDF value u (the marginal's if row is NULL, else the row's conditional): Newton's
+ * steps on the CDF from the median, inside a bracket that each step narrows, bisecting where a step
+ * would leave it.  A material's grazing rules take tens of thousands of these; bisection alone took
+ * 100 CDF evaluations each (half of a material change's time), Newton takes about six. */
+static double slope_inverse(const slope_grid *g, const slope_row *row, double u)
+{
+    double a = g->a, lo = -1e4 * a - 1.0, hi = 1e4 * a + 1.0, x = 0.0;
     for (int it = 0; it < 200; it++) {
-        double f = (conditional ? slope_conditional_cdf(ggx, a, y, x) : slope_marginal_cdf(ggx, a, x)) - u;
+        double f = (row ? slope_conditional_cdf(g, row, x) : slope_marginal_cdf(g, x)) - u;
         if (f == 0.0)
             return x;
         if (f < 0.0)
             lo = x;
         else
             hi = x;
-        double p = conditional ? slope_conditional_pdf(ggx, a, y, x) : slope_marginal_pdf(ggx, a, x);
+        double p = row ? slope_conditional_pdf(g, row, x) : slope_marginal_pdf(g, x);
         double next = p > 0.0 ? x - f / p : 0.5 * (lo + hi);
         if (!(next > lo && next < hi))
             next = 0.5 * (lo + hi);
@@ -359,6 +480,12 @@ static double slope_inverse(int ggx, double a, double y, double u, int condition
         x = next;
     }
     return x;
+}
+
+double wenv_ggx_core_share(double alpha, double cut, double tan2)
+{
+    double u = cut * (1.0 + tan2 / (alpha * alpha));
+    return (1.0 + u) * exp(-u);
 }
 
 /* wi for half-vector slopes (x, y) and wo = (s, 0, c); v.h and cos_h into *vh, *ch. */
@@ -377,30 +504,42 @@ static double angle_between(const double a[3], const double b[3])
     return atan2(sqrt(cx * cx + cy * cy + cz * cz), a[0] * b[0] + a[1] * b[1] + a[2] * b[2]);
 }
 
-wenv_status wenv_lobe_slope_cells(const wenv_lobe *lobe, const double wo[3], size_t n_x, size_t n_y, double *wi,
-                                  double *mass, double *size, size_t *count, wenv_error *err)
+wenv_status wenv_lobe_slope_cells(const wenv_lobe *lobe, double cut, const double wo[3], size_t n_x, size_t n_y,
+                                  double *wi, double *mass, double *size, size_t *count, wenv_error *err)
 {
     *count = 0;
     if (n_x < 1 || n_y < 1 || n_x > ALBEDO_SAMPLES_MAX || n_y > ALBEDO_SAMPLES_MAX)
         return wenv_error_set(err, WENV_ERR_VALUE, "cell counts must be in [1, %d], got %zu x %zu",
                               ALBEDO_SAMPLES_MAX, n_x, n_y);
-    int ggx = lobe->distribution == WENV_NDF_GGX;
-    double a = lobe->alpha, so = sqrt(wo[0] * wo[0] + wo[1] * wo[1]), co = wo[2];
+    if (!(cut >= 0.0 && cut <= 1.0) || (cut > 0.0 && lobe->distribution != WENV_NDF_GGX))
+        return wenv_error_set(err, WENV_ERR_VALUE, "a slope grid's cut must be in [0, 1], and 0 but for GGX, got %g", cut);
+    slope_grid g = {lobe->distribution == WENV_NDF_GGX, lobe->alpha, cut};
+    double so = sqrt(wo[0] * wo[0] + wo[1] * wo[1]), co = wo[2];
     /* work with the view in the xz plane, turn the nodes back at the end */
     double cp = so > 0.0 ? wo[0] / so : 1.0, sp = so > 0.0 ? wo[1] / so : 0.0, w[3] = {so, 0.0, co};
     size_t n = 0;
     for (size_t j = 0; j < n_y; j++) {
-        double y = slope_inverse(ggx, a, 0.0, ((double)j + 0.5) / (double)n_y, 0);
-        double dy = 1.0 / (double)n_y / slope_marginal_pdf(ggx, a, y);
+        double y = slope_inverse(&g, NULL, ((double)j + 0.5) / (double)n_y);
+        double dy = 1.0 / (double)n_y / slope_marginal_pdf(&g, y);
+        slope_row row;
+        make_row(&g, y, &row);
         /* the slopes x whose reflection lies above the horizon: c x^2 - 2 s x + c (y^2 - 1) < 0 */
         double r = sqrt(fmax(0.0, 1.0 - co * co * y * y));
         double x1 = co * (y * y - 1.0) / (so + r), x2 = co > 0.0 ? (so + r) / co : INFINITY;
-        double f_lo = slope_conditional_cdf(ggx, a, y, x1), f_hi = isinf(x2) ? 1.0 : slope_conditional_cdf(ggx, a, y, x2);
+        double f_lo = slope_conditional_cdf(&g, &row, x1), f_hi = isinf(x2) ? 1.0 : slope_conditional_cdf(&g, &row, x2);
         double df = (f_hi - f_lo) / (double)n_x;
         for (size_t i = 0; i < n_x; i++, n++) {
             double *d = wi + 3 * n;
-            double x = slope_inverse(ggx, a, y, f_lo + ((double)i + 0.5) * df, 1);
-            double dx = df / slope_conditional_pdf(ggx, a, y, x);
+            double u = f_lo + ((double)i + 0.5) * df, x, pdf;
+            if (g.ggx && cut > 0.0) {
+                double v = cut_inverse(&row, u), c = cos(v);
+                x = row.b * tan(v);
+                pdf = cut_g(row.cb, v) * c * c / (row.b * row.sum[CUT_PANELS]);
+            } else {
+                x = slope_inverse(&g, &row, u);
+                pdf = slope_conditional_pdf(&g, &row, x);
+            }
+            double dx = df / pdf;
             double vh, ch;
             slope_reflect(x, y, w, d, &vh, &ch);
             mass[n] = size[n] = 0.0;

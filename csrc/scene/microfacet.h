@@ -118,8 +118,14 @@ wenv_status wenv_lobe_cells(const wenv_lobe *lobe, wenv_shadowing shadowing, con
  * order for every wo: wi (3 doubles each, unit), mass (what turns the lobe's value over its D,
  * wenv_material_lobe_over_ndf, into the node's weight) and size (the cell's footprint in wi,
  * radians); nodes below the horizon have mass 0. */
-wenv_status wenv_lobe_slope_cells(const wenv_lobe *lobe, const double wo[3], size_t n_x, size_t n_y, double *wi,
-                                  double *mass, double *size, size_t *count, wenv_error *err);
+wenv_status wenv_lobe_slope_cells(const wenv_lobe *lobe, double cut, const double wo[3], size_t n_x, size_t n_y,
+                                  double *wi, double *mass, double *size, size_t *count, wenv_error *err);
+/* cut > 0 (in (0, 1], a GGX lobe only): the grid of the lobe's core instead.  A GGX lobe of alpha a
+ * is Beckmann lobes of RMS slope a / sqrt(t) mixed over t ~ Exp(1); its core, those of t >= cut,
+ * has Gaussian tails, and holds the share wenv_ggx_core_share of GGX's D at each half vector (the
+ * rest, the tail, is the mixture's lobes wider than a / sqrt(cut)).  The grid is graded in the
+ * core's D normalised, e^cut share D. */
+double wenv_ggx_core_share(double alpha, double cut, double tan2);
 
 /* ---- the lobe's terms, inline for the hot loops (~1e9 calls): written once (microfacet_terms.inc),
  * compiled in double (wenv_fresnel_dielectric, wenv_ndf_tan2, wenv_smith_k, wenv_half_vector_of,

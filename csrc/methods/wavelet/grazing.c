@@ -73,17 +73,35 @@ wenv_status wenv_grazing_light_create(wenv_grazing_light **out, const wenv_envma
 /* Cells per lobe, for a lobe about the mirror direction: N_X along the plane of the view and the
  * normal times N_Y across it, on the slope grid (wenv_lobe_slope_cells); otherwise (a
  * retro-reflective table) the polar rule's N_THETA in the distribution's CDF times N_PHI on the half
- * circle, mirrored.  A GGX lobe from alpha GGX_ALPHA_MIN up takes as many cells cut GGX_X by GGX_Y:
- * its heavy tails reach far across the plane of the view, where 4 cells left a Principled metal of
- * roughness 0.3 13 % off along a camera's views of Suzanne under forest (6 cells: 10 %), and every
- * worst case of benchmarks/accuracy.py --principled fell (metal 6.3 -> 5.3 %, paint 3.0 -> 2.5 %).
- * A narrower lobe (a clear coat) stretches along the plane of a grazing view and keeps 24 x 4
- * (16 x 6 took the coated paint under forest from 8.8 to 10 %). */
+ * circle, mirrored.
+ *
+ * A GGX lobe from alpha GGX_ALPHA_MIN up reaches far across the plane of the view with its heavy
+ * tails, which one point per cell of GGX's grid reads badly: 16 x 6 cells left a Principled metal of
+ * roughness 0.3 3.2 % off at level 5 under courtyard (1024 polar nodes: 1.1 %).  So it is cut in two
+ * (wenv_slope_part): its core, the Beckmann lobes it mixes up to alpha / sqrt(GGX_CUT) wide, on
+ * CORE_X x CORE_Y cells of the core's own grid, and its tail, the wider ones (9.5 % of D), on
+ * TAIL_X x TAIL_Y cells of a GGX grid that wide: 2.0 % (24 x 4 and 8 x 4: 2.5 %).  Up to
+ * GGX_CUT_ALPHA_MAX: a wider lobe is on the path only within a few degrees of the horizon, and the
+ * Principled BSDF's sheen and rough diffuse borrow a GGX shape of alpha 1 to place nodes; those keep
+ * GGX_X x GGX_Y cells of GGX's grid.  A narrower lobe (a clear coat) stretches along the plane of a
+ * grazing view and keeps 24 x 4 (16 x 6 took the coated paint under forest from 8.8 to 10 %). */
 #define N_X 24
 #define N_Y 4
 #define GGX_X 16
 #define GGX_Y 6
+#define CORE_X 16
+#define CORE_Y 6
+#define TAIL_X 8
+#define TAIL_Y 4
+#define GGX_CUT 0.1
 #define GGX_ALPHA_MIN 0.03
+#define GGX_CUT_ALPHA_MAX 0.5
+/* With a GGX lobe cut in two, the path's threshold falls from `grazing` texels at the horizon to
+ * (1 - FACING_CUT) of it at normal incidence: the cells read a lobe as wide as long worse than the
+ * wavelet maps do once it spans some 5 texels (the metal above at views within 37 degrees of the
+ * normal: 1.6 % on the path, 0.55 % on the maps), while towards grazing the path stays the better.
+ * The metal at level 5 then: 1.6 %. */
+#define FACING_CUT (1.0 / 3.0)
 #define N_THETA 32
 #define N_PHI 16
 /* Per node: local x y z, weight r g b, log2 of the cell's footprint (radians); each entry holds
@@ -98,8 +116,10 @@ struct wenv_grazing_rule {
     size_t n_nodes;
     float log_c_hi, dlog_c; /* entry e at log cos = log_c_hi - e dlog_c */
     float rho_scale, m_min, threshold; /* rho = rho_scale (cos_v + m_min) */
+    float face; /* the threshold is threshold (1 - face cos_v) */
     size_t stride; /* n_nodes rounded up to a multiple of 16: one field's array */
     float *nodes;  /* ENTRIES x NODE_FLOATS x stride */
+    size_t *block; /* each lobe's number of nodes, in order (while the rule is made) */
     wenv_grazing_nodes_fn read_nodes; /* the node loop for this CPU */
 };
 
@@ -108,6 +128,7 @@ void wenv_grazing_rule_free(wenv_grazing_rule *rule)
     if (!rule)
         return;
     free(rule->nodes);
+    free(rule->block);
     free(rule);
 }
 
@@ -122,16 +143,17 @@ static int lobe_is_black(const wenv_lobe *lobe)
 }
 
 /* Takes out the lobes whose every node weighs 0 at every view: a full Principled metal's dielectric
- * lobe, which the node loop read for nothing (half the metal's grazing path).  Each lobe's nodes are a block of per_lobe (a multiple of
- * 16), so the lanes of the node loop sum the same nodes in the same order as before. */
-static void drop_weightless_lobes(wenv_grazing_rule *rule, size_t per_lobe)
+ * lobe, which the node loop read for nothing (half the metal's grazing path).  Each lobe's nodes are a
+ * block (block[k] of them, a multiple of 16), so the lanes of the node loop sum the same nodes in the
+ * same order as before. */
+static void drop_weightless_lobes(wenv_grazing_rule *rule, const size_t *block, size_t n_blocks)
 {
-    size_t entry = rule->stride * NODE_FLOATS, kept = 0;
-    for (size_t at = 0; at < rule->n_nodes; at += per_lobe) {
+    size_t entry = rule->stride * NODE_FLOATS, kept = 0, at = 0;
+    for (size_t b = 0; b < n_blocks; at += block[b++]) {
         int weighs = 0;
         for (size_t e = 0; e < ENTRIES && !weighs; e++) {
             const float *w = rule->nodes + e * entry + 3 * rule->stride;
-            for (size_t k = at; k < at + per_lobe && !weighs; k++)
+            for (size_t k = at; k < at + block[b] && !weighs; k++)
                 weighs = w[k] != 0.0f || w[rule->stride + k] != 0.0f || w[2 * rule->stride + k] != 0.0f;
         }
         if (!weighs)
@@ -140,9 +162,9 @@ static void drop_weightless_lobes(wenv_grazing_rule *rule, size_t per_lobe)
             for (size_t e = 0; e < ENTRIES; e++)
                 for (size_t f = 0; f < NODE_FLOATS; f++) {
                     float *row = rule->nodes + e * entry + f * rule->stride;
-                    memmove(row + kept, row + at, per_lobe * sizeof *row);
+                    memmove(row + kept, row + at, block[b] * sizeof *row);
                 }
-        kept += per_lobe;
+        kept += block[b];
     }
     if (kept == rule->n_nodes)
         return;
@@ -156,6 +178,17 @@ static void drop_weightless_lobes(wenv_grazing_rule *rule, size_t per_lobe)
         }
     rule->n_nodes = kept;
     rule->stride = stride;
+}
+
+static int lobe_is_ggx(const wenv_lobe *lobe)
+{
+    return lobe->distribution == WENV_NDF_GGX && lobe->alpha >= GGX_ALPHA_MIN;
+}
+
+/* Whether a lobe on the slope grid is cut into a core and a tail. */
+static int lobe_is_cut(const wenv_lobe *lobe)
+{
+    return lobe->distribution == WENV_NDF_GGX && lobe->alpha >= GGX_ALPHA_MIN && lobe->alpha <= GGX_CUT_ALPHA_MAX;
 }
 
 wenv_status wenv_grazing_rule_create(wenv_grazing_rule **out, const wenv_material *mat, size_t local_n,
@@ -174,23 +207,45 @@ wenv_status wenv_grazing_rule_create(wenv_grazing_rule **out, const wenv_materia
      * Cook-Torrance lobe and 10 % of a Principled metal; a table's lobe over its fitted shape's D
      * varies within the cells (courtyard, t0.1: 0.76 % against 0.58 %).  all_slopes takes GGX
      * lobes on the grid anyway, for interactive rates: a Principled paint at roughness 0.3 went from
-     * ~200 to ~25 ms a view of 126k vertices, its error from 1.9 to 3.0 % (a metal's 2.8 to 6.3 %),
-     * and a table's lobe about the mirror direction on its fitted shape's grid. */
+     * ~200 to ~25 ms a view of 126k vertices, its error from 1.9 to 3.0 % (a metal's 2.8 to 6.3 %;
+     * before GGX lobes were cut in two, above), and a table's lobe about the mirror direction on its
+     * fitted shape's grid. */
     int slope = wenv_material_mirror_centred(mat) && (wenv_material_lobes_follow_shapes(mat) || all_slopes);
     for (size_t k = 0; k < n_lobes && !all_slopes; k++)
         if (!lobe_is_black(wenv_material_lobe(mat, k)) && wenv_material_lobe(mat, k)->distribution != WENV_NDF_BECKMANN)
             slope = 0;
-    size_t per_lobe = slope ? N_X * N_Y : 2 * N_THETA * N_PHI;
     wenv_grazing_rule *rule = calloc(1, sizeof *rule);
-    if (!rule)
+    size_t *block = rule ? malloc(lobes * sizeof *block) : NULL;
+    if (!block) {
+        free(rule);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the grazing rules");
-    rule->n_nodes = lobes * per_lobe;
+    }
+    /* each lobe's block of nodes (weightless padding to a multiple of 16) */
+    size_t n_blocks = 0, per_lobe_max = 0;
+    for (size_t k = 0; k < n_lobes; k++) {
+        const wenv_lobe *lobe = wenv_material_lobe(mat, k);
+        if (lobe_is_black(lobe))
+            continue;
+        size_t nodes = !slope               ? 2 * N_THETA * N_PHI
+                       : lobe_is_cut(lobe) ? CORE_X * CORE_Y + TAIL_X * TAIL_Y
+                       : lobe_is_ggx(lobe) ? GGX_X * GGX_Y
+                                           : N_X * N_Y;
+        block[n_blocks] = (nodes + 15) / 16 * 16;
+        per_lobe_max = block[n_blocks] > per_lobe_max ? block[n_blocks] : per_lobe_max;
+        rule->n_nodes += block[n_blocks++];
+    }
+    rule->block = block;
     rule->rho_scale = (float)(4.0 * (double)local_n * m_min / M_PI);
     rule->m_min = (float)m_min;
     rule->threshold = (float)threshold;
     rule->read_nodes = wenv_grazing_nodes_for_cpu();
-    /* the blend is 0 from rho = 2 threshold up */
-    double c_hi = 2.0 * threshold / (double)rule->rho_scale - m_min;
+    int any_cut = 0;
+    for (size_t k = 0; k < n_lobes; k++)
+        any_cut |= slope && !lobe_is_black(wenv_material_lobe(mat, k)) && lobe_is_cut(wenv_material_lobe(mat, k));
+    double kf = any_cut ? FACING_CUT : 0.0, sc = (double)rule->rho_scale;
+    rule->face = (float)kf;
+    /* the blend is 0 from rho = 2 threshold (1 - kf cos) up */
+    double c_hi = (2.0 * threshold - sc * m_min) / (sc + 2.0 * threshold * kf);
     if (!(c_hi > WENV_GRAZING_Z)) { /* the local map resolves this material's lobes at every view */
         wenv_grazing_rule_free(rule);
         return WENV_OK;
@@ -211,42 +266,50 @@ wenv_status wenv_grazing_rule_create(wenv_grazing_rule **out, const wenv_materia
     wenv_error first_err = {0};
 #pragma omp parallel
     {
-        double *wi = malloc(per_lobe * 7 * sizeof(double));
+        double *wi = malloc(per_lobe_max * 7 * sizeof(double));
         if (!wi)
             atomic_store(&failed, 1);
 #pragma omp for schedule(dynamic, 4)
         for (size_t e = 0; e < ENTRIES; e++) {
             if (atomic_load(&failed))
                 continue;
-            double *weight = wi + 3 * per_lobe, *omega = weight + 3 * per_lobe;
+            double *weight = wi + 3 * per_lobe_max, *omega = weight + 3 * per_lobe_max;
             double c = exp(log_hi - (log_hi - log_lo) * (double)e / (ENTRIES - 1));
             double wo[3] = {sqrt(fmax(0.0, 1.0 - c * c)), 0.0, c};
             float *entry = rule->nodes + e * rule->stride * NODE_FLOATS;
-            size_t at = 0;
+            size_t at = 0, b = 0;
             for (size_t k = 0; k < n_lobes && !atomic_load(&failed); k++) {
-                if (lobe_is_black(wenv_material_lobe(mat, k)))
-                    continue;
-                size_t count;
-                wenv_error lobe_err = {0};
-                /* omega: each cell's footprint, radians (slope) or its solid angle (polar) */
                 const wenv_lobe *lobe = wenv_material_lobe(mat, k);
-                int ggx = lobe->distribution == WENV_NDF_GGX && lobe->alpha >= GGX_ALPHA_MIN;
-                wenv_status st = slope ? wenv_material_lobe_slope_cells(mat, k, wo, ggx ? GGX_X : N_X, ggx ? GGX_Y : N_Y,
-                                                                        wi, weight, omega, &count, &lobe_err)
-                                       : wenv_material_lobe_cells(mat, k, wo, N_THETA, N_PHI, wi, weight, omega, &count, &lobe_err);
-                if (st) {
-                    if (!atomic_exchange(&failed, 2))
-                        first_err = lobe_err;
-                    break;
-                }
-                for (size_t i = 0; i < count; i++, at++) {
-                    for (size_t c3 = 0; c3 < 3; c3++) {
-                        entry[c3 * rule->stride + at] = (float)wi[3 * i + c3];
-                        entry[(3 + c3) * rule->stride + at] = (float)weight[3 * i + c3];
+                if (lobe_is_black(lobe))
+                    continue;
+                /* one lobe's parts: the whole lobe, or a GGX lobe's core and tail */
+                size_t start = at;
+                int cut = slope && lobe_is_cut(lobe);
+                for (int part = 0; part < (cut ? 2 : 1); part++) {
+                    size_t count;
+                    wenv_error lobe_err = {0};
+                    wenv_slope_part sp = {cut ? GGX_CUT : 0.0, part};
+                    /* omega: each cell's footprint, radians (slope) or its solid angle (polar) */
+                    size_t nx = part ? TAIL_X : cut ? CORE_X : lobe_is_ggx(lobe) ? GGX_X : N_X;
+                    size_t ny = part ? TAIL_Y : cut ? CORE_Y : lobe_is_ggx(lobe) ? GGX_Y : N_Y;
+                    wenv_status st =
+                        slope ? wenv_material_lobe_slope_cells(mat, k, wo, nx, ny, sp, wi, weight, omega, &count, &lobe_err)
+                              : wenv_material_lobe_cells(mat, k, wo, N_THETA, N_PHI, wi, weight, omega, &count, &lobe_err);
+                    if (st) {
+                        if (!atomic_exchange(&failed, 2))
+                            first_err = lobe_err;
+                        break;
                     }
-                    double footprint = slope ? omega[i] : sqrt(fmax(omega[i], 0.0));
-                    entry[6 * rule->stride + at] = footprint > 0.0 ? (float)log2(footprint) : -64.0f;
+                    for (size_t i = 0; i < count; i++, at++) {
+                        for (size_t c3 = 0; c3 < 3; c3++) {
+                            entry[c3 * rule->stride + at] = (float)wi[3 * i + c3];
+                            entry[(3 + c3) * rule->stride + at] = (float)weight[3 * i + c3];
+                        }
+                        double footprint = slope ? omega[i] : sqrt(fmax(omega[i], 0.0));
+                        entry[6 * rule->stride + at] = footprint > 0.0 ? (float)log2(footprint) : -64.0f;
+                    }
                 }
+                at = start + rule->block[b++];
             }
         }
         free(wi);
@@ -259,7 +322,9 @@ wenv_status wenv_grazing_rule_create(wenv_grazing_rule **out, const wenv_materia
         }
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the grazing rules");
     }
-    drop_weightless_lobes(rule, per_lobe);
+    drop_weightless_lobes(rule, block, n_blocks);
+    free(rule->block);
+    rule->block = NULL;
     *out = rule;
     return WENV_OK;
 }
@@ -268,7 +333,8 @@ float wenv_grazing_blend(const wenv_grazing_rule *rule, float cos_v)
 {
     if (!rule)
         return 0.0f;
-    float t = (2.0f * rule->threshold - rule->rho_scale * (cos_v + rule->m_min)) / rule->threshold;
+    float th = rule->threshold * (1.0f - rule->face * cos_v);
+    float t = (2.0f * th - rule->rho_scale * (cos_v + rule->m_min)) / th;
     t = t < 0.0f ? 0.0f : (t > 1.0f ? 1.0f : t);
     return t * t * (3.0f - 2.0f * t);
 }
