@@ -73,6 +73,7 @@ typedef struct {
     wenv_wavelet_quality quality;        /* its quality (wenv_auto_choice_quality gives the right one) */
     wenv_sh_shading_quality sh_quality;
     double predicted_error; /* relative RMSE predicted at that level */
+    double head_on;         /* the lobes' albedo head-on over theirs at 80 degrees (autoquality.c) */
     wenv_auto_level_estimate levels[WENV_AUTO_LEVELS]; /* every level's (not filled for "sh") */
     int met;                /* whether some level within the budget is predicted to meet the target */
     size_t level_bytes;     /* the chosen level's memory, as counted against the budget */

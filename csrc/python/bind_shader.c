@@ -1091,14 +1091,14 @@ static PyObject *Shader_get_stats(ShaderObject *self, void *closure)
             else
                 PyList_SET_ITEM(levels, (Py_ssize_t)i, li);
         }
-        PyObject *info = !used || !level || !order || !levels ? NULL : Py_BuildValue("{s:O,s:O,s:s,s:d,s:d,s:d,s:d,s:d,s:d,s:O,s:d,s:d,s:O,s:O,s:d,s:d}", "level", level, "sh_order", order,
+        PyObject *info = !used || !level || !order || !levels ? NULL : Py_BuildValue("{s:O,s:O,s:s,s:d,s:d,s:d,s:d,s:d,s:d,s:O,s:d,s:d,s:O,s:O,s:d,s:d,s:d}", "level", level, "sh_order", order,
                                        "method", a->method->name, "predicted_error", a->predicted_error, "target_error",
                                        self->target_error, "contrast", chosen->contrast, "lights_share", chosen->lights_share,
                                        "light_dominance", chosen->light_dominance, "env_factor", chosen->env_factor,
                                        "met", a->met ? Py_True : Py_False, "memory_budget_mb", self->memory_budget_mb,
                                        "level_mb", (double)a->level_bytes / 1048576.0, "used_normal_samples", used,
                                        "levels", levels, "seconds", a->seconds,
-                                       "analysis_seconds", a->analysis_seconds);
+                                       "analysis_seconds", a->analysis_seconds, "head_on", a->head_on);
         Py_XDECREF(levels);
         Py_XDECREF(used);
         Py_XDECREF(level);
