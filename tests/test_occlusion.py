@@ -2,6 +2,9 @@
 occlusion masks it makes, and the reference that casts every pixel's ray.  Truth here is outside the
 code under test: a ray-triangle intersection written in numpy, and closed-form view factors."""
 import math
+import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -179,6 +182,25 @@ def test_bad_occlusion_arguments_are_named():
         wenv.reference(constant_environment(1.0, 64), wenv.Lambert(0.5), n, n, positions=p, occluders="roof")
     with pytest.raises(wenv.CancelledError):
         occ.occlusion(np.zeros((5000, 3), np.float32), np.tile(n, (5000, 1)), progress=lambda f: True)
+
+
+def test_a_cancelled_occlusion_keeps_nothing_of_its_block():
+    """A cancel leaves the later vertices of the block being cast unwritten; what the block kept was
+    read from them, a count of garbage hits copied (a crash when the heap held no zeros there).  In a
+    process whose fresh allocations are filled with a non-zero byte (glibc's MALLOC_PERTURB_), the
+    cancel is reported and nothing crashes."""
+    script = ("import numpy as np, wenv\n"
+              "v = np.float32([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]])\n"
+              "occ = wenv.Occluders(v, np.uint32([[0, 1, 2], [0, 2, 3]]))\n"
+              "n = np.tile(np.float32([0, 0, 1]), (5000, 1))\n"
+              "try:\n"
+              "    occ.occlusion(np.zeros((5000, 3), np.float32), n, progress=lambda f: True)\n"
+              "except wenv.CancelledError:\n"
+              "    print('cancelled')\n")
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    run = subprocess.run([sys.executable, "-c", script], env={**os.environ, "MALLOC_PERTURB_": "204", "PYTHONPATH": root},
+                         capture_output=True, text=True, timeout=300, cwd=root)
+    assert run.returncode == 0 and run.stdout.strip() == "cancelled", (run.returncode, run.stderr[-2000:])
 
 
 def test_occluded_tests_single_rays():

@@ -265,8 +265,9 @@ static wenv_status cast(wenv_occlusion *out, const wenv_occluders *occ, const fl
             free(uv);
             free(tri);
         }
-        /* kept in vertex order: a vertex with no blocked texel keeps no mask */
-        for (size_t b = 0; b < count && !failed; b++) {
+        /* kept in vertex order: a vertex with no blocked texel keeps no mask.  A cancel leaves the
+         * block's later counts unwritten, so nothing of a cancelled block is kept. */
+        for (size_t b = 0; b < count && !failed && !cancelled; b++) {
             size_t i = first + b;
             if (!block_count[b]) {
                 o.slot[i] = -1;
