@@ -532,8 +532,10 @@ wenv_status wenv_material_lobe_slope_cells(const wenv_material *mat, size_t i, c
                 double h[3];
                 for (int q = 0; q < 3; q++)
                     h[q] = fwi[3 * f + (size_t)q] + wo[q];
-                double tan2 = (h[0] * h[0] + h[1] * h[1]) / fmax(h[2] * h[2], DBL_MIN), p = t2 + tan2, q = a2 + tan2;
-                scale = (1.0 - wenv_ggx_core_share(lobe->alpha, part.cut, tan2)) * (a2 * p * p) / (t2 * q * q);
+                double tan2 = (h[0] * h[0] + h[1] * h[1]) / fmax(h[2] * h[2], DBL_MIN);
+                double grid_q = t2 + tan2, lobe_q = a2 + tan2; /* GGX's D is alpha^2 / (pi cos^4 q^2) */
+                scale = (1.0 - wenv_ggx_core_share(lobe->alpha, part.cut, tan2)) * (a2 * grid_q * grid_q) /
+                        (t2 * lobe_q * lobe_q);
             }
             for (int q = 0; q < 3; q++)
                 weight[3 * k + (size_t)q] += rgb[q] * fmass[f] * scale;
