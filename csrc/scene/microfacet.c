@@ -530,16 +530,9 @@ wenv_status wenv_lobe_slope_cells(const wenv_lobe *lobe, double cut, const doubl
         double df = (f_hi - f_lo) / (double)n_x;
         for (size_t i = 0; i < n_x; i++, n++) {
             double *d = wi + 3 * n;
-            double u = f_lo + ((double)i + 0.5) * df, x, pdf;
-            if (g.ggx && cut > 0.0) {
-                double v = cut_inverse(&row, u), c = cos(v);
-                x = row.b * tan(v);
-                pdf = cut_g(row.cb, v) * c * c / (row.b * row.sum[CUT_PANELS]);
-            } else {
-                x = slope_inverse(&g, &row, u);
-                pdf = slope_conditional_pdf(&g, &row, x);
-            }
-            double dx = df / pdf;
+            double u = f_lo + ((double)i + 0.5) * df;
+            double x = g.ggx && cut > 0.0 ? row.b * tan(cut_inverse(&row, u)) : slope_inverse(&g, &row, u);
+            double dx = df / slope_conditional_pdf(&g, &row, x);
             double vh, ch;
             slope_reflect(x, y, w, d, &vh, &ch);
             mass[n] = size[n] = 0.0;

@@ -119,7 +119,6 @@ struct wenv_grazing_rule {
     float face; /* the threshold is threshold (1 - face cos_v) */
     size_t stride; /* n_nodes rounded up to a multiple of 16: one field's array */
     float *nodes;  /* ENTRIES x NODE_FLOATS x stride */
-    size_t *block; /* each lobe's number of nodes, in order (while the rule is made) */
     wenv_grazing_nodes_fn read_nodes; /* the node loop for this CPU */
 };
 
@@ -128,7 +127,6 @@ void wenv_grazing_rule_free(wenv_grazing_rule *rule)
     if (!rule)
         return;
     free(rule->nodes);
-    free(rule->block);
     free(rule);
 }
 
@@ -188,7 +186,7 @@ static int lobe_is_ggx(const wenv_lobe *lobe)
 /* Whether a lobe on the slope grid is cut into a core and a tail. */
 static int lobe_is_cut(const wenv_lobe *lobe)
 {
-    return lobe->distribution == WENV_NDF_GGX && lobe->alpha >= GGX_ALPHA_MIN && lobe->alpha <= GGX_CUT_ALPHA_MAX;
+    return lobe_is_ggx(lobe) && lobe->alpha <= GGX_CUT_ALPHA_MAX;
 }
 
 wenv_status wenv_grazing_rule_create(wenv_grazing_rule **out, const wenv_material *mat, size_t local_n,
@@ -222,6 +220,7 @@ wenv_status wenv_grazing_rule_create(wenv_grazing_rule **out, const wenv_materia
     }
     /* each lobe's block of nodes (weightless padding to a multiple of 16) */
     size_t n_blocks = 0, per_lobe_max = 0;
+    int any_cut = 0;
     for (size_t k = 0; k < n_lobes; k++) {
         const wenv_lobe *lobe = wenv_material_lobe(mat, k);
         if (lobe_is_black(lobe))
@@ -230,23 +229,21 @@ wenv_status wenv_grazing_rule_create(wenv_grazing_rule **out, const wenv_materia
                        : lobe_is_cut(lobe) ? CORE_X * CORE_Y + TAIL_X * TAIL_Y
                        : lobe_is_ggx(lobe) ? GGX_X * GGX_Y
                                            : N_X * N_Y;
+        any_cut |= slope && lobe_is_cut(lobe);
         block[n_blocks] = (nodes + 15) / 16 * 16;
         per_lobe_max = block[n_blocks] > per_lobe_max ? block[n_blocks] : per_lobe_max;
         rule->n_nodes += block[n_blocks++];
     }
-    rule->block = block;
     rule->rho_scale = (float)(4.0 * (double)local_n * m_min / M_PI);
     rule->m_min = (float)m_min;
     rule->threshold = (float)threshold;
     rule->read_nodes = wenv_grazing_nodes_for_cpu();
-    int any_cut = 0;
-    for (size_t k = 0; k < n_lobes; k++)
-        any_cut |= slope && !lobe_is_black(wenv_material_lobe(mat, k)) && lobe_is_cut(wenv_material_lobe(mat, k));
     double kf = any_cut ? FACING_CUT : 0.0, sc = (double)rule->rho_scale;
     rule->face = (float)kf;
     /* the blend is 0 from rho = 2 threshold (1 - kf cos) up */
     double c_hi = (2.0 * threshold - sc * m_min) / (sc + 2.0 * threshold * kf);
     if (!(c_hi > WENV_GRAZING_Z)) { /* the local map resolves this material's lobes at every view */
+        free(block);
         wenv_grazing_rule_free(rule);
         return WENV_OK;
     }
@@ -257,6 +254,7 @@ wenv_status wenv_grazing_rule_create(wenv_grazing_rule **out, const wenv_materia
     /* the padding's weights are 0: it reads the lighting and adds nothing */
     rule->nodes = calloc(ENTRIES * rule->stride * NODE_FLOATS, sizeof(float));
     if (!rule->nodes) {
+        free(block);
         wenv_grazing_rule_free(rule);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the grazing rules");
     }
@@ -309,12 +307,13 @@ wenv_status wenv_grazing_rule_create(wenv_grazing_rule **out, const wenv_materia
                         entry[6 * rule->stride + at] = footprint > 0.0 ? (float)log2(footprint) : -64.0f;
                     }
                 }
-                at = start + rule->block[b++];
+                at = start + block[b++];
             }
         }
         free(wi);
     }
     if (failed) {
+        free(block);
         wenv_grazing_rule_free(rule);
         if (failed == 2) {
             *err = first_err;
@@ -323,8 +322,7 @@ wenv_status wenv_grazing_rule_create(wenv_grazing_rule **out, const wenv_materia
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the grazing rules");
     }
     drop_weightless_lobes(rule, block, n_blocks);
-    free(rule->block);
-    rule->block = NULL;
+    free(block);
     *out = rule;
     return WENV_OK;
 }
