@@ -322,10 +322,10 @@ def bake(scene, depsgraph, obj, image, view, blend_data, uv_map=None, margin=DEF
 # What changed, in the panel's words, per part of state_of
 CHANGES = {"mesh": "the object moved or its mesh changed", "materials": "a material changed",
            "world": "the World changed", "lamps": "a lamp changed", "settings": "the scene's wenv settings changed",
-           "sequences": "an image sequence shows another frame"}
+           "frames": "an image sequence or movie shows another frame"}
 # read from a few datablocks' settings: the panel compares them at each redraw (a frame change need
 # not update the depsgraph)
-CHEAP = ("world", "lamps", "settings", "sequences")
+CHEAP = ("world", "lamps", "settings", "frames")
 
 
 def _key(value):
@@ -362,8 +362,8 @@ def state_of(scene, depsgraph, obj, parts=tuple(CHANGES)):
         st = scene.wenv
         out["settings"] = _key((st.quality, st.shadows, st.tone_mapping, round(st.max_luminance, 6),
                                 round(st.target_error, 6)))
-    if "sequences" in parts:
-        out["sequences"] = _key(textures.sequence_files(obj))
+    if "frames" in parts:
+        out["frames"] = _key(textures.frames_shown(obj))
     return out
 
 

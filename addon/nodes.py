@@ -21,9 +21,9 @@ LUMINANCE = np.array([0.2126729, 0.7151522, 0.0721750]) / 1.0000001
 
 # The Image Texture settings read as Cycles reads them; the others are read as Linear (noted).
 INTERPOLATIONS = ("Linear", "Closest")
-# The image sources read: a file (packed or not), a generated image, UDIM tiles and an image
-# sequence (the frame the scene's shows); a movie is named
-IMAGE_SOURCES = ("FILE", "GENERATED", "TILED", "SEQUENCE")
+# The image sources read: a file (packed or not), a generated image, UDIM tiles, and an image
+# sequence or a movie (the frame the scene's shows)
+IMAGE_SOURCES = ("FILE", "GENERATED", "TILED", "SEQUENCE", "MOVIE")
 
 class Unsupported(Exception):
     """A node, output or setting the evaluation does not read (its message says which)."""

@@ -6,6 +6,8 @@ over the vertex's share of the image (mip-mapped), so that a texture finer than 
 rather than aliases.  The core then shades each vertex with its own values (Shader.shade(...,
 base_color=, roughness=, ...)): a colour at the cost of a multiply-add, the inputs that shape the
 lobes through a family of materials.  What is not read yet is named, never used silently."""
+import collections
+
 import numpy as np
 
 from . import closures, engine, materials, meshes, nodes, world
@@ -75,30 +77,32 @@ class ImageCache:
     def mean(self, node):
         """An Image Texture node's image's mean linear colour (its pyramid's last level), read once
         per state a panel can check cheaply at each redraw -- its name, size, file, packing, whether
-        it has unsaved edits and, for a sequence, the frame's file -- rather than by its pixels."""
-        image, frame_file = node.image, sequence_file(node)
+        it has unsaved edits and, for a sequence or movie, the frame shown -- rather than by its pixels."""
+        image, frame = node.image, frame_shown(node)
         state = (image.name_full, tuple(image.size), image.filepath_raw, image.packed_file is not None,
                  image.is_dirty, image.colorspace_settings.name, image.source, tuple(t.number for t in image.tiles),
-                 frame_file)
+                 frame)
         means = self._means
         if state not in means:
             if len(means) > 64:
                 means.clear()
-            means[state] = tuple(float(c) for c in self.mean_of(image, frame_file))
+            means[state] = tuple(float(c) for c in self.mean_of(image, frame))
         return means[state]
 
-    def levels(self, image, frame_file=None):
+    def levels(self, image, frame=None):
         """The image's pyramid.  An image with no unsaved edits (a file or packed image as loaded)
         is known by its name, size, file and colour space, and its pixels are not read again; one
-        with edits (painted, or set by a script) is read and known by its pixels.  frame_file: an
-        image sequence's file for the frame shown (sequence_file), read by Blender's own loader."""
+        with edits (painted, or set by a script) is read and known by its pixels.  frame: the Frame
+        an image sequence or movie shows (frame_shown), read by Blender's own loader or decoder."""
         state = (tuple(image.size), image.filepath_raw, image.packed_file is not None, image.source,
-                 image.colorspace_settings.name, frame_file)
+                 image.colorspace_settings.name, frame)
         held = self._pyramids.get(image.name_full)
-        if held is not None and (frame_file is not None or not image.is_dirty) and held[2] == state:
+        if held is not None and (frame is not None or not image.is_dirty) and held[2] == state:
             return held[1]
-        if frame_file is not None:
-            rgba = _file_pixels(image, frame_file, "frame")[::-1]
+        if frame is not None and image.source == "MOVIE":
+            rgba = _movie_pixels(image, frame)[::-1]
+        elif frame is not None:
+            rgba = _file_pixels(image, frame.path, "frame")[::-1]
         else:
             rgba = world.image_pixels(image, "Texture image")[::-1]  # row 0 the bottom, as v = 0 is
         key = (engine.fingerprint(rgba), image.colorspace_settings.name)
@@ -134,11 +138,11 @@ class ImageCache:
         self._pyramids[("tiles", image.name_full)] = (state, out)
         return out
 
-    def mean_of(self, image, frame_file=None):
+    def mean_of(self, image, frame=None):
         """levels()[-1] of an image, or the tiles' mean for a UDIM image (each tile a unit of UV)."""
         if image.source == "TILED":
             return np.mean([levels[-1][0, 0] for levels in self.tiles(image).values()], axis=0)
-        return self.levels(image, frame_file)[-1][0, 0]
+        return self.levels(image, frame)[-1][0, 0]
 
 
 def _tile_pixels(image, tile, packed):
@@ -194,10 +198,37 @@ def _file_pixels(image, path, what):
     return rgba
 
 
-def sequence_frame(user, scene_frame):
-    """The frame of an image sequence an Image Texture's image user shows at the scene's frame, as
-    Blender's BKE_image_user_frame_get computes it (Cycles asks it at every render): counted from the
-    user's Start Frame, cycled over its Frames or held at their ends, then moved by its Offset."""
+def _movie_pixels(image, frame):
+    """RGBA (H, W, 4) linear, row 0 the top, of a movie's `frame` (a Frame) as Blender decodes it.
+    Image.pixels hands out the frame Blender last decoded for the image, and only a texture's image
+    user (whose frame a script may set) asks for a given one: a texture datablock, removed at once,
+    asks for it.  A movie Blender cannot open is a SetupError naming its file."""
+    import bpy
+
+    reader = bpy.data.textures.new(".wenv movie frame", "IMAGE")
+    try:
+        reader.image = image
+        reader.image_user.frame_current = frame.number
+        reader.evaluate((0.0, 0.0, 0.0))
+        rgba = world.image_pixels(image, "Texture movie")
+    finally:
+        bpy.data.textures.remove(reader)
+    if not np.isfinite(rgba[..., :3]).all():
+        raise world.SetupError(f"Texture image '{image.name}' has a texel that is not finite (NaN or infinite) in "
+                               f"frame {frame.number}: fix or replace the movie")
+    return rgba
+
+
+# The frame an image sequence or movie shows: the file read (a sequence's frame's own file, or the
+# movie) and the frame's number
+Frame = collections.namedtuple("Frame", "path number")
+
+
+def user_frame(user, scene_frame):
+    """The frame of an image sequence or movie an Image Texture's image user shows at the scene's
+    frame, as Blender's BKE_image_user_frame_get computes it (Cycles asks it at every render): counted
+    from the user's Start Frame, cycled over its Frames or held at their ends, then moved by its
+    Offset.  (A movie's frame past its ends shows its first or last, as Blender decodes it.)"""
     length = user.frame_duration
     if length == 0:
         return 0
@@ -231,22 +262,23 @@ def sequence_path(filepath, frame):
     return os.path.join(folder, stem[:start] + number + stem[end:] + ext)
 
 
-def sequence_file(node):
-    """The file an Image Texture node's image sequence shows at the current scene frame (absolute),
-    or None for any other image."""
+def frame_shown(node):
+    """The Frame an Image Texture node's image sequence or movie shows at the current scene frame
+    (its file an absolute path), or None for any other image."""
     image = node.image
-    if image is None or image.source != "SEQUENCE":
+    if image is None or image.source not in ("SEQUENCE", "MOVIE"):
         return None
     import bpy
 
     scene = bpy.context.scene
-    frame = sequence_frame(node.image_user, scene.frame_current if scene is not None else 1)
-    return bpy.path.abspath(sequence_path(image.filepath_raw, frame), library=image.library)
+    number = user_frame(node.image_user, scene.frame_current if scene is not None else 1)
+    path = sequence_path(image.filepath_raw, number) if image.source == "SEQUENCE" else image.filepath_raw
+    return Frame(bpy.path.abspath(path, library=image.library), number)
 
 
-def sequence_files(obj):
-    """(material, node, file) of every Image Texture in obj's materials (node groups included) whose
-    image sequence shows a file at the current frame: what a bake of obj read of its sequences."""
+def frames_shown(obj):
+    """(material, node, Frame) of every Image Texture in obj's materials (node groups included) whose
+    image sequence or movie shows a frame: what a bake of obj read of them."""
     out, seen = [], set()
 
     def walk(tree, owner):
@@ -255,9 +287,9 @@ def sequence_files(obj):
         seen.add(tree.name_full)
         for node in tree.nodes:
             if node.bl_idname == "ShaderNodeTexImage":
-                path = sequence_file(node)
-                if path is not None:
-                    out.append((owner, node.name, path))
+                frame = frame_shown(node)
+                if frame is not None:
+                    out.append((owner, node.name, frame))
             elif node.bl_idname == "ShaderNodeGroup":
                 walk(node.node_tree, owner)
 
@@ -288,10 +320,10 @@ images = ImageCache()
 
 
 def pyramids(node):
-    """What sample_image reads of an Image Texture node's image: its pyramid (an image sequence's at
-    the frame shown), or a UDIM image's tiles'."""
+    """What sample_image reads of an Image Texture node's image: its pyramid (an image sequence's or
+    movie's at the frame shown), or a UDIM image's tiles'."""
     image = node.image
-    return images.tiles(image) if image.source == "TILED" else images.levels(image, sequence_file(node))
+    return images.tiles(image) if image.source == "TILED" else images.levels(image, frame_shown(node))
 
 
 # ---------------------------------------------------------------------------------------------

@@ -924,11 +924,11 @@ def test_a_textured_base_color_is_read_at_each_vertex(scene):
     np.testing.assert_allclose(attribute(plane)[1], want, rtol=1e-4, atol=1e-5)
 
 
-def flat_pngs(paths_colours):
-    """Writes a flat 4 x 4 PNG of each RGB at its path, {path: RGB}."""
+def flat_pngs(paths_colours, size=4):
+    """Writes a flat size x size PNG of each RGB at its path, {path: RGB}."""
     for path, rgb in paths_colours.items():
-        flat = bpy.data.images.new("flat png", 4, 4)
-        flat.pixels.foreach_set(np.tile(np.append(np.float32(rgb), np.float32(1.0)), 16))
+        flat = bpy.data.images.new("flat png", size, size)
+        flat.pixels.foreach_set(np.tile(np.append(np.float32(rgb), np.float32(1.0)), size * size))
         flat.filepath_raw = str(path)
         flat.file_format = "PNG"
         flat.save()
@@ -1017,9 +1017,9 @@ def test_an_image_sequence_shows_the_frame_blender_gives(scene, tmp_path):
             scene.frame_set(frame)
             evaluated = mat.evaluated_get(bpy.context.evaluated_depsgraph_get()).node_tree.nodes["Image Texture"]
             shown = evaluated.image_user.frame_current
-            assert textures.sequence_frame(user, frame) == shown, (cyclic, frame)
+            assert textures.user_frame(user, frame) == shown, (cyclic, frame)
             path = image.filepath_from_user(image_user=evaluated.image_user)
-            assert textures.sequence_file(tex) == bpy.path.abspath(path)
+            assert textures.frame_shown(tex) == (bpy.path.abspath(path), shown)
             got = plan_of(scene, plane).items[0][1].inputs["base_color"]
             np.testing.assert_allclose(got, np.tile(np.float32(colours[shown]), (len(got), 1)), atol=1 / 255)
             seen.add(shown)
@@ -1033,6 +1033,70 @@ def test_an_image_sequence_shows_the_frame_blender_gives(scene, tmp_path):
     textures.images.clear()
     with pytest.raises(RuntimeError, match="frame could not be loaded: .*wood_003.png"):
         shade_op(view="CAMERA")
+
+
+def flat_movie(folder, colours):
+    """A QuickTime movie (PNG frames, lossless) of flat 16 x 16 frames, {frame number 1..n: RGB},
+    rendered by Blender's sequencer in a scene of its own, loaded as a Non-Color image."""
+    flat_pngs({folder / f"still_{number:03d}.png": rgb for number, rgb in colours.items()}, size=16)
+    maker = bpy.data.scenes.new("movie maker")
+    try:
+        maker.render.resolution_x = maker.render.resolution_y = 16
+        maker.render.resolution_percentage = 100
+        maker.frame_start, maker.frame_end = 1, len(colours)
+        maker.view_settings.view_transform = "Standard"
+        editor = maker.sequence_editor_create()
+        strips = editor.strips if hasattr(editor, "strips") else editor.sequences  # renamed in Blender 5.0
+        strip = strips.new_image("stills", str(folder / "still_001.png"), 1, 1)
+        for number in sorted(colours)[1:]:
+            strip.elements.append(f"still_{number:03d}.png")
+        strip.frame_final_duration = len(colours)
+        settings = maker.render.image_settings
+        if hasattr(settings, "media_type"):  # Blender 5.0 chooses video before the format
+            settings.media_type = "VIDEO"
+        settings.file_format = "FFMPEG"
+        maker.render.ffmpeg.format, maker.render.ffmpeg.codec = "QUICKTIME", "PNG"
+        maker.render.filepath = str(folder / "flat.mov")
+        bpy.ops.render.render(animation=True, scene=maker.name)
+    finally:
+        bpy.data.scenes.remove(maker)
+    image = bpy.data.images.load(str(folder / "flat.mov"))
+    image.colorspace_settings.name = "Non-Color"
+    return image
+
+
+def test_a_movie_shows_the_frame_blender_gives(scene, tmp_path):
+    """A Base Color from a movie of five flat frames (Frames 5, Start Frame 3), cyclic and held with
+    Offset 1, over scene frames before, in and past its range: every vertex reads the frame Blender's
+    own image user shows (its evaluated copy's, with Auto Refresh on), the first or last one where
+    that frame lies past the movie's ends, as Blender decodes it; the material has no note."""
+    from addon import textures
+    env_world(scene, "sunset")
+    colours = {k: (0.15 * k, 0.5, 1.0 - 0.15 * k) for k in range(1, 6)}
+    image = flat_movie(tmp_path, colours)
+    assert image.source == "MOVIE" and image.frame_duration == 5
+    plane, mat = textured_plane(image)
+    tex = mat.node_tree.nodes["Image Texture"]
+    user = tex.image_user
+    user.frame_duration, user.frame_start, user.use_auto_refresh = 5, 3, True
+    seen, shown_frames = set(), set()
+    for cyclic, offset in ((True, 0), (False, 1)):
+        user.use_cyclic, user.frame_offset = cyclic, offset
+        for frame in range(-1, 12):
+            scene.frame_set(frame)
+            evaluated = mat.evaluated_get(bpy.context.evaluated_depsgraph_get()).node_tree.nodes["Image Texture"]
+            shown = evaluated.image_user.frame_current
+            assert textures.user_frame(user, frame) == shown, (cyclic, frame)
+            assert textures.frame_shown(tex) == (bpy.path.abspath(image.filepath_raw), shown)
+            shown_frames.add(textures.frames_shown(plane)[0][2])
+            got = plan_of(scene, plane).items[0][1].inputs["base_color"]
+            decoded = colours[min(max(shown, 1), 5)]
+            np.testing.assert_allclose(got, np.tile(np.float32(decoded), (len(got), 1)), atol=1.5 / 255,
+                                       err_msg=f"cyclic {cyclic}, scene frame {frame}, movie frame {shown}")
+            seen.add(shown)
+    assert seen == {1, 2, 3, 4, 5, 6}  # cycled over 1-5; held at 1 and 5, then moved by the offset
+    assert len(shown_frames) == 6
+    assert not any("Base Color" in n for n in materials.principled_notes(mat))
 
 
 def test_a_texture_finer_than_the_mesh_averages(scene):

@@ -473,9 +473,9 @@ def test_a_bake_of_an_image_sequence_is_stale_on_another_frame(scene, tmp_path):
     scene.frame_set(5)  # held at frame 3: the same file
     assert bake.staleness(image, scene) is None
     scene.frame_set(2)
-    assert bake.staleness(image, scene) == "an image sequence shows another frame"
+    assert bake.staleness(image, scene) == "an image sequence or movie shows another frame"
     record = json.loads(image.wenv.state_key)
-    del record["sequences"]
+    del record["frames"]
     image.wenv.state_key = json.dumps(record)
     assert bake.staleness(image, scene) is None
 
