@@ -186,7 +186,7 @@ def _refined(plan, report, cancelled):
     call report(fraction) and stop once `cancelled` (a threading.Event) is set."""
     plan.tone = "NONE"
     plan.cull = False
-    results = plan.refine(plan.quality, 0.05, report, cancelled)
+    results = plan.refine(plan.quality, 0.25, report, cancelled)
     if results is None:
         raise engine.CancelledError("the bake was cancelled")
     return results[0][2]
@@ -360,7 +360,7 @@ def state_of(scene, depsgraph, obj, parts=tuple(CHANGES)):
         out["lamps"] = _key(lamps.signature(scene))
     if "settings" in parts:
         st = scene.wenv
-        out["settings"] = _key((st.quality, st.shadows, st.tone_mapping, round(st.max_luminance, 6),
+        out["settings"] = _key((st.quality, st.shadows, st.bounce_light, st.tone_mapping, round(st.max_luminance, 6),
                                 round(st.target_error, 6)))
     if "frames" in parts:
         out["frames"] = _key(textures.frames_shown(obj))

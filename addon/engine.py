@@ -353,7 +353,7 @@ def diffuse_light(shader, data, occlusion, lamps=None):
     """The light each vertex of `data` sends back to what it blocks: its Lambertian part's, head-on,
     with its shadows (and its own inputs, read from textures: data.inputs), the lamps' included."""
     kw = dict(lamps=lamps, positions=data.positions) if lamps else {}
-    return shader.diffuse_light(_shading_normals(data), occlusion=occlusion, **kw, **data.inputs)
+    return shader.diffuse_light(_shading_normals(data), occlusion=occlusion, **kw, **_bent(data), **data.inputs)
 
 
 def make_lamps(settings):
@@ -372,6 +372,14 @@ def make_lamps(settings):
 def _shading_normals(data):
     """The normals shading reads: a normal map's where there is one, else the mesh's."""
     return data.normals if data.shading_normals is None else data.shading_normals
+
+
+def _bent(data):
+    """The keywords telling the core which normals a normal map or Bump node bent, so that their
+    Lambertian part receives its light as Cycles' bump terminator lets it through."""
+    if data.shading_normals is None:
+        return {}
+    return {"smooth_normals": data.normals, "bump_map_correction": data.bump_map_correction}
 
 
 # ---------------------------------------------------------------------------------------------
@@ -582,14 +590,15 @@ def shade_step(shader, data, view, cull, out, first, budget, scene=None):
     next step starts and how many there are to shade.  An orthographic view is shaded whole."""
     if view.perspective:
         kw = {"cull": True, "view_projection": view.view_projection} if cull and view.view_projection is not None else {}
-        kw.update(scene or {}, **data.inputs)
+        kw.update(scene or {}, **_bent(data), **data.inputs)
         _, at_eye = _sparing_the_eye(lambda p: shader.shade_mesh(p, _shading_normals(data), view.eye, out=out,
                                                                  first=first, budget=budget, **kw), data, view.eye)
         if at_eye is not None:
             out[at_eye] = 0.0
         stats = shader.stats
         return stats["next_vertex"], stats.get("visible_vertices", data.count)
-    out[:] = shader.shade(_shading_normals(data), view.direction, **_with_positions(scene, data), **data.inputs)
+    out[:] = shader.shade(_shading_normals(data), view.direction, **_with_positions(scene, data), **_bent(data),
+                          **data.inputs)
     return data.count, data.count
 
 
@@ -612,10 +621,10 @@ def shade_arrays(shader, data, view, cull=False, scene=None):
     the eye and on screen (the rest are black), else all (None).  A vertex at the eye is black.
     `scene`: the keywords of shading with shadows (occlusion, bounce) and lamps, or None."""
     if not view.perspective:
-        return shader.shade(_shading_normals(data), view.direction, **_with_positions(scene, data),
+        return shader.shade(_shading_normals(data), view.direction, **_with_positions(scene, data), **_bent(data),
                             **data.inputs), None
     seen = None
-    kw = dict(scene or {}, **data.inputs)
+    kw = dict(scene or {}, **_bent(data), **data.inputs)
     if cull and view.view_projection is not None:
         seen = visible_vertices(data, view)
         kw.update(cull=True, view_projection=view.view_projection)

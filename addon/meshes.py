@@ -10,7 +10,7 @@ class MeshData:
     position is not finite, which are left black."""
 
     __slots__ = ("domain", "positions", "normals", "slots", "count", "notes", "unplaced", "triangles", "inputs",
-                 "textured", "shading_normals", "term_weights", "term_inputs", "sites")
+                 "textured", "shading_normals", "bump_map_correction", "term_weights", "term_inputs", "sites")
 
     def __init__(self, domain, positions, normals, slots, notes=(), unplaced=None, triangles=None, inputs=None):
         self.domain = domain
@@ -26,8 +26,10 @@ class MeshData:
         self.inputs = dict(inputs or {})
         self.textured = {}
         # (n, 3) float32 world normals a normal map bends the shading to (textures.py), or None: the
-        # mesh's, which the shadows' rays keep
+        # mesh's, which the shadows' rays keep; and whether Cycles' Bump Map Correction (the
+        # materials') masks the bent Lambertian part's grazing light
         self.shading_normals = None
+        self.bump_map_correction = True
         # per material slot of a mixture of shader nodes: each term's weight, (3,) or (n, 3)
         # (textures.read_term_weights), and each term's inputs read from textures, {keyword: (n,) or
         # (n, 3)}

@@ -146,10 +146,13 @@ class WENV_SceneSettings(bpy.types.PropertyGroup):
                                              "materials stay still, refine the colours in the background to "
                                              "High (within 1 % of the reference for roughness 0.1 and up); any "
                                              "change shows the quality set at once and drops the refinement")
-    shadows: BoolProperty(name="Shadows and Bounce Light", default=True,
-                          description="The scene's meshes block each vertex's sky (rays cast once per mesh state) "
-                                      "and send their diffuse light back into what they shadow.  A convex mesh "
-                                      "alone is shaded as without: it blocks nothing")
+    shadows: BoolProperty(name="Shadows", default=True,
+                          description="The scene's meshes block each vertex's sky and lamps (rays cast once per "
+                                      "mesh state).  A convex mesh alone is shaded as without: it blocks nothing")
+    bounce_light: BoolProperty(name="Bounce Light", default=True,
+                               description="With Shadows, what a mesh blocks sends back its diffuse light (the "
+                                           "first bounce, which fills creases as Cycles' bounces do); off, the "
+                                           "blocked directions are black, as Cycles with Max Bounces 0")
     preview_changes: BoolProperty(name="Draft While Remaking", default=True,
                                   description="In live mode at Default, High or Auto, a change that makes the "
                                               "setting remake its slices (a new World image, a material edit) "
@@ -209,7 +212,7 @@ class WENV_ImageSettings(bpy.types.PropertyGroup):
 class WENV_ObjectSettings(bpy.types.PropertyGroup):
     casts_shadows: BoolProperty(name="Casts Shadows", default=True,
                                 description="This mesh blocks the sky of the meshes wenv shades (itself included) "
-                                            "when the scene's Shadows and Bounce Light is on")
+                                            "when the scene's Shadows is on")
 
 
 class WENV_ViewportBackup(bpy.types.PropertyGroup):

@@ -26,6 +26,7 @@ def _with_inputs(part, inputs):
     copy = meshes.MeshData(part.domain, part.positions, part.normals, None,
                            inputs={k: np.ascontiguousarray(a) for k, a in inputs.items()})
     copy.shading_normals = part.shading_normals
+    copy.bump_map_correction = part.bump_map_correction
     return copy
 
 
@@ -36,7 +37,7 @@ class ShadingPlan:
     the colours back on the main thread, by object name."""
 
     def __init__(self, quality, spec, environment, view, tone, l_max, target_error=0.01, memory_budget_mb=1024,
-                 cull=False, shadows=False):
+                 cull=False, shadows=False, bounce=True):
         self.quality = quality  # what compute() shades at
         self.chosen = quality  # the scene's setting: quality is PREVIEW_QUALITY while this one is made
         self.cull = cull  # shade only the vertices a viewport sees (engine.shade_arrays)
@@ -49,6 +50,7 @@ class ShadingPlan:
         self.l_max = l_max
         self.items = []  # (object name, MeshData, material keys per slot)
         self.shadows = shadows  # shade with the scene in the way (engine.shadows)
+        self.bounce = bounce  # with shadows, what blocks sends back its diffuse light (else black)
         self.casts = []  # per item: whether it blocks light (the object's Casts Shadows)
         self.blockers = []  # (positions, triangles) of the other meshes that block light
         self.lamps = []  # the scene's lamps (wenv.Lamp: no Blender data)
@@ -74,6 +76,7 @@ class ShadingPlan:
                                            inputs={k: np.ascontiguousarray(a[sel]) for k, a in mine.items()})
                     if data.shading_normals is not None:
                         part.shading_normals = np.ascontiguousarray(data.shading_normals[sel])
+                        part.bump_map_correction = data.bump_map_correction
                 parts.append((s, sel, part))
             yield name, data, keys, parts
 
@@ -155,8 +158,8 @@ class ShadingPlan:
 
     def _scenes(self, quality, work, cancelled=None, report=None):
         """Per part of `work`, the keywords of shading it with the scene in the way: its occlusion
-        against every blocking mesh, and as bounce the light every occluder vertex sends back (the
-        shaded parts' diffuse light; black for the blockers not shaded).  None without shadows.
+        against every blocking mesh, and with bounce light the light every occluder vertex sends back
+        (the shaded parts' diffuse light; black for the blockers not shaded).  None without shadows.
         report(fraction) as the occlusions are cast; `cancelled` (a threading.Event) stops them."""
         lit = {"lamps": self.lamps} if self.lamps else None
         if not self.shadows:
@@ -182,6 +185,9 @@ class ShadingPlan:
                     self.notes.append(note)
                 scenes.append(None)
                 continue
+            scenes.append(occlusion)
+            if not self.bounce:
+                continue
             made_by = (quality, self.world.signature, key, self.target_error, self.memory_budget_mb,
                        engine.fingerprint(*(part.inputs[k] for k in sorted(part.inputs))) if part.inputs else None,
                        tuple(sorted(part.inputs)), self.lamps_key)
@@ -190,8 +196,8 @@ class ShadingPlan:
                 light = engine.shadows.light(occlusion, made_by,
                                              lambda: engine.diffuse_light(shader, taken, occlusion, self.lamps))
             bounce[offsets[i] + np.flatnonzero(sel)] += light if weight is None else weight * light
-            scenes.append(occlusion)
-        return [dict(occlusion=o, bounce=bounce, **(lit or {})) if o is not None else lit for o in scenes]
+        return [dict(occlusion=o, bounce=bounce if self.bounce else None, **(lit or {})) if o is not None else lit
+                for o in scenes]
 
     def compute(self, rays=None):
         """Shades every part; rays(fraction), if given, while their occlusions are cast."""
@@ -286,7 +292,8 @@ def new_plan(scene, view, images, cull=None, shadows=None):
     spec = world.world_spec(scene.world)
     plan = ShadingPlan(engine.quality_value(st.quality), spec, world.environment(spec, images), view, st.tone_mapping,
                        st.max_luminance, st.target_error / 100.0, st.memory_budget,
-                       cull=st.shade_only_seen if cull is None else cull, shadows=st.shadows if shadows is None else shadows)
+                       cull=st.shade_only_seen if cull is None else cull, shadows=st.shadows if shadows is None else shadows,
+                       bounce=st.bounce_light)
     note = world.image_note(spec, images)
     if note:
         plan.notes.append(note)

@@ -574,6 +574,17 @@ SMOOTH_ORDER = ("roughness", "specular_ior_level", "coat_roughness", "coat_weigh
                 "sheen_weight", "specular_tint", "sheen_tint")
 
 
+def _at_most_distinct(rows, limit):
+    """Whether `rows` (m, k) hold at most `limit` distinct rows: a pass per distinct row found, not a
+    sort (a bake's million texels)."""
+    rest = rows
+    for _ in range(limit):
+        rest = rest[np.any(rest != rest[0], axis=1)]
+        if not len(rest):
+            return True
+    return False
+
+
 def _within_family_limits(inputs, rows, where):
     """Keeps inputs ({core keyword: array over a mesh's rows}, read at `rows`) within what the core
     shades per vertex: values of a few distinct materials, or at most PER_VERTEX["smooth_channels"]
@@ -585,7 +596,7 @@ def _within_family_limits(inputs, rows, where):
     if not mine or not count:
         return []
     columns = np.column_stack([inputs[k][rows].reshape(count, -1) for k in mine])
-    if len(np.unique(columns, axis=0)) <= limits["exact_materials"]:
+    if _at_most_distinct(columns, limits["exact_materials"]):
         return []
     notes = []
     varying = {k: int(np.count_nonzero(np.ptp(inputs[k][rows].reshape(count, -1), axis=0))) for k in mine}
@@ -832,10 +843,13 @@ def read_shading_normals(obj, depsgraph, data):
     world's (Blender's own object and world spaces with Y and Z flipped), blended towards the mesh's
     normal by Strength; a Bump node's normal tilted against its Height's gradient over the surface
     (bumped_normals).  At the vertices the height is linear between the corners and detail finer than
-    the mesh is lost; a bake (data.sites) reads both at each texel.  Returns notes."""
+    the mesh is lost; a bake (data.sites) reads both at each texel.  Sets data.bump_map_correction
+    from the bent materials' Bump Map Correction (Cycles' bump terminator, which the core applies to
+    the bent rows' Lambertian part).  Returns notes."""
     notes = []
     ob_eval = obj.evaluated_get(depsgraph)
     sites = data.sites
+    corrections = {}  # bent material -> its Bump Map Correction
     for s, mat, (chain, _), mesh, corner_vert in _principled_slots(obj, depsgraph, normal_source):
         nl = len(mesh.loops)
         normal = np.empty(nl * 3, np.float32)
@@ -871,6 +885,14 @@ def read_shading_normals(obj, depsgraph, data):
             data.shading_normals = data.normals.copy()
         mine = _slot_rows(obj, data, s)
         data.shading_normals[mine] = world_n[mine]
+        # Cycles' own setting (on by default, and where Cycles is not loaded)
+        corrections[mat.name] = bool(getattr(getattr(mat, "cycles", None), "use_bump_map_correction", True))
+    # one call shades the object's bent rows: a mixture of settings is read as on, and named
+    data.bump_map_correction = not corrections or any(corrections.values())
+    if len(set(corrections.values())) > 1:
+        off = ", ".join(f"'{m}'" for m, on in sorted(corrections.items()) if not on)
+        notes.append(f"'{obj.name}': Bump Map Correction is off for {off} but on for its other bent materials: "
+                     "read as on for all")
     return notes
 
 

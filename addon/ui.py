@@ -42,6 +42,9 @@ class WENV_PT_shading(_SidebarPanel, bpy.types.Panel):
         sub.active = st.view_source == "VIEWPORT"
         sub.prop(st, "shade_only_seen")
         col.prop(st, "shadows")
+        sub = col.column()
+        sub.active = st.shadows
+        sub.prop(st, "bounce_light")
         obj = context.active_object
         if st.shadows and obj is not None and obj.type == "MESH":
             col.prop(obj.wenv, "casts_shadows", text=f"'{obj.name}' Casts Shadows")

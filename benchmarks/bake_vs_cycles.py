@@ -6,7 +6,7 @@ Rendered
     difference's RMSE is the noise of that mean): without self-shadowing (the object invisible to
     every secondary ray: what wenv models without shadows) and with it;
   - from wenv's bakes at `default` and `high` (1024 x 1024, 1600 x 1600 and 2048 x 2048, shadows off
-    and on), the baked image shown as emitted light through the UV map, by Cycles;
+    and on, Bounce Light off), the baked image shown as emitted light through the UV map, by Cycles;
   - flat (Workbench) from wenv's vertex colours at `default`, for comparison.
 Prints relative RMSEs (RMSE over the mean, over the pixels every render covers) and the bakes' times
 (median of --repeat bakes after one to warm the shader), writes out/bake_vs_cycles.json and, with
@@ -43,26 +43,37 @@ SECONDARY_RAYS = ("visible_shadow", "visible_diffuse", "visible_glossy", "visibl
 def build(size, hdri):
     """shadows_vs_cycles' Suzanne, unwrapped by Smart UV Project, the World `hdri`, Cycles' direct light."""
     scene, (obj,) = shadows_vs_cycles.build("suzanne", size)
+    smart_project(obj)
+    scene.cycles.max_bounces = 0
+    set_world(scene, hdri)
+    scene.wenv.quality = "DEFAULT"
+    scene.wenv.tone_mapping = "NONE"
+    scene.wenv.bounce_light = False  # Cycles' direct light: what the mesh blocks is black
+    bpy.context.view_layer.update()  # the camera's matrix_world follows its new place only once evaluated
+    return scene, obj
+
+
+def smart_project(obj):
+    """Unwraps obj's active UV map into islands that do not overlap (Smart UV Project)."""
     with bpy.context.temp_override(active_object=obj, object=obj, selected_objects=[obj]):
         bpy.ops.object.mode_set(mode="EDIT")
         bpy.ops.mesh.select_all(action="SELECT")
         bpy.ops.uv.smart_project(island_margin=0.02)
         bpy.ops.object.mode_set(mode="OBJECT")
-    scene.cycles.max_bounces = 0
-    set_world(scene, hdri)
-    scene.wenv.quality = "DEFAULT"
-    scene.wenv.tone_mapping = "NONE"
-    bpy.context.view_layer.update()  # the camera's matrix_world follows its new place only once evaluated
-    return scene, obj
 
 
-def emission_material(image):
-    """The bake shown as emitted light through the active UV map (linear texels)."""
+def emission_material(image, uv_map=None):
+    """The bake shown as emitted light through the UV map `uv_map` (None: the active render one;
+    linear texels)."""
     mat = bpy.data.materials.new("baked")
     tree = mat.node_tree
     tree.nodes.clear()
     tex = tree.nodes.new("ShaderNodeTexImage")
     tex.image, tex.interpolation = image, "Linear"
+    if uv_map is not None:
+        uv = tree.nodes.new("ShaderNodeUVMap")
+        uv.uv_map = uv_map
+        tree.links.new(uv.outputs["UV"], tex.inputs["Vector"])
     emit = tree.nodes.new("ShaderNodeEmission")
     out = tree.nodes.new("ShaderNodeOutputMaterial")
     tree.links.new(tex.outputs["Color"], emit.inputs["Color"])

@@ -8,11 +8,14 @@ Light objects) and shades it at `default` with the mesh's shadows; its vertex co
 flat (Workbench).  Cycles renders the scene with direct light only (Max Bounces 0) and with its
 default bounces, two seeds each (the mean is the truth, half the seeds' difference its noise);
 EEVEE with its defaults.  Also shown: what wenv gave before lamps and textures were read (the
-World's light on the unlinked values, no shadows).  Relative RMSE over the mean, over the pixels
-all cover; writes out/scene_vs_cycles.json.  About 10 minutes.
+World's light on the unlinked values, no shadows).  With --bake N, the add-on also bakes every
+texel of an N x N image through a UV map of its own (Smart UV Project; the textures keep theirs),
+with shadows and Bounce Light off (against Cycles' direct light) and on (against full Cycles), the
+bake shown as emitted light by Cycles.  Relative RMSE over the mean, over the pixels all cover;
+writes out/scene_vs_cycles.json.  About 10 minutes, 15 with a bake.
 
     python benchmarks/scene_vs_cycles.py [--hdris sunset forest] [--size 256] [--samples 128]
-                                         [--without checker stripes bumps lamps]
+                                         [--without checker stripes bumps lamps] [--bake 2048]
 """
 import argparse
 import json
@@ -31,7 +34,8 @@ import bpy  # noqa: E402
 import wenv  # noqa: E402
 
 import addon  # noqa: E402
-from addon import engine, meshes, shading, views  # noqa: E402
+from addon import bake, engine, meshes, shading, views  # noqa: E402
+from benchmarks.bake_vs_cycles import emission_material, smart_project  # noqa: E402
 from shadows_vs_cycles import build, cycles_direct_and_full, eevee_engine, render, set_world  # noqa: E402
 from tests.conftest import hdri_path  # noqa: E402
 
@@ -128,6 +132,45 @@ def at_vertices(obj, data):
     return undo
 
 
+BAKE_UV = "bake"
+
+
+def add_bake_map(obj):
+    """A UV map of islands that do not overlap (Smart UV Project), for the bake alone: the
+    textures keep reading the active render map."""
+    render_map = obj.data.uv_layers.active.name
+    layer = obj.data.uv_layers.new(name=BAKE_UV)
+    obj.data.uv_layers.active = layer
+    smart_project(obj)
+    obj.data.uv_layers.active = obj.data.uv_layers[render_map]
+    obj.data.uv_layers[render_map].active_render = True
+
+
+def baked_render(scene, obj, size, bounce, folder, seed=1, shadows=True):
+    """The add-on's bake of obj at size x size from the camera (Shadows and Bounce Light as given),
+    rendered by Cycles as emitted light through the bake's UV map; and the bake's time."""
+    import time
+
+    scene.wenv.shadows, scene.wenv.bounce_light = shadows, bounce
+    image = bpy.data.images.get("wenv scene bake") or bpy.data.images.new("wenv scene bake", size, size,
+                                                                          float_buffer=True)
+    start = time.perf_counter()
+    bake.bake(scene, bpy.context.evaluated_depsgraph_get(), obj, image, views.camera_view(scene), bpy.data,
+              uv_map=BAKE_UV, view_source="CAMERA")
+    seconds = time.perf_counter() - start
+    emit = emission_material(image, BAKE_UV)
+    paint = obj.data.materials[0]
+    obj.data.materials[0] = emit
+    bounces = scene.cycles.max_bounces
+    scene.cycles.max_bounces = 0
+    try:
+        return render(scene, "CYCLES", folder, seed), seconds
+    finally:
+        obj.data.materials[0] = paint
+        scene.cycles.max_bounces = bounces
+        bpy.data.materials.remove(emit)
+
+
 def add_lamps(scene):
     for kind, name, location, rotation, settings in (
             ("SUN", "sun", (0, 0, 5), (0.7, 0.2, 0.6), dict(energy=3.0, angle=0.05)),
@@ -147,6 +190,8 @@ def main():
     ap.add_argument("--samples", type=int, default=128)
     ap.add_argument("--without", nargs="*", default=[], choices=["checker", "stripes", "bumps", "lamps"],
                     help="leave parts out, to see what each costs")
+    ap.add_argument("--bake", type=int, default=0, metavar="N",
+                    help="also bake every texel of an N x N image (0: no bake)")
     ap.add_argument("--out", default=os.path.join(ROOT, "out", "scene_vs_cycles.json"))
     args = ap.parse_args()
     wenv.set_num_threads(2)
@@ -162,6 +207,9 @@ def main():
     obj.data.materials.append(mat)
     if "lamps" not in args.without:
         add_lamps(scene)
+    if args.bake:
+        add_bake_map(obj)
+        scene.wenv.quality, scene.wenv.tone_mapping = "DEFAULT", "NONE"
     bpy.context.view_layer.update()
     eevee = eevee_engine()
     rows = []
@@ -176,10 +224,15 @@ def main():
         occlusion = wenv.Occluders(p, data.triangles).occlusion(p, data.normals)
         eye = tuple(scene.camera.matrix_world.translation)
         kw = dict(data.inputs, lamps=plan.lamps)
+        # Cycles given the bent normals as the mesh's own (below) sees no bump: wenv's shading of them
+        # as unbent is what that comparison reads
+        shaded = {"unbent": shader.shade_mesh(p, n, eye, occlusion=occlusion, bounce=None, **kw)}
+        if data.shading_normals is not None:  # bent by the normal map, as the add-on shades them
+            kw.update(smooth_normals=data.normals, bump_map_correction=data.bump_map_correction)
         light = shader.diffuse_light(n, occlusion=occlusion, positions=p, **kw)
-        shaded = {"direct": shader.shade_mesh(p, n, eye, occlusion=occlusion, bounce=None, **kw),
-                  "full": shader.shade_mesh(p, n, eye, occlusion=occlusion, bounce=light, **kw),
-                  "before": shader.shade_mesh(p, data.normals, eye)}
+        shaded.update(direct=shader.shade_mesh(p, n, eye, occlusion=occlusion, bounce=None, **kw),
+                      full=shader.shade_mesh(p, n, eye, occlusion=occlusion, bounce=light, **kw),
+                      before=shader.shade_mesh(p, data.normals, eye))
         with tempfile.TemporaryDirectory(prefix="wenv-scene-") as folder:
             imgs = {}
             for key, rgb in shaded.items():
@@ -193,6 +246,11 @@ def main():
             scene.cycles.max_bounces = 0
             matched = [render(scene, "CYCLES", folder, seed) for seed in (1, 2)]
             undo()
+            baked = {}
+            if args.bake:
+                for key, bounce in (("bake_direct", False), ("bake_full", True)):
+                    baked[key] = baked_render(scene, obj, args.bake, bounce, folder)
+                imgs.update((key, img) for key, (img, _) in baked.items())
         mask = np.ones(imgs["direct"].shape[:2], bool)
         for img in list(imgs.values()) + direct + full + matched:
             mask &= img[..., 3] > 0.99
@@ -208,18 +266,27 @@ def main():
                    before_vs_direct=rel(imgs["before"], d_mean), noise_full=rel(full[0], full[1]) / 2,
                    full=rel(imgs["full"], f_mean), eevee_vs_full=rel(imgs["eevee"], f_mean),
                    mean_ratio_direct=float(imgs["direct"][..., :3][mask].mean() / d_mean[..., :3][mask].mean()),
-                   noise_matched=rel(matched[0], matched[1]) / 2, matched=rel(imgs["direct"], m_mean))
+                   noise_matched=rel(matched[0], matched[1]) / 2, matched=rel(imgs["unbent"], m_mean))
+        if args.bake:
+            row.update(bake=args.bake, bake_direct=rel(imgs["bake_direct"], d_mean),
+                       bake_full=rel(imgs["bake_full"], f_mean),
+                       bake_seconds={key: seconds for key, (_, seconds) in baked.items()})
         rows.append(row)
         print(f"{hdri:8s}: direct {100 * row['direct']:.1f} % (Cycles' noise {100 * row['noise_direct']:.1f} %, "
               f"before {100 * row['before_vs_direct']:.1f} %, wenv / Cycles {row['mean_ratio_direct']:.3f}); full "
               f"{100 * row['full']:.1f} % (noise {100 * row['noise_full']:.1f} %, EEVEE "
               f"{100 * row['eevee_vs_full']:.1f} %); direct against Cycles given the inputs at the vertices "
               f"{100 * row['matched']:.1f} % (noise {100 * row['noise_matched']:.1f} %)", flush=True)
+        if args.bake:
+            print(f"  bake {args.bake}^2: direct {100 * row['bake_direct']:.1f} %, full {100 * row['bake_full']:.1f} % "
+                  f"(baked in {row['bake_seconds']['bake_direct']:.2f} / {row['bake_seconds']['bake_full']:.2f} s)",
+                  flush=True)
         if plan.notes:
             print("  notes:", "; ".join(plan.notes))
     os.makedirs(os.path.dirname(args.out), exist_ok=True)
     with open(args.out, "w") as f:
         json.dump(dict(command="python benchmarks/scene_vs_cycles.py " + " ".join(sys.argv[1:]), without=args.without,
+                       bake=args.bake,
                        machine=platform.machine(), samples=args.samples, size=args.size, rows=rows), f, indent=1)
     print("wrote", args.out)
 

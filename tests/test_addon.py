@@ -1069,7 +1069,8 @@ def test_a_movie_shows_the_frame_blender_gives(scene, tmp_path):
     """A Base Color from a movie of five flat frames (Frames 5, Start Frame 3), cyclic and held with
     Offset 1, over scene frames before, in and past its range: every vertex reads the frame Blender's
     own image user shows (its evaluated copy's, with Auto Refresh on), the first or last one where
-    that frame lies past the movie's ends, as Blender decodes it; the material has no note."""
+    that frame lies past the movie's ends, as Blender decodes it; the material has no note.  A movie
+    whose file is gone is an error naming it."""
     from addon import textures
     env_world(scene, "sunset")
     colours = {k: (0.15 * k, 0.5, 1.0 - 0.15 * k) for k in range(1, 6)}
@@ -1097,6 +1098,10 @@ def test_a_movie_shows_the_frame_blender_gives(scene, tmp_path):
     assert seen == {1, 2, 3, 4, 5, 6}  # cycled over 1-5; held at 1 and 5, then moved by the offset
     assert len(shown_frames) == 6
     assert not any("Base Color" in n for n in materials.principled_notes(mat))
+    image.filepath = str(tmp_path / "gone.mov")
+    textures.images.clear()
+    with pytest.raises(RuntimeError, match="Texture movie 'flat.mov' could not be loaded: .*gone.mov"):
+        shade_op(view="CAMERA")
 
 
 def test_a_texture_finer_than_the_mesh_averages(scene):
@@ -1169,8 +1174,9 @@ def test_a_broken_texture_or_uv_map_is_a_named_error(scene):
 
 def test_a_normal_map_bends_the_shading_normals(scene):
     """A tangent-space Normal Map of one tilt (0.3 along the UV map's u, which runs along +X here) on
-    a grid: the add-on shades each vertex as the core does at that bent normal; at Strength 0, at
-    the mesh's own.  The report says a normal map is read at the vertices."""
+    a grid: the add-on shades each vertex as the core does at that bent normal, bent from the mesh's
+    (smooth_normals: Cycles' bump terminator takes its share); at Strength 0, at the mesh's own.
+    The report says a normal map is read at the vertices."""
     env_world(scene, "sunset")
     tilt = bpy.data.images.new("tilt", 4, 4, float_buffer=True)
     bent = np.float32([0.3, 0.0, np.sqrt(1.0 - 0.09)])
@@ -1193,8 +1199,10 @@ def test_a_normal_map_bends_the_shading_normals(scene):
     ior = tree.nodes["Principled BSDF"].inputs["IOR"].default_value
     shader = core_shader(wenv.load_environment(hdri_path("sunset")),
                          wenv.Principled(base_color=(0.8, 0.2, 0.1), roughness=0.4, ior=ior))
-    np.testing.assert_allclose(attribute(plane)[1], shader.shade_mesh(p, np.tile(bent, (len(p), 1)), eye),
-                               rtol=1e-4, atol=1e-5)
+    np.testing.assert_allclose(attribute(plane)[1],
+                               shader.shade_mesh(p, np.tile(bent, (len(p), 1)), eye, smooth_normals=n), rtol=1e-4,
+                               atol=1e-5)
+    assert shader.shade_mesh(p, np.tile(bent, (len(p), 1)), eye).mean() > attribute(plane)[1].mean() * 1.005
     assert any("'Normal' from a normal map is read at the vertices" in note for note in
                materials.principled_notes(mat))
     normal_map.inputs["Strength"].default_value = 0.0
@@ -2886,7 +2894,8 @@ def mesh_triangles(obj):
 def test_shadows_equal_the_core_with_occlusion(scene):
     """Suzanne alone with Shadows and Bounce Light: the colours are the core's shading with her
     occlusion (at the add-on's resolution for her size) and her own diffuse light as the bounce,
-    and differ from the unshadowed ones where she blocks her own sky."""
+    and differ from the unshadowed ones where she blocks her own sky; with Bounce Light off, the
+    core's with no bounce, darker."""
     bpy.data.objects.remove(bpy.data.objects["Cube"])
     env_world(scene, "forest")
     obj = add_monkey(subdivisions=1)
@@ -2904,6 +2913,14 @@ def test_shadows_equal_the_core_with_occlusion(scene):
     assert close.mean() > 0.99  # (the add-on's normals are not unit: a ray at a texel's edge may flip)
     plain = shader.shade_mesh(p, n, eye)
     assert np.mean(np.abs(rgb - plain)) > 0.02 * np.mean(plain)
+    # Bounce Light off: the blocked directions are black (Cycles' Max Bounces 0), darker where blocked
+    scene.wenv.bounce_light = False
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    _, direct = attribute(obj)
+    want = shader.shade_mesh(p, n, eye, occlusion=occlusion, bounce=None)
+    close = np.all(np.abs(direct - want) <= 1e-3 * np.abs(want) + 1e-5, axis=1)
+    assert close.mean() > 0.99
+    assert np.mean(rgb - direct) > 0.005 * np.mean(rgb) and np.all(direct <= rgb + 1e-4 * rgb + 1e-6)
 
 
 def test_a_convex_mesh_alone_shades_as_without_shadows(scene):

@@ -34,6 +34,7 @@ GLOSSMETER = "import wenv\n\npaint = "
 OCCLUDERS = "occluders = wenv.Occluders("
 SWEEPS = "import wenv, wenv_sweep\n"
 LAMPS = "import numpy as np, wenv\n\nm = np.eye(4)"
+BENT = "import numpy as np, wenv\n\nsky = "
 
 
 def leading_literal(comment):
@@ -225,6 +226,13 @@ def test_occluders_block_runs():
     assert ns["rgb"][4, 0] < ns["rgb"][5, 0] and abs(ns["rgb"][4, 0] - ns["truth"][4, 0]) < 0.05
 
 
+def test_bent_normals_block_runs():
+    """docs/python.md's bent plane under a white sky: the two shares it shows, Cycles' with its Bump
+    Map Correction and the cosine lobe's above the smooth horizon without."""
+    ns = {}
+    assert run_checked(readme_block(BENT), ns, "docs/python.md") == 2
+
+
 def test_lamps_block_runs():
     """docs/lamps.md's block on a sphere of normals under a dim sky, with its occlusion: the lamps
     brighten the shading, the reference agrees, and the shadowed call is no brighter."""
@@ -262,7 +270,7 @@ def test_every_python_block_is_run():
     run = {
         "README.md": [QUICK_START, "import bpy\nbpy.ops.extensions.package_install_files(",
                       "import bpy\nscene = bpy.context.scene"],
-        "docs/python.md": [API, OCCLUDERS, SWEEPS],
+        "docs/python.md": [API, OCCLUDERS, BENT, SWEEPS],
         "docs/performance.md": [AUTO],
         "docs/principled.md": [PRINCIPLED],
         "docs/measured_brdfs.md": [TABULATED],

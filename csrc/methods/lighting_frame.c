@@ -89,7 +89,8 @@ static wenv_status run(const wenv_method *method, void *state, const float *norm
 {
     if (family)
         return wenv_material_family_shade(family, method, state, normals, views, n, scene, colour ? colour->rgb : NULL,
-                                          out, err);
+                                          colour ? colour->share : NULL, colour ? colour->horizon_light : NULL, out,
+                                          err);
     if (!colour)
         return run_split(method, state, normals, views, n, scene, out, NULL, err);
     float *irradiance = malloc(n * 3 * sizeof(float));
@@ -120,22 +121,56 @@ wenv_status wenv_lighting_frame_shade_scene(const wenv_lighting_frame *frame, co
         held.key = wenv_fingerprint_floats(held.key, &held.bounce_scale, 1);
         scene = &held;
     }
-    wenv_status st;
-    if (frame->identity || n == 0) {
-        st = run(method, state, normals, views, n, scene, colour, family, out, err);
-    } else {
-        float *turned = malloc(n * 6 * sizeof(float));
-        if (!turned)
-            return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory turning %zu normals and views", n);
+    wenv_status st = WENV_OK;
+    /* a bent Lambertian part keeps its share of a uniform sky and loses that share of the light at
+     * the smooth horizon towards its bend, read as the irradiance at that horizon (vertex_colour.h;
+     * a method without diffuse light loses the share of the part's own light) */
+    int turn = !frame->identity && n > 0;
+    int bent = colour && colour->bump.smooth && n > 0, horizon = bent && method->diffuse_light;
+    float *turned = turn ? malloc(n * (horizon ? 9 : 6) * sizeof(float)) : NULL;
+    float *bump_rows = bent ? malloc(n * (horizon ? 7 : 1) * sizeof(float)) : NULL;
+    if ((turn && !turned) || (bent && !bump_rows)) {
+        free(turned);
+        free(bump_rows);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory turning %zu normals and views", n);
+    }
+    /* the shares, then the horizons and their light */
+    float *horizons = horizon ? bump_rows + n : NULL, *horizon_light = horizon ? bump_rows + 4 * n : NULL;
+    wenv_vertex_colour with_bump;
+    if (bent) {
+        wenv_bump_share_rows(normals, colour->bump.smooth, n, colour->bump.correction, bump_rows);
+        if (horizon)
+            wenv_bump_horizons(normals, colour->bump.smooth, n, horizons);
+        with_bump = *colour;
+        with_bump.share = bump_rows;
+        with_bump.horizon_light = horizon_light;
+    }
+    const float *at_normals = normals, *at_views = views, *at_horizons = horizons;
+    if (turn) {
         turn_all(frame->turn, normals, n, turned);
+        at_normals = turned;
         if (views)
             turn_all(frame->turn, views, n, turned + 3 * n);
-        st = run(method, state, turned, views ? turned + 3 * n : NULL, n, scene, colour, family, out, err);
-        free(turned);
-        if (!st && frame->scale != 1.0f)
-            for (size_t i = 0; i < 3 * n; i++)
-                out[i] *= frame->scale;
+        at_views = views ? turned + 3 * n : NULL;
+        if (horizon)
+            turn_all(frame->turn, horizons, n, turned + 6 * n);
+        at_horizons = horizon ? turned + 6 * n : NULL;
     }
+    if (horizon) {
+        float *light_out = malloc(n * 3 * sizeof(float));
+        if (!light_out)
+            st = wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the light of %zu horizons", n);
+        else
+            st = run_split(method, state, at_horizons, NULL, n, scene, light_out, horizon_light, err);
+        free(light_out);
+    }
+    if (!st)
+        st = run(method, state, at_normals, at_views, n, scene, bent ? &with_bump : colour, family, out, err);
+    if (!st && turn && frame->scale != 1.0f)
+        for (size_t i = 0; i < 3 * n; i++)
+            out[i] *= frame->scale;
+    free(turned);
+    free(bump_rows);
     /* lamps and emission in the world: the frame turns both normal and view, but not the lamps */
     if (!st && lamps && material)
         st = wenv_lamps_add(lamps, material, colour, family, normals, views, n, out, err);

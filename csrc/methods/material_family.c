@@ -1,5 +1,6 @@
 /* A material whose inputs vary per vertex (material_family.h). */
 #include "methods/material_family.h"
+#include "methods/vertex_colour.h"
 
 #include <math.h>
 #include <stdatomic.h>
@@ -736,7 +737,8 @@ static void lights_of(const wenv_material_family *f, const size_t *fv, const flo
 
 /* The vertices' Lambertian part, their members' mixed, times their colour (1 without) and light. */
 static void apply_diffuse(const wenv_material_family *f, const size_t *fv, const float *normals, const float *views,
-                          size_t n, const float *rgb, const float *irradiance, int with_alpha, float *out)
+                          size_t n, const float *rgb, const float *share, const float *horizon_light,
+                          const float *irradiance, int with_alpha, float *out)
 {
     const wenv_diffuse_table *tables = rgb ? f->per_colour : f->diffuse;
     long long nn = (long long)n;
@@ -755,7 +757,8 @@ static void apply_diffuse(const wenv_material_family *f, const size_t *fv, const
         float alpha = with_alpha && f->alpha ? f->alpha[fv[i]] : 1.0f;
         for (int c = 0; c < 3; c++) {
             float colour = rgb ? rgb[3 * i + c] : 1.0f;
-            float v = out[3 * i + c] + alpha * colour * t[c] * irradiance[3 * i + c];
+            float light = wenv_bent_light(irradiance[3 * i + c], share, horizon_light, (size_t)i, c);
+            float v = out[3 * i + c] + alpha * colour * t[c] * light;
             out[3 * i + c] = v > 0.0f ? v : 0.0f;
         }
     }
@@ -792,7 +795,8 @@ static int group_by_member(const wenv_material_family *f, const size_t *fv, size
 
 wenv_status wenv_material_family_shade(const wenv_family_rows *fr, const wenv_method *method, void *state,
                                        const float *normals, const float *views, size_t n,
-                                       const wenv_shadow_scene *scene, const float *rgb, float *out, wenv_error *err)
+                                       const wenv_shadow_scene *scene, const float *rgb, const float *share,
+                                       const float *horizon_light, float *out, wenv_error *err)
 {
     const wenv_material_family *f = fr->family;
     if (scene && scene->bounce_self)
@@ -859,7 +863,7 @@ wenv_status wenv_material_family_shade(const wenv_family_rows *fr, const wenv_me
         }
     }
     if (!st)
-        apply_diffuse(f, fv, normals, views, n, rgb, irradiance, 0, out);
+        apply_diffuse(f, fv, normals, views, n, rgb, share, horizon_light, irradiance, 0, out);
     for (size_t k = 0; !st && f->alpha && k < n; k++)
         for (int c = 0; c < 3; c++)
             out[3 * k + (size_t)c] *= f->alpha[fv[k]];
@@ -963,13 +967,13 @@ wenv_status wenv_material_family_own(const wenv_family_rows *fr, const float *no
 }
 
 wenv_status wenv_material_family_add_diffuse(const wenv_family_rows *fr, const float *normals, const float *views,
-                                             size_t n, const float *rgb, const float *irradiance, float *out,
-                                             wenv_error *err)
+                                             size_t n, const float *rgb, const float *share, const float *irradiance,
+                                             float *out, wenv_error *err)
 {
     size_t *fv;
     if (family_vertices(fr, n, &fv, err))
         return err->status;
-    apply_diffuse(fr->family, fv, normals, views, n, rgb, irradiance, 1, out);
+    apply_diffuse(fr->family, fv, normals, views, n, rgb, share, NULL, irradiance, 1, out);
     free(fv);
     return WENV_OK;
 }

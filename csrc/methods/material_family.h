@@ -101,10 +101,11 @@ wenv_status wenv_material_family_own(const wenv_family_rows *rows, const float *
                                      wenv_error *err);
 
 /* out[i] += each call vertex's Lambertian part (its members' mixed, times its colour rgb where given)
- * times irradiance[i], clamped at 0, for a view at normal i . view i (views NULL: head-on). */
+ * times irradiance[i] (of which a bent part takes its share: vertex_colour.h), clamped at 0, for a
+ * view at normal i . view i (views NULL: head-on). */
 wenv_status wenv_material_family_add_diffuse(const wenv_family_rows *rows, const float *normals, const float *views,
-                                             size_t n, const float *rgb, const float *irradiance, float *out,
-                                             wenv_error *err);
+                                             size_t n, const float *rgb, const float *share, const float *irradiance,
+                                             float *out, wenv_error *err);
 
 /* out[i] = max(0, out[i] + each call vertex's emission towards view i through its members' layers)
  * (views NULL: head-on); colours (n x 3, or NULL: the material's own) each vertex's Emission Color, as
@@ -114,12 +115,14 @@ wenv_status wenv_material_family_add_emission(const wenv_family_rows *rows, cons
 
 /* Shades n (normal, view) pairs in the method's frame as method->shade / shade_shadowed (scene set)
  * would with each vertex's own material, or with views NULL its diffuse light (method.h), into out;
- * rgb (n x 3, or NULL; given only to a family made for a colour) a colour per vertex as
+ * rgb (n x 3, or NULL; given only to a family made for a colour) a colour per vertex, and share
+ * (n, or NULL) and horizon_light (n x 3, or NULL) what a bent Lambertian part loses, as
  * vertex_colour.h's.  The scene's own bounce must be given
  * (bounce_self 0: a mesh's light with its materials is this function's with views NULL).  Sets the
  * members as the method's material in turn and the family's base material last. */
 wenv_status wenv_material_family_shade(const wenv_family_rows *rows, const wenv_method *method, void *state,
                                        const float *normals, const float *views, size_t n,
-                                       const wenv_shadow_scene *scene, const float *rgb, float *out, wenv_error *err);
+                                       const wenv_shadow_scene *scene, const float *rgb, const float *share,
+                                       const float *horizon_light, float *out, wenv_error *err);
 
 #endif

@@ -43,7 +43,8 @@ wenv_status wenv_shade_for(const wenv_lighting_frame *frame, const wenv_method *
         wenv_vertex_colour block_colour;
         if (colour) {
             block_colour = *colour;
-            block_colour.rgb = colour->rgb + 3 * at;
+            block_colour.rgb = colour->rgb ? colour->rgb + 3 * at : NULL;
+            block_colour.bump.smooth = colour->bump.smooth ? colour->bump.smooth + 3 * at : NULL;
         }
         wenv_family_rows block_family;
         if (family) {

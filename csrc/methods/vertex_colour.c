@@ -14,10 +14,12 @@ void wenv_vertex_colour_apply(const wenv_vertex_colour *colour, const float *nor
         float cos_v = wenv_view_cosine(normals + 3 * i, views ? views + 3 * i : NULL);
         float d[3];
         wenv_diffuse_table_at(colour->per_colour, cos_v, d);
-        const float *c = colour->rgb + 3 * i, *e = irradiance + 3 * i;
+        const float *e = irradiance + 3 * i;
         float *o = out + 3 * i;
         for (int k = 0; k < 3; k++) {
-            float v = o[k] + c[k] * d[k] * e[k];
+            float c = colour->rgb ? colour->rgb[3 * i + k] : 1.0f;
+            float light = wenv_bent_light(e[k], colour->share, colour->horizon_light, (size_t)i, k);
+            float v = o[k] + c * d[k] * light;
             o[k] = v > 0.0f ? v : 0.0f;
         }
     }

@@ -9,14 +9,16 @@
 
 static PyObject *reference_with(PyObject *args, PyObject *kwargs, wenv_py_vertex_inputs *vin)
 {
-    static char *kwlist[] = {"env",       "material", "normals",    "view_dirs", "progress", "positions",
-                             "occluders", "bounce",   "base_color", "lamps",     "emission_color", NULL};
+    static char *kwlist[] = {"env",       "material",       "normals",        "view_dirs",           "progress",
+                             "positions", "occluders",      "bounce",         "base_color",          "lamps",
+                             "emission_color", "smooth_normals", "bump_map_correction", NULL};
     PyObject *env_obj, *mat_obj, *nobj, *vobj, *progress_obj = Py_None, *pobj = Py_None, *occ_obj = Py_None;
     PyObject *bounce_obj = Py_None, *colour_obj = Py_None;
-    PyObject *lamps_obj = Py_None, *emit_obj = Py_None;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOO|OOOOO$OO:reference", kwlist, &env_obj, &mat_obj, &nobj,
+    PyObject *lamps_obj = Py_None, *emit_obj = Py_None, *smooth_obj = Py_None;
+    int correction = 1;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOO|OOOOO$OOOp:reference", kwlist, &env_obj, &mat_obj, &nobj,
                                      &vobj, &progress_obj, &pobj, &occ_obj, &bounce_obj, &colour_obj, &lamps_obj,
-                                     &emit_obj))
+                                     &emit_obj, &smooth_obj, &correction))
         return NULL;
     if (bounce_obj != Py_None && occ_obj == Py_None) {
         PyErr_SetString(PyExc_ValueError, "bounce is read only with occluders (what blocks the light it fills in)");
@@ -56,7 +58,7 @@ static PyObject *reference_with(PyObject *args, PyObject *kwargs, wenv_py_vertex
         return NULL;
     }
     PyObject *result = NULL;
-    Py_buffer pb = {0}, bb = {0};
+    Py_buffer pb = {0}, bb = {0}, sb = {0};
     wenv_vertex_inputs vi;
     float *rgb = NULL, *emission = NULL;
     wenv_lamp *lamps = NULL;
@@ -79,6 +81,14 @@ static PyObject *reference_with(PyObject *args, PyObject *kwargs, wenv_py_vertex
                      np, n);
         goto done;
     }
+    size_t ns = n;
+    if (smooth_obj != Py_None && wenv_py_get_vec3_array(smooth_obj, "smooth_normals", 1, &sb, &ns, NULL) < 0)
+        goto done;
+    if (ns != n) {
+        PyErr_Format(PyExc_ValueError, "smooth_normals has %zu rows but normals has %zu", ns, n);
+        goto done;
+    }
+    wenv_bump_normals bump = {sb.obj ? sb.buf : NULL, correction};
     if (colour_obj != Py_None && !(rgb = wenv_py_base_colours(colour_obj, n)))
         goto done;
     if (emit_obj != Py_None && !(emission = wenv_py_vertex_colours(emit_obj, "emission_color", n, 0)))
@@ -96,7 +106,7 @@ static PyObject *reference_with(PyObject *args, PyObject *kwargs, wenv_py_vertex
     wenv_status st;
     WENV_BEGIN_WORK
     st = wenv_reference_per_vertex(env, mat, nb.buf, vb.buf, n, occ, pb.obj ? pb.buf : NULL, bb.obj ? bb.buf : NULL, rgb,
-                                   &vi, lamps, n_lamps, emission, out, &progress, &err);
+                                   &vi, lamps, n_lamps, emission, sb.obj ? &bump : NULL, out, &progress, &err);
     WENV_END_WORK
     if (st) {
         Py_CLEAR(result);
@@ -111,6 +121,8 @@ done:
         PyBuffer_Release(&pb);
     if (bb.obj)
         PyBuffer_Release(&bb);
+    if (sb.obj)
+        PyBuffer_Release(&sb);
     PyBuffer_Release(&nb);
     PyBuffer_Release(&vb);
     return result;
@@ -131,7 +143,7 @@ static PyMethodDef reference_functions[] = {
      "reference(env, material, normals, view_dirs, progress=None, positions=None, occluders=None, bounce=None, "
      "base_color=None, *, lamps=None, emission_color=None, roughness=None, metallic=None, specular_ior_level=None, "
      "specular_tint=None, coat_weight=None, coat_roughness=None, sheen_weight=None, sheen_roughness=None, "
-     "sheen_tint=None, alpha=None)\n--\n\n"
+     "sheen_tint=None, alpha=None, smooth_normals=None, bump_map_correction=True)\n--\n\n"
      "Ground truth: the reflection equation summed over every environment pixel (exact solid angles), in the "
      "units of Shader.shade.  With occluders (a wenv.Occluders) and the vertices' positions, each pixel's ray "
      "from the vertex is cast exactly, and a blocked one brings the blocker's light where it is hit: bounce "
@@ -143,7 +155,10 @@ static PyMethodDef reference_functions[] = {
      "exactly.  "
      "lamps (a sequence of wenv.Lamp, with positions): each lamp's light summed over a fine grid of its surface "
      "(or its cone of directions), each point with the exact BRDF and, with occluders, its own ray.  "
-     "emission_color (n, 3): each vertex's Emission Color in place of a Principled material's."},
+     "emission_color (n, 3): each vertex's Emission Color in place of a Principled material's.  "
+     "smooth_normals (n, 3): the normals before a normal map or Bump node bent `normals`, the Lambertian part "
+     "receiving each direction's light as Cycles' bump terminator lets it through (bump_map_correction: the "
+     "material's Bump Map Correction)."},
     {NULL, NULL, 0, NULL},
 };
 

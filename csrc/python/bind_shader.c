@@ -389,28 +389,57 @@ static int parse_scene(ShaderObject *self, PyObject *occlusion, PyObject *bounce
     return 0;
 }
 
-/* A colour per vertex (base_color, n rows) for the shader's material, into *colour (its table in
- * *table, its rows in *rgb: wenv_py_base_colours, PyMem_Free'd by the caller).  Not given (NULL or
- * None): *rgb NULL.  -1 with the error set. */
-static int parse_colour(ShaderObject *self, PyObject *obj, size_t n, int per_vertex_material, wenv_diffuse_table *table,
-                        wenv_vertex_colour *colour, float **rgb)
+/* The smooth normals (n rows; None: sb->obj NULL) the normals were bent from, into sb (released by
+ * the caller).  -1 with the error set. */
+static int parse_smooth(PyObject *smooth_obj, size_t n, Py_buffer *sb)
+{
+    sb->obj = NULL;
+    if (!smooth_obj || smooth_obj == Py_None)
+        return 0;
+    size_t ns;
+    if (wenv_py_get_vec3_array(smooth_obj, "smooth_normals", 1, sb, &ns, NULL) < 0) {
+        sb->obj = NULL;
+        return -1;
+    }
+    if (ns == n)
+        return 0;
+    PyErr_Format(PyExc_ValueError, "smooth_normals has %zu rows but normals has %zu", ns, n);
+    PyBuffer_Release(sb);
+    sb->obj = NULL;
+    return -1;
+}
+
+/* A colour per vertex (base_color, n rows) for the shader's material, and the smooth normals the
+ * normals were bent from (sb: parse_smooth's; correction: their Bump Map Correction), into *colour
+ * (its table in *table, its rows in *rgb: wenv_py_base_colours, PyMem_Free'd by the caller).
+ * Neither given: *rgb NULL and *colour unused (colour_of).  -1 with the error set. */
+static int parse_colour(ShaderObject *self, PyObject *obj, size_t n, int per_vertex_material, const Py_buffer *sb,
+                        int correction, wenv_diffuse_table *table, wenv_vertex_colour *colour, float **rgb)
 {
     *rgb = NULL;
-    if (!obj || obj == Py_None)
+    *colour = (wenv_vertex_colour){table, NULL, {sb->obj ? sb->buf : NULL, correction}, NULL, NULL};
+    int have_rgb = obj && obj != Py_None;
+    if (!have_rgb && !sb->obj)
         return 0;
     wenv_error err = {0};
-    /* with a material per vertex, its members' tables are read (material_family.h) */
-    if (per_vertex_material)
+    /* with a material per vertex, its members' tables are read (material_family.h); without a colour
+     * the part is the material's own, its colour in */
+    if (per_vertex_material || !have_rgb)
         wenv_material_diffuse_table(wenv_py_material(self->material, "material"), table);
     else if (wenv_material_diffuse_per_colour_table(wenv_py_material(self->material, "material"), table, &err)) {
         wenv_py_raise(&err);
         return -1;
     }
-    if (!(*rgb = wenv_py_base_colours(obj, n)))
+    if (have_rgb && !(*rgb = wenv_py_base_colours(obj, n)))
         return -1;
-    colour->per_colour = table;
     colour->rgb = *rgb;
     return 0;
+}
+
+/* The colour parse_colour read, or NULL when neither a colour nor smooth normals were given. */
+static const wenv_vertex_colour *colour_of(const wenv_vertex_colour *colour)
+{
+    return colour->rgb || colour->bump.smooth ? colour : NULL;
 }
 
 /* Whether the shader's material shades as a family (material_family.h) with these per-vertex
@@ -571,12 +600,14 @@ static int positions_for(PyObject *obj, size_t n, Py_buffer *pb)
 
 static PyObject *shade_with(ShaderObject *self, PyObject *args, PyObject *kwargs, wenv_py_vertex_inputs *vin)
 {
-    static char *kwlist[] = {"normals",   "view_dirs", "occlusion", "bounce", "base_color",
-                             "positions", "lamps",     "emission_color", NULL};
+    static char *kwlist[] = {"normals",   "view_dirs", "occlusion",      "bounce",         "base_color",
+                             "positions", "lamps",     "emission_color", "smooth_normals", "bump_map_correction",
+                             NULL};
     PyObject *nobj, *vobj, *occ_obj = Py_None, *bounce_obj = NULL, *colour_obj = NULL;
-    PyObject *pos_obj = Py_None, *lamps_obj = Py_None, *emit_obj = Py_None;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|$OOOOOO:shade", kwlist, &nobj, &vobj, &occ_obj, &bounce_obj,
-                                     &colour_obj, &pos_obj, &lamps_obj, &emit_obj))
+    PyObject *pos_obj = Py_None, *lamps_obj = Py_None, *emit_obj = Py_None, *smooth_obj = Py_None;
+    int correction = 1;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|$OOOOOOOp:shade", kwlist, &nobj, &vobj, &occ_obj, &bounce_obj,
+                                     &colour_obj, &pos_obj, &lamps_obj, &emit_obj, &smooth_obj, &correction))
         return NULL;
     Py_buffer nb, vb, bb = {0}, pb = {0};
     size_t n, nvw;
@@ -589,6 +620,7 @@ static PyObject *shade_with(ShaderObject *self, PyObject *args, PyObject *kwargs
     }
     PyObject *result = NULL;
     float *expanded = NULL, *rgb = NULL, *light = NULL, *emission = NULL;
+    Py_buffer sb = {0};
     const float *views = vb.buf;
     wenv_shadow_scene scene;
     wenv_diffuse_table table;
@@ -622,7 +654,8 @@ static PyObject *shade_with(ShaderObject *self, PyObject *args, PyObject *kwargs
     }
     if (occ_obj != Py_None && parse_scene(self, occ_obj, bounce_obj, n, &scene, &bb) < 0)
         goto done;
-    if (parse_colour(self, colour_obj, n, per_vertex_material(self, colour_obj, vin), &table,
+    if (parse_smooth(smooth_obj, n, &sb) < 0 ||
+        parse_colour(self, colour_obj, n, per_vertex_material(self, colour_obj, vin), &sb, correction, &table,
                      &colour, &rgb) < 0 ||
         claim(self) < 0)
         goto done;
@@ -632,9 +665,9 @@ static PyObject *shade_with(ShaderObject *self, PyObject *args, PyObject *kwargs
                      &lamp_rows, &lamps) < 0)
         goto done;
     if (occ_obj == Py_None ||
-        own_bounce(self, nb.buf, n, &scene, rgb ? &colour : NULL, family, emission, lamps, &light) == 0)
-        result = shade_arrays(self, nb.buf, views, n, occ_obj != Py_None ? &scene : NULL, rgb ? &colour : NULL,
-                              family, emission, lamps);
+        own_bounce(self, nb.buf, n, &scene, colour_of(&colour), family, emission, lamps, &light) == 0)
+        result = shade_arrays(self, nb.buf, views, n, occ_obj != Py_None ? &scene : NULL, colour_of(&colour), family,
+                              emission, lamps);
 done:
     if (claimed)
         self->busy = 0;
@@ -643,6 +676,8 @@ done:
     PyMem_Free(emission);
     PyMem_Free(expanded);
     PyMem_Free(rgb);
+    if (sb.obj)
+        PyBuffer_Release(&sb);
     PyMem_Free(light);
     if (bb.obj)
         PyBuffer_Release(&bb);
@@ -654,11 +689,13 @@ done:
 static PyObject *diffuse_light_with(ShaderObject *self, PyObject *args, PyObject *kwargs,
                                     wenv_py_vertex_inputs *vin)
 {
-    static char *kwlist[] = {"normals", "occlusion", "base_color", "positions", "lamps", "emission_color", NULL};
+    static char *kwlist[] = {"normals", "occlusion",      "base_color",          "positions", "lamps",
+                             "emission_color", "smooth_normals", "bump_map_correction", NULL};
     PyObject *nobj, *occ_obj = Py_None, *colour_obj = NULL;
-    PyObject *pos_obj = Py_None, *lamps_obj = Py_None, *emit_obj = Py_None;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "O|$OOOOO:diffuse_light", kwlist, &nobj, &occ_obj, &colour_obj,
-                                     &pos_obj, &lamps_obj, &emit_obj))
+    PyObject *pos_obj = Py_None, *lamps_obj = Py_None, *emit_obj = Py_None, *smooth_obj = Py_None;
+    int correction = 1;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "O|$OOOOOOp:diffuse_light", kwlist, &nobj, &occ_obj, &colour_obj,
+                                     &pos_obj, &lamps_obj, &emit_obj, &smooth_obj, &correction))
         return NULL;
     if (!self->method->diffuse_light) {
         PyErr_Format(PyExc_ValueError, "method '%s' does not give the diffuse light: use a wavelet method",
@@ -674,6 +711,7 @@ static PyObject *diffuse_light_with(ShaderObject *self, PyObject *args, PyObject
     wenv_diffuse_table table;
     wenv_vertex_colour colour;
     float *rgb = NULL, *emission = NULL;
+    Py_buffer sb = {0};
     wenv_family_rows family_rows;
     const wenv_family_rows *family = NULL;
     wenv_lamp_rows lamp_rows;
@@ -685,7 +723,8 @@ static PyObject *diffuse_light_with(ShaderObject *self, PyObject *args, PyObject
         goto done;
     if (occ_obj != Py_None && parse_scene(self, occ_obj, Py_None, n, &scene, &bb) < 0)
         goto done;
-    if (parse_colour(self, colour_obj, n, per_vertex_material(self, colour_obj, vin), &table,
+    if (parse_smooth(smooth_obj, n, &sb) < 0 ||
+        parse_colour(self, colour_obj, n, per_vertex_material(self, colour_obj, vin), &sb, correction, &table,
                      &colour, &rgb) < 0 ||
         claim(self) < 0)
         goto done;
@@ -693,8 +732,8 @@ static PyObject *diffuse_light_with(ShaderObject *self, PyObject *args, PyObject
     if (ensure_family(self, colour_obj, vin, n, &family_rows, &family) == 0 &&
         ensure_lamps(self, lamps_obj, pb.obj ? pb.buf : NULL, nb.buf, n, occ_obj != Py_None ? &scene : NULL,
                      &lamp_rows, &lamps) == 0)
-        result = shade_arrays(self, nb.buf, NULL, n, occ_obj != Py_None ? &scene : NULL, rgb ? &colour : NULL,
-                              family, emission, lamps);
+        result = shade_arrays(self, nb.buf, NULL, n, occ_obj != Py_None ? &scene : NULL, colour_of(&colour), family,
+                              emission, lamps);
 done:
     if (claimed)
         self->busy = 0;
@@ -702,6 +741,8 @@ done:
         PyBuffer_Release(&pb);
     PyMem_Free(emission);
     PyMem_Free(rgb);
+    if (sb.obj)
+        PyBuffer_Release(&sb);
     PyBuffer_Release(&nb);
     return result;
 }
@@ -742,8 +783,8 @@ static int shade_visible(ShaderObject *self, const float *normals, const float *
     wenv_family_rows culled_family;
     wenv_lamp_rows culled_lamps;
     if (visible) {
-        /* normals, views, radiance, colours and emission colours */
-        gathered = PyMem_Malloc((count ? count : 1) * 15 * sizeof(float));
+        /* normals, views, radiance, colours, emission colours and smooth normals */
+        gathered = PyMem_Malloc((count ? count : 1) * 18 * sizeof(float));
         rows = scene || family || lamps ? PyMem_Malloc((count ? count : 1) * sizeof *rows) : NULL;
         if (!gathered || ((scene || family || lamps) && !rows)) {
             PyMem_Free(gathered);
@@ -755,8 +796,10 @@ static int shade_visible(ShaderObject *self, const float *normals, const float *
             if (visible[i]) {
                 memcpy(gathered + 3 * k, normals + 3 * i, 3 * sizeof(float));
                 memcpy(gathered + 3 * (count + k), views + 3 * i, 3 * sizeof(float));
-                if (colour)
+                if (colour && colour->rgb)
                     memcpy(gathered + 3 * (3 * count + k), colour->rgb + 3 * i, 3 * sizeof(float));
+                if (colour && colour->bump.smooth)
+                    memcpy(gathered + 3 * (5 * count + k), colour->bump.smooth + 3 * i, 3 * sizeof(float));
                 if (emission)
                     memcpy(gathered + 3 * (4 * count + k), emission + 3 * i, 3 * sizeof(float));
                 if (rows)
@@ -770,7 +813,8 @@ static int shade_visible(ShaderObject *self, const float *normals, const float *
         }
         if (colour) {
             culled_colour = *colour;
-            culled_colour.rgb = gathered + 9 * count;
+            culled_colour.rgb = colour->rgb ? gathered + 9 * count : NULL;
+            culled_colour.bump.smooth = colour->bump.smooth ? gathered + 15 * count : NULL;
             colour = &culled_colour;
         }
         if (family) { /* and of the family */
@@ -846,15 +890,15 @@ static PyObject *shade_mesh_with(ShaderObject *self, PyObject *args, PyObject *k
 {
     static char *kwlist[] = {"positions", "normals",   "eye",    "cull",       "view_projection", "out",
                              "first",     "budget",    "occlusion", "bounce", "base_color",      "lamps",
-                             "emission_color", NULL};
+                             "emission_color", "smooth_normals", "bump_map_correction", NULL};
     PyObject *pobj, *nobj, *eobj, *vp_obj = Py_None, *out_obj = Py_None, *budget_obj = Py_None, *first_obj = NULL;
     PyObject *occ_obj = Py_None, *bounce_obj = NULL, *colour_obj = NULL;
-    PyObject *lamps_obj = Py_None, *emit_obj = Py_None;
-    int cull = 0;
+    PyObject *lamps_obj = Py_None, *emit_obj = Py_None, *smooth_obj = Py_None;
+    int cull = 0, correction = 1;
     size_t first = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO|$pOOOOOOOOO:shade_mesh", kwlist, &pobj, &nobj, &eobj, &cull,
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO|$pOOOOOOOOOOp:shade_mesh", kwlist, &pobj, &nobj, &eobj, &cull,
                                      &vp_obj, &out_obj, &first_obj, &budget_obj, &occ_obj, &bounce_obj, &colour_obj,
-                                     &lamps_obj, &emit_obj))
+                                     &lamps_obj, &emit_obj, &smooth_obj, &correction))
         return NULL;
     if (occ_obj == Py_None && bounce_obj) {
         PyErr_SetString(PyExc_ValueError, "bounce is read only with occlusion (what blocks the light it fills in)");
@@ -898,6 +942,7 @@ static PyObject *shade_mesh_with(ShaderObject *self, PyObject *args, PyObject *k
     }
     PyObject *result = NULL;
     float *views = NULL, *rgb = NULL, *light = NULL, *emission = NULL;
+    Py_buffer sb = {0};
     unsigned char *visible = NULL;
     int claimed = 0;
     wenv_diffuse_table table;
@@ -908,7 +953,8 @@ static PyObject *shade_mesh_with(ShaderObject *self, PyObject *args, PyObject *k
     }
     if (occ_obj != Py_None && parse_scene(self, occ_obj, bounce_obj, np, &scene, &bb) < 0)
         goto done;
-    if (parse_colour(self, colour_obj, np, per_vertex_material(self, colour_obj, vin), &table,
+    if (parse_smooth(smooth_obj, np, &sb) < 0 ||
+        parse_colour(self, colour_obj, np, per_vertex_material(self, colour_obj, vin), &sb, correction, &table,
                      &colour, &rgb) < 0)
         goto done;
     if (emit_obj != Py_None && !(emission = wenv_py_vertex_colours(emit_obj, "emission_color", np, 0)))
@@ -961,10 +1007,10 @@ static PyObject *shade_mesh_with(ShaderObject *self, PyObject *args, PyObject *k
         ensure_lamps(self, lamps_obj, pb.buf, nb.buf, np, occ_obj != Py_None ? &scene : NULL, &lamp_rows, &lamps) < 0)
         goto fail;
     if (occ_obj != Py_None &&
-        own_bounce(self, nb.buf, np, &scene, rgb ? &colour : NULL, family, emission, lamps, &light) < 0)
+        own_bounce(self, nb.buf, np, &scene, colour_of(&colour), family, emission, lamps, &light) < 0)
         goto fail;
     if (shade_visible(self, nb.buf, views, np, visible, count, occ_obj != Py_None ? &scene : NULL,
-                      rgb ? &colour : NULL, family, emission, lamps, first, budget, out, &next) < 0)
+                      colour_of(&colour), family, emission, lamps, first, budget, out, &next) < 0)
         goto fail;
     self->visible = cull ? (Py_ssize_t)count : -1;
     self->next_vertex = (Py_ssize_t)next;
@@ -976,6 +1022,8 @@ done:
         self->busy = 0;
     PyMem_Free(views);
     PyMem_Free(rgb);
+    if (sb.obj)
+        PyBuffer_Release(&sb);
     PyMem_Free(emission);
     PyMem_Free(light);
     PyMem_Free(visible);
@@ -1129,7 +1177,8 @@ static PyMethodDef Shader_methods[] = {
     {"shade", (PyCFunction)(void (*)(void))Shader_shade, METH_VARARGS | METH_KEYWORDS,
      "shade(normals, view_dirs, *, occlusion=None, bounce='self', base_color=None, positions=None, lamps=None, "
      "emission_color=None, roughness=None, metallic=None, specular_ior_level=None, specular_tint=None, "
-     "coat_weight=None, coat_roughness=None, sheen_weight=None, sheen_roughness=None, sheen_tint=None, alpha=None)"
+     "coat_weight=None, coat_roughness=None, sheen_weight=None, sheen_roughness=None, sheen_tint=None, alpha=None, "
+     "smooth_normals=None, bump_map_correction=True)"
      "\n--\n\nLinear RGB radiance (float32, n x 3) for "
      "world-space normals and view directions (surface towards eye), float32 (n, 3); view_dirs may be one (3,) "
      "vector for all.  occlusion (a wenv.Occlusion made for these vertices) shades with the scene in the way: "
@@ -1154,13 +1203,19 @@ static PyMethodDef Shader_methods[] = {
      "(wenv.Principled.PER_VERTEX).  The members are made once and kept: a new view costs each vertex its "
      "cell's members' reads.  Wavelet methods only.\n\n"
      "positions (float32 (n, 3), world) and lamps (a sequence of wenv.Lamp): the scene's lamps added as Cycles "
-     "emits them, with the shadows of occlusion's scene (docs/lamps.md).  Every method."},
+     "emits them, with the shadows of occlusion's scene (docs/lamps.md).  Every method.\n\n"
+     "smooth_normals (float32 (n, 3)): the normals before a normal map or Bump node bent `normals`; the "
+     "Lambertian part then loses what Cycles' bump terminator takes (the light from below the smooth horizon, "
+     "and with bump_map_correction, the material's Bump Map Correction, grazing light masked by GGX's G1 of "
+     "the bend): each lamp weighed in its own direction, the sky's light by its share, the horizon's read "
+     "where it is lost (docs/python.md).  Every method."},
     {"diffuse_light", (PyCFunction)(void (*)(void))Shader_diffuse_light, METH_VARARGS | METH_KEYWORDS,
      "diffuse_light(normals, *, occlusion=None, base_color=None, positions=None, lamps=None, emission_color=None, "
      "roughness=None, metallic=None, ...)\n--\n\nThe light (radiance, float32 n x 3) each vertex sends "
      "back to the surfaces it blocks (shade's bounce), as if diffuse: its albedo head-on (the Lambertian "
      "part's and the lobes') over pi times its irradiance, with its shadows when occlusion is given.  "
-     "Wavelet methods only; base_color, the inputs per vertex, emission_color, positions and lamps as shade's."},
+     "Wavelet methods only; base_color, the inputs per vertex, emission_color, positions, lamps and "
+     "smooth_normals as shade's."},
     {"shade_mesh", (PyCFunction)(void (*)(void))Shader_shade_mesh, METH_VARARGS | METH_KEYWORDS,
      "shade_mesh(positions, normals, eye, *, cull=False, view_projection=None, out=None, first=0, budget=None, "
      "occlusion=None, bounce='self', base_color=None, lamps=None, emission_color=None, roughness=None, "
@@ -1177,7 +1232,8 @@ static PyMethodDef Shader_methods[] = {
      "over a fast one's result: out = fast.shade_mesh(...); then accurate.shade_mesh(..., out=out, "
      "first=k, budget=0.05) until k reaches the count.\n\n"
      "occlusion and bounce shade with the scene in the way, as shade's (the occlusion made for these "
-     "positions and normals); base_color, emission_color and the inputs per vertex as shade's; lamps (a "
+     "positions and normals); base_color, emission_color, smooth_normals and the inputs per vertex as shade's; "
+     "lamps (a "
      "sequence of wenv.Lamp) add the scene's lamps, as Cycles emits them (docs/lamps.md)."},
     {"set_environment", (PyCFunction)Shader_set_environment, METH_O,
      "set_environment(env)\n--\n\nNew lighting; rotation matrices are kept."},

@@ -1,5 +1,7 @@
 #include "reference/lamps_reference.h"
 
+#include "scene/bump_terminator.h"
+
 #include <math.h>
 
 static double dot3(const double a[3], const double b[3]) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
@@ -23,6 +25,8 @@ typedef struct {
     const double *nrm, *f, *wo;
     const wenv_occluders *occ;
     const float *origin;
+    const double *smooth;
+    int correction;
     int diffuse, glossy;
     double spec[3], irr[3]; /* per unit radiance of the lamp, before its colour */
 } sum;
@@ -41,9 +45,11 @@ static void add(sum *s, const double w[3], double weight, double t)
         if (blocked)
             return;
     }
-    if (s->diffuse)
+    if (s->diffuse) {
+        double through = s->smooth ? wenv_bump_diffuse_weight(s->nrm, s->smooth, w, s->correction) : 1.0;
         for (int c = 0; c < 3; c++)
-            s->irr[c] += weight * cos_i;
+            s->irr[c] += weight * cos_i * through;
+    }
     if (s->glossy) {
         double wi[3] = {dot3(s->f, w), dot3(s->f + 3, w), dot3(s->f + 6, w)}, rgb[3];
         wenv_material_specular_cos(s->mat, wi, s->wo, rgb);
@@ -110,14 +116,20 @@ static void flat(sum *s, const wenv_lamp *l, const double c[3], const double u[3
 
 void wenv_reference_lamps_at(const wenv_lamp *lamps, size_t n_lamps, const wenv_material *mat, const double p[3],
                              const double nrm[3], const double f[9], const double wo[3], const wenv_occluders *occ,
-                             const float origin[3], double spec[3], double irr[3])
+                             const float origin[3], const double *smooth, int correction, double spec[3],
+                             double irr[3])
 {
     double alpha = wenv_material_lobe_width(mat);
     for (size_t j = 0; j < n_lamps; j++) {
         const wenv_lamp *l = &lamps[j];
         const wenv_lamp_settings *st = &l->settings;
-        sum s = {mat, nrm, f, wo, st->cast_shadow ? occ : NULL, origin, st->diffuse, st->glossy && wo[2] > 0.0,
-                 {0, 0, 0}, {0, 0, 0}};
+        sum s = {.mat = mat,         .nrm = nrm,
+                 .f = f,             .wo = wo,
+                 .occ = st->cast_shadow ? occ : NULL,
+                 .origin = origin,   .smooth = smooth,
+                 .correction = correction,
+                 .diffuse = st->diffuse,
+                 .glossy = st->glossy && wo[2] > 0.0};
         double rel[3] = {l->position[0] - p[0], l->position[1] - p[1], l->position[2] - p[2]};
         double d = sqrt(dot3(rel, rel)), to[3] = {rel[0] / d, rel[1] / d, rel[2] / d};
         /* the lamp's angular size against the lobe sets the grid */

@@ -17,9 +17,12 @@
 
 /* Adds to spec the lamps' light on mat's glossy part and to irr what they bring its Lambertian part
  * (cosine-weighted radiance) at point p with unit normal nrm (frame f: wenv_frame of it), seen from
- * wo (local, unit); rays from `origin` (p lifted off the surface) when occ is set. */
+ * wo (local, unit); rays from `origin` (p lifted off the surface) when occ is set.  smooth (unit, or
+ * NULL): the normal nrm was bent from, the Lambertian part's light then let through as Cycles' bump
+ * terminator lets it (bump_terminator.h, with or without correction). */
 void wenv_reference_lamps_at(const wenv_lamp *lamps, size_t n_lamps, const wenv_material *mat, const double p[3],
                              const double nrm[3], const double f[9], const double wo[3], const wenv_occluders *occ,
-                             const float origin[3], double spec[3], double irr[3]);
+                             const float origin[3], const double *smooth, int correction, double spec[3],
+                             double irr[3]);
 
 #endif

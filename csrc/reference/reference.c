@@ -100,13 +100,15 @@ static wenv_status narrow_lobe(const wenv_envmap *env, const wenv_material *mat,
 static wenv_status reference_one(const wenv_envmap *env, const wenv_material *mat, const wenv_material *emitter,
                                  const float *normals, const float *views, size_t n, const wenv_occluders *occ,
                                  const float *positions, const float *bounce, const float *base_color,
-                                 const wenv_lamp *lamps, size_t n_lamps, const float *emission, float *out,
-                                 const wenv_progress *progress, wenv_error *err);
+                                 const wenv_lamp *lamps, size_t n_lamps, const float *emission,
+                                 const wenv_bump_normals *bump, float *out, const wenv_progress *progress,
+                                 wenv_error *err);
 
 wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, const float *normals,
                            const float *views, size_t n, const wenv_occluders *occ, const float *positions,
                            const float *bounce, const float *base_color, const wenv_lamp *lamps, size_t n_lamps,
-                           const float *emission, float *out, const wenv_progress *progress, wenv_error *err)
+                           const float *emission, const wenv_bump_normals *bump, float *out,
+                           const wenv_progress *progress, wenv_error *err)
 {
     /* each vertex's Emission Color: the material emitting white, times it */
     const wenv_material *emitter = mat;
@@ -122,7 +124,7 @@ wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, con
         emitter = white;
     }
     wenv_status st = reference_one(env, mat, emitter, normals, views, n, occ, positions, bounce, base_color, lamps,
-                                   n_lamps, emission, out, progress, err);
+                                   n_lamps, emission, bump, out, progress, err);
     wenv_material_free(white);
     return st;
 }
@@ -130,8 +132,9 @@ wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, con
 static wenv_status reference_one(const wenv_envmap *env, const wenv_material *mat, const wenv_material *emitter,
                                  const float *normals, const float *views, size_t n, const wenv_occluders *occ,
                                  const float *positions, const float *bounce, const float *base_color,
-                                 const wenv_lamp *lamps, size_t n_lamps, const float *emission, float *out,
-                                 const wenv_progress *progress, wenv_error *err)
+                                 const wenv_lamp *lamps, size_t n_lamps, const float *emission,
+                                 const wenv_bump_normals *bump, float *out, const wenv_progress *progress,
+                                 wenv_error *err)
 {
     if (occ && !positions)
         return wenv_error_set(err, WENV_ERR_VALUE, "occluders need the vertices' positions");
@@ -166,11 +169,12 @@ static wenv_status reference_one(const wenv_envmap *env, const wenv_material *ma
         float *wi = malloc(BLOCK * 3 * sizeof(float));
         float *fl = malloc(BLOCK * 3 * sizeof(float));
         float *fcos = malloc(BLOCK * 3 * sizeof(float));
+        float *through = bump ? malloc(BLOCK * sizeof(float)) : NULL; /* the bent Lambertian part's */
         float *wd = occ ? malloc(BLOCK * 3 * sizeof(float)) : NULL, *om = occ ? malloc(BLOCK * sizeof(float)) : NULL;
         float *uv = occ ? malloc(BLOCK * 2 * sizeof(float)) : NULL;
         uint32_t *tri = occ ? malloc(BLOCK * sizeof(uint32_t)) : NULL;
         double *nodes = n_narrow ? malloc(2 * NARROW_SAMPLES * NARROW_SAMPLES * 6 * sizeof(double)) : NULL;
-        if (!wi || !fl || !fcos || (n_narrow && !nodes) || (occ && (!wd || !om || !uv || !tri)))
+        if (!wi || !fl || !fcos || (n_narrow && !nodes) || (occ && (!wd || !om || !uv || !tri)) || (bump && !through))
             atomic_store(&failed, 1);
         wenv_error lobe_err = {0};
 #pragma omp for schedule(dynamic, 1)
@@ -179,8 +183,14 @@ static wenv_status reference_one(const wenv_envmap *env, const wenv_material *ma
                 continue;
             double nn[3], vv[3];
             wenv_unit_pair(normals, views, i, nn, vv);
-            double f[9];
+            double f[9], ns[3];
             wenv_frame(nn, f);
+            if (bump) {
+                const float *b = bump->smooth + 3 * i;
+                double len = sqrt((double)b[0] * b[0] + (double)b[1] * b[1] + (double)b[2] * b[2]);
+                for (int c = 0; c < 3; c++)
+                    ns[c] = b[c] / len;
+            }
             double wo[3] = {f[0] * vv[0] + f[1] * vv[1] + f[2] * vv[2], f[3] * vv[0] + f[4] * vv[1] + f[5] * vv[2],
                             f[6] * vv[0] + f[7] * vv[1] + f[8] * vv[2]};
             double spec[3] = {0, 0, 0}, irr[3] = {0, 0, 0};
@@ -203,6 +213,10 @@ static wenv_status reference_one(const wenv_envmap *env, const wenv_material *ma
                         w[1] = (float)f[3] * d[0] + (float)f[4] * d[1] + (float)f[5] * d[2];
                         w[2] = z;
                         memcpy(fl + 3 * fill, flux + 3 * p, 3 * sizeof(float));
+                        if (bump) {
+                            double dd[3] = {d[0], d[1], d[2]};
+                            through[fill] = (float)wenv_bump_diffuse_weight(nn, ns, dd, bump->correction);
+                        }
                         if (occ) {
                             memcpy(wd + 3 * fill, d, 3 * sizeof(float));
                             om[fill] = omega[p];
@@ -222,7 +236,7 @@ static wenv_status reference_one(const wenv_envmap *env, const wenv_material *ma
                     }
                     for (size_t q = 0; q < fill; q++)
                         for (int c = 0; c < 3; c++)
-                            irr[c] += (double)wi[3 * q + 2] * fl[3 * q + (size_t)c];
+                            irr[c] += (double)wi[3 * q + 2] * fl[3 * q + (size_t)c] * (bump ? through[q] : 1.0f);
                     if (fill && has_lobes) {
                         wenv_material_specular_cos_batch(mat, wo, wi, fill, fcos);
                         for (size_t q = 0; q < fill; q++)
@@ -246,7 +260,8 @@ static wenv_status reference_one(const wenv_envmap *env, const wenv_material *ma
                     atomic_store(&failed, 1);
             if (n_lamps && wo[2] > 0.0) {
                 double p[3] = {positions[3 * i], positions[3 * i + 1], positions[3 * i + 2]};
-                wenv_reference_lamps_at(lamps, n_lamps, mat, p, nn, f, wo, occ, b.origin, spec, irr);
+                wenv_reference_lamps_at(lamps, n_lamps, mat, p, nn, f, wo, occ, b.origin, bump ? ns : NULL,
+                                        bump ? bump->correction : 0, spec, irr);
             }
             double emitted[3] = {0.0, 0.0, 0.0};
             if (wo[2] > 0.0)
@@ -260,6 +275,7 @@ static wenv_status reference_one(const wenv_envmap *env, const wenv_material *ma
         free(wi);
         free(fl);
         free(fcos);
+        free(through);
         free(wd);
         free(om);
         free(uv);
@@ -349,8 +365,9 @@ static wenv_status key_material(const wenv_principled_inputs *in, const vertex_k
 wenv_status wenv_reference_per_vertex(const wenv_envmap *env, const wenv_material *mat, const float *normals,
                                       const float *views, size_t n, const wenv_occluders *occ, const float *positions,
                                       const float *bounce, const float *base_color, const wenv_vertex_inputs *vi,
-                                      const wenv_lamp *lamps, size_t n_lamps, const float *emission, float *out,
-                                      const wenv_progress *progress, wenv_error *err)
+                                      const wenv_lamp *lamps, size_t n_lamps, const float *emission,
+                                      const wenv_bump_normals *bump, float *out, const wenv_progress *progress,
+                                      wenv_error *err)
 {
     const wenv_principled_inputs *in = wenv_principled_inputs_of(mat);
     int any = wenv_vertex_inputs_any(vi);
@@ -358,7 +375,7 @@ wenv_status wenv_reference_per_vertex(const wenv_envmap *env, const wenv_materia
     int colour_in_metal = base_color && in && (in->metallic > 0.0 || (vi && vi->value[WENV_VERTEX_metallic]));
     if (!any && !colour_in_metal)
         return wenv_reference(env, mat, normals, views, n, occ, positions, bounce, base_color, lamps, n_lamps,
-                              emission, out, progress, err);
+                              emission, bump, out, progress, err);
     if (!in)
         return wenv_error_set(err, WENV_ERR_VALUE,
                               "inputs per vertex (Roughness, Metallic...) need a Principled material (wenv.Principled), "
@@ -367,8 +384,8 @@ wenv_status wenv_reference_per_vertex(const wenv_envmap *env, const wenv_materia
     if (wenv_vertex_inputs_check(vi, n, err))
         return err->status;
     vertex_key *key = malloc((n ? n : 1) * sizeof *key);
-    /* a group's normals, views, positions, colours, emission colours and radiance */
-    float *work = malloc((n ? n : 1) * 18 * sizeof(float));
+    /* a group's normals, views, positions, colours, emission colours, radiance and smooth normals */
+    float *work = malloc((n ? n : 1) * 21 * sizeof(float));
     if (!key || !work) {
         free(key);
         free(work);
@@ -383,7 +400,7 @@ wenv_status wenv_reference_per_vertex(const wenv_envmap *env, const wenv_materia
             b++;
         size_t count = b - a;
         float *nrm = work, *vw = work + 3 * count, *pos = work + 6 * count, *rgb = work + 9 * count;
-        float *o = work + 12 * count, *em = work + 15 * count;
+        float *o = work + 12 * count, *em = work + 15 * count, *smooth = work + 18 * count;
         for (size_t k = 0; k < count; k++) {
             size_t i = key[a + k].i;
             memcpy(nrm + 3 * k, normals + 3 * i, 3 * sizeof(float));
@@ -394,15 +411,18 @@ wenv_status wenv_reference_per_vertex(const wenv_envmap *env, const wenv_materia
                 memcpy(rgb + 3 * k, base_color + 3 * i, 3 * sizeof(float));
             if (emission)
                 memcpy(em + 3 * k, emission + 3 * i, 3 * sizeof(float));
+            if (bump)
+                memcpy(smooth + 3 * k, bump->smooth + 3 * i, 3 * sizeof(float));
         }
         wenv_material *group_mat;
         if ((st = key_material(in, &key[a], colour_in_metal, &group_mat, err)))
             break;
         group_progress gp = {progress, (double)a / (double)n, (double)count / (double)n};
         wenv_progress inner = {progress && progress->report ? report_group : NULL, &gp};
+        wenv_bump_normals group_bump = {smooth, bump ? bump->correction : 0};
         st = wenv_reference(env, group_mat, nrm, vw, count, occ, positions ? pos : NULL, bounce,
-                            base_color && !colour_in_metal ? rgb : NULL, lamps, n_lamps, emission ? em : NULL, o,
-                            &inner, err);
+                            base_color && !colour_in_metal ? rgb : NULL, lamps, n_lamps, emission ? em : NULL,
+                            bump ? &group_bump : NULL, o, &inner, err);
         wenv_material_free(group_mat);
         for (size_t k = 0; !st && k < count; k++)
             memcpy(out + 3 * key[a + k].i, o + 3 * k, 3 * sizeof(float));

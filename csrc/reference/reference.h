@@ -16,17 +16,21 @@
 #include "base/error.h"
 #include "scene/principled_inputs.h"
 #include "base/progress.h"
+#include "scene/bump_terminator.h"
 #include "scene/envmap.h"
 #include "scene/lamp.h"
 #include "scene/material.h"
 #include "scene/occluders.h"
 
 /* base_color (NULL: the material's): each vertex's colour in [0, 1] in place of the material's, in
- * its Lambertian part (wenv_material_diffuse_per_colour_at; WENV_ERR_VALUE where it cannot vary). */
+ * its Lambertian part (wenv_material_diffuse_per_colour_at; WENV_ERR_VALUE where it cannot vary).
+ * bump (NULL: none): the smooth normals the normals were bent from, whose Lambertian part then
+ * receives each direction's light as Cycles' bump terminator lets it through (bump_terminator.h). */
 wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, const float *normals,
                            const float *views, size_t n, const wenv_occluders *occ, const float *positions,
                            const float *bounce, const float *base_color, const wenv_lamp *lamps, size_t n_lamps,
-                           const float *emission, float *out, const wenv_progress *progress, wenv_error *err);
+                           const float *emission, const wenv_bump_normals *bump, float *out,
+                           const wenv_progress *progress, wenv_error *err);
 
 /* The same with each vertex's inputs (vi: principled_inputs.h's WENV_VERTEX_INPUTS, each NULL for the
  * material's own), for a Principled material (WENV_ERR_VALUE otherwise): the vertices of one set of
@@ -36,7 +40,8 @@ wenv_status wenv_reference(const wenv_envmap *env, const wenv_material *mat, con
 wenv_status wenv_reference_per_vertex(const wenv_envmap *env, const wenv_material *mat, const float *normals,
                                       const float *views, size_t n, const wenv_occluders *occ, const float *positions,
                                       const float *bounce, const float *base_color, const wenv_vertex_inputs *vi,
-                                      const wenv_lamp *lamps, size_t n_lamps, const float *emission, float *out,
-                                      const wenv_progress *progress, wenv_error *err);
+                                      const wenv_lamp *lamps, size_t n_lamps, const float *emission,
+                                      const wenv_bump_normals *bump, float *out, const wenv_progress *progress,
+                                      wenv_error *err);
 
 #endif

@@ -376,8 +376,8 @@ static void add_points(glossy_points *g, double s0, double t0, double side, size
 }
 
 wenv_status wenv_lamp_light_shade(const wenv_lamp_rows *rows, const wenv_material *mat, const wenv_vertex_lights *own,
-                                  const float *normals, const float *views, size_t n, float *out, float *irradiance,
-                                  wenv_error *err)
+                                  const float *normals, const float *views, size_t n, const wenv_bump_normals *bump,
+                                  float *out, float *irradiance, wenv_error *err)
 {
     const wenv_lamp_light *L = rows->light;
     for (size_t k = 0; k < n; k++) {
@@ -448,16 +448,26 @@ wenv_status wenv_lamp_light_shade(const wenv_lamp_rows *rows, const wenv_materia
             double cone_cos = glossy_view && !own ? mat_cone_cos : -1.0, mirror[3];
             for (int c = 0; c < 3; c++)
                 mirror[c] = 2.0 * dot3(nrm, v) * nrm[c] - v[c];
-            double spec[3] = {0.0, 0.0, 0.0}, irr[3] = {0.0, 0.0, 0.0};
+            double spec[3] = {0.0, 0.0, 0.0}, irr[3] = {0.0, 0.0, 0.0}, ns[3];
+            int bent = bump && bump->smooth;
+            if (bent) {
+                const float *b = bump->smooth + 3 * k;
+                double len = sqrt((double)b[0] * b[0] + (double)b[1] * b[1] + (double)b[2] * b[2]);
+                for (int c = 0; c < 3; c++)
+                    ns[c] = b[c] / len;
+            }
             for (size_t j = 0; j < L->n_lamps; j++) {
                 const wenv_lamp *lamp = &L->lamps[j];
                 float share = L->share[i * L->n_lamps + j];
                 uint16_t seen = L->seen[i * L->n_lamps + j];
                 if (!(share > 0.0f))
                     continue;
+                double through = 1.0, towards[3], dist;
+                if (bent && delta_direction(lamp, p, towards, &dist)) /* at the lamp's centre */
+                    through = wenv_bump_diffuse_weight(nrm, ns, towards, bump->correction);
                 if (lamp->settings.diffuse)
                     for (int c = 0; c < 3; c++)
-                        irr[c] += (double)share * lamp->radiance[c];
+                        irr[c] += (double)share * through * lamp->radiance[c];
                 if (!glossy_view || !lamp->settings.glossy)
                     continue;
                 double lamp_spec[3] = {0.0, 0.0, 0.0};

@@ -21,6 +21,7 @@
 #include "base/error.h"
 #include "base/progress.h"
 #include "methods/method.h"
+#include "scene/bump_terminator.h"
 #include "scene/lamp.h"
 #include "scene/material.h"
 #include "scene/occluders.h"
@@ -63,9 +64,10 @@ typedef struct {
 /* For n call vertices (normals and views as the shading calls take them; views NULL: the diffuse
  * light sent out head-on, no glossy part): adds the lamps' light on the glossy part to out, each
  * vertex through its own materials (own; NULL: mat for all), and what they bring the Lambertian part
- * (cosine-weighted radiance, as method.h's irradiance) to irradiance. */
+ * (cosine-weighted radiance, as method.h's irradiance) to irradiance -- where bump is set (NULL:
+ * nothing bent), each lamp's as Cycles' bump terminator lets it through in the lamp's direction. */
 wenv_status wenv_lamp_light_shade(const wenv_lamp_rows *rows, const wenv_material *mat, const wenv_vertex_lights *own,
-                                  const float *normals, const float *views, size_t n, float *out, float *irradiance,
-                                  wenv_error *err);
+                                  const float *normals, const float *views, size_t n, const wenv_bump_normals *bump,
+                                  float *out, float *irradiance, wenv_error *err);
 
 #endif
