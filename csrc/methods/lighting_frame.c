@@ -128,13 +128,13 @@ wenv_status wenv_lighting_frame_shade_scene(const wenv_lighting_frame *frame, co
     int turn = !frame->identity && n > 0;
     int bent = colour && colour->bump.smooth && n > 0, horizon = bent && method->diffuse_light;
     float *turned = turn ? malloc(n * (horizon ? 9 : 6) * sizeof(float)) : NULL;
-    float *bump_rows = bent ? malloc(n * (horizon ? 7 : 1) * sizeof(float)) : NULL;
+    /* the shares, then the horizons, their light, and the diffuse pass's other output */
+    float *bump_rows = bent ? malloc(n * (horizon ? 10 : 1) * sizeof(float)) : NULL;
     if ((turn && !turned) || (bent && !bump_rows)) {
         free(turned);
         free(bump_rows);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory turning %zu normals and views", n);
     }
-    /* the shares, then the horizons and their light */
     float *horizons = horizon ? bump_rows + n : NULL, *horizon_light = horizon ? bump_rows + 4 * n : NULL;
     wenv_vertex_colour with_bump;
     if (bent) {
@@ -156,14 +156,8 @@ wenv_status wenv_lighting_frame_shade_scene(const wenv_lighting_frame *frame, co
             turn_all(frame->turn, horizons, n, turned + 6 * n);
         at_horizons = horizon ? turned + 6 * n : NULL;
     }
-    if (horizon) {
-        float *light_out = malloc(n * 3 * sizeof(float));
-        if (!light_out)
-            st = wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the light of %zu horizons", n);
-        else
-            st = run_split(method, state, at_horizons, NULL, n, scene, light_out, horizon_light, err);
-        free(light_out);
-    }
+    if (horizon)
+        st = run_split(method, state, at_horizons, NULL, n, scene, bump_rows + 7 * n, horizon_light, err);
     if (!st)
         st = run(method, state, at_normals, at_views, n, scene, bent ? &with_bump : colour, family, out, err);
     if (!st && turn && frame->scale != 1.0f)

@@ -967,13 +967,13 @@ wenv_status wenv_material_family_own(const wenv_family_rows *fr, const float *no
 }
 
 wenv_status wenv_material_family_add_diffuse(const wenv_family_rows *fr, const float *normals, const float *views,
-                                             size_t n, const float *rgb, const float *share, const float *irradiance,
-                                             float *out, wenv_error *err)
+                                             size_t n, const float *rgb, const float *irradiance, float *out,
+                                             wenv_error *err)
 {
     size_t *fv;
     if (family_vertices(fr, n, &fv, err))
         return err->status;
-    apply_diffuse(fr->family, fv, normals, views, n, rgb, share, NULL, irradiance, 1, out);
+    apply_diffuse(fr->family, fv, normals, views, n, rgb, NULL, NULL, irradiance, 1, out);
     free(fv);
     return WENV_OK;
 }

@@ -101,11 +101,10 @@ wenv_status wenv_material_family_own(const wenv_family_rows *rows, const float *
                                      wenv_error *err);
 
 /* out[i] += each call vertex's Lambertian part (its members' mixed, times its colour rgb where given)
- * times irradiance[i] (of which a bent part takes its share: vertex_colour.h), clamped at 0, for a
- * view at normal i . view i (views NULL: head-on). */
+ * times irradiance[i], clamped at 0, for a view at normal i . view i (views NULL: head-on). */
 wenv_status wenv_material_family_add_diffuse(const wenv_family_rows *rows, const float *normals, const float *views,
-                                             size_t n, const float *rgb, const float *share, const float *irradiance,
-                                             float *out, wenv_error *err);
+                                             size_t n, const float *rgb, const float *irradiance, float *out,
+                                             wenv_error *err);
 
 /* out[i] = max(0, out[i] + each call vertex's emission towards view i through its members' layers)
  * (views NULL: head-on); colours (n x 3, or NULL: the material's own) each vertex's Emission Color, as

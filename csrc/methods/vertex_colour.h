@@ -41,8 +41,9 @@ static inline float wenv_bent_light(float e, const float *share, const float *ho
     return kept > 0.0f ? kept : 0.0f;
 }
 
-/* out[i] = max(0, out[i] + rgb[i] x share[i] x per_colour(cos_v) x irradiance[i]) for n vertices,
- * cos_v the cosine between normal i and view i (views NULL: 1, the light sent out head-on). */
+/* out[i] = max(0, out[i] + rgb[i] x per_colour(cos_v) x the light of irradiance[i] the part receives
+ * (wenv_bent_light)) for n vertices, cos_v the cosine between normal i and view i (views NULL: 1, the
+ * light sent out head-on). */
 void wenv_vertex_colour_apply(const wenv_vertex_colour *colour, const float *normals, const float *views, size_t n,
                               const float *irradiance, float *out);
 

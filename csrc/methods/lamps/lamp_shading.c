@@ -40,15 +40,9 @@ wenv_status wenv_lamps_add(const wenv_lamp_rows *lamps, const wenv_material *mat
     if (family && views &&
         (st = wenv_material_family_own(family, normals, views, n, colour ? colour->rgb : NULL, pick, weight, &own, err)))
         goto done;
-    /* a bent Lambertian part's lamps are weighed each in its direction, not by the sky's share */
+    /* a bent Lambertian part's lamps are weighed each in its direction (the caller's colour holds no
+     * sky's share: wenv_lighting_frame_shade_scene sets that on its own copy) */
     const wenv_bump_normals *bump = colour && colour->bump.smooth ? &colour->bump : NULL;
-    wenv_vertex_colour unbent;
-    if (bump) {
-        unbent = *colour;
-        unbent.share = NULL;
-        unbent.horizon_light = NULL;
-        colour = &unbent;
-    }
     if ((st = wenv_lamp_light_shade(lamps, mat, family && views ? &own : NULL, normals, views, n, bump, out,
                                     irradiance, err)))
         goto done;
@@ -60,8 +54,8 @@ wenv_status wenv_lamps_add(const wenv_lamp_rows *lamps, const wenv_material *mat
             out[i] += lobes[i % 3] * irradiance[i];
     }
     if (family) {
-        st = wenv_material_family_add_diffuse(family, normals, views, n, colour ? colour->rgb : NULL,
-                                              colour ? colour->share : NULL, irradiance, out, err);
+        st = wenv_material_family_add_diffuse(family, normals, views, n, colour ? colour->rgb : NULL, irradiance, out,
+                                              err);
     } else if (colour) {
         wenv_vertex_colour_apply(colour, normals, views, n, irradiance, out);
     } else {
