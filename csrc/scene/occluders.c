@@ -163,8 +163,9 @@ void wenv_occluders_test_rays(const wenv_occluders *occ, const float *origins, c
 /* Rays handed to Embree at once: its stream interface sorts them into packets. */
 #define STREAM 256
 
-void wenv_occluders_test(const wenv_occluders *occ, const float origin[3], const float *dirs, size_t n, float tfar,
-                         unsigned char *blocked)
+/* Rays from one origin, each ending at fars[k] (NULL: all at far). */
+static void test_from(const wenv_occluders *occ, const float origin[3], const float *dirs, size_t n, float far,
+                      const float *fars, unsigned char *blocked)
 {
     struct RTCRay rays[STREAM];
     struct RTCIntersectContext context;
@@ -173,8 +174,9 @@ void wenv_occluders_test(const wenv_occluders *occ, const float origin[3], const
         for (size_t k = 0; k < m; k++) {
             const float *d = dirs + 3 * (start + k);
             rays[k] = (struct RTCRay){.org_x = origin[0], .org_y = origin[1], .org_z = origin[2], .tnear = 0.0f,
-                                      .dir_x = d[0], .dir_y = d[1], .dir_z = d[2], .time = 0.0f, .tfar = tfar,
-                                      .mask = UINT32_MAX, .id = (unsigned)k, .flags = 0};
+                                      .dir_x = d[0], .dir_y = d[1], .dir_z = d[2], .time = 0.0f,
+                                      .tfar = fars ? fars[start + k] : far, .mask = UINT32_MAX, .id = (unsigned)k,
+                                      .flags = 0};
         }
         rtcInitIntersectContext(&context);
         context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT; /* one origin, neighbouring directions */
@@ -182,6 +184,18 @@ void wenv_occluders_test(const wenv_occluders *occ, const float origin[3], const
         for (size_t k = 0; k < m; k++)
             blocked[start + k] = rays[k].tfar < 0.0f; /* Embree marks an occluded ray with tfar = -inf */
     }
+}
+
+void wenv_occluders_test(const wenv_occluders *occ, const float origin[3], const float *dirs, size_t n, float tfar,
+                         unsigned char *blocked)
+{
+    test_from(occ, origin, dirs, n, tfar, NULL, blocked);
+}
+
+void wenv_occluders_test_until(const wenv_occluders *occ, const float origin[3], const float *dirs, const float *fars,
+                               size_t n, unsigned char *blocked)
+{
+    test_from(occ, origin, dirs, n, 0.0f, fars, blocked);
 }
 
 void wenv_occluders_hit(const wenv_occluders *occ, const float origin[3], const float *dirs, size_t n, uint32_t *tri,

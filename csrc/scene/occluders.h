@@ -44,6 +44,10 @@ float wenv_occluders_offset(const wenv_occluders *occ);
 void wenv_occluders_test(const wenv_occluders *occ, const float origin[3], const float *dirs, size_t n, float tfar,
                          unsigned char *blocked);
 
+/* The same with ray k ending at fars[k] (INFINITY: anywhere): the points of a lamp, tested at once. */
+void wenv_occluders_test_until(const wenv_occluders *occ, const float origin[3], const float *dirs, const float *fars,
+                               size_t n, unsigned char *blocked);
+
 /* The nearest surface along each of n rays from `origin` (directions as wenv_occluders_test, no far
  * limit): tri[k] its triangle, or UINT32_MAX where the ray reaches the sky, and uv[2k], uv[2k + 1]
  * the hit's barycentric weights of the triangle's second and third vertices.  Thread-safe. */

@@ -144,12 +144,21 @@ static void prepare_one(const wenv_lamp_light *L, const wenv_lamp *lamp, const w
     if (!varies && !(even > 0.0))
         return; /* outside a spot's cone */
     double factor[WENV_LAMP_CELLS * WENV_LAMP_CELLS], h = 2.0 / (double)k;
+    float dirs[3 * WENV_LAMP_CELLS * WENV_LAMP_CELLS], fars[WENV_LAMP_CELLS * WENV_LAMP_CELLS];
+    unsigned char blocked[WENV_LAMP_CELLS * WENV_LAMP_CELLS] = {0};
     for (size_t c = 0; c < k * k; c++) {
         double x[3];
         wenv_lamp_patch_point(&pa, -1.0 + h * ((double)(c % k) + 0.5), -1.0 + h * ((double)(c / k) + 0.5), x);
-        double t = sqrt(dot3(x, x)), w[3] = {x[0] / t, x[1] / t, x[2] / t}, back[3] = {-w[0], -w[1], -w[2]};
+        double t = sqrt(dot3(x, x)), back[3] = {-x[0] / t, -x[1] / t, -x[2] / t};
         factor[c] = varies ? wenv_lamp_factor(lamp, back, pa.within_sphere) : even;
-        if (reaches(blockers, origin, w, pa.infinite ? INFINITY : t))
+        for (int a = 0; a < 3; a++)
+            dirs[3 * c + (size_t)a] = (float)(x[a] / t);
+        fars[c] = pa.infinite ? INFINITY : (float)(t * (1.0 - 1e-4));
+    }
+    if (blockers) /* the cells' rays at once: one origin, neighbouring directions */
+        wenv_occluders_test_until(blockers, origin, dirs, fars, k * k, blocked);
+    for (size_t c = 0; c < k * k; c++) {
+        if (!blocked[c])
             *seen |= (uint16_t)(1u << c);
         else
             alike = 0;
