@@ -53,16 +53,19 @@ class ShadingPlan:
         self.bounce = bounce  # with shadows, what blocks sends back its diffuse light (else black)
         self.casts = []  # per item: whether it blocks light (the object's Casts Shadows)
         self.blockers = []  # (positions, triangles) of the other meshes that block light
+        # with bounce light, per blocker (in the same order): (object name, MeshData, material keys),
+        # whose diffuse light it sends back into what it shadows
+        self.senders = []
         self.lamps = []  # the scene's lamps (wenv.Lamp: no Blender data)
         self.lamps_key = ()  # what tells this pass's lamps from another's (the bounce made with them)
         self.notes = []
         self.results = None
         self.auto_choices = {}  # (object name, material key) -> stats["auto"] of the shader used
 
-    def _parts(self):
-        """Per object: (name, data, keys, parts), parts being (slot, selection, MeshData of the
-        vertices of that material slot) -- the mesh itself when one slot holds them all."""
-        for name, data, keys in self.items:
+    def _parts(self, items):
+        """Per object of `items`: (name, data, keys, parts), parts being (slot, selection, MeshData of
+        the vertices of that material slot) -- the mesh itself when one slot holds them all."""
+        for name, data, keys in items:
             slots = np.clip(data.slots, 0, len(keys) - 1)
             parts = []
             for s in np.unique(slots):
@@ -88,7 +91,7 @@ class ShadingPlan:
         return name, data.domain, tone_map(rgb, self.l_max) if self.tone == "LOG" else rgb, seen
 
     def material_keys(self):
-        return {t for _, data, keys in self.items for s in np.unique(np.clip(data.slots, 0, len(keys) - 1))
+        return {t for _, data, keys in self.items + self.senders for s in np.unique(np.clip(data.slots, 0, len(keys) - 1))
                 for t in engine.term_keys(keys[s])}
 
     def preview_if_slow(self):
@@ -124,8 +127,9 @@ class ShadingPlan:
             self.notes.append(note)
         return _with_inputs(part, {k: a for k, a in part.inputs.items() if k not in dropped})
 
-    def _ordered_parts(self, quality):
-        """(object index, name, material key, selection, part, weight) of every part of the pass, those
+    def _ordered_parts(self, quality, items=None):
+        """(object index, name, material key, selection, part, weight) of every part of the pass (of
+        `items` when given, else of the meshes shaded), those
         of one material together, the materials the shader at `quality` keeps first (the current one
         first of all): a shader holds one material at a time and keeps the last few, so each
         material's BRDF slices are made at most once per pass (~0.3-0.7 s at `default`) and a kept
@@ -133,7 +137,7 @@ class ShadingPlan:
         by its weight over the part's rows ((3,) or (rows, 3)); weight None: 1."""
         kept = engine.shaders.kept_materials(quality)
         work, order = [], {}
-        for i, (name, data, keys, parts) in enumerate(self._parts()):
+        for i, (name, data, keys, parts) in enumerate(self._parts(self.items if items is None else items)):
             for s, sel, part in parts:
                 if keys[s][0] != "MIXTURE":
                     order.setdefault(keys[s], len(order))
@@ -159,8 +163,9 @@ class ShadingPlan:
     def _scenes(self, quality, work, cancelled=None, report=None):
         """Per part of `work`, the keywords of shading it with the scene in the way: its occlusion
         against every blocking mesh, and with bounce light the light every occluder vertex sends back
-        (the shaded parts' diffuse light; black for the blockers not shaded).  None without shadows.
-        report(fraction) as the occlusions are cast; `cancelled` (a threading.Event) stops them."""
+        (the diffuse light of the parts shaded and of the other blockers, each with its own shadows
+        and materials).  None without shadows.  report(fraction) as the occlusions are cast;
+        `cancelled` (a threading.Event) stops them."""
         lit = {"lamps": self.lamps} if self.lamps else None
         if not self.shadows:
             return [lit] * len(work)
@@ -169,23 +174,29 @@ class ShadingPlan:
         meshes_in += self.blockers
         if not any(len(t) for _, t in meshes_in):
             return [lit] * len(work)
+        # the blockers not shaded send their light too: their own shadows, then their diffuse light
+        senders = self._ordered_parts(quality, self.senders) if self.bounce else []
+        everything = work + senders
         with engine.shadows.lock:
             occluders, offsets = engine.shadows.occluders(meshes_in, self.memory_budget_mb)
             occlusions = [engine.shadows.occlusion(occluders, part.positions, part.normals,
-                                                   _ray_progress(k, len(work), report, cancelled))
-                          for k, (_, _, _, _, part, _) in enumerate(work)]
+                                                   _ray_progress(k, len(everything), report, cancelled))
+                          for k, (_, _, _, _, part, _) in enumerate(everything)]
         bounce = np.zeros((offsets[-1], 3), np.float32)
         scenes = []
-        for (i, name, key, sel, part, weight), occlusion in zip(work, occlusions):
+        for k, ((i, name, key, sel, part, weight), occlusion) in enumerate(zip(everything, occlusions)):
+            sender = k >= len(work)
             shader = self._shader(quality, name, key, part.normals, cancelled)
             if not engine.models_shadows(shader):  # Auto's choice for this part: it sends back no light
-                note = (f"'{name}': shaded without shadows by {shader.method} (Auto's choice; the wavelet "
-                        "qualities shade them)")
+                note = (f"'{name}': {'sends no bounce light' if sender else 'shaded without shadows'} by "
+                        f"{shader.method} (Auto's choice; the wavelet qualities shade shadows)")
                 if note not in self.notes:
                     self.notes.append(note)
-                scenes.append(None)
+                if not sender:
+                    scenes.append(None)
                 continue
-            scenes.append(occlusion)
+            if not sender:
+                scenes.append(occlusion)
             if not self.bounce:
                 continue
             made_by = (quality, self.world.signature, key, self.target_error, self.memory_budget_mb,
@@ -195,7 +206,8 @@ class ShadingPlan:
             with engine.shadows.lock:
                 light = engine.shadows.light(occlusion, made_by,
                                              lambda: engine.diffuse_light(shader, taken, occlusion, self.lamps))
-            bounce[offsets[i] + np.flatnonzero(sel)] += light if weight is None else weight * light
+            first = offsets[len(self.items) + i if sender else i]  # the blockers follow the meshes shaded
+            bounce[first + np.flatnonzero(sel)] += light if weight is None else weight * light
         return [dict(occlusion=o, bounce=bounce if self.bounce else None, **(lit or {})) if o is not None else lit
                 for o in scenes]
 
@@ -346,8 +358,14 @@ def plan_shading(scene, depsgraph, objects, view, images, progress=None, preview
             if (obj.type == "MESH" and obj.name not in shaded and obj.wenv.casts_shadows and obj.visible_get()
                     and obj.mode != "EDIT"):
                 data = meshes.read_mesh(obj, depsgraph)
-                if data.count:
-                    plan.blockers.append((data.positions, engine.shadow_triangles(data.positions, data.triangles)[0]))
+                if not data.count:
+                    continue
+                plan.blockers.append((data.positions, engine.shadow_triangles(data.positions, data.triangles)[0]))
+                if st.bounce_light:  # its light, read as a shaded mesh's is
+                    for read in (textures.read_inputs, textures.read_term_weights, textures.read_shading_normals):
+                        notes += [n for n in read(obj, depsgraph, data) if n not in notes]
+                    notes += [n for n in materials.slot_notes(obj) if n not in notes]
+                    plan.senders.append((obj.name, data, materials.slot_material_keys(obj)))
         dropped = 0
         for (_, data, _), cast in zip(plan.items, plan.casts):
             if cast:

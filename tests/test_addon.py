@@ -2970,6 +2970,39 @@ def test_another_mesh_casts_shadows_unless_told_not_to(scene):
     assert np.array_equal(again, plain)
 
 
+def test_a_blocker_not_shaded_sends_its_light_back(scene):
+    """The plane shaded alone under the start-up cube (smooth, an orange Lambert): with Bounce Light,
+    what the cube blocks shows the cube's own diffuse light (its shadows included), as the core
+    gives it; brighter beneath the cube than with Bounce Light off."""
+    env_world(scene, "sunset")
+    plane = add_plane_under_cube()
+    cube = bpy.data.objects["Cube"]
+    cube.data.shade_smooth()
+    cube.data.materials.clear()
+    cube_mat = set_material(cube, model="LAMBERT", diffuse=(0.8, 0.5, 0.2), lobes=())
+    scene.wenv.shadows = True
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    _, rgb = attribute(plane)
+    pp, pn = world_arrays(plane, corner=False)
+    cp, cn = world_arrays(cube, corner=False)
+    occluders = wenv.Occluders(np.vstack([pp, cp]), np.vstack([mesh_triangles(plane), mesh_triangles(cube) + len(pp)]))
+    plane_occlusion = occluders.occlusion(pp, pn, resolution="auto")
+    cube_occlusion = occluders.occlusion(cp, cn, resolution="auto")
+    env = wenv.load_environment(hdri_path("sunset"))
+    shader = core_shader(env, wenv_material(plane.data.materials[0]))
+    bounce = np.vstack([shader.diffuse_light(pn, occlusion=plane_occlusion),
+                        core_shader(env, wenv_material(cube_mat)).diffuse_light(cn, occlusion=cube_occlusion)])
+    eye = tuple(scene.camera.matrix_world.translation)
+    want = shader.shade_mesh(pp, pn, eye, occlusion=plane_occlusion, bounce=bounce)
+    close = np.all(np.abs(rgb - want) <= 1e-3 * np.abs(want) + 1e-5, axis=1)
+    assert close.mean() > 0.99
+    scene.wenv.bounce_light = False
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    _, black = attribute(plane)
+    under = np.hypot(pp[:, 0], pp[:, 1]) < 1.5
+    assert np.all(rgb[under].sum(1) > black[under].sum(1) * 1.01)
+
+
 def test_a_moved_object_recasts_only_what_sees_it(scene):
     """The cube moved over the plane, beside a wall: the plane's occlusion is made from the one
     before, casting only the vertices whose rays met the cube or meet it now (not those behind the
@@ -2982,12 +3015,16 @@ def test_a_moved_object_recasts_only_what_sees_it(scene):
     assert shade_op(view="CAMERA") == {"FINISHED"}
     bpy.data.objects["Cube"].location.x += 1.5
     assert shade_op(view="CAMERA") == {"FINISHED"}
-    (occlusion,) = engine.shadows._occlusions.values()
+
+    def plane_occlusion():  # the cubes' own occlusions are kept too: their light is the plane's bounce
+        (occlusion,) = [o for o in engine.shadows._occlusions.values() if o.vertices == len(plane.data.vertices)]
+        return occlusion
+    occlusion = plane_occlusion()
     assert 0 < occlusion.cast_vertices < occlusion.vertices
     _, moved = attribute(plane)
     engine.shadows.clear()
     assert shade_op(view="CAMERA") == {"FINISHED"}
-    (again,) = engine.shadows._occlusions.values()
+    again = plane_occlusion()
     assert again.cast_vertices == again.vertices
     np.testing.assert_array_equal(attribute(plane)[1], moved)
 
