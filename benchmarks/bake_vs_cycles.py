@@ -31,7 +31,8 @@ import bpy  # noqa: E402
 import addon  # noqa: E402
 from addon import bake, meshes, shading, views  # noqa: E402
 from benchmarks import shadows_vs_cycles  # noqa: E402
-from benchmarks.shadows_vs_cycles import MATERIALS, render, set_material, set_world  # noqa: E402
+from benchmarks.shadows_vs_cycles import (MATERIALS, emission_material, render, set_material, set_world,  # noqa: E402
+                                          smart_project)
 
 METAL = MATERIALS["metal"]
 # what an object is to Cycles' rays after the camera's: all off, its light reaches every point of it
@@ -51,34 +52,6 @@ def build(size, hdri):
     scene.wenv.bounce_light = False  # Cycles' direct light: what the mesh blocks is black
     bpy.context.view_layer.update()  # the camera's matrix_world follows its new place only once evaluated
     return scene, obj
-
-
-def smart_project(obj):
-    """Unwraps obj's active UV map into islands that do not overlap (Smart UV Project)."""
-    with bpy.context.temp_override(active_object=obj, object=obj, selected_objects=[obj]):
-        bpy.ops.object.mode_set(mode="EDIT")
-        bpy.ops.mesh.select_all(action="SELECT")
-        bpy.ops.uv.smart_project(island_margin=0.02)
-        bpy.ops.object.mode_set(mode="OBJECT")
-
-
-def emission_material(image, uv_map=None):
-    """The bake shown as emitted light through the UV map `uv_map` (None: the active render one;
-    linear texels)."""
-    mat = bpy.data.materials.new("baked")
-    tree = mat.node_tree
-    tree.nodes.clear()
-    tex = tree.nodes.new("ShaderNodeTexImage")
-    tex.image, tex.interpolation = image, "Linear"
-    if uv_map is not None:
-        uv = tree.nodes.new("ShaderNodeUVMap")
-        uv.uv_map = uv_map
-        tree.links.new(uv.outputs["UV"], tex.inputs["Vector"])
-    emit = tree.nodes.new("ShaderNodeEmission")
-    out = tree.nodes.new("ShaderNodeOutputMaterial")
-    tree.links.new(tex.outputs["Color"], emit.inputs["Color"])
-    tree.links.new(emit.outputs["Emission"], out.inputs["Surface"])
-    return mat
 
 
 def timed_bake(scene, obj, image, view, repeat):

@@ -19,7 +19,6 @@ writes out/scene_vs_cycles.json.  About 10 minutes, 15 with a bake.
 """
 import argparse
 import json
-import math
 import os
 import platform
 import sys
@@ -34,9 +33,9 @@ import bpy  # noqa: E402
 import wenv  # noqa: E402
 
 import addon  # noqa: E402
-from addon import bake, engine, meshes, shading, views  # noqa: E402
-from benchmarks.bake_vs_cycles import emission_material, smart_project  # noqa: E402
-from shadows_vs_cycles import build, cycles_direct_and_full, eevee_engine, render, set_world  # noqa: E402
+from addon import engine, meshes, shading, views  # noqa: E402
+from shadows_vs_cycles import (add_bake_map, baked_render, build, cycles_direct_and_full, eevee_engine,  # noqa: E402
+                               render, set_world)
 from tests.conftest import hdri_path  # noqa: E402
 
 
@@ -132,45 +131,6 @@ def at_vertices(obj, data):
     return undo
 
 
-BAKE_UV = "bake"
-
-
-def add_bake_map(obj):
-    """A UV map of islands that do not overlap (Smart UV Project), for the bake alone: the
-    textures keep reading the active render map."""
-    render_map = obj.data.uv_layers.active.name
-    layer = obj.data.uv_layers.new(name=BAKE_UV)
-    obj.data.uv_layers.active = layer
-    smart_project(obj)
-    obj.data.uv_layers.active = obj.data.uv_layers[render_map]
-    obj.data.uv_layers[render_map].active_render = True
-
-
-def baked_render(scene, obj, size, bounce, folder, seed=1, shadows=True):
-    """The add-on's bake of obj at size x size from the camera (Shadows and Bounce Light as given),
-    rendered by Cycles as emitted light through the bake's UV map; and the bake's time."""
-    import time
-
-    scene.wenv.shadows, scene.wenv.bounce_light = shadows, bounce
-    image = bpy.data.images.get("wenv scene bake") or bpy.data.images.new("wenv scene bake", size, size,
-                                                                          float_buffer=True)
-    start = time.perf_counter()
-    bake.bake(scene, bpy.context.evaluated_depsgraph_get(), obj, image, views.camera_view(scene), bpy.data,
-              uv_map=BAKE_UV, view_source="CAMERA")
-    seconds = time.perf_counter() - start
-    emit = emission_material(image, BAKE_UV)
-    paint = obj.data.materials[0]
-    obj.data.materials[0] = emit
-    bounces = scene.cycles.max_bounces
-    scene.cycles.max_bounces = 0
-    try:
-        return render(scene, "CYCLES", folder, seed), seconds
-    finally:
-        obj.data.materials[0] = paint
-        scene.cycles.max_bounces = bounces
-        bpy.data.materials.remove(emit)
-
-
 def add_lamps(scene):
     for kind, name, location, rotation, settings in (
             ("SUN", "sun", (0, 0, 5), (0.7, 0.2, 0.6), dict(energy=3.0, angle=0.05)),
@@ -249,7 +209,7 @@ def main():
             baked = {}
             if args.bake:
                 for key, bounce in (("bake_direct", False), ("bake_full", True)):
-                    baked[key] = baked_render(scene, obj, args.bake, bounce, folder)
+                    baked[key] = baked_render(scene, [obj], args.bake, bounce, folder)
                 imgs.update((key, img) for key, (img, _) in baked.items())
         mask = np.ones(imgs["direct"].shape[:2], bool)
         for img in list(imgs.values()) + direct + full + matched:

@@ -9,11 +9,15 @@ For each case the scene is rendered
   - by EEVEE (Blender's real-time engine, default settings);
   - flat (Workbench, the vertex colours) from wenv's vertex colours: `default`, shadows with no
     bounce (against direct Cycles), shadows with the mesh's own diffuse light as the bounce
-    (against full Cycles), and without shadows.
+    (against full Cycles), and without shadows;
+  - with --bake N, from the add-on's bakes of every texel of an N x N image per object (`default`,
+    through a UV map of their own, Smart UV Project), Shadows on and Bounce Light off (against
+    direct Cycles) and on (against full Cycles), the bakes shown as emitted light by Cycles.
 Prints relative RMSEs (RMSE over the mean, over the pixels both cover) and writes
-out/shadows_vs_cycles.json.  Long: a few minutes per scene and HDRI.
+out/shadows_vs_cycles.json.  Long: a few minutes per scene and HDRI, a minute more with bakes.
 
     python benchmarks/shadows_vs_cycles.py [--scenes suzanne plane] [--hdris sunset ...] [--size 256] [--samples 128]
+                                           [--bake 2048]
 """
 import argparse
 import json
@@ -114,6 +118,80 @@ def render(scene, engine, folder, seed=0):
     return px
 
 
+def smart_project(obj):
+    """Unwraps obj's active UV map into islands that do not overlap (Smart UV Project)."""
+    with bpy.context.temp_override(active_object=obj, object=obj, selected_objects=[obj]):
+        bpy.ops.object.mode_set(mode="EDIT")
+        bpy.ops.mesh.select_all(action="SELECT")
+        bpy.ops.uv.smart_project(island_margin=0.02)
+        bpy.ops.object.mode_set(mode="OBJECT")
+
+
+def emission_material(image, uv_map=None):
+    """The bake shown as emitted light through the UV map `uv_map` (None: the active render one;
+    linear texels)."""
+    mat = bpy.data.materials.new("baked")
+    tree = mat.node_tree
+    tree.nodes.clear()
+    tex = tree.nodes.new("ShaderNodeTexImage")
+    tex.image, tex.interpolation = image, "Linear"
+    if uv_map is not None:
+        uv = tree.nodes.new("ShaderNodeUVMap")
+        uv.uv_map = uv_map
+        tree.links.new(uv.outputs["UV"], tex.inputs["Vector"])
+    emit = tree.nodes.new("ShaderNodeEmission")
+    out = tree.nodes.new("ShaderNodeOutputMaterial")
+    tree.links.new(tex.outputs["Color"], emit.inputs["Color"])
+    tree.links.new(emit.outputs["Emission"], out.inputs["Surface"])
+    return mat
+
+
+BAKE_UV = "bake"
+
+
+def add_bake_map(obj):
+    """A UV map of islands that do not overlap (Smart UV Project), for the bake alone: the
+    textures keep reading the active render map."""
+    render_map = obj.data.uv_layers.active.name
+    layer = obj.data.uv_layers.new(name=BAKE_UV)
+    obj.data.uv_layers.active = layer
+    smart_project(obj)
+    obj.data.uv_layers.active = obj.data.uv_layers[render_map]
+    obj.data.uv_layers[render_map].active_render = True
+
+
+def baked_render(scene, objs, size, bounce, folder, seed=1, shadows=True):
+    """The add-on's bake of each of objs at size x size from the camera (Shadows and Bounce Light as
+    given; each bake sees the others' materials as they are), rendered by Cycles as emitted light
+    through the bakes' UV map; and the bakes' time."""
+    from addon import bake, views
+
+    scene.wenv.shadows, scene.wenv.bounce_light = shadows, bounce
+    images, seconds = [], 0.0
+    for k, obj in enumerate(objs):
+        name = f"wenv bake {k} {size}"
+        image = bpy.data.images.get(name) or bpy.data.images.new(name, size, size, float_buffer=True)
+        start = time.perf_counter()
+        bake.bake(scene, bpy.context.evaluated_depsgraph_get(), obj, image, views.camera_view(scene), bpy.data,
+                  uv_map=BAKE_UV, view_source="CAMERA")
+        seconds += time.perf_counter() - start
+        images.append(image)
+    kept = [obj.data.materials[0] for obj in objs]
+    emits = [emission_material(image, BAKE_UV) for image in images]
+    for obj, emit in zip(objs, emits):
+        obj.data.materials[0] = emit
+    bounces = scene.cycles.max_bounces
+    scene.cycles.max_bounces = 0
+    try:
+        return render(scene, "CYCLES", folder, seed), seconds
+    finally:
+        for obj, mat in zip(objs, kept):
+            obj.data.materials[0] = mat
+        scene.cycles.max_bounces = bounces
+        for emit in emits:
+            bpy.data.materials.remove(emit)
+
+
 def cycles_direct_and_full(scene, folder):
     """Cycles at two seeds with direct light only (Max Bounces 0, the World through every shadow ray)
     and with its default bounces: (direct, full), two images each."""
@@ -146,15 +224,25 @@ def main():
     ap.add_argument("--size", type=int, default=256)
     ap.add_argument("--samples", type=int, default=128)
     ap.add_argument("--resolution", type=int, default=0, help="occlusion side (0: the add-on's choice)")
+    ap.add_argument("--bake", type=int, default=0, metavar="N",
+                    help="also bake every texel of an N x N image per object (0: no bake)")
     ap.add_argument("--out", default=os.path.join(ROOT, "out", "shadows_vs_cycles.json"))
     args = ap.parse_args()
     rows = []
     eevee = eevee_engine()
+    if args.bake:
+        import addon
+        addon.register()
     print(f"{'scene':8s} {'HDRI':10s} {'material':8s} | {'noise':>6s} {'direct':>7s} {'unshad':>7s} | "
-          f"{'noise':>6s} {'full':>7s} {'unshad':>7s} {'EEVEE':>7s}")
+          f"{'noise':>6s} {'full':>7s} {'unshad':>7s} {'EEVEE':>7s}" + (" | bake: direct full" if args.bake else ""))
     for scene_name in args.scenes:
         scene, objs = build(scene_name, args.size)
         scene.cycles.samples = args.samples
+        if args.bake:
+            for obj in objs:
+                add_bake_map(obj)
+            scene.wenv.quality, scene.wenv.tone_mapping = "DEFAULT", "NONE"
+            bpy.context.view_layer.update()
         data, p, n, t, offsets = arrays(objs)
         occluders = wenv.Occluders(p, t)
         res = args.resolution or (16 if len(p) < 40000 else 8)
@@ -185,6 +273,9 @@ def main():
                         imgs[key] = render(scene, "BLENDER_WORKBENCH", folder)
                     imgs["eevee"] = render(scene, eevee, folder)
                     direct, full = cycles_direct_and_full(scene, folder)
+                    baked = {key: baked_render(scene, objs, args.bake, bounce, folder)
+                             for key, bounce in (("bake_direct", False), ("bake_full", True))} if args.bake else {}
+                    imgs.update((key, img) for key, (img, _) in baked.items())
                 mask = np.ones(imgs["direct"].shape[:2], bool)
                 for img in list(imgs.values()) + direct + full:
                     mask &= img[..., 3] > 0.99
@@ -199,17 +290,23 @@ def main():
                            direct=rel(imgs["direct"], d_mean), unshadowed_vs_direct=rel(imgs["unshadowed"], d_mean),
                            noise_full=rel(full[0], full[1]) / 2, full=rel(imgs["full"], f_mean),
                            unshadowed_vs_full=rel(imgs["unshadowed"], f_mean), eevee_vs_full=rel(imgs["eevee"], f_mean))
+                if args.bake:
+                    row.update(bake=args.bake, bake_direct=rel(imgs["bake_direct"], d_mean),
+                               bake_full=rel(imgs["bake_full"], f_mean),
+                               bake_seconds={key: seconds for key, (_, seconds) in baked.items()})
                 rows.append(row)
                 print(f"{scene_name:8s} {hdri:10s} {mname:8s} | {100 * row['noise_direct']:5.1f}% "
                       f"{100 * row['direct']:6.1f}% {100 * row['unshadowed_vs_direct']:6.1f}% | "
                       f"{100 * row['noise_full']:5.1f}% {100 * row['full']:6.1f}% "
-                      f"{100 * row['unshadowed_vs_full']:6.1f}% {100 * row['eevee_vs_full']:6.1f}%", flush=True)
+                      f"{100 * row['unshadowed_vs_full']:6.1f}% {100 * row['eevee_vs_full']:6.1f}%"
+                      + (f" | {100 * row['bake_direct']:6.1f}% {100 * row['bake_full']:6.1f}%" if args.bake else ""),
+                      flush=True)
                 bpy.data.materials.remove(mat)
         print(f"{scene_name}: {len(p)} vertices, occlusion {res}x{res} in {t_occ:.2f} s")
     os.makedirs(os.path.dirname(args.out), exist_ok=True)
     with open(args.out, "w") as f:
         json.dump(dict(command="python benchmarks/shadows_vs_cycles.py " + " ".join(sys.argv[1:]),
-                       machine=platform.machine(), samples=args.samples, size=args.size, rows=rows), f, indent=1)
+                       machine=platform.machine(), samples=args.samples, size=args.size, bake=args.bake, rows=rows), f, indent=1)
     print("wrote", args.out)
 
 
