@@ -360,8 +360,8 @@ def state_of(scene, depsgraph, obj, parts=tuple(CHANGES)):
         out["lamps"] = _key(lamps.signature(scene))
     if "settings" in parts:
         st = scene.wenv
-        out["settings"] = _key((st.quality, st.shadows, st.bounce_light, st.tone_mapping, round(st.max_luminance, 6),
-                                round(st.target_error, 6)))
+        out["settings"] = _key((st.quality, st.shadows, st.bounce_light, st.glossy_bounce, st.tone_mapping,
+                                round(st.max_luminance, 6), round(st.target_error, 6)))
     if "frames" in parts:
         out["frames"] = _key(textures.frames_shown(obj))
     return out

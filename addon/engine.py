@@ -265,7 +265,7 @@ class ShadowCache:
         self._occlusions = {}  # fingerprint of a part's positions and normals -> wenv.Occlusion
         self._before = {}  # the same, cast against the occluders before the last change
         self._changed = None  # (first, count): the triangles of those occluders that changed
-        self._lights = {}  # (id of an occlusion kept above, what lit and made the part) -> its light
+        self._lights = {}  # (id of an occlusion kept above, what it is of which material) -> (key, light)
 
     def occluders(self, meshes, memory_budget_mb=1024):
         """wenv.Occluders of `meshes` ((positions, triangles) each, in order) and where each one's
@@ -303,13 +303,20 @@ class ShadowCache:
             self._occlusions[key] = made
         return self._occlusions[key]
 
-    def light(self, occlusion, key, make):
+    def drop_light(self):
+        """Forgets every light made (as a new World would make it anew), keeping the rays."""
+        self._lights = {}
+
+    def light(self, occlusion, holder, key, make):
         """The light a part sends back (make() when not kept): it depends on its occlusion and on
-        `key`, what lights it and what it is made of (World, material, quality), not on the view."""
-        full = (id(occlusion), key)
-        if full not in self._lights:
-            self._lights[full] = make()
-        return self._lights[full]
+        `key`, what lights it and what it is made of (World, material, quality), not on the view.
+        One is kept per occlusion and `holder` (what it is, of which material), the last made: a
+        World turning in live mode makes a new one each time."""
+        slot = (id(occlusion), holder)
+        kept = self._lights.get(slot)
+        if kept is None or kept[0] != key:
+            kept = self._lights[slot] = (key, make())
+        return kept[1]
 
 
 def _changed_triangles(keys_before, keys, counts_before, counts):
@@ -354,6 +361,28 @@ def diffuse_light(shader, data, occlusion, lamps=None):
     with its shadows (and its own inputs, read from textures: data.inputs), the lamps' included."""
     kw = dict(lamps=lamps, positions=data.positions) if lamps else {}
     return shader.diffuse_light(_shading_normals(data), occlusion=occlusion, **kw, **_bent(data), **data.inputs)
+
+
+# What a blocker sends towards what it shadows, its glossy light included (a metal's mirror image
+# of its surroundings): each sending vertex's radiance at SENDING_SIDE x SENDING_SIDE directions of
+# its hemisphere (the core's sending maps: Occlusion.sending_directions, read_sent).
+SENDING_SIDE = 8
+# what the maps are shaded at: Draft, whose few per cent on a lobe are a few per cent of a bounce
+SENDING_QUALITY = "draft"
+
+
+def sent_light(shader, data, occlusion, lamps=None, bounce_hits=None):
+    """The radiance each vertex of `data` sends towards each direction of its sending map (those of
+    occlusion.sending_directions), with its shadows and lamps, and what reaches its blocked
+    directions (bounce_hits; None: black): (n, SENDING_SIDE^2, 3)."""
+    kw = dict(lamps=lamps, positions=data.positions) if lamps else {}
+    kw.update(bounce=None) if bounce_hits is None else kw.update(bounce_hits=bounce_hits)
+    directions = occlusion.sending_directions(SENDING_SIDE)
+    out = np.empty((data.count, len(directions), 3), np.float32)
+    for j, views in enumerate(directions):
+        out[:, j] = shader.shade(_shading_normals(data), views, occlusion=occlusion, **kw, **_bent(data),
+                                 **data.inputs)
+    return out
 
 
 def make_lamps(settings):

@@ -144,7 +144,8 @@ class LiveSession:
             mats = tuple(materials.material_key(s.material.wenv if s.material else None) for s in obj.material_slots)
             objs.append((obj.name, _matrix_tuple(obj.matrix_world), len(obj.data.vertices), mats))
         return (view.signature, world_sig, tuple(objs), lamps.signature(scene), st.quality, st.tone_mapping, st.max_luminance, st.target_error,
-                st.memory_budget, st.shade_only_seen, st.refine_at_rest, st.preview_changes, st.shadows, st.bounce_light)
+                st.memory_budget, st.shade_only_seen, st.refine_at_rest, st.preview_changes, st.shadows, st.bounce_light,
+                st.glossy_bounce)
 
     @property
     def busy(self):

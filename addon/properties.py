@@ -153,6 +153,13 @@ class WENV_SceneSettings(bpy.types.PropertyGroup):
                                description="With Shadows, what a mesh blocks sends back its diffuse light (the "
                                            "first bounce, which fills creases as Cycles' bounces do); off, the "
                                            "blocked directions are black, as Cycles with Max Bounces 0")
+    glossy_bounce: BoolProperty(name="Glossy Bounce", default=False,
+                                description="With Bounce Light, what a mesh blocks sends back its whole light "
+                                            "towards each vertex it blocks, its glossy part included (a metal's "
+                                            "mirror image of its surroundings), and light bounces twice: each "
+                                            "blocking mesh is shaded at 8 x 8 directions per vertex, twice, per "
+                                            "change of lighting, material or mesh (seconds for 30,000 vertices); "
+                                            "off, its albedo is sent as if diffuse")
     preview_changes: BoolProperty(name="Draft While Remaking", default=True,
                                   description="In live mode at Default, High or Auto, a change that makes the "
                                               "setting remake its slices (a new World image, a material edit) "

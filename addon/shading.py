@@ -37,7 +37,7 @@ class ShadingPlan:
     the colours back on the main thread, by object name."""
 
     def __init__(self, quality, spec, environment, view, tone, l_max, target_error=0.01, memory_budget_mb=1024,
-                 cull=False, shadows=False, bounce=True):
+                 cull=False, shadows=False, bounce=True, glossy_bounce=True):
         self.quality = quality  # what compute() shades at
         self.chosen = quality  # the scene's setting: quality is PREVIEW_QUALITY while this one is made
         self.cull = cull  # shade only the vertices a viewport sees (engine.shade_arrays)
@@ -51,6 +51,7 @@ class ShadingPlan:
         self.items = []  # (object name, MeshData, material keys per slot)
         self.shadows = shadows  # shade with the scene in the way (engine.shadows)
         self.bounce = bounce  # with shadows, what blocks sends back its diffuse light (else black)
+        self.glossy_bounce = glossy_bounce  # and its glossy light, towards each vertex it blocks
         self.casts = []  # per item: whether it blocks light (the object's Casts Shadows)
         self.blockers = []  # (positions, triangles) of the other meshes that block light
         # with bounce light, per blocker (in the same order): (object name, MeshData, material keys),
@@ -183,7 +184,11 @@ class ShadingPlan:
                                                    _ray_progress(k, len(everything), report, cancelled))
                           for k, (_, _, _, _, part, _) in enumerate(everything)]
         bounce = np.zeros((offsets[-1], 3), np.float32)
-        scenes = []
+        # with glossy bounce, what each occluder vertex sends towards each direction, and its normal
+        sent = (np.zeros((offsets[-1], engine.SENDING_SIDE ** 2, 3), np.float32) if self.bounce and self.glossy_bounce
+                else None)  # made below, pass by pass
+        sent_normals = np.tile(np.float32([0.0, 0.0, 1.0]), (offsets[-1], 1)) if sent is not None else None
+        scenes, made, sending = [], [], []
         for k, ((i, name, key, sel, part, weight), occlusion) in enumerate(zip(everything, occlusions)):
             sender = k >= len(work)
             shader = self._shader(quality, name, key, part.normals, cancelled)
@@ -201,14 +206,42 @@ class ShadingPlan:
                 continue
             made_by = (quality, self.world.signature, key, self.target_error, self.memory_budget_mb,
                        engine.fingerprint(*(part.inputs[k] for k in sorted(part.inputs))) if part.inputs else None,
-                       tuple(sorted(part.inputs)), self.lamps_key)
+                       tuple(sorted(part.inputs)), self.lamps_key,
+                       None if part.shading_normals is None else engine.fingerprint(part.shading_normals))
+            made.append((id(occlusion), made_by))  # what each sender's light was made of, and from
             taken = self._takes(shader, name, part)
             with engine.shadows.lock:
-                light = engine.shadows.light(occlusion, made_by,
+                light = engine.shadows.light(occlusion, ("diffuse", key), made_by,
                                              lambda: engine.diffuse_light(shader, taken, occlusion, self.lamps))
-            first = offsets[len(self.items) + i if sender else i]  # the blockers follow the meshes shaded
-            bounce[first + np.flatnonzero(sel)] += light if weight is None else weight * light
-        return [dict(occlusion=o, bounce=bounce if self.bounce else None, **(lit or {})) if o is not None else lit
+            rows = offsets[len(self.items) + i if sender else i] + np.flatnonzero(sel)  # blockers follow the shaded
+            bounce[rows] += light if weight is None else weight * light
+            if sent is None:
+                continue
+            sent_normals[rows] = part.normals
+            sending.append((name, key, part, occlusion, rows, weight))
+        if sent is None:
+            return [dict(occlusion=o, bounce=bounce if self.bounce else None, **(lit or {})) if o is not None else lit
+                    for o in scenes]
+        made = tuple(made)
+
+        def at_hits(occlusion, bounces):
+            with engine.shadows.lock:
+                return engine.shadows.light(occlusion, ("hits", bounces), made,
+                                            lambda: occlusion.read_sent(sent_normals, sent))
+        # each pass sends what the last one received: the light that has bounced once more; the
+        # maps are shaded at engine.SENDING_QUALITY, a bounce being a share of what is seen
+        for bounces in range(GLOSSY_BOUNCES):
+            again = np.zeros_like(sent)
+            for name, key, part, occlusion, rows, weight in sending:
+                received = at_hits(occlusion, bounces) if bounces else None
+                shader = self._shader(engine.SENDING_QUALITY, name, key, part.normals, cancelled)
+                taken = self._takes(shader, name, part)
+                with engine.shadows.lock:
+                    toward = engine.shadows.light(occlusion, ("sent", key, bounces), made, lambda: engine.sent_light(
+                        shader, taken, occlusion, self.lamps, bounce_hits=received))
+                again[rows] += toward if weight is None else _per_direction(weight) * toward
+            sent = again
+        return [dict(occlusion=o, bounce_hits=at_hits(o, GLOSSY_BOUNCES), **(lit or {})) if o is not None else lit
                 for o in scenes]
 
     def compute(self, rays=None):
@@ -278,6 +311,16 @@ class ShadingPlan:
         return done
 
 
+# With glossy bounce, how many times light bounces between the meshes: twice, so that a metal
+# sphere's underside, which mirrors the floor, shows the floor's light in the floor's mirror image.
+GLOSSY_BOUNCES = 2
+
+
+def _per_direction(weight):
+    """A term's weight ((3,) or (rows, 3)) against sending maps (rows, directions, 3)."""
+    return weight if weight.ndim == 1 else weight[:, None, :]
+
+
 def _ray_progress(k, parts, report, cancelled):
     """The progress callback of part k's occlusion among `parts`: its share of report(fraction),
     and True to stop once `cancelled` is set (a refinement's rays stop when it is cancelled: the
@@ -305,7 +348,7 @@ def new_plan(scene, view, images, cull=None, shadows=None):
     plan = ShadingPlan(engine.quality_value(st.quality), spec, world.environment(spec, images), view, st.tone_mapping,
                        st.max_luminance, st.target_error / 100.0, st.memory_budget,
                        cull=st.shade_only_seen if cull is None else cull, shadows=st.shadows if shadows is None else shadows,
-                       bounce=st.bounce_light)
+                       bounce=st.bounce_light, glossy_bounce=st.glossy_bounce)
     note = world.image_note(spec, images)
     if note:
         plan.notes.append(note)

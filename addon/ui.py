@@ -45,6 +45,9 @@ class WENV_PT_shading(_SidebarPanel, bpy.types.Panel):
         sub = col.column()
         sub.active = st.shadows
         sub.prop(st, "bounce_light")
+        sub = sub.column()
+        sub.active = st.shadows and st.bounce_light
+        sub.prop(st, "glossy_bounce")
         obj = context.active_object
         if st.shadows and obj is not None and obj.type == "MESH":
             col.prop(obj.wenv, "casts_shadows", text=f"'{obj.name}' Casts Shadows")

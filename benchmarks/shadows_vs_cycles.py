@@ -12,7 +12,8 @@ For each case the scene is rendered
     (against full Cycles), and without shadows;
   - with --bake N, from the add-on's bakes of every texel of an N x N image per object (`default`,
     through a UV map of their own, Smart UV Project), Shadows on and Bounce Light off (against
-    direct Cycles) and on (against full Cycles), the bakes shown as emitted light by Cycles.
+    direct Cycles) and on with Glossy Bounce (against full Cycles), the bakes shown as emitted
+    light by Cycles; and what Glossy Bounce costs the add-on's shading of the scene's vertices.
 Prints relative RMSEs (RMSE over the mean, over the pixels both cover) and writes
 out/shadows_vs_cycles.json.  Long: a few minutes per scene and HDRI, a minute more with bakes.
 
@@ -192,6 +193,29 @@ def baked_render(scene, objs, size, bounce, folder, seed=1, shadows=True):
             bpy.data.materials.remove(emit)
 
 
+def glossy_cost(scene, objs):
+    """Seconds the add-on takes to shade `objs`' vertices from the camera (Shadows, Bounce Light, the
+    last material and World set) with the bounce made anew (its rays kept), without and with Glossy
+    Bounce: the median of three each."""
+    from addon import engine, shading, views
+
+    scene.wenv.shadows = scene.wenv.bounce_light = True
+    dg = bpy.context.evaluated_depsgraph_get()
+    shading.shade_objects(scene, dg, objs, views.camera_view(scene), bpy.data)  # the rays and shaders made
+    seconds = {}
+    for key, glossy in (("diffuse", False), ("glossy", True)):
+        scene.wenv.glossy_bounce = glossy
+        times = []
+        for _ in range(3):
+            engine.shadows.drop_light()
+            start = time.perf_counter()
+            shading.shade_objects(scene, dg, objs, views.camera_view(scene), bpy.data)
+            times.append(time.perf_counter() - start)
+        seconds[key] = float(np.median(times))
+    scene.wenv.glossy_bounce = True
+    return seconds
+
+
 def cycles_direct_and_full(scene, folder):
     """Cycles at two seeds with direct light only (Max Bounces 0, the World through every shadow ray)
     and with its default bounces: (direct, full), two images each."""
@@ -228,7 +252,7 @@ def main():
                     help="also bake every texel of an N x N image per object (0: no bake)")
     ap.add_argument("--out", default=os.path.join(ROOT, "out", "shadows_vs_cycles.json"))
     args = ap.parse_args()
-    rows = []
+    rows, costs = [], {}
     eevee = eevee_engine()
     if args.bake:
         import addon
@@ -242,6 +266,7 @@ def main():
             for obj in objs:
                 add_bake_map(obj)
             scene.wenv.quality, scene.wenv.tone_mapping = "DEFAULT", "NONE"
+            scene.wenv.glossy_bounce = True
             bpy.context.view_layer.update()
         data, p, n, t, offsets = arrays(objs)
         occluders = wenv.Occluders(p, t)
@@ -303,10 +328,16 @@ def main():
                       flush=True)
                 bpy.data.materials.remove(mat)
         print(f"{scene_name}: {len(p)} vertices, occlusion {res}x{res} in {t_occ:.2f} s")
+        if args.bake:
+            cost = glossy_cost(scene, objs)
+            costs[scene_name] = cost
+            print(f"{scene_name}: the add-on's shading with Bounce Light in {cost['diffuse']:.2f} s, with Glossy "
+                  f"Bounce in {cost['glossy']:.2f} s (the bounce made anew, the rays kept)")
     os.makedirs(os.path.dirname(args.out), exist_ok=True)
     with open(args.out, "w") as f:
         json.dump(dict(command="python benchmarks/shadows_vs_cycles.py " + " ".join(sys.argv[1:]),
-                       machine=platform.machine(), samples=args.samples, size=args.size, bake=args.bake, rows=rows), f, indent=1)
+                       machine=platform.machine(), samples=args.samples, size=args.size, bake=args.bake, rows=rows,
+                       glossy_bounce_seconds=costs), f, indent=1)
     print("wrote", args.out)
 
 

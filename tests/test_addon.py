@@ -2901,6 +2901,7 @@ def test_shadows_equal_the_core_with_occlusion(scene):
     obj = add_monkey(subdivisions=1)
     mat = set_material(obj, lobes=((0.2, 1.5, "GGX"),))
     scene.wenv.shadows = True
+    scene.wenv.glossy_bounce = False  # the diffuse light alone, as the core gives it
     assert shade_op(view="CAMERA") == {"FINISHED"}
     _, rgb = attribute(obj)
     p, n = world_arrays(obj, corner=False)
@@ -2981,6 +2982,7 @@ def test_a_blocker_not_shaded_sends_its_light_back(scene):
     cube.data.materials.clear()
     cube_mat = set_material(cube, model="LAMBERT", diffuse=(0.8, 0.5, 0.2), lobes=())
     scene.wenv.shadows = True
+    scene.wenv.glossy_bounce = False  # the diffuse light alone, which the core gives
     assert shade_op(view="CAMERA") == {"FINISHED"}
     _, rgb = attribute(plane)
     pp, pn = world_arrays(plane, corner=False)
@@ -3001,6 +3003,55 @@ def test_a_blocker_not_shaded_sends_its_light_back(scene):
     _, black = attribute(plane)
     under = np.hypot(pp[:, 0], pp[:, 1]) < 1.5
     assert np.all(rgb[under].sum(1) > black[under].sum(1) * 1.01)
+
+
+def test_glossy_bounce_shows_a_metal_blocker_in_a_metal_floor(scene):
+    """A metal floor under a metal cube (lobes alone): with Glossy Bounce, the floor shows what the
+    cube reflects towards it where it mirrors the cube, several times brighter than the cube's
+    albedo sent as if diffuse (the bounce without it); far from the cube, about the same."""
+    env_world(scene, "sunset")
+    plane = add_plane_under_cube()
+    plane.data.materials.clear()
+    set_material(plane, diffuse=(0.0, 0.0, 0.0), lobes=((0.15, 10.0, "GGX"),))
+    cube = bpy.data.objects["Cube"]
+    cube.data.materials.clear()
+    set_material(cube, diffuse=(0.0, 0.0, 0.0), lobes=((0.15, 10.0, "GGX"),))
+    scene.wenv.shadows = True
+    shaded = {}
+    for glossy in (False, True):
+        scene.wenv.glossy_bounce = glossy
+        assert shade_op(view="CAMERA") == {"FINISHED"}
+        shaded[glossy] = attribute(plane)[1].sum(1)
+    p, _ = world_arrays(plane, corner=False)
+    near = np.hypot(p[:, 0], p[:, 1]) < 1.3
+    assert np.mean(shaded[True][near]) > 1.2 * np.mean(shaded[False][near])
+    assert np.count_nonzero(shaded[True][near] > 3 * shaded[False][near]) >= 4  # where it mirrors the cube
+    far = np.hypot(p[:, 0], p[:, 1]) > 3.0
+    assert np.mean(np.abs(shaded[True][far] - shaded[False][far])) < 0.05 * np.mean(shaded[False][far])
+
+
+def test_what_a_blocker_sends_is_read_towards_each_hit(monkeypatch):
+    """The sending maps (engine.sent_light: each vertex's radiance at 8 x 8 directions of its
+    hemisphere) read at a hit (Occlusion.read_sent) give what the hit triangle's corners, shaded
+    with the ray's reverse as their view, send back: within the maps' spacing for a glossy lobe of
+    alpha 0.25 (closer with finer maps), and exactly for a Lambert (the same light every way)."""
+    from tests.helpers.measure import relative_rmse
+    from tests.test_shadows import sky, sphere_on_plane
+
+    p, t, n = sphere_on_plane()
+    occlusion = wenv.Occluders(p, t).occlusion(p, n, resolution=8)
+    data = meshes.MeshData("POINT", p, n, np.zeros(len(p), np.int32))
+    hits = occlusion.hits
+    pick = np.random.default_rng(3).choice(len(hits["vertex"]), 24, replace=False)
+    glossy = wenv.CookTorrance(0.05, [dict(alpha=0.25, specular=(0.9, 0.6, 0.3), ior=1.5)])
+    for material, bounds in ((glossy, {8: 0.2, 16: 0.05}), (wenv.Lambert(0.6), {8: 1e-4})):
+        shader = wenv.Shader(sky((30.0, 35.0)), material, quality="draft")
+        exact = np.array([np.einsum("c,cx->x", hits["weights"][k], shader.shade(
+            n, -hits["direction"][k], occlusion=occlusion, bounce=None)[t[hits["triangle"][k]]]) for k in pick])
+        for side, bound in bounds.items():
+            monkeypatch.setattr(engine, "SENDING_SIDE", side)
+            at_hits = occlusion.read_sent(n, engine.sent_light(shader, data, occlusion))
+            assert relative_rmse(at_hits[pick], exact) < bound
 
 
 def test_a_moved_object_recasts_only_what_sees_it(scene):

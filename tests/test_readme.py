@@ -210,7 +210,7 @@ def test_occluders_block_runs():
     them shaded: the point under the roof is blocked overhead, and both the shading and the reference
     are darker there than in the open."""
     roof = [[-1, -1, 1], [1, -1, 1], [1, 1, 1], [-1, 1, 1]]
-    ns = {"wenv": wenv, "env": wenv.Environment(np.ones((32, 64, 3), np.float32)), "mat": wenv.Lambert(0.5),
+    ns = {"wenv": wenv, "np": np, "env": wenv.Environment(np.ones((32, 64, 3), np.float32)), "mat": wenv.Lambert(0.5),
           "scene_positions": np.float32(roof + [[0, 0, 0], [5, 0, 0]]), "scene_triangles": np.array([[0, 1, 2], [0, 2, 3]]),
           "normals": np.float32([[0, 0, 1]] * 6), "view_dirs": np.float32([[0, 0.3, 1]] * 6)}
     ns.update(positions=ns["scene_positions"], origins=ns["scene_positions"], directions=ns["normals"])

@@ -112,6 +112,101 @@ def test_the_blockers_light_fills_the_shadow(scene):
     assert own[contact].sum() > 1.05 * black[contact].sum()
 
 
+def test_each_hit_lies_on_its_ray(scene):
+    """Occlusion.hits holds every blocked texel's ray, vertex by vertex: its vertex and triangle as
+    Occlusion.triangles has them, and the hit point (the triangle's corners by its weights) on the
+    ray from the vertex (lifted as the rays start) along its direction."""
+    positions, normals, _, occluders, occlusion, _, triangles = scene
+    hits = occlusion.hits
+    blocked = occlusion.triangles.reshape(len(positions), -1)
+    vertex, texel = np.nonzero(blocked >= 0)
+    np.testing.assert_array_equal(hits["vertex"], vertex)
+    np.testing.assert_array_equal(hits["triangle"], blocked[vertex, texel])
+    np.testing.assert_allclose(hits["weights"].sum(1), 1.0, atol=1e-5)
+    assert np.all(hits["weights"] >= -1e-6)
+    point = np.einsum("hc,hcx->hx", hits["weights"], positions[triangles[hits["triangle"]]])
+    start = positions[vertex] + occluders.offset * normals[vertex]
+    along = point - start
+    d = hits["direction"]
+    np.testing.assert_allclose(np.linalg.norm(d, axis=1), 1.0, atol=1e-5)
+    reach = np.einsum("hx,hx->h", along, d)
+    assert np.all(reach > 0)
+    off = np.linalg.norm(along - reach[:, None] * d, axis=1)
+    assert np.all(off <= 1e-3 * reach + 1e-4)
+    # the directions are the texels' own, turned into each vertex's frame: open texels' are not there
+    assert np.all(np.einsum("hx,hx->h", d, normals[vertex]) > 0)
+
+
+def test_light_given_per_hit_is_read_as_given(scene):
+    """bounce_hits, each occluder vertex's light interpolated at each hit, shades as bounce given per
+    vertex (for shade and shade_mesh); twice the light per hit fills the shadow with twice the light;
+    bad bounce_hits are named."""
+    positions, normals, views, occluders, occlusion, idx, triangles = scene
+    shader = wenv.Shader(sky((30.0, 35.0)), MATERIALS["glossy"], quality="default")
+    light = shader.diffuse_light(normals, occlusion=occlusion)
+    hits = occlusion.hits
+    at_hits = np.einsum("hc,hcx->hx", hits["weights"], light[triangles[hits["triangle"]]]).astype(np.float32)
+    per_vertex = shader.shade(normals, views, occlusion=occlusion, bounce=light)
+    per_hit = shader.shade(normals, views, occlusion=occlusion, bounce_hits=at_hits)
+    np.testing.assert_allclose(per_hit, per_vertex, rtol=2e-4, atol=1e-6)
+    eye = np.float32([0.5, -6.0, 4.0])
+    np.testing.assert_allclose(shader.shade_mesh(positions, normals, eye, occlusion=occlusion, bounce_hits=at_hits),
+                               shader.shade_mesh(positions, normals, eye, occlusion=occlusion, bounce=light),
+                               rtol=2e-4, atol=1e-6)
+    black = shader.shade(normals, views, occlusion=occlusion, bounce=None)
+    twice = shader.shade(normals, views, occlusion=occlusion, bounce_hits=2 * at_hits)
+    np.testing.assert_allclose(twice - black, 2 * (per_hit - black), rtol=1e-3, atol=1e-5)
+    with pytest.raises(ValueError, match="bounce_hits has 3 rows"):
+        shader.shade(normals, views, occlusion=occlusion, bounce_hits=at_hits[:3])
+    bad = at_hits.copy()
+    bad[5] = -1.0
+    with pytest.raises(ValueError, match=r"bounce_hits\[5\] is negative"):
+        shader.shade(normals, views, occlusion=occlusion, bounce_hits=bad)
+    bad[5] = np.nan
+    with pytest.raises(ValueError, match=r"bounce_hits\[5\]"):
+        shader.shade(normals, views, occlusion=occlusion, bounce_hits=bad)
+    with pytest.raises(ValueError, match="not both"):
+        shader.shade(normals, views, occlusion=occlusion, bounce=light, bounce_hits=at_hits)
+    with pytest.raises(ValueError, match="only with occlusion"):
+        shader.shade(normals, views, bounce_hits=at_hits)
+
+
+def test_sending_maps_are_read_at_each_hit(scene):
+    """Occlusion.read_sent: maps that send the same light every way give, at each hit, the hit
+    triangle's corners' light by its weights; a map that sends light along one side of a vertex's
+    frame alone is read on that side; sending_directions are unit, in each vertex's upper hemisphere;
+    bad maps are named."""
+    positions, normals, _, occluders, occlusion, _, triangles = scene
+    hits = occlusion.hits
+    light = np.random.default_rng(5).uniform(0.0, 2.0, (len(positions), 3)).astype(np.float32)
+    flat = np.repeat(light[:, None, :], 64, axis=1)
+    np.testing.assert_allclose(occlusion.read_sent(normals, flat),
+                               np.einsum("hc,hcx->hx", hits["weights"], light[triangles[hits["triangle"]]]),
+                               rtol=1e-5, atol=1e-6)
+    directions = occlusion.sending_directions(8)
+    assert directions.shape == (64, len(positions), 3)
+    np.testing.assert_allclose(np.linalg.norm(directions, axis=2), 1.0, atol=1e-5)
+    assert np.all(np.einsum("tix,ix->ti", directions, normals) > 0)
+    # light sent only towards directions of the world's +x side: the hits whose ray runs along -x
+    # (so that the hit sends back along +x) read more than those along +x
+    towards_x = np.where(directions[..., 0] > 0, 1.0, 0.0).astype(np.float32).transpose(1, 0)
+    read = occlusion.read_sent(normals, np.repeat(towards_x[..., None], 3, axis=2))[:, 0]
+    along = hits["direction"][:, 0]
+    assert read[along < -0.5].mean() > 0.8 and read[along > 0.5].mean() < 0.2
+    with pytest.raises(ValueError, match="one per occluder vertex"):
+        occlusion.read_sent(normals[:5], flat)
+    with pytest.raises(ValueError, match=r"sent must be"):
+        occlusion.read_sent(normals, flat[:, :10])
+    with pytest.raises(ValueError, match="side must be even"):
+        occlusion.read_sent(normals, np.zeros((len(positions), 9, 3), np.float32))
+    bad = flat.copy()
+    bad[7, 3, 1] = -1.0
+    with pytest.raises(ValueError, match=r"sent\[7\] is negative"):
+        occlusion.read_sent(normals, bad)
+    with pytest.raises(ValueError, match="side must be even"):
+        occlusion.sending_directions(3)
+
+
 def test_a_convex_mesh_shades_to_the_bit_as_without(one_thread):
     """A sphere alone blocks nothing: shading with its occlusion gives exactly today's colours, and so
     does a new lighting made after (the pyramid the shadows read is made in the same pass)."""

@@ -23,15 +23,18 @@
 /* What stands in a shaded mesh's way (shading with shadows): the masks and hits of the vertices
  * shaded (rows below), the scene they were cast against (the
  * exact lights' rays), and what the blockers send back through the blocked directions: bounce,
- * one RGB radiance per occluder vertex (its diffuse light: wenv_method.diffuse_light), or
+ * one RGB radiance per occluder vertex (its diffuse light: wenv_method.diffuse_light), read at each
+ * hit between the hit triangle's vertices; or bounce_hits, one RGB radiance per hit of the occlusion
+ * (hit order): what the blocker sends towards the vertex there, its glossy light included; or
  * bounce_self when the occluders' vertices are the shaded vertices, whose own diffuse light is then
- * used; neither: blocked directions are black.  `key` changes whenever any of it does: what a
+ * used; none: blocked directions are black.  `key` changes whenever any of it does: what a
  * method keeps for it (per-vertex sums over the blocked texels) is kept while the key and the
  * lighting hold. */
 typedef struct {
     const wenv_occlusion *occlusion;
     const wenv_occluders *occluders;
     const float *bounce;
+    const float *bounce_hits;
     int bounce_self;
     uint64_t key;
     /* which of the occlusion's vertices row k of the shaded arrays is: rows[k], or offset + k when

@@ -8,6 +8,7 @@
 #include "math/maps.h"
 #include "python/module.h"
 #include "scene/occlusion.h"
+#include "scene/sending_map.h"
 
 typedef struct {
     PyObject_HEAD
@@ -400,6 +401,41 @@ static PyObject *occlusion_triangles(OcclusionObject *self, void *closure)
     return a;
 }
 
+/* Every hit, in the order bounce_hits takes them: whose, where to, and what it meets. */
+static PyObject *occlusion_hits(OcclusionObject *self, void *closure)
+{
+    (void)closure;
+    const wenv_occlusion *o = &self->o;
+    size_t h = wenv_occlusion_hit_count(o);
+    Py_ssize_t one[1] = {(Py_ssize_t)h}, three[2] = {(Py_ssize_t)h, 3};
+    void *vertex_data, *direction_data, *triangle_data, *weights_data;
+    PyObject *vertex = wenv_py_new_array(1, one, "int64", &vertex_data);
+    PyObject *direction = vertex ? wenv_py_new_array(2, three, "float32", &direction_data) : NULL;
+    PyObject *triangle = direction ? wenv_py_new_array(1, one, "int64", &triangle_data) : NULL;
+    PyObject *weights = triangle ? wenv_py_new_array(2, three, "float32", &weights_data) : NULL;
+    uint32_t *whose = weights ? PyMem_Malloc((h ? h : 1) * sizeof *whose) : NULL;
+    PyObject *out = whose ? PyDict_New() : NULL;
+    if (weights && !whose)
+        PyErr_NoMemory();
+    if (out) {
+        wenv_occlusion_hit_rays(o, whose, direction_data);
+        for (size_t k = 0; k < h; k++) {
+            ((int64_t *)vertex_data)[k] = whose[k];
+            ((int64_t *)triangle_data)[k] = o->hits[k].triangle;
+            wenv_occlusion_hit_weights(&o->hits[k], (float *)weights_data + 3 * k);
+        }
+        if (PyDict_SetItemString(out, "vertex", vertex) < 0 || PyDict_SetItemString(out, "direction", direction) < 0 ||
+            PyDict_SetItemString(out, "triangle", triangle) < 0 || PyDict_SetItemString(out, "weights", weights) < 0)
+            Py_CLEAR(out);
+    }
+    PyMem_Free(whose);
+    Py_XDECREF(vertex);
+    Py_XDECREF(direction);
+    Py_XDECREF(triangle);
+    Py_XDECREF(weights);
+    return out;
+}
+
 /* Each vertex's visible share of its hemisphere, by solid angle. */
 static PyObject *occlusion_open(OcclusionObject *self, void *closure)
 {
@@ -460,10 +496,120 @@ static PyGetSetDef occlusion_getset[] = {
      "the sky.", NULL},
     {"open_fraction", (getter)occlusion_open, NULL,
      "float64 (n,): each vertex's visible share of its hemisphere, by solid angle.", NULL},
+    {"hits", (getter)occlusion_hits, NULL,
+     "dict of every blocked texel's ray, in the order Shader.shade's bounce_hits takes them (vertex by vertex, "
+     "texels in row-major order): 'vertex' int64 (h,) whose texel it is, 'direction' float32 (h, 3) its unit world "
+     "direction, 'triangle' int64 (h,) the occluders' triangle it meets first, 'weights' float32 (h, 3) the hit's "
+     "barycentric weights of that triangle's corners.", NULL},
     {"directions", (getter)occlusion_directions, NULL,
      "float64 (resolution, resolution, 3): each texel's direction in a vertex's frame (+Z the normal; the "
      "tangents of wenv's one frame).", NULL},
     {NULL, NULL, NULL, NULL, NULL},
+};
+
+/* A side of the sending maps: even, 2 .. WENV_SENDING_SIDE_MAX.  -1 with the error set. */
+static int sending_side(size_t side)
+{
+    if (side < 2 || side > WENV_SENDING_SIDE_MAX || side % 2) {
+        PyErr_Format(PyExc_ValueError, "a sending map's side must be even, 2 to %d, got %zu", WENV_SENDING_SIDE_MAX,
+                     side);
+        return -1;
+    }
+    return 0;
+}
+
+static PyObject *occlusion_sending_directions(OcclusionObject *self, PyObject *args, PyObject *kwargs)
+{
+    static char *kwlist[] = {"side", NULL};
+    PyObject *side_obj;
+    size_t side, n = self->o.n_vertices;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "O:sending_directions", kwlist, &side_obj) ||
+        wenv_py_get_size(side_obj, "side", &side) < 0 || sending_side(side) < 0)
+        return NULL;
+    Py_ssize_t shape[3] = {(Py_ssize_t)(side * side), (Py_ssize_t)n, 3};
+    float *out;
+    PyObject *a = wenv_py_new_float_array(3, shape, &out);
+    if (!a)
+        return NULL;
+    WENV_BEGIN_WORK
+    wenv_sending_directions(self->o.normals, n, side, out);
+    WENV_END_WORK
+    return a;
+}
+
+static PyObject *occlusion_read_sent(OcclusionObject *self, PyObject *args, PyObject *kwargs)
+{
+    static char *kwlist[] = {"normals", "sent", NULL};
+    PyObject *nobj, *sobj, *held = NULL;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO:read_sent", kwlist, &nobj, &sobj))
+        return NULL;
+    const wenv_occluders *occ = ((OccludersObject *)self->occluders)->occ;
+    size_t nv = wenv_occluders_vertex_count(occ), rows;
+    Py_buffer nb, sb;
+    if (wenv_py_get_vec3_array(nobj, "normals", 1, &nb, &rows, NULL) < 0)
+        return NULL;
+    PyObject *result = NULL;
+    float *unit = NULL;
+    if (rows != nv) {
+        PyErr_Format(PyExc_ValueError, "normals has %zu rows, one per occluder vertex (%zu)", rows, nv);
+        PyBuffer_Release(&nb);
+        return NULL;
+    }
+    if (wenv_py_get_typed_array(sobj, "sent", "float32", 0, &sb, &held) < 0) {
+        PyBuffer_Release(&nb);
+        return NULL;
+    }
+    size_t side = sb.ndim == 3 ? (size_t)lround(sqrt((double)sb.shape[1])) : 0;
+    if (sb.ndim != 3 || (size_t)sb.shape[0] != nv || sb.shape[2] != 3 || side * side != (size_t)sb.shape[1]) {
+        PyErr_Format(PyExc_ValueError, "sent must be (occluder vertices (%zu), side^2, 3): each vertex's map", nv);
+        goto done;
+    }
+    if (sending_side(side) < 0)
+        goto done;
+    const float *s = sb.buf;
+    for (size_t i = 0; i < nv * side * side * 3; i++)
+        if (!(s[i] >= 0.0f) || isinf(s[i])) {
+            PyErr_Format(PyExc_ValueError, "sent[%zu] is negative or not finite: it is light (radiance)",
+                         i / (side * side * 3));
+            goto done;
+        }
+    if (!(unit = PyMem_Malloc((nv ? nv : 1) * 3 * sizeof(float)))) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    const float *m = nb.buf;
+    for (size_t i = 0; i < nv; i++) { /* the frames of unit normals, as the maps were made in */
+        float len = sqrtf(m[3 * i] * m[3 * i] + m[3 * i + 1] * m[3 * i + 1] + m[3 * i + 2] * m[3 * i + 2]);
+        for (int k = 0; k < 3; k++)
+            unit[3 * i + (size_t)k] = m[3 * i + (size_t)k] / len;
+    }
+    Py_ssize_t shape[2] = {(Py_ssize_t)wenv_occlusion_hit_count(&self->o), 3};
+    float *out;
+    if ((result = wenv_py_new_float_array(2, shape, &out))) {
+        WENV_BEGIN_WORK
+        wenv_sending_read(&self->o, occ, unit, s, side, out);
+        WENV_END_WORK
+    }
+done:
+    PyMem_Free(unit);
+    wenv_py_release_array(&sb, &held);
+    PyBuffer_Release(&nb);
+    return result;
+}
+
+static PyMethodDef occlusion_methods[] = {
+    {"sending_directions", (PyCFunction)(void (*)(void))occlusion_sending_directions, METH_VARARGS | METH_KEYWORDS,
+     "sending_directions(side)\n--\n\nfloat32 (side^2, n, 3): the unit world direction of each texel centre of a "
+     "side x side hemi-octahedral map in each vertex's frame (its normal as the occlusion holds it), texel by texel "
+     "(row-major): the views at which to shade the vertices for the maps read_sent reads."},
+    {"read_sent", (PyCFunction)(void (*)(void))occlusion_read_sent, METH_VARARGS | METH_KEYWORDS,
+     "read_sent(normals, sent)\n--\n\nfloat32 (h, 3), Shader.shade's bounce_hits: what reaches each hit (in the "
+     "order of `hits`) from what it meets.  `sent` (occluder vertices, side^2, 3) holds the radiance each occluder "
+     "vertex sends towards each texel of its map (sending_directions of an occlusion made for it: texel t of "
+     "vertex v at sent[v, t]), `normals` (occluder vertices, 3) their normals (the maps' frames); each hit reads "
+     "its triangle's corners' maps towards the ray's start, bilinearly, weighed by the hit's barycentric "
+     "weights."},
+    {NULL, NULL, 0, NULL},
 };
 
 static PyTypeObject OcclusionType = {
@@ -476,6 +622,7 @@ static PyTypeObject OcclusionType = {
               "per texel of a hemi-octahedral map in the vertex's frame; a vertex that sees its whole hemisphere "
               "holds none.  Immutable.",
     .tp_getset = occlusion_getset,
+    .tp_methods = occlusion_methods,
 };
 
 int wenv_register_occlusion(PyObject *module)

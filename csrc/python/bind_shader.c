@@ -336,10 +336,32 @@ static void Shader_dealloc(ShaderObject *self)
     Py_TYPE(self)->tp_free((PyObject *)self);
 }
 
-/* The scene of `occlusion` and `bounce` (NULL: not given, 'self') for n shaded vertices into *scene
- * (bounce's buffer in *bb, released by the caller when bb->obj is set).  -1 with the error set. */
-static int parse_scene(ShaderObject *self, PyObject *occlusion, PyObject *bounce, size_t n, wenv_shadow_scene *scene,
-                       Py_buffer *bb)
+/* The light given as reaching the blocked texels: per hit of the occlusion (n_hits rows, hit order),
+ * not negative, into hb.  -1 with the error set. */
+static int parse_bounce_hits(PyObject *obj, const wenv_occlusion *o, Py_buffer *hb)
+{
+    size_t rows, hits = o->n_masks ? o->hit_start[o->n_masks] : 0;
+    if (wenv_py_get_vec3_array(obj, "bounce_hits", 0, hb, &rows, NULL) < 0)
+        return -1;
+    if (rows != hits) {
+        PyErr_Format(PyExc_ValueError, "bounce_hits has %zu rows, one per hit of the occlusion (%zu: Occlusion.hits)",
+                     rows, hits);
+        return -1;
+    }
+    const float *b = hb->buf;
+    for (size_t i = 0; i < 3 * rows; i++)
+        if (!(b[i] >= 0.0f) || isinf(b[i])) {
+            PyErr_Format(PyExc_ValueError, "bounce_hits[%zu] is negative or not finite: it is light (radiance)", i / 3);
+            return -1;
+        }
+    return 0;
+}
+
+/* The scene of `occlusion` and `bounce` (NULL: not given, 'self') or `bounce_hits` (NULL or None: not
+ * given) for n shaded vertices into *scene (their buffers in *bb, released by the caller when
+ * bb->obj is set, and bb[1]).  -1 with the error set. */
+static int parse_scene(ShaderObject *self, PyObject *occlusion, PyObject *bounce, PyObject *bounce_hits, size_t n,
+                       wenv_shadow_scene *scene, Py_buffer bb[2])
 {
     memset(scene, 0, sizeof *scene);
     if (!self->method->shade_shadowed) {
@@ -357,7 +379,17 @@ static int parse_scene(ShaderObject *self, PyObject *occlusion, PyObject *bounce
     }
     uint64_t key = wenv_fingerprint_word(WENV_FINGERPRINT_START, scene->occlusion->fingerprint);
     size_t nv = wenv_occluders_vertex_count(scene->occluders);
-    if (!bounce || (PyUnicode_Check(bounce) && PyUnicode_CompareWithASCIIString(bounce, "self") == 0)) {
+    if (bounce_hits && bounce_hits != Py_None) {
+        if (bounce && bounce != Py_None) {
+            PyErr_SetString(PyExc_ValueError, "give bounce (per occluder vertex) or bounce_hits (per hit), not both");
+            return -1;
+        }
+        if (parse_bounce_hits(bounce_hits, scene->occlusion, &bb[1]) < 0)
+            return -1;
+        scene->bounce_hits = bb[1].buf;
+        size_t hits = scene->occlusion->n_masks ? scene->occlusion->hit_start[scene->occlusion->n_masks] : 0;
+        key = wenv_fingerprint_floats(wenv_fingerprint_word(key, 4), scene->bounce_hits, 3 * hits);
+    } else if (!bounce || (PyUnicode_Check(bounce) && PyUnicode_CompareWithASCIIString(bounce, "self") == 0)) {
         if (nv != n) {
             PyErr_Format(PyExc_ValueError,
                          "bounce='self' reads the shaded mesh's own light, but the occluders have %zu vertices and "
@@ -370,13 +402,13 @@ static int parse_scene(ShaderObject *self, PyObject *occlusion, PyObject *bounce
         key = wenv_fingerprint_word(key, 1);
     } else if (bounce != Py_None) {
         size_t rows;
-        if (wenv_py_get_vec3_array(bounce, "bounce", 0, bb, &rows, NULL) < 0)
+        if (wenv_py_get_vec3_array(bounce, "bounce", 0, &bb[0], &rows, NULL) < 0)
             return -1;
         if (rows != nv) {
             PyErr_Format(PyExc_ValueError, "bounce has %zu rows, one per occluder vertex (%zu)", rows, nv);
             return -1;
         }
-        const float *b = bb->buf;
+        const float *b = bb[0].buf;
         for (size_t i = 0; i < 3 * rows; i++)
             if (b[i] < 0.0f) {
                 PyErr_Format(PyExc_ValueError, "bounce[%zu] is negative: it is light (radiance)", i / 3);
@@ -602,14 +634,15 @@ static PyObject *shade_with(ShaderObject *self, PyObject *args, PyObject *kwargs
 {
     static char *kwlist[] = {"normals",   "view_dirs", "occlusion",      "bounce",         "base_color",
                              "positions", "lamps",     "emission_color", "smooth_normals", "bump_map_correction",
-                             NULL};
-    PyObject *nobj, *vobj, *occ_obj = Py_None, *bounce_obj = NULL, *colour_obj = NULL;
+                             "bounce_hits", NULL};
+    PyObject *nobj, *vobj, *occ_obj = Py_None, *bounce_obj = NULL, *colour_obj = NULL, *hits_obj = NULL;
     PyObject *pos_obj = Py_None, *lamps_obj = Py_None, *emit_obj = Py_None, *smooth_obj = Py_None;
     int correction = 1;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|$OOOOOOOp:shade", kwlist, &nobj, &vobj, &occ_obj, &bounce_obj,
-                                     &colour_obj, &pos_obj, &lamps_obj, &emit_obj, &smooth_obj, &correction))
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|$OOOOOOOpO:shade", kwlist, &nobj, &vobj, &occ_obj, &bounce_obj,
+                                     &colour_obj, &pos_obj, &lamps_obj, &emit_obj, &smooth_obj, &correction,
+                                     &hits_obj))
         return NULL;
-    Py_buffer nb, vb, bb = {0}, pb = {0};
+    Py_buffer nb, vb, bb[2] = {{0}, {0}}, pb = {0};
     size_t n, nvw;
     int single_n, single_v;
     if (wenv_py_get_vec3_array(nobj, "normals", 1, &nb, &n, &single_n) < 0)
@@ -648,11 +681,11 @@ static PyObject *shade_with(ShaderObject *self, PyObject *args, PyObject *kwargs
         PyErr_Format(PyExc_ValueError, "view_dirs has %zu rows but normals has %zu", nvw, n);
         goto done;
     }
-    if (occ_obj == Py_None && bounce_obj) {
+    if (occ_obj == Py_None && (bounce_obj || (hits_obj && hits_obj != Py_None))) {
         PyErr_SetString(PyExc_ValueError, "bounce is read only with occlusion (what blocks the light it fills in)");
         goto done;
     }
-    if (occ_obj != Py_None && parse_scene(self, occ_obj, bounce_obj, n, &scene, &bb) < 0)
+    if (occ_obj != Py_None && parse_scene(self, occ_obj, bounce_obj, hits_obj, n, &scene, bb) < 0)
         goto done;
     if (parse_smooth(smooth_obj, n, &sb) < 0 ||
         parse_colour(self, colour_obj, n, per_vertex_material(self, colour_obj, vin), &sb, correction, &table,
@@ -679,8 +712,9 @@ done:
     if (sb.obj)
         PyBuffer_Release(&sb);
     PyMem_Free(light);
-    if (bb.obj)
-        PyBuffer_Release(&bb);
+    for (int k = 0; k < 2; k++)
+        if (bb[k].obj)
+            PyBuffer_Release(&bb[k]);
     PyBuffer_Release(&nb);
     PyBuffer_Release(&vb);
     return result;
@@ -702,7 +736,7 @@ static PyObject *diffuse_light_with(ShaderObject *self, PyObject *args, PyObject
                      self->method->name);
         return NULL;
     }
-    Py_buffer nb, bb = {0}, pb = {0};
+    Py_buffer nb, bb[2] = {{0}, {0}}, pb = {0};
     size_t n;
     if (wenv_py_get_vec3_array(nobj, "normals", 1, &nb, &n, NULL) < 0)
         return NULL;
@@ -721,7 +755,7 @@ static PyObject *diffuse_light_with(ShaderObject *self, PyObject *args, PyObject
         goto done;
     if (emit_obj != Py_None && !(emission = wenv_py_vertex_colours(emit_obj, "emission_color", n, 0)))
         goto done;
-    if (occ_obj != Py_None && parse_scene(self, occ_obj, Py_None, n, &scene, &bb) < 0)
+    if (occ_obj != Py_None && parse_scene(self, occ_obj, Py_None, NULL, n, &scene, bb) < 0)
         goto done;
     if (parse_smooth(smooth_obj, n, &sb) < 0 ||
         parse_colour(self, colour_obj, n, per_vertex_material(self, colour_obj, vin), &sb, correction, &table,
@@ -890,17 +924,17 @@ static PyObject *shade_mesh_with(ShaderObject *self, PyObject *args, PyObject *k
 {
     static char *kwlist[] = {"positions", "normals",   "eye",    "cull",       "view_projection", "out",
                              "first",     "budget",    "occlusion", "bounce", "base_color",      "lamps",
-                             "emission_color", "smooth_normals", "bump_map_correction", NULL};
+                             "emission_color", "smooth_normals", "bump_map_correction", "bounce_hits", NULL};
     PyObject *pobj, *nobj, *eobj, *vp_obj = Py_None, *out_obj = Py_None, *budget_obj = Py_None, *first_obj = NULL;
-    PyObject *occ_obj = Py_None, *bounce_obj = NULL, *colour_obj = NULL;
+    PyObject *occ_obj = Py_None, *bounce_obj = NULL, *colour_obj = NULL, *hits_obj = NULL;
     PyObject *lamps_obj = Py_None, *emit_obj = Py_None, *smooth_obj = Py_None;
     int cull = 0, correction = 1;
     size_t first = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO|$pOOOOOOOOOOp:shade_mesh", kwlist, &pobj, &nobj, &eobj, &cull,
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO|$pOOOOOOOOOOpO:shade_mesh", kwlist, &pobj, &nobj, &eobj, &cull,
                                      &vp_obj, &out_obj, &first_obj, &budget_obj, &occ_obj, &bounce_obj, &colour_obj,
-                                     &lamps_obj, &emit_obj, &smooth_obj, &correction))
+                                     &lamps_obj, &emit_obj, &smooth_obj, &correction, &hits_obj))
         return NULL;
-    if (occ_obj == Py_None && bounce_obj) {
+    if (occ_obj == Py_None && (bounce_obj || (hits_obj && hits_obj != Py_None))) {
         PyErr_SetString(PyExc_ValueError, "bounce is read only with occlusion (what blocks the light it fills in)");
         return NULL;
     }
@@ -931,7 +965,7 @@ static PyObject *shade_mesh_with(ShaderObject *self, PyObject *args, PyObject *k
     }
     if (vp_obj != Py_None && wenv_py_get_matrix(vp_obj, "view_projection", 4, 16, vp) < 0)
         return NULL;
-    Py_buffer pb, nb, ob = {0}, bb = {0};
+    Py_buffer pb, nb, ob = {0}, bb[2] = {{0}, {0}};
     size_t np, nn;
     wenv_shadow_scene scene;
     if (wenv_py_get_vec3_array(pobj, "positions", 0, &pb, &np, NULL) < 0)
@@ -951,7 +985,7 @@ static PyObject *shade_mesh_with(ShaderObject *self, PyObject *args, PyObject *k
         PyErr_Format(PyExc_ValueError, "positions has %zu rows but normals has %zu", np, nn);
         goto done;
     }
-    if (occ_obj != Py_None && parse_scene(self, occ_obj, bounce_obj, np, &scene, &bb) < 0)
+    if (occ_obj != Py_None && parse_scene(self, occ_obj, bounce_obj, hits_obj, np, &scene, bb) < 0)
         goto done;
     if (parse_smooth(smooth_obj, np, &sb) < 0 ||
         parse_colour(self, colour_obj, np, per_vertex_material(self, colour_obj, vin), &sb, correction, &table,
@@ -1029,8 +1063,9 @@ done:
     PyMem_Free(visible);
     if (ob.obj)
         PyBuffer_Release(&ob);
-    if (bb.obj)
-        PyBuffer_Release(&bb);
+    for (int k = 0; k < 2; k++)
+        if (bb[k].obj)
+            PyBuffer_Release(&bb[k]);
     PyBuffer_Release(&pb);
     PyBuffer_Release(&nb);
     return result;
@@ -1178,7 +1213,7 @@ static PyMethodDef Shader_methods[] = {
      "shade(normals, view_dirs, *, occlusion=None, bounce='self', base_color=None, positions=None, lamps=None, "
      "emission_color=None, roughness=None, metallic=None, specular_ior_level=None, specular_tint=None, "
      "coat_weight=None, coat_roughness=None, sheen_weight=None, sheen_roughness=None, sheen_tint=None, alpha=None, "
-     "smooth_normals=None, bump_map_correction=True)"
+     "smooth_normals=None, bump_map_correction=True, bounce_hits=None)"
      "\n--\n\nLinear RGB radiance (float32, n x 3) for "
      "world-space normals and view directions (surface towards eye), float32 (n, 3); view_dirs may be one (3,) "
      "vector for all.  occlusion (a wenv.Occlusion made for these vertices) shades with the scene in the way: "
@@ -1186,7 +1221,9 @@ static PyMethodDef Shader_methods[] = {
      "blockers send their light back -- bounce='self' (the occluders are this mesh: its own light, as "
      "diffuse_light gives it), an "
      "array (occluder vertices, 3) of each occluder vertex's light (Shader.diffuse_light), or None (black).  "
-     "Wavelet methods only.\n\nbase_color (float32 (n, 3), linear RGB, clamped to [0, 1] as the material's own "
+     "bounce_hits, in place of bounce, gives the light reaching each blocked texel itself: float32 (h, 3), one row "
+     "per ray of Occlusion.hits, in its order (what the blocker sends towards this vertex, its glossy light "
+     "included).  Wavelet methods only.\n\nbase_color (float32 (n, 3), linear RGB, clamped to [0, 1] as the material's own "
      "is): each vertex's colour in place of the material's -- a Principled BSDF's Base Color, a Lambert's or "
      "Cook-Torrance's diffuse albedo -- at the cost of a multiply-add a vertex (it scales the Lambertian part "
      "alone); a ValueError says why for a material whose colour also enters its lobes (a metal, a rough "
@@ -1218,8 +1255,8 @@ static PyMethodDef Shader_methods[] = {
      "smooth_normals as shade's."},
     {"shade_mesh", (PyCFunction)(void (*)(void))Shader_shade_mesh, METH_VARARGS | METH_KEYWORDS,
      "shade_mesh(positions, normals, eye, *, cull=False, view_projection=None, out=None, first=0, budget=None, "
-     "occlusion=None, bounce='self', base_color=None, lamps=None, emission_color=None, roughness=None, "
-     "metallic=None, ...)\n--\n\nShade vertices seen from a perspective eye position.  cull=True shades only what the eye sees: "
+     "occlusion=None, bounce='self', bounce_hits=None, base_color=None, lamps=None, emission_color=None, "
+     "roughness=None, metallic=None, ...)\n--\n\nShade vertices seen from a perspective eye position.  cull=True shades only what the eye sees: "
      "vertices whose normal faces it and, given view_projection (the viewport's 4 x 4 world-to-clip "
      "matrix, row-major: Blender's region_3d.perspective_matrix), those inside its frustum; the rows of "
      "the others are left as they were in `out` (a float32 (n, 3) array written in place and returned) "
@@ -1231,7 +1268,7 @@ static PyMethodDef Shader_methods[] = {
      "rows not reached keep what `out` held.  So a view that rests is refined by an accurate Shader "
      "over a fast one's result: out = fast.shade_mesh(...); then accurate.shade_mesh(..., out=out, "
      "first=k, budget=0.05) until k reaches the count.\n\n"
-     "occlusion and bounce shade with the scene in the way, as shade's (the occlusion made for these "
+     "occlusion and bounce (or bounce_hits) shade with the scene in the way, as shade's (the occlusion made for these "
      "positions and normals); base_color, emission_color, smooth_normals and the inputs per vertex as shade's; "
      "lamps (a "
      "sequence of wenv.Lamp) add the scene's lamps, as Cycles emits them (docs/lamps.md)."},

@@ -17,6 +17,33 @@ void wenv_occlusion_texel_direction(size_t resolution, size_t t, double d[3])
                      d);
 }
 
+size_t wenv_occlusion_hit_count(const wenv_occlusion *o)
+{
+    return o->n_masks ? o->hit_start[o->n_masks] : 0;
+}
+
+void wenv_occlusion_hit_rays(const wenv_occlusion *o, uint32_t *vertex, float *direction)
+{
+    size_t r = o->resolution, texels = r * r;
+    for (size_t i = 0; i < o->n_vertices; i++) {
+        if (o->slot[i] < 0)
+            continue;
+        size_t h = o->hit_start[o->slot[i]];
+        double n[3] = {o->normals[3 * i], o->normals[3 * i + 1], o->normals[3 * i + 2]}, f[9];
+        wenv_frame(n, f);
+        for (size_t t = 0; t < texels; t++) {
+            if (wenv_occlusion_visible(o, i, t))
+                continue;
+            double d[3];
+            wenv_occlusion_texel_direction(r, t, d);
+            vertex[h] = (uint32_t)i;
+            for (int k = 0; k < 3; k++) /* local (x, y, z) -> world: rows of f are the axes, as the rays were cast */
+                direction[3 * h + (size_t)k] = (float)(f[k] * d[0] + f[3 + k] * d[1] + f[6 + k] * d[2]);
+            h++;
+        }
+    }
+}
+
 size_t wenv_occlusion_auto_resolution(size_t n)
 {
     size_t r = WENV_OCCLUSION_RESOLUTION_MAX;

@@ -89,6 +89,13 @@ static inline int wenv_occlusion_visible(const wenv_occlusion *o, size_t i, size
     return s < 0 || (int)((o->masks[(size_t)s * o->words + t / 64] >> (t % 64)) & 1u);
 }
 
+/* How many hits it holds: every blocked texel of every vertex. */
+size_t wenv_occlusion_hit_count(const wenv_occlusion *o);
+
+/* For each hit, in hit order (vertex by vertex, blocked texels in texel order): the vertex whose
+ * texel it is, and its ray's unit direction in the world (as it was cast), 3 floats. */
+void wenv_occlusion_hit_rays(const wenv_occlusion *o, uint32_t *vertex, float *direction);
+
 /* The unit direction, in the vertex's local frame (+Z the normal), through texel t's centre. */
 void wenv_occlusion_texel_direction(size_t resolution, size_t t, double d[3]);
 

@@ -329,6 +329,7 @@ void wenv_shadow_bounce(const wenv_shadow_scene *scene, size_t slot, const float
     const float *bounce = scene->bounce;
     const wenv_occlusion *o = scene->occlusion;
     const wenv_occlusion_hit *hit = o->hits + o->hit_start[slot];
+    const float *at_hits = scene->bounce_hits ? scene->bounce_hits + 3 * o->hit_start[slot] : NULL;
     const uint32_t *triangles = wenv_occluders_triangles(scene->occluders);
     wenv_vertex_shadow vs = {.mask = o->masks + slot * o->words, .resolution = o->resolution};
     size_t texels = o->resolution * o->resolution;
@@ -338,8 +339,10 @@ void wenv_shadow_bounce(const wenv_shadow_scene *scene, size_t slot, const float
         float w[3];
         wenv_occlusion_hit_weights(&hit[k], w);
         for (int c = 0; c < 3; c++) {
-            float b = scale * (w[0] * bounce[3 * (size_t)tri[0] + (size_t)c] +
-                               w[1] * bounce[3 * (size_t)tri[1] + (size_t)c] + w[2] * bounce[3 * (size_t)tri[2] + (size_t)c]);
+            float b = scale * (at_hits ? at_hits[3 * k + (size_t)c]
+                                       : w[0] * bounce[3 * (size_t)tri[0] + (size_t)c] +
+                                             w[1] * bounce[3 * (size_t)tri[1] + (size_t)c] +
+                                             w[2] * bounce[3 * (size_t)tri[2] + (size_t)c]);
             lbar[3 * k + (size_t)c] -= b;
             e_hidden[c] -= b * cosine[t];
         }

@@ -21,7 +21,8 @@
  *
  * What is not exact: within a blocked texel the lighting is its mean over the texel, so a lobe
  * narrower than a texel that sees part of one reads the mean where it would read its own part; and
- * a blocker sends its Lambertian light only (head-on), one bounce, read at the texel's centre ray. */
+ * a blocker sends one bounce, read at the texel's centre ray: its Lambertian light (head-on) from
+ * its vertices, or what the caller gives per hit (method.h: bounce_hits). */
 #ifndef WENV_SHADOWS_H
 #define WENV_SHADOWS_H
 
@@ -92,7 +93,7 @@ void wenv_shadow_hidden_light(const wenv_vertex_shadow *vs, const wenv_node_pyra
                               float *lbar, float e_hidden[3]);
 
 /* The blocker's light B through each blocked texel of mask slot k (hits in texel order): the
- * scene's bounce per occluder vertex interpolated at the hit; subtracted from lbar (in place), and
+ * scene's bounce per hit, or its bounce per occluder vertex interpolated at the hit; subtracted from lbar (in place), and
  * sum of the change x the texels' cosine integrals added to e_hidden. */
 void wenv_shadow_bounce(const wenv_shadow_scene *scene, size_t slot, const float *cosine, float *lbar,
                         float e_hidden[3]);

@@ -647,7 +647,7 @@ static wenv_status ensure_shadows(wenv_wavelet *wavelet, const wenv_shadow_scene
         sending.bounce = own_light;
         sending.bounce_scale = 1.0f;
     }
-    if (sending.bounce) {
+    if (sending.bounce || sending.bounce_hits) {
         const float *cosine = m->texel_reflection.cosine;
         float *hidden = wavelet->shadow_hidden, *e_hidden = wavelet->shadow_e_hidden;
         long long nm = (long long)o->n_masks;
