@@ -19,6 +19,7 @@ out/shadows_vs_cycles.json.  Long: a few minutes per scene and HDRI, a minute mo
 
     python benchmarks/shadows_vs_cycles.py [--scenes suzanne plane] [--hdris sunset ...] [--size 256] [--samples 128]
                                            [--bake 2048]
+    python benchmarks/shadows_vs_cycles.py --summary out/shadows_vs_cycles.json
 """
 import argparse
 import json
@@ -240,6 +241,31 @@ def arrays(objs):
     return data, p, n, t, offsets
 
 
+def summary(rows):
+    """The rows as a markdown table, and per material how many cases meet the targets: within Cycles'
+    noise + 2 % of direct Cycles, and at most half EEVEE's error from full Cycles."""
+    bake = "bake_direct" in rows[0]
+    head = ["scene", "HDRI", "material", "noise (direct)", "wenv, direct", "unshadowed", "noise (full)", "wenv, full",
+            "EEVEE"] + (["bake, direct", "bake, full"] if bake else [])
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in rows:
+        cells = [r["scene"], r["hdri"], r["material"]] + [f"{100 * r[k]:.1f} %" for k in (
+            "noise_direct", "direct", "unshadowed_vs_direct", "noise_full", "full", "eevee_vs_full")]
+        cells += [f"{100 * r[k]:.1f} %" for k in ("bake_direct", "bake_full")] if bake else []
+        lines.append("| " + " | ".join(cells) + " |")
+    for material in dict.fromkeys(r["material"] for r in rows):
+        mine = [r for r in rows if r["material"] == material]
+        for what, direct, full in [("vertex colours", "direct", "full")] + ([("bake", "bake_direct", "bake_full")]
+                                                                             if bake else []):
+            ok_direct = sum(r[direct] <= r["noise_direct"] + 0.02 for r in mine)
+            ok_full = sum(r[full] <= 0.5 * r["eevee_vs_full"] for r in mine)
+            excess = np.median([r[direct] - r["noise_direct"] for r in mine])
+            lines.append(f"{material}, {what}: within noise + 2 % of direct Cycles in {ok_direct} of {len(mine)} "
+                         f"(median excess over the noise {100 * excess:.1f} %); within half EEVEE's error of full "
+                         f"Cycles in {ok_full} of {len(mine)}")
+    return "\n".join(lines)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenes", nargs="*", default=["suzanne", "plane"])
@@ -251,7 +277,12 @@ def main():
     ap.add_argument("--bake", type=int, default=0, metavar="N",
                     help="also bake every texel of an N x N image per object (0: no bake)")
     ap.add_argument("--out", default=os.path.join(ROOT, "out", "shadows_vs_cycles.json"))
+    ap.add_argument("--summary", metavar="JSON", help="print the table and the targets met of a run's JSON, and stop")
     args = ap.parse_args()
+    if args.summary:
+        with open(args.summary) as f:
+            print(summary(json.load(f)["rows"]))
+        return
     rows, costs = [], {}
     eevee = eevee_engine()
     if args.bake:
@@ -339,6 +370,7 @@ def main():
                        machine=platform.machine(), samples=args.samples, size=args.size, bake=args.bake, rows=rows,
                        glossy_bounce_seconds=costs), f, indent=1)
     print("wrote", args.out)
+    print(summary(rows))
 
 
 if __name__ == "__main__":
