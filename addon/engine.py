@@ -369,6 +369,34 @@ def diffuse_light(shader, data, occlusion, lamps=None):
 SENDING_SIDE = 8
 # what the maps are shaded at: Draft, whose few per cent on a lobe are a few per cent of a bounce
 SENDING_QUALITY = "draft"
+# The roughness the maps' lobes are widened to at least (Blender's; GGX alpha 0.16): a lobe narrower
+# than the maps' spacing (about 22 degrees) would be read where a texel centre happens to fall, and
+# a sun's highlight caught on one would spread over its neighbours many times over.  Widening keeps
+# the light a lobe reflects and spreads it as the maps can hold it.
+SENDING_ROUGHNESS = 0.6
+ROUGHNESS_INPUTS = ("roughness", "coat_roughness")
+
+
+def sending_key(key):
+    """The material key the sending maps are shaded with: `key`'s lobes widened to SENDING_ROUGHNESS
+    at least (a measured BRDF as it is)."""
+    if key[0] == "PRINCIPLED":
+        inputs = dict(key[1])
+        for name in ROUGHNESS_INPUTS:
+            if name in inputs:
+                inputs[name] = max(inputs[name], SENDING_ROUGHNESS)
+        return ("PRINCIPLED", tuple(sorted(inputs.items())))
+    if key[0] in ("MIXTURE", "default", "MEASURED") or key[0] == "LAMBERT":
+        return key
+    model, diffuse, shadowing, lobes = key
+    least = alpha_from_roughness(SENDING_ROUGHNESS)
+    return (model, diffuse, shadowing, tuple((s, max(a, least), n, d) for s, a, n, d in lobes))
+
+
+def sending_inputs(inputs):
+    """Per-vertex inputs with their roughness widened as sending_key widens the material's."""
+    return {k: np.maximum(v, np.float32(SENDING_ROUGHNESS)) if k in ROUGHNESS_INPUTS else v
+            for k, v in inputs.items()}
 
 
 def sent_light(shader, data, occlusion, lamps=None, bounce_hits=None):

@@ -229,13 +229,15 @@ class ShadingPlan:
                 return engine.shadows.light(occlusion, ("hits", bounces), made,
                                             lambda: occlusion.read_sent(sent_normals, sent))
         # each pass sends what the last one received: the light that has bounced once more; the
-        # maps are shaded at engine.SENDING_QUALITY, a bounce being a share of what is seen
+        # maps are shaded at engine.SENDING_QUALITY, a bounce being a share of what is seen, with
+        # lobes no narrower than the maps hold (engine.sending_key)
         for bounces in range(GLOSSY_BOUNCES):
             again = np.zeros_like(sent)
             for name, key, part, occlusion, rows, weight in sending:
                 received = at_hits(occlusion, bounces) if bounces else None
-                shader = self._shader(engine.SENDING_QUALITY, name, key, part.normals, cancelled)
+                shader = self._shader(engine.SENDING_QUALITY, name, engine.sending_key(key), part.normals, cancelled)
                 taken = self._takes(shader, name, part)
+                taken = _with_inputs(taken, engine.sending_inputs(taken.inputs)) if taken.inputs else taken
                 with engine.shadows.lock:
                     toward = engine.shadows.light(occlusion, ("sent", key, bounces), made, lambda: engine.sent_light(
                         shader, taken, occlusion, self.lamps, bounce_hits=received))

@@ -3030,6 +3030,25 @@ def test_glossy_bounce_shows_a_metal_blocker_in_a_metal_floor(scene):
     assert np.mean(np.abs(shaded[True][far] - shaded[False][far])) < 0.05 * np.mean(shaded[False][far])
 
 
+def test_the_sending_maps_widen_narrow_lobes():
+    """The sending maps are shaded with lobes no narrower than engine.SENDING_ROUGHNESS (a sun's
+    highlight caught on a texel centre would otherwise spread over its neighbours): a Principled's
+    Roughness and Coat Roughness, a Cook-Torrance lobe's alpha and textured roughness are raised to
+    it, wider ones kept, a measured BRDF kept as it is."""
+    least = engine.SENDING_ROUGHNESS
+    key = ("PRINCIPLED", tuple(sorted({"roughness": 0.1, "coat_roughness": 0.9, "metallic": 1.0}.items())))
+    widened = dict(engine.sending_key(key)[1])
+    assert widened == {"roughness": least, "coat_roughness": 0.9, "metallic": 1.0}
+    lobes = (((1.0, 1.0, 1.0), 0.01, 1.5, "GGX"), ((1.0, 1.0, 1.0), 0.9, 1.5, "GGX"))
+    _, _, _, wide = engine.sending_key(("COOK_TORRANCE", (0.1, 0.1, 0.1), "SMITH", lobes))
+    assert [a for _, a, _, _ in wide] == [pytest.approx(engine.alpha_from_roughness(least)), 0.9]
+    measured = ("MEASURED", "x.binary", (1, 2))
+    assert engine.sending_key(measured) == measured
+    inputs = engine.sending_inputs({"roughness": np.float32([0.05, 0.9]), "base_color": np.ones((2, 3), np.float32)})
+    np.testing.assert_allclose(inputs["roughness"], [least, 0.9])
+    assert np.array_equal(inputs["base_color"], np.ones((2, 3), np.float32))
+
+
 def test_what_a_blocker_sends_is_read_towards_each_hit(monkeypatch):
     """The sending maps (engine.sent_light: each vertex's radiance at 8 x 8 directions of its
     hemisphere) read at a hit (Occlusion.read_sent) give what the hit triangle's corners, shaded
