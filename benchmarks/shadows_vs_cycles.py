@@ -15,10 +15,12 @@ For each case the scene is rendered
     direct Cycles) and on with Glossy Bounce (against full Cycles), the bakes shown as emitted
     light by Cycles; and what Glossy Bounce costs the add-on's shading of the scene's vertices.
 Prints relative RMSEs (RMSE over the mean, over the pixels both cover) and writes
-out/shadows_vs_cycles.json.  Long: a few minutes per scene and HDRI, a minute more with bakes.
+out/shadows_vs_cycles.json.  Long: a few minutes per scene and HDRI, a minute more with bakes.  --renders DIR keeps the Cycles and EEVEE
+renders there and reads them back in a later run of the same scene, size and samples (they do not
+depend on wenv): a run that changes only wenv then renders only wenv's images.
 
     python benchmarks/shadows_vs_cycles.py [--scenes suzanne plane] [--hdris sunset ...] [--size 256] [--samples 128]
-                                           [--bake 2048]
+                                           [--bake 2048] [--renders DIR]
     python benchmarks/shadows_vs_cycles.py --summary out/shadows_vs_cycles.json
 """
 import argparse
@@ -217,13 +219,28 @@ def glossy_cost(scene, objs):
     return seconds
 
 
-def cycles_direct_and_full(scene, folder):
+def kept_render(scene, engine, kept, seed=0):
+    """render() through a folder of renders kept between runs: `kept` is (folder, name of the case),
+    the folder None to render into a temporary one and keep nothing."""
+    folder, case = kept
+    if folder is None:
+        with tempfile.TemporaryDirectory(prefix="wenv-shadows-") as tmp:
+            return render(scene, engine, tmp, seed)
+    path = os.path.join(folder, f"{case}-{engine}-{scene.cycles.max_bounces}-{seed}.npy")
+    if os.path.exists(path):
+        return np.load(path)
+    px = render(scene, engine, folder, seed)
+    np.save(path, px)
+    return px
+
+
+def cycles_direct_and_full(scene, kept):
     """Cycles at two seeds with direct light only (Max Bounces 0, the World through every shadow ray)
     and with its default bounces: (direct, full), two images each."""
     scene.cycles.max_bounces = 0
-    direct = [render(scene, "CYCLES", folder, seed) for seed in (1, 2)]
+    direct = [kept_render(scene, "CYCLES", kept, seed) for seed in (1, 2)]
     scene.cycles.max_bounces = 12
-    return direct, [render(scene, "CYCLES", folder, seed) for seed in (1, 2)]
+    return direct, [kept_render(scene, "CYCLES", kept, seed) for seed in (1, 2)]
 
 
 def eevee_engine():
@@ -276,6 +293,7 @@ def main():
     ap.add_argument("--resolution", type=int, default=0, help="occlusion side (0: the add-on's choice)")
     ap.add_argument("--bake", type=int, default=0, metavar="N",
                     help="also bake every texel of an N x N image per object (0: no bake)")
+    ap.add_argument("--renders", metavar="DIR", help="keep Cycles' and EEVEE's renders here, and reuse them")
     ap.add_argument("--out", default=os.path.join(ROOT, "out", "shadows_vs_cycles.json"))
     ap.add_argument("--summary", metavar="JSON", help="print the table and the targets met of a run's JSON, and stop")
     args = ap.parse_args()
@@ -288,6 +306,8 @@ def main():
     if args.bake:
         import addon
         addon.register()
+    if args.renders:
+        os.makedirs(args.renders, exist_ok=True)
     print(f"{'scene':8s} {'HDRI':10s} {'material':8s} | {'noise':>6s} {'direct':>7s} {'unshad':>7s} | "
           f"{'noise':>6s} {'full':>7s} {'unshad':>7s} {'EEVEE':>7s}" + (" | bake: direct full" if args.bake else ""))
     for scene_name in args.scenes:
@@ -327,8 +347,9 @@ def main():
                         for obj, d, o in zip(objs, data, offsets):
                             meshes.write_colors(obj.data, d.domain, rgb[o:o + d.count])
                         imgs[key] = render(scene, "BLENDER_WORKBENCH", folder)
-                    imgs["eevee"] = render(scene, eevee, folder)
-                    direct, full = cycles_direct_and_full(scene, folder)
+                    kept = (args.renders, f"{scene_name}-{hdri}-{mname}-{args.size}-{args.samples}")
+                    imgs["eevee"] = kept_render(scene, eevee, kept)
+                    direct, full = cycles_direct_and_full(scene, kept)
                     baked = {key: baked_render(scene, objs, args.bake, bounce, folder)
                              for key, bounce in (("bake_direct", False), ("bake_full", True))} if args.bake else {}
                     imgs.update((key, img) for key, (img, _) in baked.items())
