@@ -9,9 +9,11 @@ would not.  With shadows, each texel casts its own rays against the scene (the o
 and every other blocker; the core's Auto resolution, 4 x 4 directions from 524k texels, the exact
 lights along their own rays where a texel's mask is mixed about them), and what the rays meet sends
 the light of its vertices (their diffuse light, or with Glossy Bounce their light towards the
-texel), so a shadow's edge is as sharp as the texels.  The result goes into a Blender image (the margin extended about the islands,
+texel), so a shadow's edge is as sharp as the texels; what the texels' coarser masks miss of the
+sky's soft occlusion is added back from the vertices (_mask_correction).  The result goes into a Blender image (the margin extended about the islands,
 the texels outside them untouched); undo restores the image as it was (its pixels are no part of
 Blender's undo, so the add-on keeps each bake's and puts them back, restore_after_undo)."""
+import copy
 import json
 import threading
 
@@ -157,12 +159,12 @@ class _Stages:
     """Progress over a bake's stages, each a share of the whole; progress(fraction) returning True
     cancels (CancelledError at the next report)."""
 
-    SHARES = {"sites": 0.05, "reading": 0.15, "shadows": 0.25, "shading": 0.5, "writing": 0.05}
+    SHARES = {"sites": 0.05, "reading": 0.15, "shadows": 0.25, "shading": 0.4, "vertices": 0.1, "writing": 0.05}
 
     def __init__(self, progress, shadows):
         self.progress = progress
         self.cancelled = threading.Event()
-        shares = {k: v for k, v in self.SHARES.items() if shadows or k != "shadows"}
+        shares = {k: v for k, v in self.SHARES.items() if shadows or k not in ("shadows", "vertices")}
         total = sum(shares.values())
         self.start, at = {}, 0.0
         for k, v in shares.items():
@@ -195,13 +197,12 @@ def _refined(plan, report, cancelled, rays=None):
     return results[0][2]
 
 
-def _stand_around(scene, depsgraph, obj, view, blend_data, plan, notes):
-    """Puts the scene into `plan` (a bake's, its one item the texels) as the texels' shadows and
-    bounce light: the object's own mesh (when it casts shadows) and every other blocker, each
-    sending the light its vertices are shaded with (the add-on's vertex shading, its rays and light
-    kept across passes).  Each texel then casts its own rays against them."""
-    around = shading.plan_shading(scene, depsgraph, [obj], view, blend_data.images)
-    notes += [n for n in around.notes if n not in notes]
+def _stand_around(plan, around):
+    """Puts the scene of `around` (the add-on's vertex plan of the baked object) into `plan` as what
+    its items receive light from: the object's own mesh (when it casts shadows) and every other
+    blocker, each sending the light its vertices are shaded with (their rays and light kept across
+    passes, as the vertex shading keeps them)."""
+    plan.shadows = True
     plan.receive_only = True
     if around.items and around.casts[0]:
         _, data, _ = around.items[0]
@@ -210,6 +211,32 @@ def _stand_around(scene, depsgraph, obj, view, blend_data, plan, notes):
             plan.senders.append(around.items[0])
     plan.blockers += around.blockers
     plan.senders += around.senders
+
+
+def _vertex_shading(plan, item, resolution, report, cancelled):
+    """The radiance of `item` (the baked object's vertices) in `plan`'s scene, its masks at
+    `resolution` (None: the vertex shading's own, kept)."""
+    at = copy.copy(plan)
+    at.items, at.casts, at.resolution = [item], [False], resolution
+    return _refined(at, report, cancelled)
+
+
+def _mask_correction(plan, around, mesh, sites, stages):
+    """What the texels' masks miss against the vertices' finer ones, at each texel: the vertices'
+    shading with their own masks less their shading with masks of the texels' side, interpolated
+    over the triangle (None when the sides are the same).  A million texels cast 4 x 4 rays each,
+    where the vertices of a 31k mesh cast 16 x 16: the sky's soft occlusion is then the vertices',
+    and what is sharp (a lamp's or a sun's shadow, a highlight its own geometry hides) the texels'."""
+    if not around.items:
+        return None
+    item = around.items[0]
+    if engine.shadows.occlusion_resolution(item[1].count) == plan.resolution:
+        return None
+    fine = _vertex_shading(plan, item, None, lambda f: stages.report("vertices", 0.5 * f), stages.cancelled)
+    coarse = _vertex_shading(plan, item, plan.resolution, lambda f: stages.report("vertices", 0.5 + 0.5 * f),
+                             stages.cancelled)
+    rows = meshes.corner_vertices(mesh) if item[1].domain == "POINT" else np.arange(len(mesh.loops))
+    return sites.at((fine - coarse)[rows])
 
 
 def encode(rgb, image):
@@ -294,11 +321,18 @@ def bake(scene, depsgraph, obj, image, view, blend_data, uv_map=None, margin=DEF
     notes += [n for n in materials.slot_notes(obj) if n not in notes and not n.endswith(textures.AT_VERTICES)]
     plan.items.append((obj.name, data, materials.slot_material_keys(obj)))
     plan.casts.append(False)
+    around = None
     if st.shadows:
-        plan.shadows = True
-        _stand_around(scene, depsgraph, obj, view, blend_data, plan, notes)
+        around = shading.plan_shading(scene, depsgraph, [obj], view, blend_data.images)
+        notes += [n for n in around.notes if n not in notes]
+        _stand_around(plan, around)
+        plan.resolution = engine.shadows.occlusion_resolution(data.count)
     stages.report("reading", 1.0)
     rgb = _refined(plan, stages.reporter("shading"), stages.cancelled, stages.reporter("shadows") if st.shadows else None)
+    if around is not None:
+        correction = _mask_correction(plan, around, mesh, sites, stages)
+        if correction is not None:
+            rgb = np.maximum(rgb + correction, 0.0)
     if data.unplaced is not None:
         rgb[data.unplaced] = 0.0
     if st.tone_mapping == "LOG":

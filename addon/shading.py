@@ -54,8 +54,11 @@ class ShadingPlan:
         self.glossy_bounce = glossy_bounce  # and its glossy light, towards each vertex it blocks
         self.casts = []  # per item: whether it blocks light (the object's Casts Shadows)
         # the items only receive light, standing in no scene of their own: a bake's texels, whose mesh
-        # is among the blockers (and senders); their occlusions are cast for this pass alone
+        # is among the blockers (and senders)
         self.receive_only = False
+        # with receive_only, the side of the items' occlusion masks: None, the kept occlusion at the
+        # core's Auto; a number, cast at it for this pass alone (a bake's texels: millions of them)
+        self.resolution = None
         self.blockers = []  # (positions, triangles) of the other meshes that block light
         # with bounce light, per blocker (in the same order): (object name, MeshData, material keys),
         # whose diffuse light it sends back into what it shadows
@@ -185,9 +188,13 @@ class ShadingPlan:
         everything = work + senders
         with engine.shadows.lock:
             occluders, offsets = engine.shadows.occluders(meshes_in, self.memory_budget_mb)
-            occlusions = [(engine.shadows.cast if self.receive_only and k < len(work) else engine.shadows.occlusion)(
-                occluders, part.positions, part.normals, _ray_progress(k, len(everything), report, cancelled))
-                for k, (_, _, _, _, part, _) in enumerate(everything)]
+            transient = self.receive_only and self.resolution is not None
+            occlusions = [
+                engine.shadows.cast(occluders, part.positions, part.normals, self.resolution, progress)
+                if transient and k < len(work) else engine.shadows.occlusion(occluders, part.positions, part.normals,
+                                                                             progress)
+                for k, (_, _, _, _, part, _) in enumerate(everything)
+                for progress in [_ray_progress(k, len(everything), report, cancelled)]]
         bounce = np.zeros((offsets[-1], 3), np.float32)
         # with glossy bounce, what each occluder vertex sends towards each direction, and its normal
         sent = (np.zeros((offsets[-1], engine.SENDING_SIDE ** 2, 3), np.float32) if self.bounce and self.glossy_bounce
@@ -228,7 +235,7 @@ class ShadingPlan:
             return [dict(occlusion=o, bounce=bounce if self.bounce else None, **(lit or {})) if o is not None else lit
                     for o in scenes]
         made = tuple(made)
-        passing = {id(o) for o in occlusions[:len(work)]} if self.receive_only else set()
+        passing = {id(o) for o in occlusions[:len(work)]} if transient else set()
 
         def at_hits(occlusion, bounces):
             if id(occlusion) in passing:

@@ -354,9 +354,11 @@ def world_vertices(obj):
 @pytest.mark.parametrize("bounce", [False, True])
 def test_each_texel_casts_its_own_shadow_rays(scene, bounce):
     """With shadows on, every texel of a plane under a ball is the core's shading at its centre with
-    its own occlusion against the plane and the ball (cast at the texel, the core's Auto resolution),
-    direct light alone or with what the rays meet sending its vertices' diffuse light (each mesh's
-    own, with its own shadows): the shadow is the texels', not the plane's few vertices'."""
+    its own occlusion against the plane and the ball, direct light alone or with what the rays meet
+    sending its vertices' diffuse light (each mesh's own, with its own shadows), plus what its
+    coarser masks miss: 65,536 texels cast 11 x 11 rays (the finest within 2^23), the plane's 16
+    vertices 16 x 16, and the vertices' shading with their own masks less that with 11 x 11 ones is
+    added, interpolated over the triangle.  The shadow is the texels', not the plane's few vertices'."""
     env_world(scene, "sunset")
     bpy.data.objects.remove(bpy.data.objects["Cube"])
     bpy.ops.mesh.primitive_uv_sphere_add(segments=16, ring_count=8, radius=0.6, location=(0.3, 0.0, 0.8))
@@ -365,7 +367,8 @@ def test_each_texel_casts_its_own_shadow_rays(scene, bounce):
     ball.data.materials.append(principled_material("metal", base=(0.9, 0.6, 0.3), metallic=1.0, roughness=0.3))
     plane = grid(cuts=3, size=6.0)
     scene.wenv.shadows, scene.wenv.bounce_light, scene.wenv.glossy_bounce = True, bounce, False
-    image = filled_image("shadowed bake", 48, 48)
+    size = 256
+    image = filled_image("shadowed bake", size, size)
     count, _ = bake_now(scene, plane, image)
     got = pixels(image)[:, :3]
 
@@ -373,16 +376,21 @@ def test_each_texel_casts_its_own_shadow_rays(scene, bounce):
     occluders = wenv.Occluders(np.vstack([pp, bp]), np.vstack([pt, bt + len(pp)]))
     eye = tuple(scene.camera.matrix_world.translation)
     plane_shader = draft_shader(principled_of(plane.active_material))
-    texels, _, (points, normals, _, _, _) = expected_radiance(plane, 48, 48, plane_shader, eye)
-    assert count == len(texels) == 48 * 48
-    occlusion = occluders.occlusion(points, normals, resolution="auto")
+    texels, _, (points, normals, _, corners, w) = expected_radiance(plane, size, size, plane_shader, eye)
+    assert count == len(texels) == size * size
     light = None
     if bounce:
         ball_shader = draft_shader(principled_of(ball.active_material))
-        light = np.vstack([plane_shader.diffuse_light(pn, occlusion=occluders.occlusion(pp, pn, resolution="auto")),
-                           ball_shader.diffuse_light(bn, occlusion=occluders.occlusion(bp, bn, resolution="auto"))])
-    want = plane_shader.shade_mesh(points, normals, eye, occlusion=occlusion, bounce=light)
-    np.testing.assert_allclose(got[texels], want, rtol=1e-3, atol=1e-5)
+        light = np.vstack([plane_shader.diffuse_light(pn, occlusion=occluders.occlusion(pp, pn, resolution=16)),
+                           ball_shader.diffuse_light(bn, occlusion=occluders.occlusion(bp, bn, resolution=16))])
+    want = plane_shader.shade_mesh(points, normals, eye, occlusion=occluders.occlusion(points, normals, resolution=11),
+                                   bounce=light)
+    at_vertices = [plane_shader.shade_mesh(pp, pn, eye, occlusion=occluders.occlusion(pp, pn, resolution=r), bounce=light)
+                   for r in (16, 11)]
+    corner_vertex = np.array([loop.vertex_index for loop in plane.data.loops])
+    missed = np.einsum("kc,kcd->kd", w, (at_vertices[0] - at_vertices[1])[corner_vertex[corners]])
+    assert np.abs(missed).max() > 1e-4  # the masks' sides tell apart here
+    np.testing.assert_allclose(got[texels], np.maximum(want + missed, 0.0), rtol=1e-3, atol=1e-5)
     # the ball's shadow: far darker than the open sky beside it, over texels between the plane's vertices
     open_sky = plane_shader.shade_mesh(points, normals, eye)
     under = np.linalg.norm(points[:, :2] - (0.3, 0.0), axis=1) < 0.3

@@ -68,6 +68,19 @@ def test_masks_match_a_ray_cast_written_apart(yard):
     assert np.all(o.open_fraction <= 1.0) and np.any(o.open_fraction < 0.9)
 
 
+def test_auto_resolution_is_the_finest_within_the_ray_budget():
+    """Occluders.auto_resolution(n): the side 'auto' casts n vertices at, the finest r (4 to 16) whose
+    n r^2 rays stay within 2^23; what occlusion(resolution='auto') casts."""
+    for n, r in ((1, 16), (32768, 16), (32769, 15), (126290, 8), (524288, 4), (10 ** 7, 4), (65536, 11)):
+        assert wenv.Occluders.auto_resolution(n) == r
+    occ = wenv.Occluders(*square(1.0, 1.0))
+    p = np.zeros((40000, 3), np.float32)
+    up = np.tile(np.float32([0, 0, 1]), (40000, 1))
+    assert occ.occlusion(p, up, resolution="auto").resolution == wenv.Occluders.auto_resolution(40000) == 14
+    with pytest.raises(ValueError, match="count"):
+        wenv.Occluders.auto_resolution(-1)
+
+
 def test_a_convex_mesh_blocks_nothing():
     """A convex mesh alone: every vertex sees its whole hemisphere and holds no mask: one index a
     vertex beside the positions and unit normals the masks are for (what the lights' rays start from)."""

@@ -318,7 +318,20 @@ static PyObject *occluders_offset(OccludersObject *self, void *closure)
     return ready(self) < 0 ? NULL : PyFloat_FromDouble(wenv_occluders_offset(self->occ));
 }
 
+/* auto_resolution(count) -> int */
+static PyObject *occluders_auto_resolution(PyObject *cls, PyObject *count_obj)
+{
+    (void)cls;
+    size_t count;
+    if (wenv_py_get_size(count_obj, "count", &count) < 0)
+        return NULL;
+    return PyLong_FromSize_t(wenv_occlusion_auto_resolution(count));
+}
+
 static PyMethodDef occluders_methods[] = {
+    {"auto_resolution", (PyCFunction)occluders_auto_resolution, METH_O | METH_STATIC,
+     "auto_resolution(count)\n--\n\nThe resolution occlusion(..., resolution='auto') casts `count` vertices at: the "
+     "finest whose rays stay within 2^23."},
     {"occluded", (PyCFunction)(void (*)(void))occluders_occluded, METH_VARARGS | METH_KEYWORDS,
      "occluded(origins, directions, tfar=inf)\n--\n\nWhether anything blocks each ray (bool, n): origins float32 "
      "(n, 3) or one (3,), directions float32 (n, 3) (normalised here), up to distance tfar."},
