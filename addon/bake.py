@@ -5,11 +5,15 @@ its position and normal interpolated from the triangle's corners (bent by a norm
 node read at the texel), its material's inputs read from textures at the texel, lit by the World
 and the lamps, seen from the view.  The texels are shaded by the same core call as vertices: a bake
 is a mesh of a million vertices that costs no ray and no table row a mesh of that many vertices
-would not.  Shadows and bounce light are the vertices': each vertex's ratio of its shading with the
-scene in the way to its shading without is interpolated to the texels, so a shadow's edge is as
-sharp as the mesh.  The result goes into a Blender image (the margin extended about the islands,
+would not.  With shadows, each texel casts its own rays against the scene (the object's own mesh
+and every other blocker; the core's Auto resolution, 4 x 4 directions from 524k texels, the exact
+lights along their own rays where a texel's mask is mixed about them), and what the rays meet sends
+the light of its vertices (their diffuse light, or with Glossy Bounce their light towards the
+texel), so a shadow's edge is as sharp as the texels; what the texels' coarser masks miss of the
+sky's soft occlusion is added back from the vertices (_mask_correction).  The result goes into a Blender image (the margin extended about the islands,
 the texels outside them untouched); undo restores the image as it was (its pixels are no part of
 Blender's undo, so the add-on keeps each bake's and puts them back, restore_after_undo)."""
+import copy
 import json
 import threading
 
@@ -155,12 +159,12 @@ class _Stages:
     """Progress over a bake's stages, each a share of the whole; progress(fraction) returning True
     cancels (CancelledError at the next report)."""
 
-    SHARES = {"sites": 0.05, "reading": 0.15, "shadows": 0.25, "shading": 0.5, "writing": 0.05}
+    SHARES = {"sites": 0.05, "reading": 0.15, "shadows": 0.25, "shading": 0.4, "vertices": 0.1, "writing": 0.05}
 
     def __init__(self, progress, shadows):
         self.progress = progress
         self.cancelled = threading.Event()
-        shares = {k: v for k, v in self.SHARES.items() if shadows or k != "shadows"}
+        shares = {k: v for k, v in self.SHARES.items() if shadows or k not in ("shadows", "vertices")}
         total = sum(shares.values())
         self.start, at = {}, 0.0
         for k, v in shares.items():
@@ -181,34 +185,61 @@ class _Stages:
         return lambda fraction: self.report(stage, fraction)
 
 
-def _refined(plan, report, cancelled):
+def _refined(plan, report, cancelled, rays=None):
     """plan's radiance per row of its one item (tone mapping left for later), shaded in steps that
-    call report(fraction) and stop once `cancelled` (a threading.Event) is set."""
+    call report(fraction) (rays(fraction) while shadow rays are cast) and stop once `cancelled` (a
+    threading.Event) is set."""
     plan.tone = "NONE"
     plan.cull = False
-    results = plan.refine(plan.quality, 0.25, report, cancelled)
+    results = plan.refine(plan.quality, 0.25, report, cancelled, rays)
     if results is None:
         raise engine.CancelledError("the bake was cancelled")
     return results[0][2]
 
 
-def _shadow_ratio(scene, depsgraph, obj, view, blend_data, stages, mesh, sites):
-    """At each texel, the ratio of its vertices' shading with the scene in the way (shadows and
-    bounce light) to their shading without, interpolated over the triangle per channel; None when
-    nothing blocks the mesh's sky."""
-    plan = shading.plan_shading(scene, depsgraph, [obj], view, blend_data.images)
-    if not plan.items:
+def _stand_around(plan, around):
+    """Puts the scene of `around` (the add-on's vertex plan of the baked object) into `plan` as what
+    its items receive light from: the object's own mesh (when it casts shadows) and every other
+    blocker, each sending the light its vertices are shaded with (their rays and light kept across
+    passes, as the vertex shading keeps them)."""
+    plan.shadows = True
+    plan.receive_only = True
+    if around.items and around.casts[0]:
+        _, data, _ = around.items[0]
+        plan.blockers.append((data.positions, data.triangles))
+        if plan.bounce:
+            plan.senders.append(around.items[0])
+    plan.blockers += around.blockers
+    plan.senders += around.senders
+
+
+def _vertex_shading(plan, item, resolution, report, cancelled):
+    """The radiance of `item` (the baked object's vertices) in `plan`'s scene, its masks at
+    `resolution` with point rays, as the texels'."""
+    at = copy.copy(plan)
+    at.items, at.casts, at.resolution = [item], [False], resolution
+    return _refined(at, report, cancelled)
+
+
+def _mask_correction(plan, around, mesh, sites, stages):
+    """What the texels' masks miss against the vertices' finer ones, at each texel: the vertices'
+    shading with masks of their own side less their shading with masks of the texels' side,
+    interpolated over the triangle (None when the sides are the same).  A million texels cast 4 x 4
+    rays each, where the vertices of a 31k mesh cast 16 x 16: the sky's soft occlusion is then the
+    vertices', and what is sharp (a lamp's or a sun's shadow, a highlight its own geometry hides)
+    the texels'.  Both of the vertices' shadings cast point rays, as the texels do: an exact light's
+    or a mirror direction's answer is the same ray in both, and cancels."""
+    if not around.items:
         return None
-    _, data, _ = plan.items[0]
-    shadowed = _refined(plan, lambda f: stages.report("shadows", 0.5 * f), stages.cancelled)
-    plan.shadows = False
-    open_sky = _refined(plan, lambda f: stages.report("shadows", 0.5 + 0.5 * f), stages.cancelled)
-    # where a vertex reflects next to nothing either way, the ratio is 1: a floor a thousandth of the
-    # mesh's mean keeps it from dividing noise by noise
-    floor = 1e-3 * float(np.mean(open_sky)) + 1e-12
-    ratio = (shadowed + floor) / (open_sky + floor)
-    rows = meshes.corner_vertices(mesh) if data.domain == "POINT" else np.arange(len(mesh.loops))
-    return sites.at(ratio[rows])
+    item = around.items[0]
+    side = engine.shadows.occlusion_resolution(item[1].count)
+    if side == plan.resolution:
+        return None
+    fine = _vertex_shading(plan, item, side, lambda f: stages.report("vertices", 0.5 * f), stages.cancelled)
+    coarse = _vertex_shading(plan, item, plan.resolution, lambda f: stages.report("vertices", 0.5 + 0.5 * f),
+                             stages.cancelled)
+    rows = meshes.corner_vertices(mesh) if item[1].domain == "POINT" else np.arange(len(mesh.loops))
+    return sites.at((fine - coarse)[rows])
 
 
 def encode(rgb, image):
@@ -293,11 +324,18 @@ def bake(scene, depsgraph, obj, image, view, blend_data, uv_map=None, margin=DEF
     notes += [n for n in materials.slot_notes(obj) if n not in notes and not n.endswith(textures.AT_VERTICES)]
     plan.items.append((obj.name, data, materials.slot_material_keys(obj)))
     plan.casts.append(False)
+    around = None
+    if st.shadows:
+        around = shading.plan_shading(scene, depsgraph, [obj], view, blend_data.images)
+        notes += [n for n in around.notes if n not in notes]
+        _stand_around(plan, around)
+        plan.resolution, plan.point_rays = engine.shadows.occlusion_resolution(data.count), True
     stages.report("reading", 1.0)
-    ratio = _shadow_ratio(scene, depsgraph, obj, view, blend_data, stages, mesh, sites) if st.shadows else None
-    rgb = _refined(plan, stages.reporter("shading"), stages.cancelled)
-    if ratio is not None:
-        rgb *= ratio
+    rgb = _refined(plan, stages.reporter("shading"), stages.cancelled, stages.reporter("shadows") if st.shadows else None)
+    if around is not None:
+        correction = _mask_correction(plan, around, mesh, sites, stages)
+        if correction is not None:
+            rgb = np.maximum(rgb + correction, 0.0)
     if data.unplaced is not None:
         rgb[data.unplaced] = 0.0
     if st.tone_mapping == "LOG":

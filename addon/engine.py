@@ -299,9 +299,24 @@ class ShadowCache:
                 del self._before[key]
             else:
                 # the core's Auto: 16 x 16 texels up to 32k vertices, 8 x 8 at 126k (casting ~1.7 s)
-                made = occluders.occlusion(positions, normals, resolution="auto", progress=progress)
+                made = occluders.occlusion(positions, normals, resolution=self.occlusion_resolution(len(positions)),
+                                           progress=progress)
             self._occlusions[key] = made
         return self._occlusions[key]
+
+    @staticmethod
+    def occlusion_resolution(count):
+        """The side of the masks occlusion() casts `count` vertices at (the core's Auto)."""
+        return wenv.Occluders.auto_resolution(count)
+
+    @staticmethod
+    def cast(occluders, positions, normals, resolution, point_rays=False, progress=None):
+        """An occlusion cast at `resolution` for one pass and kept nowhere (a bake's texels: millions
+        of them, each bake of other texels)."""
+        if progress is not None:
+            progress(0.0)
+        return occluders.occlusion(positions, normals, resolution=resolution, progress=progress,
+                                   point_rays=point_rays)
 
     def drop_light(self):
         """Forgets every light made (as a new World would make it anew), keeping the rays."""

@@ -53,6 +53,14 @@ class ShadingPlan:
         self.bounce = bounce  # with shadows, what blocks sends back its diffuse light (else black)
         self.glossy_bounce = glossy_bounce  # and its glossy light, towards each vertex it blocks
         self.casts = []  # per item: whether it blocks light (the object's Casts Shadows)
+        # the items only receive light, standing in no scene of their own: a bake's texels, whose mesh
+        # is among the blockers (and senders)
+        self.receive_only = False
+        # with receive_only, the side of the items' occlusion masks: None, the kept occlusion at the
+        # core's Auto; a number, cast at it for this pass alone (a bake's texels: millions of them),
+        # with point rays if `point_rays` (wenv.Occluders.occlusion)
+        self.resolution = None
+        self.point_rays = False
         self.blockers = []  # (positions, triangles) of the other meshes that block light
         # with bounce light, per blocker (in the same order): (object name, MeshData, material keys),
         # whose diffuse light it sends back into what it shadows
@@ -170,8 +178,10 @@ class ShadingPlan:
         lit = {"lamps": self.lamps} if self.lamps else None
         if not self.shadows:
             return [lit] * len(work)
-        meshes_in = [(data.positions, data.triangles if cast else np.zeros((0, 3), np.int32))
-                     for (_, data, _), cast in zip(self.items, self.casts)]
+        meshes_in = [] if self.receive_only else [
+            (data.positions, data.triangles if cast else np.zeros((0, 3), np.int32))
+            for (_, data, _), cast in zip(self.items, self.casts)]
+        first_blocker = len(meshes_in)  # where the blockers' (and the senders') rows start
         meshes_in += self.blockers
         if not any(len(t) for _, t in meshes_in):
             return [lit] * len(work)
@@ -180,9 +190,13 @@ class ShadingPlan:
         everything = work + senders
         with engine.shadows.lock:
             occluders, offsets = engine.shadows.occluders(meshes_in, self.memory_budget_mb)
-            occlusions = [engine.shadows.occlusion(occluders, part.positions, part.normals,
-                                                   _ray_progress(k, len(everything), report, cancelled))
-                          for k, (_, _, _, _, part, _) in enumerate(everything)]
+            transient = self.receive_only and self.resolution is not None
+            occlusions = [
+                engine.shadows.cast(occluders, part.positions, part.normals, self.resolution, self.point_rays, progress)
+                if transient and k < len(work) else engine.shadows.occlusion(occluders, part.positions, part.normals,
+                                                                             progress)
+                for k, (_, _, _, _, part, _) in enumerate(everything)
+                for progress in [_ray_progress(k, len(everything), report, cancelled)]]
         bounce = np.zeros((offsets[-1], 3), np.float32)
         # with glossy bounce, what each occluder vertex sends towards each direction, and its normal
         sent = (np.zeros((offsets[-1], engine.SENDING_SIDE ** 2, 3), np.float32) if self.bounce and self.glossy_bounce
@@ -202,7 +216,7 @@ class ShadingPlan:
                 continue
             if not sender:
                 scenes.append(occlusion)
-            if not self.bounce:
+            if not self.bounce or (self.receive_only and not sender):
                 continue
             made_by = (quality, self.world.signature, key, self.target_error, self.memory_budget_mb,
                        engine.fingerprint(*(part.inputs[k] for k in sorted(part.inputs))) if part.inputs else None,
@@ -213,7 +227,7 @@ class ShadingPlan:
             with engine.shadows.lock:
                 light = engine.shadows.light(occlusion, ("diffuse", key), made_by,
                                              lambda: engine.diffuse_light(shader, taken, occlusion, self.lamps))
-            rows = offsets[len(self.items) + i if sender else i] + np.flatnonzero(sel)  # blockers follow the shaded
+            rows = offsets[first_blocker + i if sender else i] + np.flatnonzero(sel)  # blockers follow the shaded
             bounce[rows] += light if weight is None else weight * light
             if sent is None:
                 continue
@@ -223,8 +237,11 @@ class ShadingPlan:
             return [dict(occlusion=o, bounce=bounce if self.bounce else None, **(lit or {})) if o is not None else lit
                     for o in scenes]
         made = tuple(made)
+        passing = {id(o) for o in occlusions[:len(work)]} if transient else set()
 
         def at_hits(occlusion, bounces):
+            if id(occlusion) in passing:
+                return occlusion.read_sent(sent_normals, sent)  # cast for this pass alone: nothing kept
             with engine.shadows.lock:
                 return engine.shadows.light(occlusion, ("hits", bounces), made,
                                             lambda: occlusion.read_sent(sent_normals, sent))
@@ -260,19 +277,19 @@ class ShadingPlan:
                     seens[i][sel] = part_seen
         self.results = self._results(rgbs, seens)
 
-    def refine(self, quality, step_seconds, report, cancelled):
+    def refine(self, quality, step_seconds, report, cancelled, rays=None):
         """compute() again at `quality`, in steps of about `step_seconds` that each hold the
         shader cache's lock only for themselves, so a new pass waits at most a step (a new
         material's BRDF slices, made in the first step, stop when cancelled).  Returns the results
         as compute() makes them, or None once `cancelled` (a threading.Event) is set;
-        `report(fraction)` after each step."""
+        `report(fraction)` after each step, `rays(fraction)` while occlusions are cast."""
         rgbs, seens = self._buffers()
         total = sum(data.count for _, data, _ in self.items)
         done = 0
         work = self._ordered_parts(quality)
         with engine.shaders.lock:
             try:
-                scenes = self._scenes(quality, work, cancelled)
+                scenes = self._scenes(quality, work, cancelled, rays)
             except engine.CancelledError:
                 return None
         for (i, name, key, sel, part, weight), scene in zip(work, scenes):

@@ -342,39 +342,61 @@ def test_a_bump_node_is_read_at_each_texel(scene):
     np.testing.assert_allclose(pixels(image)[inside, :3], want[inside], rtol=1e-3, atol=1e-5)
 
 
-def test_shadows_reach_the_texels_as_the_vertices_ratio(scene):
-    """With shadows on, each texel is its open-sky shading times its vertices' ratio of shadowed to
-    open shading, interpolated over its triangle (the add-on's vertex shading gives both)."""
+def world_vertices(obj):
+    """World positions and normals per vertex, and the loop triangles' vertices, read with mathutils."""
+    m = obj.matrix_world
+    nm = m.to_3x3().inverted().transposed()
+    p = np.array([tuple(m @ v.co) for v in obj.data.vertices], np.float32)
+    n = np.array([tuple((nm @ v.normal).normalized()) for v in obj.data.vertices], np.float32)
+    return p, n, np.array([tuple(t.vertices) for t in obj.data.loop_triangles])
+
+
+@pytest.mark.parametrize("bounce", [False, True])
+def test_each_texel_casts_its_own_shadow_rays(scene, bounce):
+    """With shadows on, every texel of a plane under a ball is the core's shading at its centre with
+    its own occlusion against the plane and the ball (point rays), direct light alone or with what
+    the rays meet sending its vertices' diffuse light (each mesh's own, with its own shadows), plus
+    what its coarser masks miss: 65,536 texels cast 11 x 11 rays (the finest within 2^23), the
+    plane's 16 vertices 16 x 16, and the vertices' shading with 16 x 16 masks less that with 11 x 11
+    ones (point rays both) is added, interpolated over the triangle.  The shadow is the texels', not
+    the plane's few vertices'."""
     env_world(scene, "sunset")
-    cube = bpy.data.objects["Cube"]
-    cube.location = (0.0, 0.0, 1.5)
-    cube.scale = (0.5, 0.5, 0.5)
-    plane = grid(cuts=6, size=6.0)
-    image = filled_image("shadowed bake", 24, 24)
-    bake_now(scene, plane, image)
-    open_sky = pixels(image)[:, :3].copy()
-    scene.wenv.shadows = True
-    bake_now(scene, plane, image)
-    shadowed = pixels(image)[:, :3].copy()
-    select_only(plane)
-    vertex = {}
-    for on in (True, False):
-        scene.wenv.shadows = on
-        assert bpy.ops.wenv.shade(view="CAMERA") == {"FINISHED"}
-        attr = plane.data.color_attributes["wenv_radiance"]
-        buf = np.empty(len(attr.data) * 4, np.float32)
-        attr.data.foreach_get("color", buf)
-        vertex[on] = buf.reshape(-1, 4)[:, :3]
-    assert attr.domain == "POINT"
-    floor = 1e-3 * vertex[False].mean()
-    ratio = (vertex[True] + floor) / (vertex[False] + floor)
-    _, _, uv, tris = mesh_corners(plane)
-    texels, corners, w = independent_texels(uv, tris, 24, 24)
-    corner_vertex = np.array([l.vertex_index for l in plane.data.loops])
-    want = open_sky[texels] * np.einsum("kc,kcd->kd", w, ratio[corner_vertex[corners]])
-    np.testing.assert_allclose(shadowed[texels], want, rtol=1e-3, atol=1e-6)
-    under = np.linalg.norm((centres(24, 24).reshape(-1, 2)[texels] - 0.5) * 6.0, axis=1) < 0.5
-    assert (shadowed[texels][under].sum(axis=1) < 0.97 * open_sky[texels][under].sum(axis=1)).all()
+    bpy.data.objects.remove(bpy.data.objects["Cube"])
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=16, ring_count=8, radius=0.6, location=(0.3, 0.0, 0.8))
+    ball = bpy.context.object
+    ball.data.shade_smooth()
+    ball.data.materials.append(principled_material("metal", base=(0.9, 0.6, 0.3), metallic=1.0, roughness=0.3))
+    plane = grid(cuts=3, size=6.0)
+    scene.wenv.shadows, scene.wenv.bounce_light, scene.wenv.glossy_bounce = True, bounce, False
+    size = 256
+    image = filled_image("shadowed bake", size, size)
+    count, _ = bake_now(scene, plane, image)
+    got = pixels(image)[:, :3]
+
+    (pp, pn, pt), (bp, bn, bt) = world_vertices(plane), world_vertices(ball)
+    occluders = wenv.Occluders(np.vstack([pp, bp]), np.vstack([pt, bt + len(pp)]))
+    eye = tuple(scene.camera.matrix_world.translation)
+    plane_shader = draft_shader(principled_of(plane.active_material))
+    texels, _, (points, normals, _, corners, w) = expected_radiance(plane, size, size, plane_shader, eye)
+    assert count == len(texels) == size * size
+    light = None
+    if bounce:
+        ball_shader = draft_shader(principled_of(ball.active_material))
+        light = np.vstack([plane_shader.diffuse_light(pn, occlusion=occluders.occlusion(pp, pn, resolution=16)),
+                           ball_shader.diffuse_light(bn, occlusion=occluders.occlusion(bp, bn, resolution=16))])
+    want = plane_shader.shade_mesh(points, normals, eye, bounce=light,
+                                   occlusion=occluders.occlusion(points, normals, resolution=11, point_rays=True))
+    at_vertices = [plane_shader.shade_mesh(pp, pn, eye, bounce=light,
+                                           occlusion=occluders.occlusion(pp, pn, resolution=r, point_rays=True))
+                   for r in (16, 11)]
+    corner_vertex = np.array([loop.vertex_index for loop in plane.data.loops])
+    missed = np.einsum("kc,kcd->kd", w, (at_vertices[0] - at_vertices[1])[corner_vertex[corners]])
+    assert np.abs(missed).max() > 1e-4  # the masks' sides tell apart here
+    np.testing.assert_allclose(got[texels], np.maximum(want + missed, 0.0), rtol=1e-3, atol=1e-5)
+    # the ball's shadow: far darker than the open sky beside it, over texels between the plane's vertices
+    open_sky = plane_shader.shade_mesh(points, normals, eye)
+    under = np.linalg.norm(points[:, :2] - (0.3, 0.0), axis=1) < 0.3
+    assert under.sum() >= 9 and (got[texels][under].sum(axis=1) < 0.85 * open_sky[under].sum(axis=1)).all()
 
 
 def test_bake_is_one_undo_step_that_undo_takes_back(scene):

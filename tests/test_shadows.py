@@ -112,6 +112,46 @@ def test_the_blockers_light_fills_the_shadow(scene):
     assert own[contact].sum() > 1.05 * black[contact].sum()
 
 
+def test_point_rays_catch_what_coarse_masks_miss():
+    """A thin pole's shadow from a sun on the ground: 8 x 8 masks' rays pass beside the pole far from
+    it, so without point rays the sun reaches most of the shadow's line; with point_rays=True every
+    point casts the sun's ray and the line is dark, as the ray-cast reference has it.  Points that
+    see their whole sky shade as without occlusion, within half a per cent."""
+    pole = box((-0.1, -0.1, 0.0), (0.1, 0.1, 3.0))
+    ground = square(6.0, 0.0)
+    occluders = wenv.Occluders(*merged(ground, pole))
+    height = 64
+    i = int(((-30.0 / 360.0) + 0.5) % 1.0 * 2 * height)  # the sun's 2 x 2 pixels, as sky_pixels puts them
+    j = int((0.5 - 35.0 / 180.0) * height)
+    az, el = np.radians((0.5 - (i + 1) / (2 * height)) * 360.0), np.radians((0.5 - (j + 1) / height) * 180.0)
+    away = -np.array([np.cos(az), np.sin(az)])  # the shadow falls away from the sun
+    d = np.linspace(0.5, 3.5, 24)
+    line = np.column_stack([d * away[0], d * away[1], np.zeros_like(d)])
+    open_ground = np.column_stack([d * away[1] + 4.0, -d * away[0], np.zeros_like(d)])  # far beside it
+    points = np.vstack([line, open_ground]).astype(np.float32)
+    up = np.tile(np.float32([0, 0, 1]), (len(points), 1))
+    views = np.tile(np.float32([0.0, -0.6, 0.8]), (len(points), 1))
+    env, mat = sky((30.0, 35.0)), wenv.Lambert(0.8)
+    shader = wenv.Shader(env, mat, quality="default")
+    coarse = occluders.occlusion(points, up, resolution=8)
+    pointed = occluders.occlusion(points, up, resolution=8, point_rays=True)
+    assert pointed.point_rays and not coarse.point_rays and pointed.blocked_vertices == len(points)
+    truth = wenv.reference(env, mat, up, views, positions=points, occluders=occluders)
+    plain = shader.shade(up, views)
+    with_masks = shader.shade(up, views, occlusion=coarse, bounce=None)
+    with_rays = shader.shade(up, views, occlusion=pointed, bounce=None)
+    shadow = slice(0, len(line))
+    assert np.all(truth[shadow].sum(1) < 0.5 * plain[shadow].sum(1))  # the sun is most of the light
+    missed = with_masks[shadow].sum(1) > 0.9 * plain[shadow].sum(1)  # the sun passing between the rays
+    assert missed.sum() >= len(line) // 2
+    np.testing.assert_allclose(with_rays[shadow], truth[shadow], rtol=0.05)
+    # the lights walked with visibility (a wide cluster read by its parts): within half a per cent
+    np.testing.assert_allclose(with_rays[len(line):], plain[len(line):], rtol=5e-3)
+    with pytest.raises(ValueError, match="point_rays"):
+        occluders.occlusion(points, up, previous=pointed, changed=(0, 0), point_rays=False)
+    assert occluders.occlusion(points, up, previous=pointed, changed=(0, 0)).point_rays
+
+
 def test_each_hit_lies_on_its_ray(scene):
     """Occlusion.hits holds every blocked texel's ray, vertex by vertex: its vertex and triangle as
     Occlusion.triangles has them, and the hit point (the triangle's corners by its weights) on the

@@ -246,10 +246,12 @@ static int refresh_args(PyObject *previous, PyObject *changed, size_t *resolutio
 /* occlusion(positions, normals, resolution=8, progress=None, previous=None, changed=None) -> wenv.Occlusion */
 static PyObject *occluders_occlusion(OccludersObject *self, PyObject *args, PyObject *kwargs)
 {
-    static char *kwlist[] = {"positions", "normals", "resolution", "progress", "previous", "changed", NULL};
+    static char *kwlist[] = {"positions", "normals", "resolution", "progress", "previous", "changed", "point_rays",
+                             NULL};
     PyObject *pobj, *nobj, *res_obj = NULL, *progress_obj = Py_None, *previous = Py_None, *changed = Py_None;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|OOOO:occlusion", kwlist, &pobj, &nobj, &res_obj, &progress_obj,
-                                     &previous, &changed) ||
+    int point_rays = -1;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|OOOO$p:occlusion", kwlist, &pobj, &nobj, &res_obj,
+                                     &progress_obj, &previous, &changed, &point_rays) ||
         ready(self) < 0)
         return NULL;
     size_t resolution = 8, first = 0, count = 0;
@@ -267,6 +269,11 @@ static PyObject *occluders_occlusion(OccludersObject *self, PyObject *args, PyOb
     const OcclusionObject *before;
     if (refresh_args(previous, changed, &resolution, res_obj != NULL && !automatic, &before, &first, &count) < 0)
         return NULL;
+    if (before && point_rays >= 0 && point_rays != before->o.point_rays) {
+        PyErr_Format(PyExc_ValueError, "point_rays=%s is not previous's: a refresh keeps what previous was made as",
+                     point_rays ? "True" : "False");
+        return NULL;
+    }
     Py_buffer pb, nb;
     size_t np;
     if (wenv_py_get_vec3_pair(pobj, "positions", nobj, "normals", 1, &pb, &nb, &np) < 0)
@@ -287,7 +294,7 @@ static PyObject *occluders_occlusion(OccludersObject *self, PyObject *args, PyOb
         st = wenv_occlusion_refresh(&out->o, &before->o, ((OccludersObject *)before->occluders)->occ, self->occ,
                                     pb.buf, nb.buf, np, first, count, &progress, &err);
     else
-        st = wenv_occlusion_make(&out->o, self->occ, pb.buf, nb.buf, np, resolution, &progress, &err);
+        st = wenv_occlusion_make(&out->o, self->occ, pb.buf, nb.buf, np, resolution, point_rays > 0, &progress, &err);
     WENV_END_WORK
     if (st) {
         Py_CLEAR(out);
@@ -336,12 +343,14 @@ static PyMethodDef occluders_methods[] = {
      "occluded(origins, directions, tfar=inf)\n--\n\nWhether anything blocks each ray (bool, n): origins float32 "
      "(n, 3) or one (3,), directions float32 (n, 3) (normalised here), up to distance tfar."},
     {"occlusion", (PyCFunction)(void (*)(void))occluders_occlusion, METH_VARARGS | METH_KEYWORDS,
-     "occlusion(positions, normals, resolution=8, progress=None, previous=None, changed=None)\n--\n\nWhich "
-     "directions of each vertex's hemisphere the scene blocks, as a wenv.Occlusion: a ray from the vertex (lifted "
-     "off the surface by Occluders.offset) through the centre of each texel of a resolution x resolution "
-     "hemi-octahedral map in the vertex's frame (resolution 4 to 16, or 'auto': the finest whose rays, "
-     "vertices x resolution^2, stay within 2^23, about 1.7 s on 2 cores).  progress(fraction) may return True to "
-     "cancel.\n\nAfter a change (an object moved, deformed, edited or removed), previous (the occlusion of the "
+     "occlusion(positions, normals, resolution=8, progress=None, previous=None, changed=None, *, point_rays=False)"
+     "\n--\n\nWhich directions of each vertex's hemisphere the scene blocks, as a wenv.Occlusion: a ray from the "
+     "vertex (lifted off the surface by Occluders.offset) through the centre of each texel of a resolution x "
+     "resolution hemi-octahedral map in the vertex's frame (resolution 4 to 16, or 'auto': the finest whose rays, "
+     "vertices x resolution^2, stay within 2^23, about 1.7 s on 2 cores).  point_rays=True: shading casts a ray "
+     "along every point-like direction it reads (an exact light's, a narrow lobe's mirror direction) at every "
+     "vertex, rather than trusting the mask where its texels about the direction agree (what coarse masks miss "
+     "between their rays).  progress(fraction) may return True to cancel.\n\nAfter a change (an object moved, deformed, edited or removed), previous (the occlusion of the "
      "same positions and normals before) and changed=(first, count) (the triangles of previous's occluders that "
      "changed, every other one here in the same order, the new ones in their place) cast only the vertices whose "
      "rays met the changed triangles or meet them now; the result is what a new cast gives, and cast_vertices "
@@ -486,6 +495,8 @@ static PyObject *occlusion_size(OcclusionObject *self, void *closure)
 {
     size_t which = (size_t)(uintptr_t)closure;
     const wenv_occlusion *o = &self->o;
+    if (which == 5)
+        return PyBool_FromLong(o->point_rays);
     size_t v = which == 0 ? o->resolution
                           : which == 1 ? o->n_vertices
                                        : which == 2 ? o->n_masks
@@ -498,10 +509,14 @@ static PyGetSetDef occlusion_getset[] = {
     {"resolution", (getter)occlusion_size, NULL, "The maps' side.", (void *)0},
     {"vertices", (getter)occlusion_size, NULL, "Number of vertices.", (void *)1},
     {"blocked_vertices", (getter)occlusion_size, NULL,
-     "Vertices some direction of whose hemisphere is blocked (the others hold no mask).", (void *)2},
+     "Vertices that hold a mask: those some direction of whose hemisphere is blocked (with point_rays, all).",
+     (void *)2},
     {"nbytes", (getter)occlusion_size, NULL, "Bytes held.", (void *)3},
     {"cast_vertices", (getter)occlusion_size, NULL,
      "How many vertices' rays were cast to make it: all of them, unless made from a previous occlusion.", (void *)4},
+    {"point_rays", (getter)occlusion_size, NULL,
+     "Whether shading casts a ray along every point-like direction (exact lights, mirror directions) rather than "
+     "reading the mask where it agrees; every vertex then holds a mask.", (void *)5},
     {"visible", (getter)occlusion_visible, NULL,
      "bool (n, resolution, resolution): texel (row, column) of a vertex's map reaches the sky.", NULL},
     {"triangles", (getter)occlusion_triangles, NULL,

@@ -178,8 +178,8 @@ static unsigned short keep_vertex(const refresh_plan *rp, size_t i, uint64_t *ma
 
 /* Casts (or, refreshing, keeps where nothing it sees changed) every vertex's mask. */
 static wenv_status cast(wenv_occlusion *out, const wenv_occluders *occ, const float *positions, const float *normals,
-                        size_t n, size_t resolution, const refresh_plan *refresh, const wenv_progress *progress,
-                        wenv_error *err)
+                        size_t n, size_t resolution, int point_rays, const refresh_plan *refresh,
+                        const wenv_progress *progress, wenv_error *err)
 {
     memset(out, 0, sizeof *out);
     if (resolution < WENV_OCCLUSION_RESOLUTION_MIN || resolution > WENV_OCCLUSION_RESOLUTION_MAX)
@@ -206,7 +206,7 @@ static wenv_status cast(wenv_occlusion *out, const wenv_occluders *occ, const fl
                               "the occlusion of %zu vertices needs at least %.0f MB, over the memory budget of %.0f MB",
                               n, fixed / 1048576.0, budget / 1048576.0);
     size_t hit_budget = (size_t)((budget - fixed) / sizeof(wenv_occlusion_hit));
-    wenv_occlusion o = {.resolution = resolution, .n_vertices = n, .words = words};
+    wenv_occlusion o = {.resolution = resolution, .n_vertices = n, .words = words, .point_rays = point_rays};
     o.slot = malloc((n ? n : 1) * sizeof *o.slot);
     o.masks = malloc((n ? n : 1) * words * sizeof *o.masks); /* shrunk to the masks kept after */
     o.hit_start = malloc(((n ? n : 1) + 1) * sizeof *o.hit_start);
@@ -296,7 +296,7 @@ static wenv_status cast(wenv_occlusion *out, const wenv_occluders *occ, const fl
          * block's later counts unwritten, so nothing of a cancelled block is kept. */
         for (size_t b = 0; b < count && !failed && !cancelled; b++) {
             size_t i = first + b;
-            if (!block_count[b]) {
+            if (!block_count[b] && !point_rays) {
                 o.slot[i] = -1;
                 continue;
             }
@@ -334,7 +334,7 @@ static wenv_status cast(wenv_occlusion *out, const wenv_occluders *occ, const fl
     size_t *starts = realloc(o.hit_start, (o.n_masks + 1) * sizeof *o.hit_start);
     if (starts)
         o.hit_start = starts;
-    uint64_t h = wenv_fingerprint_word(WENV_FINGERPRINT_START, resolution);
+    uint64_t h = wenv_fingerprint_word(wenv_fingerprint_word(WENV_FINGERPRINT_START, resolution), (uint64_t)point_rays);
     h = wenv_fingerprint_word(wenv_fingerprint_word(h, n), wenv_occluders_triangle_count(occ));
     for (size_t k = 0; k < o.n_masks * words; k++)
         h = wenv_fingerprint_word(h, o.masks[k]);
@@ -348,10 +348,10 @@ static wenv_status cast(wenv_occlusion *out, const wenv_occluders *occ, const fl
 }
 
 wenv_status wenv_occlusion_make(wenv_occlusion *out, const wenv_occluders *occ, const float *positions,
-                                const float *normals, size_t n, size_t resolution, const wenv_progress *progress,
-                                wenv_error *err)
+                                const float *normals, size_t n, size_t resolution, int point_rays,
+                                const wenv_progress *progress, wenv_error *err)
 {
-    return cast(out, occ, positions, normals, n, resolution, NULL, progress, err);
+    return cast(out, occ, positions, normals, n, resolution, point_rays, NULL, progress, err);
 }
 
 /* Grows lo..hi to hold triangles [first, first + count) of occ. */
@@ -416,7 +416,7 @@ wenv_status wenv_occlusion_refresh(wenv_occlusion *out, const wenv_occlusion *be
     /* rays start off the surface by a fraction of the scene's size: another size moves every start,
      * and only a new cast gives what a new cast gives */
     if (wenv_occluders_offset(occ) != wenv_occluders_offset(occluders_before))
-        return cast(out, occ, positions, normals, n, before->resolution, NULL, progress, err);
+        return cast(out, occ, positions, normals, n, before->resolution, before->point_rays, NULL, progress, err);
     refresh_plan plan = {.before = before, .occluders_before = occluders_before, .first = first,
                          .end_before = end_before, .shift = (long long)count_now - (long long)count,
                          .lo = {INFINITY, INFINITY, INFINITY}, .hi = {-INFINITY, -INFINITY, -INFINITY}};
@@ -431,7 +431,7 @@ wenv_status wenv_occlusion_refresh(wenv_occlusion *out, const wenv_occlusion *be
             return err->status;
         plan.changed = changed;
     }
-    wenv_status st = cast(out, occ, positions, normals, n, before->resolution, &plan, progress, err);
+    wenv_status st = cast(out, occ, positions, normals, n, before->resolution, before->point_rays, &plan, progress, err);
     wenv_occluders_free(changed);
     return st;
 }

@@ -1,7 +1,11 @@
 /* Which directions of each vertex's hemisphere the scene blocks: one bit per texel of an r x r
  * hemi-octahedral map in the vertex's frame (math/frame.h, math/maps.h), set where a ray from the
  * vertex through the texel's centre reaches the sky.  A vertex that sees its whole hemisphere holds
- * no mask at all, so a scene that blocks nothing (a convex mesh alone) costs one index a vertex.
+ * no mask at all, so a scene that blocks nothing (a convex mesh alone) costs one index a vertex --
+ * unless it is made with point rays: then every vertex holds a mask, and the directions shading
+ * reads as points (the exact lights, a narrow lobe's mirror direction) are always cast as rays,
+ * never taken from the mask, which at a coarse side misses what stands between its rays (a bake's
+ * texels, 4 x 4 rays each).
  * Depends on the mesh state only: a new World, view or material needs none made again. */
 #ifndef WENV_OCCLUSION_H
 #define WENV_OCCLUSION_H
@@ -45,16 +49,18 @@ typedef struct {
     float *normals;     /* n x 3: their unit normals (the masks' frames) */
     uint64_t fingerprint; /* of all the above: what tells one occlusion from another */
     size_t cast_vertices; /* how many vertices' rays were cast to make it (all of them, unless refreshed) */
+    int point_rays;       /* every vertex holds a mask; point-like directions are cast, not read from it */
 } wenv_occlusion;
 
 /* The masks of n vertices (positions and normals as xyz floats; normals non-zero) against `occ`,
- * within the memory budget `occ` was made with (WENV_ERR_VALUE saying so when it would not fit).
+ * within the memory budget `occ` was made with (WENV_ERR_VALUE saying so when it would not fit);
+ * `point_rays` as wenv_occlusion's.
  * Rays start wenv_occluders_offset off the surface along the normal.  Progress
  * and cancel as base/progress.h.  WENV_ERR_VALUE for a resolution out of range or a normal that is
  * zero or not finite (naming "normals[i]"), or a position not finite ("positions[i]"). */
 wenv_status wenv_occlusion_make(wenv_occlusion *out, const wenv_occluders *occ, const float *positions,
-                                const float *normals, size_t n, size_t resolution, const wenv_progress *progress,
-                                wenv_error *err);
+                                const float *normals, size_t n, size_t resolution, int point_rays,
+                                const wenv_progress *progress, wenv_error *err);
 
 /* The same after some triangles changed (an object moved, deformed, edited or removed), casting only
  * what the change can reach: `before` is the occlusion of these positions and normals against

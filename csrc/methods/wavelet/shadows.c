@@ -173,17 +173,17 @@ static int light_at_edge(const wenv_light_visibility *vis, const float l[3])
     return open && shut;
 }
 
-/* Direction l: what the mask says where its texels about l agree, else a ray, whose answer is kept
- * in the vertex's memo if `keep` (a light's direction, the same at every view; not a mirror
- * direction, which each view moves). */
+/* Direction l: what the mask says where its texels about l agree (unless the occlusion asks for
+ * point rays), else a ray, whose answer is kept in the vertex's memo if `keep` (a light's
+ * direction, the same at every view; not a mirror direction, which each view moves). */
 static float visible_along(const wenv_vertex_shadow *vs, const float l[3], int keep)
 {
     int open, shut;
     texels_about(vs, l, &open, &shut);
-    if (!shut)
-        return open ? 1.0f : 0.0f; /* below the horizon it brings nothing anyway */
-    if (!open)
-        return 0.0f;
+    if (!open && !shut)
+        return 0.0f; /* below the horizon it brings nothing anyway */
+    if (!vs->point_rays && (!shut || !open))
+        return open ? 1.0f : 0.0f;
     int known = keep && vs->memo_slot ? wenv_light_memo_find(vs->memo_slot, l) : -1;
     if (known >= 0)
         return (float)known;
@@ -260,6 +260,7 @@ void wenv_vertex_shadow_init(wenv_vertex_shadow *vs, const wenv_shadow_scene *sc
             vs->frame[3 * r + c] = (float)(f[3 * r] * t[3 * c] + f[3 * r + 1] * t[3 * c + 1] + f[3 * r + 2] * t[3 * c + 2]);
     vs->turn = t;
     vs->mask = o->masks + (size_t)o->slot[i] * o->words;
+    vs->point_rays = o->point_rays;
     vs->memo = memo;
     vs->memo_slot = memo ? memo->slots + o->slot[i] : NULL;
     vs->resolution = o->resolution;

@@ -64,6 +64,7 @@ typedef struct {
     float origin[3];
     wenv_light_memo *memo;         /* where the lights' rays' answers are kept (NULL: nowhere) */
     wenv_light_memo_slot *memo_slot; /* this vertex's */
+    int point_rays;                  /* point-like directions always cast (wenv_occlusion's) */
 } wenv_vertex_shadow;
 
 /* Sets vs for vertex i of scene's occlusion, which must hold a mask for it (slot >= 0); its lights'
