@@ -191,12 +191,14 @@ class ShadingPlan:
         with engine.shadows.lock:
             occluders, offsets = engine.shadows.occluders(meshes_in, self.memory_budget_mb)
             transient = self.receive_only and self.resolution is not None
-            occlusions = [
-                engine.shadows.cast(occluders, part.positions, part.normals, self.resolution, self.point_rays, progress)
-                if transient and k < len(work) else engine.shadows.occlusion(occluders, part.positions, part.normals,
-                                                                             progress)
-                for k, (_, _, _, _, part, _) in enumerate(everything)
-                for progress in [_ray_progress(k, len(everything), report, cancelled)]]
+
+            def occlusion_of(k, part):
+                progress = _ray_progress(k, len(everything), report, cancelled)
+                if transient and k < len(work):  # the receivers' own, cast for this pass alone
+                    return engine.shadows.cast(occluders, part.positions, part.normals, self.resolution,
+                                               self.point_rays, progress)
+                return engine.shadows.occlusion(occluders, part.positions, part.normals, progress)
+            occlusions = [occlusion_of(k, part) for k, (_, _, _, _, part, _) in enumerate(everything)]
         bounce = np.zeros((offsets[-1], 3), np.float32)
         # with glossy bounce, what each occluder vertex sends towards each direction, and its normal
         sent = (np.zeros((offsets[-1], engine.SENDING_SIDE ** 2, 3), np.float32) if self.bounce and self.glossy_bounce
