@@ -215,7 +215,7 @@ def _stand_around(plan, around):
 
 def _vertex_shading(plan, item, resolution, report, cancelled):
     """The radiance of `item` (the baked object's vertices) in `plan`'s scene, its masks at
-    `resolution` with point rays, as the texels'."""
+    `resolution` (None: the vertex shading's own, kept) with point rays, as the texels'."""
     at = copy.copy(plan)
     at.items, at.casts, at.resolution = [item], [False], resolution
     return _refined(at, report, cancelled)
@@ -235,7 +235,7 @@ def _mask_correction(plan, around, mesh, sites, stages):
     side = engine.shadows.occlusion_resolution(item[1].count)
     if side == plan.resolution:
         return None
-    fine = _vertex_shading(plan, item, side, lambda f: stages.report("vertices", 0.5 * f), stages.cancelled)
+    fine = _vertex_shading(plan, item, None, lambda f: stages.report("vertices", 0.5 * f), stages.cancelled)
     coarse = _vertex_shading(plan, item, plan.resolution, lambda f: stages.report("vertices", 0.5 + 0.5 * f),
                              stages.cancelled)
     rows = meshes.corner_vertices(mesh) if item[1].domain == "POINT" else np.arange(len(mesh.loops))

@@ -57,8 +57,8 @@ class ShadingPlan:
         # is among the blockers (and senders)
         self.receive_only = False
         # with receive_only, the side of the items' occlusion masks: None, the kept occlusion at the
-        # core's Auto; a number, cast at it for this pass alone (a bake's texels: millions of them),
-        # with point rays if `point_rays` (wenv.Occluders.occlusion)
+        # core's Auto; a number, cast at it for this pass alone (a bake's texels: millions of them);
+        # with point rays if `point_rays` (wenv.Occluders.occlusion; the kept one made so for the pass)
         self.resolution = None
         self.point_rays = False
         self.blockers = []  # (positions, triangles) of the other meshes that block light
@@ -190,14 +190,15 @@ class ShadingPlan:
         everything = work + senders
         with engine.shadows.lock:
             occluders, offsets = engine.shadows.occluders(meshes_in, self.memory_budget_mb)
-            transient = self.receive_only and self.resolution is not None
+            transient = self.receive_only and (self.resolution is not None or self.point_rays)
 
             def occlusion_of(k, part):
                 progress = _ray_progress(k, len(everything), report, cancelled)
-                if transient and k < len(work):  # the receivers' own, cast for this pass alone
+                if transient and k < len(work) and self.resolution is not None:  # cast for this pass alone
                     return engine.shadows.cast(occluders, part.positions, part.normals, self.resolution,
                                                self.point_rays, progress)
-                return engine.shadows.occlusion(occluders, part.positions, part.normals, progress)
+                kept = engine.shadows.occlusion(occluders, part.positions, part.normals, progress)
+                return kept.with_point_rays() if transient and k < len(work) else kept
             occlusions = [occlusion_of(k, part) for k, (_, _, _, _, part, _) in enumerate(everything)]
         bounce = np.zeros((offsets[-1], 3), np.float32)
         # with glossy bounce, what each occluder vertex sends towards each direction, and its normal

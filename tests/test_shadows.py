@@ -116,7 +116,8 @@ def test_point_rays_catch_what_coarse_masks_miss():
     """A thin pole's shadow from a sun on the ground: 8 x 8 masks' rays pass beside the pole far from
     it, so without point rays the sun reaches most of the shadow's line; with point_rays=True every
     point casts the sun's ray and the line is dark, as the ray-cast reference has it.  Points that
-    see their whole sky shade as without occlusion, within half a per cent."""
+    see their whole sky shade as without occlusion, within half a per cent.  with_point_rays() makes
+    the same from the masks cast without."""
     pole = box((-0.1, -0.1, 0.0), (0.1, 0.1, 3.0))
     ground = square(6.0, 0.0)
     occluders = wenv.Occluders(*merged(ground, pole))
@@ -147,6 +148,12 @@ def test_point_rays_catch_what_coarse_masks_miss():
     np.testing.assert_allclose(with_rays[shadow], truth[shadow], rtol=0.05)
     # the lights walked with visibility (a wide cluster read by its parts): within half a per cent
     np.testing.assert_allclose(with_rays[len(line):], plain[len(line):], rtol=5e-3)
+    # made from the masks cast without: the same masks and hits, no ray cast, the same shading
+    converted = coarse.with_point_rays()
+    assert converted.point_rays and converted.cast_vertices == 0 and converted.blocked_vertices == len(points)
+    np.testing.assert_array_equal(converted.visible, pointed.visible)
+    np.testing.assert_array_equal(converted.triangles, pointed.triangles)
+    np.testing.assert_array_equal(shader.shade(up, views, occlusion=converted, bounce=None), with_rays)
     with pytest.raises(ValueError, match="point_rays"):
         occluders.occlusion(points, up, previous=pointed, changed=(0, 0), point_rays=False)
     assert occluders.occlusion(points, up, previous=pointed, changed=(0, 0)).point_rays

@@ -625,7 +625,31 @@ done:
     return result;
 }
 
+/* with_point_rays() -> wenv.Occlusion */
+static PyObject *occlusion_with_point_rays(OcclusionObject *self, PyObject *unused)
+{
+    (void)unused;
+    OcclusionObject *out = PyObject_New(OcclusionObject, &OcclusionType);
+    if (!out)
+        return NULL;
+    memset(&out->o, 0, sizeof out->o);
+    out->occluders = Py_NewRef(self->occluders);
+    wenv_error err = {0};
+    wenv_status st;
+    WENV_BEGIN_WORK
+    st = wenv_occlusion_with_point_rays(&out->o, &self->o, &err);
+    WENV_END_WORK
+    if (st) {
+        Py_CLEAR(out);
+        wenv_py_raise(&err);
+    }
+    return (PyObject *)out;
+}
+
 static PyMethodDef occlusion_methods[] = {
+    {"with_point_rays", (PyCFunction)occlusion_with_point_rays, METH_NOARGS,
+     "with_point_rays()\n--\n\nThis occlusion as if cast with point_rays=True (its masks and hits, every vertex "
+     "holding a mask), casting no ray: cast_vertices is 0."},
     {"sending_directions", (PyCFunction)(void (*)(void))occlusion_sending_directions, METH_VARARGS | METH_KEYWORDS,
      "sending_directions(side)\n--\n\nfloat32 (side^2, n, 3): the unit world direction of each texel centre of a "
      "side x side hemi-octahedral map in each vertex's frame (its normal as the occlusion holds it), texel by texel "

@@ -354,6 +354,46 @@ wenv_status wenv_occlusion_make(wenv_occlusion *out, const wenv_occluders *occ, 
     return cast(out, occ, positions, normals, n, resolution, point_rays, NULL, progress, err);
 }
 
+wenv_status wenv_occlusion_with_point_rays(wenv_occlusion *out, const wenv_occlusion *o, wenv_error *err)
+{
+    memset(out, 0, sizeof *out);
+    size_t n = o->n_vertices, words = o->words, texels = o->resolution * o->resolution;
+    size_t hits = wenv_occlusion_hit_count(o), rows = n ? n : 1;
+    wenv_occlusion c = {.resolution = o->resolution, .n_vertices = n, .words = words, .point_rays = 1, .n_masks = n};
+    c.slot = malloc(rows * sizeof *c.slot);
+    c.masks = malloc(rows * words * sizeof *c.masks);
+    c.hit_start = malloc((n + 1) * sizeof *c.hit_start);
+    c.hits = malloc((hits ? hits : 1) * sizeof *c.hits);
+    c.positions = malloc(rows * 3 * sizeof *c.positions);
+    c.normals = malloc(rows * 3 * sizeof *c.normals);
+    if (!c.slot || !c.masks || !c.hit_start || !c.hits || !c.positions || !c.normals) {
+        wenv_occlusion_free(&c);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the occlusion of %zu vertices", n);
+    }
+    memcpy(c.positions, o->positions, n * 3 * sizeof(float));
+    memcpy(c.normals, o->normals, n * 3 * sizeof(float));
+    if (hits) /* kept in vertex order, as the masks are */
+        memcpy(c.hits, o->hits, hits * sizeof *c.hits);
+    c.hit_start[0] = 0;
+    for (size_t i = 0; i < n; i++) {
+        uint64_t *mask = c.masks + i * words;
+        int32_t s = o->slot[i];
+        c.slot[i] = (int32_t)i;
+        if (s >= 0) {
+            memcpy(mask, o->masks + (size_t)s * words, words * sizeof *mask);
+            c.hit_start[i + 1] = c.hit_start[i] + (o->hit_start[s + 1] - o->hit_start[s]);
+            continue;
+        }
+        memset(mask, 0, words * sizeof *mask); /* every texel open, as a cast sets them */
+        for (size_t t = 0; t < texels; t++)
+            mask[t / 64] |= (uint64_t)1 << (t % 64);
+        c.hit_start[i + 1] = c.hit_start[i];
+    }
+    c.fingerprint = wenv_fingerprint_word(o->fingerprint, 0x706f696e74ull); /* "point" */
+    *out = c;
+    return WENV_OK;
+}
+
 /* Grows lo..hi to hold triangles [first, first + count) of occ. */
 static void add_bounds(const wenv_occluders *occ, size_t first, size_t count, float lo[3], float hi[3])
 {

@@ -76,6 +76,10 @@ wenv_status wenv_occlusion_refresh(wenv_occlusion *out, const wenv_occlusion *be
                                    const wenv_occluders *occluders_before, const wenv_occluders *occ,
                                    const float *positions, const float *normals, size_t n, size_t first,
                                    size_t count, const wenv_progress *progress, wenv_error *err);
+/* `o` as if made with point rays: the same masks and hits, every vertex holding a mask (an open one
+ * where `o` held none), so that shading casts its point-like directions; no ray is cast.  Its
+ * fingerprint is o's marked as such. */
+wenv_status wenv_occlusion_with_point_rays(wenv_occlusion *out, const wenv_occlusion *o, wenv_error *err);
 void wenv_occlusion_free(wenv_occlusion *o);
 /* The bytes it holds. */
 size_t wenv_occlusion_bytes(const wenv_occlusion *o);
