@@ -11,8 +11,9 @@ every exact light and narrow lobe's mirror direction cast along its own ray, so 
 as sharp as the texels; what the rays meet sends the light of its vertices (their diffuse light, or
 with Glossy Bounce their light towards the texel); what the texels' coarse masks miss of the sky's
 soft occlusion is added back from the vertices (_mask_correction).  The result goes into a Blender
-image (the margin extended about the islands, the texels outside them untouched); undo restores the image as it was (its pixels are no part of
-Blender's undo, so the add-on keeps each bake's and puts them back, restore_after_undo)."""
+image (the margin extended about the islands, the texels outside them untouched); undo restores the
+image as it was (its pixels are no part of Blender's undo, so the add-on keeps each bake's and puts
+them back, restore_after_undo)."""
 import copy
 import json
 import threading
@@ -331,7 +332,8 @@ def bake(scene, depsgraph, obj, image, view, blend_data, uv_map=None, margin=DEF
         _stand_around(plan, around)
         plan.resolution, plan.point_rays = engine.shadows.occlusion_resolution(data.count), True
     stages.report("reading", 1.0)
-    rgb = _refined(plan, stages.reporter("shading"), stages.cancelled, stages.reporter("shadows") if st.shadows else None)
+    rgb = _refined(plan, stages.reporter("shading"), stages.cancelled,
+                   stages.reporter("shadows") if st.shadows else None)
     if around is not None:
         correction = _mask_correction(plan, around, mesh, sites, stages)
         if correction is not None:

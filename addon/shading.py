@@ -190,15 +190,17 @@ class ShadingPlan:
         everything = work + senders
         with engine.shadows.lock:
             occluders, offsets = engine.shadows.occluders(meshes_in, self.memory_budget_mb)
+            # the receivers' occlusions made for this pass alone (nothing made of them is kept)
             transient = self.receive_only and (self.resolution is not None or self.point_rays)
 
             def occlusion_of(k, part):
                 progress = _ray_progress(k, len(everything), report, cancelled)
-                if transient and k < len(work) and self.resolution is not None:  # cast for this pass alone
+                receiver = self.receive_only and k < len(work)
+                if receiver and self.resolution is not None:
                     return engine.shadows.cast(occluders, part.positions, part.normals, self.resolution,
                                                self.point_rays, progress)
                 kept = engine.shadows.occlusion(occluders, part.positions, part.normals, progress)
-                return kept.with_point_rays() if transient and k < len(work) else kept
+                return kept.with_point_rays() if receiver and self.point_rays else kept
             occlusions = [occlusion_of(k, part) for k, (_, _, _, _, part, _) in enumerate(everything)]
         bounce = np.zeros((offsets[-1], 3), np.float32)
         # with glossy bounce, what each occluder vertex sends towards each direction, and its normal

@@ -46,8 +46,8 @@ def main():
                                       views.camera_view(scene), bpy.data, uv_map=scenes.BAKE_UV)
                 times.append(time.perf_counter() - start)
             rows.append(dict(size=size, shadows=shadows, texels=texels, seconds=float(np.median(times[1:]))))
-            print(f"{size} x {size}, shadows {'on ' if shadows else 'off'}: {texels} texels in {rows[-1]['seconds']:.2f} s",
-                  flush=True)
+            print(f"{size} x {size}, shadows {'on ' if shadows else 'off'}: {texels} texels in "
+                  f"{rows[-1]['seconds']:.2f} s", flush=True)
     os.makedirs(os.path.dirname(args.out), exist_ok=True)
     with open(args.out, "w") as f:
         json.dump(dict(command="python benchmarks/bake_cost.py " + " ".join(sys.argv[1:]), machine=platform.machine(),

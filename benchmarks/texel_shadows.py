@@ -64,7 +64,8 @@ def main():
         return np.einsum("mc,mcx->mx", w, x[t[tri]])
 
     rows = []
-    print(f"{len(pts)} points; masks {fine_side} x {fine_side} at the vertices, {texel_side} x {texel_side} at the points")
+    print(f"{len(pts)} points; masks {fine_side} x {fine_side} at the vertices, "
+          f"{texel_side} x {texel_side} at the points")
     for case in args.cases:
         hdri, material = case.split(":")
         env = wenv.load_environment(hdri_path(hdri))
@@ -93,9 +94,9 @@ def main():
                                                        for k, v in row.items() if isinstance(v, dict)), flush=True)
     os.makedirs(os.path.dirname(args.out), exist_ok=True)
     with open(args.out, "w") as f:
-        json.dump(dict(command="python benchmarks/texel_shadows.py " + " ".join(sys.argv[1:]), machine=platform.machine(),
-                       points=len(pts), vertices=len(p), fine_side=fine_side, texel_side=texel_side, rows=rows), f,
-                  indent=1)
+        json.dump(dict(command="python benchmarks/texel_shadows.py " + " ".join(sys.argv[1:]),
+                       machine=platform.machine(), points=len(pts), vertices=len(p), fine_side=fine_side,
+                       texel_side=texel_side, rows=rows), f, indent=1)
     print("wrote", args.out)
 
 

@@ -334,7 +334,8 @@ static wenv_status cast(wenv_occlusion *out, const wenv_occluders *occ, const fl
     size_t *starts = realloc(o.hit_start, (o.n_masks + 1) * sizeof *o.hit_start);
     if (starts)
         o.hit_start = starts;
-    uint64_t h = wenv_fingerprint_word(wenv_fingerprint_word(WENV_FINGERPRINT_START, resolution), (uint64_t)point_rays);
+    uint64_t h = wenv_fingerprint_word(WENV_FINGERPRINT_START, resolution);
+    h = wenv_fingerprint_word(h, (uint64_t)point_rays);
     h = wenv_fingerprint_word(wenv_fingerprint_word(h, n), wenv_occluders_triangle_count(occ));
     for (size_t k = 0; k < o.n_masks * words; k++)
         h = wenv_fingerprint_word(h, o.masks[k]);
@@ -471,7 +472,8 @@ wenv_status wenv_occlusion_refresh(wenv_occlusion *out, const wenv_occlusion *be
             return err->status;
         plan.changed = changed;
     }
-    wenv_status st = cast(out, occ, positions, normals, n, before->resolution, before->point_rays, &plan, progress, err);
+    wenv_status st =
+        cast(out, occ, positions, normals, n, before->resolution, before->point_rays, &plan, progress, err);
     wenv_occluders_free(changed);
     return st;
 }
