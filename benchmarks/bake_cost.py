@@ -1,9 +1,9 @@
 """What a bake costs with and without shadows: Suzanne subdivided 3 times (31,658 vertices, Smart UV
-Project), the gloss of shadows_vs_cycles.py under night, `default`, Bounce Light on, from the camera;
-each size baked four times, the median of the last three.  Prints and writes out/bake_cost.json.
-Run it with two builds in turn to compare them side by side.
+Project), a material of shadows_vs_cycles.py (the gloss unless told) under night, `default`, Bounce
+Light on, from the camera; each size baked four times, the median of the last three.  Prints and
+writes out/bake_cost.json.  Run it with two builds in turn to compare them side by side.
 
-    python benchmarks/bake_cost.py [--sizes 1024 2048]
+    python benchmarks/bake_cost.py [--sizes 1024 2048] [--material gloss|paint|metal]
 """
 import argparse
 import json
@@ -26,6 +26,7 @@ from benchmarks import shadows_vs_cycles as scenes  # noqa: E402
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", type=int, nargs="*", default=[1024, 2048])
+    ap.add_argument("--material", default="gloss", choices=list(scenes.MATERIALS))
     ap.add_argument("--out", default=os.path.join(ROOT, "out", "bake_cost.json"))
     args = ap.parse_args()
     addon.register()
@@ -33,7 +34,7 @@ def main():
     scenes.add_bake_map(objs[0])
     scene.wenv.quality, scene.wenv.tone_mapping = "DEFAULT", "NONE"
     scenes.set_world(scene, "night")
-    scenes.set_material(objs, scenes.MATERIALS["gloss"])
+    scenes.set_material(objs, scenes.MATERIALS[args.material])
     rows = []
     for size in args.sizes:
         for shadows in (False, True):
@@ -51,7 +52,7 @@ def main():
     os.makedirs(os.path.dirname(args.out), exist_ok=True)
     with open(args.out, "w") as f:
         json.dump(dict(command="python benchmarks/bake_cost.py " + " ".join(sys.argv[1:]), machine=platform.machine(),
-                       rows=rows), f, indent=1)
+                       material=args.material, rows=rows), f, indent=1)
     print("wrote", args.out)
 
 

@@ -219,32 +219,97 @@ static size_t blocked_before(const wenv_vertex_shadow *vs, size_t t)
     return count + (size_t)__builtin_popcountll(~vs->mask[t / 64] & below);
 }
 
-void wenv_shadow_narrow_specular(const wenv_vertex_shadow *vs, const float *lbar, const float *hidden,
-                                 const float r[3], const float albedo[3], float s[3])
+/* A direction's visibility for a narrow lobe: open below the mask's horizon, where the lobe's light
+ * is the unshadowed shading's (as a mirror direction there always was). */
+static float lobe_direction_open(const wenv_vertex_shadow *vs, const float l[3])
 {
     const float *f = vs->frame;
+    if (!(f[6] * l[0] + f[7] * l[1] + f[8] * l[2] > 0.0f))
+        return 1.0f;
+    return visible_along(vs, l, 0);
+}
+
+/* The rings of a narrow lobe's rays: half vectors at the GGX slope quantiles xi (tan theta_h =
+ * alpha sqrt(xi / (1 - xi))), each ring standing for half the lobe's microfacets. */
+static const struct {
+    float xi;
+    int count;
+} LOBE_RINGS[] = {{0.25f, 3}, {0.75f, 6}};
+
+float wenv_shadow_lobe_visible(const wenv_vertex_shadow *vs, const float n[3], const float v[3], float cos_v,
+                               float alpha)
+{
+    float r[3];
+    for (int c = 0; c < 3; c++)
+        r[c] = 2.0f * cos_v * n[c] - v[c];
+    if (!vs->point_rays || alpha < WENV_LOBE_RAYS_ALPHA_MIN)
+        return lobe_direction_open(vs, r);
+    /* a tangent frame about n (Duff et al. 2017, branchless) */
+    float sign = n[2] >= 0.0f ? 1.0f : -1.0f, a = -1.0f / (sign + n[2]), b = n[0] * n[1] * a;
+    float t[3] = {1.0f + sign * n[0] * n[0] * a, sign * b, -sign * n[0]}, u[3] = {b, sign + n[1] * n[1] * a, -n[1]};
+    size_t rings = sizeof LOBE_RINGS / sizeof LOBE_RINGS[0];
+    float seen = 0.0f, total = 0.0f;
+    for (size_t g = 0; g < rings; g++) {
+        float slope = alpha * sqrtf(LOBE_RINGS[g].xi / (1.0f - LOBE_RINGS[g].xi));
+        float weight = 1.0f / ((float)rings * (float)LOBE_RINGS[g].count);
+        for (int k = 0; k < LOBE_RINGS[g].count; k++) {
+            /* the rings turned against each other, so that together they cover the azimuths */
+            float phi = 2.0f * (float)M_PI * ((float)k + 0.5f * (float)g) / (float)LOBE_RINGS[g].count;
+            float h[3], len = 0.0f;
+            for (int c = 0; c < 3; c++) {
+                h[c] = n[c] + slope * (cosf(phi) * t[c] + sinf(phi) * u[c]);
+                len += h[c] * h[c];
+            }
+            len = sqrtf(len);
+            float vh = (v[0] * h[0] + v[1] * h[1] + v[2] * h[2]) / len, d[3];
+            for (int c = 0; c < 3; c++)
+                d[c] = 2.0f * vh * h[c] / len - v[c];
+            float cos_i = d[0] * n[0] + d[1] * n[1] + d[2] * n[2];
+            if (!(vh > 0.0f) || !(cos_i > 0.0f))
+                continue; /* facing away, or reflected below the surface: no light either way */
+            /* the half vectors are drawn as D(h) cos(theta_h) is: each direction's share of f cos is
+             * then G (v.h) / (n.h) up to what all share; G's light-side factor (Smith's, GGX) keeps
+             * the rays near the horizon, where blockers stand, from counting as much as the rest */
+            float tan2_i = (1.0f - cos_i * cos_i) / (cos_i * cos_i);
+            float w = weight * vh * len * 2.0f / (1.0f + sqrtf(1.0f + alpha * alpha * tan2_i)); /* n.h = 1 / len */
+            total += w;
+            seen += w * lobe_direction_open(vs, d);
+        }
+    }
+    return total > 0.0f ? seen / total : lobe_direction_open(vs, r);
+}
+
+void wenv_shadow_narrow_specular(const wenv_vertex_shadow *vs, const float *lbar, const float *hidden,
+                                 const float n[3], const float v[3], float cos_v, float alpha, const float albedo[3],
+                                 float s[3])
+{
+    float seen = wenv_shadow_lobe_visible(vs, n, v, cos_v, alpha);
+    if (seen >= 1.0f)
+        return;
+    const float *f = vs->frame;
+    float r[3];
+    for (int c = 0; c < 3; c++)
+        r[c] = 2.0f * cos_v * n[c] - v[c];
     float d[3] = {f[0] * r[0] + f[1] * r[1] + f[2] * r[2], f[3] * r[0] + f[4] * r[1] + f[5] * r[2],
                   f[6] * r[0] + f[7] * r[1] + f[8] * r[2]};
-    if (!(d[2] > 0.0f) || visible_along(vs, r, 0) > 0.0f)
-        return;
     /* the blocker's light through the mirror direction's texel, or the mean of the blocked ones about it */
-    long n = (long)vs->resolution;
+    long side = (long)vs->resolution;
     size_t at = texel_of(d, vs->resolution);
-    long i = (long)at % n, j = (long)at / n;
+    long i = (long)at % side, j = (long)at / side;
     float back[3] = {0.0f, 0.0f, 0.0f};
     int count = 0;
     for (int ring = 0; ring <= 1 && !count; ring++)
         for (long b = j - ring; b <= j + ring; b++)
             for (long a = i - ring; a <= i + ring; a++) {
-                if (a < 0 || b < 0 || a >= n || b >= n || texel_open(vs, (size_t)(b * n + a)))
+                if (a < 0 || b < 0 || a >= side || b >= side || texel_open(vs, (size_t)(b * side + a)))
                     continue;
-                size_t k = blocked_before(vs, (size_t)(b * n + a));
+                size_t k = blocked_before(vs, (size_t)(b * side + a));
                 for (int c = 0; c < 3; c++)
                     back[c] += lbar[3 * k + (size_t)c] - hidden[3 * k + (size_t)c];
                 count++;
             }
     for (int c = 0; c < 3; c++)
-        s[c] = count ? albedo[c] * back[c] / (float)count : 0.0f;
+        s[c] = seen * s[c] + (1.0f - seen) * (count ? albedo[c] * back[c] / (float)count : 0.0f);
 }
 
 void wenv_vertex_shadow_init(wenv_vertex_shadow *vs, const wenv_shadow_scene *scene, size_t i, wenv_light_memo *memo)

@@ -219,10 +219,8 @@ static void shade_vertex(const wenv_wavelet *wavelet, const vertex_taps *tp, con
     }
     if (sh && wavelet->m->texel_reflection.specular && wavelet->m->albedo) {
         if (wavelet->m->lobes_narrow) {
-            float r[3];
-            for (int c = 0; c < 3; c++)
-                r[c] = 2.0f * tp->cos_v * tp->n[c] - tp->v[c];
-            wenv_shadow_narrow_specular(&sh->vs, sh->lbar, sh->hidden, r, a, s);
+            wenv_shadow_narrow_specular(&sh->vs, sh->lbar, sh->hidden, tp->n, tp->v, tp->cos_v,
+                                        wavelet->m->lobe_alpha, a, s);
         } else {
             wenv_shadow_specular(&sh->vs, &wavelet->m->texel_reflection, sh->hidden, tp->v, a, s);
         }
@@ -616,11 +614,15 @@ static wenv_status ensure_shadows(wenv_wavelet *wavelet, const wenv_shadow_scene
         wenv_texel_reflection_free(&m->texel_reflection);
         if (wenv_texel_reflection_make(&m->texel_reflection, m->mat, o->resolution, err))
             return err->status;
-        double alpha_max = 0.0;
-        for (size_t k = 0; k < wenv_material_lobe_count(m->mat); k++)
-            alpha_max = fmax(alpha_max, wenv_material_lobe(m->mat, k)->alpha);
-        m->lobes_narrow = wenv_material_mirror_centred(m->mat) && wenv_shadow_lobes_narrow(alpha_max, o->resolution);
     }
+    double alpha_max = 0.0;
+    for (size_t k = 0; k < wenv_material_lobe_count(m->mat); k++)
+        alpha_max = fmax(alpha_max, wenv_material_lobe(m->mat, k)->alpha);
+    /* with point rays, a lobe narrow against the coarsest masks is seen through its own rays at every
+     * side: a bake's texels and its vertices' two passes (shadows.h) then see it alike */
+    size_t side = o->point_rays ? WENV_OCCLUSION_RESOLUTION_MIN : o->resolution;
+    m->lobes_narrow = wenv_material_mirror_centred(m->mat) && wenv_shadow_lobes_narrow(alpha_max, side);
+    m->lobe_alpha = (float)alpha_max;
     if (ensure_hidden_light(wavelet, scene, err) || !with_bounce)
         return err->status;
     size_t own = scene->bounce_self ? m->serial : 0;

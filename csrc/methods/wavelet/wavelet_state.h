@@ -36,6 +36,7 @@ typedef struct {
     float *table;            /* ns x nv x 3 */
     wenv_texel_reflection texel_reflection; /* shading with shadows: made for the masks' resolution */
     int lobes_narrow;        /* ... and whether its lobes are narrow against the masks' texels */
+    float lobe_alpha;        /* the widest lobe's alpha (a narrow lobe's rays, shadows.h) */
     unsigned char *row_ready, *row_need; /* per normal sample, as slice_ready and slice_need */
 } wenv_wavelet_material;
 
