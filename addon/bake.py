@@ -7,8 +7,8 @@ and the lamps, seen from the view.  The texels are shaded by the same core call 
 is a mesh of a million vertices that costs no ray and no table row a mesh of that many vertices
 would not.  With shadows, each texel casts its own rays against the scene (the object's own mesh
 and every other blocker): a mask at the core's Auto side (4 x 4 from 524k texels) with point rays,
-every exact light and narrow lobe's mirror direction cast along its own ray, so a shadow's edge is
-as sharp as the texels; what the rays meet sends the light of its vertices (their diffuse light, or
+every exact light cast along its own ray and a narrow lobe along nine about its mirror direction,
+so a shadow's edge is as sharp as the texels; what the rays meet sends the light of its vertices (their diffuse light, or
 with Glossy Bounce their light towards the texel); what the texels' coarse masks miss of the sky's
 soft occlusion is added back from the vertices (_mask_correction).  The result goes into a Blender
 image (the margin extended about the islands, the texels outside them untouched); undo restores the
@@ -229,7 +229,7 @@ def _mask_correction(plan, around, mesh, sites, stages):
     rays each, where the vertices of a 31k mesh cast 16 x 16: the sky's soft occlusion is then the
     vertices', and what is sharp (a lamp's or a sun's shadow, a highlight its own geometry hides)
     the texels'.  Both of the vertices' shadings cast point rays, as the texels do: an exact light's
-    or a mirror direction's answer is the same ray in both, and cancels."""
+    or a narrow lobe's answer is the same rays in both, and cancels."""
     if not around.items:
         return None
     item = around.items[0]

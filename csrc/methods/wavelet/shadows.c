@@ -235,6 +235,7 @@ static const struct {
     float xi;
     int count;
 } LOBE_RINGS[] = {{0.25f, 3}, {0.75f, 6}};
+#define LOBE_RAYS_MAX 9 /* the rings' rays */
 
 float wenv_shadow_lobe_visible(const wenv_vertex_shadow *vs, const float n[3], const float v[3], float cos_v,
                                float alpha)
@@ -247,8 +248,8 @@ float wenv_shadow_lobe_visible(const wenv_vertex_shadow *vs, const float n[3], c
     /* a tangent frame about n (Duff et al. 2017, branchless) */
     float sign = n[2] >= 0.0f ? 1.0f : -1.0f, a = -1.0f / (sign + n[2]), b = n[0] * n[1] * a;
     float t[3] = {1.0f + sign * n[0] * n[0] * a, sign * b, -sign * n[0]}, u[3] = {b, sign + n[1] * n[1] * a, -n[1]};
-    size_t rings = sizeof LOBE_RINGS / sizeof LOBE_RINGS[0];
-    float seen = 0.0f, total = 0.0f;
+    size_t rings = sizeof LOBE_RINGS / sizeof LOBE_RINGS[0], cast = 0;
+    float seen = 0.0f, total = 0.0f, world[3 * LOBE_RAYS_MAX], ray_weight[LOBE_RAYS_MAX];
     for (size_t g = 0; g < rings; g++) {
         float slope = alpha * sqrtf(LOBE_RINGS[g].xi / (1.0f - LOBE_RINGS[g].xi));
         float weight = 1.0f / ((float)rings * (float)LOBE_RINGS[g].count);
@@ -273,9 +274,21 @@ float wenv_shadow_lobe_visible(const wenv_vertex_shadow *vs, const float n[3], c
             float tan2_i = (1.0f - cos_i * cos_i) / (cos_i * cos_i);
             float w = weight * vh * len * 2.0f / (1.0f + sqrtf(1.0f + alpha * alpha * tan2_i)); /* n.h = 1 / len */
             total += w;
-            seen += w * lobe_direction_open(vs, d);
+            const float *f = vs->frame, *turn = vs->turn;
+            if (!(f[6] * d[0] + f[7] * d[1] + f[8] * d[2] > 0.0f) || cast == LOBE_RAYS_MAX) {
+                seen += w * lobe_direction_open(vs, d); /* below the mask's horizon: open */
+                continue;
+            }
+            for (int c = 0; c < 3; c++) /* the rays are cast in the world */
+                world[3 * cast + (size_t)c] = turn[c] * d[0] + turn[3 + c] * d[1] + turn[6 + c] * d[2];
+            ray_weight[cast++] = w;
         }
     }
+    /* one call for the lobe's rays: Embree takes rays from one origin as a coherent stream */
+    unsigned char hit[LOBE_RAYS_MAX];
+    wenv_occluders_test(vs->occluders, vs->origin, world, cast, INFINITY, hit);
+    for (size_t k = 0; k < cast; k++)
+        seen += hit[k] ? 0.0f : ray_weight[k];
     return total > 0.0f ? seen / total : lobe_direction_open(vs, r);
 }
 
