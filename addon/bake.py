@@ -8,9 +8,9 @@ is a mesh of a million vertices that costs no ray and no table row a mesh of tha
 would not.  With shadows, each texel casts its own rays against the scene (the object's own mesh
 and every other blocker): a mask at the core's Auto side (4 x 4 from 524k texels) with point rays,
 every exact light cast along its own ray and a narrow lobe along nine about its mirror direction,
-so a shadow's edge is as sharp as the texels; what the rays meet sends the light of its vertices (their diffuse light, or
-with Glossy Bounce their light towards the texel); what the texels' coarse masks miss of the sky's
-soft occlusion is added back from the vertices (_mask_correction).  The result goes into a Blender
+so a shadow's edge is as sharp as the texels; what the rays meet sends the light of its vertices
+(their diffuse light, or with Glossy Bounce their light towards the texel); what the texels' coarse
+masks miss of the sky's soft occlusion is added back from the vertices (_mask_correction).  The result goes into a Blender
 image (the margin extended about the islands, the texels outside them untouched); undo restores the
 image as it was (its pixels are no part of Blender's undo, so the add-on keeps each bake's and puts
 them back, restore_after_undo)."""
