@@ -351,8 +351,8 @@ static PyMethodDef occluders_methods[] = {
      "along every point-like direction it reads (an exact light's, a narrow lobe's mirror direction) at every "
      "vertex, rather than trusting the mask where its texels about the direction agree (what coarse masks miss "
      "between their rays).  progress(fraction) may return True to cancel.\n\nAfter a change (an object moved, "
-     "deformed, edited or removed), previous (the occlusion of the same positions and normals before) and changed=(first, count) (the triangles of previous's occluders that "
-     "changed, every other one here in the same order, the new ones in their place) cast only the vertices whose "
+     "deformed, edited or removed), previous (the occlusion of the same positions and normals before) and "
+     "changed=(first, count) (the triangles of previous's occluders that changed, every other one here in the same order, the new ones in their place) cast only the vertices whose "
      "rays met the changed triangles or meet them now; the result is what a new cast gives, and cast_vertices "
      "says how many were cast."},
     {NULL, NULL, 0, NULL},

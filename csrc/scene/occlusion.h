@@ -3,9 +3,9 @@
  * vertex through the texel's centre reaches the sky.  A vertex that sees its whole hemisphere holds
  * no mask at all, so a scene that blocks nothing (a convex mesh alone) costs one index a vertex --
  * unless it is made with point rays: then every vertex holds a mask, and the directions shading
- * reads as points (the exact lights, a narrow lobe's rays about its mirror direction) are always cast as rays,
- * never taken from the mask, which at a coarse side misses what stands between its rays (a bake's
- * texels, 4 x 4 rays each).
+ * reads as points (the exact lights, a narrow lobe's rays about its mirror direction) are always
+ * cast as rays, never taken from the mask, which at a coarse side misses what stands between its
+ * rays (a bake's texels, 4 x 4 rays each).
  * Depends on the mesh state only: a new World, view or material needs none made again. */
 #ifndef WENV_OCCLUSION_H
 #define WENV_OCCLUSION_H

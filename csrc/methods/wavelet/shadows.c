@@ -231,25 +231,24 @@ static float lobe_direction_open(const wenv_vertex_shadow *vs, const float l[3])
 
 /* The rings of a narrow lobe's rays: half vectors at the GGX slope quantiles xi (tan theta_h =
  * alpha sqrt(xi / (1 - xi))), each ring standing for half the lobe's microfacets. */
+enum { LOBE_INNER_RAYS = 3, LOBE_OUTER_RAYS = 6, LOBE_RAYS = LOBE_INNER_RAYS + LOBE_OUTER_RAYS };
 static const struct {
     float xi;
     int count;
-} LOBE_RINGS[] = {{0.25f, 3}, {0.75f, 6}};
-#define LOBE_RAYS_MAX 9 /* the rings' rays */
+} LOBE_RINGS[] = {{0.25f, LOBE_INNER_RAYS}, {0.75f, LOBE_OUTER_RAYS}};
 
-float wenv_shadow_lobe_visible(const wenv_vertex_shadow *vs, const float n[3], const float v[3], float cos_v,
-                               float alpha)
+/* The share of a narrow lobe (alpha, about the mirror direction r of view v at normal n) that reaches
+ * the sky, in [0, 1], as wenv_shadow_narrow_specular reads it; below the mask's horizon is open. */
+static float lobe_visible(const wenv_vertex_shadow *vs, const float n[3], const float v[3], const float r[3],
+                          float alpha)
 {
-    float r[3];
-    for (int c = 0; c < 3; c++)
-        r[c] = 2.0f * cos_v * n[c] - v[c];
     if (!vs->point_rays || alpha < WENV_LOBE_RAYS_ALPHA_MIN)
         return lobe_direction_open(vs, r);
     /* a tangent frame about n (Duff et al. 2017, branchless) */
     float sign = n[2] >= 0.0f ? 1.0f : -1.0f, a = -1.0f / (sign + n[2]), b = n[0] * n[1] * a;
     float t[3] = {1.0f + sign * n[0] * n[0] * a, sign * b, -sign * n[0]}, u[3] = {b, sign + n[1] * n[1] * a, -n[1]};
     size_t rings = sizeof LOBE_RINGS / sizeof LOBE_RINGS[0], cast = 0;
-    float seen = 0.0f, total = 0.0f, world[3 * LOBE_RAYS_MAX], ray_weight[LOBE_RAYS_MAX];
+    float seen = 0.0f, total = 0.0f, world[3 * LOBE_RAYS], ray_weight[LOBE_RAYS];
     for (size_t g = 0; g < rings; g++) {
         float slope = alpha * sqrtf(LOBE_RINGS[g].xi / (1.0f - LOBE_RINGS[g].xi));
         float weight = 1.0f / ((float)rings * (float)LOBE_RINGS[g].count);
@@ -275,8 +274,8 @@ float wenv_shadow_lobe_visible(const wenv_vertex_shadow *vs, const float n[3], c
             float w = weight * vh * len * 2.0f / (1.0f + sqrtf(1.0f + alpha * alpha * tan2_i)); /* n.h = 1 / len */
             total += w;
             const float *f = vs->frame, *turn = vs->turn;
-            if (!(f[6] * d[0] + f[7] * d[1] + f[8] * d[2] > 0.0f) || cast == LOBE_RAYS_MAX) {
-                seen += w * lobe_direction_open(vs, d); /* below the mask's horizon: open */
+            if (!(f[6] * d[0] + f[7] * d[1] + f[8] * d[2] > 0.0f)) {
+                seen += w; /* below the mask's horizon: open */
                 continue;
             }
             for (int c = 0; c < 3; c++) /* the rays are cast in the world */
@@ -285,7 +284,7 @@ float wenv_shadow_lobe_visible(const wenv_vertex_shadow *vs, const float n[3], c
         }
     }
     /* one call for the lobe's rays: Embree takes rays from one origin as a coherent stream */
-    unsigned char hit[LOBE_RAYS_MAX];
+    unsigned char hit[LOBE_RAYS];
     wenv_occluders_test(vs->occluders, vs->origin, world, cast, INFINITY, hit);
     for (size_t k = 0; k < cast; k++)
         seen += hit[k] ? 0.0f : ray_weight[k];
@@ -296,13 +295,13 @@ void wenv_shadow_narrow_specular(const wenv_vertex_shadow *vs, const float *lbar
                                  const float n[3], const float v[3], float cos_v, float alpha, const float albedo[3],
                                  float s[3])
 {
-    float seen = wenv_shadow_lobe_visible(vs, n, v, cos_v, alpha);
-    if (seen >= 1.0f)
-        return;
-    const float *f = vs->frame;
     float r[3];
     for (int c = 0; c < 3; c++)
         r[c] = 2.0f * cos_v * n[c] - v[c];
+    float seen = lobe_visible(vs, n, v, r, alpha);
+    if (seen >= 1.0f)
+        return;
+    const float *f = vs->frame;
     float d[3] = {f[0] * r[0] + f[1] * r[1] + f[2] * r[2], f[3] * r[0] + f[4] * r[1] + f[5] * r[2],
                   f[6] * r[0] + f[7] * r[1] + f[8] * r[2]};
     /* the blocker's light through the mirror direction's texel, or the mean of the blocked ones about it */

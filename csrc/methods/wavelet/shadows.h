@@ -78,27 +78,21 @@ void wenv_shadow_specular(const wenv_vertex_shadow *vs, const wenv_texel_reflect
                           const float v[3], const float albedo[3], float s[3]);
 
 /* Whether lobes no wider than alpha_max (their alpha) are narrow against the masks' texels at
- * `resolution`: then their visibility is their mirror direction's (wenv_shadow_narrow_specular). */
+ * `resolution`: then they are seen through their own rays (wenv_shadow_narrow_specular). */
 int wenv_shadow_lobes_narrow(double alpha_max, size_t resolution);
 
 /* Lobes narrower than this (their alpha) are seen through their mirror direction alone, even with
  * point rays: their reflected directions stay within about two degrees of it. */
 #define WENV_LOBE_RAYS_ALPHA_MIN 0.02f
 
-/* How much of a narrow lobe (alpha, about the mirror direction of unit view v at unit normal n,
- * cos_v = n.v, all in the method's frame) reaches the sky, in [0, 1].  Without point rays, or below
- * WENV_LOBE_RAYS_ALPHA_MIN, its mirror direction's answer (the mask where its texels about it agree,
- * else a ray).  With point rays, a ray through each of nine half vectors at the lobe's slope
- * quantiles: a 4 x 4 mask's texel is wider than a metal's lobe, and a single ray would cut its
- * blurred mirror image of a blocker as sharply as a mirror's.  Directions below the mask's horizon
- * count as open. */
-float wenv_shadow_lobe_visible(const wenv_vertex_shadow *vs, const float n[3], const float v[3], float cos_v,
-                               float alpha);
-
-/* For lobes narrow against a texel: what the lobes reflect, s, is kept for the share of the lobe
- * that reaches the sky (wenv_shadow_lobe_visible) and is the albedo times the blocker's light for the
- * rest (lbar and hidden as the vertex's blocked texels hold them: the blocker's light is their
- * difference, read about the mirror direction). */
+/* For lobes narrow against a texel (the widest's alpha; unit view v at unit normal n, cos_v = n.v,
+ * in the method's frame): what the lobes reflect, s, is kept for the share of the lobe that reaches
+ * the sky -- without point rays, or below WENV_LOBE_RAYS_ALPHA_MIN, its mirror direction's answer
+ * (the mask where its texels about it agree, else a ray); with point rays, nine rays through half
+ * vectors at the lobe's slope quantiles, since a 4 x 4 mask's texel is wider than a metal's lobe and
+ * one ray would cut its blurred mirror image of a blocker as sharply as a mirror's -- and is the
+ * albedo times the blocker's light for the rest (lbar and hidden as the vertex's blocked texels
+ * hold them: the blocker's light is their difference, read about the mirror direction). */
 void wenv_shadow_narrow_specular(const wenv_vertex_shadow *vs, const float *lbar, const float *hidden,
                                  const float n[3], const float v[3], float cos_v, float alpha, const float albedo[3],
                                  float s[3]);
