@@ -198,16 +198,17 @@ void wenv_occluders_test_until(const wenv_occluders *occ, const float origin[3],
     test_from(occ, origin, dirs, n, 0.0f, fars, blocked);
 }
 
-void wenv_occluders_hit(const wenv_occluders *occ, const float origin[3], const float *dirs, size_t n, uint32_t *tri,
-                        float *uv)
+/* The nearest hits of n rays, ray k from origins + k * origin_stride (0: all from one origin). */
+static void hit_from(const wenv_occluders *occ, const float *origins, size_t origin_stride, const float *dirs,
+                     size_t n, uint32_t *tri, float *uv)
 {
     struct RTCRayHit rays[STREAM];
     struct RTCIntersectContext context;
     for (size_t start = 0; start < n; start += STREAM) {
         size_t m = n - start < STREAM ? n - start : STREAM;
         for (size_t k = 0; k < m; k++) {
-            const float *d = dirs + 3 * (start + k);
-            rays[k].ray = (struct RTCRay){.org_x = origin[0], .org_y = origin[1], .org_z = origin[2], .tnear = 0.0f,
+            const float *d = dirs + 3 * (start + k), *o = origins + origin_stride * (start + k);
+            rays[k].ray = (struct RTCRay){.org_x = o[0], .org_y = o[1], .org_z = o[2], .tnear = 0.0f,
                                           .dir_x = d[0], .dir_y = d[1], .dir_z = d[2], .time = 0.0f, .tfar = INFINITY,
                                           .mask = UINT32_MAX, .id = (unsigned)k, .flags = 0};
             rays[k].hit.geomID = RTC_INVALID_GEOMETRY_ID;
@@ -223,4 +224,16 @@ void wenv_occluders_hit(const wenv_occluders *occ, const float origin[3], const 
             uv[2 * (start + k) + 1] = hit ? rays[k].hit.v : 0.0f;
         }
     }
+}
+
+void wenv_occluders_hit(const wenv_occluders *occ, const float origin[3], const float *dirs, size_t n, uint32_t *tri,
+                        float *uv)
+{
+    hit_from(occ, origin, 0, dirs, n, tri, uv);
+}
+
+void wenv_occluders_hit_rays(const wenv_occluders *occ, const float *origins, const float *dirs, size_t n,
+                             uint32_t *tri, float *uv)
+{
+    hit_from(occ, origins, 3, dirs, n, tri, uv);
 }

@@ -53,6 +53,10 @@ void wenv_occluders_test_until(const wenv_occluders *occ, const float origin[3],
  * the hit's barycentric weights of the triangle's second and third vertices.  Thread-safe. */
 void wenv_occluders_hit(const wenv_occluders *occ, const float origin[3], const float *dirs, size_t n, uint32_t *tri,
                         float *uv);
+/* The same for n rays of their own origins (xyz floats each), on the calling thread: rays that run
+ * side by side (neighbouring origins, the same direction) next to each other are traced together. */
+void wenv_occluders_hit_rays(const wenv_occluders *occ, const float *origins, const float *dirs, size_t n,
+                             uint32_t *tri, float *uv);
 
 /* The same for n rays of their own origins (xyz floats each), on every thread. */
 void wenv_occluders_test_rays(const wenv_occluders *occ, const float *origins, const float *dirs, size_t n, float tfar,

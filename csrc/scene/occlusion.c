@@ -73,6 +73,8 @@ static int finite3(const float *v) { return isfinite(v[0]) && isfinite(v[1]) && 
 
 /* Vertices cast per block: their hits are gathered in a block-sized buffer, then compacted. */
 #define BLOCK_VERTICES 2048
+/* Rays traced at once: the neighbouring vertices' (as many as fill it), direction by direction. */
+#define GROUP_RAYS 1024
 
 /* Appends `count` hits to the growing array; -1 out of memory, -2 over `budget` hits. */
 static int append_hits(wenv_occlusion *o, size_t *cap, const wenv_occlusion_hit *h, size_t count, size_t budget)
@@ -196,6 +198,7 @@ static wenv_status cast(wenv_occlusion *out, const wenv_occluders *occ, const fl
         return wenv_error_set(err, WENV_ERR_VALUE, "too many vertices (%zu)", n);
     size_t texels = resolution * resolution, words = (texels + 63) / 64;
     size_t block = n < BLOCK_VERTICES ? (n ? n : 1) : BLOCK_VERTICES;
+    size_t group = texels < GROUP_RAYS ? GROUP_RAYS / texels : 1;
     /* what every vertex holds whatever it sees, and the hits (those of the blocked texels) the rest
      * of the budget leaves room for */
     double fixed = (double)n * (sizeof(int32_t) + 6 * sizeof(float) + sizeof(size_t) + words * 8) +
@@ -243,54 +246,80 @@ static wenv_status cast(wenv_occlusion *out, const wenv_occluders *occ, const fl
         size_t count = n - first < block ? n - first : block;
 #pragma omp parallel
         {
-            float *dirs = malloc(texels * 3 * sizeof *dirs), *uv = malloc(texels * 2 * sizeof *uv);
-            uint32_t *tri = malloc(texels * sizeof *tri);
-            if (!dirs || !uv || !tri)
+            /* a vertex's directions, and its group's rays: neighbouring vertices' rays in one
+             * direction run side by side, traced together */
+            float *dirs = malloc(texels * 3 * sizeof *dirs), *ray_dirs = malloc(group * texels * 3 * sizeof *ray_dirs);
+            float *ray_origins = malloc(group * texels * 3 * sizeof *ray_origins);
+            float *uv = malloc(group * texels * 2 * sizeof *uv);
+            uint32_t *tri = malloc(group * texels * sizeof *tri);
+            unsigned char *kept = malloc(group);
+            if (!dirs || !ray_dirs || !ray_origins || !uv || !tri || !kept)
                 atomic_store(&failed, 1);
-#pragma omp for schedule(dynamic, 64)
-            for (size_t b = 0; b < count; b++) {
+#pragma omp for schedule(dynamic, 4)
+            for (size_t g = 0; g < (count + group - 1) / group; g++) {
                 if (atomic_load(&failed) || atomic_load(&cancelled))
                     continue;
-                size_t i = first + b;
-                const float *p = positions + 3 * i, *m = normals + 3 * i;
-                float len = sqrtf(m[0] * m[0] + m[1] * m[1] + m[2] * m[2]);
-                double nn[3] = {m[0] / len, m[1] / len, m[2] / len}, f[9];
-                for (int k = 0; k < 3; k++)
-                    o.normals[3 * i + (size_t)k] = (float)nn[k];
-                wenv_frame(nn, f);
-                for (size_t t = 0; t < texels; t++) { /* local (x, y, z) -> world: rows of f are the axes */
-                    const float *l = local + 3 * t;
+                size_t b0 = g * group, m = (b0 + group < count ? b0 + group : count) - b0, recasting = 0;
+                for (size_t j = 0; j < m; j++) {
+                    size_t b = b0 + j, i = first + b;
+                    const float *p = positions + 3 * i, *nm = normals + 3 * i;
+                    float len = sqrtf(nm[0] * nm[0] + nm[1] * nm[1] + nm[2] * nm[2]);
+                    double nn[3] = {nm[0] / len, nm[1] / len, nm[2] / len}, f[9];
                     for (int k = 0; k < 3; k++)
-                        dirs[3 * t + (size_t)k] = (float)(f[k] * l[0] + f[3 + k] * l[1] + f[6 + k] * l[2]);
-                }
-                float origin[3] = {p[0] + lift * (float)nn[0], p[1] + lift * (float)nn[1], p[2] + lift * (float)nn[2]};
-                uint64_t *mask = block_masks + b * words;
-                wenv_occlusion_hit *h = block_hits + b * texels;
-                if (refresh && !sees_a_change(refresh, i, origin, nn, dirs, texels, lift)) {
-                    block_count[b] = keep_vertex(refresh, i, mask, h);
-                    wenv_progress_item(progress, &done, n, &cancelled);
-                    continue;
-                }
-                atomic_fetch_add(&recast, 1);
-                wenv_occluders_hit(occ, origin, dirs, texels, tri, uv);
-                memset(mask, 0, words * sizeof *mask);
-                unsigned short nh = 0;
-                for (size_t t = 0; t < texels; t++) {
-                    if (tri[t] == UINT32_MAX) {
-                        mask[t / 64] |= (uint64_t)1 << (t % 64);
-                        continue;
+                        o.normals[3 * i + (size_t)k] = (float)nn[k];
+                    wenv_frame(nn, f);
+                    float origin[3] = {p[0] + lift * (float)nn[0], p[1] + lift * (float)nn[1], p[2] + lift * (float)nn[2]};
+                    for (size_t t = 0; t < texels; t++) { /* local (x, y, z) -> world: rows of f are the axes */
+                        const float *l = local + 3 * t;
+                        for (int k = 0; k < 3; k++) {
+                            dirs[3 * t + (size_t)k] = (float)(f[k] * l[0] + f[3 + k] * l[1] + f[6 + k] * l[2]);
+                            ray_dirs[3 * (t * m + j) + (size_t)k] = dirs[3 * t + (size_t)k];
+                            ray_origins[3 * (t * m + j) + (size_t)k] = origin[k];
+                        }
                     }
-                    float u = uv[2 * t] < 0.0f ? 0.0f : (uv[2 * t] > 1.0f ? 1.0f : uv[2 * t]);
-                    float v = uv[2 * t + 1] < 0.0f ? 0.0f : (uv[2 * t + 1] > 1.0f - u ? 1.0f - u : uv[2 * t + 1]);
-                    h[nh++] = (wenv_occlusion_hit){.triangle = tri[t], .u = (uint16_t)lrintf(u * 65535.0f),
-                                                   .v = (uint16_t)lrintf(v * 65535.0f)};
+                    kept[j] = refresh && !sees_a_change(refresh, i, origin, nn, dirs, texels, lift);
+                    if (kept[j]) {
+                        block_count[b] = keep_vertex(refresh, i, block_masks + b * words, block_hits + b * texels);
+                        wenv_progress_item(progress, &done, n, &cancelled);
+                    } else
+                        recasting++;
                 }
-                block_count[b] = nh;
-                wenv_progress_item(progress, &done, n, &cancelled);
+                if (!recasting)
+                    continue;
+                /* A ray's answer may depend on those it is traced with (which of two triangles it
+                 * meets on their common edge), so a group is always traced whole, as a first cast
+                 * traces it, and a refresh keeps what it need not cast again. */
+                wenv_occluders_hit_rays(occ, ray_origins, ray_dirs, m * texels, tri, uv);
+                atomic_fetch_add(&recast, recasting);
+                for (size_t j = 0; j < m; j++) {
+                    if (kept[j])
+                        continue;
+                    size_t b = b0 + j;
+                    uint64_t *mask = block_masks + b * words;
+                    wenv_occlusion_hit *h = block_hits + b * texels;
+                    memset(mask, 0, words * sizeof *mask);
+                    unsigned short nh = 0;
+                    for (size_t t = 0; t < texels; t++) {
+                        size_t r = t * m + j;
+                        if (tri[r] == UINT32_MAX) {
+                            mask[t / 64] |= (uint64_t)1 << (t % 64);
+                            continue;
+                        }
+                        float u = uv[2 * r] < 0.0f ? 0.0f : (uv[2 * r] > 1.0f ? 1.0f : uv[2 * r]);
+                        float v = uv[2 * r + 1] < 0.0f ? 0.0f : (uv[2 * r + 1] > 1.0f - u ? 1.0f - u : uv[2 * r + 1]);
+                        h[nh++] = (wenv_occlusion_hit){.triangle = tri[r], .u = (uint16_t)lrintf(u * 65535.0f),
+                                                       .v = (uint16_t)lrintf(v * 65535.0f)};
+                    }
+                    block_count[b] = nh;
+                    wenv_progress_item(progress, &done, n, &cancelled);
+                }
             }
             free(dirs);
+            free(ray_dirs);
+            free(ray_origins);
             free(uv);
             free(tri);
+            free(kept);
         }
         /* kept in vertex order: a vertex with no blocked texel keeps no mask.  A cancel leaves the
          * block's later counts unwritten, so nothing of a cancelled block is kept. */
