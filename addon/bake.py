@@ -136,7 +136,8 @@ def texel_data(obj, depsgraph, mesh, sites):
     nrm = np.empty(nl * 3, np.float32)
     mesh.corner_normals.foreach_get("vector", nrm)
     with np.errstate(invalid="ignore", over="ignore"):
-        points = sites.at(textures.world_points(mesh, ob_eval.matrix_world)[meshes.corner_vertices(mesh)])
+        corner_points = textures.world_points(mesh, ob_eval.matrix_world)[meshes.corner_vertices(mesh)]
+        points = sites.at(corner_points)
         normals = sites.at(nrm.reshape(nl, 3)) @ np.array(ob_eval.matrix_world.to_3x3().inverted_safe(), np.float32)
         length = np.linalg.norm(normals, axis=1)
     zero = ~(length > 1e-20)
@@ -153,7 +154,39 @@ def texel_data(obj, depsgraph, mesh, sites):
     data = meshes.MeshData("TEXEL", np.ascontiguousarray(points, np.float32), np.ascontiguousarray(normals, np.float32),
                            slot_of_triangle[sites.triangle], notes, unplaced)
     data.sites = sites
+    with np.errstate(invalid="ignore", over="ignore"):
+        data.mask_blocks = mask_blocks(sites, points, normals, texel_sizes(sites, corner_points))
     return data
+
+
+def texel_sizes(sites, corner_points):
+    """Each texel's side on the mesh (world units): the square root of its share of its triangle's
+    area (corner positions per face corner, (nl, 3))."""
+    p0, p1, p2 = (corner_points[sites.tri_corners[:, k]].astype(np.float64) for k in range(3))
+    area = 0.5 * np.linalg.norm(np.cross(p1 - p0, p2 - p0), axis=1)
+    return np.sqrt(area / np.maximum(sites.area, 1e-30) / (sites.width * sites.height))[sites.triangle]
+
+
+# Neighbouring texels that share a mask: within this many texels' sides of their block's first, their
+# normals within this angle of its.  A mask's texel is 22 degrees across at the bake's 4 x 4.
+SHARED_MASK_REACH = 2.5
+SHARED_MASK_COS = np.cos(np.radians(10.0))
+
+
+def mask_blocks(sites, points, normals, sizes):
+    """The texels' blocks of 2 x 2 of the image that share one occlusion mask (meshes.MeshData's
+    mask_blocks): each texel joins its block's first (in texel order) where it lies next to it on
+    the mesh, facing about the same way (not across a seam to another island, or a crease); else -1.
+    Each keeps its own point rays, so a shadow's edge stays as sharp as the texels; what is shared is
+    the sky's soft occlusion and the blockers' light, at half the image's resolution."""
+    x, y = sites.texels % sites.width, sites.texels // sites.width
+    block = (y // 2) * ((sites.width + 1) // 2) + x // 2
+    ids, first = np.unique(block, return_index=True)
+    owner = first[np.searchsorted(ids, block)]
+    reach = SHARED_MASK_REACH * np.maximum(sizes, sizes[owner])
+    near = np.linalg.norm(points - points[owner], axis=1) <= reach
+    facing = np.einsum("ij,ij->i", normals, normals[owner]) >= SHARED_MASK_COS
+    return np.where(near & facing, block, -1).astype(np.int64)
 
 
 class _Stages:

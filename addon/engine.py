@@ -310,13 +310,14 @@ class ShadowCache:
         return wenv.Occluders.auto_resolution(count)
 
     @staticmethod
-    def cast(occluders, positions, normals, resolution, point_rays=False, progress=None):
+    def cast(occluders, positions, normals, resolution, point_rays=False, progress=None, mask_blocks=None):
         """An occlusion cast at `resolution` for one pass and kept nowhere (a bake's texels: millions
-        of them, each bake of other texels)."""
+        of them, each bake of other texels); the elements of one of `mask_blocks` (meshes.MeshData's)
+        share the mask of its first."""
         if progress is not None:
             progress(0.0)
         return occluders.occlusion(positions, normals, resolution=resolution, progress=progress,
-                                   point_rays=point_rays)
+                                   point_rays=point_rays, masks_from=masks_from(mask_blocks))
 
     def drop_light(self):
         """Forgets every light made (as a new World would make it anew), keeping the rays."""
@@ -332,6 +333,18 @@ class ShadowCache:
         if kept is None or kept[0] != key:
             kept = self._lights[slot] = (key, make())
         return kept[1]
+
+
+def masks_from(blocks):
+    """The element whose mask each reads (wenv's masks_from): the first of its block (blocks >= 0), or
+    itself (-1); None for None."""
+    if blocks is None:
+        return None
+    out = np.arange(len(blocks))
+    rows = np.flatnonzero(blocks >= 0)
+    ids, first = np.unique(blocks[rows], return_index=True)
+    out[rows] = rows[first][np.searchsorted(ids, blocks[rows])]
+    return out
 
 
 def _changed_triangles(keys_before, keys, counts_before, counts):

@@ -10,7 +10,7 @@ class MeshData:
     position is not finite, which are left black."""
 
     __slots__ = ("domain", "positions", "normals", "slots", "count", "notes", "unplaced", "triangles", "inputs",
-                 "textured", "shading_normals", "bump_map_correction", "term_weights", "term_inputs", "sites")
+                 "textured", "shading_normals", "bump_map_correction", "term_weights", "term_inputs", "sites", "mask_blocks")
 
     def __init__(self, domain, positions, normals, slots, notes=(), unplaced=None, triangles=None, inputs=None):
         self.domain = domain
@@ -38,6 +38,9 @@ class MeshData:
         # for a bake's texels (domain "TEXEL"), where each lies on the mesh (bake.TexelSites); None for
         # vertices and corners
         self.sites = None
+        # (n,) int64: elements of one block (>= 0) share one occlusion mask, -1 its own (a bake's 2 x 2
+        # texels: bake.mask_blocks); None: each its own
+        self.mask_blocks = None
 
 
 def _read(collection, attr, count, width, dtype=np.float32):

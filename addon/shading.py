@@ -89,6 +89,8 @@ class ShadingPlan:
                     if data.shading_normals is not None:
                         part.shading_normals = np.ascontiguousarray(data.shading_normals[sel])
                         part.bump_map_correction = data.bump_map_correction
+                    if data.mask_blocks is not None:
+                        part.mask_blocks = data.mask_blocks[sel]
                 parts.append((s, sel, part))
             yield name, data, keys, parts
 
@@ -198,7 +200,7 @@ class ShadingPlan:
                 receiver = self.receive_only and k < len(work)
                 if receiver and self.resolution is not None:
                     return engine.shadows.cast(occluders, part.positions, part.normals, self.resolution,
-                                               self.point_rays, progress)
+                                               self.point_rays, progress, part.mask_blocks)
                 kept = engine.shadows.occlusion(occluders, part.positions, part.normals, progress)
                 return kept.with_point_rays() if receiver and self.point_rays else kept
             occlusions = [occlusion_of(k, part) for k, (_, _, _, _, part, _) in enumerate(everything)]

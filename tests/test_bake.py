@@ -12,7 +12,7 @@ import wenv
 
 import bpy  # noqa: E402  (installed by scripts/setup.sh; missing, the tests fail rather than skip)
 
-from addon import bake, engine, materials, views  # noqa: E402
+from addon import bake, engine, materials, meshes, textures, views  # noqa: E402
 
 from conftest import hdri_path  # noqa: E402
 from test_addon import (as_the_interface_runs, animate_camera, env_world, image_sequence,  # noqa: E402,F401
@@ -356,10 +356,11 @@ def test_each_texel_casts_its_own_shadow_rays(scene, bounce):
     """With shadows on, every texel of a plane under a ball is the core's shading at its centre with
     its own occlusion against the plane and the ball (point rays), direct light alone or with what
     the rays meet sending its vertices' diffuse light (each mesh's own, with its own shadows), plus
-    what its coarser masks miss: 65,536 texels cast 11 x 11 rays (the finest within 2^23), the
-    plane's 16 vertices 16 x 16, and the vertices' shading with 16 x 16 masks less that with 11 x 11
-    ones (point rays both) is added, interpolated over the triangle.  The shadow is the texels', not
-    the plane's few vertices'."""
+    what its coarser masks miss: 65,536 texels cast 11 x 11 rays (the finest within 2^23), each
+    2 x 2 block of the flat plane's texels the mask of its first, the plane's 16 vertices 16 x 16,
+    and the vertices' shading with 16 x 16 masks less that with 11 x 11 ones (point rays both) is
+    added, interpolated over the triangle.  The shadow is the texels', not the plane's few
+    vertices'."""
     env_world(scene, "sunset")
     bpy.data.objects.remove(bpy.data.objects["Cube"])
     bpy.ops.mesh.primitive_uv_sphere_add(segments=16, ring_count=8, radius=0.6, location=(0.3, 0.0, 0.8))
@@ -384,8 +385,12 @@ def test_each_texel_casts_its_own_shadow_rays(scene, bounce):
         ball_shader = draft_shader(principled_of(ball.active_material))
         light = np.vstack([plane_shader.diffuse_light(pn, occlusion=occluders.occlusion(pp, pn, resolution=16)),
                            ball_shader.diffuse_light(bn, occlusion=occluders.occlusion(bp, bn, resolution=16))])
-    want = plane_shader.shade_mesh(points, normals, eye, bounce=light,
-                                   occlusion=occluders.occlusion(points, normals, resolution=11, point_rays=True))
+    # the plane is one flat island filling the image: every 2 x 2 block shares its first texel's mask
+    x, y = texels % size, texels // size
+    first = np.searchsorted(texels, (y - y % 2) * size + x - x % 2)
+    shared = occluders.occlusion(points, normals, resolution=11, point_rays=True, masks_from=first)
+    assert shared.blocked_vertices == len(texels) // 4
+    want = plane_shader.shade_mesh(points, normals, eye, bounce=light, occlusion=shared)
     at_vertices = [plane_shader.shade_mesh(pp, pn, eye, bounce=light,
                                            occlusion=occluders.occlusion(pp, pn, resolution=r, point_rays=True))
                    for r in (16, 11)]
@@ -397,6 +402,31 @@ def test_each_texel_casts_its_own_shadow_rays(scene, bounce):
     open_sky = plane_shader.shade_mesh(points, normals, eye)
     under = np.linalg.norm(points[:, :2] - (0.3, 0.0), axis=1) < 0.3
     assert under.sum() >= 9 and (got[texels][under].sum(axis=1) < 0.85 * open_sky[under].sum(axis=1)).all()
+
+
+def test_texels_share_masks_within_a_face_not_across_seams_or_creases(scene):
+    """A cube's default UV map lays its six faces out as islands that touch in the image: a 2 x 2
+    block of texels shares one mask only where its texels lie next to each other on one face, never
+    across a seam to another island or round one of the cube's edges; on the faces, nearly all do."""
+    cube = bpy.data.objects["Cube"]
+    mesh, _ = meshes.shaded_mesh(cube, bpy.context.evaluated_depsgraph_get())
+    layer = textures.uv_layer(mesh, None)
+    size = 125  # odd: the islands' edges fall inside blocks
+    sites, _ = bake.texel_sites(textures.corner_uvs(mesh, layer), textures.triangle_corners(mesh), size, size, 1024)
+    data = bake.texel_data(cube, bpy.context.evaluated_depsgraph_get(), mesh, sites)
+    from_ = engine.masks_from(data.mask_blocks)
+    sharer = from_ != np.arange(data.count)
+    assert sharer.mean() > 0.7  # three of each four texels, but where blocks straddle an island's edge
+    face = np.argmax(np.abs(data.normals), axis=1) * 2 + (data.normals.max(axis=1) > 0.5)  # the cube's six faces
+    np.testing.assert_array_equal(face[sharer], face[from_[sharer]])
+    step = 2.0 / np.sqrt(np.bincount(face, minlength=6)[face])  # a texel's side on the cube's 2 x 2 faces
+    assert (np.linalg.norm(data.positions - data.positions[from_], axis=1) <= 3.0 * step).all()
+    # across a seam: the texels of a block whose first lies on another face read their own masks
+    x, y = sites.texels % size, sites.texels // size
+    block = (y // 2) * ((size + 1) // 2) + x // 2
+    ids, first = np.unique(block, return_index=True)
+    mixed = face != face[first[np.searchsorted(ids, block)]]
+    assert mixed.sum() > 0 and not sharer[mixed].any()
 
 
 def test_bake_is_one_undo_step_that_undo_takes_back(scene):

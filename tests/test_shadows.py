@@ -159,6 +159,52 @@ def test_point_rays_catch_what_coarse_masks_miss():
     assert occluders.occlusion(points, up, previous=pointed, changed=(0, 0)).point_rays
 
 
+def test_shared_masks_keep_each_point_s_own_rays():
+    """masks_from: points along a pole's shadow each read the mask of a point beside the shadow (a
+    bake's neighbouring texels share one), which alone is cast.  Each point still casts its own
+    lights' rays from where it is: those in the shadow are dark and those beside it lit, as the
+    reference has them, and the soft part read from the mask is the owner's."""
+    pole = box((-0.1, -0.1, 0.0), (0.1, 0.1, 3.0))
+    occluders = wenv.Occluders(*merged(square(6.0, 0.0), pole))
+    height = 64
+    i = int(((-30.0 / 360.0) + 0.5) % 1.0 * 2 * height)
+    j = int((0.5 - 35.0 / 180.0) * height)
+    az = np.radians((0.5 - (i + 1) / (2 * height)) * 360.0)
+    away, side = -np.array([np.cos(az), np.sin(az)]), np.array([np.sin(az), -np.cos(az)])
+    d = np.linspace(0.5, 3.5, 16)
+    beside = np.column_stack([d * away[0] + 0.35 * side[0], d * away[1] + 0.35 * side[1], np.zeros_like(d)])
+    line = np.column_stack([d * away[0], d * away[1], np.zeros_like(d)])
+    points = np.vstack([beside, line]).astype(np.float32)
+    up = np.tile(np.float32([0, 0, 1]), (len(points), 1))
+    views = np.tile(np.float32([0.0, -0.6, 0.8]), (len(points), 1))
+    env, mat = sky((30.0, 35.0)), wenv.Lambert(0.8)
+    shader = wenv.Shader(env, mat, quality="default")
+    owners = np.arange(len(d))
+    masks_from = np.concatenate([owners, owners])  # each shadow point reads the mask of the one beside it
+    shared = occluders.occlusion(points, up, resolution=4, point_rays=True, masks_from=masks_from)
+    own = occluders.occlusion(points, up, resolution=4, point_rays=True)
+    assert shared.blocked_vertices == shared.cast_vertices == len(d)
+    np.testing.assert_array_equal(shared.visible[len(d):], own.visible[:len(d)])
+    np.testing.assert_array_equal(shared.visible[:len(d)], own.visible[:len(d)])
+    assert (shared.hits["vertex"] < len(d)).all()
+    truth = wenv.reference(env, mat, up, views, positions=points, occluders=occluders)
+    got = shader.shade(up, views, occlusion=shared, bounce=None)
+    assert np.all(truth[len(d):].sum(1) < 0.5 * truth[:len(d)].sum(1))  # the sun is most of the light
+    np.testing.assert_allclose(got, truth, rtol=0.05)
+    for bad, match in ((np.concatenate([owners + len(d), owners]), "reads its own"),
+                       (np.full(len(points), len(points)), "vertex index"), (owners, "one vertex index per vertex")):
+        with pytest.raises(ValueError, match=match):
+            occluders.occlusion(points, up, resolution=4, point_rays=True, masks_from=bad)
+    with pytest.raises(ValueError, match="point_rays"):
+        occluders.occlusion(points, up, resolution=4, masks_from=masks_from)
+    with pytest.raises(ValueError, match="previous"):
+        occluders.occlusion(points, up, previous=own, changed=(0, 0), point_rays=True, masks_from=masks_from)
+    with pytest.raises(ValueError, match="shares masks"):
+        occluders.occlusion(points, up, previous=shared, changed=(0, 0))
+    with pytest.raises(ValueError, match="shares masks"):
+        shared.with_point_rays()
+
+
 def test_point_rays_blur_a_metal_lobe_s_mirror_image():
     """A metal (alpha 0.09) on the ground mirrors a wall's top edge: its lobe is narrower than a 4 x 4
     mask's texel, so each point reads it through rays of its own.  With point rays a point casts

@@ -243,15 +243,48 @@ static int refresh_args(PyObject *previous, PyObject *changed, size_t *resolutio
     return 0;
 }
 
-/* occlusion(positions, normals, resolution=8, progress=None, previous=None, changed=None) -> wenv.Occlusion */
+/* masks_from as the core takes it: n vertex indices (PyMem_Malloc'ed into *out); NULL for None. */
+static int masks_from_arg(PyObject *obj, size_t n, uint32_t **out)
+{
+    *out = NULL;
+    if (obj == Py_None)
+        return 0;
+    Py_buffer view;
+    PyObject *held = NULL;
+    if (wenv_py_get_typed_array(obj, "masks_from", "int64", 0, &view, &held) < 0)
+        return -1;
+    int ok = view.ndim == 1 && (size_t)view.shape[0] == n;
+    if (!ok)
+        PyErr_Format(PyExc_ValueError, "masks_from must hold one vertex index per vertex (%zu)", n);
+    const int64_t *from = view.buf;
+    *out = ok ? PyMem_Malloc((n ? n : 1) * sizeof **out) : NULL;
+    if (ok && !*out)
+        PyErr_NoMemory();
+    for (size_t i = 0; *out && i < n; i++) {
+        if (from[i] < 0 || (uint64_t)from[i] >= n) {
+            PyErr_Format(PyExc_ValueError, "masks_from[%zu] must be a vertex index in [0, %zu), got %lld", i, n,
+                         (long long)from[i]);
+            PyMem_Free(*out);
+            *out = NULL;
+            break;
+        }
+        (*out)[i] = (uint32_t)from[i];
+    }
+    wenv_py_release_array(&view, &held);
+    return *out ? 0 : -1;
+}
+
+/* occlusion(positions, normals, resolution=8, progress=None, previous=None, changed=None, *, point_rays=False,
+ *           masks_from=None) -> wenv.Occlusion */
 static PyObject *occluders_occlusion(OccludersObject *self, PyObject *args, PyObject *kwargs)
 {
     static char *kwlist[] = {"positions", "normals", "resolution", "progress", "previous", "changed", "point_rays",
-                             NULL};
+                             "masks_from", NULL};
     PyObject *pobj, *nobj, *res_obj = NULL, *progress_obj = Py_None, *previous = Py_None, *changed = Py_None;
+    PyObject *masks_obj = Py_None;
     int point_rays = -1;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|OOOO$p:occlusion", kwlist, &pobj, &nobj, &res_obj,
-                                     &progress_obj, &previous, &changed, &point_rays) ||
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|OOOO$pO:occlusion", kwlist, &pobj, &nobj, &res_obj,
+                                     &progress_obj, &previous, &changed, &point_rays, &masks_obj) ||
         ready(self) < 0)
         return NULL;
     size_t resolution = 8, first = 0, count = 0;
@@ -269,6 +302,13 @@ static PyObject *occluders_occlusion(OccludersObject *self, PyObject *args, PyOb
     const OcclusionObject *before;
     if (refresh_args(previous, changed, &resolution, res_obj != NULL && !automatic, &before, &first, &count) < 0)
         return NULL;
+    if (masks_obj != Py_None && (before || point_rays <= 0)) {
+        PyErr_SetString(PyExc_ValueError, before ? "masks_from is not taken with previous: a refresh keeps "
+                                                   "previous's masks"
+                                                 : "masks_from needs point_rays=True: a vertex reading another's "
+                                                   "mask casts its own point-like directions");
+        return NULL;
+    }
     if (before && point_rays >= 0 && point_rays != before->o.point_rays) {
         PyErr_Format(PyExc_ValueError, "point_rays=%s is not previous's: a refresh keeps what previous was made as",
                      point_rays ? "True" : "False");
@@ -280,7 +320,11 @@ static PyObject *occluders_occlusion(OccludersObject *self, PyObject *args, PyOb
         return NULL;
     if (automatic && !before)
         resolution = wenv_occlusion_auto_resolution(np);
-    OcclusionObject *out = PyObject_New(OcclusionObject, &OcclusionType);
+    uint32_t *masks_from = NULL;
+    OcclusionObject *out = NULL;
+    if (masks_from_arg(masks_obj, np, &masks_from) < 0)
+        goto done;
+    out = PyObject_New(OcclusionObject, &OcclusionType);
     if (!out)
         goto done;
     memset(&out->o, 0, sizeof out->o);
@@ -294,7 +338,8 @@ static PyObject *occluders_occlusion(OccludersObject *self, PyObject *args, PyOb
         st = wenv_occlusion_refresh(&out->o, &before->o, ((OccludersObject *)before->occluders)->occ, self->occ,
                                     pb.buf, nb.buf, np, first, count, &progress, &err);
     else
-        st = wenv_occlusion_make(&out->o, self->occ, pb.buf, nb.buf, np, resolution, point_rays > 0, &progress, &err);
+        st = wenv_occlusion_make(&out->o, self->occ, pb.buf, nb.buf, np, resolution, point_rays > 0, masks_from,
+                                 &progress, &err);
     WENV_END_WORK
     if (st) {
         Py_CLEAR(out);
@@ -302,6 +347,7 @@ static PyObject *occluders_occlusion(OccludersObject *self, PyObject *args, PyOb
             wenv_py_raise(&err);
     }
 done:
+    PyMem_Free(masks_from);
     PyBuffer_Release(&pb);
     PyBuffer_Release(&nb);
     return (PyObject *)out;
@@ -343,14 +389,17 @@ static PyMethodDef occluders_methods[] = {
      "occluded(origins, directions, tfar=inf)\n--\n\nWhether anything blocks each ray (bool, n): origins float32 "
      "(n, 3) or one (3,), directions float32 (n, 3) (normalised here), up to distance tfar."},
     {"occlusion", (PyCFunction)(void (*)(void))occluders_occlusion, METH_VARARGS | METH_KEYWORDS,
-     "occlusion(positions, normals, resolution=8, progress=None, previous=None, changed=None, *, point_rays=False)"
+     "occlusion(positions, normals, resolution=8, progress=None, previous=None, changed=None, *, point_rays=False, "
+     "masks_from=None)"
      "\n--\n\nWhich directions of each vertex's hemisphere the scene blocks, as a wenv.Occlusion: a ray from the "
      "vertex (lifted off the surface by Occluders.offset) through the centre of each texel of a resolution x "
      "resolution hemi-octahedral map in the vertex's frame (resolution 4 to 16, or 'auto': the finest whose rays, "
      "vertices x resolution^2, stay within 2^23, about 1.7 s on 2 cores).  point_rays=True: shading casts a ray "
      "along every point-like direction it reads (an exact light's, a narrow lobe's mirror direction) at every "
      "vertex, rather than trusting the mask where its texels about the direction agree (what coarse masks miss "
-     "between their rays).  progress(fraction) may return True to cancel.\n\nAfter a change (an object moved, "
+     "between their rays).  masks_from (with point_rays; integer array, one per vertex): vertex i reads the mask of "
+     "vertex masks_from[i] (one that reads its own), whose rays alone are cast, keeping its own position and normal "
+     "for its point rays (a bake's neighbouring texels).  progress(fraction) may return True to cancel.\n\nAfter a change (an object moved, "
      "deformed, edited or removed), previous (the occlusion of the same positions and normals before) and "
      "changed=(first, count) (the triangles of previous's occluders that changed, every other one here in the same order, the new ones in their place) cast only the vertices whose "
      "rays met the changed triangles or meet them now; the result is what a new cast gives, and cast_vertices "
@@ -509,7 +558,8 @@ static PyGetSetDef occlusion_getset[] = {
     {"resolution", (getter)occlusion_size, NULL, "The maps' side.", (void *)0},
     {"vertices", (getter)occlusion_size, NULL, "Number of vertices.", (void *)1},
     {"blocked_vertices", (getter)occlusion_size, NULL,
-     "Vertices that hold a mask: those some direction of whose hemisphere is blocked (with point_rays, all).",
+     "Masks held: one per vertex some direction of whose hemisphere is blocked (with point_rays, one per vertex, or "
+     "per vertex reading its own with masks_from).",
      (void *)2},
     {"nbytes", (getter)occlusion_size, NULL, "Bytes held.", (void *)3},
     {"cast_vertices", (getter)occlusion_size, NULL,

@@ -25,10 +25,8 @@ size_t wenv_occlusion_hit_count(const wenv_occlusion *o)
 void wenv_occlusion_hit_rays(const wenv_occlusion *o, uint32_t *vertex, float *direction)
 {
     size_t r = o->resolution, texels = r * r;
-    for (size_t i = 0; i < o->n_vertices; i++) {
-        if (o->slot[i] < 0)
-            continue;
-        size_t h = o->hit_start[o->slot[i]];
+    for (size_t s = 0; s < o->n_masks; s++) {
+        size_t i = o->owner[s], h = o->hit_start[s];
         double n[3] = {o->normals[3 * i], o->normals[3 * i + 1], o->normals[3 * i + 2]}, f[9];
         wenv_frame(n, f);
         for (size_t t = 0; t < texels; t++) {
@@ -60,12 +58,14 @@ void wenv_occlusion_free(wenv_occlusion *o)
     free(o->hits);
     free(o->positions);
     free(o->normals);
+    free(o->owner);
     memset(o, 0, sizeof *o);
 }
 
 size_t wenv_occlusion_bytes(const wenv_occlusion *o)
 {
-    return o->n_vertices * (sizeof *o->slot + 6 * sizeof(float)) + o->n_masks * (o->words * 8 + sizeof(size_t)) +
+    return o->n_vertices * (sizeof *o->slot + 6 * sizeof(float)) +
+           o->n_masks * (o->words * 8 + sizeof(size_t) + sizeof *o->owner) +
            (o->n_masks ? o->hit_start[o->n_masks] : 0) * sizeof *o->hits;
 }
 
@@ -180,8 +180,8 @@ static unsigned short keep_vertex(const refresh_plan *rp, size_t i, uint64_t *ma
 
 /* Casts (or, refreshing, keeps where nothing it sees changed) every vertex's mask. */
 static wenv_status cast(wenv_occlusion *out, const wenv_occluders *occ, const float *positions, const float *normals,
-                        size_t n, size_t resolution, int point_rays, const refresh_plan *refresh,
-                        const wenv_progress *progress, wenv_error *err)
+                        size_t n, size_t resolution, int point_rays, const uint32_t *masks_from,
+                        const refresh_plan *refresh, const wenv_progress *progress, wenv_error *err)
 {
     memset(out, 0, sizeof *out);
     if (resolution < WENV_OCCLUSION_RESOLUTION_MIN || resolution > WENV_OCCLUSION_RESOLUTION_MAX)
@@ -196,6 +196,14 @@ static wenv_status cast(wenv_occlusion *out, const wenv_occluders *occ, const fl
     }
     if (n > (size_t)INT32_MAX)
         return wenv_error_set(err, WENV_ERR_VALUE, "too many vertices (%zu)", n);
+    for (size_t i = 0; masks_from && i < n; i++) {
+        if (!point_rays)
+            return wenv_error_set(err, WENV_ERR_VALUE, "masks_from needs point_rays: a vertex reading another's "
+                                                       "mask casts its own point-like directions");
+        if (masks_from[i] >= n || masks_from[masks_from[i]] != masks_from[i])
+            return wenv_error_set(err, WENV_ERR_VALUE, "masks_from[%zu] must be a vertex (below %zu) that reads its own "
+                                                       "mask, got %u", i, n, (unsigned)masks_from[i]);
+    }
     size_t texels = resolution * resolution, words = (texels + 63) / 64;
     size_t block = n < BLOCK_VERTICES ? (n ? n : 1) : BLOCK_VERTICES;
     size_t group = texels < GROUP_RAYS ? GROUP_RAYS / texels : 1;
@@ -215,11 +223,12 @@ static wenv_status cast(wenv_occlusion *out, const wenv_occluders *occ, const fl
     o.hit_start = malloc(((n ? n : 1) + 1) * sizeof *o.hit_start);
     o.positions = malloc((n ? n : 1) * 3 * sizeof *o.positions);
     o.normals = malloc((n ? n : 1) * 3 * sizeof *o.normals);
+    o.owner = malloc((n ? n : 1) * sizeof *o.owner); /* shrunk as the masks are */
     wenv_occlusion_hit *block_hits = malloc(block * texels * sizeof *block_hits);
     unsigned short *block_count = malloc(block * sizeof *block_count);
     uint64_t *block_masks = malloc(block * words * sizeof *block_masks);
     float *local = malloc(texels * 3 * sizeof *local);
-    if (!o.slot || !o.masks || !o.hit_start || !o.positions || !o.normals || !block_hits || !block_count ||
+    if (!o.slot || !o.masks || !o.hit_start || !o.positions || !o.normals || !o.owner || !block_hits || !block_count ||
         !block_masks || !local) {
         free(block_hits);
         free(block_count);
@@ -248,53 +257,65 @@ static wenv_status cast(wenv_occlusion *out, const wenv_occluders *occ, const fl
         {
             /* a vertex's directions, and its group's rays: neighbouring vertices' rays in one
              * direction run side by side, traced together */
-            float *dirs = malloc(texels * 3 * sizeof *dirs), *ray_dirs = malloc(group * texels * 3 * sizeof *ray_dirs);
+            float *dirs = malloc(group * texels * 3 * sizeof *dirs), *origins = malloc(group * 3 * sizeof *origins);
+            float *ray_dirs = malloc(group * texels * 3 * sizeof *ray_dirs);
             float *ray_origins = malloc(group * texels * 3 * sizeof *ray_origins);
             float *uv = malloc(group * texels * 2 * sizeof *uv);
             uint32_t *tri = malloc(group * texels * sizeof *tri);
-            unsigned char *kept = malloc(group);
-            if (!dirs || !ray_dirs || !ray_origins || !uv || !tri || !kept)
+            size_t *traced = malloc(group * sizeof *traced);
+            if (!dirs || !origins || !ray_dirs || !ray_origins || !uv || !tri || !traced)
                 atomic_store(&failed, 1);
 #pragma omp for schedule(dynamic, 4)
             for (size_t g = 0; g < (count + group - 1) / group; g++) {
                 if (atomic_load(&failed) || atomic_load(&cancelled))
                     continue;
-                size_t b0 = g * group, m = (b0 + group < count ? b0 + group : count) - b0, recasting = 0;
-                for (size_t j = 0; j < m; j++) {
-                    size_t b = b0 + j, i = first + b;
+                size_t b0 = g * group, b_end = b0 + group < count ? b0 + group : count, m = 0, recasting = 0;
+                for (size_t b = b0; b < b_end; b++) {
+                    size_t i = first + b;
                     const float *p = positions + 3 * i, *nm = normals + 3 * i;
                     float len = sqrtf(nm[0] * nm[0] + nm[1] * nm[1] + nm[2] * nm[2]);
                     double nn[3] = {nm[0] / len, nm[1] / len, nm[2] / len}, f[9];
                     for (int k = 0; k < 3; k++)
                         o.normals[3 * i + (size_t)k] = (float)nn[k];
+                    if (masks_from && masks_from[i] != i) { /* it reads another's mask */
+                        wenv_progress_item(progress, &done, n, &cancelled);
+                        continue;
+                    }
                     wenv_frame(nn, f);
-                    float origin[3] = {p[0] + lift * (float)nn[0], p[1] + lift * (float)nn[1], p[2] + lift * (float)nn[2]};
+                    float *d = dirs + m * texels * 3, *origin = origins + 3 * m;
                     for (size_t t = 0; t < texels; t++) { /* local (x, y, z) -> world: rows of f are the axes */
                         const float *l = local + 3 * t;
-                        for (int k = 0; k < 3; k++) {
-                            dirs[3 * t + (size_t)k] = (float)(f[k] * l[0] + f[3 + k] * l[1] + f[6 + k] * l[2]);
-                            ray_dirs[3 * (t * m + j) + (size_t)k] = dirs[3 * t + (size_t)k];
-                            ray_origins[3 * (t * m + j) + (size_t)k] = origin[k];
-                        }
+                        for (int k = 0; k < 3; k++)
+                            d[3 * t + (size_t)k] = (float)(f[k] * l[0] + f[3 + k] * l[1] + f[6 + k] * l[2]);
                     }
-                    kept[j] = refresh && !sees_a_change(refresh, i, origin, nn, dirs, texels, lift);
-                    if (kept[j]) {
+                    for (int k = 0; k < 3; k++)
+                        origin[k] = p[k] + lift * (float)nn[k];
+                    /* a ray's answer may depend on those it is traced with (which of two triangles it
+                     * meets on their common edge), so a group is always traced whole, as a first cast
+                     * traces it, and a refresh keeps what it need not cast again */
+                    if (refresh && !sees_a_change(refresh, i, origin, nn, d, texels, lift)) {
                         block_count[b] = keep_vertex(refresh, i, block_masks + b * words, block_hits + b * texels);
                         wenv_progress_item(progress, &done, n, &cancelled);
-                    } else
-                        recasting++;
+                        traced[m++] = SIZE_MAX;
+                        continue;
+                    }
+                    recasting++;
+                    traced[m++] = b;
                 }
                 if (!recasting)
                     continue;
-                /* A ray's answer may depend on those it is traced with (which of two triangles it
-                 * meets on their common edge), so a group is always traced whole, as a first cast
-                 * traces it, and a refresh keeps what it need not cast again. */
+                for (size_t t = 0; t < texels; t++)
+                    for (size_t j = 0; j < m; j++)
+                        for (int k = 0; k < 3; k++) {
+                            ray_dirs[3 * (t * m + j) + (size_t)k] = dirs[3 * (j * texels + t) + (size_t)k];
+                            ray_origins[3 * (t * m + j) + (size_t)k] = origins[3 * j + (size_t)k];
+                        }
                 wenv_occluders_hit_rays(occ, ray_origins, ray_dirs, m * texels, tri, uv);
                 atomic_fetch_add(&recast, recasting);
                 for (size_t j = 0; j < m; j++) {
-                    if (kept[j])
+                    size_t b = traced[j];
+                    if (b == SIZE_MAX)
                         continue;
-                    size_t b = b0 + j;
                     uint64_t *mask = block_masks + b * words;
                     wenv_occlusion_hit *h = block_hits + b * texels;
                     memset(mask, 0, words * sizeof *mask);
@@ -315,16 +336,19 @@ static wenv_status cast(wenv_occlusion *out, const wenv_occluders *occ, const fl
                 }
             }
             free(dirs);
+            free(origins);
             free(ray_dirs);
             free(ray_origins);
             free(uv);
             free(tri);
-            free(kept);
+            free(traced);
         }
         /* kept in vertex order: a vertex with no blocked texel keeps no mask.  A cancel leaves the
          * block's later counts unwritten, so nothing of a cancelled block is kept. */
         for (size_t b = 0; b < count && !failed && !cancelled; b++) {
             size_t i = first + b;
+            if (masks_from && masks_from[i] != i)
+                continue; /* its slot is its mask's, once all are kept */
             if (!block_count[b] && !point_rays) {
                 o.slot[i] = -1;
                 continue;
@@ -337,6 +361,7 @@ static wenv_status cast(wenv_occlusion *out, const wenv_occluders *occ, const fl
             }
             memcpy(o.masks + o.n_masks * words, block_masks + b * words, words * sizeof *o.masks);
             o.slot[i] = (int32_t)o.n_masks;
+            o.owner[o.n_masks] = (uint32_t)i;
             o.hit_start[o.n_masks + 1] = o.hit_start[o.n_masks] + block_count[b];
             o.n_masks++;
         }
@@ -356,6 +381,11 @@ static wenv_status cast(wenv_occlusion *out, const wenv_occluders *occ, const fl
         return nomem ? wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the occlusion")
                      : wenv_error_set(err, WENV_ERR_CANCELLED, "occlusion cancelled");
     }
+    for (size_t i = 0; masks_from && i < n; i++)
+        if (masks_from[i] != i) {
+            o.slot[i] = o.slot[masks_from[i]];
+            o.shared = 1;
+        }
     /* the blocks were sized for every vertex: give back what the kept masks do not use */
     uint64_t *masks = realloc(o.masks, (o.n_masks ? o.n_masks : 1) * words * sizeof *o.masks);
     if (masks)
@@ -363,6 +393,9 @@ static wenv_status cast(wenv_occlusion *out, const wenv_occluders *occ, const fl
     size_t *starts = realloc(o.hit_start, (o.n_masks + 1) * sizeof *o.hit_start);
     if (starts)
         o.hit_start = starts;
+    uint32_t *owners = realloc(o.owner, (o.n_masks ? o.n_masks : 1) * sizeof *o.owner);
+    if (owners)
+        o.owner = owners;
     uint64_t h = wenv_fingerprint_word(WENV_FINGERPRINT_START, resolution);
     h = wenv_fingerprint_word(h, (uint64_t)point_rays);
     h = wenv_fingerprint_word(wenv_fingerprint_word(h, n), wenv_occluders_triangle_count(occ));
@@ -370,6 +403,8 @@ static wenv_status cast(wenv_occlusion *out, const wenv_occluders *occ, const fl
         h = wenv_fingerprint_word(h, o.masks[k]);
     for (size_t k = 0; k < o.hit_start[o.n_masks]; k++)
         h = wenv_fingerprint_word(h, ((uint64_t)o.hits[k].triangle << 32) | ((uint64_t)o.hits[k].u << 16) | o.hits[k].v);
+    for (size_t i = 0; o.shared && i < n; i++)
+        h = wenv_fingerprint_word(h, (uint64_t)(uint32_t)o.slot[i]);
     h = wenv_fingerprint_floats(h, o.positions, 3 * n);
     o.fingerprint = wenv_fingerprint_floats(h, o.normals, 3 * n);
     o.cast_vertices = atomic_load(&recast);
@@ -379,14 +414,16 @@ static wenv_status cast(wenv_occlusion *out, const wenv_occluders *occ, const fl
 
 wenv_status wenv_occlusion_make(wenv_occlusion *out, const wenv_occluders *occ, const float *positions,
                                 const float *normals, size_t n, size_t resolution, int point_rays,
-                                const wenv_progress *progress, wenv_error *err)
+                                const uint32_t *masks_from, const wenv_progress *progress, wenv_error *err)
 {
-    return cast(out, occ, positions, normals, n, resolution, point_rays, NULL, progress, err);
+    return cast(out, occ, positions, normals, n, resolution, point_rays, masks_from, NULL, progress, err);
 }
 
 wenv_status wenv_occlusion_with_point_rays(wenv_occlusion *out, const wenv_occlusion *o, wenv_error *err)
 {
     memset(out, 0, sizeof *out);
+    if (o->shared)
+        return wenv_error_set(err, WENV_ERR_VALUE, "the occlusion shares masks: it was made with point rays");
     size_t n = o->n_vertices, words = o->words, texels = o->resolution * o->resolution;
     size_t hits = wenv_occlusion_hit_count(o), rows = n ? n : 1;
     wenv_occlusion c = {.resolution = o->resolution, .n_vertices = n, .words = words, .point_rays = 1, .n_masks = n};
@@ -396,7 +433,8 @@ wenv_status wenv_occlusion_with_point_rays(wenv_occlusion *out, const wenv_occlu
     c.hits = malloc((hits ? hits : 1) * sizeof *c.hits);
     c.positions = malloc(rows * 3 * sizeof *c.positions);
     c.normals = malloc(rows * 3 * sizeof *c.normals);
-    if (!c.slot || !c.masks || !c.hit_start || !c.hits || !c.positions || !c.normals) {
+    c.owner = malloc(rows * sizeof *c.owner);
+    if (!c.slot || !c.masks || !c.hit_start || !c.hits || !c.positions || !c.normals || !c.owner) {
         wenv_occlusion_free(&c);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the occlusion of %zu vertices", n);
     }
@@ -409,6 +447,7 @@ wenv_status wenv_occlusion_with_point_rays(wenv_occlusion *out, const wenv_occlu
         uint64_t *mask = c.masks + i * words;
         int32_t s = o->slot[i];
         c.slot[i] = (int32_t)i;
+        c.owner[i] = (uint32_t)i;
         if (s >= 0) {
             memcpy(mask, o->masks + (size_t)s * words, words * sizeof *mask);
             c.hit_start[i + 1] = c.hit_start[i] + (o->hit_start[s + 1] - o->hit_start[s]);
@@ -462,6 +501,8 @@ wenv_status wenv_occlusion_refresh(wenv_occlusion *out, const wenv_occlusion *be
         return wenv_error_set(err, WENV_ERR_VALUE,
                               "the occluders have %zu triangles: fewer than the %zu outside the changed ones", total,
                               total_before - count);
+    if (before->shared)
+        return wenv_error_set(err, WENV_ERR_VALUE, "previous shares masks between vertices: cast it anew");
     if (before->n_vertices != n || memcmp(before->positions, positions, n * 3 * sizeof(float)))
         return wenv_error_set(err, WENV_ERR_VALUE, "previous was made for other positions: cast the occlusion anew");
     for (size_t i = 0; i < n; i++) {
@@ -486,7 +527,8 @@ wenv_status wenv_occlusion_refresh(wenv_occlusion *out, const wenv_occlusion *be
     /* rays start off the surface by a fraction of the scene's size: another size moves every start,
      * and only a new cast gives what a new cast gives */
     if (wenv_occluders_offset(occ) != wenv_occluders_offset(occluders_before))
-        return cast(out, occ, positions, normals, n, before->resolution, before->point_rays, NULL, progress, err);
+        return cast(out, occ, positions, normals, n, before->resolution, before->point_rays, NULL, NULL, progress,
+                    err);
     refresh_plan plan = {.before = before, .occluders_before = occluders_before, .first = first,
                          .end_before = end_before, .shift = (long long)count_now - (long long)count,
                          .lo = {INFINITY, INFINITY, INFINITY}, .hi = {-INFINITY, -INFINITY, -INFINITY}};
@@ -502,7 +544,7 @@ wenv_status wenv_occlusion_refresh(wenv_occlusion *out, const wenv_occlusion *be
         plan.changed = changed;
     }
     wenv_status st =
-        cast(out, occ, positions, normals, n, before->resolution, before->point_rays, &plan, progress, err);
+        cast(out, occ, positions, normals, n, before->resolution, before->point_rays, NULL, &plan, progress, err);
     wenv_occluders_free(changed);
     return st;
 }

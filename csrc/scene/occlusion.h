@@ -50,17 +50,22 @@ typedef struct {
     uint64_t fingerprint; /* of all the above: what tells one occlusion from another */
     size_t cast_vertices; /* how many vertices' rays were cast to make it (all of them, unless refreshed) */
     int point_rays;       /* every vertex holds a mask; point-like directions are cast, not read from it */
+    uint32_t *owner;      /* n_masks: the vertex whose rays made mask k, in whose frame it lies */
+    int shared;           /* some vertices read another's mask (wenv_occlusion_make's masks_from) */
 } wenv_occlusion;
 
 /* The masks of n vertices (positions and normals as xyz floats; normals non-zero) against `occ`,
  * within the memory budget `occ` was made with (WENV_ERR_VALUE saying so when it would not fit);
- * `point_rays` as wenv_occlusion's.
+ * `point_rays` as wenv_occlusion's.  masks_from (NULL: each vertex its own): vertex i reads the mask
+ * of vertex masks_from[i], which reads its own, so that only those cast their masks' rays: the
+ * neighbouring texels of a bake share one, each keeping its own position and normal, so its point
+ * rays and frame (needs point_rays; WENV_ERR_VALUE naming "masks_from[i]" otherwise).
  * Rays start wenv_occluders_offset off the surface along the normal.  Progress
  * and cancel as base/progress.h.  WENV_ERR_VALUE for a resolution out of range or a normal that is
  * zero or not finite (naming "normals[i]"), or a position not finite ("positions[i]"). */
 wenv_status wenv_occlusion_make(wenv_occlusion *out, const wenv_occluders *occ, const float *positions,
                                 const float *normals, size_t n, size_t resolution, int point_rays,
-                                const wenv_progress *progress, wenv_error *err);
+                                const uint32_t *masks_from, const wenv_progress *progress, wenv_error *err);
 
 /* The same after some triangles changed (an object moved, deformed, edited or removed), casting only
  * what the change can reach: `before` is the occlusion of these positions and normals against
@@ -71,14 +76,15 @@ wenv_status wenv_occlusion_make(wenv_occlusion *out, const wenv_occluders *occ, 
  * most without a ray); the others keep their masks and hits.  The result is what
  * wenv_occlusion_make would give, with `cast_vertices` telling how many were cast (all of them when
  * the scene's lift changed, which moves every ray's start: wenv_occluders_offset).  WENV_ERR_VALUE
- * when `before` is of other positions or normals, or a triangle outside the changed ones differs. */
+ * when `before` is of other positions or normals, shares masks, or a triangle outside the changed
+ * ones differs. */
 wenv_status wenv_occlusion_refresh(wenv_occlusion *out, const wenv_occlusion *before,
                                    const wenv_occluders *occluders_before, const wenv_occluders *occ,
                                    const float *positions, const float *normals, size_t n, size_t first,
                                    size_t count, const wenv_progress *progress, wenv_error *err);
 /* `o` as if made with point rays: the same masks and hits, every vertex holding a mask (an open one
  * where `o` held none), so that shading casts its point-like directions; no ray is cast.  Its
- * fingerprint is o's marked as such. */
+ * fingerprint is o's marked as such.  WENV_ERR_VALUE when `o` shares masks (made with point rays). */
 wenv_status wenv_occlusion_with_point_rays(wenv_occlusion *out, const wenv_occlusion *o, wenv_error *err);
 void wenv_occlusion_free(wenv_occlusion *o);
 /* The bytes it holds. */
@@ -102,8 +108,8 @@ static inline int wenv_occlusion_visible(const wenv_occlusion *o, size_t i, size
 /* How many hits it holds: every blocked texel of every vertex. */
 size_t wenv_occlusion_hit_count(const wenv_occlusion *o);
 
-/* For each hit, in hit order (vertex by vertex, blocked texels in texel order): the vertex whose
- * texel it is, and its ray's unit direction in the world (as it was cast), 3 floats. */
+/* For each hit, in hit order (mask by mask, blocked texels in texel order): the vertex whose texel
+ * it is (the mask's owner), and its ray's unit direction in the world (as it was cast), 3 floats. */
 void wenv_occlusion_hit_rays(const wenv_occlusion *o, uint32_t *vertex, float *direction);
 
 /* The unit direction, in the vertex's local frame (+Z the normal), through texel t's centre. */

@@ -38,12 +38,10 @@ void wenv_sending_read(const wenv_occlusion *o, const wenv_occluders *occ, const
 {
     size_t r = o->resolution, texels = r * r, per = side * side;
     const uint32_t *triangles = wenv_occluders_triangles(occ);
-    long long nn = (long long)o->n_vertices;
+    long long nm = (long long)o->n_masks;
 #pragma omp parallel for schedule(dynamic, 64)
-    for (long long i = 0; i < nn; i++) {
-        if (o->slot[i] < 0)
-            continue;
-        size_t h = o->hit_start[o->slot[i]];
+    for (long long s = 0; s < nm; s++) {
+        size_t i = o->owner[s], h = o->hit_start[s];
         float f[9];
         frame_of(o->normals + 3 * (size_t)i, f);
         for (size_t t = 0; t < texels; t++) {

@@ -1,4 +1,4 @@
-/* What rays said of the exact lights' visibility, kept per vertex with blocked texels.
+/* What rays said of the exact lights' visibility, kept per vertex that holds a mask.
  *
  * Why: a light whose texels about it are partly blocked is tested by a ray, and under a lighting of
  * many small lights (a studio's softboxes) those rays were most of what shadows added to a view

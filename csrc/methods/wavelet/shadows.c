@@ -339,7 +339,7 @@ void wenv_vertex_shadow_init(wenv_vertex_shadow *vs, const wenv_shadow_scene *sc
     vs->mask = o->masks + (size_t)o->slot[i] * o->words;
     vs->point_rays = o->point_rays;
     vs->memo = memo;
-    vs->memo_slot = memo ? memo->slots + o->slot[i] : NULL;
+    vs->memo_slot = memo ? memo->slots + i : NULL; /* a vertex's own: vertices may share a mask, not rays */
     vs->resolution = o->resolution;
     vs->occluders = scene->occluders;
     float lift = wenv_occluders_offset(scene->occluders);

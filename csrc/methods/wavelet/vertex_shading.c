@@ -576,7 +576,7 @@ static wenv_status ensure_hidden_light(wenv_wavelet *wavelet, const wenv_shadow_
     /* the lights' rays are kept for a quarter of what the occluders may take */
     if (!wavelet->shadow_lights && !(wavelet->shadow_lights = calloc(1, sizeof *wavelet->shadow_lights)))
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the shadows of %zu vertices", o->n_vertices);
-    if (wenv_light_memo_reset(wavelet->shadow_lights, o->n_masks, wenv_occluders_memory_budget(scene->occluders) / 4,
+    if (wenv_light_memo_reset(wavelet->shadow_lights, o->n_vertices, wenv_occluders_memory_budget(scene->occluders) / 4,
                               err))
         return err->status;
     if (renew_pair(&wavelet->shadow_lbar, hits, &wavelet->shadow_e_env, o->n_masks) < 0)
@@ -584,14 +584,12 @@ static wenv_status ensure_hidden_light(wenv_wavelet *wavelet, const wenv_shadow_
     const wenv_node_pyramid *pyramid = wenv_grazing_light_pyramid(wavelet->grazing_light);
     const float *cosine = wavelet->m->texel_reflection.cosine;
     float *lbar = wavelet->shadow_lbar, *e_env = wavelet->shadow_e_env;
-    long long nn = (long long)o->n_vertices;
+    long long nm = (long long)o->n_masks;
 #pragma omp parallel for schedule(dynamic, 256)
-    for (long long i = 0; i < nn; i++) {
-        if (o->slot[i] < 0)
-            continue;
-        size_t slot = (size_t)o->slot[i];
-        wenv_vertex_shadow vs;
-        wenv_vertex_shadow_init(&vs, scene, (size_t)i, NULL);
+    for (long long k = 0; k < nm; k++) {
+        size_t slot = (size_t)k;
+        wenv_vertex_shadow vs; /* in the frame of the vertex whose rays made the mask */
+        wenv_vertex_shadow_init(&vs, scene, o->owner[k], NULL);
         wenv_shadow_hidden_light(&vs, pyramid, cosine, lbar + 3 * o->hit_start[slot], e_env + 3 * slot);
     }
     wavelet->shadow_env_key = key;
