@@ -127,10 +127,11 @@ def texel_sites(uv, tri_corners, width, height, memory_budget_mb, progress=None,
     return sites, overlapped
 
 
-def texel_data(obj, depsgraph, mesh, sites):
+def texel_data(obj, depsgraph, mesh, sites, shadows=False):
     """meshes.MeshData of the texels (domain "TEXEL"): world positions and normals interpolated over
     each texel's triangle (smooth or flat as the mesh's corner normals are), the material slot of its
-    face; texels at no finite position are `unplaced` (left black)."""
+    face; texels at no finite position are `unplaced` (left black).  With `shadows`, the blocks of
+    texels that share an occlusion mask (mask_blocks)."""
     ob_eval = obj.evaluated_get(depsgraph)
     nl = len(mesh.loops)
     nrm = np.empty(nl * 3, np.float32)
@@ -154,8 +155,9 @@ def texel_data(obj, depsgraph, mesh, sites):
     data = meshes.MeshData("TEXEL", np.ascontiguousarray(points, np.float32), np.ascontiguousarray(normals, np.float32),
                            slot_of_triangle[sites.triangle], notes, unplaced)
     data.sites = sites
-    with np.errstate(invalid="ignore", over="ignore"):
-        data.mask_blocks = mask_blocks(sites, points, normals, texel_sizes(sites, corner_points))
+    if shadows:
+        with np.errstate(invalid="ignore", over="ignore"):
+            data.mask_blocks = mask_blocks(sites, points, normals, texel_sizes(sites, corner_points))
     return data
 
 
@@ -349,7 +351,7 @@ def bake(scene, depsgraph, obj, image, view, blend_data, uv_map=None, margin=DEF
     if inside == 0:
         raise SetupError(f"No texel of '{image.name}' lies in a face of UV map '{layer.name}' of '{obj.name}'")
     stages.report("reading")
-    data = texel_data(obj, depsgraph, mesh, sites)
+    data = texel_data(obj, depsgraph, mesh, sites, st.shadows)
     notes.extend(data.notes)
     for read in (textures.read_inputs, textures.read_term_weights, textures.read_shading_normals):
         notes.extend(read(obj, depsgraph, data))

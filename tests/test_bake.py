@@ -413,7 +413,7 @@ def test_texels_share_masks_within_a_face_not_across_seams_or_creases(scene):
     layer = textures.uv_layer(mesh, None)
     size = 125  # odd: the islands' edges fall inside blocks
     sites, _ = bake.texel_sites(textures.corner_uvs(mesh, layer), textures.triangle_corners(mesh), size, size, 1024)
-    data = bake.texel_data(cube, bpy.context.evaluated_depsgraph_get(), mesh, sites)
+    data = bake.texel_data(cube, bpy.context.evaluated_depsgraph_get(), mesh, sites, shadows=True)
     from_ = engine.masks_from(data.mask_blocks)
     sharer = from_ != np.arange(data.count)
     assert sharer.mean() > 0.7  # three of each four texels, but where blocks straddle an island's edge
