@@ -18,6 +18,8 @@ void wenv_texel_reflection_free(wenv_texel_reflection *t)
 {
     free(t->specular);
     free(t->cosine);
+    free(t->direction);
+    free(t->footprint);
     memset(t, 0, sizeof *t);
 }
 
@@ -40,10 +42,19 @@ wenv_status wenv_texel_reflection_make(wenv_texel_reflection *out, const wenv_ma
     out->resolution = r;
     out->views = views;
     out->cosine = calloc(texels, sizeof *out->cosine);
+    out->direction = malloc(texels * 3 * sizeof *out->direction);
+    out->footprint = malloc(texels * sizeof *out->footprint);
     out->specular = calloc(views * views * texels * 3, sizeof *out->specular);
-    if (!out->cosine || !out->specular) {
+    if (!out->cosine || !out->direction || !out->footprint || !out->specular) {
         wenv_texel_reflection_free(out);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the shadows' texel reflection");
+    }
+    for (size_t t = 0; t < texels; t++) {
+        double d[3];
+        wenv_hemi_decode(wenv_map_texel_center(r, t % r), wenv_map_texel_center(r, t / r), d);
+        for (int c = 0; c < 3; c++)
+            out->direction[3 * t + (size_t)c] = (float)d[c];
+        out->footprint[t] = 0.5f * log2f((float)wenv_hemi_texel_solid_angle(r, t % r, t / r));
     }
     size_t fine = r * SUBTEXELS;
     for (size_t fj = 0; fj < fine; fj++)
@@ -380,24 +391,22 @@ void wenv_shadow_specular(const wenv_vertex_shadow *vs, const wenv_texel_reflect
         s[c] -= albedo[c] * acc[c];
 }
 
-void wenv_shadow_hidden_light(const wenv_vertex_shadow *vs, const wenv_node_pyramid *pyramid, const float *cosine,
-                              float *lbar, float e_hidden[3])
+void wenv_shadow_hidden_light(const wenv_vertex_shadow *vs, const wenv_node_pyramid *pyramid,
+                              const wenv_texel_reflection *tr, float *lbar, float e_hidden[3])
 {
     size_t r = vs->resolution, texels = r * r;
     const float *f = vs->frame;
     e_hidden[0] = e_hidden[1] = e_hidden[2] = 0.0f;
     FOR_EACH_BLOCKED(vs, texels, {
-        double l[3];
-        wenv_hemi_decode(wenv_map_texel_center(r, t % r), wenv_map_texel_center(r, t / r), l);
+        const float *l = tr->direction + 3 * t;
         float d[3];
         for (int c = 0; c < 3; c++)
-            d[c] = (float)(f[c] * l[0] + f[3 + c] * l[1] + f[6 + c] * l[2]);
+            d[c] = f[c] * l[0] + f[3 + c] * l[1] + f[6 + c] * l[2];
         /* read over the texel: a footprint of the square root of its solid angle */
-        float footprint = 0.5f * log2f((float)wenv_hemi_texel_solid_angle(r, t % r, t / r));
         float *x = lbar + 3 * k;
-        wenv_node_pyramid_read(pyramid, d, footprint, x);
+        wenv_node_pyramid_read(pyramid, d, tr->footprint[t], x);
         for (int c = 0; c < 3; c++)
-            e_hidden[c] += x[c] * cosine[t];
+            e_hidden[c] += x[c] * tr->cosine[t];
     });
 }
 

@@ -39,11 +39,14 @@
 /* A material's reflection integrated over each texel of the r x r mask map, RGB: the lobes' f cos at
  * `views` x `views` view directions (texel centres of a hemi-octahedral map of views in the vertex's
  * frame) as shares of their albedo, and the cosine's integral (the Lambertian part's weight, the
- * same for every view). */
+ * same for every view); with each texel's centre direction and footprint, read for every blocked
+ * texel of every mask. */
 typedef struct {
     size_t resolution, views;
-    float *specular; /* views^2 x r^2 x 3; NULL for a material without lobes */
-    float *cosine;   /* r^2 */
+    float *specular;  /* views^2 x r^2 x 3; NULL for a material without lobes */
+    float *cosine;    /* r^2 */
+    float *direction; /* r^2 x 3: the texel's centre, local (+Z the normal) */
+    float *footprint; /* r^2: log2 of the square root of its solid angle */
 } wenv_texel_reflection;
 
 #define WENV_TEXEL_REFLECTION_VIEWS 16
@@ -98,9 +101,10 @@ void wenv_shadow_narrow_specular(const wenv_vertex_shadow *vs, const float *lbar
                                  float s[3]);
 
 /* For each blocked texel of vertex vs (texel order), the environment read over its solid angle into
- * lbar (3 floats each); returns sum of lbar x the texel's cosine integral into e_hidden. */
-void wenv_shadow_hidden_light(const wenv_vertex_shadow *vs, const wenv_node_pyramid *pyramid, const float *cosine,
-                              float *lbar, float e_hidden[3]);
+ * lbar (3 floats each); returns sum of lbar x the texel's cosine integral into e_hidden (the texels'
+ * of tr, at the masks' resolution). */
+void wenv_shadow_hidden_light(const wenv_vertex_shadow *vs, const wenv_node_pyramid *pyramid,
+                              const wenv_texel_reflection *tr, float *lbar, float e_hidden[3]);
 
 /* The blocker's light B through each blocked texel of mask slot k (hits in texel order): the
  * scene's bounce per hit, or its bounce per occluder vertex interpolated at the hit; subtracted from lbar (in place), and

@@ -582,7 +582,7 @@ static wenv_status ensure_hidden_light(wenv_wavelet *wavelet, const wenv_shadow_
     if (renew_pair(&wavelet->shadow_lbar, hits, &wavelet->shadow_e_env, o->n_masks) < 0)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the shadows of %zu vertices", o->n_vertices);
     const wenv_node_pyramid *pyramid = wenv_grazing_light_pyramid(wavelet->grazing_light);
-    const float *cosine = wavelet->m->texel_reflection.cosine;
+    const wenv_texel_reflection *tr = &wavelet->m->texel_reflection;
     float *lbar = wavelet->shadow_lbar, *e_env = wavelet->shadow_e_env;
     long long nm = (long long)o->n_masks;
 #pragma omp parallel for schedule(dynamic, 256)
@@ -590,7 +590,7 @@ static wenv_status ensure_hidden_light(wenv_wavelet *wavelet, const wenv_shadow_
         size_t slot = (size_t)k;
         wenv_vertex_shadow vs; /* in the frame of the vertex whose rays made the mask */
         wenv_vertex_shadow_init(&vs, scene, o->owner[k], NULL);
-        wenv_shadow_hidden_light(&vs, pyramid, cosine, lbar + 3 * o->hit_start[slot], e_env + 3 * slot);
+        wenv_shadow_hidden_light(&vs, pyramid, tr, lbar + 3 * o->hit_start[slot], e_env + 3 * slot);
     }
     wavelet->shadow_env_key = key;
     wavelet->shadow_env_valid = 1;
