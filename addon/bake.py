@@ -6,9 +6,10 @@ read at the texel), its material's inputs read from textures at the texel, lit b
 lamps, seen from the view.  The texels are shaded by the same core call as vertices: a bake is a
 mesh of a million vertices that costs no ray and no table row a mesh of that many vertices would
 not.  With shadows, each texel casts its own rays against the scene (the object's own mesh and every
-other blocker): a mask at the core's Auto side (4 x 4 from 524k texels) with point rays, every exact
-light cast along its own ray and a narrow lobe along nine about its mirror direction, so a shadow's
-edge is as sharp as the texels; what the rays meet sends the light of its vertices (their diffuse
+other blocker): point rays, every exact light cast along its own ray and a narrow lobe along nine
+about its mirror direction, so a shadow's edge is as sharp as the texels; and a mask at the core's
+Auto side (4 x 4 from 524k texels), one per 2 x 2 block of texels side by side on one face
+(mask_blocks); what the rays meet sends the light of its vertices (their diffuse
 light, or with Glossy Bounce their light towards the texel); what the texels' coarse masks miss of
 the sky's soft occlusion is added back from the vertices (_mask_correction).  The result goes into a
 Blender image (the margin extended about the islands, the texels outside them untouched); undo
