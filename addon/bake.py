@@ -184,8 +184,7 @@ def mask_blocks(sites, points, normals, sizes):
     the sky's soft occlusion and the blockers' light, at half the image's resolution."""
     x, y = sites.texels % sites.width, sites.texels // sites.width
     block = (y // 2) * ((sites.width + 1) // 2) + x // 2
-    ids, first = np.unique(block, return_index=True)
-    owner = first[np.searchsorted(ids, block)]
+    owner = engine.masks_from(block)
     reach = SHARED_MASK_REACH * np.maximum(sizes, sizes[owner])
     near = np.linalg.norm(points - points[owner], axis=1) <= reach
     facing = np.einsum("ij,ij->i", normals, normals[owner]) >= SHARED_MASK_COS

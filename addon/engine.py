@@ -342,8 +342,10 @@ def masks_from(blocks):
         return None
     out = np.arange(len(blocks))
     rows = np.flatnonzero(blocks >= 0)
-    ids, first = np.unique(blocks[rows], return_index=True)
-    out[rows] = rows[first][np.searchsorted(ids, blocks[rows])]
+    ids = blocks[rows]
+    first = np.empty(int(ids.max()) + 1 if len(ids) else 0, np.int64)
+    first[ids[::-1]] = rows[::-1]  # of repeated indices the last assignment stays: each block's first row
+    out[rows] = first[ids]
     return out
 
 

@@ -394,7 +394,7 @@ static PyMethodDef occluders_methods[] = {
      "\n--\n\nWhich directions of each vertex's hemisphere the scene blocks, as a wenv.Occlusion: a ray from the "
      "vertex (lifted off the surface by Occluders.offset) through the centre of each texel of a resolution x "
      "resolution hemi-octahedral map in the vertex's frame (resolution 4 to 16, or 'auto': the finest whose rays, "
-     "vertices x resolution^2, stay within 2^23, about 1.7 s on 2 cores).  point_rays=True: shading casts a ray "
+     "vertices x resolution^2, stay within 2^23, about 1.2 s on 2 cores).  point_rays=True: shading casts a ray "
      "along every point-like direction it reads (an exact light's, a narrow lobe's mirror direction) at every "
      "vertex, rather than trusting the mask where its texels about the direction agree (what coarse masks miss "
      "between their rays).  masks_from (with point_rays; integer array, one per vertex): vertex i reads the mask of "

@@ -23,8 +23,8 @@
 
 /* The resolution Auto picks for n vertices: the finest whose rays (n r^2) stay within
  * WENV_OCCLUSION_AUTO_RAYS, so that casting (or casting again after an edit) takes about the same
- * time whatever the mesh's size: 1.7 s on 2 cores for Suzanne's 126,290 vertices at 8 x 8, where
- * 16 x 16 took 5.5 s; 16 x 16 up to 32,768 vertices. */
+ * time whatever the mesh's size: 1.2 s on 2 cores for Suzanne's 126,290 vertices at 8 x 8, where
+ * 16 x 16 took 4.2 s; 16 x 16 up to 32,768 vertices. */
 #define WENV_OCCLUSION_AUTO_RAYS ((size_t)1 << 23)
 size_t wenv_occlusion_auto_resolution(size_t n);
 
