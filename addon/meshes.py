@@ -10,7 +10,8 @@ class MeshData:
     position is not finite, which are left black."""
 
     __slots__ = ("domain", "positions", "normals", "slots", "count", "notes", "unplaced", "triangles", "inputs",
-                 "textured", "shading_normals", "bump_map_correction", "term_weights", "term_inputs", "sites", "mask_blocks")
+                 "textured", "shading_normals", "bump_map_correction", "term_weights", "term_inputs", "sites",
+                 "mask_blocks")
 
     def __init__(self, domain, positions, normals, slots, notes=(), unplaced=None, triangles=None, inputs=None):
         self.domain = domain

@@ -204,15 +204,17 @@ static wenv_status cast(wenv_occlusion *out, const wenv_occluders *occ, const fl
             return wenv_error_set(err, WENV_ERR_VALUE, "masks_from needs point_rays: a vertex reading another's "
                                                        "mask casts its own point-like directions");
         if (masks_from[i] >= n || masks_from[masks_from[i]] != masks_from[i])
-            return wenv_error_set(err, WENV_ERR_VALUE, "masks_from[%zu] must be a vertex (below %zu) that reads its own "
-                                                       "mask, got %u", i, n, (unsigned)masks_from[i]);
+            return wenv_error_set(err, WENV_ERR_VALUE,
+                                  "masks_from[%zu] must be a vertex (below %zu) that reads its own mask, got %u", i, n,
+                                  (unsigned)masks_from[i]);
     }
     size_t texels = resolution * resolution, words = (texels + 63) / 64;
     size_t block = n < BLOCK_VERTICES ? (n ? n : 1) : BLOCK_VERTICES;
     size_t group = GROUP_RAYS / texels > GROUP_VERTICES ? GROUP_RAYS / texels : GROUP_VERTICES;
     /* what every vertex holds whatever it sees, and the hits (those of the blocked texels) the rest
      * of the budget leaves room for */
-    double fixed = (double)n * (sizeof(int32_t) + 6 * sizeof(float) + sizeof(size_t) + words * 8) +
+    double fixed = (double)n * (sizeof(int32_t) + 6 * sizeof(float) + sizeof(size_t) + sizeof(uint32_t) +
+                                words * 8) +
                    (double)block * texels * (sizeof(wenv_occlusion_hit) + 1);
     double budget = (double)wenv_occluders_memory_budget(occ);
     if (fixed > budget)
