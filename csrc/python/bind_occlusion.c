@@ -302,11 +302,8 @@ static PyObject *occluders_occlusion(OccludersObject *self, PyObject *args, PyOb
     const OcclusionObject *before;
     if (refresh_args(previous, changed, &resolution, res_obj != NULL && !automatic, &before, &first, &count) < 0)
         return NULL;
-    if (masks_obj != Py_None && (before || point_rays <= 0)) {
-        PyErr_SetString(PyExc_ValueError, before ? "masks_from is not taken with previous: a refresh keeps "
-                                                   "previous's masks"
-                                                 : "masks_from needs point_rays=True: a vertex reading another's "
-                                                   "mask casts its own point-like directions");
+    if (masks_obj != Py_None && before) {
+        PyErr_SetString(PyExc_ValueError, "masks_from is not taken with previous: a refresh keeps previous's masks");
         return NULL;
     }
     if (before && point_rays >= 0 && point_rays != before->o.point_rays) {
@@ -395,8 +392,8 @@ static PyMethodDef occluders_methods[] = {
      "vertex (lifted off the surface by Occluders.offset) through the centre of each texel of a resolution x "
      "resolution hemi-octahedral map in the vertex's frame (resolution 4 to 16, or 'auto': the finest whose rays, "
      "vertices x resolution^2, stay within 2^23, about 1.2 s on 2 cores).  point_rays=True: shading casts a ray "
-     "along every point-like direction it reads (an exact light's, a narrow lobe's mirror direction) at every "
-     "vertex, rather than trusting the mask where its texels about the direction agree (what coarse masks miss "
+     "along every point-like direction it reads (an exact light's, nine about a narrow lobe's mirror direction) "
+     "at every vertex, rather than trusting the mask where its texels about the direction agree (what coarse masks miss "
      "between their rays).  masks_from (with point_rays; integer array, one per vertex): vertex i reads the mask of "
      "vertex masks_from[i] (one that reads its own), whose rays alone are cast, keeping its own position and normal "
      "for its point rays (a bake's neighbouring texels).  progress(fraction) may return True to cancel.\n\n"

@@ -180,10 +180,7 @@ static void test_from(const wenv_occluders *occ, const float origin[3], const fl
         }
         rtcInitIntersectContext(&context);
         context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT; /* one origin, neighbouring directions */
-        if (m == 1) /* a light's ray: the stream's set-up would cost more than the ray */
-            rtcOccluded1(occ->scene, &context, &rays[0]);
-        else
-            rtcOccluded1M(occ->scene, &context, rays, (unsigned)m, sizeof rays[0]);
+        rtcOccluded1M(occ->scene, &context, rays, (unsigned)m, sizeof rays[0]);
         for (size_t k = 0; k < m; k++)
             blocked[start + k] = rays[k].tfar < 0.0f; /* Embree marks an occluded ray with tfar = -inf */
     }

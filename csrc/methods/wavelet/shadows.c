@@ -51,7 +51,7 @@ wenv_status wenv_texel_reflection_make(wenv_texel_reflection *out, const wenv_ma
     }
     for (size_t t = 0; t < texels; t++) {
         double d[3];
-        wenv_hemi_decode(wenv_map_texel_center(r, t % r), wenv_map_texel_center(r, t / r), d);
+        wenv_occlusion_texel_direction(r, t, d);
         for (int c = 0; c < 3; c++)
             out->direction[3 * t + (size_t)c] = (float)d[c];
         out->footprint[t] = 0.5f * log2f((float)wenv_hemi_texel_solid_angle(r, t % r, t / r));

@@ -587,10 +587,9 @@ static wenv_status ensure_hidden_light(wenv_wavelet *wavelet, const wenv_shadow_
     long long nm = (long long)o->n_masks;
 #pragma omp parallel for schedule(dynamic, 256)
     for (long long k = 0; k < nm; k++) {
-        size_t slot = (size_t)k;
         wenv_vertex_shadow vs; /* in the frame of the vertex whose rays made the mask */
         wenv_vertex_shadow_init(&vs, scene, o->owner[k], NULL);
-        wenv_shadow_hidden_light(&vs, pyramid, tr, lbar + 3 * o->hit_start[slot], e_env + 3 * slot);
+        wenv_shadow_hidden_light(&vs, pyramid, tr, lbar + 3 * o->hit_start[k], e_env + 3 * k);
     }
     wavelet->shadow_env_key = key;
     wavelet->shadow_env_valid = 1;
