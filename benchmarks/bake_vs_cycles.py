@@ -3,8 +3,9 @@ Project), a Principled metal (roughness 0.3) under forest, seen from the camera 
 
 Rendered
   - by Cycles, direct light only (Max Bounces 0), at two seeds (their mean is the truth; half their
-    difference's RMSE is the noise of that mean): without self-shadowing (the object invisible to
-    every secondary ray: what wenv models without shadows) and with it;
+    difference's RMSE is the noise of that mean), every pixel at --samples (adaptive sampling off):
+    without self-shadowing (the object invisible to every secondary ray: what wenv models without
+    shadows) and with it;
   - from wenv's bakes at `default` and `high` (1024 x 1024, 1600 x 1600 and 2048 x 2048, shadows off
     and on, Bounce Light off), the baked image shown as emitted light through the UV map, by Cycles;
   - flat (Workbench) from wenv's vertex colours at `default`, for comparison.
@@ -12,7 +13,7 @@ Prints relative RMSEs (RMSE over the mean, over the pixels every render covers) 
 (median of --repeat bakes after one to warm the shader), writes out/bake_vs_cycles.json and, with
 --picture, docs/bake_vs_cycles.png.
 
-    python benchmarks/bake_vs_cycles.py [--hdri forest] [--sizes 1024 1600 2048] [--samples 512] [--repeat 3] [--picture]
+    python benchmarks/bake_vs_cycles.py [--hdri forest] [--sizes 1024 1600 2048] [--samples 2048] [--repeat 3] [--picture]
 """
 import argparse
 import json
@@ -88,7 +89,7 @@ def main():
     ap.add_argument("--sizes", type=int, nargs="*", default=[1024, 1600, 2048],
                     help="bake sizes (1600: about a million texels in Suzanne's islands)")
     ap.add_argument("--size", type=int, default=256, help="the renders' side")
-    ap.add_argument("--samples", type=int, default=512)
+    ap.add_argument("--samples", type=int, default=2048, help="Cycles' samples in every pixel (its truth)")
     ap.add_argument("--qualities", nargs="*", default=["default", "high"])
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--picture", action="store_true", help="write docs/bake_vs_cycles.png")

@@ -5,7 +5,9 @@ under Blender's eight bundled HDRIs, for a Principled paint, metal and gloss.
 For each case the scene is rendered
   - by Cycles with direct light only (Max Bounces 0: the World through every shadow ray) and with
     its default bounces, each at two seeds (their mean is the truth; half their difference's RMSE
-    is the noise of that mean);
+    is the noise of that mean), every pixel at --samples (adaptive sampling off: it stops a pixel
+    whose first samples missed a highlight smaller than the pixel, such as a one-pixel light of
+    night's seen in the gloss, and both seeds then agree on a value far too dark);
   - by EEVEE (Blender's real-time engine, default settings);
   - flat (Workbench, the vertex colours) from wenv's vertex colours: `default`, shadows with no
     bounce (against direct Cycles), shadows with the mesh's own diffuse light as the bounce
@@ -21,7 +23,7 @@ depend on wenv): a run that changes only wenv then renders only wenv's images.
 
     python benchmarks/shadows_vs_cycles.py [--scenes suzanne plane] [--hdris sunset ...] [--size 256] [--samples 128]
                                            [--bake 2048] [--renders DIR]
-    python benchmarks/shadows_vs_cycles.py --summary out/shadows_vs_cycles.json
+    python benchmarks/shadows_vs_cycles.py --summary out/shadows_vs_cycles.json [more.json ...]
 """
 import argparse
 import json
@@ -88,6 +90,7 @@ def render_settings(scene, size):
     scene.render.image_settings.file_format = "OPEN_EXR"
     scene.render.image_settings.color_depth = "32"
     scene.cycles.use_denoising = False
+    scene.cycles.use_adaptive_sampling = False
     scene.display.shading.light = "FLAT"
     scene.display.shading.color_type = "VERTEX"
 
@@ -221,11 +224,14 @@ def glossy_cost(scene, objs):
 
 def kept_render(scene, engine, kept, seed=0):
     """render() through a folder of renders kept between runs: `kept` is (folder, name of the case),
-    the folder None to render into a temporary one and keep nothing."""
+    the folder None to render into a temporary one and keep nothing.  Cycles' renders are known by
+    their samples too (EEVEE's do not depend on them)."""
     folder, case = kept
     if folder is None:
         with tempfile.TemporaryDirectory(prefix="wenv-shadows-") as tmp:
             return render(scene, engine, tmp, seed)
+    if engine == "CYCLES":
+        case += f"-{scene.cycles.samples}-fixed"
     path = os.path.join(folder, f"{case}-{engine}-{scene.cycles.max_bounces}-{seed}.npy")
     if os.path.exists(path):
         return np.load(path)
@@ -289,17 +295,26 @@ def main():
     ap.add_argument("--hdris", nargs="*", default=HDRI_NAMES)
     ap.add_argument("--materials", nargs="*", default=list(MATERIALS))
     ap.add_argument("--size", type=int, default=256)
-    ap.add_argument("--samples", type=int, default=128)
+    ap.add_argument("--samples", type=int, default=1024, help="Cycles' samples per pixel (every pixel)")
     ap.add_argument("--resolution", type=int, default=0, help="occlusion side (0: the add-on's choice)")
     ap.add_argument("--bake", type=int, default=0, metavar="N",
                     help="also bake every texel of an N x N image per object (0: no bake)")
     ap.add_argument("--renders", metavar="DIR", help="keep Cycles' and EEVEE's renders here, and reuse them")
     ap.add_argument("--out", default=os.path.join(ROOT, "out", "shadows_vs_cycles.json"))
-    ap.add_argument("--summary", metavar="JSON", help="print the table and the targets met of a run's JSON, and stop")
+    ap.add_argument("--summary", metavar="JSON", nargs="+",
+                    help="print the table and the targets met of runs' JSON (a later run's case replaces an earlier "
+                         "one's), and stop")
     args = ap.parse_args()
     if args.summary:
-        with open(args.summary) as f:
-            print(summary(json.load(f)["rows"]))
+        cases = {}
+        for path in args.summary:
+            with open(path) as f:
+                cases.update(((r["scene"], r["hdri"], r["material"]), r) for r in json.load(f)["rows"])
+        order = (["suzanne", "plane"], HDRI_NAMES, list(MATERIALS))
+        def place(row):
+            return tuple(o.index(row[k]) for o, k in zip(order, ("scene", "hdri", "material")))
+
+        print(summary(sorted(cases.values(), key=place)))
         return
     rows, costs = [], {}
     eevee = eevee_engine()
@@ -347,7 +362,7 @@ def main():
                         for obj, d, o in zip(objs, data, offsets):
                             meshes.write_colors(obj.data, d.domain, rgb[o:o + d.count])
                         imgs[key] = render(scene, "BLENDER_WORKBENCH", folder)
-                    kept = (args.renders, f"{scene_name}-{hdri}-{mname}-{args.size}-{args.samples}")
+                    kept = (args.renders, f"{scene_name}-{hdri}-{mname}-{args.size}")
                     imgs["eevee"] = kept_render(scene, eevee, kept)
                     direct, full = cycles_direct_and_full(scene, kept)
                     baked = {key: baked_render(scene, objs, args.bake, bounce, folder)
@@ -361,15 +376,23 @@ def main():
                     a, b = a[..., :3][mask].astype(np.float64), b[..., :3][mask].astype(np.float64)
                     return float(np.sqrt(np.mean((a - b) ** 2)) / np.mean(b))
 
+                def half_error_pixels(a, b):
+                    """How few pixels hold half of a's squared error against b (a few: highlights
+                    smaller than a pixel)."""
+                    e = np.sort(((a[..., :3] - b[..., :3]) ** 2).sum(-1)[mask].astype(np.float64))[::-1]
+                    return int(np.searchsorted(np.cumsum(e), 0.5 * e.sum()) + 1)
+
                 d_mean, f_mean = (direct[0] + direct[1]) / 2, (full[0] + full[1]) / 2
                 row = dict(scene=scene_name, hdri=hdri, material=mname, vertices=len(p), pixels=int(mask.sum()),
                            noise_direct=rel(direct[0], direct[1]) / 2,
                            direct=rel(imgs["direct"], d_mean), unshadowed_vs_direct=rel(imgs["unshadowed"], d_mean),
                            noise_full=rel(full[0], full[1]) / 2, full=rel(imgs["full"], f_mean),
-                           unshadowed_vs_full=rel(imgs["unshadowed"], f_mean), eevee_vs_full=rel(imgs["eevee"], f_mean))
+                           unshadowed_vs_full=rel(imgs["unshadowed"], f_mean), eevee_vs_full=rel(imgs["eevee"], f_mean),
+                           direct_half_error_pixels=half_error_pixels(imgs["direct"], d_mean))
                 if args.bake:
                     row.update(bake=args.bake, bake_direct=rel(imgs["bake_direct"], d_mean),
                                bake_full=rel(imgs["bake_full"], f_mean),
+                               bake_half_error_pixels=half_error_pixels(imgs["bake_direct"], d_mean),
                                bake_seconds={key: seconds for key, (_, seconds) in baked.items()})
                 rows.append(row)
                 print(f"{scene_name:8s} {hdri:10s} {mname:8s} | {100 * row['noise_direct']:5.1f}% "
