@@ -249,17 +249,27 @@ static const struct {
 } LOBE_RINGS[] = {{0.25f, LOBE_INNER_RAYS}, {0.75f, LOBE_OUTER_RAYS}};
 
 /* The share of a narrow lobe (alpha, about the mirror direction r of view v at normal n) that reaches
- * the sky, in [0, 1], as wenv_shadow_narrow_specular reads it; below the mask's horizon is open. */
-static float lobe_visible(const wenv_vertex_shadow *vs, const float n[3], const float v[3], const float r[3],
-                          float alpha)
+ * the sky, in [0, 1], as wenv_shadow_narrow_specular reads it; below the mask's horizon is open.
+ * With rays and a pyramid, lit[c] gets the share of what the lobe reflects of the lighting in
+ * channel c that reaches it: each ray weighted by the lighting along it too, so that a blocker
+ * hiding the bright part of what a lobe sees takes that part's light, not the lobe's mean share of
+ * it (the uniform lighting the geometric share assumes).  Otherwise lit[c] is the geometric share. */
+static float lobe_visible(const wenv_vertex_shadow *vs, const wenv_node_pyramid *pyramid, const float n[3],
+                          const float v[3], const float r[3], float alpha, float lit[3])
 {
-    if (!vs->point_rays || alpha < WENV_LOBE_RAYS_ALPHA_MIN)
-        return lobe_direction_open(vs, r);
+    if (!vs->point_rays || alpha < WENV_LOBE_RAYS_ALPHA_MIN) {
+        float open = lobe_direction_open(vs, r);
+        lit[0] = lit[1] = lit[2] = open;
+        return open;
+    }
     /* a tangent frame about n (Duff et al. 2017, branchless) */
     float sign = n[2] >= 0.0f ? 1.0f : -1.0f, a = -1.0f / (sign + n[2]), b = n[0] * n[1] * a;
     float t[3] = {1.0f + sign * n[0] * n[0] * a, sign * b, -sign * n[0]}, u[3] = {b, sign + n[1] * n[1] * a, -n[1]};
     size_t rings = sizeof LOBE_RINGS / sizeof LOBE_RINGS[0], cast = 0;
-    float seen = 0.0f, total = 0.0f, world[3 * LOBE_RAYS], ray_weight[LOBE_RAYS];
+    float seen = 0.0f, total = 0.0f, world[3 * LOBE_RAYS], ray_weight[LOBE_RAYS], ray_light[3 * LOBE_RAYS];
+    float light_seen[3] = {0.0f, 0.0f, 0.0f}, light_total[3] = {0.0f, 0.0f, 0.0f};
+    /* each ray stands for a ninth of the lobe's reflected cone, about 2 alpha in radius */
+    float log2_footprint = log2f(2.0f * alpha * sqrtf((float)M_PI / (float)LOBE_RAYS));
     for (size_t g = 0; g < rings; g++) {
         float slope = alpha * sqrtf(LOBE_RINGS[g].xi / (1.0f - LOBE_RINGS[g].xi));
         float weight = 1.0f / ((float)rings * (float)LOBE_RINGS[g].count);
@@ -283,33 +293,50 @@ static float lobe_visible(const wenv_vertex_shadow *vs, const float n[3], const 
              * the rays near the horizon, where blockers stand, from counting as much as the rest */
             float tan2_i = (1.0f - cos_i * cos_i) / (cos_i * cos_i);
             float w = weight * vh * len * 2.0f / (1.0f + sqrtf(1.0f + alpha * alpha * tan2_i)); /* n.h = 1 / len */
+            float along[3] = {1.0f, 1.0f, 1.0f};
+            if (pyramid)
+                wenv_node_pyramid_read(pyramid, d, log2_footprint, along);
             total += w;
+            for (int c = 0; c < 3; c++)
+                light_total[c] += w * along[c];
             const float *f = vs->frame, *turn = vs->turn;
             if (!(f[6] * d[0] + f[7] * d[1] + f[8] * d[2] > 0.0f)) {
                 seen += w; /* below the mask's horizon: open */
+                for (int c = 0; c < 3; c++)
+                    light_seen[c] += w * along[c];
                 continue;
             }
-            for (int c = 0; c < 3; c++) /* the rays are cast in the world */
+            for (int c = 0; c < 3; c++) { /* the rays are cast in the world */
                 world[3 * cast + (size_t)c] = turn[c] * d[0] + turn[3 + c] * d[1] + turn[6 + c] * d[2];
+                ray_light[3 * cast + (size_t)c] = w * along[c];
+            }
             ray_weight[cast++] = w;
         }
     }
     /* one call for the lobe's rays: Embree takes rays from one origin as a coherent stream */
     unsigned char hit[LOBE_RAYS];
     wenv_occluders_test(vs->occluders, vs->origin, world, cast, INFINITY, hit);
-    for (size_t k = 0; k < cast; k++)
-        seen += hit[k] ? 0.0f : ray_weight[k];
-    return total > 0.0f ? seen / total : lobe_direction_open(vs, r);
+    for (size_t k = 0; k < cast; k++) {
+        if (hit[k])
+            continue;
+        seen += ray_weight[k];
+        for (int c = 0; c < 3; c++)
+            light_seen[c] += ray_light[3 * k + (size_t)c];
+    }
+    float open = total > 0.0f ? seen / total : lobe_direction_open(vs, r);
+    for (int c = 0; c < 3; c++) /* a channel the lighting leaves black along every ray: the geometric share */
+        lit[c] = light_total[c] > 0.0f ? light_seen[c] / light_total[c] : open;
+    return open;
 }
 
-void wenv_shadow_narrow_specular(const wenv_vertex_shadow *vs, const float *lbar, const float *hidden,
-                                 const float n[3], const float v[3], float cos_v, float alpha, const float albedo[3],
-                                 float s[3])
+void wenv_shadow_narrow_specular(const wenv_vertex_shadow *vs, const wenv_node_pyramid *pyramid, const float *lbar,
+                                 const float *hidden, const float n[3], const float v[3], float cos_v, float alpha,
+                                 const float albedo[3], float s[3])
 {
-    float r[3];
+    float r[3], lit[3];
     for (int c = 0; c < 3; c++)
         r[c] = 2.0f * cos_v * n[c] - v[c];
-    float seen = lobe_visible(vs, n, v, r, alpha);
+    float seen = lobe_visible(vs, pyramid, n, v, r, alpha, lit);
     if (seen >= 1.0f)
         return;
     const float *f = vs->frame;
@@ -332,7 +359,7 @@ void wenv_shadow_narrow_specular(const wenv_vertex_shadow *vs, const float *lbar
                 count++;
             }
     for (int c = 0; c < 3; c++)
-        s[c] = seen * s[c] + (1.0f - seen) * (count ? albedo[c] * back[c] / (float)count : 0.0f);
+        s[c] = lit[c] * s[c] + (1.0f - seen) * (count ? albedo[c] * back[c] / (float)count : 0.0f);
 }
 
 void wenv_vertex_shadow_init(wenv_vertex_shadow *vs, const wenv_shadow_scene *scene, size_t i, wenv_light_memo *memo)

@@ -95,10 +95,13 @@ int wenv_shadow_lobes_narrow(double alpha_max, size_t resolution);
  * vectors at the lobe's slope quantiles, since a 4 x 4 mask's texel is wider than a metal's lobe and
  * one ray would cut its blurred mirror image of a blocker as sharply as a mirror's -- and is the
  * albedo times the blocker's light for the rest (lbar and hidden as the vertex's blocked texels
- * hold them: the blocker's light is their difference, read about the mirror direction). */
-void wenv_shadow_narrow_specular(const wenv_vertex_shadow *vs, const float *lbar, const float *hidden,
-                                 const float n[3], const float v[3], float cos_v, float alpha, const float albedo[3],
-                                 float s[3]);
+ * hold them: the blocker's light is their difference, read about the mirror direction).  With the
+ * rays and the lighting's pyramid, s is kept for the share of its light the open rays carry, each
+ * ray's weight times the lighting along it (pyramid NULL: the lobe's share, the lighting taken as
+ * uniform over it). */
+void wenv_shadow_narrow_specular(const wenv_vertex_shadow *vs, const wenv_node_pyramid *pyramid, const float *lbar,
+                                 const float *hidden, const float n[3], const float v[3], float cos_v, float alpha,
+                                 const float albedo[3], float s[3]);
 
 /* For each blocked texel of vertex vs (texel order), the environment read over its solid angle into
  * lbar (3 floats each); returns sum of lbar x the texel's cosine integral into e_hidden (the texels'
