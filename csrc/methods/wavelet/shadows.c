@@ -266,8 +266,9 @@ static float lobe_visible(const wenv_vertex_shadow *vs, const wenv_node_pyramid 
     float sign = n[2] >= 0.0f ? 1.0f : -1.0f, a = -1.0f / (sign + n[2]), b = n[0] * n[1] * a;
     float t[3] = {1.0f + sign * n[0] * n[0] * a, sign * b, -sign * n[0]}, u[3] = {b, sign + n[1] * n[1] * a, -n[1]};
     size_t rings = sizeof LOBE_RINGS / sizeof LOBE_RINGS[0], cast = 0;
-    float seen = 0.0f, total = 0.0f, world[3 * LOBE_RAYS], ray_weight[LOBE_RAYS], ray_light[3 * LOBE_RAYS];
-    float light_seen[3] = {0.0f, 0.0f, 0.0f}, light_total[3] = {0.0f, 0.0f, 0.0f};
+    float seen = 0.0f, total = 0.0f, world[3 * LOBE_RAYS], ray_weight[LOBE_RAYS], ray_dir[3 * LOBE_RAYS];
+    unsigned char ray_cast[LOBE_RAYS];
+    size_t rays = 0;
     /* each ray stands for a ninth of the lobe's reflected cone, about 2 alpha in radius */
     float log2_footprint = log2f(2.0f * alpha * sqrtf((float)M_PI / (float)LOBE_RAYS));
     for (size_t g = 0; g < rings; g++) {
@@ -293,35 +294,47 @@ static float lobe_visible(const wenv_vertex_shadow *vs, const wenv_node_pyramid 
              * the rays near the horizon, where blockers stand, from counting as much as the rest */
             float tan2_i = (1.0f - cos_i * cos_i) / (cos_i * cos_i);
             float w = weight * vh * len * 2.0f / (1.0f + sqrtf(1.0f + alpha * alpha * tan2_i)); /* n.h = 1 / len */
-            float along[3] = {1.0f, 1.0f, 1.0f};
-            if (pyramid)
-                wenv_node_pyramid_read(pyramid, d, log2_footprint, along);
-            total += w;
-            for (int c = 0; c < 3; c++)
-                light_total[c] += w * along[c];
             const float *f = vs->frame, *turn = vs->turn;
-            if (!(f[6] * d[0] + f[7] * d[1] + f[8] * d[2] > 0.0f)) {
-                seen += w; /* below the mask's horizon: open */
-                for (int c = 0; c < 3; c++)
-                    light_seen[c] += w * along[c];
-                continue;
+            /* below the mask's horizon: open */
+            ray_cast[rays] = f[6] * d[0] + f[7] * d[1] + f[8] * d[2] > 0.0f;
+            if (ray_cast[rays]) {
+                for (int c = 0; c < 3; c++) /* the rays are cast in the world */
+                    world[3 * cast + (size_t)c] = turn[c] * d[0] + turn[3 + c] * d[1] + turn[6 + c] * d[2];
+                cast++;
             }
-            for (int c = 0; c < 3; c++) { /* the rays are cast in the world */
-                world[3 * cast + (size_t)c] = turn[c] * d[0] + turn[3 + c] * d[1] + turn[6 + c] * d[2];
-                ray_light[3 * cast + (size_t)c] = w * along[c];
-            }
-            ray_weight[cast++] = w;
+            memcpy(ray_dir + 3 * rays, d, sizeof d);
+            ray_weight[rays++] = w;
         }
     }
     /* one call for the lobe's rays: Embree takes rays from one origin as a coherent stream */
-    unsigned char hit[LOBE_RAYS];
+    unsigned char hit[LOBE_RAYS], blocked[LOBE_RAYS];
     wenv_occluders_test(vs->occluders, vs->origin, world, cast, INFINITY, hit);
-    for (size_t k = 0; k < cast; k++) {
-        if (hit[k])
-            continue;
-        seen += ray_weight[k];
-        for (int c = 0; c < 3; c++)
-            light_seen[c] += ray_light[3 * k + (size_t)c];
+    int any_blocked = 0;
+    for (size_t k = 0, c = 0; k < rays; k++) {
+        blocked[k] = ray_cast[k] && hit[c++];
+        any_blocked |= blocked[k];
+    }
+    if (!rays) {
+        float open = lobe_direction_open(vs, r);
+        lit[0] = lit[1] = lit[2] = open;
+        return open;
+    }
+    if (!any_blocked) {
+        lit[0] = lit[1] = lit[2] = 1.0f;
+        return 1.0f;
+    }
+    /* the lighting along each ray is read only for a lobe something blocks */
+    float light_seen[3] = {0.0f, 0.0f, 0.0f}, light_total[3] = {0.0f, 0.0f, 0.0f};
+    for (size_t k = 0; k < rays; k++) {
+        float along[3] = {1.0f, 1.0f, 1.0f};
+        if (pyramid)
+            wenv_node_pyramid_read(pyramid, ray_dir + 3 * k, log2_footprint, along);
+        total += ray_weight[k];
+        seen += blocked[k] ? 0.0f : ray_weight[k];
+        for (int c = 0; c < 3; c++) {
+            light_total[c] += ray_weight[k] * along[c];
+            light_seen[c] += blocked[k] ? 0.0f : ray_weight[k] * along[c];
+        }
     }
     float open = total > 0.0f ? seen / total : lobe_direction_open(vs, r);
     for (int c = 0; c < 3; c++) /* a channel the lighting leaves black along every ray: the geometric share */
