@@ -5,9 +5,10 @@ rays both), and the vertices' ratio of shadowed to open shading interpolated to 
 Suzanne subdivided 3 times (31,658 vertices, 16 x 16 masks at the vertices), `default`, direct
 light (no bounce), 3,000 points facing the camera drawn uniformly over her triangles: under small
 bright lights a few points carry most of the error, so the figures move with the draw.  Prints
-relative RMSEs and mean biases, writes out/texel_shadows.json.
+relative RMSEs and mean biases (and, for comparison, each point's own masks at the vertices' side, and the
+unshadowed shading against the unshadowed reference: the method's own error), writes out/texel_shadows.json.
 
-    python benchmarks/texel_shadows.py [--cases city:paint night:gloss ...] [--points 3000]
+    python benchmarks/texel_shadows.py [--cases city:paint night:gloss ...] [--points 3000] [--lobe-rings 0]
 """
 import argparse
 import json
@@ -47,6 +48,8 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases", nargs="*", default=["city:paint", "courtyard:paint", "night:gloss", "night:metal"])
     ap.add_argument("--points", type=int, default=3000)
+    ap.add_argument("--lobe-rings", type=int, default=None,
+                    help="the quality's lobe_rings (default: `default`'s): 0 reads a narrow lobe through nine rays")
     ap.add_argument("--out", default=os.path.join(ROOT, "out", "texel_shadows.json"))
     args = ap.parse_args()
     p, n, t = suzanne(3)
@@ -59,6 +62,7 @@ def main():
     fine = occluders.occlusion(p, n, resolution=fine_side, point_rays=True)
     coarse = occluders.occlusion(p, n, resolution=texel_side, point_rays=True)
     at_points = occluders.occlusion(pts, nrm, resolution=texel_side, point_rays=True)
+    fine_at_points = occluders.occlusion(pts, nrm, resolution=fine_side, point_rays=True)
 
     def interpolated(x):
         return np.einsum("mc,mcx->mx", w, x[t[tri]])
@@ -70,10 +74,12 @@ def main():
         hdri, material = case.split(":")
         env = wenv.load_environment(hdri_path(hdri))
         principled = wenv.Principled(**MATERIALS[material])
-        shader = wenv.Shader(env, principled, quality="default")
+        quality = "default" if args.lobe_rings is None else {"lobe_rings": args.lobe_rings}
+        shader = wenv.Shader(env, principled, quality=quality)
         truth = wenv.reference(env, principled, nrm, view, positions=pts, occluders=occluders)
+        open_truth = wenv.reference(env, principled, nrm, view)
 
-        def error(a):
+        def error(a, truth=truth):
             return dict(rmse=float(np.sqrt(np.mean((a - truth) ** 2)) / np.mean(truth)),
                         bias=float(np.mean(a - truth) / np.mean(truth)))
 
@@ -88,15 +94,17 @@ def main():
                    own_masks_and_vertices=error(np.maximum(own + interpolated(vertex_fine - vertex_coarse), 0.0)),
                    vertices_ratio=error(shader.shade(nrm, view) * interpolated((vertex_own + floor) /
                                                                                (vertex_open + floor))),
-                   unshadowed=error(shader.shade(nrm, view)))
+                   unshadowed=error(shader.shade(nrm, view)),
+                   fine_masks_at_points=error(shader.shade(nrm, view, occlusion=fine_at_points, bounce=None)),
+                   method_unshadowed=error(shader.shade(nrm, view), open_truth))
         rows.append(row)
         print(f"{hdri:10s} {material:6s} " + "  ".join(f"{k}: {100 * v['rmse']:.1f} % (bias {100 * v['bias']:+.1f} %)"
                                                        for k, v in row.items() if isinstance(v, dict)), flush=True)
     os.makedirs(os.path.dirname(args.out), exist_ok=True)
     with open(args.out, "w") as f:
         json.dump(dict(command="python benchmarks/texel_shadows.py " + " ".join(sys.argv[1:]),
-                       machine=platform.machine(), points=len(pts), vertices=len(p), fine_side=fine_side,
-                       texel_side=texel_side, rows=rows), f, indent=1)
+                       machine=platform.machine(), lobe_rings=args.lobe_rings, points=len(pts), vertices=len(p),
+                       fine_side=fine_side, texel_side=texel_side, rows=rows), f, indent=1)
     print("wrote", args.out)
 
 

@@ -468,6 +468,7 @@ def test_reference_constant_environment():
     ({"grazing": "yes"}, "grazing"), ({"light_tolerance": 0.0}, "light_tolerance"),
     ({"light_tolerance": float("nan")}, "light_tolerance"), ({"light_tolerance": 2.0}, "light_tolerance"),
     ({"grazing_slopes": 2}, "grazing_slopes"), ({"grazing_slopes": -1}, "grazing_slopes"),
+    ({"lobe_rings": 9}, "lobe_rings"), ({"lobe_rings": -1}, "lobe_rings"),
 ])
 def test_bad_quality(quality, message):
     env = gradient_env()

@@ -12,10 +12,11 @@ const char *const WENV_PRESET_NAMES[WENV_PRESET_COUNT] = {"draft", "default", "h
 #define DEFAULT_QUALITY                                                                                        \
     {.global_n = 128, .local_n = 64, .normal_n = 32, .view_n = 24, .coefficients = 512, .light_coefficients = 0, \
      .matrix_epsilon = 1e-4, .lights = 4096, .light_threshold = 256, .light_tolerance = 0.05, .grazing = 6,     \
-     .grazing_slopes = 1}
+     .grazing_slopes = 1, .lobe_rings = 4}
 #define HIGH_QUALITY                                                                                           \
     {.global_n = 128, .local_n = 64, .normal_n = 64, .view_n = 32, .coefficients = 512, .light_coefficients = 0, \
-     .matrix_epsilon = 1e-4, .lights = 4096, .light_threshold = 8, .light_tolerance = 0.003, .grazing = 6}
+     .matrix_epsilon = 1e-4, .lights = 4096, .light_threshold = 8, .light_tolerance = 0.003, .grazing = 6,      \
+     .lobe_rings = 8}
 
 const wenv_wavelet_quality WENV_WAVELET_PRESETS[WENV_PRESET_COUNT] = {
     [WENV_PRESET_DRAFT] = {.global_n = 32, .local_n = 16, .normal_n = 16, .view_n = 8, .coefficients = 32,
@@ -61,7 +62,7 @@ const wenv_wavelet_quality WENV_AUTO_LADDER[WENV_AUTO_LEVELS] = {
      .matrix_epsilon = 1e-4, .lights = 1024, .light_threshold = 256, .light_tolerance = 0.003, .grazing = 0},
     {.global_n = 128, .local_n = 64, .normal_n = 64, .view_n = 32, .coefficients = 512, .light_coefficients = 0,
      .matrix_epsilon = 1e-4, .lights = 4096, .light_threshold = 16, .light_tolerance = 0.05, .grazing = 6,
-     .grazing_slopes = 1},
+     .grazing_slopes = 1, .lobe_rings = 4},
     HIGH_QUALITY,
 };
 

@@ -1298,7 +1298,7 @@ static PyTypeObject ShaderType = {
               "target_error=0.01, memory_budget_mb=1024, normals=None)\n--\n\n"
               "Environment shading by wavelet rotation.  quality: 'draft', 'default', 'high', 'auto' or a dict of "
               "global, local, normals, views, coefficients, light_coefficients, matrix_epsilon, lights, light_threshold, "
-              "light_tolerance, grazing, grazing_slopes.  method: "
+              "light_tolerance, grazing, grazing_slopes, lobe_rings.  method: "
               "'rotation' (precomputed sparse matrices, cached on disk in cache_dir; None: WENV_CACHE_DIR or "
               "~/.cache/wenv; False: no cache) or 'slicing' (the same shading without matrices); None picks "
               "'rotation' where the matrices are in the cache or take at most 768 MB (and memory_budget_mb), "

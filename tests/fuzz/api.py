@@ -194,7 +194,7 @@ class Fuzzer(Draws):
         valid = {"global": [32, 64, 16], "local": [8, 16, 32], "normals": [4, 8, 16], "views": [4, 8, 12],
                  "coefficients": [0, 32, 128], "light_coefficients": [0, 64], "matrix_epsilon": [1e-3, 0.0],
                  "lights": [0, 16, 4096], "light_threshold": [8.0, 256.0], "light_tolerance": [0.003, 0.05, 1.0],
-                 "grazing": [0.0, 6.0], "grazing_slopes": [0, 1]}
+                 "grazing": [0.0, 6.0], "grazing_slopes": [0, 1], "lobe_rings": [0, 4, 8]}
         for key, values in valid.items():
             if self.chance(0.3):
                 q[key] = self.odd(self.pick(values), 0.1)

@@ -241,49 +241,47 @@ static float lobe_direction_open(const wenv_vertex_shadow *vs, const float l[3])
 }
 
 /* The rings of a narrow lobe's rays: half vectors at the GGX slope quantiles xi (tan theta_h =
- * alpha sqrt(xi / (1 - xi))), each ring standing for half the lobe's microfacets. */
-enum { LOBE_INNER_RAYS = 3, LOBE_OUTER_RAYS = 6, LOBE_RAYS = LOBE_INNER_RAYS + LOBE_OUTER_RAYS };
-static const struct {
+ * alpha sqrt(xi / (1 - xi))), each ring standing for an equal share of the lobe's microfacets.  The
+ * nine first; rings of 6, 10, 14, ... rays at xi = (g + 1/2) / rings where they disagree. */
+typedef struct {
     float xi;
     int count;
-} LOBE_RINGS[] = {{0.25f, LOBE_INNER_RAYS}, {0.75f, LOBE_OUTER_RAYS}};
+} lobe_ring;
+static const lobe_ring NINE_RAYS[] = {{0.25f, 3}, {0.75f, 6}};
+enum { NINE = 9, RING_RAYS_FIRST = 6, RING_RAYS_STEP = 4 };
+#define LOBE_RAYS_MAX                                                                                          \
+    (WENV_LOBE_RINGS_MAX * RING_RAYS_FIRST + RING_RAYS_STEP * WENV_LOBE_RINGS_MAX * (WENV_LOBE_RINGS_MAX - 1) / 2)
 
-/* The share of a narrow lobe (alpha, about the mirror direction r of view v at normal n) that reaches
- * the sky, in [0, 1], as wenv_shadow_narrow_specular reads it; below the mask's horizon is open.
- * With rays and a pyramid, lit[c] gets the share of what the lobe reflects of the lighting in
- * channel c that reaches it: each ray weighted by the lighting along it too, so that a blocker
- * hiding the bright part of what a lobe sees takes that part's light, not the lobe's mean share of
- * it (the uniform lighting the geometric share assumes).  Otherwise lit[c] is the geometric share. */
-static float lobe_visible(const wenv_vertex_shadow *vs, const wenv_node_pyramid *pyramid, const float n[3],
-                          const float v[3], const float r[3], float alpha, float lit[3])
+/* A lobe's rays: their directions (the method's frame), weights, and which a blocker stops. */
+typedef struct {
+    size_t count;
+    float dir[3 * LOBE_RAYS_MAX], weight[LOBE_RAYS_MAX];
+    unsigned char blocked[LOBE_RAYS_MAX];
+    int any_blocked, any_open;
+} lobe_rays;
+
+static void cast_lobe_rays(const wenv_vertex_shadow *vs, const float n[3], const float v[3], float alpha,
+                           const lobe_ring *ring, size_t rings, lobe_rays *out)
 {
-    if (!vs->point_rays || alpha < WENV_LOBE_RAYS_ALPHA_MIN) {
-        float open = lobe_direction_open(vs, r);
-        lit[0] = lit[1] = lit[2] = open;
-        return open;
-    }
     /* a tangent frame about n (Duff et al. 2017, branchless) */
     float sign = n[2] >= 0.0f ? 1.0f : -1.0f, a = -1.0f / (sign + n[2]), b = n[0] * n[1] * a;
     float t[3] = {1.0f + sign * n[0] * n[0] * a, sign * b, -sign * n[0]}, u[3] = {b, sign + n[1] * n[1] * a, -n[1]};
-    size_t rings = sizeof LOBE_RINGS / sizeof LOBE_RINGS[0], cast = 0;
-    float seen = 0.0f, total = 0.0f, world[3 * LOBE_RAYS], ray_weight[LOBE_RAYS], ray_dir[3 * LOBE_RAYS];
-    unsigned char ray_cast[LOBE_RAYS];
-    size_t rays = 0;
-    /* each ray stands for a ninth of the lobe's reflected cone, about 2 alpha in radius */
-    float log2_footprint = log2f(2.0f * alpha * sqrtf((float)M_PI / (float)LOBE_RAYS));
+    float world[3 * LOBE_RAYS_MAX];
+    unsigned char above[LOBE_RAYS_MAX], hit[LOBE_RAYS_MAX];
+    size_t count = 0, cast = 0;
     for (size_t g = 0; g < rings; g++) {
-        float slope = alpha * sqrtf(LOBE_RINGS[g].xi / (1.0f - LOBE_RINGS[g].xi));
-        float weight = 1.0f / ((float)rings * (float)LOBE_RINGS[g].count);
-        for (int k = 0; k < LOBE_RINGS[g].count; k++) {
-            /* the rings turned against each other, so that together they cover the azimuths */
-            float phi = 2.0f * (float)M_PI * ((float)k + 0.5f * (float)g) / (float)LOBE_RINGS[g].count;
+        float slope = alpha * sqrtf(ring[g].xi / (1.0f - ring[g].xi));
+        float weight = 1.0f / ((float)rings * (float)ring[g].count);
+        for (int k = 0; k < ring[g].count; k++) {
+            /* every other ring turned by half a step, so that together they cover the azimuths */
+            float phi = 2.0f * (float)M_PI * ((float)k + 0.5f * (float)(g % 2)) / (float)ring[g].count;
             float h[3], len = 0.0f;
             for (int c = 0; c < 3; c++) {
                 h[c] = n[c] + slope * (cosf(phi) * t[c] + sinf(phi) * u[c]);
                 len += h[c] * h[c];
             }
             len = sqrtf(len);
-            float vh = (v[0] * h[0] + v[1] * h[1] + v[2] * h[2]) / len, d[3];
+            float vh = (v[0] * h[0] + v[1] * h[1] + v[2] * h[2]) / len, *d = out->dir + 3 * count;
             for (int c = 0; c < 3; c++)
                 d[c] = 2.0f * vh * h[c] / len - v[c];
             float cos_i = d[0] * n[0] + d[1] * n[1] + d[2] * n[2];
@@ -293,47 +291,75 @@ static float lobe_visible(const wenv_vertex_shadow *vs, const wenv_node_pyramid 
              * then G (v.h) / (n.h) up to what all share; G's light-side factor (Smith's, GGX) keeps
              * the rays near the horizon, where blockers stand, from counting as much as the rest */
             float tan2_i = (1.0f - cos_i * cos_i) / (cos_i * cos_i);
-            float w = weight * vh * len * 2.0f / (1.0f + sqrtf(1.0f + alpha * alpha * tan2_i)); /* n.h = 1 / len */
+            out->weight[count] = weight * vh * len * 2.0f / (1.0f + sqrtf(1.0f + alpha * alpha * tan2_i));
             const float *f = vs->frame, *turn = vs->turn;
-            /* below the mask's horizon: open */
-            ray_cast[rays] = f[6] * d[0] + f[7] * d[1] + f[8] * d[2] > 0.0f;
-            if (ray_cast[rays]) {
+            above[count] = f[6] * d[0] + f[7] * d[1] + f[8] * d[2] > 0.0f; /* below the mask's horizon: open */
+            if (above[count]) {
                 for (int c = 0; c < 3; c++) /* the rays are cast in the world */
                     world[3 * cast + (size_t)c] = turn[c] * d[0] + turn[3 + c] * d[1] + turn[6 + c] * d[2];
                 cast++;
             }
-            memcpy(ray_dir + 3 * rays, d, sizeof d);
-            ray_weight[rays++] = w;
+            count++;
         }
     }
     /* one call for the lobe's rays: Embree takes rays from one origin as a coherent stream */
-    unsigned char hit[LOBE_RAYS], blocked[LOBE_RAYS];
-    wenv_occluders_test(vs->occluders, vs->origin, world, cast, INFINITY, hit);
-    int any_blocked = 0;
-    for (size_t k = 0, c = 0; k < rays; k++) {
-        blocked[k] = ray_cast[k] && hit[c++];
-        any_blocked |= blocked[k];
+    if (cast)
+        wenv_occluders_test(vs->occluders, vs->origin, world, cast, INFINITY, hit);
+    out->count = count;
+    out->any_blocked = out->any_open = 0;
+    for (size_t k = 0, c = 0; k < count; k++) {
+        out->blocked[k] = above[k] && hit[c++];
+        out->any_blocked |= out->blocked[k];
+        out->any_open |= !out->blocked[k];
     }
-    if (!rays) {
+}
+
+/* The share of a narrow lobe (alpha, about the mirror direction r of view v at normal n) that reaches
+ * the sky, in [0, 1], as wenv_shadow_narrow_specular reads it; below the mask's horizon is open.
+ * With rays and a pyramid, lit[c] gets the share of what the lobe reflects of the lighting in
+ * channel c that reaches it: each ray weighted by the lighting along it too, so that a blocker
+ * hiding the bright part of what a lobe sees takes that part's light, not the lobe's mean share of
+ * it (the uniform lighting the geometric share assumes).  Otherwise lit[c] is the geometric share. */
+static float lobe_visible(const wenv_vertex_shadow *vs, const wenv_node_pyramid *pyramid, const float n[3],
+                          const float v[3], const float r[3], float alpha, size_t fine_rings, float lit[3])
+{
+    lobe_rays rays;
+    rays.count = 0;
+    if (vs->point_rays && alpha >= WENV_LOBE_RAYS_ALPHA_MIN)
+        cast_lobe_rays(vs, n, v, alpha, NINE_RAYS, sizeof NINE_RAYS / sizeof NINE_RAYS[0], &rays);
+    if (!rays.count) {
         float open = lobe_direction_open(vs, r);
         lit[0] = lit[1] = lit[2] = open;
         return open;
     }
-    if (!any_blocked) {
+    if (!rays.any_blocked) {
         lit[0] = lit[1] = lit[2] = 1.0f;
         return 1.0f;
     }
-    /* the lighting along each ray is read only for a lobe something blocks */
-    float light_seen[3] = {0.0f, 0.0f, 0.0f}, light_total[3] = {0.0f, 0.0f, 0.0f};
-    for (size_t k = 0; k < rays; k++) {
-        float along[3] = {1.0f, 1.0f, 1.0f};
+    size_t used = NINE;
+    if (rays.any_open && fine_rings) {
+        /* a blocker's edge crosses the lobe: where it lies, and what light it hides, is read finer */
+        lobe_ring ring[WENV_LOBE_RINGS_MAX];
+        used = 0;
+        for (size_t g = 0; g < fine_rings; g++) {
+            ring[g] = (lobe_ring){((float)g + 0.5f) / (float)fine_rings, RING_RAYS_FIRST + RING_RAYS_STEP * (int)g};
+            used += (size_t)ring[g].count;
+        }
+        cast_lobe_rays(vs, n, v, alpha, ring, fine_rings, &rays);
+    }
+    /* the lighting along each ray is read only for a lobe something blocks, at the ray's share of
+     * the lobe's reflected cone (about 2 alpha in radius) */
+    float log2_footprint = log2f(2.0f * alpha * sqrtf((float)M_PI / (float)used));
+    float seen = 0.0f, total = 0.0f, light_seen[3] = {0.0f, 0.0f, 0.0f}, light_total[3] = {0.0f, 0.0f, 0.0f};
+    for (size_t k = 0; k < rays.count; k++) {
+        float along[3] = {1.0f, 1.0f, 1.0f}, w = rays.weight[k];
         if (pyramid)
-            wenv_node_pyramid_read(pyramid, ray_dir + 3 * k, log2_footprint, along);
-        total += ray_weight[k];
-        seen += blocked[k] ? 0.0f : ray_weight[k];
+            wenv_node_pyramid_read(pyramid, rays.dir + 3 * k, log2_footprint, along);
+        total += w;
+        seen += rays.blocked[k] ? 0.0f : w;
         for (int c = 0; c < 3; c++) {
-            light_total[c] += ray_weight[k] * along[c];
-            light_seen[c] += blocked[k] ? 0.0f : ray_weight[k] * along[c];
+            light_total[c] += w * along[c];
+            light_seen[c] += rays.blocked[k] ? 0.0f : w * along[c];
         }
     }
     float open = total > 0.0f ? seen / total : lobe_direction_open(vs, r);
@@ -344,12 +370,12 @@ static float lobe_visible(const wenv_vertex_shadow *vs, const wenv_node_pyramid 
 
 void wenv_shadow_narrow_specular(const wenv_vertex_shadow *vs, const wenv_node_pyramid *pyramid, const float *lbar,
                                  const float *hidden, const float n[3], const float v[3], float cos_v, float alpha,
-                                 const float albedo[3], float s[3])
+                                 size_t fine_rings, const float albedo[3], float s[3])
 {
     float r[3], lit[3];
     for (int c = 0; c < 3; c++)
         r[c] = 2.0f * cos_v * n[c] - v[c];
-    float seen = lobe_visible(vs, pyramid, n, v, r, alpha, lit);
+    float seen = lobe_visible(vs, pyramid, n, v, r, alpha, fine_rings, lit);
     if (seen >= 1.0f)
         return;
     const float *f = vs->frame;

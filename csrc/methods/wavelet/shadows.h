@@ -88,20 +88,25 @@ int wenv_shadow_lobes_narrow(double alpha_max, size_t resolution);
  * point rays: their reflected directions stay within about two degrees of it. */
 #define WENV_LOBE_RAYS_ALPHA_MIN 0.02f
 
+/* The most rings a narrow lobe's shadow rays may be cast again on (wenv_wavelet_quality.lobe_rings):
+ * 6, 10, 14, ... rays a ring, 160 on 8. */
+#define WENV_LOBE_RINGS_MAX 8
+
 /* For lobes narrow against a texel (the widest's alpha; unit view v at unit normal n, cos_v = n.v,
  * in the method's frame): what the lobes reflect, s, is kept for the share of the lobe that reaches
  * the sky -- without point rays, or below WENV_LOBE_RAYS_ALPHA_MIN, its mirror direction's answer
  * (the mask where its texels about it agree, else a ray); with point rays, nine rays through half
  * vectors at the lobe's slope quantiles, since a 4 x 4 mask's texel is wider than a metal's lobe and
- * one ray would cut its blurred mirror image of a blocker as sharply as a mirror's -- and is the
- * albedo times the blocker's light for the rest (lbar and hidden as the vertex's blocked texels
- * hold them: the blocker's light is their difference, read about the mirror direction).  With the
- * rays and the lighting's pyramid, s is kept for the share of its light the open rays carry, each
- * ray's weight times the lighting along it (pyramid NULL: the lobe's share, the lighting taken as
- * uniform over it). */
+ * one ray would cut its blurred mirror image of a blocker as sharply as a mirror's; where the nine
+ * disagree (a blocker's edge crosses the lobe), `fine_rings` rings of rays in their place (0: the
+ * nine alone) -- and is the albedo times the blocker's light for the rest (lbar and hidden as the
+ * vertex's blocked texels hold them: the blocker's light is their difference, read about the mirror
+ * direction).  With the rays and the lighting's pyramid, s is kept for the share of its light the
+ * open rays carry, each ray's weight times the lighting along it (pyramid NULL: the lobe's share,
+ * the lighting taken as uniform over it). */
 void wenv_shadow_narrow_specular(const wenv_vertex_shadow *vs, const wenv_node_pyramid *pyramid, const float *lbar,
                                  const float *hidden, const float n[3], const float v[3], float cos_v, float alpha,
-                                 const float albedo[3], float s[3]);
+                                 size_t fine_rings, const float albedo[3], float s[3]);
 
 /* For each blocked texel of vertex vs (texel order), the environment read over its solid angle into
  * lbar (3 floats each); returns sum of lbar x the texel's cosine integral into e_hidden (the texels'

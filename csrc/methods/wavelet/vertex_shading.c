@@ -220,7 +220,8 @@ static void shade_vertex(const wenv_wavelet *wavelet, const vertex_taps *tp, con
     if (sh && wavelet->m->texel_reflection.specular && wavelet->m->albedo) {
         if (wavelet->m->lobes_narrow) {
             wenv_shadow_narrow_specular(&sh->vs, wenv_grazing_light_pyramid(wavelet->grazing_light), sh->lbar,
-                                        sh->hidden, tp->n, tp->v, tp->cos_v, wavelet->m->lobe_alpha, a, s);
+                                        sh->hidden, tp->n, tp->v, tp->cos_v, wavelet->m->lobe_alpha,
+                                        wavelet->q.lobe_rings, a, s);
         } else {
             wenv_shadow_specular(&sh->vs, &wavelet->m->texel_reflection, sh->hidden, tp->v, a, s);
         }

@@ -38,6 +38,9 @@ wenv_status wenv_wavelet_quality_check(const wenv_wavelet_quality *q, wenv_error
                               q->light_tolerance);
     if (!(q->grazing >= 0.0 && q->grazing <= 64.0))
         return wenv_error_set(err, WENV_ERR_VALUE, "quality['grazing'] must be in [0, 64], got %g", q->grazing);
+    if (q->lobe_rings > WENV_LOBE_RINGS_MAX)
+        return wenv_error_set(err, WENV_ERR_VALUE, "quality['lobe_rings'] must be 0 to %d, got %zu", WENV_LOBE_RINGS_MAX,
+                              q->lobe_rings);
     if (q->grazing_slopes > 1)
         return wenv_error_set(err, WENV_ERR_VALUE, "quality['grazing_slopes'] must be 0 or 1, got %zu", q->grazing_slopes);
     if (!(q->matrix_epsilon >= 0.0 && q->matrix_epsilon < 1.0))

@@ -59,6 +59,8 @@ typedef struct {
                                 * (grazing.h; 0: never) */
     size_t grazing_slopes;     /* 1: GGX lobes too on the grazing path's 96 slope cells (else 1024
                                 * polar nodes: exact for GGX's tails, 10x the cost) */
+    size_t lobe_rings;         /* a narrow lobe that its nine shadow rays find partly blocked is cast
+                                * again on this many rings of rays (shadows.h; 0: the nine alone) */
 } wenv_wavelet_quality;
 
 /* Materials a shader keeps besides the current one's, most recently set first, while they hold at

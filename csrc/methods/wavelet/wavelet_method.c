@@ -24,6 +24,7 @@ static const wenv_param PARAMS[] = {
     PARAM("light_tolerance", WENV_PARAM_REAL, light_tolerance),
     PARAM("grazing", WENV_PARAM_REAL, grazing),
     PARAM("grazing_slopes", WENV_PARAM_SIZE, grazing_slopes),
+    PARAM("lobe_rings", WENV_PARAM_SIZE, lobe_rings),
 };
 #undef PARAM
 
