@@ -87,16 +87,16 @@ def main():
         vertex_fine = shader.shade(n, vertex_view, occlusion=fine, bounce=None)
         vertex_coarse = shader.shade(n, vertex_view, occlusion=coarse, bounce=None)
         vertex_open = shader.shade(n, vertex_view)
+        open_shading = shader.shade(nrm, view)
         floor = 1e-3 * vertex_open.mean()  # as the ratio was taken: dividing noise by noise kept at 1
         own = shader.shade(nrm, view, occlusion=at_points, bounce=None)
         row = dict(hdri=hdri, material=material,
                    own_masks=error(own),
                    own_masks_and_vertices=error(np.maximum(own + interpolated(vertex_fine - vertex_coarse), 0.0)),
-                   vertices_ratio=error(shader.shade(nrm, view) * interpolated((vertex_own + floor) /
-                                                                               (vertex_open + floor))),
-                   unshadowed=error(shader.shade(nrm, view)),
+                   vertices_ratio=error(open_shading * interpolated((vertex_own + floor) / (vertex_open + floor))),
+                   unshadowed=error(open_shading),
                    fine_masks_at_points=error(shader.shade(nrm, view, occlusion=fine_at_points, bounce=None)),
-                   method_unshadowed=error(shader.shade(nrm, view), open_truth))
+                   method_unshadowed=error(open_shading, open_truth))
         rows.append(row)
         print(f"{hdri:10s} {material:6s} " + "  ".join(f"{k}: {100 * v['rmse']:.1f} % (bias {100 * v['bias']:+.1f} %)"
                                                        for k, v in row.items() if isinstance(v, dict)), flush=True)
