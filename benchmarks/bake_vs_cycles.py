@@ -8,7 +8,10 @@ Rendered
     shadows) and with it;
   - from wenv's bakes at `default` and `high` (1024 x 1024, 1600 x 1600 and 2048 x 2048, shadows off
     and on, Bounce Light off), the baked image shown as emitted light through the UV map, by Cycles;
-  - flat (Workbench) from wenv's vertex colours at `default`, for comparison.
+  - flat (Workbench) from wenv's vertex colours at `default`, for comparison;
+  - from a bake of --finest (4096 x 4096) at each quality, shadows off and on, shown the same way: each bake's
+    distance from it is what the image's size alone costs at this view (the column `image`), whatever the
+    shading's own error.
 Prints relative RMSEs (RMSE over the mean, over the pixels every render covers) and the bakes' times
 (median of --repeat bakes after one to warm the shader), writes out/bake_vs_cycles.json and, with
 --picture, docs/bake_vs_cycles.png.
@@ -58,12 +61,28 @@ def build(size, hdri):
 def timed_bake(scene, obj, image, view, repeat):
     dg = bpy.context.evaluated_depsgraph_get()
     bake.bake(scene, dg, obj, image, view, bpy.data, view_source="CAMERA")  # warms the shader and the shadows
+    if not repeat:
+        return bake.bake(scene, dg, obj, image, view, bpy.data, view_source="CAMERA")[0], None
     times = []
     for _ in range(repeat):
         start = time.perf_counter()
         count, _ = bake.bake(scene, dg, obj, image, view, bpy.data, view_source="CAMERA")
         times.append(time.perf_counter() - start)
     return count, float(np.median(times))
+
+
+def box_filtered(image, size):
+    """A size x size image whose every texel is the mean of the texels of `image` (a multiple of
+    `size` on a side) over its area: a bake whose texels are filtered as Cycles' bake filters them
+    (its samples spread evenly over each texel), from a finer bake."""
+    side = image.size[0]
+    k = side // size
+    px = np.empty(side * side * 4, np.float32)
+    image.pixels.foreach_get(px)
+    small = px.reshape(size, k, size, k, 4).mean(axis=(1, 3))
+    out = bpy.data.images.new(f"box {size}", size, size, alpha=True, float_buffer=True)
+    out.pixels.foreach_set(np.ascontiguousarray(small, np.float32).ravel())
+    return out
 
 
 def picture(path, panels):
@@ -88,6 +107,8 @@ def main():
     ap.add_argument("--hdri", default="forest")
     ap.add_argument("--sizes", type=int, nargs="*", default=[1024, 1600, 2048],
                     help="bake sizes (1600: about a million texels in Suzanne's islands)")
+    ap.add_argument("--finest", type=int, default=4096,
+                    help="the bake each size is measured against for what the image's size alone costs (0: none)")
     ap.add_argument("--size", type=int, default=256, help="the renders' side")
     ap.add_argument("--samples", type=int, default=2048, help="Cycles' samples in every pixel (its truth)")
     ap.add_argument("--qualities", nargs="*", default=["default", "high"])
@@ -120,19 +141,28 @@ def main():
             plan.compute()
             meshes.write_colors(obj.data, data.domain, plan.results[0][2])
             vertex[shadows] = render(scene, "BLENDER_WORKBENCH", folder)
+        def shown(image):
+            obj.data.materials.clear()
+            obj.data.materials.append(emission_material(image))
+            img = render(scene, "CYCLES", folder, 0)
+            obj.data.materials.clear()
+            obj.data.materials.append(metal)
+            return img
+
         bakes = {}
         for quality in args.qualities:
             scene.wenv.quality = quality.upper()
-            for size in args.sizes:
+            for size in args.sizes + ([args.finest] if args.finest else []):
                 image = bpy.data.images.new(f"bake {size}", size, size, alpha=True, float_buffer=True)
                 for shadows in (False, True):
                     scene.wenv.shadows = shadows
-                    count, seconds = timed_bake(scene, obj, image, view, args.repeat)
-                    obj.data.materials.clear()
-                    obj.data.materials.append(emission_material(image))
-                    bakes[(quality, size, shadows)] = (render(scene, "CYCLES", folder, 0), count, seconds)
-                    obj.data.materials.clear()
-                    obj.data.materials.append(metal)
+                    count, seconds = timed_bake(scene, obj, image, view, args.repeat if size in args.sizes else 0)
+                    bakes[(quality, size, shadows)] = (shown(image), count, seconds)
+                    if size == args.finest and size % args.sizes[0] == 0:
+                        small = box_filtered(image, args.sizes[0])
+                        texels = bakes[(quality, args.sizes[0], shadows)][1]
+                        bakes[(quality, "box", shadows)] = (shown(small), texels, None)
+                        bpy.data.images.remove(small)
                 bpy.data.images.remove(image)
         scene.wenv.quality = "DEFAULT"
         scene.cycles.samples = samples
@@ -147,19 +177,27 @@ def main():
     def darker(a, b):
         return float(1.0 - np.mean(a[..., :3][mask]) / np.mean(b[..., :3][mask]))
 
-    print(f"{'what':36s} {'shadows':>7s} {'texels':>9s} {'bake':>8s} {'vs Cycles':>9s} {'noise':>6s} {'darker':>7s}")
+    print(f"{'what':36s} {'shadows':>7s} {'texels':>9s} {'bake':>8s} {'vs Cycles':>9s} {'noise':>6s} {'darker':>7s}"
+          f" {'image':>6s}")
     for shadows in (False, True):
         truth = (cycles[shadows][0] + cycles[shadows][1]) / 2
         noise = rel(cycles[shadows][0], cycles[shadows][1]) / 2
-        entries = [("vertex colours, default", vertex[shadows], len(obj.data.vertices), None)]
+        entries = [("vertex colours, default", vertex[shadows], len(obj.data.vertices), None, None)]
         entries += [(f"bake {size} x {size}, {quality}",) + bakes[(quality, size, shadows)]
-                    for quality in args.qualities for size in args.sizes]
-        for what, img, count, seconds in entries:
+                    + (bakes[(quality, args.finest, shadows)][0] if args.finest else None,)
+                    for quality in args.qualities for size in args.sizes + ([args.finest] if args.finest else [])]
+        entries += [(f"bake {args.sizes[0]} x {args.sizes[0]} box-filtered from {args.finest}, {quality}",)
+                    + bakes[(quality, "box", shadows)] + (bakes[(quality, args.finest, shadows)][0],)
+                    for quality in args.qualities if (quality, "box", shadows) in bakes]
+        for what, img, count, seconds, finest in entries:
             row = dict(what=what, shadows=shadows, points=int(count), seconds=seconds, relative_rmse=rel(img, truth),
-                       cycles_noise=noise, darker=darker(img, truth))
+                       cycles_noise=noise, darker=darker(img, truth),
+                       image_resolution=None if finest is None or finest is img else rel(img, finest))
             rows.append(row)
             print(f"{what:36s} {str(shadows):>7s} {count:9d} " + (f"{seconds:7.2f}s" if seconds else f"{'':8s}")
-                  + f" {100 * row['relative_rmse']:8.1f}% {100 * noise:5.1f}% {100 * row['darker']:6.1f}%", flush=True)
+                  + f" {100 * row['relative_rmse']:8.1f}% {100 * noise:5.1f}% {100 * row['darker']:6.1f}%"
+                  + (f" {100 * row['image_resolution']:5.1f}%" if row["image_resolution"] is not None else ""),
+                  flush=True)
         imgs[shadows] = truth
     os.makedirs(os.path.dirname(args.out), exist_ok=True)
     with open(args.out, "w") as f:
