@@ -1,8 +1,8 @@
 """Shader nodes other than the Principled BSDF against Cycles: a Diffuse BSDF (smooth and rough), a
 coloured Glossy BSDF, a Metallic BSDF, a Sheen BSDF, and Mix and Add Shaders of them inside a node
 group, each read by the add-on (addon/closures.py) as Principled terms times weights, on Cycles'
-unoccluded sphere under sunset: the terms' references summed by their weights against Cycles' render,
-within its noise."""
+unoccluded sphere under sunset (at half its size: a quarter of the pixels for the references to
+sum): the terms' references summed by their weights against Cycles' render, within its noise."""
 import math
 
 import numpy as np
@@ -12,14 +12,13 @@ bpy = pytest.importorskip("bpy")
 
 import wenv  # noqa: E402
 from addon import closures, engine  # noqa: E402
-from tests.helpers.cycles_sphere import SphereScene  # noqa: E402
-from tests.helpers.measure import bundled_hdri  # noqa: E402
+from tests.helpers.cycles_sphere import SphereScene, halved_hdri  # noqa: E402
 from tests.helpers.blender_versions import node_material as new_node_material  # noqa: E402
 
 
 @pytest.fixture(scope="module")
 def sphere():
-    return SphereScene("sunset", size=48, samples=384)
+    return SphereScene("sunset", size=48, samples=384, image=halved_hdri("sunset"))
 
 
 def node_material(build):
@@ -91,7 +90,7 @@ def test_shader_nodes_match_cycles_within_its_noise(sphere, case):
     sphere._use(mat)
     found, notes = closures.terms(mat)
     assert found and not notes, notes
-    env = wenv.load_environment(bundled_hdri("sunset"))
+    env = sphere.environment()
     ref = sum(np.float64(t.colour) * wenv.reference(env, engine.principled(t.inputs), sphere.normals, sphere.views)
               for t in found)
     a, b = (sphere.render(seed)[sphere.mask].astype(np.float64) for seed in (1, 2))

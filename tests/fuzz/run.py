@@ -1,5 +1,5 @@
 """Builds the fuzz targets (libFuzzer, clang, -fsanitize=fuzzer,address,undefined), writes their seed
-corpus and fuzzes each for a given time, one after the other on one core.
+corpus and fuzzes each for a given time on one core, as many at once as --jobs (the machine's cores).
 
     .venv/bin/python tests/fuzz/run.py --seconds 600                 # every target, 10 minutes each
     .venv/bin/python tests/fuzz/run.py --seconds 60 exr rgbe         # some targets
@@ -23,6 +23,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from concurrent.futures import ThreadPoolExecutor
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(os.path.dirname(HERE))
@@ -68,9 +69,9 @@ def compile_if_stale(cmd, src_paths, out_path):
         raise SystemExit("fuzz build failed:\n" + " ".join(cmd) + "\n" + build.stderr[-6000:])
 
 
-def build(build_dir, cc="clang"):
+def build(build_dir, cc="clang", jobs=1):
     """Compiles csrc/ (without python/) with coverage for libFuzzer and the sanitizers, once per
-    changed source, and links one binary per target.  Returns {target: binary}."""
+    changed source, `jobs` compilers at once, and links one binary per target.  Returns {target: binary}."""
     obj_dir = os.path.join(build_dir, "obj")
     exr = [f for f in pkg_config("--cflags", "OpenEXR") if f.startswith("-I")] or ["-I/usr/include/OpenEXR"]
     flags = CFLAGS + ["-I" + CSRC] + exr
@@ -86,14 +87,16 @@ def build(build_dir, cc="clang"):
     with open(stamp, "w") as f:
         f.write(used)
     headers = glob.glob(os.path.join(CSRC, "**", "*.h"), recursive=True)
-    objects = []
+    objects, compiles = [], []
     for src in sorted(glob.glob(os.path.join(CSRC, "**", "*.c"), recursive=True)):
         rel = os.path.relpath(src, CSRC)
         if rel.startswith("python" + os.sep):
             continue
         obj = os.path.join(obj_dir, rel.replace(os.sep, "__")[:-2] + ".o")
-        compile_if_stale([cc, *flags, "-fsanitize=fuzzer-no-link", "-c", src, "-o", obj], [src, *headers], obj)
+        compiles.append(([cc, *flags, "-fsanitize=fuzzer-no-link", "-c", src, "-o", obj], [src, *headers], obj))
         objects.append(obj)
+    with ThreadPoolExecutor(jobs) as pool:
+        list(pool.map(lambda job: compile_if_stale(*job), compiles))  # the first failure is raised here
     lib = os.path.join(build_dir, "libwenv_core.a")
     if not os.path.exists(lib) or os.path.getmtime(lib) < max(os.path.getmtime(o) for o in objects):
         if os.path.exists(lib):
@@ -187,6 +190,8 @@ def main(argv=None):
     ap.add_argument("--build-dir", default=os.path.join(ROOT, "build", "fuzz"))
     ap.add_argument("--corpus-dir", help="keep each target's corpus in CORPUS_DIR/<target> (default: a fresh one)")
     ap.add_argument("--json", help="also write the results to this file")
+    ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
+                    help="targets fuzzed (and sources compiled) at once, each on one core (default: the cores)")
     args = ap.parse_args(argv)
     targets = args.targets or TARGETS
     if set(targets) - set(TARGETS):
@@ -194,7 +199,9 @@ def main(argv=None):
     if not shutil.which("clang"):
         raise SystemExit("clang is missing: run scripts/setup.sh")
     t0 = time.monotonic()
-    binaries = build(args.build_dir)
+    if args.jobs < 1:
+        ap.error("--jobs must be 1 or more")
+    binaries = build(args.build_dir, jobs=args.jobs)
     seed_root = os.path.join(args.build_dir, "seeds")
     sys.path.insert(0, HERE)
     from seeds import write_seeds
@@ -202,12 +209,14 @@ def main(argv=None):
     write_seeds(seed_root, targets)
     print("built and seeded in %.0f s" % (time.monotonic() - t0), flush=True)
     results = []
-    with tempfile.TemporaryDirectory() as scratch:
-        for target in targets:
-            corpus = os.path.join(args.corpus_dir or scratch, target)
-            r = fuzz(target, binaries[target], args.seconds, os.path.join(seed_root, target), corpus,
-                     os.path.join(args.build_dir, "crashes", target), args.timeout, args.rss_limit_mb,
-                     os.path.join(args.build_dir, f"{target}.log"))
+    with tempfile.TemporaryDirectory() as scratch, ThreadPoolExecutor(args.jobs) as pool:
+        runs = [pool.submit(fuzz, target, binaries[target], args.seconds, os.path.join(seed_root, target),
+                            os.path.join(args.corpus_dir or scratch, target),
+                            os.path.join(args.build_dir, "crashes", target), args.timeout, args.rss_limit_mb,
+                            os.path.join(args.build_dir, f"{target}.log"))
+                for target in targets]
+        for target, run in zip(targets, runs):  # reported in the targets' order as each ends
+            r = run.result()
             results.append(r)
             print("%-13s %10d inputs in %5.0f s, %d crash(es), slowest corpus input %d ms, corpus %d, peak %d MB"
                   % (target, r["execs"], r["seconds"], len(r["crashes"]), r["slowest_corpus_ms"], r["corpus"],

@@ -33,6 +33,15 @@ from tests.helpers.blender_versions import node_material, use_world_nodes
 SOCKETS = {row["name"]: row["socket"] for row in wenv.Principled.INPUTS}
 
 
+def halved_hdri(name):
+    """A bundled HDRI at half its width and height, each pixel the mean of the four it covers (row 0
+    the top, as SphereScene's `image`): the same sky with a quarter of the pixels, for tests whose
+    reference sums over every one of them."""
+    px = wenv.load_environment(bundled_hdri(name)).pixels
+    h, w = px.shape[0] // 2 * 2, px.shape[1] // 2 * 2
+    return np.ascontiguousarray(px[:h, :w].reshape(h // 2, 2, w // 2, 2, 3).mean(axis=(1, 3)), np.float32)
+
+
 class SphereScene:
     """The scene above, built in the current bpy session (it replaces whatever is loaded)."""
 
@@ -171,10 +180,14 @@ class SphereScene:
             base += len(p)
         return wenv.Occluders(np.vstack([p for p, _ in parts]), np.vstack([t for _, t in parts]))
 
+    def environment(self):
+        """The World's lighting as wenv reads it: `image`, or the bundled HDRI."""
+        return wenv.Environment(self.image) if self.image is not None else wenv.load_environment(bundled_hdri(self.hdri))
+
     def compare_shadowed(self, material, seeds=(1, 2)):
         """With the ground: Cycles with Max Bounces 0 (two seeds) against wenv.reference casting every
         pixel's ray against the sphere and the ground; as compare()."""
-        env = wenv.Environment(self.image) if self.image is not None else wenv.load_environment(bundled_hdri(self.hdri))
+        env = self.environment()
         self.scene.cycles.max_bounces = 0
         a, b = (self.render(seed)[self.mask].astype(np.float64) for seed in seeds)
         ref = wenv.reference(env, material, self.normals, self.views, positions=self.positions,
@@ -190,8 +203,7 @@ class SphereScene:
         pixels: {'noise': one render's relative RMSE from the other's (/ sqrt 2), 'error': the two
         renders' mean against the reference, 'noise_of_mean': what the mean's own noise adds,
         'ratio': mean radiance per channel, Cycles over wenv}."""
-        import wenv
-        env = wenv.load_environment(bundled_hdri(self.hdri))
+        env = self.environment()
         a, b = (self.render(seed)[self.mask].astype(np.float64) for seed in seeds)
         ref = wenv.reference(env, material, self.normals, self.views).astype(np.float64)
         scale = math.sqrt(float(np.mean(ref ** 2)))

@@ -1,0 +1,19 @@
+"""The installable extension's zip, built as a user builds it."""
+import os
+import subprocess
+import sys
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
+def build_extension_zip():
+    """The zip scripts/build_extension.sh builds, by the main environment's tools (the zip is one for
+    every Blender)."""
+    main = os.path.join(ROOT, ".venv", "bin", "python")
+    proc = subprocess.run(["bash", os.path.join(ROOT, "scripts", "build_extension.sh")], cwd=ROOT,
+                          capture_output=True, text=True, timeout=300,
+                          env=dict(os.environ, PYTHON=main if os.path.exists(main) else sys.executable))
+    assert proc.returncode == 0, proc.stderr + proc.stdout
+    path = os.path.join(ROOT, proc.stdout.split()[0])
+    assert os.path.isfile(path)
+    return path
