@@ -12,7 +12,11 @@ Materials: Lambert, specular-only Cook-Torrance (Beckmann) m = 0.1, 0.2, 0.5, an
 paint, metal (roughness 0.3, GGX alpha 0.09) and coated paint (Coat Roughness 0.1, alpha 0.01) of
 the Principled accuracy table.  Prints the table and writes out/one_percent.json.
 
+`--also KEY=VALUE[,KEY=VALUE]...` adds settings measured beside them: `default` with those quality
+keys changed (say `light_threshold=32`), each one's error and view change.
+
     python benchmarks/one_percent.py [--hdris city forest] [--materials m0.1,metal] [--repeat 5]
+                                     [--also light_threshold=32 light_threshold=8,light_tolerance=0.003]
 """
 import argparse
 import json
@@ -51,7 +55,16 @@ def main():
     ap.add_argument("--hdris", nargs="+", default=HDRIS)
     ap.add_argument("--materials", default=",".join(NAMES))
     ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--also", nargs="*", default=[], metavar="KEY=VALUE,...",
+                    help="`default` with these quality keys changed, measured beside it")
     args = ap.parse_args()
+    also = {}
+    for text in args.also:
+        try:
+            also[text] = {k: float(v) if any(c in v for c in ".e") else int(v)
+                          for k, v in (kv.split("=") for kv in text.split(","))}
+        except ValueError:
+            ap.error(f"--also takes KEY=VALUE[,KEY=VALUE]..., not {text!r}")
     wenv.set_num_threads(2)
     names = args.materials.split(",")
     refs = {False: np.load(DATA), True: np.load(PRINCIPLED_DATA)}
@@ -75,6 +88,10 @@ def main():
                                   ("high", wenv.Shader(env, mat, quality="high", method="slicing"))):
                 row[f"{label}_error"] = relative_rmse(shader.shade(data["normals"], data["views"]), data[f"{h}/{name}"])
                 row[f"{label}_ms"] = view_ms(shader, pos, args.repeat)
+            for label, keys in also.items():
+                shader = wenv.Shader(env, mat, quality=keys)  # a partial dict: the rest from `default`
+                row[f"{label}_error"] = relative_rmse(shader.shade(data["normals"], data["views"]), data[f"{h}/{name}"])
+                row[f"{label}_ms"] = view_ms(shader, pos, args.repeat)
             # the limit in rounds of its own beside each case's: its 97 MB pass between two views
             # would push the shading's tables out of the caches and slow the views 20-30 %
             row["gather_limit_ms"] = statistics.median(gather_limit_ms(gather) for _ in range(args.repeat))
@@ -82,7 +99,9 @@ def main():
             print(f"{h:10s} {name:8s} {setting:>5s} {100 * row['auto_error']:6.2f}% {row['auto_ms']:6.1f}ms "
                   f"({row['auto_ms'] / row['gather_limit_ms']:4.1f}x) | "
                   f"{100 * row['default_error']:6.2f}% {row['default_ms']:6.1f}ms | {100 * row['high_error']:5.2f}% "
-                  f"{row['high_ms']:6.1f}ms", flush=True)
+                  f"{row['high_ms']:6.1f}ms"
+                  + "".join(f" | {label} {100 * row[label + '_error']:5.2f}% {row[label + '_ms']:6.1f}ms"
+                            for label in also), flush=True)
     limits = [x["gather_limit_ms"] for x in rows]
     print(f"\ngather limit: median {statistics.median(limits):.1f} ms ({min(limits):.1f}-{max(limits):.1f})")
     print("per material, worst over the HDRIs: auto's error and view change (both within 1 % and 30 ms?)")
