@@ -60,9 +60,9 @@ def build(size, hdri):
 
 def timed_bake(scene, obj, image, view, repeat):
     dg = bpy.context.evaluated_depsgraph_get()
-    bake.bake(scene, dg, obj, image, view, bpy.data, view_source="CAMERA")  # warms the shader and the shadows
+    count, _ = bake.bake(scene, dg, obj, image, view, bpy.data, view_source="CAMERA")  # warms the shader and shadows
     if not repeat:
-        return bake.bake(scene, dg, obj, image, view, bpy.data, view_source="CAMERA")[0], None
+        return count, None
     times = []
     for _ in range(repeat):
         start = time.perf_counter()
@@ -116,6 +116,7 @@ def main():
     ap.add_argument("--picture", action="store_true", help="write docs/bake_vs_cycles.png")
     ap.add_argument("--out", default=os.path.join(ROOT, "out", "bake_vs_cycles.json"))
     args = ap.parse_args()
+    all_sizes = args.sizes + ([args.finest] if args.finest else [])
     addon.register()
     scene, obj = build(args.size, args.hdri)
     scene.cycles.samples = args.samples
@@ -152,7 +153,7 @@ def main():
         bakes = {}
         for quality in args.qualities:
             scene.wenv.quality = quality.upper()
-            for size in args.sizes + ([args.finest] if args.finest else []):
+            for size in all_sizes:
                 image = bpy.data.images.new(f"bake {size}", size, size, alpha=True, float_buffer=True)
                 for shadows in (False, True):
                     scene.wenv.shadows = shadows
@@ -185,7 +186,7 @@ def main():
         entries = [("vertex colours, default", vertex[shadows], len(obj.data.vertices), None, None)]
         entries += [(f"bake {size} x {size}, {quality}",) + bakes[(quality, size, shadows)]
                     + (bakes[(quality, args.finest, shadows)][0] if args.finest else None,)
-                    for quality in args.qualities for size in args.sizes + ([args.finest] if args.finest else [])]
+                    for quality in args.qualities for size in all_sizes]
         entries += [(f"bake {args.sizes[0]} x {args.sizes[0]} box-filtered from {args.finest}, {quality}",)
                     + bakes[(quality, "box", shadows)] + (bakes[(quality, args.finest, shadows)][0],)
                     for quality in args.qualities if (quality, "box", shadows) in bakes]

@@ -83,13 +83,11 @@ def main():
             a = auto.stats["auto"]
             setting = f"sh{a['sh_order']}" if a["method"] == "sh" else str(a["level"])
             row = {"hdri": h, "material": name, "auto": setting, "auto_met_claimed": a["met"]}
-            for label, shader in (("auto", auto),
-                                  ("default", wenv.Shader(env, mat, quality="default")),
-                                  ("high", wenv.Shader(env, mat, quality="high", method="slicing"))):
-                row[f"{label}_error"] = relative_rmse(shader.shade(data["normals"], data["views"]), data[f"{h}/{name}"])
-                row[f"{label}_ms"] = view_ms(shader, pos, args.repeat)
-            for label, keys in also.items():
-                shader = wenv.Shader(env, mat, quality=keys)  # a partial dict: the rest from `default`
+            settings = [("auto", auto), ("default", wenv.Shader(env, mat, quality="default")),
+                        ("high", wenv.Shader(env, mat, quality="high", method="slicing"))]
+            # a partial quality dict takes the rest from `default`
+            settings += [(label, wenv.Shader(env, mat, quality=keys)) for label, keys in also.items()]
+            for label, shader in settings:
                 row[f"{label}_error"] = relative_rmse(shader.shade(data["normals"], data["views"]), data[f"{h}/{name}"])
                 row[f"{label}_ms"] = view_ms(shader, pos, args.repeat)
             # the limit in rounds of its own beside each case's: its 97 MB pass between two views
