@@ -1,5 +1,6 @@
 /* Reading the lighting at a grazing rule's nodes: the inner loop of the grazing path, written for
- * AVX-512 and AVX2 (gathers) with a portable version, the best for the CPU chosen at run time. */
+ * AVX-512 (gathers) and AVX2 (a 128-bit load per row of taps) with a portable version, the best for
+ * the CPU chosen at run time. */
 #ifndef WENV_GRAZING_NODES_H
 #define WENV_GRAZING_NODES_H
 
