@@ -3,7 +3,7 @@ round so that the machine's load falls on both alike, and prints every figure's 
 and their ratio.  For checking that a change of structure left speed and accuracy where they were.
 
     .venv/bin/python benchmarks/compare_builds.py BEFORE_DIR AFTER_DIR [--rounds 3]
-        [--benchmarks bench_shade,bench_peers,bench_gloss,accuracy]
+        [--benchmarks bench_shade,bench_peers,bench_gloss,accuracy,speed_breakdown]
 
 Each DIR holds a built `wenv` extension (for example `python setup.py build_ext --build-lib DIR`
 run in a checkout of the other commit).  Every benchmark writes its JSON to out/; each run's is
@@ -23,6 +23,7 @@ OUTPUTS = {  # what each benchmark writes, relative to out/
     "bench_peers": "bench_peers.json",
     "bench_gloss": "bench_gloss.json",
     "accuracy": "accuracy.json",
+    "speed_breakdown": "speed_breakdown.json",
 }
 
 

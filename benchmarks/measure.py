@@ -6,6 +6,7 @@ The scripts run as scripts (benchmarks/ first on sys.path) and import the tests'
 tests.helpers: importing this module puts the checkout on sys.path, last, so that a wenv named by
 PYTHONPATH (another build, a sanitized one) is still the one imported."""
 import os
+import platform
 import statistics
 import sys
 import time
@@ -16,6 +17,25 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 OUT = os.path.join(ROOT, "out")
 if ROOT not in sys.path:
     sys.path.append(ROOT)
+
+
+def cpu():
+    """The CPU's model name and its widest vector extension the hot loops dispatch on ("AMD EPYC,
+    avx2"): timings differ by both, and wenv picks its loops by the second at run time."""
+    name, flags = platform.processor() or platform.machine(), set()
+    try:
+        with open("/proc/cpuinfo") as fp:
+            for line in fp:
+                key, _, value = line.partition(":")
+                if key.strip() == "model name":
+                    name = value.strip()
+                elif key.strip() == "flags":
+                    flags = set(value.split())
+                    break
+    except OSError:
+        pass
+    widest = next((f for f in ("avx512f", "avx2") if f in flags), "baseline")
+    return f"{name}, {widest}"
 
 
 def sphere_image(size):

@@ -9,6 +9,8 @@ saves when turned off (`lights` 0: the suns and bright features left in the wave
 tables.  Writes out/speed_breakdown.json.
 
     python benchmarks/speed_breakdown.py [--hdris forest studio] [--repeat 5]
+
+benchmarks/compare_builds.py runs it against two builds side by side (`--benchmarks speed_breakdown`).
 """
 import argparse
 import json
@@ -19,12 +21,9 @@ import time
 
 import numpy as np
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, ROOT)
-sys.path.insert(0, os.path.join(ROOT, "tests"))
-import wenv  # noqa: E402
-
-from conftest import hdri_path  # noqa: E402
+from measure import OUT, cpu  # puts the checkout on sys.path, after a build that PYTHONPATH names
+import wenv
+from tests.conftest import hdri_path
 
 EYE = (0.0, -4.2, 0.0)
 MATERIALS = {
@@ -61,7 +60,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--hdris", nargs="*", default=["forest", "studio"])
     ap.add_argument("--repeat", type=int, default=5)
-    ap.add_argument("--out", default=os.path.join(ROOT, "out", "speed_breakdown.json"))
+    ap.add_argument("--out", default=os.path.join(OUT, "speed_breakdown.json"))
     args = ap.parse_args()
     wenv.set_num_threads(2)
     normals = sphere()
@@ -93,7 +92,7 @@ def main():
     os.makedirs(os.path.dirname(args.out), exist_ok=True)
     with open(args.out, "w") as f:
         json.dump(dict(command="python benchmarks/speed_breakdown.py " + " ".join(sys.argv[1:]),
-                       machine=platform.machine(), vertices=len(normals), rows=rows), f, indent=1)
+                       machine=platform.machine(), cpu=cpu(), vertices=len(normals), rows=rows), f, indent=1)
     print("wrote", args.out)
 
 
