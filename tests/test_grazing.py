@@ -154,8 +154,8 @@ def test_lobes_the_grazing_path_takes_at_every_view_make_no_slices():
         sh.set_environment(city)
         assert np.array_equal(sh.shade(n, v), wenv.Shader(city, mat, quality="default", method="slicing").shade(n, v))
         assert sh.stats["slices_ready"] == 0 and sh.stats["pairs_ready"] == 0
-    ref = wenv.reference(sunset, lobe(0.05), n, v)
-    out = wenv.Shader(sunset, lobe(0.05), quality="default", method="slicing").shade(n, v)
+    ref = wenv.reference(sunset, lobe(0.05), n[:500], v[:500])  # 500 of the pairs: the reference sums every pixel
+    out = wenv.Shader(sunset, lobe(0.05), quality="default", method="slicing").shade(n[:500], v[:500])
     assert np.sqrt(np.mean((out - ref) ** 2) / np.mean(ref ** 2)) < 0.02
     sh = wenv.Shader(sunset, lobe(0.1), quality="default", method="slicing")
     sh.shade(n, v)

@@ -158,10 +158,27 @@ static wenv_status reference_one(const wenv_envmap *env, const wenv_material *ma
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the reference");
     }
     size_t count = wenv_envmap_samples(env, dirs, flux, omega);
+    /* A black pixel sends nothing, and without a bounce neither does what blocks it: the sums leave it
+     * out (a softbox and a sun in a black World are a few hundred of 10^5 pixels).  A World black
+     * throughout skips the lobe rules too (scenes lit by lamps alone, where a lobe is "narrow" against
+     * a tiny image and its rule would cost ~10^5 reads a vertex to add zero). */
+    int world_dark = 0;
+    if (!(occ && bounce)) {
+        size_t kept = 0;
+        for (size_t p = 0; p < count; p++) {
+            if (flux[3 * p] == 0.0f && flux[3 * p + 1] == 0.0f && flux[3 * p + 2] == 0.0f)
+                continue;
+            memmove(dirs + 3 * kept, dirs + 3 * p, 3 * sizeof(float));
+            memmove(flux + 3 * kept, flux + 3 * p, 3 * sizeof(float));
+            omega[kept++] = omega[p];
+        }
+        count = kept;
+        world_dark = count == 0;
+    }
     size_t n_lobes = wenv_material_lobe_count(mat), n_narrow = 0;
     double narrow_alpha = WENV_NARROW_LOBE_PIXELS * wenv_envmap_pixel_angle(env);
     for (size_t l = 0; l < n_lobes; l++)
-        n_narrow += wenv_material_lobe(mat, l)->alpha < narrow_alpha;
+        n_narrow += !world_dark && wenv_material_lobe(mat, l)->alpha < narrow_alpha;
     atomic_int failed = 0, cancelled = 0;
     atomic_size_t done = 0;
 #pragma omp parallel
@@ -200,7 +217,7 @@ static wenv_status reference_one(const wenv_envmap *env, const wenv_material *ma
                 for (int c = 0; c < 3; c++)
                     b.origin[c] = positions[3 * i + (size_t)c] + lift * (float)nn[c];
             }
-            if (wo[2] > 0.0) {
+            if (wo[2] > 0.0 && !world_dark) {
                 size_t fill = 0;
                 for (size_t p = 0; p <= count; p++) {
                     if (p < count) {

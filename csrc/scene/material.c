@@ -484,11 +484,30 @@ wenv_status wenv_material_albedo(const wenv_material *mat, const double wo[3], s
  * so that the weights sum to the lobe's albedo within 0.1 % to 80 degrees (one point per cell: 0.3 %). */
 #define SLOPE_SUBCELLS 4
 
-wenv_status wenv_material_lobe_slope_cells(const wenv_material *mat, size_t i, const double wo[3], size_t n_x,
-                                           size_t n_y, wenv_slope_part part, double *wi, double *weight,
-                                           double *size, size_t *count, wenv_error *err)
+/* A lobe part's slope grid: the material and the part, and the rows of its cells and of their
+ * SLOPE_SUBCELLS finer cells, made once for the lobe's every view. */
+struct wenv_lobe_slope_grid {
+    const wenv_material *mat;
+    size_t i;
+    wenv_slope_part part;
+    size_t n_y;
+    wenv_lobe grid; /* the shape's, its core's, or for the tail the GGX lobe as wide as the tail's narrowest */
+    wenv_slope_rows *coarse, *fine;
+};
+
+void wenv_lobe_slope_grid_free(wenv_lobe_slope_grid *g)
 {
-    *count = 0;
+    if (!g)
+        return;
+    wenv_slope_rows_free(g->coarse);
+    wenv_slope_rows_free(g->fine);
+    free(g);
+}
+
+wenv_status wenv_lobe_slope_grid_make(const wenv_material *mat, size_t i, size_t n_y, wenv_slope_part part,
+                                      wenv_lobe_slope_grid **out, wenv_error *err)
+{
+    *out = NULL;
     if (i >= mat->n_lobes)
         return wenv_error_set(err, WENV_ERR_VALUE, "lobe %zu of %zu", i, mat->n_lobes);
     const wenv_lobe *lobe = &mat->lobes[i];
@@ -496,20 +515,39 @@ wenv_status wenv_material_lobe_slope_cells(const wenv_material *mat, size_t i, c
         (part.tail && !(part.cut > 0.0)))
         return wenv_error_set(err, WENV_ERR_VALUE, "a lobe's part must cut a GGX lobe at a scale in (0, 1], got %g",
                               part.cut);
-    /* the grid: the shape's, its core's, or for the tail the GGX lobe as wide as the tail's narrowest */
-    wenv_lobe grid = *lobe;
+    wenv_lobe_slope_grid *g = calloc(1, sizeof *g);
+    if (!g)
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for a lobe's cells");
+    *g = (wenv_lobe_slope_grid){.mat = mat, .i = i, .part = part, .n_y = n_y, .grid = *lobe};
     double grid_cut = part.tail ? 0.0 : part.cut;
     if (part.tail)
-        grid.alpha = lobe->alpha / sqrt(part.cut);
-    if (wenv_lobe_slope_cells(&grid, grid_cut, wo, n_x, n_y, wi, weight, size, count, err))
+        g->grid.alpha = lobe->alpha / sqrt(part.cut);
+    if (wenv_slope_rows_make(&g->grid, grid_cut, n_y, &g->coarse, err) ||
+        wenv_slope_rows_make(&g->grid, grid_cut, n_y * SLOPE_SUBCELLS, &g->fine, err)) {
+        wenv_lobe_slope_grid_free(g);
         return err->status;
-    size_t K = SLOPE_SUBCELLS, fx = n_x * K, fy = n_y * K, nf = fx * fy;
+    }
+    *out = g;
+    return WENV_OK;
+}
+
+wenv_status wenv_lobe_slope_grid_cells(const wenv_lobe_slope_grid *g, const double wo[3], size_t n_x, double *wi,
+                                       double *weight, double *size, size_t *count, wenv_error *err)
+{
+    const wenv_material *mat = g->mat;
+    size_t i = g->i;
+    wenv_slope_part part = g->part;
+    const wenv_lobe *lobe = &mat->lobes[i];
+    *count = 0;
+    if (wenv_slope_rows_cells(g->coarse, wo, n_x, wi, weight, size, count, err))
+        return err->status;
+    size_t K = SLOPE_SUBCELLS, fx = n_x * K, fy = g->n_y * K, nf = fx * fy;
     double *fine = malloc(nf * 5 * sizeof *fine);
     if (!fine)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for a lobe's cells");
     double *fwi = fine, *fmass = fine + 3 * nf, *fsize = fine + 4 * nf;
     size_t got;
-    if (wenv_lobe_slope_cells(&grid, grid_cut, wo, fx, fy, fwi, fmass, fsize, &got, err)) {
+    if (wenv_slope_rows_cells(g->fine, wo, fx, fwi, fmass, fsize, &got, err)) {
         free(fine);
         return err->status;
     }
@@ -517,7 +555,7 @@ wenv_status wenv_material_lobe_slope_cells(const wenv_material *mat, size_t i, c
     wenv_lobe_rgb_fn over_ndf = wenv_material_lobe_over_ndf_fn(mat);
     /* the core's grid is e^cut times its share of D: its value over that is the lobe's over D, e^-cut */
     double core_scale = part.cut > 0.0 && !part.tail ? exp(-part.cut) : 1.0;
-    double a2 = lobe->alpha * lobe->alpha, t2 = grid.alpha * grid.alpha;
+    double a2 = lobe->alpha * lobe->alpha, t2 = g->grid.alpha * g->grid.alpha;
     /* fine row r, column c lies in coarse row r / K, column c / K: each fine row splits its own
      * range of columns into fx, so K of them make one coarse column */
     for (size_t r = 0; r < fy; r++)
@@ -542,4 +580,17 @@ wenv_status wenv_material_lobe_slope_cells(const wenv_material *mat, size_t i, c
         }
     free(fine);
     return WENV_OK;
+}
+
+wenv_status wenv_material_lobe_slope_cells(const wenv_material *mat, size_t i, const double wo[3], size_t n_x,
+                                           size_t n_y, wenv_slope_part part, double *wi, double *weight,
+                                           double *size, size_t *count, wenv_error *err)
+{
+    *count = 0;
+    wenv_lobe_slope_grid *g;
+    if (wenv_lobe_slope_grid_make(mat, i, n_y, part, &g, err))
+        return err->status;
+    wenv_status st = wenv_lobe_slope_grid_cells(g, wo, n_x, wi, weight, size, count, err);
+    wenv_lobe_slope_grid_free(g);
+    return st;
 }

@@ -275,4 +275,14 @@ wenv_status wenv_material_lobe_slope_cells(const wenv_material *mat, size_t i, c
                                            size_t n_y, wenv_slope_part part, double *wi, double *weight,
                                            double *size, size_t *count, wenv_error *err);
 
+/* The same rule for many views: what no view changes (the grid's rows, coarse and fine: half of a
+ * core's work) made once by wenv_lobe_slope_grid_make, then each view's nodes, to the bit those of
+ * wenv_material_lobe_slope_cells.  The grid holds mat, which must outlive it. */
+typedef struct wenv_lobe_slope_grid wenv_lobe_slope_grid;
+wenv_status wenv_lobe_slope_grid_make(const wenv_material *mat, size_t i, size_t n_y, wenv_slope_part part,
+                                      wenv_lobe_slope_grid **out, wenv_error *err);
+wenv_status wenv_lobe_slope_grid_cells(const wenv_lobe_slope_grid *g, const double wo[3], size_t n_x, double *wi,
+                                       double *weight, double *size, size_t *count, wenv_error *err);
+void wenv_lobe_slope_grid_free(wenv_lobe_slope_grid *g);
+
 #endif

@@ -504,42 +504,84 @@ static double angle_between(const double a[3], const double b[3])
     return atan2(sqrt(cx * cx + cy * cy + cz * cz), a[0] * b[0] + a[1] * b[1] + a[2] * b[2]);
 }
 
-wenv_status wenv_lobe_slope_cells(const wenv_lobe *lobe, double cut, const double wo[3], size_t n_x, size_t n_y,
-                                  double *wi, double *mass, double *size, size_t *count, wenv_error *err)
+/* A grid's rows: each row's slope y, its share of the marginal (dy) and its conditional table. */
+struct wenv_slope_rows {
+    slope_grid g;
+    size_t n_y;
+    double *y, *dy;
+    slope_row *row;
+};
+
+void wenv_slope_rows_free(wenv_slope_rows *rows)
 {
-    *count = 0;
-    if (n_x < 1 || n_y < 1 || n_x > ALBEDO_SAMPLES_MAX || n_y > ALBEDO_SAMPLES_MAX)
-        return wenv_error_set(err, WENV_ERR_VALUE, "cell counts must be in [1, %d], got %zu x %zu",
-                              ALBEDO_SAMPLES_MAX, n_x, n_y);
+    if (!rows)
+        return;
+    free(rows->y);
+    free(rows->row);
+    free(rows);
+}
+
+wenv_status wenv_slope_rows_make(const wenv_lobe *lobe, double cut, size_t n_y, wenv_slope_rows **out,
+                                 wenv_error *err)
+{
+    *out = NULL;
+    if (n_y < 1 || n_y > ALBEDO_SAMPLES_MAX)
+        return wenv_error_set(err, WENV_ERR_VALUE, "row counts must be in [1, %d], got %zu", ALBEDO_SAMPLES_MAX, n_y);
     if (!(cut >= 0.0 && cut <= 1.0) || (cut > 0.0 && lobe->distribution != WENV_NDF_GGX))
         return wenv_error_set(err, WENV_ERR_VALUE, "a slope grid's cut must be in [0, 1], and 0 but for GGX, got %g", cut);
-    slope_grid g = {lobe->distribution == WENV_NDF_GGX, lobe->alpha, cut};
+    wenv_slope_rows *rows = calloc(1, sizeof *rows);
+    if (rows) {
+        rows->y = malloc(2 * n_y * sizeof *rows->y);
+        rows->row = malloc(n_y * sizeof *rows->row);
+    }
+    if (!rows || !rows->y || !rows->row) {
+        wenv_slope_rows_free(rows);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for a slope grid's %zu rows", n_y);
+    }
+    rows->g = (slope_grid){lobe->distribution == WENV_NDF_GGX, lobe->alpha, cut};
+    rows->n_y = n_y;
+    rows->dy = rows->y + n_y;
+    for (size_t j = 0; j < n_y; j++) {
+        rows->y[j] = slope_inverse(&rows->g, NULL, ((double)j + 0.5) / (double)n_y);
+        rows->dy[j] = 1.0 / (double)n_y / slope_marginal_pdf(&rows->g, rows->y[j]);
+        make_row(&rows->g, rows->y[j], &rows->row[j]);
+    }
+    *out = rows;
+    return WENV_OK;
+}
+
+wenv_status wenv_slope_rows_cells(const wenv_slope_rows *rows, const double wo[3], size_t n_x, double *wi,
+                                  double *mass, double *size, size_t *count, wenv_error *err)
+{
+    *count = 0;
+    if (n_x < 1 || n_x > ALBEDO_SAMPLES_MAX)
+        return wenv_error_set(err, WENV_ERR_VALUE, "cell counts must be in [1, %d], got %zu x %zu",
+                              ALBEDO_SAMPLES_MAX, n_x, rows->n_y);
+    const slope_grid *g = &rows->g;
     double so = sqrt(wo[0] * wo[0] + wo[1] * wo[1]), co = wo[2];
     /* work with the view in the xz plane, turn the nodes back at the end */
     double cp = so > 0.0 ? wo[0] / so : 1.0, sp = so > 0.0 ? wo[1] / so : 0.0, w[3] = {so, 0.0, co};
     size_t n = 0;
-    for (size_t j = 0; j < n_y; j++) {
-        double y = slope_inverse(&g, NULL, ((double)j + 0.5) / (double)n_y);
-        double dy = 1.0 / (double)n_y / slope_marginal_pdf(&g, y);
-        slope_row row;
-        make_row(&g, y, &row);
+    for (size_t j = 0; j < rows->n_y; j++) {
+        double y = rows->y[j], dy = rows->dy[j];
+        const slope_row *row = &rows->row[j];
         /* the slopes x whose reflection lies above the horizon: c x^2 - 2 s x + c (y^2 - 1) < 0 */
         double r = sqrt(fmax(0.0, 1.0 - co * co * y * y));
         double x1 = co * (y * y - 1.0) / (so + r), x2 = co > 0.0 ? (so + r) / co : INFINITY;
-        double f_lo = slope_conditional_cdf(&g, &row, x1), f_hi = isinf(x2) ? 1.0 : slope_conditional_cdf(&g, &row, x2);
+        double f_lo = slope_conditional_cdf(g, row, x1), f_hi = isinf(x2) ? 1.0 : slope_conditional_cdf(g, row, x2);
         double df = (f_hi - f_lo) / (double)n_x;
         for (size_t i = 0; i < n_x; i++, n++) {
             double *d = wi + 3 * n;
             double u = f_lo + ((double)i + 0.5) * df;
-            double x = g.ggx && cut > 0.0 ? row.b * tan(cut_inverse(&row, u)) : slope_inverse(&g, &row, u);
-            double dx = df / slope_conditional_pdf(&g, &row, x);
+            double x = g->ggx && g->cut > 0.0 ? row->b * tan(cut_inverse(row, u)) : slope_inverse(g, row, u);
+            double dx = df / slope_conditional_pdf(g, row, x);
             double vh, ch;
             slope_reflect(x, y, w, d, &vh, &ch);
             mass[n] = size[n] = 0.0;
             if (co > 0.0 && d[2] > 0.0 && vh > 0.0 && df > 0.0) {
                 /* Int f cos E d wi = Int (f 4 cos_i cos_o / D) (v.h) / (cos_o cos_h) E dP(slopes):
                  * the cell's share of P times the factor that turns the lobe's value over D into it */
-                mass[n] = df / (double)n_y * vh / (co * ch);
+                mass[n] = df / (double)rows->n_y * vh / (co * ch);
                 /* the cell's extent in wi along each axis; its footprint is their geometric mean */
                 double e[2], p[3], q[3], t1, t2;
                 slope_reflect(x - 0.5 * dx, y, w, p, &t1, &t2);
@@ -557,4 +599,19 @@ wenv_status wenv_lobe_slope_cells(const wenv_lobe *lobe, double cut, const doubl
     }
     *count = n;
     return WENV_OK;
+}
+
+wenv_status wenv_lobe_slope_cells(const wenv_lobe *lobe, double cut, const double wo[3], size_t n_x, size_t n_y,
+                                  double *wi, double *mass, double *size, size_t *count, wenv_error *err)
+{
+    *count = 0;
+    if (n_x < 1 || n_y < 1 || n_x > ALBEDO_SAMPLES_MAX || n_y > ALBEDO_SAMPLES_MAX)
+        return wenv_error_set(err, WENV_ERR_VALUE, "cell counts must be in [1, %d], got %zu x %zu",
+                              ALBEDO_SAMPLES_MAX, n_x, n_y);
+    wenv_slope_rows *rows;
+    if (wenv_slope_rows_make(lobe, cut, n_y, &rows, err))
+        return err->status;
+    wenv_status st = wenv_slope_rows_cells(rows, wo, n_x, wi, mass, size, count, err);
+    wenv_slope_rows_free(rows);
+    return st;
 }

@@ -127,6 +127,16 @@ wenv_status wenv_lobe_slope_cells(const wenv_lobe *lobe, double cut, const doubl
  * core's D normalised, e^cut share D. */
 double wenv_ggx_core_share(double alpha, double cut, double tan2);
 
+/* A slope grid's rows, which no view changes (each row's slope, its share and its conditional table,
+ * half the rule's work for a cut lobe): made once, then read for every view by wenv_slope_rows_cells,
+ * which writes what wenv_lobe_slope_cells writes, to the bit. */
+typedef struct wenv_slope_rows wenv_slope_rows;
+wenv_status wenv_slope_rows_make(const wenv_lobe *lobe, double cut, size_t n_y, wenv_slope_rows **out,
+                                 wenv_error *err);
+wenv_status wenv_slope_rows_cells(const wenv_slope_rows *rows, const double wo[3], size_t n_x, double *wi,
+                                  double *mass, double *size, size_t *count, wenv_error *err);
+void wenv_slope_rows_free(wenv_slope_rows *rows);
+
 /* ---- the lobe's terms, inline for the hot loops (~1e9 calls): written once (microfacet_terms.inc),
  * compiled in double (wenv_fresnel_dielectric, wenv_ndf_tan2, wenv_smith_k, wenv_half_vector_of,
  * wenv_vis_smith, wenv_vis_vcavity) and in float (the same names with _f) ---- */

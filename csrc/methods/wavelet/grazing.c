@@ -189,6 +189,24 @@ static int lobe_is_cut(const wenv_lobe *lobe)
     return lobe_is_ggx(lobe) && lobe->alpha <= GGX_CUT_ALPHA_MAX;
 }
 
+/* A slope rule's columns and rows for a lobe's part (0: the whole lobe or a cut lobe's core, 1: its tail). */
+static size_t slope_columns(const wenv_lobe *lobe, int part)
+{
+    return part ? TAIL_X : lobe_is_cut(lobe) ? CORE_X : lobe_is_ggx(lobe) ? GGX_X : N_X;
+}
+
+static size_t slope_rows(const wenv_lobe *lobe, int part)
+{
+    return part ? TAIL_Y : lobe_is_cut(lobe) ? CORE_Y : lobe_is_ggx(lobe) ? GGX_Y : N_Y;
+}
+
+static void free_grids(wenv_lobe_slope_grid **grids, size_t n_lobes)
+{
+    for (size_t k = 0; grids && k < 2 * n_lobes; k++)
+        wenv_lobe_slope_grid_free(grids[k]);
+    free(grids);
+}
+
 wenv_status wenv_grazing_rule_create(wenv_grazing_rule **out, const wenv_material *mat, size_t local_n,
                                      double threshold, int all_slopes, wenv_error *err)
 {
@@ -258,6 +276,26 @@ wenv_status wenv_grazing_rule_create(wenv_grazing_rule **out, const wenv_materia
         wenv_grazing_rule_free(rule);
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the grazing rules");
     }
+    /* each slope grid's rows, which no entry's view changes, made once (2 parts a lobe at most) */
+    wenv_lobe_slope_grid **grids = slope ? calloc(2 * n_lobes, sizeof *grids) : NULL;
+    if (slope && !grids) {
+        free(block);
+        wenv_grazing_rule_free(rule);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the grazing rules");
+    }
+    for (size_t k = 0; slope && k < n_lobes; k++) {
+        const wenv_lobe *lobe = wenv_material_lobe(mat, k);
+        int cut = lobe_is_cut(lobe);
+        for (int part = 0; !lobe_is_black(lobe) && part < (cut ? 2 : 1); part++) {
+            wenv_slope_part sp = {cut ? GGX_CUT : 0.0, part};
+            if (wenv_lobe_slope_grid_make(mat, k, slope_rows(lobe, part), sp, &grids[2 * k + (size_t)part], err)) {
+                free_grids(grids, n_lobes);
+                free(block);
+                wenv_grazing_rule_free(rule);
+                return err->status;
+            }
+        }
+    }
     /* the entries are independent, and a lobe's cells cost it several inverse error functions
      * each: half a material change's time on one thread */
     atomic_int failed = 0;
@@ -286,12 +324,11 @@ wenv_status wenv_grazing_rule_create(wenv_grazing_rule **out, const wenv_materia
                 for (int part = 0; part < (cut ? 2 : 1); part++) {
                     size_t count;
                     wenv_error lobe_err = {0};
-                    wenv_slope_part sp = {cut ? GGX_CUT : 0.0, part};
                     /* omega: each cell's footprint, radians (slope) or its solid angle (polar) */
-                    size_t nx = part ? TAIL_X : cut ? CORE_X : lobe_is_ggx(lobe) ? GGX_X : N_X;
-                    size_t ny = part ? TAIL_Y : cut ? CORE_Y : lobe_is_ggx(lobe) ? GGX_Y : N_Y;
+                    const wenv_lobe_slope_grid *grid = slope ? grids[2 * k + (size_t)part] : NULL;
                     wenv_status st =
-                        slope ? wenv_material_lobe_slope_cells(mat, k, wo, nx, ny, sp, wi, weight, omega, &count, &lobe_err)
+                        slope ? wenv_lobe_slope_grid_cells(grid, wo, slope_columns(lobe, part), wi, weight, omega,
+                                                           &count, &lobe_err)
                               : wenv_material_lobe_cells(mat, k, wo, N_THETA, N_PHI, wi, weight, omega, &count, &lobe_err);
                     if (st) {
                         if (!atomic_exchange(&failed, 2))
@@ -312,6 +349,7 @@ wenv_status wenv_grazing_rule_create(wenv_grazing_rule **out, const wenv_materia
         }
         free(wi);
     }
+    free_grids(grids, n_lobes);
     if (failed) {
         free(block);
         wenv_grazing_rule_free(rule);
