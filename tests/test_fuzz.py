@@ -1,5 +1,5 @@
 """A short fuzzing run of every file reader (tests/fuzz/run.py: libFuzzer with AddressSanitizer and
-UndefinedBehaviorSanitizer, 25 s per target, two at a time on two cores, with the build): no crash, leak,
+UndefinedBehaviorSanitizer, 15 s per target, two at a time on two cores, with the build): no crash, leak,
 failed check or input slower than 10 s, and each target tried many inputs and found new ones
 beyond its seeds.  The seeds include the inputs that once broke a reader, so they are replayed
 first.  Then the Python API's random-input run (tests/fuzz/api.py) and the add-on's random scenes
@@ -17,7 +17,7 @@ sys.path.insert(0, os.path.join(ROOT, "tests", "fuzz"))
 from run import TARGETS  # noqa: E402
 import wenv  # noqa: E402
 
-SECONDS = 25
+SECONDS = 15
 MIN_INPUTS = 10_000  # each target runs 10^4 to 10^5 inputs a second here
 
 
@@ -90,7 +90,7 @@ def test_api_survives_random_input(tmp_path):
     assert counts.get("returned glossmeter gloss", 0) + counts.get("returned glossmeter measure", 0) >= 3, counts
 
 
-ADDON_ITERATIONS = 300
+ADDON_ITERATIONS = 200
 
 
 def test_addon_survives_random_scenes_and_use(tmp_path):

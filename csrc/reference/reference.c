@@ -18,6 +18,7 @@
  * rule reads the pixel under each node: the same lighting the pixel sum integrates, each pixel's
  * radiance over its area (Cycles' "Closest" interpolation; its default "Linear" blurs the lighting by
  * about a pixel, which a lobe a few pixels wide reflecting a sun of a few pixels tells apart). */
+#define NODE_RAYS 256     /* a narrow lobe's node rays handed to Embree at once */
 #define NARROW_SAMPLES 192 /* the rule's divisions: 2 x 192^2 nodes over a lobe a few pixels wide */
 
 /* What blocks the lighting, if anything: the scene and the ray's start (the vertex, lifted). */
@@ -65,15 +66,30 @@ static wenv_status narrow_lobe(const wenv_envmap *env, const wenv_material *mat,
     double *weights = nodes + 3 * max;
     if (wenv_material_lobe_nodes(mat, i, wo, NARROW_SAMPLES, nodes, weights, &n, err))
         return err->status;
-    for (size_t k = 0; k < n; k++) {
-        const double *l = nodes + 3 * k;
-        double d[3] = {f[0] * l[0] + f[3] * l[1] + f[6] * l[2], f[1] * l[0] + f[4] * l[1] + f[7] * l[2],
-                       f[2] * l[0] + f[5] * l[1] + f[8] * l[2]};
-        float L[3];
-        if (!blocked_one(b, d, L))
-            wenv_envmap_lookup_nearest(env, d, L);
-        for (int c = 0; c < 3; c++)
-            acc[c] += weights[3 * k + (size_t)c] * L[c];
+    /* the nodes' rays a batch at a time: Embree traces rays from one origin together far faster */
+    float fd[3 * NODE_RAYS], uv[2 * NODE_RAYS];
+    uint32_t tri[NODE_RAYS];
+    for (size_t start = 0; start < n; start += NODE_RAYS) {
+        size_t m = n - start < NODE_RAYS ? n - start : NODE_RAYS;
+        for (size_t k = 0; k < m; k++) {
+            const double *l = nodes + 3 * (start + k);
+            for (int c = 0; c < 3; c++)
+                fd[3 * k + (size_t)c] = (float)(f[c] * l[0] + f[3 + c] * l[1] + f[6 + c] * l[2]);
+        }
+        if (b->occ)
+            wenv_occluders_hit(b->occ, b->origin, fd, m, tri, uv);
+        for (size_t k = 0; k < m; k++) {
+            const double *l = nodes + 3 * (start + k);
+            double d[3] = {f[0] * l[0] + f[3] * l[1] + f[6] * l[2], f[1] * l[0] + f[4] * l[1] + f[7] * l[2],
+                           f[2] * l[0] + f[5] * l[1] + f[8] * l[2]};
+            float L[3];
+            if (b->occ && tri[k] != UINT32_MAX)
+                blocker_light(b, tri[k], uv + 2 * k, L);
+            else
+                wenv_envmap_lookup_nearest(env, d, L);
+            for (int c = 0; c < 3; c++)
+                acc[c] += weights[3 * (start + k) + (size_t)c] * L[c];
+        }
     }
     double cut = wenv_material_lobe_cos_h_min(mat, i);
     wenv_lobe_rgb_fn value = wenv_material_lobe_value_fn(mat);
