@@ -98,12 +98,12 @@ def test_each_input_in_a_few_values_is_shaded_exactly(sphere, name):
     ("sheen_weight", 0.0, 1.0, 5e-4),  # linear (to the LTC table's rounding)
 ])
 def test_a_smooth_input_is_within_its_bound_of_each_vertex_own(sphere, name, lo, hi, bound):
-    """An input varying smoothly over the sphere, under forest (a sun): against every vertex shaded with
-    a plain material at its own value, within the bound docs/python.md states."""
+    """An input varying smoothly over the sphere (16 values), under forest (a sun): against every vertex
+    shaded with a plain material at its own value, within the bound docs/python.md states."""
     v, views = sphere
     env = wenv.load_environment(hdri_path("forest"))
     base = {**BASE, **UNDER.get(name, {})}
-    inputs = {name: smooth(v, lo, hi, (hi - lo) / 30)}
+    inputs = {name: smooth(v, lo, hi, (hi - lo) / 15)}
     got = wenv.Shader(env, wenv.Principled(**base), quality="default", method="slicing").shade(v, views, **inputs)
     assert relative_rmse(got, each_own(env, base, inputs, v, views)) < bound
 
