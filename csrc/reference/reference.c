@@ -67,26 +67,26 @@ static wenv_status narrow_lobe(const wenv_envmap *env, const wenv_material *mat,
     if (wenv_material_lobe_nodes(mat, i, wo, NARROW_SAMPLES, nodes, weights, &n, err))
         return err->status;
     /* the nodes' rays a batch at a time: Embree traces rays from one origin together far faster */
+    double d[3 * NODE_RAYS];
     float fd[3 * NODE_RAYS], uv[2 * NODE_RAYS];
     uint32_t tri[NODE_RAYS];
     for (size_t start = 0; start < n; start += NODE_RAYS) {
         size_t m = n - start < NODE_RAYS ? n - start : NODE_RAYS;
         for (size_t k = 0; k < m; k++) {
             const double *l = nodes + 3 * (start + k);
-            for (int c = 0; c < 3; c++)
-                fd[3 * k + (size_t)c] = (float)(f[c] * l[0] + f[3 + c] * l[1] + f[6 + c] * l[2]);
+            for (size_t c = 0; c < 3; c++) {
+                d[3 * k + c] = f[c] * l[0] + f[3 + c] * l[1] + f[6 + c] * l[2];
+                fd[3 * k + c] = (float)d[3 * k + c];
+            }
         }
         if (b->occ)
             wenv_occluders_hit(b->occ, b->origin, fd, m, tri, uv);
         for (size_t k = 0; k < m; k++) {
-            const double *l = nodes + 3 * (start + k);
-            double d[3] = {f[0] * l[0] + f[3] * l[1] + f[6] * l[2], f[1] * l[0] + f[4] * l[1] + f[7] * l[2],
-                           f[2] * l[0] + f[5] * l[1] + f[8] * l[2]};
             float L[3];
             if (b->occ && tri[k] != UINT32_MAX)
                 blocker_light(b, tri[k], uv + 2 * k, L);
             else
-                wenv_envmap_lookup_nearest(env, d, L);
+                wenv_envmap_lookup_nearest(env, d + 3 * k, L);
             for (int c = 0; c < 3; c++)
                 acc[c] += weights[3 * (start + k) + (size_t)c] * L[c];
         }

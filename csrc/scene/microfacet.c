@@ -605,9 +605,6 @@ wenv_status wenv_lobe_slope_cells(const wenv_lobe *lobe, double cut, const doubl
                                   double *wi, double *mass, double *size, size_t *count, wenv_error *err)
 {
     *count = 0;
-    if (n_x < 1 || n_y < 1 || n_x > ALBEDO_SAMPLES_MAX || n_y > ALBEDO_SAMPLES_MAX)
-        return wenv_error_set(err, WENV_ERR_VALUE, "cell counts must be in [1, %d], got %zu x %zu",
-                              ALBEDO_SAMPLES_MAX, n_x, n_y);
     wenv_slope_rows *rows;
     if (wenv_slope_rows_make(lobe, cut, n_y, &rows, err))
         return err->status;

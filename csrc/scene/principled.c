@@ -533,7 +533,7 @@ static void reweight(const wenv_material *mat, size_t i, const double wo[3], con
         wenv_material_reweight_nodes(mat, i, wo, wi, weight, count, value_at, &ctx);
         return;
     }
-    /* the ratio with D and G2 cancelled, a third of the reference's time on narrow lobes */
+    /* the ratio with D and G2 cancelled, which the generic path evaluates twice at every node */
     for (size_t q = count; q-- > 0;) { /* from the back: weight[q] becomes weight[3q..3q+2] */
         const double *d = wi + 3 * q;
         double w = weight[q], f[3] = {0.0, 0.0, 0.0}, fs = 0.0;

@@ -243,10 +243,9 @@ wenv_status wenv_grazing_rule_create(wenv_grazing_rule **out, const wenv_materia
         const wenv_lobe *lobe = wenv_material_lobe(mat, k);
         if (lobe_is_black(lobe))
             continue;
-        size_t nodes = !slope               ? 2 * N_THETA * N_PHI
-                       : lobe_is_cut(lobe) ? CORE_X * CORE_Y + TAIL_X * TAIL_Y
-                       : lobe_is_ggx(lobe) ? GGX_X * GGX_Y
-                                           : N_X * N_Y;
+        size_t nodes = !slope ? 2 * N_THETA * N_PHI
+                              : slope_columns(lobe, 0) * slope_rows(lobe, 0) +
+                                    (lobe_is_cut(lobe) ? slope_columns(lobe, 1) * slope_rows(lobe, 1) : 0);
         any_cut |= slope && lobe_is_cut(lobe);
         block[n_blocks] = (nodes + 15) / 16 * 16;
         per_lobe_max = block[n_blocks] > per_lobe_max ? block[n_blocks] : per_lobe_max;
