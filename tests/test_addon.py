@@ -2118,6 +2118,7 @@ def test_live_session_refines_at_rest_and_drops_it_on_a_change(scene):
     scene.camera.location = (6.0, -5.0, 2.5)
     assert session.tick(ctx) is False and job._cancel.is_set()
     session.wait(300)
+    job.wait(300)  # dropped by the session at the change, it ends at its next progress report
     assert job.done and session.tick(ctx) is True  # the new Draft pass
     np.testing.assert_allclose(attribute(obj)[1], core("draft"), rtol=1e-4, atol=1e-5)
     # off: no refinement

@@ -1,11 +1,13 @@
 """The C core below the bindings stands on its own: csrc/ without csrc/python/ builds into a plain
 program (tests/c/core_check.c) that checks the material interface and every registered shading
 method against closed forms, and no numerical file includes Python.h."""
+import functools
 import glob
 import os
 import re
 import shlex
 import subprocess
+import tempfile
 from concurrent.futures import ThreadPoolExecutor
 
 import pytest
@@ -98,12 +100,22 @@ def setup_compile_args():
     raise AssertionError("setup.py has no extra_compile_args")
 
 
+@functools.lru_cache(maxsize=None)
+def vectoriser_report(source, arch):
+    """GCC's run compiling csrc/<source> with setup.py's flags for `arch`, reporting the loops it
+    vectorised (once per source and CPU: principled.c holds two of the loops)."""
+    with tempfile.TemporaryDirectory() as folder:
+        return subprocess.run(["gcc", *setup_compile_args(), "-march=" + arch, "-fPIC", "-I" + CSRC, "-c",
+                               os.path.join(CSRC, source), "-o", os.path.join(folder, "o.o"),
+                               "-fopt-info-vec-optimized"], capture_output=True, text=True)
+
+
 @pytest.mark.skipif(os.uname().machine != "x86_64", reason="the vector clones are built for x86-64 only")
 @pytest.mark.parametrize("arch", ["x86-64-v3", "x86-64-v4"])
 @pytest.mark.parametrize("source, loop_in", [("scene/cook_torrance.c", "ct_lobe_lanes"),
                                              ("scene/principled.c", "ggx_lanes"),
                                              ("scene/principled.c", "sheen_lanes")])
-def test_float_brdf_loops_run_in_vector_lanes(tmp_path, arch, source, loop_in):
+def test_float_brdf_loops_run_in_vector_lanes(arch, source, loop_in):
     """The exact lights' BRDF evaluations are written for the vectoriser; GCC once left them scalar
     (a branch in the loop, an aliasing read, a trapping select) and a view took 1.4-2x as long.  Compiled
     with setup.py's flags for each clone's CPU, the loop over directions must be reported vectorised."""
@@ -111,9 +123,7 @@ def test_float_brdf_loops_run_in_vector_lanes(tmp_path, arch, source, loop_in):
     lines = open(path).read().split("\n")
     start = next(i for i, l in enumerate(lines) if re.search(r"\b" + loop_in + r"\(", l))
     loop = next(i for i in range(start, len(lines)) if re.match(r"\s*for \(size_t k = 0; k < ", lines[i])) + 1
-    cmd = ["gcc", *setup_compile_args(), "-march=" + arch, "-fPIC", "-I" + CSRC, "-c", path, "-o",
-           str(tmp_path / "o.o"), "-fopt-info-vec-optimized"]
-    build = subprocess.run(cmd, capture_output=True, text=True)
+    build = vectoriser_report(source, arch)
     assert build.returncode == 0, build.stderr[-4000:]
     assert re.search(rf"{re.escape(source)}:{loop}:\d+: optimized: loop vectorized", build.stderr), \
         f"{source}:{loop} ({loop_in}) not vectorised for {arch}"

@@ -56,11 +56,12 @@ static int blocked_one(const blocker *b, const double d[3], float rgb[3])
 }
 
 /* Lobe i's reflected radiance at view wo (frame f) by its node rule over the lighting, minus
- * what the pixel sum gave it (the pixels whose half vector lies inside its cone), into acc.  With
+ * what the pixel sum gave it (the pixels whose half vector lies inside its cone, cos_h >= cut), into acc.  With
  * occluders, a blocked node or pixel brings the blocker's light, in both. */
-static wenv_status narrow_lobe(const wenv_envmap *env, const wenv_material *mat, size_t i, const double f[9],
-                               const double wo[3], const float *dirs, const float *flux, const float *omega,
-                               size_t count, double *nodes, const blocker *b, double acc[3], wenv_error *err)
+static wenv_status narrow_lobe(const wenv_envmap *env, const wenv_material *mat, size_t i, double cut,
+                               const double f[9], const double wo[3], const float *dirs, const float *flux,
+                               const float *omega, size_t count, double *nodes, const blocker *b, double acc[3],
+                               wenv_error *err)
 {
     size_t max = 2 * NARROW_SAMPLES * NARROW_SAMPLES, n = 0;
     double *weights = nodes + 3 * max;
@@ -91,7 +92,6 @@ static wenv_status narrow_lobe(const wenv_envmap *env, const wenv_material *mat,
                 acc[c] += weights[3 * (start + k) + (size_t)c] * L[c];
         }
     }
-    double cut = wenv_material_lobe_cos_h_min(mat, i);
     wenv_lobe_rgb_fn value = wenv_material_lobe_value_fn(mat);
     for (size_t p = 0; p < count; p++) {
         const float *d = dirs + 3 * p;
@@ -195,6 +195,16 @@ static wenv_status reference_one(const wenv_envmap *env, const wenv_material *ma
     double narrow_alpha = WENV_NARROW_LOBE_PIXELS * wenv_envmap_pixel_angle(env);
     for (size_t l = 0; l < n_lobes; l++)
         n_narrow += !world_dark && wenv_material_lobe(mat, l)->alpha < narrow_alpha;
+    /* each narrow lobe's cone, found once (thousands of NDF values) rather than at every vertex */
+    double *cut = n_narrow ? malloc(n_lobes * sizeof(double)) : NULL;
+    if (n_narrow && !cut) {
+        free(dirs);
+        free(flux);
+        free(omega);
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the reference");
+    }
+    for (size_t l = 0; n_narrow && l < n_lobes; l++)
+        cut[l] = wenv_material_lobe(mat, l)->alpha < narrow_alpha ? wenv_material_lobe_cos_h_min(mat, l) : 1.0;
     atomic_int failed = 0, cancelled = 0;
     atomic_size_t done = 0;
 #pragma omp parallel
@@ -289,7 +299,7 @@ static wenv_status reference_one(const wenv_envmap *env, const wenv_material *ma
             }
             for (size_t l = 0; n_narrow && wo[2] > 0.0 && l < n_lobes; l++)
                 if (wenv_material_lobe(mat, l)->alpha < narrow_alpha &&
-                    narrow_lobe(env, mat, l, f, wo, dirs, flux, omega, count, nodes, &b, spec, &lobe_err))
+                    narrow_lobe(env, mat, l, cut[l], f, wo, dirs, flux, omega, count, nodes, &b, spec, &lobe_err))
                     atomic_store(&failed, 1);
             if (n_lamps && wo[2] > 0.0) {
                 double p[3] = {positions[3 * i], positions[3 * i + 1], positions[3 * i + 2]};
@@ -318,6 +328,7 @@ static wenv_status reference_one(const wenv_envmap *env, const wenv_material *ma
     free(dirs);
     free(flux);
     free(omega);
+    free(cut);
     if (failed)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the reference");
     if (cancelled || wenv_progress_finish(progress))

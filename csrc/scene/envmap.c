@@ -759,9 +759,14 @@ static void lookup_equirect(const wenv_envmap *env, const double d[3], int neare
     fy = fmin(fmax(fy, 0.0), (double)(h - 1)); /* the poles clamp to the first and last rows */
     double x0f = floor(fx), y0f = floor(fy);
     double wx = fx - x0f, wy = fy - y0f;
-    if (nearest) {
-        wx = wx >= 0.5;
-        wy = wy >= 0.5;
+    if (nearest) { /* the one pixel the bilinear blend's snapped weights pick, read alone */
+        long long x = (long long)x0f + (wx >= 0.5), n = (long long)w;
+        x = x < 0 ? x + n : (x >= n ? x - n : x); /* fx lies in [-0.5, w - 0.5]: one wrap at most */
+        size_t y = (size_t)y0f + (wy >= 0.5 && (size_t)y0f + 1 < h);
+        const float *p = pixel_at(env, y, (size_t)x);
+        for (int c = 0; c < 3; c++)
+            acc[c] = p[c];
+        return;
     }
     long long xi = (long long)x0f % (long long)w; /* wraps horizontally across the seam */
     if (xi < 0)
