@@ -33,6 +33,7 @@ void wenv_wavelet_material_free(wenv_wavelet_material *m)
     free(m->table);
     free(m->row_ready);
     free(m->row_need);
+    free(m->row_asked);
     wenv_texel_reflection_free(&m->texel_reflection);
     free(m);
 }
@@ -462,8 +463,9 @@ wenv_status wenv_wavelet_set_material(wenv_wavelet *wavelet, const wenv_material
         m->table = malloc(wavelet->ns * nv * 3 * sizeof(float));
         m->row_ready = calloc(wavelet->ns, 1);
         m->row_need = calloc(wavelet->ns, 1);
+        m->row_asked = calloc(wavelet->ns, 1);
     }
-    if (!m || !m->brdf_start || !m->table || !m->row_ready || !m->row_need) {
+    if (!m || !m->brdf_start || !m->table || !m->row_ready || !m->row_need || !m->row_asked) {
         st = wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for BRDF slices");
         goto fail;
     }

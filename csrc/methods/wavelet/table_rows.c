@@ -106,3 +106,23 @@ wenv_status wenv_wavelet_fill_rows(wenv_wavelet *wavelet, const size_t *rows, si
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory filling the shading table");
     return WENV_OK;
 }
+
+/* Lane s of block_rows alone: the same terms in the same order (C11 contracts no multiply-add), so the
+ * same value to the bit as the row's entry. */
+void wenv_wavelet_table_entry(const wenv_wavelet *wavelet, size_t s, size_t j, float rgb[3])
+{
+    const wenv_wavelet_material *m = wavelet->m;
+    const float *slice = wavelet->slices[s];
+    float a0 = 0.0f, a1 = 0.0f, a2 = 0.0f;
+    for (size_t q = m->brdf_start[j]; q < m->brdf_start[j + 1]; q++) {
+        const float *l = slice + (size_t)m->brdf_idx[q] * 3;
+        const float *b = m->brdf_rgb + 3 * q;
+        a0 += b[0] * l[0];
+        a1 += b[1] * l[1];
+        a2 += b[2] * l[2];
+    }
+    const float *inv = m->view_inv_albedo + 3 * j;
+    rgb[0] = a0 * inv[0];
+    rgb[1] = a1 * inv[1];
+    rgb[2] = a2 * inv[2];
+}

@@ -54,6 +54,7 @@ wenv_status wenv_wavelet_remake_ready(wenv_wavelet *wavelet, int lighting, wenv_
             for (size_t s = 0; s < wavelet->ns; s++)
                 k->row_need[s] = k == wavelet->m && (k->row_need[s] || k->row_ready[s] == USED);
             memset(k->row_ready, 0, wavelet->ns);
+            memset(k->row_asked, 0, wavelet->ns);
         }
     }
     if (!wavelet->have_env || !wavelet->m)
@@ -182,15 +183,16 @@ static void lights_irradiance(const wenv_wavelet *wavelet, const float n[3], con
                            e);
 }
 
-/* o: the radiance; with irr, o all but the Lambertian part and irr the light it reflects (method.h). */
-static void shade_vertex(const wenv_wavelet *wavelet, const vertex_taps *tp, const vertex_shadow *sh, float *o,
-                         float *irr)
+/* o: the radiance; with irr, o all but the Lambertian part and irr the light it reflects (method.h).
+ * entries: the vertex's 16 table entries made for it (NULL: read from the table). */
+static void shade_vertex(const wenv_wavelet *wavelet, const vertex_taps *tp, const vertex_shadow *sh,
+                         const float *entries, float *o, float *irr)
 {
     float e[3], m[3] = {0, 0, 0}, s[3] = {0, 0, 0};
     sampled_irradiance(wavelet, tp->sample, tp->sample_w, sh, e);
     /* table entries are mean radiances under the lobe (see albedo_tables) */
     for (int k = 0; k < 16 && wavelet->m->brdf_terms; k++) {
-        const float *t = wavelet->m->table + 3 * (size_t)tp->pair[k];
+        const float *t = entries ? entries + 3 * k : wavelet->m->table + 3 * (size_t)tp->pair[k];
         float w = tp->pair_w[k];
         if (w > 0.0f) {
             m[0] += w * t[0];
@@ -328,8 +330,8 @@ static void order_by_orbit(const wenv_slice_operators *ops, size_t *samples, siz
     free(key);
 }
 
-/* Makes the lighting slices and table rows flagged in slice_need / row_need. */
-static wenv_status fill_needed(wenv_wavelet *wavelet, wenv_error *err)
+/* Makes the lighting slices flagged in slice_need. */
+static wenv_status fill_slices(wenv_wavelet *wavelet, wenv_error *err)
 {
     size_t *todo = malloc(wavelet->ns * sizeof(size_t));
     if (!todo)
@@ -374,11 +376,21 @@ static wenv_status fill_needed(wenv_wavelet *wavelet, wenv_error *err)
         free(scratch);
     }
     free(group);
-    if (failed) {
-        free(todo);
+    free(todo);
+    if (failed)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory computing lighting slices");
-    }
-    ntodo = 0;
+    return WENV_OK;
+}
+
+/* Makes the lighting slices and table rows flagged in slice_need / row_need. */
+static wenv_status fill_needed(wenv_wavelet *wavelet, wenv_error *err)
+{
+    if (fill_slices(wavelet, err))
+        return err->status;
+    size_t *todo = malloc(wavelet->ns * sizeof(size_t));
+    if (!todo)
+        return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory shading");
+    size_t ntodo = 0;
     for (size_t s = 0; s < wavelet->ns; s++) {
         if (wavelet->m->row_need[s] && !wavelet->m->row_ready[s])
             todo[ntodo++] = s;
@@ -408,6 +420,34 @@ static const vertex_shadow *vertex_shadow_at(const wenv_wavelet *wavelet, const 
     sh->lbar = wavelet->shadow_lbar + 3 * scene->occlusion->hit_start[slot];
     sh->e_hidden = (env_only ? wavelet->shadow_e_env : wavelet->shadow_e_hidden) + 3 * slot;
     return sh;
+}
+
+/* Whether the np vertices whose table rows are missing read entries made for them alone rather than
+ * whole rows; if so marks those rows asked and unflags them.  A row holds every view's entry, made
+ * in vector lanes that share each read of a BRDF term, and serves later views until the lighting or
+ * the material changes; an entry is one view's terms for one tap of one vertex.  So entries when a
+ * vertex's 16, each counted as ENTRY_AGAINST_ROW row entries, come to fewer than the rows' entries
+ * (a few thousand scattered vertices, such as a test's random pairs, against rows of a thousand
+ * views), and rows once one of them is asked for again (a small mesh's next view). */
+#define ENTRY_AGAINST_ROW 16
+static int by_entries(wenv_wavelet *wavelet, size_t np)
+{
+    wenv_wavelet_material *m = wavelet->m;
+    size_t rows = 0;
+    for (size_t s = 0; s < wavelet->ns; s++) {
+        if (!m->row_need[s] || m->row_ready[s])
+            continue;
+        if (m->row_asked[s])
+            return 0;
+        rows++;
+    }
+    if (!(np * 16 * ENTRY_AGAINST_ROW < rows * wavelet->nv))
+        return 0;
+    for (size_t s = 0; s < wavelet->ns; s++) {
+        m->row_asked[s] |= m->row_need[s] && !m->row_ready[s];
+        m->row_need[s] = 0;
+    }
+    return 1;
 }
 
 static wenv_status shade_all(wenv_wavelet *wavelet, const float *normals, const float *views, size_t n,
@@ -440,7 +480,7 @@ static wenv_status shade_all(wenv_wavelet *wavelet, const float *normals, const 
         }
         if (read_taps(wavelet, &tp)) {
             vertex_shadow sh;
-            shade_vertex(wavelet, &tp, vertex_shadow_at(wavelet, scene, (size_t)i, 0, &sh), o, irr);
+            shade_vertex(wavelet, &tp, vertex_shadow_at(wavelet, scene, (size_t)i, 0, &sh), NULL, o, irr);
             continue;
         }
         flag_taps(&tp, wavelet->slice_need, wavelet->m->row_need);
@@ -448,7 +488,8 @@ static wenv_status shade_all(wenv_wavelet *wavelet, const float *normals, const 
     }
     size_t np = atomic_load(&npending);
     if (np) {
-        if (fill_needed(wavelet, err)) {
+        int entries = by_entries(wavelet, np);
+        if (entries ? fill_slices(wavelet, err) : fill_needed(wavelet, err)) {
             free(pending);
             return err->status;
         }
@@ -456,10 +497,15 @@ static wenv_status shade_all(wenv_wavelet *wavelet, const float *normals, const 
         for (size_t e = 0; e < np; e++) {
             vertex_taps tp;
             vertex_shadow sh;
+            float made[48];
             size_t i = pending[e];
             compute_taps(wavelet, normals + 3 * i, views + 3 * i, &tp);
-            shade_vertex(wavelet, &tp, vertex_shadow_at(wavelet, scene, i, 0, &sh), out + 3 * i,
-                         irradiance ? irradiance + 3 * i : NULL);
+            for (int k = 0; entries && k < 16; k++)
+                if (tp.pair_w[k] > 0.0f)
+                    wenv_wavelet_table_entry(wavelet, tp.pair[k] / wavelet->nv, tp.pair[k] % wavelet->nv,
+                                             made + 3 * k);
+            shade_vertex(wavelet, &tp, vertex_shadow_at(wavelet, scene, i, 0, &sh), entries ? made : NULL,
+                         out + 3 * i, irradiance ? irradiance + 3 * i : NULL);
         }
     }
     free(pending);

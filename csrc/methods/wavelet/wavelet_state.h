@@ -38,6 +38,7 @@ typedef struct {
     int lobes_narrow;        /* ... and whether its lobes are narrow against the masks' texels */
     float lobe_alpha;        /* the widest lobe's alpha (a narrow lobe's rays, shadows.h) */
     unsigned char *row_ready, *row_need; /* per normal sample, as slice_ready and slice_need */
+    unsigned char *row_asked; /* per normal sample: read as entries since the row went stale (vertex_shading.c) */
 } wenv_wavelet_material;
 
 /* Sub-samples of the local map's texels, k x k per texel in texel order, with their tent taps. */
@@ -151,13 +152,15 @@ size_t wenv_wavelet_material_bytes(const wenv_wavelet *wavelet, const wenv_wavel
 /* A material's table and its rows' two states. */
 static inline size_t wenv_wavelet_table_bytes(const wenv_wavelet *wavelet)
 {
-    return wavelet->ns * (wavelet->nv * 3 * sizeof(float) + 2);
+    return wavelet->ns * (wavelet->nv * 3 * sizeof(float) + 3);
 }
 
 /* vertex_shading.c: after a new lighting (lighting = 1) or a material made current, remakes at once
  * what the latest shade call read; a new lighting marks the rest stale. */
-/* table_rows.c: the table rows of the n normal samples rows[] (their lighting slices made). */
+/* table_rows.c: the table rows of the n normal samples rows[] (their lighting slices made); one entry,
+ * (normal sample s, view sample j), on its own: the row's value to the bit. */
 wenv_status wenv_wavelet_fill_rows(wenv_wavelet *wavelet, const size_t *rows, size_t n, wenv_error *err);
+void wenv_wavelet_table_entry(const wenv_wavelet *wavelet, size_t s, size_t j, float rgb[3]);
 wenv_status wenv_wavelet_remake_ready(wenv_wavelet *wavelet, int lighting, wenv_error *err);
 
 /* vertex_shading.c: frees what the lights keep of a palette. */
