@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import wenv
-from conftest import WAVELET_BASE
+from conftest import WAVELET_BASE, random_pairs
 from test_culling import look_at, sphere
 
 
@@ -97,6 +97,24 @@ def test_a_new_lighting_remakes_at_once_every_row_the_last_whole_call_read(scene
     assert shader.stats["pairs_ready"] == read and not np.array_equal(first, again)
     assert np.array_equal(again, wenv.Shader(other, mat, quality=shader.quality, method="slicing")
                           .shade_mesh(pos, nrm, eye))
+
+
+def test_scattered_pairs_read_their_entries_alone_to_the_bit(scene):
+    """A thousand scattered pairs, whose table rows are all missing, read their 16 entries made for
+    them alone rather than a thousand whole rows (csrc/methods/wavelet/vertex_shading.c): the same
+    values to the bit as a shader that made the rows, since an entry sums a row's terms in the row's
+    order.  Asked for again, the rows are made."""
+    env, mat = scene
+    nrm, v = random_pairs(1000, seed=5)
+    shader = wenv.Shader(env, mat, quality="default", method="slicing")
+    alone = shader.shade(nrm, v)
+    assert shader.stats["pairs_ready"] == 0
+    rows = wenv.Shader(env, mat, quality="default", method="slicing")
+    whole = rows.shade(np.tile(nrm, (40, 1)), np.tile(v, (40, 1)))[:1000]  # 40,000 vertices: rows
+    assert rows.stats["pairs_ready"] > 0 and np.any(alone > 0)
+    assert np.array_equal(alone, whole)
+    again = shader.shade(nrm, v)
+    assert shader.stats["pairs_ready"] > 0 and np.array_equal(again, alone)
 
 
 def test_step_arguments_are_checked(scene):
