@@ -24,6 +24,7 @@ OUTPUTS = {  # what each benchmark writes, relative to out/
     "bench_gloss": "bench_gloss.json",
     "accuracy": "accuracy.json",
     "speed_breakdown": "speed_breakdown.json",
+    "bench_scattered": "bench_scattered.json",
 }
 
 

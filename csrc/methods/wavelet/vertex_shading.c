@@ -425,11 +425,13 @@ static const vertex_shadow *vertex_shadow_at(const wenv_wavelet *wavelet, const 
 /* Whether the np vertices whose table rows are missing read entries made for them alone rather than
  * whole rows; if so marks those rows asked and unflags them.  A row holds every view's entry, made
  * in vector lanes that share each read of a BRDF term, and serves later views until the lighting or
- * the material changes; an entry is one view's terms for one tap of one vertex.  So entries when a
- * vertex's 16, each counted as ENTRY_AGAINST_ROW row entries, come to fewer than the rows' entries
- * (a few thousand scattered vertices, such as a test's random pairs, against rows of a thousand
- * views), and rows once one of them is asked for again (a small mesh's next view). */
-#define ENTRY_AGAINST_ROW 16
+ * the material changes; an entry is one view's terms for one tap of one vertex, at about 16 times a
+ * row entry's cost.  So entries only when a vertex's 16, each counted as ENTRY_AGAINST_ROW row
+ * entries, come to fewer than the missing rows' entries: a few thousand scattered vertices (a
+ * test's random pairs) against rows of a thousand views, at a quarter of the rows' cost or less,
+ * while a mesh's vertices, which share their normal samples, make rows; and rows once one of them
+ * is asked for again (the same vertices' next view). */
+#define ENTRY_AGAINST_ROW 64
 static int by_entries(wenv_wavelet *wavelet, size_t np)
 {
     wenv_wavelet_material *m = wavelet->m;
