@@ -149,7 +149,7 @@ void wenv_wavelet_free_quadrature(wenv_wavelet *wavelet);
 void wenv_wavelet_material_free(wenv_wavelet_material *m);
 size_t wenv_wavelet_material_bytes(const wenv_wavelet *wavelet, const wenv_wavelet_material *m);
 
-/* A material's table and its rows' two states. */
+/* A material's table and its rows' three states (ready, needed, asked). */
 static inline size_t wenv_wavelet_table_bytes(const wenv_wavelet *wavelet)
 {
     return wavelet->ns * (wavelet->nv * 3 * sizeof(float) + 3);
