@@ -51,7 +51,7 @@ class TexelSites:
         self.texels = texels
         self.triangle = triangle
         self.tri_corners = tri_corners
-        self.corners = tri_corners[triangle]
+        self.corners = tri_corners[triangle].astype(np.int64, copy=False)
         self.weights = weights
         self.uv = uv
         self.area = _uv_areas(uv, tri_corners)  # each triangle's area in the bake map
@@ -60,14 +60,10 @@ class TexelSites:
         self.inside = np.ones(self.count, bool)  # False: a texel of the ring just outside the islands
 
     def at(self, values):
-        """Values given per face corner ((nl,) or (nl, k)) at each texel, linear over its triangle."""
-        w = self.weights
-        c = self.corners
-        if values.ndim == 1:
-            return (w[:, 0] * values[c[:, 0]] + w[:, 1] * values[c[:, 1]] + w[:, 2] * values[c[:, 2]]).astype(
-                np.float32)
-        return (w[:, :1] * values[c[:, 0]] + w[:, 1:2] * values[c[:, 1]] + w[:, 2:] * values[c[:, 2]]).astype(
-            np.float32)
+        """Values given per face corner ((nl,) or (nl, k)) at each texel, linear over its triangle
+        (float32)."""
+        out = engine.corner_values_at(values.reshape(len(values), -1), self.corners, self.weights)
+        return out.reshape(-1) if values.ndim == 1 else out
 
     def footprint_in(self, uv):
         """Each texel's side in the units of another UV map (corner coordinates `uv`): the bake's texel

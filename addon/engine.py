@@ -485,6 +485,12 @@ def uv_texels(uv, triangles, width, height, memory_budget_mb, progress=None, bor
         raise SetupError(f"Cannot bake: {exc}") from None
 
 
+def corner_values_at(values, corners, weights):
+    """wenv.corner_values_at: values per face corner (m, k) at points of corners and weights (n, 3),
+    (n, k) float32."""
+    return wenv.corner_values_at(values, corners, weights)
+
+
 def extend_margin(pixels, filled, margin):
     """wenv.extend_margin: the islands' colours carried `margin` texels outwards, in place."""
     return wenv.extend_margin(pixels, filled, margin)

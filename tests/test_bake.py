@@ -126,6 +126,67 @@ def test_extend_margin_fills_rings_and_nothing_beyond():
         wenv.extend_margin(px.astype(np.float64), filled, 1)
 
 
+def margin_by_rings(px, filled, margin):
+    """The Extend margin as its definition reads: each ring, every unfilled texel touching a filled
+    one takes the mean of those it touches (summed in the 8-neighbours' row order), all at once."""
+    px, filled = px.copy(), filled.copy()
+    h, w = filled.shape
+    for _ in range(margin):
+        ring = []
+        for y in range(h):
+            for x in range(w):
+                if filled[y, x]:
+                    continue
+                near = [(b, a) for b in range(max(y - 1, 0), min(y + 2, h)) for a in range(max(x - 1, 0), min(x + 2, w))
+                        if filled[b, a]]
+                if near:
+                    total = np.zeros(px.shape[2], np.float32)
+                    for b, a in near:
+                        total += px[b, a]
+                    ring.append((y, x, total / np.float32(len(near))))
+        for y, x, value in ring:
+            px[y, x], filled[y, x] = value, True
+    return px, filled
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_extend_margin_equals_the_ring_rule_on_scattered_islands(seed):
+    """Islands of random texels, shapes and channel counts: the margin the core fills ring by ring
+    (visiting only each ring's texels) is the definition's, to the bit, and so is the count."""
+    rng = np.random.default_rng(seed)
+    h, w = (int(v) for v in rng.integers(5, 40, 2))
+    channels = int(rng.integers(1, 5))
+    px = rng.random((h, w, channels)).astype(np.float32)
+    filled = rng.random((h, w)) < (0.02, 0.1, 0.3, 0.0)[seed]
+    margin = int(rng.integers(1, 7))
+    want_px, want_filled = margin_by_rings(px, filled, margin)
+    got_px, got_filled = px.copy(), filled.copy()
+    added = wenv.extend_margin(got_px, got_filled, margin)
+    assert added == int(want_filled.sum() - filled.sum())
+    assert np.array_equal(got_filled, want_filled) and np.array_equal(got_px, want_px)
+
+
+def test_corner_values_at_sums_as_numpy_does_and_names_bad_corners():
+    """Values per face corner read at barycentric points: each point's three terms summed in float64
+    in corner order, rounded to float32 -- numpy's sum of the same float64 terms, to the bit -- for
+    one column and several, float32 values taken as their float64 selves."""
+    rng = np.random.default_rng(3)
+    weights = rng.normal(0.33, 0.4, (500, 3)).astype(np.float32)  # outside the triangle too (the border ring)
+    corners = rng.integers(0, 50, (500, 3))
+    for values in (rng.normal(size=(50, 3)), rng.normal(size=(50, 1)), rng.normal(size=(50, 4)).astype(np.float32)):
+        v = values.astype(np.float64)
+        want = (weights[:, :1] * v[corners[:, 0]] + weights[:, 1:2] * v[corners[:, 1]]
+                + weights[:, 2:] * v[corners[:, 2]]).astype(np.float32)
+        got = wenv.corner_values_at(values, corners, weights)
+        assert got.dtype == np.float32 and np.array_equal(got, want)
+    with pytest.raises(ValueError, match=r"corners\[1\] names a row past the 50 values"):
+        wenv.corner_values_at(rng.normal(size=(50, 3)), [[0, 1, 2], [0, 50, 2]], np.ones((2, 3), np.float32))
+    with pytest.raises(ValueError, match="corners and weights"):
+        wenv.corner_values_at(rng.normal(size=(50, 3)), [[0, 1, 2]], np.ones((2, 3), np.float32))
+    with pytest.raises(TypeError, match="values"):
+        wenv.corner_values_at("not an array", [[0, 1, 2]], np.ones((1, 3), np.float32))
+
+
 # ---------------------------------------------------------------------------------------------
 # The add-on: independent texel centres
 

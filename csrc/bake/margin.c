@@ -1,55 +1,112 @@
 /* The "Extend" margin (margin.h): one ring at a time, each ring reading only the texels filled
- * before it and marking its own apart, so rows can be done by any thread in any order. */
+ * before it and marking its own filled after, so its texels can be done by any thread in any order.
+ * Only the rings' texels are visited: the first ring is found by one pass over the image, each next
+ * one among the unfilled neighbours of the last (a texel that touched a filled one before would
+ * have been in an earlier ring), so a margin costs its rings, not a pass over the image a ring. */
 #include "bake/margin.h"
 
 #include <stdlib.h>
+
+typedef struct {
+    size_t *at;
+    size_t count, capacity;
+} texel_list;
+
+static int list_push(texel_list *list, size_t texel)
+{
+    if (list->count == list->capacity) {
+        size_t capacity = list->capacity ? 2 * list->capacity : 1024;
+        size_t *grown = realloc(list->at, capacity * sizeof *grown);
+        if (!grown)
+            return -1;
+        list->at = grown;
+        list->capacity = capacity;
+    }
+    list->at[list->count++] = texel;
+    return 0;
+}
+
+static int touches_filled(const uint8_t *filled, size_t width, size_t height, size_t x, size_t y)
+{
+    for (size_t yy = y ? y - 1 : 0; yy <= y + 1 && yy < height; yy++)
+        for (size_t xx = x ? x - 1 : 0; xx <= x + 1 && xx < width; xx++)
+            if (filled[yy * width + xx])
+                return 1;
+    return 0;
+}
+
+/* The mean of the filled 8-neighbours of texel `at` into its pixel (it has at least one). */
+static void take_mean(float *pixels, const uint8_t *filled, size_t width, size_t height, size_t channels, size_t at)
+{
+    size_t x = at % width, y = at / width;
+    float sum[4] = {0.0f, 0.0f, 0.0f, 0.0f};
+    int n = 0;
+    for (size_t yy = y ? y - 1 : 0; yy <= y + 1 && yy < height; yy++)
+        for (size_t xx = x ? x - 1 : 0; xx <= x + 1 && xx < width; xx++) {
+            size_t from = yy * width + xx;
+            if (!filled[from])
+                continue;
+            for (size_t c = 0; c < channels; c++)
+                sum[c] += pixels[from * channels + c];
+            n++;
+        }
+    for (size_t c = 0; c < channels; c++)
+        pixels[at * channels + c] = sum[c] / (float)n;
+}
 
 wenv_status wenv_extend_margin(float *pixels, uint8_t *filled, size_t width, size_t height, size_t channels,
                                size_t margin, size_t *added, wenv_error *err)
 {
     if (channels == 0 || channels > 4)
         return wenv_error_set(err, WENV_ERR_VALUE, "pixels must have 1 to 4 channels, got %zu", channels);
-    uint8_t *ring_marks = calloc(width * height > 0 ? width * height : 1, 1);
-    if (!ring_marks)
-        return wenv_error_set(err, WENV_ERR_NOMEM, "no memory for a %zu x %zu margin", width, height);
-    size_t count = 0;
-    for (size_t ring = 0; ring < margin; ring++) {
-        size_t ring_count = 0;
-#pragma omp parallel for schedule(static) reduction(+ : ring_count)
-        for (size_t y = 0; y < height; y++) {
+    *added = 0;
+    if (margin == 0 || width == 0 || height == 0)
+        return WENV_OK;
+    uint8_t *queued = malloc(width * height); /* in this ring or the next */
+    texel_list ring = {0}, next = {0};
+    int failed = !queued;
+    if (!failed) {
+        long long rows = (long long)height;
+#pragma omp parallel for schedule(static)
+        for (long long y = 0; y < rows; y++)
             for (size_t x = 0; x < width; x++) {
-                size_t at = y * width + x;
-                if (filled[at])
-                    continue;
-                float sum[4] = {0.0f, 0.0f, 0.0f, 0.0f};
-                int n = 0;
-                for (size_t yy = y ? y - 1 : 0; yy <= y + 1 && yy < height; yy++)
-                    for (size_t xx = x ? x - 1 : 0; xx <= x + 1 && xx < width; xx++) {
-                        size_t from = yy * width + xx;
-                        if (!filled[from])
-                            continue;
-                        for (size_t c = 0; c < channels; c++)
-                            sum[c] += pixels[from * channels + c];
-                        n++;
-                    }
-                if (!n)
-                    continue;
-                for (size_t c = 0; c < channels; c++)
-                    pixels[at * channels + c] = sum[c] / (float)n;
-                ring_marks[at] = 1;
-                ring_count++;
+                size_t at = (size_t)y * width + x;
+                queued[at] = !filled[at] && touches_filled(filled, width, height, x, (size_t)y);
             }
-        }
-        if (!ring_count)
-            break;
-        for (size_t i = 0; i < width * height; i++)
-            if (ring_marks[i]) {
-                filled[i] = 1;
-                ring_marks[i] = 0;
-            }
-        count += ring_count;
     }
-    free(ring_marks);
+    for (size_t at = 0; at < width * height && !failed; at++)
+        if (queued[at])
+            failed = list_push(&ring, at) < 0;
+    size_t count = 0;
+    for (size_t r = 0; r < margin && ring.count && !failed; r++) {
+        long long n = (long long)ring.count;
+#pragma omp parallel for schedule(static)
+        for (long long k = 0; k < n; k++)
+            take_mean(pixels, filled, width, height, channels, ring.at[k]);
+        for (size_t k = 0; k < ring.count; k++)
+            filled[ring.at[k]] = 1;
+        count += ring.count;
+        next.count = 0;
+        for (size_t k = 0; k < ring.count && r + 1 < margin && !failed; k++) {
+            size_t x = ring.at[k] % width, y = ring.at[k] / width;
+            for (size_t yy = y ? y - 1 : 0; yy <= y + 1 && yy < height && !failed; yy++)
+                for (size_t xx = x ? x - 1 : 0; xx <= x + 1 && xx < width && !failed; xx++) {
+                    size_t at = yy * width + xx;
+                    if (filled[at] || queued[at])
+                        continue;
+                    queued[at] = 1;
+                    failed = list_push(&next, at) < 0;
+                }
+        }
+        texel_list swap = ring;
+        ring = next;
+        next = swap;
+    }
+    free(queued);
+    free(ring.at);
+    free(next.at);
+    if (failed)
+        return wenv_error_set(err, WENV_ERR_NOMEM, "no memory for a %zu x %zu margin", width, height);
     *added = count;
     return WENV_OK;
 }

@@ -1,8 +1,9 @@
-/* wenv.uv_texels and wenv.extend_margin: the image side of a bake (bake/texel_raster.h,
- * bake/margin.h). */
+/* wenv.uv_texels, wenv.corner_values_at and wenv.extend_margin: the image side of a bake
+ * (bake/texel_raster.h, bake/corner_interpolation.h, bake/margin.h). */
 #include <stdint.h>
 #include <string.h>
 
+#include "bake/corner_interpolation.h"
 #include "bake/margin.h"
 #include "bake/texel_raster.h"
 #include "python/module.h"
@@ -102,6 +103,53 @@ done:
     return result;
 }
 
+/* corner_values_at(values, corners, weights) -> (n, k) float32 */
+static PyObject *corner_values_at(PyObject *self, PyObject *args, PyObject *kwargs)
+{
+    (void)self;
+    static char *kwlist[] = {"values", "corners", "weights", NULL};
+    PyObject *v_obj, *c_obj, *w_obj;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO:corner_values_at", kwlist, &v_obj, &c_obj, &w_obj))
+        return NULL;
+    Py_buffer vb, cb, wb;
+    PyObject *v_held, *c_held, *w_held, *result = NULL;
+    if (wenv_py_get_typed_array(v_obj, "values", "float64", 0, &vb, &v_held) < 0)
+        return NULL;
+    if (wenv_py_get_typed_array(c_obj, "corners", "int64", 0, &cb, &c_held) < 0) {
+        wenv_py_release_array(&vb, &v_held);
+        return NULL;
+    }
+    if (wenv_py_get_typed_array(w_obj, "weights", "float32", 0, &wb, &w_held) < 0) {
+        wenv_py_release_array(&vb, &v_held);
+        wenv_py_release_array(&cb, &c_held);
+        return NULL;
+    }
+    if (vb.ndim != 2 || cb.ndim != 2 || cb.shape[1] != 3 || wb.ndim != 2 || wb.shape[1] != 3 ||
+        wb.shape[0] != cb.shape[0]) {
+        PyErr_SetString(PyExc_ValueError, "values must have shape (m, k), corners and weights (n, 3)");
+        goto done;
+    }
+    Py_ssize_t shape[2] = {cb.shape[0], vb.shape[1]};
+    void *out;
+    if (!(result = wenv_py_new_array(2, shape, "float32", &out)))
+        goto done;
+    wenv_error err = {0};
+    wenv_status st;
+    WENV_BEGIN_WORK
+    st = wenv_corner_interpolate(vb.buf, (size_t)vb.shape[0], (size_t)vb.shape[1], cb.buf, wb.buf,
+                                 (size_t)cb.shape[0], out, &err);
+    WENV_END_WORK
+    if (st) {
+        Py_CLEAR(result);
+        wenv_py_raise(&err);
+    }
+done:
+    wenv_py_release_array(&vb, &v_held);
+    wenv_py_release_array(&cb, &c_held);
+    wenv_py_release_array(&wb, &w_held);
+    return result;
+}
+
 /* extend_margin(pixels, filled, margin) -> texels filled; both arrays written in place */
 static PyObject *extend_margin(PyObject *self, PyObject *args, PyObject *kwargs)
 {
@@ -153,6 +201,11 @@ static PyMethodDef bake_functions[] = {
      "border=True: each texel outside every triangle that touches one inside (8-neighbours) holds that\n"
      "neighbour's triangle t as -2 - t, with its centre's (extrapolated) weights in it.\n"
      "ValueError for an image of no texels or one whose bake would pass memory_budget_mb."},
+    {"corner_values_at", (PyCFunction)(void (*)(void))corner_values_at, METH_VARARGS | METH_KEYWORDS,
+     "corner_values_at(values, corners, weights)\n--\n\n"
+     "Values given per face corner read at points by their barycentric weights: values (m, k), corners\n"
+     "(n, 3) rows of it, weights (n, 3).  Returns (n, k) float32, each point's w0 v0 + w1 v1 + w2 v2 summed\n"
+     "in float64.  ValueError for a corner that is not a row of values."},
     {"extend_margin", (PyCFunction)(void (*)(void))extend_margin, METH_VARARGS | METH_KEYWORDS,
      "extend_margin(pixels, filled, margin)\n--\n\n"
      "Carries the colours of the texels `filled` marks outwards by `margin` rings, in place (Blender's\n"

@@ -35,6 +35,7 @@ void wenv_wavelet_material_free(wenv_wavelet_material *m)
     free(m->row_need);
     free(m->row_asked);
     wenv_texel_reflection_free(&m->texel_reflection);
+    wenv_texel_reflection_free(&m->texel_reflection_before);
     free(m);
 }
 

@@ -189,12 +189,15 @@ static int light_at_edge(const wenv_light_visibility *vis, const float l[3])
  * direction, the same at every view; not a mirror direction, which each view moves). */
 static float visible_along(const wenv_vertex_shadow *vs, const float l[3], int keep)
 {
-    int open, shut;
-    texels_about(vs, l, &open, &shut);
-    if (!open && !shut)
+    const float *f = vs->frame;
+    if (!(f[6] * l[0] + f[7] * l[1] + f[8] * l[2] > 0.0f))
         return 0.0f; /* below the horizon it brings nothing anyway */
-    if (!vs->point_rays && (!shut || !open))
-        return open ? 1.0f : 0.0f;
+    if (!vs->point_rays) { /* point rays ask no mask */
+        int open, shut;
+        texels_about(vs, l, &open, &shut);
+        if (!shut || !open)
+            return open ? 1.0f : 0.0f;
+    }
     int known = keep && vs->memo_slot ? wenv_light_memo_find(vs->memo_slot, l) : -1;
     if (known >= 0)
         return (float)known;

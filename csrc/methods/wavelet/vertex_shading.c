@@ -657,9 +657,14 @@ static wenv_status ensure_shadows(wenv_wavelet *wavelet, const wenv_shadow_scene
     const wenv_occlusion *o = scene->occlusion;
     wenv_wavelet_material *m = wavelet->m;
     if (m->texel_reflection.resolution != o->resolution) {
-        wenv_texel_reflection_free(&m->texel_reflection);
-        if (wenv_texel_reflection_make(&m->texel_reflection, m->mat, o->resolution, err))
-            return err->status;
+        wenv_texel_reflection kept = m->texel_reflection;
+        m->texel_reflection = m->texel_reflection_before;
+        m->texel_reflection_before = kept;
+        if (m->texel_reflection.resolution != o->resolution) {
+            wenv_texel_reflection_free(&m->texel_reflection);
+            if (wenv_texel_reflection_make(&m->texel_reflection, m->mat, o->resolution, err))
+                return err->status;
+        }
     }
     double alpha_max = 0.0;
     for (size_t k = 0; k < wenv_material_lobe_count(m->mat); k++)

@@ -35,6 +35,8 @@ typedef struct {
     size_t brdf_terms;
     float *table;            /* ns x nv x 3 */
     wenv_texel_reflection texel_reflection; /* shading with shadows: made for the masks' resolution */
+    wenv_texel_reflection texel_reflection_before; /* the one of the resolution before: a bake's texels
+                                                     * and vertices take turns at two */
     int lobes_narrow;        /* ... and whether its lobes are narrow against the masks' texels */
     float lobe_alpha;        /* the widest lobe's alpha (a narrow lobe's rays, shadows.h) */
     unsigned char *row_ready, *row_need; /* per normal sample, as slice_ready and slice_need */
