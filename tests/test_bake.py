@@ -167,18 +167,21 @@ def test_extend_margin_equals_the_ring_rule_on_scattered_islands(seed):
 
 
 def test_corner_values_at_sums_as_numpy_does_and_names_bad_corners():
-    """Values per face corner read at barycentric points: each point's three terms summed in float64
-    in corner order, rounded to float32 -- numpy's sum of the same float64 terms, to the bit -- for
-    one column and several, float32 values taken as their float64 selves."""
+    """Values per face corner read at barycentric points: each point's three terms summed in corner
+    order as numpy sums them -- float32 values in float32, float64 ones in float64 rounded to
+    float32 -- to the bit, for one column and several."""
     rng = np.random.default_rng(3)
     weights = rng.normal(0.33, 0.4, (500, 3)).astype(np.float32)  # outside the triangle too (the border ring)
     corners = rng.integers(0, 50, (500, 3))
-    for values in (rng.normal(size=(50, 3)), rng.normal(size=(50, 1)), rng.normal(size=(50, 4)).astype(np.float32)):
-        v = values.astype(np.float64)
+    for values in (rng.normal(size=(50, 3)), rng.normal(size=(50, 1)), rng.normal(size=(50, 4)).astype(np.float32),
+                   rng.normal(size=(50, 1)).astype(np.float32)):
+        v = values
         want = (weights[:, :1] * v[corners[:, 0]] + weights[:, 1:2] * v[corners[:, 1]]
                 + weights[:, 2:] * v[corners[:, 2]]).astype(np.float32)
         got = wenv.corner_values_at(values, corners, weights)
         assert got.dtype == np.float32 and np.array_equal(got, want)
+        if values.dtype == np.float32:  # not the float64 sum: the test tells the two apart
+            assert not np.array_equal(got, wenv.corner_values_at(values.astype(np.float64), corners, weights))
     with pytest.raises(ValueError, match=r"corners\[1\] names a row past the 50 values"):
         wenv.corner_values_at(rng.normal(size=(50, 3)), [[0, 1, 2], [0, 50, 2]], np.ones((2, 3), np.float32))
     with pytest.raises(ValueError, match="corners and weights"):

@@ -111,9 +111,18 @@ static PyObject *corner_values_at(PyObject *self, PyObject *args, PyObject *kwar
     PyObject *v_obj, *c_obj, *w_obj;
     if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO:corner_values_at", kwlist, &v_obj, &c_obj, &w_obj))
         return NULL;
+    /* float32 rows are summed in float32, as numpy sums them; any other numbers in float64 */
+    int single = 0;
+    Py_buffer probe;
+    if (PyObject_CheckBuffer(v_obj) && PyObject_GetBuffer(v_obj, &probe, PyBUF_FORMAT | PyBUF_STRIDES) == 0) {
+        single = probe.format && (strcmp(probe.format, "f") == 0 || strcmp(probe.format, "<f") == 0);
+        PyBuffer_Release(&probe);
+    } else {
+        PyErr_Clear();
+    }
     Py_buffer vb, cb, wb;
     PyObject *v_held, *c_held, *w_held, *result = NULL;
-    if (wenv_py_get_typed_array(v_obj, "values", "float64", 0, &vb, &v_held) < 0)
+    if (wenv_py_get_typed_array(v_obj, "values", single ? "float32" : "float64", 0, &vb, &v_held) < 0)
         return NULL;
     if (wenv_py_get_typed_array(c_obj, "corners", "int64", 0, &cb, &c_held) < 0) {
         wenv_py_release_array(&vb, &v_held);
@@ -136,8 +145,10 @@ static PyObject *corner_values_at(PyObject *self, PyObject *args, PyObject *kwar
     wenv_error err = {0};
     wenv_status st;
     WENV_BEGIN_WORK
-    st = wenv_corner_interpolate(vb.buf, (size_t)vb.shape[0], (size_t)vb.shape[1], cb.buf, wb.buf,
-                                 (size_t)cb.shape[0], out, &err);
+    st = single ? wenv_corner_interpolate_f(vb.buf, (size_t)vb.shape[0], (size_t)vb.shape[1], cb.buf, wb.buf,
+                                            (size_t)cb.shape[0], out, &err)
+                : wenv_corner_interpolate(vb.buf, (size_t)vb.shape[0], (size_t)vb.shape[1], cb.buf, wb.buf,
+                                          (size_t)cb.shape[0], out, &err);
     WENV_END_WORK
     if (st) {
         Py_CLEAR(result);
@@ -205,7 +216,8 @@ static PyMethodDef bake_functions[] = {
      "corner_values_at(values, corners, weights)\n--\n\n"
      "Values given per face corner read at points by their barycentric weights: values (m, k), corners\n"
      "(n, 3) rows of it, weights (n, 3).  Returns (n, k) float32, each point's w0 v0 + w1 v1 + w2 v2 summed\n"
-     "in float64.  ValueError for a corner that is not a row of values."},
+     "in that order as numpy sums it: in float32 for float32 values, else in float64.  ValueError for a\n"
+     "corner that is not a row of values."},
     {"extend_margin", (PyCFunction)(void (*)(void))extend_margin, METH_VARARGS | METH_KEYWORDS,
      "extend_margin(pixels, filled, margin)\n--\n\n"
      "Carries the colours of the texels `filled` marks outwards by `margin` rings, in place (Blender's\n"
