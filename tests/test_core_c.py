@@ -80,11 +80,12 @@ def test_core_without_python(tmp_path, sanitized):
     summary = re.search(r"^(\d+) passed, (\d+) failed$", run.stdout, re.M)
     assert summary and summary.group(2) == "0"
     # Cycles' bump terminator (2), a GGX lobe cut in two (6), a lamp (1), the bake's texels and margin (3), the grazing pyramid's halves
-    # and the node loops this CPU runs (4), materials (9), each model's accelerators against the defaults
-    # derived from its lobe_value (35), then a white furnace, the Lambertian part's light given apart and
+    # and the node loops and single reads this CPU runs (5), materials (9), each model's accelerators against the
+    # defaults derived from its lobe_value (35), then a white furnace, the Lambertian part's light given apart and
     # stats per method, the registry and the reference
-    assert int(summary.group(1)) == 2 + 6 + 1 + 3 + 4 + 9 + 35 + 3 * len(wenv.METHODS) + 2
+    assert int(summary.group(1)) == 2 + 6 + 1 + 3 + 5 + 9 + 35 + 3 * len(wenv.METHODS) + 2
     assert run.stdout.count("is lobe_value's") == 9 and "its cone for the exact lights is its shape's" in run.stdout
+    assert "ok   a single pyramid read is the portable one's to the bit" in run.stdout
     for method in wenv.METHODS:
         assert f"ok   {method}: a white environment reflects the albedo" in run.stdout
         assert f"ok   {method}: the Lambertian part's light apart, coloured, is the whole" in run.stdout

@@ -412,6 +412,18 @@ static void check_grazing_nodes(void)
                                                                  : wenv_grazing_nodes_version(0);
     check(wenv_grazing_nodes_for_cpu() == best && best, "the shading runs the best node loop this CPU has", versions,
           versions);
+    /* single reads (a shadow's blocked texels): the CPU's conversion of a tap's halves, where it has
+     * one, reads what the portable read does, to the bit */
+    int same = 1, by_cpu = p.halves_by_cpu;
+    for (int k = 0; k < NODES && same; k++) {
+        float d[3] = {a[k], a[STRIDE + k], a[2 * STRIDE + k]}, portable[3], fast[3];
+        p.halves_by_cpu = 0;
+        wenv_node_pyramid_read(&p, d, a[6 * STRIDE + k], portable);
+        p.halves_by_cpu = by_cpu;
+        wenv_node_pyramid_read(&p, d, a[6 * STRIDE + k], fast);
+        same = memcmp(portable, fast, sizeof fast) == 0 && portable[0] > 0.0f;
+    }
+    check(same, "a single pyramid read is the portable one's to the bit", same, 1);
     free(rgb);
     free(texels);
     free(a);

@@ -20,44 +20,107 @@
 
 /* ---- portable ---------------------------------------------------------------------------------- */
 
-static inline void level_read(const wenv_node_pyramid *p, int32_t level, float u, float v, float wl, float sum[3])
+/* Where one level's bilinear read of (u, v) starts: its first tap (the next is 4 halves on, the row
+ * below *row taps on) and the weights across (*tx) and down (*ty). */
+static inline const uint16_t *level_taps1(const wenv_node_pyramid *p, int32_t level, float u, float v, float *tx,
+                                          float *ty, int32_t *row)
 {
-    int32_t side = p->side[level], row = side + 2;
+    int32_t side = p->side[level];
+    *row = side + 2;
     float fx = (u + 1.0f) * 0.5f * (float)side - 0.5f, fy = (v + 1.0f) * 0.5f * (float)side - 0.5f;
     int32_t ix = (int32_t)(fx + 1.0f) - 1, iy = (int32_t)(fy + 1.0f) - 1; /* floor for x >= -1 */
-    float tx = fx - (float)ix, ty = fy - (float)iy;
+    *tx = fx - (float)ix;
+    *ty = fy - (float)iy;
     /* the border holds what lies past the edges: -1 and side are its columns and rows */
     ix = ix < -1 ? -1 : (ix > side - 1 ? side - 1 : ix);
     iy = iy < -1 ? -1 : (iy > side - 1 ? side - 1 : iy);
-    const uint16_t *t0 = p->texels + 4 * (size_t)(p->offset[level] + (iy + 1) * row + ix + 1);
+    return p->texels + 4 * (size_t)(p->offset[level] + (iy + 1) * *row + ix + 1);
+}
+
+/* Tap c (0 to 3: across, then down) of a read starting at t0, and its weight in it. */
+static inline const uint16_t *level_tap(const uint16_t *t0, int32_t row, int32_t c, float wl, float tx, float ty,
+                                        float *wt)
+{
+    *wt = wl * ((c & 1) ? tx : 1.0f - tx) * ((c >> 1) ? ty : 1.0f - ty);
+    return t0 + 4 * ((c & 1) + (c >> 1) * row);
+}
+
+static inline void level_read(const wenv_node_pyramid *p, int32_t level, float u, float v, float wl, float sum[3])
+{
+    float tx, ty, wt;
+    int32_t row;
+    const uint16_t *t0 = level_taps1(p, level, u, v, &tx, &ty, &row);
     for (int32_t c = 0; c < 4; c++) {
-        const uint16_t *t = t0 + 4 * ((c & 1) + (c >> 1) * row);
-        float wt = wl * ((c & 1) ? tx : 1.0f - tx) * ((c >> 1) ? ty : 1.0f - ty);
+        const uint16_t *t = level_tap(t0, row, c, wl, tx, ty, &wt);
         sum[0] += wt * wenv_float_from_half(t[0]);
         sum[1] += wt * wenv_float_from_half(t[1]);
         sum[2] += wt * wenv_float_from_half(t[2]);
     }
 }
 
-/* The lighting in world direction (d0, d1, d2) at level lod (before clamping), into sum. */
-static inline void read_direction(const wenv_node_pyramid *p, float d0, float d1, float d2, float lod, float sum[3])
+/* Direction (d0, d1, d2)'s octahedral (u, v), and the two levels read at lod (clamped) with the
+ * coarser one's weight. */
+static inline void direction_levels(const wenv_node_pyramid *p, float d0, float d1, float d2, float lod, float *u,
+                                    float *v, int32_t *l0, int32_t *l1, float *fl)
 {
     float top = (float)p->top;
     /* octahedral encoding (wenv_oct_encode_f) */
-    float l1 = 1.0f / (fabsf(d0) + fabsf(d1) + fabsf(d2) + 1e-30f);
-    float pu = d0 * l1, pv = d1 * l1;
-    float u = d2 < 0.0f ? copysignf(1.0f - fabsf(pv), pu) : pu, v = d2 < 0.0f ? copysignf(1.0f - fabsf(pu), pv) : pv;
+    float inv = 1.0f / (fabsf(d0) + fabsf(d1) + fabsf(d2) + 1e-30f);
+    float pu = d0 * inv, pv = d1 * inv;
+    *u = d2 < 0.0f ? copysignf(1.0f - fabsf(pv), pu) : pu;
+    *v = d2 < 0.0f ? copysignf(1.0f - fabsf(pu), pv) : pv;
     lod = lod < 0.0f ? 0.0f : (lod > top ? top : lod);
-    int32_t l0 = (int32_t)lod, l1v = l0 + 1 < p->top ? l0 + 1 : p->top;
-    float fl = lod - (float)l0;
-    level_read(p, l0, u, v, 1.0f - fl, sum);
-    level_read(p, l1v, u, v, fl, sum);
+    *l0 = (int32_t)lod;
+    *l1 = *l0 + 1 < p->top ? *l0 + 1 : p->top;
+    *fl = lod - (float)*l0;
 }
+
+/* The lighting in world direction (d0, d1, d2) at level lod (before clamping), into sum. */
+static inline void read_direction(const wenv_node_pyramid *p, float d0, float d1, float d2, float lod, float sum[3])
+{
+    float u, v, fl;
+    int32_t l0, l1;
+    direction_levels(p, d0, d1, d2, lod, &u, &v, &l0, &l1, &fl);
+    level_read(p, l0, u, v, 1.0f - fl, sum);
+    level_read(p, l1, u, v, fl, sum);
+}
+
+#ifdef WENV_HAVE_X86_NODES
+#define F16C __attribute__((target("f16c")))
+
+/* read_direction with each tap's four halves converted at once by the CPU: every channel's products
+ * and sums are the portable read's, in its order, and the conversion is exact, so the values are
+ * the same to the bit.  Shadows read a blocked texel's lighting so, a few times per vertex. */
+F16C static void read_direction_f16c(const wenv_node_pyramid *p, const float d[3], float lod, float sum[3])
+{
+    float u, v, fl, tx, ty, wt;
+    int32_t levels[2], row;
+    direction_levels(p, d[0], d[1], d[2], lod, &u, &v, &levels[0], &levels[1], &fl);
+    __m128 acc = _mm_setzero_ps();
+    for (int k = 0; k < 2; k++) {
+        const uint16_t *t0 = level_taps1(p, levels[k], u, v, &tx, &ty, &row);
+        for (int32_t c = 0; c < 4; c++) {
+            const uint16_t *t = level_tap(t0, row, c, k ? fl : 1.0f - fl, tx, ty, &wt);
+            __m128 h = _mm_cvtph_ps(_mm_loadl_epi64((const __m128i *)(const void *)t));
+            acc = _mm_add_ps(acc, _mm_mul_ps(_mm_set1_ps(wt), h));
+        }
+    }
+    float out[4];
+    _mm_storeu_ps(out, acc);
+    for (int c = 0; c < 3; c++)
+        sum[c] = out[c];
+}
+#endif
 
 void wenv_node_pyramid_read(const wenv_node_pyramid *p, const float d[3], float log2_footprint, float rgb[3])
 {
     rgb[0] = rgb[1] = rgb[2] = 0.0f;
-    read_direction(p, d[0], d[1], d[2], log2_footprint + p->lod_offset, rgb);
+#ifdef WENV_HAVE_X86_NODES
+    if (p->halves_by_cpu)
+        read_direction_f16c(p, d, log2_footprint + p->lod_offset, rgb);
+    else
+#endif
+        read_direction(p, d[0], d[1], d[2], log2_footprint + p->lod_offset, rgb);
     for (int c = 0; c < 3; c++)
         rgb[c] *= p->scale;
 }
@@ -104,6 +167,11 @@ uint16_t *wenv_node_pyramid_make(wenv_node_pyramid *p, const float *const *rgb, 
     }
     p->top = (int32_t)levels - 1;
     p->texels = halves;
+    p->halves_by_cpu = 0;
+#ifdef WENV_HAVE_X86_NODES
+    __builtin_cpu_init();
+    p->halves_by_cpu = __builtin_cpu_supports("avx2"); /* every AVX2 CPU has F16C (see below) */
+#endif
     return halves;
 }
 

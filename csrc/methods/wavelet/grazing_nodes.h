@@ -21,6 +21,7 @@ typedef struct {
     int32_t top;      /* the coarsest level */
     float lod_offset; /* level = log2 of a node's footprint (radians) + this */
     float scale;      /* radiance per unit of a texel's halves (a power of two) */
+    int halves_by_cpu; /* single reads convert a tap's halves with the CPU's F16C (the same floats) */
 } wenv_node_pyramid;
 
 /* The node pyramid of `levels` octahedral levels, level k `sides[k]` squared texels of r g b floats
