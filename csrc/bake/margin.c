@@ -26,10 +26,24 @@ static int list_push(texel_list *list, size_t texel)
     return 0;
 }
 
-static int touches_filled(const uint8_t *filled, size_t width, size_t height, size_t x, size_t y)
+/* Texel `at`'s 3 x 3 neighbourhood, itself included, clipped to the image: rows y0..y1, columns
+ * x0..x1. */
+typedef struct {
+    size_t x0, x1, y0, y1;
+} neighbourhood;
+
+static neighbourhood around(size_t at, size_t width, size_t height)
 {
-    for (size_t yy = y ? y - 1 : 0; yy <= y + 1 && yy < height; yy++)
-        for (size_t xx = x ? x - 1 : 0; xx <= x + 1 && xx < width; xx++)
+    size_t x = at % width, y = at / width;
+    return (neighbourhood){.x0 = x ? x - 1 : 0, .x1 = x + 1 < width ? x + 1 : x,
+                           .y0 = y ? y - 1 : 0, .y1 = y + 1 < height ? y + 1 : y};
+}
+
+static int touches_filled(const uint8_t *filled, size_t width, size_t height, size_t at)
+{
+    neighbourhood a = around(at, width, height);
+    for (size_t yy = a.y0; yy <= a.y1; yy++)
+        for (size_t xx = a.x0; xx <= a.x1; xx++)
             if (filled[yy * width + xx])
                 return 1;
     return 0;
@@ -38,11 +52,11 @@ static int touches_filled(const uint8_t *filled, size_t width, size_t height, si
 /* The mean of the filled 8-neighbours of texel `at` into its pixel (it has at least one). */
 static void take_mean(float *pixels, const uint8_t *filled, size_t width, size_t height, size_t channels, size_t at)
 {
-    size_t x = at % width, y = at / width;
+    neighbourhood a = around(at, width, height);
     float sum[4] = {0.0f, 0.0f, 0.0f, 0.0f};
     int n = 0;
-    for (size_t yy = y ? y - 1 : 0; yy <= y + 1 && yy < height; yy++)
-        for (size_t xx = x ? x - 1 : 0; xx <= x + 1 && xx < width; xx++) {
+    for (size_t yy = a.y0; yy <= a.y1; yy++)
+        for (size_t xx = a.x0; xx <= a.x1; xx++) {
             size_t from = yy * width + xx;
             if (!filled[from])
                 continue;
@@ -69,10 +83,8 @@ wenv_status wenv_extend_margin(float *pixels, uint8_t *filled, size_t width, siz
         long long rows = (long long)height;
 #pragma omp parallel for schedule(static)
         for (long long y = 0; y < rows; y++)
-            for (size_t x = 0; x < width; x++) {
-                size_t at = (size_t)y * width + x;
-                queued[at] = !filled[at] && touches_filled(filled, width, height, x, (size_t)y);
-            }
+            for (size_t at = (size_t)y * width; at < ((size_t)y + 1) * width; at++)
+                queued[at] = !filled[at] && touches_filled(filled, width, height, at);
     }
     for (size_t at = 0; at < width * height && !failed; at++)
         if (queued[at])
@@ -88,9 +100,9 @@ wenv_status wenv_extend_margin(float *pixels, uint8_t *filled, size_t width, siz
         count += ring.count;
         next.count = 0;
         for (size_t k = 0; k < ring.count && r + 1 < margin && !failed; k++) {
-            size_t x = ring.at[k] % width, y = ring.at[k] / width;
-            for (size_t yy = y ? y - 1 : 0; yy <= y + 1 && yy < height && !failed; yy++)
-                for (size_t xx = x ? x - 1 : 0; xx <= x + 1 && xx < width && !failed; xx++) {
+            neighbourhood a = around(ring.at[k], width, height);
+            for (size_t yy = a.y0; yy <= a.y1 && !failed; yy++)
+                for (size_t xx = a.x0; xx <= a.x1 && !failed; xx++) {
                     size_t at = yy * width + xx;
                     if (filled[at] || queued[at])
                         continue;

@@ -153,6 +153,14 @@ static inline int texel_open(const wenv_vertex_shadow *vs, size_t t)
     return (int)((vs->mask[t / 64] >> (t % 64)) & 1u);
 }
 
+/* Whether direction l (in the method's frame) lies above the vertex's horizon: the z that
+ * texels_about computes, and its test. */
+static inline int above_horizon(const wenv_vertex_shadow *vs, const float l[3])
+{
+    const float *f = vs->frame;
+    return f[6] * l[0] + f[7] * l[1] + f[8] * l[2] > 0.0f;
+}
+
 /* How many of the mask's texels about direction l (in the method's frame) are open and blocked: its
  * texel and the eight around it.  0 and 0 below the horizon. */
 static void texels_about(const wenv_vertex_shadow *vs, const float l[3], int *open, int *shut)
@@ -189,8 +197,7 @@ static int light_at_edge(const wenv_light_visibility *vis, const float l[3])
  * direction, the same at every view; not a mirror direction, which each view moves). */
 static float visible_along(const wenv_vertex_shadow *vs, const float l[3], int keep)
 {
-    const float *f = vs->frame;
-    if (!(f[6] * l[0] + f[7] * l[1] + f[8] * l[2] > 0.0f))
+    if (!above_horizon(vs, l))
         return 0.0f; /* below the horizon it brings nothing anyway */
     if (!vs->point_rays) { /* point rays ask no mask */
         int open, shut;
@@ -237,8 +244,7 @@ static size_t blocked_before(const wenv_vertex_shadow *vs, size_t t)
  * is the unshadowed shading's (as a mirror direction there always was). */
 static float lobe_direction_open(const wenv_vertex_shadow *vs, const float l[3])
 {
-    const float *f = vs->frame;
-    if (!(f[6] * l[0] + f[7] * l[1] + f[8] * l[2] > 0.0f))
+    if (!above_horizon(vs, l))
         return 1.0f;
     return visible_along(vs, l, 0);
 }
