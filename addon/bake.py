@@ -237,8 +237,8 @@ def _stand_around(plan, around):
     plan.shadows = True
     plan.receive_only = True
     if around.items and around.casts[0]:
-        _, data, _ = around.items[0]
-        plan.blockers.append((data.positions, data.triangles))
+        name, data, _ = around.items[0]
+        plan.blockers.append((name, data.positions, data.triangles))
         if plan.bounce:
             plan.senders.append(around.items[0])
     plan.blockers += around.blockers

@@ -247,6 +247,14 @@ def shadow_triangles(positions, triangles):
     return np.ascontiguousarray(triangles[keep]), int((~keep).sum())
 
 
+def _merged_occluders(meshes, memory_budget_mb):
+    """(wenv.Occluders of `meshes` as one, where each one's vertices start among its positions)."""
+    positions = np.ascontiguousarray(np.vstack([p for p, _ in meshes]), np.float32)
+    offsets = np.cumsum([0] + [len(p) for p, _ in meshes])
+    triangles = np.vstack([t + o for (_, t), o in zip(meshes, offsets)]).astype(np.int64)
+    return wenv.Occluders(positions, triangles, memory_budget_mb=memory_budget_mb), offsets
+
+
 class ShadowCache:
     """The scene's occluders (an Embree scene of every blocking mesh, world space) and each shaded
     part's occlusion, kept while the meshes' positions and triangles are unchanged (by content: a
@@ -266,16 +274,14 @@ class ShadowCache:
         self._before = {}  # the same, cast against the occluders before the last change
         self._changed = None  # (first, count): the triangles of those occluders that changed
         self._lights = {}  # (id of an occlusion kept above, what it is of which material) -> (key, light)
+        self._some = {}  # fingerprints of some of the meshes -> their wenv.Occluders (a lamp's shadow linking)
 
     def occluders(self, meshes, memory_budget_mb=1024):
         """wenv.Occluders of `meshes` ((positions, triangles) each, in order) and where each one's
         vertices start among its positions; the same object while the meshes are unchanged."""
         keys = [fingerprint(p, t) for p, t in meshes]
         if keys != self._mesh_keys:
-            positions = np.ascontiguousarray(np.vstack([p for p, _ in meshes]), np.float32)
-            offsets = np.cumsum([0] + [len(p) for p, _ in meshes])
-            triangles = np.vstack([t + o for (_, t), o in zip(meshes, offsets)]).astype(np.int64)
-            occluders = wenv.Occluders(positions, triangles, memory_budget_mb=memory_budget_mb)
+            occluders, offsets = _merged_occluders(meshes, memory_budget_mb)
             self._changed = None if self._mesh_keys is None else _changed_triangles(
                 self._mesh_keys, keys, self._triangle_counts, [len(t) for _, t in meshes])
             self._before = self._occlusions if self._changed is not None else {}
@@ -283,7 +289,16 @@ class ShadowCache:
             self._mesh_keys, self._triangle_counts = keys, [len(t) for _, t in meshes]
             self._occlusions = {}
             self._lights = {}
+            self._some = {}
         return self._occluders
+
+    def occluders_of(self, meshes, memory_budget_mb=1024):
+        """wenv.Occluders of some of the meshes occluders() was last given ((positions, triangles)
+        each): what blocks a lamp whose Light links its shadows.  Kept while those meshes are."""
+        key = tuple(fingerprint(p, t) for p, t in meshes)
+        if key not in self._some:
+            self._some[key] = _merged_occluders(meshes, memory_budget_mb)[0]
+        return self._some[key]
 
     def occlusion(self, occluders, positions, normals, progress=None):
         """The occlusion of one part (its world positions and normals) against `occluders`: kept,
@@ -443,12 +458,18 @@ def sent_light(shader, data, occlusion, lamps=None, bounce_hits=None):
     return out
 
 
-def make_lamps(settings):
-    """wenv.Lamp for each of lamps.read_lamps' settings; SetupError naming the light whose setting the
-    core refuses (a negative or infinite power a script set, say)."""
+def make_lamps(settings, blockers=None):
+    """wenv.Lamp for each of lamps.read_lamps' settings, lamp j blocked by blockers[j] where given (a
+    wenv.Occluders; False: by nothing) rather than by the scene; SetupError naming the light whose
+    setting the core refuses (a negative or infinite power a script set, say)."""
     made = []
-    for s in settings:
-        kw = {k: v for k, v in s.items() if k not in ("type", "matrix", "name")}
+    for j, s in enumerate(settings):
+        kw = {k: v for k, v in s.items() if k not in ("type", "matrix", "name", "receivers", "blockers")}
+        own = (blockers or {}).get(j)
+        if own is False:
+            kw["cast_shadow"] = False
+        elif own is not None:
+            kw["blockers"] = own
         try:
             made.append(wenv.Lamp(s["type"], s["matrix"], **kw))
         except ValueError as exc:

@@ -63,26 +63,74 @@ def lamp_settings(obj):
             notes.append(f"Light '{obj.name}': a spread of {math.degrees(s['spread']):.2g} degrees is a beam, "
                          "not shaded")
             return None, notes
-    links = getattr(obj, "light_linking", None)
-    if links is not None and (links.receiver_collection is not None or links.blocker_collection is not None):
-        notes.append(f"Light '{obj.name}': light linking is not honoured: it lights, and is blocked by, every "
-                     "object")
     return s, notes
+
+
+class Linked:
+    """Which objects a Light's linking collection lets in, as Blender's depsgraph reads it: an
+    object listed with Include is in, with Exclude out; any other is in unless something is
+    included.  `states`: ((object name, 'INCLUDE' or 'EXCLUDE'), ...)."""
+
+    __slots__ = ("states", "includes")
+
+    def __init__(self, states, includes):
+        self.states, self.includes = states, includes
+
+    def reaches(self, name):
+        state = dict(self.states).get(name)
+        return state == "INCLUDE" if state else not self.includes
+
+    def __repr__(self):  # what key_of reads
+        return f"Linked({self.states!r}, {self.includes!r})"
+
+
+def _linked(collection, scene):
+    """Linked of a light or shadow linking collection (None: none).  Each object takes the state of
+    the entry it is reached through at the collection's first level, an object listed there itself
+    after the collections holding it (as the depsgraph visits them)."""
+    if collection is None:
+        return None
+    states = {}
+    for child, entry in zip(collection.children, collection.collection_children):
+        for obj in child.all_objects:
+            states[obj.name] = entry.light_linking.link_state
+    for obj, entry in zip(collection.objects, collection.collection_objects):
+        states[obj.name] = entry.light_linking.link_state
+    here = scene.objects
+    includes = any(state == "INCLUDE" and name in here for name, state in states.items())
+    return Linked(tuple(sorted(states.items())), includes)
 
 
 def read_lamps(scene):
     """Every Light object of the scene that renders: (settings for wenv.Lamp, each with its object's
-    'name'; notes).  Light groups only split Cycles' render passes, whose sum is what is shaded."""
+    'name' and its light linking -- 'receivers' and 'blockers', each a Linked or None --; notes).
+    Light groups only split Cycles' render passes, whose sum is what is shaded."""
     found, notes = [], []
     for obj in scene.objects:
+        links = getattr(obj, "light_linking", None)
+        if obj.type == "MESH" and links is not None and (links.receiver_collection or links.blocker_collection):
+            notes.append(f"'{obj.name}': an emitting mesh's light linking is not honoured: its light reaches, and "
+                         "is blocked by, every object")
         if obj.type != "LIGHT" or obj.hide_render or not obj.visible_get():
             continue
         s, more = lamp_settings(obj)
         notes.extend(more)
         if s is not None:
             s["name"] = obj.name
+            s["receivers"] = _linked(links.receiver_collection, scene) if links is not None else None
+            s["blockers"] = _linked(links.blocker_collection, scene) if links is not None else None
             found.append(s)
     return found, notes
+
+
+def lights(settings, name):
+    """Whether the lamp of read_lamps' `settings` lights object `name` (its light linking)."""
+    return settings["receivers"] is None or settings["receivers"].reaches(name)
+
+
+def blocked_by(settings, name):
+    """Whether object `name` blocks the lamp's light (its shadow linking)."""
+    return settings["blockers"] is None or settings["blockers"].reaches(name)
 
 
 def summary(scene):

@@ -61,11 +61,12 @@ class ShadingPlan:
         # with point rays if `point_rays` (wenv.Occluders.occlusion; the kept one made so for the pass)
         self.resolution = None
         self.point_rays = False
-        self.blockers = []  # (positions, triangles) of the other meshes that block light
+        self.blockers = []  # (object name, positions, triangles) of the other meshes that block light
         # with bounce light, per blocker (in the same order): (object name, MeshData, material keys),
         # whose diffuse light it sends back into what it shadows
         self.senders = []
         self.lamps = []  # the scene's lamps (wenv.Lamp: no Blender data)
+        self.lamp_settings = []  # and what they were made of (lamps.read_lamps': their light linking)
         self.lamps_key = ()  # what tells this pass's lamps from another's (the bounce made with them)
         self.notes = []
         self.results = None
@@ -177,21 +178,22 @@ class ShadingPlan:
         (the diffuse light of the parts shaded and of the other blockers, each with its own shadows
         and materials).  None without shadows.  report(fraction) as the occlusions are cast;
         `cancelled` (a threading.Event) stops them."""
-        lit = {"lamps": self.lamps} if self.lamps else None
         if not self.shadows:
-            return [lit] * len(work)
-        meshes_in = [] if self.receive_only else [
-            (data.positions, data.triangles if cast else np.zeros((0, 3), np.int32))
-            for (_, data, _), cast in zip(self.items, self.casts)]
-        first_blocker = len(meshes_in)  # where the blockers' (and the senders') rows start
-        meshes_in += self.blockers
+            return [self._lit(w[1]) for w in work]
+        named = [] if self.receive_only else [
+            (name, data.positions, data.triangles if cast else np.zeros((0, 3), np.int32))
+            for (name, data, _), cast in zip(self.items, self.casts)]
+        first_blocker = len(named)  # where the blockers' (and the senders') rows start
+        named += self.blockers
+        meshes_in = [(p, t) for _, p, t in named]
         if not any(len(t) for _, t in meshes_in):
-            return [lit] * len(work)
+            return [self._lit(w[1]) for w in work]
         # the blockers not shaded send their light too: their own shadows, then their diffuse light
         senders = self._ordered_parts(quality, self.senders) if self.bounce else []
         everything = work + senders
         with engine.shadows.lock:
             occluders, offsets = engine.shadows.occluders(meshes_in, self.memory_budget_mb)
+            shadowing = self._shadowing_lamps(named)
             # the receivers' occlusions made for this pass alone (nothing made of them is kept)
             transient = self.receive_only and (self.resolution is not None or self.point_rays)
 
@@ -233,16 +235,18 @@ class ShadingPlan:
             taken = self._takes(shader, name, part)
             with engine.shadows.lock:
                 light = engine.shadows.light(occlusion, ("diffuse", key), made_by,
-                                             lambda: engine.diffuse_light(shader, taken, occlusion, self.lamps))
+                                             lambda: engine.diffuse_light(shader, taken, occlusion,
+                                                                          self._lamps_of(name, shadowing)))
             rows = offsets[first_blocker + i if sender else i] + np.flatnonzero(sel)  # blockers follow the shaded
             bounce[rows] += light if weight is None else weight * light
             if sent is None:
                 continue
             sent_normals[rows] = part.normals
             sending.append((name, key, part, occlusion, rows, weight))
+        lits = [self._lit(w[1], shadowing) for w in work]
         if sent is None:
             return [dict(occlusion=o, bounce=bounce if self.bounce else None, **(lit or {})) if o is not None else lit
-                    for o in scenes]
+                    for o, lit in zip(scenes, lits)]
         made = tuple(made)
         passing = {id(o) for o in occlusions[:len(work)]} if transient else set()
 
@@ -264,11 +268,36 @@ class ShadingPlan:
                 taken = _with_inputs(taken, engine.sending_inputs(taken.inputs)) if taken.inputs else taken
                 with engine.shadows.lock:
                     toward = engine.shadows.light(occlusion, ("sent", key, bounces), made, lambda: engine.sent_light(
-                        shader, taken, occlusion, self.lamps, bounce_hits=received))
+                        shader, taken, occlusion, self._lamps_of(name, shadowing), bounce_hits=received))
                 again[rows] += toward if weight is None else _per_direction(weight) * toward
             sent = again
         return [dict(occlusion=o, bounce_hits=at_hits(o, GLOSSY_BOUNCES), **(lit or {})) if o is not None else lit
-                for o in scenes]
+                for o, lit in zip(scenes, lits)]
+
+    def _lamps_of(self, name, made=None):
+        """Of the lamps `made` from self.lamp_settings (None: self.lamps), those that light object
+        `name` (their Lights' light linking)."""
+        return [lamp for lamp, s in zip(self.lamps if made is None else made, self.lamp_settings)
+                if lamps.lights(s, name)]
+
+    def _lit(self, name, made=None):
+        """The keywords of object `name`'s lamps (_lamps_of), or None without any."""
+        mine = self._lamps_of(name, made)
+        return {"lamps": mine} if mine else None
+
+    def _shadowing_lamps(self, named):
+        """self.lamps, with each whose Light links its shadows blocked only by the meshes of `named`
+        ((object name, positions, triangles), the scene's blockers) that its blocker collection lets
+        block it (new wenv.Lamps, then; by nothing when it lets none)."""
+        own = {}
+        blocking = [(name, p, t) for name, p, t in named if len(t)]
+        for j, s in enumerate(self.lamp_settings):
+            if s["blockers"] is None or not s["cast_shadow"]:
+                continue
+            some = [(p, t) for name, p, t in blocking if lamps.blocked_by(s, name)]
+            if len(some) < len(blocking):  # all of them: the scene's own occluders
+                own[j] = engine.shadows.occluders_of(some, self.memory_budget_mb) if some else False
+        return engine.make_lamps(self.lamp_settings, own) if own else self.lamps
 
     def compute(self, rays=None):
         """Shades every part; rays(fraction), if given, while their occlusions are cast."""
@@ -381,6 +410,7 @@ def new_plan(scene, view, images, cull=None, shadows=None):
     lamp_settings, lamp_notes = lamps.read_lamps(scene)
     plan.notes.extend(lamp_notes)
     plan.lamps = engine.make_lamps(lamp_settings)
+    plan.lamp_settings = lamp_settings
     plan.lamps_key = lamps.key_of(lamp_settings)
     return plan
 
@@ -429,7 +459,8 @@ def plan_shading(scene, depsgraph, objects, view, images, progress=None, preview
                 data = meshes.read_mesh(obj, depsgraph)
                 if not data.count:
                     continue
-                plan.blockers.append((data.positions, engine.shadow_triangles(data.positions, data.triangles)[0]))
+                plan.blockers.append((obj.name, data.positions,
+                                      engine.shadow_triangles(data.positions, data.triangles)[0]))
                 if st.bounce_light:  # its light, read as a shaded mesh's is
                     for read in (textures.read_inputs, textures.read_term_weights, textures.read_shading_normals):
                         notes += [n for n in read(obj, depsgraph, data) if n not in notes]

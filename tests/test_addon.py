@@ -1833,7 +1833,7 @@ def test_texture_sampling_wraps_as_the_node_extends():
 
 def test_what_wenv_does_not_shade_is_reported(scene):
     """Linked inputs (a texture: its unlinked value is used; a normal map: not used), inputs wenv does
-    not shade, a node tree with more than the Principled BSDF and a lamp's light linking are named in
+    not shade, a node tree with more than the Principled BSDF and an emitting mesh's light linking are named in
     the shading report and in the Material panel, never dropped silently."""
     from addon import ui
     env_world(scene, "sunset")
@@ -1857,12 +1857,11 @@ def test_what_wenv_does_not_shade_is_reported(scene):
     assert not any("Emission" in n for n in notes)  # emission is shaded
     from addon import shading, views
     receivers = bpy.data.collections.new("lit-only")
-    bpy.data.objects["Light"].hide_render = False
-    bpy.data.objects["Light"].light_linking.receiver_collection = receivers
+    obj.light_linking.receiver_collection = receivers  # an emitting mesh's
     view = views.camera_view(bpy.context.scene)
     _, report = shading.shade_objects(bpy.context.scene, bpy.context.evaluated_depsgraph_get(), [obj], view,
                                       bpy.data)
-    assert any("Light 'Light': light linking is not honoured" in n for n in report), report
+    assert any(f"'{obj.name}': an emitting mesh's light linking is not honoured" in n for n in report), report
     assert all(f"'textured': {n}" in report for n in notes), report
     panel = [l[1] for l in draw_panel(ui.WENV_PT_material) if l[0] == "label"]
     assert all(n in panel for n in notes)
@@ -3004,6 +3003,58 @@ def test_a_blocker_not_shaded_sends_its_light_back(scene):
     _, black = attribute(plane)
     under = np.hypot(pp[:, 0], pp[:, 1]) < 1.5
     assert np.all(rgb[under].sum(1) > black[under].sum(1) * 1.01)
+
+
+def test_light_linking_is_honoured(scene):
+    """The start-up Light over a plane under the cube (shadows on): a receiver collection that
+    includes only the cube leaves the plane unlit by it, one that only excludes the cube lights the
+    plane as before; a blocker collection that excludes the cube (or includes only the plane) takes
+    the cube's shadow of that Light away, exactly as a Light casting no shadow, while the World's
+    shadows stay; one including the cube keeps it."""
+    from addon import lamps as addon_lamps
+    env_world(scene, "sunset", strength=0.3)
+    plane = add_plane_under_cube()
+    light = bpy.data.objects["Light"]
+    light.hide_render = False
+    light.data.energy = 3000.0
+    scene.wenv.shadows, scene.wenv.bounce_light = True, False
+
+    def shaded():
+        bpy.context.view_layer.update()
+        assert shade_op(view="CAMERA") == {"FINISHED"}
+        return attribute(plane)[1].copy()
+
+    def linking(kind, **states):
+        coll = bpy.data.collections.new(f"{kind}-{len(bpy.data.collections)}")
+        setattr(light.light_linking, f"{kind}_collection", coll)
+        for name, state in states.items():
+            coll.objects.link(bpy.data.objects[name])
+            coll.collection_objects[len(coll.objects) - 1].light_linking.link_state = state
+    lit = shaded()
+    light.hide_render = True
+    world_only = shaded()
+    light.hide_render = False
+    assert lit.sum() > 1.5 * world_only.sum()
+    linking("receiver", Cube="INCLUDE")
+    np.testing.assert_allclose(shaded(), world_only, rtol=1e-5, atol=1e-6)
+    linking("receiver", Cube="EXCLUDE")
+    np.testing.assert_allclose(shaded(), lit, rtol=1e-5, atol=1e-6)
+    light.light_linking.receiver_collection = None
+
+    light.data.use_shadow = False
+    unblocked = shaded()
+    light.data.use_shadow = True
+    in_shadow = np.abs(unblocked - lit).sum(1) > 0.05 * np.abs(unblocked).sum(1)
+    assert in_shadow.sum() >= 5  # the cube's shadow of the Light on the plane
+    for states in ({"Cube": "EXCLUDE"}, {plane.name: "INCLUDE"}):
+        linking("blocker", **states)
+        np.testing.assert_allclose(shaded(), unblocked, rtol=1e-5, atol=1e-6)
+    linking("blocker", Cube="INCLUDE")
+    np.testing.assert_allclose(shaded(), lit, rtol=1e-5, atol=1e-6)
+    # a new state is a change of the lamps (the live mode shades again)
+    before = addon_lamps.signature(scene)
+    light.light_linking.blocker_collection.collection_objects[0].light_linking.link_state = "EXCLUDE"
+    assert addon_lamps.signature(scene) != before
 
 
 def test_glossy_bounce_shows_a_metal_blocker_in_a_metal_floor(scene):

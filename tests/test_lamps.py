@@ -1,7 +1,8 @@
 """The scene's lamps (wenv.Lamp) in Cycles' units: closed forms of their irradiance, every method's lamp
 light against the reference that sums each lamp over a fine grid of its surface, shadows against
 the reference's own rays, each vertex's own material and colour, the World's strength and turn
-leaving lamps alone, a new power making nothing again, and bad input.  Against Cycles itself:
+leaving lamps alone, a lamp's own blockers (shadow linking), a new power making nothing again, and bad
+input.  Against Cycles itself:
 tests/test_lamps_cycles.py."""
 import math
 
@@ -9,6 +10,7 @@ import numpy as np
 import pytest
 
 import wenv
+from tests.helpers.meshes import uv_sphere
 from tests.test_shadows import sphere_on_plane
 
 BLACK = wenv.Environment(np.zeros((16, 32, 3), np.float32))
@@ -249,6 +251,35 @@ def test_lamp_shadows_match_the_reference_rays(contact, lamp, bound):
                                          cast_shadow=False)])
     if lamp == "sun":
         assert relative_rmse(free, unshadowed) < 0.01
+
+
+def test_a_lamps_own_blockers_stand_for_the_scenes(contact):
+    """Shadow linking: a lamp given blockers is blocked by them alone where the call is shadowed, in
+    the fast path and the reference alike; given the scene's own occluders, it is shaded as without."""
+    positions, normals, views, occluders, occlusion = contact
+    sphere_triangles = len(uv_sphere(16, 32, 1.0)[1])
+    plane_alone = wenv.Occluders(positions, sphere_on_plane()[1][sphere_triangles:])
+    far = wenv.Occluders(np.float32([[50, 50, -50], [51, 50, -50], [50, 51, -50]]), np.array([[0, 1, 2]]))
+    mat = wenv.Principled(base_color=(0.8, 0.3, 0.2), roughness=0.3)
+    shader = wenv.Shader(BLACK, mat, quality="draft")
+    kw = dict(occlusion=occlusion, bounce=None, positions=positions)
+
+    def area(**more):
+        return wenv.Lamp("AREA", placed((-1, 1, 3), shine=(0.3, -0.3, -1.0)), energy=400.0, size=1.2, **more)
+    shadowed = shader.shade(normals, views, lamps=[area()], **kw)
+    assert area(blockers=plane_alone).blockers is plane_alone and area().blockers is None
+    assert np.array_equal(shader.shade(normals, views, lamps=[area(blockers=occluders)], **kw), shadowed)
+    free = shader.shade(normals, views, lamps=[area(cast_shadow=False)], **kw)
+    assert np.array_equal(shader.shade(normals, views, lamps=[area(blockers=far)], **kw), free)
+    # the sphere excluded from what blocks the lamp: no contact shadow on the plane
+    linked = shader.shade(normals, views, lamps=[area(blockers=plane_alone)], **kw)
+    assert relative_rmse(shadowed, free) > 0.1 and relative_rmse(linked, free) < 0.01, relative_rmse(linked, free)
+    ref = wenv.reference(BLACK, mat, normals, views, positions=positions, occluders=occluders,
+                         lamps=[area(blockers=plane_alone)])
+    assert relative_rmse(linked, ref) < 0.03, relative_rmse(linked, ref)
+    # unshadowed calls stay so: a lamp's blockers only replace a scene's
+    assert np.array_equal(shader.shade(normals, views, positions=positions, lamps=[area(blockers=occluders)]),
+                          shader.shade(normals, views, positions=positions, lamps=[area()]))
 
 
 def test_a_new_power_makes_nothing_again(contact):

@@ -48,3 +48,43 @@ def test_lamps_match_cycles_within_its_noise(lit_scene, material):
         # the mean's own noise, with room for the noise's own spread and the mesh's facets
         assert error < 1.5 * noise_of_mean + 0.01, (error, noise_of_mean)
     assert abs(cycles.mean() / ref.mean() - 1.0) < 0.02
+
+
+def test_light_linking_matches_cycles(lit_scene):
+    """The area lamp's receiver collection includes only the ground, the spot's excludes only the
+    ground: Cycles lights the sphere with neither the area lamp nor less of the spot, and wenv, the
+    lamps chosen for the sphere as the add-on chooses them (addon/lamps.py), within Cycles' noise."""
+    scene = lit_scene
+    material = dict(base_color=(0.7, 0.5, 0.3), roughness=0.5)
+    scene.principled(**material)
+    made = []
+    try:
+        for light, state in (("area", "INCLUDE"), ("spot", "EXCLUDE")):
+            coll = bpy.data.collections.new(f"receivers of {light}")
+            coll.objects.link(scene.ground)
+            coll.collection_objects[0].light_linking.link_state = state
+            bpy.data.objects[light].light_linking.receiver_collection = coll
+            made.append(light)
+        bpy.context.view_layer.update()
+        settings, _ = lamps.read_lamps(scene.scene)
+        everything = engine.make_lamps(settings)
+        lit = [lamp for lamp, s in zip(everything, settings) if lamps.lights(s, scene.sphere.name)]
+        assert len(lit) == 3 and not lamps.lights(next(s for s in settings if s["name"] == "area"), scene.sphere.name)
+        a, b = (scene.render(seed)[scene.mask].astype(np.float64) for seed in (1, 2))
+    finally:
+        for light in made:
+            bpy.data.objects[light].light_linking.receiver_collection = None
+        bpy.context.view_layer.update()
+    black = wenv.Environment(np.zeros((8, 16, 3), np.float32))
+    mat = wenv.Principled(**material)
+    occluders = scene.occluders()
+    kw = dict(positions=scene.positions, occluders=occluders)
+    ref = wenv.reference(black, mat, scene.normals, scene.views, lamps=lit, **kw).astype(np.float64)
+    unlinked = wenv.reference(black, mat, scene.normals, scene.views, lamps=everything, **kw).astype(np.float64)
+    scale = math.sqrt(float(np.mean(ref ** 2)))
+    noise_of_mean = math.sqrt(float(np.mean((a - b) ** 2)) / 2) / scale / math.sqrt(2)
+    cycles = (a + b) / 2
+    error = math.sqrt(float(np.mean((cycles - ref) ** 2))) / scale
+    assert error < 1.5 * noise_of_mean + 0.01, (error, noise_of_mean)
+    # the area lamp's light would be well outside the noise
+    assert math.sqrt(float(np.mean((cycles - unlinked) ** 2))) / scale > 5 * (noise_of_mean + 0.01)

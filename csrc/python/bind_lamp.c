@@ -4,11 +4,13 @@
 #include <math.h>
 #include <string.h>
 
+#include "python/bind_occlusion.h"
 #include "python/module.h"
 
 typedef struct {
     PyObject_HEAD
     wenv_lamp lamp;
+    PyObject *blockers; /* the wenv.Occluders lamp.blockers points into, or NULL */
 } LampObject;
 
 static PyTypeObject LampType;
@@ -50,13 +52,17 @@ static int lamp_init(LampObject *self, PyObject *args, PyObject *kwargs)
 {
     static char *kwlist[] = {"type",         "matrix",     "color",      "energy",   "exposure", "normalize",
                              "radius",       "soft_falloff", "angle",    "spot_size", "spot_blend", "shape",
-                             "size",         "size_y",     "spread",     "cast_shadow", "diffuse", "glossy", NULL};
+                             "size",         "size_y",     "spread",     "cast_shadow", "diffuse", "glossy", "blockers", NULL};
     PyObject *type_obj, *matrix = Py_None, *color = NULL, *energy = NULL, *exposure = NULL, *normalize = NULL;
     PyObject *radius = NULL, *soft = NULL, *angle = NULL, *spot_size = NULL, *spot_blend = NULL, *shape = NULL;
     PyObject *size = NULL, *size_y = NULL, *spread = NULL, *shadow = NULL, *diffuse = NULL, *glossy = NULL;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "O|O$OOOOOOOOOOOOOOOO:Lamp", kwlist, &type_obj, &matrix, &color,
+    PyObject *blockers = Py_None;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "O|O$OOOOOOOOOOOOOOOOO:Lamp", kwlist, &type_obj, &matrix, &color,
                                      &energy, &exposure, &normalize, &radius, &soft, &angle, &spot_size, &spot_blend,
-                                     &shape, &size, &size_y, &spread, &shadow, &diffuse, &glossy))
+                                     &shape, &size, &size_y, &spread, &shadow, &diffuse, &glossy, &blockers))
+        return -1;
+    const wenv_occluders *own = NULL;
+    if (blockers != Py_None && !(own = wenv_py_occluders(blockers, "blockers")))
         return -1;
     int kind = name_index(type_obj, "type", KIND_NAMES, 4);
     if (kind < 0)
@@ -86,7 +92,21 @@ static int lamp_init(LampObject *self, PyObject *args, PyObject *kwargs)
         wenv_py_raise(&err);
         return -1;
     }
+    self->lamp.blockers = own;
+    Py_XSETREF(self->blockers, own ? Py_NewRef(blockers) : NULL);
     return 0;
+}
+
+static void lamp_dealloc(LampObject *self)
+{
+    Py_XDECREF(self->blockers);
+    Py_TYPE(self)->tp_free((PyObject *)self);
+}
+
+static PyObject *lamp_get_blockers(LampObject *self, void *closure)
+{
+    (void)closure;
+    return Py_NewRef(self->blockers ? self->blockers : Py_None);
 }
 
 int wenv_py_lamps(PyObject *obj, const char *name, wenv_lamp **lamps, size_t *n)
@@ -156,6 +176,10 @@ static PyGetSetDef lamp_getset[] = {
      "in W/sr; a sun of angle 0's irradiance in W/m^2.",
      NULL},
     {"position", (getter)lamp_get_position, NULL, "Where it is (the matrix's last column).", NULL},
+    {"blockers", (getter)lamp_get_blockers, NULL,
+     "The wenv.Occluders that block its light where shadows are on, in place of the scene's (a Light's shadow "
+     "linking), or None: the scene's.",
+     NULL},
     {NULL, NULL, NULL, NULL, NULL},
 };
 
@@ -166,16 +190,18 @@ static PyTypeObject LampType = {
     .tp_flags = Py_TPFLAGS_DEFAULT,
     .tp_doc = "Lamp(type, matrix=None, *, color=(1, 1, 1), energy=10, exposure=0, normalize=True, radius=0, "
               "soft_falloff=True, angle=0.00918, spot_size=pi/4, spot_blend=0.15, shape='SQUARE', size=0.25, "
-              "size_y=0.25, spread=pi, cast_shadow=True, diffuse=True, glossy=True)\n--\n\n"
+              "size_y=0.25, spread=pi, cast_shadow=True, diffuse=True, glossy=True, blockers=None)\n--\n\n"
               "A scene's lamp as a Blender Light object sets it up, shaded as Cycles emits it (docs/lamps.md).  "
               "type: 'SUN', 'POINT', 'SPOT' or 'AREA'; matrix: the object's matrix_world (4 x 4; None: at the "
               "origin, shining down -Z); the rest are the Light's settings under Blender's names (radius is "
               "shadow_soft_size, soft_falloff use_soft_falloff, cast_shadow use_shadow; color times the "
               "temperature's colour where the light uses one), and diffuse and glossy the object's ray "
-              "visibility.  Energy is in W (a sun's in W/m^2).  A ValueError names a setting out of Blender's "
-              "range: a negative or infinite energy, say.",
+              "visibility.  Energy is in W (a sun's in W/m^2).  blockers (a wenv.Occluders): what blocks its light "
+              "where a call is shadowed, in place of the call's occluders (a Light's shadow linking).  A "
+              "ValueError names a setting out of Blender's range: a negative or infinite energy, say.",
     .tp_new = PyType_GenericNew,
     .tp_init = (initproc)lamp_init,
+    .tp_dealloc = (destructor)lamp_dealloc,
     .tp_repr = (reprfunc)lamp_repr,
     .tp_getset = lamp_getset,
 };

@@ -125,7 +125,7 @@ void wenv_reference_lamps_at(const wenv_lamp *lamps, size_t n_lamps, const wenv_
         const wenv_lamp_settings *st = &l->settings;
         sum s = {.mat = mat,         .nrm = nrm,
                  .f = f,             .wo = wo,
-                 .occ = st->cast_shadow ? occ : NULL,
+                 .occ = wenv_lamp_blockers(l, occ),
                  .origin = origin,   .smooth = smooth,
                  .correction = correction,
                  .diffuse = st->diffuse,

@@ -232,5 +232,13 @@ uint64_t wenv_lamp_geometry_key(const wenv_lamp *l, uint64_t h)
     h = wenv_fingerprint_doubles(h, s->matrix, 16);
     double shape[8] = {s->radius, s->angle, s->spot_size, s->spot_blend, s->size, s->size_y, s->spread, (double)s->shape};
     h = wenv_fingerprint_doubles(h, shape, 8);
+    h = wenv_fingerprint_word(h, l->blockers ? wenv_occluders_fingerprint(l->blockers) : 0);
     return wenv_fingerprint_word(h, (uint64_t)(s->soft_falloff * 2 + s->cast_shadow));
+}
+
+const wenv_occluders *wenv_lamp_blockers(const wenv_lamp *l, const wenv_occluders *scene)
+{
+    if (!scene || !l->settings.cast_shadow)
+        return NULL;
+    return l->blockers ? l->blockers : scene;
 }

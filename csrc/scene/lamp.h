@@ -24,6 +24,7 @@
 #include <stdint.h>
 
 #include "base/error.h"
+#include "scene/occluders.h"
 
 typedef enum { WENV_LAMP_SUN = 0, WENV_LAMP_POINT, WENV_LAMP_SPOT, WENV_LAMP_AREA } wenv_lamp_kind;
 typedef enum { WENV_LAMP_SQUARE = 0, WENV_LAMP_RECTANGLE, WENV_LAMP_DISK, WENV_LAMP_ELLIPSE } wenv_lamp_shape;
@@ -70,6 +71,9 @@ typedef struct {
     double spot_stretch;     /* spot: how much its scale may widen an angle (the longest axis over the shortest) */
     double spread_tan, spread_norm; /* area: tan h and 1 / (tan h - h); spread_tan 0: no spread */
     double radiance[3];      /* of the emitting surface; a point: its intensity; a direction: irradiance */
+    /* what blocks this lamp's light where a scene is shadowed, in place of the scene's occluders (a
+     * Light's shadow linking; NULL: the scene's); borrowed for one call, never kept */
+    const wenv_occluders *blockers;
 } wenv_lamp;
 
 /* Made from settings: WENV_ERR_VALUE naming the setting after `name` ("Lamp.energy must be finite
@@ -89,8 +93,12 @@ int wenv_lamp_factor_varies(const wenv_lamp *lamp);
  * edge and blend well away from them (what lets a lamp that looks wide be read at its centre). */
 int wenv_lamp_factor_even(const wenv_lamp *lamp, const double toward_vertex[3], double angle, int within_sphere);
 
-/* Of what decides where its light falls and what blocks it (not its colour or power): what a
- * cache of its shadows is kept against. */
+/* Of what decides where its light falls and what blocks it (not its colour or power; its own
+ * blockers by their fingerprint): what a cache of its shadows is kept against. */
 uint64_t wenv_lamp_geometry_key(const wenv_lamp *lamp, uint64_t h);
+
+/* What blocks the lamp's light in a scene shadowed by `scene` (NULL: unshadowed): nothing when it
+ * casts no shadow, its own blockers where it has them, else the scene's. */
+const wenv_occluders *wenv_lamp_blockers(const wenv_lamp *lamp, const wenv_occluders *scene);
 
 #endif

@@ -107,6 +107,15 @@ static int factor_even(const wenv_lamp *lamp, const wenv_lamp_patch *pa, double 
            wenv_lamp_factor_even(lamp, back, wenv_lamp_patch_angle(pa), pa->within_sphere);
 }
 
+/* The lamps as later shades read them (their light, not what blocked it): their blockers were
+ * borrowed for the call that made the shadows. */
+static void keep_settings(wenv_lamp *kept, const wenv_lamp *lamps, size_t n_lamps)
+{
+    memcpy(kept, lamps, n_lamps * sizeof *lamps);
+    for (size_t j = 0; j < n_lamps; j++)
+        kept[j].blockers = NULL;
+}
+
 /* Vertex i's share of lamp j and the cells it sees. */
 static void prepare_one(const wenv_lamp_light *L, const wenv_lamp *lamp, const wenv_occluders *occ, size_t i,
                         float *share, uint16_t *seen)
@@ -118,7 +127,7 @@ static void prepare_one(const wenv_lamp_light *L, const wenv_lamp *lamp, const w
         nrm[c] = L->normals[3 * i + (size_t)c];
         origin[c] = L->positions[3 * i + (size_t)c] + L->lift * L->normals[3 * i + (size_t)c];
     }
-    const wenv_occluders *blockers = lamp->settings.cast_shadow ? occ : NULL;
+    const wenv_occluders *blockers = wenv_lamp_blockers(lamp, occ);
     *share = 0.0f;
     *seen = 0;
     if (lamp->delta) {
@@ -233,7 +242,7 @@ wenv_status wenv_lamp_light_ensure(wenv_lamp_light **light, const wenv_lamp *lam
         n_redo += redo[j];
     }
     if (keep && n_redo == 0) { /* colours, powers, flags: read at each shade */
-        memcpy(before->lamps, lamps, n_lamps * sizeof *lamps);
+        keep_settings(before->lamps, lamps, n_lamps);
         free(redo);
         wenv_lamp_light_free(l);
         return WENV_OK;
@@ -247,7 +256,6 @@ wenv_status wenv_lamp_light_ensure(wenv_lamp_light **light, const wenv_lamp *lam
     l->key = key;
     l->made = (before ? before->made : 0) + 1;
     l->lift = occ ? wenv_occluders_offset(occ) : 0.0f;
-    memcpy(l->lamps, lamps, n_lamps * sizeof *lamps);
     memcpy(l->positions, positions, 3 * n * sizeof(float));
     for (size_t i = 0; i < n; i++) {
         const float *m = normals + 3 * i;
@@ -258,6 +266,7 @@ wenv_status wenv_lamp_light_ensure(wenv_lamp_light **light, const wenv_lamp *lam
     atomic_size_t done = 0;
     atomic_int cancelled = 0;
     long long nn = (long long)n;
+    keep_settings(l->lamps, lamps, n_lamps);
 #pragma omp parallel for schedule(dynamic, 64)
     for (long long i = 0; i < nn; i++) {
         if (atomic_load(&cancelled))
