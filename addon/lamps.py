@@ -54,9 +54,8 @@ def lamp_settings(obj):
         s["radius"] = float(light.shadow_soft_size)
         s["soft_falloff"] = compat.light_soft_falloff(light)
         if light.type == "SPOT":
+            # (its Square setting changes neither Cycles' nor EEVEE's light: the cone is round)
             s["spot_size"], s["spot_blend"] = float(light.spot_size), float(light.spot_blend)
-            if getattr(light, "use_square", False):
-                notes.append(f"Light '{obj.name}': a square spot's cone is shaded round")
     elif light.type == "AREA":
         s.update(shape=light.shape, size=float(light.size), size_y=float(light.size_y), spread=float(light.spread))
         if s["spread"] < 1e-3:
