@@ -506,6 +506,12 @@ def uv_texels(uv, triangles, width, height, memory_budget_mb, progress=None, bor
         raise SetupError(f"Cannot bake: {exc}") from None
 
 
+def noise_texture(points, **settings):
+    """(fac, colour) of Blender's Noise Texture at `points` ((n, 3) float32), as Cycles evaluates it
+    (wenv.noise_texture's settings)."""
+    return wenv.noise_texture(np.ascontiguousarray(points, np.float32), **settings)
+
+
 def corner_values_at(values, corners, weights):
     """wenv.corner_values_at: values per face corner (m, k) at points of corners and weights (n, 3),
     (n, k) float32."""

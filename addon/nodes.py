@@ -1,8 +1,9 @@
 """Shader nodes between Image Textures and a Principled BSDF's input, evaluated at each shaded vertex as
 Cycles' SVM evaluates them (intern/cycles/kernel/svm/): Image Texture, RGB and Value, Mix (and the
 older MixRGB) with its common blend modes, Math, Invert, ColorRamp, RGB Curves, Hue/Saturation/Value,
-Gamma, Brightness/Contrast, Separate and Combine Color (RGB), and on the way to a texture's Vector the
-Texture Coordinate's and UV Map's UVs through Mapping and Vector Math.  Colours are (n, 3) float32,
+Gamma, Brightness/Contrast, Separate and Combine Color (RGB), the Noise Texture, and on the way to a
+texture's Vector the Texture Coordinate's and UV Map's UVs (an Image Texture's) or its Generated and
+Object coordinates (a Noise Texture's) through Mapping and Vector Math.  Colours are (n, 3) float32,
 values (n,), at the shaded rows; a texture's UVs are read at the face corners and its samples averaged
 to the rows.  Any other node, output or mode raises Unsupported naming it, so that the caller uses the
 socket's unlinked value and says so: nothing is used silently."""
@@ -10,7 +11,7 @@ import math
 
 import numpy as np
 
-from . import world
+from . import engine, world
 
 # How deep a chain may go: a loop of links (which Blender marks invalid, but a script may leave) ends
 # here rather than in Python's recursion limit.
@@ -24,6 +25,15 @@ INTERPOLATIONS = ("Linear", "Closest")
 # The image sources read: a file (packed or not), a generated image, UDIM tiles, and an image
 # sequence or a movie (the frame the scene's shows)
 IMAGE_SOURCES = ("FILE", "GENERATED", "TILED", "SEQUENCE", "MOVIE")
+
+# The Noise Texture's inputs read as wenv.noise_texture's settings: (keyword, socket name)
+NOISE_INPUTS = (("w", "W"), ("scale", "Scale"), ("detail", "Detail"), ("roughness", "Roughness"),
+                ("lacunarity", "Lacunarity"), ("offset", "Offset"), ("gain", "Gain"), ("distortion", "Distortion"))
+# Where a procedural texture is read without a mesh (one_point: the panel's checks, the glossmeter's
+# means): 16 x 16 x 16 points over the unit cube, which Generated coordinates span, averaged.
+_side = (np.arange(16, dtype=np.float32) + 0.5) / 16.0
+MEAN_POINTS = np.stack(np.meshgrid(_side, _side, _side, indexing="ij"), -1).reshape(-1, 3)
+
 
 class Unsupported(Exception):
     """A node, output or setting the evaluation does not read (its message says which)."""
@@ -65,10 +75,13 @@ class Evaluator:
     Image Texture node at the corners (textures.py gives it); `uv(uv_map)` gives (uv, footprint,
     rows) of the mesh's UV map (None: the active render one), or None without one."""
 
-    def __init__(self, count, uv, texture, checking=False):
+    def __init__(self, count, uv, texture, checking=False, points=None):
         self.count = count
         self._uv = uv
         self._texture = texture
+        # points(space, other): the rows' 'GENERATED' or 'OBJECT' coordinates ((count, 3), `other`'s
+        # object space where given); None: MEAN_POINTS, averaged (one_point)
+        self._points = points
         self.checking = checking  # only whether every node is read: no tables made, no texel read
         self.textures = []  # the Image Texture nodes read
         self.notes = []  # what of them is read otherwise than Cycles reads it
@@ -116,6 +129,31 @@ class Evaluator:
             self.notes.append(f"'{node.name}': 8-bit colour space '{space}' is not decoded: its values are read as "
                               "linear")
         return self._texture(node, uv, footprint, rows)
+
+    def _ShaderNodeTexNoise(self, node, output, depth):
+        if output.identifier not in ("Fac", "Color"):  # (Fac is named Factor from 5.0)
+            raise Unsupported(f"'{node.name}''s {output.name} output")
+        _identity_mapping(node)
+        kw = {}
+        for key, name in NOISE_INPUTS:
+            socket = next((x for x in node.inputs if x.identifier == name), None)
+            if socket is None or not socket.enabled:  # (an unavailable socket is not found by name)
+                continue
+            if socket.is_linked:
+                raise Unsupported(f"'{node.name}''s {name}, linked")
+            kw[key] = float(socket.default_value)
+        dims = int(node.noise_dimensions[0])
+        points = self.points(_input(node, "Vector"), depth) if dims > 1 else None
+        if self.checking:
+            return np.zeros((self.count, 3) if output.identifier == "Color" else self.count, np.float32)
+        if points is None:
+            points = np.zeros((self.count if self._points is not None else 1, 3), np.float32)
+        colour = output.identifier == "Color"  # (Fac alone is a third of the work)
+        got = engine.noise_texture(points, dimensions=dims, type=node.noise_type, normalize=node.normalize,
+                                   color=colour, **kw)[1 if colour else 0]
+        if self._points is None:  # a mean over the unit cube
+            got = got.mean(axis=0, keepdims=True)
+        return got
 
     def _ShaderNodeRGB(self, node, output, depth):
         return np.tile(np.float32(tuple(output.default_value)[:3]), (self.count, 1))
@@ -176,7 +214,7 @@ class Evaluator:
     def _ShaderNodeValToRGB(self, node, output, depth):
         t = np.clip(self.value(node.inputs["Fac"], depth), 0.0, 1.0)
         if self.checking:
-            return np.zeros((self.count, 3) if output.name == "Color" else self.count, np.float32)
+            return np.zeros((self.count, 3) if output.identifier == "Color" else self.count, np.float32)
         # the ramp read through Blender's own evaluation on a fine table, as Cycles bakes it to one
         ramp = node.color_ramp
         x = np.linspace(0.0, 1.0, 1025)
@@ -237,6 +275,33 @@ class Evaluator:
         what = f"'{node.name}''s {output.name}" if node.bl_idname == "ShaderNodeTexCoord" else f"'{node.name}'"
         raise Unsupported(f"a texture's Vector from {what}, which wenv does not evaluate yet")
 
+    # -- a procedural texture's Vector: coordinates at the rows
+    def points(self, socket, depth):
+        """(count, 3) coordinates of a procedural texture's Vector input: Generated where unlinked, a
+        Texture Coordinate's Generated or Object, through Mapping and Vector Math nodes."""
+        fed = _fed(socket, depth)
+        if fed is None:
+            return self._coordinates("GENERATED")
+        node, output = fed
+        if node.bl_idname == "ShaderNodeTexCoord" and output.name in ("Generated", "Object"):
+            return self._coordinates(output.name.upper(), node.object if output.name == "Object" else None)
+        if node.bl_idname == "ShaderNodeMapping":
+            if node.vector_type not in ("POINT", "TEXTURE", "VECTOR"):
+                raise Unsupported(f"'{node.name}' of type {node.vector_type.lower()}")
+            p = self.points(node.inputs["Vector"], depth + 1).astype(np.float64)
+            return self._mapped(node, p).astype(np.float32)
+        if node.bl_idname == "ShaderNodeVectorMath":
+            op = _vector_op(node)
+            p = self.points(node.inputs[0], depth + 1).astype(np.float64)
+            return op(p)[0].astype(np.float32)
+        what = f"'{node.name}''s {output.name}" if node.bl_idname == "ShaderNodeTexCoord" else f"'{node.name}'"
+        raise Unsupported(f"a procedural texture's Vector from {what}, which wenv does not evaluate yet")
+
+    def _coordinates(self, space, other=None):
+        if self._points is None:
+            return MEAN_POINTS
+        return self._points(space, other)
+
     def _uvs(self, uv_map):
         got = self._uv(uv_map)
         if got is None:
@@ -253,35 +318,65 @@ class Evaluator:
         if node.vector_type not in ("POINT", "TEXTURE"):
             raise Unsupported(f"'{node.name}' of type {node.vector_type.lower()}")
         uv, footprint, rows = self.vector(node.inputs["Vector"], depth + 1)
-        loc = self._constant_vector(node.inputs["Location"], f"'{node.name}''s Location")
-        rot = self._constant_vector(node.inputs["Rotation"], f"'{node.name}''s Rotation")
+        out = self._mapped(node, np.column_stack([uv.astype(np.float64), np.zeros(len(uv))]))
         scale = self._constant_vector(node.inputs["Scale"], f"'{node.name}''s Scale")
-        m = _euler_xyz(rot)
-        p = np.column_stack([uv.astype(np.float64), np.zeros(len(uv))])
-        if node.vector_type == "POINT":  # scale, rotate, then move
-            out = (p * scale) @ m.T + loc
+        if node.vector_type == "POINT":
             stretch = math.sqrt(abs(scale[0] * scale[1]))
-        else:  # the inverse: the texture is moved, turned and scaled
-            out = ((p - loc) @ m) / np.where(scale == 0.0, 1.0, scale)
+        else:
             stretch = 1.0 / math.sqrt(abs(scale[0] * scale[1])) if scale[0] * scale[1] != 0.0 else 1.0
         return out[:, :2].astype(np.float32), (footprint * stretch).astype(np.float32), rows
 
+    def _mapped(self, node, p):
+        """Points p (n, 3) through a Mapping node of type point, texture or vector, as Cycles maps them."""
+        rot = self._constant_vector(node.inputs["Rotation"], f"'{node.name}''s Rotation")
+        scale = self._constant_vector(node.inputs["Scale"], f"'{node.name}''s Scale")
+        m = _euler_xyz(rot)
+        if node.vector_type == "VECTOR":  # a direction: scaled and turned, not moved
+            return (p * scale) @ m.T
+        loc = self._constant_vector(node.inputs["Location"], f"'{node.name}''s Location")
+        if node.vector_type == "POINT":  # scale, rotate, then move
+            return (p * scale) @ m.T + loc
+        return ((p - loc) @ m) / np.where(scale == 0.0, 1.0, scale)  # the inverse: the texture moved
+
     def _vector_math(self, node, depth):
-        ops = {"ADD": lambda a, b: a + b, "SUBTRACT": lambda a, b: a - b, "MULTIPLY": lambda a, b: a * b,
-               "DIVIDE": lambda a, b: np.where(b != 0.0, a / np.where(b != 0.0, b, 1.0), 0.0)}
-        if node.operation not in ops and node.operation != "SCALE":
-            raise Unsupported(f"'{node.name}' ({node.operation.lower()})")
+        op = _vector_op(node)
         uv, footprint, rows = self.vector(node.inputs[0], depth + 1)
-        if node.operation == "SCALE":
-            s = node.inputs["Scale"]
-            if s.is_linked:
-                raise Unsupported(f"'{node.name}''s Scale, linked")
-            return uv * s.default_value, footprint * abs(s.default_value), rows
-        b = self._constant_vector(node.inputs[1], f"'{node.name}''s second vector")[:2]
-        out = ops[node.operation](uv.astype(np.float64), b)
-        stretch = math.sqrt(abs(b[0] * b[1])) if node.operation == "MULTIPLY" else (
-            1.0 / math.sqrt(abs(b[0] * b[1])) if node.operation == "DIVIDE" and b[0] * b[1] != 0.0 else 1.0)
-        return out.astype(np.float32), (footprint * stretch).astype(np.float32), rows
+        out, stretch = op(np.column_stack([uv.astype(np.float64), np.zeros(len(uv))]))
+        return out[:, :2].astype(np.float32), (footprint * stretch).astype(np.float32), rows
+
+
+def _vector_op(node):
+    """A Vector Math node of a constant second operand as op(p) -> (p', how much it stretches a
+    footprint in the first two axes); Unsupported for other operations or a linked operand."""
+    if node.operation == "SCALE":
+        s = node.inputs["Scale"]
+        if s.is_linked:
+            raise Unsupported(f"'{node.name}''s Scale, linked")
+        k = float(s.default_value)
+        return lambda p: (p * k, abs(k))
+    ops = {"ADD": lambda a, b: a + b, "SUBTRACT": lambda a, b: a - b, "MULTIPLY": lambda a, b: a * b,
+           "DIVIDE": lambda a, b: np.where(b != 0.0, a / np.where(b != 0.0, b, 1.0), 0.0)}
+    if node.operation not in ops:
+        raise Unsupported(f"'{node.name}' ({node.operation.lower()})")
+    second = node.inputs[1]
+    if second.is_linked:
+        raise Unsupported(f"'{node.name}''s second vector, linked")
+    b = np.array(tuple(second.default_value), np.float64)
+    stretch = math.sqrt(abs(b[0] * b[1])) if node.operation == "MULTIPLY" else (
+        1.0 / math.sqrt(abs(b[0] * b[1])) if node.operation == "DIVIDE" and b[0] * b[1] != 0.0 else 1.0)
+    return lambda p: (ops[node.operation](p, b), stretch)
+
+
+def _identity_mapping(node):
+    """Unsupported when a texture node's own Mapping (its hidden texture_mapping) is not the identity."""
+    tm = getattr(node, "texture_mapping", None)
+    if tm is None:
+        return
+    same = (tuple(tm.translation) == (0.0, 0.0, 0.0) and tuple(tm.rotation) == (0.0, 0.0, 0.0)
+            and tuple(tm.scale) == (1.0, 1.0, 1.0) and not tm.use_min and not tm.use_max
+            and (tm.mapping_x, tm.mapping_y, tm.mapping_z) == ("X", "Y", "Z") and tm.mapping == "FLAT")
+    if not same:
+        raise Unsupported(f"'{node.name}''s own texture mapping")
 
 
 class MissingUV(Unsupported):

@@ -543,7 +543,8 @@ def read_inputs(obj, depsgraph, data):
                 data.count, lambda uv_map: data_uv_rows(mesh, uv_map, data, corner_vert),
                 lambda tex, uv, footprint, rows, s=s: _colours_memo((obj.name, data.domain, s, tex.name),
                                                                    pyramids(tex), Source(tex, None),
-                                                                   (uv, footprint, rows), data.count))
+                                                                   (uv, footprint, rows), data.count),
+                points=row_points(obj, mesh, data.positions))
             try:
                 values = ev.colour(sock) if keyword in COLOUR_KEYWORDS else ev.value(sock)
             except nodes.MissingUV as exc:
@@ -797,16 +798,36 @@ def world_points(mesh, m):
     return co.reshape(nv, 3).astype(np.float64) @ m[:3, :3].T + m[:3, 3]
 
 
+def row_points(obj, mesh, positions):
+    """An Evaluator's points(space, other) for rows at world `positions` ((n, 3)): their coordinates
+    in `other`'s object space ('OBJECT'; obj's own without one) or in the mesh's texture space
+    ('GENERATED', as Cycles maps it: the texture space's box onto the unit cube)."""
+    def points(space, other=None):
+        inverse = np.array((other or obj).matrix_world.inverted_safe(), np.float64)
+        local = positions.astype(np.float64) @ inverse[:3, :3].T + inverse[:3, 3]
+        if space == "GENERATED":
+            loc, size = np.array(mesh.texspace_location, np.float64), np.array(mesh.texspace_size, np.float64)
+            scale = np.where(size != 0.0, 0.5 / np.where(size != 0.0, size, 1.0), 0.0)
+            local = local * scale - (loc * scale - 0.5)
+        return local.astype(np.float32)
+    return points
+
+
 def _height_reader(obj, s, mesh, corner_vert, where, count):
     """An Evaluator of a Bump node's Height at `where`'s points: the face corners (where None) or
     a bake's texel sites."""
     rows = ((lambda uv_map: uv_rows(mesh, uv_map, "CORNER", corner_vert)) if where is None else
             (lambda uv_map: data_uv_rows(mesh, uv_map, _SitesOnly(where), corner_vert)))
     tag = ("height", "CORNER") if where is None else ("height", "TEXEL", where.shift)
+
+    def points(space, other=None):
+        corners = world_points(mesh, obj.matrix_world)[corner_vert]
+        return row_points(obj, mesh, corners if where is None else where.at(corners))(space, other)
     return nodes.Evaluator(count, rows,
                            lambda tex, uv, footprint, rows_: _colours_memo((obj.name, s) + tag + (tex.name,),
                                                                            pyramids(tex), Source(tex, None),
-                                                                           (uv, footprint, rows_), count))
+                                                                           (uv, footprint, rows_), count),
+                           points=points)
 
 
 def _bump_gradients(obj, s, mat, chain, mesh, corner_vert, m, sites, notes):
@@ -928,7 +949,8 @@ def read_term_weights(obj, depsgraph, data):
                 lambda tex, uv, footprint, rows, s=s, t=t: _colours_memo((obj.name, data.domain, s, t, tex.name),
                                                                          pyramids(tex),
                                                                          Source(tex, None), (uv, footprint, rows),
-                                                                         data.count)) if reads else None
+                                                                         data.count),
+                points=row_points(obj, mesh, data.positions)) if reads else None
             weight, fac = colour, np.ones((data.count, 1), np.float32)
             if term.factors:
                 try:

@@ -788,7 +788,7 @@ def test_from_principled_warns_about_links_and_missing_node(scene):
     cube = bpy.data.objects["Cube"]
     select_only(cube)
     mat = principled_material("textured")
-    tex = mat.node_tree.nodes.new("ShaderNodeTexNoise")
+    tex = mat.node_tree.nodes.new("ShaderNodeTexWave")
     mat.node_tree.links.new(tex.outputs["Color"], mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"])
     cube.active_material = mat
     warnings = materials.fill_from_principled(mat)
@@ -1123,6 +1123,61 @@ def test_a_texture_finer_than_the_mesh_averages(scene):
     assert set(np.unique(colours)) <= {0.0, 1.0}  # the texel under each vertex, as Cycles' Closest
 
 
+def test_a_noise_texture_is_read_at_each_vertex(scene):
+    """A Principled Base Color from a Noise Texture (its unlinked Vector: Generated coordinates) and a
+    Roughness from another's Fac through a Texture Coordinate's Object and a Mapping node, on a moved,
+    turned and stretched Suzanne: each vertex reads wenv.noise_texture at its own coordinates (as
+    tests/test_noise_texture.py holds it to Cycles); a Bump node of the noise tilts the normals; a
+    linked Scale is named and the socket's unlinked value used."""
+    env_world(scene, "sunset")
+    obj = add_monkey(subdivisions=1)
+    obj.location, obj.rotation_euler, obj.scale = (0.3, -0.2, 0.5), (0.2, 0.1, 0.4), (1.2, 0.8, 1.0)
+    mat = principled_material("noisy")
+    obj.data.materials.append(mat)
+    select_only(obj)
+    tree = mat.node_tree
+    bsdf = tree.nodes["Principled BSDF"]
+    colour_noise, rough_noise = tree.nodes.new("ShaderNodeTexNoise"), tree.nodes.new("ShaderNodeTexNoise")
+    rough_noise.noise_type, rough_noise.inputs["Detail"].default_value = "RIDGED_MULTIFRACTAL", 3.0
+    coords, mapping = tree.nodes.new("ShaderNodeTexCoord"), tree.nodes.new("ShaderNodeMapping")
+    mapping.inputs["Location"].default_value = (0.1, 0.2, 0.3)
+    mapping.inputs["Rotation"].default_value = (0.0, 0.0, 0.5)
+    tree.links.new(coords.outputs["Object"], mapping.inputs["Vector"])
+    tree.links.new(mapping.outputs["Vector"], rough_noise.inputs["Vector"])
+    tree.links.new(colour_noise.outputs["Color"], bsdf.inputs["Base Color"])
+    tree.links.new(rough_noise.outputs[0], bsdf.inputs["Roughness"])
+    bpy.context.view_layer.update()
+    data = plan_of(scene, obj).items[0][1]
+    inverse = np.array(obj.matrix_world.inverted(), np.float64)
+    local = data.positions.astype(np.float64) @ inverse[:3, :3].T + inverse[:3, 3]
+    loc, size = np.array(obj.data.texspace_location), np.array(obj.data.texspace_size)
+    want_colour = wenv.noise_texture(((local - loc) / (2.0 * size) + 0.5).astype(np.float32))[1]
+    c, s_ = np.cos(0.5), np.sin(0.5)
+    mapped = local @ np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]]).T + (0.1, 0.2, 0.3)
+    want_rough = wenv.noise_texture(mapped.astype(np.float32), type="RIDGED_MULTIFRACTAL", detail=3.0)[0]
+    np.testing.assert_allclose(data.inputs["base_color"], want_colour, atol=1e-4)
+    assert np.ptp(data.inputs["base_color"][:, 0]) > 0.2  # it varies over the mesh
+    np.testing.assert_allclose(data.inputs["roughness"], np.clip(want_rough, 0.0, 1.0), atol=1e-4)
+    assert not any("Noise" in n for n in materials.principled_notes(mat))
+    from addon import textures
+    mean, images = textures.socket_at_means(bsdf, "Base Color")  # the glossmeter's: over the unit cube
+    assert images == [] and np.all(np.abs(np.asarray(mean) - 0.5) < 0.05), mean
+
+    bump = tree.nodes.new("ShaderNodeBump")
+    bump.inputs["Distance"].default_value = 0.3
+    tree.links.new(colour_noise.outputs[0], bump.inputs["Height"])
+    tree.links.new(bump.outputs["Normal"], bsdf.inputs["Normal"])
+    data = plan_of(scene, obj).items[0][1]
+    unit = [n / np.linalg.norm(n, axis=1, keepdims=True) for n in (data.shading_normals, data.normals)]
+    tilt = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", *unit), -1.0, 1.0)))
+    assert np.median(tilt) > 1.0, np.median(tilt)
+
+    tree.links.new(tree.nodes.new("ShaderNodeValue").outputs[0], colour_noise.inputs["Scale"])
+    notes = materials.principled_notes(mat)
+    assert any("'Base Color' is linked" in n and "Scale, linked" in n for n in notes), notes
+    assert "base_color" not in plan_of(scene, obj).items[0][1].inputs
+
+
 def test_a_texture_wenv_cannot_read_is_named_with_the_value_used(scene):
     """A Base Color through object coordinates, or a UV map the mesh lacks: the report says so and the
     unlinked value is used."""
@@ -1331,10 +1386,10 @@ def test_a_bump_node_over_a_normal_map_and_what_it_does_not_read(scene):
     np.testing.assert_allclose(data.shading_normals, np.tile(want, (data.count, 1)), atol=2e-4)
     assert "'Normal' from a Bump node over a normal map is read at the vertices: detail finer than the mesh " \
         "is lost" in materials.principled_notes(mat)
-    noise = tree.nodes.new("ShaderNodeTexNoise")
-    tree.links.new(noise.outputs["Fac"], bump.inputs["Height"])
+    wave = tree.nodes.new("ShaderNodeTexWave")
+    tree.links.new(next(o for o in wave.outputs if o.identifier == "Fac"), bump.inputs["Height"])
     notes = materials.principled_notes(mat)
-    assert any("'Normal' is linked" in n and "Height comes from" in n and "Noise Texture" in n for n in notes), notes
+    assert any("'Normal' is linked" in n and "Height comes from" in n and "Wave Texture" in n for n in notes), notes
     data = plan_of(scene, plane).items[0][1]
     assert data.shading_normals is None
 
@@ -1522,7 +1577,7 @@ def test_textured_inputs_of_mixed_bsdfs_are_read_at_each_vertex(scene):
     want += 0.3 * colour * core_shader(env, engine.principled(found[1].inputs)).shade_mesh(p, n, eye,
                                                                                        roughness=glossy_rough)
     np.testing.assert_allclose(rgb, want, rtol=1e-4, atol=1e-5)
-    noise = tree.nodes.new("ShaderNodeTexNoise")
+    noise = tree.nodes.new("ShaderNodeTexWave")
     tree.links.new(noise.outputs["Fac"], glossy.inputs["Roughness"])
     assert any("'Glossy BSDF': 'Roughness' is linked (" in n and "unlinked value is used" in n
                for n in materials.principled_notes(mat))
@@ -1673,15 +1728,15 @@ def test_hue_saturation_converts_as_colorsys_does():
 
 
 def test_a_node_wenv_does_not_evaluate_is_named_and_the_value_used(scene):
-    """A Noise Texture into Roughness, or a loop of links: the report names it, the socket's unlinked
+    """A Wave Texture into Roughness, or a loop of links: the report names it, the socket's unlinked
     value is used, and the pass goes on."""
     env_world(scene, "sunset")
     plane, mat = textured_plane(bpy.data.images.new("flat", 4, 4, float_buffer=True))
     tree = mat.node_tree
-    noise = tree.nodes.new("ShaderNodeTexNoise")
+    noise = tree.nodes.new("ShaderNodeTexWave")
     tree.links.new(noise.outputs["Fac"], tree.nodes["Principled BSDF"].inputs["Roughness"])
     notes = materials.principled_notes(mat)
-    assert any("'Roughness' is linked ('Noise Texture', a node wenv does not evaluate yet): its unlinked value 0.4 "
+    assert any("'Roughness' is linked ('Wave Texture', a node wenv does not evaluate yet): its unlinked value 0.4 "
                "is used" in n for n in notes), notes
     assert "roughness" not in plan_of(scene, plane).items[0][1].inputs
     a, b = tree.nodes.new("ShaderNodeMath"), tree.nodes.new("ShaderNodeMath")
@@ -1845,7 +1900,7 @@ def test_what_wenv_does_not_shade_is_reported(scene):
     obj.active_material = mat
     tree = mat.node_tree
     node = tree.nodes["Principled BSDF"]
-    tex = tree.nodes.new("ShaderNodeTexNoise")
+    tex = tree.nodes.new("ShaderNodeTexWave")
     tree.links.new(tex.outputs["Color"], node.inputs["Base Color"])
     bump = tree.nodes.new("ShaderNodeBump")
     tree.links.new(tex.outputs["Fac"], bump.inputs["Height"])

@@ -35,6 +35,7 @@ OCCLUDERS = "occluders = wenv.Occluders("
 SWEEPS = "import wenv, wenv_sweep\n"
 LAMPS = "import numpy as np, wenv\n\nm = np.eye(4)"
 BENT = "import numpy as np, wenv\n\nsky = "
+NOISE = "fac, colour = wenv.noise_texture(points, "
 
 
 def leading_literal(comment):
@@ -233,6 +234,19 @@ def test_bent_normals_block_runs():
     assert run_checked(readme_block(BENT), ns, "docs/python.md") == 2
 
 
+def test_noise_block_runs():
+    """docs/python.md's noise block on a small sphere's vertices: a colour and roughness that vary
+    from vertex to vertex, shaded."""
+    v, _ = uv_sphere(12, 24)
+    n = np.ascontiguousarray(v, np.float32)
+    ns = {"wenv": wenv, "points": n, "normals": n, "views": np.tile(np.float32([0, -1, 0.3]), (len(n), 1)),
+          "shader": wenv.Shader(wenv.Environment(np.ones((16, 32, 3), np.float32)),
+                                wenv.Principled(base_color=(0.5, 0.5, 0.5)), quality="draft")}
+    run_checked(readme_block(NOISE), ns, "docs/python.md")
+    assert ns["colour"].shape == (len(n), 3) and ns["fac"].std() > 0.02
+    assert ns["rgb"].shape == (len(n), 3) and ns["rgb"][:, 0].std() > 0.01
+
+
 def test_lamps_block_runs():
     """docs/lamps.md's block on a sphere of normals under a dim sky, with its occlusion: the lamps
     brighten the shading, the reference agrees, and the shadowed call is no brighter."""
@@ -270,7 +284,7 @@ def test_every_python_block_is_run():
     run = {
         "README.md": [QUICK_START, "import bpy\nbpy.ops.extensions.package_install_files(",
                       "import bpy\nscene = bpy.context.scene"],
-        "docs/python.md": [API, OCCLUDERS, BENT, SWEEPS],
+        "docs/python.md": [API, OCCLUDERS, BENT, NOISE, SWEEPS],
         "docs/performance.md": [AUTO],
         "docs/principled.md": [PRINCIPLED],
         "docs/measured_brdfs.md": [TABULATED],

@@ -113,7 +113,7 @@ PyMODINIT_FUNC PyInit_wenv(void)
     if (PyModule_AddStringConstant(m, "__version__", "0.1.0") < 0 || wenv_register_envmap(m) < 0 ||
         wenv_register_material(m) < 0 || wenv_register_principled(m) < 0 || wenv_register_shader(m) < 0 || wenv_register_reference(m) < 0 ||
         wenv_register_glossmeter(m) < 0 || wenv_register_occlusion(m) < 0 || wenv_register_lamp(m) < 0 ||
-        wenv_register_bake(m) < 0 || wenv_register_internals(m) < 0)
+        wenv_register_bake(m) < 0 || wenv_register_textures(m) < 0 || wenv_register_internals(m) < 0)
         goto fail;
     return m;
 fail:

@@ -1,0 +1,132 @@
+"""Blender's Noise Texture (wenv.noise_texture) against Cycles: a 4 m plane seen from straight above by
+an orthographic camera that it fills, its Emission coloured by a Noise Texture, one sample a pixel at
+the pixel's centre; Cycles' pixels against wenv's noise at those points, for each dimension and type,
+with distortion and without normalisation, and through the plane's Generated coordinates.  Then bad
+input."""
+import tempfile
+
+import numpy as np
+import pytest
+
+import wenv
+
+bpy = pytest.importorskip("bpy")
+
+N = 48
+DEFAULTS = dict(scale=5.0, detail=2.0, roughness=0.5, lacunarity=2.0, offset=0.0, gain=1.0, distortion=0.0, w=0.0)
+SOCKETS = dict(scale="Scale", detail="Detail", roughness="Roughness", lacunarity="Lacunarity", offset="Offset",
+               gain="Gain", distortion="Distortion", w="W")
+
+
+@pytest.fixture(scope="module")
+def plane():
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    sc = bpy.context.scene
+    sc.render.engine = "CYCLES"
+    sc.cycles.device = "CPU"
+    sc.cycles.samples = 1
+    sc.cycles.use_denoising = False
+    sc.cycles.filter_width = 0.01  # the sample at the pixel's centre
+    sc.render.resolution_x = sc.render.resolution_y = N
+    sc.view_settings.view_transform = "Standard"
+    sc.render.image_settings.file_format = "OPEN_EXR"
+    sc.render.image_settings.color_depth = "32"
+    bpy.ops.mesh.primitive_plane_add(size=4.0, location=(0.5, -0.25, 0.0))
+    obj = bpy.context.object
+    cam = bpy.data.objects.new("camera", bpy.data.cameras.new("camera"))
+    sc.collection.objects.link(cam)
+    sc.camera = cam
+    cam.data.type, cam.data.ortho_scale = "ORTHO", 4.0
+    cam.location = (0.5, -0.25, 5.0)
+    mat = bpy.data.materials.new("noise")
+    if bpy.app.version < (5, 0, 0):
+        mat.use_nodes = True
+    tree = mat.node_tree
+    tree.nodes.clear()
+    out, emission = tree.nodes.new("ShaderNodeOutputMaterial"), tree.nodes.new("ShaderNodeEmission")
+    noise, coords = tree.nodes.new("ShaderNodeTexNoise"), tree.nodes.new("ShaderNodeTexCoord")
+    tree.links.new(emission.outputs[0], out.inputs["Surface"])
+    obj.data.materials.append(mat)
+    side = (np.arange(N) + 0.5) / N * 4.0 - 2.0
+    x, y = np.meshgrid(side, side)  # the pixels' centres in the plane's object space, row 0 at the bottom
+    local = np.stack([x.ravel(), y.ravel(), np.zeros(N * N)], 1)
+    folder = tempfile.mkdtemp(prefix="wenv-noise-")
+
+    def render(settings, output, vector="Object"):
+        for link in list(tree.links):
+            if link.to_node in (noise, emission):
+                tree.links.remove(link)
+        if vector:  # (by identifier: a socket unavailable in 1D is not found by name)
+            tree.links.new(coords.outputs[vector], next(s for s in noise.inputs if s.identifier == "Vector"))
+        tree.links.new(noise.outputs[output], emission.inputs["Color"])
+        noise.noise_dimensions = f"{settings.get('dimensions', 3)}D"
+        noise.noise_type = settings.get("type", "FBM")
+        noise.normalize = settings.get("normalize", True)
+        for key, name in SOCKETS.items():
+            socket = next(s for s in noise.inputs if s.identifier == name)
+            socket.default_value = settings.get(key, DEFAULTS[key])
+        sc.render.filepath = f"{folder}/noise.exr"
+        bpy.ops.render.render(write_still=True)
+        img = bpy.data.images.load(sc.render.filepath)
+        px = np.array(img.pixels[:], np.float32).reshape(N * N, 4)[:, :3]
+        bpy.data.images.remove(img)
+        return px
+    return obj, local, render
+
+
+CASES = [dict(), dict(type="MULTIFRACTAL", detail=3.5), dict(type="RIDGED_MULTIFRACTAL", offset=1.0, gain=2.0),
+         dict(type="HYBRID_MULTIFRACTAL", detail=4.3, offset=0.5, gain=1.5), dict(type="HETERO_TERRAIN", offset=0.7),
+         dict(dimensions=2, distortion=1.3, scale=3.0), dict(dimensions=4, w=0.37, detail=5.0, roughness=0.7),
+         dict(dimensions=1, w=1.7), dict(distortion=0.8, detail=2.5, normalize=False, lacunarity=2.5)]
+
+
+@pytest.mark.parametrize("settings", CASES, ids=lambda c: ",".join(f"{k}={v}" for k, v in c.items()) or "defaults")
+def test_noise_matches_cycles(plane, settings):
+    """Fac and Color within float rounding of Cycles' (a wrong hash or octave is off by 0.1 or more)."""
+    _, local, render = plane
+    fac, colour = wenv.noise_texture(local.astype(np.float32), **settings)
+    assert fac.std() > 0.01 or settings.get("dimensions") == 1  # a texture that varies over the plane
+    np.testing.assert_allclose(render(settings, "Fac")[:, 0], fac, atol=5e-4, rtol=0)
+    np.testing.assert_allclose(render(settings, "Color"), colour, atol=5e-4, rtol=0)
+
+
+def test_generated_coordinates_are_the_texture_space(plane):
+    """An unlinked Vector reads Generated coordinates: the mesh's texture space's box onto the unit
+    cube (a flat plane's z size taken as 1, as Blender takes it)."""
+    obj, local, render = plane
+    loc, size = np.array(obj.data.texspace_location), np.array(obj.data.texspace_size)
+    assert size[2] == 1.0
+    generated = ((local - loc) / (2.0 * size) + 0.5).astype(np.float32)
+    fac, _ = wenv.noise_texture(generated)
+    np.testing.assert_allclose(render({}, "Fac", vector=None)[:, 0], fac, atol=5e-4, rtol=0)
+
+
+@pytest.mark.parametrize("kwargs, error, words", [
+    (dict(type="CELLS"), ValueError, "type must be"),
+    (dict(dimensions=5), ValueError, "dimensions must be 1, 2, 3 or 4"),
+    (dict(scale=float("nan")), ValueError, "scale must be finite"),
+    (dict(w=np.zeros(3, np.float32)), ValueError, "w must be a number or have shape"),
+    (dict(w="x"), TypeError, "w"),
+])
+def test_bad_noise_input_is_named(kwargs, error, words):
+    """Each bad argument gets an error that names it."""
+    with pytest.raises(error, match=words):
+        wenv.noise_texture(np.zeros((4, 3), np.float32), **kwargs)
+    with pytest.raises(ValueError, match=r"vectors must have shape \(n, 3\)"):
+        wenv.noise_texture(np.zeros((4, 2), np.float32))
+
+
+def test_colour_on_request_progress_and_cancel():
+    """Fac alone (color=False) is the Fac of both; progress reports blocks of points up to 1, and a
+    progress that returns True cancels."""
+    points = np.random.default_rng(3).random((20000, 3)).astype(np.float32)
+    fac, colour = wenv.noise_texture(points, detail=3.0)
+    alone, none = wenv.noise_texture(points, detail=3.0, color=False)
+    assert none is None and np.array_equal(alone, fac) and np.array_equal(colour[:, 0], fac)
+    seen = []
+    wenv.noise_texture(points, progress=lambda f: seen.append(f) and False)
+    assert seen and seen[-1] == 1.0 and seen == sorted(seen)
+    with pytest.raises(wenv.CancelledError):
+        wenv.noise_texture(points, progress=lambda f: True)
+    with pytest.raises(TypeError, match="progress must be callable"):
+        wenv.noise_texture(points, progress=3)
