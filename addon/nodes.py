@@ -26,9 +26,11 @@ INTERPOLATIONS = ("Linear", "Closest")
 # sequence or a movie (the frame the scene's shows)
 IMAGE_SOURCES = ("FILE", "GENERATED", "TILED", "SEQUENCE", "MOVIE")
 
-# The Noise Texture's inputs read as wenv.noise_texture's settings: (keyword, socket name)
+# A procedural texture's inputs read as the core's settings: (keyword, socket identifier)
 NOISE_INPUTS = (("w", "W"), ("scale", "Scale"), ("detail", "Detail"), ("roughness", "Roughness"),
                 ("lacunarity", "Lacunarity"), ("offset", "Offset"), ("gain", "Gain"), ("distortion", "Distortion"))
+WAVE_INPUTS = (("scale", "Scale"), ("distortion", "Distortion"), ("detail", "Detail"), ("detail_scale", "Detail Scale"),
+               ("detail_roughness", "Detail Roughness"), ("phase", "Phase Offset"))
 # Where a procedural texture is read without a mesh (one_point: the panel's checks, the glossmeter's
 # means): 16 x 16 x 16 points over the unit cube, which Generated coordinates span, averaged.
 _side = (np.arange(16, dtype=np.float32) + 0.5) / 16.0
@@ -131,17 +133,7 @@ class Evaluator:
         return self._texture(node, uv, footprint, rows)
 
     def _ShaderNodeTexNoise(self, node, output, depth):
-        if output.identifier not in ("Fac", "Color"):  # (Fac is named Factor from 5.0)
-            raise Unsupported(f"'{node.name}''s {output.name} output")
-        _identity_mapping(node)
-        kw = {}
-        for key, name in NOISE_INPUTS:
-            socket = next((x for x in node.inputs if x.identifier == name), None)
-            if socket is None or not socket.enabled:  # (an unavailable socket is not found by name)
-                continue
-            if socket.is_linked:
-                raise Unsupported(f"'{node.name}''s {name}, linked")
-            kw[key] = float(socket.default_value)
+        kw = _procedural_inputs(node, output, NOISE_INPUTS)
         dims = int(node.noise_dimensions[0])
         points = self.points(_input(node, "Vector"), depth) if dims > 1 else None
         if self.checking:
@@ -154,6 +146,55 @@ class Evaluator:
         if self._points is None:  # a mean over the unit cube
             got = got.mean(axis=0, keepdims=True)
         return got
+
+    def _ShaderNodeTexWave(self, node, output, depth):
+        kw = _procedural_inputs(node, output, WAVE_INPUTS)
+        points = self.points(_input(node, "Vector"), depth)
+        if self.checking:
+            return self._grey(np.zeros(self.count, np.float32), output)
+        direction = node.bands_direction if node.wave_type == "BANDS" else node.rings_direction
+        return self._grey(engine.wave_texture(points, wave_type=node.wave_type, direction=direction,
+                                              profile=node.wave_profile, **kw), output)
+
+    def _ShaderNodeTexChecker(self, node, output, depth):
+        scale = _procedural_inputs(node, output, (("scale", "Scale"),))["scale"]
+        p = (self.points(_input(node, "Vector"), depth) * np.float32(scale) + np.float32(1e-6)) * np.float32(0.999999)
+        cell = np.abs(np.floor(p).astype(np.int64)) % 2
+        fac = ((cell[:, 0] == cell[:, 1]).astype(np.int64) == cell[:, 2]).astype(np.float32)
+        if self._points is None:
+            fac = fac.mean(keepdims=True)  # the share of Color1 over the unit cube
+        if output.identifier == "Fac":
+            return fac
+        one, two = self.colour(_input(node, "Color1"), depth), self.colour(_input(node, "Color2"), depth)
+        return (fac[:, None] * one + (1.0 - fac[:, None]) * two).astype(np.float32)
+
+    def _ShaderNodeTexGradient(self, node, output, depth):
+        _procedural_inputs(node, output, ())
+        p = self.points(_input(node, "Vector"), depth).astype(np.float32)
+        x, y, z = p[:, 0], p[:, 1], p[:, 2]
+        kind = node.gradient_type
+        if kind == "LINEAR":
+            f = x
+        elif kind == "QUADRATIC":
+            f = np.maximum(x, 0.0) ** 2
+        elif kind == "EASING":
+            r = np.clip(x, 0.0, 1.0)
+            f = 3.0 * r * r - 2.0 * r * r * r
+        elif kind == "DIAGONAL":
+            f = (x + y) * np.float32(0.5)
+        elif kind == "RADIAL":
+            f = np.arctan2(y, x) / np.float32(2.0 * math.pi) + np.float32(0.5)
+        else:  # spherical: biased so that a unit vector gives exactly 0
+            r = np.maximum(np.float32(0.999999) - np.sqrt(x * x + y * y + z * z), 0.0)
+            f = r * r if kind == "QUADRATIC_SPHERE" else r
+        return self._grey(np.clip(f, 0.0, 1.0).astype(np.float32), output)
+
+    def _grey(self, fac, output):
+        """A texture's Fac as its output: itself, or its Color (Fac in each channel); averaged over
+        the unit cube without a mesh (one_point)."""
+        if self._points is None:
+            fac = fac.mean(keepdims=True)
+        return np.repeat(fac[:, None], 3, axis=1) if output.identifier == "Color" else fac
 
     def _ShaderNodeRGB(self, node, output, depth):
         return np.tile(np.float32(tuple(output.default_value)[:3]), (self.count, 1))
@@ -365,6 +406,24 @@ def _vector_op(node):
     stretch = math.sqrt(abs(b[0] * b[1])) if node.operation == "MULTIPLY" else (
         1.0 / math.sqrt(abs(b[0] * b[1])) if node.operation == "DIVIDE" and b[0] * b[1] != 0.0 else 1.0)
     return lambda p: (ops[node.operation](p, b), stretch)
+
+
+def _procedural_inputs(node, output, table):
+    """A procedural texture node's unlinked inputs of `table` ((keyword, socket identifier)) as the
+    core's settings; Unsupported for an output other than Fac or Color, a linked input or the
+    node's own texture mapping."""
+    if output.identifier not in ("Fac", "Color"):  # (Fac is named Factor from 5.0)
+        raise Unsupported(f"'{node.name}''s {output.name} output")
+    _identity_mapping(node)
+    kw = {}
+    for key, name in table:
+        socket = next((x for x in node.inputs if x.identifier == name), None)
+        if socket is None or not socket.enabled:  # (an unavailable socket is not found by name)
+            continue
+        if socket.is_linked:
+            raise Unsupported(f"'{node.name}''s {socket.name}, linked")
+        kw[key] = float(socket.default_value)
+    return kw
 
 
 def _identity_mapping(node):

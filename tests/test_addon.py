@@ -788,7 +788,7 @@ def test_from_principled_warns_about_links_and_missing_node(scene):
     cube = bpy.data.objects["Cube"]
     select_only(cube)
     mat = principled_material("textured")
-    tex = mat.node_tree.nodes.new("ShaderNodeTexWave")
+    tex = mat.node_tree.nodes.new("ShaderNodeTexMagic")
     mat.node_tree.links.new(tex.outputs["Color"], mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"])
     cube.active_material = mat
     warnings = materials.fill_from_principled(mat)
@@ -1127,7 +1127,7 @@ def test_a_noise_texture_is_read_at_each_vertex(scene):
     """A Principled Base Color from a Noise Texture (its unlinked Vector: Generated coordinates) and a
     Roughness from another's Fac through a Texture Coordinate's Object and a Mapping node, on a moved,
     turned and stretched Suzanne: each vertex reads wenv.noise_texture at its own coordinates (as
-    tests/test_noise_texture.py holds it to Cycles); a Bump node of the noise tilts the normals; a
+    tests/test_procedural_textures.py holds it to Cycles); a Bump node of the noise tilts the normals; a
     linked Scale is named and the socket's unlinked value used."""
     env_world(scene, "sunset")
     obj = add_monkey(subdivisions=1)
@@ -1386,10 +1386,10 @@ def test_a_bump_node_over_a_normal_map_and_what_it_does_not_read(scene):
     np.testing.assert_allclose(data.shading_normals, np.tile(want, (data.count, 1)), atol=2e-4)
     assert "'Normal' from a Bump node over a normal map is read at the vertices: detail finer than the mesh " \
         "is lost" in materials.principled_notes(mat)
-    wave = tree.nodes.new("ShaderNodeTexWave")
-    tree.links.new(next(o for o in wave.outputs if o.identifier == "Fac"), bump.inputs["Height"])
+    magic = tree.nodes.new("ShaderNodeTexMagic")
+    tree.links.new(next(o for o in magic.outputs if o.identifier == "Fac"), bump.inputs["Height"])
     notes = materials.principled_notes(mat)
-    assert any("'Normal' is linked" in n and "Height comes from" in n and "Wave Texture" in n for n in notes), notes
+    assert any("'Normal' is linked" in n and "Height comes from" in n and "Magic Texture" in n for n in notes), notes
     data = plan_of(scene, plane).items[0][1]
     assert data.shading_normals is None
 
@@ -1577,8 +1577,8 @@ def test_textured_inputs_of_mixed_bsdfs_are_read_at_each_vertex(scene):
     want += 0.3 * colour * core_shader(env, engine.principled(found[1].inputs)).shade_mesh(p, n, eye,
                                                                                        roughness=glossy_rough)
     np.testing.assert_allclose(rgb, want, rtol=1e-4, atol=1e-5)
-    noise = tree.nodes.new("ShaderNodeTexWave")
-    tree.links.new(noise.outputs["Fac"], glossy.inputs["Roughness"])
+    magic = tree.nodes.new("ShaderNodeTexMagic")
+    tree.links.new(magic.outputs["Fac"], glossy.inputs["Roughness"])
     assert any("'Glossy BSDF': 'Roughness' is linked (" in n and "unlinked value is used" in n
                for n in materials.principled_notes(mat))
 
@@ -1728,15 +1728,15 @@ def test_hue_saturation_converts_as_colorsys_does():
 
 
 def test_a_node_wenv_does_not_evaluate_is_named_and_the_value_used(scene):
-    """A Wave Texture into Roughness, or a loop of links: the report names it, the socket's unlinked
+    """A Magic Texture into Roughness, or a loop of links: the report names it, the socket's unlinked
     value is used, and the pass goes on."""
     env_world(scene, "sunset")
     plane, mat = textured_plane(bpy.data.images.new("flat", 4, 4, float_buffer=True))
     tree = mat.node_tree
-    noise = tree.nodes.new("ShaderNodeTexWave")
-    tree.links.new(noise.outputs["Fac"], tree.nodes["Principled BSDF"].inputs["Roughness"])
+    magic = tree.nodes.new("ShaderNodeTexMagic")
+    tree.links.new(magic.outputs["Fac"], tree.nodes["Principled BSDF"].inputs["Roughness"])
     notes = materials.principled_notes(mat)
-    assert any("'Roughness' is linked ('Wave Texture', a node wenv does not evaluate yet): its unlinked value 0.4 "
+    assert any("'Roughness' is linked ('Magic Texture', a node wenv does not evaluate yet): its unlinked value 0.4 "
                "is used" in n for n in notes), notes
     assert "roughness" not in plan_of(scene, plane).items[0][1].inputs
     a, b = tree.nodes.new("ShaderNodeMath"), tree.nodes.new("ShaderNodeMath")
@@ -1900,7 +1900,7 @@ def test_what_wenv_does_not_shade_is_reported(scene):
     obj.active_material = mat
     tree = mat.node_tree
     node = tree.nodes["Principled BSDF"]
-    tex = tree.nodes.new("ShaderNodeTexWave")
+    tex = tree.nodes.new("ShaderNodeTexMagic")
     tree.links.new(tex.outputs["Color"], node.inputs["Base Color"])
     bump = tree.nodes.new("ShaderNodeBump")
     tree.links.new(tex.outputs["Fac"], bump.inputs["Height"])

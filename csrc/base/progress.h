@@ -36,4 +36,24 @@ static inline int wenv_progress_finish(const wenv_progress *p)
     return p && p->report && p->report(p->ctx, 1.0);
 }
 
+/* Runs each(ctx, first, end) over [0, n) in blocks of `block` items, in parallel, with a report after
+ * each block and a last one at the end.  Nonzero: the report asked to stop (blocks not yet begun
+ * are skipped). */
+static inline int wenv_progress_blocks(size_t n, size_t block, void (*each)(const void *ctx, size_t first, size_t end),
+                                       const void *ctx, const wenv_progress *p)
+{
+    size_t blocks = (n + block - 1) / block;
+    atomic_size_t done = 0;
+    atomic_int cancelled = 0;
+#pragma omp parallel for schedule(dynamic, 1)
+    for (long long b = 0; b < (long long)blocks; b++) {
+        if (atomic_load(&cancelled))
+            continue;
+        size_t first = (size_t)b * block, end = first + block < n ? first + block : n;
+        each(ctx, first, end);
+        wenv_progress_item(p, &done, blocks, &cancelled);
+    }
+    return atomic_load(&cancelled) || wenv_progress_finish(p);
+}
+
 #endif

@@ -1,11 +1,36 @@
-/* wenv.noise_texture: Blender's Noise Texture node at points (scene/noise_texture.h). */
+/* wenv.noise_texture and wenv.wave_texture: Blender's procedural texture nodes at points
+ * (scene/noise_texture.h, scene/wave_texture.h). */
 #include <string.h>
 
 #include "python/module.h"
 #include "scene/noise_texture.h"
+#include "scene/wave_texture.h"
 
 static const char *const TYPE_NAMES[] = {"MULTIFRACTAL", "FBM", "HYBRID_MULTIFRACTAL", "RIDGED_MULTIFRACTAL",
                                          "HETERO_TERRAIN"};
+
+/* The index of `name` among `names` (count of them); -1 + ValueError naming `what` otherwise. */
+static int choice(const char *name, const char *what, const char *const *names, int count)
+{
+    for (int k = 0; k < count; k++)
+        if (strcmp(name, names[k]) == 0)
+            return k;
+    PyErr_Format(PyExc_ValueError, "%s must be one of %s ... %s, got '%s'", what, names[0], names[count - 1], name);
+    return -1;
+}
+
+/* The (n, 3) float32 vectors of a texture call; -1 with the error set. */
+static int get_vectors(PyObject *obj, Py_buffer *view, PyObject **held)
+{
+    if (wenv_py_get_typed_array(obj, "vectors", "float32", 0, view, held) < 0)
+        return -1;
+    if (view->ndim != 2 || view->shape[1] != 3) {
+        wenv_py_release_array(view, held);
+        PyErr_SetString(PyExc_ValueError, "vectors must have shape (n, 3)");
+        return -1;
+    }
+    return 0;
+}
 
 /* noise_texture(vectors, w=0, *, dimensions=3, type='FBM', normalize=True, scale=5, detail=2,
  * roughness=0.5, lacunarity=2, offset=0, gain=1, distortion=0, color=True, progress=None)
@@ -31,24 +56,16 @@ static PyObject *noise_texture(PyObject *self, PyObject *args, PyObject *kwargs)
     wenv_noise_settings s = {.dimensions = dimensions, .normalize = normalize, .scale = (float)scale,
                              .detail = (float)detail, .roughness = (float)roughness, .lacunarity = (float)lacunarity,
                              .offset = (float)offset, .gain = (float)gain, .distortion = (float)distortion};
-    int found = -1;
-    for (int k = 0; k < 5; k++)
-        if (strcmp(type, TYPE_NAMES[k]) == 0)
-            found = k;
+    int found = choice(type, "type", TYPE_NAMES, 5);
     if (found < 0)
-        return PyErr_Format(PyExc_ValueError, "type must be 'FBM', 'MULTIFRACTAL', 'HYBRID_MULTIFRACTAL', "
-                            "'RIDGED_MULTIFRACTAL' or 'HETERO_TERRAIN', got '%s'", type);
+        return NULL;
     s.type = (wenv_noise_type)found;
     Py_buffer vb, wb = {0};
     PyObject *v_held, *w_held = NULL, *fac = NULL, *colour = NULL;
-    if (wenv_py_get_typed_array(v_obj, "vectors", "float32", 0, &vb, &v_held) < 0)
+    if (get_vectors(v_obj, &vb, &v_held) < 0)
         return NULL;
     double w0 = 0.0;
     int w_array = w_obj && w_obj != Py_None && !PyFloat_Check(w_obj) && !PyLong_Check(w_obj);
-    if (vb.ndim != 2 || vb.shape[1] != 3) {
-        PyErr_SetString(PyExc_ValueError, "vectors must have shape (n, 3)");
-        goto done;
-    }
     if (w_array) {
         if (wenv_py_get_typed_array(w_obj, "w", "float32", 0, &wb, &w_held) < 0)
             goto done;
@@ -93,6 +110,62 @@ done:
     return NULL;
 }
 
+/* wave_texture(vectors, *, wave_type='BANDS', direction='X', profile='SIN', scale=5, distortion=0,
+ * detail=2, detail_scale=1, detail_roughness=0.5, phase=0, progress=None) -> fac (n,) */
+static PyObject *wave_texture(PyObject *self, PyObject *args, PyObject *kwargs)
+{
+    (void)self;
+    static char *kwlist[] = {"vectors", "wave_type", "direction", "profile", "scale", "distortion", "detail",
+                             "detail_scale", "detail_roughness", "phase", "progress", NULL};
+    static const char *const TYPES[] = {"BANDS", "RINGS"};
+    static const char *const BANDS[] = {"X", "Y", "Z", "DIAGONAL"}, *const RINGS[] = {"X", "Y", "Z", "SPHERICAL"};
+    static const char *const PROFILES[] = {"SIN", "SAW", "TRI"};
+    PyObject *v_obj, *progress_obj = Py_None;
+    const char *type = "BANDS", *direction = "X", *profile = "SIN";
+    double scale = 5.0, distortion = 0.0, detail = 2.0, detail_scale = 1.0, detail_roughness = 0.5, phase = 0.0;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "O|$sssddddddO:wave_texture", kwlist, &v_obj, &type, &direction,
+                                     &profile, &scale, &distortion, &detail, &detail_scale, &detail_roughness, &phase,
+                                     &progress_obj))
+        return NULL;
+    if (progress_obj != Py_None && !PyCallable_Check(progress_obj)) {
+        PyErr_SetString(PyExc_TypeError, "progress must be callable or None");
+        return NULL;
+    }
+    int t = choice(type, "wave_type", TYPES, 2), d = t < 0 ? -1 : choice(direction, "direction", t ? RINGS : BANDS, 4);
+    int p = d < 0 ? -1 : choice(profile, "profile", PROFILES, 3);
+    if (p < 0)
+        return NULL;
+    wenv_wave_settings s = {.type = (wenv_wave_type)t, .direction = (wenv_wave_direction)d,
+                            .profile = (wenv_wave_profile)p, .scale = (float)scale, .distortion = (float)distortion,
+                            .detail = (float)detail, .detail_scale = (float)detail_scale,
+                            .detail_roughness = (float)detail_roughness, .phase = (float)phase};
+    Py_buffer vb;
+    PyObject *v_held, *fac;
+    if (get_vectors(v_obj, &vb, &v_held) < 0)
+        return NULL;
+    Py_ssize_t n = vb.shape[0];
+    float *out;
+    if (!(fac = wenv_py_new_float_array(1, &n, &out))) {
+        wenv_py_release_array(&vb, &v_held);
+        return NULL;
+    }
+    wenv_py_progress_bridge bridge = {.callback = progress_obj};
+    wenv_progress progress = wenv_py_progress(&bridge);
+    wenv_error err = {0};
+    wenv_status st;
+    WENV_BEGIN_WORK
+    st = wenv_wave_texture(&s, vb.buf, (size_t)n, out, &progress, &err);
+    WENV_END_WORK
+    wenv_py_release_array(&vb, &v_held);
+    if (st) {
+        Py_DECREF(fac);
+        if (!(bridge.raised && PyErr_Occurred()))
+            wenv_py_raise(&err);
+        return NULL;
+    }
+    return fac;
+}
+
 static PyMethodDef texture_functions[] = {
     {"noise_texture", (PyCFunction)(void (*)(void))noise_texture, METH_VARARGS | METH_KEYWORDS,
      "noise_texture(vectors, w=0, *, dimensions=3, type='FBM', normalize=True, scale=5, detail=2, roughness=0.5, "
@@ -103,6 +176,14 @@ static PyMethodDef texture_functions[] = {
      "node's Fac and Color outputs (color None with color=False, a third of the work).  Detail is clamped to "
      "[0, 15] and roughness to >= 0, as Cycles clamps them.  progress(fraction) is called as blocks of points "
      "finish; returning True cancels (wenv.CancelledError).",
+    },
+    {"wave_texture", (PyCFunction)(void (*)(void))wave_texture, METH_VARARGS | METH_KEYWORDS,
+     "wave_texture(vectors, *, wave_type='BANDS', direction='X', profile='SIN', scale=5, distortion=0, detail=2, "
+     "detail_scale=1, detail_roughness=0.5, phase=0, progress=None)\n--\n\n"
+     "Blender's Wave Texture node at points, as Cycles evaluates it: `vectors` (n, 3) float32 is its Vector "
+     "input; wave_type, direction (bands: 'X', 'Y', 'Z', 'DIAGONAL'; rings: 'X', 'Y', 'Z', 'SPHERICAL') and "
+     "profile ('SIN', 'SAW', 'TRI') its settings, the rest its inputs (phase: Phase Offset).  Returns its Fac "
+     "(n,) float32; its Color is Fac in each channel.  progress(fraction) may cancel (wenv.CancelledError).",
     },
     {NULL, NULL, 0, NULL},
 };

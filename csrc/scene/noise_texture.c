@@ -5,7 +5,6 @@
 #include "scene/noise_texture.h"
 
 #include <math.h>
-#include <stdatomic.h>
 #include <stdint.h>
 #include <string.h>
 
@@ -178,6 +177,15 @@ static float fbm(const float *p, int d, const wenv_noise_settings *s)
                         : lerp(sum, sum2, rmd);
 }
 
+float wenv_noise_fbm3(const float p[3], float detail, float roughness, float lacunarity, int normalize)
+{
+    wenv_noise_settings s = {.dimensions = 3, .type = WENV_NOISE_FBM, .normalize = normalize,
+                             .detail = fminf(fmaxf(detail, 0.0f), 15.0f), .roughness = roughness,
+                             .lacunarity = lacunarity};
+    float q[4] = {p[0], p[1], p[2], 0.0f};
+    return fbm(q, 3, &s);
+}
+
 static float multifractal(const float *p0, int d, const wenv_noise_settings *s)
 {
     float value = 1.0f, pwr = 1.0f, p[4];
@@ -304,6 +312,20 @@ static void noise_at(const wenv_noise_settings *s, const float *vectors, const f
     }
 }
 
+typedef struct {
+    const wenv_noise_settings *s;
+    const float *vectors, *w;
+    float w0;
+    float *value, *colour;
+} noise_job;
+
+static void noise_block(const void *ctx, size_t first, size_t end)
+{
+    const noise_job *job = ctx;
+    for (size_t i = first; i < end; i++)
+        noise_at(job->s, job->vectors, job->w, job->w0, i, job->value, job->colour);
+}
+
 wenv_status wenv_noise_texture(const wenv_noise_settings *settings, const float *vectors, const float *w, float w0,
                                size_t n, float *value, float *colour, const wenv_progress *progress, wenv_error *err)
 {
@@ -323,19 +345,8 @@ wenv_status wenv_noise_texture(const wenv_noise_settings *settings, const float 
     /* as Cycles clamps them */
     s.detail = fminf(fmaxf(s.detail, 0.0f), 15.0f);
     s.roughness = fmaxf(s.roughness, 0.0f);
-    size_t blocks = (n + BLOCK - 1) / BLOCK;
-    atomic_size_t done = 0;
-    atomic_int cancelled = 0;
-#pragma omp parallel for schedule(dynamic, 1)
-    for (long long b = 0; b < (long long)blocks; b++) {
-        if (atomic_load(&cancelled))
-            continue;
-        size_t end = (size_t)(b + 1) * BLOCK < n ? (size_t)(b + 1) * BLOCK : n;
-        for (size_t i = (size_t)b * BLOCK; i < end; i++)
-            noise_at(&s, vectors, w, w0, i, value, colour);
-        wenv_progress_item(progress, &done, blocks, &cancelled);
-    }
-    if (atomic_load(&cancelled) || wenv_progress_finish(progress))
+    noise_job job = {&s, vectors, w, w0, value, colour};
+    if (wenv_progress_blocks(n, BLOCK, noise_block, &job, progress))
         return wenv_error_set(err, WENV_ERR_CANCELLED, "the noise texture was cancelled");
     return WENV_OK;
 }

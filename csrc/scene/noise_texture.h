@@ -36,4 +36,7 @@ wenv_status wenv_noise_texture(const wenv_noise_settings *settings, const float 
                                size_t n, float *value, float *colour, const wenv_progress *progress,
                                wenv_error *err);
 
+/* Cycles' fBM of 3D noise at p (noise_fbm): what other textures distort with (the Wave Texture). */
+float wenv_noise_fbm3(const float p[3], float detail, float roughness, float lacunarity, int normalize);
+
 #endif

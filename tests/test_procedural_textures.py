@@ -1,8 +1,9 @@
-"""Blender's Noise Texture (wenv.noise_texture) against Cycles: a 4 m plane seen from straight above by
-an orthographic camera that it fills, its Emission coloured by a Noise Texture, one sample a pixel at
-the pixel's centre; Cycles' pixels against wenv's noise at those points, for each dimension and type,
-with distortion and without normalisation, and through the plane's Generated coordinates.  Then bad
-input."""
+"""Blender's procedural textures against Cycles: a 4 m plane seen from straight above by an
+orthographic camera that it fills, its Emission coloured by a texture node, one sample a pixel at the
+pixel's centre.  Cycles' pixels against wenv.noise_texture at those points, for each dimension and type,
+with distortion and without normalisation, and through the plane's Generated coordinates; and against
+the add-on's reading of the node (addon/nodes.py) for the Noise, Wave, Checker and Gradient Textures.
+Then bad input."""
 import tempfile
 
 import numpy as np
@@ -11,6 +12,8 @@ import pytest
 import wenv
 
 bpy = pytest.importorskip("bpy")
+
+from addon import nodes  # noqa: E402
 
 N = 48
 DEFAULTS = dict(scale=5.0, detail=2.0, roughness=0.5, lacunarity=2.0, offset=0.0, gain=1.0, distortion=0.0, w=0.0)
@@ -45,6 +48,8 @@ def plane():
     tree.nodes.clear()
     out, emission = tree.nodes.new("ShaderNodeOutputMaterial"), tree.nodes.new("ShaderNodeEmission")
     noise, coords = tree.nodes.new("ShaderNodeTexNoise"), tree.nodes.new("ShaderNodeTexCoord")
+    others = {kind: tree.nodes.new(kind) for kind in ("ShaderNodeTexWave", "ShaderNodeTexChecker",
+                                                       "ShaderNodeTexGradient", "ShaderNodeMapping")}
     tree.links.new(emission.outputs[0], out.inputs["Surface"])
     obj.data.materials.append(mat)
     side = (np.arange(N) + 0.5) / N * 4.0 - 2.0
@@ -52,9 +57,30 @@ def plane():
     local = np.stack([x.ravel(), y.ravel(), np.zeros(N * N)], 1)
     folder = tempfile.mkdtemp(prefix="wenv-noise-")
 
+    def shot():
+        bpy.ops.render.render(write_still=True)
+        img = bpy.data.images.load(sc.render.filepath)
+        px = np.array(img.pixels[:], np.float32).reshape(N * N, 4)[:, :3]
+        bpy.data.images.remove(img)
+        return px
+
+    def render_node(kind, output, configure):
+        """Cycles' pixels and the add-on's reading of a `kind` node, set up by configure(node,
+        mapping), fed Object coordinates through a Mapping node."""
+        for link in list(tree.links):
+            if link.to_node != out:
+                tree.links.remove(link)
+        node, mapping = noise if kind == "ShaderNodeTexNoise" else others[kind], others["ShaderNodeMapping"]
+        tree.links.new(coords.outputs["Object"], mapping.inputs["Vector"])
+        tree.links.new(mapping.outputs["Vector"], node.inputs["Vector"])
+        tree.links.new(next(o for o in node.outputs if o.identifier == output), emission.inputs["Color"])
+        configure(node, mapping)
+        ev = nodes.Evaluator(N * N, None, None, points=lambda space, other: local.astype(np.float32))
+        return shot(), ev.colour(emission.inputs["Color"])
+
     def render(settings, output, vector="Object"):
         for link in list(tree.links):
-            if link.to_node in (noise, emission):
+            if link.to_node != out:
                 tree.links.remove(link)
         if vector:  # (by identifier: a socket unavailable in 1D is not found by name)
             tree.links.new(coords.outputs[vector], next(s for s in noise.inputs if s.identifier == "Vector"))
@@ -65,13 +91,9 @@ def plane():
         for key, name in SOCKETS.items():
             socket = next(s for s in noise.inputs if s.identifier == name)
             socket.default_value = settings.get(key, DEFAULTS[key])
-        sc.render.filepath = f"{folder}/noise.exr"
-        bpy.ops.render.render(write_still=True)
-        img = bpy.data.images.load(sc.render.filepath)
-        px = np.array(img.pixels[:], np.float32).reshape(N * N, 4)[:, :3]
-        bpy.data.images.remove(img)
-        return px
-    return obj, local, render
+        return shot()
+    sc.render.filepath = f"{folder}/texture.exr"
+    return obj, local, render, render_node
 
 
 CASES = [dict(), dict(type="MULTIFRACTAL", detail=3.5), dict(type="RIDGED_MULTIFRACTAL", offset=1.0, gain=2.0),
@@ -83,7 +105,7 @@ CASES = [dict(), dict(type="MULTIFRACTAL", detail=3.5), dict(type="RIDGED_MULTIF
 @pytest.mark.parametrize("settings", CASES, ids=lambda c: ",".join(f"{k}={v}" for k, v in c.items()) or "defaults")
 def test_noise_matches_cycles(plane, settings):
     """Fac and Color within float rounding of Cycles' (a wrong hash or octave is off by 0.1 or more)."""
-    _, local, render = plane
+    _, local, render, _ = plane
     fac, colour = wenv.noise_texture(local.astype(np.float32), **settings)
     assert fac.std() > 0.01 or settings.get("dimensions") == 1  # a texture that varies over the plane
     np.testing.assert_allclose(render(settings, "Fac")[:, 0], fac, atol=5e-4, rtol=0)
@@ -93,12 +115,49 @@ def test_noise_matches_cycles(plane, settings):
 def test_generated_coordinates_are_the_texture_space(plane):
     """An unlinked Vector reads Generated coordinates: the mesh's texture space's box onto the unit
     cube (a flat plane's z size taken as 1, as Blender takes it)."""
-    obj, local, render = plane
+    obj, local, render, _ = plane
     loc, size = np.array(obj.data.texspace_location), np.array(obj.data.texspace_size)
     assert size[2] == 1.0
     generated = ((local - loc) / (2.0 * size) + 0.5).astype(np.float32)
     fac, _ = wenv.noise_texture(generated)
     np.testing.assert_allclose(render({}, "Fac", vector=None)[:, 0], fac, atol=5e-4, rtol=0)
+
+
+def _set(node, **values):
+    for name, value in values.items():
+        if name.isupper() or " " in name or name[0].isupper():
+            next(s for s in node.inputs if s.identifier == name).default_value = value
+        else:
+            setattr(node, name, value)
+
+
+NODE_CASES = [
+    ("ShaderNodeTexNoise", "Color", lambda n, m: _set(n, noise_type="RIDGED_MULTIFRACTAL", Detail=3.0, Gain=1.5)),
+    ("ShaderNodeTexWave", "Fac", lambda n, m: _set(n, wave_type="BANDS", bands_direction="DIAGONAL",
+                                                   wave_profile="SIN", Scale=2.0)),
+    ("ShaderNodeTexWave", "Color", lambda n, m: _set(n, wave_type="RINGS", rings_direction="Z", wave_profile="SAW",
+                                                     Distortion=4.0, Detail=3.0, **{"Detail Scale": 1.5})),
+    ("ShaderNodeTexWave", "Fac", lambda n, m: _set(n, wave_type="RINGS", rings_direction="SPHERICAL",
+                                                   wave_profile="TRI", **{"Phase Offset": 1.2})),
+    ("ShaderNodeTexChecker", "Color", lambda n, m: _set(n, Scale=3.0, Color1=(0.9, 0.2, 0.1, 1.0),
+                                                        Color2=(0.1, 0.3, 0.8, 1.0))),
+    ("ShaderNodeTexChecker", "Fac", lambda n, m: (_set(n, Scale=2.5), _set(m, Rotation=(0.0, 0.0, 0.4)))),
+] + [("ShaderNodeTexGradient", "Fac", lambda n, m, g=g: (_set(n, gradient_type=g),
+                                                          _set(m, Scale=(0.4, 0.4, 0.4), Rotation=(0.0, 0.0, 0.0))))
+     for g in ("LINEAR", "QUADRATIC", "EASING", "DIAGONAL", "SPHERICAL", "QUADRATIC_SPHERE", "RADIAL")]
+
+
+@pytest.mark.parametrize("kind, output, configure", NODE_CASES,
+                         ids=[f"{k[13:]}-{o}-{i}" for i, (k, o, _) in enumerate(NODE_CASES)])
+def test_the_addon_reads_procedural_textures_as_cycles_renders_them(plane, kind, output, configure):
+    """The add-on's evaluation of the node (through a Mapping node of Object coordinates) against
+    Cycles' pixels.  A checker's or a saw's jump falls between two pixels' values only where a pixel's
+    centre lies within float rounding of it: a handful of pixels may take the other side."""
+    _, _, _, render_node = plane
+    cycles, ours = render_node(kind, output, configure)
+    assert ours.shape == cycles.shape and ours.std() > 0.02
+    off = np.abs(cycles - ours).max(axis=1) > 1e-4
+    assert off.sum() <= 3, (off.sum(), np.abs(cycles - ours).max())
 
 
 @pytest.mark.parametrize("kwargs, error, words", [
@@ -130,3 +189,16 @@ def test_colour_on_request_progress_and_cancel():
         wenv.noise_texture(points, progress=lambda f: True)
     with pytest.raises(TypeError, match="progress must be callable"):
         wenv.noise_texture(points, progress=3)
+
+
+def test_bad_wave_input_is_named():
+    """The Wave Texture's settings are checked as the Noise Texture's are."""
+    points = np.zeros((4, 3), np.float32)
+    with pytest.raises(ValueError, match="direction must be one of X"):
+        wenv.wave_texture(points, direction="SPHERICAL")  # a rings direction, given to bands
+    with pytest.raises(ValueError, match="profile must be one of"):
+        wenv.wave_texture(points, profile="SQUARE")
+    with pytest.raises(ValueError, match="phase must be finite"):
+        wenv.wave_texture(points, phase=float("inf"))
+    with pytest.raises(wenv.CancelledError):
+        wenv.wave_texture(np.zeros((10000, 3), np.float32), progress=lambda f: True)
