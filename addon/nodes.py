@@ -84,6 +84,7 @@ class Evaluator:
         # points(space, other): the rows' 'GENERATED' or 'OBJECT' coordinates ((count, 3), `other`'s
         # object space where given); None: MEAN_POINTS, averaged (one_point)
         self._points = points
+        self.spaces = set()  # the coordinates read
         self.checking = checking  # only whether every node is read: no tables made, no texel read
         self.textures = []  # the Image Texture nodes read
         self.notes = []  # what of them is read otherwise than Cycles reads it
@@ -339,6 +340,7 @@ class Evaluator:
         raise Unsupported(f"a procedural texture's Vector from {what}, which wenv does not evaluate yet")
 
     def _coordinates(self, space, other=None):
+        self.spaces.add(space)
         if self._points is None:
             return MEAN_POINTS
         return self._points(space, other)

@@ -553,6 +553,11 @@ def read_inputs(obj, depsgraph, data):
                 continue
             except nodes.Unsupported:
                 continue  # named by materials.principled_notes, the unlinked value used
+            if "GENERATED" in ev.spaces and deformed(obj):
+                note = (f"'{obj.name}': '{socket}' ('{mat.name}') reads Generated coordinates on the deformed mesh "
+                        "(Cycles reads them undeformed: its shape keys or deforming modifiers move the texture)")
+                if note not in notes:
+                    notes.append(note)
             if not np.isfinite(values).all():
                 row = int(np.argwhere(~np.isfinite(values.reshape(len(values), -1)).all(axis=1))[0, 0])
                 raise world.SetupError(f"Material '{mat.name}': its nodes give '{socket}' a value that is not "
@@ -796,6 +801,19 @@ def world_points(mesh, m):
     mesh.vertices.foreach_get("co", co)
     m = np.array(m, np.float64)
     return co.reshape(nv, 3).astype(np.float64) @ m[:3, :3].T + m[:3, 3]
+
+
+# Modifiers that move a mesh's vertices (Generated coordinates stay where the undeformed mesh has them)
+DEFORMING_MODIFIERS = {"ARMATURE", "CAST", "CURVE", "DISPLACE", "HOOK", "LAPLACIANDEFORM", "LATTICE", "MESH_DEFORM",
+                       "SHRINKWRAP", "SIMPLE_DEFORM", "SMOOTH", "CORRECTIVE_SMOOTH", "LAPLACIANSMOOTH",
+                       "SURFACE_DEFORM", "WARP", "WAVE", "MESH_CACHE", "MESH_SEQUENCE_CACHE", "NODES"}
+
+
+def deformed(obj):
+    """Whether shape keys or a modifier move obj's mesh from where its Generated coordinates lie."""
+    keys = getattr(obj.data, "shape_keys", None)
+    return (keys is not None and len(keys.key_blocks) > 1) or any(
+        m.type in DEFORMING_MODIFIERS and m.show_render for m in obj.modifiers)
 
 
 def row_points(obj, mesh, positions):

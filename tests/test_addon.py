@@ -1172,6 +1172,9 @@ def test_a_noise_texture_is_read_at_each_vertex(scene):
     tilt = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", *unit), -1.0, 1.0)))
     assert np.median(tilt) > 1.0, np.median(tilt)
 
+    obj.modifiers.new("bend", "SIMPLE_DEFORM")  # moves the vertices, not their Generated coordinates
+    plan = plan_of(scene, obj)
+    assert any("reads Generated coordinates on the deformed mesh" in n for n in plan.notes), plan.notes
     tree.links.new(tree.nodes.new("ShaderNodeValue").outputs[0], colour_noise.inputs["Scale"])
     notes = materials.principled_notes(mat)
     assert any("'Base Color' is linked" in n and "Scale, linked" in n for n in notes), notes
