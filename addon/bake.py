@@ -350,7 +350,7 @@ def bake(scene, depsgraph, obj, image, view, blend_data, uv_map=None, margin=DEF
     data = texel_data(obj, depsgraph, mesh, sites, st.shadows)
     notes.extend(data.notes)
     for read in (textures.read_inputs, textures.read_term_weights, textures.read_shading_normals):
-        notes.extend(read(obj, depsgraph, data))
+        notes.extend(read(obj, depsgraph, data, progress=stages.reporter("reading")))  # (procedural textures)
     plan = shading.new_plan(scene, view, blend_data.images, cull=False, shadows=False)
     notes += [n for n in plan.notes if n not in notes]
     notes += [n for n in materials.slot_notes(obj) if n not in notes and not n.endswith(textures.AT_VERTICES)]

@@ -512,6 +512,11 @@ def noise_texture(points, **settings):
     return wenv.noise_texture(np.ascontiguousarray(points, np.float32), **settings)
 
 
+def voronoi_texture(points, **settings):
+    """(distance, colour) of Blender's Voronoi Texture at `points` ((n, 3) float32), as Cycles evaluates it."""
+    return wenv.voronoi_texture(np.ascontiguousarray(points, np.float32), **settings)
+
+
 def wave_texture(points, **settings):
     """Blender's Wave Texture's Fac at `points` ((n, 3) float32), as Cycles evaluates it."""
     return wenv.wave_texture(np.ascontiguousarray(points, np.float32), **settings)

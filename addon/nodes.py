@@ -29,6 +29,9 @@ IMAGE_SOURCES = ("FILE", "GENERATED", "TILED", "SEQUENCE", "MOVIE")
 # A procedural texture's inputs read as the core's settings: (keyword, socket identifier)
 NOISE_INPUTS = (("w", "W"), ("scale", "Scale"), ("detail", "Detail"), ("roughness", "Roughness"),
                 ("lacunarity", "Lacunarity"), ("offset", "Offset"), ("gain", "Gain"), ("distortion", "Distortion"))
+VORONOI_INPUTS = (("w", "W"), ("scale", "Scale"), ("detail", "Detail"), ("roughness", "Roughness"),
+                  ("lacunarity", "Lacunarity"), ("smoothness", "Smoothness"), ("exponent", "Exponent"),
+                  ("randomness", "Randomness"))
 WAVE_INPUTS = (("scale", "Scale"), ("distortion", "Distortion"), ("detail", "Detail"), ("detail_scale", "Detail Scale"),
                ("detail_roughness", "Detail Roughness"), ("phase", "Phase Offset"))
 # Where a procedural texture is read without a mesh (one_point: the panel's checks, the glossmeter's
@@ -77,7 +80,7 @@ class Evaluator:
     Image Texture node at the corners (textures.py gives it); `uv(uv_map)` gives (uv, footprint,
     rows) of the mesh's UV map (None: the active render one), or None without one."""
 
-    def __init__(self, count, uv, texture, checking=False, points=None):
+    def __init__(self, count, uv, texture, checking=False, points=None, progress=None):
         self.count = count
         self._uv = uv
         self._texture = texture
@@ -85,6 +88,9 @@ class Evaluator:
         # object space where given); None: MEAN_POINTS, averaged (one_point)
         self._points = points
         self.spaces = set()  # the coordinates read
+        # progress(fraction) while a procedural texture is evaluated (a bake's million texels), which
+        # may cancel (CancelledError, raised by it or by the core when it returns True)
+        self.progress = progress
         self.checking = checking  # only whether every node is read: no tables made, no texel read
         self.textures = []  # the Image Texture nodes read
         self.notes = []  # what of them is read otherwise than Cycles reads it
@@ -143,10 +149,26 @@ class Evaluator:
             points = np.zeros((self.count if self._points is not None else 1, 3), np.float32)
         colour = output.identifier == "Color"  # (Fac alone is a third of the work)
         got = engine.noise_texture(points, dimensions=dims, type=node.noise_type, normalize=node.normalize,
-                                   color=colour, **kw)[1 if colour else 0]
+                                   color=colour, progress=self.progress, **kw)[1 if colour else 0]
         if self._points is None:  # a mean over the unit cube
             got = got.mean(axis=0, keepdims=True)
         return got
+
+    def _ShaderNodeTexVoronoi(self, node, output, depth):
+        if output.identifier not in ("Distance", "Color", "Radius"):
+            raise Unsupported(f"'{node.name}''s {output.name} output")
+        kw = _procedural_inputs(node, None, VORONOI_INPUTS)
+        dims = int(node.voronoi_dimensions[0])
+        points = self.points(_input(node, "Vector"), depth) if dims > 1 else None
+        colour = output.identifier == "Color"
+        if self.checking:
+            return np.zeros((self.count, 3) if colour else self.count, np.float32)
+        if points is None:
+            points = np.zeros((self.count if self._points is not None else 1, 3), np.float32)
+        got = engine.voronoi_texture(points, dimensions=dims, feature=node.feature, distance=node.distance,
+                                     normalize=node.normalize, color=colour, progress=self.progress,
+                                     **kw)[1 if colour else 0]
+        return got.mean(axis=0, keepdims=True) if self._points is None else got
 
     def _ShaderNodeTexWave(self, node, output, depth):
         kw = _procedural_inputs(node, output, WAVE_INPUTS)
@@ -155,7 +177,7 @@ class Evaluator:
             return self._grey(np.zeros(self.count, np.float32), output)
         direction = node.bands_direction if node.wave_type == "BANDS" else node.rings_direction
         return self._grey(engine.wave_texture(points, wave_type=node.wave_type, direction=direction,
-                                              profile=node.wave_profile, **kw), output)
+                                              profile=node.wave_profile, progress=self.progress, **kw), output)
 
     def _ShaderNodeTexChecker(self, node, output, depth):
         scale = _procedural_inputs(node, output, (("scale", "Scale"),))["scale"]
@@ -412,9 +434,9 @@ def _vector_op(node):
 
 def _procedural_inputs(node, output, table):
     """A procedural texture node's unlinked inputs of `table` ((keyword, socket identifier)) as the
-    core's settings; Unsupported for an output other than Fac or Color, a linked input or the
-    node's own texture mapping."""
-    if output.identifier not in ("Fac", "Color"):  # (Fac is named Factor from 5.0)
+    core's settings; Unsupported for an output other than Fac or Color (output None: checked by the
+    caller), a linked input or the node's own texture mapping."""
+    if output is not None and output.identifier not in ("Fac", "Color"):  # (Fac is named Factor from 5.0)
         raise Unsupported(f"'{node.name}''s {output.name} output")
     _identity_mapping(node)
     kw = {}

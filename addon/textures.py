@@ -527,12 +527,13 @@ def _textured(node):
     return (node, None) if any(node.inputs[s].is_linked for s in TEXTURED_SOCKETS) else (None, None)
 
 
-def read_inputs(obj, depsgraph, data):
+def read_inputs(obj, depsgraph, data, progress=None):
     """Sets data.inputs (meshes.MeshData) for the rows of the material slots whose Principled BSDF
     takes an input of TEXTURED_SOCKETS from Image Textures through nodes wenv evaluates
     (data.textured[keyword]: those slots): Base Color as linear RGB, Roughness and Metallic as
     values (a colour's luminance).  Returns notes: a missing UV map (that slot keeps the unlinked
-    value).  What a chain wenv does not evaluate is materials.principled_notes' to name."""
+    value).  What a chain wenv does not evaluate is materials.principled_notes' to name.
+    progress(fraction) while procedural textures are evaluated may cancel (as nodes.Evaluator's)."""
     notes = []
     for s, mat, (node, _), mesh, corner_vert in _principled_slots(obj, depsgraph, _textured):
         for socket, keyword in TEXTURED_SOCKETS.items():
@@ -544,7 +545,7 @@ def read_inputs(obj, depsgraph, data):
                 lambda tex, uv, footprint, rows, s=s: _colours_memo((obj.name, data.domain, s, tex.name),
                                                                    pyramids(tex), Source(tex, None),
                                                                    (uv, footprint, rows), data.count),
-                points=row_points(obj, mesh, data.positions))
+                points=row_points(obj, mesh, data.positions), progress=progress)
             try:
                 values = ev.colour(sock) if keyword in COLOUR_KEYWORDS else ev.value(sock)
             except nodes.MissingUV as exc:
@@ -831,7 +832,7 @@ def row_points(obj, mesh, positions):
     return points
 
 
-def _height_reader(obj, s, mesh, corner_vert, where, count):
+def _height_reader(obj, s, mesh, corner_vert, where, count, progress=None):
     """An Evaluator of a Bump node's Height at `where`'s points: the face corners (where None) or
     a bake's texel sites."""
     rows = ((lambda uv_map: uv_rows(mesh, uv_map, "CORNER", corner_vert)) if where is None else
@@ -845,10 +846,10 @@ def _height_reader(obj, s, mesh, corner_vert, where, count):
                            lambda tex, uv, footprint, rows_: _colours_memo((obj.name, s) + tag + (tex.name,),
                                                                            pyramids(tex), Source(tex, None),
                                                                            (uv, footprint, rows_), count),
-                           points=points)
+                           points=points, progress=progress)
 
 
-def _bump_gradients(obj, s, mat, chain, mesh, corner_vert, m, sites, notes):
+def _bump_gradients(obj, s, mat, chain, mesh, corner_vert, m, sites, notes, progress=None):
     """The world gradient of a Bump node's Height at each corner (linear over each triangle,
     height_gradients) or, with `sites`, at each baked texel: the height read there and one texel
     along the bake's u and v, through the UV map's own gradients over the triangle.  None without
@@ -856,10 +857,10 @@ def _bump_gradients(obj, s, mat, chain, mesh, corner_vert, m, sites, notes):
     socket = chain.bump.inputs["Height"]
     try:
         if sites is None:
-            height = _height_reader(obj, s, mesh, corner_vert, None, len(mesh.loops)).value(socket)
+            height = _height_reader(obj, s, mesh, corner_vert, None, len(mesh.loops), progress).value(socket)
             heights = [height]
         else:
-            heights = [_height_reader(obj, s, mesh, corner_vert, at, sites.count).value(socket)
+            heights = [_height_reader(obj, s, mesh, corner_vert, at, sites.count, progress).value(socket)
                        for at in (sites, sites.shifted(1.0, 0.0), sites.shifted(0.0, 1.0))]
     except nodes.MissingUV as exc:
         notes.append(_no_uv_map(obj, exc.uv_map, f"the Bump node of '{mat.name}'", "it is not used"))
@@ -875,7 +876,7 @@ def _bump_gradients(obj, s, mat, chain, mesh, corner_vert, m, sites, notes):
     return (hu - h)[:, None] * sites.width * grad_u + (hv - h)[:, None] * sites.height * grad_v
 
 
-def read_shading_normals(obj, depsgraph, data):
+def read_shading_normals(obj, depsgraph, data, progress=None):
     """Sets data.shading_normals (world space, per shaded row) for the material slots whose
     Principled BSDF's Normal comes from a normal map or a Bump node, as Cycles makes them: a Normal
     Map's 2 x colour - 1 in the UV map's tangent frame (MikkTSpace), in the object's space or the
@@ -910,7 +911,7 @@ def read_shading_normals(obj, depsgraph, data):
             else:
                 world_n, bent = mapped, True
         if chain.bump is not None and chain.bump.inputs["Height"].is_linked:
-            gradient = _bump_gradients(obj, s, mat, chain, mesh, corner_vert, m, sites, notes)
+            gradient = _bump_gradients(obj, s, mat, chain, mesh, corner_vert, m, sites, notes, progress)
             if gradient is not None:
                 world_n = bumped_normals(world_n, gradient, chain.distance, chain.bump_strength)
                 bent = True
@@ -939,7 +940,7 @@ def read_shading_normals(obj, depsgraph, data):
 # A mixture's weights per vertex
 
 
-def read_term_weights(obj, depsgraph, data):
+def read_term_weights(obj, depsgraph, data, progress=None):
     """Sets data.term_weights[slot] for the material slots whose shader nodes are a mixture
     (closures.py): each term's weight, (3,) where it is constant, else (n, 3) over data's rows, its
     textured Mix Shader factors (and a Glossy BSDF's textured Color) read at each vertex; and
@@ -968,7 +969,7 @@ def read_term_weights(obj, depsgraph, data):
                                                                          pyramids(tex),
                                                                          Source(tex, None), (uv, footprint, rows),
                                                                          data.count),
-                points=row_points(obj, mesh, data.positions)) if reads else None
+                points=row_points(obj, mesh, data.positions), progress=progress) if reads else None
             weight, fac = colour, np.ones((data.count, 1), np.float32)
             if term.factors:
                 try:

@@ -1,9 +1,10 @@
-/* wenv.noise_texture and wenv.wave_texture: Blender's procedural texture nodes at points
- * (scene/noise_texture.h, scene/wave_texture.h). */
+/* wenv.noise_texture, wenv.wave_texture and wenv.voronoi_texture: Blender's procedural texture nodes
+ * at points (scene/noise_texture.h, scene/wave_texture.h, scene/voronoi_texture.h). */
 #include <string.h>
 
 #include "python/module.h"
 #include "scene/noise_texture.h"
+#include "scene/voronoi_texture.h"
 #include "scene/wave_texture.h"
 
 static const char *const TYPE_NAMES[] = {"MULTIFRACTAL", "FBM", "HYBRID_MULTIFRACTAL", "RIDGED_MULTIFRACTAL",
@@ -27,6 +28,24 @@ static int get_vectors(PyObject *obj, Py_buffer *view, PyObject **held)
     if (view->ndim != 2 || view->shape[1] != 3) {
         wenv_py_release_array(view, held);
         PyErr_SetString(PyExc_ValueError, "vectors must have shape (n, 3)");
+        return -1;
+    }
+    return 0;
+}
+
+/* The W input of a texture call: *array set (and the view held) for an (n,) array, else *w0 from a
+ * number; -1 with the error set. */
+static int get_w(PyObject *w_obj, Py_ssize_t n, Py_buffer *view, PyObject **held, int *array, double *w0)
+{
+    *array = w_obj && w_obj != Py_None && !PyFloat_Check(w_obj) && !PyLong_Check(w_obj);
+    *w0 = 0.0;
+    if (!*array)
+        return w_obj && w_obj != Py_None ? wenv_py_get_finite(w_obj, "w", w0) : 0;
+    if (wenv_py_get_typed_array(w_obj, "w", "float32", 0, view, held) < 0)
+        return -1;
+    if (view->ndim != 1 || view->shape[0] != n) {
+        wenv_py_release_array(view, held);
+        PyErr_SetString(PyExc_ValueError, "w must be a number or have shape (n,), one per vector");
         return -1;
     }
     return 0;
@@ -64,18 +83,10 @@ static PyObject *noise_texture(PyObject *self, PyObject *args, PyObject *kwargs)
     PyObject *v_held, *w_held = NULL, *fac = NULL, *colour = NULL;
     if (get_vectors(v_obj, &vb, &v_held) < 0)
         return NULL;
-    double w0 = 0.0;
-    int w_array = w_obj && w_obj != Py_None && !PyFloat_Check(w_obj) && !PyLong_Check(w_obj);
-    if (w_array) {
-        if (wenv_py_get_typed_array(w_obj, "w", "float32", 0, &wb, &w_held) < 0)
-            goto done;
-        if (wb.ndim != 1 || wb.shape[0] != vb.shape[0]) {
-            PyErr_SetString(PyExc_ValueError, "w must be a number or have shape (n,), one per vector");
-            goto done;
-        }
-    } else if (w_obj && w_obj != Py_None && wenv_py_get_finite(w_obj, "w", &w0) < 0) {
+    double w0;
+    int w_array;
+    if (get_w(w_obj, vb.shape[0], &wb, &w_held, &w_array, &w0) < 0)
         goto done;
-    }
     Py_ssize_t n = vb.shape[0], shape[2] = {vb.shape[0], 3};
     float *fac_out, *colour_out = NULL;
     if (!(fac = wenv_py_new_float_array(1, &n, &fac_out)))
@@ -166,6 +177,75 @@ static PyObject *wave_texture(PyObject *self, PyObject *args, PyObject *kwargs)
     return fac;
 }
 
+/* voronoi_texture(vectors, w=0, *, dimensions=3, feature='F1', distance='EUCLIDEAN', normalize=False,
+ * scale=5, detail=0, roughness=0.5, lacunarity=2, smoothness=1, exponent=0.5, randomness=1, color=True,
+ * progress=None) -> (distance (n,), color (n, 3) or None) */
+static PyObject *voronoi_texture(PyObject *self, PyObject *args, PyObject *kwargs)
+{
+    (void)self;
+    static char *kwlist[] = {"vectors", "w", "dimensions", "feature", "distance", "normalize", "scale", "detail",
+                             "roughness", "lacunarity", "smoothness", "exponent", "randomness", "color", "progress",
+                             NULL};
+    static const char *const FEATURES[] = {"F1", "F2", "SMOOTH_F1", "DISTANCE_TO_EDGE", "N_SPHERE_RADIUS"};
+    static const char *const METRICS[] = {"EUCLIDEAN", "MANHATTAN", "CHEBYCHEV", "MINKOWSKI"};
+    PyObject *v_obj, *w_obj = NULL, *progress_obj = Py_None;
+    const char *feature = "F1", *metric = "EUCLIDEAN";
+    int dimensions = 3, normalize = 0, want_colour = 1;
+    double scale = 5.0, detail = 0.0, roughness = 0.5, lacunarity = 2.0, smoothness = 1.0, exponent = 0.5;
+    double randomness = 1.0;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "O|O$isspdddddddpO:voronoi_texture", kwlist, &v_obj, &w_obj,
+                                     &dimensions, &feature, &metric, &normalize, &scale, &detail, &roughness,
+                                     &lacunarity, &smoothness, &exponent, &randomness, &want_colour, &progress_obj))
+        return NULL;
+    if (progress_obj != Py_None && !PyCallable_Check(progress_obj)) {
+        PyErr_SetString(PyExc_TypeError, "progress must be callable or None");
+        return NULL;
+    }
+    int f = choice(feature, "feature", FEATURES, 5), m = f < 0 ? -1 : choice(metric, "distance", METRICS, 4);
+    if (m < 0)
+        return NULL;
+    wenv_voronoi_settings s = {.dimensions = dimensions, .feature = (wenv_voronoi_feature)f,
+                               .metric = (wenv_voronoi_metric)m, .normalize = normalize, .scale = (float)scale,
+                               .detail = (float)detail, .roughness = (float)roughness,
+                               .lacunarity = (float)lacunarity, .smoothness = (float)smoothness,
+                               .exponent = (float)exponent, .randomness = (float)randomness};
+    Py_buffer vb, wb;
+    PyObject *v_held, *w_held = NULL, *dist = NULL, *colour = NULL;
+    int w_array;
+    double w0;
+    if (get_vectors(v_obj, &vb, &v_held) < 0)
+        return NULL;
+    Py_ssize_t n = vb.shape[0], shape[2] = {vb.shape[0], 3};
+    float *dist_out, *colour_out = NULL;
+    if (get_w(w_obj, n, &wb, &w_held, &w_array, &w0) < 0 || !(dist = wenv_py_new_float_array(1, &n, &dist_out)) ||
+        (want_colour && !(colour = wenv_py_new_float_array(2, shape, &colour_out))))
+        goto fail;
+    wenv_py_progress_bridge bridge = {.callback = progress_obj};
+    wenv_progress progress = wenv_py_progress(&bridge);
+    wenv_error err = {0};
+    wenv_status st;
+    WENV_BEGIN_WORK
+    st = wenv_voronoi_texture(&s, vb.buf, w_array ? wb.buf : NULL, (float)w0, (size_t)n, dist_out, colour_out,
+                              &progress, &err);
+    WENV_END_WORK
+    if (st) {
+        if (!(bridge.raised && PyErr_Occurred()))
+            wenv_py_raise(&err);
+        goto fail;
+    }
+    wenv_py_release_array(&vb, &v_held);
+    if (w_held)
+        wenv_py_release_array(&wb, &w_held);
+    return Py_BuildValue("(NN)", dist, colour ? colour : Py_NewRef(Py_None));
+fail:
+    Py_XDECREF(dist);
+    Py_XDECREF(colour);
+    wenv_py_release_array(&vb, &v_held);
+    if (w_held)
+        wenv_py_release_array(&wb, &w_held);
+    return NULL;
+}
+
 static PyMethodDef texture_functions[] = {
     {"noise_texture", (PyCFunction)(void (*)(void))noise_texture, METH_VARARGS | METH_KEYWORDS,
      "noise_texture(vectors, w=0, *, dimensions=3, type='FBM', normalize=True, scale=5, detail=2, roughness=0.5, "
@@ -184,6 +264,16 @@ static PyMethodDef texture_functions[] = {
      "input; wave_type, direction (bands: 'X', 'Y', 'Z', 'DIAGONAL'; rings: 'X', 'Y', 'Z', 'SPHERICAL') and "
      "profile ('SIN', 'SAW', 'TRI') its settings, the rest its inputs (phase: Phase Offset).  Returns its Fac "
      "(n,) float32; its Color is Fac in each channel.  progress(fraction) may cancel (wenv.CancelledError).",
+    },
+    {"voronoi_texture", (PyCFunction)(void (*)(void))voronoi_texture, METH_VARARGS | METH_KEYWORDS,
+     "voronoi_texture(vectors, w=0, *, dimensions=3, feature='F1', distance='EUCLIDEAN', normalize=False, scale=5, "
+     "detail=0, roughness=0.5, lacunarity=2, smoothness=1, exponent=0.5, randomness=1, color=True, progress=None)"
+     "\n--\n\n"
+     "Blender's Voronoi Texture node at points, as Cycles evaluates it: `vectors` (n, 3) float32 is its Vector "
+     "input, `w` its W (a number or (n,) float32; read in 1D and 4D), feature and distance (the metric) its "
+     "settings, the rest its inputs.  Returns (distance (n,), color (n, 3) or None with color=False) float32: "
+     "the node's Distance (its Radius for 'N_SPHERE_RADIUS') and Color.  progress(fraction) may cancel "
+     "(wenv.CancelledError).",
     },
     {NULL, NULL, 0, NULL},
 };

@@ -8,67 +8,16 @@
 #include <stdint.h>
 #include <string.h>
 
+#include "math/lookup3.h"
+
 /* Points per progress report and cancel check. */
 #define BLOCK 4096
-
-/* ---- Jenkins' lookup3 (burtleburtle.net/bob/c/lookup3.c), on 1 to 4 words ---- */
-
-static inline uint32_t rot(uint32_t x, int k) { return (x << k) | (x >> (32 - k)); }
-
-static inline void lookup3_mix(uint32_t *a, uint32_t *b, uint32_t *c)
-{
-    *a -= *c, *a ^= rot(*c, 4), *c += *b;
-    *b -= *a, *b ^= rot(*a, 6), *a += *c;
-    *c -= *b, *c ^= rot(*b, 8), *b += *a;
-    *a -= *c, *a ^= rot(*c, 16), *c += *b;
-    *b -= *a, *b ^= rot(*a, 19), *a += *c;
-    *c -= *b, *c ^= rot(*b, 4), *b += *a;
-}
-
-static inline uint32_t lookup3_final(uint32_t a, uint32_t b, uint32_t c)
-{
-    c ^= b, c -= rot(b, 14);
-    a ^= c, a -= rot(c, 11);
-    b ^= a, b -= rot(a, 25);
-    c ^= b, c -= rot(b, 16);
-    a ^= c, a -= rot(c, 4);
-    b ^= a, b -= rot(a, 14);
-    c ^= b, c -= rot(b, 24);
-    return c;
-}
-
-/* The hash of d words k[0..d): lookup3's hashword of a d-word key, seed 13. */
-static uint32_t hash_words(const uint32_t *k, int d)
-{
-    uint32_t a, b, c;
-    a = b = c = 0xdeadbeefu + ((uint32_t)d << 2) + 13u;
-    if (d == 4) {
-        a += k[0], b += k[1], c += k[2];
-        lookup3_mix(&a, &b, &c);
-        a += k[3];
-        return lookup3_final(a, b, c);
-    }
-    if (d >= 3)
-        c += k[2];
-    if (d >= 2)
-        b += k[1];
-    a += k[0];
-    return lookup3_final(a, b, c);
-}
-
-static uint32_t float_bits(float f)
-{
-    uint32_t u;
-    memcpy(&u, &f, sizeof u);
-    return u;
-}
 
 /* Cycles' random offsets of a seed, component k: the seeds of distortion and of Color's channels. */
 static float seed_offset(float seed, int k, int d)
 {
-    uint32_t key[2] = {float_bits(seed), float_bits((float)k)};
-    uint32_t h = d == 1 ? hash_words(key, 1) : hash_words(key, 2);
-    return 100.0f + (float)h * (1.0f / (float)0xFFFFFFFFu) * 100.0f;
+    float key[2] = {seed, (float)k};
+    return 100.0f + wenv_lookup3_unit(key, d == 1 ? 1 : 2) * 100.0f;
 }
 
 /* ---- Perlin noise ---- */
@@ -123,7 +72,7 @@ static inline float perlin(const float *p, const int d)
             key[k] = (uint32_t)(cell[k] + up);
             off[k] = up ? frac[k] - 1.0f : frac[k];
         }
-        values[corner] = gradient(hash_words(key, d), off, d);
+        values[corner] = gradient(wenv_lookup3(key, d), off, d);
     }
     /* along x first: corner bit 0 */
     for (int k = 0; k < d; k++)
