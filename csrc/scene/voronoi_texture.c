@@ -156,10 +156,12 @@ static int cells_within(int reach, int d)
     return count;
 }
 
-/* The point of the cell at `offset` from `cell`, in the cell's local frame, and the cell itself. */
-static void cell_point(const float *cell, const float *offset, int d, float randomness, float *point, float *at)
+/* The point of the cell at `offset` from `cell`, in the cell's local frame, the cell itself and its
+ * jitter (jitter NULL: not wanted). */
+static void cell_point(const float *cell, const float *offset, int d, float randomness, float *point, float *at,
+                       float *jitter_out)
 {
-    float jitter[4];
+    float mine[4], *jitter = jitter_out ? jitter_out : mine;
     for (int k = 0; k < d; k++)
         at[k] = cell[k] + offset[k];
     cell_jitter(at, d, jitter);
@@ -184,7 +186,7 @@ static octave_out nearest(const float *coord, int d, const wenv_voronoi_settings
     split(coord, d, cell, local);
     for (int i = 0, count = cells_within(1, d); i < count; i++) {
         neighbour(i, 1, d, offset);
-        cell_point(cell, offset, d, s->randomness, point, at);
+        cell_point(cell, offset, d, s->randomness, point, at, NULL);
         float dist = metric_distance(point, local, d, s);
         if (dist < d1) {
             d2 = d1;
@@ -201,20 +203,23 @@ static octave_out nearest(const float *coord, int d, const wenv_voronoi_settings
     return out;
 }
 
-static octave_out smooth_f1(const float *coord, int d, const wenv_voronoi_settings *s)
+static octave_out smooth_f1(const float *coord, int d, const wenv_voronoi_settings *s, int want_colour)
 {
-    float cell[4], local[4], offset[4], point[4], at[4], rgb[3];
+    float cell[4], local[4], offset[4], point[4], at[4], rgb[4];
     float dist_sum = 0.0f, colour[3] = {0.0f, 0.0f, 0.0f}, h = -1.0f;
     split(coord, d, cell, local);
     for (int i = 0, count = cells_within(2, d); i < count; i++) {
         neighbour(i, 2, d, offset);
-        cell_point(cell, offset, d, s->randomness, point, at);
+        cell_point(cell, offset, d, s->randomness, point, at, rgb);
         float dist = metric_distance(point, local, d, s);
         h = h == -1.0f ? 1.0f : smoothstep01(0.5f + 0.5f * (dist_sum - dist) / s->smoothness);
         float correction = s->smoothness * h * (1.0f - h);
         dist_sum = lerp(dist_sum, dist, h) - correction;
         correction /= 1.0f + 3.0f * s->smoothness;
-        cell_colour(at, d, rgb);
+        if (!want_colour)
+            continue;
+        if (d < 3) /* from 3D on a cell's colour is its jitter's first three */
+            cell_colour(at, d, rgb);
         for (int c = 0; c < 3; c++)
             colour[c] = lerp(colour[c], rgb[c], h) - correction;
     }
@@ -237,7 +242,7 @@ static float distance_to_edge(const float *coord, int d, const wenv_voronoi_sett
     int count = cells_within(1, d);
     for (int i = 0; i < count; i++) {
         neighbour(i, 1, d, offset);
-        cell_point(cell, offset, d, s->randomness, point, at);
+        cell_point(cell, offset, d, s->randomness, point, at, NULL);
         float v[4], dd = 0.0f;
         for (int k = 0; k < d; k++) {
             v[k] = point[k] - local[k];
@@ -251,7 +256,7 @@ static float distance_to_edge(const float *coord, int d, const wenv_voronoi_sett
     least = FLT_MAX;
     for (int i = 0; i < count; i++) {
         neighbour(i, 1, d, offset);
-        cell_point(cell, offset, d, s->randomness, point, at);
+        cell_point(cell, offset, d, s->randomness, point, at, NULL);
         float v[4], perp[4], pp = 0.0f;
         for (int k = 0; k < d; k++) {
             v[k] = point[k] - local[k];
@@ -276,7 +281,7 @@ static float n_sphere_radius(const float *coord, int d, const wenv_voronoi_setti
     int count = cells_within(1, d);
     for (int i = 0; i < count; i++) {
         neighbour(i, 1, d, offset);
-        cell_point(cell, offset, d, s->randomness, point, at);
+        cell_point(cell, offset, d, s->randomness, point, at, NULL);
         float dist = euclidean(point, local, d);
         if (dist < least) {
             least = dist;
@@ -291,7 +296,7 @@ static float n_sphere_radius(const float *coord, int d, const wenv_voronoi_setti
         neighbour(i, 1, d, offset);
         for (int k = 0; k < d; k++)
             offset[k] += closest_offset[k];
-        cell_point(cell, offset, d, s->randomness, point, at);
+        cell_point(cell, offset, d, s->randomness, point, at, NULL);
         float dist = euclidean(closest, point, d);
         if (dist < least) {
             least = dist;
@@ -301,12 +306,12 @@ static float n_sphere_radius(const float *coord, int d, const wenv_voronoi_setti
     return euclidean(other, closest, d) / 2.0f;
 }
 
-static octave_out octave(const float *coord, int d, const wenv_voronoi_settings *s)
+static octave_out octave(const float *coord, int d, const wenv_voronoi_settings *s, int want_colour)
 {
     if (s->feature == WENV_VORONOI_F2)
         return nearest(coord, d, s, 1);
     if (s->feature == WENV_VORONOI_SMOOTH_F1 && s->smoothness != 0.0f)
-        return smooth_f1(coord, d, s);
+        return smooth_f1(coord, d, s, want_colour);
     return nearest(coord, d, s, 0);
 }
 
@@ -317,14 +322,15 @@ static void scaled(const float *p, float k, int d, float *out)
 }
 
 /* Cycles' fractal Voronoi: octaves summed as fBM sums them, max_distance normalising. */
-static octave_out fractal(const float *coord, int d, const wenv_voronoi_settings *s, float max_distance)
+static octave_out fractal(const float *coord, int d, const wenv_voronoi_settings *s, float max_distance,
+                          int want_colour)
 {
     float amplitude = 1.0f, max_amplitude = 0.0f, scale = 1.0f, q[4];
     octave_out out = {0.0f, {0.0f, 0.0f, 0.0f}};
     int zero_input = s->detail == 0.0f || s->roughness == 0.0f;
     for (int i = 0; i <= (int)ceilf(s->detail); i++) {
         scaled(coord, scale, d, q);
-        octave_out o = octave(q, d, s);
+        octave_out o = octave(q, d, s, want_colour);
         if (zero_input) {
             max_amplitude = 1.0f;
             out = o;
@@ -391,6 +397,48 @@ typedef struct {
     float *distance, *colour;
 } voronoi_job;
 
+/* One point's outputs, d a constant where this is inlined (the cell loops then unroll). */
+static inline void voronoi_point(const voronoi_job *job, size_t i, const int d, float max_distance)
+{
+    const wenv_voronoi_settings *s = job->s;
+    float p[4] = {0.0f, 0.0f, 0.0f, 0.0f}, wi = (job->w ? job->w[i] : job->w0) * s->scale;
+    if (d == 1) {
+        p[0] = wi;
+    } else {
+        for (int k = 0; k < (d == 4 ? 3 : d); k++)
+            p[k] = job->vectors[3 * i + (size_t)k] * s->scale;
+        if (d == 4)
+            p[3] = wi;
+    }
+    octave_out out = {0.0f, {0.0f, 0.0f, 0.0f}};
+    if (s->feature == WENV_VORONOI_DISTANCE_TO_EDGE)
+        out.distance = fractal_distance_to_edge(p, d, s, max_distance);
+    else if (s->feature == WENV_VORONOI_N_SPHERE_RADIUS)
+        out.distance = n_sphere_radius(p, d, s);
+    else
+        out = fractal(p, d, s, max_distance, job->colour != NULL);
+    job->distance[i] = out.distance;
+    if (job->colour)
+        memcpy(job->colour + 3 * i, out.colour, sizeof out.colour);
+}
+
+/* A block of points at a constant dimension: GCC inlines the whole chain into each (flatten). */
+#if defined(__GNUC__)
+#define FLATTEN __attribute__((flatten))
+#else
+#define FLATTEN
+#endif
+#define BLOCK_OF(D)                                                                                                \
+    FLATTEN static void block_##D(const voronoi_job *job, size_t first, size_t end, float max_distance)           \
+    {                                                                                                              \
+        for (size_t i = first; i < end; i++)                                                                       \
+            voronoi_point(job, i, D, max_distance);                                                                \
+    }
+BLOCK_OF(1)
+BLOCK_OF(2)
+BLOCK_OF(3)
+BLOCK_OF(4)
+
 static void voronoi_block(const void *ctx, size_t first, size_t end)
 {
     const voronoi_job *job = ctx;
@@ -403,26 +451,18 @@ static void voronoi_block(const void *ctx, size_t first, size_t end)
     if (s->feature != WENV_VORONOI_DISTANCE_TO_EDGE)
         max_distance = (d == 1 ? half : metric_distance(origin, corner, d, s)) *
                        (s->feature == WENV_VORONOI_F2 ? 2.0f : 1.0f);
-    for (size_t i = first; i < end; i++) {
-        float p[4] = {0.0f, 0.0f, 0.0f, 0.0f}, wi = (job->w ? job->w[i] : job->w0) * s->scale;
-        if (d == 1) {
-            p[0] = wi;
-        } else {
-            for (int k = 0; k < (d == 4 ? 3 : d); k++)
-                p[k] = job->vectors[3 * i + (size_t)k] * s->scale;
-            if (d == 4)
-                p[3] = wi;
-        }
-        octave_out out = {0.0f, {0.0f, 0.0f, 0.0f}};
-        if (s->feature == WENV_VORONOI_DISTANCE_TO_EDGE)
-            out.distance = fractal_distance_to_edge(p, d, s, max_distance);
-        else if (s->feature == WENV_VORONOI_N_SPHERE_RADIUS)
-            out.distance = n_sphere_radius(p, d, s);
-        else
-            out = fractal(p, d, s, max_distance);
-        job->distance[i] = out.distance;
-        if (job->colour)
-            memcpy(job->colour + 3 * i, out.colour, sizeof out.colour);
+    switch (d) {
+    case 1:
+        block_1(job, first, end, max_distance);
+        break;
+    case 2:
+        block_2(job, first, end, max_distance);
+        break;
+    case 3:
+        block_3(job, first, end, max_distance);
+        break;
+    default:
+        block_4(job, first, end, max_distance);
     }
 }
 
