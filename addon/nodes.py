@@ -32,6 +32,8 @@ NOISE_INPUTS = (("w", "W"), ("scale", "Scale"), ("detail", "Detail"), ("roughnes
 VORONOI_INPUTS = (("w", "W"), ("scale", "Scale"), ("detail", "Detail"), ("roughness", "Roughness"),
                   ("lacunarity", "Lacunarity"), ("smoothness", "Smoothness"), ("exponent", "Exponent"),
                   ("randomness", "Randomness"))
+BRICK_INPUTS = (("scale", "Scale"), ("mortar_size", "Mortar Size"), ("mortar_smooth", "Mortar Smooth"),
+                ("bias", "Bias"), ("width", "Brick Width"), ("height", "Row Height"))
 WAVE_INPUTS = (("scale", "Scale"), ("distortion", "Distortion"), ("detail", "Detail"), ("detail_scale", "Detail Scale"),
                ("detail_roughness", "Detail Roughness"), ("phase", "Phase Offset"))
 # Where a procedural texture is read without a mesh (one_point: the panel's checks, the glossmeter's
@@ -190,6 +192,36 @@ class Evaluator:
             return fac
         one, two = self.colour(_input(node, "Color1"), depth), self.colour(_input(node, "Color2"), depth)
         return (fac[:, None] * one + (1.0 - fac[:, None]) * two).astype(np.float32)
+
+    def _ShaderNodeTexBrick(self, node, output, depth):
+        kw = _procedural_inputs(node, output, BRICK_INPUTS)
+        f32 = np.float32
+        p = self.points(_input(node, "Vector"), depth).astype(np.float32) * f32(kw["scale"])
+        width, height = f32(kw["width"]), f32(kw["height"])
+        row = np.floor(p[:, 1] / height).astype(np.int64)
+        width = np.full(len(p), width, np.float32)
+        offset = np.zeros(len(p), np.float32)
+        if node.offset_frequency and node.squash_frequency:
+            width = np.where(row % node.squash_frequency != 0, width, width * f32(node.squash)).astype(np.float32)
+            offset = np.where(row % node.offset_frequency != 0, f32(0.0), width * f32(node.offset)).astype(np.float32)
+        brick = np.floor((p[:, 0] + offset) / width).astype(np.int64)
+        x = (p[:, 0] + offset) - width * brick.astype(np.float32)
+        y = p[:, 1] - height * row.astype(np.float32)
+        tint = np.clip(_brick_noise(((row << 16) + (brick & 0xFFFF)) & 0xFFFFFFFF) + f32(kw["bias"]), 0.0, 1.0)
+        nearest = np.minimum(np.minimum(x, y), np.minimum(width - x, height - y))
+        size, smooth = f32(kw["mortar_size"]), f32(kw["mortar_smooth"])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.clip((f32(1.0) - nearest / size) / smooth, 0.0, 1.0).astype(np.float32)
+            eased = f32(3.0) * t * t - f32(2.0) * t * t * t  # Cycles' smoothstepf
+        mortar = np.where(nearest >= size, f32(0.0), f32(1.0) if smooth == 0.0 else eased).astype(np.float32)
+        if self._points is None:  # over the unit cube: the mean mortar and tint
+            mortar, tint = mortar.mean(keepdims=True), tint.mean(keepdims=True)
+        if output.identifier == "Fac":
+            return mortar
+        one, two = self.colour(_input(node, "Color1"), depth), self.colour(_input(node, "Color2"), depth)
+        bricks = np.where((mortar != 1.0)[:, None], (1.0 - tint)[:, None] * one + tint[:, None] * two, one)
+        return (bricks * (1.0 - mortar[:, None]) + self.colour(_input(node, "Mortar"), depth) * mortar[:, None]
+                ).astype(np.float32)
 
     def _ShaderNodeTexGradient(self, node, output, depth):
         _procedural_inputs(node, output, ())
@@ -430,6 +462,14 @@ def _vector_op(node):
     stretch = math.sqrt(abs(b[0] * b[1])) if node.operation == "MULTIPLY" else (
         1.0 / math.sqrt(abs(b[0] * b[1])) if node.operation == "DIVIDE" and b[0] * b[1] != 0.0 else 1.0)
     return lambda p: (ops[node.operation](p, b), stretch)
+
+
+def _brick_noise(n):
+    """Cycles' brick_noise: a fast integer noise of n (int64 holding uint32 words), in [0, 1)."""
+    n = (n + 1013) & 0x7FFFFFFF
+    n = ((n >> 13) ^ n).astype(np.uint64)
+    nn = (n * ((n * n * 60493 + 19990303) & 0xFFFFFFFF) + 1376312589) & 0x7FFFFFFF  # uint32 wrap-around
+    return (np.float32(0.5) * (nn.astype(np.float32) / np.float32(1073741824.0))).astype(np.float32)
 
 
 def _procedural_inputs(node, output, table):

@@ -158,7 +158,13 @@ NODE_CASES = [
     ("Color", dict(distance="CHEBYCHEV", voronoi_dimensions="4D", W=0.3)),
     ("Distance", dict(feature="F2", voronoi_dimensions="1D", W=2.7)),
     ("Distance", dict(feature="DISTANCE_TO_EDGE", voronoi_dimensions="2D", Randomness=0.5)),
-)] + [("ShaderNodeTexGradient", "Fac", lambda n, m, g=g: (_set(n, gradient_type=g),
+)] + [
+    ("ShaderNodeTexBrick", "Color", lambda n, m: _set(n, Scale=2.0, Bias=0.2, Color1=(0.8, 0.3, 0.2, 1.0),
+                                                      Mortar=(0.9, 0.9, 0.85, 1.0), **{"Mortar Smooth": 0.3})),
+    ("ShaderNodeTexBrick", "Fac", lambda n, m: (_set(n, Scale=1.0, offset=0.3, offset_frequency=3, squash=0.6,
+                                                     squash_frequency=2, **{"Mortar Size": 0.03}),
+                                                _set(m, Location=(-1.3, -2.2, 0.0)))),
+] + [("ShaderNodeTexGradient", "Fac", lambda n, m, g=g: (_set(n, gradient_type=g),
                                                           _set(m, Scale=(0.4, 0.4, 0.4), Rotation=(0.0, 0.0, 0.0))))
      for g in ("LINEAR", "QUADRATIC", "EASING", "DIAGONAL", "SPHERICAL", "QUADRATIC_SPHERE", "RADIAL")]
 
