@@ -51,6 +51,66 @@ static int get_w(PyObject *w_obj, Py_ssize_t n, Py_buffer *view, PyObject **held
     return 0;
 }
 
+/* A texture of a value and a colour per point, as the core computes it. */
+typedef wenv_status (*texture_call)(const void *settings, const float *vectors, const float *w, float w0, size_t n,
+                                    float *value, float *colour, const wenv_progress *progress, wenv_error *err);
+
+static wenv_status noise_adapter(const void *settings, const float *vectors, const float *w, float w0, size_t n,
+                                 float *value, float *colour, const wenv_progress *progress, wenv_error *err)
+{
+    return wenv_noise_texture(settings, vectors, w, w0, n, value, colour, progress, err);
+}
+
+static wenv_status voronoi_adapter(const void *settings, const float *vectors, const float *w, float w0, size_t n,
+                                   float *value, float *colour, const wenv_progress *progress, wenv_error *err)
+{
+    return wenv_voronoi_texture(settings, vectors, w, w0, n, value, colour, progress, err);
+}
+
+/* (value (n,), colour (n, 3) or None) of `call` at the vectors and W given, the GIL released. */
+static PyObject *run_texture(texture_call call, const void *settings, PyObject *v_obj, PyObject *w_obj,
+                             int want_colour, PyObject *progress_obj)
+{
+    if (progress_obj != Py_None && !PyCallable_Check(progress_obj)) {
+        PyErr_SetString(PyExc_TypeError, "progress must be callable or None");
+        return NULL;
+    }
+    Py_buffer vb, wb;
+    PyObject *v_held, *w_held = NULL, *value = NULL, *colour = NULL;
+    int w_array;
+    double w0;
+    if (get_vectors(v_obj, &vb, &v_held) < 0)
+        return NULL;
+    Py_ssize_t n = vb.shape[0], shape[2] = {vb.shape[0], 3};
+    float *value_out, *colour_out = NULL;
+    if (get_w(w_obj, n, &wb, &w_held, &w_array, &w0) < 0 || !(value = wenv_py_new_float_array(1, &n, &value_out)) ||
+        (want_colour && !(colour = wenv_py_new_float_array(2, shape, &colour_out))))
+        goto fail;
+    wenv_py_progress_bridge bridge = {.callback = progress_obj};
+    wenv_progress progress = wenv_py_progress(&bridge);
+    wenv_error err = {0};
+    wenv_status st;
+    WENV_BEGIN_WORK
+    st = call(settings, vb.buf, w_array ? wb.buf : NULL, (float)w0, (size_t)n, value_out, colour_out, &progress, &err);
+    WENV_END_WORK
+    if (st) {
+        if (!(bridge.raised && PyErr_Occurred()))
+            wenv_py_raise(&err);
+        goto fail;
+    }
+    wenv_py_release_array(&vb, &v_held);
+    if (w_held)
+        wenv_py_release_array(&wb, &w_held);
+    return Py_BuildValue("(NN)", value, colour ? colour : Py_NewRef(Py_None));
+fail:
+    Py_XDECREF(value);
+    Py_XDECREF(colour);
+    wenv_py_release_array(&vb, &v_held);
+    if (w_held)
+        wenv_py_release_array(&wb, &w_held);
+    return NULL;
+}
+
 /* noise_texture(vectors, w=0, *, dimensions=3, type='FBM', normalize=True, scale=5, detail=2,
  * roughness=0.5, lacunarity=2, offset=0, gain=1, distortion=0, color=True, progress=None)
  * -> (fac (n,), color (n, 3) or None) */
@@ -68,10 +128,6 @@ static PyObject *noise_texture(PyObject *self, PyObject *args, PyObject *kwargs)
                                      &dimensions, &type, &normalize, &scale, &detail, &roughness, &lacunarity,
                                      &offset, &gain, &distortion, &want_colour, &progress_obj))
         return NULL;
-    if (progress_obj != Py_None && !PyCallable_Check(progress_obj)) {
-        PyErr_SetString(PyExc_TypeError, "progress must be callable or None");
-        return NULL;
-    }
     wenv_noise_settings s = {.dimensions = dimensions, .normalize = normalize, .scale = (float)scale,
                              .detail = (float)detail, .roughness = (float)roughness, .lacunarity = (float)lacunarity,
                              .offset = (float)offset, .gain = (float)gain, .distortion = (float)distortion};
@@ -79,46 +135,7 @@ static PyObject *noise_texture(PyObject *self, PyObject *args, PyObject *kwargs)
     if (found < 0)
         return NULL;
     s.type = (wenv_noise_type)found;
-    Py_buffer vb, wb = {0};
-    PyObject *v_held, *w_held = NULL, *fac = NULL, *colour = NULL;
-    if (get_vectors(v_obj, &vb, &v_held) < 0)
-        return NULL;
-    double w0;
-    int w_array;
-    if (get_w(w_obj, vb.shape[0], &wb, &w_held, &w_array, &w0) < 0)
-        goto done;
-    Py_ssize_t n = vb.shape[0], shape[2] = {vb.shape[0], 3};
-    float *fac_out, *colour_out = NULL;
-    if (!(fac = wenv_py_new_float_array(1, &n, &fac_out)))
-        goto done;
-    if (want_colour && !(colour = wenv_py_new_float_array(2, shape, &colour_out)))
-        goto done;
-    wenv_py_progress_bridge bridge = {.callback = progress_obj};
-    wenv_progress progress = wenv_py_progress(&bridge);
-    wenv_error err = {0};
-    wenv_status st;
-    WENV_BEGIN_WORK
-    st = wenv_noise_texture(&s, vb.buf, w_array ? wb.buf : NULL, (float)w0, (size_t)n, fac_out, colour_out,
-                            &progress, &err);
-    WENV_END_WORK
-    if (st) {
-        if (!(bridge.raised && PyErr_Occurred()))
-            wenv_py_raise(&err);
-        goto done;
-    }
-    if (!colour)
-        colour = Py_NewRef(Py_None);
-    wenv_py_release_array(&vb, &v_held);
-    if (w_held)
-        wenv_py_release_array(&wb, &w_held);
-    return Py_BuildValue("(NN)", fac, colour);
-done:
-    Py_XDECREF(fac);
-    Py_XDECREF(colour);
-    wenv_py_release_array(&vb, &v_held);
-    if (w_held)
-        wenv_py_release_array(&wb, &w_held);
-    return NULL;
+    return run_texture(noise_adapter, &s, v_obj, w_obj, want_colour, progress_obj);
 }
 
 /* wave_texture(vectors, *, wave_type='BANDS', direction='X', profile='SIN', scale=5, distortion=0,
@@ -197,10 +214,6 @@ static PyObject *voronoi_texture(PyObject *self, PyObject *args, PyObject *kwarg
                                      &dimensions, &feature, &metric, &normalize, &scale, &detail, &roughness,
                                      &lacunarity, &smoothness, &exponent, &randomness, &want_colour, &progress_obj))
         return NULL;
-    if (progress_obj != Py_None && !PyCallable_Check(progress_obj)) {
-        PyErr_SetString(PyExc_TypeError, "progress must be callable or None");
-        return NULL;
-    }
     int f = choice(feature, "feature", FEATURES, 5), m = f < 0 ? -1 : choice(metric, "distance", METRICS, 4);
     if (m < 0)
         return NULL;
@@ -209,41 +222,7 @@ static PyObject *voronoi_texture(PyObject *self, PyObject *args, PyObject *kwarg
                                .detail = (float)detail, .roughness = (float)roughness,
                                .lacunarity = (float)lacunarity, .smoothness = (float)smoothness,
                                .exponent = (float)exponent, .randomness = (float)randomness};
-    Py_buffer vb, wb;
-    PyObject *v_held, *w_held = NULL, *dist = NULL, *colour = NULL;
-    int w_array;
-    double w0;
-    if (get_vectors(v_obj, &vb, &v_held) < 0)
-        return NULL;
-    Py_ssize_t n = vb.shape[0], shape[2] = {vb.shape[0], 3};
-    float *dist_out, *colour_out = NULL;
-    if (get_w(w_obj, n, &wb, &w_held, &w_array, &w0) < 0 || !(dist = wenv_py_new_float_array(1, &n, &dist_out)) ||
-        (want_colour && !(colour = wenv_py_new_float_array(2, shape, &colour_out))))
-        goto fail;
-    wenv_py_progress_bridge bridge = {.callback = progress_obj};
-    wenv_progress progress = wenv_py_progress(&bridge);
-    wenv_error err = {0};
-    wenv_status st;
-    WENV_BEGIN_WORK
-    st = wenv_voronoi_texture(&s, vb.buf, w_array ? wb.buf : NULL, (float)w0, (size_t)n, dist_out, colour_out,
-                              &progress, &err);
-    WENV_END_WORK
-    if (st) {
-        if (!(bridge.raised && PyErr_Occurred()))
-            wenv_py_raise(&err);
-        goto fail;
-    }
-    wenv_py_release_array(&vb, &v_held);
-    if (w_held)
-        wenv_py_release_array(&wb, &w_held);
-    return Py_BuildValue("(NN)", dist, colour ? colour : Py_NewRef(Py_None));
-fail:
-    Py_XDECREF(dist);
-    Py_XDECREF(colour);
-    wenv_py_release_array(&vb, &v_held);
-    if (w_held)
-        wenv_py_release_array(&wb, &w_held);
-    return NULL;
+    return run_texture(voronoi_adapter, &s, v_obj, w_obj, want_colour, progress_obj);
 }
 
 static PyMethodDef texture_functions[] = {
