@@ -1,9 +1,10 @@
 """Shader nodes between Image Textures and a Principled BSDF's input, evaluated at each shaded vertex as
 Cycles' SVM evaluates them (intern/cycles/kernel/svm/): Image Texture, RGB and Value, Mix (and the
 older MixRGB) with its common blend modes, Math, Invert, ColorRamp, RGB Curves, Hue/Saturation/Value,
-Gamma, Brightness/Contrast, Separate and Combine Color (RGB), the Noise Texture, and on the way to a
-texture's Vector the Texture Coordinate's and UV Map's UVs (an Image Texture's) or its Generated and
-Object coordinates (a Noise Texture's) through Mapping and Vector Math.  Colours are (n, 3) float32,
+Gamma, Brightness/Contrast, Separate and Combine Color (RGB), the procedural textures, the mesh's
+attributes (Color Attribute, and Attribute of the geometry), and on the way to a texture's Vector the
+Texture Coordinate's and UV Map's UVs (an Image Texture's) or its Generated and Object coordinates or
+an attribute (a procedural texture's) through Mapping and Vector Math.  Colours are (n, 3) float32,
 values (n,), at the shaded rows; a texture's UVs are read at the face corners and its samples averaged
 to the rows.  Any other node, output or mode raises Unsupported naming it, so that the caller uses the
 socket's unlinked value and says so: nothing is used silently."""
@@ -82,10 +83,13 @@ class Evaluator:
     Image Texture node at the corners (textures.py gives it); `uv(uv_map)` gives (uv, footprint,
     rows) of the mesh's UV map (None: the active render one), or None without one."""
 
-    def __init__(self, count, uv, texture, checking=False, points=None, progress=None):
+    def __init__(self, count, uv, texture, checking=False, points=None, progress=None, attribute=None):
         self.count = count
         self._uv = uv
         self._texture = texture
+        # attribute(name, colour) -> (values (count, k), Cycles' type) of a mesh attribute at the rows,
+        # or (None, None) where the mesh has none of that name; None: no mesh (one_point)
+        self._attribute = attribute
         # points(space, other): the rows' 'GENERATED' or 'OBJECT' coordinates ((count, 3), `other`'s
         # object space where given); None: MEAN_POINTS, averaged (one_point)
         self._points = points
@@ -251,6 +255,43 @@ class Evaluator:
             fac = fac.mean(keepdims=True)
         return np.repeat(fac[:, None], 3, axis=1) if output.identifier == "Color" else fac
 
+    # -- mesh attributes, as Cycles' svm_node_vertex_color and svm_node_attr read them
+    def _ShaderNodeVertexColor(self, node, output, depth):
+        got, kind = self._mesh_attribute(node, node.layer_name, True)
+        alpha = output.identifier == "Alpha"
+        if got is None:  # no such attribute: black and transparent
+            return np.zeros(self.count if alpha else (self.count, 3), np.float32)
+        if kind not in ("RGBA", "FLOAT4"):
+            raise Unsupported(f"'{node.name}', whose '{node.layer_name}' is not a colour attribute")
+        return np.ascontiguousarray(got[:, 3] if alpha else got[:, :3])
+
+    def _ShaderNodeAttribute(self, node, output, depth):
+        if node.attribute_type != "GEOMETRY":
+            raise Unsupported(f"'{node.name}', an attribute of the {node.attribute_type.lower().replace('_', ' ')}")
+        got, kind = self._mesh_attribute(node, node.attribute_name, False)
+        which = output.identifier
+        if which == "Alpha":
+            return (np.ascontiguousarray(got[:, 3]) if kind in ("RGBA", "FLOAT4")
+                    else np.ones(self.count, np.float32))
+        if got is None:  # no such attribute: 0
+            return np.zeros(self.count if which == "Fac" else (self.count, 3), np.float32)
+        if which == "Fac":  # a value's own, a pair's first, a vector's or colour's average
+            return np.ascontiguousarray(got[:, 0]) if kind in ("FLOAT", "FLOAT2") else got[:, :3].mean(axis=1)
+        if kind == "FLOAT":
+            return np.repeat(got, 3, axis=1)
+        if kind == "FLOAT2":
+            return np.column_stack([got, np.zeros(self.count, np.float32)])
+        return np.ascontiguousarray(got[:, :3])
+
+    def _mesh_attribute(self, node, name, colour):
+        """(values (count, k) float32, Cycles' type) of the mesh attribute `name` (a Color Attribute
+        node's empty name: the default colour attribute), or (None, None) where the mesh has none."""
+        if self._attribute is not None:
+            return self._attribute(name, colour)
+        if self.checking:
+            return np.zeros((self.count, 4), np.float32), "RGBA"
+        raise NeedsMesh(f"'{node.name}', a mesh attribute, which has no value without a mesh")
+
     def _ShaderNodeRGB(self, node, output, depth):
         return np.tile(np.float32(tuple(output.default_value)[:3]), (self.count, 1))
 
@@ -374,13 +415,16 @@ class Evaluator:
     # -- a procedural texture's Vector: coordinates at the rows
     def points(self, socket, depth):
         """(count, 3) coordinates of a procedural texture's Vector input: Generated where unlinked, a
-        Texture Coordinate's Generated or Object, through Mapping and Vector Math nodes."""
+        Texture Coordinate's Generated or Object or an Attribute's vector, through Mapping and Vector
+        Math nodes."""
         fed = _fed(socket, depth)
         if fed is None:
             return self._coordinates("GENERATED")
         node, output = fed
         if node.bl_idname == "ShaderNodeTexCoord" and output.name in ("Generated", "Object"):
             return self._coordinates(output.name.upper(), node.object if output.name == "Object" else None)
+        if node.bl_idname == "ShaderNodeAttribute" and output.identifier in ("Color", "Vector"):
+            return self._ShaderNodeAttribute(node, output, depth + 1)
         if node.bl_idname == "ShaderNodeMapping":
             if node.vector_type not in ("POINT", "TEXTURE", "VECTOR"):
                 raise Unsupported(f"'{node.name}' of type {node.vector_type.lower()}")
@@ -500,6 +544,10 @@ def _identity_mapping(node):
             and (tm.mapping_x, tm.mapping_y, tm.mapping_z) == ("X", "Y", "Z") and tm.mapping == "FLAT")
     if not same:
         raise Unsupported(f"'{node.name}''s own texture mapping")
+
+
+class NeedsMesh(Unsupported):
+    """A node whose value only a mesh gives (an attribute), read without one (one_point's means)."""
 
 
 class MissingUV(Unsupported):

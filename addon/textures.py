@@ -53,6 +53,8 @@ def socket_at_means(principled, socket):
     ev = nodes.one_point(lambda node: np.float32([images.mean(node)]))
     try:
         out = ev.colour(sock) if TEXTURED_SOCKETS[socket] in COLOUR_KEYWORDS else ev.value(sock)
+    except nodes.NeedsMesh as exc:  # (a material has no mesh to take an attribute's mean over)
+        raise world.SetupError(f"it reads {exc}") from None
     except nodes.Unsupported:
         return None
     return out[0], [t.image.name for t in ev.textures]
@@ -545,7 +547,8 @@ def read_inputs(obj, depsgraph, data, progress=None):
                 lambda tex, uv, footprint, rows, s=s: _colours_memo((obj.name, data.domain, s, tex.name),
                                                                    pyramids(tex), Source(tex, None),
                                                                    (uv, footprint, rows), data.count),
-                points=row_points(obj, mesh, data.positions), progress=progress)
+                points=row_points(obj, mesh, data.positions), progress=progress,
+                attribute=attribute_reader(mesh, corner_vert, data.domain, data.sites, notes))
             try:
                 values = ev.colour(sock) if keyword in COLOUR_KEYWORDS else ev.value(sock)
             except nodes.MissingUV as exc:
@@ -832,7 +835,78 @@ def row_points(obj, mesh, positions):
     return points
 
 
-def _height_reader(obj, s, mesh, corner_vert, where, count, progress=None):
+# A mesh attribute's data type -> (its values' property, width, dtype read, Cycles' type of it)
+ATTRIBUTE_TYPES = {"FLOAT": ("value", 1, np.float32, "FLOAT"), "INT": ("value", 1, np.int32, "FLOAT"),
+                   "INT8": ("value", 1, np.int32, "FLOAT"), "BOOLEAN": ("value", 1, bool, "FLOAT"),
+                   "FLOAT2": ("vector", 2, np.float32, "FLOAT2"), "INT32_2D": ("value", 2, np.int32, "FLOAT2"),
+                   "FLOAT_VECTOR": ("vector", 3, np.float32, "FLOAT3"),
+                   # colours in scene linear (a byte colour's sRGB decoded, its alpha not), as Cycles keeps them
+                   "FLOAT_COLOR": ("color", 4, np.float32, "RGBA"), "BYTE_COLOR": ("color", 4, np.float32, "RGBA"),
+                   "QUATERNION": ("value", 4, np.float32, "FLOAT4")}
+
+
+def corner_attribute(mesh, attr, corner_vert):
+    """A mesh attribute's values at each face corner ((nl, k) float32), as Cycles spreads them over
+    the triangles: a point's at its corners, a face's at all of its, an edge's averaged at its two
+    vertices."""
+    prop, width, dtype, _ = ATTRIBUTE_TYPES[attr.data_type]
+    values = np.empty(len(attr.data) * width, dtype)
+    attr.data.foreach_get(prop, values)
+    values = values.reshape(-1, width).astype(np.float32)
+    if attr.domain == "POINT":
+        return values[corner_vert]
+    if attr.domain == "CORNER":
+        return values
+    if attr.domain == "FACE":
+        starts = np.empty(len(mesh.polygons), np.int32)
+        mesh.polygons.foreach_get("loop_start", starts)
+        return values[np.repeat(np.arange(len(starts)), np.diff(starts, append=len(corner_vert)))]
+    ends = np.empty(len(mesh.edges) * 2, np.int32)  # 'EDGE'
+    mesh.edges.foreach_get("vertices", ends)
+    count = np.bincount(ends, minlength=len(mesh.vertices)).astype(np.float64)
+    total = np.stack([np.bincount(ends, weights=np.repeat(values[:, c], 2), minlength=len(mesh.vertices))
+                      for c in range(width)], axis=1)
+    return (total / np.maximum(count, 1.0)[:, None]).astype(np.float32)[corner_vert]
+
+
+def attribute_reader(mesh, corner_vert, domain, sites=None, notes=None):
+    """An Evaluator's attribute(name, colour) for rows of `domain` ('POINT': the vertices, each the
+    mean of its corners' values where they differ; 'CORNER': the face corners) or, with `sites`, a
+    bake's texels (linear over each triangle, as Cycles interpolates): (values (rows, k) float32,
+    Cycles' type), or (None, None) where the mesh has no such attribute, which Cycles reads as 0.  An
+    empty name with `colour` is the mesh's default colour attribute (Cycles' render colour).  Reading
+    otherwise than Cycles appends to `notes`."""
+    def read(name, colour):
+        if colour and not name:
+            name = mesh.color_attributes.default_color_name
+        attr = mesh.attributes.get(name) if name else None
+        if attr is not None and name == meshes.ATTRIBUTE:
+            _note(notes, f"'{name}' is wenv's own shading: read as no attribute (0)")
+            attr = None
+        if attr is not None and attr.data_type not in ATTRIBUTE_TYPES:
+            _note(notes, f"'{name}' holds {attr.data_type.lower()} values, which wenv does not read: read as 0")
+            attr = None
+        if attr is None:
+            return None, None
+        corners = corner_attribute(mesh, attr, corner_vert)
+        if sites is not None:
+            return sites.at(corners), ATTRIBUTE_TYPES[attr.data_type][3]
+        if domain == "CORNER":
+            return corners, ATTRIBUTE_TYPES[attr.data_type][3]
+        n = len(mesh.vertices)
+        count = np.bincount(corner_vert, minlength=n).astype(np.float64)
+        total = np.stack([np.bincount(corner_vert, weights=corners[:, c], minlength=n)
+                          for c in range(corners.shape[1])], axis=1)
+        return (total / np.maximum(count, 1.0)[:, None]).astype(np.float32), ATTRIBUTE_TYPES[attr.data_type][3]
+    return read
+
+
+def _note(notes, note):
+    if notes is not None and note not in notes:
+        notes.append(note)
+
+
+def _height_reader(obj, s, mesh, corner_vert, where, count, progress=None, notes=None):
     """An Evaluator of a Bump node's Height at `where`'s points: the face corners (where None) or
     a bake's texel sites."""
     rows = ((lambda uv_map: uv_rows(mesh, uv_map, "CORNER", corner_vert)) if where is None else
@@ -846,7 +920,8 @@ def _height_reader(obj, s, mesh, corner_vert, where, count, progress=None):
                            lambda tex, uv, footprint, rows_: _colours_memo((obj.name, s) + tag + (tex.name,),
                                                                            pyramids(tex), Source(tex, None),
                                                                            (uv, footprint, rows_), count),
-                           points=points, progress=progress)
+                           points=points, progress=progress,
+                           attribute=attribute_reader(mesh, corner_vert, "CORNER", where, notes))
 
 
 def _bump_gradients(obj, s, mat, chain, mesh, corner_vert, m, sites, notes, progress=None):
@@ -857,10 +932,11 @@ def _bump_gradients(obj, s, mat, chain, mesh, corner_vert, m, sites, notes, prog
     socket = chain.bump.inputs["Height"]
     try:
         if sites is None:
-            height = _height_reader(obj, s, mesh, corner_vert, None, len(mesh.loops), progress).value(socket)
+            height = _height_reader(obj, s, mesh, corner_vert, None, len(mesh.loops), progress,
+                                    notes).value(socket)
             heights = [height]
         else:
-            heights = [_height_reader(obj, s, mesh, corner_vert, at, sites.count, progress).value(socket)
+            heights = [_height_reader(obj, s, mesh, corner_vert, at, sites.count, progress, notes).value(socket)
                        for at in (sites, sites.shifted(1.0, 0.0), sites.shifted(0.0, 1.0))]
     except nodes.MissingUV as exc:
         notes.append(_no_uv_map(obj, exc.uv_map, f"the Bump node of '{mat.name}'", "it is not used"))
@@ -969,7 +1045,8 @@ def read_term_weights(obj, depsgraph, data, progress=None):
                                                                          pyramids(tex),
                                                                          Source(tex, None), (uv, footprint, rows),
                                                                          data.count),
-                points=row_points(obj, mesh, data.positions), progress=progress) if reads else None
+                points=row_points(obj, mesh, data.positions), progress=progress,
+                attribute=attribute_reader(mesh, corner_vert, data.domain, data.sites, notes)) if reads else None
             weight, fac = colour, np.ones((data.count, 1), np.float32)
             if term.factors:
                 try:

@@ -1181,6 +1181,57 @@ def test_a_noise_texture_is_read_at_each_vertex(scene):
     assert "base_color" not in plan_of(scene, obj).items[0][1].inputs
 
 
+def test_mesh_attributes_are_read_at_each_vertex(scene):
+    """A Principled Base Color from a Color Attribute node (unnamed: the mesh's default colour, bytes
+    per face corner) and a Roughness from an Attribute node's Fac (a float per vertex) on Suzanne:
+    each vertex reads its corners' mean colour, decoded from sRGB, and its own value (as
+    tests/test_attributes.py holds the reading to Cycles), and the add-on's colours are the core's
+    shading with them.  An attribute the mesh lacks reads black, as in Cycles; the glossmeter, which
+    has no mesh to average over, says so."""
+    from addon import gloss
+    env_world(scene, "sunset")
+    obj = add_monkey(subdivisions=1)
+    mesh = obj.data
+    rng = np.random.default_rng(3)
+    codes = rng.integers(0, 256, (len(mesh.loops), 4))
+    mesh.color_attributes.new("paint", "BYTE_COLOR", "CORNER").data.foreach_set(
+        "color_srgb", (codes / 255.0).astype(np.float32).ravel())
+    rough = np.where(rng.random(len(mesh.vertices)) < 0.5, 0.25, 0.6).astype(np.float32)
+    mesh.attributes.new("rough", "FLOAT", "POINT").data.foreach_set("value", rough)
+    mat = principled_material("painted", roughness=0.4)
+    obj.data.materials.append(mat)
+    select_only(obj)
+    tree = mat.node_tree
+    bsdf = tree.nodes["Principled BSDF"]
+    paint, reading = tree.nodes.new("ShaderNodeVertexColor"), tree.nodes.new("ShaderNodeAttribute")
+    reading.attribute_name = "rough"
+    tree.links.new(paint.outputs["Color"], bsdf.inputs["Base Color"])
+    tree.links.new(reading.outputs["Fac"], bsdf.inputs["Roughness"])
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    c = codes[:, :3] / 255.0  # sRGB's decoding, written out
+    linear = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+    corner_vert = np.array([loop.vertex_index for loop in mesh.loops])
+    count = np.bincount(corner_vert, minlength=len(mesh.vertices))
+    colours = np.stack([np.bincount(corner_vert, linear[:, k], len(mesh.vertices)) for k in range(3)], 1)
+    colours = (colours / count[:, None]).astype(np.float32)
+    data = plan_of(scene, obj).items[0][1]
+    np.testing.assert_allclose(data.inputs["base_color"], colours, atol=2e-6)
+    np.testing.assert_array_equal(data.inputs["roughness"], rough)
+    assert not any("Color Attribute" in n or "Attribute" in n for n in materials.principled_notes(mat))
+    p, n = world_arrays(obj, corner=False)
+    eye = tuple(scene.camera.matrix_world.translation)
+    want = core_shader(wenv.load_environment(hdri_path("sunset")),
+                       wenv.Principled(base_color=(0.8, 0.2, 0.1), roughness=0.4, ior=bsdf.inputs["IOR"].default_value)
+                       ).shade_mesh(p, n, eye, base_color=colours, roughness=rough)
+    np.testing.assert_allclose(attribute(obj)[1], want, rtol=1e-4, atol=1e-5)
+    obj.active_material = mat
+    _key, note = gloss.reading_key(mat)
+    assert "Base Color's texture cannot be read" in note and "a mesh attribute" in note, note
+
+    paint.layer_name = "not there"
+    np.testing.assert_array_equal(plan_of(scene, obj).items[0][1].inputs["base_color"], 0.0)
+
+
 def test_a_texture_wenv_cannot_read_is_named_with_the_value_used(scene):
     """A Base Color through object coordinates, or a UV map the mesh lacks: the report says so and the
     unlinked value is used."""
