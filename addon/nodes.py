@@ -43,6 +43,18 @@ _side = (np.arange(16, dtype=np.float32) + 0.5) / 16.0
 MEAN_POINTS = np.stack(np.meshgrid(_side, _side, _side, indexing="ij"), -1).reshape(-1, 3)
 
 
+# ... and of a UV map (u, v, 0) over the unit square
+MEAN_SQUARE = np.column_stack([MEAN_POINTS[:256, 1:], np.zeros(256, np.float32)])
+
+
+def _same(values):
+    return values
+
+
+def _mean(values):
+    return values.mean(axis=0, keepdims=True)
+
+
 class Unsupported(Exception):
     """A node, output or setting the evaluation does not read (its message says which)."""
 
@@ -148,50 +160,42 @@ class Evaluator:
     def _ShaderNodeTexNoise(self, node, output, depth):
         kw = _procedural_inputs(node, output, NOISE_INPUTS)
         dims = int(node.noise_dimensions[0])
-        points = self.points(_input(node, "Vector"), depth) if dims > 1 else None
+        points, reduce = self.points(_input(node, "Vector"), depth) if dims > 1 else self._no_points()
         if self.checking:
             return np.zeros((self.count, 3) if output.identifier == "Color" else self.count, np.float32)
-        if points is None:
-            points = np.zeros((self.count if self._points is not None else 1, 3), np.float32)
         colour = output.identifier == "Color"  # (Fac alone is a third of the work)
-        got = engine.noise_texture(points, dimensions=dims, type=node.noise_type, normalize=node.normalize,
-                                   color=colour, progress=self.progress, **kw)[1 if colour else 0]
-        if self._points is None:  # a mean over the unit cube
-            got = got.mean(axis=0, keepdims=True)
-        return got
+        return reduce(engine.noise_texture(points, dimensions=dims, type=node.noise_type, normalize=node.normalize,
+                                           color=colour, progress=self.progress, **kw)[1 if colour else 0])
 
     def _ShaderNodeTexVoronoi(self, node, output, depth):
         if output.identifier not in ("Distance", "Color", "Radius"):
             raise Unsupported(f"'{node.name}''s {output.name} output")
         kw = _procedural_inputs(node, None, VORONOI_INPUTS)
         dims = int(node.voronoi_dimensions[0])
-        points = self.points(_input(node, "Vector"), depth) if dims > 1 else None
+        points, reduce = self.points(_input(node, "Vector"), depth) if dims > 1 else self._no_points()
         colour = output.identifier == "Color"
         if self.checking:
             return np.zeros((self.count, 3) if colour else self.count, np.float32)
-        if points is None:
-            points = np.zeros((self.count if self._points is not None else 1, 3), np.float32)
-        got = engine.voronoi_texture(points, dimensions=dims, feature=node.feature, distance=node.distance,
-                                     normalize=node.normalize, color=colour, progress=self.progress,
-                                     **kw)[1 if colour else 0]
-        return got.mean(axis=0, keepdims=True) if self._points is None else got
+        return reduce(engine.voronoi_texture(points, dimensions=dims, feature=node.feature, distance=node.distance,
+                                             normalize=node.normalize, color=colour, progress=self.progress,
+                                             **kw)[1 if colour else 0])
 
     def _ShaderNodeTexWave(self, node, output, depth):
         kw = _procedural_inputs(node, output, WAVE_INPUTS)
-        points = self.points(_input(node, "Vector"), depth)
+        points, reduce = self.points(_input(node, "Vector"), depth)
         if self.checking:
             return self._grey(np.zeros(self.count, np.float32), output)
         direction = node.bands_direction if node.wave_type == "BANDS" else node.rings_direction
-        return self._grey(engine.wave_texture(points, wave_type=node.wave_type, direction=direction,
-                                              profile=node.wave_profile, progress=self.progress, **kw), output)
+        return self._grey(reduce(engine.wave_texture(points, wave_type=node.wave_type, direction=direction,
+                                                     profile=node.wave_profile, progress=self.progress, **kw)), output)
 
     def _ShaderNodeTexChecker(self, node, output, depth):
         scale = _procedural_inputs(node, output, (("scale", "Scale"),))["scale"]
-        p = (self.points(_input(node, "Vector"), depth) * np.float32(scale) + np.float32(1e-6)) * np.float32(0.999999)
+        p, reduce = self.points(_input(node, "Vector"), depth)
+        p = (p * np.float32(scale) + np.float32(1e-6)) * np.float32(0.999999)
         cell = np.abs(np.floor(p).astype(np.int64)) % 2
-        fac = ((cell[:, 0] == cell[:, 1]).astype(np.int64) == cell[:, 2]).astype(np.float32)
-        if self._points is None:
-            fac = fac.mean(keepdims=True)  # the share of Color1 over the unit cube
+        # (over a vertex's corners or the unit cube: the share of Color1)
+        fac = reduce(((cell[:, 0] == cell[:, 1]).astype(np.int64) == cell[:, 2]).astype(np.float32))
         if output.identifier == "Fac":
             return fac
         one, two = self.colour(_input(node, "Color1"), depth), self.colour(_input(node, "Color2"), depth)
@@ -200,7 +204,8 @@ class Evaluator:
     def _ShaderNodeTexBrick(self, node, output, depth):
         kw = _procedural_inputs(node, output, BRICK_INPUTS)
         f32 = np.float32
-        p = self.points(_input(node, "Vector"), depth).astype(np.float32) * f32(kw["scale"])
+        p, reduce = self.points(_input(node, "Vector"), depth)
+        p = p.astype(np.float32) * f32(kw["scale"])
         width, height = f32(kw["width"]), f32(kw["height"])
         row = np.floor(p[:, 1] / height).astype(np.int64)
         width = np.full(len(p), width, np.float32)
@@ -218,19 +223,18 @@ class Evaluator:
             t = np.clip((f32(1.0) - nearest / size) / smooth, 0.0, 1.0).astype(np.float32)
             eased = f32(3.0) * t * t - f32(2.0) * t * t * t  # Cycles' smoothstepf
         mortar = np.where(nearest >= size, f32(0.0), f32(1.0) if smooth == 0.0 else eased).astype(np.float32)
-        if self._points is None:  # over the unit cube: the mean mortar and tint
-            mortar, tint = mortar.mean(keepdims=True), tint.mean(keepdims=True)
         if output.identifier == "Fac":
-            return mortar
-        one, two = self.colour(_input(node, "Color1"), depth), self.colour(_input(node, "Color2"), depth)
-        bricks = np.where((mortar != 1.0)[:, None], (1.0 - tint)[:, None] * one + tint[:, None] * two, one)
-        return (bricks * (1.0 - mortar[:, None]) + self.colour(_input(node, "Mortar"), depth) * mortar[:, None]
-                ).astype(np.float32)
+            return reduce(mortar)
+        # the colour is each colour by a weight: their means over a vertex's corners (or the unit cube)
+        weights = reduce(np.column_stack([(1.0 - mortar) * (1.0 - tint), (1.0 - mortar) * tint, mortar]))
+        return (weights[:, :1] * self.colour(_input(node, "Color1"), depth)
+                + weights[:, 1:2] * self.colour(_input(node, "Color2"), depth)
+                + weights[:, 2:] * self.colour(_input(node, "Mortar"), depth)).astype(np.float32)
 
     def _ShaderNodeTexGradient(self, node, output, depth):
         _procedural_inputs(node, output, ())
-        p = self.points(_input(node, "Vector"), depth).astype(np.float32)
-        x, y, z = p[:, 0], p[:, 1], p[:, 2]
+        p, reduce = self.points(_input(node, "Vector"), depth)
+        x, y, z = (np.ascontiguousarray(c, np.float32) for c in p.T)
         kind = node.gradient_type
         if kind == "LINEAR":
             f = x
@@ -246,13 +250,10 @@ class Evaluator:
         else:  # spherical: biased so that a unit vector gives exactly 0
             r = np.maximum(np.float32(0.999999) - np.sqrt(x * x + y * y + z * z), 0.0)
             f = r * r if kind == "QUADRATIC_SPHERE" else r
-        return self._grey(np.clip(f, 0.0, 1.0).astype(np.float32), output)
+        return self._grey(reduce(np.clip(f, 0.0, 1.0).astype(np.float32)), output)
 
     def _grey(self, fac, output):
-        """A texture's Fac as its output: itself, or its Color (Fac in each channel); averaged over
-        the unit cube without a mesh (one_point)."""
-        if self._points is None:
-            fac = fac.mean(keepdims=True)
+        """A texture's Fac as its output: itself, or its Color (Fac in each channel)."""
         return np.repeat(fac[:, None], 3, axis=1) if output.identifier == "Color" else fac
 
     # -- mesh attributes, as Cycles' svm_node_vertex_color and svm_node_attr read them
@@ -412,36 +413,65 @@ class Evaluator:
         what = f"'{node.name}''s {output.name}" if node.bl_idname == "ShaderNodeTexCoord" else f"'{node.name}'"
         raise Unsupported(f"a texture's Vector from {what}, which wenv does not evaluate yet")
 
-    # -- a procedural texture's Vector: coordinates at the rows
+    # -- a procedural texture's Vector: coordinates at the rows, or where they are read for them
     def points(self, socket, depth):
-        """(count, 3) coordinates of a procedural texture's Vector input: Generated where unlinked, a
-        Texture Coordinate's Generated or Object or an Attribute's vector, through Mapping and Vector
-        Math nodes."""
+        """(points (m, 3) float32, reduce) of a procedural texture's Vector input: Generated where
+        unlinked, a Texture Coordinate's Generated, Object or UV, a UV Map node's or an Attribute's
+        vector, through Mapping and Vector Math nodes.  reduce(values at the points) gives the values
+        at the rows: the points are the rows' own, or a UV map's at each vertex's face corners (a seam's
+        two sides, whose values a vertex averages as it does an image's), or, without a mesh
+        (one_point), over the unit cube (Generated and Object) or square (UV) for their mean."""
         fed = _fed(socket, depth)
         if fed is None:
             return self._coordinates("GENERATED")
         node, output = fed
         if node.bl_idname == "ShaderNodeTexCoord" and output.name in ("Generated", "Object"):
             return self._coordinates(output.name.upper(), node.object if output.name == "Object" else None)
+        if node.bl_idname == "ShaderNodeTexCoord" and output.name == "UV":
+            return self._uv_points(None)
+        if node.bl_idname == "ShaderNodeUVMap":
+            return self._uv_points(node.uv_map or None)
         if node.bl_idname == "ShaderNodeAttribute" and output.identifier in ("Color", "Vector"):
-            return self._ShaderNodeAttribute(node, output, depth + 1)
+            return self._ShaderNodeAttribute(node, output, depth + 1), _same
         if node.bl_idname == "ShaderNodeMapping":
             if node.vector_type not in ("POINT", "TEXTURE", "VECTOR"):
                 raise Unsupported(f"'{node.name}' of type {node.vector_type.lower()}")
-            p = self.points(node.inputs["Vector"], depth + 1).astype(np.float64)
-            return self._mapped(node, p).astype(np.float32)
+            p, reduce = self.points(node.inputs["Vector"], depth + 1)
+            return self._mapped(node, p.astype(np.float64)).astype(np.float32), reduce
         if node.bl_idname == "ShaderNodeVectorMath":
             op = _vector_op(node)
-            p = self.points(node.inputs[0], depth + 1).astype(np.float64)
-            return op(p)[0].astype(np.float32)
+            p, reduce = self.points(node.inputs[0], depth + 1)
+            return op(p.astype(np.float64))[0].astype(np.float32), reduce
         what = f"'{node.name}''s {output.name}" if node.bl_idname == "ShaderNodeTexCoord" else f"'{node.name}'"
         raise Unsupported(f"a procedural texture's Vector from {what}, which wenv does not evaluate yet")
 
     def _coordinates(self, space, other=None):
         self.spaces.add(space)
         if self._points is None:
-            return MEAN_POINTS
-        return self._points(space, other)
+            return MEAN_POINTS, _mean
+        return self._points(space, other), _same
+
+    def _uv_points(self, uv_map):
+        """points() of a UV map's (u, v, 0), as Cycles' UV output reads it."""
+        if self._points is None:
+            return MEAN_SQUARE, _mean
+        uv, _footprint, rows = self._uvs(uv_map)
+        p = np.column_stack([uv, np.zeros(len(uv), np.float32)]).astype(np.float32)
+        if len(rows) == self.count and np.array_equal(rows, np.arange(self.count)):
+            return p, _same
+        count = np.bincount(rows, minlength=self.count).astype(np.float64)
+
+        def reduce(values):  # each row's mean over its corners
+            flat = values.reshape(len(values), -1).astype(np.float64)
+            total = np.stack([np.bincount(rows, weights=flat[:, c], minlength=self.count)
+                              for c in range(flat.shape[1])], axis=1)
+            out = (total / np.maximum(count, 1.0)[:, None]).astype(np.float32)
+            return out.reshape((self.count,) + values.shape[1:])
+        return p, reduce
+
+    def _no_points(self):
+        """points() of a 1D texture, which reads W alone: one point, its value at every row."""
+        return np.zeros((1, 3), np.float32), lambda values: np.repeat(values, self.count, axis=0)
 
     def _uvs(self, uv_map):
         got = self._uv(uv_map)

@@ -1232,6 +1232,36 @@ def test_mesh_attributes_are_read_at_each_vertex(scene):
     np.testing.assert_array_equal(plan_of(scene, obj).items[0][1].inputs["base_color"], 0.0)
 
 
+def test_a_procedural_texture_through_the_uv_map_averages_a_seams_corners(scene):
+    """A Noise Texture read through the UV map (Texture Coordinate's UV, as (u, v, 0)) on Suzanne,
+    whose UV map has seams: each vertex reads the noise at each of its corners' UVs and takes their
+    mean, as it does an image's samples, rather than the noise at a mean UV between two islands."""
+    env_world(scene, "sunset")
+    obj = add_monkey(subdivisions=1)
+    mat = principled_material("uv noise")
+    obj.data.materials.append(mat)
+    select_only(obj)
+    tree = mat.node_tree
+    noise, coords = tree.nodes.new("ShaderNodeTexNoise"), tree.nodes.new("ShaderNodeTexCoord")
+    noise.inputs["Scale"].default_value = 9.0
+    tree.links.new(coords.outputs["UV"], noise.inputs["Vector"])
+    tree.links.new(noise.outputs[0], tree.nodes["Principled BSDF"].inputs["Roughness"])
+    mesh = obj.data
+    uv = np.empty(len(mesh.loops) * 2, np.float32)
+    mesh.uv_layers.active.uv.foreach_get("vector", uv)
+    uv = uv.reshape(-1, 2)
+    corner_vert = np.array([loop.vertex_index for loop in mesh.loops])
+    at_corners = wenv.noise_texture(np.column_stack([uv, np.zeros(len(uv), np.float32)]), scale=9.0)[0]
+    want = np.bincount(corner_vert, at_corners, len(mesh.vertices)) / np.bincount(corner_vert)
+    data = plan_of(scene, obj).items[0][1]
+    np.testing.assert_allclose(data.inputs["roughness"], np.clip(want, 0.0, 1.0), atol=2e-6)
+    high, low = np.zeros(len(mesh.vertices)), np.full(len(mesh.vertices), np.inf)
+    np.maximum.at(high, corner_vert, uv[:, 0])
+    np.minimum.at(low, corner_vert, uv[:, 0])
+    assert ((high - low) > 0.05).sum() > 20  # seams: vertices whose corners lie far apart in UV
+    assert not any("Noise" in n for n in materials.principled_notes(mat))
+
+
 def test_a_texture_wenv_cannot_read_is_named_with_the_value_used(scene):
     """A Base Color through object coordinates, or a UV map the mesh lacks: the report says so and the
     unlinked value is used."""

@@ -2,7 +2,8 @@
 orthographic camera that it fills, its Emission coloured by a texture node, one sample a pixel at the
 pixel's centre.  Cycles' pixels against wenv.noise_texture at those points, for each dimension and type,
 with distortion and without normalisation, and through the plane's Generated coordinates; and against
-the add-on's reading of the node (addon/nodes.py) for the Noise, Wave, Checker and Gradient Textures.
+the add-on's reading of the node (addon/nodes.py) for the Noise, Wave, Checker and Gradient Textures,
+through Object coordinates or the plane's UV map.
 Then bad input."""
 import tempfile
 
@@ -80,7 +81,9 @@ def plane():
         if vector.enabled:
             tree.links.new(mapping.outputs["Vector"], vector)
         tree.links.new(next(o for o in node.outputs if o.identifier == output), emission.inputs["Color"])
-        ev = nodes.Evaluator(N * N, None, None, points=lambda space, other: local.astype(np.float32))
+        uv = ((local[:, :2] + 2.0) / 4.0).astype(np.float32)  # the plane's UV map at the pixels' centres
+        ev = nodes.Evaluator(N * N, lambda uv_map: (uv, np.ones(N * N, np.float32), np.arange(N * N)), None,
+                             points=lambda space, other: local.astype(np.float32))
         return shot(), ev.colour(emission.inputs["Color"])
 
     def render(settings, output, vector="Object"):
@@ -136,6 +139,18 @@ def _set(node, **values):
             setattr(node, name, value)
 
 
+def _uv_coordinates(mapping, uv_map=None):
+    """Feeds a Mapping node the plane's UV map: the Texture Coordinate's UV, or a UV Map node's."""
+    tree = mapping.id_data
+    if uv_map is None:
+        coords = mapping.inputs["Vector"].links[0].from_node
+        tree.links.new(coords.outputs["UV"], mapping.inputs["Vector"])
+    else:
+        node = tree.nodes.new("ShaderNodeUVMap")
+        node.uv_map = uv_map
+        tree.links.new(node.outputs["UV"], mapping.inputs["Vector"])
+
+
 NODE_CASES = [
     ("ShaderNodeTexNoise", "Color", lambda n, m: _set(n, noise_type="RIDGED_MULTIFRACTAL", Detail=3.0, Gain=1.5)),
     ("ShaderNodeTexWave", "Fac", lambda n, m: _set(n, wave_type="BANDS", bands_direction="DIAGONAL",
@@ -164,6 +179,9 @@ NODE_CASES = [
     ("ShaderNodeTexBrick", "Fac", lambda n, m: (_set(n, Scale=1.0, offset=0.3, offset_frequency=3, squash=0.6,
                                                      squash_frequency=2, **{"Mortar Size": 0.03}),
                                                 _set(m, Location=(-1.3, -2.2, 0.0)))),
+] + [
+    ("ShaderNodeTexNoise", "Fac", lambda n, m: (_set(n, Scale=7.0), _uv_coordinates(m))),
+    ("ShaderNodeTexChecker", "Color", lambda n, m: (_set(n, Scale=5.0), _uv_coordinates(m, "UVMap"))),
 ] + [("ShaderNodeTexGradient", "Fac", lambda n, m, g=g: (_set(n, gradient_type=g),
                                                           _set(m, Scale=(0.4, 0.4, 0.4), Rotation=(0.0, 0.0, 0.0))))
      for g in ("LINEAR", "QUADRATIC", "EASING", "DIAGONAL", "SPHERICAL", "QUADRATIC_SPHERE", "RADIAL")]
