@@ -45,6 +45,9 @@ MEAN_POINTS = np.stack(np.meshgrid(_side, _side, _side, indexing="ij"), -1).resh
 
 # ... and of a UV map (u, v, 0) over the unit square
 MEAN_SQUARE = np.column_stack([MEAN_POINTS[:256, 1:], np.zeros(256, np.float32)])
+# The Geometry node's Pointiness and Random Per Island, which Cycles computes from the mesh, asked of
+# attribute() as names no attribute can have
+POINTINESS, RANDOM_PER_ISLAND = ("pointiness",), ("random per island",)
 
 
 def _same(values):
@@ -95,15 +98,17 @@ class Evaluator:
     Image Texture node at the corners (textures.py gives it); `uv(uv_map)` gives (uv, footprint,
     rows) of the mesh's UV map (None: the active render one), or None without one."""
 
-    def __init__(self, count, uv, texture, checking=False, points=None, progress=None, attribute=None):
+    def __init__(self, count, uv, texture, checking=False, points=None, progress=None, attribute=None, owner=None):
         self.count = count
         self._uv = uv
         self._texture = texture
         # attribute(name, colour) -> (values (count, k), Cycles' type) of a mesh attribute at the rows,
         # or (None, None) where the mesh has none of that name; None: no mesh (one_point)
         self._attribute = attribute
+        self._owner = owner  # (object, material) the rows are of (Object Info); None: none (one_point)
         # points(space, other): the rows' 'GENERATED' or 'OBJECT' coordinates ((count, 3), `other`'s
-        # object space where given); None: MEAN_POINTS, averaged (one_point)
+        # object space where given), 'WORLD' positions or 'NORMAL' (unit, world); None: MEAN_POINTS,
+        # averaged (one_point)
         self._points = points
         self.spaces = set()  # the coordinates read
         # progress(fraction) while a procedural texture is evaluated (a bake's million texels), which
@@ -284,6 +289,32 @@ class Evaluator:
             return np.column_stack([got, np.zeros(self.count, np.float32)])
         return np.ascontiguousarray(got[:, :3])
 
+    # -- the object's and the geometry's, as Cycles' svm_node_object_info and svm_node_geometry give them
+    def _ShaderNodeObjectInfo(self, node, output, depth):
+        which = output.identifier
+        if self._owner is None:
+            if not self.checking:
+                raise NeedsMesh(f"'{node.name}', an object's {output.name}, which has no value without an object")
+            value = (0.0, 0.0, 0.0) if which in ("Location", "Color") else 0.0
+        else:
+            obj, mat = self._owner
+            value = {"Location": lambda: tuple(obj.matrix_world.translation), "Color": lambda: tuple(obj.color)[:3],
+                     "Alpha": lambda: obj.color[3], "Object Index": lambda: obj.pass_index,
+                     "Material Index": lambda: mat.pass_index if mat is not None else 0,
+                     "Random": lambda: object_random(obj.name)}[which]()
+        if isinstance(value, tuple):
+            return np.tile(np.float32(value), (self.count, 1))
+        return np.full(self.count, value, np.float32)
+
+    def _ShaderNodeNewGeometry(self, node, output, depth):
+        if output.identifier in ("Pointiness", "Random Per Island"):
+            got, _kind = self._mesh_attribute(node, POINTINESS if output.identifier == "Pointiness"
+                                              else RANDOM_PER_ISLAND, False)
+            return np.ascontiguousarray(got[:, 0])
+        if output.identifier not in ("Position", "Normal"):
+            raise Unsupported(f"'{node.name}''s {output.name} output")
+        return self._coordinates("WORLD" if output.identifier == "Position" else "NORMAL", node=node)[0]
+
     def _mesh_attribute(self, node, name, colour):
         """(values (count, k) float32, Cycles' type) of the mesh attribute `name` (a Color Attribute
         node's empty name: the default colour attribute), or (None, None) where the mesh has none."""
@@ -417,7 +448,8 @@ class Evaluator:
     def points(self, socket, depth):
         """(points (m, 3) float32, reduce) of a procedural texture's Vector input: Generated where
         unlinked, a Texture Coordinate's Generated, Object or UV, a UV Map node's or an Attribute's
-        vector, through Mapping and Vector Math nodes.  reduce(values at the points) gives the values
+        vector, a Geometry node's Position or Normal or an Object Info's Location or Color, through
+        Mapping and Vector Math nodes.  reduce(values at the points) gives the values
         at the rows: the points are the rows' own, or a UV map's at each vertex's face corners (a seam's
         two sides, whose values a vertex averages as it does an image's), or, without a mesh
         (one_point), over the unit cube (Generated and Object) or square (UV) for their mean."""
@@ -433,6 +465,10 @@ class Evaluator:
             return self._uv_points(node.uv_map or None)
         if node.bl_idname == "ShaderNodeAttribute" and output.identifier in ("Color", "Vector"):
             return self._ShaderNodeAttribute(node, output, depth + 1), _same
+        if node.bl_idname == "ShaderNodeNewGeometry" and output.identifier in ("Position", "Normal"):
+            return self._coordinates("WORLD" if output.identifier == "Position" else "NORMAL", node=node)
+        if node.bl_idname == "ShaderNodeObjectInfo" and output.identifier in ("Location", "Color"):
+            return self._ShaderNodeObjectInfo(node, output, depth + 1), _same
         if node.bl_idname == "ShaderNodeMapping":
             if node.vector_type not in ("POINT", "TEXTURE", "VECTOR"):
                 raise Unsupported(f"'{node.name}' of type {node.vector_type.lower()}")
@@ -445,11 +481,15 @@ class Evaluator:
         what = f"'{node.name}''s {output.name}" if node.bl_idname == "ShaderNodeTexCoord" else f"'{node.name}'"
         raise Unsupported(f"a procedural texture's Vector from {what}, which wenv does not evaluate yet")
 
-    def _coordinates(self, space, other=None):
+    def _coordinates(self, space, other=None, node=None):
         self.spaces.add(space)
-        if self._points is None:
+        if self._points is not None:
+            return self._points(space, other), _same
+        if space in ("GENERATED", "OBJECT"):
             return MEAN_POINTS, _mean
-        return self._points(space, other), _same
+        if self.checking:  # (the world's positions and normals have no cube to average over)
+            return np.zeros((self.count, 3), np.float32), _same
+        raise NeedsMesh(f"'{node.name}', the geometry's {space.lower()}, which has no value without a mesh")
 
     def _uv_points(self, uv_map):
         """points() of a UV map's (u, v, 0), as Cycles' UV output reads it."""
@@ -577,7 +617,8 @@ def _identity_mapping(node):
 
 
 class NeedsMesh(Unsupported):
-    """A node whose value only a mesh gives (an attribute), read without one (one_point's means)."""
+    """A node whose value only a mesh or object gives (an attribute, a position, an object's colour),
+    read without one (one_point's means)."""
 
 
 class MissingUV(Unsupported):
@@ -586,6 +627,27 @@ class MissingUV(Unsupported):
     def __init__(self, uv_map):
         super().__init__(uv_map)
         self.uv_map = uv_map
+
+
+def _mix(a, b, c):
+    """lookup3's final mix of three 32-bit words (Cycles' util/hash.h)."""
+    def rot(x, k):
+        return ((x << k) | (x >> (32 - k))) & 0xFFFFFFFF
+    for x, y, k in ((2, 1, 14), (0, 2, 11), (1, 0, 25), (2, 1, 16), (0, 2, 4), (1, 0, 14), (2, 1, 24)):
+        words = [a, b, c]
+        words[x] = ((words[x] ^ words[y]) - rot(words[y], k)) & 0xFFFFFFFF
+        a, b, c = words
+    return c
+
+
+def object_random(name):
+    """Object Info's Random for an object (not an instance) of that name, as Cycles makes it:
+    hash_uint2(hash_string(name), 0) over 0xFFFFFFFF."""
+    h = 0
+    for byte in name.encode("utf-8"):
+        h = (h * 37 + byte) & 0xFFFFFFFF
+    start = (0xDEADBEEF + (2 << 2) + 13) & 0xFFFFFFFF
+    return float(np.float32(_mix((start + h) & 0xFFFFFFFF, start, start)) * np.float32(1.0 / 0xFFFFFFFF))
 
 
 def _euler_xyz(r):

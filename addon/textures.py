@@ -547,8 +547,8 @@ def read_inputs(obj, depsgraph, data, progress=None):
                 lambda tex, uv, footprint, rows, s=s: _colours_memo((obj.name, data.domain, s, tex.name),
                                                                    pyramids(tex), Source(tex, None),
                                                                    (uv, footprint, rows), data.count),
-                points=row_points(obj, mesh, data.positions), progress=progress,
-                attribute=attribute_reader(mesh, corner_vert, data.domain, data.sites, notes))
+                points=row_points(obj, mesh, data.positions, data.normals), progress=progress,
+                attribute=attribute_reader(mesh, corner_vert, data.domain, data.sites, notes), owner=(obj, mat))
             try:
                 values = ev.colour(sock) if keyword in COLOUR_KEYWORDS else ev.value(sock)
             except nodes.MissingUV as exc:
@@ -820,11 +820,16 @@ def deformed(obj):
         m.type in DEFORMING_MODIFIERS and m.show_render for m in obj.modifiers)
 
 
-def row_points(obj, mesh, positions):
-    """An Evaluator's points(space, other) for rows at world `positions` ((n, 3)): their coordinates
-    in `other`'s object space ('OBJECT'; obj's own without one) or in the mesh's texture space
-    ('GENERATED', as Cycles maps it: the texture space's box onto the unit cube)."""
+def row_points(obj, mesh, positions, normals):
+    """An Evaluator's points(space, other) for rows at world `positions` ((n, 3)) with world
+    `normals`: their coordinates in `other`'s object space ('OBJECT'; obj's own without one) or in
+    the mesh's texture space ('GENERATED', as Cycles maps it: the texture space's box onto the unit
+    cube), the positions themselves ('WORLD') or the unit normals ('NORMAL')."""
     def points(space, other=None):
+        if space == "WORLD":
+            return np.ascontiguousarray(positions, np.float32)
+        if space == "NORMAL":
+            return _unit_rows(np.asarray(normals, np.float64)).astype(np.float32)
         inverse = np.array((other or obj).matrix_world.inverted_safe(), np.float64)
         local = positions.astype(np.float64) @ inverse[:3, :3].T + inverse[:3, 3]
         if space == "GENERATED":
@@ -869,6 +874,142 @@ def corner_attribute(mesh, attr, corner_vert):
     return (total / np.maximum(count, 1.0)[:, None]).astype(np.float32)[corner_vert]
 
 
+def welded_vertices(co):
+    """Each vertex's representative among the vertices at (nearly) its position, as Cycles welds
+    them for Pointiness: in the order of their coordinates' float sums (ties: the higher index
+    first), a vertex joins the first later one whose sum is within 3 FLT_EPSILON and whose squared
+    distance is under FLT_EPSILON, and chains of them end at one."""
+    eps = np.float32(np.finfo(np.float32).eps)
+    out = np.arange(len(co))
+    # Only a vertex with another closer than sqrt(eps) on every axis can join or be joined: such a
+    # pair shares a cell of side 1e-3 in one of the eight grids shifted by half a cell per axis.
+    # The scan below skips the others, which changes no join (they would match nothing).
+    near = np.zeros(len(co), bool)
+    for shift in np.ndindex(2, 2, 2):
+        cell = np.floor(co.astype(np.float64) / 1e-3 + 0.5 * np.array(shift)).astype(np.int64)
+        order = np.lexsort(cell.T)
+        same = np.flatnonzero((cell[order[1:]] == cell[order[:-1]]).all(axis=1))
+        near[order[same]] = near[order[same + 1]] = True
+    some = np.flatnonzero(near)
+    if not len(some):
+        return out
+    c = co[some]
+    sums = (c[:, 0] + c[:, 1]) + c[:, 2]  # (float32, summed as Cycles sums them)
+    order = np.lexsort((-some, sums))
+    s, p = sums[order], c[order]
+    joined = np.full(len(c), -1, np.int64)  # in sorted positions
+    open_ = np.arange(len(c) - 1)  # those whose window may still hold another
+    k = 1
+    while len(open_):
+        open_ = open_[s[open_ + k] - s[open_] <= 3 * eps]
+        d = p[open_ + k] - p[open_]
+        hit = np.einsum("ij,ij->i", d, d) < eps
+        joined[open_[hit]] = open_[hit] + k
+        open_ = open_[~hit & (open_ + k + 1 < len(c))]
+        k += 1
+    root = np.where(joined >= 0, joined, np.arange(len(c)))
+    while True:  # follow the chains to their ends
+        nxt = root[root]
+        if np.array_equal(nxt, root):
+            break
+        root = nxt
+    out[some[order]] = some[order[root]]
+    return out
+
+
+def pointiness(mesh):
+    """The Geometry node's Pointiness at each vertex, as Cycles' attr_create_pointiness makes it:
+    the angle between the (welded) vertex normal and the mean direction of its edges, over pi, then
+    averaged with its neighbours' once.  Kept while the mesh's positions and edges are the same."""
+    nv = len(mesh.vertices)
+    co = np.empty(nv * 3, np.float32)
+    mesh.vertices.foreach_get("co", co)
+    co = co.reshape(nv, 3)
+    ends = np.empty(len(mesh.edges) * 2, np.int32)
+    mesh.edges.foreach_get("vertices", ends)
+    key = engine.fingerprint(co, ends)
+    if _pointiness_kept.get(mesh.name, (None,))[0] == key:
+        return _pointiness_kept[mesh.name][1]
+    normals = np.empty(nv * 3, np.float32)
+    mesh.vertex_normals.foreach_get("vector", normals)
+    root = welded_vertices(co)
+    normals = normals.reshape(nv, 3)
+    n = np.stack([np.bincount(root, normals[:, c], nv) for c in range(3)], axis=1)
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    edges = np.sort(root[ends.reshape(-1, 2)], axis=1)
+    edges = edges[edges[:, 0] != edges[:, 1]]  # (a collapsed edge has no direction)
+    pair = np.unique(edges[:, 0] * np.int64(nv) + edges[:, 1])  # each welded edge once
+    v0, v1 = pair // nv, pair % nv
+    direction = (co[v1] - co[v0]).astype(np.float64)
+    direction /= np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-300)
+    accum = np.stack([np.bincount(v0, direction[:, c], nv) - np.bincount(v1, direction[:, c], nv)
+                      for c in range(3)], axis=1)
+    count = (np.bincount(v0, minlength=nv) + np.bincount(v1, minlength=nv)).astype(np.float64)
+    cosine = np.einsum("ij,ij->i", n, accum) / np.maximum(count, 1.0)
+    raw = np.where(count > 0, np.arccos(np.clip(cosine, -1.0, 1.0)) / np.pi, 0.0)
+    raw[root != np.arange(nv)] = 0.0  # (a welded duplicate takes its representative's, below)
+    blurred = (raw + np.bincount(v0, raw[v1], nv) + np.bincount(v1, raw[v0], nv)) / (count + 1.0)
+    out = blurred[root].astype(np.float32)
+    if len(_pointiness_kept) > 16:
+        _pointiness_kept.clear()
+    _pointiness_kept[mesh.name] = (key, out)
+    return out
+
+
+_pointiness_kept = {}
+
+
+def island_random(mesh):
+    """The Geometry node's Random Per Island at each vertex, as Cycles makes it: the vertices joined
+    along the edges, in the edges' order, by Cycles' disjoint set (union by rank, the first edge
+    end's root kept on a tie), and each island's root hashed (hash_uint_to_float).  Kept while the
+    edges are the same."""
+    ends = np.empty(len(mesh.edges) * 2, np.int32)
+    mesh.edges.foreach_get("vertices", ends)
+    nv = len(mesh.vertices)
+    key = engine.fingerprint(ends, np.int64([nv]))
+    if _islands_kept.get(mesh.name, (None,))[0] == key:
+        return _islands_kept[mesh.name][1]
+    parents, ranks = list(range(nv)), [0] * nv
+
+    def find(x):
+        root = x
+        while parents[root] != root:
+            root = parents[root]
+        while parents[x] != root:
+            parents[x], x = root, parents[x]
+        return root
+    for a, b in ends.reshape(-1, 2).tolist():  # (the disjoint set's order is what picks each root)
+        ra, rb = find(a), find(b)
+        if ra == rb:
+            continue
+        if ranks[ra] < ranks[rb]:
+            ra, rb = rb, ra
+        parents[rb] = ra
+        if ranks[ra] == ranks[rb]:
+            ranks[ra] += 1
+    roots = np.array([find(v) for v in range(nv)], np.int64)
+    out = (_hash_uint(roots).astype(np.float32) / np.float32(0xFFFFFFFF)).astype(np.float32)
+    if len(_islands_kept) > 16:
+        _islands_kept.clear()
+    _islands_kept[mesh.name] = (key, out)
+    return out
+
+
+_islands_kept = {}
+
+
+def _hash_uint(k):
+    """Cycles' hash_uint (lookup3 of one word) of each of k (int64 holding uint32)."""
+    def rot(x, r):
+        return ((x << np.uint64(r)) | (x >> np.uint64(32 - r))) & np.uint64(0xFFFFFFFF)
+    start = np.uint64((0xDEADBEEF + (1 << 2) + 13) & 0xFFFFFFFF)
+    words = [(k.astype(np.uint64) + start) & np.uint64(0xFFFFFFFF), np.full(len(k), start), np.full(len(k), start)]
+    for x, y, r in ((2, 1, 14), (0, 2, 11), (1, 0, 25), (2, 1, 16), (0, 2, 4), (1, 0, 14), (2, 1, 24)):
+        words[x] = ((words[x] ^ words[y]) - rot(words[y], r)) & np.uint64(0xFFFFFFFF)
+    return words[2]
+
+
 def attribute_reader(mesh, corner_vert, domain, sites=None, notes=None):
     """An Evaluator's attribute(name, colour) for rows of `domain` ('POINT': the vertices, each the
     mean of its corners' values where they differ; 'CORNER': the face corners) or, with `sites`, a
@@ -877,6 +1018,11 @@ def attribute_reader(mesh, corner_vert, domain, sites=None, notes=None):
     empty name with `colour` is the mesh's default colour attribute (Cycles' render colour).  Reading
     otherwise than Cycles appends to `notes`."""
     def read(name, colour):
+        if name is nodes.POINTINESS:
+            return _to_rows(pointiness(mesh)[corner_vert, None], "FLOAT")
+        if name is nodes.RANDOM_PER_ISLAND:  # (one value a triangle: not interpolated, as Cycles keeps it)
+            values = island_random(mesh)[corner_vert, None]
+            return (values[sites.corners[:, 0]], "FLOAT") if sites is not None else _to_rows(values, "FLOAT")
         if colour and not name:
             name = mesh.color_attributes.default_color_name
         attr = mesh.attributes.get(name) if name else None
@@ -888,16 +1034,18 @@ def attribute_reader(mesh, corner_vert, domain, sites=None, notes=None):
             attr = None
         if attr is None:
             return None, None
-        corners = corner_attribute(mesh, attr, corner_vert)
+        return _to_rows(corner_attribute(mesh, attr, corner_vert), ATTRIBUTE_TYPES[attr.data_type][3])
+
+    def _to_rows(corners, kind):
         if sites is not None:
-            return sites.at(corners), ATTRIBUTE_TYPES[attr.data_type][3]
+            return sites.at(corners), kind
         if domain == "CORNER":
-            return corners, ATTRIBUTE_TYPES[attr.data_type][3]
+            return corners, kind
         n = len(mesh.vertices)
         count = np.bincount(corner_vert, minlength=n).astype(np.float64)
         total = np.stack([np.bincount(corner_vert, weights=corners[:, c], minlength=n)
                           for c in range(corners.shape[1])], axis=1)
-        return (total / np.maximum(count, 1.0)[:, None]).astype(np.float32), ATTRIBUTE_TYPES[attr.data_type][3]
+        return (total / np.maximum(count, 1.0)[:, None]).astype(np.float32), kind
     return read
 
 
@@ -915,13 +1063,19 @@ def _height_reader(obj, s, mesh, corner_vert, where, count, progress=None, notes
 
     def points(space, other=None):
         corners = world_points(mesh, obj.matrix_world)[corner_vert]
-        return row_points(obj, mesh, corners if where is None else where.at(corners))(space, other)
+        normals = np.empty(len(corner_vert) * 3, np.float32)
+        mesh.corner_normals.foreach_get("vector", normals)
+        normals = normals.reshape(-1, 3) @ np.array(obj.matrix_world.to_3x3().inverted_safe(), np.float32)
+        if where is not None:
+            corners, normals = where.at(corners), where.at(normals)
+        return row_points(obj, mesh, corners, normals)(space, other)
     return nodes.Evaluator(count, rows,
                            lambda tex, uv, footprint, rows_: _colours_memo((obj.name, s) + tag + (tex.name,),
                                                                            pyramids(tex), Source(tex, None),
                                                                            (uv, footprint, rows_), count),
                            points=points, progress=progress,
-                           attribute=attribute_reader(mesh, corner_vert, "CORNER", where, notes))
+                           attribute=attribute_reader(mesh, corner_vert, "CORNER", where, notes),
+                           owner=(obj, obj.material_slots[s].material))
 
 
 def _bump_gradients(obj, s, mat, chain, mesh, corner_vert, m, sites, notes, progress=None):
@@ -1045,8 +1199,9 @@ def read_term_weights(obj, depsgraph, data, progress=None):
                                                                          pyramids(tex),
                                                                          Source(tex, None), (uv, footprint, rows),
                                                                          data.count),
-                points=row_points(obj, mesh, data.positions), progress=progress,
-                attribute=attribute_reader(mesh, corner_vert, data.domain, data.sites, notes)) if reads else None
+                points=row_points(obj, mesh, data.positions, data.normals), progress=progress,
+                attribute=attribute_reader(mesh, corner_vert, data.domain, data.sites, notes),
+                owner=(obj, mat)) if reads else None
             weight, fac = colour, np.ones((data.count, 1), np.float32)
             if term.factors:
                 try:

@@ -16,7 +16,7 @@ import bpy  # noqa: E402  (installed by scripts/setup.sh; missing, the tests fai
 import mathutils  # noqa: E402  (ships with bpy)
 
 import addon  # noqa: E402
-from addon import engine, gloss, live, materials, meshes, shading, views, world  # noqa: E402
+from addon import engine, gloss, live, materials, meshes, nodes, shading, views, world  # noqa: E402
 
 from conftest import hdri_path, readme_block  # noqa: E402
 from tests.helpers.blender_versions import has_diffuse_roughness, has_light_temperature, node_material
@@ -1232,6 +1232,36 @@ def test_mesh_attributes_are_read_at_each_vertex(scene):
     np.testing.assert_array_equal(plan_of(scene, obj).items[0][1].inputs["base_color"], 0.0)
 
 
+def test_object_info_and_geometry_are_read_at_each_vertex(scene):
+    """Roughness from Object Info's Random and Base Color from the Geometry node's Normal, on a
+    turned Suzanne: every vertex reads the object's Random (hashed from its name as Cycles hashes it:
+    tests/test_attributes.py) and its own unit world normal; a second object reads its own Random."""
+    env_world(scene, "sunset")
+    obj = add_monkey(subdivisions=1)
+    obj.rotation_euler = (0.3, 0.0, 0.7)
+    mat = principled_material("per object")
+    obj.data.materials.append(mat)
+    select_only(obj)
+    tree = mat.node_tree
+    bsdf = tree.nodes["Principled BSDF"]
+    info, geometry = tree.nodes.new("ShaderNodeObjectInfo"), tree.nodes.new("ShaderNodeNewGeometry")
+    tree.links.new(info.outputs["Random"], bsdf.inputs["Roughness"])
+    tree.links.new(geometry.outputs["Normal"], bsdf.inputs["Base Color"])
+    bpy.context.view_layer.update()
+    data = plan_of(scene, obj).items[0][1]
+    np.testing.assert_array_equal(data.inputs["roughness"], np.float32(nodes.object_random(obj.name)))
+    unit = data.normals / np.linalg.norm(data.normals, axis=1, keepdims=True)
+    np.testing.assert_allclose(data.inputs["base_color"], unit, atol=1e-6)
+    other = obj.copy()
+    other.name = "Another monkey"
+    scene.collection.objects.link(other)
+    bpy.context.view_layer.update()
+    assert nodes.object_random(other.name) != nodes.object_random(obj.name)
+    np.testing.assert_array_equal(plan_of(scene, other).items[0][1].inputs["roughness"],
+                                  np.float32(nodes.object_random(other.name)))
+    assert not any("Object Info" in n or "Geometry" in n for n in materials.principled_notes(mat))
+
+
 def test_a_procedural_texture_through_the_uv_map_averages_a_seams_corners(scene):
     """A Noise Texture read through the UV map (Texture Coordinate's UV, as (u, v, 0)) on Suzanne,
     whose UV map has seams: each vertex reads the noise at each of its corners' UVs and takes their
@@ -1803,7 +1833,6 @@ def test_hue_saturation_converts_as_colorsys_does():
     """The Hue/Saturation/Value node's conversions against Python's colorsys (the same HSV model as
     Cycles' rgb_to_hsv and hsv_to_rgb), over random colours and the greys."""
     import colorsys
-    from addon import nodes
     rgb = np.vstack([np.random.default_rng(4).uniform(0.0, 1.0, (200, 3)), [[0.3, 0.3, 0.3], [0.0, 0.0, 0.0]]])
     h, s, v = nodes._rgb_to_hsv(rgb)
     want = np.array([colorsys.rgb_to_hsv(*c) for c in rgb])

@@ -1,8 +1,10 @@
-"""A mesh's attributes (the Color Attribute and Attribute nodes) against Cycles: a 4 m grid of 36 quads
-seen from straight above by an orthographic camera that it fills, its Emission fed by the node,
-one sample a pixel at the pixel's centre.  The add-on reads the attribute at each pixel's centre as a
-bake reads it at a texel's (addon/textures.py attribute_reader): points, corners, faces and edges, each
-data type Cycles reads, and an attribute the mesh lacks."""
+"""A mesh's attributes (the Color Attribute and Attribute nodes), its object's (Object Info) and its
+geometry's (Geometry's Position and Normal) against Cycles: a 4 m grid of 36 quads, its heights
+rolling, seen from straight above by an orthographic camera that it fills, its Emission fed by the
+node, one sample a pixel at the pixel's centre.  The add-on reads the node at each pixel's centre as a
+bake reads it at a texel's (addon/textures.py attribute_reader and row_points): points, corners,
+faces and edges, each data type Cycles reads, an attribute the mesh lacks, and each output of Object
+Info."""
 import tempfile
 
 import numpy as np
@@ -31,7 +33,28 @@ def grid():
     sc.render.filepath = f"{tempfile.mkdtemp(prefix='wenv-attributes-')}/attribute.exr"
     bpy.ops.mesh.primitive_grid_add(x_subdivisions=6, y_subdivisions=6, size=4.0)
     obj = bpy.context.object
+    obj.name = "Crate.004 – ÿ"  # (Random hashes the name's UTF-8 bytes)
+    obj.location.z = 0.5  # (seen from above: the pixels still fall where they did)
+    obj.color, obj.pass_index = (0.3, 0.6, 0.9, 0.4), 7
     mesh = obj.data
+    co = np.empty(len(mesh.vertices) * 3, np.float32)
+    mesh.vertices.foreach_get("co", co)
+    co = co.reshape(-1, 3)
+    co[:, 2] = 0.4 * np.sin(1.3 * co[:, 0]) * np.cos(0.9 * co[:, 1])
+    mesh.vertices.foreach_set("co", co.ravel())
+    import bmesh
+    bm = bmesh.new()
+    bm.from_mesh(mesh)
+    # the middle column of faces apart: vertices on its sides twice (Pointiness welds them back)
+    bmesh.ops.split_edges(bm, edges=[e for e in bm.edges if abs(e.verts[0].co.x - e.verts[1].co.x) < 1e-6
+                                     and abs(abs(e.verts[0].co.x) - 2.0 / 3.0) < 1e-3])
+    bm.to_mesh(mesh)
+    bm.free()
+    mesh.shade_smooth()
+    mesh.update()
+    co = np.empty(len(mesh.vertices) * 3, np.float32)
+    mesh.vertices.foreach_get("co", co)
+    co = co.reshape(-1, 3)
     cam = bpy.data.objects.new("camera", bpy.data.cameras.new("camera"))
     sc.collection.objects.link(cam)
     sc.camera = cam
@@ -52,6 +75,7 @@ def grid():
         attr.data.foreach_set(prop, values)
     mesh.color_attributes.default_color_name = "paint"
     mat = bpy.data.materials.new("attribute")
+    mat.pass_index = 3
     if bpy.app.version < (5, 0, 0):
         mat.use_nodes = True
     tree = mat.node_tree
@@ -61,11 +85,15 @@ def grid():
     mesh.materials.append(mat)
     # the pixels' centres as texel sites of a UV map over the grid (row 0 at the bottom, as a render's)
     corner_vert = meshes.corner_vertices(mesh)
-    co = np.empty(len(mesh.vertices) * 3, np.float32)
-    mesh.vertices.foreach_get("co", co)
-    uv = (co.reshape(-1, 3)[corner_vert, :2] + 2.0) / 4.0
+    uv = (co[corner_vert, :2] + 2.0) / 4.0
     sites, _ = bake.texel_sites(uv, textures.triangle_corners(mesh), N, N, 1024)
     assert sites.count == N * N
+    bpy.context.view_layer.update()
+    normals = np.empty(len(mesh.loops) * 3, np.float32)
+    mesh.corner_normals.foreach_get("vector", normals)
+    world = np.array(obj.matrix_world)
+    points = textures.row_points(obj, mesh, sites.at(co[corner_vert] @ world[:3, :3].T + world[:3, 3]),
+                                 sites.at(normals.reshape(-1, 3)))
 
     def compare(kind, output, configure):
         """Cycles' pixels and the add-on's reading at them of a `kind` node set by configure(node)."""
@@ -79,8 +107,8 @@ def grid():
         px = np.array(img.pixels[:], np.float32).reshape(N * N, 4)[:, :3]
         bpy.data.images.remove(img)
         notes = []
-        ev = nodes.Evaluator(N * N, None, None, attribute=textures.attribute_reader(mesh, corner_vert, "TEXEL",
-                                                                                   sites, notes))
+        ev = nodes.Evaluator(N * N, None, None, points=points, owner=(obj, mat),
+                             attribute=textures.attribute_reader(mesh, corner_vert, "TEXEL", sites, notes))
         return px[sites.texels], ev.colour(emission.inputs["Color"]), notes
     return compare
 
@@ -117,15 +145,63 @@ def test_attributes_read_as_cycles_renders_them(grid, kind, output, name):
     np.testing.assert_allclose(ours, cycles, atol=1e-5)
 
 
+INFO = ["Location", "Color", "Alpha", "Object Index", "Material Index", "Random"]
+
+
+@pytest.mark.parametrize("output", INFO)
+def test_object_info_reads_as_cycles_renders_it(grid, output):
+    """Each output of Object Info, Random hashed from the object's name as Cycles hashes it."""
+    cycles, ours, _ = grid("ShaderNodeObjectInfo", output, lambda node: None)
+    assert ours.any()
+    np.testing.assert_allclose(ours, cycles, atol=1e-6)
+
+
+@pytest.mark.parametrize("output", ["Position", "Normal", "Pointiness", "Random Per Island"])
+def test_geometry_reads_as_cycles_renders_it(grid, output):
+    """The Geometry node's world position, its smooth normal, interpolated over each triangle, its
+    pointiness (the split vertices welded back) and the random value of each island of the grid
+    (the middle column of faces is one, the sides two more)."""
+    cycles, ours, _ = grid("ShaderNodeNewGeometry", output, lambda node: None)
+    assert np.ptp(ours[:, 0]) > (0.02 if output == "Pointiness" else 0.5)
+    np.testing.assert_allclose(ours, cycles, atol=1e-5)
+
+
 def test_what_is_not_read_is_named(grid):
     """An attribute of the object (not the mesh) is named and not read; wenv's own shading is read as
     no attribute, and said so."""
     with pytest.raises(nodes.Unsupported, match="attribute of the object"):
         grid("ShaderNodeAttribute", "Color", _named("paint", "OBJECT"))
-    mesh = bpy.data.objects["Grid"].data
+    mesh = bpy.data.meshes["Grid"]
     meshes.write_colors(mesh, "POINT", np.ones((len(mesh.vertices), 3), np.float32))
     try:
         cycles, ours, notes = grid("ShaderNodeAttribute", "Color", _named(meshes.ATTRIBUTE))
         assert not ours.any() and notes == [f"'{meshes.ATTRIBUTE}' is wenv's own shading: read as no attribute (0)"]
     finally:
         meshes.remove_colors(mesh)
+
+
+def test_pointiness_welds_vertices_as_cycles_scans_them():
+    """textures.welded_vertices against Cycles' scan written out plainly (attr_create_pointiness's
+    step 1): random points, some repeated exactly (welded) and some moved by 1e-5 (whose coordinate
+    sums then differ by more than Cycles' window: not welded)."""
+    rng = np.random.default_rng(0)
+    co = rng.random((1500, 3)).astype(np.float32)
+    co = np.vstack([co, co[:200] + rng.normal(0.0, 1e-5, (200, 3)).astype(np.float32), co[:60], co[:20]])
+    sums = (co[:, 0] + co[:, 1]) + co[:, 2]
+    order = sorted(range(len(co)), key=lambda i: (sums[i], -i))
+    eps = np.float32(np.finfo(np.float32).eps)
+    orig = list(range(len(co)))
+    for a, i in enumerate(order):
+        for j in order[a + 1:]:
+            if sums[j] - sums[i] > 3 * eps:
+                break
+            d = co[j] - co[i]
+            if float(np.dot(d, d)) < eps:
+                orig[i] = j
+                break
+    for i in range(len(co)):
+        while orig[i] != orig[orig[i]]:
+            orig[i] = orig[orig[i]]
+    got = textures.welded_vertices(co)
+    np.testing.assert_array_equal(got, orig)
+    assert (got != np.arange(len(co))).sum() >= 80
