@@ -522,6 +522,12 @@ def wave_texture(points, **settings):
     return wenv.wave_texture(np.ascontiguousarray(points, np.float32), **settings)
 
 
+def white_noise_texture(points, w=0.0, **settings):
+    """(value, colour) of Blender's White Noise Texture at `points` ((n, 3) float32) and W, as Cycles
+    evaluates it."""
+    return wenv.white_noise_texture(np.ascontiguousarray(points, np.float32), w, **settings)
+
+
 def corner_values_at(values, corners, weights):
     """wenv.corner_values_at: values per face corner (m, k) at points of corners and weights (n, 3),
     (n, k) float32."""

@@ -185,6 +185,20 @@ class Evaluator:
                                              normalize=node.normalize, color=colour, progress=self.progress,
                                              **kw)[1 if colour else 0])
 
+    def _ShaderNodeTexWhiteNoise(self, node, output, depth):
+        _identity_mapping(node)
+        dims = int(node.noise_dimensions[0])
+        w = _input(node, "W")
+        if w.enabled and w.is_linked:
+            raise Unsupported(f"'{node.name}''s W, linked")
+        points, reduce = self.points(_input(node, "Vector"), depth) if dims > 1 else self._no_points()
+        colour = output.identifier == "Color"
+        if self.checking:
+            return np.zeros((self.count, 3) if colour else self.count, np.float32)
+        got = engine.white_noise_texture(points, float(w.default_value), dimensions=dims, color=colour,
+                                         progress=self.progress)
+        return reduce(got[1 if colour else 0])
+
     def _ShaderNodeTexWave(self, node, output, depth):
         kw = _procedural_inputs(node, output, WAVE_INPUTS)
         points, reduce = self.points(_input(node, "Vector"), depth)
@@ -478,8 +492,13 @@ class Evaluator:
             op = _vector_op(node)
             p, reduce = self.points(node.inputs[0], depth + 1)
             return op(p.astype(np.float64))[0].astype(np.float32), reduce
-        what = f"'{node.name}''s {output.name}" if node.bl_idname == "ShaderNodeTexCoord" else f"'{node.name}'"
-        raise Unsupported(f"a procedural texture's Vector from {what}, which wenv does not evaluate yet")
+        if node.bl_idname == "ShaderNodeTexCoord":
+            raise Unsupported(f"a procedural texture's Vector from '{node.name}''s {output.name}, which wenv does not "
+                              "evaluate yet")
+        if self._points is None and not self.checking:  # (a chain's mean is not its texture's at a mean)
+            raise NeedsMesh(f"'{node.name}' into a procedural texture's Vector, which has no mean without a mesh")
+        got = self.evaluate(socket, depth)  # any other value or colour, as Cycles makes it a vector
+        return np.ascontiguousarray(got if got.ndim == 2 else np.repeat(got[:, None], 3, axis=1), np.float32), _same
 
     def _coordinates(self, space, other=None, node=None):
         self.spaces.add(space)

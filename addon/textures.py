@@ -989,7 +989,7 @@ def island_random(mesh):
         if ranks[ra] == ranks[rb]:
             ranks[ra] += 1
     roots = np.array([find(v) for v in range(nv)], np.int64)
-    out = (_hash_uint(roots).astype(np.float32) / np.float32(0xFFFFFFFF)).astype(np.float32)
+    out = _hash_uint(roots).astype(np.float32) * np.float32(2.0 ** -32)  # (Cycles' uint_to_float_incl)
     if len(_islands_kept) > 16:
         _islands_kept.clear()
     _islands_kept[mesh.name] = (key, out)

@@ -166,6 +166,37 @@ def test_geometry_reads_as_cycles_renders_it(grid, output):
     np.testing.assert_allclose(ours, cycles, atol=1e-5)
 
 
+def _white_noise(dimensions, source=None, w=0.0):
+    """configure() of a White Noise Texture in `dimensions`, its Vector from `source` ((node type,
+    output identifier) or None) and its W."""
+    def configure(node):
+        node.noise_dimensions = f"{dimensions}D"
+        next(s for s in node.inputs if s.identifier == "W").default_value = w
+        if source is not None:
+            feed = node.id_data.nodes.new(source[0])
+            node.id_data.links.new(next(o for o in feed.outputs if o.identifier == source[1]), node.inputs["Vector"])
+    return configure
+
+
+WHITE_NOISE = [(3, ("ShaderNodeObjectInfo", "Random"), 0.0, "Color"),
+               (4, ("ShaderNodeObjectInfo", "Location"), 0.37, "Value"),
+               (2, ("ShaderNodeObjectInfo", "Location"), 0.0, "Color"),
+               (1, None, 1.7, "Color"),
+               (3, ("ShaderNodeNewGeometry", "Random Per Island"), 0.0, "Color")]
+
+
+@pytest.mark.parametrize("dimensions, source, w, output", WHITE_NOISE,
+                         ids=[f"{d}D-{s[1] if s else 'W'}-{o}" for d, s, _, o in WHITE_NOISE])
+def test_white_noise_of_exact_inputs_reads_as_cycles_renders_it(grid, dimensions, source, w, output):
+    """The White Noise Texture hashes its input's bits: fed what wenv reads to the bit as Cycles does
+    (an object's or island's Random, its Location, W), each pixel's value is Cycles' to the bit (the
+    per-object or per-island colour it is used for); the islands differ."""
+    cycles, ours, _ = grid("ShaderNodeTexWhiteNoise", output, _white_noise(dimensions, source, w))
+    np.testing.assert_array_equal(ours, cycles)
+    if source is not None and source[1] == "Random Per Island":
+        assert len(np.unique(ours[:, 0])) == 3
+
+
 def test_what_is_not_read_is_named(grid):
     """An attribute of the object (not the mesh) is named and not read; wenv's own shading is read as
     no attribute, and said so."""

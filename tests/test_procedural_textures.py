@@ -200,6 +200,26 @@ def test_the_addon_reads_procedural_textures_as_cycles_renders_them(plane, kind,
     assert off.sum() <= 3, (off.sum(), np.abs(cycles - ours).max())
 
 
+def _distorted_by_noise(node, mapping):
+    """Feeds the Mapping node a Noise Texture's Color (of Object coordinates): the distortion chain of
+    many procedural materials."""
+    tree = mapping.id_data
+    coords, noise = mapping.inputs["Vector"].links[0].from_node, tree.nodes.new("ShaderNodeTexNoise")
+    noise.inputs["Scale"].default_value = 2.0
+    tree.links.new(coords.outputs["Object"], noise.inputs["Vector"])
+    tree.links.new(noise.outputs["Color"], mapping.inputs["Vector"])
+    _set(mapping, Scale=(3.0, 3.0, 3.0))
+
+
+def test_a_texture_of_another_texture_reads_as_cycles_renders_it(plane):
+    """A Voronoi Texture whose Vector is a Noise Texture's Color (through a Mapping node): the noise
+    is within 1e-4 of Cycles (above), and so is the distance it gives."""
+    _, _, _, render_node = plane
+    cycles, ours = render_node("ShaderNodeTexVoronoi", "Distance", _distorted_by_noise)
+    assert ours.std() > 0.05
+    np.testing.assert_allclose(ours, cycles, atol=1e-4)
+
+
 @pytest.mark.parametrize("kwargs, error, words", [
     (dict(type="CELLS"), ValueError, "type must be"),
     (dict(dimensions=5), ValueError, "dimensions must be 1, 2, 3 or 4"),
@@ -242,6 +262,25 @@ def test_bad_wave_input_is_named():
         wenv.wave_texture(points, phase=float("inf"))
     with pytest.raises(wenv.CancelledError):
         wenv.wave_texture(np.zeros((10000, 3), np.float32), progress=lambda f: True)
+
+
+def test_white_noise_input_and_cancel():
+    """The White Noise Texture's core: bad dimensions and points named, W per point or one for all,
+    the colour's first channel is the value, its values spread over [0, 1], and a cancel."""
+    points = np.random.default_rng(6).random((4000, 3)).astype(np.float32)
+    with pytest.raises(ValueError, match="dimensions must be 1, 2, 3 or 4"):
+        wenv.white_noise_texture(points, dimensions=5)
+    with pytest.raises(ValueError, match=r"vectors must have shape \(n, 3\)"):
+        wenv.white_noise_texture(points[:, :2])
+    with pytest.raises(ValueError, match="w must be a number or have shape"):
+        wenv.white_noise_texture(points, np.zeros(3, np.float32), dimensions=4)
+    with pytest.raises(wenv.CancelledError):
+        wenv.white_noise_texture(np.zeros((100000, 3), np.float32), progress=lambda f: True)
+    value, colour = wenv.white_noise_texture(points, 0.25, dimensions=4)
+    each, _ = wenv.white_noise_texture(points, np.full(len(points), 0.25, np.float32), dimensions=4, color=False)
+    assert np.array_equal(value, each) and np.array_equal(colour[:, 0], value)
+    assert 0.0 <= colour.min() and colour.max() <= 1.0 and abs(colour.mean() - 0.5) < 0.02
+    assert not np.array_equal(wenv.white_noise_texture(points, 0.5, dimensions=4)[0], value)
 
 
 def test_bad_voronoi_input_is_named():

@@ -1,11 +1,13 @@
-/* wenv.noise_texture, wenv.wave_texture and wenv.voronoi_texture: Blender's procedural texture nodes
- * at points (scene/noise_texture.h, scene/wave_texture.h, scene/voronoi_texture.h). */
+/* wenv.noise_texture, wenv.wave_texture, wenv.voronoi_texture and wenv.white_noise_texture: Blender's
+ * procedural texture nodes at points (scene/noise_texture.h, scene/wave_texture.h,
+ * scene/voronoi_texture.h, scene/white_noise_texture.h). */
 #include <string.h>
 
 #include "python/module.h"
 #include "scene/noise_texture.h"
 #include "scene/voronoi_texture.h"
 #include "scene/wave_texture.h"
+#include "scene/white_noise_texture.h"
 
 static const char *const TYPE_NAMES[] = {"MULTIFRACTAL", "FBM", "HYBRID_MULTIFRACTAL", "RIDGED_MULTIFRACTAL",
                                          "HETERO_TERRAIN"};
@@ -65,6 +67,12 @@ static wenv_status voronoi_adapter(const void *settings, const float *vectors, c
                                    float *value, float *colour, const wenv_progress *progress, wenv_error *err)
 {
     return wenv_voronoi_texture(settings, vectors, w, w0, n, value, colour, progress, err);
+}
+
+static wenv_status white_noise_adapter(const void *settings, const float *vectors, const float *w, float w0, size_t n,
+                                       float *value, float *colour, const wenv_progress *progress, wenv_error *err)
+{
+    return wenv_white_noise_texture(*(const int *)settings, vectors, w, w0, n, value, colour, progress, err);
 }
 
 /* (value (n,), colour (n, 3) or None) of `call` at the vectors and W given, the GIL released. */
@@ -225,6 +233,20 @@ static PyObject *voronoi_texture(PyObject *self, PyObject *args, PyObject *kwarg
     return run_texture(voronoi_adapter, &s, v_obj, w_obj, want_colour, progress_obj);
 }
 
+/* white_noise_texture(vectors, w=0, *, dimensions=3, color=True, progress=None)
+ * -> (value (n,), color (n, 3) or None) */
+static PyObject *white_noise_texture(PyObject *self, PyObject *args, PyObject *kwargs)
+{
+    (void)self;
+    static char *kwlist[] = {"vectors", "w", "dimensions", "color", "progress", NULL};
+    PyObject *v_obj, *w_obj = NULL, *progress_obj = Py_None;
+    int dimensions = 3, want_colour = 1;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "O|O$ipO:white_noise_texture", kwlist, &v_obj, &w_obj,
+                                     &dimensions, &want_colour, &progress_obj))
+        return NULL;
+    return run_texture(white_noise_adapter, &dimensions, v_obj, w_obj, want_colour, progress_obj);
+}
+
 static PyMethodDef texture_functions[] = {
     {"noise_texture", (PyCFunction)(void (*)(void))noise_texture, METH_VARARGS | METH_KEYWORDS,
      "noise_texture(vectors, w=0, *, dimensions=3, type='FBM', normalize=True, scale=5, detail=2, roughness=0.5, "
@@ -253,6 +275,13 @@ static PyMethodDef texture_functions[] = {
      "settings, the rest its inputs.  Returns (distance (n,), color (n, 3) or None with color=False) float32: "
      "the node's Distance (its Radius for 'N_SPHERE_RADIUS') and Color.  progress(fraction) may cancel "
      "(wenv.CancelledError).",
+    },
+    {"white_noise_texture", (PyCFunction)(void (*)(void))white_noise_texture, METH_VARARGS | METH_KEYWORDS,
+     "white_noise_texture(vectors, w=0, *, dimensions=3, color=True, progress=None)\n--\n\n"
+     "Blender's White Noise Texture node at points, as Cycles evaluates it: `vectors` (n, 3) float32 is its "
+     "Vector input, `w` its W (a number or (n,) float32; read in 1D and 4D).  Returns (value (n,), color (n, 3) "
+     "or None with color=False) float32, the bits of each point's coordinates hashed into [0, 1].  "
+     "progress(fraction) may cancel (wenv.CancelledError).",
     },
     {NULL, NULL, 0, NULL},
 };

@@ -14,7 +14,7 @@ int wenv_register_glossmeter(PyObject *module); /* bind_glossmeter.c: Glossmeter
 int wenv_register_occlusion(PyObject *module);  /* bind_occlusion.c: Occluders, Occlusion */
 int wenv_register_lamp(PyObject *module);       /* bind_lamp.c: Lamp */
 int wenv_register_bake(PyObject *module);       /* bind_bake.c: uv_texels, extend_margin */
-int wenv_register_textures(PyObject *module);   /* bind_textures.c: noise_texture, wave_texture */
+int wenv_register_textures(PyObject *module);   /* bind_textures.c: the procedural textures */
 int wenv_register_internals(PyObject *module);  /* bind_internals.c: private hooks for the tests */
 
 #endif
