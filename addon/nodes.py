@@ -199,6 +199,16 @@ class Evaluator:
                                          progress=self.progress)
         return reduce(got[1 if colour else 0])
 
+    def _ShaderNodeTexMagic(self, node, output, depth):
+        kw = _procedural_inputs(node, output, (("scale", "Scale"), ("distortion", "Distortion")))
+        points, reduce = self.points(_input(node, "Vector"), depth)
+        if self.checking:
+            return self._grey(np.zeros(self.count, np.float32), output)
+        colour = reduce(_magic(points, kw["scale"], node.turbulence_depth, kw["distortion"]))
+        if output.identifier == "Color":
+            return colour
+        return ((colour[:, 0] + colour[:, 1]) + colour[:, 2]) * np.float32(1.0 / 3.0)  # Cycles' average()
+
     def _ShaderNodeTexWave(self, node, output, depth):
         kw = _procedural_inputs(node, output, WAVE_INPUTS)
         points, reduce = self.points(_input(node, "Vector"), depth)
@@ -595,6 +605,40 @@ def _vector_op(node):
     stretch = math.sqrt(abs(b[0] * b[1])) if node.operation == "MULTIPLY" else (
         1.0 / math.sqrt(abs(b[0] * b[1])) if node.operation == "DIVIDE" and b[0] * b[1] != 0.0 else 1.0)
     return lambda p: (ops[node.operation](p, b), stretch)
+
+
+def _magic(p, scale, depth, distortion):
+    """Cycles' svm_magic at points p (n, 3): float32 throughout, each sine and cosine rounded from
+    double as sinf and cosf round."""
+    f32 = np.float32
+
+    def sin(v):
+        return np.sin(v.astype(np.float64)).astype(f32)
+
+    def cos(v):
+        return np.cos(v.astype(np.float64)).astype(f32)
+    px, py, pz = (np.fmod(np.ascontiguousarray(p[:, k], f32), f32(2.0 * math.pi)) for k in range(3))
+    five, d = f32(5.0), f32(distortion)
+    x = sin((px + py + pz) * five * f32(scale))
+    y = cos((-px + py - pz) * five * f32(scale))
+    z = -cos((-px - py + pz) * five * f32(scale))
+    if depth > 0:
+        x, y, z = x * d, y * d, z * d
+        y = -cos(x - y + z) * d
+    # the turbulence's later steps: (which of x, y, z it sets, from what, negated)
+    steps = ((0, lambda x, y, z: cos(x - y - z)), (2, lambda x, y, z: sin(-x - y - z)),
+             (0, lambda x, y, z: -cos(-x + y - z)), (1, lambda x, y, z: -sin(-x + y + z)),
+             (1, lambda x, y, z: -cos(-x + y + z)), (0, lambda x, y, z: cos(x + y + z)),
+             (2, lambda x, y, z: sin(x + y - z)), (0, lambda x, y, z: -cos(-x - y + z)),
+             (1, lambda x, y, z: -sin(x - y + z)))
+    xyz = [x, y, z]
+    for axis, step in steps[:max(depth - 1, 0)]:
+        xyz[axis] = step(*xyz) * d
+    x, y, z = xyz
+    if distortion != 0.0:
+        twice = d * f32(2.0)
+        x, y, z = x / twice, y / twice, z / twice
+    return np.stack([f32(0.5) - x, f32(0.5) - y, f32(0.5) - z], axis=1).astype(f32)
 
 
 def _brick_noise(n):

@@ -788,7 +788,7 @@ def test_from_principled_warns_about_links_and_missing_node(scene):
     cube = bpy.data.objects["Cube"]
     select_only(cube)
     mat = principled_material("textured")
-    tex = mat.node_tree.nodes.new("ShaderNodeTexMagic")
+    tex = mat.node_tree.nodes.new("ShaderNodeAmbientOcclusion")
     mat.node_tree.links.new(tex.outputs["Color"], mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"])
     cube.active_material = mat
     warnings = materials.fill_from_principled(mat)
@@ -1500,10 +1500,11 @@ def test_a_bump_node_over_a_normal_map_and_what_it_does_not_read(scene):
     np.testing.assert_allclose(data.shading_normals, np.tile(want, (data.count, 1)), atol=2e-4)
     assert "'Normal' from a Bump node over a normal map is read at the vertices: detail finer than the mesh " \
         "is lost" in materials.principled_notes(mat)
-    magic = tree.nodes.new("ShaderNodeTexMagic")
-    tree.links.new(next(o for o in magic.outputs if o.identifier == "Fac"), bump.inputs["Height"])
+    occlusion = tree.nodes.new("ShaderNodeAmbientOcclusion")
+    tree.links.new(occlusion.outputs["AO"], bump.inputs["Height"])
     notes = materials.principled_notes(mat)
-    assert any("'Normal' is linked" in n and "Height comes from" in n and "Magic Texture" in n for n in notes), notes
+    assert any("'Normal' is linked" in n and "Height comes from" in n and "Ambient Occlusion" in n
+               for n in notes), notes
     data = plan_of(scene, plane).items[0][1]
     assert data.shading_normals is None
 
@@ -1691,8 +1692,8 @@ def test_textured_inputs_of_mixed_bsdfs_are_read_at_each_vertex(scene):
     want += 0.3 * colour * core_shader(env, engine.principled(found[1].inputs)).shade_mesh(p, n, eye,
                                                                                        roughness=glossy_rough)
     np.testing.assert_allclose(rgb, want, rtol=1e-4, atol=1e-5)
-    magic = tree.nodes.new("ShaderNodeTexMagic")
-    tree.links.new(magic.outputs["Fac"], glossy.inputs["Roughness"])
+    occlusion = tree.nodes.new("ShaderNodeAmbientOcclusion")
+    tree.links.new(occlusion.outputs["AO"], glossy.inputs["Roughness"])
     assert any("'Glossy BSDF': 'Roughness' is linked (" in n and "unlinked value is used" in n
                for n in materials.principled_notes(mat))
 
@@ -1841,16 +1842,16 @@ def test_hue_saturation_converts_as_colorsys_does():
 
 
 def test_a_node_wenv_does_not_evaluate_is_named_and_the_value_used(scene):
-    """A Magic Texture into Roughness, or a loop of links: the report names it, the socket's unlinked
-    value is used, and the pass goes on."""
+    """An Ambient Occlusion node into Roughness, or a loop of links: the report names it, the socket's
+    unlinked value is used, and the pass goes on."""
     env_world(scene, "sunset")
     plane, mat = textured_plane(bpy.data.images.new("flat", 4, 4, float_buffer=True))
     tree = mat.node_tree
-    magic = tree.nodes.new("ShaderNodeTexMagic")
-    tree.links.new(magic.outputs["Fac"], tree.nodes["Principled BSDF"].inputs["Roughness"])
+    occlusion = tree.nodes.new("ShaderNodeAmbientOcclusion")
+    tree.links.new(occlusion.outputs["AO"], tree.nodes["Principled BSDF"].inputs["Roughness"])
     notes = materials.principled_notes(mat)
-    assert any("'Roughness' is linked ('Magic Texture', a node wenv does not evaluate yet): its unlinked value 0.4 "
-               "is used" in n for n in notes), notes
+    assert any("'Roughness' is linked ('Ambient Occlusion', a node wenv does not evaluate yet): its unlinked value "
+               "0.4 is used" in n for n in notes), notes
     assert "roughness" not in plan_of(scene, plane).items[0][1].inputs
     a, b = tree.nodes.new("ShaderNodeMath"), tree.nodes.new("ShaderNodeMath")
     tree.links.new(a.outputs[0], b.inputs[0])
@@ -2013,10 +2014,10 @@ def test_what_wenv_does_not_shade_is_reported(scene):
     obj.active_material = mat
     tree = mat.node_tree
     node = tree.nodes["Principled BSDF"]
-    tex = tree.nodes.new("ShaderNodeTexMagic")
+    tex = tree.nodes.new("ShaderNodeAmbientOcclusion")
     tree.links.new(tex.outputs["Color"], node.inputs["Base Color"])
     bump = tree.nodes.new("ShaderNodeBump")
-    tree.links.new(tex.outputs["Fac"], bump.inputs["Height"])
+    tree.links.new(tex.outputs["AO"], bump.inputs["Height"])
     tree.links.new(bump.outputs["Normal"], node.inputs["Normal"])
     node.inputs["Transmission Weight"].default_value = 0.5
     node.inputs["Emission Strength"].default_value = 2.0

@@ -182,6 +182,11 @@ NODE_CASES = [
 ] + [
     ("ShaderNodeTexNoise", "Fac", lambda n, m: (_set(n, Scale=7.0), _uv_coordinates(m))),
     ("ShaderNodeTexChecker", "Color", lambda n, m: (_set(n, Scale=5.0), _uv_coordinates(m, "UVMap"))),
+] + [
+    ("ShaderNodeTexMagic", "Color", lambda n, m: _set(n, Scale=1.5)),
+    ("ShaderNodeTexMagic", "Color", lambda n, m: _set(n, turbulence_depth=10, Scale=0.5, Distortion=1.2)),
+    ("ShaderNodeTexMagic", "Fac", lambda n, m: _set(n, turbulence_depth=6, Scale=0.7, Distortion=1.5)),
+    ("ShaderNodeTexMagic", "Color", lambda n, m: _set(n, turbulence_depth=0, Distortion=0.0)),
 ] + [("ShaderNodeTexGradient", "Fac", lambda n, m, g=g: (_set(n, gradient_type=g),
                                                           _set(m, Scale=(0.4, 0.4, 0.4), Rotation=(0.0, 0.0, 0.0))))
      for g in ("LINEAR", "QUADRATIC", "EASING", "DIAGONAL", "SPHERICAL", "QUADRATIC_SPHERE", "RADIAL")]
