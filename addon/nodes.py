@@ -125,7 +125,12 @@ class Evaluator:
 
     def value(self, socket, depth=0):
         out = self.evaluate(socket, depth)
-        return luminance(out) if out.ndim == 2 else out
+        if out.ndim == 1:
+            return out
+        fed = source(socket)
+        if fed is not None and fed[1].type == "VECTOR":  # a vector's average, a colour's luminance
+            return ((out[:, 0] + out[:, 1]) + out[:, 2]) * np.float32(1.0 / 3.0)
+        return luminance(out)
 
     def evaluate(self, socket, depth=0):
         """The socket's value at every row: its node's output, or its own (unlinked) value."""
@@ -356,11 +361,16 @@ class Evaluator:
 
     # -- colour and value operations
     def _ShaderNodeMix(self, node, output, depth):
-        if node.data_type not in ("FLOAT", "RGBA"):
+        if node.data_type not in ("FLOAT", "RGBA", "VECTOR"):
             raise Unsupported(f"'{node.name}' mixing {node.data_type.lower()}s")
-        t = self.value(_input(node, "Factor_Float"), depth)
+        uniform = node.data_type != "VECTOR" or node.factor_mode == "UNIFORM"
+        t = (self.value(_input(node, "Factor_Float"), depth) if uniform
+             else self.colour(_input(node, "Factor_Vector"), depth))
         if node.clamp_factor:
             t = np.clip(t, 0.0, 1.0)
+        if node.data_type == "VECTOR":
+            a, b = self.colour(_input(node, "A_Vector"), depth), self.colour(_input(node, "B_Vector"), depth)
+            return (a + (t[:, None] if uniform else t) * (b - a)).astype(np.float32)
         if node.data_type == "FLOAT":
             a, b = self.value(_input(node, "A_Float"), depth), self.value(_input(node, "B_Float"), depth)
             return (a + t * (b - a)).astype(np.float32)
@@ -448,6 +458,45 @@ class Evaluator:
     def _ShaderNodeCombineRGB(self, node, output, depth):
         return np.stack([self.value(node.inputs[k], depth) for k in ("R", "G", "B")], axis=1)
 
+    # -- coordinates as values (a texture's own Vector reads them through points() and vector())
+    def _ShaderNodeTexCoord(self, node, output, depth):
+        if output.name not in ("Generated", "Object", "UV"):
+            raise Unsupported(f"'{node.name}''s {output.name}, which wenv does not evaluate yet")
+        return self._as_values(node, lambda: self._uv_points(None) if output.name == "UV" else self._coordinates(
+            output.name.upper(), node.object if output.name == "Object" else None))
+
+    def _ShaderNodeUVMap(self, node, output, depth):
+        return self._as_values(node, lambda: self._uv_points(node.uv_map or None))
+
+    def _ShaderNodeMapping(self, node, output, depth):
+        if node.vector_type not in ("POINT", "TEXTURE", "VECTOR"):
+            raise Unsupported(f"'{node.name}' of type {node.vector_type.lower()}")
+        return self._mapped(node, self.colour(node.inputs["Vector"], depth).astype(np.float64)).astype(np.float32)
+
+    def _as_values(self, node, points):
+        """points()'s coordinates at the rows, for a node whose value passes on; without a mesh only
+        checked (a mean of what follows them is not their mean's)."""
+        if self._points is None:
+            if self.checking:
+                return np.zeros((self.count, 3), np.float32)
+            raise NeedsMesh(f"'{node.name}''s coordinates, which have no value without a mesh")
+        p, reduce = points()
+        return reduce(p)
+
+    def _ShaderNodeSeparateXYZ(self, node, output, depth):
+        return self.colour(node.inputs["Vector"], depth)[:, "XYZ".index(output.identifier)].copy()
+
+    def _ShaderNodeCombineXYZ(self, node, output, depth):
+        return np.stack([self.value(node.inputs[k], depth) for k in "XYZ"], axis=1).astype(np.float32)
+
+    def _ShaderNodeVectorMath(self, node, output, depth):
+        a, b, c = (self.colour(_input(node, k), depth).astype(np.float32) for k in ("Vector", "Vector_001", "Vector_002"))
+        scale = self.value(_input(node, "Scale"), depth)[:, None]
+        out = _vector_math(node.name, node.operation, a, b, c, scale)
+        if output.identifier == "Value":
+            return out if out.ndim == 1 else np.zeros(self.count, np.float32)
+        return out if out.ndim == 2 else np.zeros((self.count, 3), np.float32)
+
     # -- a texture's Vector: UVs at the face corners, and what scales their footprint
     def vector(self, socket, depth):
         """(uv (corners, 2), footprint (corners,), rows) of a Vector input: the UV map a Texture
@@ -498,7 +547,7 @@ class Evaluator:
                 raise Unsupported(f"'{node.name}' of type {node.vector_type.lower()}")
             p, reduce = self.points(node.inputs["Vector"], depth + 1)
             return self._mapped(node, p.astype(np.float64)).astype(np.float32), reduce
-        if node.bl_idname == "ShaderNodeVectorMath":
+        if node.bl_idname == "ShaderNodeVectorMath" and _of_constants(node):
             op = _vector_op(node)
             p, reduce = self.points(node.inputs[0], depth + 1)
             return op(p.astype(np.float64))[0].astype(np.float32), reduce
@@ -585,6 +634,12 @@ class Evaluator:
         return out[:, :2].astype(np.float32), (footprint * stretch).astype(np.float32), rows
 
 
+def _of_constants(node):
+    """Whether a Vector Math node is one _vector_op reads (its first vector carried through it)."""
+    second = node.inputs["Scale"] if node.operation == "SCALE" else node.inputs[1]
+    return node.operation in ("SCALE", "ADD", "SUBTRACT", "MULTIPLY", "DIVIDE") and not second.is_linked
+
+
 def _vector_op(node):
     """A Vector Math node of a constant second operand as op(p) -> (p', how much it stretches a
     footprint in the first two axes); Unsupported for other operations or a linked operand."""
@@ -639,6 +694,40 @@ def _magic(p, scale, depth, distortion):
         twice = d * f32(2.0)
         x, y, z = x / twice, y / twice, z / twice
     return np.stack([f32(0.5) - x, f32(0.5) - y, f32(0.5) - z], axis=1).astype(f32)
+
+
+def _vector_math(name, op, a, b, c, scale):
+    """Cycles' svm_vector_math: a vector (n, 3), or a value (n,) for a dot product, distance or
+    length; float32 as Cycles computes."""
+    f32 = np.float32
+
+    def dot(u, v):
+        return (u[:, 0] * v[:, 0] + u[:, 1] * v[:, 1]) + u[:, 2] * v[:, 2]
+
+    def divide(u, v):
+        return np.where(v != 0.0, u / np.where(v != 0.0, v, f32(1.0)), f32(0.0)).astype(f32)
+
+    def unit(u):
+        length = np.sqrt(dot(u, u))[:, None]
+        return np.where(length != 0.0, u / np.where(length != 0.0, length, f32(1.0)), f32(0.0)).astype(f32)
+    ops = {
+        "ADD": lambda: a + b, "SUBTRACT": lambda: a - b, "MULTIPLY": lambda: a * b, "DIVIDE": lambda: divide(a, b),
+        "MULTIPLY_ADD": lambda: a * b + c, "CROSS_PRODUCT": lambda: np.cross(a, b),
+        "PROJECT": lambda: divide(dot(a, b)[:, None] * b, np.repeat(dot(b, b)[:, None], 3, axis=1)),
+        "REFLECT": lambda: a - f32(2.0) * unit(b) * dot(a, unit(b))[:, None],
+        "FACEFORWARD": lambda: np.where((dot(c, b) < 0.0)[:, None], a, -a),
+        "DOT_PRODUCT": lambda: dot(a, b), "DISTANCE": lambda: np.sqrt(dot(a - b, a - b)),
+        "LENGTH": lambda: np.sqrt(dot(a, a)), "SCALE": lambda: a * scale, "NORMALIZE": lambda: unit(a),
+        "SNAP": lambda: np.floor(divide(a, b)) * b, "FLOOR": lambda: np.floor(a), "CEIL": lambda: np.ceil(a),
+        "MODULO": lambda: np.where(b != 0.0, np.fmod(a, np.where(b != 0.0, b, f32(1.0))), f32(0.0)),
+        "FRACTION": lambda: a - np.floor(a), "ABSOLUTE": lambda: np.abs(a),
+        "MINIMUM": lambda: np.minimum(a, b), "MAXIMUM": lambda: np.maximum(a, b),
+        "WRAP": lambda: np.where(b - c != 0.0, a - (b - c) * np.floor(divide(a - c, b - c)), c),
+        "SINE": lambda: np.sin(a), "COSINE": lambda: np.cos(a), "TANGENT": lambda: np.tan(a)}
+    if op not in ops:
+        raise Unsupported(f"'{name}' ({op.lower().replace('_', ' ')})")
+    with np.errstate(all="ignore"):
+        return ops[op]().astype(f32)
 
 
 def _brick_noise(n):
