@@ -443,17 +443,23 @@ class Evaluator:
         return (c + fac * (out - c)).astype(np.float32)
 
     def _ShaderNodeSeparateColor(self, node, output, depth):
-        if node.mode != "RGB":
-            raise Unsupported(f"'{node.name}' separating {node.mode}")
-        return self.colour(node.inputs["Color"], depth)[:, ("Red", "Green", "Blue").index(output.name)].copy()
+        c = self.colour(node.inputs["Color"], depth)
+        if node.mode == "HSV":
+            c = np.stack(_rgb_to_hsv(c), axis=1)
+        elif node.mode == "HSL":
+            c = _rgb_to_hsl(c)
+        return np.ascontiguousarray(c[:, ("Red", "Green", "Blue").index(output.identifier)], np.float32)
 
     def _ShaderNodeSeparateRGB(self, node, output, depth):
         return self.colour(node.inputs["Image"], depth)[:, ("R", "G", "B").index(output.name)].copy()
 
     def _ShaderNodeCombineColor(self, node, output, depth):
-        if node.mode != "RGB":
-            raise Unsupported(f"'{node.name}' combining {node.mode}")
-        return np.stack([self.value(node.inputs[k], depth) for k in ("Red", "Green", "Blue")], axis=1)
+        c = np.stack([self.value(_input(node, k), depth) for k in ("Red", "Green", "Blue")], axis=1)
+        if node.mode == "HSV":
+            c = _hsv_to_rgb(c[:, 0], c[:, 1], c[:, 2])
+        elif node.mode == "HSL":
+            c = _hsl_to_rgb(c)
+        return c.astype(np.float32)
 
     def _ShaderNodeCombineRGB(self, node, output, depth):
         return np.stack([self.value(node.inputs[k], depth) for k in ("R", "G", "B")], axis=1)
@@ -834,9 +840,39 @@ def _blend(name, mode, t, a, b):
         out = a + t * (np.maximum(a, b) - a)
     elif mode == "OVERLAY":
         out = np.where(a < 0.5, a * (1.0 - t + 2.0 * t * b), 1.0 - (1.0 - t + 2.0 * t * (1.0 - b)) * (1.0 - a))
+    elif mode == "EXCLUSION":
+        out = np.maximum(a + t * (a + b - 2.0 * a * b - a), 0.0)
+    elif mode == "DODGE":
+        with np.errstate(divide="ignore", invalid="ignore"):
+            lift = 1.0 - t * b
+            out = np.where(a == 0.0, a, np.where(lift <= 0.0, 1.0, np.minimum(a / lift, 1.0)))
+    elif mode == "BURN":
+        with np.errstate(divide="ignore", invalid="ignore"):
+            fall = 1.0 - t + t * b
+            out = np.where(fall <= 0.0, 0.0, np.clip(1.0 - (1.0 - a) / fall, 0.0, 1.0))
+    elif mode == "SOFT_LIGHT":
+        out = (1.0 - t) * a + t * ((1.0 - a) * b * a + a * (1.0 - (1.0 - b) * (1.0 - a)))
+    elif mode == "LINEAR_LIGHT":
+        out = a + t * (2.0 * b - 1.0)
+    elif mode in ("HUE", "SATURATION", "VALUE", "COLOR"):
+        out = _blend_hsv(mode, t, a, b)
     else:
         raise Unsupported(f"'{name}' blending by {mode.lower().replace('_', ' ')}")
     return out.astype(np.float32)
+
+
+def _blend_hsv(mode, t, a, b):
+    """Cycles' svm_mix_hue, _sat, _val and _color: a's hue, saturation or value (or hue and
+    saturation) towards b's."""
+    t = np.broadcast_to(t, a.shape)[:, 0]
+    h, s, v = _rgb_to_hsv(a)
+    h2, s2, v2 = _rgb_to_hsv(b)
+    if mode == "VALUE":
+        return _hsv_to_rgb(h, s, (1.0 - t) * v + t * v2)
+    if mode == "SATURATION":
+        return np.where((s != 0.0)[:, None], _hsv_to_rgb(h, (1.0 - t) * s + t * s2, v), a)
+    turned = _hsv_to_rgb(h2, s2 if mode == "COLOR" else s, v)
+    return np.where((s2 != 0.0)[:, None], a + t[:, None] * (turned - a), a)
 
 
 def _safe_divide(a, b):
@@ -880,6 +916,30 @@ def _rgb_to_hsv(c):
     h = np.where(r == v, cb - cg, np.where(g == v, 2.0 + cr - cb, 4.0 + cg - cr)) / 6.0
     h = np.where(h < 0.0, h + 1.0, h)
     return np.where(s != 0.0, h, 0.0), s, v
+
+
+def _rgb_to_hsl(c):
+    """Cycles' rgb_to_hsl of each row of c (n, 3)."""
+    r, g, b = c[:, 0], c[:, 1], c[:, 2]
+    high, low = np.max(c, axis=1), np.min(c, axis=1)
+    light = np.minimum(1.0, (high + low) / 2.0)
+    delta = high - low
+    grey = delta == 0.0
+    safe = np.where(grey, 1.0, delta)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = np.where(light > 0.5, delta / (2.0 - high - low), delta / (high + low))
+    h = np.where(high == r, (g - b) / safe + np.where(g < b, 6.0, 0.0),
+                 np.where(high == g, (b - r) / safe + 2.0, (r - g) / safe + 4.0))
+    return np.stack([np.where(grey, 0.0, h / 6.0), np.where(grey, 0.0, s), light], axis=1)
+
+
+def _hsl_to_rgb(c):
+    """Cycles' hsl_to_rgb of each row of c (n, 3)."""
+    h, s, light = c[:, 0], c[:, 1], c[:, 2]
+    n = np.clip(np.stack([np.abs(h * 6.0 - 3.0) - 1.0, 2.0 - np.abs(h * 6.0 - 2.0), 2.0 - np.abs(h * 6.0 - 4.0)],
+                         axis=1), 0.0, 1.0)
+    chroma = (1.0 - np.abs(2.0 * light - 1.0)) * s
+    return (n - 0.5) * chroma[:, None] + light[:, None]
 
 
 def _hsv_to_rgb(h, s, v):

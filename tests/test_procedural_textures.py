@@ -283,6 +283,40 @@ def test_vector_nodes_read_as_cycles_renders_them(plane, kind, output, configure
     assert off.sum() <= 3, (off.sum(), np.abs(cycles - ours).max())
 
 
+def _colour_of_points(node, mapping, into="A_Color"):
+    """Links the Mapping node into a colour input, the plane's points mapped into [0, 1]."""
+    _set(mapping, Scale=(0.25, 0.2, 0.3), Location=(0.5, 0.4, 0.6))
+    mapping.id_data.links.new(mapping.outputs["Vector"], next(s for s in node.inputs if s.identifier == into))
+
+
+def _blending(mode):
+    return lambda n, m: (_set(n, data_type="RGBA", blend_type=mode, Factor_Float=0.7,
+                              B_Color=(0.9, 0.35, 0.1, 1.0)), _colour_of_points(n, m))
+
+
+BLENDS = ["EXCLUSION", "DODGE", "BURN", "SOFT_LIGHT", "LINEAR_LIGHT", "HUE", "SATURATION", "VALUE", "COLOR",
+          "OVERLAY", "SCREEN", "DIVIDE"]
+COLOUR_NODES = [("ShaderNodeMix", "Result_Color", _blending(mode)) for mode in BLENDS] + [
+    ("ShaderNodeSeparateColor", out, lambda n, m, mode=mode: (_set(n, mode=mode), _colour_of_points(n, m, "Color")))
+    for mode, out in (("HSV", "Red"), ("HSL", "Green"), ("HSL", "Blue"))] + [
+    ("ShaderNodeCombineColor", "Color", lambda n, m, mode=mode: (_set(n, mode=mode, Green=0.8, Blue=0.45),
+                                                                 _colour_of_points(n, m, "Red")))
+    for mode in ("HSV", "HSL")]
+
+
+@pytest.mark.parametrize("kind, output, configure", COLOUR_NODES,
+                         ids=[f"{k[10:]}-{b}" for k, b in zip([k for k, _, _ in COLOUR_NODES],
+                                                               BLENDS + ["HSV", "HSL-S", "HSL-L", "HSV", "HSL"])])
+def test_colour_nodes_read_as_cycles_renders_them(plane, kind, output, configure):
+    """The Mix node's blend modes, and Separate and Combine Color in HSV and HSL, of colours made
+    from the pixels' points: within 1e-4 of Cycles' pixels."""
+    _, _, _, render_node = plane
+    cycles, ours = render_node(kind, output, configure)
+    assert ours.shape == cycles.shape and ours.std() > 0.02
+    off = np.abs(cycles - ours).max(axis=1) > 1e-4
+    assert off.sum() <= 3, (off.sum(), np.abs(cycles - ours).max())
+
+
 @pytest.mark.parametrize("kwargs, error, words", [
     (dict(type="CELLS"), ValueError, "type must be"),
     (dict(dimensions=5), ValueError, "dimensions must be 1, 2, 3 or 4"),
