@@ -880,7 +880,15 @@ def _safe_divide(a, b):
 
 
 def _math(name, op, a, b=None, c=None):
-    """Cycles' svm_math for its common operations (safe division and power as Cycles makes them)."""
+    """Cycles' svm_math: every operation, made safe where Cycles makes it so (division, power,
+    logarithm, square roots, modulo, the arcs)."""
+    def wrap(v, high, low):
+        span = high - low
+        return np.where(span != 0.0, v - span * np.floor(_safe_divide(v - low, span)), low)
+
+    def smooth_min(x, y, k):
+        h = np.maximum(k - np.abs(x - y), 0.0) / np.where(k != 0.0, k, 1.0)
+        return np.where(k != 0.0, np.minimum(x, y) - h * h * h * k * np.float32(1.0 / 6.0), np.minimum(x, y))
     simple = {
         "ADD": lambda: a + b, "SUBTRACT": lambda: a - b, "MULTIPLY": lambda: a * b,
         "DIVIDE": lambda: _safe_divide(a, b), "MULTIPLY_ADD": lambda: a * b + c,
@@ -891,6 +899,22 @@ def _math(name, op, a, b=None, c=None):
         "FRACT": lambda: a - np.floor(a), "SINE": lambda: np.sin(a), "COSINE": lambda: np.cos(a),
         "SNAP": lambda: np.where(b != 0.0, np.floor(_safe_divide(a, b)) * b, 0.0),
         "POWER": lambda: _power(a, b),
+        "LOGARITHM": lambda: np.where((a > 0.0) & (b > 0.0), _safe_divide(np.log(np.maximum(a, 1e-38)),
+                                                                         np.log(np.maximum(b, 1e-38))), 0.0),
+        "INVERSE_SQRT": lambda: np.where(a > 0.0, 1.0 / np.sqrt(np.maximum(a, 1e-38)), 0.0),
+        "EXPONENT": lambda: np.exp(a), "SIGN": lambda: np.sign(a),
+        "RADIANS": lambda: a * np.float32(math.pi / 180.0), "DEGREES": lambda: a * np.float32(180.0 / math.pi),
+        "COMPARE": lambda: ((a == b) | (np.abs(a - b) <= np.maximum(c, np.finfo(np.float32).eps))).astype(np.float32),
+        "SMOOTH_MIN": lambda: smooth_min(a, b, c), "SMOOTH_MAX": lambda: -smooth_min(-a, -b, c),
+        "TRUNC": lambda: np.trunc(a), "MODULO": lambda: np.where(b != 0.0, np.fmod(a, np.where(b != 0.0, b, 1.0)), 0.0),
+        "FLOORED_MODULO": lambda: np.where(b != 0.0, a - np.floor(_safe_divide(a, b)) * b, 0.0),
+        "WRAP": lambda: wrap(a, b, c),
+        "PINGPONG": lambda: np.where(b != 0.0, np.abs((_safe_divide(a - b, b * 2.0) - np.floor(
+            _safe_divide(a - b, b * 2.0))) * b * 2.0 - b), 0.0),
+        "TANGENT": lambda: np.tan(a), "ARCSINE": lambda: np.arcsin(np.clip(a, -1.0, 1.0)),
+        "ARCCOSINE": lambda: np.arccos(np.clip(a, -1.0, 1.0)), "ARCTANGENT": lambda: np.arctan(a),
+        "ARCTAN2": lambda: np.arctan2(a, b), "SINH": lambda: np.sinh(a), "COSH": lambda: np.cosh(a),
+        "TANH": lambda: np.tanh(a),
     }
     if op not in simple:
         raise Unsupported(f"'{name}' ({op.lower().replace('_', ' ')})")

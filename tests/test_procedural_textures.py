@@ -317,6 +317,35 @@ def test_colour_nodes_read_as_cycles_renders_them(plane, kind, output, configure
     assert off.sum() <= 3, (off.sum(), np.abs(cycles - ours).max())
 
 
+def _math_of_points(operation, b=0.35, c=0.2):
+    """configure() of a Math node on the mean of the pixel's mapped point, its other inputs b and c."""
+    def configure(node, mapping):
+        _set(node, operation=operation)
+        node.inputs[1].default_value, node.inputs[2].default_value = b, c
+        _set(mapping, Scale=(3.0, 2.5, 2.0) if operation == "TRUNC" else (0.6, 0.5, 0.4))  # (whole steps)
+        node.id_data.links.new(mapping.outputs["Vector"], node.inputs[0])
+    return configure
+
+
+MATHS = [("LOGARITHM", 2.5, 0.0), ("INVERSE_SQRT", 0.0, 0.0), ("EXPONENT", 0.0, 0.0), ("SIGN", 0.0, 0.0),
+         ("COMPARE", 0.1, 0.2), ("SMOOTH_MIN", 0.1, 0.3), ("SMOOTH_MAX", -0.1, 0.4), ("TRUNC", 0.0, 0.0),
+         ("MODULO", 0.3, 0.0), ("FLOORED_MODULO", 0.3, 0.0), ("WRAP", 0.4, -0.3), ("PINGPONG", 0.25, 0.0),
+         ("ARCSINE", 0.0, 0.0), ("ARCCOSINE", 0.0, 0.0), ("ARCTANGENT", 0.0, 0.0), ("ARCTAN2", 0.3, 0.0),
+         ("SINH", 0.0, 0.0), ("TANH", 0.0, 0.0), ("DEGREES", 0.0, 0.0), ("TANGENT", 0.0, 0.0)]
+
+
+@pytest.mark.parametrize("operation, b, c", MATHS, ids=[m[0] for m in MATHS])
+def test_math_operations_read_as_cycles_renders_them(plane, operation, b, c):
+    """The Math node's operations (those test_addon.py does not hold to Cycles already) of a value
+    that varies over the plane: within 1e-4 of Cycles' pixels (relative past 1), a step's pixels
+    aside."""
+    _, _, _, render_node = plane
+    cycles, ours = render_node("ShaderNodeMath", "Value", _math_of_points(operation, b, c))
+    assert ours.shape == cycles.shape and ours.std() > 0.02
+    off = (np.abs(cycles - ours) > 1e-4 * np.maximum(1.0, np.abs(cycles))).any(axis=1)
+    assert off.sum() <= 3, (off.sum(), np.abs(cycles - ours).max())
+
+
 @pytest.mark.parametrize("kwargs, error, words", [
     (dict(type="CELLS"), ValueError, "type must be"),
     (dict(dimensions=5), ValueError, "dimensions must be 1, 2, 3 or 4"),
