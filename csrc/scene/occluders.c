@@ -163,23 +163,24 @@ void wenv_occluders_test_rays(const wenv_occluders *occ, const float *origins, c
 /* Rays handed to Embree at once: its stream interface sorts them into packets. */
 #define STREAM 256
 
-/* Rays from one origin, each ending at fars[k] (NULL: all at far). */
-static void test_from(const wenv_occluders *occ, const float origin[3], const float *dirs, size_t n, float far,
-                      const float *fars, unsigned char *blocked)
+/* Rays from origins + k * origin_stride (0: all from one origin), each ending at fars[k] (NULL: all
+ * at far). */
+static void test_from(const wenv_occluders *occ, const float *origins, size_t origin_stride, const float *dirs,
+                      size_t n, float far, const float *fars, unsigned char *blocked)
 {
     struct RTCRay rays[STREAM];
     struct RTCIntersectContext context;
     for (size_t start = 0; start < n; start += STREAM) {
         size_t m = n - start < STREAM ? n - start : STREAM;
         for (size_t k = 0; k < m; k++) {
-            const float *d = dirs + 3 * (start + k);
+            const float *d = dirs + 3 * (start + k), *origin = origins + origin_stride * (start + k);
             rays[k] = (struct RTCRay){.org_x = origin[0], .org_y = origin[1], .org_z = origin[2], .tnear = 0.0f,
                                       .dir_x = d[0], .dir_y = d[1], .dir_z = d[2], .time = 0.0f,
                                       .tfar = fars ? fars[start + k] : far, .mask = UINT32_MAX, .id = (unsigned)k,
                                       .flags = 0};
         }
         rtcInitIntersectContext(&context);
-        context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT; /* one origin, neighbouring directions */
+        context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT; /* neighbouring origins and directions */
         rtcOccluded1M(occ->scene, &context, rays, (unsigned)m, sizeof rays[0]);
         for (size_t k = 0; k < m; k++)
             blocked[start + k] = rays[k].tfar < 0.0f; /* Embree marks an occluded ray with tfar = -inf */
@@ -189,13 +190,19 @@ static void test_from(const wenv_occluders *occ, const float origin[3], const fl
 void wenv_occluders_test(const wenv_occluders *occ, const float origin[3], const float *dirs, size_t n, float tfar,
                          unsigned char *blocked)
 {
-    test_from(occ, origin, dirs, n, tfar, NULL, blocked);
+    test_from(occ, origin, 0, dirs, n, tfar, NULL, blocked);
 }
 
 void wenv_occluders_test_until(const wenv_occluders *occ, const float origin[3], const float *dirs, const float *fars,
                                size_t n, unsigned char *blocked)
 {
-    test_from(occ, origin, dirs, n, 0.0f, fars, blocked);
+    test_from(occ, origin, 0, dirs, n, 0.0f, fars, blocked);
+}
+
+void wenv_occluders_test_each(const wenv_occluders *occ, const float *origins, const float *dirs, const float *fars,
+                              size_t n, unsigned char *blocked)
+{
+    test_from(occ, origins, 3, dirs, n, 0.0f, fars, blocked);
 }
 
 /* The nearest hits of n rays, ray k from origins + k * origin_stride (0: all from one origin). */

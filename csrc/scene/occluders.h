@@ -47,6 +47,10 @@ void wenv_occluders_test(const wenv_occluders *occ, const float origin[3], const
 /* The same with ray k ending at fars[k] (INFINITY: anywhere): the points of a lamp, tested at once. */
 void wenv_occluders_test_until(const wenv_occluders *occ, const float origin[3], const float *dirs, const float *fars,
                                size_t n, unsigned char *blocked);
+/* The same with ray k from its own origin (origins + 3 k): neighbouring points' rays to a lamp, one
+ * stream.  On the calling thread, no allocation. */
+void wenv_occluders_test_each(const wenv_occluders *occ, const float *origins, const float *dirs, const float *fars,
+                              size_t n, unsigned char *blocked);
 
 /* The nearest surface along each of n rays from `origin` (directions as wenv_occluders_test, no far
  * limit): tri[k] its triangle, or UINT32_MAX where the ray reaches the sky, and uv[2k], uv[2k + 1]

@@ -52,17 +52,6 @@ static uint64_t mesh_key(const float *positions, const float *normals, size_t n,
     return wenv_fingerprint_word(h, occ ? wenv_occluders_fingerprint(occ) : 0);
 }
 
-/* Whether a ray from `origin` along unit d reaches distance t (INFINITY: the sky) unblocked. */
-static int reaches(const wenv_occluders *occ, const float origin[3], const double d[3], double t)
-{
-    if (!occ)
-        return 1;
-    float dir[3] = {(float)d[0], (float)d[1], (float)d[2]};
-    unsigned char blocked = 0;
-    wenv_occluders_test(occ, origin, dir, 1, isinf(t) ? INFINITY : (float)(t * (1.0 - 1e-4)), &blocked);
-    return !blocked;
-}
-
 /* How many cells a side the lamp's patch is read in from a point. */
 static size_t cells_of(const wenv_lamp_patch *pa)
 {
@@ -116,91 +105,154 @@ static void keep_settings(wenv_lamp *kept, const wenv_lamp *lamps, size_t n_lamp
         kept[j].blockers = NULL;
 }
 
-/* Vertex i's share of lamp j and the cells it sees. */
-static void prepare_one(const wenv_lamp_light *L, const wenv_lamp *lamp, const wenv_occluders *occ, size_t i,
-                        float *share, uint16_t *seen)
+/* Vertices whose rays to a lamp are cast as one stream (neighbours in the mesh's order: their rays
+ * start near each other and run towards the same lamp). */
+#define RAY_BLOCK 16
+#define CELLS2 (WENV_LAMP_CELLS * WENV_LAMP_CELLS)
+
+/* One vertex's view of a lamp while its rays are cast: what finish_one reads. */
+typedef struct {
+    wenv_lamp_patch pa;
+    double nrm[3], whole, even, weight;
+    double factor[CELLS2];
+    size_t k;     /* cells a side of the patch (0: a delta lamp) */
+    size_t first; /* its rays among the block's */
+    size_t rays;  /* how many (0: nothing to test, every cell seen) */
+    int varies, lit;
+} lamp_view;
+
+/* Vertex i's view of the lamp and its rays (towards the cells' centres, or the delta lamp) written
+ * at origins, dirs and fars; returns how many (none where no light reaches it or nothing blocks). */
+static size_t prepare_rays(const wenv_lamp_light *L, const wenv_lamp *lamp, int blocked_at_all, size_t i,
+                           lamp_view *v, float *origins, float *dirs, float *fars)
 {
-    double p[3], nrm[3];
+    double p[3];
     float origin[3];
     for (int c = 0; c < 3; c++) {
         p[c] = L->positions[3 * i + (size_t)c];
-        nrm[c] = L->normals[3 * i + (size_t)c];
+        v->nrm[c] = L->normals[3 * i + (size_t)c];
         origin[c] = L->positions[3 * i + (size_t)c] + L->lift * L->normals[3 * i + (size_t)c];
     }
-    const wenv_occluders *blockers = wenv_lamp_blockers(lamp, occ);
-    *share = 0.0f;
-    *seen = 0;
+    v->lit = 0;
+    v->rays = 0;
+    v->k = 0;
     if (lamp->delta) {
         double w[3], dist;
         if (!delta_direction(lamp, p, w, &dist))
-            return;
-        double cos_i = dot3(nrm, w), weight = delta_weight(lamp, w, dist);
-        if (!(cos_i > 0.0) || !(weight > 0.0) || !reaches(blockers, origin, w, dist))
-            return;
-        *share = (float)(cos_i * weight);
-        *seen = 1;
-        return;
+            return 0;
+        double cos_i = dot3(v->nrm, w), weight = delta_weight(lamp, w, dist);
+        if (!(cos_i > 0.0) || !(weight > 0.0))
+            return 0;
+        v->lit = 1;
+        v->weight = cos_i * weight;
+        if (!blocked_at_all)
+            return 0;
+        memcpy(origins, origin, sizeof origin);
+        for (int c = 0; c < 3; c++)
+            dirs[c] = (float)w[c];
+        fars[0] = isinf(dist) ? INFINITY : (float)(dist * (1.0 - 1e-4));
+        return v->rays = 1;
     }
-    wenv_lamp_patch pa;
-    if (!wenv_lamp_patch_at(lamp, p, &pa))
-        return;
-    double whole = wenv_lamp_patch_psa(&pa, nrm);
-    if (!(whole > 0.0))
-        return;
-    size_t k = cells_of(&pa);
-    double even;
-    int varies = !factor_even(lamp, &pa, &even), alike = !varies;
-    if (!varies && !(even > 0.0))
-        return; /* outside a spot's cone */
-    double factor[WENV_LAMP_CELLS * WENV_LAMP_CELLS], h = 2.0 / (double)k;
-    float dirs[3 * WENV_LAMP_CELLS * WENV_LAMP_CELLS], fars[WENV_LAMP_CELLS * WENV_LAMP_CELLS];
-    unsigned char blocked[WENV_LAMP_CELLS * WENV_LAMP_CELLS] = {0};
+    if (!wenv_lamp_patch_at(lamp, p, &v->pa))
+        return 0;
+    v->whole = wenv_lamp_patch_psa(&v->pa, v->nrm);
+    if (!(v->whole > 0.0))
+        return 0;
+    size_t k = cells_of(&v->pa);
+    v->varies = !factor_even(lamp, &v->pa, &v->even);
+    if (!v->varies && !(v->even > 0.0))
+        return 0; /* outside a spot's cone */
+    v->lit = 1;
+    v->k = k;
+    double h = 2.0 / (double)k;
     for (size_t c = 0; c < k * k; c++) {
         double x[3];
-        wenv_lamp_patch_point(&pa, -1.0 + h * ((double)(c % k) + 0.5), -1.0 + h * ((double)(c / k) + 0.5), x);
+        wenv_lamp_patch_point(&v->pa, -1.0 + h * ((double)(c % k) + 0.5), -1.0 + h * ((double)(c / k) + 0.5), x);
         double t = sqrt(dot3(x, x)), back[3] = {-x[0] / t, -x[1] / t, -x[2] / t};
-        factor[c] = varies ? wenv_lamp_factor(lamp, back, pa.within_sphere) : even;
+        v->factor[c] = v->varies ? wenv_lamp_factor(lamp, back, v->pa.within_sphere) : v->even;
+        memcpy(origins + 3 * c, origin, sizeof origin);
         for (int a = 0; a < 3; a++)
             dirs[3 * c + (size_t)a] = (float)(x[a] / t);
-        fars[c] = pa.infinite ? INFINITY : (float)(t * (1.0 - 1e-4));
+        fars[c] = v->pa.infinite ? INFINITY : (float)(t * (1.0 - 1e-4));
     }
-    if (blockers) /* the cells' rays at once: one origin, neighbouring directions */
-        wenv_occluders_test_until(blockers, origin, dirs, fars, k * k, blocked);
+    return v->rays = blocked_at_all ? k * k : 0;
+}
+
+/* The vertex's share of the lamp and the cells it sees, its rays' answers at blocked (NULL: none
+ * cast, every cell seen). */
+static void finish_one(const lamp_view *v, const wenv_lamp *lamp, const unsigned char *blocked, float *share,
+                       uint16_t *seen)
+{
+    *share = 0.0f;
+    *seen = 0;
+    if (!v->lit)
+        return;
+    if (v->k == 0) { /* a delta lamp */
+        if (!(v->rays && blocked[0])) {
+            *share = (float)v->weight;
+            *seen = 1;
+        }
+        return;
+    }
+    size_t k = v->k;
+    int alike = !v->varies;
     for (size_t c = 0; c < k * k; c++) {
-        if (!blocked[c])
+        if (!(v->rays && blocked[c]))
             *seen |= (uint16_t)(1u << c);
         else
             alike = 0;
     }
     if (alike) { /* all of it seen, equally bright: the closed form alone */
-        *share = (float)(whole * even);
+        *share = (float)(v->whole * v->even);
         return;
     }
     if (k == 1) {
-        *share = (float)(whole * factor[0] * (double)(*seen & 1u));
+        *share = (float)(v->whole * v->factor[0] * (double)(*seen & 1u));
         return;
     }
     /* the cells' own shares weigh what is seen, read twice as finely where the factor varies */
-    size_t kf = varies ? 2 * k : k;
+    size_t kf = v->varies ? 2 * k : k;
     double hf = 2.0 / (double)kf, sum = 0.0, lit = 0.0;
     for (size_t c = 0; c < kf * kf; c++) {
         size_t a = c % kf, b = c / kf, cell = (b * k / kf) * k + a * k / kf;
         if (!((*seen >> cell) & 1u)) {
-            sum += wenv_lamp_patch_cell_psa(&pa, kf, a, b, nrm);
+            sum += wenv_lamp_patch_cell_psa(&v->pa, kf, a, b, v->nrm);
             continue;
         }
-        double f = factor[cell];
-        if (varies) {
+        double f = v->factor[cell];
+        if (v->varies) {
             double x[3];
-            wenv_lamp_patch_point(&pa, -1.0 + hf * ((double)a + 0.5), -1.0 + hf * ((double)b + 0.5), x);
+            wenv_lamp_patch_point(&v->pa, -1.0 + hf * ((double)a + 0.5), -1.0 + hf * ((double)b + 0.5), x);
             double t = sqrt(dot3(x, x)), back[3] = {-x[0] / t, -x[1] / t, -x[2] / t};
-            f = wenv_lamp_factor(lamp, back, pa.within_sphere);
+            f = wenv_lamp_factor(lamp, back, v->pa.within_sphere);
         }
-        double psa = wenv_lamp_patch_cell_psa(&pa, kf, a, b, nrm);
+        double psa = wenv_lamp_patch_cell_psa(&v->pa, kf, a, b, v->nrm);
         sum += psa;
         lit += psa * f;
     }
-    *share = sum > 0.0 ? (float)(whole * lit / sum) : 0.0f;
+    *share = sum > 0.0 ? (float)(v->whole * lit / sum) : 0.0f;
+}
+
+/* Vertices [first, end)'s shares of lamp j and the cells they see, their rays cast as one stream. */
+static void prepare_block(wenv_lamp_light *L, const wenv_lamp *lamp, const wenv_occluders *occ, size_t j,
+                          size_t first, size_t end)
+{
+    lamp_view views[RAY_BLOCK];
+    float origins[3 * RAY_BLOCK * CELLS2], dirs[3 * RAY_BLOCK * CELLS2], fars[RAY_BLOCK * CELLS2];
+    unsigned char blocked[RAY_BLOCK * CELLS2];
+    const wenv_occluders *blockers = wenv_lamp_blockers(lamp, occ);
+    size_t rays = 0;
+    for (size_t i = first; i < end; i++) {
+        lamp_view *v = &views[i - first];
+        v->first = rays;
+        rays += prepare_rays(L, lamp, blockers != NULL, i, v, origins + 3 * rays, dirs + 3 * rays, fars + rays);
+    }
+    if (rays)
+        wenv_occluders_test_each(blockers, origins, dirs, fars, rays, blocked);
+    for (size_t i = first; i < end; i++) {
+        const lamp_view *v = &views[i - first];
+        finish_one(v, lamp, blocked + v->first, &L->share[i * L->n_lamps + j], &L->seen[i * L->n_lamps + j]);
+    }
 }
 
 wenv_status wenv_lamp_light_ensure(wenv_lamp_light **light, const wenv_lamp *lamps, size_t n_lamps,
@@ -265,18 +317,18 @@ wenv_status wenv_lamp_light_ensure(wenv_lamp_light **light, const wenv_lamp *lam
     }
     atomic_size_t done = 0;
     atomic_int cancelled = 0;
-    long long nn = (long long)n;
+    size_t blocks = (n + RAY_BLOCK - 1) / RAY_BLOCK;
     keep_settings(l->lamps, lamps, n_lamps);
-#pragma omp parallel for schedule(dynamic, 64)
-    for (long long i = 0; i < nn; i++) {
+#pragma omp parallel for schedule(dynamic, 4)
+    for (long long b = 0; b < (long long)blocks; b++) {
         if (atomic_load(&cancelled))
             continue;
+        size_t first = (size_t)b * RAY_BLOCK, end = first + RAY_BLOCK < n ? first + RAY_BLOCK : n;
         for (size_t j = 0; j < n_lamps; j++)
             if (redo[j])
-                prepare_one(l, &lamps[j], occ, (size_t)i, &l->share[(size_t)i * n_lamps + j],
-                            &l->seen[(size_t)i * n_lamps + j]);
-        if ((i & 255) == 255)
-            wenv_progress_item(progress, &done, (n + 255) / 256, &cancelled);
+                prepare_block(l, &lamps[j], occ, j, first, end);
+        if ((b & 15) == 15)
+            wenv_progress_item(progress, &done, (blocks + 15) / 16, &cancelled);
     }
     free(redo);
     if (atomic_load(&cancelled) || wenv_progress_finish(progress)) {
