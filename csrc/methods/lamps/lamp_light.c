@@ -206,6 +206,8 @@ static void finish_one(const lamp_view *v, const wenv_lamp *lamp, const unsigned
         *share = (float)(v->whole * v->even);
         return;
     }
+    if (*seen == 0) /* none of it seen: no light, whatever the cells' shares */
+        return;
     if (k == 1) {
         *share = (float)(v->whole * v->factor[0] * (double)(*seen & 1u));
         return;
