@@ -98,7 +98,8 @@ class Evaluator:
     Image Texture node at the corners (textures.py gives it); `uv(uv_map)` gives (uv, footprint,
     rows) of the mesh's UV map (None: the active render one), or None without one."""
 
-    def __init__(self, count, uv, texture, checking=False, points=None, progress=None, attribute=None, owner=None):
+    def __init__(self, count, uv, texture, checking=False, points=None, progress=None, attribute=None, owner=None,
+                 footprint=None):
         self.count = count
         self._uv = uv
         self._texture = texture
@@ -106,6 +107,9 @@ class Evaluator:
         # or (None, None) where the mesh has none of that name; None: no mesh (one_point)
         self._attribute = attribute
         self._owner = owner  # (object, material) the rows are of (Object Info); None: none (one_point)
+        # footprint(coords (count, 2)) -> each row's side in those coordinates (an Image Texture read
+        # through coordinates other than a UV map); None: read at the point
+        self._footprint = footprint
         # points(space, other): the rows' 'GENERATED' or 'OBJECT' coordinates ((count, 3), `other`'s
         # object space where given), 'WORLD' positions or 'NORMAL' (unit, world); None: MEAN_POINTS,
         # averaged (one_point)
@@ -155,9 +159,15 @@ class Evaluator:
             raise Unsupported(f"'{node.name}', which has no image")
         if image.source not in IMAGE_SOURCES:
             raise Unsupported(f"'{node.name}', whose {image.source.lower()} image wenv does not read yet")
-        if node.projection != "FLAT":
+        if node.projection not in ("FLAT", "BOX"):
             raise Unsupported(f"'{node.name}', whose {node.projection.lower()} projection wenv does not read yet")
-        uv, footprint, rows = self.vector(node.inputs["Vector"], depth)
+        try:
+            if node.projection == "BOX":
+                raise _NotUV()
+            uv, footprint, rows = self.vector(node.inputs["Vector"], depth)
+            samples = [(None, uv, footprint, rows)]
+        except _NotUV:  # coordinates of the rows: a plane of them, or a box's three
+            samples = self._image_coordinates(node, depth)
         self.textures.append(node)
         if node.interpolation not in INTERPOLATIONS:
             self.notes.append(f"'{node.name}': {node.interpolation} interpolation is read as Linear")
@@ -165,7 +175,35 @@ class Evaluator:
         if not image.is_float and space not in world.SRGB_SPACES and space not in world.LINEAR_SPACES:
             self.notes.append(f"'{node.name}': 8-bit colour space '{space}' is not decoded: its values are read as "
                               "linear")
-        return self._texture(node, uv, footprint, rows)
+        out = None
+        for weight, uv, footprint, rows in samples:
+            got = self._texture(node, uv, footprint, rows)
+            got = got if weight is None else weight[:, None] * got
+            out = got if out is None else out + got
+        return out.astype(np.float32)
+
+    def _image_coordinates(self, node, depth):
+        """[(weight per row or None, uv, footprint, rows)] of an Image Texture whose Vector is not a UV
+        map: the plane of its x and y (flat), or the box's three planes weighted by the object-space
+        normal as Cycles' svm_node_tex_image_box weighs them."""
+        p, _reduce = self.points(node.inputs["Vector"], depth)  # (per row: a UV map goes through vector())
+        rows = np.arange(self.count)
+        if self._points is None:  # no mesh: the image's mean
+            return [(None, np.zeros((1, 2), np.float32), np.ones(1, np.float32), np.zeros(1, np.int64))]
+
+        def plane(u, v):
+            uv = np.ascontiguousarray(np.stack([u, v], axis=1), np.float32)
+            return uv, (self._footprint(uv) if self._footprint else np.zeros(self.count, np.float32)), rows
+        if node.projection == "FLAT":
+            return [(None,) + plane(p[:, 0], p[:, 1])]
+        signed = self._coordinates("OBJECT_NORMAL", node=node)[0]
+        weight = _box_weights(signed, np.float32(node.projection_blend))
+        x, y, z = p[:, 0], p[:, 1], p[:, 2]
+        one = np.float32(1.0)
+        planes = (plane(np.where(signed[:, 0] < 0.0, one - y, y), z),
+                  plane(np.where(signed[:, 1] > 0.0, one - x, x), z),
+                  plane(np.where(signed[:, 2] > 0.0, one - y, y), x))
+        return [(weight[:, k],) + planes[k] for k in range(3) if (weight[:, k] > 0.0).any()]
 
     def _ShaderNodeTexNoise(self, node, output, depth):
         kw = _procedural_inputs(node, output, NOISE_INPUTS)
@@ -496,7 +534,8 @@ class Evaluator:
         return np.stack([self.value(node.inputs[k], depth) for k in "XYZ"], axis=1).astype(np.float32)
 
     def _ShaderNodeVectorMath(self, node, output, depth):
-        a, b, c = (self.colour(_input(node, k), depth).astype(np.float32) for k in ("Vector", "Vector_001", "Vector_002"))
+        a, b, c = (self.colour(_input(node, k), depth).astype(np.float32)
+                   for k in ("Vector", "Vector_001", "Vector_002"))
         scale = self.value(_input(node, "Scale"), depth)[:, None]
         out = _vector_math(node.name, node.operation, a, b, c, scale)
         if output.identifier == "Value":
@@ -520,8 +559,7 @@ class Evaluator:
             return self._mapping(node, depth)
         if node.bl_idname == "ShaderNodeVectorMath":
             return self._vector_math(node, depth)
-        what = f"'{node.name}''s {output.name}" if node.bl_idname == "ShaderNodeTexCoord" else f"'{node.name}'"
-        raise Unsupported(f"a texture's Vector from {what}, which wenv does not evaluate yet")
+        raise _NotUV()  # other coordinates: points() reads them
 
     # -- a procedural texture's Vector: coordinates at the rows, or where they are read for them
     def points(self, socket, depth):
@@ -558,7 +596,7 @@ class Evaluator:
             p, reduce = self.points(node.inputs[0], depth + 1)
             return op(p.astype(np.float64))[0].astype(np.float32), reduce
         if node.bl_idname == "ShaderNodeTexCoord":
-            raise Unsupported(f"a procedural texture's Vector from '{node.name}''s {output.name}, which wenv does not "
+            raise Unsupported(f"a texture's Vector from '{node.name}''s {output.name}, which wenv does not "
                               "evaluate yet")
         if self._points is None and not self.checking:  # (a chain's mean is not its texture's at a mean)
             raise NeedsMesh(f"'{node.name}' into a procedural texture's Vector, which has no mean without a mesh")
@@ -779,6 +817,10 @@ class NeedsMesh(Unsupported):
     read without one (one_point's means)."""
 
 
+class _NotUV(Unsupported):
+    """An Image Texture's Vector that is not a UV map (its coordinates are read as points)."""
+
+
 class MissingUV(Unsupported):
     """The mesh has no UV map of that name (None: no render UV map)."""
 
@@ -806,6 +848,43 @@ def object_random(name):
         h = (h * 37 + byte) & 0xFFFFFFFF
     start = (0xDEADBEEF + (2 << 2) + 13) & 0xFFFFFFFF
     return float(np.float32(_mix((start + h) & 0xFFFFFFFF, start, start)) * np.float32(1.0 / 0xFFFFFFFF))
+
+
+def _box_weights(n, blend):
+    """Cycles' svm_node_tex_image_box's weights (n, 3) of the x, y and z planes for object-space
+    normals n (n, 3) and the node's Blend, in float32 as Cycles computes them."""
+    f32 = np.float32
+    a = np.abs(n.astype(f32))
+    a = a / (a[:, 0] + a[:, 1] + a[:, 2])[:, None]
+    x, y, z = a[:, 0], a[:, 1], a[:, 2]
+    limit = f32(0.5) * (f32(1.0) + blend)
+    w = np.zeros_like(a)
+    left = np.ones(len(a), bool)
+
+    def take(cond, values):
+        nonlocal left
+        cond = cond & left
+        for k, v in enumerate(values):
+            if v is not None:
+                w[cond, k] = (v if np.ndim(v) == 0 else v[cond])
+        left = left & ~cond
+    take((x > limit * (x + y)) & (x > limit * (x + z)), (f32(1.0), None, None))
+    take((y > limit * (x + y)) & (y > limit * (y + z)), (None, f32(1.0), None))
+    take((z > limit * (x + z)) & (z > limit * (y + z)), (None, None, f32(1.0)))
+    if blend > 0.0:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            def ramp(share):
+                return np.clip((share - f32(0.5) * (f32(1.0) - blend)) / blend, f32(0.0), f32(1.0))
+            xy, yz, xz = ramp(x / (x + y)), ramp(y / (y + z)), ramp(x / (x + z))
+            take(z < (f32(1.0) - limit) * (y + x), (xy, f32(1.0) - xy, None))
+            take(x < (f32(1.0) - limit) * (y + z), (None, yz, f32(1.0) - yz))
+            take(y < (f32(1.0) - limit) * (x + z), (xz, None, f32(1.0) - xz))
+            three = [((f32(2.0) - limit) * c + (limit - f32(1.0))) / (f32(2.0) * limit - f32(1.0))
+                     for c in (x, y, z)]
+            take(np.ones(len(a), bool), three)
+    else:
+        take(np.ones(len(a), bool), (f32(1.0), None, None))  # Cycles' fallback to one side
+    return w
 
 
 def _euler_xyz(r):

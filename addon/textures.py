@@ -548,7 +548,8 @@ def read_inputs(obj, depsgraph, data, progress=None):
                                                                    pyramids(tex), Source(tex, None),
                                                                    (uv, footprint, rows), data.count),
                 points=row_points(obj, mesh, data.positions, data.normals), progress=progress,
-                attribute=attribute_reader(mesh, corner_vert, data.domain, data.sites, notes), owner=(obj, mat))
+                attribute=attribute_reader(mesh, corner_vert, data.domain, data.sites, notes), owner=(obj, mat),
+                footprint=coordinate_footprint(mesh, corner_vert, data.domain, data.sites))
             try:
                 values = ev.colour(sock) if keyword in COLOUR_KEYWORDS else ev.value(sock)
             except nodes.MissingUV as exc:
@@ -824,12 +825,16 @@ def row_points(obj, mesh, positions, normals):
     """An Evaluator's points(space, other) for rows at world `positions` ((n, 3)) with world
     `normals`: their coordinates in `other`'s object space ('OBJECT'; obj's own without one) or in
     the mesh's texture space ('GENERATED', as Cycles maps it: the texture space's box onto the unit
-    cube), the positions themselves ('WORLD') or the unit normals ('NORMAL')."""
+    cube), the positions themselves ('WORLD') or the unit normals ('NORMAL', or in object space:
+    'OBJECT_NORMAL')."""
     def points(space, other=None):
         if space == "WORLD":
             return np.ascontiguousarray(positions, np.float32)
         if space == "NORMAL":
             return _unit_rows(np.asarray(normals, np.float64)).astype(np.float32)
+        if space == "OBJECT_NORMAL":  # (a normal back into object space: times the object's matrix)
+            m = np.array(obj.matrix_world, np.float64)
+            return _unit_rows(np.asarray(normals, np.float64) @ m[:3, :3]).astype(np.float32)
         inverse = np.array((other or obj).matrix_world.inverted_safe(), np.float64)
         local = positions.astype(np.float64) @ inverse[:3, :3].T + inverse[:3, 3]
         if space == "GENERATED":
@@ -1054,6 +1059,42 @@ def _note(notes, note):
         notes.append(note)
 
 
+def coordinate_footprint(mesh, corner_vert, domain, sites=None):
+    """An Evaluator's footprint(coords): each row's side in 2D coordinates given at its rows (an
+    Image Texture read through Generated or Object coordinates), as uv_rows measures a UV map's: the
+    area of the coordinates' triangles about each vertex over three; at a bake's texels (`sites`),
+    from the coordinates of the next texels along the image's rows and columns (the smaller of the
+    steps either way, so that a step across an island's edge is not read)."""
+    if sites is not None:
+        def at_texels(co):
+            where = np.full(sites.width * sites.height, -1, np.int64)
+            where[sites.texels] = np.arange(sites.count)
+            steps = []
+            for step, edge in ((1, sites.texels % sites.width), (sites.width, sites.texels // sites.width)):
+                last = sites.width - 1 if step == 1 else sites.height - 1
+                ahead = np.where(edge < last, where[np.minimum(sites.texels + step, len(where) - 1)], -1)
+                behind = np.where(edge > 0, where[np.maximum(sites.texels - step, 0)], -1)
+                d_ahead = np.where((ahead >= 0)[:, None], co[np.maximum(ahead, 0)] - co, np.inf)
+                d_behind = np.where((behind >= 0)[:, None], co - co[np.maximum(behind, 0)], np.inf)
+                pick = np.linalg.norm(d_ahead, axis=1) <= np.linalg.norm(d_behind, axis=1)
+                steps.append(np.where(pick[:, None], d_ahead, d_behind))
+            (du, dv) = steps
+            area = np.abs(du[:, 0] * dv[:, 1] - du[:, 1] * dv[:, 0])
+            return np.where(np.isfinite(area), np.sqrt(np.where(np.isfinite(area), area, 0.0)), 0.0).astype(np.float32)
+        return at_texels
+    loops = triangle_corners(mesh)
+    n = len(mesh.vertices)
+
+    def at_rows(co):
+        uv = co[corner_vert] if domain == "POINT" else co
+        a, b, c = uv[loops[:, 0]], uv[loops[:, 1]], uv[loops[:, 2]]
+        area = 0.5 * np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1]))
+        share = np.bincount(corner_vert[loops].ravel(), weights=np.repeat(area / 3.0, 3), minlength=n)
+        side = np.sqrt(share).astype(np.float32)
+        return side if domain == "POINT" else side[corner_vert]
+    return at_rows
+
+
 def _height_reader(obj, s, mesh, corner_vert, where, count, progress=None, notes=None):
     """An Evaluator of a Bump node's Height at `where`'s points: the face corners (where None) or
     a bake's texel sites."""
@@ -1075,7 +1116,8 @@ def _height_reader(obj, s, mesh, corner_vert, where, count, progress=None, notes
                                                                            (uv, footprint, rows_), count),
                            points=points, progress=progress,
                            attribute=attribute_reader(mesh, corner_vert, "CORNER", where, notes),
-                           owner=(obj, obj.material_slots[s].material))
+                           owner=(obj, obj.material_slots[s].material),
+                           footprint=coordinate_footprint(mesh, corner_vert, "CORNER", where))
 
 
 def _bump_gradients(obj, s, mat, chain, mesh, corner_vert, m, sites, notes, progress=None):
@@ -1201,7 +1243,8 @@ def read_term_weights(obj, depsgraph, data, progress=None):
                                                                          data.count),
                 points=row_points(obj, mesh, data.positions, data.normals), progress=progress,
                 attribute=attribute_reader(mesh, corner_vert, data.domain, data.sites, notes),
-                owner=(obj, mat)) if reads else None
+                owner=(obj, mat),
+                footprint=coordinate_footprint(mesh, corner_vert, data.domain, data.sites)) if reads else None
             weight, fac = colour, np.ones((data.count, 1), np.float32)
             if term.factors:
                 try:
