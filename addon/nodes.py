@@ -159,10 +159,8 @@ class Evaluator:
             raise Unsupported(f"'{node.name}', which has no image")
         if image.source not in IMAGE_SOURCES:
             raise Unsupported(f"'{node.name}', whose {image.source.lower()} image wenv does not read yet")
-        if node.projection not in ("FLAT", "BOX"):
-            raise Unsupported(f"'{node.name}', whose {node.projection.lower()} projection wenv does not read yet")
         try:
-            if node.projection == "BOX":
+            if node.projection != "FLAT":
                 raise _NotUV()
             uv, footprint, rows = self.vector(node.inputs["Vector"], depth)
             samples = [(None, uv, footprint, rows)]
@@ -196,6 +194,8 @@ class Evaluator:
             return uv, (self._footprint(uv) if self._footprint else np.zeros(self.count, np.float32)), rows
         if node.projection == "FLAT":
             return [(None,) + plane(p[:, 0], p[:, 1])]
+        if node.projection in ("SPHERE", "TUBE"):
+            return [(None,) + plane(*_wrapped(p, node.projection))]
         signed = self._coordinates("OBJECT_NORMAL", node=node)[0]
         weight = _box_weights(signed, np.float32(node.projection_blend))
         x, y, z = p[:, 0], p[:, 1], p[:, 2]
@@ -527,6 +527,36 @@ class Evaluator:
         p, reduce = points()
         return reduce(p)
 
+    def _ShaderNodeMapRange(self, node, output, depth):
+        vector = node.data_type == "FLOAT_VECTOR"
+        names = (("Vector", "From_Min_FLOAT3", "From_Max_FLOAT3", "To_Min_FLOAT3", "To_Max_FLOAT3", "Steps_FLOAT3")
+                 if vector else ("Value", "From Min", "From Max", "To Min", "To Max", "Steps"))
+        read = self.colour if vector else self.value
+        x, lo, hi, to_lo, to_hi, steps = (read(_input(node, k), depth).astype(np.float32) for k in names)
+        f32 = np.float32
+        with np.errstate(divide="ignore", invalid="ignore"):
+            if node.interpolation_type in ("LINEAR", "STEPPED"):
+                factor = np.where(hi != lo, (x - lo) / np.where(hi != lo, hi - lo, f32(1.0)), f32(0.0))
+                if node.interpolation_type == "STEPPED":
+                    factor = np.where((hi != lo) & (steps > 0.0), np.floor(factor * (steps + f32(1.0))) /
+                                      np.where(steps > 0.0, steps, f32(1.0)), f32(0.0))
+            else:
+                step = _smoothstep if node.interpolation_type == "SMOOTHSTEP" else _smootherstep
+                factor = np.where(lo > hi, f32(1.0) - step(hi, lo, x), step(lo, hi, x))
+        out = (to_lo + factor * (to_hi - to_lo)).astype(f32)
+        if node.clamp and node.interpolation_type in ("LINEAR", "STEPPED"):
+            out = np.clip(out, np.minimum(to_lo, to_hi), np.maximum(to_lo, to_hi))
+        return out
+
+    def _ShaderNodeClamp(self, node, output, depth):
+        x, a, b = (self.value(node.inputs[k], depth) for k in ("Value", "Min", "Max"))
+        if node.clamp_type == "RANGE":
+            return np.clip(x, np.minimum(a, b), np.maximum(a, b)).astype(np.float32)
+        return np.minimum(np.maximum(x, a), b).astype(np.float32)
+
+    def _ShaderNodeRGBToBW(self, node, output, depth):
+        return luminance(self.colour(node.inputs["Color"], depth))
+
     def _ShaderNodeSeparateXYZ(self, node, output, depth):
         return self.colour(node.inputs["Vector"], depth)[:, "XYZ".index(output.identifier)].copy()
 
@@ -848,6 +878,38 @@ def object_random(name):
         h = (h * 37 + byte) & 0xFFFFFFFF
     start = (0xDEADBEEF + (2 << 2) + 13) & 0xFFFFFFFF
     return float(np.float32(_mix((start + h) & 0xFFFFFFFF, start, start)) * np.float32(1.0 / 0xFFFFFFFF))
+
+
+def _smoothstep(lo, hi, x):
+    """Cycles' smoothstep (0 below lo, 1 from hi on)."""
+    t = (x - lo) / np.where(hi != lo, hi - lo, np.float32(1.0))
+    return np.where(x < lo, 0.0, np.where(x >= hi, 1.0, (np.float32(3.0) - np.float32(2.0) * t) * (t * t)))
+
+
+def _smootherstep(lo, hi, x):
+    """Cycles' smootherstep."""
+    t = np.clip(np.where(hi != lo, (x - lo) / np.where(hi != lo, hi - lo, np.float32(1.0)), 0.0), 0.0, 1.0)
+    return t * t * t * (t * (t * np.float32(6.0) - np.float32(15.0)) + np.float32(10.0))
+
+
+def _wrapped(co, projection):
+    """Cycles' map_to_sphere or map_to_tube of coordinates co (n, 3) remapped from the unit box to
+    [-1, 1]: (u, v)."""
+    f32 = np.float32
+    c = ((co.astype(f32) - f32(0.5)) * f32(2.0)).astype(f32)
+    x, y, z = c[:, 0], c[:, 1], c[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        if projection == "TUBE":
+            length = np.sqrt(x * x + y * y)
+            ok = length > 0.0
+            u = (f32(1.0) - np.arctan2(x / length, y / length) / f32(math.pi)) * f32(0.5)
+            v = (z + f32(1.0)) * f32(0.5)
+            return np.where(ok, u, f32(0.0)), np.where(ok, v, f32(0.0))
+        square = x * x + y * y + z * z
+        ok = square > 0.0
+        u = np.where((x == 0.0) & (y == 0.0), f32(0.0), f32(0.5) - np.arctan2(x, y) * f32(0.5 / math.pi))
+        v = f32(1.0) - np.arccos(np.clip(z / np.sqrt(square), -1.0, 1.0)) * f32(1.0 / math.pi)
+        return np.where(ok, u, f32(0.0)).astype(f32), np.where(ok, v, f32(0.0)).astype(f32)
 
 
 def _box_weights(n, blend):

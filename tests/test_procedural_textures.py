@@ -346,6 +346,50 @@ def test_math_operations_read_as_cycles_renders_them(plane, operation, b, c):
     assert off.sum() <= 3, (off.sum(), np.abs(cycles - ours).max())
 
 
+def _value_of_points(settings, into="Value", **inputs):
+    """configure() of a node of `settings` and inputs whose `into` input is the pixel's mapped point
+    (a vector read as a value: its average)."""
+    def configure(node, mapping):
+        _set(node, **settings)
+        _set(node, **inputs)
+        _set(mapping, Scale=(0.6, 0.5, 0.4), Location=(0.1, 0.0, 0.0))
+        if into is not None:
+            node.id_data.links.new(mapping.outputs["Vector"], next(s for s in node.inputs if s.identifier == into))
+    return configure
+
+
+RANGE = {"From Min": -0.3, "From Max": 0.4, "To Min": 0.2, "To Max": 1.3}
+RANGE3 = {"From_Min_FLOAT3": (-0.3, -0.5, 0.0), "From_Max_FLOAT3": (0.4, 0.6, 1.0), "To_Min_FLOAT3": (0.2, 0.0, 1.0),
+          "To_Max_FLOAT3": (1.3, 1.0, -1.0)}
+VALUE_NODES = [
+    ("ShaderNodeMapRange", "Result", _value_of_points(dict(interpolation_type="LINEAR", clamp=True), **RANGE)),
+    ("ShaderNodeMapRange", "Result", _value_of_points(dict(interpolation_type="LINEAR", clamp=False), **RANGE)),
+    ("ShaderNodeMapRange", "Result", _value_of_points(dict(interpolation_type="STEPPED"), Steps=4.0, **RANGE)),
+    ("ShaderNodeMapRange", "Result", _value_of_points(dict(interpolation_type="SMOOTHSTEP"), **RANGE)),
+    ("ShaderNodeMapRange", "Result", _value_of_points(dict(interpolation_type="SMOOTHERSTEP"),
+                                                      **{**RANGE, "From Min": 0.4, "From Max": -0.3})),
+    ("ShaderNodeMapRange", "Vector", _value_of_points(dict(data_type="FLOAT_VECTOR", interpolation_type="LINEAR",
+                                                           clamp=True), into=None, **RANGE3)),
+    ("ShaderNodeMapRange", "Vector", _value_of_points(dict(data_type="FLOAT_VECTOR", interpolation_type="SMOOTHSTEP"),
+                                                      into=None, **RANGE3)),
+    ("ShaderNodeClamp", "Result", _value_of_points(dict(clamp_type="MINMAX"), Min=-0.1, Max=0.2)),
+    ("ShaderNodeClamp", "Result", _value_of_points(dict(clamp_type="RANGE"), Min=0.2, Max=-0.1)),
+    ("ShaderNodeRGBToBW", "Val", _value_of_points({}, into="Color")),
+]
+
+
+@pytest.mark.parametrize("kind, output, configure", VALUE_NODES,
+                         ids=[f"{k[10:]}-{i}" for i, (k, _, _) in enumerate(VALUE_NODES)])
+def test_value_nodes_read_as_cycles_renders_them(plane, kind, output, configure):
+    """Map Range (each interpolation, clamped or not, of values and vectors), Clamp and RGB to BW of
+    the pixels' points: within 1e-4 of Cycles' pixels, a step's pixels aside."""
+    _, _, _, render_node = plane
+    cycles, ours = render_node(kind, output, configure)
+    assert ours.shape == cycles.shape and ours.std() > 0.02
+    off = np.abs(cycles - ours).max(axis=1) > 1e-4
+    assert off.sum() <= 3, (off.sum(), np.abs(cycles - ours).max())
+
+
 @pytest.mark.parametrize("kwargs, error, words", [
     (dict(type="CELLS"), ValueError, "type must be"),
     (dict(dimensions=5), ValueError, "dimensions must be 1, 2, 3 or 4"),
