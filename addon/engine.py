@@ -528,6 +528,12 @@ def white_noise_texture(points, w=0.0, **settings):
     return wenv.white_noise_texture(np.ascontiguousarray(points, np.float32), w, **settings)
 
 
+def gabor_texture(points, **settings):
+    """(value, phase, intensity) of Blender's Gabor Texture at `points` ((n, 3) float32), as Cycles
+    evaluates it."""
+    return wenv.gabor_texture(np.ascontiguousarray(points, np.float32), **settings)
+
+
 def corner_values_at(values, corners, weights):
     """wenv.corner_values_at: values per face corner (m, k) at points of corners and weights (n, 3),
     (n, k) float32."""

@@ -252,6 +252,24 @@ class Evaluator:
             return colour
         return ((colour[:, 0] + colour[:, 1]) + colour[:, 2]) * np.float32(1.0 / 3.0)  # Cycles' average()
 
+    def _ShaderNodeTexGabor(self, node, output, depth):
+        _identity_mapping(node)
+        kw = {}
+        for key, name in (("scale", "Scale"), ("frequency", "Frequency"), ("anisotropy", "Anisotropy"),
+                          ("orientation_2d", "Orientation 2D"), ("orientation_3d", "Orientation 3D")):
+            socket = _input(node, name)
+            if not socket.enabled:
+                continue
+            if socket.is_linked:
+                raise Unsupported(f"'{node.name}''s {socket.name}, linked")
+            value = socket.default_value
+            kw[key] = float(value) if isinstance(value, float) else tuple(float(c) for c in value)
+        points, reduce = self.points(_input(node, "Vector"), depth)
+        if self.checking:
+            return np.zeros(self.count, np.float32)
+        got = engine.gabor_texture(points, dimensions=int(node.gabor_type[0]), progress=self.progress, **kw)
+        return reduce(got[("Value", "Phase", "Intensity").index(output.identifier)])
+
     def _ShaderNodeTexWave(self, node, output, depth):
         kw = _procedural_inputs(node, output, WAVE_INPUTS)
         points, reduce = self.points(_input(node, "Vector"), depth)

@@ -1,5 +1,5 @@
-"""The procedural textures' cost: wenv.noise_texture, wenv.voronoi_texture and wenv.wave_texture at
-a million random points (what a bake of a million texels reads), 2 threads, the median of --repeat
+"""The procedural textures' cost: wenv.noise_texture, wenv.voronoi_texture, wenv.wave_texture,
+wenv.white_noise_texture and wenv.gabor_texture at a million random points (what a bake of a million texels reads), 2 threads, the median of --repeat
 calls each, at the node's defaults and at the heavier settings users pick (more detail, distortion,
 Smooth F1, colour).  Prints a table and writes out/bench_textures.json.  Timing is not part of the
 test suite.
@@ -31,6 +31,9 @@ CASES = [
     ("Wave, bands (defaults)", wenv.wave_texture, dict()),
     ("Wave, rings, distortion 2, detail 4", wenv.wave_texture, dict(wave_type="RINGS", direction="SPHERICAL",
                                                                    distortion=2.0, detail=4.0)),
+    ("White Noise, Color", wenv.white_noise_texture, dict()),
+    ("Gabor, 2D (defaults)", wenv.gabor_texture, dict()),
+    ("Gabor, 3D", wenv.gabor_texture, dict(dimensions=3)),
 ]
 
 

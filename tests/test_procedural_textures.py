@@ -187,6 +187,12 @@ NODE_CASES = [
     ("ShaderNodeTexMagic", "Color", lambda n, m: _set(n, turbulence_depth=10, Scale=0.5, Distortion=1.2)),
     ("ShaderNodeTexMagic", "Fac", lambda n, m: _set(n, turbulence_depth=6, Scale=0.7, Distortion=1.5)),
     ("ShaderNodeTexMagic", "Color", lambda n, m: _set(n, turbulence_depth=0, Distortion=0.0)),
+] + [
+    ("ShaderNodeTexGabor", "Value", lambda n, m: None),
+    ("ShaderNodeTexGabor", "Phase", lambda n, m: _set(n, Anisotropy=0.3, Frequency=3.0, Scale=2.0)),
+    ("ShaderNodeTexGabor", "Intensity", lambda n, m: _set(n, gabor_type="3D", Anisotropy=0.5, Scale=3.0,
+                                                         **{"Orientation 3D": (0.2, 0.5, 0.8)})),
+    ("ShaderNodeTexGabor", "Value", lambda n, m: _set(n, gabor_type="3D", Frequency=1.5, Scale=4.0)),
 ] + [("ShaderNodeTexGradient", "Fac", lambda n, m, g=g: (_set(n, gradient_type=g),
                                                           _set(m, Scale=(0.4, 0.4, 0.4), Rotation=(0.0, 0.0, 0.0))))
      for g in ("LINEAR", "QUADRATIC", "EASING", "DIAGONAL", "SPHERICAL", "QUADRATIC_SPHERE", "RADIAL")]
@@ -451,6 +457,26 @@ def test_white_noise_input_and_cancel():
     assert np.array_equal(value, each) and np.array_equal(colour[:, 0], value)
     assert 0.0 <= colour.min() and colour.max() <= 1.0 and abs(colour.mean() - 0.5) < 0.02
     assert not np.array_equal(wenv.white_noise_texture(points, 0.5, dimensions=4)[0], value)
+
+
+def test_bad_gabor_input_is_named():
+    """The Gabor Texture's core: each bad setting named, three outputs consistent with each other,
+    and a cancel."""
+    points = np.random.default_rng(8).random((500, 3)).astype(np.float32)
+    with pytest.raises(ValueError, match="dimensions must be 2 or 3"):
+        wenv.gabor_texture(points, dimensions=4)
+    with pytest.raises(ValueError, match="frequency must be finite"):
+        wenv.gabor_texture(points, frequency=float("inf"))
+    with pytest.raises(ValueError, match="orientation_3d must not be zero"):
+        wenv.gabor_texture(points, dimensions=3, orientation_3d=(0.0, 0.0, 0.0))
+    with pytest.raises(TypeError):
+        wenv.gabor_texture(points, orientation_3d=(1.0, 2.0))
+    with pytest.raises(wenv.CancelledError):
+        wenv.gabor_texture(np.zeros((20000, 3), np.float32), progress=lambda f: True)
+    value, phase, intensity = wenv.gabor_texture(points, anisotropy=0.4)
+    assert 0.0 <= phase.min() and phase.max() <= 1.0 and (intensity >= 0.0).all()
+    # the value is the phasor's sine part: within the intensity of one half either way
+    assert (np.abs(value - 0.5) <= 0.5 * intensity + 1e-6).all() and value.std() > 0.02
 
 
 def test_bad_voronoi_input_is_named():

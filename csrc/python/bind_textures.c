@@ -1,9 +1,10 @@
-/* wenv.noise_texture, wenv.wave_texture, wenv.voronoi_texture and wenv.white_noise_texture: Blender's
- * procedural texture nodes at points (scene/noise_texture.h, scene/wave_texture.h,
- * scene/voronoi_texture.h, scene/white_noise_texture.h). */
+/* wenv.noise_texture, wenv.wave_texture, wenv.voronoi_texture, wenv.white_noise_texture and
+ * wenv.gabor_texture: Blender's procedural texture nodes at points (scene/noise_texture.h,
+ * scene/wave_texture.h, scene/voronoi_texture.h, scene/white_noise_texture.h, scene/gabor_texture.h). */
 #include <string.h>
 
 #include "python/module.h"
+#include "scene/gabor_texture.h"
 #include "scene/noise_texture.h"
 #include "scene/voronoi_texture.h"
 #include "scene/wave_texture.h"
@@ -247,6 +248,57 @@ static PyObject *white_noise_texture(PyObject *self, PyObject *args, PyObject *k
     return run_texture(white_noise_adapter, &dimensions, v_obj, w_obj, want_colour, progress_obj);
 }
 
+/* gabor_texture(vectors, *, dimensions=2, scale=5, frequency=2, anisotropy=1, orientation_2d=pi/4,
+ * orientation_3d=(1.4142, 1.4142, 0), progress=None) -> (value, phase, intensity), each (n,) */
+static PyObject *gabor_texture(PyObject *self, PyObject *args, PyObject *kwargs)
+{
+    (void)self;
+    static char *kwlist[] = {"vectors", "dimensions", "scale", "frequency", "anisotropy", "orientation_2d",
+                             "orientation_3d", "progress", NULL};
+    PyObject *v_obj, *progress_obj = Py_None;
+    int dimensions = 2;
+    double scale = 5.0, frequency = 2.0, anisotropy = 1.0, orientation_2d = 0.78539816339744831;
+    double o3[3] = {1.41421356237309505, 1.41421356237309505, 0.0};
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "O|$idddd(ddd)O:gabor_texture", kwlist, &v_obj, &dimensions, &scale,
+                                     &frequency, &anisotropy, &orientation_2d, &o3[0], &o3[1], &o3[2], &progress_obj))
+        return NULL;
+    if (progress_obj != Py_None && !PyCallable_Check(progress_obj)) {
+        PyErr_SetString(PyExc_TypeError, "progress must be callable or None");
+        return NULL;
+    }
+    wenv_gabor_settings s = {.dimensions = dimensions, .scale = (float)scale, .frequency = (float)frequency,
+                             .anisotropy = (float)anisotropy, .orientation_2d = (float)orientation_2d,
+                             .orientation_3d = {(float)o3[0], (float)o3[1], (float)o3[2]}};
+    Py_buffer vb;
+    PyObject *v_held, *out[3] = {NULL, NULL, NULL};
+    if (get_vectors(v_obj, &vb, &v_held) < 0)
+        return NULL;
+    Py_ssize_t n = vb.shape[0];
+    float *arrays[3];
+    for (int k = 0; k < 3; k++)
+        if (!(out[k] = wenv_py_new_float_array(1, &n, &arrays[k])))
+            goto fail;
+    wenv_py_progress_bridge bridge = {.callback = progress_obj};
+    wenv_progress progress = wenv_py_progress(&bridge);
+    wenv_error err = {0};
+    wenv_status st;
+    WENV_BEGIN_WORK
+    st = wenv_gabor_texture(&s, vb.buf, (size_t)n, arrays[0], arrays[1], arrays[2], &progress, &err);
+    WENV_END_WORK
+    if (st) {
+        if (!(bridge.raised && PyErr_Occurred()))
+            wenv_py_raise(&err);
+        goto fail;
+    }
+    wenv_py_release_array(&vb, &v_held);
+    return Py_BuildValue("(NNN)", out[0], out[1], out[2]);
+fail:
+    for (int k = 0; k < 3; k++)
+        Py_XDECREF(out[k]);
+    wenv_py_release_array(&vb, &v_held);
+    return NULL;
+}
+
 static PyMethodDef texture_functions[] = {
     {"noise_texture", (PyCFunction)(void (*)(void))noise_texture, METH_VARARGS | METH_KEYWORDS,
      "noise_texture(vectors, w=0, *, dimensions=3, type='FBM', normalize=True, scale=5, detail=2, roughness=0.5, "
@@ -281,6 +333,14 @@ static PyMethodDef texture_functions[] = {
      "Blender's White Noise Texture node at points, as Cycles evaluates it: `vectors` (n, 3) float32 is its "
      "Vector input, `w` its W (a number or (n,) float32; read in 1D and 4D).  Returns (value (n,), color (n, 3) "
      "or None with color=False) float32, the bits of each point's coordinates hashed into [0, 1].  "
+     "progress(fraction) may cancel (wenv.CancelledError).",
+    },
+    {"gabor_texture", (PyCFunction)(void (*)(void))gabor_texture, METH_VARARGS | METH_KEYWORDS,
+     "gabor_texture(vectors, *, dimensions=2, scale=5, frequency=2, anisotropy=1, orientation_2d=pi/4, "
+     "orientation_3d=(1.4142, 1.4142, 0), progress=None)\n--\n\n"
+     "Blender's Gabor Texture node at points, as Cycles evaluates it: `vectors` (n, 3) float32 is its Vector "
+     "input, dimensions its type (2 or 3), the rest its inputs (orientation_2d in radians, orientation_3d a "
+     "direction).  Returns (value, phase, intensity), each (n,) float32: the node's three outputs.  "
      "progress(fraction) may cancel (wenv.CancelledError).",
     },
     {NULL, NULL, 0, NULL},
