@@ -925,20 +925,24 @@ def welded_vertices(co):
 def pointiness(mesh):
     """The Geometry node's Pointiness at each vertex, as Cycles' attr_create_pointiness makes it:
     the angle between the (welded) vertex normal and the mean direction of its edges, over pi, then
-    averaged with its neighbours' once.  Kept while the mesh's positions and edges are the same."""
+    averaged with its neighbours' once.  Kept while the mesh's positions, edges and normals are the
+    same."""
     nv = len(mesh.vertices)
     co = np.empty(nv * 3, np.float32)
     mesh.vertices.foreach_get("co", co)
     co = co.reshape(nv, 3)
     ends = np.empty(len(mesh.edges) * 2, np.int32)
     mesh.edges.foreach_get("vertices", ends)
-    key = engine.fingerprint(co, ends)
-    if _pointiness_kept.get(mesh.name, (None,))[0] == key:
-        return _pointiness_kept[mesh.name][1]
     normals = np.empty(nv * 3, np.float32)
     mesh.vertex_normals.foreach_get("vector", normals)
-    root = welded_vertices(co)
     normals = normals.reshape(nv, 3)
+    return _kept(_pointiness_kept, mesh.name, engine.fingerprint(co, ends, normals),
+                 lambda: _pointiness(co, ends, normals))
+
+
+def _pointiness(co, ends, normals):
+    nv = len(co)
+    root = welded_vertices(co)
     n = np.stack([np.bincount(root, normals[:, c], nv) for c in range(3)], axis=1)
     n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
     edges = np.sort(root[ends.reshape(-1, 2)], axis=1)
@@ -954,14 +958,22 @@ def pointiness(mesh):
     raw = np.where(count > 0, np.arccos(np.clip(cosine, -1.0, 1.0)) / np.pi, 0.0)
     raw[root != np.arange(nv)] = 0.0  # (a welded duplicate takes its representative's, below)
     blurred = (raw + np.bincount(v0, raw[v1], nv) + np.bincount(v1, raw[v0], nv)) / (count + 1.0)
-    out = blurred[root].astype(np.float32)
-    if len(_pointiness_kept) > 16:
-        _pointiness_kept.clear()
-    _pointiness_kept[mesh.name] = (key, out)
-    return out
+    return blurred[root].astype(np.float32)
 
 
-_pointiness_kept = {}
+# mesh name -> (what its value was made of, the value): Pointiness and Random Per Island, made again
+# only when what they are made of changes
+_pointiness_kept, _islands_kept = {}, {}
+
+
+def _kept(store, name, key, make):
+    """make()'s value for the mesh `name`, kept in `store` while `key` is the same (16 meshes at most)."""
+    held = store.get(name)
+    if held is None or held[0] != key:
+        if len(store) > 16:
+            store.clear()
+        held = store[name] = (key, make())
+    return held[1]
 
 
 def island_random(mesh):
@@ -972,9 +984,10 @@ def island_random(mesh):
     ends = np.empty(len(mesh.edges) * 2, np.int32)
     mesh.edges.foreach_get("vertices", ends)
     nv = len(mesh.vertices)
-    key = engine.fingerprint(ends, np.int64([nv]))
-    if _islands_kept.get(mesh.name, (None,))[0] == key:
-        return _islands_kept[mesh.name][1]
+    return _kept(_islands_kept, mesh.name, engine.fingerprint(ends, np.int64([nv])), lambda: _island_random(ends, nv))
+
+
+def _island_random(ends, nv):
     parents, ranks = list(range(nv)), [0] * nv
 
     def find(x):
@@ -994,14 +1007,7 @@ def island_random(mesh):
         if ranks[ra] == ranks[rb]:
             ranks[ra] += 1
     roots = np.array([find(v) for v in range(nv)], np.int64)
-    out = _hash_uint(roots).astype(np.float32) * np.float32(2.0 ** -32)  # (Cycles' uint_to_float_incl)
-    if len(_islands_kept) > 16:
-        _islands_kept.clear()
-    _islands_kept[mesh.name] = (key, out)
-    return out
-
-
-_islands_kept = {}
+    return _hash_uint(roots).astype(np.float32) * np.float32(2.0 ** -32)  # (Cycles' uint_to_float_incl)
 
 
 def _hash_uint(k):

@@ -5,32 +5,20 @@ node, one sample a pixel at the pixel's centre.  The add-on reads the node at ea
 bake reads it at a texel's (addon/textures.py attribute_reader and row_points): points, corners,
 faces and edges, each data type Cycles reads, an attribute the mesh lacks, and each output of Object
 Info."""
-import tempfile
-
 import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy")
 
 from addon import bake, meshes, nodes, textures  # noqa: E402
+from tests.helpers.cycles_pixels import pixel_scene  # noqa: E402
 
 N = 40
 
 
 @pytest.fixture(scope="module")
 def grid():
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    sc = bpy.context.scene
-    sc.render.engine = "CYCLES"
-    sc.cycles.device = "CPU"
-    sc.cycles.samples = 1
-    sc.cycles.use_denoising = False
-    sc.cycles.filter_width = 0.01  # the sample at the pixel's centre
-    sc.render.resolution_x = sc.render.resolution_y = N
-    sc.view_settings.view_transform = "Standard"
-    sc.render.image_settings.file_format = "OPEN_EXR"
-    sc.render.image_settings.color_depth = "32"
-    sc.render.filepath = f"{tempfile.mkdtemp(prefix='wenv-attributes-')}/attribute.exr"
+    shot = pixel_scene(bpy, N)
     bpy.ops.mesh.primitive_grid_add(x_subdivisions=6, y_subdivisions=6, size=4.0)
     obj = bpy.context.object
     obj.name = "Crate.004 – ÿ"  # (Random hashes the name's UTF-8 bytes)
@@ -55,11 +43,6 @@ def grid():
     co = np.empty(len(mesh.vertices) * 3, np.float32)
     mesh.vertices.foreach_get("co", co)
     co = co.reshape(-1, 3)
-    cam = bpy.data.objects.new("camera", bpy.data.cameras.new("camera"))
-    sc.collection.objects.link(cam)
-    sc.camera = cam
-    cam.data.type, cam.data.ortho_scale = "ORTHO", 4.0
-    cam.location = (0.0, 0.0, 5.0)
     rng = np.random.default_rng(7)
     sizes = {"POINT": len(mesh.vertices), "CORNER": len(mesh.loops), "FACE": len(mesh.polygons),
              "EDGE": len(mesh.edges)}
@@ -102,10 +85,7 @@ def grid():
         node = tree.nodes.new(kind)
         configure(node)
         tree.links.new(next(o for o in node.outputs if o.identifier == output), emission.inputs["Color"])
-        bpy.ops.render.render(write_still=True)
-        img = bpy.data.images.load(sc.render.filepath)
-        px = np.array(img.pixels[:], np.float32).reshape(N * N, 4)[:, :3]
-        bpy.data.images.remove(img)
+        px = shot()
         notes = []
         ev = nodes.Evaluator(N * N, None, lambda tex, uv, footprint, rows: textures.colours_at_rows(
                                  textures.pyramids(tex), textures.Source(tex, None), uv, footprint, rows, N * N),

@@ -5,8 +5,6 @@ with distortion and without normalisation, and through the plane's Generated coo
 the add-on's reading of the node (addon/nodes.py) for the Noise, Wave, Checker and Gradient Textures,
 through Object coordinates or the plane's UV map.
 Then bad input."""
-import tempfile
-
 import numpy as np
 import pytest
 
@@ -15,6 +13,7 @@ import wenv
 bpy = pytest.importorskip("bpy")
 
 from addon import nodes  # noqa: E402
+from tests.helpers.cycles_pixels import pixel_scene  # noqa: E402
 
 N = 48
 DEFAULTS = dict(scale=5.0, detail=2.0, roughness=0.5, lacunarity=2.0, offset=0.0, gain=1.0, distortion=0.0, w=0.0)
@@ -24,24 +23,9 @@ SOCKETS = dict(scale="Scale", detail="Detail", roughness="Roughness", lacunarity
 
 @pytest.fixture(scope="module")
 def plane():
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    sc = bpy.context.scene
-    sc.render.engine = "CYCLES"
-    sc.cycles.device = "CPU"
-    sc.cycles.samples = 1
-    sc.cycles.use_denoising = False
-    sc.cycles.filter_width = 0.01  # the sample at the pixel's centre
-    sc.render.resolution_x = sc.render.resolution_y = N
-    sc.view_settings.view_transform = "Standard"
-    sc.render.image_settings.file_format = "OPEN_EXR"
-    sc.render.image_settings.color_depth = "32"
+    shot = pixel_scene(bpy, N, at=(0.5, -0.25))
     bpy.ops.mesh.primitive_plane_add(size=4.0, location=(0.5, -0.25, 0.0))
     obj = bpy.context.object
-    cam = bpy.data.objects.new("camera", bpy.data.cameras.new("camera"))
-    sc.collection.objects.link(cam)
-    sc.camera = cam
-    cam.data.type, cam.data.ortho_scale = "ORTHO", 4.0
-    cam.location = (0.5, -0.25, 5.0)
     mat = bpy.data.materials.new("noise")
     if bpy.app.version < (5, 0, 0):
         mat.use_nodes = True
@@ -55,14 +39,6 @@ def plane():
     side = (np.arange(N) + 0.5) / N * 4.0 - 2.0
     x, y = np.meshgrid(side, side)  # the pixels' centres in the plane's object space, row 0 at the bottom
     local = np.stack([x.ravel(), y.ravel(), np.zeros(N * N)], 1)
-    folder = tempfile.mkdtemp(prefix="wenv-noise-")
-
-    def shot():
-        bpy.ops.render.render(write_still=True)
-        img = bpy.data.images.load(sc.render.filepath)
-        px = np.array(img.pixels[:], np.float32).reshape(N * N, 4)[:, :3]
-        bpy.data.images.remove(img)
-        return px
 
     def render_node(kind, output, configure):
         """Cycles' pixels and the add-on's reading of a `kind` node, set up by configure(node,
@@ -100,7 +76,6 @@ def plane():
             socket = next(s for s in noise.inputs if s.identifier == name)
             socket.default_value = settings.get(key, DEFAULTS[key])
         return shot()
-    sc.render.filepath = f"{folder}/texture.exr"
     return obj, local, render, render_node
 
 
