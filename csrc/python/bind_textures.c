@@ -76,6 +76,41 @@ static wenv_status white_noise_adapter(const void *settings, const float *vector
     return wenv_white_noise_texture(*(const int *)settings, vectors, w, w0, n, value, colour, progress, err);
 }
 
+/* Runs work(ctx, progress, err) with the GIL released, `progress_obj` (None or a callable, checked
+ * by the caller) told the fractions; -1 with the Python error set when it fails or is cancelled. */
+static int run_released(wenv_status (*work)(void *ctx, const wenv_progress *p, wenv_error *err), void *ctx,
+                        PyObject *progress_obj)
+{
+    wenv_py_progress_bridge bridge = {.callback = progress_obj};
+    wenv_progress progress = wenv_py_progress(&bridge);
+    wenv_error err = {0};
+    wenv_status st;
+    WENV_BEGIN_WORK
+    st = work(ctx, &progress, &err);
+    WENV_END_WORK
+    if (!st)
+        return 0;
+    if (!(bridge.raised && PyErr_Occurred()))
+        wenv_py_raise(&err);
+    return -1;
+}
+
+/* A texture call of a value and a colour per point, as run_released runs it. */
+typedef struct {
+    texture_call call;
+    const void *settings;
+    const float *vectors, *w;
+    float w0;
+    size_t n;
+    float *value, *colour;
+} texture_work;
+
+static wenv_status run_texture_work(void *ctx, const wenv_progress *p, wenv_error *err)
+{
+    texture_work *t = ctx;
+    return t->call(t->settings, t->vectors, t->w, t->w0, t->n, t->value, t->colour, p, err);
+}
+
 /* (value (n,), colour (n, 3) or None) of `call` at the vectors and W given, the GIL released. */
 static PyObject *run_texture(texture_call call, const void *settings, PyObject *v_obj, PyObject *w_obj,
                              int want_colour, PyObject *progress_obj)
@@ -95,18 +130,10 @@ static PyObject *run_texture(texture_call call, const void *settings, PyObject *
     if (get_w(w_obj, n, &wb, &w_held, &w_array, &w0) < 0 || !(value = wenv_py_new_float_array(1, &n, &value_out)) ||
         (want_colour && !(colour = wenv_py_new_float_array(2, shape, &colour_out))))
         goto fail;
-    wenv_py_progress_bridge bridge = {.callback = progress_obj};
-    wenv_progress progress = wenv_py_progress(&bridge);
-    wenv_error err = {0};
-    wenv_status st;
-    WENV_BEGIN_WORK
-    st = call(settings, vb.buf, w_array ? wb.buf : NULL, (float)w0, (size_t)n, value_out, colour_out, &progress, &err);
-    WENV_END_WORK
-    if (st) {
-        if (!(bridge.raised && PyErr_Occurred()))
-            wenv_py_raise(&err);
+    texture_work work = {call, settings, vb.buf, w_array ? wb.buf : NULL, (float)w0, (size_t)n, value_out,
+                         colour_out};
+    if (run_released(run_texture_work, &work, progress_obj) < 0)
         goto fail;
-    }
     wenv_py_release_array(&vb, &v_held);
     if (w_held)
         wenv_py_release_array(&wb, &w_held);
@@ -145,6 +172,19 @@ static PyObject *noise_texture(PyObject *self, PyObject *args, PyObject *kwargs)
         return NULL;
     s.type = (wenv_noise_type)found;
     return run_texture(noise_adapter, &s, v_obj, w_obj, want_colour, progress_obj);
+}
+
+typedef struct {
+    const wenv_wave_settings *s;
+    const float *vectors;
+    size_t n;
+    float *fac;
+} wave_work;
+
+static wenv_status run_wave_work(void *ctx, const wenv_progress *p, wenv_error *err)
+{
+    wave_work *w = ctx;
+    return wenv_wave_texture(w->s, w->vectors, w->n, w->fac, p, err);
 }
 
 /* wave_texture(vectors, *, wave_type='BANDS', direction='X', profile='SIN', scale=5, distortion=0,
@@ -186,18 +226,11 @@ static PyObject *wave_texture(PyObject *self, PyObject *args, PyObject *kwargs)
         wenv_py_release_array(&vb, &v_held);
         return NULL;
     }
-    wenv_py_progress_bridge bridge = {.callback = progress_obj};
-    wenv_progress progress = wenv_py_progress(&bridge);
-    wenv_error err = {0};
-    wenv_status st;
-    WENV_BEGIN_WORK
-    st = wenv_wave_texture(&s, vb.buf, (size_t)n, out, &progress, &err);
-    WENV_END_WORK
+    wave_work work = {&s, vb.buf, (size_t)n, out};
+    int failed = run_released(run_wave_work, &work, progress_obj) < 0;
     wenv_py_release_array(&vb, &v_held);
-    if (st) {
+    if (failed) {
         Py_DECREF(fac);
-        if (!(bridge.raised && PyErr_Occurred()))
-            wenv_py_raise(&err);
         return NULL;
     }
     return fac;
@@ -248,6 +281,19 @@ static PyObject *white_noise_texture(PyObject *self, PyObject *args, PyObject *k
     return run_texture(white_noise_adapter, &dimensions, v_obj, w_obj, want_colour, progress_obj);
 }
 
+typedef struct {
+    const wenv_gabor_settings *s;
+    const float *vectors;
+    size_t n;
+    float *out[3];
+} gabor_work;
+
+static wenv_status run_gabor_work(void *ctx, const wenv_progress *p, wenv_error *err)
+{
+    gabor_work *g = ctx;
+    return wenv_gabor_texture(g->s, g->vectors, g->n, g->out[0], g->out[1], g->out[2], p, err);
+}
+
 /* gabor_texture(vectors, *, dimensions=2, scale=5, frequency=2, anisotropy=1, orientation_2d=pi/4,
  * orientation_3d=(1.4142, 1.4142, 0), progress=None) -> (value, phase, intensity), each (n,) */
 static PyObject *gabor_texture(PyObject *self, PyObject *args, PyObject *kwargs)
@@ -278,18 +324,9 @@ static PyObject *gabor_texture(PyObject *self, PyObject *args, PyObject *kwargs)
     for (int k = 0; k < 3; k++)
         if (!(out[k] = wenv_py_new_float_array(1, &n, &arrays[k])))
             goto fail;
-    wenv_py_progress_bridge bridge = {.callback = progress_obj};
-    wenv_progress progress = wenv_py_progress(&bridge);
-    wenv_error err = {0};
-    wenv_status st;
-    WENV_BEGIN_WORK
-    st = wenv_gabor_texture(&s, vb.buf, (size_t)n, arrays[0], arrays[1], arrays[2], &progress, &err);
-    WENV_END_WORK
-    if (st) {
-        if (!(bridge.raised && PyErr_Occurred()))
-            wenv_py_raise(&err);
+    gabor_work work = {&s, vb.buf, (size_t)n, {arrays[0], arrays[1], arrays[2]}};
+    if (run_released(run_gabor_work, &work, progress_obj) < 0)
         goto fail;
-    }
     wenv_py_release_array(&vb, &v_held);
     return Py_BuildValue("(NNN)", out[0], out[1], out[2]);
 fail:
