@@ -348,6 +348,7 @@ def bake(scene, depsgraph, obj, image, view, blend_data, uv_map=None, margin=DEF
         raise SetupError(f"No texel of '{image.name}' lies in a face of UV map '{layer.name}' of '{obj.name}'")
     stages.report("reading")
     data = texel_data(obj, depsgraph, mesh, sites, st.shadows)
+    data.view = view
     notes.extend(data.notes)
     for read in (textures.read_inputs, textures.read_term_weights, textures.read_shading_normals):
         notes.extend(read(obj, depsgraph, data, progress=stages.reporter("reading")))  # (procedural textures)

@@ -11,7 +11,7 @@ class MeshData:
 
     __slots__ = ("domain", "positions", "normals", "slots", "count", "notes", "unplaced", "triangles", "inputs",
                  "textured", "shading_normals", "bump_map_correction", "term_weights", "term_inputs", "sites",
-                 "mask_blocks")
+                 "mask_blocks", "view")
 
     def __init__(self, domain, positions, normals, slots, notes=(), unplaced=None, triangles=None, inputs=None):
         self.domain = domain
@@ -42,6 +42,8 @@ class MeshData:
         # (n,) int64: elements of one block (>= 0) share one occlusion mask, -1 its own (a bake's 2 x 2
         # texels: bake.mask_blocks); None: each its own
         self.mask_blocks = None
+        # the views.View the rows are shaded for (what Layer Weight and Fresnel read), or None
+        self.view = None
 
 
 def _read(collection, attr, count, width, dtype=np.float32):

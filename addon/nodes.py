@@ -189,13 +189,13 @@ class Evaluator:
         if self._points is None:  # no mesh: the image's mean
             return [(None, np.zeros((1, 2), np.float32), np.ones(1, np.float32), np.zeros(1, np.int64))]
 
-        def plane(u, v):
+        def plane(u, v, wrap=False):
             uv = np.ascontiguousarray(np.stack([u, v], axis=1), np.float32)
-            return uv, (self._footprint(uv) if self._footprint else np.zeros(self.count, np.float32)), rows
+            return uv, (self._footprint(uv, wrap) if self._footprint else np.zeros(self.count, np.float32)), rows
         if node.projection == "FLAT":
             return [(None,) + plane(p[:, 0], p[:, 1])]
         if node.projection in ("SPHERE", "TUBE"):
-            return [(None,) + plane(*_wrapped(p, node.projection))]
+            return [(None,) + plane(*_wrapped(p, node.projection), wrap=True)]
         signed = self._coordinates("OBJECT_NORMAL", node=node)[0]
         weight = _box_weights(signed, np.float32(node.projection_blend))
         x, y, z = p[:, 0], p[:, 1], p[:, 2]
@@ -392,6 +392,9 @@ class Evaluator:
         return np.full(self.count, value, np.float32)
 
     def _ShaderNodeNewGeometry(self, node, output, depth):
+        if output.identifier in ("Incoming", "Backfacing"):
+            incoming, _normal, back = self._towards_viewer(node)
+            return incoming if output.identifier == "Incoming" else back.astype(np.float32)
         if output.identifier in ("Pointiness", "Random Per Island"):
             got, _kind = self._mesh_attribute(node, POINTINESS if output.identifier == "Pointiness"
                                               else RANDOM_PER_ISLAND, False)
@@ -399,6 +402,46 @@ class Evaluator:
         if output.identifier not in ("Position", "Normal"):
             raise Unsupported(f"'{node.name}''s {output.name} output")
         return self._coordinates("WORLD" if output.identifier == "Position" else "NORMAL", node=node)[0]
+
+    # -- what depends on the view: the direction towards the viewer at each row
+    def _towards_viewer(self, node):
+        """(unit directions towards the viewer (count, 3), unit shading normals facing it, whether the
+        row's face looks away) at the rows, as Cycles' sd->wi, sd->N (flipped on a back face) and
+        SD_BACKFACING are."""
+        if self._points is None:
+            if self.checking:
+                zeros = np.zeros((self.count, 3), np.float32)
+                return zeros, zeros, np.zeros(self.count, bool)
+            raise NeedsMesh(f"'{node.name}', which depends on the view, which has no value without a mesh")
+        incoming = self._points("INCOMING", None)
+        if incoming is None:
+            raise Unsupported(f"'{node.name}', which depends on the view (here read without one)")
+        normal = self._points("NORMAL", None)
+        back = np.einsum("ij,ij->i", incoming, normal) < 0.0
+        return incoming, np.where(back[:, None], -normal, normal), back
+
+    def _facing_normal(self, node, depth, normal):
+        socket = node.inputs["Normal"]
+        return self.colour(socket, depth) if socket.is_linked else normal
+
+    def _ShaderNodeLayerWeight(self, node, output, depth):
+        incoming, normal, back = self._towards_viewer(node)
+        blend = self.value(node.inputs["Blend"], depth)
+        cos = np.einsum("ij,ij->i", incoming, self._facing_normal(node, depth, normal)).astype(np.float32)
+        f32 = np.float32
+        if output.identifier == "Fresnel":
+            eta = np.maximum(f32(1.0) - blend, f32(1e-5))
+            return _fresnel_dielectric_cos(cos, np.where(back, eta, f32(1.0) / eta))
+        f = np.abs(cos)
+        b = np.clip(blend, 0.0, 1.0 - 1e-5).astype(f32)
+        power = np.where(b < 0.5, f32(2.0) * b, f32(0.5) / (f32(1.0) - b))
+        return (f32(1.0) - np.where(blend != 0.5, np.power(f, power), f)).astype(f32)
+
+    def _ShaderNodeFresnel(self, node, output, depth):
+        incoming, normal, back = self._towards_viewer(node)
+        eta = np.maximum(self.value(node.inputs["IOR"], depth), np.float32(1e-5))
+        cos = np.einsum("ij,ij->i", incoming, self._facing_normal(node, depth, normal)).astype(np.float32)
+        return _fresnel_dielectric_cos(cos, np.where(back, np.float32(1.0) / eta, eta))
 
     def _mesh_attribute(self, node, name, colour):
         """(values (count, k) float32, Cycles' type) of the mesh attribute `name` (a Color Attribute
@@ -896,6 +939,20 @@ def object_random(name):
         h = (h * 37 + byte) & 0xFFFFFFFF
     start = (0xDEADBEEF + (2 << 2) + 13) & 0xFFFFFFFF
     return float(np.float32(_mix((start + h) & 0xFFFFFFFF, start, start)) * np.float32(1.0 / 0xFFFFFFFF))
+
+
+def _fresnel_dielectric_cos(cos, eta):
+    """Cycles' fresnel_dielectric_cos: the unpolarised Fresnel reflectance at |cos| for relative
+    index eta, 1 past the critical angle."""
+    f32 = np.float32
+    c = np.abs(cos).astype(f32)
+    g = eta * eta - f32(1.0) + c * c
+    root = np.sqrt(np.maximum(g, f32(0.0)))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a = (root - c) / (root + c)
+        b = (c * (root + c) - f32(1.0)) / (c * (root - c) + f32(1.0))
+        r = f32(0.5) * a * a * (f32(1.0) + b * b)
+    return np.where(g > 0.0, r, f32(1.0)).astype(f32)
 
 
 def _smoothstep(lo, hi, x):

@@ -441,6 +441,7 @@ def plan_shading(scene, depsgraph, objects, view, images, progress=None, preview
     plan.notes = notes
     for obj in mesh_objects:
         data = meshes.read_mesh(obj, depsgraph)
+        data.view = view
         notes.extend(data.notes)
         if data.count == 0:
             notes.append(f"'{obj.name}' has no vertices")
@@ -457,6 +458,7 @@ def plan_shading(scene, depsgraph, objects, view, images, progress=None, preview
             if (obj.type == "MESH" and obj.name not in shaded and obj.wenv.casts_shadows and obj.visible_get()
                     and obj.mode != "EDIT"):
                 data = meshes.read_mesh(obj, depsgraph)
+                data.view = view
                 if not data.count:
                     continue
                 plan.blockers.append((obj.name, data.positions,

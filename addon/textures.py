@@ -547,7 +547,7 @@ def read_inputs(obj, depsgraph, data, progress=None):
                 lambda tex, uv, footprint, rows, s=s: _colours_memo((obj.name, data.domain, s, tex.name),
                                                                    pyramids(tex), Source(tex, None),
                                                                    (uv, footprint, rows), data.count),
-                points=row_points(obj, mesh, data.positions, data.normals), progress=progress,
+                points=row_points(obj, mesh, data.positions, data.normals, data.view), progress=progress,
                 attribute=attribute_reader(mesh, corner_vert, data.domain, data.sites, notes), owner=(obj, mat),
                 footprint=coordinate_footprint(mesh, corner_vert, data.domain, data.sites))
             try:
@@ -821,15 +821,22 @@ def deformed(obj):
         m.type in DEFORMING_MODIFIERS and m.show_render for m in obj.modifiers)
 
 
-def row_points(obj, mesh, positions, normals):
+def row_points(obj, mesh, positions, normals, view=None):
     """An Evaluator's points(space, other) for rows at world `positions` ((n, 3)) with world
     `normals`: their coordinates in `other`'s object space ('OBJECT'; obj's own without one) or in
     the mesh's texture space ('GENERATED', as Cycles maps it: the texture space's box onto the unit
-    cube), the positions themselves ('WORLD') or the unit normals ('NORMAL', or in object space:
-    'OBJECT_NORMAL')."""
+    cube), the positions themselves ('WORLD'), the unit normals ('NORMAL', or in object space:
+    'OBJECT_NORMAL') or the unit directions towards the viewer of `view` ('INCOMING'; None without
+    one)."""
     def points(space, other=None):
         if space == "WORLD":
             return np.ascontiguousarray(positions, np.float32)
+        if space == "INCOMING":
+            if view is None:
+                return None
+            if view.perspective:
+                return _unit_rows(np.array(view.eye, np.float64) - np.asarray(positions, np.float64)).astype(np.float32)
+            return np.tile(np.asarray(view.direction, np.float32), (len(positions), 1))
         if space == "NORMAL":
             return _unit_rows(np.asarray(normals, np.float64)).astype(np.float32)
         if space == "OBJECT_NORMAL":  # (a normal back into object space: times the object's matrix)
@@ -1070,9 +1077,15 @@ def coordinate_footprint(mesh, corner_vert, domain, sites=None):
     Image Texture read through Generated or Object coordinates), as uv_rows measures a UV map's: the
     area of the coordinates' triangles about each vertex over three; at a bake's texels (`sites`),
     from the coordinates of the next texels along the image's rows and columns (the smaller of the
-    steps either way, so that a step across an island's edge is not read)."""
+    steps either way, so that a step across an island's edge is not read).  With wrap, the first
+    coordinate is an angle's turn (a sphere's or tube's u): steps are read the short way round."""
+    def turned(d, wrap):
+        if wrap:
+            d = d.copy()
+            d[:, 0] = (d[:, 0] + 0.5) % 1.0 - 0.5
+        return d
     if sites is not None:
-        def at_texels(co):
+        def at_texels(co, wrap=False):
             where = np.full(sites.width * sites.height, -1, np.int64)
             where[sites.texels] = np.arange(sites.count)
             steps = []
@@ -1080,8 +1093,8 @@ def coordinate_footprint(mesh, corner_vert, domain, sites=None):
                 last = sites.width - 1 if step == 1 else sites.height - 1
                 ahead = np.where(edge < last, where[np.minimum(sites.texels + step, len(where) - 1)], -1)
                 behind = np.where(edge > 0, where[np.maximum(sites.texels - step, 0)], -1)
-                d_ahead = np.where((ahead >= 0)[:, None], co[np.maximum(ahead, 0)] - co, np.inf)
-                d_behind = np.where((behind >= 0)[:, None], co - co[np.maximum(behind, 0)], np.inf)
+                d_ahead = np.where((ahead >= 0)[:, None], turned(co[np.maximum(ahead, 0)] - co, wrap), np.inf)
+                d_behind = np.where((behind >= 0)[:, None], turned(co - co[np.maximum(behind, 0)], wrap), np.inf)
                 pick = np.linalg.norm(d_ahead, axis=1) <= np.linalg.norm(d_behind, axis=1)
                 steps.append(np.where(pick[:, None], d_ahead, d_behind))
             (du, dv) = steps
@@ -1091,9 +1104,10 @@ def coordinate_footprint(mesh, corner_vert, domain, sites=None):
     loops = triangle_corners(mesh)
     n = len(mesh.vertices)
 
-    def at_rows(co):
+    def at_rows(co, wrap=False):
         uv = co[corner_vert] if domain == "POINT" else co
-        a, b, c = uv[loops[:, 0]], uv[loops[:, 1]], uv[loops[:, 2]]
+        a = uv[loops[:, 0]]
+        b, c = a + turned(uv[loops[:, 1]] - a, wrap), a + turned(uv[loops[:, 2]] - a, wrap)
         area = 0.5 * np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1]))
         share = np.bincount(corner_vert[loops].ravel(), weights=np.repeat(area / 3.0, 3), minlength=n)
         side = np.sqrt(share).astype(np.float32)
@@ -1247,7 +1261,7 @@ def read_term_weights(obj, depsgraph, data, progress=None):
                                                                          pyramids(tex),
                                                                          Source(tex, None), (uv, footprint, rows),
                                                                          data.count),
-                points=row_points(obj, mesh, data.positions, data.normals), progress=progress,
+                points=row_points(obj, mesh, data.positions, data.normals, data.view), progress=progress,
                 attribute=attribute_reader(mesh, corner_vert, data.domain, data.sites, notes),
                 owner=(obj, mat),
                 footprint=coordinate_footprint(mesh, corner_vert, data.domain, data.sites)) if reads else None

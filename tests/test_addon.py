@@ -1647,6 +1647,58 @@ def test_a_mix_of_shader_nodes_with_a_textured_factor(scene):
     assert readings[60] > 10 * gloss.gloss_readings(("LAMBERT", (0.8, 0.8, 0.8), "SMITH", ()))[60]
 
 
+def test_a_mix_by_layer_weight_follows_the_view(scene):
+    """A Mix Shader of a Diffuse and a Glossy BSDF whose Fac is Layer Weight's Facing (Blend 0.3), on
+    Suzanne: each vertex's factor is 1 - |cos|^0.6 of the angle between its normal and the direction
+    to the camera (as Cycles' svm_node_layer_weight, held to Cycles' pixels in test_attributes.py),
+    the colours are the core's shading of each term weighted by it, and another view gives other
+    factors."""
+    from addon import closures
+    env_world(scene, "sunset")
+    obj = add_monkey(subdivisions=1)
+    mat = principled_material("facing")
+    obj.data.materials.append(mat)
+    select_only(obj)
+    tree = mat.node_tree
+    for n in [n for n in tree.nodes if n.bl_idname != "ShaderNodeOutputMaterial"]:
+        tree.nodes.remove(n)
+    diffuse, glossy = tree.nodes.new("ShaderNodeBsdfDiffuse"), tree.nodes.new("ShaderNodeBsdfGlossy")
+    diffuse.inputs["Color"].default_value = (0.5, 0.2, 0.1, 1.0)
+    glossy.inputs["Roughness"].default_value = 0.25
+    glossy.distribution = "GGX"
+    mix_node, weight = tree.nodes.new("ShaderNodeMixShader"), tree.nodes.new("ShaderNodeLayerWeight")
+    weight.inputs["Blend"].default_value = 0.3
+    tree.links.new(weight.outputs["Facing"], mix_node.inputs[0])
+    tree.links.new(diffuse.outputs[0], mix_node.inputs[1])
+    tree.links.new(glossy.outputs[0], mix_node.inputs[2])
+    tree.links.new(mix_node.outputs[0], tree.nodes["Material Output"].inputs["Surface"])
+    mat.wenv.model = "PRINCIPLED"
+    found, _ = closures.terms(mat)
+    assert not closures.factor_notes(mat)
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    _, rgb = attribute(obj)
+    p, n = world_arrays(obj, corner=False)
+    eye = np.array(scene.camera.matrix_world.translation)
+
+    def facing(eye):
+        towards = (eye - p) / np.linalg.norm(eye - p, axis=1, keepdims=True)
+        unit = n / np.linalg.norm(n, axis=1, keepdims=True)
+        return 1.0 - np.abs(np.einsum("ij,ij->i", towards, unit)) ** 0.6
+    fac = facing(eye)
+    env = wenv.load_environment(hdri_path("sunset"))
+    want = np.zeros_like(rgb)
+    for term, w in zip(found, ((1 - fac)[:, None], fac[:, None])):
+        want += w * np.float32(term.colour) * core_shader(env, engine.principled(term.inputs)).shade_mesh(
+            p, n, tuple(eye))
+    np.testing.assert_allclose(rgb, want, rtol=2e-4, atol=2e-5)
+    assert np.ptp(fac) > 0.5
+    scene.camera.location = (-4.0, 3.0, 2.0)
+    bpy.context.view_layer.update()
+    data = plan_of(scene, obj).items[0][1]
+    moved = facing(np.array(scene.camera.matrix_world.translation))
+    np.testing.assert_allclose(data.term_weights[0][1][:, 0], moved * np.float32(found[1].colour[0]), atol=2e-5)
+
+
 def test_textured_inputs_of_mixed_bsdfs_are_read_at_each_vertex(scene):
     """A Mix Shader (Fac 0.3) of a Principled BSDF whose Roughness is an image of two halves and a
     Glossy BSDF whose Color and Roughness are images of halves: each vertex is the core's shading of
