@@ -119,6 +119,7 @@ class Evaluator:
         # may cancel (CancelledError, raised by it or by the core when it returns True)
         self.progress = progress
         self.checking = checking  # only whether every node is read: no tables made, no texel read
+        self._groups = []  # the group nodes being evaluated through, innermost last
         self.textures = []  # the Image Texture nodes read
         self.notes = []  # what of them is read otherwise than Cycles reads it
 
@@ -402,6 +403,61 @@ class Evaluator:
         if output.identifier not in ("Position", "Normal"):
             raise Unsupported(f"'{node.name}''s {output.name} output")
         return self._coordinates("WORLD" if output.identifier == "Position" else "NORMAL", node=node)[0]
+
+    # -- node groups, evaluated through: a group's output is its inner node's, a Group Input the socket
+    # the group node is fed by
+    def _ShaderNodeGroup(self, node, output, depth):
+        tree = node.node_tree
+        inner = None if tree is None else next(
+            (n for n in tree.nodes if n.bl_idname == "NodeGroupOutput" and n.is_active_output), None)
+        if inner is None:
+            raise Unsupported(f"'{node.name}', a group with no output")
+        self._groups.append(node)
+        try:
+            return self.evaluate(next(s for s in inner.inputs if s.identifier == output.identifier), depth)
+        finally:
+            self._groups.pop()
+
+    def _NodeGroupInput(self, node, output, depth):
+        if not self._groups:
+            raise Unsupported(f"'{node.name}', a group's input read outside its group")
+        outer = self._groups.pop()
+        try:
+            return self.evaluate(next(s for s in outer.inputs if s.identifier == output.identifier), depth)
+        finally:
+            self._groups.append(outer)
+
+    def _ShaderNodeVectorRotate(self, node, output, depth):
+        v = self.colour(_input(node, "Vector"), depth).astype(np.float64)
+        centre = self.colour(_input(node, "Center"), depth).astype(np.float64)
+        p = v - centre
+        if node.rotation_type == "EULER_XYZ":
+            rotation = self.colour(_input(node, "Rotation"), depth).astype(np.float64)
+            m = np.stack([_euler_xyz(r) for r in rotation]) if np.ptp(rotation, axis=0).any() else \
+                np.broadcast_to(_euler_xyz(rotation[0]), (self.count, 3, 3))
+            turned = np.einsum("nji,nj->ni" if node.invert else "nij,nj->ni", m, p)
+            return (turned + centre).astype(np.float32)
+        if node.rotation_type == "AXIS_ANGLE":
+            axis = self.colour(_input(node, "Axis"), depth).astype(np.float64)
+        else:
+            axis = np.tile(np.eye(3)["XYZ".index(node.rotation_type[0])], (self.count, 1))
+        length = np.linalg.norm(axis, axis=1, keepdims=True)
+        angle = self.value(_input(node, "Angle"), depth).astype(np.float64) * (-1.0 if node.invert else 1.0)
+        k = np.where(length > 0.0, axis / np.where(length > 0.0, length, 1.0), 0.0)
+        cos, sin = np.cos(angle)[:, None], np.sin(angle)[:, None]
+        # Rodrigues' rotation, as Cycles' rotate_around_axis
+        turned = p * cos + np.cross(k, p) * sin + k * np.sum(k * p, axis=1, keepdims=True) * (1.0 - cos)
+        return np.where(length > 0.0, turned + centre, v).astype(np.float32)
+
+    def _ShaderNodeNormal(self, node, output, depth):
+        direction = np.float32(tuple(node.outputs["Normal"].default_value))
+        direction = direction / np.float32(max(float(np.linalg.norm(direction)), 1e-30))
+        if output.identifier == "Normal":
+            return np.tile(direction, (self.count, 1))
+        n = self.colour(node.inputs["Normal"], depth).astype(np.float32)
+        length = np.linalg.norm(n, axis=1, keepdims=True)
+        unit = np.where(length > 0.0, n / np.where(length > 0.0, length, 1.0), 0.0)
+        return (unit @ direction).astype(np.float32)
 
     # -- what depends on the view: the direction towards the viewer at each row
     def _towards_viewer(self, node):

@@ -168,6 +168,57 @@ def test_what_depends_on_the_view_reads_as_cycles_renders_it(grid, kind, output,
     np.testing.assert_allclose(ours, cycles, atol=1e-5)
 
 
+def _normal_dot(node):
+    """The Normal node's Dot of the Geometry's normal against a tilted direction."""
+    node.outputs["Normal"].default_value = (0.3, -0.4, 0.8)
+    geometry = node.id_data.nodes.new("ShaderNodeNewGeometry")
+    node.id_data.links.new(geometry.outputs["Normal"], node.inputs["Normal"])
+
+
+def _grouped(node):
+    """A node group (its input a Geometry's position, its Math inside scaling the input's x by its
+    second input, 2.5, then a Color Ramp), nested in another group that passes both inputs on."""
+    def group(name, build):
+        tree = bpy.data.node_groups.new(name, "ShaderNodeTree")
+        tree.interface.new_socket("Out", in_out="OUTPUT", socket_type="NodeSocketColor")
+        tree.interface.new_socket("Where", in_out="INPUT", socket_type="NodeSocketVector")
+        tree.interface.new_socket("Gain", in_out="INPUT", socket_type="NodeSocketFloat")
+        g_in, g_out = tree.nodes.new("NodeGroupInput"), tree.nodes.new("NodeGroupOutput")
+        build(tree, g_in, g_out)
+        return tree
+
+    def inner(tree, g_in, g_out):
+        sep, mul, ramp = (tree.nodes.new(k) for k in ("ShaderNodeSeparateXYZ", "ShaderNodeMath", "ShaderNodeValToRGB"))
+        mul.operation = "MULTIPLY"
+        tree.links.new(g_in.outputs[0], sep.inputs[0])
+        tree.links.new(sep.outputs["X"], mul.inputs[0])
+        tree.links.new(g_in.outputs[1], mul.inputs[1])
+        tree.links.new(mul.outputs[0], ramp.inputs["Fac"])
+        ramp.color_ramp.elements[0].color = (0.1, 0.3, 0.9, 1.0)
+        tree.links.new(ramp.outputs["Color"], g_out.inputs[0])
+
+    def outer(tree, g_in, g_out):
+        held = tree.nodes.new("ShaderNodeGroup")
+        held.node_tree = group("inner", inner)
+        tree.links.new(g_in.outputs[0], held.inputs[0])
+        tree.links.new(g_in.outputs[1], held.inputs[1])
+        tree.links.new(held.outputs[0], g_out.inputs[0])
+    node.node_tree = group("outer", outer)
+    geometry = node.id_data.nodes.new("ShaderNodeNewGeometry")
+    node.id_data.links.new(geometry.outputs["Position"], node.inputs[0])
+    node.inputs[1].default_value = 0.25
+
+
+def test_normal_node_and_node_groups_read_as_cycles_renders_them(grid):
+    """The Normal node's Dot, and a chain inside a node group inside another (its inputs passed
+    through): within 1e-5 of Cycles' pixels."""
+    for kind, output, configure in (("ShaderNodeNormal", "Dot", _normal_dot), ("ShaderNodeGroup", "Socket_0",
+                                                                                _grouped)):
+        cycles, ours, _ = grid(kind, output, configure)
+        assert np.ptp(ours) > 0.1
+        np.testing.assert_allclose(ours, cycles, atol=1e-5)
+
+
 def _white_noise(dimensions, source=None, w=0.0):
     """configure() of a White Noise Texture in `dimensions`, its Vector from `source` ((node type,
     output identifier) or None) and its W."""

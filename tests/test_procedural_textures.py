@@ -243,6 +243,13 @@ VECTOR_CASES = [
     ("SINE", "Vector", {}), ("TANGENT", "Vector", {}), ("CEIL", "Vector", {})]
 VECTOR_NODES = [("ShaderNodeVectorMath", out, _vector_math(op, **kw)) for op, out, kw in VECTOR_CASES] + [
     ("ShaderNodeSeparateXYZ", "Y", lambda n, m: None),
+    ("ShaderNodeVectorRotate", "Vector", lambda n, m: _set(n, rotation_type="AXIS_ANGLE", Axis=(0.3, -0.5, 0.8),
+                                                          Angle=1.1, Center=(0.2, 0.1, 0.0))),
+    ("ShaderNodeVectorRotate", "Vector", lambda n, m: _set(n, rotation_type="Z_AXIS", invert=True, Angle=0.7)),
+    ("ShaderNodeVectorRotate", "Vector", lambda n, m: _set(n, rotation_type="EULER_XYZ", Rotation=(0.4, -0.9, 1.3),
+                                                          Center=(0.0, 0.3, 0.5))),
+    ("ShaderNodeVectorRotate", "Vector", lambda n, m: _set(n, rotation_type="EULER_XYZ", invert=True,
+                                                          Rotation=(0.4, -0.9, 1.3))),
     ("ShaderNodeMix", "Result_Vector", lambda n, m: (_set(n, data_type="VECTOR", factor_mode="NON_UNIFORM"),
                                                      _set(n, Factor_Vector=(0.2, 0.7, 1.0), B_Vector=B),
                                                      _mapped_into("A_Vector")(n, m))),
@@ -252,10 +259,10 @@ VECTOR_NODES = [("ShaderNodeVectorMath", out, _vector_math(op, **kw)) for op, ou
 
 @pytest.mark.parametrize("kind, output, configure", VECTOR_NODES,
                          ids=[f"{k[10:]}-{c[0] if k.endswith('VectorMath') else o}"
-                              for (k, o, _), c in zip(VECTOR_NODES, VECTOR_CASES + [("",)] * 4)])
+                              for (k, o, _), c in zip(VECTOR_NODES, VECTOR_CASES + [("",)] * 8)])
 def test_vector_nodes_read_as_cycles_renders_them(plane, kind, output, configure):
-    """Vector Math (each operation), Separate and Combine XYZ, a Mix of vectors, and a vector read as a
-    value, of the pixels' Object coordinates: within 1e-4 of Cycles' pixels (relative past 1), a
+    """Vector Math (each operation), Separate and Combine XYZ, Vector Rotate (each type), a Mix of
+    vectors, and a vector read as a value, of the pixels' Object coordinates: within 1e-4 of Cycles' pixels (relative past 1), a
     floor's or modulo's step aside (a handful of pixels whose centre lies within rounding of one)."""
     _, _, _, render_node = plane
     cycles, ours = render_node(kind, output, configure)
