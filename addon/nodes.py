@@ -586,16 +586,19 @@ class Evaluator:
         fac = self.value(node.inputs["Fac"], depth)[:, None]
         if self.checking:
             return c
-        mapping = node.mapping
-        mapping.initialize()
-        lo, hi = -1.0, 2.0  # Cycles' table spans the curves' range; values outside extrapolate flat
-        x = np.linspace(lo, hi, 3073)
-        combined = np.array([mapping.evaluate(mapping.curves[3], float(p)) for p in x], np.float32)
+        x, combined = _curve_table(node.mapping, 3)
         out = np.empty_like(c)
         for k in range(3):
-            curve = np.array([mapping.evaluate(mapping.curves[k], float(p)) for p in x], np.float32)
-            out[:, k] = np.interp(np.interp(c[:, k], x, combined), x, curve)
+            out[:, k] = np.interp(np.interp(c[:, k], x, combined), x, _curve_table(node.mapping, k)[1])
         return (c + fac * (out - c)).astype(np.float32)
+
+    def _ShaderNodeFloatCurve(self, node, output, depth):
+        v = self.value(_input(node, "Value"), depth)
+        fac = self.value(_input(node, "Factor"), depth)
+        if self.checking:
+            return v
+        x, curve = _curve_table(node.mapping, 0)
+        return (v + fac * (np.interp(v, x, curve) - v)).astype(np.float32)
 
     def _ShaderNodeSeparateColor(self, node, output, depth):
         c = self.colour(node.inputs["Color"], depth)
@@ -1009,6 +1012,14 @@ def _fresnel_dielectric_cos(cos, eta):
         b = (c * (root + c) - f32(1.0)) / (c * (root - c) + f32(1.0))
         r = f32(0.5) * a * a * (f32(1.0) + b * b)
     return np.where(g > 0.0, r, f32(1.0)).astype(f32)
+
+
+def _curve_table(mapping, k):
+    """(x, y) of curve k of a CurveMapping sampled finely over [-1, 2] through Blender's own
+    evaluation (Cycles' table spans the curves' range; values outside extrapolate flat)."""
+    mapping.initialize()
+    x = np.linspace(-1.0, 2.0, 3073)
+    return x, np.array([mapping.evaluate(mapping.curves[k], float(p)) for p in x], np.float32)
 
 
 def _smoothstep(lo, hi, x):

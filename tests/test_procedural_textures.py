@@ -346,6 +346,19 @@ def _value_of_points(settings, into="Value", **inputs):
     return configure
 
 
+def _curved(node, mapping):
+    """A Float Curve (Factor 0.8) or RGB Curves (Fac 0.9) whose curves are bent by a point each (RGB
+    Curves: the combined curve and red's), fed the pixel's mapped point."""
+    curves = node.mapping.curves
+    for k, (x, y) in ((0, (0.3, 0.7)), (3, (0.6, 0.35))) if len(curves) > 1 else ((0, (0.3, 0.7)),):
+        curves[k].points.new(x, y)
+    node.mapping.update()
+    _set(mapping, Scale=(0.25, 0.2, 0.3), Location=(0.5, 0.4, 0.6))
+    into = "Value" if node.bl_idname == "ShaderNodeFloatCurve" else "Color"
+    node.inputs["Factor" if into == "Value" else "Fac"].default_value = 0.8 if into == "Value" else 0.9
+    node.id_data.links.new(mapping.outputs["Vector"], node.inputs[into])
+
+
 RANGE = {"From Min": -0.3, "From Max": 0.4, "To Min": 0.2, "To Max": 1.3}
 RANGE3 = {"From_Min_FLOAT3": (-0.3, -0.5, 0.0), "From_Max_FLOAT3": (0.4, 0.6, 1.0), "To_Min_FLOAT3": (0.2, 0.0, 1.0),
           "To_Max_FLOAT3": (1.3, 1.0, -1.0)}
@@ -363,14 +376,17 @@ VALUE_NODES = [
     ("ShaderNodeClamp", "Result", _value_of_points(dict(clamp_type="MINMAX"), Min=-0.1, Max=0.2)),
     ("ShaderNodeClamp", "Result", _value_of_points(dict(clamp_type="RANGE"), Min=0.2, Max=-0.1)),
     ("ShaderNodeRGBToBW", "Val", _value_of_points({}, into="Color")),
+    ("ShaderNodeFloatCurve", "Value", _curved),
+    ("ShaderNodeRGBCurve", "Color", _curved),
 ]
 
 
 @pytest.mark.parametrize("kind, output, configure", VALUE_NODES,
                          ids=[f"{k[10:]}-{i}" for i, (k, _, _) in enumerate(VALUE_NODES)])
 def test_value_nodes_read_as_cycles_renders_them(plane, kind, output, configure):
-    """Map Range (each interpolation, clamped or not, of values and vectors), Clamp and RGB to BW of
-    the pixels' points: within 1e-4 of Cycles' pixels, a step's pixels aside."""
+    """Map Range (each interpolation, clamped or not, of values and vectors), Clamp, RGB to BW, Float
+    Curve and RGB Curves (curves bent by a point) of the pixels' points: within 1e-4 of Cycles'
+    pixels, a step's pixels aside."""
     _, _, _, render_node = plane
     cycles, ours = render_node(kind, output, configure)
     assert ours.shape == cycles.shape and ours.std() > 0.02
