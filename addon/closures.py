@@ -20,7 +20,8 @@ WHITE = (1.0, 1.0, 1.0)
 
 class Term:
     """One closure: Principled inputs (wenv names), a constant RGB weight, and the Mix Shader factors
-    that weigh it per vertex (a tuple of (socket, take): take 'fac' or '1-fac'), and the Principled
+    that weigh it per vertex (a tuple of (socket, take, the group nodes the socket lies in): take
+    'fac' or '1-fac'), and the Principled
     BSDF node itself where the term is one, else None.  `linked`: {core keyword: socket} of its
     linked inputs that the core takes per vertex (read from textures where the nodes between are
     evaluated); `weight_socket`: a linked colour that weighs the term per vertex (a Glossy BSDF's
@@ -240,8 +241,8 @@ def terms(material):
                 if fac > 0.0:
                     walk(shaders[1], tuple(c * fac for c in colour), factors, groups, depth + 1)
             else:
-                walk(shaders[0], colour, factors + ((fac, "1-fac"),), groups, depth + 1)
-                walk(shaders[1], colour, factors + ((fac, "fac"),), groups, depth + 1)
+                walk(shaders[0], colour, factors + ((fac, "1-fac", fac_groups),), groups, depth + 1)
+                walk(shaders[1], colour, factors + ((fac, "fac", fac_groups),), groups, depth + 1)
         elif kind == "ShaderNodeAddShader":
             for s in node.inputs:
                 walk(s, colour, factors, groups, depth + 1)
@@ -267,9 +268,9 @@ def _factor_values(evaluator, factors):
     """The product of a term's factors, each read by the evaluator (a textured Fac per vertex), as
     (rows,) float32; a factor wenv does not evaluate reads its unlinked value (named in the notes)."""
     total = np.ones(evaluator.count, np.float32)
-    for socket, take in factors:
+    for socket, take, groups in factors:
         try:
-            fac = np.clip(evaluator.value(socket), 0.0, 1.0)
+            fac = np.clip(evaluator.value_within(socket, groups), 0.0, 1.0)
         except nodes.Unsupported:
             fac = np.full(evaluator.count, min(max(float(socket.default_value), 0.0), 1.0), np.float32)
         total *= fac if take == "fac" else 1.0 - fac
@@ -291,11 +292,11 @@ def factor_notes(material):
     found, _ = terms(material) if material.node_tree is not None else (None, [])
     notes, seen = [], set()
     for term in found or ():
-        for socket, _take in term.factors:
+        for socket, _take, groups in term.factors:
             if socket.as_pointer() in seen:
                 continue
             seen.add(socket.as_pointer())
-            textures, why = nodes.check(socket)
+            textures, why = nodes.check(socket, groups)
             if textures is None:
                 notes.append(f"'{socket.node.name}''s Fac is linked ({why}): its unlinked value is used")
     return notes

@@ -137,6 +137,15 @@ class Evaluator:
             return ((out[:, 0] + out[:, 1]) + out[:, 2]) * np.float32(1.0 / 3.0)
         return luminance(out)
 
+    def value_within(self, socket, groups):
+        """value() of a socket inside node groups (the group nodes it lies in, outermost first): its
+        Group Inputs read the sockets those group nodes are fed by."""
+        held, self._groups = self._groups, list(groups)
+        try:
+            return self.value(socket)
+        finally:
+            self._groups = held
+
     def evaluate(self, socket, depth=0):
         """The socket's value at every row: its node's output, or its own (unlinked) value."""
         fed = _fed(socket, depth)
@@ -1269,12 +1278,13 @@ def one_point(texture, checking=False):
                      lambda node, uv, footprint, rows: texture(node), checking)
 
 
-def check(principled_socket):
-    """(textures, notes) when every node feeding a Principled socket is evaluated -- the Image Texture
-    nodes read, and what of them is read otherwise than Cycles reads it -- or (None, why not)."""
+def check(principled_socket, groups=()):
+    """(textures, notes) when every node feeding a Principled socket (inside `groups`, the group nodes
+    it lies in, outermost first) is evaluated -- the Image Texture nodes read, and what of them is
+    read otherwise than Cycles reads it -- or (None, why not)."""
     ev = one_point(lambda node: np.zeros((1, 3), np.float32), checking=True)
     try:
-        ev.evaluate(principled_socket)
+        ev.value_within(principled_socket, groups)
     except Unsupported as exc:
         return None, str(exc)
     return ev.textures, ev.notes

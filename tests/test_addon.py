@@ -1652,7 +1652,8 @@ def test_a_mix_by_layer_weight_follows_the_view(scene):
     Suzanne: each vertex's factor is 1 - |cos|^0.6 of the angle between its normal and the direction
     to the camera (as Cycles' svm_node_layer_weight, held to Cycles' pixels in test_attributes.py),
     the colours are the core's shading of each term weighted by it, and another view gives other
-    factors."""
+    factors; inside a node group, a factor made from the group's input by nodes there follows the
+    input out."""
     from addon import closures
     env_world(scene, "sunset")
     obj = add_monkey(subdivisions=1)
@@ -1697,6 +1698,29 @@ def test_a_mix_by_layer_weight_follows_the_view(scene):
     data = plan_of(scene, obj).items[0][1]
     moved = facing(np.array(scene.camera.matrix_world.translation))
     np.testing.assert_allclose(data.term_weights[0][1][:, 0], moved * np.float32(found[1].colour[0]), atol=2e-5)
+
+    # the Mix Shader inside a node group, its Fac half the group's input through a Math node there
+    group = bpy.data.node_groups.new("halved mix", "ShaderNodeTree")
+    group.interface.new_socket("Shader", in_out="OUTPUT", socket_type="NodeSocketShader")
+    group.interface.new_socket("Fac", in_out="INPUT", socket_type="NodeSocketFloat")
+    g_in, g_out = group.nodes.new("NodeGroupInput"), group.nodes.new("NodeGroupOutput")
+    half, inner_mix = group.nodes.new("ShaderNodeMath"), group.nodes.new("ShaderNodeMixShader")
+    half.operation, half.inputs[1].default_value = "MULTIPLY", 0.5
+    group.links.new(g_in.outputs[0], half.inputs[0])
+    group.links.new(half.outputs[0], inner_mix.inputs[0])
+    for k, kind in ((1, "ShaderNodeBsdfDiffuse"), (2, "ShaderNodeBsdfGlossy")):
+        bsdf = group.nodes.new(kind)
+        bsdf.inputs["Color"].default_value = tuple(found[k - 1].colour) + (1.0,)
+        group.links.new(bsdf.outputs[0], inner_mix.inputs[k])
+    group.links.new(inner_mix.outputs[0], g_out.inputs[0])
+    holder = tree.nodes.new("ShaderNodeGroup")
+    holder.node_tree = group
+    tree.links.new(weight.outputs["Facing"], holder.inputs[0])
+    tree.links.new(holder.outputs[0], tree.nodes["Material Output"].inputs["Surface"])
+    assert not closures.factor_notes(mat)
+    data = plan_of(scene, obj).items[0][1]
+    np.testing.assert_allclose(data.term_weights[0][1][:, 0], 0.5 * moved * np.float32(found[1].colour[0]),
+                               atol=2e-5)
 
 
 def test_textured_inputs_of_mixed_bsdfs_are_read_at_each_vertex(scene):
