@@ -359,6 +359,13 @@ def _curved(node, mapping):
     node.id_data.links.new(mapping.outputs["Vector"], node.inputs[into])
 
 
+def _kelvin(node, mapping):
+    """A Blackbody whose Temperature is the pixel's mapped point, from 500 K to 14,000 K (every range
+    of Cycles' fit, and past both ends)."""
+    _set(mapping, Scale=(10200.0, 0.0, 0.0), Location=(21750.0, 0.0, 0.0))  # (a vector read as its mean)
+    node.id_data.links.new(mapping.outputs["Vector"], node.inputs["Temperature"])
+
+
 RANGE = {"From Min": -0.3, "From Max": 0.4, "To Min": 0.2, "To Max": 1.3}
 RANGE3 = {"From_Min_FLOAT3": (-0.3, -0.5, 0.0), "From_Max_FLOAT3": (0.4, 0.6, 1.0), "To_Min_FLOAT3": (0.2, 0.0, 1.0),
           "To_Max_FLOAT3": (1.3, 1.0, -1.0)}
@@ -377,6 +384,7 @@ VALUE_NODES = [
     ("ShaderNodeClamp", "Result", _value_of_points(dict(clamp_type="RANGE"), Min=0.2, Max=-0.1)),
     ("ShaderNodeRGBToBW", "Val", _value_of_points({}, into="Color")),
     ("ShaderNodeFloatCurve", "Value", _curved),
+    ("ShaderNodeBlackbody", "Color", _kelvin),
     ("ShaderNodeRGBCurve", "Color", _curved),
 ]
 
