@@ -50,6 +50,15 @@ MEAN_SQUARE = np.column_stack([MEAN_POINTS[:256, 1:], np.zeros(256, np.float32)]
 POINTINESS, RANDOM_PER_ISLAND = ("pointiness",), ("random per island",)
 
 
+def group_means(values, index, count):
+    """The mean of values ((m,) or (m, k)) over each of `count` groups, value j in group index[j]
+    (float32; 0 for a group of none)."""
+    flat = values.reshape(len(values), -1)
+    n = np.bincount(index, minlength=count).astype(np.float64)
+    total = np.stack([np.bincount(index, weights=flat[:, c], minlength=count) for c in range(flat.shape[1])], axis=1)
+    return (total / np.maximum(n, 1.0)[:, None]).astype(np.float32).reshape((count,) + values.shape[1:])
+
+
 def _same(values):
     return values
 
@@ -783,15 +792,7 @@ class Evaluator:
         p = np.column_stack([uv, np.zeros(len(uv), np.float32)]).astype(np.float32)
         if len(rows) == self.count and np.array_equal(rows, np.arange(self.count)):
             return p, _same
-        count = np.bincount(rows, minlength=self.count).astype(np.float64)
-
-        def reduce(values):  # each row's mean over its corners
-            flat = values.reshape(len(values), -1).astype(np.float64)
-            total = np.stack([np.bincount(rows, weights=flat[:, c], minlength=self.count)
-                              for c in range(flat.shape[1])], axis=1)
-            out = (total / np.maximum(count, 1.0)[:, None]).astype(np.float32)
-            return out.reshape((self.count,) + values.shape[1:])
-        return p, reduce
+        return p, lambda values: group_means(values, rows, self.count)  # each row's mean over its corners
 
     def _no_points(self):
         """points() of a 1D texture, which reads W alone: one point, its value at every row."""

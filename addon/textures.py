@@ -448,12 +448,28 @@ def uv_rows(mesh, uv_map, domain, corner_vert):
     if layer is None:
         return None
     uv = corner_uvs(mesh, layer)
-    loops = triangle_corners(mesh)
-    a, b, c = uv[loops[:, 0]], uv[loops[:, 1]], uv[loops[:, 2]]
-    area = 0.5 * np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1]))
-    share = np.bincount(corner_vert[loops].ravel(), weights=np.repeat(area / 3.0, 3), minlength=len(mesh.vertices))
+    share = vertex_shares(uv, triangle_corners(mesh), corner_vert, len(mesh.vertices))
     rows = corner_vert if domain == "POINT" else np.arange(len(uv))
     return uv, np.sqrt(share[corner_vert]).astype(np.float32), rows
+
+
+def vertex_shares(uv, loops, corner_vert, n_vertices, wrap=False):
+    """Each vertex's share of the 2D area of its triangles (a third of each), their corners'
+    coordinates `uv` ((corners, 2)); with wrap, the first coordinate is a turn (read the short way
+    round)."""
+    a, b, c = uv[loops[:, 0]], uv[loops[:, 1]], uv[loops[:, 2]]
+    if wrap:
+        b, c = a + _turned(b - a, wrap), a + _turned(c - a, wrap)
+    area = 0.5 * np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1]))
+    return np.bincount(corner_vert[loops].ravel(), weights=np.repeat(area / 3.0, 3), minlength=n_vertices)
+
+
+def _turned(d, wrap):
+    """Steps d (n, 2) with their first coordinate, a turn, taken the short way round where wrap."""
+    if wrap:
+        d = d.copy()
+        d[:, 0] = (d[:, 0] + 0.5) % 1.0 - 0.5
+    return d
 
 
 def data_uv_rows(mesh, uv_map, data, corner_vert):
@@ -473,9 +489,7 @@ def colours_at_rows(levels, source, uv, footprint, rows, n_rows):
     """The colour of each shaded row: its corners' samples of the image's pyramid (or UDIM tiles:
     pyramids()), averaged where a vertex has several (a UV seam)."""
     rgb = sample_image(levels, uv, footprint, source.node.interpolation, source.node.extension)
-    count = np.bincount(rows, minlength=n_rows).astype(np.float64)
-    total = np.stack([np.bincount(rows, weights=rgb[:, c], minlength=n_rows) for c in range(3)], axis=1)
-    return (total / np.maximum(count, 1.0)[:, None]).astype(np.float32)
+    return nodes.group_means(rgb, rows, n_rows)
 
 
 # (object name, slot, socket) -> (what the colours were read from, the colours, the pyramid they were
@@ -880,10 +894,7 @@ def corner_attribute(mesh, attr, corner_vert):
         return values[np.repeat(np.arange(len(starts)), np.diff(starts, append=len(corner_vert)))]
     ends = np.empty(len(mesh.edges) * 2, np.int32)  # 'EDGE'
     mesh.edges.foreach_get("vertices", ends)
-    count = np.bincount(ends, minlength=len(mesh.vertices)).astype(np.float64)
-    total = np.stack([np.bincount(ends, weights=np.repeat(values[:, c], 2), minlength=len(mesh.vertices))
-                      for c in range(width)], axis=1)
-    return (total / np.maximum(count, 1.0)[:, None]).astype(np.float32)[corner_vert]
+    return nodes.group_means(np.repeat(values, 2, axis=0), ends, len(mesh.vertices))[corner_vert]
 
 
 def welded_vertices(co):
@@ -1059,11 +1070,7 @@ def attribute_reader(mesh, corner_vert, domain, sites=None, notes=None):
             return sites.at(corners), kind
         if domain == "CORNER":
             return corners, kind
-        n = len(mesh.vertices)
-        count = np.bincount(corner_vert, minlength=n).astype(np.float64)
-        total = np.stack([np.bincount(corner_vert, weights=corners[:, c], minlength=n)
-                          for c in range(corners.shape[1])], axis=1)
-        return (total / np.maximum(count, 1.0)[:, None]).astype(np.float32), kind
+        return nodes.group_means(corners, corner_vert, len(mesh.vertices)), kind
     return read
 
 
@@ -1079,11 +1086,6 @@ def coordinate_footprint(mesh, corner_vert, domain, sites=None):
     from the coordinates of the next texels along the image's rows and columns (the smaller of the
     steps either way, so that a step across an island's edge is not read).  With wrap, the first
     coordinate is an angle's turn (a sphere's or tube's u): steps are read the short way round."""
-    def turned(d, wrap):
-        if wrap:
-            d = d.copy()
-            d[:, 0] = (d[:, 0] + 0.5) % 1.0 - 0.5
-        return d
     if sites is not None:
         def at_texels(co, wrap=False):
             where = np.full(sites.width * sites.height, -1, np.int64)
@@ -1093,24 +1095,18 @@ def coordinate_footprint(mesh, corner_vert, domain, sites=None):
                 last = sites.width - 1 if step == 1 else sites.height - 1
                 ahead = np.where(edge < last, where[np.minimum(sites.texels + step, len(where) - 1)], -1)
                 behind = np.where(edge > 0, where[np.maximum(sites.texels - step, 0)], -1)
-                d_ahead = np.where((ahead >= 0)[:, None], turned(co[np.maximum(ahead, 0)] - co, wrap), np.inf)
-                d_behind = np.where((behind >= 0)[:, None], turned(co - co[np.maximum(behind, 0)], wrap), np.inf)
+                d_ahead = np.where((ahead >= 0)[:, None], _turned(co[np.maximum(ahead, 0)] - co, wrap), np.inf)
+                d_behind = np.where((behind >= 0)[:, None], _turned(co - co[np.maximum(behind, 0)], wrap), np.inf)
                 pick = np.linalg.norm(d_ahead, axis=1) <= np.linalg.norm(d_behind, axis=1)
                 steps.append(np.where(pick[:, None], d_ahead, d_behind))
             (du, dv) = steps
             area = np.abs(du[:, 0] * dv[:, 1] - du[:, 1] * dv[:, 0])
             return np.where(np.isfinite(area), np.sqrt(np.where(np.isfinite(area), area, 0.0)), 0.0).astype(np.float32)
         return at_texels
-    loops = triangle_corners(mesh)
-    n = len(mesh.vertices)
-
-    def at_rows(co, wrap=False):
+    def at_rows(co, wrap=False):  # (the triangles read only when an image is read so: not at every plan)
         uv = co[corner_vert] if domain == "POINT" else co
-        a = uv[loops[:, 0]]
-        b, c = a + turned(uv[loops[:, 1]] - a, wrap), a + turned(uv[loops[:, 2]] - a, wrap)
-        area = 0.5 * np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1]))
-        share = np.bincount(corner_vert[loops].ravel(), weights=np.repeat(area / 3.0, 3), minlength=n)
-        side = np.sqrt(share).astype(np.float32)
+        side = np.sqrt(vertex_shares(uv, triangle_corners(mesh), corner_vert, len(mesh.vertices), wrap))
+        side = side.astype(np.float32)
         return side if domain == "POINT" else side[corner_vert]
     return at_rows
 
