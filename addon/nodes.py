@@ -88,6 +88,31 @@ def source(socket):
     return None
 
 
+def used(socket, depth=0):
+    """Whether an output socket reaches an output node through its links (forward, through any node
+    and into groups): what Cycles keeps of a graph after removing the nodes no output uses."""
+    if depth > MAX_DEPTH:
+        return False
+    for link in socket.links:
+        if not link.is_valid or link.is_muted:
+            continue
+        node = link.to_node
+        if node.bl_idname in ("ShaderNodeOutputMaterial", "NodeGroupOutput"):
+            return True
+        if any(used(out, depth + 1) for out in node.outputs):
+            return True
+    return False
+
+
+def unassociates_alpha(node):
+    """Whether Cycles divides an Image Texture's colour by its alpha (svm_image_texture's
+    NODE_IMAGE_ALPHA_UNASSOCIATE): its Alpha output is used and its image's alpha is associated (the
+    image not data, its alpha neither channel-packed nor ignored)."""
+    image = node.image
+    return (image is not None and image.colorspace_settings.name not in world.DATA_SPACES
+            and image.alpha_mode not in ("CHANNEL_PACKED", "NONE") and used(node.outputs["Alpha"]))
+
+
 def _fed(socket, depth):
     """source(socket) for a chain `depth` nodes deep; None when unlinked (its own value is read)."""
     if depth > MAX_DEPTH:
@@ -171,8 +196,6 @@ class Evaluator:
 
     # -- sources
     def _ShaderNodeTexImage(self, node, output, depth):
-        if output.name != "Color":
-            raise Unsupported(f"'{node.name}''s {output.name} output")
         image = node.image
         if image is None:
             raise Unsupported(f"'{node.name}', which has no image")
@@ -192,10 +215,17 @@ class Evaluator:
         if not image.is_float and space not in world.SRGB_SPACES and space not in world.LINEAR_SPACES:
             self.notes.append(f"'{node.name}': 8-bit colour space '{space}' is not decoded: its values are read as "
                               "linear")
+        alpha, unassociated = output.identifier == "Alpha", unassociates_alpha(node)
         out = None
         for weight, uv, footprint, rows in samples:
-            got = self._texture(node, uv, footprint, rows)
-            got = got if weight is None else weight[:, None] * got
+            got = self._texture(node, uv, footprint, rows)  # RGB, or RGBA where the image has alpha
+            if alpha:
+                got = got[:, 3] if got.shape[1] == 4 else np.ones(len(got), np.float32)
+            elif got.shape[1] == 4:  # associated, as Cycles samples it: divided where the Alpha is used
+                a = got[:, 3:]
+                got = np.where((a != 0.0) & (a != 1.0), got[:, :3] / np.where(a != 0.0, a, 1.0),
+                               got[:, :3]) if unassociated else got[:, :3]
+            got = got if weight is None else (weight if alpha else weight[:, None]) * got
             out = got if out is None else out + got
         return out.astype(np.float32)
 
@@ -469,6 +499,9 @@ class Evaluator:
 
     def _ShaderNodeBlackbody(self, node, output, depth):
         return _blackbody(self.value(node.inputs["Temperature"], depth))
+
+    def _ShaderNodeWavelength(self, node, output, depth):
+        return _wavelength(self.value(node.inputs["Wavelength"], depth))
 
     def _ShaderNodeNormal(self, node, output, depth):
         direction = np.float32(tuple(node.outputs["Normal"].default_value))
@@ -1077,6 +1110,49 @@ def _blackbody(t):
     return np.maximum(out, 0.0).astype(np.float32)
 
 
+# The CIE 1931 2-degree standard observer's colour matching functions (x, y, z) from 380 to 780 nm
+# every 5 nm, to four places: the table Cycles' svm_math_wavelength_color_xyz interpolates
+_CIE_1931 = np.float32([
+    [0.0014, 0.0000, 0.0065], [0.0022, 0.0001, 0.0105], [0.0042, 0.0001, 0.0201], [0.0076, 0.0002, 0.0362],
+    [0.0143, 0.0004, 0.0679], [0.0232, 0.0006, 0.1102], [0.0435, 0.0012, 0.2074], [0.0776, 0.0022, 0.3713],
+    [0.1344, 0.0040, 0.6456], [0.2148, 0.0073, 1.0391], [0.2839, 0.0116, 1.3856], [0.3285, 0.0168, 1.6230],
+    [0.3483, 0.0230, 1.7471], [0.3481, 0.0298, 1.7826], [0.3362, 0.0380, 1.7721], [0.3187, 0.0480, 1.7441],
+    [0.2908, 0.0600, 1.6692], [0.2511, 0.0739, 1.5281], [0.1954, 0.0910, 1.2876], [0.1421, 0.1126, 1.0419],
+    [0.0956, 0.1390, 0.8130], [0.0580, 0.1693, 0.6162], [0.0320, 0.2080, 0.4652], [0.0147, 0.2586, 0.3533],
+    [0.0049, 0.3230, 0.2720], [0.0024, 0.4073, 0.2123], [0.0093, 0.5030, 0.1582], [0.0291, 0.6082, 0.1117],
+    [0.0633, 0.7100, 0.0782], [0.1096, 0.7932, 0.0573], [0.1655, 0.8620, 0.0422], [0.2257, 0.9149, 0.0298],
+    [0.2904, 0.9540, 0.0203], [0.3597, 0.9803, 0.0134], [0.4334, 0.9950, 0.0087], [0.5121, 1.0000, 0.0057],
+    [0.5945, 0.9950, 0.0039], [0.6784, 0.9786, 0.0027], [0.7621, 0.9520, 0.0021], [0.8425, 0.9154, 0.0018],
+    [0.9163, 0.8700, 0.0017], [0.9786, 0.8163, 0.0014], [1.0263, 0.7570, 0.0011], [1.0567, 0.6949, 0.0010],
+    [1.0622, 0.6310, 0.0008], [1.0456, 0.5668, 0.0006], [1.0026, 0.5030, 0.0003], [0.9384, 0.4412, 0.0002],
+    [0.8544, 0.3810, 0.0002], [0.7514, 0.3210, 0.0001], [0.6424, 0.2650, 0.0000], [0.5419, 0.2170, 0.0000],
+    [0.4479, 0.1750, 0.0000], [0.3608, 0.1382, 0.0000], [0.2835, 0.1070, 0.0000], [0.2187, 0.0816, 0.0000],
+    [0.1649, 0.0610, 0.0000], [0.1212, 0.0446, 0.0000], [0.0874, 0.0320, 0.0000], [0.0636, 0.0232, 0.0000],
+    [0.0468, 0.0170, 0.0000], [0.0329, 0.0119, 0.0000], [0.0227, 0.0082, 0.0000], [0.0158, 0.0057, 0.0000],
+    [0.0114, 0.0041, 0.0000], [0.0081, 0.0029, 0.0000], [0.0058, 0.0021, 0.0000], [0.0041, 0.0015, 0.0000],
+    [0.0029, 0.0010, 0.0000], [0.0020, 0.0007, 0.0000], [0.0014, 0.0005, 0.0000], [0.0010, 0.0004, 0.0000],
+    [0.0007, 0.0002, 0.0000], [0.0005, 0.0002, 0.0000], [0.0003, 0.0001, 0.0000], [0.0002, 0.0001, 0.0000],
+    [0.0002, 0.0001, 0.0000], [0.0001, 0.0000, 0.0000], [0.0001, 0.0000, 0.0000], [0.0001, 0.0000, 0.0000],
+    [0.0000, 0.0000, 0.0000]])
+# CIE XYZ (D65) to Blender's scene linear, Rec.709: Blender's colour configuration's matrix (Cycles
+# reaches it through ACES2065-1, whose two matrices there cancel to this within 1e-6)
+_XYZ_TO_REC709 = np.float32([[3.2409699, -1.5373832, -0.4986108], [-0.9692436, 1.8759675, 0.0415551],
+                             [0.0556301, -0.2039770, 1.0569715]])
+
+
+def _wavelength(nm):
+    """Cycles' svm_node_wavelength: the CIE 1931 colour of light of wavelength nm, interpolated every
+    5 nm (black outside 380-780 nm), in scene linear, scaled by 1 / 2.52 and clamped at 0."""
+    t = (np.asarray(nm, np.float32) - np.float32(380.0)) * np.float32(0.2)
+    i = np.trunc(t).astype(np.int64)  # (float_to_int truncates towards 0)
+    inside = (i >= 0) & (i < 80)
+    k = np.clip(i, 0, 79)
+    f = (t - i)[:, None]
+    xyz = (np.float32(1.0) - f) * _CIE_1931[k] + f * _CIE_1931[k + 1]
+    rgb = (xyz @ _XYZ_TO_REC709.T) * np.float32(1.0 / 2.52)
+    return np.where(inside[:, None], np.maximum(rgb, 0.0), 0.0).astype(np.float32)
+
+
 def _smoothstep(lo, hi, x):
     """Cycles' smoothstep (0 below lo, 1 from hi on)."""
     t = (x - lo) / np.where(hi != lo, hi - lo, np.float32(1.0))
@@ -1319,7 +1395,7 @@ def _hsv_to_rgb(h, s, v):
 
 def one_point(texture, checking=False):
     """An Evaluator of a single point at UV (0, 0): texture(node) gives each Image Texture's (1, 3)
-    colour there (what a socket reads without a mesh: the panel's checks, the glossmeter's means)."""
+    colour there, or (1, 4) with its alpha (what a socket reads without a mesh: the panel's checks, the glossmeter's means)."""
     return Evaluator(1, lambda uv_map: (np.zeros((1, 2), np.float32), np.ones(1, np.float32), np.zeros(1, np.int64)),
                      lambda node, uv, footprint, rows: texture(node), checking)
 

@@ -65,11 +65,12 @@ def socket_at_means(principled, socket):
 
 
 class ImageCache:
-    """Each image's mip pyramid (linear RGB, level 0 the image, each next a 2 x 2 box of the last,
-    to 1 x 1), kept while its pixels are the same.  Holds no Blender data."""
+    """Each image's mip pyramid (what Cycles samples of it: cycles_texels), level 0 the image, each
+    next a 2 x 2 box of the last, to 1 x 1), kept while its pixels are the same.  Holds no Blender
+    data."""
 
     def __init__(self):
-        self._pyramids = {}  # image name -> (fingerprint of its pixels and settings, levels, state)
+        self._pyramids = {}  # (image name, unassociated) -> (fingerprint of its pixels and settings, levels, state)
         self._means = {}  # a state Image.mean checks -> the mean colour
 
     def clear(self):
@@ -77,78 +78,119 @@ class ImageCache:
         self._means = {}
 
     def mean(self, node):
-        """An Image Texture node's image's mean linear colour (its pyramid's last level), read once
-        per state a panel can check cheaply at each redraw -- its name, size, file, packing, whether
-        it has unsaved edits and, for a sequence or movie, the frame shown -- rather than by its pixels."""
-        image, frame = node.image, frame_shown(node)
+        """An Image Texture node's image's mean (its pyramid's last level: RGB, or RGBA where it has
+        alpha), read once per state a panel can check cheaply at each redraw -- its name, size, file,
+        packing, whether it has unsaved edits and, for a sequence or movie, the frame shown -- rather
+        than by its pixels."""
+        image, frame, unassociated = node.image, frame_shown(node), nodes.unassociates_alpha(node)
         state = (image.name_full, tuple(image.size), image.filepath_raw, image.packed_file is not None,
-                 image.is_dirty, image.colorspace_settings.name, image.source, tuple(t.number for t in image.tiles),
-                 frame)
+                 image.is_dirty, image.colorspace_settings.name, image.alpha_mode, image.source,
+                 tuple(t.number for t in image.tiles), frame, unassociated)
         means = self._means
         if state not in means:
             if len(means) > 64:
                 means.clear()
-            means[state] = tuple(float(c) for c in self.mean_of(image, frame))
+            means[state] = tuple(float(c) for c in self.mean_of(image, frame, unassociated))
         return means[state]
 
-    def levels(self, image, frame=None):
+    def levels(self, image, frame=None, unassociated=False):
         """The image's pyramid.  An image with no unsaved edits (a file or packed image as loaded)
         is known by its name, size, file and colour space, and its pixels are not read again; one
         with edits (painted, or set by a script) is read and known by its pixels.  frame: the Frame
-        an image sequence or movie shows (frame_shown), read by Blender's own loader or decoder."""
+        an image sequence or movie shows (frame_shown), read by Blender's own loader or decoder.
+        unassociated: for a node whose colour Cycles divides by its alpha (cycles_texels)."""
         state = (tuple(image.size), image.filepath_raw, image.packed_file is not None, image.source,
-                 image.colorspace_settings.name, frame)
-        held = self._pyramids.get(image.name_full)
+                 image.colorspace_settings.name, image.alpha_mode, frame)
+        name = (image.name_full, unassociated)
+        held = self._pyramids.get(name)
         if held is not None and (frame is not None or not image.is_dirty) and held[2] == state:
             return held[1]
+        is_float = None
         if frame is not None and image.source == "MOVIE":
-            rgba = _movie_pixels(image, frame)[::-1]
+            rgba = _movie_pixels(image, frame)
         elif frame is not None:
-            rgba = _file_pixels(image, frame.path, "frame")[::-1]
+            rgba, is_float = _file_pixels(image, frame.path, "frame")
         else:
-            rgba = world.image_pixels(image, "Texture image")[::-1]  # row 0 the bottom, as v = 0 is
-        key = (engine.fingerprint(rgba), image.colorspace_settings.name)
+            rgba = world.image_pixels(image, "Texture image", as_stored=True)
+        rgba = rgba[::-1]  # row 0 the bottom, as v = 0 is
+        key = (engine.fingerprint(rgba), image.colorspace_settings.name, image.alpha_mode)
         if held is None or held[0] != key:
-            if not np.isfinite(rgba[..., :3]).all():
-                bad = np.argwhere(~np.isfinite(rgba[..., :3]).all(axis=2))[0]
+            if not np.isfinite(rgba).all():
+                bad = np.argwhere(~np.isfinite(rgba).all(axis=2))[0]
                 raise world.SetupError(f"Texture image '{image.name}' has a texel that is not finite (NaN or "
                                        f"infinite) at column {bad[1]}, row {bad[0]}: fix or replace the image")
-            held = (key, _pyramid(np.ascontiguousarray(rgba[..., :3])), state)
-            self._pyramids[image.name_full] = held
+            held = (key, _pyramid(cycles_texels(rgba, image, unassociated, is_float)), state)
+            self._pyramids[name] = held
         elif held[2] != state:
             held = (held[0], held[1], state)
-            self._pyramids[image.name_full] = held
+            self._pyramids[name] = held
         return held[1]
 
-    def tiles(self, image):
+    def tiles(self, image, unassociated=False):
         """A UDIM image's pyramids, {tile number: levels}: its first tile as levels() reads the image
         (Blender hands out that tile's pixels, unsaved edits included), each other tile from its
         packed data or its file.  A tile neither packed nor found on disk is a SetupError naming
-        its file; a generated tile past the first is nodes.Unsupported."""
+        its file; a generated tile past the first is nodes.Unsupported.  Where some tiles have alpha,
+        every tile's pyramid has it."""
         numbers = tuple(t.number for t in image.tiles)
         packed = {p.tile_number: p for p in image.packed_files}
         state = (numbers, tuple(image.size), image.filepath_raw, tuple(sorted(packed)),
-                 image.colorspace_settings.name)
-        held = self._pyramids.get(("tiles", image.name_full))
-        first = self.levels(image)
-        if held is not None and held[0] == state and held[1].get(numbers[0]) is first:
+                 image.colorspace_settings.name, image.alpha_mode)
+        held = self._pyramids.get(("tiles", image.name_full, unassociated))
+        first = self.levels(image, unassociated=unassociated)
+        if held is not None and held[0] == state and held[2] is first:
             return held[1]
         out = {numbers[0]: first}
         for tile in image.tiles[1:]:
-            out[tile.number] = _pyramid(np.ascontiguousarray(
-                _tile_pixels(image, tile, packed.get(tile.number))[::-1][..., :3]))
-        self._pyramids[("tiles", image.name_full)] = (state, out)
+            rgba, is_float = _tile_pixels(image, tile, packed.get(tile.number))
+            out[tile.number] = _pyramid(cycles_texels(rgba[::-1], image, unassociated, is_float))
+        if len({levels[0].shape[2] for levels in out.values()}) > 1:
+            out = {number: [_opaque(level) for level in levels] for number, levels in out.items()}
+        self._pyramids[("tiles", image.name_full, unassociated)] = (state, out, first)
         return out
 
-    def mean_of(self, image, frame=None):
+    def mean_of(self, image, frame=None, unassociated=False):
         """levels()[-1] of an image, or the tiles' mean for a UDIM image (each tile a unit of UV)."""
         if image.source == "TILED":
-            return np.mean([levels[-1][0, 0] for levels in self.tiles(image).values()], axis=0)
-        return self.levels(image, frame)[-1][0, 0]
+            return np.mean([levels[-1][0, 0] for levels in self.tiles(image, unassociated).values()], axis=0)
+        return self.levels(image, frame, unassociated)[-1][0, 0]
+
+
+def _opaque(level):
+    """An RGB level with alpha 1 (an RGBA one as it is)."""
+    if level.shape[2] == 4:
+        return level
+    return np.concatenate([level, np.ones(level.shape[:2] + (1,), np.float32)], axis=2)
+
+
+def cycles_texels(rgba, image, unassociated=False, is_float=None):
+    """What Cycles samples of an image, from its RGBA as stored (world.image_pixels(as_stored=True)):
+    scene-linear RGB where every texel is opaque (or its alpha is ignored), else RGBA with the colour
+    associated with alpha as Cycles' loaders leave it -- a float image's as stored, a byte image's
+    multiplied by alpha in 8-bit integers, (c * a) / 255, before its sRGB is decoded; data and
+    channel-packed colours not at all.  unassociated: the texels for a node whose Alpha output is used,
+    whose colour Cycles divides by alpha before decoding sRGB (svm_image_texture): a byte texel's
+    colour is then that quotient decoded, times alpha, so that dividing the filtered colour by the
+    filtered alpha gives it back.  is_float: the loaded pixels' (image.is_float unless given)."""
+    is_float = image.is_float if is_float is None else is_float
+    space = image.colorspace_settings.name
+    srgb = not is_float and space in world.SRGB_SPACES
+    rgb, alpha = rgba[..., :3], rgba[..., 3:4]
+    if image.alpha_mode == "NONE" or (alpha == 1.0).all():
+        return np.ascontiguousarray(world.srgb_to_linear(rgb) if srgb else rgb, np.float32)
+    if not is_float and space not in world.DATA_SPACES and image.alpha_mode != "CHANNEL_PACKED":
+        c, a = np.rint(rgb * 255.0), np.rint(alpha * 255.0)
+        rgb = np.floor(c * a / 255.0) / 255.0
+        if unassociated:
+            rgb = np.where((a > 0.0) & (a < 255.0), rgb * (255.0 / np.maximum(a, 1.0)), rgb)
+    rgb = world.srgb_to_linear(rgb) if srgb else rgb
+    if unassociated and not is_float and space not in world.DATA_SPACES and image.alpha_mode != "CHANNEL_PACKED":
+        rgb = rgb * alpha
+    return np.ascontiguousarray(np.concatenate([rgb, alpha], axis=2), np.float32)
 
 
 def _tile_pixels(image, tile, packed):
-    """RGBA (H, W, 4) linear, row 0 the top, of a UDIM tile past the first, from its packed data or
+    """_file_pixels of a UDIM tile past the first, from its packed data or
     its file (<UDIM> or <UVTILE> in the path)."""
     import os
     import tempfile
@@ -173,9 +215,9 @@ def _tile_pixels(image, tile, packed):
 
 
 def _file_pixels(image, path, what):
-    """RGBA (H, W, 4) linear, row 0 the top, of the file at `path` read for `image` (a UDIM tile, a
-    sequence's frame: `what` names it) by Blender's own loader in the image's colour space, into a
-    datablock removed at once.  A file that is missing, unreadable or holds a texel that is not finite
+    """(RGBA (H, W, 4) as stored, row 0 the top; whether it is float) of the file at `path` read for
+    `image` (a UDIM tile, a sequence's frame: `what` names it) by Blender's own loader in the image's
+    colour space, into a datablock removed at once.  A file that is missing, unreadable or holds a texel that is not finite
     is a SetupError naming it."""
     import os
 
@@ -187,21 +229,22 @@ def _file_pixels(image, path, what):
     try:
         loaded = bpy.data.images.load(path, check_existing=False)
         loaded.colorspace_settings.name = image.colorspace_settings.name
-        rgba = world.image_pixels(loaded, f"Texture image '{image.name}' {what}")
+        rgba = world.image_pixels(loaded, f"Texture image '{image.name}' {what}", as_stored=True)
+        is_float = loaded.is_float
     except RuntimeError as exc:
         raise world.SetupError(f"Texture image '{image.name}': {what} could not be loaded: {path} "
                                f"({exc})") from None
     finally:
         if loaded is not None:
             bpy.data.images.remove(loaded)
-    if not np.isfinite(rgba[..., :3]).all():
+    if not np.isfinite(rgba).all():
         raise world.SetupError(f"Texture image '{image.name}' has a texel that is not finite (NaN or infinite) in "
                                f"{what}: fix or replace the image")
-    return rgba
+    return rgba, is_float
 
 
 def _movie_pixels(image, frame):
-    """RGBA (H, W, 4) linear, row 0 the top, of a movie's `frame` (a Frame) as Blender decodes it.
+    """RGBA (H, W, 4) as stored, row 0 the top, of a movie's `frame` (a Frame) as Blender decodes it.
     Image.pixels hands out the frame Blender last decoded for the image, and only a texture's image
     user (whose frame a script may set) asks for a given one: a texture datablock, removed at once,
     asks for it.  A movie Blender cannot open is a SetupError naming its file."""
@@ -212,10 +255,10 @@ def _movie_pixels(image, frame):
         reader.image = image
         reader.image_user.frame_current = frame.number
         reader.evaluate((0.0, 0.0, 0.0))
-        rgba = world.image_pixels(image, "Texture movie")
+        rgba = world.image_pixels(image, "Texture movie", as_stored=True)
     finally:
         bpy.data.textures.remove(reader)
-    if not np.isfinite(rgba[..., :3]).all():
+    if not np.isfinite(rgba).all():
         raise world.SetupError(f"Texture image '{image.name}' has a texel that is not finite (NaN or infinite) in "
                                f"frame {frame.number}: fix or replace the movie")
     return rgba
@@ -324,8 +367,10 @@ images = ImageCache()
 def pyramids(node):
     """What sample_image reads of an Image Texture node's image: its pyramid (an image sequence's or
     movie's at the frame shown), or a UDIM image's tiles'."""
-    image = node.image
-    return images.tiles(image) if image.source == "TILED" else images.levels(image, frame_shown(node))
+    image, unassociated = node.image, nodes.unassociates_alpha(node)
+    if image.source == "TILED":
+        return images.tiles(image, unassociated)
+    return images.levels(image, frame_shown(node), unassociated)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -350,7 +395,7 @@ def _bilinear(level, uv, extension):
     y = uv[:, 1] * h - 0.5
     x0, y0 = np.floor(x).astype(np.int64), np.floor(y).astype(np.int64)
     fx, fy = (x - x0)[:, None].astype(np.float32), (y - y0)[:, None].astype(np.float32)
-    out = np.zeros((len(uv), 3), np.float32)
+    out = np.zeros((len(uv), level.shape[2]), np.float32)
     for dx, dy, wgt in ((0, 0, (1 - fx) * (1 - fy)), (1, 0, fx * (1 - fy)), (0, 1, (1 - fx) * fy), (1, 1, fx * fy)):
         i, j = _wrap(x0 + dx, w, extension), _wrap(y0 + dy, h, extension)
         inside = (i >= 0) & (j >= 0)
@@ -359,7 +404,7 @@ def _bilinear(level, uv, extension):
 
 
 def sample(levels, uv, footprint, interpolation, extension):
-    """Linear RGB (n, 3) at UVs (n, 2): Closest reads the nearest texel of the image; otherwise
+    """The levels' RGB or RGBA (n, 3 or 4) at UVs (n, 2): Closest reads the nearest texel of the image; otherwise
     bilinear between the two mip levels about each point's footprint (its side in texels of the
     image, n), blended by where it falls between them."""
     base = levels[0]
@@ -371,7 +416,7 @@ def sample(levels, uv, footprint, interpolation, extension):
         return np.where(inside[:, None], base[np.maximum(j, 0), np.maximum(i, 0)], 0.0).astype(np.float32)
     lod = np.clip(np.log2(np.maximum(footprint, 1.0)), 0.0, len(levels) - 1)
     lo = np.floor(lod).astype(np.int64)
-    out = np.zeros((len(uv), 3), np.float32)
+    out = np.zeros((len(uv), base.shape[2]), np.float32)
     for k in np.unique(lo):
         rows = lo == k
         t = (lod[rows] - k)[:, None].astype(np.float32)
@@ -392,7 +437,7 @@ def sample_image(pyramids, uv, footprint, interpolation, extension):
     cell = np.floor(uv).astype(np.int64)
     number = np.where((cell[:, 0] >= 0) & (cell[:, 0] < 10) & (cell[:, 1] >= 0),
                       1001 + cell[:, 0] + 10 * cell[:, 1], -1)
-    out = np.tile(MISSING_TILE, (len(uv), 1))
+    out = np.tile(MISSING_TILE[:next(iter(pyramids.values()))[0].shape[2]], (len(uv), 1))
     for tile, levels in pyramids.items():
         rows = number == tile
         if rows.any():
@@ -403,7 +448,7 @@ def sample_image(pyramids, uv, footprint, interpolation, extension):
 
 
 # What Cycles reads where an image has no tile: its missing-image colour
-MISSING_TILE = np.float32([1.0, 0.0, 1.0])
+MISSING_TILE = np.float32([1.0, 0.0, 1.0, 1.0])
 
 
 # ---------------------------------------------------------------------------------------------
@@ -741,7 +786,7 @@ def _mapped_normals(mesh, corner_vert, source, strength, object_n, normal, to_wo
         return None
     nl = len(mesh.loops)
     colour = sample_image(pyramids(source.node), got[0], got[1], source.node.interpolation,
-                          source.node.extension)
+                          source.node.extension)[:, :3]
     c = 2.0 * colour - 1.0
     space = source.space
     if space == "TANGENT":

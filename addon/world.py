@@ -123,12 +123,14 @@ def world_spec(world):
                      strength=strength, key=key)
 
 
-def _srgb_to_linear(x):
+def srgb_to_linear(x):
     return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4).astype(np.float32)
 
 
-def image_pixels(image, what="World image"):
-    """RGBA float32 (H, W, 4), row 0 the top, linear: one bulk copy out of Blender."""
+def image_pixels(image, what="World image", as_stored=False):
+    """RGBA float32 (H, W, 4), row 0 the top: one bulk copy out of Blender.  RGB linear, alpha 1;
+    as_stored: the values as Blender holds them (a byte image's display-encoded, a float image's
+    associated with alpha) with the image's alpha (a two-channel image's second, else 1)."""
     w, h = image.size  # reading the size loads the image
     if w == 0 or h == 0:
         where = image.filepath_raw or "(no file)"
@@ -142,9 +144,13 @@ def image_pixels(image, what="World image"):
         rgba[..., :3] = px[..., :3]
     else:
         rgba[..., :3] = px[..., :1]
+    if as_stored:
+        if channels in (2, 4):
+            rgba[..., 3] = px[..., channels - 1]
+        return rgba
     # Float images come linear; byte images hand out their stored, display-encoded values.
     if not image.is_float and image.colorspace_settings.name in SRGB_SPACES:
-        rgba[..., :3] = _srgb_to_linear(rgba[..., :3])
+        rgba[..., :3] = srgb_to_linear(rgba[..., :3])
     return rgba
 
 
@@ -152,6 +158,8 @@ def image_pixels(image, what="World image"):
 # the linear Rec.709 ones (and data) as stored.  Blender converts float images itself.
 SRGB_SPACES = {"sRGB", "sRGB EOTF"}
 LINEAR_SPACES = {"Linear Rec.709", "scene_linear", "Non-Color", "Linear", "Raw"}
+# The colour spaces whose values Cycles reads as data (colorspace_is_data): never associated with alpha
+DATA_SPACES = {"Non-Color", "Raw"}
 
 
 def image_note(spec, images):

@@ -498,7 +498,7 @@ def test_8_bit_world_images_by_colour_space(scene, space, decoded):
     spec = world.world_spec(scene.world)
     held = world.image_pixels(img)[..., :3]
     byte = np.float32(128 / 255)  # 0.5 as stored in 8 bits
-    np.testing.assert_allclose(held, world._srgb_to_linear(byte) if decoded else byte, rtol=1e-6)
+    np.testing.assert_allclose(held, world.srgb_to_linear(byte) if decoded else byte, rtol=1e-6)
     _, notes = shading.shade_objects(scene, bpy.context.evaluated_depsgraph_get(), [obj],
                                      views.camera_view(scene), bpy.data)
     noted = [n for n in notes if "8-bit in colour space" in n]

@@ -92,8 +92,10 @@ def grid():
                              points=points, owner=(obj, mat),
                              attribute=textures.attribute_reader(mesh, corner_vert, "TEXEL", sites, notes),
                              footprint=textures.coordinate_footprint(mesh, corner_vert, "TEXEL", sites))
+        compare.evaluator = ev
         return px[sites.texels], ev.colour(emission.inputs["Color"]), notes
     compare.texels = sites.texels  # (each row's pixel)
+    compare.emission = emission
     return compare
 
 
@@ -282,6 +284,51 @@ def test_an_image_through_coordinates_reads_as_cycles_renders_it(grid, projectio
         side = (np.arange(N) + 0.5) / N * 4.0 - 2.0
         x, y = np.meshgrid(side, side)
         off &= (np.hypot(x, y).ravel() > 0.3)[grid.texels]
+    assert off.sum() <= 3, (off.sum(), np.abs(cycles - ours).max())
+
+
+def _image_with_alpha(is_float, alpha_mode="STRAIGHT", space=None, alpha_used=False):
+    """configure() of an Image Texture (Closest) of a 24 x 24 image whose alpha runs from 0 to 1
+    (a fifth of its texels 0, a fifth 1), read through object coordinates as _image_through reads
+    them; alpha_used: its Alpha output also scales the Emission's Strength."""
+    flat = _image_through("FLAT")
+
+    def configure(node):
+        name = f"alpha {is_float} {alpha_mode} {space}"
+        image = bpy.data.images.get(name) or bpy.data.images.new(name, 24, 24, alpha=True, float_buffer=is_float)
+        rng = np.random.default_rng(5)
+        alpha = rng.choice([0.0, 1.0, 0.5], 24 * 24, p=[0.2, 0.2, 0.6])
+        alpha = np.where(alpha == 0.5, rng.random(24 * 24), alpha)
+        image.alpha_mode = alpha_mode
+        if space is not None:  # (before the pixels: a generated image's are made afresh in a new space)
+            image.colorspace_settings.name = space
+        image.pixels.foreach_set(np.column_stack([rng.random((24 * 24, 3)), alpha]).astype(np.float32).ravel())
+        flat(node)
+        node.image, node.interpolation = image, "Closest"
+        if alpha_used:
+            node.id_data.links.new(node.outputs["Alpha"], grid_emission(node).inputs["Strength"])
+    return configure
+
+
+def grid_emission(node):
+    return next(n for n in node.id_data.nodes if n.bl_idname == "ShaderNodeEmission")
+
+
+@pytest.mark.parametrize("is_float, alpha_mode, space, output, alpha_used", [
+    (False, "STRAIGHT", None, "Color", False), (False, "STRAIGHT", None, "Color", True),
+    (False, "STRAIGHT", None, "Alpha", False), (True, "STRAIGHT", None, "Color", False),
+    (True, "STRAIGHT", None, "Color", True), (False, "CHANNEL_PACKED", None, "Color", True),
+    (False, "NONE", None, "Color", False), (False, "STRAIGHT", "Non-Color", "Color", True)])
+def test_an_image_with_alpha_reads_as_cycles_renders_it(grid, is_float, alpha_mode, space, output, alpha_used):
+    """An image with alpha as Cycles samples it: a byte image's colour associated with alpha in 8 bits
+    before its sRGB is decoded, a float image's as stored; divided by alpha again where the node's
+    Alpha output is used (here scaling the Emission), not where it is channel-packed or data; alpha
+    ignored (1) where the image's alpha mode is None.  Within 1e-4 of Cycles' pixels."""
+    cycles, ours, _ = grid("ShaderNodeTexImage", output, _image_with_alpha(is_float, alpha_mode, space, alpha_used))
+    if alpha_used:
+        ours = ours * grid.evaluator.value(grid.emission.inputs["Strength"])[:, None]
+    assert np.ptp(ours) > 0.2
+    off = np.abs(cycles - ours).max(axis=1) > 1e-4
     assert off.sum() <= 3, (off.sum(), np.abs(cycles - ours).max())
 
 

@@ -366,6 +366,13 @@ def _kelvin(node, mapping):
     node.id_data.links.new(mapping.outputs["Vector"], node.inputs["Temperature"])
 
 
+def _nanometres(node, mapping):
+    """A Wavelength whose Wavelength is the pixel's mapped point, from 300 to 860 nm (past both ends of
+    the table)."""
+    _set(mapping, Scale=(420.0, 0.0, 0.0), Location=(1740.0, 0.0, 0.0))  # (a vector read as its mean)
+    node.id_data.links.new(mapping.outputs["Vector"], node.inputs["Wavelength"])
+
+
 RANGE = {"From Min": -0.3, "From Max": 0.4, "To Min": 0.2, "To Max": 1.3}
 RANGE3 = {"From_Min_FLOAT3": (-0.3, -0.5, 0.0), "From_Max_FLOAT3": (0.4, 0.6, 1.0), "To_Min_FLOAT3": (0.2, 0.0, 1.0),
           "To_Max_FLOAT3": (1.3, 1.0, -1.0)}
@@ -385,6 +392,7 @@ VALUE_NODES = [
     ("ShaderNodeRGBToBW", "Val", _value_of_points({}, into="Color")),
     ("ShaderNodeFloatCurve", "Value", _curved),
     ("ShaderNodeBlackbody", "Color", _kelvin),
+    ("ShaderNodeWavelength", "Color", _nanometres),
     ("ShaderNodeRGBCurve", "Color", _curved),
 ]
 
