@@ -247,8 +247,9 @@ def shadow_triangles(positions, triangles):
     return np.ascontiguousarray(triangles[keep]), int((~keep).sum())
 
 
-def _merged_occluders(meshes, memory_budget_mb):
-    """(wenv.Occluders of `meshes` as one, where each one's vertices start among its positions)."""
+def merged_occluders(meshes, memory_budget_mb=1024):
+    """(wenv.Occluders of `meshes` ([(world positions, triangles)]) as one, where each one's vertices
+    start among its positions)."""
     positions = np.ascontiguousarray(np.vstack([p for p, _ in meshes]), np.float32)
     offsets = np.cumsum([0] + [len(p) for p, _ in meshes])
     triangles = np.vstack([t + o for (_, t), o in zip(meshes, offsets)]).astype(np.int64)
@@ -281,7 +282,7 @@ class ShadowCache:
         vertices start among its positions; the same object while the meshes are unchanged."""
         keys = [fingerprint(p, t) for p, t in meshes]
         if keys != self._mesh_keys:
-            occluders, offsets = _merged_occluders(meshes, memory_budget_mb)
+            occluders, offsets = merged_occluders(meshes, memory_budget_mb)
             self._changed = None if self._mesh_keys is None else _changed_triangles(
                 self._mesh_keys, keys, self._triangle_counts, [len(t) for _, t in meshes])
             self._before = self._occlusions if self._changed is not None else {}
@@ -297,7 +298,7 @@ class ShadowCache:
         each): what blocks a lamp whose Light links its shadows.  Kept while those meshes are."""
         key = tuple(fingerprint(p, t) for p, t in meshes)
         if key not in self._some:
-            self._some[key] = _merged_occluders(meshes, memory_budget_mb)[0]
+            self._some[key] = merged_occluders(meshes, memory_budget_mb)[0]
         return self._some[key]
 
     def occlusion(self, occluders, positions, normals, progress=None):

@@ -133,8 +133,11 @@ class Evaluator:
     rows) of the mesh's UV map (None: the active render one), or None without one."""
 
     def __init__(self, count, uv, texture, checking=False, points=None, progress=None, attribute=None, owner=None,
-                 footprint=None):
+                 footprint=None, ambient=None):
         self.count = count
+        # ambient(positions, normals, distance, inside, only_local, samples) -> the rows' unoccluded shares
+        # (ambient.py), None where no rays are cast (no scene, or a Bump node's height)
+        self._ambient = ambient
         self._uv = uv
         self._texture = texture
         # attribute(name, colour) -> (values (count, k), Cycles' type) of a mesh attribute at the rows,
@@ -451,6 +454,23 @@ class Evaluator:
         if output.identifier not in ("Position", "Normal"):
             raise Unsupported(f"'{node.name}''s {output.name} output")
         return self._coordinates("WORLD" if output.identifier == "Position" else "NORMAL", node=node)[0]
+
+    def _ShaderNodeAmbientOcclusion(self, node, output, depth):
+        for name in ("Normal", "Distance"):
+            if node.inputs[name].is_linked:
+                raise Unsupported(f"'{node.name}''s {name}, linked")
+        if self._ambient is None:
+            if not self.checking:
+                raise Unsupported(f"'{node.name}', which casts rays: read into a material's inputs and factors, "
+                                  "not here")
+            share = np.ones(self.count, np.float32)
+        else:
+            share = self._ambient(self._coordinates("WORLD", node=node)[0], self._coordinates("NORMAL", node=node)[0],
+                                  float(node.inputs["Distance"].default_value), node.inside, node.only_local,
+                                  node.samples)
+        if output.identifier == "AO":
+            return share
+        return self.colour(node.inputs["Color"], depth) * share[:, None]
 
     # -- node groups, evaluated through: a group's output is its inner node's, a Group Input the socket
     # the group node is fed by

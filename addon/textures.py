@@ -10,7 +10,7 @@ import collections
 
 import numpy as np
 
-from . import closures, engine, materials, meshes, nodes, world
+from . import ambient, closures, engine, materials, meshes, nodes, world
 
 # The sockets read from textures and the nodes between (nodes.py), by the core's keyword: every input
 # the core shades per vertex (wenv.Principled.INPUTS' per_vertex).  A colour into a value socket is
@@ -608,7 +608,8 @@ def read_inputs(obj, depsgraph, data, progress=None):
                                                                    (uv, footprint, rows), data.count),
                 points=row_points(obj, mesh, data.positions, data.normals, data.view), progress=progress,
                 attribute=attribute_reader(mesh, corner_vert, data.domain, data.sites, notes), owner=(obj, mat),
-                footprint=coordinate_footprint(mesh, corner_vert, data.domain, data.sites))
+                footprint=coordinate_footprint(mesh, corner_vert, data.domain, data.sites),
+                ambient=ambient_reader(obj, depsgraph, data.domain, progress))
             try:
                 values = ev.colour(sock) if keyword in COLOUR_KEYWORDS else ev.value(sock)
             except nodes.MissingUV as exc:
@@ -636,6 +637,18 @@ def read_inputs(obj, depsgraph, data, progress=None):
         mine = {k: a for k, a in data.inputs.items() if s in data.textured[k]}
         notes += _within_family_limits(mine, _slot_rows(obj, data, s), f"'{mat.name}'")
     return notes
+
+
+def ambient_reader(obj, depsgraph, domain, progress=None):
+    """An Evaluator's ambient() for obj's rows (ambient.shares against the scene's meshes): the node's
+    Samples rays a point, at least VERTEX_RAYS at vertices or corners and TEXEL_RAYS at a bake's texels."""
+    least = ambient.TEXEL_RAYS if domain == "TEXEL" else ambient.VERTEX_RAYS
+
+    def read(positions, normals, distance, inside, only_local, samples):
+        rays = max(least, samples)
+        return ambient.shares((obj.name, domain, distance, inside, only_local, rays), positions, normals, distance,
+                              inside, ambient.blockers(depsgraph, obj, only_local), rays, progress)
+    return read
 
 
 # The inputs read at their mean first when more vary smoothly than a vertex may mix (the core's
@@ -1305,7 +1318,8 @@ def read_term_weights(obj, depsgraph, data, progress=None):
                 points=row_points(obj, mesh, data.positions, data.normals, data.view), progress=progress,
                 attribute=attribute_reader(mesh, corner_vert, data.domain, data.sites, notes),
                 owner=(obj, mat),
-                footprint=coordinate_footprint(mesh, corner_vert, data.domain, data.sites)) if reads else None
+                footprint=coordinate_footprint(mesh, corner_vert, data.domain, data.sites),
+                ambient=ambient_reader(obj, depsgraph, data.domain, progress)) if reads else None
             weight, fac = colour, np.ones((data.count, 1), np.float32)
             if term.factors:
                 try:
