@@ -113,6 +113,32 @@ def unassociates_alpha(node):
             and image.alpha_mode not in ("CHANNEL_PACKED", "NONE") and used(node.outputs["Alpha"]))
 
 
+def property_rgba(owner, name):
+    """Blender's find_property_rgba: `owner`'s custom property `name`, else the property at the RNA
+    path `name`, as RGBA -- a number or a boolean (v, v, v, 1), an array of at most four numbers
+    over (0, 0, 0, 1) -- or None (no such property, or one of another kind)."""
+    keys = owner.keys() if hasattr(owner, "keys") else ()
+    if name in keys:
+        value = owner[name]
+    else:
+        try:
+            value = owner.path_resolve(name)
+        except (ValueError, TypeError):
+            return None
+    if isinstance(value, bool):
+        return (float(value),) * 3 + (1.0,)
+    if isinstance(value, (int, float)):
+        return (float(value),) * 3 + (1.0,)
+    if isinstance(value, str) or not hasattr(value, "__len__") or not 0 < len(value) <= 4:
+        return None
+    items = list(value)
+    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in items):
+        return None
+    out = [0.0, 0.0, 0.0, 1.0]
+    out[:len(items)] = [float(v) for v in items]
+    return tuple(out)
+
+
 def _fed(socket, depth):
     """source(socket) for a chain `depth` nodes deep; None when unlinked (its own value is read)."""
     if depth > MAX_DEPTH:
@@ -410,8 +436,10 @@ class Evaluator:
 
     def _ShaderNodeAttribute(self, node, output, depth):
         if node.attribute_type != "GEOMETRY":
-            raise Unsupported(f"'{node.name}', an attribute of the {node.attribute_type.lower().replace('_', ' ')}")
-        got, kind = self._mesh_attribute(node, node.attribute_name, False)
+            rgba = np.float32(self._uniform_attribute(node))
+            got, kind = np.tile(rgba, (self.count, 1)), "RGBA"
+        else:
+            got, kind = self._mesh_attribute(node, node.attribute_name, False)
         which = output.identifier
         if which == "Alpha":
             return (np.ascontiguousarray(got[:, 3]) if kind in ("RGBA", "FLOAT4")
@@ -425,6 +453,30 @@ class Evaluator:
         if kind == "FLOAT2":
             return np.column_stack([got, np.zeros(self.count, np.float32)])
         return np.ascontiguousarray(got[:, :3])
+
+    def _uniform_attribute(self, node):
+        """An Attribute node's RGBA of the object (or instancer: wenv shades objects, not instances),
+        looked up on the object then its data, or of the view layer, then the scene, then its World,
+        as Blender's BKE_object_dupli_find_rgba_attribute and BKE_view_layer_find_rgba_attribute
+        look it up for Cycles; (0, 0, 0, 0) where none has it."""
+        import bpy
+
+        name = node.attribute_name
+        if node.attribute_type == "VIEW_LAYER":
+            scene = bpy.context.scene
+            owners = (bpy.context.view_layer, scene, scene.world if scene is not None else None)
+        elif self._owner is None:
+            if not self.checking:
+                raise NeedsMesh(f"'{node.name}', an attribute of the object, which has no value without an object")
+            owners = ()
+        else:
+            obj = self._owner[0]
+            owners = (obj, obj.data)
+        for owner in owners:
+            found = property_rgba(owner, name) if owner is not None else None
+            if found is not None:
+                return found
+        return (0.0, 0.0, 0.0, 0.0)
 
     # -- the object's and the geometry's, as Cycles' svm_node_object_info and svm_node_geometry give them
     def _ShaderNodeObjectInfo(self, node, output, depth):

@@ -338,6 +338,42 @@ def test_an_image_with_alpha_reads_as_cycles_renders_it(grid, is_float, alpha_mo
 
 
 @pytest.fixture
+def properties(grid):
+    """Custom properties on the grid's object, mesh, view layer, scene and a World, and a string one,
+    removed after."""
+    obj, scene = bpy.data.objects["Crate.004 – ÿ"], bpy.context.scene
+    scene.world = bpy.data.worlds.new("props")
+    owners = (obj, obj.data, bpy.context.view_layer, scene, scene.world)
+    values = ({"tint": [0.2, 0.5, 0.9], "wear": 0.7, "flags": [3, -2], "shown": True, "label": "x"},
+              {"wear": 0.1, "rgba": [0.3, 0.2, 0.1, 0.6]}, {"layer": 0.35}, {"layer": 0.9, "sky": 4},
+              {"sky": 2.0, "haze": [0.4, 0.5]})
+    for owner, props in zip(owners, values):
+        for key, value in props.items():
+            owner[key] = value
+    yield
+    for owner, props in zip(owners, values):
+        for key in props:
+            del owner[key]
+    bpy.data.worlds.remove(scene.world)
+
+
+@pytest.mark.parametrize("kind, name, output", [
+    ("OBJECT", "tint", "Color"), ("OBJECT", "wear", "Fac"), ("OBJECT", "rgba", "Alpha"), ("OBJECT", "rgba", "Color"),
+    ("OBJECT", "flags", "Vector"), ("OBJECT", "shown", "Fac"), ("OBJECT", "color", "Color"),
+    ("OBJECT", "location", "Fac"), ("OBJECT", "label", "Color"), ("OBJECT", "absent", "Alpha"),
+    ("INSTANCER", "tint", "Color"), ("VIEW_LAYER", "layer", "Fac"), ("VIEW_LAYER", "sky", "Color"),
+    ("VIEW_LAYER", "haze", "Color"), ("VIEW_LAYER", "frame_current", "Fac")])
+def test_attributes_of_the_object_and_view_layer_read_as_cycles_renders_them(grid, properties, kind, name, output):
+    """An Attribute of the object (or instancer) looked up on the object, then its mesh, and of the
+    view layer on the layer, then the scene, then its World: a custom property first, then an RNA
+    path, a number (or boolean) as a grey, an array of up to four over (0, 0, 0, 1), anything else or
+    nothing as (0, 0, 0, 0), as Blender hands them to Cycles.  Within 1e-5 of Cycles' pixels."""
+    cycles, ours, notes = grid("ShaderNodeAttribute", output, _named(name, kind))
+    assert not notes
+    np.testing.assert_allclose(ours, cycles, atol=1e-5)
+
+
+@pytest.fixture
 def lid(grid):
     """A box over a corner of the grid that the camera does not see but that blocks the grid's rays
     (as Cycles' shadow rays see it), removed after."""
@@ -374,10 +410,12 @@ def test_ambient_occlusion_reads_as_cycles_renders_it(grid, lid, distance, insid
 
 
 def test_what_is_not_read_is_named(grid):
-    """An attribute of the object (not the mesh) is named and not read; wenv's own shading is read as
-    no attribute, and said so."""
-    with pytest.raises(nodes.Unsupported, match="attribute of the object"):
-        grid("ShaderNodeAttribute", "Color", _named("paint", "OBJECT"))
+    """wenv's own shading is read as no attribute, and said so; an Ambient Occlusion node's linked
+    Distance is named."""
+    def linked_distance(node):
+        node.id_data.links.new(node.id_data.nodes.new("ShaderNodeValue").outputs[0], node.inputs["Distance"])
+    with pytest.raises(nodes.Unsupported, match="Distance, linked"):
+        grid("ShaderNodeAmbientOcclusion", "AO", linked_distance)
     mesh = bpy.data.meshes["Grid"]
     meshes.write_colors(mesh, "POINT", np.ones((len(mesh.vertices), 3), np.float32))
     try:
