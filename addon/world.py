@@ -11,23 +11,28 @@ class WorldSpec:
     """What the World asks for, read from its nodes without touching pixels (cheap: the live mode
     compares it every tick).  `key` identifies the image data, `transform` the rotation/strength."""
 
-    __slots__ = ("kind", "image_name", "projection", "rotation", "strength", "color", "key")
+    __slots__ = ("kind", "image_name", "projection", "rotation", "strength", "color", "key", "world_name", "reason")
 
     def __init__(self, kind, image_name=None, projection="equirect", rotation=0.0, strength=1.0,
-                 color=None, key=()):
-        self.kind = kind
+                 color=None, key=(), world_name=None, reason=None):
+        self.kind = kind  # "color", "image", or "rendered" (any other set-up: Cycles renders it)
         self.image_name = image_name
         self.projection = projection
         self.rotation = rotation
         self.strength = strength
         self.color = color
         self.key = key
+        self.world_name = world_name  # (rendered) the World datablock
+        self.reason = reason  # (rendered) what in it the image path does not read
 
     @property
     def signature(self):
         return (self.key, self.rotation, self.strength)
 
     def describe(self):
+        if self.kind == "rendered":
+            return (f"'{self.world_name}' as Cycles renders it ({RENDER_WIDTH} x {RENDER_WIDTH // 2}, "
+                    f"{RENDER_SAMPLES} samples a pixel): {self.reason}")
         if self.kind == "color":
             c = ", ".join(f"{v:.3g}" for v in self.color)
             return f"constant ({c}) x {self.strength:.3g}"
@@ -35,9 +40,14 @@ class WorldSpec:
         return f"{self.image_name} ({proj}), rotation {math.degrees(self.rotation):.1f} deg, strength {self.strength:.3g}"
 
 
+class _NotPlain(Exception):
+    """A World set-up read otherwise than as an image or a colour: Cycles renders it (the message
+    says what)."""
+
+
 def _unlinked_value(socket, what):
     if socket.is_linked:
-        raise SetupError(f"World: {what} is driven by a node link; only a plain value is supported")
+        raise _NotPlain(f"{what} is driven by a node link")
     return socket.default_value
 
 
@@ -61,20 +71,19 @@ def _mapping_rotation(env_node):
     if node is None or node.bl_idname == "ShaderNodeTexCoord":
         return 0.0
     if node.bl_idname != "ShaderNodeMapping":
-        raise SetupError(f"World: the Environment Texture's Vector comes from '{node.name}'; "
-                         "only a Mapping node (rotation about Z) is supported")
+        raise _NotPlain(f"the Environment Texture's Vector comes from '{node.name}'")
     if node.vector_type not in {"POINT", "VECTOR"}:
-        raise SetupError(f"World: Mapping node '{node.name}' is of type {node.vector_type}; use Point or Vector")
+        raise _NotPlain(f"Mapping node '{node.name}' is of type {node.vector_type.lower()}")
     feed = source_node(node.inputs["Vector"])
     if feed is not None and not (feed.bl_idname == "ShaderNodeTexCoord"
                                  and node.inputs["Vector"].links[0].from_socket.name == "Generated"):
-        raise SetupError(f"World: Mapping node '{node.name}' must be fed by Generated coordinates or nothing")
+        raise _NotPlain(f"Mapping node '{node.name}' is fed by other than Generated coordinates")
     rot = _unlinked_value(node.inputs["Rotation"], "the Mapping rotation")
     scale = _unlinked_value(node.inputs["Scale"], "the Mapping scale")
     if abs(rot[0]) > 1e-6 or abs(rot[1]) > 1e-6:
-        raise SetupError(f"World: Mapping node '{node.name}' rotates about X or Y; only Z rotation is supported")
+        raise _NotPlain(f"Mapping node '{node.name}' rotates about X or Y")
     if any(abs(s - 1.0) > 1e-6 for s in scale):
-        raise SetupError(f"World: Mapping node '{node.name}' has scale {tuple(scale)}; only scale 1 is supported")
+        raise _NotPlain(f"Mapping node '{node.name}' scales by {tuple(round(v, 4) for v in scale)}")
     return float(rot[2])
 
 
@@ -85,8 +94,12 @@ def _output_node(tree):
 
 
 def world_spec(world):
-    """Reads the World's node set-up; raises SetupError with a user-facing message if it cannot be
-    shaded (no World, no nodes, missing image, unsupported nodes)."""
+    """Reads the World's node set-up: an Environment Texture's image (turned about Z by a Mapping
+    node) or a plain colour, times the Background's Strength, read as they are; any other set-up
+    (a Sky Texture, mixed textures, a turn about X...) as Cycles renders it (kind "rendered", keyed
+    by everything in its nodes).  Raises SetupError with a user-facing message for a World that
+    cannot be shaded (none, no nodes or output, nothing connected, an image missing, a negative
+    Strength)."""
     if world is None:
         raise SetupError("The scene has no World: add one with an Environment Texture or a Background colour")
     tree = world.node_tree
@@ -98,8 +111,16 @@ def world_spec(world):
     bg = source_node(out.inputs["Surface"])
     if bg is None:
         raise SetupError(f"World '{world.name}': nothing is connected to the World Output's Surface")
+    try:
+        return _plain_spec(world, bg)
+    except _NotPlain as exc:
+        return WorldSpec("rendered", key=("rendered", world.name_full, tree_key(tree)), world_name=world.name,
+                         reason=str(exc))
+
+
+def _plain_spec(world, bg):
     if bg.bl_idname != "ShaderNodeBackground":
-        raise SetupError(f"World '{world.name}': the Surface comes from '{bg.name}'; only a Background node is supported")
+        raise _NotPlain(f"the Surface comes from '{bg.name}'")
     strength = float(_unlinked_value(bg.inputs["Strength"], "the Background strength"))
     if not math.isfinite(strength) or strength < 0:
         raise SetupError(f"World '{world.name}': Background strength {strength} must be >= 0")
@@ -108,19 +129,85 @@ def world_spec(world):
         color = tuple(float(c) for c in bg.inputs["Color"].default_value[:3])
         return WorldSpec("color", color=color, strength=strength, key=("color", color))
     if src.bl_idname != "ShaderNodeTexEnvironment":
-        raise SetupError(f"World '{world.name}': the Background colour comes from '{src.name}'; "
-                         "only an Environment Texture (or a plain colour) is supported")
+        raise _NotPlain(f"the Background colour comes from '{src.name}'")
     image = src.image
     if image is None:
         raise SetupError(f"World '{world.name}': the Environment Texture '{src.name}' has no image")
     if image.source not in {"FILE", "GENERATED"}:
-        raise SetupError(f"World image '{image.name}' is a {image.source.lower()}; only still images are supported")
+        raise _NotPlain(f"World image '{image.name}' is a {image.source.lower()}")
     projection = {"EQUIRECTANGULAR": "equirect", "MIRROR_BALL": "mirror_ball"}[src.projection]
     rotation = _mapping_rotation(src)
     key = ("image", image.name, image.filepath_raw, image.packed_file is not None, tuple(image.size),
            image.colorspace_settings.name, projection)
     return WorldSpec("image", image_name=image.name, projection=projection, rotation=rotation,
                      strength=strength, key=key)
+
+
+# What tree_key leaves out of a node: where it is drawn and what it is called, nothing it computes
+_LAYOUT = {"rna_type", "name", "label", "location", "location_absolute", "width", "height", "dimensions", "select",
+           "show_options", "show_preview", "show_texture", "hide", "parent", "use_custom_color", "color",
+           "color_tag", "warning_propagation", "inputs", "outputs", "internal_links", "type"}
+
+
+def _id_key(value, depth):
+    """What of an ID a node points at changes a World's light: an image's file and state, a node
+    group's nodes, an object's place."""
+    kind = type(value).__name__
+    if kind == "Image":
+        return (kind, value.name_full, value.filepath_raw, value.packed_file is not None, tuple(value.size),
+                value.is_dirty, value.source, value.colorspace_settings.name, value.alpha_mode)
+    if hasattr(value, "nodes") and depth < 8:
+        return (kind, value.name_full, tree_key(value, depth + 1))
+    if hasattr(value, "matrix_world"):
+        return (kind, value.name_full, tuple(tuple(r) for r in value.matrix_world))
+    return (kind, value.name_full)
+
+
+def _rna_key(struct, depth):
+    """Every property of a node (or of a struct it holds: a ColorRamp, curves, a texture mapping)
+    that is not layout, as a tuple."""
+    out = []
+    for prop in struct.bl_rna.properties:
+        ident = prop.identifier
+        if ident in _LAYOUT or ident.startswith("bl_"):
+            continue
+        value = getattr(struct, ident, None)
+        if prop.type == "POINTER":
+            if value is None:
+                out.append((ident, None))
+            elif hasattr(value, "name_full"):  # an ID
+                out.append((ident, _id_key(value, depth)))
+            elif depth < 3:
+                out.append((ident, _rna_key(value, depth + 1)))
+        elif prop.type == "COLLECTION":
+            if depth < 3:
+                out.append((ident, tuple(_rna_key(item, depth + 1) for item in value)))
+        else:
+            try:
+                value = tuple(value) if not isinstance(value, str) else value
+            except TypeError:
+                pass
+            out.append((ident, value))
+    return tuple(out)
+
+
+def tree_key(tree, depth=0):
+    """Everything in a node tree that changes what it gives: each node's settings and unlinked
+    inputs, and the links (cheap enough for the live mode's tick: a World has a few nodes)."""
+    nodes = []
+    for node in sorted(tree.nodes, key=lambda n: n.name):
+        inputs = []
+        for socket in node.inputs:
+            value = getattr(socket, "default_value", None)
+            try:
+                value = tuple(value) if not isinstance(value, (str, float, int, bool)) and value is not None else value
+            except TypeError:
+                value = None
+            inputs.append((socket.identifier, socket.enabled, value))
+        nodes.append((node.bl_idname, node.name, node.mute, tuple(inputs), _rna_key(node, depth)))
+    links = sorted((link.from_node.name, link.from_socket.identifier, link.to_node.name, link.to_socket.identifier,
+                    link.is_muted, link.is_valid) for link in tree.links)
+    return (tuple(nodes), tuple(links))
 
 
 def srgb_to_linear(x):
@@ -163,8 +250,25 @@ DATA_SPACES = {"Non-Color", "Raw"}
 
 
 def image_note(spec, images):
-    """A sentence when an 8-bit World image is in a colour space wenv does not decode (its stored
-    values are then read as linear Rec.709), else None."""
+    """A sentence when the World is rendered by Cycles (what for, and what of it is not read: its
+    Volume, a Light Path node, seen as a camera ray sees it), or when an 8-bit World image is in a
+    colour space wenv does not decode (its stored values are then read as linear Rec.709), else
+    None."""
+    if spec.kind == "rendered":
+        import bpy
+
+        world = bpy.data.worlds.get(spec.world_name)
+        tree = world.node_tree if world is not None else None
+        unread = []
+        if tree is not None:
+            out = _output_node(tree)
+            if out is not None and out.inputs["Volume"].is_linked:
+                unread.append("its Volume is not shaded")
+            if any(n.bl_idname == "ShaderNodeLightPath" for n in tree.nodes):
+                unread.append("its Light Path node reads as a camera ray (Cycles' lighting may differ)")
+        return (f"World '{spec.world_name}' is shaded as Cycles renders it ({spec.reason}): an equirectangular "
+                f"{RENDER_WIDTH} x {RENDER_WIDTH // 2} image at {RENDER_SAMPLES} samples a pixel, rendered again "
+                "when its nodes change" + ("; " + "; ".join(unread) if unread else ""))
     image = images.get(spec.image_name) if spec.kind == "image" else None
     if image is None or image.is_float:
         return None
@@ -175,8 +279,120 @@ def image_note(spec, images):
             "values were read as linear Rec.709 (set it to sRGB or a linear space, or use a float image)")
 
 
+# A World other than an image or a colour, as Cycles renders it: an equirectangular image of this
+# width (and half its height), each pixel the mean of this many samples over its area (a box filter);
+# the pixels of a small bright feature (a sun's disc) again at SUN_SAMPLES, so that its few pixels
+# keep its energy (at 16 samples a sun of half a degree lost 1-2 % of a plane's light)
+RENDER_WIDTH = 1024
+RENDER_SAMPLES = 16
+SUN_SAMPLES = 1024
+SUN_CONTRAST = 100.0  # a pixel this many times the image's mean is the bright feature's
+
+
+def _bright_box(px):
+    """(x0, y0, x1, y1), pixels from the bottom left, about the pixels SUN_CONTRAST times brighter
+    than the image's mean (and two more on each side), or None: none, or spread over more than a
+    hundredth of the image (a bright sky rather than a sun) or across the image's seam."""
+    lum = px[..., :3].mean(axis=2)
+    ys, xs = np.nonzero(lum > SUN_CONTRAST * max(float(lum.mean()), 1e-30))
+    if not len(xs):
+        return None
+    h, w = lum.shape
+    x0, x1 = max(int(xs.min()) - 2, 0), min(int(xs.max()) + 3, w)
+    y0, y1 = max(int(ys.min()) - 2, 0), min(int(ys.max()) + 3, h)
+    if (x1 - x0) * (y1 - y0) > w * h // 100:
+        return None
+    return x0, y0, x1, y1
+
+
+def render_world(world, frame=None, width=RENDER_WIDTH, samples=RENDER_SAMPLES):
+    """RGBA float32 (width / 2, width, 4), row 0 the top, scene linear: `world` as Cycles renders it
+    through an equirectangular panoramic camera (the projection of an Environment Texture's image:
+    Cycles' own sky, mixed textures, any node set-up), at the scene frame `frame` (the current one
+    if None); a small bright feature's pixels (_bright_box) rendered again at SUN_SAMPLES.  It
+    renders a scene of its own, with nothing but the World and the camera, removed at once (and
+    the Render Result image, if the render made it).  SetupError if Cycles cannot render it (a
+    render already running)."""
+    import os
+    import shutil
+    import tempfile
+
+    import bpy
+
+    height = width // 2
+    had_result = "Render Result" in bpy.data.images
+    folder = tempfile.mkdtemp(prefix="wenv-world-")
+    sc = bpy.data.scenes.new(".wenv world render")
+    camera_data = bpy.data.cameras.new(".wenv world camera")
+    camera = bpy.data.objects.new(".wenv world camera", camera_data)
+    try:
+        sc.world = world
+        if frame is None and bpy.context.scene is not None:
+            frame = bpy.context.scene.frame_current
+        sc.frame_current = frame if frame is not None else 1
+        sc.render.engine = "CYCLES"
+        sc.cycles.device = "CPU"
+        sc.cycles.samples = samples
+        sc.cycles.use_adaptive_sampling = False
+        sc.cycles.use_denoising = False
+        sc.cycles.pixel_filter_type = "BOX"  # each pixel the mean over its own area
+        sc.cycles.filter_width = 1.0
+        sc.render.resolution_x, sc.render.resolution_y, sc.render.resolution_percentage = width, height, 100
+        sc.render.image_settings.file_format = "OPEN_EXR"
+        sc.render.image_settings.color_depth = "32"
+        sc.render.filepath = os.path.join(folder, "world.exr")
+        sc.collection.objects.link(camera)
+        sc.camera = camera
+        camera_data.type, camera_data.panorama_type = "PANO", "EQUIRECTANGULAR"
+        camera.rotation_euler = (math.pi / 2, 0.0, -math.pi / 2)  # the image's centre along -X, as the texture's
+
+        def shot():
+            try:
+                bpy.ops.render.render(write_still=True, scene=sc.name)
+            except RuntimeError as exc:
+                raise SetupError(f"World '{world.name}' could not be rendered by Cycles: {exc}") from None
+            loaded = bpy.data.images.load(sc.render.filepath, check_existing=False)
+            try:
+                buf = np.empty(width * height * 4, np.float32)
+                loaded.pixels.foreach_get(buf)
+            finally:
+                bpy.data.images.remove(loaded)
+            return buf.reshape(height, width, 4)  # (row 0 the bottom)
+        px = shot()
+        box = _bright_box(px) if samples < SUN_SAMPLES else None
+        if box is not None:
+            x0, y0, x1, y1 = box
+            sc.cycles.samples = SUN_SAMPLES
+            sc.render.use_border, sc.render.use_crop_to_border = True, False
+            sc.render.border_min_x, sc.render.border_max_x = x0 / width, x1 / width
+            sc.render.border_min_y, sc.render.border_max_y = y0 / height, y1 / height
+            fine = shot()
+            px[y0:y1, x0:x1] = fine[y0:y1, x0:x1]
+    finally:
+        bpy.data.objects.remove(camera)
+        bpy.data.cameras.remove(camera_data)
+        bpy.data.scenes.remove(sc)
+        if not had_result and "Render Result" in bpy.data.images:
+            bpy.data.images.remove(bpy.data.images["Render Result"])
+        shutil.rmtree(folder, ignore_errors=True)
+    return np.ascontiguousarray(px[::-1])
+
+
 def environment_from_spec(spec, images):
-    """Core Environment for a WorldSpec (pixels read afresh); `images` is bpy.data.images."""
+    """Core Environment for a WorldSpec (pixels read afresh, or rendered); `images` is bpy.data.images."""
+    if spec.kind == "rendered":
+        import bpy
+
+        world = bpy.data.worlds.get(spec.world_name)
+        if world is None:
+            raise SetupError(f"World '{spec.world_name}' no longer exists")
+        px = render_world(world)
+        if not np.all(np.isfinite(px[..., :3])):
+            raise SetupError(f"World '{world.name}' renders NaN or infinite pixels")
+        try:
+            return engine.environment(px, projection="equirect", rotation=0.0, strength=1.0)
+        except ValueError as exc:
+            raise SetupError(f"World '{world.name}': {exc}") from None
     if spec.kind == "color":
         px = np.empty((4, 8, 4), np.float32)
         px[...] = (*spec.color, 1.0)
@@ -199,6 +415,9 @@ def environment(spec, images):
     try:
         if spec.kind == "color":
             return environment_from_spec(spec, images)
+        if spec.kind == "rendered":  # rendered once per state of its nodes
+            return engine.shaders.environment(spec.key, spec.signature, 0.0, 1.0,
+                                              lambda: environment_from_spec(spec, images))
         untransformed = WorldSpec("image", spec.image_name, spec.projection, 0.0, 1.0, key=spec.key)
         return engine.shaders.environment(spec.key, spec.signature, spec.rotation, spec.strength,
                                           lambda: environment_from_spec(untransformed, images))
