@@ -380,33 +380,32 @@ def render_world(world, frame=None, width=RENDER_WIDTH, samples=RENDER_SAMPLES):
 
 def environment_from_spec(spec, images):
     """Core Environment for a WorldSpec (pixels read afresh, or rendered); `images` is bpy.data.images."""
+    if spec.kind == "color":
+        px = np.empty((4, 8, 4), np.float32)
+        px[...] = (*spec.color, 1.0)
+        return engine.environment(px, projection="equirect", rotation=0.0, strength=spec.strength)
     if spec.kind == "rendered":
         import bpy
 
         world = bpy.data.worlds.get(spec.world_name)
         if world is None:
             raise SetupError(f"World '{spec.world_name}' no longer exists")
-        px = render_world(world)
-        if not np.all(np.isfinite(px[..., :3])):
-            raise SetupError(f"World '{world.name}' renders NaN or infinite pixels")
-        try:
-            return engine.environment(px, projection="equirect", rotation=0.0, strength=1.0)
-        except ValueError as exc:
-            raise SetupError(f"World '{world.name}': {exc}") from None
-    if spec.kind == "color":
-        px = np.empty((4, 8, 4), np.float32)
-        px[...] = (*spec.color, 1.0)
-        return engine.environment(px, projection="equirect", rotation=0.0, strength=spec.strength)
+        return _lit_by(render_world(world), f"World '{world.name}'", "equirect", 0.0, 1.0)
     image = images.get(spec.image_name)
     if image is None:
         raise SetupError(f"World image '{spec.image_name}' no longer exists")
-    px = image_pixels(image)
+    return _lit_by(image_pixels(image), f"World image '{image.name}'", spec.projection, spec.rotation, spec.strength)
+
+
+def _lit_by(px, what, projection, rotation, strength):
+    """engine.environment of pixels, a SetupError naming `what` for pixels not finite or lighting the
+    core refuses."""
     if not np.all(np.isfinite(px[..., :3])):
-        raise SetupError(f"World image '{image.name}' holds NaN or infinite pixels")
+        raise SetupError(f"{what} holds NaN or infinite pixels")
     try:
-        return engine.environment(px, projection=spec.projection, rotation=spec.rotation, strength=spec.strength)
+        return engine.environment(px, projection=projection, rotation=rotation, strength=strength)
     except ValueError as exc:
-        raise SetupError(f"World image '{image.name}': {exc}") from None
+        raise SetupError(f"{what}: {exc}") from None
 
 
 def environment(spec, images):
