@@ -602,6 +602,23 @@ class Evaluator:
         back = np.einsum("ij,ij->i", incoming, normal) < 0.0
         return incoming, np.where(back[:, None], -normal, normal), back
 
+    def _ShaderNodeLightPath(self, node, output, depth):
+        """What a camera ray's hit reads (wenv shades what the camera or viewport sees): Is Camera Ray
+        1, every other kind and depth 0, and Ray Length the distance from a perspective view's eye."""
+        which = output.identifier
+        if which == "Is Camera Ray":
+            return np.ones(self.count, np.float32)
+        if which != "Ray Length":
+            return np.zeros(self.count, np.float32)
+        incoming, _normal, _back = self._towards_viewer(node)
+        if self.checking:
+            return np.zeros(self.count, np.float32)
+        view = self._points("VIEW", None)
+        if view is None or not view.perspective:
+            raise Unsupported(f"'{node.name}''s Ray Length, which wenv reads in a perspective view only")
+        eye = np.asarray(view.eye, np.float64)
+        return np.linalg.norm(self._points("WORLD", None).astype(np.float64) - eye, axis=1).astype(np.float32)
+
     def _facing_normal(self, node, depth, normal):
         socket = node.inputs["Normal"]
         return self.colour(socket, depth) if socket.is_linked else normal

@@ -898,11 +898,13 @@ def row_points(obj, mesh, positions, normals, view=None):
     `normals`: their coordinates in `other`'s object space ('OBJECT'; obj's own without one) or in
     the mesh's texture space ('GENERATED', as Cycles maps it: the texture space's box onto the unit
     cube), the positions themselves ('WORLD'), the unit normals ('NORMAL', or in object space:
-    'OBJECT_NORMAL') or the unit directions towards the viewer of `view` ('INCOMING'; None without
-    one)."""
+    'OBJECT_NORMAL'), the unit directions towards the viewer of `view` ('INCOMING'; None without
+    one) or the view itself ('VIEW')."""
     def points(space, other=None):
         if space == "WORLD":
             return np.ascontiguousarray(positions, np.float32)
+        if space == "VIEW":  # (the view itself)
+            return view
         if space == "INCOMING":
             if view is None:
                 return None

@@ -1413,6 +1413,27 @@ def test_an_ambient_occlusion_node_is_read_at_each_vertex(scene):
     assert (local[near_cube] - share[near_cube]).mean() > 0.02 and np.mean(local < share - 0.05) < 0.01
 
 
+def test_a_light_path_ray_length_is_the_distance_from_the_eye(scene):
+    """A Light Path's Ray Length into Roughness (through a Math node dividing it by 20): each vertex
+    reads its distance from the camera's eye, as the camera ray that meets it has run."""
+    env_world(scene, "sunset")
+    obj = add_monkey(subdivisions=1)
+    mat = principled_material("depth")
+    obj.data.materials.append(mat)
+    tree = mat.node_tree
+    path, divide = tree.nodes.new("ShaderNodeLightPath"), tree.nodes.new("ShaderNodeMath")
+    divide.operation, divide.inputs[1].default_value = "DIVIDE", 20.0
+    tree.links.new(path.outputs["Ray Length"], divide.inputs[0])
+    tree.links.new(divide.outputs[0], tree.nodes["Principled BSDF"].inputs["Roughness"])
+    select_only(obj)
+    bpy.context.view_layer.update()
+    data = plan_of(scene, obj).items[0][1]
+    eye = np.array(scene.camera.matrix_world.translation)
+    want = np.linalg.norm(data.positions - eye, axis=1) / 20.0
+    np.testing.assert_allclose(data.inputs["roughness"], want, rtol=1e-5)
+    assert np.ptp(want) > 0.05
+
+
 def test_a_texture_wenv_cannot_read_is_named_with_the_value_used(scene):
     """A Base Color through the view's reflection, or a UV map the mesh lacks: the report says so and
     the unlinked value is used."""

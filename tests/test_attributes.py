@@ -337,6 +337,18 @@ def test_an_image_with_alpha_reads_as_cycles_renders_it(grid, is_float, alpha_mo
     assert off.sum() <= 3, (off.sum(), np.abs(cycles - ours).max())
 
 
+@pytest.mark.parametrize("output", ["Is Camera Ray", "Is Shadow Ray", "Is Diffuse Ray", "Is Glossy Ray",
+                                    "Ray Depth", "Transparent Depth"])
+def test_light_path_reads_as_a_camera_ray_sees_it(grid, output):
+    """The Light Path node as the camera's rays meet the grid (what wenv shades): within 1e-6 of
+    Cycles' pixels (its Ray Length is read in a perspective view only, and named in this
+    orthographic one)."""
+    cycles, ours, _ = grid("ShaderNodeLightPath", output, lambda node: None)
+    np.testing.assert_allclose(ours, cycles, atol=1e-6)
+    with pytest.raises(nodes.Unsupported, match="Ray Length, which wenv reads in a perspective view only"):
+        grid("ShaderNodeLightPath", "Ray Length", lambda node: None)
+
+
 @pytest.fixture
 def properties(grid):
     """Custom properties on the grid's object, mesh, view layer, scene and a World, and a string one,
