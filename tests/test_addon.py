@@ -610,8 +610,8 @@ def test_a_world_of_other_nodes_is_rendered_by_cycles(scene):
     cam.location, cam.rotation_euler = (0.0, 0.0, 3.0), (0.0, 0.0, 0.0)
     cam.data.type, cam.data.ortho_scale = "ORTHO", 1.0
     scene.render.engine = "CYCLES"
-    scene.cycles.samples, scene.cycles.use_denoising, scene.cycles.device = 256, False, "CPU"
-    scene.render.resolution_x = scene.render.resolution_y = 8
+    scene.cycles.samples, scene.cycles.use_denoising, scene.cycles.device = 128, False, "CPU"
+    scene.render.resolution_x = scene.render.resolution_y = 4
     scene.view_settings.view_transform = "Standard"
     scene.render.image_settings.file_format, scene.render.image_settings.color_depth = "OPEN_EXR", "32"
     import tempfile
