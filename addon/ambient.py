@@ -74,7 +74,11 @@ def _occluders(meshes_in):
     if held is None:
         if len(_scenes) > 1:
             _scenes.clear()
-        held = _scenes[key] = (engine.merged_occluders([(p, t) for _, p, t in meshes_in])[0], key)
+        try:
+            made = engine.merged_occluders([(p, t) for _, p, t in meshes_in])[0]
+        except ValueError as exc:  # (over the memory budget, a position not finite)
+            raise engine.SetupError(f"The Ambient Occlusion node's meshes cannot be cast against: {exc}") from None
+        held = _scenes[key] = (made, key)
     return held
 
 
