@@ -767,10 +767,24 @@ class Evaluator:
 
     # -- coordinates as values (a texture's own Vector reads them through points() and vector())
     def _ShaderNodeTexCoord(self, node, output, depth):
-        if output.name not in ("Generated", "Object", "UV"):
+        if output.name not in ("Generated", "Object", "UV", "Normal", "Reflection"):
             raise Unsupported(f"'{node.name}''s {output.name}, which wenv does not evaluate yet")
-        return self._as_values(node, lambda: self._uv_points(None) if output.name == "UV" else self._coordinates(
-            output.name.upper(), node.object if output.name == "Object" else None))
+        return self._as_values(node, lambda: self._texture_coordinates(node, output))
+
+    def _texture_coordinates(self, node, output):
+        """(points, reduce) of a Texture Coordinate's output, as svm_node_tex_coord gives them: the UV
+        map's, the Generated or Object coordinates, the normal in object space (Normal), or the view's
+        direction mirrored about the normal in the world (Reflection: 2 (N.I) N - I, the normal
+        facing the viewer)."""
+        if output.name == "UV":
+            return self._uv_points(None)
+        if output.name == "Normal":
+            return self._coordinates("OBJECT_NORMAL", node=node)
+        if output.name == "Reflection":
+            incoming, normal, _back = self._towards_viewer(node)
+            cos = np.einsum("ij,ij->i", normal, incoming)[:, None]
+            return (np.float32(2.0) * cos * normal - incoming).astype(np.float32), _same
+        return self._coordinates(output.name.upper(), node.object if output.name == "Object" else None)
 
     def _ShaderNodeUVMap(self, node, output, depth):
         return self._as_values(node, lambda: self._uv_points(node.uv_map or None))
@@ -867,10 +881,9 @@ class Evaluator:
         if fed is None:
             return self._coordinates("GENERATED")
         node, output = fed
-        if node.bl_idname == "ShaderNodeTexCoord" and output.name in ("Generated", "Object"):
-            return self._coordinates(output.name.upper(), node.object if output.name == "Object" else None)
-        if node.bl_idname == "ShaderNodeTexCoord" and output.name == "UV":
-            return self._uv_points(None)
+        if node.bl_idname == "ShaderNodeTexCoord" and output.name in ("Generated", "Object", "UV", "Normal",
+                                                                      "Reflection"):
+            return self._texture_coordinates(node, output)
         if node.bl_idname == "ShaderNodeUVMap":
             return self._uv_points(node.uv_map or None)
         if node.bl_idname == "ShaderNodeAttribute" and output.identifier in ("Color", "Vector"):

@@ -337,6 +337,15 @@ def test_an_image_with_alpha_reads_as_cycles_renders_it(grid, is_float, alpha_mo
     assert off.sum() <= 3, (off.sum(), np.abs(cycles - ours).max())
 
 
+@pytest.mark.parametrize("output", ["Normal", "Reflection"])
+def test_texture_coordinates_of_the_normal_read_as_cycles_renders_them(grid, output):
+    """The Texture Coordinate's Normal (in object space) and Reflection (the view mirrored about the
+    normal, in the world) over the rolling grid: within 1e-5 of Cycles' pixels."""
+    cycles, ours, _ = grid("ShaderNodeTexCoord", output, lambda node: None)
+    assert np.ptp(ours) > 0.5
+    np.testing.assert_allclose(ours, cycles, atol=1e-5)
+
+
 @pytest.mark.parametrize("output", ["Is Camera Ray", "Is Shadow Ray", "Is Diffuse Ray", "Is Glossy Ray",
                                     "Ray Depth", "Transparent Depth"])
 def test_light_path_reads_as_a_camera_ray_sees_it(grid, output):
