@@ -268,7 +268,8 @@ def image_note(spec, images):
                 unread.append("its Light Path node reads as a camera ray (Cycles' lighting may differ)")
         return (f"World '{spec.world_name}' is shaded as Cycles renders it ({spec.reason}): an equirectangular "
                 f"{RENDER_WIDTH} x {RENDER_WIDTH // 2} image at {RENDER_SAMPLES} samples a pixel, rendered again "
-                "when its nodes change" + ("; " + "; ".join(unread) if unread else ""))
+                "when its nodes change (an image's unsaved edits are not seen)"
+                + ("; " + "; ".join(unread) if unread else ""))
     image = images.get(spec.image_name) if spec.kind == "image" else None
     if image is None or image.is_float:
         return None
@@ -279,104 +280,47 @@ def image_note(spec, images):
             "values were read as linear Rec.709 (set it to sRGB or a linear space, or use a float image)")
 
 
-# A World other than an image or a colour, as Cycles renders it: an equirectangular image of this
-# width (and half its height), each pixel the mean of this many samples over its area (a box filter);
-# the pixels of a small bright feature (a sun's disc) again at SUN_SAMPLES, so that its few pixels
-# keep its energy (without, a sun of half a degree gave a plane 1-2 % too little light at 16 samples
-# and 5 % too much at 8; with it, 8 and 16 agree to 1e-6, the sky being smooth)
+# A World other than an image or a colour, as Cycles renders it (world_render.py): an
+# equirectangular image of this width (and half its height), each pixel the mean of this many
+# samples over its area, and a sun's few pixels again at world_render.SUN_SAMPLES so that they keep
+# its energy (without, a sun of half a degree gave a plane 1-2 % too little light at 16 samples and
+# 5 % too much at 8; with it, 8 and 16 agree to 1e-6, the sky being smooth)
 RENDER_WIDTH = 1024
 RENDER_SAMPLES = 8
-SUN_SAMPLES = 1024
-SUN_CONTRAST = 100.0  # a pixel this many times the image's mean is the bright feature's
-
-
-def _bright_box(px):
-    """(x0, y0, x1, y1), pixels from the bottom left, about the pixels SUN_CONTRAST times brighter
-    than the image's mean (and two more on each side), or None: none, or spread over more than a
-    hundredth of the image (a bright sky rather than a sun) or across the image's seam."""
-    lum = px[..., :3].mean(axis=2)
-    ys, xs = np.nonzero(lum > SUN_CONTRAST * max(float(lum.mean()), 1e-30))
-    if not len(xs):
-        return None
-    h, w = lum.shape
-    x0, x1 = max(int(xs.min()) - 2, 0), min(int(xs.max()) + 3, w)
-    y0, y1 = max(int(ys.min()) - 2, 0), min(int(ys.max()) + 3, h)
-    if (x1 - x0) * (y1 - y0) > w * h // 100:
-        return None
-    return x0, y0, x1, y1
 
 
 def render_world(world, frame=None, width=RENDER_WIDTH, samples=RENDER_SAMPLES):
     """RGBA float32 (width / 2, width, 4), row 0 the top, scene linear: `world` as Cycles renders it
-    through an equirectangular panoramic camera (the projection of an Environment Texture's image:
-    Cycles' own sky, mixed textures, any node set-up), at the scene frame `frame` (the current one
-    if None); a small bright feature's pixels (_bright_box) rendered again at SUN_SAMPLES.  It
-    renders a scene of its own, with nothing but the World and the camera, removed at once (and
-    the Render Result image, if the render made it).  SetupError if Cycles cannot render it (a
-    render already running)."""
+    (world_render.py) at the scene frame `frame` (the current one if None), in a Blender process of
+    its own -- Blender's own binary, or this Python where bpy is a module -- from the World written
+    to a file of its own (images by absolute path, packed ones packed; an image's unsaved edits are
+    not seen), so that nothing of the user's file changes.  SetupError if the render fails."""
     import os
     import shutil
+    import subprocess
+    import sys
     import tempfile
 
     import bpy
 
-    height = width // 2
-    had_result = "Render Result" in bpy.data.images
+    if frame is None:
+        frame = bpy.context.scene.frame_current if bpy.context.scene is not None else 1
     folder = tempfile.mkdtemp(prefix="wenv-world-")
-    sc = bpy.data.scenes.new(".wenv world render")
-    camera_data = bpy.data.cameras.new(".wenv world camera")
-    camera = bpy.data.objects.new(".wenv world camera", camera_data)
     try:
-        sc.world = world
-        if frame is None and bpy.context.scene is not None:
-            frame = bpy.context.scene.frame_current
-        sc.frame_current = frame if frame is not None else 1
-        sc.render.engine = "CYCLES"
-        sc.cycles.device = "CPU"
-        sc.cycles.samples = samples
-        sc.cycles.use_adaptive_sampling = False
-        sc.cycles.use_denoising = False
-        sc.cycles.pixel_filter_type = "BOX"  # each pixel the mean over its own area
-        sc.cycles.filter_width = 1.0
-        sc.render.resolution_x, sc.render.resolution_y, sc.render.resolution_percentage = width, height, 100
-        sc.render.image_settings.file_format = "OPEN_EXR"
-        sc.render.image_settings.color_depth = "32"
-        sc.render.filepath = os.path.join(folder, "world.exr")
-        sc.collection.objects.link(camera)
-        sc.camera = camera
-        camera_data.type, camera_data.panorama_type = "PANO", "EQUIRECTANGULAR"
-        camera.rotation_euler = (math.pi / 2, 0.0, -math.pi / 2)  # the image's centre along -X, as the texture's
-
-        def shot():
-            try:
-                bpy.ops.render.render(write_still=True, scene=sc.name)
-            except RuntimeError as exc:
-                raise SetupError(f"World '{world.name}' could not be rendered by Cycles: {exc}") from None
-            loaded = bpy.data.images.load(sc.render.filepath, check_existing=False)
-            try:
-                buf = np.empty(width * height * 4, np.float32)
-                loaded.pixels.foreach_get(buf)
-            finally:
-                bpy.data.images.remove(loaded)
-            return buf.reshape(height, width, 4)  # (row 0 the bottom)
-        px = shot()
-        box = _bright_box(px) if samples < SUN_SAMPLES else None
-        if box is not None:
-            x0, y0, x1, y1 = box
-            sc.cycles.samples = SUN_SAMPLES
-            sc.render.use_border, sc.render.use_crop_to_border = True, False
-            sc.render.border_min_x, sc.render.border_max_x = x0 / width, x1 / width
-            sc.render.border_min_y, sc.render.border_max_y = y0 / height, y1 / height
-            fine = shot()
-            px[y0:y1, x0:x1] = fine[y0:y1, x0:x1]
+        blend, out = os.path.join(folder, "world.blend"), os.path.join(folder, "world.npy")
+        bpy.data.libraries.write(blend, {world}, path_remap="ABSOLUTE", fake_user=True)
+        script = os.path.join(os.path.dirname(os.path.abspath(__file__)), "world_render.py")
+        launch = ([bpy.app.binary_path, "-b", "--factory-startup", "--python", script] if bpy.app.binary_path
+                  else [sys.executable, script])
+        done = subprocess.run(launch + ["--", blend, world.name, out, str(width), str(samples), str(int(frame))],
+                              capture_output=True, text=True, timeout=900)
+        if done.returncode != 0 or not os.path.exists(out):
+            tail = (done.stderr or done.stdout).strip().splitlines()[-3:]
+            raise SetupError(f"World '{world.name}' could not be rendered by Cycles: " + " / ".join(tail))
+        px = np.load(out)
     finally:
-        bpy.data.objects.remove(camera)
-        bpy.data.cameras.remove(camera_data)
-        bpy.data.scenes.remove(sc)
-        if not had_result and "Render Result" in bpy.data.images:
-            bpy.data.images.remove(bpy.data.images["Render Result"])
         shutil.rmtree(folder, ignore_errors=True)
-    return np.ascontiguousarray(px[::-1])
+    return np.ascontiguousarray(px[::-1], np.float32)
 
 
 def environment_from_spec(spec, images):
