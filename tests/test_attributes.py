@@ -323,12 +323,15 @@ def grid_emission(node):
     (False, "STRAIGHT", None, "Color", False), (False, "STRAIGHT", None, "Color", True),
     (False, "STRAIGHT", None, "Alpha", False), (True, "STRAIGHT", None, "Color", False),
     (True, "STRAIGHT", None, "Color", True), (False, "CHANNEL_PACKED", None, "Color", True),
-    (False, "NONE", None, "Color", False), (False, "STRAIGHT", "Non-Color", "Color", True)])
+    (False, "NONE", None, "Color", False), (False, "STRAIGHT", "Non-Color", "Color", True),
+    (False, "PREMUL", None, "Color", False), (True, "CHANNEL_PACKED", None, "Color", True)])
 def test_an_image_with_alpha_reads_as_cycles_renders_it(grid, is_float, alpha_mode, space, output, alpha_used):
     """An image with alpha as Cycles samples it: a byte image's colour associated with alpha in 8 bits
     before its sRGB is decoded, a float image's as stored; divided by alpha again where the node's
     Alpha output is used (here scaling the Emission), not where it is channel-packed or data; alpha
-    ignored (1) where the image's alpha mode is None.  Within 1e-4 of Cycles' pixels."""
+    ignored (1) where the image's alpha mode is None; a byte image of Premultiplied alpha mode
+    associated as a straight one (Blender holds 8-bit colours straight).  Within 1e-4 of Cycles'
+    pixels."""
     cycles, ours, _ = grid("ShaderNodeTexImage", output, _image_with_alpha(is_float, alpha_mode, space, alpha_used))
     if alpha_used:
         ours = ours * grid.evaluator.value(grid.emission.inputs["Strength"])[:, None]
