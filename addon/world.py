@@ -289,9 +289,9 @@ RENDER_WIDTH = 1024
 RENDER_SAMPLES = 8
 
 
-def render_world(world, frame=None, width=RENDER_WIDTH, samples=RENDER_SAMPLES):
+def render_world(world, frame=None, width=None, samples=None):
     """RGBA float32 (width / 2, width, 4), row 0 the top, scene linear: `world` as Cycles renders it
-    (world_render.py) at the scene frame `frame` (the current one if None), in a Blender process of
+    (world_render.py; RENDER_WIDTH and RENDER_SAMPLES unless given) at the scene frame `frame` (the current one if None), in a Blender process of
     its own -- Blender's own binary, or this Python where bpy is a module -- from the World written
     to a file of its own (images by absolute path, packed ones packed; an image's unsaved edits are
     not seen), so that nothing of the user's file changes.  SetupError if the render fails."""
@@ -303,6 +303,7 @@ def render_world(world, frame=None, width=RENDER_WIDTH, samples=RENDER_SAMPLES):
 
     import bpy
 
+    width, samples = width or RENDER_WIDTH, samples or RENDER_SAMPLES
     if frame is None:
         frame = bpy.context.scene.frame_current if bpy.context.scene is not None else 1
     folder = tempfile.mkdtemp(prefix="wenv-world-")

@@ -35,7 +35,7 @@ sys.path.append(ROOT)  # after PYTHONPATH: scripts/sanitize_tests.sh puts its sa
 import bpy  # noqa: E402
 
 import addon  # noqa: E402
-from addon import engine, live, meshes, ui  # noqa: E402
+from addon import engine, live, meshes, ui, world  # noqa: E402
 from tests.helpers import merl_files  # noqa: E402
 from draws import Draws, arguments, report  # noqa: E402  (tests/fuzz, the script's folder)
 
@@ -469,6 +469,10 @@ def run(seed, iterations, only=None, slow=60.0, verbose=False):
     hooked = []
     sys.excepthook = lambda kind, value, tb: hooked.append("".join(traceback.format_exception(kind, value, tb)))
     addon.register()
+    # a World other than an image is rendered by Cycles in a process of its own: small here, since
+    # the run shades many such Worlds and asks only that they shade (tests/test_addon.py holds the
+    # render's truth)
+    world.RENDER_WIDTH, world.RENDER_SAMPLES = 64, 2
     counts = collections.Counter()
     t0 = time.perf_counter()
     finding = None
