@@ -125,9 +125,7 @@ def property_rgba(owner, name):
             value = owner.path_resolve(name)
         except (ValueError, TypeError):
             return None
-    if isinstance(value, bool):
-        return (float(value),) * 3 + (1.0,)
-    if isinstance(value, (int, float)):
+    if isinstance(value, (bool, int, float)):
         return (float(value),) * 3 + (1.0,)
     if isinstance(value, str) or not hasattr(value, "__len__") or not 0 < len(value) <= 4:
         return None
@@ -608,11 +606,10 @@ class Evaluator:
         which = output.identifier
         if which == "Is Camera Ray":
             return np.ones(self.count, np.float32)
-        if which != "Ray Length":
+        if which != "Ray Length" or (self._points is None and self.checking):
             return np.zeros(self.count, np.float32)
-        incoming, _normal, _back = self._towards_viewer(node)
-        if self.checking:
-            return np.zeros(self.count, np.float32)
+        if self._points is None:
+            raise NeedsMesh(f"'{node.name}''s Ray Length, which has no value without a mesh")
         view = self._points("VIEW", None)
         if view is None or not view.perspective:
             raise Unsupported(f"'{node.name}''s Ray Length, which wenv reads in a perspective view only")

@@ -404,7 +404,7 @@ def new_plan(scene, view, images, cull=None, shadows=None):
                        st.max_luminance, st.target_error / 100.0, st.memory_budget,
                        cull=st.shade_only_seen if cull is None else cull, shadows=st.shadows if shadows is None else shadows,
                        bounce=st.bounce_light, glossy_bounce=st.glossy_bounce)
-    note = world.image_note(spec, images)
+    note = world.world_note(spec, images)
     if note:
         plan.notes.append(note)
     lamp_settings, lamp_notes = lamps.read_lamps(scene)

@@ -178,13 +178,14 @@ def cycles_texels(rgba, image, unassociated=False, is_float=None):
     rgb, alpha = rgba[..., :3], rgba[..., 3:4]
     if image.alpha_mode == "NONE" or (alpha == 1.0).all():
         return np.ascontiguousarray(world.srgb_to_linear(rgb) if srgb else rgb, np.float32)
-    if not is_float and space not in world.DATA_SPACES and image.alpha_mode != "CHANNEL_PACKED":
+    associates_bytes = not is_float and space not in world.DATA_SPACES and image.alpha_mode != "CHANNEL_PACKED"
+    if associates_bytes:
         c, a = np.rint(rgb * 255.0), np.rint(alpha * 255.0)
         rgb = np.floor(c * a / 255.0) / 255.0
         if unassociated:
             rgb = np.where((a > 0.0) & (a < 255.0), rgb * (255.0 / np.maximum(a, 1.0)), rgb)
     rgb = world.srgb_to_linear(rgb) if srgb else rgb
-    if unassociated and not is_float and space not in world.DATA_SPACES and image.alpha_mode != "CHANNEL_PACKED":
+    if associates_bytes and unassociated:
         rgb = rgb * alpha
     return np.ascontiguousarray(np.concatenate([rgb, alpha], axis=2), np.float32)
 
@@ -596,6 +597,7 @@ def read_inputs(obj, depsgraph, data, progress=None):
     value).  What a chain wenv does not evaluate is materials.principled_notes' to name.
     progress(fraction) while procedural textures are evaluated may cancel (as nodes.Evaluator's)."""
     notes = []
+    occlusion = ambient_reader(obj, depsgraph, data.domain, progress)
     for s, mat, (node, _), mesh, corner_vert in _principled_slots(obj, depsgraph, _textured):
         for socket, keyword in TEXTURED_SOCKETS.items():
             sock = node.inputs[socket]
@@ -608,8 +610,7 @@ def read_inputs(obj, depsgraph, data, progress=None):
                                                                    (uv, footprint, rows), data.count),
                 points=row_points(obj, mesh, data.positions, data.normals, data.view), progress=progress,
                 attribute=attribute_reader(mesh, corner_vert, data.domain, data.sites, notes), owner=(obj, mat),
-                footprint=coordinate_footprint(mesh, corner_vert, data.domain, data.sites),
-                ambient=ambient_reader(obj, depsgraph, data.domain, progress))
+                footprint=coordinate_footprint(mesh, corner_vert, data.domain, data.sites), ambient=occlusion)
             try:
                 values = ev.colour(sock) if keyword in COLOUR_KEYWORDS else ev.value(sock)
             except nodes.MissingUV as exc:
@@ -641,13 +642,17 @@ def read_inputs(obj, depsgraph, data, progress=None):
 
 def ambient_reader(obj, depsgraph, domain, progress=None):
     """An Evaluator's ambient() for obj's rows (ambient.shares against the scene's meshes): the node's
-    Samples rays a point, at least VERTEX_RAYS at vertices or corners and TEXEL_RAYS at a bake's texels."""
+    Samples rays a point, at least VERTEX_RAYS at vertices or corners and TEXEL_RAYS at a bake's texels.
+    The meshes are read once per reader (one per object and pass), however many sockets read the node."""
     least = ambient.TEXEL_RAYS if domain == "TEXEL" else ambient.VERTEX_RAYS
+    read_meshes = {}
 
     def read(positions, normals, distance, inside, only_local, samples):
         rays = max(least, samples)
+        if only_local not in read_meshes:
+            read_meshes[only_local] = ambient.blockers(depsgraph, obj, only_local)
         return ambient.shares((obj.name, domain, distance, inside, only_local, rays), positions, normals, distance,
-                              inside, ambient.blockers(depsgraph, obj, only_local), rays, progress)
+                              inside, read_meshes[only_local], rays, progress)
     return read
 
 
@@ -1297,6 +1302,7 @@ def read_term_weights(obj, depsgraph, data, progress=None):
     unlinked value is used)."""
     notes = []
     mesh = corner_vert = None
+    occlusion = ambient_reader(obj, depsgraph, data.domain, progress)
     for s, slot in enumerate(obj.material_slots):
         mat = slot.material
         if mat is None or mat.wenv.model != "PRINCIPLED" or mat.node_tree is None:
@@ -1321,7 +1327,7 @@ def read_term_weights(obj, depsgraph, data, progress=None):
                 attribute=attribute_reader(mesh, corner_vert, data.domain, data.sites, notes),
                 owner=(obj, mat),
                 footprint=coordinate_footprint(mesh, corner_vert, data.domain, data.sites),
-                ambient=ambient_reader(obj, depsgraph, data.domain, progress)) if reads else None
+                ambient=occlusion) if reads else None
             weight, fac = colour, np.ones((data.count, 1), np.float32)
             if term.factors:
                 try:

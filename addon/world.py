@@ -249,7 +249,7 @@ LINEAR_SPACES = {"Linear Rec.709", "scene_linear", "Non-Color", "Linear", "Raw"}
 DATA_SPACES = {"Non-Color", "Raw"}
 
 
-def image_note(spec, images):
+def world_note(spec, images):
     """A sentence when the World is rendered by Cycles (what for, and what of it is not read: its
     Volume, a Light Path node, seen as a camera ray sees it), or when an 8-bit World image is in a
     colour space wenv does not decode (its stored values are then read as linear Rec.709), else

@@ -503,9 +503,9 @@ def test_8_bit_world_images_by_colour_space(scene, space, decoded):
                                      views.camera_view(scene), bpy.data)
     noted = [n for n in notes if "8-bit in colour space" in n]
     if space == "Display P3":
-        assert noted == [world.image_note(spec, bpy.data.images)] and "'Display P3'" in noted[0]
+        assert noted == [world.world_note(spec, bpy.data.images)] and "'Display P3'" in noted[0]
     else:
-        assert noted == [] and world.image_note(spec, bpy.data.images) is None
+        assert noted == [] and world.world_note(spec, bpy.data.images) is None
 
 
 def _break(scene, how):
