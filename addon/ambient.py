@@ -16,7 +16,7 @@ import numpy as np
 from . import engine, meshes
 
 VERTEX_RAYS = 64  # at least, at each vertex (31,658 of Suzanne's: 2 M rays, about 0.3 s on 2 cores)
-TEXEL_RAYS = 16  # at least, at each texel of a bake (a million: 16 M rays, about 3 s on 2 cores)
+TEXEL_RAYS = 16  # at least, at each texel of a bake (a million: 16 M rays, about 3 s on 2 cores, 45 % of it Embree's)
 CHUNK = 1 << 20  # rays cast between two calls of progress()
 
 _scenes = {}  # which meshes -> their wenv.Occluders (the last two kept)
