@@ -375,7 +375,7 @@ def bake(scene, depsgraph, obj, image, view, blend_data, uv_map=None, margin=DEF
     if st.tone_mapping == "LOG":
         rgb = shading.tone_map(rgb, st.max_luminance)
     stages.report("writing")
-    state = state_of(scene, depsgraph, obj)
+    state = state_of(scene, depsgraph, obj, [p for p in CHANGES if p not in AROUND or reads_other_meshes(obj, st)])
     clipped = write(image, sites, rgb, margin)
     record = image.wenv
     record.baked_object, record.uv_map, record.margin, record.view = obj.name, layer.name, margin, view_source
@@ -393,11 +393,15 @@ def bake(scene, depsgraph, obj, image, view, blend_data, uv_map=None, margin=DEF
 
 # What changed, in the panel's words, per part of state_of
 CHANGES = {"mesh": "the object moved or its mesh changed", "materials": "a material changed",
+           "surroundings": "another mesh that shadows or lights it changed",
+           "casters": "another mesh that shadows or lights it changed",
            "world": "the World changed", "lamps": "a lamp changed", "settings": "the scene's wenv settings changed",
            "frames": "an image sequence or movie shows another frame"}
 # read from a few datablocks' settings: the panel compares them at each redraw (a frame change need
 # not update the depsgraph)
-CHEAP = ("world", "lamps", "settings", "frames")
+CHEAP = ("world", "lamps", "settings", "frames", "casters")
+# recorded only by a bake that read meshes besides its own
+AROUND = ("surroundings", "casters")
 
 
 def _key(value):
@@ -412,17 +416,69 @@ def view_key(view):
     return _key(signature)
 
 
+def reads_other_meshes(obj, settings):
+    """Whether a bake of `obj` reads meshes besides its own: the shadows and light of the others
+    (the scene's wenv Shadows), or the rays of an Ambient Occlusion node not set to Only Local in
+    one of its materials (any node tree the material's reaches)."""
+    if settings.shadows:
+        return True
+    trees = [slot.material.node_tree for slot in obj.material_slots
+             if slot.material is not None and slot.material.node_tree is not None]
+    seen = set()
+    while trees:
+        tree = trees.pop()
+        if tree.name in seen:
+            continue
+        seen.add(tree.name)
+        for node in tree.nodes:
+            if node.bl_idname == "ShaderNodeAmbientOcclusion" and not node.only_local:
+                return True
+            if getattr(node, "node_tree", None) is not None:
+                trees.append(node.node_tree)
+    return False
+
+
+def _mesh_key(obj, depsgraph):
+    mesh, _ = meshes.shaded_mesh(obj, depsgraph)
+    co = np.empty(len(mesh.vertices) * 3, np.float32)
+    mesh.vertices.foreach_get("co", co)
+    return engine.fingerprint(co, np.array(obj.matrix_world, np.float32)).hex()
+
+
+def _surroundings_key(scene, depsgraph, obj):
+    """What the other meshes that may shadow or light `obj` are: each visible one's place and shape,
+    whether it casts shadows, and with Bounce Light its materials (their light)."""
+    st, others = scene.wenv, []
+    for other in scene.objects:
+        if other.type != "MESH" or other.name == obj.name or other.mode == "EDIT" or not other.visible_get():
+            continue
+        looks = None
+        if st.shadows and st.bounce_light:
+            try:
+                looks = _key(materials.slot_material_keys(other))
+            except SetupError as exc:
+                looks = _key(str(exc))
+        others.append((other.name, _mesh_key(other, depsgraph), other.wenv.casts_shadows,
+                       getattr(other, "visible_shadow", True), looks))
+    return _key(others)
+
+
 def state_of(scene, depsgraph, obj, parts=tuple(CHANGES)):
     """Keys of what a bake of `obj` is made of besides the view (`parts` of CHANGES): its mesh and
-    place, its materials, the World, the lamps and the scene's wenv settings."""
+    place, its materials, the other meshes about it, the World, the lamps and the scene's wenv
+    settings."""
     out = {}
     if "mesh" in parts:
-        mesh, _ = meshes.shaded_mesh(obj, depsgraph)
-        co = np.empty(len(mesh.vertices) * 3, np.float32)
-        mesh.vertices.foreach_get("co", co)
-        out["mesh"] = engine.fingerprint(co, np.array(obj.matrix_world, np.float32)).hex()
+        out["mesh"] = _mesh_key(obj, depsgraph)
     if "materials" in parts:
         out["materials"] = _key(materials.slot_material_keys(obj))
+    if "surroundings" in parts:
+        out["surroundings"] = _surroundings_key(scene, depsgraph, obj)
+    if "casters" in parts:
+        # which meshes cast shadows (an add-on's setting updates no depsgraph) and are seen
+        out["casters"] = _key(sorted(o.name for o in scene.objects
+                                     if o.type == "MESH" and o.name != obj.name and o.wenv.casts_shadows
+                                     and getattr(o, "visible_shadow", True) and o.visible_get()))
     if "world" in parts:
         try:
             out["world"] = _key(world.world_spec(scene.world).signature)
@@ -439,11 +495,13 @@ def state_of(scene, depsgraph, obj, parts=tuple(CHANGES)):
     return out
 
 
-def note_changes(scene, depsgraph, images, parts, objects_changed):
+def note_changes(scene, depsgraph, images, parts, objects_changed, shared_changed=False):
     """After a change to the scene: marks stale (wenv.stale, the words of CHANGES) each baked image of
     `images` whose object is in `scene` and not stale yet, when a part of what it was made of that
     the change could touch (`parts`, of CHANGES; "mesh" only for the objects named in
-    `objects_changed`) is no longer what it was."""
+    `objects_changed`, "surroundings" for the others, or whatever the objects changed with
+    `shared_changed`: a collection, material, node tree or image) is no longer what it was.  A bake
+    compares only the parts it recorded: "surroundings" where it read other meshes."""
     for image in images:
         record = image.wenv
         if not record.baked_object or record.stale:
@@ -451,7 +509,8 @@ def note_changes(scene, depsgraph, images, parts, objects_changed):
         obj = scene.objects.get(record.baked_object)
         if obj is None or obj.type != "MESH":
             continue
-        mine = [p for p in parts if p != "mesh" or obj.name in objects_changed]
+        mine = [p for p in parts if (p != "mesh" or obj.name in objects_changed)
+                and (p != "surroundings" or shared_changed or set(objects_changed) - {obj.name})]
         changed = _first_changed(record, scene, depsgraph, obj, mine)
         if changed is not None:
             record.stale = CHANGES[changed]

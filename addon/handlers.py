@@ -66,11 +66,14 @@ def frame_change_post(scene, depsgraph=None):
 
 
 # What a change to a datablock of each type may change of a bake (bake.CHANGES); objects also their
-# mesh, and a Light object or Light the lamps
-_TOUCHES = ((bpy.types.World, ("world",)), (bpy.types.Material, ("materials",)),
-            (bpy.types.ShaderNodeTree, ("materials", "world")), (bpy.types.Light, ("lamps",)),
-            (bpy.types.Image, ("materials", "world")), (bpy.types.Mesh, ("mesh",)),
-            (bpy.types.Scene, ("world", "lamps", "settings")))
+# mesh and the other meshes about a bake, and a Light object or Light the lamps
+_TOUCHES = ((bpy.types.World, ("world",)), (bpy.types.Material, ("materials", "surroundings")),
+            (bpy.types.ShaderNodeTree, ("materials", "world", "surroundings")), (bpy.types.Light, ("lamps",)),
+            (bpy.types.Image, ("materials", "world", "surroundings")), (bpy.types.Mesh, ("mesh", "surroundings")),
+            (bpy.types.Collection, ("surroundings",)), (bpy.types.Scene, ("world", "lamps", "settings", "surroundings")))
+# changes to data that objects share: the other meshes about a bake may change with them (an
+# object hidden in the viewport updates the scene alone)
+_SHARED = (bpy.types.Material, bpy.types.ShaderNodeTree, bpy.types.Image, bpy.types.Collection, bpy.types.Scene)
 
 
 @persistent
@@ -79,22 +82,23 @@ def depsgraph_update_post(scene, depsgraph):
     datablocks could touch are compared."""
     if not any(i.wenv.baked_object and not i.wenv.stale for i in bpy.data.images):
         return
-    parts, objects = set(), set()
+    parts, objects, shared = set(), set(), False
     for update in depsgraph.updates:
         data = getattr(update.id, "original", update.id)
         if isinstance(data, bpy.types.Object):
             objects.add(data.name)
-            parts.add("lamps" if data.type == "LIGHT" else "mesh")
+            parts.update(("lamps",) if data.type == "LIGHT" else ("mesh", "surroundings"))
             continue
         if isinstance(data, bpy.types.Image) and data.wenv.baked_object:
             continue  # a bake's own image, written
         for kind, touched in _TOUCHES:
             if isinstance(data, kind):
                 parts.update(touched)
+        shared = shared or isinstance(data, _SHARED)
         if isinstance(data, bpy.types.Mesh):
             objects.update(o.name for o in scene.objects if o.data == data)
     if parts:
-        bake.note_changes(scene, depsgraph, bpy.data.images, sorted(parts), objects)
+        bake.note_changes(scene, depsgraph, bpy.data.images, sorted(parts), objects, shared)
 
 
 @persistent

@@ -573,6 +573,53 @@ def test_a_bake_is_marked_stale_by_what_changes_it(scene):
     assert settle() is None
 
 
+def test_a_bake_that_read_other_meshes_is_stale_when_they_change(scene):
+    """A bake with Shadows, or with an Ambient Occlusion node that reaches the scene, is stale when
+    another mesh moves, hides or is added; one that read only its own mesh is not, nor is one whose
+    node is Only Local."""
+    env_world(scene, "sunset")
+    plane = grid(cuts=2)
+    bpy.ops.mesh.primitive_cube_add(size=0.5, location=(0.0, 0.0, 1.0))
+    cube = bpy.context.object
+    image = filled_image("about", 8, 8)
+    words = "another mesh that shadows or lights it changed"
+
+    def settle():
+        bpy.context.view_layer.update()
+        return bake.staleness(bpy.data.images["about"], bpy.context.scene)
+
+    def bake_again():
+        bake_now(scene, plane, bpy.data.images["about"])
+        assert settle() is None
+
+    scene.wenv.shadows = True
+    bake_again()
+    changes = [lambda: setattr(cube, "location", (0.5, 0.0, 1.0)), lambda: cube.hide_set(True),
+               lambda: cube.hide_set(False), lambda: setattr(cube.wenv, "casts_shadows", False),
+               lambda: bpy.ops.mesh.primitive_uv_sphere_add(radius=0.2, location=(1.0, 1.0, 0.5))]
+    for k, change in enumerate(changes):
+        change()
+        assert settle() == words, k
+        bake_again()
+    bpy.data.materials.new("other").diffuse_color = (1.0, 0.0, 0.0, 1.0)  # a material no mesh uses
+    assert settle() is None
+
+    scene.wenv.shadows = False
+    bake_again()
+    cube.location = (0.0, 0.5, 1.0)
+    assert settle() is None  # the bake read no other mesh
+    tree = plane.active_material.node_tree
+    ao = tree.nodes.new("ShaderNodeAmbientOcclusion")
+    tree.links.new(ao.outputs["Color"], tree.nodes["Principled BSDF"].inputs["Base Color"])
+    bake_again()
+    cube.location = (0.0, 0.0, 1.0)
+    assert settle() == words
+    ao.only_local = True
+    bake_again()
+    cube.location = (0.5, 0.5, 1.0)
+    assert settle() is None
+
+
 def test_a_bake_of_an_image_sequence_is_stale_on_another_frame(scene, tmp_path):
     """A Base Color from an image sequence (frames 1-3): a frame change that shows another file calls
     the bake stale, one past the sequence's end (held at its last frame) does not, and a bake made
