@@ -581,7 +581,7 @@ def test_a_bake_that_read_other_meshes_is_stale_when_they_change(scene):
     plane = grid(cuts=2)
     bpy.ops.mesh.primitive_cube_add(size=0.5, location=(0.0, 0.0, 1.0))
     cube = bpy.context.object
-    image = filled_image("about", 8, 8)
+    filled_image("about", 8, 8)
     words = "another mesh that shadows or lights it changed"
 
     def settle():
