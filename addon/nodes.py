@@ -501,9 +501,10 @@ class Evaluator:
             got, _kind = self._mesh_attribute(node, POINTINESS if output.identifier == "Pointiness"
                                               else RANDOM_PER_ISLAND, False)
             return np.ascontiguousarray(got[:, 0])
-        if output.identifier not in ("Position", "Normal"):
+        spaces = {"Position": "WORLD", "Normal": "NORMAL", "True Normal": "TRUE_NORMAL"}
+        if output.identifier not in spaces:
             raise Unsupported(f"'{node.name}''s {output.name} output")
-        return self._coordinates("WORLD" if output.identifier == "Position" else "NORMAL", node=node)[0]
+        return self._coordinates(spaces[output.identifier], node=node)[0]
 
     def _ShaderNodeAmbientOcclusion(self, node, output, depth):
         for name in ("Normal", "Distance"):
@@ -914,7 +915,8 @@ class Evaluator:
             return MEAN_POINTS, _mean
         if self.checking:  # (the world's positions and normals have no cube to average over)
             return np.zeros((self.count, 3), np.float32), _same
-        raise NeedsMesh(f"'{node.name}', the geometry's {space.lower()}, which has no value without a mesh")
+        raise NeedsMesh(f"'{node.name}', the geometry's {space.lower().replace('_', ' ')}, which has no value without "
+                        "a mesh")
 
     def _uv_points(self, uv_map):
         """points() of a UV map's (u, v, 0), as Cycles' UV output reads it."""

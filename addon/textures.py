@@ -608,7 +608,9 @@ def read_inputs(obj, depsgraph, data, progress=None):
                 lambda tex, uv, footprint, rows, s=s: _colours_memo((obj.name, data.domain, s, tex.name),
                                                                    pyramids(tex), Source(tex, None),
                                                                    (uv, footprint, rows), data.count),
-                points=row_points(obj, mesh, data.positions, data.normals, data.view), progress=progress,
+                points=row_points(obj, mesh, data.positions, data.normals, data.view,
+                                  lambda: true_normals(obj, mesh, corner_vert, data.domain, data.sites)),
+                progress=progress,
                 attribute=attribute_reader(mesh, corner_vert, data.domain, data.sites, notes), owner=(obj, mat),
                 footprint=coordinate_footprint(mesh, corner_vert, data.domain, data.sites), ambient=occlusion)
             try:
@@ -898,16 +900,18 @@ def deformed(obj):
         m.type in DEFORMING_MODIFIERS and m.show_render for m in obj.modifiers)
 
 
-def row_points(obj, mesh, positions, normals, view=None):
+def row_points(obj, mesh, positions, normals, view=None, face_normals=None):
     """An Evaluator's points(space, other) for rows at world `positions` ((n, 3)) with world
     `normals`: their coordinates in `other`'s object space ('OBJECT'; obj's own without one) or in
     the mesh's texture space ('GENERATED', as Cycles maps it: the texture space's box onto the unit
     cube), the positions themselves ('WORLD'), the unit normals ('NORMAL', or in object space:
-    'OBJECT_NORMAL'), the unit directions towards the viewer of `view` ('INCOMING'; None without
-    one) or the view itself ('VIEW')."""
+    'OBJECT_NORMAL'), the faces' normals (`face_normals()`, 'TRUE_NORMAL'), the unit directions
+    towards the viewer of `view` ('INCOMING'; None without one) or the view itself ('VIEW')."""
     def points(space, other=None):
         if space == "WORLD":
             return np.ascontiguousarray(positions, np.float32)
+        if space == "TRUE_NORMAL":
+            return face_normals()
         if space == "VIEW":  # (the view itself)
             return view
         if space == "INCOMING":
@@ -929,6 +933,33 @@ def row_points(obj, mesh, positions, normals, view=None):
             local = local * scale - (loc * scale - 0.5)
         return local.astype(np.float32)
     return points
+
+
+def true_normals(obj, mesh, corner_vert, domain, sites=None):
+    """The faces' own normal at each shaded row (world, unit), as Cycles' Ng: a texel's (`sites`)
+    triangle's, a face corner's face's, and at a vertex, which has no one face, its faces' mean
+    weighted by their areas.  The winding's side, as the Normal's (a back face's is not turned), and
+    a mirrored object's turned back as Cycles turns it."""
+    p = world_points(mesh, obj.matrix_world)
+    tris = triangle_corners(mesh)
+    v = corner_vert[tris]
+    cross = np.cross(p[v[:, 1]] - p[v[:, 0]], p[v[:, 2]] - p[v[:, 0]])  # twice each triangle's area
+    if np.linalg.det(np.array(obj.matrix_world, np.float64)[:3, :3]) < 0.0:
+        cross = -cross
+
+    def summed(index, weights, count):
+        return np.stack([np.bincount(index, weights=weights[:, k], minlength=count) for k in range(3)], axis=1)
+    if domain == "TEXEL":
+        return _unit_rows(cross[sites.triangle])
+    face = np.empty(len(tris), np.int32)
+    mesh.loop_triangles.foreach_get("polygon_index", face)
+    starts = np.empty(len(mesh.polygons), np.int32)
+    mesh.polygons.foreach_get("loop_start", starts)
+    corner_face = np.repeat(np.arange(len(starts)), np.diff(starts, append=len(corner_vert)))
+    faces = summed(face, cross, len(starts))  # each face's normal times twice its area
+    if domain == "POINT":  # each face's, whole, to each of its vertices
+        return _unit_rows(summed(corner_vert, faces[corner_face], len(mesh.vertices)))
+    return _unit_rows(faces)[corner_face]
 
 
 # A mesh attribute's data type -> (its values' property, width, dtype read, Cycles' type of it)
@@ -1190,7 +1221,9 @@ def _height_reader(obj, s, mesh, corner_vert, where, count, progress=None, notes
         normals = normals.reshape(-1, 3) @ np.array(obj.matrix_world.to_3x3().inverted_safe(), np.float32)
         if where is not None:
             corners, normals = where.at(corners), where.at(normals)
-        return row_points(obj, mesh, corners, normals)(space, other)
+        return row_points(obj, mesh, corners, normals,
+                          face_normals=lambda: true_normals(obj, mesh, corner_vert,
+                                                            "CORNER" if where is None else "TEXEL", where))(space, other)
     return nodes.Evaluator(count, rows,
                            lambda tex, uv, footprint, rows_: _colours_memo((obj.name, s) + tag + (tex.name,),
                                                                            pyramids(tex), Source(tex, None),
@@ -1323,7 +1356,9 @@ def read_term_weights(obj, depsgraph, data, progress=None):
                                                                          pyramids(tex),
                                                                          Source(tex, None), (uv, footprint, rows),
                                                                          data.count),
-                points=row_points(obj, mesh, data.positions, data.normals, data.view), progress=progress,
+                points=row_points(obj, mesh, data.positions, data.normals, data.view,
+                                  lambda: true_normals(obj, mesh, corner_vert, data.domain, data.sites)),
+                progress=progress,
                 attribute=attribute_reader(mesh, corner_vert, data.domain, data.sites, notes),
                 owner=(obj, mat),
                 footprint=coordinate_footprint(mesh, corner_vert, data.domain, data.sites),

@@ -8,7 +8,7 @@ Info."""
 import numpy as np
 import pytest
 
-bpy = pytest.importorskip("bpy")
+import bpy  # noqa: E402  (installed by scripts/setup.sh; missing, the tests fail rather than skip)
 
 from addon import ambient, bake, meshes, nodes, textures, views  # noqa: E402
 from tests.helpers.cycles_pixels import pixel_scene  # noqa: E402
@@ -76,7 +76,8 @@ def grid():
     mesh.corner_normals.foreach_get("vector", normals)
     world = np.array(obj.matrix_world)
     points = textures.row_points(obj, mesh, sites.at(co[corner_vert] @ world[:3, :3].T + world[:3, 3]),
-                                 sites.at(normals.reshape(-1, 3)), views.View(False, direction=(0.0, 0.0, 1.0)))
+                                 sites.at(normals.reshape(-1, 3)), views.View(False, direction=(0.0, 0.0, 1.0)),
+                                 lambda: textures.true_normals(obj, mesh, corner_vert, "TEXEL", sites))
 
     def compare(kind, output, configure):
         """Cycles' pixels and the add-on's reading at them of a `kind` node set by configure(node)."""
@@ -98,6 +99,7 @@ def grid():
         compare.evaluator = ev
         return px[sites.texels], ev.colour(emission.inputs["Color"]), notes
     compare.texels = sites.texels  # (each row's pixel)
+    compare.sites = sites
     compare.rays = ambient.TEXEL_RAYS
     compare.scene = bpy.context.scene
     compare.emission = emission
@@ -147,13 +149,22 @@ def test_object_info_reads_as_cycles_renders_it(grid, output):
     np.testing.assert_allclose(ours, cycles, atol=1e-6)
 
 
-@pytest.mark.parametrize("output", ["Position", "Normal", "Pointiness", "Random Per Island"])
+@pytest.mark.parametrize("output", ["Position", "Normal", "True Normal", "Pointiness", "Random Per Island"])
 def test_geometry_reads_as_cycles_renders_it(grid, output):
-    """The Geometry node's world position, its smooth normal, interpolated over each triangle, its
-    pointiness (the split vertices welded back) and the random value of each island of the grid
-    (the middle column of faces is one, the sides two more)."""
+    """The Geometry node's world position, its smooth normal, interpolated over each triangle, each
+    triangle's own normal (True Normal: the grid's quads are not flat, so each of their triangles
+    has its own), its pointiness (the split vertices welded back) and the random value of each
+    island of the grid (the middle column of faces is one, the sides two more)."""
     cycles, ours, _ = grid("ShaderNodeNewGeometry", output, lambda node: None)
     assert np.ptp(ours[:, 0]) > (0.02 if output == "Pointiness" else 0.5)
+    if output == "True Normal":
+        # a triangle's own value jumps at its edges, and the quads' diagonals run through pixel
+        # centres here: those pixels may take either triangle
+        inside = grid.sites.weights.min(axis=1) > 1e-4
+        assert inside.mean() > 0.9
+        ours, cycles = ours[inside], cycles[inside]
+        _, smooth, _ = grid("ShaderNodeNewGeometry", "Normal", lambda node: None)
+        assert np.abs(smooth[inside] - ours).max() > 0.05  # (which is not the smooth normal)
     np.testing.assert_allclose(ours, cycles, atol=1e-5)
 
 
@@ -474,3 +485,33 @@ def test_pointiness_welds_vertices_as_cycles_scans_them():
     got = textures.welded_vertices(co)
     np.testing.assert_array_equal(got, orig)
     assert (got != np.arange(len(co))).sum() >= 80
+
+
+def test_true_normals_at_vertices_and_corners_are_their_faces():
+    """A cube mirrored in x and turned: at a face corner its face's normal (the mesh's own polygon
+    normal carried into the world), at a vertex the mean of its three faces', as Cycles turns a
+    mirrored object's back to the winding's side."""
+    bpy.ops.mesh.primitive_cube_add(size=2.0, location=(3.0, 0.0, 0.0), rotation=(0.3, 0.2, 0.1))
+    cube = bpy.context.object
+    cube.scale = (-1.0, 1.5, 1.0)
+    bpy.context.view_layer.update()
+    mesh = cube.data
+    corner_vert = meshes.corner_vertices(mesh)
+    to_world = np.array(cube.matrix_world.to_3x3().inverted_safe().transposed(), np.float64)
+    faces = np.array([p.normal for p in mesh.polygons], np.float64) @ to_world.T
+    faces /= np.linalg.norm(faces, axis=1, keepdims=True)
+    corner_face = np.concatenate([[p.index] * p.loop_total for p in mesh.polygons])
+    at_corners = textures.true_normals(cube, mesh, corner_vert, "CORNER")
+    np.testing.assert_allclose(at_corners, faces[corner_face], atol=1e-6)
+    # each vertex on three faces, weighted by their areas in the world (parallelograms)
+    m = np.array(cube.matrix_world.to_3x3(), np.float64)
+    co = np.array([v.co for v in mesh.vertices], np.float64) @ m.T
+    areas = np.array([np.linalg.norm(np.cross(co[p.vertices[1]] - co[p.vertices[0]], co[p.vertices[3]] - co[p.vertices[0]]))
+                      for p in mesh.polygons])
+    assert np.ptp(areas) > 1.0
+    at_vertices = textures.true_normals(cube, mesh, corner_vert, "POINT")
+    for v in range(len(mesh.vertices)):
+        own = sorted({corner_face[c] for c in np.flatnonzero(corner_vert == v)})
+        mean = (areas[own, None] * faces[own]).sum(axis=0)
+        np.testing.assert_allclose(at_vertices[v], mean / np.linalg.norm(mean), atol=1e-6)
+    bpy.data.objects.remove(cube)

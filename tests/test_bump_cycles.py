@@ -9,7 +9,7 @@ import tempfile
 import numpy as np
 import pytest
 
-bpy = pytest.importorskip("bpy")
+import bpy  # noqa: E402  (installed by scripts/setup.sh; missing, the tests fail rather than skip)
 
 from test_addon import attribute, flat_pngs, registered, scene, select_only, shade_op  # noqa: E402,F401
 

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-bpy = pytest.importorskip("bpy")
+import bpy  # noqa: E402  (installed by scripts/setup.sh; missing, the tests fail rather than skip)
 
 import wenv  # noqa: E402
 from addon import closures, engine  # noqa: E402

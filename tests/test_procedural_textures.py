@@ -10,7 +10,7 @@ import pytest
 
 import wenv
 
-bpy = pytest.importorskip("bpy")
+import bpy  # noqa: E402  (installed by scripts/setup.sh; missing, the tests fail rather than skip)
 
 from addon import nodes  # noqa: E402
 from tests.helpers.cycles_pixels import pixel_scene  # noqa: E402
