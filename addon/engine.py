@@ -235,15 +235,20 @@ def fingerprint(*arrays):
     return h.digest()
 
 
-def shadow_triangles(positions, triangles):
-    """The triangles of a mesh that can block light: those of non-zero area between finite
-    positions (a degenerate face blocks nothing; the core refuses it).  Returns (kept, dropped)."""
-    if len(triangles) == 0:
-        return triangles.reshape(0, 3), 0
+def with_area(positions, triangles):
+    """Which triangles have an area: not zero, between finite positions (the core refuses the others)."""
     a, b, c = (positions[triangles[:, k]].astype(np.float64) for k in range(3))
     with np.errstate(invalid="ignore", over="ignore"):
         area = np.linalg.norm(np.cross(b - a, c - a), axis=1)
-    keep = np.isfinite(area) & (area > 0.0)
+    return np.isfinite(area) & (area > 0.0)
+
+
+def shadow_triangles(positions, triangles):
+    """The triangles of a mesh that can block light: those with_area (a degenerate face blocks
+    nothing).  Returns (kept, dropped)."""
+    if len(triangles) == 0:
+        return triangles.reshape(0, 3), 0
+    keep = with_area(positions, triangles)
     return np.ascontiguousarray(triangles[keep]), int((~keep).sum())
 
 

@@ -157,8 +157,11 @@ class Evaluator:
     rows) of the mesh's UV map (None: the active render one), or None without one."""
 
     def __init__(self, count, uv, texture, checking=False, points=None, progress=None, attribute=None, owner=None,
-                 footprint=None, ambient=None):
+                 footprint=None, ambient=None, bevel=None):
         self.count = count
+        # bevel(positions, normals, radius) -> the Bevel node's unit normals at the rows (bevel.py),
+        # None where the surface about them is not read (no mesh, or a Bump node's height)
+        self._bevel = bevel
         # ambient(positions, normals, distance, inside, only_local, samples) -> the rows' unoccluded shares
         # (ambient.py), None where no rays are cast (no scene, or a Bump node's height)
         self._ambient = ambient
@@ -522,6 +525,22 @@ class Evaluator:
         if output.identifier == "AO":
             return share
         return self.colour(node.inputs["Color"], depth) * share[:, None]
+
+    def _ShaderNodeBevel(self, node, output, depth):
+        if node.inputs["Radius"].is_linked:
+            raise Unsupported(f"'{node.name}''s Radius, linked")
+        if self._bevel is None:
+            if not self.checking:
+                raise Unsupported(f"'{node.name}', which reads the surface about each point: read into a material's "
+                                  "inputs, factors and Normal, not here")
+            return np.zeros((self.count, 3), np.float32)
+        normal = self._coordinates("NORMAL", node=node)[0]
+        got = self._bevel(self._coordinates("WORLD", node=node)[0], normal, float(node.inputs["Radius"].default_value))
+        if node.inputs["Normal"].is_linked:  # that normal turned as the bevel turns the mesh's (svm_node_bevel)
+            turned = self.colour(node.inputs["Normal"], depth) + (got - normal)
+            length = np.linalg.norm(turned, axis=1, keepdims=True)
+            got = np.where(length > 0.0, turned / np.where(length > 0.0, length, 1.0), 0.0)
+        return got.astype(np.float32)
 
     # -- node groups, evaluated through: a group's output is its inner node's, a Group Input the socket
     # the group node is fed by

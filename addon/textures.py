@@ -10,7 +10,7 @@ import collections
 
 import numpy as np
 
-from . import ambient, closures, engine, materials, meshes, nodes, world
+from . import ambient, bevel, closures, engine, materials, meshes, nodes, world
 
 # The sockets read from textures and the nodes between (nodes.py), by the core's keyword: every input
 # the core shades per vertex (wenv.Principled.INPUTS' per_vertex).  A colour into a value socket is
@@ -612,7 +612,8 @@ def read_inputs(obj, depsgraph, data, progress=None):
                                   lambda: true_normals(obj, mesh, corner_vert, data.domain, data.sites)),
                 progress=progress,
                 attribute=attribute_reader(mesh, corner_vert, data.domain, data.sites, notes), owner=(obj, mat),
-                footprint=coordinate_footprint(mesh, corner_vert, data.domain, data.sites), ambient=occlusion)
+                footprint=coordinate_footprint(mesh, corner_vert, data.domain, data.sites), ambient=occlusion,
+                bevel=bevel_reader(obj, depsgraph, progress, data.sites))
             try:
                 values = ev.colour(sock) if keyword in COLOUR_KEYWORDS else ev.value(sock)
             except nodes.MissingUV as exc:
@@ -656,6 +657,13 @@ def ambient_reader(obj, depsgraph, domain, progress=None):
         return ambient.shares((obj.name, domain, distance, inside, only_local, rays), positions, normals, distance,
                               inside, read_meshes[only_local], rays, progress)
     return read
+
+
+def bevel_reader(obj, depsgraph, progress=None, sites=None):
+    """An Evaluator's bevel() for obj's rows (bevel.normals: its own surface about each row; a bake's
+    texels at `sites`)."""
+    return lambda positions, normals, radius: bevel.normals(obj, depsgraph, positions, normals, radius, progress,
+                                                            sites)
 
 
 # The inputs read at their mean first when more vary smoothly than a vertex may mix (the core's
@@ -717,16 +725,18 @@ AT_VERTICES = "is read at the vertices: detail finer than the mesh is lost"
 class NormalChain:
     """What bends a Principled BSDF's Normal, as wenv reads it: a Normal Map node (`map`, a Source,
     with `map_strength`) and/or a Bump node over it (`bump`, the node, with its unlinked Strength
-    and Distance, Distance negated when inverted)."""
+    and Distance, Distance negated when inverted); or a Bevel node (`bevel`, with its unlinked
+    Radius)."""
 
-    __slots__ = ("map", "map_strength", "bump", "bump_strength", "distance")
+    __slots__ = ("map", "map_strength", "bump", "bump_strength", "distance", "bevel", "bevel_radius")
 
     def __init__(self):
-        self.map = self.bump = None
-        self.map_strength = self.bump_strength = self.distance = 0.0
+        self.map = self.bump = self.bevel = None
+        self.map_strength = self.bump_strength = self.distance = self.bevel_radius = 0.0
 
     def note(self):
-        what = " over ".join(w for w, on in (("a Bump node", self.bump), ("a normal map", self.map)) if on is not None)
+        what = " over ".join(w for w, on in (("a Bevel node", self.bevel), ("a Bump node", self.bump),
+                                             ("a normal map", self.map)) if on is not None)
         return f"'Normal' from {what} {AT_VERTICES}"
 
 
@@ -769,11 +779,21 @@ def _bump(node, chain):
     return None
 
 
+def _bevel(node, chain):
+    """Reads a Bevel node into chain; None, or why not."""
+    linked = [name for name in ("Radius", "Normal") if node.inputs[name].is_linked]
+    if linked:
+        return f"'{node.name}', whose {linked[0]} is linked"
+    chain.bevel = node
+    chain.bevel_radius = max(float(node.inputs["Radius"].default_value), 0.0)
+    return None
+
+
 def normal_source(principled):
     """(NormalChain, None) when a Principled BSDF's Normal comes from a Normal Map node (any of
-    NORMAL_MAP_SPACES, its Color an Image Texture) or a Bump node (its Height from nodes wenv
-    evaluates, its Normal unlinked or such a Normal Map); else (None, reason) with why it is not read,
-    reason None when Normal is unlinked."""
+    NORMAL_MAP_SPACES, its Color an Image Texture), a Bump node (its Height from nodes wenv
+    evaluates, its Normal unlinked or such a Normal Map) or a Bevel node (its Radius and Normal
+    unlinked); else (None, reason) with why it is not read, reason None when Normal is unlinked."""
     sock = principled.inputs["Normal"]
     if not sock.is_linked:
         return None, None
@@ -785,6 +805,8 @@ def normal_source(principled):
         why = _normal_map(node, chain)
     elif node.bl_idname == "ShaderNodeBump":
         why = _bump(node, chain)
+    elif node.bl_idname == "ShaderNodeBevel":
+        why = _bevel(node, chain)
     else:
         why = f"'{node.name}', a node wenv does not evaluate yet"
     return (chain, None) if why is None else (None, why)
@@ -935,17 +957,22 @@ def row_points(obj, mesh, positions, normals, view=None, face_normals=None):
     return points
 
 
+def triangle_normals(obj, positions, triangles):
+    """Each triangle's normal in the world times twice its area ((m, 3) float64, `positions` the
+    world's, `triangles` indices into them), on its winding's side as Cycles' Ng: a mirrored
+    object's turned back."""
+    p = positions
+    cross = np.cross(p[triangles[:, 1]] - p[triangles[:, 0]], p[triangles[:, 2]] - p[triangles[:, 0]])
+    return -cross if np.linalg.det(np.array(obj.matrix_world, np.float64)[:3, :3]) < 0.0 else cross
+
+
 def true_normals(obj, mesh, corner_vert, domain, sites=None):
     """The faces' own normal at each shaded row (world, unit), as Cycles' Ng: a texel's (`sites`)
     triangle's, a face corner's face's, and at a vertex, which has no one face, its faces' mean
     weighted by their areas.  The winding's side, as the Normal's (a back face's is not turned), and
     a mirrored object's turned back as Cycles turns it."""
-    p = world_points(mesh, obj.matrix_world)
     tris = triangle_corners(mesh)
-    v = corner_vert[tris]
-    cross = np.cross(p[v[:, 1]] - p[v[:, 0]], p[v[:, 2]] - p[v[:, 0]])  # twice each triangle's area
-    if np.linalg.det(np.array(obj.matrix_world, np.float64)[:3, :3]) < 0.0:
-        cross = -cross
+    cross = triangle_normals(obj, world_points(mesh, obj.matrix_world), corner_vert[tris])
 
     def summed(index, weights, count):
         return np.stack([np.bincount(index, weights=weights[:, k], minlength=count) for k in range(3)], axis=1)
@@ -1251,6 +1278,9 @@ def _bump_gradients(obj, s, mat, chain, mesh, corner_vert, m, sites, notes, prog
     except nodes.MissingUV as exc:
         notes.append(_no_uv_map(obj, exc.uv_map, f"the Bump node of '{mat.name}'", "it is not used"))
         return None
+    except nodes.Unsupported as exc:  # (what reads the scene about each point: not at a height's points)
+        notes.append(f"'{obj.name}': the Bump node of '{mat.name}' takes its Height from {exc}: it is not used")
+        return None
     if not all(np.isfinite(h).all() for h in heights):
         raise world.SetupError(f"Material '{mat.name}': its Bump node's Height is not finite (NaN or "
                                f"infinite) on '{obj.name}'")
@@ -1277,6 +1307,14 @@ def read_shading_normals(obj, depsgraph, data, progress=None):
     sites = data.sites
     corrections = {}  # bent material -> its Bump Map Correction
     for s, mat, (chain, _), mesh, corner_vert in _principled_slots(obj, depsgraph, normal_source):
+        mine = _slot_rows(obj, data, s)
+        if chain.bevel is not None:  # read where the rows are: their own positions and normals
+            if data.shading_normals is None:
+                data.shading_normals = data.normals.copy()
+            data.shading_normals[mine] = bevel.normals(obj, depsgraph, data.positions, data.normals, chain.bevel_radius,
+                                                       progress, data.sites)[mine]
+            corrections[mat.name] = bool(getattr(getattr(mat, "cycles", None), "use_bump_map_correction", True))
+            continue
         nl = len(mesh.loops)
         normal = np.empty(nl * 3, np.float32)
         mesh.corner_normals.foreach_get("vector", normal)
@@ -1309,7 +1347,6 @@ def read_shading_normals(obj, depsgraph, data, progress=None):
                                            for k in range(3)], axis=1))
         if data.shading_normals is None:
             data.shading_normals = data.normals.copy()
-        mine = _slot_rows(obj, data, s)
         data.shading_normals[mine] = world_n[mine]
         # Cycles' own setting (on by default, and where Cycles is not loaded)
         corrections[mat.name] = bool(getattr(getattr(mat, "cycles", None), "use_bump_map_correction", True))
@@ -1362,7 +1399,7 @@ def read_term_weights(obj, depsgraph, data, progress=None):
                 attribute=attribute_reader(mesh, corner_vert, data.domain, data.sites, notes),
                 owner=(obj, mat),
                 footprint=coordinate_footprint(mesh, corner_vert, data.domain, data.sites),
-                ambient=occlusion) if reads else None
+                ambient=occlusion, bevel=bevel_reader(obj, depsgraph, progress, data.sites)) if reads else None
             weight, fac = colour, np.ones((data.count, 1), np.float32)
             if term.factors:
                 try:

@@ -1647,6 +1647,17 @@ def test_a_bump_node_over_a_normal_map_and_what_it_does_not_read(scene):
                for n in notes), notes
     data = plan_of(scene, plane).items[0][1]
     assert data.shading_normals is None
+    # a Height from what reads the scene about each point (which a height's points do not): named, the
+    # mapped normal as it is, and the operator does not fail
+    for kind, output in (("ShaderNodeAmbientOcclusion", "AO"), ("ShaderNodeBevel", "Normal")):
+        source = tree.nodes.new(kind)
+        tree.links.new(source.outputs[output], bump.inputs["Height"])
+        plan = plan_of(scene, plane)
+        np.testing.assert_allclose(plan.items[0][1].shading_normals, np.tile(want, (plan.items[0][1].count, 1)),
+                                   atol=2e-4)
+        assert any("the Bump node of 'mapped and bumped' takes its Height from" in n and source.name in n
+                   for n in plan.notes), plan.notes
+        assert shade_op(view="CAMERA") == {"FINISHED"}
 
 
 def test_the_glossmeter_reads_a_textured_base_color_at_its_mean(scene):

@@ -12,10 +12,10 @@ import wenv
 
 import bpy  # noqa: E402  (installed by scripts/setup.sh; missing, the tests fail rather than skip)
 
-from addon import bake, engine, materials, meshes, textures, views  # noqa: E402
+from addon import bake, bevel, engine, materials, meshes, textures, views  # noqa: E402
 
 from conftest import hdri_path  # noqa: E402
-from test_addon import (as_the_interface_runs, animate_camera, env_world, image_sequence,  # noqa: E402,F401
+from test_addon import (as_the_interface_runs, animate_camera, attribute, env_world, image_sequence,  # noqa: E402,F401
                         principled_material, registered, scene, select_only)
 
 SENTINEL = np.float32([0.123, 0.456, 0.789, 0.5])
@@ -404,6 +404,87 @@ def test_a_bump_node_is_read_at_each_texel(scene):
     up = np.tile(np.float32([0, 0, 1]), (len(c), 1))  # the plane's own, which the Bump node bends
     want = draft_shader(principled_of(mat)).shade_mesh(points, normal.astype(np.float32), eye, smooth_normals=up)
     np.testing.assert_allclose(pixels(image)[inside, :3], want[inside], rtol=1e-3, atol=1e-5)
+
+
+def test_a_bevel_node_rounds_a_fold_at_each_texel(scene):
+    """A grid folded along x = 0 (its right half tilted), flat, whose Principled Normal is a Bevel
+    node: each texel is shaded at the core's bevelled normal of its centre (wenv.Occluders.bevel over
+    the fold's triangles, each its own normal), bent from the face's own."""
+    env_world(scene, "sunset")
+    scene.wenv.shadows = False
+    mat = principled_material("bevelled", roughness=0.4)
+    tree = mat.node_tree
+    node = tree.nodes.new("ShaderNodeBevel")
+    node.inputs["Radius"].default_value = 0.5
+    tree.links.new(node.outputs["Normal"], tree.nodes["Principled BSDF"].inputs["Normal"])
+    plane = grid(cuts=1, material=mat)
+    mesh = plane.data
+    co = np.array([tuple(v.co) for v in mesh.vertices], np.float32)
+    co[:, 2] = 0.8 * np.maximum(co[:, 0], 0.0)
+    mesh.vertices.foreach_set("co", co.ravel())
+    mesh.shade_flat()
+    mesh.update()
+    bpy.context.view_layer.update()
+    image = filled_image("bevelled bake", 32, 32)
+    bake_now(scene, plane, image)
+    c = centres(32, 32).reshape(-1, 2)
+    x, y = (c[:, 0] - 0.5) * 4.0, (c[:, 1] - 0.5) * 4.0
+    points = np.column_stack([x, y, 0.8 * np.maximum(x, 0.0)]).astype(np.float32)
+    tilted = np.float32([-0.8, 0.0, 1.0]) / np.float32(np.hypot(0.8, 1.0))
+    own = np.where((x < 0.0)[:, None], np.float32([0.0, 0.0, 1.0]), tilted).astype(np.float32)
+    triangles = np.array([tuple(t.vertices) for t in mesh.loop_triangles])
+    left = co[triangles].mean(axis=1)[:, 0] < 0.0
+    corner_normals = np.repeat(np.where(left[:, None], np.float32([0.0, 0.0, 1.0]), tilted), 3, axis=0)
+    bent = wenv.Occluders(co, triangles).bevel(points, corner_normals.astype(np.float32), 0.5)
+    eye = tuple(scene.camera.matrix_world.translation)
+    shader = draft_shader(principled_of(mat))
+    want = shader.shade_mesh(points, bent, eye, smooth_normals=own)
+    np.testing.assert_allclose(pixels(image)[:, :3], want, rtol=1e-3, atol=1e-5)
+    unbent = shader.shade_mesh(points, own, eye)
+    near = np.abs(x) < 0.3
+    assert np.abs(want - unbent)[near].mean() > 0.05 * unbent[near].mean()  # (it bevels)
+    # at the vertices (each face's corners: the mesh is flat), the same normals at the corners, and
+    # the report says where it is read
+    select_only(plane)
+    assert bpy.ops.wenv.shade(view="CAMERA") == {"FINISHED"}
+    corner = np.array([mesh.loops[k].vertex_index for k in range(len(mesh.loops))])
+    face_of = np.concatenate([[f.index] * f.loop_total for f in mesh.polygons])
+    left_face = np.array([f.center.x for f in mesh.polygons]) < 0.0
+    face_normal = np.where(left_face[:, None], np.float32([0.0, 0.0, 1.0]), tilted)[face_of].astype(np.float32)
+    at_corners = wenv.Occluders(co, triangles).bevel(co[corner], corner_normals.astype(np.float32), 0.5)
+    domain, shaded = attribute(plane)
+    assert domain == "CORNER"
+    np.testing.assert_allclose(shaded, shader.shade_mesh(co[corner], at_corners, eye, smooth_normals=face_normal),
+                               rtol=1e-3, atol=1e-5)
+    assert any("'Normal' from a Bevel node is read at the vertices" in n for n in materials.principled_notes(mat))
+
+
+def test_a_bevel_on_a_dense_mesh_is_interpolated_from_its_vertices(scene):
+    """The fold of a grid of 0.1 m quads, smooth, bevelled at a Radius of 0.5: a bake's texels read
+    the normal interpolated from their triangle's corners where it turns linearly over the triangle
+    (bevel.LINEAR_DEGREES at its centre), within 0.5 degrees of each texel's own integral (0.34
+    here)."""
+    plane = grid(cuts=39)
+    mesh = plane.data
+    co = np.array([tuple(v.co) for v in mesh.vertices], np.float32)
+    co[:, 2] = 0.8 * np.maximum(co[:, 0], 0.0)
+    mesh.vertices.foreach_set("co", co.ravel())
+    mesh.update()
+    bpy.context.view_layer.update()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    corner_vert = meshes.corner_vertices(mesh)
+    sites, _ = bake.texel_sites(textures.corner_uvs(mesh, mesh.uv_layers.active), textures.triangle_corners(mesh),
+                                128, 128, 1024)
+    normals = np.empty(len(mesh.loops) * 3, np.float32)
+    mesh.corner_normals.foreach_get("vector", normals)
+    points, own = sites.at(co[corner_vert]), sites.at(normals.reshape(-1, 3))
+    got = bevel.normals(plane, depsgraph, points, own, 0.5, sites=sites)
+    direct = bevel.normals(plane, depsgraph, points, own, 0.5)
+    apart = np.degrees(np.arccos(np.clip((got * direct).sum(axis=1), -1.0, 1.0)))
+    assert (apart > 1e-3).mean() > 0.02  # (texels about the fold interpolated: not each its own)
+    assert apart.max() < 0.5, apart.max()
+    turned = np.degrees(np.arccos(np.clip((direct * own).sum(axis=1) / np.linalg.norm(own, axis=1), -1.0, 1.0)))
+    assert turned.max() > 5.0  # (the fold is rounded)
 
 
 def world_vertices(obj):

@@ -214,7 +214,8 @@ def test_occluders_block_runs():
     ns = {"wenv": wenv, "np": np, "env": wenv.Environment(np.ones((32, 64, 3), np.float32)), "mat": wenv.Lambert(0.5),
           "scene_positions": np.float32(roof + [[0, 0, 0], [5, 0, 0]]), "scene_triangles": np.array([[0, 1, 2], [0, 2, 3]]),
           "normals": np.float32([[0, 0, 1]] * 6), "view_dirs": np.float32([[0, 0.3, 1]] * 6)}
-    ns.update(positions=ns["scene_positions"], origins=ns["scene_positions"], directions=ns["normals"])
+    ns.update(positions=ns["scene_positions"], origins=ns["scene_positions"], directions=ns["normals"],
+              points=ns["scene_positions"], corner_normals=np.float32([[0, 0, 1]] * 6))
     # the roof moved sideways: its two triangles changed
     ns.update(new_scene_positions=ns["scene_positions"] + np.float32([[0.3, 0, 0]] * 4 + [[0, 0, 0]] * 2),
               new_scene_triangles=ns["scene_triangles"], first=0, count=2)
@@ -225,6 +226,9 @@ def test_occluders_block_runs():
     assert ns["occlusion"].cast_vertices == 2
     assert ns["truth"][4, 0] < ns["truth"][5, 0] < 0.5 * 1.01  # (white sky: 0.5 in the open, to the pixels)
     assert ns["rgb"][4, 0] < ns["rgb"][5, 0] and abs(ns["rgb"][4, 0] - ns["truth"][4, 0]) < 0.05
+    # the roof's own corners bevel to its normal; the far ground point, with no roof within 0.05, to none
+    np.testing.assert_allclose(ns["bevelled"][:4], [[0, 0, 1]] * 4, atol=1e-6)
+    assert not ns["bevelled"][5].any()
 
 
 def test_bent_normals_block_runs():

@@ -37,10 +37,8 @@ static PyObject *uv_texels(PyObject *self, PyObject *args, PyObject *kwargs)
         return wenv_py_errorf(PyExc_ValueError,
                               "a %zu x %zu image needs %.0f MB to bake, over the memory budget of %.0f MB", width,
                               height, need_mb, budget_mb);
-    if (progress_obj != Py_None && !PyCallable_Check(progress_obj)) {
-        PyErr_SetString(PyExc_TypeError, "progress must be callable or None");
+    if (wenv_py_check_progress(progress_obj) < 0)
         return NULL;
-    }
     Py_buffer ub, tb;
     PyObject *uv_held, *tri_held;
     if (wenv_py_get_typed_array(uv_obj, "uv", "float32", 0, &ub, &uv_held) < 0)

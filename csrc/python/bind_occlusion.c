@@ -7,6 +7,7 @@
 
 #include "math/maps.h"
 #include "python/module.h"
+#include "scene/bevel.h"
 #include "scene/occlusion.h"
 #include "scene/sending_map.h"
 
@@ -208,6 +209,58 @@ done:
     return result;
 }
 
+/* bevel(points, corner_normals, radius, progress=None): the Bevel node's unit normal per point. */
+static PyObject *occluders_bevel(OccludersObject *self, PyObject *args, PyObject *kwargs)
+{
+    static char *kwlist[] = {"points", "corner_normals", "radius", "progress", NULL};
+    PyObject *pobj, *nobj, *progress_obj = Py_None;
+    double radius;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOd|O:bevel", kwlist, &pobj, &nobj, &radius, &progress_obj) ||
+        ready(self) < 0)
+        return NULL;
+    if (wenv_py_check_progress(progress_obj) < 0)
+        return NULL;
+    if (!(radius > 0.0) || !isfinite(radius)) {
+        wenv_py_errorf(PyExc_ValueError, "radius must be positive and finite, got %g", radius);
+        return NULL;
+    }
+    Py_buffer pb, nb;
+    size_t np, nn;
+    if (wenv_py_get_vec3_array(pobj, "points", 0, &pb, &np, NULL) < 0)
+        return NULL;
+    if (wenv_py_get_vec3_array(nobj, "corner_normals", 0, &nb, &nn, NULL) < 0) {
+        PyBuffer_Release(&pb);
+        return NULL;
+    }
+    PyObject *result = NULL;
+    size_t triangles = wenv_occluders_triangle_count(self->occ);
+    if (nn != 3 * triangles) {
+        PyErr_Format(PyExc_ValueError, "corner_normals has %zu rows: it needs 3 per triangle (%zu)", nn,
+                     3 * triangles);
+        goto done;
+    }
+    Py_ssize_t shape[2] = {(Py_ssize_t)np, 3};
+    float *out;
+    if (!(result = wenv_py_new_float_array(2, shape, &out)))
+        goto done;
+    wenv_py_progress_bridge bridge = {.callback = progress_obj};
+    wenv_progress progress = wenv_py_progress(&bridge);
+    wenv_error err = {0};
+    wenv_status st;
+    WENV_BEGIN_WORK
+    st = wenv_bevel_normals(self->occ, nb.buf, pb.buf, np, radius, out, &progress, &err);
+    WENV_END_WORK
+    if (st) {
+        Py_CLEAR(result);
+        if (!(bridge.raised && PyErr_Occurred()))
+            wenv_py_raise(&err);
+    }
+done:
+    PyBuffer_Release(&pb);
+    PyBuffer_Release(&nb);
+    return result;
+}
+
 /* The previous occlusion and the changed triangles of a refresh: previous None (and changed None)
  * for a new cast.  -1 + an exception naming the argument. */
 static int refresh_args(PyObject *previous, PyObject *changed, size_t *resolution, int resolution_given,
@@ -295,10 +348,8 @@ static PyObject *occluders_occlusion(OccludersObject *self, PyObject *args, PyOb
     }
     if (res_obj && !automatic && wenv_py_get_size(res_obj, "resolution", &resolution) < 0)
         return NULL;
-    if (progress_obj != Py_None && !PyCallable_Check(progress_obj)) {
-        PyErr_SetString(PyExc_TypeError, "progress must be callable or None");
+    if (wenv_py_check_progress(progress_obj) < 0)
         return NULL;
-    }
     const OcclusionObject *before;
     if (refresh_args(previous, changed, &resolution, res_obj != NULL && !automatic, &before, &first, &count) < 0)
         return NULL;
@@ -382,6 +433,12 @@ static PyMethodDef occluders_methods[] = {
     {"auto_resolution", (PyCFunction)occluders_auto_resolution, METH_O | METH_STATIC,
      "auto_resolution(count)\n--\n\nThe resolution occlusion(..., resolution='auto') casts `count` vertices at: the "
      "finest whose rays stay within 2^23."},
+    {"bevel", (PyCFunction)(void (*)(void))occluders_bevel, METH_VARARGS | METH_KEYWORDS,
+     "bevel(points, corner_normals, radius, progress=None)\n--\n\nThe Bevel node's normal at each point (float32 "
+     "(n, 3)), as Cycles' converges to it: the mean of the smooth normals of these triangles (an object's own) "
+     "within `radius` of the point, weighted over their area by Cycles' falloff (radius - r)^3; (0, 0, 0) where "
+     "none lies within it.  corner_normals: float32 (3 m, 3), each triangle's three smooth normals in the "
+     "Occluders' order.  progress(fraction) may return True to cancel."},
     {"occluded", (PyCFunction)(void (*)(void))occluders_occluded, METH_VARARGS | METH_KEYWORDS,
      "occluded(origins, directions, tfar=inf)\n--\n\nWhether anything blocks each ray (bool, n): origins float32 "
      "(n, 3) or one (3,), directions float32 (n, 3) (normalised here), up to distance tfar."},

@@ -45,10 +45,8 @@ static PyObject *reference_with(PyObject *args, PyObject *kwargs, wenv_py_vertex
     const struct wenv_material *mat = wenv_py_material(mat_obj, "material");
     if (!mat)
         return NULL;
-    if (progress_obj != Py_None && !PyCallable_Check(progress_obj)) {
-        PyErr_SetString(PyExc_TypeError, "progress must be callable or None");
+    if (wenv_py_check_progress(progress_obj) < 0)
         return NULL;
-    }
     Py_buffer nb, vb;
     size_t n, nv;
     if (wenv_py_get_vec3_array(nobj, "normals", 1, &nb, &n, NULL) < 0)

@@ -291,10 +291,8 @@ static int Shader_init(ShaderObject *self, PyObject *args, PyObject *kwargs)
         memcpy(self->quality, wenv_auto_choice_quality(&self->auto_choice), method->quality_size);
     else if (parse_quality(method, quality_obj, self->quality) < 0)
         return -1;
-    if (progress_obj != Py_None && !PyCallable_Check(progress_obj)) {
-        PyErr_SetString(PyExc_TypeError, "progress must be callable or None");
+    if (wenv_py_check_progress(progress_obj) < 0)
         return -1;
-    }
     Py_XSETREF(self->progress, progress_obj == Py_None ? NULL : Py_NewRef(progress_obj));
     wenv_method_setup setup = {0};
     PyObject *cache_bytes;

@@ -115,10 +115,8 @@ static wenv_status run_texture_work(void *ctx, const wenv_progress *p, wenv_erro
 static PyObject *run_texture(texture_call call, const void *settings, PyObject *v_obj, PyObject *w_obj,
                              int want_colour, PyObject *progress_obj)
 {
-    if (progress_obj != Py_None && !PyCallable_Check(progress_obj)) {
-        PyErr_SetString(PyExc_TypeError, "progress must be callable or None");
+    if (wenv_py_check_progress(progress_obj) < 0)
         return NULL;
-    }
     Py_buffer vb, wb;
     PyObject *v_held, *w_held = NULL, *value = NULL, *colour = NULL;
     int w_array;
@@ -204,10 +202,8 @@ static PyObject *wave_texture(PyObject *self, PyObject *args, PyObject *kwargs)
                                      &profile, &scale, &distortion, &detail, &detail_scale, &detail_roughness, &phase,
                                      &progress_obj))
         return NULL;
-    if (progress_obj != Py_None && !PyCallable_Check(progress_obj)) {
-        PyErr_SetString(PyExc_TypeError, "progress must be callable or None");
+    if (wenv_py_check_progress(progress_obj) < 0)
         return NULL;
-    }
     int t = choice(type, "wave_type", TYPES, 2), d = t < 0 ? -1 : choice(direction, "direction", t ? RINGS : BANDS, 4);
     int p = d < 0 ? -1 : choice(profile, "profile", PROFILES, 3);
     if (p < 0)
@@ -308,10 +304,8 @@ static PyObject *gabor_texture(PyObject *self, PyObject *args, PyObject *kwargs)
     if (!PyArg_ParseTupleAndKeywords(args, kwargs, "O|$idddd(ddd)O:gabor_texture", kwlist, &v_obj, &dimensions, &scale,
                                      &frequency, &anisotropy, &orientation_2d, &o3[0], &o3[1], &o3[2], &progress_obj))
         return NULL;
-    if (progress_obj != Py_None && !PyCallable_Check(progress_obj)) {
-        PyErr_SetString(PyExc_TypeError, "progress must be callable or None");
+    if (wenv_py_check_progress(progress_obj) < 0)
         return NULL;
-    }
     wenv_gabor_settings s = {.dimensions = dimensions, .scale = (float)scale, .frequency = (float)frequency,
                              .anisotropy = (float)anisotropy, .orientation_2d = (float)orientation_2d,
                              .orientation_3d = {(float)o3[0], (float)o3[1], (float)o3[2]}};

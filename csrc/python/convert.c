@@ -367,6 +367,15 @@ wenv_progress wenv_py_progress(wenv_py_progress_bridge *bridge)
     return p;
 }
 
+int wenv_py_check_progress(PyObject *progress)
+{
+    if (progress != Py_None && !PyCallable_Check(progress)) {
+        PyErr_SetString(PyExc_TypeError, "progress must be callable or None");
+        return -1;
+    }
+    return 0;
+}
+
 int wenv_py_take_vertex_inputs(PyObject *kwargs, wenv_py_vertex_inputs *v)
 {
     memset(v, 0, sizeof *v);

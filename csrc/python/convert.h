@@ -88,6 +88,8 @@ typedef struct {
 } wenv_py_progress_bridge;
 
 wenv_progress wenv_py_progress(wenv_py_progress_bridge *bridge);
+/* 0 when `progress` is None or callable; else -1 with TypeError naming the argument. */
+int wenv_py_check_progress(PyObject *progress);
 
 /* base_color: one linear RGB colour per vertex (n rows), finite and non-negative, copied clamped to
  * [0, 1] as a material clamps its own (PyMem_Free it).  NULL with a ValueError or TypeError naming

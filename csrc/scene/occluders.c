@@ -249,3 +249,25 @@ void wenv_occluders_hit_rays(const wenv_occluders *occ, const float *origins, co
 {
     hit_from(occ, origins, 3, dirs, n, tri, uv);
 }
+
+typedef struct {
+    void (*visit)(void *user, size_t triangle);
+    void *user;
+} near_visit;
+
+static bool visit_near(struct RTCPointQueryFunctionArguments *args)
+{
+    const near_visit *v = args->userPtr;
+    v->visit(v->user, args->primID);
+    return false; /* the query's radius is left as it was */
+}
+
+void wenv_occluders_near(const wenv_occluders *occ, const float point[3], float radius,
+                         void (*visit)(void *user, size_t triangle), void *user)
+{
+    struct RTCPointQuery query = {.x = point[0], .y = point[1], .z = point[2], .time = 0.0f, .radius = radius};
+    struct RTCPointQueryContext context;
+    rtcInitPointQueryContext(&context);
+    near_visit v = {visit, user};
+    rtcPointQuery(occ->scene, &query, &context, visit_near, &v);
+}

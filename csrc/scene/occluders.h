@@ -66,4 +66,9 @@ void wenv_occluders_hit_rays(const wenv_occluders *occ, const float *origins, co
 void wenv_occluders_test_rays(const wenv_occluders *occ, const float *origins, const float *dirs, size_t n, float tfar,
                               unsigned char *blocked);
 
+/* Calls visit(user, triangle) for each triangle whose bounds come within `radius` of `point` (some
+ * farther ones too: visit decides), through Embree's point query.  Thread-safe. */
+void wenv_occluders_near(const wenv_occluders *occ, const float point[3], float radius,
+                         void (*visit)(void *user, size_t triangle), void *user);
+
 #endif
