@@ -107,10 +107,11 @@ def used(socket, depth=0):
 def unassociates_alpha(node):
     """Whether Cycles divides an Image Texture's colour by its alpha (svm_image_texture's
     NODE_IMAGE_ALPHA_UNASSOCIATE): its Alpha output is used and its image's alpha is associated (the
-    image not data, its alpha neither channel-packed nor ignored)."""
-    image = node.image
-    return (image is not None and image.colorspace_settings.name not in world.DATA_SPACES
-            and image.alpha_mode not in ("CHANNEL_PACKED", "NONE") and used(node.outputs["Alpha"]))
+    image not data, its alpha neither channel-packed nor ignored).  An Environment Texture has no
+    Alpha: its colour stays associated."""
+    image, alpha = node.image, node.outputs.get("Alpha")
+    return (image is not None and alpha is not None and image.colorspace_settings.name not in world.DATA_SPACES
+            and image.alpha_mode not in ("CHANNEL_PACKED", "NONE") and used(alpha))
 
 
 def property_rgba(owner, name):
@@ -238,6 +239,13 @@ class Evaluator:
             samples = [(None, uv, footprint, rows)]
         except _NotUV:  # coordinates of the rows: a plane of them, or a box's three
             samples = self._image_coordinates(node, depth)
+        return self._sampled(node, output, samples)
+
+    def _sampled(self, node, output, samples):
+        """An image node's output from its image sampled at `samples` ([(weight per row or None, uv,
+        footprint, rows)], summed): its colour, associated with alpha as Cycles samples it (divided
+        again where the Alpha output is used), or its alpha."""
+        image = node.image
         self.textures.append(node)
         if node.interpolation not in INTERPOLATIONS:
             self.notes.append(f"'{node.name}': {node.interpolation} interpolation is read as Linear")
@@ -258,6 +266,38 @@ class Evaluator:
             got = got if weight is None else (weight if alpha else weight[:, None]) * got
             out = got if out is None else out + got
         return out.astype(np.float32)
+
+    def _ShaderNodeTexEnvironment(self, node, output, depth):
+        """An image of the directions (svm_node_tex_environment): its Vector (the position in the world
+        when unlinked, as Cycles reads it on a surface) made unit and mapped equirectangularly (u =
+        0.5 - atan2(y, x) / 2 pi, v = 1 - acos(z) / pi) or as a mirror ball, the image repeating."""
+        image = node.image
+        if image is None:
+            raise Unsupported(f"'{node.name}', which has no image")
+        if image.source not in IMAGE_SOURCES:
+            raise Unsupported(f"'{node.name}', whose {image.source.lower()} image wenv does not read yet")
+        if node.projection not in ("EQUIRECTANGULAR", "MIRROR_BALL"):
+            raise Unsupported(f"'{node.name}''s {node.projection.lower()} projection")
+        socket = node.inputs["Vector"]
+        if self._points is None and not socket.is_linked:  # no mesh: the image's mean
+            return self._sampled(node, output, [(None, np.zeros((1, 2), np.float32), np.ones(1, np.float32),
+                                                 np.zeros(1, np.int64))])
+        d = (self.colour(socket, depth) if socket.is_linked else self._coordinates("WORLD", node=node)[0])
+        d = d.astype(np.float64)
+        length = np.linalg.norm(d, axis=1, keepdims=True)
+        d = np.where(length > 0.0, d / np.where(length > 0.0, length, 1.0), 0.0)
+        if node.projection == "EQUIRECTANGULAR":
+            u = np.where(length[:, 0] > 0.0, 0.5 - np.arctan2(d[:, 1], d[:, 0]) / (2.0 * np.pi), 0.0)
+            v = np.where(length[:, 0] > 0.0, 1.0 - np.arccos(np.clip(d[:, 2], -1.0, 1.0)) / np.pi, 0.0)
+        else:  # the mirror ball seen along +y (direction_to_mirrorball)
+            d[:, 1] -= 1.0
+            div = 2.0 * np.sqrt(np.maximum(-0.5 * d[:, 1], 0.0))
+            d = np.where(div[:, None] > 0.0, d / np.where(div > 0.0, div, 1.0)[:, None], d)
+            u, v = 0.5 * (d[:, 0] + 1.0), 0.5 * (d[:, 2] + 1.0)
+        uv = np.ascontiguousarray(np.column_stack([u, v]), np.float32)
+        footprint = (self._footprint(uv, node.projection == "EQUIRECTANGULAR") if self._footprint
+                     else np.zeros(self.count, np.float32))
+        return self._sampled(node, output, [(None, uv, footprint, np.arange(self.count))])
 
     def _image_coordinates(self, node, depth):
         """[(weight per row or None, uv, footprint, rows)] of an Image Texture whose Vector is not a UV

@@ -323,7 +323,7 @@ def frame_shown(node):
 
 
 def frames_shown(obj):
-    """(material, node, Frame) of every Image Texture in obj's materials (node groups included) whose
+    """(material, node, Frame) of every image node in obj's materials (node groups included) whose
     image sequence or movie shows a frame: what a bake of obj read of them."""
     out, seen = [], set()
 
@@ -332,7 +332,7 @@ def frames_shown(obj):
             return
         seen.add(tree.name_full)
         for node in tree.nodes:
-            if node.bl_idname == "ShaderNodeTexImage":
+            if node.bl_idname in ("ShaderNodeTexImage", "ShaderNodeTexEnvironment"):
                 frame = frame_shown(node)
                 if frame is not None:
                     out.append((owner, node.name, frame))
@@ -534,8 +534,13 @@ def data_uv_rows(mesh, uv_map, data, corner_vert):
 def colours_at_rows(levels, source, uv, footprint, rows, n_rows):
     """The colour of each shaded row: its corners' samples of the image's pyramid (or UDIM tiles:
     pyramids()), averaged where a vertex has several (a UV seam)."""
-    rgb = sample_image(levels, uv, footprint, source.node.interpolation, source.node.extension)
+    rgb = sample_image(levels, uv, footprint, source.node.interpolation, extension_of(source.node))
     return nodes.group_means(rgb, rows, n_rows)
+
+
+def extension_of(node):
+    """An image node's extension: an Image Texture's own; an Environment Texture's images repeat."""
+    return getattr(node, "extension", "REPEAT")
 
 
 # (object name, slot, socket) -> (what the colours were read from, the colours, the pyramid they were
@@ -546,7 +551,7 @@ _colours_kept = {}
 def _colours_memo(key, levels, source, got, n_rows):
     """colours_at_rows, kept while the image's pyramid, the node's settings and the UVs are the same:
     a new view samples nothing."""
-    made_of = (id(levels), source.node.interpolation, source.node.extension, n_rows, engine.fingerprint(*got))
+    made_of = (id(levels), source.node.interpolation, extension_of(source.node), n_rows, engine.fingerprint(*got))
     held = _colours_kept.get(key)
     if held is None or held[0] != made_of:
         if len(_colours_kept) > 256:

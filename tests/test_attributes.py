@@ -304,6 +304,34 @@ def test_an_image_through_coordinates_reads_as_cycles_renders_it(grid, projectio
     assert off.sum() <= 3, (off.sum(), np.abs(cycles - ours).max())
 
 
+@pytest.mark.parametrize("projection, coordinates", [("EQUIRECTANGULAR", None), ("EQUIRECTANGULAR", "Reflection"),
+                                                     ("MIRROR_BALL", "Normal")])
+def test_an_environment_texture_reads_as_cycles_renders_it(grid, projection, coordinates):
+    """An Environment Texture in an object's material: its Vector the position in the world (unlinked,
+    as Cycles reads it on a surface), the view mirrored about the normal, or the object-space
+    normal (turned a quarter), mapped equirectangularly or as a mirror ball: within 1e-4 of Cycles' pixels but a few
+    where the direction turns within a pixel (wenv filters over the pixel, Cycles does not): about
+    the map's pole, above the world's origin."""
+    def configure(node):
+        _image_through("FLAT")(node.id_data.nodes.new("ShaderNodeTexImage"))  # (makes the image)
+        node.image, node.projection = bpy.data.images["smooth"], projection
+        if coordinates is not None:  # turned a quarter about x: what the grid reflects sits on the map's equator
+            tree = node.id_data
+            coords, turn = tree.nodes.new("ShaderNodeTexCoord"), tree.nodes.new("ShaderNodeMapping")
+            turn.vector_type = "VECTOR"
+            turn.inputs["Rotation"].default_value = (np.pi / 2, 0.0, 0.0)
+            tree.links.new(coords.outputs[coordinates], turn.inputs["Vector"])
+            tree.links.new(turn.outputs["Vector"], node.inputs["Vector"])
+    cycles, ours, notes = grid("ShaderNodeTexEnvironment", "Color", configure)
+    assert np.ptp(ours) > 0.2 and notes == []
+    off = np.abs(cycles - ours).max(axis=1) > 1e-4
+    if coordinates is None:  # straight above the world's origin the directions reach the map's pole,
+        side = (np.arange(N) + 0.5) / N * 4.0 - 2.0  # where u turns a whole circle within a pixel
+        x, y = np.meshgrid(side, side)
+        off &= (np.hypot(x, y).ravel() > 0.5)[grid.texels]
+    assert off.sum() <= 3, (off.sum(), np.abs(cycles - ours).max())
+
+
 def _image_with_alpha(is_float, alpha_mode="STRAIGHT", space=None, alpha_used=False):
     """configure() of an Image Texture (Closest) of a 24 x 24 image whose alpha runs from 0 to 1
     (a fifth of its texels 0, a fifth 1), read through object coordinates as _image_through reads
