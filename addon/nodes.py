@@ -544,10 +544,34 @@ class Evaluator:
             got, _kind = self._mesh_attribute(node, POINTINESS if output.identifier == "Pointiness"
                                               else RANDOM_PER_ISLAND, False)
             return np.ascontiguousarray(got[:, 0])
+        if output.identifier == "Tangent":
+            return self._radial_tangent(node, "Z")
         spaces = {"Position": "WORLD", "Normal": "NORMAL", "True Normal": "TRUE_NORMAL"}
         if output.identifier not in spaces:
             raise Unsupported(f"'{node.name}''s {output.name} output")
         return self._coordinates(spaces[output.identifier], node=node)[0]
+
+    def _ShaderNodeTangent(self, node, output, depth):
+        if node.direction_type != "RADIAL":
+            raise Unsupported(f"'{node.name}', a tangent of a UV map")
+        return self._radial_tangent(node, node.axis)
+
+    def _radial_tangent(self, node, axis):
+        """The tangent about an axis of the texture space through the row (svm_node_tangent, radial;
+        the Geometry's Tangent is about Z): the Generated coordinates turned a quarter about the axis,
+        carried into the world as a normal is, and made perpendicular to the shading normal."""
+        g = self._coordinates("GENERATED", node=node)[0].astype(np.float64) - 0.5
+        if self._owner is None:  # (no mesh: only checked)
+            return np.zeros((self.count, 3), np.float32)
+        zero = np.zeros(len(g))
+        t = {"X": (zero, -g[:, 2], g[:, 1]), "Y": (-g[:, 2], zero, g[:, 0]), "Z": (-g[:, 1], g[:, 0], zero)}[axis]
+        to_world = np.array(self._owner[0].matrix_world.to_3x3().inverted_safe(), np.float64)
+        t = np.column_stack(t) @ to_world  # (the inverse transpose, as a row vector)
+        n = self._coordinates("NORMAL", node=node)[0].astype(np.float64)
+        across = np.cross(t, n)
+        length = np.linalg.norm(across, axis=1, keepdims=True)
+        across = np.where(length > 0.0, across / np.where(length > 0.0, length, 1.0), 0.0)
+        return np.cross(n, across).astype(np.float32)
 
     def _ShaderNodeAmbientOcclusion(self, node, output, depth):
         for name in ("Normal", "Distance"):

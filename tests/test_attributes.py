@@ -169,6 +169,19 @@ def test_geometry_reads_as_cycles_renders_it(grid, output):
     np.testing.assert_allclose(ours, cycles, atol=1e-5)
 
 
+@pytest.mark.parametrize("kind, axis", [("ShaderNodeNewGeometry", None), ("ShaderNodeTangent", "X"),
+                                        ("ShaderNodeTangent", "Y"), ("ShaderNodeTangent", "Z")])
+def test_radial_tangents_read_as_cycles_renders_them(grid, kind, axis):
+    """The Geometry's Tangent and the Tangent node's radial ones (about X, Y, Z of the texture space,
+    made perpendicular to the smooth normal): within 1e-4 of Cycles' pixels."""
+    def configure(node):
+        if axis is not None:
+            node.direction_type, node.axis = "RADIAL", axis
+    cycles, ours, _ = grid(kind, "Tangent", configure)
+    assert np.ptp(ours, axis=0).min() > 0.5
+    np.testing.assert_allclose(ours, cycles, atol=1e-4)  # (float32 coordinates crossed and made unit)
+
+
 FACING = [("ShaderNodeLayerWeight", "Fresnel", dict(Blend=0.5)), ("ShaderNodeLayerWeight", "Fresnel", dict(Blend=0.2)),
           ("ShaderNodeLayerWeight", "Facing", dict(Blend=0.5)), ("ShaderNodeLayerWeight", "Facing", dict(Blend=0.15)),
           ("ShaderNodeLayerWeight", "Facing", dict(Blend=0.9)), ("ShaderNodeFresnel", "Fac", dict(IOR=1.45)),
