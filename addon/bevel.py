@@ -61,7 +61,7 @@ def surface(obj, depsgraph):
 # LINEAR_DEGREES of the integral at the triangle's centre (and the triangle at most LINEAR_SHARE of
 # the Radius across), the others their own: so a dense mesh's million texels cost about its
 # vertices' and triangles' integrals, and a fold's or a coarse mesh's texels their own.
-LINEAR_SHARE = 0.5
+LINEAR_SHARE = 0.25
 LINEAR_DEGREES = 0.25
 
 _normals = {}  # object name -> (what its rows' normals were made of, the normals)

@@ -52,6 +52,11 @@ static double distance(const double a[3], const double b[3])
 /* 8-point Gauss-Legendre nodes and weights on [-1, 1] (one half: they are symmetric). */
 static const double GL_X[4] = {0.1834346424956498, 0.5255324099163290, 0.7966664774136267, 0.9602898564975363};
 static const double GL_W[4] = {0.3626837833783620, 0.3137066959985185, 0.2223810344533745, 0.1012285362903763};
+/* 4-point Gauss-Legendre (one half), over an edge's arc of at most SHORT_ARC radians each side of
+ * its middle: most of a dense mesh's edges seen from a point. */
+static const double GL4_X[2] = {0.3399810435848563, 0.8611363115940526};
+static const double GL4_W[2] = {0.6521451548625461, 0.3478548451374538};
+#define SHORT_ARC 0.35
 
 /* The falloff integrated over the disk of radius rho about the foot of the point on a plane at
  * distance h: the integral of (R - t)^3 t dt from |h| to sqrt(h^2 + rho^2), t the distance from
@@ -71,13 +76,11 @@ static double disk_integral(double rho, double h, double radius)
  * t = sqrt(h^2 + s^2), by 4-point Gauss-Legendre (it weighs how a smooth triangle's normal turns). */
 static double moment_integral(double rho, double h, double radius)
 {
-    static const double X[2] = {0.3399810435848563, 0.8611363115940526}, W[2] = {0.6521451548625461,
-                                                                               0.3478548451374538};
     double sum = 0.0;
     for (int q = 0; q < 2; q++)
         for (int side = -1; side <= 1; side += 2) {
-            double x = 0.5 * rho * (1.0 + side * X[q]), f = radius - sqrt(h * h + x * x);
-            sum += f > 0.0 ? W[q] * f * f * f * x * x : 0.0;
+            double x = 0.5 * rho * (1.0 + side * GL4_X[q]), f = radius - sqrt(h * h + x * x);
+            sum += f > 0.0 ? GL4_W[q] * f * f * f * x * x : 0.0;
         }
     return 0.5 * rho * sum;
 }
@@ -148,12 +151,14 @@ static int polar_integrals(const bevel_sum *s, double *weight, double moment[3],
         }
         if (in_hi > in_lo) { /* out to the edge, where it lies within the circle */
             double mid = 0.5 * (in_hi + in_lo), half = 0.5 * (in_hi - in_lo), inner = 0.0, m_c = 0.0, m_s = 0.0;
-            for (int q = 0; q < 4; q++)
+            int short_arc = half <= SHORT_ARC;
+            const double *xs = short_arc ? GL4_X : GL_X, *ws = short_arc ? GL4_W : GL_W;
+            for (int q = 0; q < (short_arc ? 2 : 4); q++)
                 for (int side = -1; side <= 1; side += 2) {
-                    double phi = mid + side * half * GL_X[q], rho = d / cos(phi);
-                    inner += GL_W[q] * disk_integral(rho, h, s->radius);
+                    double phi = mid + side * half * xs[q], rho = d / cos(phi);
+                    inner += ws[q] * disk_integral(rho, h, s->radius);
                     if (moment) {
-                        double m = GL_W[q] * moment_integral(rho, h, s->radius);
+                        double m = ws[q] * moment_integral(rho, h, s->radius);
                         m_c += m * cos(phi);
                         m_s += m * sin(phi);
                     }
