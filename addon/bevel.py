@@ -7,7 +7,7 @@ Samples to raise.  An object's triangles, with their corners' smooth normals, ar
 mesh and place are the same."""
 import numpy as np
 
-from . import engine, meshes
+from . import engine, meshes, nodes
 
 _surfaces = {}  # object name -> (what its surface was made of, (wenv.Occluders, corner normals))
 
@@ -111,7 +111,7 @@ def _bevelled(occ, corner_normals, positions, radius, progress, sites, points, c
     if tried.any():
         needed = np.unique(v[tried])
         at_vertex[needed] = occ.bevel(points[needed], corner_normals, radius, progress)
-        guess = _unit(at_vertex[v[tried]].sum(axis=1))
+        guess = nodes.unit_rows(at_vertex[v[tried]].sum(axis=1))
         truth = occ.bevel(np.ascontiguousarray(centre[tried], np.float32), corner_normals, radius, progress)
         linear[np.flatnonzero(tried)] = (guess * truth).sum(axis=1) >= np.cos(np.radians(LINEAR_DEGREES))
     small = linear[sites.triangle]
@@ -119,10 +119,7 @@ def _bevelled(occ, corner_normals, positions, radius, progress, sites, points, c
     if (~small).any():
         got[~small] = occ.bevel(positions[~small], corner_normals, radius, progress)
     if small.any():
-        got[small] = _unit(engine.corner_values_at(at_vertex[corner_vert], sites.corners[small], sites.weights[small]))
+        inner = engine.corner_values_at(at_vertex[corner_vert], sites.corners[small], sites.weights[small])
+        got[small] = nodes.unit_rows(inner)
     return got
 
-
-def _unit(v):
-    length = np.linalg.norm(v, axis=1, keepdims=True)
-    return np.where(length > 0.0, v / np.where(length > 0.0, length, 1.0), 0.0).astype(np.float32)

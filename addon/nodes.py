@@ -71,6 +71,12 @@ class Unsupported(Exception):
     """A node, output or setting the evaluation does not read (its message says which)."""
 
 
+def unit_rows(v):
+    """Each row of v made unit; a zero row stays zero."""
+    length = np.linalg.norm(v, axis=1, keepdims=True)
+    return np.where(length > 0.0, v / np.where(length > 0.0, length, 1.0), 0.0)
+
+
 def luminance(rgb):
     """A colour's luminance (float32), as Cycles converts a colour into a value."""
     return (np.asarray(rgb, np.float64) @ LUMINANCE).astype(np.float32)
@@ -568,10 +574,7 @@ class Evaluator:
         to_world = np.array(self._owner[0].matrix_world.to_3x3().inverted_safe(), np.float64)
         t = np.column_stack(t) @ to_world  # (the inverse transpose, as a row vector)
         n = self._coordinates("NORMAL", node=node)[0].astype(np.float64)
-        across = np.cross(t, n)
-        length = np.linalg.norm(across, axis=1, keepdims=True)
-        across = np.where(length > 0.0, across / np.where(length > 0.0, length, 1.0), 0.0)
-        return np.cross(n, across).astype(np.float32)
+        return np.cross(n, unit_rows(np.cross(t, n))).astype(np.float32)
 
     def _ShaderNodeAmbientOcclusion(self, node, output, depth):
         for name in ("Normal", "Distance"):
@@ -601,9 +604,7 @@ class Evaluator:
         normal = self._coordinates("NORMAL", node=node)[0]
         got = self._bevel(self._coordinates("WORLD", node=node)[0], normal, float(node.inputs["Radius"].default_value))
         if node.inputs["Normal"].is_linked:  # that normal turned as the bevel turns the mesh's (svm_node_bevel)
-            turned = self.colour(node.inputs["Normal"], depth) + (got - normal)
-            length = np.linalg.norm(turned, axis=1, keepdims=True)
-            got = np.where(length > 0.0, turned / np.where(length > 0.0, length, 1.0), 0.0)
+            got = unit_rows(self.colour(node.inputs["Normal"], depth) + (got - normal))
         return got.astype(np.float32)
 
     # -- node groups, evaluated through: a group's output is its inner node's, a Group Input the socket
@@ -663,8 +664,7 @@ class Evaluator:
         if output.identifier == "Normal":
             return np.tile(direction, (self.count, 1))
         n = self.colour(node.inputs["Normal"], depth).astype(np.float32)
-        length = np.linalg.norm(n, axis=1, keepdims=True)
-        unit = np.where(length > 0.0, n / np.where(length > 0.0, length, 1.0), 0.0)
+        unit = unit_rows(n)
         return (unit @ direction).astype(np.float32)
 
     # -- what depends on the view: the direction towards the viewer at each row
