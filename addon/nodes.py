@@ -558,21 +558,30 @@ class Evaluator:
         return self._coordinates(spaces[output.identifier], node=node)[0]
 
     def _ShaderNodeTangent(self, node, output, depth):
-        if node.direction_type != "RADIAL":
-            raise Unsupported(f"'{node.name}', a tangent of a UV map")
-        return self._radial_tangent(node, node.axis)
+        if node.direction_type == "RADIAL":
+            return self._radial_tangent(node, node.axis)
+        # the UV map's MikkTSpace tangent (its active render one where unnamed), 0 where the mesh has
+        # no such map, as Cycles reads its tangent attribute
+        got, _kind = self._mesh_attribute(node, UVTangent(node.uv_map), False)
+        if got is None or self._owner is None:
+            return np.zeros((self.count, 3), np.float32)
+        return self._surface_tangent(node, got[:, :3].astype(np.float64))
 
     def _radial_tangent(self, node, axis):
         """The tangent about an axis of the texture space through the row (svm_node_tangent, radial;
-        the Geometry's Tangent is about Z): the Generated coordinates turned a quarter about the axis,
-        carried into the world as a normal is, and made perpendicular to the shading normal."""
+        the Geometry's Tangent is about Z): the Generated coordinates turned a quarter about the axis."""
         g = self._coordinates("GENERATED", node=node)[0].astype(np.float64) - 0.5
         if self._owner is None:  # (no mesh: only checked)
             return np.zeros((self.count, 3), np.float32)
         zero = np.zeros(len(g))
         t = {"X": (zero, -g[:, 2], g[:, 1]), "Y": (-g[:, 2], zero, g[:, 0]), "Z": (-g[:, 1], g[:, 0], zero)}[axis]
+        return self._surface_tangent(node, np.column_stack(t))
+
+    def _surface_tangent(self, node, t):
+        """An object-space tangent `t` at each row carried into the world as a normal is, and made
+        perpendicular to the shading normal (svm_node_tangent)."""
         to_world = np.array(self._owner[0].matrix_world.to_3x3().inverted_safe(), np.float64)
-        t = np.column_stack(t) @ to_world  # (the inverse transpose, as a row vector)
+        t = t @ to_world  # (the inverse transpose, as a row vector)
         n = self._coordinates("NORMAL", node=node)[0].astype(np.float64)
         return np.cross(n, unit_rows(np.cross(t, n))).astype(np.float32)
 
@@ -1199,6 +1208,16 @@ class NeedsMesh(Unsupported):
 
 class _NotUV(Unsupported):
     """An Image Texture's Vector that is not a UV map (its coordinates are read as points)."""
+
+
+class UVTangent:
+    """The name an Evaluator's attribute(name, colour) reads a UV map's tangents by (None or "": the
+    active render UV map)."""
+
+    __slots__ = ("uv_map",)
+
+    def __init__(self, uv_map):
+        self.uv_map = uv_map or None
 
 
 class MissingUV(Unsupported):

@@ -10,7 +10,7 @@ import collections
 
 import numpy as np
 
-from . import ambient, bevel, closures, engine, materials, meshes, nodes, world
+from . import ambient, bevel, closures, compat, engine, materials, meshes, nodes, world
 
 # The sockets read from textures and the nodes between (nodes.py), by the core's keyword: every input
 # the core shades per vertex (wenv.Principled.INPUTS' per_vertex).  A colour into a value socket is
@@ -831,19 +831,12 @@ def _mapped_normals(mesh, corner_vert, source, strength, object_n, normal, to_wo
            else data_uv_rows(mesh, source.uv_map, _SitesOnly(sites), corner_vert))
     if got is None:
         return None
-    nl = len(mesh.loops)
     colour = sample_image(pyramids(source.node), got[0], got[1], source.node.interpolation,
                           source.node.extension)[:, :3]
     c = 2.0 * colour - 1.0
     space = source.space
     if space == "TANGENT":
-        layer = uv_layer(mesh, source.uv_map)
-        mesh.calc_tangents(uvmap=layer.name)  # runtime data only, nothing the file keeps
-        tangent = np.empty(nl * 3, np.float32)
-        sign = np.empty(nl, np.float32)
-        mesh.loops.foreach_get("tangent", tangent)
-        mesh.loops.foreach_get("bitangent_sign", sign)
-        tangent = tangent.reshape(nl, 3)
+        tangent, sign = corner_tangents(mesh, uv_layer(mesh, source.uv_map), corner_vert)
         if sites is not None:
             tangent, sign = sites.at(tangent), np.where(sites.at(sign) < 0.0, -1.0, 1.0).astype(np.float32)
         bitangent = sign[:, None] * np.cross(object_n, tangent)
@@ -856,6 +849,70 @@ def _mapped_normals(mesh, corner_vert, source, strength, object_n, normal, to_wo
         mapped = _unit_rows(mapped @ to_world)
     # blended in the world towards the mesh's normal by Strength, as Cycles blends them
     return mapped if strength == 1.0 else _unit_rows(normal + (mapped - normal) * strength)
+
+
+def corner_tangents(mesh, layer, corner_vert):
+    """The UV `layer`'s MikkTSpace tangents ((nl, 3) float32, object space) and bitangent signs ((nl,)
+    float32, +-1) at each face corner, as Cycles makes them for a normal map and the Tangent node.
+    Cycles computes them over the mesh's loop triangles; Blender's calc_tangents over its faces (a
+    quad whole, up to 0.14 away from Cycles' on a curved grid, and no face of more corners).  So
+    they are read from a copy made of the loop triangles, each corner then the mean of its
+    triangles'.  Kept while the mesh's points, corners, UVs and normals are the same."""
+    nl = len(mesh.loops)
+    normals = np.empty(nl * 3, np.float32)
+    mesh.corner_normals.foreach_get("vector", normals)
+    co = np.empty(len(mesh.vertices) * 3, np.float32)
+    mesh.vertices.foreach_get("co", co)
+    uv = corner_uvs(mesh, layer)
+    made_of = engine.fingerprint(co, corner_vert, uv, normals)
+    held = _tangents_kept.get((mesh.name, layer.name))
+    if held is None or held[0] != made_of:
+        if len(_tangents_kept) > 16:
+            _tangents_kept.clear()
+        held = (made_of, _triangle_tangents(mesh, co, corner_vert, uv, normals.reshape(nl, 3)))
+        _tangents_kept[(mesh.name, layer.name)] = held
+    return held[1]
+
+
+# (mesh name, UV map) -> (what its tangents were made of, (tangents, signs))
+_tangents_kept = {}
+
+
+def _triangle_tangents(mesh, co, corner_vert, uv, normals):
+    """corner_tangents made by Blender over a copy of the mesh's loop triangles."""
+    import bpy
+
+    nl = len(mesh.loops)
+    tris = triangle_corners(mesh).ravel()
+    copy = bpy.data.meshes.new(".wenv tangents")  # removed before returning: nothing the file keeps
+    try:
+        copy.vertices.add(len(mesh.vertices))
+        copy.vertices.foreach_set("co", co)
+        copy.loops.add(len(tris))
+        copy.attributes[".corner_vert"].data.foreach_set("value", corner_vert[tris])
+        copy.polygons.add(len(tris) // 3)
+        copy.polygons.foreach_set("loop_start", np.arange(0, len(tris), 3, dtype=np.int32))
+        copy.update(calc_edges=True)
+        copy.uv_layers.new(name="UVMap").uv.foreach_set("vector", uv[tris].ravel())
+        # the mesh's own normals (a triangle's normals are not its face's), as Cycles reads them
+        vertex_normals = None
+        if mesh.normals_domain == "POINT":
+            vertex_normals = np.empty(len(mesh.vertices) * 3, np.float32)
+            mesh.vertex_normals.foreach_get("vector", vertex_normals)
+            vertex_normals = vertex_normals.reshape(-1, 3)
+        compat.set_corner_normals(copy, normals[tris], vertex_normals)
+        copy.calc_tangents(uvmap="UVMap")
+        tangent = np.empty(len(tris) * 3, np.float32)
+        sign = np.empty(len(tris), np.float32)
+        copy.loops.foreach_get("tangent", tangent)
+        copy.loops.foreach_get("bitangent_sign", sign)
+    finally:
+        bpy.data.meshes.remove(copy)
+    count = np.bincount(tris, minlength=nl).astype(np.float64)
+    mean = np.stack([np.bincount(tris, weights=tangent[k::3], minlength=nl) for k in range(3)], axis=1)
+    mean /= np.maximum(count, 1.0)[:, None]
+    signs = np.bincount(tris, weights=sign, minlength=nl)
+    return mean.astype(np.float32), np.where(signs < 0.0, -1.0, 1.0).astype(np.float32)
 
 
 class _SitesOnly:
@@ -1180,6 +1237,9 @@ def attribute_reader(mesh, corner_vert, domain, sites=None, notes=None):
         if name is nodes.RANDOM_PER_ISLAND:  # (one value a triangle: not interpolated, as Cycles keeps it)
             values = island_random(mesh)[corner_vert, None]
             return (values[sites.corners[:, 0]], "FLOAT") if sites is not None else _to_rows(values, "FLOAT")
+        if isinstance(name, nodes.UVTangent):
+            layer = uv_layer(mesh, name.uv_map)
+            return (None, None) if layer is None else _to_rows(corner_tangents(mesh, layer, corner_vert)[0], "FLOAT3")
         if colour and not name:
             name = mesh.color_attributes.default_color_name
         attr = mesh.attributes.get(name) if name else None

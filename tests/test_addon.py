@@ -1520,6 +1520,47 @@ def test_a_normal_map_bends_the_shading_normals(scene):
     np.testing.assert_allclose(attribute(plane)[1], shader.shade_mesh(p, n, eye), rtol=1e-4, atol=1e-5)
 
 
+def test_a_normal_map_on_a_face_of_many_corners(scene):
+    """A tangent-space Normal Map on a disc that is one face of 12 corners (for which Blender's own
+    calc_tangents computes nothing), turned 40 degrees about X: each vertex is shaded at the map's
+    tilt of 0.3 along the UV map's u, which runs 30 degrees from the disc's +X here, carried into the
+    world with the disc."""
+    env_world(scene, "sunset")
+    tilt = bpy.data.images.new("tilt", 4, 4, float_buffer=True)
+    bent = np.float32([0.3, 0.0, np.sqrt(1.0 - 0.09)])
+    tilt.pixels.foreach_set(np.tile(np.append(0.5 * bent + 0.5, 1.0).astype(np.float32), 16))
+    bpy.ops.mesh.primitive_circle_add(vertices=12, radius=1.5, fill_type="NGON", rotation=(math.radians(40.0), 0, 0))
+    disc = bpy.context.object
+    mesh = disc.data
+    assert [len(p.vertices) for p in mesh.polygons] == [12]
+    turn = math.radians(30.0)
+    co = np.array([mesh.vertices[l.vertex_index].co[:2] for l in mesh.loops], np.float64)
+    uv = np.column_stack([co @ (math.cos(turn), math.sin(turn)), co @ (-math.sin(turn), math.cos(turn))]) / 4 + 0.5
+    layer = mesh.uv_layers.new(name="turned")
+    layer.uv.foreach_set("vector", uv.astype(np.float32).ravel())
+    mat = principled_material("bumpy", roughness=0.4)
+    tree = mat.node_tree
+    tex = tree.nodes.new("ShaderNodeTexImage")
+    tex.image = tilt
+    normal_map = tree.nodes.new("ShaderNodeNormalMap")
+    normal_map.uv_map = "turned"
+    tree.links.new(tex.outputs["Color"], normal_map.inputs["Color"])
+    tree.links.new(normal_map.outputs["Normal"], tree.nodes["Principled BSDF"].inputs["Normal"])
+    mesh.materials.append(mat)
+    select_only(disc)
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    p, n = world_arrays(disc, corner=False)
+    frame = np.array([[math.cos(turn), -math.sin(turn), 0.0], [math.sin(turn), math.cos(turn), 0.0], [0.0, 0.0, 1.0]])
+    want = np.array(disc.matrix_world.to_3x3()) @ frame @ bent
+    eye = tuple(scene.camera.matrix_world.translation)
+    ior = tree.nodes["Principled BSDF"].inputs["IOR"].default_value
+    shader = core_shader(wenv.load_environment(hdri_path("sunset")),
+                         wenv.Principled(base_color=(0.8, 0.2, 0.1), roughness=0.4, ior=ior))
+    np.testing.assert_allclose(attribute(disc)[1], shader.shade_mesh(p, np.tile(want.astype(np.float32), (len(p), 1)),
+                                                                     eye, smooth_normals=n), rtol=1e-4, atol=1e-5)
+    assert not np.allclose(attribute(disc)[1], shader.shade_mesh(p, n, eye), rtol=0.01)
+
+
 @pytest.mark.parametrize("space", ["OBJECT", "WORLD", "BLENDER_OBJECT", "BLENDER_WORLD"])
 def test_object_and_world_space_normal_maps(scene, space):
     """A Normal Map in object or world space (Blender's own with Y and Z flipped, as Cycles reads

@@ -18,6 +18,12 @@ N = 40
 
 @pytest.fixture(scope="module")
 def grid():
+    return rolling_grid()
+
+
+def rolling_grid(ngons=False):
+    """compare(kind, output, configure) on the rolling grid; with `ngons`, some of its faces joined
+    in pairs and threes (faces of 6 and 8 corners, which Blender and Cycles triangulate)."""
     shot = pixel_scene(bpy, N)
     bpy.ops.mesh.primitive_grid_add(x_subdivisions=6, y_subdivisions=6, size=4.0)
     obj = bpy.context.object
@@ -36,6 +42,11 @@ def grid():
     # the middle column of faces apart: vertices on its sides twice (Pointiness welds them back)
     bmesh.ops.split_edges(bm, edges=[e for e in bm.edges if abs(e.verts[0].co.x - e.verts[1].co.x) < 1e-6
                                      and abs(abs(e.verts[0].co.x) - 2.0 / 3.0) < 1e-3])
+    if ngons:  # three faces of column 0 joined (8 corners), and two of the middle island's (6)
+        joined = ((-5.0 / 3.0, -2.0 / 3.0), (-5.0 / 3.0, 0.0), (0.0, 1.0))  # the edges' midpoints
+        bmesh.ops.dissolve_edges(bm, edges=[e for e in bm.edges if any(
+            abs(0.5 * (e.verts[0].co.x + e.verts[1].co.x) - x) < 1e-3 and
+            abs(0.5 * (e.verts[0].co.y + e.verts[1].co.y) - y) < 1e-3 for x, y in joined)], use_verts=False)
     bm.to_mesh(mesh)
     bm.free()
     mesh.shade_smooth()
@@ -180,6 +191,21 @@ def test_radial_tangents_read_as_cycles_renders_them(grid, kind, axis):
     cycles, ours, _ = grid(kind, "Tangent", configure)
     assert np.ptp(ours, axis=0).min() > 0.5
     np.testing.assert_allclose(ours, cycles, atol=1e-4)  # (float32 coordinates crossed and made unit)
+
+
+@pytest.mark.parametrize("uv_map", ["", "UVMap", "absent"])
+def test_uv_tangents_read_as_cycles_renders_them(grid, uv_map):
+    """The Tangent node's UV map tangent (MikkTSpace, the active render map when unnamed, 0 for a map
+    the mesh lacks), made perpendicular to the smooth normal: within 1e-4 of Cycles' pixels."""
+    def configure(node):
+        node.direction_type, node.uv_map = "UV_MAP", uv_map
+    cycles, ours, notes = grid("ShaderNodeTangent", "Tangent", configure)
+    assert notes == []
+    if uv_map == "absent":
+        assert not ours.any()
+    else:
+        assert np.ptp(ours, axis=0).max() > 0.5 and np.abs(np.linalg.norm(ours, axis=1) - 1.0).max() < 1e-5
+    np.testing.assert_allclose(ours, cycles, atol=1e-4)
 
 
 FACING = [("ShaderNodeLayerWeight", "Fresnel", dict(Blend=0.5)), ("ShaderNodeLayerWeight", "Fresnel", dict(Blend=0.2)),
