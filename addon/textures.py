@@ -636,6 +636,8 @@ def read_inputs(obj, depsgraph, data, progress=None):
                 row = int(np.argwhere(~np.isfinite(values.reshape(len(values), -1)).all(axis=1))[0, 0])
                 raise world.SetupError(f"Material '{mat.name}': its nodes give '{socket}' a value that is not "
                                        f"finite (NaN or infinite) at element {row} of '{obj.name}'")
+            if keyword in COLOUR_KEYWORDS:
+                values = at_least_zero(values, sock, f"'{obj.name}' ('{mat.name}')", notes)
             if keyword not in data.inputs:
                 data.inputs[keyword] = np.zeros((data.count, 3) if keyword in COLOUR_KEYWORDS else data.count,
                                                 np.float32)
@@ -1511,4 +1513,22 @@ def _term_input(ev, socket, colour, obj, mat, label, notes):
     except nodes.Unsupported:
         return None
     _check_finite(values, mat, f"'{label}''s '{socket.name}'", obj)
+    if colour:
+        values = at_least_zero(values, socket, f"'{obj.name}' ('{label}' in '{mat.name}')", notes)
     return np.ascontiguousarray(values, np.float32)
+
+
+# The colours Cycles' Principled BSDF clamps at 0 (svm_node_closure_bsdf).  Any other colour below 0
+# (a Diffuse BSDF's, an emission's) takes light away in Cycles, which the core does not shade.
+CLAMPED_AT_ZERO = ("Base Color", "Specular Tint", "Sheen Tint", "Coat Tint")
+
+
+def at_least_zero(values, socket, where, notes):
+    """A colour input's `values` with what lies below 0 read as 0, noted where Cycles reads it
+    otherwise."""
+    if not (values < 0.0).any():
+        return values
+    if not (socket.node.bl_idname == "ShaderNodeBsdfPrincipled" and socket.name in CLAMPED_AT_ZERO):
+        _note(notes, f"{where}: '{socket.name}' of '{socket.node.name}' is below 0 in places, where Cycles "
+                     "takes light away: read as 0")
+    return np.maximum(values, 0.0).astype(np.float32)

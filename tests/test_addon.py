@@ -1300,7 +1300,8 @@ def test_mesh_attributes_are_read_at_each_vertex(scene):
 def test_object_info_and_geometry_are_read_at_each_vertex(scene):
     """Roughness from Object Info's Random and Base Color from the Geometry node's Normal, on a
     turned Suzanne: every vertex reads the object's Random (hashed from its name as Cycles hashes it:
-    tests/test_attributes.py) and its own unit world normal; a second object reads its own Random."""
+    tests/test_attributes.py) and its own unit world normal, below 0 read as 0 as Cycles' Principled
+    BSDF clamps it (and she shades); a second object reads its own Random."""
     env_world(scene, "sunset")
     obj = add_monkey(subdivisions=1)
     obj.rotation_euler = (0.3, 0.0, 0.7)
@@ -1316,7 +1317,10 @@ def test_object_info_and_geometry_are_read_at_each_vertex(scene):
     data = plan_of(scene, obj).items[0][1]
     np.testing.assert_array_equal(data.inputs["roughness"], np.float32(nodes.object_random(obj.name)))
     unit = data.normals / np.linalg.norm(data.normals, axis=1, keepdims=True)
-    np.testing.assert_allclose(data.inputs["base_color"], unit, atol=1e-6)
+    assert (unit < -0.5).any()
+    np.testing.assert_allclose(data.inputs["base_color"], np.maximum(unit, 0.0), atol=1e-6)
+    assert not any("below 0" in n for n in plan_of(scene, obj).notes)
+    assert shade_op(view="CAMERA") == {"FINISHED"}
     other = obj.copy()
     other.name = "Another monkey"
     scene.collection.objects.link(other)
@@ -1325,6 +1329,30 @@ def test_object_info_and_geometry_are_read_at_each_vertex(scene):
     np.testing.assert_array_equal(plan_of(scene, other).items[0][1].inputs["roughness"],
                                   np.float32(nodes.object_random(other.name)))
     assert not any("Object Info" in n or "Geometry" in n for n in materials.principled_notes(mat))
+
+
+@pytest.mark.parametrize("kind", ["ShaderNodeBsdfDiffuse", "ShaderNodeEmission"])
+def test_a_colour_below_zero_in_a_mix_is_named_and_read_as_zero(scene, kind):
+    """A Diffuse BSDF's or an Emission's Color from the Geometry's Normal, in a Mix Shader: where it
+    is below 0 Cycles takes light away, which wenv does not shade.  It is read as 0, and named."""
+    env_world(scene, "sunset")
+    obj = add_monkey(subdivisions=1)
+    mat = node_material(bpy, "below zero")
+    tree = mat.node_tree
+    tree.nodes.remove(tree.nodes["Principled BSDF"])
+    node, other, mix = tree.nodes.new(kind), tree.nodes.new("ShaderNodeBsdfDiffuse"), tree.nodes.new("ShaderNodeMixShader")
+    tree.links.new(tree.nodes.new("ShaderNodeNewGeometry").outputs["Normal"], node.inputs["Color"])
+    tree.links.new(node.outputs[0], mix.inputs[1])
+    tree.links.new(other.outputs[0], mix.inputs[2])
+    tree.links.new(mix.outputs[0], tree.nodes["Material Output"].inputs["Surface"])
+    obj.data.materials.append(mat)
+    select_only(obj)
+    bpy.context.view_layer.update()
+    plan = plan_of(scene, obj)
+    read = plan.items[0][1].term_inputs[0][0]["base_color" if kind.endswith("Diffuse") else "emission_color"]
+    assert read.min() == 0.0 and read.max() > 0.5
+    assert any(f"'Color' of '{node.name}' is below 0 in places" in n for n in plan.notes)
+    assert shade_op(view="CAMERA") == {"FINISHED"}
 
 
 def test_a_procedural_texture_through_the_uv_map_averages_a_seams_corners(scene):
