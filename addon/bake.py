@@ -379,7 +379,8 @@ def bake(scene, depsgraph, obj, image, view, blend_data, uv_map=None, margin=DEF
     clipped = write(image, sites, rgb, margin)
     record = image.wenv
     record.baked_object, record.uv_map, record.margin, record.view = obj.name, layer.name, margin, view_source
-    record.view_key, record.state_key = view_key(view), json.dumps(state)
+    record.reads_camera = data.reads_camera
+    record.view_key, record.state_key = view_key(view, data.reads_camera), json.dumps(state)
     record.frame, record.texels, record.stale = scene.frame_current, inside, ""
     if clipped:
         notes.append(f"Image '{image.name}' holds bytes: {clipped} texels brighter than 1 were clipped (a float image "
@@ -410,10 +411,11 @@ def _key(value):
     return engine.fingerprint(np.frombuffer(repr(value).encode(), np.uint8)).hex()
 
 
-def view_key(view):
+def view_key(view, reads_camera=False):
+    """A key of `view` (of its camera's space and frame too with `reads_camera`)."""
     signature = tuple(np.round(np.asarray(x, np.float64), 5).tolist() if isinstance(x, (tuple, np.ndarray)) else x
                       for x in view.signature)
-    return _key(signature)
+    return _key((signature, view.camera_signature) if reads_camera else signature)
 
 
 def reads_other_meshes(obj, settings):
@@ -554,7 +556,7 @@ def staleness(image, scene, context=None):
             now = None
     except SetupError:
         return "the view is gone"
-    if now is not None and view_key(now) != record.view_key:
+    if now is not None and view_key(now, record.reads_camera) != record.view_key:
         return "the camera moved" if record.view == "CAMERA" else "the view changed"
     return None
 

@@ -105,6 +105,7 @@ class LiveSession:
         self.last_error = None
         self.shades = 0
         self._plan = None
+        self._reads_camera = False  # the last pass read the camera's space or frame (signature)
         self._worker = None
         self._error = None
         self._discard = False  # the worker's plan was read from data an undo has since replaced
@@ -143,7 +144,9 @@ class LiveSession:
         for obj in self.objects(scene):
             mats = tuple(materials.material_key(s.material.wenv if s.material else None) for s in obj.material_slots)
             objs.append((obj.name, _matrix_tuple(obj.matrix_world), len(obj.data.vertices), mats))
-        return (view.signature, world_sig, tuple(objs), lamps.signature(scene), st.quality, st.tone_mapping, st.max_luminance, st.target_error,
+        # a camera's turn or lens changes only what reads the camera's space or frame
+        view_sig = (view.signature, view.camera_signature) if self._reads_camera else view.signature
+        return (view_sig, world_sig, tuple(objs), lamps.signature(scene), st.quality, st.tone_mapping, st.max_luminance, st.target_error,
                 st.memory_budget, st.shade_only_seen, st.refine_at_rest, st.preview_changes, st.shadows, st.bounce_light,
                 st.glossy_bounce)
 
@@ -258,6 +261,7 @@ class LiveSession:
         except engine.SetupError as exc:
             self.last_error = str(exc)
             return False
+        self._reads_camera = any(data.reads_camera for _, data, _ in self._plan.items)
         self._worker = threading.Thread(target=self._compute, name="wenv-live", daemon=True)
         self._worker.start()
         return False

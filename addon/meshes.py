@@ -11,7 +11,7 @@ class MeshData:
 
     __slots__ = ("domain", "positions", "normals", "slots", "count", "notes", "unplaced", "triangles", "inputs",
                  "textured", "shading_normals", "bump_map_correction", "term_weights", "term_inputs", "sites",
-                 "mask_blocks", "view")
+                 "mask_blocks", "view", "reads_camera")
 
     def __init__(self, domain, positions, normals, slots, notes=(), unplaced=None, triangles=None, inputs=None):
         self.domain = domain
@@ -42,8 +42,11 @@ class MeshData:
         # (n,) int64: elements of one block (>= 0) share one occlusion mask, -1 its own (a bake's 2 x 2
         # texels: bake.mask_blocks); None: each its own
         self.mask_blocks = None
-        # the views.View the rows are shaded for (what Layer Weight and Fresnel read), or None
+        # the views.View the rows are shaded for (what Layer Weight and Fresnel read), or None; and
+        # whether an input read the view's camera space or frame (a Texture Coordinate's Camera or
+        # Window), which a turn of the camera then changes
         self.view = None
+        self.reads_camera = False
 
 
 def _read(collection, attr, count, width, dtype=np.float32):

@@ -48,6 +48,8 @@ MEAN_SQUARE = np.column_stack([MEAN_POINTS[:256, 1:], np.zeros(256, np.float32)]
 # The Geometry node's Pointiness and Random Per Island, which Cycles computes from the mesh, asked of
 # attribute() as names no attribute can have
 POINTINESS, RANDOM_PER_ISLAND = ("pointiness",), ("random per island",)
+# The Texture Coordinate node's outputs read (the rest are named)
+TEXTURE_COORDINATES = ("Generated", "Object", "UV", "Normal", "Reflection", "Camera", "Window")
 
 
 def group_means(values, index, count):
@@ -69,6 +71,11 @@ def _mean(values):
 
 class Unsupported(Exception):
     """A node, output or setting the evaluation does not read (its message says which)."""
+
+
+class ViewLacks(Unsupported):
+    """A node that reads what the view shaded for does not have (a camera's frame, or any view):
+    checking a material cannot tell, so the reading names it."""
 
 
 def unit_rows(v):
@@ -688,7 +695,7 @@ class Evaluator:
             raise NeedsMesh(f"'{node.name}', which depends on the view, which has no value without a mesh")
         incoming = self._points("INCOMING", None)
         if incoming is None:
-            raise Unsupported(f"'{node.name}', which depends on the view (here read without one)")
+            raise ViewLacks(f"'{node.name}', which depends on the view (here read without one)")
         normal = self._points("NORMAL", None)
         back = np.einsum("ij,ij->i", incoming, normal) < 0.0
         return incoming, np.where(back[:, None], -normal, normal), back
@@ -857,17 +864,24 @@ class Evaluator:
 
     # -- coordinates as values (a texture's own Vector reads them through points() and vector())
     def _ShaderNodeTexCoord(self, node, output, depth):
-        if output.name not in ("Generated", "Object", "UV", "Normal", "Reflection"):
+        if output.name not in TEXTURE_COORDINATES:
             raise Unsupported(f"'{node.name}''s {output.name}, which wenv does not evaluate yet")
         return self._as_values(node, lambda: self._texture_coordinates(node, output))
 
     def _texture_coordinates(self, node, output):
         """(points, reduce) of a Texture Coordinate's output, as svm_node_tex_coord gives them: the UV
-        map's, the Generated or Object coordinates, the normal in object space (Normal), or the view's
+        map's, the Generated or Object coordinates, the normal in object space (Normal), the view's
         direction mirrored about the normal in the world (Reflection: 2 (N.I) N - I, the normal
-        facing the viewer)."""
+        facing the viewer), the point in the view's camera space (Camera) or its place in the
+        camera's or viewport's frame (Window: (x, y, 0) from 0 to 1 across it)."""
         if output.name == "UV":
             return self._uv_points(None)
+        if output.name in ("Camera", "Window"):
+            got = self._coordinates(output.name.upper(), node=node)
+            if got[0] is None:
+                raise ViewLacks(f"'{node.name}''s {output.name}, which a view given by a matrix alone (or a "
+                                "panoramic camera's) does not have")
+            return got
         if output.name == "Normal":
             return self._coordinates("OBJECT_NORMAL", node=node)
         if output.name == "Reflection":
@@ -971,8 +985,7 @@ class Evaluator:
         if fed is None:
             return self._coordinates("GENERATED")
         node, output = fed
-        if node.bl_idname == "ShaderNodeTexCoord" and output.name in ("Generated", "Object", "UV", "Normal",
-                                                                      "Reflection"):
+        if node.bl_idname == "ShaderNodeTexCoord" and output.name in TEXTURE_COORDINATES:
             return self._texture_coordinates(node, output)
         if node.bl_idname == "ShaderNodeUVMap":
             return self._uv_points(node.uv_map or None)

@@ -205,6 +205,9 @@ class WENV_ImageSettings(bpy.types.PropertyGroup):
     margin: IntProperty(name="Margin", default=0, min=0)
     view: StringProperty(name="View", description="Where the bake was seen from: CAMERA, VIEWPORT or MATRIX")
     view_key: StringProperty(name="View Key", options={"HIDDEN"}, description="The view baked for")
+    reads_camera: BoolProperty(name="Reads the Camera", default=False, options={"HIDDEN"},
+                               description="The bake read the camera's space or frame (a Texture Coordinate's "
+                                           "Camera or Window): its turn or lens changes the bake too")
     state_key: StringProperty(name="State Key", options={"HIDDEN"},
                               description="The mesh, World, materials and lamps baked with")
     frame: IntProperty(name="Frame", default=0)

@@ -18,6 +18,8 @@ from . import ambient, bevel, closures, compat, engine, materials, meshes, nodes
 TEXTURED_SOCKETS = {row["socket"]: row["name"] for row in engine.PRINCIPLED_INPUTS if row["per_vertex"]}
 # those read as colours (the rest as values)
 COLOUR_KEYWORDS = tuple(row["name"] for row in engine.PRINCIPLED_INPUTS if row["per_vertex"] and row["size"] == 3)
+# The spaces of row_points a camera's turn or lens changes
+CAMERA_SPACES = frozenset(("CAMERA", "WINDOW"))
 # An Image Texture's extensions, each read as Cycles reads it (_wrap)
 EXTENSIONS = ("REPEAT", "EXTEND", "CLIP", "MIRROR")
 
@@ -625,8 +627,12 @@ def read_inputs(obj, depsgraph, data, progress=None):
                 notes.append(_no_uv_map(obj, exc.uv_map, f"'{socket}' ('{mat.name}')",
                                         f"its {socket}'s unlinked value is used"))
                 continue
+            except nodes.ViewLacks as exc:
+                _note(notes, f"'{obj.name}': '{socket}' ('{mat.name}') reads {exc}: its unlinked value is used")
+                continue
             except nodes.Unsupported:
                 continue  # named by materials.principled_notes, the unlinked value used
+            data.reads_camera |= bool(ev.spaces & CAMERA_SPACES)
             if "GENERATED" in ev.spaces and deformed(obj):
                 note = (f"'{obj.name}': '{socket}' ('{mat.name}') reads Generated coordinates on the deformed mesh "
                         "(Cycles reads them undeformed: its shape keys or deforming modifiers move the texture)")
@@ -990,7 +996,8 @@ def row_points(obj, mesh, positions, normals, view=None, face_normals=None):
     """An Evaluator's points(space, other) for rows at world `positions` ((n, 3)) with world
     `normals`: their coordinates in `other`'s object space ('OBJECT'; obj's own without one) or in
     the mesh's texture space ('GENERATED', as Cycles maps it: the texture space's box onto the unit
-    cube), the positions themselves ('WORLD'), the unit normals ('NORMAL', or in object space:
+    cube), in the view's camera space ('CAMERA') or frame ('WINDOW'; None without them), the
+    positions themselves ('WORLD'), the unit normals ('NORMAL', or in object space:
     'OBJECT_NORMAL'), the faces' normals (`face_normals()`, 'TRUE_NORMAL'), the unit directions
     towards the viewer of `view` ('INCOMING'; None without one) or the view itself ('VIEW')."""
     def points(space, other=None):
@@ -1000,6 +1007,17 @@ def row_points(obj, mesh, positions, normals, view=None, face_normals=None):
             return face_normals()
         if space == "VIEW":  # (the view itself)
             return view
+        if space in ("CAMERA", "WINDOW"):  # (None where the view has no such matrix)
+            m = None if view is None else view.camera if space == "CAMERA" else view.window
+            if m is None:
+                return None
+            p = np.asarray(positions, np.float64) @ m[:3, :3].T + m[:3, 3]
+            if space == "CAMERA":
+                return p.astype(np.float32)
+            w = (np.asarray(positions, np.float64) @ m[3, :3] + m[3, 3])[:, None]
+            # as Cycles' transform_perspective: 0 where the point lies in the eye's plane
+            ndc = np.where(w != 0.0, p[:, :2] / np.where(w != 0.0, w, 1.0) * 0.5 + 0.5, 0.0)
+            return np.column_stack([ndc, np.zeros(len(p))]).astype(np.float32)
         if space == "INCOMING":
             if view is None:
                 return None
@@ -1489,6 +1507,8 @@ def read_term_weights(obj, depsgraph, data, progress=None):
                 got = _term_input(ev, socket, keyword in COLOUR_KEYWORDS, obj, mat, term.label, notes)
                 if got is not None:
                     inputs[keyword] = got
+            if ev is not None:
+                data.reads_camera |= bool(ev.spaces & CAMERA_SPACES)
             notes += _within_family_limits(inputs, np.ones(data.count, bool), f"'{term.label}' in '{mat.name}'")
             term_inputs.append(inputs)
         data.term_weights[s] = weights
@@ -1509,6 +1529,10 @@ def _term_input(ev, socket, colour, obj, mat, label, notes):
     except nodes.MissingUV as exc:
         notes.append(_no_uv_map(obj, exc.uv_map, f"'{socket.name}' of '{label}' ('{mat.name}')",
                                 "its unlinked value is used"))
+        return None
+    except nodes.ViewLacks as exc:
+        _note(notes, f"'{obj.name}': '{socket.name}' of '{label}' ('{mat.name}') reads {exc}: its unlinked value "
+                     "is used")
         return None
     except nodes.Unsupported:
         return None

@@ -5,17 +5,27 @@ import numpy as np
 from .engine import SetupError
 
 
+# Cycles' camera space looks along +Z, Blender's along -Z (blender_camera_matrix)
+_CYCLES_CAMERA = np.diag([1.0, 1.0, -1.0, 1.0])
+
+
 class View:
     """Perspective (eye position) or orthographic (one direction towards the viewer); a viewport's
-    perspective view also has its world-to-clip matrix, which tells what is on screen."""
+    perspective view also has its world-to-clip matrix, which tells what is on screen.  `camera`
+    (world to Cycles' camera space, the camera's scale cleared) and `window` (world to the clip space
+    of the camera's or viewport's frame) are what a Texture Coordinate's Camera and Window read, where
+    known; they are not part of `signature` (camera_signature: only a material reading them
+    depends on a camera's turn or lens)."""
 
-    __slots__ = ("perspective", "eye", "direction", "view_projection")
+    __slots__ = ("perspective", "eye", "direction", "view_projection", "camera", "window")
 
     def __init__(self, perspective, eye=None, direction=None, view_projection=None):
         self.perspective = perspective
         self.eye = None if eye is None else tuple(float(x) for x in eye)
         self.direction = None if direction is None else np.asarray(direction, np.float32)
         self.view_projection = None if view_projection is None else np.asarray(view_projection, np.float64)
+        self.camera = None
+        self.window = None
 
     @classmethod
     def from_view_matrix(cls, view_matrix, perspective):
@@ -35,12 +45,26 @@ class View:
         if not np.isfinite(m).all():
             raise SetupError("The view (camera) matrix holds values that are not finite")
         if perspective:
-            return cls(True, eye=m[:3, 3])
-        z = m[:3, 2]
-        norm = np.linalg.norm(z)
-        if not norm > 0:
-            raise SetupError("The view matrix is degenerate")
-        return cls(False, direction=z / norm)
+            view = cls(True, eye=m[:3, 3])
+        else:
+            z = m[:3, 2]
+            norm = np.linalg.norm(z)
+            if not norm > 0:
+                raise SetupError("The view matrix is degenerate")
+            view = cls(False, direction=z / norm)
+        unscaled = m.copy()
+        lengths = np.linalg.norm(m[:3, :3], axis=0)
+        if (lengths > 0).all():
+            unscaled[:3, :3] /= lengths
+            try:
+                view.camera = _CYCLES_CAMERA @ np.linalg.inv(unscaled)
+            except np.linalg.LinAlgError:
+                pass  # (a flattened camera: Camera coordinates stay unknown)
+        return view
+
+    @property
+    def camera_signature(self):
+        return tuple(None if m is None else tuple(np.round(m, 6).ravel().tolist()) for m in (self.camera, self.window))
 
     @property
     def signature(self):
@@ -53,7 +77,17 @@ def camera_view(scene):
     if cam is None:
         raise SetupError("The scene has no camera")
     perspective = getattr(cam.data, "type", "PERSP") != "ORTHO"
-    return View.from_camera_matrix(np.array(cam.matrix_world), perspective)
+    view = View.from_camera_matrix(np.array(cam.matrix_world), perspective)
+    if cam.type == "CAMERA" and cam.data.type != "PANO" and view.camera is not None:
+        import bpy
+
+        render = scene.render
+        # the frame as Cycles renders it: the lens, sensor fit, shift and the image's aspect
+        projection = cam.calc_matrix_camera(bpy.context.view_layer.depsgraph, x=render.resolution_x,
+                                            y=render.resolution_y, scale_x=render.pixel_aspect_x,
+                                            scale_y=render.pixel_aspect_y)
+        view.window = np.array(projection, np.float64) @ np.linalg.inv(_CYCLES_CAMERA) @ view.camera
+    return view
 
 
 def region_view(region_3d, scene):
@@ -66,9 +100,11 @@ def region_view(region_3d, scene):
     m[:3, :3] = rot
     m[:3, 3] = np.array(region_3d.view_location, np.float64) + rot[:, 2] * region_3d.view_distance
     view = View.from_camera_matrix(m, region_3d.view_perspective == "PERSP")
+    # the lens and the region's shape (window_matrix) after the view just built
+    window = np.array(region_3d.window_matrix, np.float64) @ np.linalg.inv(m)
+    view.window = window
     if view.perspective:
-        # the lens and the region's shape (window_matrix) after the view just built
-        view.view_projection = np.array(region_3d.window_matrix, np.float64) @ np.linalg.inv(m)
+        view.view_projection = window
     return view
 
 

@@ -199,7 +199,7 @@ def main():
                 meshes.write_colors(obj.data, data.domain, rgb)
                 imgs[key] = render(scene, "BLENDER_WORKBENCH", folder)
             imgs["eevee"] = render(scene, eevee, folder)
-            direct, full = cycles_direct_and_full(scene, folder)
+            direct, full = cycles_direct_and_full(scene, (None, "scene"))  # (nothing kept between runs)
             # Cycles given the inputs wenv read at the vertices (interpolated across the faces, as
             # Cycles interpolates attributes): what is left is wenv's own, not the mesh's resolution
             undo = at_vertices(obj, data)

@@ -16,7 +16,7 @@ import bpy  # noqa: E402  (installed by scripts/setup.sh; missing, the tests fai
 import mathutils  # noqa: E402  (ships with bpy)
 
 import addon  # noqa: E402
-from addon import engine, gloss, live, materials, meshes, nodes, shading, views, world  # noqa: E402
+from addon import bake, engine, gloss, live, materials, meshes, nodes, shading, views, world  # noqa: E402
 
 from conftest import hdri_path, readme_block  # noqa: E402
 from tests.helpers.blender_versions import has_diffuse_roughness, has_light_temperature, node_material
@@ -2534,6 +2534,71 @@ def test_live_session_reshades_on_changes_only(scene):
     env_node.image = image
     assert settle() == (False, True), session.last_error
     assert session.last_error is None
+
+
+def test_camera_and_window_coordinates_follow_the_camera(scene):
+    """Base Color from a Texture Coordinate's Window (or its Camera, moved into the positive by a
+    Vector Math) on Suzanne seen by the start-up scene's perspective camera: each vertex reads its
+    place in the camera's frame as Blender's own world_to_camera_view gives it (Cycles' orthographic
+    pixels: tests/test_attributes.py), or its place in the camera's space, depth along +Z.  A turn of
+    the camera that leaves its eye where it was reshades such a material in live mode and makes its
+    bake stale; a material that does not read the camera is neither."""
+    from bpy_extras.object_utils import world_to_camera_view
+
+    env_world(scene, "sunset")
+    obj = add_monkey(subdivisions=1)
+    mat = principled_material("framed")
+    obj.data.materials.append(mat)
+    select_only(obj)
+    tree = mat.node_tree
+    coords, add = tree.nodes.new("ShaderNodeTexCoord"), tree.nodes.new("ShaderNodeVectorMath")
+    add.inputs[1].default_value = (10.0, 10.0, 0.0)
+    tree.links.new(coords.outputs["Window"], tree.nodes["Principled BSDF"].inputs["Base Color"])
+    bpy.context.view_layer.update()
+    cam = scene.camera
+    data = plan_of(scene, obj).items[0][1]
+    assert data.reads_camera
+    want = np.array([world_to_camera_view(scene, cam, mathutils.Vector(p)) for p in data.positions.astype(float)])
+    want[:, 2] = 0.0
+    assert 0.0 < want[:, :2].min() and want[:, :2].max() < 1.0 and np.ptp(want[:, 0]) > 0.1
+    np.testing.assert_allclose(data.inputs["base_color"], want, atol=2e-5)
+    tree.links.new(coords.outputs["Camera"], add.inputs[0])
+    tree.links.new(add.outputs[0], tree.nodes["Principled BSDF"].inputs["Base Color"])
+    data = plan_of(scene, obj).items[0][1]
+    local = np.array([cam.matrix_world.normalized().inverted() @ mathutils.Vector(p)
+                      for p in data.positions.astype(float)])
+    np.testing.assert_allclose(data.inputs["base_color"], local * (1.0, 1.0, -1.0) + (10.0, 10.0, 0.0), atol=1e-4)
+
+    scene.wenv.view_source = "CAMERA"
+    session = live.LiveSession([obj.name])
+    ctx = bpy.context
+
+    def settle():
+        started = session.tick(ctx)
+        session.wait(60)
+        return (started, session.tick(ctx))
+
+    def turn():
+        cam.rotation_euler.z += 0.05
+        return settle() == (False, True)
+    assert settle() == (False, True)
+    settle()  # (the first pass learnt that the material reads the camera)
+    assert turn()
+    image = bpy.data.images.new("framed bake", 8, 8)
+    scene.wenv.bake_image = image
+    bpy.context.view_layer.objects.active = obj
+    assert bpy.ops.wenv.bake(view="CAMERA") == {"FINISHED"} and bake.staleness(image, scene) is None
+    cam.rotation_euler.z += 0.05
+    bpy.context.view_layer.update()
+    assert bake.staleness(image, scene) == "the camera moved"
+    tree.links.new(tree.nodes.new("ShaderNodeRGB").outputs[0], tree.nodes["Principled BSDF"].inputs["Base Color"])
+    assert settle() == (False, True)
+    settle()
+    assert not turn()
+    assert bpy.ops.wenv.bake(view="CAMERA") == {"FINISHED"}
+    cam.rotation_euler.z += 0.05
+    bpy.context.view_layer.update()
+    assert bake.staleness(image, scene) is None
 
 
 def test_live_session_refines_at_rest_and_drops_it_on_a_change(scene):

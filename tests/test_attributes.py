@@ -87,7 +87,7 @@ def rolling_grid(ngons=False):
     mesh.corner_normals.foreach_get("vector", normals)
     world = np.array(obj.matrix_world)
     points = textures.row_points(obj, mesh, sites.at(co[corner_vert] @ world[:3, :3].T + world[:3, 3]),
-                                 sites.at(normals.reshape(-1, 3)), views.View(False, direction=(0.0, 0.0, 1.0)),
+                                 sites.at(normals.reshape(-1, 3)), views.camera_view(bpy.context.scene),
                                  lambda: textures.true_normals(obj, mesh, corner_vert, "TEXEL", sites))
 
     def compare(kind, output, configure):
@@ -206,6 +206,18 @@ def test_uv_tangents_read_as_cycles_renders_them(grid, uv_map):
     else:
         assert np.ptp(ours, axis=0).max() > 0.5 and np.abs(np.linalg.norm(ours, axis=1) - 1.0).max() < 1e-5
     np.testing.assert_allclose(ours, cycles, atol=1e-4)
+
+
+@pytest.mark.parametrize("output", ["Camera", "Window"])
+def test_camera_and_window_coordinates_read_as_cycles_renders_them(grid, output):
+    """A Texture Coordinate's Camera (the point in Cycles' camera space: depth along +Z) and Window
+    (its place in the camera's frame, 0 to 1), seen by the orthographic camera above the grid:
+    within 1e-5 of Cycles' pixels."""
+    cycles, ours, notes = grid("ShaderNodeTexCoord", output, lambda node: None)
+    assert notes == [] and np.ptp(ours[:, 0]) > (0.9 if output == "Window" else 3.5)
+    if output == "Camera":
+        assert ours[:, 2].min() > 3.0  # (in front of the camera, 5 m above the grid's middle)
+    np.testing.assert_allclose(ours, cycles, atol=1e-5)
 
 
 FACING = [("ShaderNodeLayerWeight", "Fresnel", dict(Blend=0.5)), ("ShaderNodeLayerWeight", "Fresnel", dict(Blend=0.2)),
