@@ -47,7 +47,7 @@ MEAN_POINTS = np.stack(np.meshgrid(_side, _side, _side, indexing="ij"), -1).resh
 MEAN_SQUARE = np.column_stack([MEAN_POINTS[:256, 1:], np.zeros(256, np.float32)])
 # The Geometry node's Pointiness and Random Per Island, which Cycles computes from the mesh, asked of
 # attribute() as names no attribute can have
-POINTINESS, RANDOM_PER_ISLAND = ("pointiness",), ("random per island",)
+POINTINESS, RANDOM_PER_ISLAND, PARAMETRIC = ("pointiness",), ("random per island",), ("parametric",)
 # The Texture Coordinate node's outputs read (the rest are named)
 TEXTURE_COORDINATES = ("Generated", "Object", "UV", "Normal", "Reflection", "Camera", "Window")
 
@@ -559,6 +559,13 @@ class Evaluator:
             return np.ascontiguousarray(got[:, 0])
         if output.identifier == "Tangent":
             return self._radial_tangent(node, "Z")
+        if output.identifier == "Parametric":  # (where the point lies in its triangle)
+            note = (f"'{node.name}''s Parametric is read at a bake's texels; at a vertex, which lies in several "
+                    "triangles, it reads 0")
+            if note not in self.notes:
+                self.notes.append(note)
+            got, _kind = self._mesh_attribute(node, PARAMETRIC, False)
+            return np.zeros((self.count, 3), np.float32) if got is None else np.ascontiguousarray(got[:, :3])
         spaces = {"Position": "WORLD", "Normal": "NORMAL", "True Normal": "TRUE_NORMAL"}
         if output.identifier not in spaces:
             raise Unsupported(f"'{node.name}''s {output.name} output")

@@ -1254,6 +1254,11 @@ def attribute_reader(mesh, corner_vert, domain, sites=None, notes=None):
     def read(name, colour):
         if name is nodes.POINTINESS:
             return _to_rows(pointiness(mesh)[corner_vert, None], "FLOAT")
+        if name is nodes.PARAMETRIC:  # at a texel, Cycles' (1 - u - v, u, 0) of its triangle; none elsewhere
+            if sites is None:
+                return None, None
+            w = sites.weights  # (u weighs the loop triangle's second corner)
+            return np.column_stack([w[:, 0], w[:, 1], np.zeros(len(w))]).astype(np.float32), "FLOAT3"
         if name is nodes.RANDOM_PER_ISLAND:  # (one value a triangle: not interpolated, as Cycles keeps it)
             values = island_random(mesh)[corner_vert, None]
             return (values[sites.corners[:, 0]], "FLOAT") if sites is not None else _to_rows(values, "FLOAT")

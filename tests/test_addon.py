@@ -1355,6 +1355,22 @@ def test_a_colour_below_zero_in_a_mix_is_named_and_read_as_zero(scene, kind):
     assert shade_op(view="CAMERA") == {"FINISHED"}
 
 
+def test_the_parametric_output_reads_zero_at_the_vertices_and_says_so(scene):
+    """The Geometry's Parametric is where a point lies in its triangle: a vertex lies in several, so
+    it reads 0 there (a bake reads it at each texel: tests/test_attributes.py), and the panel says so."""
+    env_world(scene, "sunset")
+    obj = add_monkey()
+    mat = principled_material("parametric")
+    obj.data.materials.append(mat)
+    tree = mat.node_tree
+    tree.links.new(tree.nodes.new("ShaderNodeNewGeometry").outputs["Parametric"],
+                   tree.nodes["Principled BSDF"].inputs["Base Color"])
+    bpy.context.view_layer.update()
+    data = plan_of(scene, obj).items[0][1]
+    np.testing.assert_array_equal(data.inputs["base_color"], 0.0)
+    assert any("Parametric is read at a bake's texels; at a vertex" in n for n in materials.principled_notes(mat))
+
+
 def test_a_procedural_texture_through_the_uv_map_averages_a_seams_corners(scene):
     """A Noise Texture read through the UV map (Texture Coordinate's UV, as (u, v, 0)) on Suzanne,
     whose UV map has seams: each vertex reads the noise at each of its corners' UVs and takes their

@@ -161,23 +161,28 @@ def test_object_info_reads_as_cycles_renders_it(grid, output):
     np.testing.assert_allclose(ours, cycles, atol=1e-6)
 
 
-@pytest.mark.parametrize("output", ["Position", "Normal", "True Normal", "Pointiness", "Random Per Island"])
+@pytest.mark.parametrize("output", ["Position", "Normal", "True Normal", "Pointiness", "Random Per Island",
+                                    "Parametric"])
 def test_geometry_reads_as_cycles_renders_it(grid, output):
     """The Geometry node's world position, its smooth normal, interpolated over each triangle, each
     triangle's own normal (True Normal: the grid's quads are not flat, so each of their triangles
-    has its own), its pointiness (the split vertices welded back) and the random value of each
-    island of the grid (the middle column of faces is one, the sides two more)."""
-    cycles, ours, _ = grid("ShaderNodeNewGeometry", output, lambda node: None)
+    has its own), where the point lies in its triangle (Parametric: Cycles' (1 - u - v, u, 0), the
+    weights of the loop triangle's first two corners), its pointiness (the split vertices welded
+    back) and the random value of each island of the grid (the middle column of faces is one, the
+    sides two more)."""
+    cycles, ours, notes = grid("ShaderNodeNewGeometry", output, lambda node: None)
     assert np.ptp(ours[:, 0]) > (0.02 if output == "Pointiness" else 0.5)
-    if output == "True Normal":
+    if output in ("True Normal", "Parametric"):
         # a triangle's own value jumps at its edges, and the quads' diagonals run through pixel
         # centres here: those pixels may take either triangle
         inside = grid.sites.weights.min(axis=1) > 1e-4
         assert inside.mean() > 0.9
         ours, cycles = ours[inside], cycles[inside]
+    if output == "True Normal":
         _, smooth, _ = grid("ShaderNodeNewGeometry", "Normal", lambda node: None)
         assert np.abs(smooth[inside] - ours).max() > 0.05  # (which is not the smooth normal)
     np.testing.assert_allclose(ours, cycles, atol=1e-5)
+    assert notes == []
 
 
 @pytest.mark.parametrize("kind, axis", [("ShaderNodeNewGeometry", None), ("ShaderNodeTangent", "X"),

@@ -20,11 +20,11 @@ def test_the_grid_has_faces_of_six_and_eight_corners(grid):
     assert sizes == [4, 6, 8]
 
 
-@pytest.mark.parametrize("output", ["Position", "Normal", "True Normal"])
+@pytest.mark.parametrize("output", ["Position", "Normal", "True Normal", "Parametric"])
 def test_geometry_on_faces_of_many_corners(grid, output):
-    """The point and normals within each face's triangles, as Cycles interpolates them."""
+    """The point, its normals and its place within each face's triangles, as Cycles reads them."""
     cycles, ours, _ = grid("ShaderNodeNewGeometry", output, lambda node: None)
-    if output == "True Normal":  # (a pixel centre on a triangle's edge may take either triangle)
+    if output in ("True Normal", "Parametric"):  # (a pixel centre on a triangle's edge may take either triangle)
         inside = grid.sites.weights.min(axis=1) > 1e-4
         ours, cycles = ours[inside], cycles[inside]
     np.testing.assert_allclose(ours, cycles, atol=1e-5)
