@@ -69,25 +69,29 @@ _normals = {}  # object name -> (what its rows' normals were made of, the normal
 
 def normals(obj, depsgraph, positions, row_normals, radius, progress=None, sites=None):
     """The Bevel node's normal (world, unit, (n, 3) float32) at each of `positions` on obj, with
-    `radius`: a point with no surface within it (or a Radius of 0, as Cycles) keeps its own normal of
-    `row_normals`.  With `sites` (a bake's bake.TexelSites, one a row), a texel on a triangle over
-    which the normal turns linearly reads its corners' (LINEAR_DEGREES).  Kept per object while the
-    surface, the rows and the radius are the same.  progress(fraction) may cancel (return True:
-    engine.CancelledError)."""
+    `radius` (one, or each row's from a linked Radius): a point with no surface within it (or a
+    Radius of 0 or less, as Cycles) keeps its own normal of `row_normals`.  With `sites` (a bake's
+    bake.TexelSites, one a row) and one radius, a texel on a triangle over which the normal turns
+    linearly reads its corners' (LINEAR_DEGREES).  Kept per object while the surface, the rows and
+    the radius are the same.  progress(fraction) may cancel (return True: engine.CancelledError)."""
     own = np.ascontiguousarray(row_normals, np.float32)
-    if not radius > 0.0 or len(positions) == 0:
+    radius = np.asarray(radius, np.float32)
+    if radius.ndim and len(radius) and np.ptp(radius) == 0.0:
+        radius = radius[0]  # (one for all: a bake's texels may then share their corners')
+    if not (radius > 0.0).any() or len(positions) == 0:
         return own
     held = surface(obj, depsgraph)
     if held is None:
         return own
     occ, corner_normals, made_of, points, corner_vert = held
     positions = np.ascontiguousarray(positions, np.float32)
-    key = (made_of, engine.fingerprint(positions), float(radius), sites is not None)
+    key = (made_of, engine.fingerprint(positions, radius), sites is not None)
     kept = _normals.get(obj.name)
     if kept is not None and kept[0] == key:
         got = kept[1].copy()
     else:
-        got = _bevelled(occ, corner_normals, positions, float(radius), progress, sites, points, corner_vert)
+        got = (occ.bevel(positions, corner_normals, radius, progress) if radius.ndim else
+               _bevelled(occ, corner_normals, positions, float(radius), progress, sites, points, corner_vert))
         if len(_normals) > 8:
             _normals.clear()
         _normals[obj.name] = (key, got.copy())

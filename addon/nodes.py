@@ -617,15 +617,17 @@ class Evaluator:
         return self.colour(node.inputs["Color"], depth) * share[:, None]
 
     def _ShaderNodeBevel(self, node, output, depth):
-        if node.inputs["Radius"].is_linked:
-            raise Unsupported(f"'{node.name}''s Radius, linked")
+        radius = node.inputs["Radius"]
+        radius = self.value(radius, depth) if radius.is_linked else float(radius.default_value)
         if self._bevel is None:
             if not self.checking:
                 raise Unsupported(f"'{node.name}', which reads the surface about each point: read into a material's "
                                   "inputs, factors and Normal, not here")
             return np.zeros((self.count, 3), np.float32)
+        if not np.isfinite(radius).all():
+            raise engine.SetupError(f"'{node.name}''s Radius is not finite (NaN or infinite) where the nodes give it")
         normal = self._coordinates("NORMAL", node=node)[0]
-        got = self._bevel(self._coordinates("WORLD", node=node)[0], normal, float(node.inputs["Radius"].default_value))
+        got = self._bevel(self._coordinates("WORLD", node=node)[0], normal, radius)
         if node.inputs["Normal"].is_linked:  # that normal turned as the bevel turns the mesh's (svm_node_bevel)
             got = unit_rows(self.colour(node.inputs["Normal"], depth) + (got - normal))
         return got.astype(np.float32)

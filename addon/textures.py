@@ -596,6 +596,21 @@ def _textured(node):
     return (node, None) if any(node.inputs[s].is_linked for s in TEXTURED_SOCKETS) else (None, None)
 
 
+def _rows_evaluator(obj, depsgraph, data, mesh, corner_vert, mat, tag, notes, occlusion, progress=None):
+    """An Evaluator of `mat`'s sockets at data's rows of obj (its mesh and corners): images sampled
+    once per content and `tag` (what in the material reads them), and the scene's rays (occlusion:
+    ambient_reader's) and obj's surface (the Bevel node) read where nodes ask."""
+    return nodes.Evaluator(
+        data.count, lambda uv_map: data_uv_rows(mesh, uv_map, data, corner_vert),
+        lambda tex, uv, footprint, rows: _colours_memo((obj.name, data.domain) + tag + (tex.name,), pyramids(tex),
+                                                       Source(tex, None), (uv, footprint, rows), data.count),
+        points=row_points(obj, mesh, data.positions, data.normals, data.view,
+                          lambda: true_normals(obj, mesh, corner_vert, data.domain, data.sites)),
+        progress=progress, attribute=attribute_reader(mesh, corner_vert, data.domain, data.sites, notes),
+        owner=(obj, mat), footprint=coordinate_footprint(mesh, corner_vert, data.domain, data.sites),
+        ambient=occlusion, bevel=bevel_reader(obj, depsgraph, progress, data.sites))
+
+
 def read_inputs(obj, depsgraph, data, progress=None):
     """Sets data.inputs (meshes.MeshData) for the rows of the material slots whose Principled BSDF
     takes an input of TEXTURED_SOCKETS from Image Textures through nodes wenv evaluates
@@ -610,17 +625,7 @@ def read_inputs(obj, depsgraph, data, progress=None):
             sock = node.inputs[socket]
             if not sock.is_linked:
                 continue
-            ev = nodes.Evaluator(
-                data.count, lambda uv_map: data_uv_rows(mesh, uv_map, data, corner_vert),
-                lambda tex, uv, footprint, rows, s=s: _colours_memo((obj.name, data.domain, s, tex.name),
-                                                                   pyramids(tex), Source(tex, None),
-                                                                   (uv, footprint, rows), data.count),
-                points=row_points(obj, mesh, data.positions, data.normals, data.view,
-                                  lambda: true_normals(obj, mesh, corner_vert, data.domain, data.sites)),
-                progress=progress,
-                attribute=attribute_reader(mesh, corner_vert, data.domain, data.sites, notes), owner=(obj, mat),
-                footprint=coordinate_footprint(mesh, corner_vert, data.domain, data.sites), ambient=occlusion,
-                bevel=bevel_reader(obj, depsgraph, progress, data.sites))
+            ev = _rows_evaluator(obj, depsgraph, data, mesh, corner_vert, mat, (s,), notes, occlusion, progress)
             try:
                 values = ev.colour(sock) if keyword in COLOUR_KEYWORDS else ev.value(sock)
             except nodes.MissingUV as exc:
@@ -739,7 +744,7 @@ class NormalChain:
     """What bends a Principled BSDF's Normal, as wenv reads it: a Normal Map node (`map`, a Source,
     with `map_strength`) and/or a Bump node over it (`bump`, the node, with its unlinked Strength
     and Distance, Distance negated when inverted); or a Bevel node (`bevel`, with its unlinked
-    Radius)."""
+    Radius, or its Radius socket where linked: read at the rows)."""
 
     __slots__ = ("map", "map_strength", "bump", "bump_strength", "distance", "bevel", "bevel_radius")
 
@@ -794,19 +799,25 @@ def _bump(node, chain):
 
 def _bevel(node, chain):
     """Reads a Bevel node into chain; None, or why not."""
-    linked = [name for name in ("Radius", "Normal") if node.inputs[name].is_linked]
-    if linked:
-        return f"'{node.name}', whose {linked[0]} is linked"
+    if node.inputs["Normal"].is_linked:
+        return f"'{node.name}', whose Normal is linked"
+    radius = node.inputs["Radius"]
+    if radius.is_linked:
+        read, why = nodes.check(radius)
+        if read is None:
+            return f"'{node.name}', whose Radius comes from {why}"
+        chain.bevel_radius = radius
+    else:
+        chain.bevel_radius = max(float(radius.default_value), 0.0)
     chain.bevel = node
-    chain.bevel_radius = max(float(node.inputs["Radius"].default_value), 0.0)
     return None
 
 
 def normal_source(principled):
     """(NormalChain, None) when a Principled BSDF's Normal comes from a Normal Map node (any of
     NORMAL_MAP_SPACES, its Color an Image Texture), a Bump node (its Height from nodes wenv
-    evaluates, its Normal unlinked or such a Normal Map) or a Bevel node (its Radius and Normal
-    unlinked); else (None, reason) with why it is not read, reason None when Normal is unlinked."""
+    evaluates, its Normal unlinked or such a Normal Map) or a Bevel node (its Normal unlinked, its
+    Radius from nodes wenv evaluates); else (None, reason) with why it is not read, reason None when Normal is unlinked."""
     sock = principled.inputs["Normal"]
     if not sock.is_linked:
         return None, None
@@ -1399,9 +1410,14 @@ def read_shading_normals(obj, depsgraph, data, progress=None):
     for s, mat, (chain, _), mesh, corner_vert in _principled_slots(obj, depsgraph, normal_source):
         mine = _slot_rows(obj, data, s)
         if chain.bevel is not None:  # read where the rows are: their own positions and normals
+            radius = chain.bevel_radius
+            if not isinstance(radius, float):  # (linked: each row's, from the nodes)
+                radius = _rows_evaluator(obj, depsgraph, data, mesh, corner_vert, mat, (s, "radius"), notes,
+                                         ambient_reader(obj, depsgraph, data.domain, progress), progress).value(radius)
+                _check_finite(radius, mat, "its Bevel node's Radius", obj)
             if data.shading_normals is None:
                 data.shading_normals = data.normals.copy()
-            data.shading_normals[mine] = bevel.normals(obj, depsgraph, data.positions, data.normals, chain.bevel_radius,
+            data.shading_normals[mine] = bevel.normals(obj, depsgraph, data.positions, data.normals, radius,
                                                        progress, data.sites)[mine]
             corrections[mat.name] = bool(getattr(getattr(mat, "cycles", None), "use_bump_map_correction", True))
             continue
@@ -1477,19 +1493,8 @@ def read_term_weights(obj, depsgraph, data, progress=None):
             if reads and mesh is None:
                 mesh = meshes.shaded_mesh(obj, depsgraph)[0]
                 corner_vert = meshes.corner_vertices(mesh)
-            ev = nodes.Evaluator(
-                data.count, lambda uv_map: data_uv_rows(mesh, uv_map, data, corner_vert),
-                lambda tex, uv, footprint, rows, s=s, t=t: _colours_memo((obj.name, data.domain, s, t, tex.name),
-                                                                         pyramids(tex),
-                                                                         Source(tex, None), (uv, footprint, rows),
-                                                                         data.count),
-                points=row_points(obj, mesh, data.positions, data.normals, data.view,
-                                  lambda: true_normals(obj, mesh, corner_vert, data.domain, data.sites)),
-                progress=progress,
-                attribute=attribute_reader(mesh, corner_vert, data.domain, data.sites, notes),
-                owner=(obj, mat),
-                footprint=coordinate_footprint(mesh, corner_vert, data.domain, data.sites),
-                ambient=occlusion, bevel=bevel_reader(obj, depsgraph, progress, data.sites)) if reads else None
+            ev = (_rows_evaluator(obj, depsgraph, data, mesh, corner_vert, mat, (s, t), notes, occlusion, progress)
+                  if reads else None)
             weight, fac = colour, np.ones((data.count, 1), np.float32)
             if term.factors:
                 try:

@@ -530,16 +530,26 @@ def test_ambient_occlusion_reads_as_cycles_renders_it(grid, lid, distance, insid
 
 
 @pytest.mark.parametrize("radius, linked, flat", [(0.3, False, False), (0.12, False, False), (0.3, True, False),
-                                                  (0.3, False, True)])
+                                                  (0.3, False, True), ("0.175 x", False, False)])
 def test_bevel_reads_as_cycles_renders_it(grid, radius, linked, flat):
     """The Bevel node's normal over the rolling grid (its quads folded along their diagonals, the
-    middle column's sides cut apart), smooth or flat, and with a Normal fed to it (that normal turned
-    as the bevel turns the mesh's), against Cycles converged (256 samples a pixel of 16 rays each):
-    wenv integrates over the surface what Cycles' rays estimate.  Within 0.002 RMS (0.0003-0.0005
-    here), where the mesh's own normal is 0.016-0.4 away."""
+    middle column's sides cut apart), smooth or flat, with a Normal fed to it (that normal turned
+    as the bevel turns the mesh's), and with a Radius from the nodes, 0.175 times the point's x
+    (below 0 on the grid's left half, where it keeps its own normal, as Cycles), against Cycles
+    converged (256 samples a pixel of 16 rays each): wenv integrates over the surface what Cycles'
+    rays estimate.  Within 0.002 RMS (0.0003-0.0005 here), where the mesh's own normal is 0.016-0.4
+    away."""
     def configure(node):
         node.samples = 16
-        node.inputs["Radius"].default_value = radius
+        if radius == "0.175 x":
+            tree = node.id_data
+            split, scale = tree.nodes.new("ShaderNodeSeparateXYZ"), tree.nodes.new("ShaderNodeMath")
+            scale.operation, scale.inputs[1].default_value = "MULTIPLY", 0.175
+            tree.links.new(tree.nodes.new("ShaderNodeNewGeometry").outputs["Position"], split.inputs[0])
+            tree.links.new(split.outputs["X"], scale.inputs[0])
+            tree.links.new(scale.outputs[0], node.inputs["Radius"])
+        else:
+            node.inputs["Radius"].default_value = radius
         if linked:
             normal = node.id_data.nodes.new("ShaderNodeCombineXYZ")
             normal.inputs["X"].default_value, normal.inputs["Z"].default_value = 0.3, 1.0
@@ -555,7 +565,11 @@ def test_bevel_reads_as_cycles_renders_it(grid, radius, linked, flat):
         grid.scene.cycles.samples = 1
         mesh.shade_smooth()
     unlike = np.sqrt(np.mean((cycles - own) ** 2))
-    assert unlike > 0.015  # (it bevels)
+    assert unlike > (0.008 if radius == "0.175 x" else 0.015)  # (it bevels: one half of the grid, there)
+    if radius == "0.175 x":
+        left = grid("ShaderNodeNewGeometry", "Position", lambda node: None)[1][:, 0] < -0.01
+        assert left.mean() > 0.4
+        np.testing.assert_array_equal(ours[left], own[left])
     diff = np.abs(cycles - ours)
     assert np.sqrt(np.mean(diff ** 2)) < 0.002 and np.percentile(diff, 99) < 0.008, (
         np.sqrt(np.mean(diff ** 2)), np.percentile(diff, 99), unlike)

@@ -457,6 +457,20 @@ def test_a_bevel_node_rounds_a_fold_at_each_texel(scene):
     np.testing.assert_allclose(shaded, shader.shade_mesh(co[corner], at_corners, eye, smooth_normals=face_normal),
                                rtol=1e-3, atol=1e-5)
     assert any("'Normal' from a Bevel node is read at the vertices" in n for n in materials.principled_notes(mat))
+    # a Radius from the nodes, 0.5 + 0.1 y: each texel bevelled at its own
+    split, radius = tree.nodes.new("ShaderNodeSeparateXYZ"), tree.nodes.new("ShaderNodeMath")
+    radius.operation = "MULTIPLY_ADD"
+    radius.inputs[1].default_value, radius.inputs[2].default_value = 0.1, 0.5
+    tree.links.new(tree.nodes.new("ShaderNodeNewGeometry").outputs["Position"], split.inputs[0])
+    tree.links.new(split.outputs["Y"], radius.inputs[0])
+    tree.links.new(radius.outputs[0], node.inputs["Radius"])
+    bake_now(scene, plane, image)
+    varied = wenv.Occluders(co, triangles).bevel(points, corner_normals.astype(np.float32),
+                                                 (0.5 + 0.1 * points[:, 1]).astype(np.float32))
+    np.testing.assert_allclose(pixels(image)[:, :3], shader.shade_mesh(points, varied, eye, smooth_normals=own),
+                               rtol=1e-3, atol=1e-5)
+    assert np.abs(varied - bent).max() > 0.01
+    assert not any("Bevel" in n and "Radius" in n for n in materials.principled_notes(mat))
 
 
 def test_a_bevel_on_a_dense_mesh_is_interpolated_from_its_vertices(scene):

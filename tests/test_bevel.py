@@ -82,6 +82,29 @@ def test_a_coarse_smooth_surface_bevels_as_its_normals_turn():
         assert degrees_apart(got, own).max() > (0.2 if radius == 0.1 else 2.0)
 
 
+def test_each_point_may_have_its_own_radius():
+    """A radius per point (a Bevel node's linked Radius): each point as a call at its own radius,
+    to the bit, against the dense sum too; a radius of 0 or less reads nothing, as Cycles'."""
+    positions, triangles = box((-1.0, -1.0, -1.0), (1.0, 1.0, 1.0))
+    face = np.cross(positions[triangles[:, 1]] - positions[triangles[:, 0]],
+                    positions[triangles[:, 2]] - positions[triangles[:, 0]])
+    corner_normals = np.repeat(face / np.linalg.norm(face, axis=1, keepdims=True), 3, axis=0).astype(np.float32)
+    occ = wenv.Occluders(positions, triangles)
+    points = np.float32([[0.0, 0.9, 1.0], [0.95, 0.9, 1.0], [0.0, 0.65, 1.0], [0.5, 1.0, 0.7], [0.0, 0.95, 1.0],
+                         [0.2, 0.97, 1.0]])
+    radii = np.float32([0.3, 0.15, 0.45, 0.2, 0.0, -0.1])
+    got = occ.bevel(points, corner_normals, radii)
+    for k in range(4):
+        np.testing.assert_array_equal(got[k], occ.bevel(points[k:k + 1], corner_normals, float(radii[k]))[0])
+        assert degrees_apart(got[k:k + 1], dense_bevel(positions, triangles, corner_normals, points[k:k + 1],
+                                                       float(radii[k])))[0] < 0.05
+    np.testing.assert_array_equal(got[4:], 0.0)
+    with pytest.raises(ValueError, match=r"radius\[1\] must be finite"):
+        occ.bevel(points[:2], corner_normals, np.float32([0.1, np.nan]))
+    with pytest.raises(ValueError, match="radius must have shape"):
+        occ.bevel(points, corner_normals, radii[:3])
+
+
 def test_no_surface_within_the_radius_gives_zeros():
     positions, triangles = box((-1.0, -1.0, -1.0), (1.0, 1.0, 1.0))
     occ = wenv.Occluders(positions, triangles)

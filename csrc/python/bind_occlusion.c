@@ -209,27 +209,38 @@ done:
     return result;
 }
 
-/* bevel(points, corner_normals, radius, progress=None): the Bevel node's unit normal per point. */
+/* bevel(points, corner_normals, radius, progress=None): the Bevel node's unit normal per point;
+ * radius one for all, or float32 (n,), each point's. */
 static PyObject *occluders_bevel(OccludersObject *self, PyObject *args, PyObject *kwargs)
 {
     static char *kwlist[] = {"points", "corner_normals", "radius", "progress", NULL};
-    PyObject *pobj, *nobj, *progress_obj = Py_None;
-    double radius;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOd|O:bevel", kwlist, &pobj, &nobj, &radius, &progress_obj) ||
+    PyObject *pobj, *nobj, *robj, *progress_obj = Py_None;
+    double radius = 0.0;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO|O:bevel", kwlist, &pobj, &nobj, &robj, &progress_obj) ||
         ready(self) < 0)
         return NULL;
     if (wenv_py_check_progress(progress_obj) < 0)
         return NULL;
-    if (!(radius > 0.0) || !isfinite(radius)) {
-        wenv_py_errorf(PyExc_ValueError, "radius must be positive and finite, got %g", radius);
-        return NULL;
+    int per_point = PyObject_CheckBuffer(robj);
+    if (!per_point) {
+        if (wenv_py_get_finite(robj, "radius", &radius) < 0)
+            return NULL;
+        if (!(radius > 0.0)) {
+            wenv_py_errorf(PyExc_ValueError, "radius must be positive and finite, got %g", radius);
+            return NULL;
+        }
     }
-    Py_buffer pb, nb;
+    Py_buffer pb, nb, rb = {0};
     size_t np, nn;
     if (wenv_py_get_vec3_array(pobj, "points", 0, &pb, &np, NULL) < 0)
         return NULL;
     if (wenv_py_get_vec3_array(nobj, "corner_normals", 0, &nb, &nn, NULL) < 0) {
         PyBuffer_Release(&pb);
+        return NULL;
+    }
+    if (per_point && wenv_py_get_vertex_values(robj, "radius", np, &rb) < 0) {
+        PyBuffer_Release(&pb);
+        PyBuffer_Release(&nb);
         return NULL;
     }
     PyObject *result = NULL;
@@ -248,7 +259,7 @@ static PyObject *occluders_bevel(OccludersObject *self, PyObject *args, PyObject
     wenv_error err = {0};
     wenv_status st;
     WENV_BEGIN_WORK
-    st = wenv_bevel_normals(self->occ, nb.buf, pb.buf, np, radius, out, &progress, &err);
+    st = wenv_bevel_normals(self->occ, nb.buf, pb.buf, np, radius, per_point ? rb.buf : NULL, out, &progress, &err);
     WENV_END_WORK
     if (st) {
         Py_CLEAR(result);
@@ -258,6 +269,8 @@ static PyObject *occluders_bevel(OccludersObject *self, PyObject *args, PyObject
 done:
     PyBuffer_Release(&pb);
     PyBuffer_Release(&nb);
+    if (per_point)
+        PyBuffer_Release(&rb);
     return result;
 }
 
@@ -437,7 +450,8 @@ static PyMethodDef occluders_methods[] = {
      "bevel(points, corner_normals, radius, progress=None)\n--\n\nThe Bevel node's normal at each point (float32 "
      "(n, 3)), as Cycles' converges to it: the mean of the smooth normals of these triangles (an object's own) "
      "within `radius` of the point, weighted over their area by Cycles' falloff (radius - r)^3; (0, 0, 0) where "
-     "none lies within it.  corner_normals: float32 (3 m, 3), each triangle's three smooth normals in the "
+     "none lies within it.  radius: one for every point (positive), or float32 (n,), each point's (0 or less "
+     "reads nothing, as Cycles').  corner_normals: float32 (3 m, 3), each triangle's three smooth normals in the "
      "Occluders' order.  progress(fraction) may return True to cancel."},
     {"occluded", (PyCFunction)(void (*)(void))occluders_occluded, METH_VARARGS | METH_KEYWORDS,
      "occluded(origins, directions, tfar=inf)\n--\n\nWhether anything blocks each ray (bool, n): origins float32 "

@@ -247,6 +247,7 @@ typedef struct {
     const float *corner_normals, *points;
     const triangle_summary *summaries;
     double radius;
+    const float *radii; /* each point's, or NULL: radius */
     float *out;
 } bevel_job;
 
@@ -300,15 +301,17 @@ static void bevel_block(const void *ctx, size_t first, size_t end)
     const bevel_job *job = ctx;
     bevel_sum s = {.positions = wenv_occluders_positions(job->surface),
                    .triangles = wenv_occluders_triangles(job->surface),
-                   .corner_normals = job->corner_normals, .summaries = job->summaries, .radius = job->radius};
+                   .corner_normals = job->corner_normals, .summaries = job->summaries};
     for (size_t i = first; i < end; i++) {
         const float *p = job->points + 3 * i;
         for (int k = 0; k < 3; k++) {
             s.p[k] = p[k];
             s.sum[k] = 0.0;
         }
+        s.radius = job->radii ? job->radii[i] : job->radius;
         /* (the query's radius a little wider: a triangle just within it in double is visited) */
-        wenv_occluders_near(job->surface, p, (float)(job->radius * (1.0 + 1e-5)), visit, &s);
+        if (s.radius > 0.0)
+            wenv_occluders_near(job->surface, p, (float)(s.radius * (1.0 + 1e-5)), visit, &s);
         double len = sqrt(s.sum[0] * s.sum[0] + s.sum[1] * s.sum[1] + s.sum[2] * s.sum[2]);
         for (int k = 0; k < 3; k++)
             job->out[3 * i + (size_t)k] = len > 0.0 ? (float)(s.sum[k] / len) : 0.0f;
@@ -316,16 +319,20 @@ static void bevel_block(const void *ctx, size_t first, size_t end)
 }
 
 wenv_status wenv_bevel_normals(const wenv_occluders *surface, const float *corner_normals, const float *points,
-                               size_t n, double radius, float *out, const wenv_progress *progress, wenv_error *err)
+                               size_t n, double radius, const float *radii, float *out, const wenv_progress *progress,
+                               wenv_error *err)
 {
-    if (!(radius > 0.0) || !isfinite(radius))
+    if (!radii && (!(radius > 0.0) || !isfinite(radius)))
         return wenv_error_set(err, WENV_ERR_VALUE, "radius must be positive and finite, got %g", radius);
+    for (size_t i = 0; radii && i < n; i++)
+        if (!isfinite(radii[i]))
+            return wenv_error_set(err, WENV_ERR_VALUE, "radius[%zu] must be finite, got %g", i, (double)radii[i]);
     size_t m = wenv_occluders_triangle_count(surface);
     triangle_summary *summaries = malloc((m ? m : 1) * sizeof *summaries);
     if (!summaries)
         return wenv_error_set(err, WENV_ERR_NOMEM, "out of memory for the summaries of %zu triangles", m);
     summarise(wenv_occluders_positions(surface), wenv_occluders_triangles(surface), corner_normals, m, summaries);
-    bevel_job job = {surface, corner_normals, points, summaries, radius, out};
+    bevel_job job = {surface, corner_normals, points, summaries, radius, radii, out};
     int stopped = wenv_progress_blocks(n, BLOCK, bevel_block, &job, progress);
     free(summaries);
     return stopped ? wenv_error_set(err, WENV_ERR_CANCELLED, "cancelled") : WENV_OK;

@@ -13,12 +13,14 @@
 #include "scene/occluders.h"
 
 /* For each of the n points (xyz floats), the unit bevelled normal into out (n x 3 floats), or
- * (0, 0, 0) where no surface lies within `radius` (Cycles then keeps the point's own normal).
+ * (0, 0, 0) where no surface lies within its radius (Cycles then keeps the point's own normal):
+ * radii[i] where radii is given (a radius of 0 or less reads nothing, as Cycles'), else `radius`.
  * `surface` is the object's own triangles alone; corner_normals holds each triangle's three smooth
  * normals (9 floats a triangle, in the surface's order; a flat face's are its own normal).
- * WENV_ERR_VALUE for a radius that is not positive and finite; WENV_ERR_CANCELLED when progress
- * asks to stop. */
+ * WENV_ERR_VALUE for a radius that is not finite (or, without radii, not positive);
+ * WENV_ERR_CANCELLED when progress asks to stop. */
 wenv_status wenv_bevel_normals(const wenv_occluders *surface, const float *corner_normals, const float *points,
-                               size_t n, double radius, float *out, const wenv_progress *progress, wenv_error *err);
+                               size_t n, double radius, const float *radii, float *out, const wenv_progress *progress,
+                               wenv_error *err);
 
 #endif
