@@ -222,3 +222,43 @@ def test_occluded_tests_single_rays():
     assert occ.occluded(np.float32([0, 0, 0]), np.stack([up, side, -up])).tolist() == [True, False, False]
     assert occ.occluded(np.float32([[0, 0, 0], [5, 0, 0]]), np.stack([up, up])).tolist() == [True, False]
     assert occ.occluded(np.float32([0, 0, 0]), up[None], tfar=0.5).tolist() == [False]  # the roof is further
+
+
+def test_ambient_shares_are_the_closed_form_under_a_wide_roof():
+    """wenv.Occluders.ambient (the Ambient Occlusion node): under a roof at height h, wide enough to
+    stand for a plane, a cosine-weighted ray runs the distance d > h where cos theta < h / d: the open
+    share is (h / d)^2 (cos^2 theta is uniform over such rays).  Within half a ray of it at 1024
+    rays a point; the rays below (Inside) meet nothing, nor any ray for a distance of 0."""
+    occ = wenv.Occluders(*square(1000.0, 1.0))
+    points = np.float32([[0.0, 0.0, 0.0], [3.0, -2.0, 0.0], [0.0, 0.0, 0.5]])
+    up = np.tile(np.float32([0.0, 0.0, 1.0]), (3, 1))
+    got = occ.ambient(points, up, 2.0, 1024)
+    np.testing.assert_allclose(got, [0.25, 0.25, 0.0625], atol=0.5 / 1024)
+    assert occ.ambient(points, up * 7.0, 2.0, 1024).tolist() == got.tolist()  # (normals made unit)
+    np.testing.assert_array_equal(occ.ambient(points, up, 2.0, 64, inside=True), 1.0)
+    np.testing.assert_array_equal(occ.ambient(points, up, 0.0, 64), 1.0)
+    np.testing.assert_array_equal(occ.ambient(points[:2], up[:2], 0.9, 64), 1.0)  # (the roof beyond reach)
+    # each point's pattern turned its own way (under half a roof: the turn shows): the same rays at
+    # every call, not the same as a neighbour's
+    half = wenv.Occluders(*square(500.0, 1.0, x=500.0))
+    at, normal = np.tile(points[:1], (64, 1)), np.tile(up[:1], (64, 1))
+    few = half.ambient(at, normal, 2.0, 8)
+    assert len(set(few.tolist())) > 1 and half.ambient(at, normal, 2.0, 8).tolist() == few.tolist()
+
+
+def test_bad_ambient_arguments_are_named():
+    occ = wenv.Occluders(*square(1.0, 1.0))
+    point, up = np.float32([[0.0, 0.0, 0.0]]), np.float32([[0.0, 0.0, 1.0]])
+    for rays in (0, 1025):
+        with pytest.raises(ValueError, match="rays must be from 1 to 1024"):
+            occ.ambient(point, up, 1.0, rays)
+    with pytest.raises(ValueError, match="distance must be finite"):
+        occ.ambient(point, up, float("nan"), 16)
+    with pytest.raises(ValueError, match="normals"):
+        occ.ambient(point, np.float32([[0.0, np.nan, 1.0]]), 1.0, 16)
+    with pytest.raises(ValueError, match="points"):
+        occ.ambient(np.float32([[0.0, 0.0]]), up, 1.0, 16)
+    with pytest.raises(TypeError, match="progress"):
+        occ.ambient(point, up, 1.0, 16, progress=3)
+    with pytest.raises(wenv.CancelledError):
+        occ.ambient(np.tile(point, (100000, 1)), np.tile(up, (100000, 1)), 1.0, 16, progress=lambda f: True)

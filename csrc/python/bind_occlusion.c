@@ -7,6 +7,7 @@
 
 #include "math/maps.h"
 #include "python/module.h"
+#include "scene/ambient.h"
 #include "scene/bevel.h"
 #include "scene/occlusion.h"
 #include "scene/sending_map.h"
@@ -206,6 +207,50 @@ static PyObject *occluders_occluded(OccludersObject *self, PyObject *args, PyObj
 done:
     PyBuffer_Release(&ob);
     PyBuffer_Release(&db);
+    return result;
+}
+
+/* ambient(points, normals, distance, rays, inside=False, progress=None): the Ambient Occlusion
+ * node's unoccluded share per point. */
+static PyObject *occluders_ambient(OccludersObject *self, PyObject *args, PyObject *kwargs)
+{
+    static char *kwlist[] = {"points", "normals", "distance", "rays", "inside", "progress", NULL};
+    PyObject *pobj, *nobj, *progress_obj = Py_None;
+    double distance;
+    Py_ssize_t rays;
+    int inside = 0;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOdn|pO:ambient", kwlist, &pobj, &nobj, &distance, &rays,
+                                     &inside, &progress_obj) ||
+        ready(self) < 0 || wenv_py_check_progress(progress_obj) < 0)
+        return NULL;
+    if (rays < 1) {
+        wenv_py_errorf(PyExc_ValueError, "rays must be from 1 to %d, got %zd", WENV_AMBIENT_MAX_RAYS, rays);
+        return NULL;
+    }
+    Py_buffer pb, nb;
+    size_t np;
+    if (wenv_py_get_vec3_pair(pobj, "points", nobj, "normals", 0, &pb, &nb, &np) < 0)
+        return NULL;
+    PyObject *result = NULL;
+    Py_ssize_t shape[1] = {(Py_ssize_t)np};
+    float *out;
+    if (!(result = wenv_py_new_float_array(1, shape, &out)))
+        goto done;
+    wenv_py_progress_bridge bridge = {.callback = progress_obj};
+    wenv_progress progress = wenv_py_progress(&bridge);
+    wenv_error err = {0};
+    wenv_status st;
+    WENV_BEGIN_WORK
+    st = wenv_ambient_shares(self->occ, pb.buf, nb.buf, np, (size_t)rays, distance, inside, out, &progress, &err);
+    WENV_END_WORK
+    if (st) {
+        Py_CLEAR(result);
+        if (!(bridge.raised && PyErr_Occurred()))
+            wenv_py_raise(&err);
+    }
+done:
+    PyBuffer_Release(&pb);
+    PyBuffer_Release(&nb);
     return result;
 }
 
@@ -446,6 +491,12 @@ static PyMethodDef occluders_methods[] = {
     {"auto_resolution", (PyCFunction)occluders_auto_resolution, METH_O | METH_STATIC,
      "auto_resolution(count)\n--\n\nThe resolution occlusion(..., resolution='auto') casts `count` vertices at: the "
      "finest whose rays stay within 2^23."},
+    {"ambient", (PyCFunction)(void (*)(void))occluders_ambient, METH_VARARGS | METH_KEYWORDS,
+     "ambient(points, normals, distance, rays, inside=False, progress=None)\n--\n\nThe Ambient Occlusion node's "
+     "share at each point (float32 (n,)), as Cycles' converges to it: of `rays` cosine-weighted rays about its "
+     "normal (the opposite one with `inside`), a stratified set turned by a hash of the point's index, those that "
+     "run `distance` without meeting these triangles; 1 everywhere for a distance of 0 or less.  points, normals: "
+     "float32 (n, 3).  rays: 1 to 1024.  progress(fraction) may return True to cancel."},
     {"bevel", (PyCFunction)(void (*)(void))occluders_bevel, METH_VARARGS | METH_KEYWORDS,
      "bevel(points, corner_normals, radius, progress=None)\n--\n\nThe Bevel node's normal at each point (float32 "
      "(n, 3)), as Cycles' converges to it: the mean of the smooth normals of these triangles (an object's own) "

@@ -188,8 +188,14 @@ void wenv_occluders_test_rays(const wenv_occluders *occ, const float *origins, c
 #pragma omp parallel for schedule(dynamic, 4)
     for (size_t s = 0; s < streams; s++) {
         size_t start = s * STREAM, m = n - start < STREAM ? n - start : STREAM;
-        test_from(occ, origins + 3 * start, 3, dirs + 3 * start, m, tfar, NULL, 0, blocked + start);
+        wenv_occluders_test_scattered(occ, origins + 3 * start, dirs + 3 * start, m, tfar, blocked + start);
     }
+}
+
+void wenv_occluders_test_scattered(const wenv_occluders *occ, const float *origins, const float *dirs, size_t n,
+                                   float tfar, unsigned char *blocked)
+{
+    test_from(occ, origins, 3, dirs, n, tfar, NULL, 0, blocked);
 }
 
 void wenv_occluders_test(const wenv_occluders *occ, const float origin[3], const float *dirs, size_t n, float tfar,

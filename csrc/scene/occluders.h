@@ -62,6 +62,11 @@ void wenv_occluders_hit(const wenv_occluders *occ, const float origin[3], const 
 void wenv_occluders_hit_rays(const wenv_occluders *occ, const float *origins, const float *dirs, size_t n,
                              uint32_t *tri, float *uv);
 
+/* The same for n rays of their own origins (xyz floats each) that scatter (a hemisphere's from each
+ * point), on the calling thread, in streams Embree sorts into packets.  No allocation. */
+void wenv_occluders_test_scattered(const wenv_occluders *occ, const float *origins, const float *dirs, size_t n,
+                                   float tfar, unsigned char *blocked);
+
 /* The same for n rays of their own origins (xyz floats each), on every thread. */
 void wenv_occluders_test_rays(const wenv_occluders *occ, const float *origins, const float *dirs, size_t n, float tfar,
                               unsigned char *blocked);
