@@ -73,9 +73,10 @@ class Unsupported(Exception):
     """A node, output or setting the evaluation does not read (its message says which)."""
 
 
-class ViewLacks(Unsupported):
-    """A node that reads what the view shaded for does not have (a camera's frame, or any view):
-    checking a material cannot tell, so the reading names it."""
+class UnreadAtRows(Unsupported):
+    """What a node cannot read at these rows: a view's frame or any view, where the view shaded for
+    has none; a texture's setting linked to values that vary from row to row.  Checking a material
+    cannot tell, so the reading names it."""
 
 
 def unit_rows(v):
@@ -337,8 +338,38 @@ class Evaluator:
                   plane(np.where(signed[:, 2] > 0.0, one - y, y), x))
         return [(weight[:, k],) + planes[k] for k in range(3) if (weight[:, k] > 0.0).any()]
 
+    def _procedural_inputs(self, node, depth, output, table):
+        """A procedural texture node's inputs of `table` ((keyword, socket identifier)) as the core's
+        settings (_setting); Unsupported for an output other than Fac or Color (output None: checked by
+        the caller) or the node's own texture mapping."""
+        if output is not None and output.identifier not in ("Fac", "Color"):  # (Fac is named Factor from 5.0)
+            raise Unsupported(f"'{node.name}''s {output.name} output")
+        _identity_mapping(node)
+        kw = {}
+        for key, name in table:
+            socket = next((x for x in node.inputs if x.identifier == name), None)
+            if socket is None or not socket.enabled:  # (an unavailable socket is not found by name)
+                continue
+            kw[key] = self._setting(node, socket, depth)
+        return kw
+
+    def _setting(self, node, socket, depth):
+        """A texture's setting, which the core takes one for all the rows: the socket's unlinked value,
+        or the linked one where it is the same at every row (a Value node's, a group's input);
+        UnreadAtRows where it varies from row to row."""
+        vector = socket.type in ("VECTOR", "RGBA")
+        if not socket.is_linked:
+            value = socket.default_value
+            return tuple(float(c) for c in value) if vector else float(value)
+        got = self.colour(socket, depth) if vector else self.value(socket, depth)
+        if len(got) and np.ptp(got, axis=0).max() > 0.0:
+            raise UnreadAtRows(f"'{node.name}''s {socket.name}, linked to values that vary from point to point "
+                               "(wenv's textures take one for all)")
+        first = got[0] if len(got) else np.zeros(got.shape[1:], np.float32)
+        return tuple(float(c) for c in first) if vector else float(first)
+
     def _ShaderNodeTexNoise(self, node, output, depth):
-        kw = _procedural_inputs(node, output, NOISE_INPUTS)
+        kw = self._procedural_inputs(node, depth, output, NOISE_INPUTS)
         dims = int(node.noise_dimensions[0])
         points, reduce = self.points(_input(node, "Vector"), depth) if dims > 1 else self._no_points()
         if self.checking:
@@ -350,7 +381,7 @@ class Evaluator:
     def _ShaderNodeTexVoronoi(self, node, output, depth):
         if output.identifier not in ("Distance", "Color", "Radius"):
             raise Unsupported(f"'{node.name}''s {output.name} output")
-        kw = _procedural_inputs(node, None, VORONOI_INPUTS)
+        kw = self._procedural_inputs(node, depth, None, VORONOI_INPUTS)
         dims = int(node.voronoi_dimensions[0])
         points, reduce = self.points(_input(node, "Vector"), depth) if dims > 1 else self._no_points()
         colour = output.identifier == "Color"
@@ -364,18 +395,16 @@ class Evaluator:
         _identity_mapping(node)
         dims = int(node.noise_dimensions[0])
         w = _input(node, "W")
-        if w.enabled and w.is_linked:
-            raise Unsupported(f"'{node.name}''s W, linked")
+        w = self._setting(node, w, depth) if w.enabled else float(w.default_value)
         points, reduce = self.points(_input(node, "Vector"), depth) if dims > 1 else self._no_points()
         colour = output.identifier == "Color"
         if self.checking:
             return np.zeros((self.count, 3) if colour else self.count, np.float32)
-        got = engine.white_noise_texture(points, float(w.default_value), dimensions=dims, color=colour,
-                                         progress=self.progress)
+        got = engine.white_noise_texture(points, w, dimensions=dims, color=colour, progress=self.progress)
         return reduce(got[1 if colour else 0])
 
     def _ShaderNodeTexMagic(self, node, output, depth):
-        kw = _procedural_inputs(node, output, (("scale", "Scale"), ("distortion", "Distortion")))
+        kw = self._procedural_inputs(node, depth, output, (("scale", "Scale"), ("distortion", "Distortion")))
         points, reduce = self.points(_input(node, "Vector"), depth)
         if self.checking:
             return self._grey(np.zeros(self.count, np.float32), output)
@@ -390,12 +419,8 @@ class Evaluator:
         for key, name in (("scale", "Scale"), ("frequency", "Frequency"), ("anisotropy", "Anisotropy"),
                           ("orientation_2d", "Orientation 2D"), ("orientation_3d", "Orientation 3D")):
             socket = _input(node, name)
-            if not socket.enabled:
-                continue
-            if socket.is_linked:
-                raise Unsupported(f"'{node.name}''s {socket.name}, linked")
-            value = socket.default_value
-            kw[key] = float(value) if isinstance(value, float) else tuple(float(c) for c in value)
+            if socket.enabled:
+                kw[key] = self._setting(node, socket, depth)
         points, reduce = self.points(_input(node, "Vector"), depth)
         if self.checking:
             return np.zeros(self.count, np.float32)
@@ -403,7 +428,7 @@ class Evaluator:
         return reduce(got[("Value", "Phase", "Intensity").index(output.identifier)])
 
     def _ShaderNodeTexWave(self, node, output, depth):
-        kw = _procedural_inputs(node, output, WAVE_INPUTS)
+        kw = self._procedural_inputs(node, depth, output, WAVE_INPUTS)
         points, reduce = self.points(_input(node, "Vector"), depth)
         if self.checking:
             return self._grey(np.zeros(self.count, np.float32), output)
@@ -412,7 +437,7 @@ class Evaluator:
                                                      profile=node.wave_profile, progress=self.progress, **kw)), output)
 
     def _ShaderNodeTexChecker(self, node, output, depth):
-        scale = _procedural_inputs(node, output, (("scale", "Scale"),))["scale"]
+        scale = self._procedural_inputs(node, depth, output, (("scale", "Scale"),))["scale"]
         p, reduce = self.points(_input(node, "Vector"), depth)
         p = (p * np.float32(scale) + np.float32(1e-6)) * np.float32(0.999999)
         cell = np.abs(np.floor(p).astype(np.int64)) % 2
@@ -424,7 +449,7 @@ class Evaluator:
         return (fac[:, None] * one + (1.0 - fac[:, None]) * two).astype(np.float32)
 
     def _ShaderNodeTexBrick(self, node, output, depth):
-        kw = _procedural_inputs(node, output, BRICK_INPUTS)
+        kw = self._procedural_inputs(node, depth, output, BRICK_INPUTS)
         f32 = np.float32
         p, reduce = self.points(_input(node, "Vector"), depth)
         p = p.astype(np.float32) * f32(kw["scale"])
@@ -454,7 +479,7 @@ class Evaluator:
                 + weights[:, 2:] * self.colour(_input(node, "Mortar"), depth)).astype(np.float32)
 
     def _ShaderNodeTexGradient(self, node, output, depth):
-        _procedural_inputs(node, output, ())
+        self._procedural_inputs(node, depth, output, ())
         p, reduce = self.points(_input(node, "Vector"), depth)
         x, y, z = (np.ascontiguousarray(c, np.float32) for c in p.T)
         kind = node.gradient_type
@@ -704,7 +729,7 @@ class Evaluator:
             raise NeedsMesh(f"'{node.name}', which depends on the view, which has no value without a mesh")
         incoming = self._points("INCOMING", None)
         if incoming is None:
-            raise ViewLacks(f"'{node.name}', which depends on the view (here read without one)")
+            raise UnreadAtRows(f"'{node.name}', which depends on the view (here read without one)")
         normal = self._points("NORMAL", None)
         back = np.einsum("ij,ij->i", incoming, normal) < 0.0
         return incoming, np.where(back[:, None], -normal, normal), back
@@ -888,7 +913,7 @@ class Evaluator:
         if output.name in ("Camera", "Window"):
             got = self._coordinates(output.name.upper(), node=node)
             if got[0] is None:
-                raise ViewLacks(f"'{node.name}''s {output.name}, which a view given by a matrix alone (or a "
+                raise UnreadAtRows(f"'{node.name}''s {output.name}, which a view given by a matrix alone (or a "
                                 "panoramic camera's) does not have")
             return got
         if output.name == "Normal":
@@ -1191,24 +1216,6 @@ def _brick_noise(n):
     n = ((n >> 13) ^ n).astype(np.uint64)
     nn = (n * ((n * n * 60493 + 19990303) & 0xFFFFFFFF) + 1376312589) & 0x7FFFFFFF  # uint32 wrap-around
     return (np.float32(0.5) * (nn.astype(np.float32) / np.float32(1073741824.0))).astype(np.float32)
-
-
-def _procedural_inputs(node, output, table):
-    """A procedural texture node's unlinked inputs of `table` ((keyword, socket identifier)) as the
-    core's settings; Unsupported for an output other than Fac or Color (output None: checked by the
-    caller), a linked input or the node's own texture mapping."""
-    if output is not None and output.identifier not in ("Fac", "Color"):  # (Fac is named Factor from 5.0)
-        raise Unsupported(f"'{node.name}''s {output.name} output")
-    _identity_mapping(node)
-    kw = {}
-    for key, name in table:
-        socket = next((x for x in node.inputs if x.identifier == name), None)
-        if socket is None or not socket.enabled:  # (an unavailable socket is not found by name)
-            continue
-        if socket.is_linked:
-            raise Unsupported(f"'{node.name}''s {socket.name}, linked")
-        kw[key] = float(socket.default_value)
-    return kw
 
 
 def _identity_mapping(node):

@@ -632,7 +632,7 @@ def read_inputs(obj, depsgraph, data, progress=None):
                 notes.append(_no_uv_map(obj, exc.uv_map, f"'{socket}' ('{mat.name}')",
                                         f"its {socket}'s unlinked value is used"))
                 continue
-            except nodes.ViewLacks as exc:
+            except nodes.UnreadAtRows as exc:
                 _note(notes, f"'{obj.name}': '{socket}' ('{mat.name}') reads {exc}: its unlinked value is used")
                 continue
             except nodes.Unsupported:
@@ -1412,8 +1412,17 @@ def read_shading_normals(obj, depsgraph, data, progress=None):
         if chain.bevel is not None:  # read where the rows are: their own positions and normals
             radius = chain.bevel_radius
             if not isinstance(radius, float):  # (linked: each row's, from the nodes)
-                radius = _rows_evaluator(obj, depsgraph, data, mesh, corner_vert, mat, (s, "radius"), notes,
-                                         ambient_reader(obj, depsgraph, data.domain, progress), progress).value(radius)
+                socket = radius
+                try:
+                    radius = _rows_evaluator(obj, depsgraph, data, mesh, corner_vert, mat, (s, "radius"), notes,
+                                             ambient_reader(obj, depsgraph, data.domain, progress),
+                                             progress).value(socket)
+                except nodes.Unsupported as exc:  # (a missing UV map, what varies where it may not)
+                    radius = max(float(socket.default_value), 0.0)
+                    instead = f"its unlinked value, {radius:g}, is used"
+                    notes.append(_no_uv_map(obj, exc.uv_map, f"the Bevel node's Radius ('{mat.name}')", instead)
+                                 if isinstance(exc, nodes.MissingUV) else
+                                 f"'{obj.name}': the Bevel node's Radius ('{mat.name}') reads {exc}: {instead}")
                 _check_finite(radius, mat, "its Bevel node's Radius", obj)
             if data.shading_normals is None:
                 data.shading_normals = data.normals.copy()
@@ -1499,9 +1508,11 @@ def read_term_weights(obj, depsgraph, data, progress=None):
             if term.factors:
                 try:
                     fac = closures._factor_values(ev, term.factors)
-                except nodes.MissingUV as exc:
+                except (nodes.MissingUV, nodes.UnreadAtRows) as exc:
                     notes.append(_no_uv_map(obj, exc.uv_map, f"a Mix Shader's Fac ('{mat.name}')",
-                                            "its unlinked value is used"))
+                                            "its unlinked value is used") if isinstance(exc, nodes.MissingUV) else
+                                 f"'{obj.name}': a Mix Shader's Fac ('{mat.name}') reads {exc}: its unlinked value "
+                                 "is used")
                     fac = closures._factor_values(nodes.one_point(lambda node: np.zeros((1, 3), np.float32)),
                                                   term.factors)[0] * np.ones(data.count, np.float32)
                 _check_finite(fac, mat, "a Mix Shader's Fac", obj)
@@ -1540,7 +1551,7 @@ def _term_input(ev, socket, colour, obj, mat, label, notes):
         notes.append(_no_uv_map(obj, exc.uv_map, f"'{socket.name}' of '{label}' ('{mat.name}')",
                                 "its unlinked value is used"))
         return None
-    except nodes.ViewLacks as exc:
+    except nodes.UnreadAtRows as exc:
         _note(notes, f"'{obj.name}': '{socket.name}' of '{label}' ('{mat.name}') reads {exc}: its unlinked value "
                      "is used")
         return None

@@ -1193,7 +1193,8 @@ def test_a_noise_texture_is_read_at_each_vertex(scene):
     Roughness from another's Fac through a Texture Coordinate's Object and a Mapping node, on a moved,
     turned and stretched Suzanne: each vertex reads wenv.noise_texture at its own coordinates (as
     tests/test_procedural_textures.py holds it to Cycles); a Bump node of the noise tilts the normals; a
-    linked Scale is named and the socket's unlinked value used."""
+    Scale from a Value node is read, one that varies from point to point named and the socket's
+    unlinked value used."""
     env_world(scene, "sunset")
     obj = add_monkey(subdivisions=1)
     obj.location, obj.rotation_euler, obj.scale = (0.3, -0.2, 0.5), (0.2, 0.1, 0.4), (1.2, 0.8, 1.0)
@@ -1240,10 +1241,22 @@ def test_a_noise_texture_is_read_at_each_vertex(scene):
     obj.modifiers.new("bend", "SIMPLE_DEFORM")  # moves the vertices, not their Generated coordinates
     plan = plan_of(scene, obj)
     assert any("reads Generated coordinates on the deformed mesh" in n for n in plan.notes), plan.notes
-    tree.links.new(tree.nodes.new("ShaderNodeValue").outputs[0], colour_noise.inputs["Scale"])
-    notes = materials.principled_notes(mat)
-    assert any("'Base Color' is linked" in n and "Scale, linked" in n for n in notes), notes
-    assert "base_color" not in plan_of(scene, obj).items[0][1].inputs
+    obj.modifiers.clear()
+    # a Scale from a Value node (the same at every point) is read; one that varies is named
+    value = tree.nodes.new("ShaderNodeValue")
+    value.outputs[0].default_value = 2.5
+    tree.links.new(value.outputs[0], colour_noise.inputs["Scale"])
+    data = plan_of(scene, obj).items[0][1]
+    generated = ((local - loc) / (2.0 * size) + 0.5).astype(np.float32)
+    np.testing.assert_allclose(data.inputs["base_color"], wenv.noise_texture(generated, scale=2.5)[1], atol=1e-4)
+    assert not any("Scale" in n for n in materials.principled_notes(mat))
+    split = tree.nodes.new("ShaderNodeSeparateXYZ")
+    tree.links.new(coords.outputs["Object"], split.inputs[0])
+    tree.links.new(split.outputs["X"], colour_noise.inputs["Scale"])
+    plan = plan_of(scene, obj)
+    assert any("Base Color' ('noisy') reads 'Noise Texture''s Scale, linked to values that vary" in n
+               for n in plan.notes), plan.notes
+    assert "base_color" not in plan.items[0][1].inputs
 
 
 def test_mesh_attributes_are_read_at_each_vertex(scene):
