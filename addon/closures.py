@@ -264,13 +264,19 @@ def is_one_principled(material):
     return one_principled(terms(material)[0])
 
 
-def _factor_values(evaluator, factors):
+def _factor_values(evaluator, factors, rows=False):
     """The product of a term's factors, each read by the evaluator (a textured Fac per vertex), as
-    (rows,) float32; a factor wenv does not evaluate reads its unlinked value (named in the notes)."""
+    (rows,) float32; a factor wenv does not evaluate reads its unlinked value (named in the notes).
+    With `rows` (the mesh's rows read), what only the rows show is raised for the caller to name: a
+    missing UV map (MissingUV), a setting that varies or a view's frame (UnreadAtRows)."""
     total = np.ones(evaluator.count, np.float32)
     for socket, take, groups in factors:
         try:
             fac = np.clip(evaluator.value_within(socket, groups), 0.0, 1.0)
+        except (nodes.MissingUV, nodes.UnreadAtRows):
+            if rows:
+                raise
+            fac = np.full(evaluator.count, min(max(float(socket.default_value), 0.0), 1.0), np.float32)
         except nodes.Unsupported:
             fac = np.full(evaluator.count, min(max(float(socket.default_value), 0.0), 1.0), np.float32)
         total *= fac if take == "fac" else 1.0 - fac

@@ -1507,9 +1507,9 @@ def read_term_weights(obj, depsgraph, data, progress=None):
             weight, fac = colour, np.ones((data.count, 1), np.float32)
             if term.factors:
                 try:
-                    fac = closures._factor_values(ev, term.factors)
+                    fac = closures._factor_values(ev, term.factors, rows=True)
                 except (nodes.MissingUV, nodes.UnreadAtRows) as exc:
-                    notes.append(_no_uv_map(obj, exc.uv_map, f"a Mix Shader's Fac ('{mat.name}')",
+                    _note(notes, _no_uv_map(obj, exc.uv_map, f"a Mix Shader's Fac ('{mat.name}')",
                                             "its unlinked value is used") if isinstance(exc, nodes.MissingUV) else
                                  f"'{obj.name}': a Mix Shader's Fac ('{mat.name}') reads {exc}: its unlinked value "
                                  "is used")

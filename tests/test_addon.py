@@ -1384,6 +1384,44 @@ def test_the_parametric_output_reads_zero_at_the_vertices_and_says_so(scene):
     assert any("Parametric is read at a bake's texels; at a vertex" in n for n in materials.principled_notes(mat))
 
 
+def test_what_only_the_rows_show_in_a_mix_factor_is_named(scene):
+    """A Mix Shader's Fac from a Noise Texture whose Scale varies from point to point, or from an
+    image through a UV map the mesh lacks: a check of the material cannot tell, so reading the rows
+    names it (once), the factor's unlinked value used, and the operator finishes."""
+    env_world(scene, "sunset")
+    obj = add_monkey()
+    mat = node_material(bpy, "mixed")
+    tree = mat.node_tree
+    tree.nodes.remove(tree.nodes["Principled BSDF"])
+    mix = tree.nodes.new("ShaderNodeMixShader")
+    mix.inputs[0].default_value = 0.25
+    tree.links.new(tree.nodes.new("ShaderNodeBsdfDiffuse").outputs[0], mix.inputs[1])
+    tree.links.new(tree.nodes.new("ShaderNodeBsdfGlossy").outputs[0], mix.inputs[2])
+    tree.links.new(mix.outputs[0], tree.nodes["Material Output"].inputs["Surface"])
+    noise, split = tree.nodes.new("ShaderNodeTexNoise"), tree.nodes.new("ShaderNodeSeparateXYZ")
+    tree.links.new(tree.nodes.new("ShaderNodeNewGeometry").outputs["Position"], split.inputs[0])
+    tree.links.new(split.outputs["X"], noise.inputs["Scale"])
+    tree.links.new(noise.outputs[0], mix.inputs[0])
+    obj.data.materials.append(mat)
+    select_only(obj)
+    bpy.context.view_layer.update()
+    plan = plan_of(scene, obj)
+    said = [n for n in plan.notes if "a Mix Shader's Fac ('mixed') reads 'Noise Texture''s Scale, linked to values "
+            "that vary" in n]
+    assert len(said) == 1, plan.notes
+    weights = plan.items[0][1].term_weights[0]
+    np.testing.assert_allclose(weights[0], 0.75, rtol=1e-6)  # (the Diffuse's share at the unlinked 0.25)
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    image = tree.nodes.new("ShaderNodeTexImage")
+    image.image = bpy.data.images.new("stripes", 4, 4)
+    uv = tree.nodes.new("ShaderNodeUVMap")
+    uv.uv_map = "no such map"
+    tree.links.new(uv.outputs[0], image.inputs["Vector"])
+    tree.links.new(image.outputs["Color"], mix.inputs[0])
+    plan = plan_of(scene, obj)
+    assert any("no UV map 'no such map' for a Mix Shader's Fac ('mixed')" in n for n in plan.notes), plan.notes
+
+
 def test_a_procedural_texture_through_the_uv_map_averages_a_seams_corners(scene):
     """A Noise Texture read through the UV map (Texture Coordinate's UV, as (u, v, 0)) on Suzanne,
     whose UV map has seams: each vertex reads the noise at each of its corners' UVs and takes their
