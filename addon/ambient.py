@@ -22,7 +22,8 @@ _shares = {}  # object name -> (what its shares were cast from, the shares)
 def blockers(depsgraph, obj, only_local):
     """(name, world positions, triangles) of the meshes the node's rays may meet: obj's alone with
     Only Local, else every visible mesh object of the scene that casts shadows (Object > Visibility >
-    Shadow, as Cycles' shadow rays see them; one in Edit Mode is skipped, as wenv skips it)."""
+    Shadow, as Cycles' shadow rays see them; one in Edit Mode is skipped, as wenv skips it) and the
+    instances, curves and text that do (meshes.other_geometry)."""
     scene = depsgraph.scene
     objs = [obj] if only_local else [
         o for o in scene.objects
@@ -32,6 +33,9 @@ def blockers(depsgraph, obj, only_local):
         data = meshes.read_mesh(o, depsgraph)
         if data.count:
             out.append((o.name, data.positions, engine.shadow_triangles(data.positions, data.triangles)[0]))
+    if not only_local:  # what else Cycles' rays meet: instances, curves, text
+        out += [(name, p, engine.shadow_triangles(p, t)[0])
+                for name, p, t in meshes.other_geometry(depsgraph, skip={o.name for o in objs})]
     return out
 
 

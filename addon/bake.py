@@ -462,6 +462,9 @@ def _surroundings_key(scene, depsgraph, obj):
                 looks = _key(str(exc))
         others.append((other.name, _mesh_key(other, depsgraph), other.wenv.casts_shadows,
                        getattr(other, "visible_shadow", True), looks))
+    if depsgraph is not None:  # instances, curves and text: where they are
+        others += [(name, engine.fingerprint(p, t).hex()) for name, p, t in
+                   meshes.other_geometry(depsgraph, skip={obj.name})]
     return _key(others)
 
 

@@ -252,6 +252,13 @@ def shadow_triangles(positions, triangles):
     return np.ascontiguousarray(triangles[keep]), int((~keep).sum())
 
 
+def occluder_bytes(positions, triangles):
+    """About the bytes occluders of `positions` and `triangles` (arrays, or None) take: what the memory
+    budget holds them to."""
+    return wenv.Occluders.bytes_needed(0 if positions is None else len(positions),
+                                       0 if triangles is None else len(triangles))
+
+
 def merged_occluders(meshes, memory_budget_mb=1024):
     """(wenv.Occluders of `meshes` ([(world positions, triangles)]) as one, where each one's vertices
     start among its positions)."""

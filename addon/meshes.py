@@ -137,6 +137,41 @@ def read_mesh(obj, depsgraph):
     return MeshData(domain, world_pos, world_nrm, slots, notes, unplaced, triangles.reshape(-1, 3))
 
 
+# Objects Cycles renders as meshes though they are not: their evaluated geometry
+CONVERTED_TYPES = ("CURVE", "FONT", "SURFACE", "META")
+
+
+def other_geometry(depsgraph, skip=()):
+    """(name, world positions (float32), triangles) of what blocks light in Cycles besides the scene's
+    mesh objects: every instance of a mesh or of such an object (a collection instance's, particles',
+    a Geometry Nodes tree's), and the curves, text, surfaces and metaballs, which Cycles renders as
+    meshes -- each where its object casts shadows (Object > Visibility > Shadow, and wenv's Casts
+    Shadows).  `name` is the original object's, which light linking names; objects named in `skip`
+    are left out."""
+    out = []
+    for inst in depsgraph.object_instances:
+        ob = inst.object
+        if ob.type not in ("MESH",) + CONVERTED_TYPES or not (inst.is_instance or ob.type != "MESH"):
+            continue
+        original = ob.original
+        if original.name in skip or not getattr(ob, "visible_shadow", True):
+            continue
+        if not original.wenv.casts_shadows or (not inst.is_instance and not original.visible_get()):
+            continue
+        mesh = ob.data if ob.type == "MESH" else ob.to_mesh()
+        try:
+            if mesh is None or not len(mesh.polygons):
+                continue
+            co = _read(mesh.attributes["position"].data, "vector", len(mesh.vertices), 3)
+            triangles = _read(mesh.loop_triangles, "vertices", len(mesh.loop_triangles), 3, np.int32)
+        finally:
+            if ob.type != "MESH":
+                ob.to_mesh_clear()
+        m = np.array(inst.matrix_world, np.float32)
+        out.append((original.name, (co @ m[:3, :3].T + m[:3, 3]).astype(np.float32), triangles.reshape(-1, 3)))
+    return out
+
+
 def write_colors(mesh, domain, rgb, seen=None):
     """Writes (n, 3) colours into the add-on's FLOAT_COLOR attribute (recreated if its domain or
     type differ) and makes it the active colour attribute.  With `seen` (bool, n), only those rows:

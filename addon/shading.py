@@ -468,6 +468,7 @@ def plan_shading(scene, depsgraph, objects, view, images, progress=None, preview
                         notes += [n for n in read(obj, depsgraph, data) if n not in notes]
                     notes += [n for n in materials.slot_notes(obj) if n not in notes]
                     plan.senders.append((obj.name, data, materials.slot_material_keys(obj)))
+        notes += _other_blockers(plan, depsgraph, shaded, st)
         dropped = 0
         for (_, data, _), cast in zip(plan.items, plan.casts):
             if cast:
@@ -480,6 +481,33 @@ def plan_shading(scene, depsgraph, objects, view, images, progress=None, preview
     if plan.quality != engine.AUTO:
         engine.shaders.get(plan.quality, progress)
     return plan
+
+
+def _other_blockers(plan, depsgraph, shaded, st):
+    """Adds to plan.blockers what else blocks light in Cycles (meshes.other_geometry: instances,
+    curves, text), within the memory budget; returns notes."""
+    others = meshes.other_geometry(depsgraph, skip=shaded)
+    if not others:
+        return []
+    budget = st.memory_budget * 1048576.0
+    used = sum(engine.occluder_bytes(data.positions, data.triangles) for _, data, _ in plan.items)
+    used += sum(engine.occluder_bytes(p, t) for _, p, t in plan.blockers)
+    left = []
+    for name, p, t in others:
+        need = engine.occluder_bytes(p, t)
+        if used + need > budget:
+            left.append(name)
+            continue
+        used += need
+        plan.blockers.append((name, p, engine.shadow_triangles(p, t)[0]))
+    notes = []
+    if left:
+        notes.append(f"{len(left)} instance(s) or curve object(s) cast no shadow: over the memory budget "
+                     f"({st.memory_budget} MB) with the rest of the scene")
+    if st.bounce_light and len(left) < len(others):
+        notes.append(f"{len(others) - len(left)} instance(s) or curve object(s) block light but send none back "
+                     "(Bounce Light reads the light of mesh objects)")
+    return notes
 
 
 def shade_objects(scene, depsgraph, objects, view, blend_data, progress=None, rays=None):

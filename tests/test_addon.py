@@ -3569,6 +3569,66 @@ def test_another_mesh_casts_shadows_unless_told_not_to(scene):
     assert np.array_equal(again, plain)
 
 
+def test_instances_and_curves_cast_shadows_as_meshes_do(scene):
+    """The start-up cube moved into a collection shown only through a collection instance, then a
+    text object (which Cycles renders as a mesh), above the plane: the plane is shaded as under an
+    ordinary mesh object of the same shape in the same place (Bounce Light off: an instance sends
+    no light back, and the report says so with it on); with the instanced object's Casts Shadows
+    off, as under nothing.  (The mesh object's flat faces are cast from their corners, the instance's
+    from its vertices: a ray along an edge of the cube may pass one and meet the other, so a few
+    vertices differ, by under 1 %.)"""
+    def same_as(got, want):
+        off = np.abs(got - want) > 1e-5 + 1e-5 * np.abs(want)
+        assert off.any(axis=1).mean() < 0.03 and np.abs(got - want).max() < 0.01 * np.abs(want).max()
+    env_world(scene, "sunset")
+    plane = add_plane_under_cube()
+    scene.wenv.shadows, scene.wenv.bounce_light = True, False
+    cube = bpy.data.objects["Cube"]
+    cube.location = (0.3, -0.2, 0.0)
+    bpy.context.view_layer.update()
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    _, under_mesh = attribute(plane)
+    blocks = bpy.data.collections.new("blocks")
+    for holder in list(cube.users_collection):
+        holder.objects.unlink(cube)
+    blocks.objects.link(cube)
+    bpy.context.view_layer.update()
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    _, under_nothing = attribute(plane)
+    assert np.abs(under_nothing - under_mesh).max() > 0.01
+    instance = bpy.data.objects.new("instancer", None)
+    instance.instance_type, instance.instance_collection = "COLLECTION", blocks
+    scene.collection.objects.link(instance)
+    bpy.context.view_layer.update()
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    same_as(attribute(plane)[1], under_mesh)
+    scene.wenv.bounce_light = True
+    notes = plan_of(scene, plane).notes
+    assert any("1 instance(s) or curve object(s) block light but send none back" in n for n in notes), notes
+    scene.wenv.bounce_light = False
+    cube.wenv.casts_shadows = False
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    np.testing.assert_allclose(attribute(plane)[1], under_nothing, rtol=1e-5, atol=1e-6)
+    # a text object, as the mesh Blender makes of it
+    bpy.data.objects.remove(instance)
+    bpy.ops.object.text_add(location=(-1.0, -0.5, 0.0))
+    text = bpy.context.object
+    text.data.extrude, text.scale = 0.2, (2.0, 2.0, 2.0)
+    bpy.context.view_layer.update()
+    select_only(plane)
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    _, under_text = attribute(plane)
+    as_mesh = bpy.data.objects.new("text as mesh", bpy.data.meshes.new_from_object(text.evaluated_get(
+        bpy.context.evaluated_depsgraph_get())))
+    as_mesh.matrix_world = text.matrix_world
+    scene.collection.objects.link(as_mesh)
+    text.hide_set(True)
+    bpy.context.view_layer.update()
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    same_as(attribute(plane)[1], under_text)
+    assert np.abs(under_text - under_nothing).max() > 0.01
+
+
 def test_a_blocker_not_shaded_sends_its_light_back(scene):
     """The plane shaded alone under the start-up cube (smooth, an orange Lambert): with Bounce Light,
     what the cube blocks shows the cube's own diffuse light (its shadows included), as the core

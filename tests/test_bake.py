@@ -670,8 +670,8 @@ def test_a_bake_is_marked_stale_by_what_changes_it(scene):
 
 def test_a_bake_that_read_other_meshes_is_stale_when_they_change(scene):
     """A bake with Shadows, or with an Ambient Occlusion node that reaches the scene, is stale when
-    another mesh moves, hides or is added; one that read only its own mesh is not, nor is one whose
-    node is Only Local."""
+    another mesh moves, hides or is added, or an instance is placed or moved; one that read only its
+    own mesh is not, nor is one whose node is Only Local."""
     env_world(scene, "sunset")
     plane = grid(cuts=2)
     bpy.ops.mesh.primitive_cube_add(size=0.5, location=(0.0, 0.0, 1.0))
@@ -696,6 +696,18 @@ def test_a_bake_that_read_other_meshes_is_stale_when_they_change(scene):
         change()
         assert settle() == words, k
         bake_again()
+    # an instance of a collection, placed and then moved
+    blocks = bpy.data.collections.new("blocks")
+    blocks.objects.link(bpy.data.objects.new("block", cube.data))
+    instancer = bpy.data.objects.new("instancer", None)
+    instancer.instance_type, instancer.instance_collection = "COLLECTION", blocks
+    instancer.location = (-0.5, 0.5, 1.0)
+    scene.collection.objects.link(instancer)
+    assert settle() == words
+    bake_again()
+    instancer.location = (-0.5, -0.5, 1.0)
+    assert settle() == words
+    bake_again()
     bpy.data.materials.new("other").diffuse_color = (1.0, 0.0, 0.0, 1.0)  # a material no mesh uses
     assert settle() is None
 

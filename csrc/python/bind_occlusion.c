@@ -478,6 +478,19 @@ static PyObject *occluders_offset(OccludersObject *self, void *closure)
 }
 
 /* auto_resolution(count) -> int */
+static PyObject *occluders_bytes_needed(PyObject *cls, PyObject *args)
+{
+    (void)cls;
+    Py_ssize_t positions, triangles;
+    if (!PyArg_ParseTuple(args, "nn:bytes_needed", &positions, &triangles))
+        return NULL;
+    if (positions < 0 || triangles < 0) {
+        PyErr_SetString(PyExc_ValueError, "positions and triangles must be counts (0 or more)");
+        return NULL;
+    }
+    return PyFloat_FromDouble(wenv_occluders_bytes_needed((size_t)positions, (size_t)triangles));
+}
+
 static PyObject *occluders_auto_resolution(PyObject *cls, PyObject *count_obj)
 {
     (void)cls;
@@ -488,6 +501,9 @@ static PyObject *occluders_auto_resolution(PyObject *cls, PyObject *count_obj)
 }
 
 static PyMethodDef occluders_methods[] = {
+    {"bytes_needed", (PyCFunction)occluders_bytes_needed, METH_VARARGS | METH_STATIC,
+     "bytes_needed(positions, triangles)\n--\n\nAbout how many bytes Occluders of that many positions and "
+     "triangles take: what memory_budget_mb holds them to."},
     {"auto_resolution", (PyCFunction)occluders_auto_resolution, METH_O | METH_STATIC,
      "auto_resolution(count)\n--\n\nThe resolution occlusion(..., resolution='auto') casts `count` vertices at: the "
      "finest whose rays stay within 2^23."},

@@ -53,6 +53,11 @@ static wenv_status check(const float *p, size_t np, const uint32_t *t, size_t nt
     return WENV_OK;
 }
 
+double wenv_occluders_bytes_needed(size_t n_positions, size_t n_triangles)
+{
+    return (double)n_triangles * BYTES_PER_TRIANGLE + (double)n_positions * BYTES_PER_POSITION;
+}
+
 wenv_status wenv_occluders_create(wenv_occluders **out, const float *positions, size_t n_positions,
                                   const uint32_t *triangles, size_t n_triangles, size_t memory_budget,
                                   wenv_error *err)
@@ -63,7 +68,7 @@ wenv_status wenv_occluders_create(wenv_occluders **out, const float *positions, 
     if (n_triangles > UINT32_MAX / 3 || n_positions > UINT32_MAX)
         return wenv_error_set(err, WENV_ERR_VALUE, "too many triangles (%zu) or positions (%zu)", n_triangles,
                               n_positions);
-    double need = (double)n_triangles * BYTES_PER_TRIANGLE + (double)n_positions * BYTES_PER_POSITION;
+    double need = wenv_occluders_bytes_needed(n_positions, n_triangles);
     if (need > (double)memory_budget)
         return wenv_error_set(err, WENV_ERR_VALUE,
                               "occluders of %zu triangles need about %.0f MB, over the memory budget of %.0f MB",

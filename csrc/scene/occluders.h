@@ -20,6 +20,9 @@ wenv_status wenv_occluders_create(wenv_occluders **out, const float *positions, 
                                   const uint32_t *triangles, size_t n_triangles, size_t memory_budget,
                                   wenv_error *err);
 void wenv_occluders_free(wenv_occluders *occ);
+/* About how many bytes occluders of that many positions and triangles take (what the memory budget
+ * is held to). */
+double wenv_occluders_bytes_needed(size_t n_positions, size_t n_triangles);
 
 size_t wenv_occluders_triangle_count(const wenv_occluders *occ);
 /* The positions the triangles index, and the triangles (3 indices each) as the scene holds them. */
