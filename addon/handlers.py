@@ -78,8 +78,11 @@ _SHARED = (bpy.types.Material, bpy.types.ShaderNodeTree, bpy.types.Image, bpy.ty
 
 @persistent
 def depsgraph_update_post(scene, depsgraph):
-    """Marks the bakes a change makes stale (bake.note_changes): only the parts of them the changed
-    datablocks could touch are compared."""
+    """Tells the live session what changed about its meshes (LiveSession.note_updates); marks the
+    bakes a change makes stale (bake.note_changes): only the parts of them the changed datablocks
+    could touch are compared."""
+    if LiveState.session is not None:
+        LiveState.session.note_updates(scene, depsgraph.updates)
     if not any(i.wenv.baked_object and not i.wenv.stale for i in bpy.data.images):
         return
     parts, objects, shared = set(), set(), False

@@ -2,7 +2,9 @@
 drives these from modal timers, tests drive them directly)."""
 import threading
 
-from . import engine, lamps, materials, shading, views, world
+import bpy
+
+from . import bake, engine, lamps, materials, shading, views, world
 
 
 class _WorkerJob:
@@ -106,6 +108,9 @@ class LiveSession:
         self.shades = 0
         self._plan = None
         self._reads_camera = False  # the last pass read the camera's space or frame (signature)
+        # changes to the scene's other objects (moved, edited, added, an instance placed), counted
+        # by the depsgraph handler (note_updates): what the session's shadows and rays may meet
+        self.others_changed = 0
         self._worker = None
         self._error = None
         self._discard = False  # the worker's plan was read from data an undo has since replaced
@@ -123,6 +128,23 @@ class LiveSession:
 
     def objects(self, scene):
         return [scene.objects[n] for n in self.object_names if n in scene.objects]
+
+    def note_updates(self, scene, updates):
+        """After a depsgraph update: counts a change to what the session's meshes do not hold --
+        another object (not a lamp or camera: the signature reads those), a mesh or curve none of
+        them uses, a collection (instances) -- but not the colours the session writes to its own."""
+        own = set(self.object_names)
+        own_data = {scene.objects[n].data for n in own if n in scene.objects}
+        for update in updates:
+            data = getattr(update.id, "original", update.id)
+            if isinstance(data, bpy.types.Object):
+                other = data.name not in own and data.type not in ("LIGHT", "CAMERA")
+            else:
+                other = (isinstance(data, (bpy.types.Mesh, bpy.types.Curve)) and data not in own_data
+                         or isinstance(data, bpy.types.Collection))
+            if other:
+                self.others_changed += 1
+                return
 
     def view(self, context):
         scene = context.scene
@@ -146,6 +168,9 @@ class LiveSession:
             objs.append((obj.name, _matrix_tuple(obj.matrix_world), len(obj.data.vertices), mats))
         # a camera's turn or lens changes only what reads the camera's space or frame
         view_sig = (view.signature, view.camera_signature) if self._reads_camera else view.signature
+        # the other objects, where the shadows or an Ambient Occlusion node's rays meet them
+        if any(bake.reads_other_meshes(obj, st) for obj in self.objects(scene)):
+            objs.append(("others", self.others_changed))
         return (view_sig, world_sig, tuple(objs), lamps.signature(scene), st.quality, st.tone_mapping, st.max_luminance, st.target_error,
                 st.memory_budget, st.shade_only_seen, st.refine_at_rest, st.preview_changes, st.shadows, st.bounce_light,
                 st.glossy_bounce)

@@ -2668,6 +2668,43 @@ def test_camera_and_window_coordinates_follow_the_camera(scene):
     assert bake.staleness(image, scene) is None
 
 
+def test_live_session_reshades_when_what_shadows_it_changes(scene):
+    """With Shadows, live mode shades the plane again when the cube above it moves, its mesh is
+    edited or an instance of it is placed, and not for its own colours; with Shadows off, another
+    object's move changes nothing it shades."""
+    env_world(scene, "sunset")
+    plane = add_plane_under_cube()
+    scene.wenv.shadows, scene.wenv.view_source = True, "CAMERA"
+    session = live.LiveSession([plane.name])
+    live.LiveState.session = session  # (the depsgraph handler tells the registered session)
+    ctx = bpy.context
+
+    def settle():
+        started = session.tick(ctx)
+        session.wait(60)
+        return (started, session.tick(ctx))
+    try:
+        assert settle() == (False, True)
+        assert settle() == (False, False)  # (its own colours, written, are no change)
+        cube = bpy.data.objects["Cube"]
+        before = attribute(plane)[1].copy()
+        for change in (lambda: setattr(cube, "location", (0.5, 0.5, 0.0)),
+                       lambda: (cube.data.vertices[0].co.__setitem__(2, 2.0), cube.data.update()),
+                       lambda: scene.collection.objects.link(bpy.data.objects.new("copy", cube.data))):
+            change()
+            bpy.context.view_layer.update()
+            assert settle() == (False, True)
+            assert not np.array_equal(attribute(plane)[1], before)
+            before = attribute(plane)[1].copy()
+        scene.wenv.shadows = False
+        assert settle() == (False, True)
+        cube.location = (-0.5, 0.0, 0.0)
+        bpy.context.view_layer.update()
+        assert settle() == (False, False)
+    finally:
+        live.LiveState.session = None
+
+
 def test_live_session_refines_at_rest_and_drops_it_on_a_change(scene):
     """At Draft, live mode writes Draft's colours at once, then, while nothing changes, High's
     (the core's result at high for the same arrays); a change shows Draft again at once and drops
