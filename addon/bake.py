@@ -464,7 +464,7 @@ def _surroundings_key(scene, depsgraph, obj):
                        getattr(other, "visible_shadow", True), looks))
     if depsgraph is not None:  # instances, curves and text: where they are
         others += [(name, engine.fingerprint(p, t).hex()) for name, p, t in
-                   meshes.other_geometry(depsgraph, skip={obj.name})]
+                   meshes.other_geometry(depsgraph, skip={obj.name})[0]]
     return _key(others)
 
 

@@ -1,6 +1,8 @@
 """Meshes: evaluated meshes as world-space arrays; shaded colours in their colour attribute."""
 import numpy as np
 
+from . import engine
+
 ATTRIBUTE = "wenv_radiance"
 
 
@@ -141,14 +143,15 @@ def read_mesh(obj, depsgraph):
 CONVERTED_TYPES = ("CURVE", "FONT", "SURFACE", "META")
 
 
-def other_geometry(depsgraph, skip=()):
-    """(name, world positions (float32), triangles) of what blocks light in Cycles besides the scene's
-    mesh objects: every instance of a mesh or of such an object (a collection instance's, particles',
-    a Geometry Nodes tree's), and the curves, text, surfaces and metaballs, which Cycles renders as
-    meshes -- each where its object casts shadows (Object > Visibility > Shadow, and wenv's Casts
-    Shadows).  `name` is the original object's, which light linking names; objects named in `skip`
-    are left out."""
-    out = []
+def other_geometry(depsgraph, skip=(), room=None):
+    """[(name, world positions (float32), triangles)] of what blocks light in Cycles besides the
+    scene's mesh objects: every instance of a mesh or of such an object (a collection instance's,
+    particles', a Geometry Nodes tree's), and the curves, text, surfaces and metaballs, which Cycles
+    renders as meshes -- each where its object casts shadows (Object > Visibility > Shadow, and
+    wenv's Casts Shadows) -- and how many were left out: past `room` (bytes, engine.occluder_bytes;
+    None: no limit), the rest are counted, not read.  `name` is the original object's, which light
+    linking names; objects named in `skip` are left out."""
+    out, left = [], 0
     for inst in depsgraph.object_instances:
         ob = inst.object
         if ob.type not in ("MESH",) + CONVERTED_TYPES or not (inst.is_instance or ob.type != "MESH"):
@@ -158,10 +161,18 @@ def other_geometry(depsgraph, skip=()):
             continue
         if not original.wenv.casts_shadows or (not inst.is_instance and not original.visible_get()):
             continue
+        if left:  # (past the room: counted, not read)
+            left += 1
+            continue
         mesh = ob.data if ob.type == "MESH" else ob.to_mesh()
         try:
             if mesh is None or not len(mesh.polygons):
                 continue
+            if room is not None:
+                room -= engine.occluder_bytes(mesh.vertices, mesh.loop_triangles)
+                if room < 0:
+                    left = 1
+                    continue
             co = _read(mesh.attributes["position"].data, "vector", len(mesh.vertices), 3)
             triangles = _read(mesh.loop_triangles, "vertices", len(mesh.loop_triangles), 3, np.int32)
         finally:
@@ -169,7 +180,7 @@ def other_geometry(depsgraph, skip=()):
                 ob.to_mesh_clear()
         m = np.array(inst.matrix_world, np.float32)
         out.append((original.name, (co @ m[:3, :3].T + m[:3, 3]).astype(np.float32), triangles.reshape(-1, 3)))
-    return out
+    return out, left
 
 
 def write_colors(mesh, domain, rgb, seen=None):

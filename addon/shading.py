@@ -486,26 +486,16 @@ def plan_shading(scene, depsgraph, objects, view, images, progress=None, preview
 def _other_blockers(plan, depsgraph, shaded, st):
     """Adds to plan.blockers what else blocks light in Cycles (meshes.other_geometry: instances,
     curves, text), within the memory budget; returns notes."""
-    others = meshes.other_geometry(depsgraph, skip=shaded)
-    if not others:
-        return []
-    budget = st.memory_budget * 1048576.0
     used = sum(engine.occluder_bytes(data.positions, data.triangles) for _, data, _ in plan.items)
     used += sum(engine.occluder_bytes(p, t) for _, p, t in plan.blockers)
-    left = []
-    for name, p, t in others:
-        need = engine.occluder_bytes(p, t)
-        if used + need > budget:
-            left.append(name)
-            continue
-        used += need
-        plan.blockers.append((name, p, engine.shadow_triangles(p, t)[0]))
+    others, left = meshes.other_geometry(depsgraph, skip=shaded, room=st.memory_budget * 1048576.0 - used)
+    plan.blockers += [(name, p, engine.shadow_triangles(p, t)[0]) for name, p, t in others]
     notes = []
     if left:
-        notes.append(f"{len(left)} instance(s) or curve object(s) cast no shadow: over the memory budget "
+        notes.append(f"{left} instance(s) or curve object(s) cast no shadow: over the memory budget "
                      f"({st.memory_budget} MB) with the rest of the scene")
-    if st.bounce_light and len(left) < len(others):
-        notes.append(f"{len(others) - len(left)} instance(s) or curve object(s) block light but send none back "
+    if st.bounce_light and others:
+        notes.append(f"{len(others)} instance(s) or curve object(s) block light but send none back "
                      "(Bounce Light reads the light of mesh objects)")
     return notes
 

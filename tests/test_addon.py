@@ -3639,6 +3639,10 @@ def test_instances_and_curves_cast_shadows_as_meshes_do(scene):
     bpy.context.view_layer.update()
     assert shade_op(view="CAMERA") == {"FINISHED"}
     same_as(attribute(plane)[1], under_mesh)
+    # past the memory budget's room an instance is counted, not read
+    got, left = meshes.other_geometry(bpy.context.evaluated_depsgraph_get(), room=100.0)
+    assert got == [] and left == 1
+    assert len(meshes.other_geometry(bpy.context.evaluated_depsgraph_get())[0]) == 1
     scene.wenv.bounce_light = True
     notes = plan_of(scene, plane).notes
     assert any("1 instance(s) or curve object(s) block light but send none back" in n for n in notes), notes
