@@ -379,17 +379,19 @@ class Evaluator:
                                            color=colour, progress=self.progress, **kw)[1 if colour else 0])
 
     def _ShaderNodeTexVoronoi(self, node, output, depth):
-        if output.identifier not in ("Distance", "Color", "Radius"):
-            raise Unsupported(f"'{node.name}''s {output.name} output")
+        which = output.identifier
         kw = self._procedural_inputs(node, depth, None, VORONOI_INPUTS)
         dims = int(node.voronoi_dimensions[0])
         points, reduce = self.points(_input(node, "Vector"), depth) if dims > 1 else self._no_points()
-        colour = output.identifier == "Color"
+        colour, position = which == "Color", which in ("Position", "W")
         if self.checking:
-            return np.zeros((self.count, 3) if colour else self.count, np.float32)
-        return reduce(engine.voronoi_texture(points, dimensions=dims, feature=node.feature, distance=node.distance,
-                                             normalize=node.normalize, color=colour, progress=self.progress,
-                                             **kw)[1 if colour else 0])
+            return np.zeros((self.count, 3) if which in ("Color", "Position") else self.count, np.float32)
+        got = engine.voronoi_texture(points, dimensions=dims, feature=node.feature, distance=node.distance,
+                                     normalize=node.normalize, color=colour, position=position, progress=self.progress,
+                                     **kw)
+        if position:  # the cell's point, (x, y, z, W)
+            return reduce(np.ascontiguousarray(got[2][:, :3] if which == "Position" else got[2][:, 3]))
+        return reduce(got[1 if colour else 0])
 
     def _ShaderNodeTexWhiteNoise(self, node, output, depth):
         _identity_mapping(node)

@@ -148,6 +148,12 @@ NODE_CASES = [
     ("Color", dict(distance="CHEBYCHEV", voronoi_dimensions="4D", W=0.3)),
     ("Distance", dict(feature="F2", voronoi_dimensions="1D", W=2.7)),
     ("Distance", dict(feature="DISTANCE_TO_EDGE", voronoi_dimensions="2D", Randomness=0.5)),
+    ("Position", dict()),
+    ("Position", dict(feature="F2", distance="MANHATTAN", Detail=2.5, Roughness=0.6)),
+    ("Position", dict(feature="SMOOTH_F1", Smoothness=0.5, Randomness=0.8)),
+    ("Position", dict(voronoi_dimensions="2D", Detail=1.0)),
+    ("W", dict(voronoi_dimensions="4D", W=0.6, feature="SMOOTH_F1", Smoothness=0.3)),
+    ("W", dict(voronoi_dimensions="1D", W=1.7, Detail=2.0)),
 )] + [
     ("ShaderNodeTexBrick", "Color", lambda n, m: _set(n, Scale=2.0, Bias=0.2, Color1=(0.8, 0.3, 0.2, 1.0),
                                                       Mortar=(0.9, 0.9, 0.85, 1.0), **{"Mortar Smooth": 0.3})),
@@ -506,8 +512,9 @@ def test_bad_voronoi_input_is_named():
         wenv.voronoi_texture(points, dimensions=0)
     with pytest.raises(wenv.CancelledError):
         wenv.voronoi_texture(np.zeros((10000, 3), np.float32), progress=lambda f: True)
-    distance, colour = wenv.voronoi_texture(points)
-    alone, none = wenv.voronoi_texture(points, color=False)
+    distance, colour, no_position = wenv.voronoi_texture(points)
+    alone, none, _ = wenv.voronoi_texture(points, color=False)
+    assert no_position is None
     assert none is None and np.array_equal(alone, distance) and colour.shape == (300, 3)
 
 

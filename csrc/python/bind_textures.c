@@ -54,25 +54,32 @@ static int get_w(PyObject *w_obj, Py_ssize_t n, Py_buffer *view, PyObject **held
     return 0;
 }
 
-/* A texture of a value and a colour per point, as the core computes it. */
+/* A texture of a value and a colour per point (and a position: the Voronoi's cell), as the core
+ * computes it. */
 typedef wenv_status (*texture_call)(const void *settings, const float *vectors, const float *w, float w0, size_t n,
-                                    float *value, float *colour, const wenv_progress *progress, wenv_error *err);
+                                    float *value, float *colour, float *position, const wenv_progress *progress,
+                                    wenv_error *err);
 
 static wenv_status noise_adapter(const void *settings, const float *vectors, const float *w, float w0, size_t n,
-                                 float *value, float *colour, const wenv_progress *progress, wenv_error *err)
+                                 float *value, float *colour, float *position, const wenv_progress *progress,
+                                 wenv_error *err)
 {
+    (void)position;
     return wenv_noise_texture(settings, vectors, w, w0, n, value, colour, progress, err);
 }
 
 static wenv_status voronoi_adapter(const void *settings, const float *vectors, const float *w, float w0, size_t n,
-                                   float *value, float *colour, const wenv_progress *progress, wenv_error *err)
+                                   float *value, float *colour, float *position, const wenv_progress *progress,
+                                   wenv_error *err)
 {
-    return wenv_voronoi_texture(settings, vectors, w, w0, n, value, colour, progress, err);
+    return wenv_voronoi_texture(settings, vectors, w, w0, n, value, colour, position, progress, err);
 }
 
 static wenv_status white_noise_adapter(const void *settings, const float *vectors, const float *w, float w0, size_t n,
-                                       float *value, float *colour, const wenv_progress *progress, wenv_error *err)
+                                       float *value, float *colour, float *position, const wenv_progress *progress,
+                                       wenv_error *err)
 {
+    (void)position;
     return wenv_white_noise_texture(*(const int *)settings, vectors, w, w0, n, value, colour, progress, err);
 }
 
@@ -102,43 +109,49 @@ typedef struct {
     const float *vectors, *w;
     float w0;
     size_t n;
-    float *value, *colour;
+    float *value, *colour, *position;
 } texture_work;
 
 static wenv_status run_texture_work(void *ctx, const wenv_progress *p, wenv_error *err)
 {
     texture_work *t = ctx;
-    return t->call(t->settings, t->vectors, t->w, t->w0, t->n, t->value, t->colour, p, err);
+    return t->call(t->settings, t->vectors, t->w, t->w0, t->n, t->value, t->colour, t->position, p, err);
 }
 
-/* (value (n,), colour (n, 3) or None) of `call` at the vectors and W given, the GIL released. */
+/* (value (n,), colour (n, 3) or None) of `call` at the vectors and W given, the GIL released; with
+ * want_position 0 or 1 a third, (n, 4) or None: the Voronoi's cell. */
 static PyObject *run_texture(texture_call call, const void *settings, PyObject *v_obj, PyObject *w_obj,
-                             int want_colour, PyObject *progress_obj)
+                             int want_colour, int want_position, PyObject *progress_obj)
 {
     if (wenv_py_check_progress(progress_obj) < 0)
         return NULL;
     Py_buffer vb, wb;
-    PyObject *v_held, *w_held = NULL, *value = NULL, *colour = NULL;
+    PyObject *v_held, *w_held = NULL, *value = NULL, *colour = NULL, *position = NULL;
     int w_array;
     double w0;
     if (get_vectors(v_obj, &vb, &v_held) < 0)
         return NULL;
-    Py_ssize_t n = vb.shape[0], shape[2] = {vb.shape[0], 3};
-    float *value_out, *colour_out = NULL;
+    Py_ssize_t n = vb.shape[0], shape[2] = {vb.shape[0], 3}, shape4[2] = {vb.shape[0], 4};
+    float *value_out, *colour_out = NULL, *position_out = NULL;
     if (get_w(w_obj, n, &wb, &w_held, &w_array, &w0) < 0 || !(value = wenv_py_new_float_array(1, &n, &value_out)) ||
-        (want_colour && !(colour = wenv_py_new_float_array(2, shape, &colour_out))))
+        (want_colour && !(colour = wenv_py_new_float_array(2, shape, &colour_out))) ||
+        (want_position > 0 && !(position = wenv_py_new_float_array(2, shape4, &position_out))))
         goto fail;
     texture_work work = {call, settings, vb.buf, w_array ? wb.buf : NULL, (float)w0, (size_t)n, value_out,
-                         colour_out};
+                         colour_out, position_out};
     if (run_released(run_texture_work, &work, progress_obj) < 0)
         goto fail;
     wenv_py_release_array(&vb, &v_held);
     if (w_held)
         wenv_py_release_array(&wb, &w_held);
+    if (want_position >= 0)
+        return Py_BuildValue("(NNN)", value, colour ? colour : Py_NewRef(Py_None),
+                             position ? position : Py_NewRef(Py_None));
     return Py_BuildValue("(NN)", value, colour ? colour : Py_NewRef(Py_None));
 fail:
     Py_XDECREF(value);
     Py_XDECREF(colour);
+    Py_XDECREF(position);
     wenv_py_release_array(&vb, &v_held);
     if (w_held)
         wenv_py_release_array(&wb, &w_held);
@@ -169,7 +182,7 @@ static PyObject *noise_texture(PyObject *self, PyObject *args, PyObject *kwargs)
     if (found < 0)
         return NULL;
     s.type = (wenv_noise_type)found;
-    return run_texture(noise_adapter, &s, v_obj, w_obj, want_colour, progress_obj);
+    return run_texture(noise_adapter, &s, v_obj, w_obj, want_colour, -1, progress_obj);
 }
 
 typedef struct {
@@ -234,23 +247,24 @@ static PyObject *wave_texture(PyObject *self, PyObject *args, PyObject *kwargs)
 
 /* voronoi_texture(vectors, w=0, *, dimensions=3, feature='F1', distance='EUCLIDEAN', normalize=False,
  * scale=5, detail=0, roughness=0.5, lacunarity=2, smoothness=1, exponent=0.5, randomness=1, color=True,
- * progress=None) -> (distance (n,), color (n, 3) or None) */
+ * position=False, progress=None) -> (distance (n,), color (n, 3) or None, position (n, 4) or None) */
 static PyObject *voronoi_texture(PyObject *self, PyObject *args, PyObject *kwargs)
 {
     (void)self;
     static char *kwlist[] = {"vectors", "w", "dimensions", "feature", "distance", "normalize", "scale", "detail",
-                             "roughness", "lacunarity", "smoothness", "exponent", "randomness", "color", "progress",
-                             NULL};
+                             "roughness", "lacunarity", "smoothness", "exponent", "randomness", "color", "position",
+                             "progress", NULL};
     static const char *const FEATURES[] = {"F1", "F2", "SMOOTH_F1", "DISTANCE_TO_EDGE", "N_SPHERE_RADIUS"};
     static const char *const METRICS[] = {"EUCLIDEAN", "MANHATTAN", "CHEBYCHEV", "MINKOWSKI"};
     PyObject *v_obj, *w_obj = NULL, *progress_obj = Py_None;
     const char *feature = "F1", *metric = "EUCLIDEAN";
-    int dimensions = 3, normalize = 0, want_colour = 1;
+    int dimensions = 3, normalize = 0, want_colour = 1, want_position = 0;
     double scale = 5.0, detail = 0.0, roughness = 0.5, lacunarity = 2.0, smoothness = 1.0, exponent = 0.5;
     double randomness = 1.0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "O|O$isspdddddddpO:voronoi_texture", kwlist, &v_obj, &w_obj,
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "O|O$isspdddddddppO:voronoi_texture", kwlist, &v_obj, &w_obj,
                                      &dimensions, &feature, &metric, &normalize, &scale, &detail, &roughness,
-                                     &lacunarity, &smoothness, &exponent, &randomness, &want_colour, &progress_obj))
+                                     &lacunarity, &smoothness, &exponent, &randomness, &want_colour, &want_position,
+                                     &progress_obj))
         return NULL;
     int f = choice(feature, "feature", FEATURES, 5), m = f < 0 ? -1 : choice(metric, "distance", METRICS, 4);
     if (m < 0)
@@ -260,7 +274,7 @@ static PyObject *voronoi_texture(PyObject *self, PyObject *args, PyObject *kwarg
                                .detail = (float)detail, .roughness = (float)roughness,
                                .lacunarity = (float)lacunarity, .smoothness = (float)smoothness,
                                .exponent = (float)exponent, .randomness = (float)randomness};
-    return run_texture(voronoi_adapter, &s, v_obj, w_obj, want_colour, progress_obj);
+    return run_texture(voronoi_adapter, &s, v_obj, w_obj, want_colour, want_position, progress_obj);
 }
 
 /* white_noise_texture(vectors, w=0, *, dimensions=3, color=True, progress=None)
@@ -274,7 +288,7 @@ static PyObject *white_noise_texture(PyObject *self, PyObject *args, PyObject *k
     if (!PyArg_ParseTupleAndKeywords(args, kwargs, "O|O$ipO:white_noise_texture", kwlist, &v_obj, &w_obj,
                                      &dimensions, &want_colour, &progress_obj))
         return NULL;
-    return run_texture(white_noise_adapter, &dimensions, v_obj, w_obj, want_colour, progress_obj);
+    return run_texture(white_noise_adapter, &dimensions, v_obj, w_obj, want_colour, -1, progress_obj);
 }
 
 typedef struct {
@@ -351,13 +365,14 @@ static PyMethodDef texture_functions[] = {
     },
     {"voronoi_texture", (PyCFunction)(void (*)(void))voronoi_texture, METH_VARARGS | METH_KEYWORDS,
      "voronoi_texture(vectors, w=0, *, dimensions=3, feature='F1', distance='EUCLIDEAN', normalize=False, scale=5, "
-     "detail=0, roughness=0.5, lacunarity=2, smoothness=1, exponent=0.5, randomness=1, color=True, progress=None)"
-     "\n--\n\n"
+     "detail=0, roughness=0.5, lacunarity=2, smoothness=1, exponent=0.5, randomness=1, color=True, position=False, "
+     "progress=None)\n--\n\n"
      "Blender's Voronoi Texture node at points, as Cycles evaluates it: `vectors` (n, 3) float32 is its Vector "
      "input, `w` its W (a number or (n,) float32; read in 1D and 4D), feature and distance (the metric) its "
-     "settings, the rest its inputs.  Returns (distance (n,), color (n, 3) or None with color=False) float32: "
-     "the node's Distance (its Radius for 'N_SPHERE_RADIUS') and Color.  progress(fraction) may cancel "
-     "(wenv.CancelledError).",
+     "settings, the rest its inputs.  Returns (distance (n,), color (n, 3) or None with color=False, position "
+     "(n, 4) or None without position=True) float32: the node's Distance (its Radius for 'N_SPHERE_RADIUS'), "
+     "Color, and its Position and W as (x, y, z, W) (0 where the dimensions have none, and for the distance to "
+     "edge and the radius).  progress(fraction) may cancel (wenv.CancelledError).",
     },
     {"white_noise_texture", (PyCFunction)(void (*)(void))white_noise_texture, METH_VARARGS | METH_KEYWORDS,
      "white_noise_texture(vectors, w=0, *, dimensions=3, color=True, progress=None)\n--\n\n"

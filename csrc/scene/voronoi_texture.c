@@ -19,6 +19,7 @@
 typedef struct {
     float distance;
     float colour[3];
+    float position[4]; /* Cycles' float4: (x, y, z, W), 0 where the dimension has none */
 } octave_out;
 
 static inline float lerp(float a, float b, float t) { return a + t * (b - a); }
@@ -178,10 +179,25 @@ static void split(const float *coord, int d, float *cell, float *local)
     }
 }
 
+/* A point of d dimensions as Cycles' voronoi_position places it in (x, y, z, W). */
+static void as_position(const float *cell, const float *point, int d, float *out)
+{
+    float v[4] = {0.0f, 0.0f, 0.0f, 0.0f};
+    for (int k = 0; k < d; k++)
+        v[k] = cell[k] + point[k];
+    if (d == 1) {
+        out[0] = out[1] = out[2] = 0.0f;
+        out[3] = v[0];
+    } else {
+        memcpy(out, v, sizeof v);
+    }
+}
+
 /* F1 or F2 of one octave. */
 static octave_out nearest(const float *coord, int d, const wenv_voronoi_settings *s, int second)
 {
     float cell[4], local[4], offset[4], point[4], at[4], best_at[4] = {0}, next_at[4] = {0};
+    float best_point[4] = {0}, next_point[4] = {0};
     float d1 = FLT_MAX, d2 = FLT_MAX;
     split(coord, d, cell, local);
     for (int i = 0, count = cells_within(1, d); i < count; i++) {
@@ -191,22 +207,26 @@ static octave_out nearest(const float *coord, int d, const wenv_voronoi_settings
         if (dist < d1) {
             d2 = d1;
             memcpy(next_at, best_at, sizeof next_at);
+            memcpy(next_point, best_point, sizeof next_point);
             d1 = dist;
             memcpy(best_at, at, sizeof best_at);
+            memcpy(best_point, point, sizeof best_point);
         } else if (second && dist < d2) {
             d2 = dist;
             memcpy(next_at, at, sizeof next_at);
+            memcpy(next_point, point, sizeof next_point);
         }
     }
-    octave_out out = {second ? d2 : d1, {0}};
+    octave_out out = {second ? d2 : d1, {0}, {0}};
     cell_colour(second ? next_at : best_at, d, out.colour);
+    as_position(cell, second ? next_point : best_point, d, out.position);
     return out;
 }
 
 static octave_out smooth_f1(const float *coord, int d, const wenv_voronoi_settings *s, int want_colour)
 {
     float cell[4], local[4], offset[4], point[4], at[4], rgb[4];
-    float dist_sum = 0.0f, colour[3] = {0.0f, 0.0f, 0.0f}, h = -1.0f;
+    float dist_sum = 0.0f, colour[3] = {0.0f, 0.0f, 0.0f}, smooth_point[4] = {0.0f, 0.0f, 0.0f, 0.0f}, h = -1.0f;
     split(coord, d, cell, local);
     for (int i = 0, count = cells_within(2, d); i < count; i++) {
         neighbour(i, 2, d, offset);
@@ -216,6 +236,8 @@ static octave_out smooth_f1(const float *coord, int d, const wenv_voronoi_settin
         float correction = s->smoothness * h * (1.0f - h);
         dist_sum = lerp(dist_sum, dist, h) - correction;
         correction /= 1.0f + 3.0f * s->smoothness;
+        for (int k = 0; k < d; k++)
+            smooth_point[k] = lerp(smooth_point[k], point[k], h) - correction;
         if (!want_colour)
             continue;
         if (d < 3) /* from 3D on a cell's colour is its jitter's first three */
@@ -223,7 +245,8 @@ static octave_out smooth_f1(const float *coord, int d, const wenv_voronoi_settin
         for (int c = 0; c < 3; c++)
             colour[c] = lerp(colour[c], rgb[c], h) - correction;
     }
-    octave_out out = {dist_sum, {colour[0], colour[1], colour[2]}};
+    octave_out out = {dist_sum, {colour[0], colour[1], colour[2]}, {0}};
+    as_position(cell, smooth_point, d, out.position);
     return out;
 }
 
@@ -326,7 +349,7 @@ static octave_out fractal(const float *coord, int d, const wenv_voronoi_settings
                           int want_colour)
 {
     float amplitude = 1.0f, max_amplitude = 0.0f, scale = 1.0f, q[4];
-    octave_out out = {0.0f, {0.0f, 0.0f, 0.0f}};
+    octave_out out = {0.0f, {0.0f, 0.0f, 0.0f}, {0.0f, 0.0f, 0.0f, 0.0f}};
     int zero_input = s->detail == 0.0f || s->roughness == 0.0f;
     for (int i = 0; i <= (int)ceilf(s->detail); i++) {
         scaled(coord, scale, d, q);
@@ -341,6 +364,8 @@ static octave_out fractal(const float *coord, int d, const wenv_voronoi_settings
             out.distance += o.distance * amplitude;
             for (int c = 0; c < 3; c++)
                 out.colour[c] += o.colour[c] * amplitude;
+            for (int k = 0; k < 4; k++)
+                out.position[k] = lerp(out.position[k], o.position[k] / scale, amplitude);
             scale *= s->lacunarity;
             amplitude *= s->roughness;
         } else {
@@ -350,6 +375,9 @@ static octave_out fractal(const float *coord, int d, const wenv_voronoi_settings
                 out.distance = lerp(out.distance, out.distance + o.distance * amplitude, remainder);
                 for (int c = 0; c < 3; c++)
                     out.colour[c] = lerp(out.colour[c], out.colour[c] + o.colour[c] * amplitude, remainder);
+                for (int k = 0; k < 4; k++)
+                    out.position[k] =
+                        lerp(out.position[k], lerp(out.position[k], o.position[k] / scale, amplitude), remainder);
             }
         }
     }
@@ -358,6 +386,8 @@ static octave_out fractal(const float *coord, int d, const wenv_voronoi_settings
         for (int c = 0; c < 3; c++)
             out.colour[c] /= max_amplitude;
     }
+    for (int k = 0; k < 4; k++) /* back from the node's Scale (Cycles' safe_divide) */
+        out.position[k] = s->scale != 0.0f ? out.position[k] / s->scale : 0.0f;
     return out;
 }
 
@@ -394,7 +424,7 @@ typedef struct {
     const wenv_voronoi_settings *s;
     const float *vectors, *w;
     float w0;
-    float *distance, *colour;
+    float *distance, *colour, *position;
 } voronoi_job;
 
 /* One point's outputs, d a constant where this is inlined (the cell loops then unroll). */
@@ -410,7 +440,7 @@ static inline void voronoi_point(const voronoi_job *job, size_t i, const int d, 
         if (d == 4)
             p[3] = wi;
     }
-    octave_out out = {0.0f, {0.0f, 0.0f, 0.0f}};
+    octave_out out = {0.0f, {0.0f, 0.0f, 0.0f}, {0.0f, 0.0f, 0.0f, 0.0f}};
     if (s->feature == WENV_VORONOI_DISTANCE_TO_EDGE)
         out.distance = fractal_distance_to_edge(p, d, s, max_distance);
     else if (s->feature == WENV_VORONOI_N_SPHERE_RADIUS)
@@ -420,6 +450,8 @@ static inline void voronoi_point(const voronoi_job *job, size_t i, const int d, 
     job->distance[i] = out.distance;
     if (job->colour)
         memcpy(job->colour + 3 * i, out.colour, sizeof out.colour);
+    if (job->position)
+        memcpy(job->position + 4 * i, out.position, sizeof out.position);
 }
 
 /* A block of points at a constant dimension: GCC inlines the whole chain into each (flatten). */
@@ -467,8 +499,8 @@ static void voronoi_block(const void *ctx, size_t first, size_t end)
 }
 
 wenv_status wenv_voronoi_texture(const wenv_voronoi_settings *settings, const float *vectors, const float *w,
-                                 float w0, size_t n, float *distance, float *colour, const wenv_progress *progress,
-                                 wenv_error *err)
+                                 float w0, size_t n, float *distance, float *colour, float *position,
+                                 const wenv_progress *progress, wenv_error *err)
 {
     wenv_voronoi_settings s = *settings;
     if (s.dimensions < 1 || s.dimensions > 4)
@@ -488,7 +520,7 @@ wenv_status wenv_voronoi_texture(const wenv_voronoi_settings *settings, const fl
     s.roughness = fminf(fmaxf(s.roughness, 0.0f), 1.0f);
     s.randomness = fminf(fmaxf(s.randomness, 0.0f), 1.0f);
     s.smoothness = fminf(fmaxf(s.smoothness / 2.0f, 0.0f), 0.5f);
-    voronoi_job job = {&s, vectors, w, w0, distance, colour};
+    voronoi_job job = {&s, vectors, w, w0, distance, colour, position};
     if (wenv_progress_blocks(n, BLOCK, voronoi_block, &job, progress))
         return wenv_error_set(err, WENV_ERR_CANCELLED, "the Voronoi texture was cancelled");
     return WENV_OK;

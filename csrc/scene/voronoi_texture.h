@@ -37,10 +37,12 @@ typedef struct {
 
 /* At n points (`vectors`, n x 3; NULL for 1D; W w[i], or w0 where w is NULL): the node's Distance
  * (distance[i]; its Radius for N-Sphere Radius) and, where colour is not NULL, its Color
- * (colour[3 i ..]; black for the distance to edge and the radius, as Cycles gives them).  Reports
- * to `progress` (NULL: none), which may cancel.  ValueError for a setting out of range. */
+ * (colour[3 i ..]; black for the distance to edge and the radius, as Cycles gives them) and, where
+ * position is not NULL, the cell's point (position[4 i ..]: x, y, z and W, 0 where the dimensions
+ * have none, as are they for the distance to edge and the radius; its Position and W outputs).
+ * Reports to `progress` (NULL: none), which may cancel.  ValueError for a setting out of range. */
 wenv_status wenv_voronoi_texture(const wenv_voronoi_settings *settings, const float *vectors, const float *w,
-                                 float w0, size_t n, float *distance, float *colour, const wenv_progress *progress,
-                                 wenv_error *err);
+                                 float w0, size_t n, float *distance, float *colour, float *position,
+                                 const wenv_progress *progress, wenv_error *err);
 
 #endif
