@@ -1528,8 +1528,8 @@ def test_a_light_path_ray_length_is_the_distance_from_the_eye(scene):
 
 
 def test_a_texture_wenv_cannot_read_is_named_with_the_value_used(scene):
-    """A Base Color through a Voronoi Texture's Position, or a UV map the mesh lacks: the report says
-    so and the unlinked value is used."""
+    """A Base Color through a Sky Texture's Color (in an object's material), or a UV map the mesh
+    lacks: the report says so and the unlinked value is used."""
     env_world(scene, "sunset")
     image = bpy.data.images.new("flat", 8, 8, float_buffer=True)
     plane, mat = textured_plane(image)
@@ -1540,10 +1540,10 @@ def test_a_texture_wenv_cannot_read_is_named_with_the_value_used(scene):
     plan = plan_of(scene, plane)
     assert "base_color" not in plan.items[0][1].inputs
     assert any("no UV map 'no such map'" in note and "unlinked value is used" in note for note in plan.notes)
-    cells = tree.nodes.new("ShaderNodeTexVoronoi")
-    tree.links.new(cells.outputs["Position"], tree.nodes["Image Texture"].inputs["Vector"])
+    sky = tree.nodes.new("ShaderNodeTexSky")
+    tree.links.new(sky.outputs["Color"], tree.nodes["Image Texture"].inputs["Vector"])
     notes = materials.principled_notes(mat)
-    assert any("'Base Color' is linked" in n and "'Voronoi Texture''s Position" in n and "(0.8, 0.2, 0.1) is used"
+    assert any("'Base Color' is linked" in n and "'Sky Texture'" in n and "(0.8, 0.2, 0.1) is used"
                in n for n in notes), notes
 
 
