@@ -2560,19 +2560,23 @@ def test_missing_measured_brdf_file_is_named(scene, tmp_path):
 # Live mode, frame changes, precomputation
 
 
+def settled(session):
+    """What the modal timer does over a few ticks: start the worker, then write its result.
+    (whether the first tick started nothing, whether the last wrote colours)"""
+    started = session.tick(bpy.context)
+    session.wait(60)
+    return (started, session.tick(bpy.context))
+
+
 def test_live_session_reshades_on_changes_only(scene):
     env_world(scene, "sunset")
     obj = add_monkey()
     mat = set_material(obj)
     scene.wenv.view_source = "CAMERA"
     session = live.LiveSession([obj.name])
-    ctx = bpy.context
 
     def settle():
-        """What the modal timer does over a few ticks: start the worker, then write its result."""
-        started = session.tick(ctx)
-        session.wait(60)
-        return (started, session.tick(ctx))
+        return settled(session)
 
     assert settle() == (False, True) and ATTR in obj.data.color_attributes
     assert settle() == (False, False)  # nothing changed: no work
@@ -2638,12 +2642,9 @@ def test_camera_and_window_coordinates_follow_the_camera(scene):
 
     scene.wenv.view_source = "CAMERA"
     session = live.LiveSession([obj.name])
-    ctx = bpy.context
 
     def settle():
-        started = session.tick(ctx)
-        session.wait(60)
-        return (started, session.tick(ctx))
+        return settled(session)
 
     def turn():
         cam.rotation_euler.z += 0.05
@@ -2677,12 +2678,9 @@ def test_live_session_reshades_when_what_shadows_it_changes(scene):
     scene.wenv.shadows, scene.wenv.view_source = True, "CAMERA"
     session = live.LiveSession([plane.name])
     live.LiveState.session = session  # (the depsgraph handler tells the registered session)
-    ctx = bpy.context
 
     def settle():
-        started = session.tick(ctx)
-        session.wait(60)
-        return (started, session.tick(ctx))
+        return settled(session)
     try:
         assert settle() == (False, True)
         assert settle() == (False, False)  # (its own colours, written, are no change)
@@ -3181,9 +3179,7 @@ def test_live_mode_shades_what_an_undo_restores(scene):
     live.LiveState.session = session  # where the undo handler finds it
 
     def settle():
-        started = session.tick(bpy.context)
-        session.wait(60)
-        return (started, session.tick(bpy.context))
+        return settled(session)
 
     try:
         assert settle() == (False, True)
