@@ -627,9 +627,11 @@ class Evaluator:
         return np.cross(n, unit_rows(np.cross(t, n))).astype(np.float32)
 
     def _ShaderNodeAmbientOcclusion(self, node, output, depth):
-        for name in ("Normal", "Distance"):
-            if node.inputs[name].is_linked:
-                raise Unsupported(f"'{node.name}''s {name}, linked")
+        if node.inputs["Normal"].is_linked:
+            raise Unsupported(f"'{node.name}''s Normal, linked")
+        distance = constant_value(node.inputs["Distance"])
+        if distance is None:
+            raise Unsupported(f"'{node.name}''s Distance, linked to values that vary from point to point")
         if self._ambient is None:
             if not self.checking:
                 raise Unsupported(f"'{node.name}', which casts rays: read into a material's inputs and factors, "
@@ -637,8 +639,7 @@ class Evaluator:
             share = np.ones(self.count, np.float32)
         else:
             share = self._ambient(self._coordinates("WORLD", node=node)[0], self._coordinates("NORMAL", node=node)[0],
-                                  float(node.inputs["Distance"].default_value), node.inside, node.only_local,
-                                  node.samples)
+                                  distance, node.inside, node.only_local, node.samples)
         if output.identifier == "AO":
             return share
         return self.colour(node.inputs["Color"], depth) * share[:, None]
@@ -1632,6 +1633,20 @@ def one_point(texture, checking=False):
     colour there, or (1, 4) with its alpha (what a socket reads without a mesh: the panel's checks, the glossmeter's means)."""
     return Evaluator(1, lambda uv_map: (np.zeros((1, 2), np.float32), np.ones(1, np.float32), np.zeros(1, np.int64)),
                      lambda node, uv, footprint, rows: texture(node), checking)
+
+
+def constant_value(socket):
+    """The value of `socket` where it is the same at every point: its unlinked value, or what nodes
+    that read nothing varying over a mesh give it (a Value node, Math on such values); None where they
+    read a texture, coordinates or the mesh, or wenv does not evaluate them."""
+    if not socket.is_linked:
+        return float(socket.default_value)
+    ev = one_point(lambda node: np.zeros((1, 3), np.float32))
+    try:
+        got = ev.value(socket)
+    except (Unsupported, NeedsMesh):
+        return None
+    return None if ev.textures or ev.spaces or not np.isfinite(got[0]) else float(got[0])
 
 
 def check(principled_socket, groups=()):

@@ -742,8 +742,9 @@ AT_VERTICES = "is read at the vertices: detail finer than the mesh is lost"
 
 class NormalChain:
     """What bends a Principled BSDF's Normal, as wenv reads it: a Normal Map node (`map`, a Source,
-    with `map_strength`) and/or a Bump node over it (`bump`, the node, with its unlinked Strength
-    and Distance, Distance negated when inverted); or a Bevel node (`bevel`, with its unlinked
+    with `map_strength`) and/or a Bump node over it (`bump`, the node, with its Strength and
+    Distance, Distance negated when inverted: unlinked, or the same at every point,
+    nodes.constant_value); or a Bevel node (`bevel`, with its unlinked
     Radius, or its Radius socket where linked: read at the rows)."""
 
     __slots__ = ("map", "map_strength", "bump", "bump_strength", "distance", "bevel", "bevel_radius")
@@ -762,23 +763,25 @@ def _normal_map(node, chain):
     """Reads a Normal Map node into chain; None, or why it is not read."""
     if node.space not in NORMAL_MAP_SPACES:
         return f"'{node.name}' in {node.space.lower().replace('_', ' ')} space, which wenv does not read yet"
-    if node.inputs["Strength"].is_linked:
-        return f"'{node.name}', whose Strength is linked"
+    strength = nodes.constant_value(node.inputs["Strength"])
+    if strength is None:
+        return f"'{node.name}', whose Strength is linked to values that vary from point to point"
     tex = world.source_node(node.inputs["Color"])
     if tex is None or tex.bl_idname != "ShaderNodeTexImage" or tex.image is None or tex.projection != "FLAT":
         return f"'{node.name}', whose Color is not an Image Texture wenv reads"
     if world.source_node(tex.inputs["Vector"]) is not None or tex.image.source not in nodes.IMAGE_SOURCES:
         return f"'{tex.name}', whose Vector or image source wenv does not read yet"
     chain.map = Source(tex, node.uv_map or None, node.space)
-    chain.map_strength = max(float(node.inputs["Strength"].default_value), 0.0)
+    chain.map_strength = max(strength, 0.0)
     return None
 
 
 def _bump(node, chain):
     """Reads a Bump node (and a Normal Map feeding its Normal) into chain; None, or why not."""
-    linked = [name for name in ("Strength", "Distance") if node.inputs[name].is_linked]
-    if linked:
-        return f"'{node.name}', whose {linked[0]} is linked"
+    strength, distance = (nodes.constant_value(node.inputs[name]) for name in ("Strength", "Distance"))
+    if strength is None or distance is None:
+        return (f"'{node.name}', whose {'Strength' if strength is None else 'Distance'} is linked to values that "
+                "vary from point to point")
     if node.inputs["Height"].is_linked:
         read, why = nodes.check(node.inputs["Height"])
         if read is None:
@@ -792,8 +795,8 @@ def _bump(node, chain):
         if why is not None:
             return why
     chain.bump = node
-    chain.bump_strength = max(float(node.inputs["Strength"].default_value), 0.0)
-    chain.distance = float(node.inputs["Distance"].default_value) * (-1.0 if node.invert else 1.0)
+    chain.bump_strength = max(strength, 0.0)
+    chain.distance = distance * (-1.0 if node.invert else 1.0)
     return None
 
 

@@ -1613,6 +1613,25 @@ def test_a_normal_map_bends_the_shading_normals(scene):
     normal_map.inputs["Strength"].default_value = 0.0
     assert shade_op(view="CAMERA") == {"FINISHED"}
     np.testing.assert_allclose(attribute(plane)[1], shader.shade_mesh(p, n, eye), rtol=1e-4, atol=1e-5)
+    # a Strength from nodes that give it one value everywhere (a Value node, through Math) is read;
+    # one that varies from point to point is named, and the map not read
+    normal_map.inputs["Strength"].default_value = 0.7
+    value, half = tree.nodes.new("ShaderNodeValue"), tree.nodes.new("ShaderNodeMath")
+    value.outputs[0].default_value, half.operation, half.inputs[1].default_value = 0.0, "MULTIPLY", 0.5
+    tree.links.new(value.outputs[0], half.inputs[0])
+    tree.links.new(half.outputs[0], normal_map.inputs["Strength"])
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    np.testing.assert_allclose(attribute(plane)[1], shader.shade_mesh(p, n, eye), rtol=1e-4, atol=1e-5)
+    value.outputs[0].default_value = 2.0  # (a Strength of 1)
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    np.testing.assert_allclose(attribute(plane)[1],
+                               shader.shade_mesh(p, np.tile(bent, (len(p), 1)), eye, smooth_normals=n), rtol=1e-4,
+                               atol=1e-5)
+    split = tree.nodes.new("ShaderNodeSeparateXYZ")
+    tree.links.new(tree.nodes.new("ShaderNodeNewGeometry").outputs["Position"], split.inputs[0])
+    tree.links.new(split.outputs["X"], half.inputs[0])
+    assert any("Strength is linked to values that vary from point to point" in note
+               for note in materials.principled_notes(mat))
 
 
 def test_a_normal_map_on_a_face_of_many_corners(scene):
@@ -1744,8 +1763,16 @@ def test_a_bump_node_tilts_the_normals_against_its_heights_gradient(scene, inver
     assert "'Normal' from a Bump node is read at the vertices: detail finer than the mesh is lost" in \
         materials.principled_notes(mat)
     bump.inputs["Strength"].default_value = 0.0
-    data = plan_of(scene, plane).items[0][1]
-    np.testing.assert_allclose(data.shading_normals, np.tile(n, (data.count, 1)), atol=1e-5)
+    flat = plan_of(scene, plane).items[0][1]
+    np.testing.assert_allclose(flat.shading_normals, np.tile(n, (flat.count, 1)), atol=1e-5)
+    # Distance and Strength from Value nodes: as their values unlinked
+    for name, v in (("Distance", 0.5), ("Strength", 0.7)):
+        value = tree.nodes.new("ShaderNodeValue")
+        value.outputs[0].default_value = v
+        bump.inputs[name].default_value = 0.1
+        tree.links.new(value.outputs[0], bump.inputs[name])
+    linked = plan_of(scene, plane).items[0][1]
+    np.testing.assert_array_equal(linked.shading_normals, data.shading_normals)
 
 
 def test_a_bump_node_over_a_normal_map_and_what_it_does_not_read(scene):

@@ -576,12 +576,28 @@ def test_bevel_reads_as_cycles_renders_it(grid, radius, linked, flat):
 
 
 def test_what_is_not_read_is_named(grid):
-    """wenv's own shading is read as no attribute, and said so; an Ambient Occlusion node's linked
-    Distance is named."""
-    def linked_distance(node):
-        node.id_data.links.new(node.id_data.nodes.new("ShaderNodeValue").outputs[0], node.inputs["Distance"])
-    with pytest.raises(nodes.Unsupported, match="Distance, linked"):
-        grid("ShaderNodeAmbientOcclusion", "AO", linked_distance)
+    """wenv's own shading is read as no attribute, and said so; an Ambient Occlusion node's Distance
+    linked to a value that varies from point to point is named, one from a Value node read as that
+    value."""
+    def varying_distance(node):
+        tree = node.id_data
+        split = tree.nodes.new("ShaderNodeSeparateXYZ")
+        tree.links.new(tree.nodes.new("ShaderNodeNewGeometry").outputs["Position"], split.inputs[0])
+        tree.links.new(split.outputs["X"], node.inputs["Distance"])
+    with pytest.raises(nodes.Unsupported, match="Distance, linked to values that vary"):
+        grid("ShaderNodeAmbientOcclusion", "AO", varying_distance)
+
+    def value_distance(node):
+        value = node.id_data.nodes.new("ShaderNodeValue")
+        value.outputs[0].default_value = 0.8
+        node.id_data.links.new(value.outputs[0], node.inputs["Distance"])
+
+    def plain_distance(node):
+        node.inputs["Distance"].default_value = 0.8
+    _, from_value, _ = grid("ShaderNodeAmbientOcclusion", "AO", value_distance)
+    _, plain, _ = grid("ShaderNodeAmbientOcclusion", "AO", plain_distance)
+    np.testing.assert_array_equal(from_value, plain)
+    assert np.ptp(plain) > 0.1
     mesh = bpy.data.meshes["Grid"]
     meshes.write_colors(mesh, "POINT", np.ones((len(mesh.vertices), 3), np.float32))
     try:
