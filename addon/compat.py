@@ -7,6 +7,8 @@ place: the rest of the add-on asks here rather than testing versions or attribut
   normalize came with 4.5 (their absence is a light of its colour, exposure 0, normalized).
 - The Principled BSDF's sockets a version lacks (Diffuse Roughness before 4.3) read as the node's
   default in the versions that have it (materials.principled_inputs).
+- The Voronoi Texture hashes its 2D to 4D cells by PCG from 5.0, by lookup3 before: each version's
+  pattern is its own (`VORONOI_CELL_HASH`).
 - Custom normals: from 5.0 a mesh keeps them as a corner attribute of vectors, `custom_normal`,
   set directly; before, encoded in each corner's normal space by `normals_split_custom_set`.
 - Blender as a Python module (bpy from PyPI) 4.2 and 4.5 crash or hang when the interpreter exits
@@ -18,6 +20,7 @@ import atexit
 import bpy
 
 NODES_ALWAYS_ON = bpy.app.version >= (5, 0, 0)
+VORONOI_CELL_HASH = "PCG" if bpy.app.version >= (5, 0, 0) else "LOOKUP3"
 
 
 def new_node_material(name):

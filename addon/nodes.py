@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from . import engine, world
+from . import compat, engine, world
 
 # How deep a chain may go: a loop of links (which Blender marks invalid, but a script may leave) ends
 # here rather than in Python's recursion limit.
@@ -388,7 +388,7 @@ class Evaluator:
             return np.zeros((self.count, 3) if which in ("Color", "Position") else self.count, np.float32)
         got = engine.voronoi_texture(points, dimensions=dims, feature=node.feature, distance=node.distance,
                                      normalize=node.normalize, color=colour, position=position, progress=self.progress,
-                                     **kw)
+                                     cell_hash=compat.VORONOI_CELL_HASH, **kw)
         if position:  # the cell's point, (x, y, z, W)
             return reduce(np.ascontiguousarray(got[2][:, :3] if which == "Position" else got[2][:, 3]))
         return reduce(got[1 if colour else 0])

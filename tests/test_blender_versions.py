@@ -1,6 +1,7 @@
 """The add-on on every Blender the manifest names: its tests (tests/test_addon.py: register, shade,
 the panels, live mode, undo, save and reload; tests/test_addon_install.py: install from the built
-zip into a fresh user folder) run on each LTS release in its own environment, made by
+zip into a fresh user folder; tests/test_procedural_textures.py: the textures against that
+release's Cycles) run on each LTS release in its own environment, made by
 scripts/blender_versions.sh (scripts/setup.sh runs it).  The newest Blender runs the whole suite in
 .venv.  The zip is built once, by the main environment (it is one for every Blender), and the
 releases run at the same time, each in its own process."""
@@ -14,7 +15,8 @@ from tests.helpers.blender_versions import exits_cleanly
 from tests.helpers.extension_zip import build_extension_zip
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-ADDON_TESTS = ["tests/test_addon.py", "tests/test_addon_install.py"]
+# and the procedural textures against each release's Cycles (the Voronoi's cells hashed otherwise before 5.0)
+ADDON_TESTS = ["tests/test_addon.py", "tests/test_addon_install.py", "tests/test_procedural_textures.py"]
 SERIES = ["4.2", "4.5"]
 
 

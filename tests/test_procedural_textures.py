@@ -179,6 +179,10 @@ NODE_CASES = [
      for g in ("LINEAR", "QUADRATIC", "EASING", "DIAGONAL", "SPHERICAL", "QUADRATIC_SPHERE", "RADIAL")]
 
 
+# (the nodes of this Blender: the Gabor Texture came with 4.3)
+NODE_CASES = [case for case in NODE_CASES if hasattr(bpy.types, case[0])]
+
+
 @pytest.mark.parametrize("kind, output, configure", NODE_CASES,
                          ids=[f"{k[13:]}-{o}-{i}" for i, (k, o, _) in enumerate(NODE_CASES)])
 def test_the_addon_reads_procedural_textures_as_cycles_renders_them(plane, kind, output, configure):
@@ -307,7 +311,9 @@ def test_colour_nodes_read_as_cycles_renders_them(plane, kind, output, configure
     _, _, _, render_node = plane
     cycles, ours = render_node(kind, output, configure)
     assert ours.shape == cycles.shape and ours.std() > 0.02
-    off = np.abs(cycles - ours).max(axis=1) > 1e-4
+    # (Cycles before 5.0 gives a wavelength's colour up to 1.8e-4 otherwise)
+    off = np.abs(cycles - ours).max(axis=1) > (3e-4 if kind == "ShaderNodeWavelength" and bpy.app.version < (5, 0, 0)
+                                               else 1e-4)
     assert off.sum() <= 3, (off.sum(), np.abs(cycles - ours).max())
 
 
@@ -412,7 +418,9 @@ def test_value_nodes_read_as_cycles_renders_them(plane, kind, output, configure)
     _, _, _, render_node = plane
     cycles, ours = render_node(kind, output, configure)
     assert ours.shape == cycles.shape and ours.std() > 0.02
-    off = np.abs(cycles - ours).max(axis=1) > 1e-4
+    # (Cycles before 5.0 gives a wavelength's colour up to 1.8e-4 otherwise)
+    off = np.abs(cycles - ours).max(axis=1) > (3e-4 if kind == "ShaderNodeWavelength" and bpy.app.version < (5, 0, 0)
+                                               else 1e-4)
     assert off.sum() <= 3, (off.sum(), np.abs(cycles - ours).max())
 
 
@@ -510,6 +518,14 @@ def test_bad_voronoi_input_is_named():
         wenv.voronoi_texture(points, randomness=float("nan"))
     with pytest.raises(ValueError, match="dimensions must be 1, 2, 3 or 4"):
         wenv.voronoi_texture(points, dimensions=0)
+    with pytest.raises(ValueError, match="cell_hash must be one of PCG"):
+        wenv.voronoi_texture(points, cell_hash="MD5")
+    # the cells of Blender before 5.0 (each release against its own Cycles above): 1D's the same
+    for dims in (1, 2, 3, 4):
+        same = np.array_equal(wenv.voronoi_texture(points, dimensions=dims, w=points[:, 0].copy())[0],
+                              wenv.voronoi_texture(points, dimensions=dims, w=points[:, 0].copy(),
+                                                   cell_hash="LOOKUP3")[0])
+        assert same == (dims == 1), dims
     with pytest.raises(wenv.CancelledError):
         wenv.voronoi_texture(np.zeros((10000, 3), np.float32), progress=lambda f: True)
     distance, colour, no_position = wenv.voronoi_texture(points)

@@ -253,27 +253,29 @@ static PyObject *voronoi_texture(PyObject *self, PyObject *args, PyObject *kwarg
     (void)self;
     static char *kwlist[] = {"vectors", "w", "dimensions", "feature", "distance", "normalize", "scale", "detail",
                              "roughness", "lacunarity", "smoothness", "exponent", "randomness", "color", "position",
-                             "progress", NULL};
+                             "cell_hash", "progress", NULL};
+    static const char *const CELL_HASHES[] = {"PCG", "LOOKUP3"};
     static const char *const FEATURES[] = {"F1", "F2", "SMOOTH_F1", "DISTANCE_TO_EDGE", "N_SPHERE_RADIUS"};
     static const char *const METRICS[] = {"EUCLIDEAN", "MANHATTAN", "CHEBYCHEV", "MINKOWSKI"};
     PyObject *v_obj, *w_obj = NULL, *progress_obj = Py_None;
-    const char *feature = "F1", *metric = "EUCLIDEAN";
+    const char *feature = "F1", *metric = "EUCLIDEAN", *cell_hash = "PCG";
     int dimensions = 3, normalize = 0, want_colour = 1, want_position = 0;
     double scale = 5.0, detail = 0.0, roughness = 0.5, lacunarity = 2.0, smoothness = 1.0, exponent = 0.5;
     double randomness = 1.0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "O|O$isspdddddddppO:voronoi_texture", kwlist, &v_obj, &w_obj,
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "O|O$isspdddddddppsO:voronoi_texture", kwlist, &v_obj, &w_obj,
                                      &dimensions, &feature, &metric, &normalize, &scale, &detail, &roughness,
                                      &lacunarity, &smoothness, &exponent, &randomness, &want_colour, &want_position,
-                                     &progress_obj))
+                                     &cell_hash, &progress_obj))
         return NULL;
     int f = choice(feature, "feature", FEATURES, 5), m = f < 0 ? -1 : choice(metric, "distance", METRICS, 4);
-    if (m < 0)
+    int h = m < 0 ? -1 : choice(cell_hash, "cell_hash", CELL_HASHES, 2);
+    if (h < 0)
         return NULL;
     wenv_voronoi_settings s = {.dimensions = dimensions, .feature = (wenv_voronoi_feature)f,
                                .metric = (wenv_voronoi_metric)m, .normalize = normalize, .scale = (float)scale,
                                .detail = (float)detail, .roughness = (float)roughness,
                                .lacunarity = (float)lacunarity, .smoothness = (float)smoothness,
-                               .exponent = (float)exponent, .randomness = (float)randomness};
+                               .exponent = (float)exponent, .randomness = (float)randomness, .lookup3_cells = h};
     return run_texture(voronoi_adapter, &s, v_obj, w_obj, want_colour, want_position, progress_obj);
 }
 
@@ -366,13 +368,14 @@ static PyMethodDef texture_functions[] = {
     {"voronoi_texture", (PyCFunction)(void (*)(void))voronoi_texture, METH_VARARGS | METH_KEYWORDS,
      "voronoi_texture(vectors, w=0, *, dimensions=3, feature='F1', distance='EUCLIDEAN', normalize=False, scale=5, "
      "detail=0, roughness=0.5, lacunarity=2, smoothness=1, exponent=0.5, randomness=1, color=True, position=False, "
-     "progress=None)\n--\n\n"
+     "cell_hash='PCG', progress=None)\n--\n\n"
      "Blender's Voronoi Texture node at points, as Cycles evaluates it: `vectors` (n, 3) float32 is its Vector "
      "input, `w` its W (a number or (n,) float32; read in 1D and 4D), feature and distance (the metric) its "
      "settings, the rest its inputs.  Returns (distance (n,), color (n, 3) or None with color=False, position "
      "(n, 4) or None without position=True) float32: the node's Distance (its Radius for 'N_SPHERE_RADIUS'), "
      "Color, and its Position and W as (x, y, z, W) (0 where the dimensions have none, and for the distance to "
-     "edge and the radius).  progress(fraction) may cancel (wenv.CancelledError).",
+     "edge and the radius).  cell_hash: how 2D to 4D cells are hashed, 'PCG' as Blender from 5.0, 'LOOKUP3' as "
+     "before.  progress(fraction) may cancel (wenv.CancelledError).",
     },
     {"white_noise_texture", (PyCFunction)(void (*)(void))white_noise_texture, METH_VARARGS | METH_KEYWORDS,
      "white_noise_texture(vectors, w=0, *, dimensions=3, color=True, progress=None)\n--\n\n"

@@ -118,24 +118,47 @@ static void pcg_unit(const float *c, int d, int dims, float *out)
         out[k] = (float)v[k] * (1.0f / (float)0x7FFFFFFFu);
 }
 
-/* The jitter of cell c's point, each component in [0, 1]. */
-static void cell_jitter(const float *c, int d, float *out)
+/* lookup3 of the cell's d coordinates followed by `extra` (the hashes' counter), or of them in the
+ * order `order` gives (NULL: as they are), into [0, 1]: Cycles' hash_floatN_to_float, by which
+ * Blender hashed every cell before 5.0 and still hashes a 1D one. */
+static float lookup3_of(const float *c, int d, float extra, const int *order)
 {
-    if (d == 1)
+    float k[4];
+    for (int i = 0; i < d; i++)
+        k[i] = c[order ? order[i] : i];
+    if (extra >= 0.0f)
+        k[d] = extra;
+    return wenv_lookup3_unit(k, extra >= 0.0f ? d + 1 : d);
+}
+
+/* The jitter of cell c's point, each component in [0, 1]: Cycles' hash_floatN_to_floatN before
+ * Blender 5.0 (`lookup3`), its signed PCG since (and lookup3 in 1D). */
+static void cell_jitter(const float *c, int d, int lookup3, float *out)
+{
+    static const int ROTATED[3][4] = {{3, 0, 1, 2}, {2, 3, 0, 1}, {1, 2, 3, 0}};
+    if (d == 1) {
         out[0] = wenv_lookup3_unit(c, 1);
-    else
+    } else if (!lookup3) {
         pcg_unit(c, d, d, out);
+    } else {
+        out[0] = lookup3_of(c, d, -1.0f, NULL);
+        for (int k = 1; k < d; k++) /* 2D: (x, y, 1); 3D: (x, y, z, 1), (x, y, z, 2); 4D: the rotations */
+            out[k] = d == 4 ? lookup3_of(c, 4, -1.0f, ROTATED[k - 1]) : lookup3_of(c, d, (float)k, NULL);
+    }
 }
 
 /* Cell c's colour. */
-static void cell_colour(const float *c, int d, float *rgb)
+static void cell_colour(const float *c, int d, int lookup3, float *rgb)
 {
-    if (d == 1) { /* hash_float_to_float3: (x), (x, 1), (x, 2) */
-        rgb[0] = wenv_lookup3_unit(c, 1);
-        for (int i = 1; i < 3; i++) {
-            float k[2] = {c[0], (float)i};
-            rgb[i] = wenv_lookup3_unit(k, 2);
-        }
+    static const int SHUFFLED[2][4] = {{2, 0, 3, 1}, {3, 2, 1, 0}};
+    if (d == 1 || (lookup3 && d < 4)) { /* hash_floatN_to_float3: (c), (c, 1), (c, 2) */
+        rgb[0] = lookup3_of(c, d, -1.0f, NULL);
+        for (int i = 1; i < 3; i++)
+            rgb[i] = lookup3_of(c, d, (float)i, NULL);
+    } else if (lookup3) { /* hash_float4_to_float3: c, (z, x, w, y), (w, z, y, x) */
+        rgb[0] = lookup3_of(c, 4, -1.0f, NULL);
+        for (int i = 1; i < 3; i++)
+            rgb[i] = lookup3_of(c, 4, -1.0f, SHUFFLED[i - 1]);
     } else {
         pcg_unit(c, d, 3, rgb);
     }
@@ -159,15 +182,15 @@ static int cells_within(int reach, int d)
 
 /* The point of the cell at `offset` from `cell`, in the cell's local frame, the cell itself and its
  * jitter (jitter NULL: not wanted). */
-static void cell_point(const float *cell, const float *offset, int d, float randomness, float *point, float *at,
-                       float *jitter_out)
+static void cell_point(const float *cell, const float *offset, int d, const wenv_voronoi_settings *s, float *point,
+                       float *at, float *jitter_out)
 {
     float mine[4], *jitter = jitter_out ? jitter_out : mine;
     for (int k = 0; k < d; k++)
         at[k] = cell[k] + offset[k];
-    cell_jitter(at, d, jitter);
+    cell_jitter(at, d, s->lookup3_cells, jitter);
     for (int k = 0; k < d; k++)
-        point[k] = offset[k] + jitter[k] * randomness;
+        point[k] = offset[k] + jitter[k] * s->randomness;
 }
 
 static void split(const float *coord, int d, float *cell, float *local)
@@ -202,7 +225,7 @@ static octave_out nearest(const float *coord, int d, const wenv_voronoi_settings
     split(coord, d, cell, local);
     for (int i = 0, count = cells_within(1, d); i < count; i++) {
         neighbour(i, 1, d, offset);
-        cell_point(cell, offset, d, s->randomness, point, at, NULL);
+        cell_point(cell, offset, d, s, point, at, NULL);
         float dist = metric_distance(point, local, d, s);
         if (dist < d1) {
             d2 = d1;
@@ -218,7 +241,7 @@ static octave_out nearest(const float *coord, int d, const wenv_voronoi_settings
         }
     }
     octave_out out = {second ? d2 : d1, {0}, {0}};
-    cell_colour(second ? next_at : best_at, d, out.colour);
+    cell_colour(second ? next_at : best_at, d, s->lookup3_cells, out.colour);
     as_position(cell, second ? next_point : best_point, d, out.position);
     return out;
 }
@@ -230,7 +253,7 @@ static octave_out smooth_f1(const float *coord, int d, const wenv_voronoi_settin
     split(coord, d, cell, local);
     for (int i = 0, count = cells_within(2, d); i < count; i++) {
         neighbour(i, 2, d, offset);
-        cell_point(cell, offset, d, s->randomness, point, at, rgb);
+        cell_point(cell, offset, d, s, point, at, rgb);
         float dist = metric_distance(point, local, d, s);
         h = h == -1.0f ? 1.0f : smoothstep01(0.5f + 0.5f * (dist_sum - dist) / s->smoothness);
         float correction = s->smoothness * h * (1.0f - h);
@@ -240,8 +263,8 @@ static octave_out smooth_f1(const float *coord, int d, const wenv_voronoi_settin
             smooth_point[k] = lerp(smooth_point[k], point[k], h) - correction;
         if (!want_colour)
             continue;
-        if (d < 3) /* from 3D on a cell's colour is its jitter's first three */
-            cell_colour(at, d, rgb);
+        if (d < 3 || (d == 4 && s->lookup3_cells)) /* else a cell's colour is its jitter's first three */
+            cell_colour(at, d, s->lookup3_cells, rgb);
         for (int c = 0; c < 3; c++)
             colour[c] = lerp(colour[c], rgb[c], h) - correction;
     }
@@ -265,7 +288,7 @@ static float distance_to_edge(const float *coord, int d, const wenv_voronoi_sett
     int count = cells_within(1, d);
     for (int i = 0; i < count; i++) {
         neighbour(i, 1, d, offset);
-        cell_point(cell, offset, d, s->randomness, point, at, NULL);
+        cell_point(cell, offset, d, s, point, at, NULL);
         float v[4], dd = 0.0f;
         for (int k = 0; k < d; k++) {
             v[k] = point[k] - local[k];
@@ -279,7 +302,7 @@ static float distance_to_edge(const float *coord, int d, const wenv_voronoi_sett
     least = FLT_MAX;
     for (int i = 0; i < count; i++) {
         neighbour(i, 1, d, offset);
-        cell_point(cell, offset, d, s->randomness, point, at, NULL);
+        cell_point(cell, offset, d, s, point, at, NULL);
         float v[4], perp[4], pp = 0.0f;
         for (int k = 0; k < d; k++) {
             v[k] = point[k] - local[k];
@@ -304,7 +327,7 @@ static float n_sphere_radius(const float *coord, int d, const wenv_voronoi_setti
     int count = cells_within(1, d);
     for (int i = 0; i < count; i++) {
         neighbour(i, 1, d, offset);
-        cell_point(cell, offset, d, s->randomness, point, at, NULL);
+        cell_point(cell, offset, d, s, point, at, NULL);
         float dist = euclidean(point, local, d);
         if (dist < least) {
             least = dist;
@@ -319,7 +342,7 @@ static float n_sphere_radius(const float *coord, int d, const wenv_voronoi_setti
         neighbour(i, 1, d, offset);
         for (int k = 0; k < d; k++)
             offset[k] += closest_offset[k];
-        cell_point(cell, offset, d, s->randomness, point, at, NULL);
+        cell_point(cell, offset, d, s, point, at, NULL);
         float dist = euclidean(closest, point, d);
         if (dist < least) {
             least = dist;

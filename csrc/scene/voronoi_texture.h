@@ -33,6 +33,7 @@ typedef struct {
     wenv_voronoi_metric metric;
     int normalize;
     float scale, detail, roughness, lacunarity, smoothness, exponent, randomness;
+    int lookup3_cells; /* hash 2D to 4D cells as Blender did before 5.0 (lookup3), not by PCG */
 } wenv_voronoi_settings;
 
 /* At n points (`vectors`, n x 3; NULL for 1D; W w[i], or w0 where w is NULL): the node's Distance
