@@ -9,6 +9,8 @@ place: the rest of the add-on asks here rather than testing versions or attribut
   default in the versions that have it (materials.principled_inputs).
 - The Voronoi Texture hashes its 2D to 4D cells by PCG from 5.0, by lookup3 before: each version's
   pattern is its own (`VORONOI_CELL_HASH`).
+- Bump Map Correction masks a bent diffuse closure's grazing light by a microfacet shadowing term
+  from 4.5, by Chiang et al.'s before (`BUMP_MAP_CORRECTION`).
 - Custom normals: from 5.0 a mesh keeps them as a corner attribute of vectors, `custom_normal`,
   set directly; before, encoded in each corner's normal space by `normals_split_custom_set`.
 - Blender as a Python module (bpy from PyPI) 4.2 and 4.5 crash or hang when the interpreter exits
@@ -21,6 +23,9 @@ import bpy
 
 NODES_ALWAYS_ON = bpy.app.version >= (5, 0, 0)
 VORONOI_CELL_HASH = "PCG" if bpy.app.version >= (5, 0, 0) else "LOOKUP3"
+# the bump terminator of a material's Bump Map Correction: Cycles' microfacet shadowing from 4.5,
+# Chiang et al.'s term before
+BUMP_MAP_CORRECTION = "MICROFACET" if bpy.app.version >= (4, 5, 0) else "CHIANG"
 
 
 def new_node_material(name):

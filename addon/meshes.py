@@ -29,8 +29,9 @@ class MeshData:
         self.inputs = dict(inputs or {})
         self.textured = {}
         # (n, 3) float32 world normals a normal map bends the shading to (textures.py), or None: the
-        # mesh's, which the shadows' rays keep; and whether Cycles' Bump Map Correction (the
-        # materials') masks the bent Lambertian part's grazing light
+        # mesh's, which the shadows' rays keep; and how Cycles' Bump Map Correction (the
+        # materials') masks the bent Lambertian part's grazing light (the core's bump_map_correction:
+        # False, or the Blender's term, compat.BUMP_MAP_CORRECTION)
         self.shading_normals = None
         self.bump_map_correction = True
         # per material slot of a mixture of shader nodes: each term's weight, (3,) or (n, 3)

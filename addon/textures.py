@@ -1469,7 +1469,9 @@ def read_shading_normals(obj, depsgraph, data, progress=None):
         # Cycles' own setting (on by default, and where Cycles is not loaded)
         corrections[mat.name] = bool(getattr(getattr(mat, "cycles", None), "use_bump_map_correction", True))
     # one call shades the object's bent rows: a mixture of settings is read as on, and named
-    data.bump_map_correction = not corrections or any(corrections.values())
+    # (the correction of the Blender running: its Cycles' microfacet term from 4.5, Chiang et al.'s before)
+    data.bump_map_correction = (compat.BUMP_MAP_CORRECTION if not corrections or any(corrections.values())
+                                else False)
     if len(set(corrections.values())) > 1:
         off = ", ".join(f"'{m}'" for m, on in sorted(corrections.items()) if not on)
         notes.append(f"'{obj.name}': Bump Map Correction is off for {off} but on for its other bent materials: "

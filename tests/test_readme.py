@@ -232,10 +232,11 @@ def test_occluders_block_runs():
 
 
 def test_bent_normals_block_runs():
-    """docs/python.md's bent plane under a white sky: the two shares it shows, Cycles' with its Bump
-    Map Correction and the cosine lobe's above the smooth horizon without."""
+    """docs/python.md's bent plane under a white sky: the three shares it shows, Cycles' with its Bump
+    Map Correction (Blender 4.5's and the earlier releases') and the cosine lobe's above the smooth
+    horizon without."""
     ns = {}
-    assert run_checked(readme_block(BENT), ns, "docs/python.md") == 2
+    assert run_checked(readme_block(BENT), ns, "docs/python.md") == 3
 
 
 def test_noise_block_runs():

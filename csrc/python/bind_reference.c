@@ -16,9 +16,9 @@ static PyObject *reference_with(PyObject *args, PyObject *kwargs, wenv_py_vertex
     PyObject *bounce_obj = Py_None, *colour_obj = Py_None;
     PyObject *lamps_obj = Py_None, *emit_obj = Py_None, *smooth_obj = Py_None;
     int correction = 1;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOO|OOOOO$OOOp:reference", kwlist, &env_obj, &mat_obj, &nobj,
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOO|OOOOO$OOOO&:reference", kwlist, &env_obj, &mat_obj, &nobj,
                                      &vobj, &progress_obj, &pobj, &occ_obj, &bounce_obj, &colour_obj, &lamps_obj,
-                                     &emit_obj, &smooth_obj, &correction))
+                                     &emit_obj, &smooth_obj, wenv_py_bump_correction, &correction))
         return NULL;
     if (bounce_obj != Py_None && occ_obj == Py_None) {
         PyErr_SetString(PyExc_ValueError, "bounce is read only with occluders (what blocks the light it fills in)");

@@ -636,9 +636,9 @@ static PyObject *shade_with(ShaderObject *self, PyObject *args, PyObject *kwargs
     PyObject *nobj, *vobj, *occ_obj = Py_None, *bounce_obj = NULL, *colour_obj = NULL, *hits_obj = NULL;
     PyObject *pos_obj = Py_None, *lamps_obj = Py_None, *emit_obj = Py_None, *smooth_obj = Py_None;
     int correction = 1;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|$OOOOOOOpO:shade", kwlist, &nobj, &vobj, &occ_obj, &bounce_obj,
-                                     &colour_obj, &pos_obj, &lamps_obj, &emit_obj, &smooth_obj, &correction,
-                                     &hits_obj))
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|$OOOOOOOO&O:shade", kwlist, &nobj, &vobj, &occ_obj, &bounce_obj,
+                                     &colour_obj, &pos_obj, &lamps_obj, &emit_obj, &smooth_obj,
+                                     wenv_py_bump_correction, &correction, &hits_obj))
         return NULL;
     Py_buffer nb, vb, bb[2] = {{0}, {0}}, pb = {0};
     size_t n, nvw;
@@ -726,8 +726,9 @@ static PyObject *diffuse_light_with(ShaderObject *self, PyObject *args, PyObject
     PyObject *nobj, *occ_obj = Py_None, *colour_obj = NULL;
     PyObject *pos_obj = Py_None, *lamps_obj = Py_None, *emit_obj = Py_None, *smooth_obj = Py_None;
     int correction = 1;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "O|$OOOOOOp:diffuse_light", kwlist, &nobj, &occ_obj, &colour_obj,
-                                     &pos_obj, &lamps_obj, &emit_obj, &smooth_obj, &correction))
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "O|$OOOOOOO&:diffuse_light", kwlist, &nobj, &occ_obj, &colour_obj,
+                                     &pos_obj, &lamps_obj, &emit_obj, &smooth_obj, wenv_py_bump_correction,
+                                     &correction))
         return NULL;
     if (!self->method->diffuse_light) {
         PyErr_Format(PyExc_ValueError, "method '%s' does not give the diffuse light: use a wavelet method",
@@ -928,9 +929,10 @@ static PyObject *shade_mesh_with(ShaderObject *self, PyObject *args, PyObject *k
     PyObject *lamps_obj = Py_None, *emit_obj = Py_None, *smooth_obj = Py_None;
     int cull = 0, correction = 1;
     size_t first = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO|$pOOOOOOOOOOpO:shade_mesh", kwlist, &pobj, &nobj, &eobj, &cull,
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO|$pOOOOOOOOOOO&O:shade_mesh", kwlist, &pobj, &nobj, &eobj, &cull,
                                      &vp_obj, &out_obj, &first_obj, &budget_obj, &occ_obj, &bounce_obj, &colour_obj,
-                                     &lamps_obj, &emit_obj, &smooth_obj, &correction, &hits_obj))
+                                     &lamps_obj, &emit_obj, &smooth_obj, wenv_py_bump_correction, &correction,
+                                     &hits_obj))
         return NULL;
     if (occ_obj == Py_None && (bounce_obj || (hits_obj && hits_obj != Py_None))) {
         PyErr_SetString(PyExc_ValueError, "bounce is read only with occlusion (what blocks the light it fills in)");

@@ -6,6 +6,8 @@
 #include <stdio.h>
 #include <string.h>
 
+#include "scene/bump_terminator.h"
+
 static void set_message(PyObject *type, const char *text)
 {
     PyObject *message = PyUnicode_DecodeUTF8(text, (Py_ssize_t)strlen(text), "backslashreplace");
@@ -355,6 +357,28 @@ int wenv_py_get_vertex_values(PyObject *obj, const char *name, size_t n, Py_buff
         return -1;
     }
     return 0;
+}
+
+int wenv_py_bump_correction(PyObject *obj, void *mode)
+{
+    int *out = mode;
+    if (PyUnicode_Check(obj)) {
+        const char *name = PyUnicode_AsUTF8(obj);
+        if (!name)
+            return 0;
+        if (strcmp(name, "MICROFACET") == 0 || strcmp(name, "CHIANG") == 0) {
+            *out = name[0] == 'M' ? WENV_BUMP_MICROFACET : WENV_BUMP_CHIANG;
+            return 1;
+        }
+        PyErr_Format(PyExc_ValueError, "bump_map_correction must be True, False, 'MICROFACET' or 'CHIANG', got '%s'",
+                     name);
+        return 0;
+    }
+    int truth = PyObject_IsTrue(obj);
+    if (truth < 0)
+        return 0;
+    *out = truth ? WENV_BUMP_MICROFACET : WENV_BUMP_NONE;
+    return 1;
 }
 
 wenv_progress wenv_py_progress(wenv_py_progress_bridge *bridge)

@@ -101,6 +101,9 @@ float *wenv_py_base_colours(PyObject *obj, size_t n);
 /* One float32 value per vertex (1-D, n of them) from `obj` named `name`: a view of its buffer into
  * *view (released by the caller), or -1 with TypeError/ValueError set. */
 int wenv_py_get_vertex_values(PyObject *obj, const char *name, size_t n, Py_buffer *view);
+/* An "O&" converter of bump_map_correction into a WENV_BUMP_* mode (int): True or 'MICROFACET'
+ * (Blender 4.5 on), 'CHIANG' (before), False or None; 0 with ValueError otherwise. */
+int wenv_py_bump_correction(PyObject *obj, void *mode);
 
 /* The inputs per vertex (principled_inputs.h's WENV_VERTEX_INPUTS) a call takes as keywords:
  * wenv_py_take_vertex_inputs takes them out of kwargs (the rest in `rest`, for PyArg_Parse...),

@@ -21,6 +21,15 @@ static double bend_alpha2(double cos_bend)
     return a2 < 1.0 ? a2 : 1.0;
 }
 
+/* Chiang, Li and Burley's term of g = cos(smooth, l) / (cos(bent, l) cos(bend)). */
+static double chiang(double ci, double cn, double cd)
+{
+    double g = cn * cd > 0.0 ? ci / (cn * cd) : 0.0;
+    if (g >= 1.0)
+        return 1.0;
+    return g > 0.0 ? (-g + 1.0) * g * g + g : 0.0;
+}
+
 double wenv_bump_diffuse_weight(const double n[3], const double ns[3], const double l[3], int correction)
 {
     double cos_sl = ns[0] * l[0] + ns[1] * l[1] + ns[2] * l[2];
@@ -29,8 +38,10 @@ double wenv_bump_diffuse_weight(const double n[3], const double ns[3], const dou
     if (cos_sl * cos_sn * cos_nl < 0.0)
         return 0.0;
     double ci = fabs(cos_sl), cd = fabs(cos_sn);
-    if (!correction || cd >= 1.0 || ci >= 1.0)
+    if (correction == WENV_BUMP_NONE || cd >= 1.0 || ci >= 1.0)
         return 1.0;
+    if (correction == WENV_BUMP_CHIANG)
+        return chiang(ci, fabs(cos_nl), cd);
     if (ci < 1e-6)
         return 0.0;
     return ggx_g1(bend_alpha2(cd), ci);
@@ -44,15 +55,18 @@ static double share_at(double cd, int correction, const double *x, const double 
     double sd = sqrt(fmax(0.0, 1.0 - cd * cd)), a2 = bend_alpha2(cd), sum = 0.0;
     for (int k = 0; k < QUAD_NODES; k++) {
         double t = 0.5 * M_PI * x[k], ct = cos(t), st = sin(t);
-        double a = cd * ct, b = sd * st, ring;
-        if (a >= b)
-            ring = 2.0 * M_PI * a;
-        else {
-            double phi0 = acos(-a / b);
-            ring = 2.0 * (a * phi0 + b * sin(phi0));
+        double a = cd * ct, b = sd * st, ring, phi0 = a >= b ? M_PI : acos(-a / b);
+        if (correction == WENV_BUMP_CHIANG && cd < 1.0) { /* the term turns with the azimuth too */
+            ring = 0.0;
+            for (int j = 0; j < QUAD_NODES; j++) {
+                double cn = a + b * cos(phi0 * x[j]);
+                ring += 2.0 * phi0 * w[j] * cn * chiang(ct, cn, cd);
+            }
+        } else {
+            ring = a >= b ? 2.0 * M_PI * a : 2.0 * (a * phi0 + b * sin(phi0));
+            ring *= correction == WENV_BUMP_MICROFACET && cd < 1.0 ? ggx_g1(a2, ct) : 1.0;
         }
-        double g = correction && cd < 1.0 ? ggx_g1(a2, ct) : 1.0;
-        sum += w[k] * 0.5 * M_PI * g * ring * st;
+        sum += w[k] * 0.5 * M_PI * ring * st;
     }
     return sum / M_PI;
 }

@@ -1,19 +1,24 @@
 /* Cycles' bump terminator: what a diffuse closure receives where a normal map or a Bump node bends
  * its normal n away from the surface's smooth normal ns.
  *
- * Why: Cycles (Blender 4.2+) rejects light from below the smooth surface's horizon and, with the
- * material's Bump Map Correction (on by default), masks light at grazing angles to it by GGX's G1 of
- * alpha^2 = min(1, tan^2(bend) / 8) (Conty Estevez, Lecocq and Stein 2019, "A Microfacet-Based
- * Shadowing Function to Solve the Bump Terminator Problem").  A bent diffuse closure then reflects
- * less than its normal alone says: 4.7 % less on average for the bumps of the textured scene under a
- * uniform sky, 12 % at a 30-degree bend.  Glossy closures keep their normal here. */
+ * Why: Cycles rejects light from below the smooth surface's horizon and, with the material's Bump
+ * Map Correction (on by default), masks light at grazing angles to it: from Blender 4.5 by GGX's G1
+ * of alpha^2 = min(1, tan^2(bend) / 8) (Conty Estevez, Lecocq and Stein 2019, "A Microfacet-Based
+ * Shadowing Function to Solve the Bump Terminator Problem"), before by Chiang, Li and Burley's
+ * 2019 term of g = cos(smooth, l) / (cos(bent, l) cos(bend)), -g^3 + g^2 + g below 1 ("Taming the
+ * Shadow Terminator").  A bent diffuse closure then reflects less than its normal alone says: 4.7 %
+ * less on average for the bumps of the textured scene under a uniform sky, 12 % at a 30-degree
+ * bend (17 % by Chiang's).  Glossy closures keep their normal here. */
 #ifndef WENV_BUMP_TERMINATOR_H
 #define WENV_BUMP_TERMINATOR_H
 
 #include <stddef.h>
 
+/* The correction a material's Bump Map Correction makes: none, Blender 4.5's, or the one before. */
+enum { WENV_BUMP_NONE = 0, WENV_BUMP_MICROFACET = 1, WENV_BUMP_CHIANG = 2 };
+
 /* Normals bent by a normal map or Bump node, with the smooth normals they were bent from (n x 3, one
- * per shaded vertex) and the material's Bump Map Correction. */
+ * per shaded vertex) and the material's Bump Map Correction (WENV_BUMP_*). */
 typedef struct {
     const float *smooth;
     int correction;
@@ -21,7 +26,7 @@ typedef struct {
 
 /* How much of light from unit direction l a diffuse closure of unit normal n on a surface of unit
  * smooth normal ns receives (its cosine with n aside), as Cycles' bump_shadowing_term: 0 from the
- * smooth surface's other side, else G1 of the bend (1 without correction). */
+ * smooth surface's other side, else the correction's (WENV_BUMP_*; 1 without one). */
 double wenv_bump_diffuse_weight(const double n[3], const double ns[3], const double l[3], int correction);
 
 /* The share of a uniform sky's light a bent diffuse closure receives, by the cosine of the bend. */
