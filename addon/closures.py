@@ -12,7 +12,7 @@ glossmeter, by the code that is proven against Cycles already.  Node groups are 
 Cycles flattens them."""
 import numpy as np
 
-from . import engine, nodes
+from . import compat, engine, nodes
 
 MAX_DEPTH = 64
 WHITE = (1.0, 1.0, 1.0)
@@ -93,7 +93,11 @@ def _unread_note(node, sockets):
 def _diffuse(node):
     inputs = _defaults() | {"base_color": _value(node.inputs["Color"]), "specular_ior_level": 0.0,
                             "diffuse_roughness": _value(node.inputs["Roughness"])}
-    return inputs, WHITE, _unread_note(node, ("Color", "Roughness", "Normal"))
+    notes = _unread_note(node, ("Color", "Roughness", "Normal"))
+    if compat.DIFFUSE_OREN_NAYAR_CLASSIC and (inputs["diffuse_roughness"] > 0.0 or node.inputs["Roughness"].is_linked):
+        notes.append(f"'{node.name}': its Roughness is shaded by the energy-preserving Oren-Nayar of Blender 4.3 on; "
+                     "this Blender's Cycles uses the classic one (4 % apart at Roughness 0.6)")
+    return inputs, WHITE, notes
 
 
 def _distribution(node, allowed=("GGX", "MULTI_GGX")):

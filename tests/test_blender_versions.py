@@ -1,6 +1,6 @@
 """The add-on on every Blender the manifest names: its tests (tests/test_addon.py: register, shade,
 the panels, live mode, undo, save and reload; tests/test_addon_install.py: install from the built
-zip into a fresh user folder; tests/test_procedural_textures.py: the textures against that
+zip into a fresh user folder; the node, texture, bump and shader-node comparisons against that
 release's Cycles) run on each LTS release in its own environment, made by
 scripts/blender_versions.sh (scripts/setup.sh runs it).  The newest Blender runs the whole suite in
 .venv.  The zip is built once, by the main environment (it is one for every Blender), and the
@@ -15,8 +15,12 @@ from tests.helpers.blender_versions import exits_cleanly
 from tests.helpers.extension_zip import build_extension_zip
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-# and the procedural textures against each release's Cycles (the Voronoi's cells hashed otherwise before 5.0)
-ADDON_TESTS = ["tests/test_addon.py", "tests/test_addon_install.py", "tests/test_procedural_textures.py"]
+# and what differs from release to release against each one's Cycles (the Voronoi's cells hashed
+# otherwise before 5.0, the bump terminator before 4.5, a rough Diffuse BSDF and the Metallic BSDF
+# before 4.3)
+ADDON_TESTS = ["tests/test_addon.py", "tests/test_addon_install.py", "tests/test_procedural_textures.py",
+               "tests/test_attributes.py", "tests/test_ngons_cycles.py", "tests/test_bump_cycles.py",
+               "tests/test_closures_cycles.py"]
 SERIES = ["4.2", "4.5"]
 
 

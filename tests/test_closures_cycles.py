@@ -11,7 +11,7 @@ import pytest
 import bpy  # noqa: E402  (installed by scripts/setup.sh; missing, the tests fail rather than skip)
 
 import wenv  # noqa: E402
-from addon import closures, engine  # noqa: E402
+from addon import closures, compat, engine  # noqa: E402
 from tests.helpers.cycles_sphere import SphereScene, halved_hdri  # noqa: E402
 from tests.helpers.blender_versions import node_material as new_node_material  # noqa: E402
 
@@ -84,12 +84,15 @@ def _add(tree, a, b):
     return node.outputs[0]
 
 
-@pytest.mark.parametrize("case", list(CASES))
+@pytest.mark.parametrize("case", [c for c in CASES if c != "metallic" or hasattr(bpy.types, "ShaderNodeBsdfMetallic")])
 def test_shader_nodes_match_cycles_within_its_noise(sphere, case):
+    """(The Metallic BSDF came with Blender 4.3; before it, a rough Diffuse BSDF is Cycles' classic
+    Oren-Nayar, which wenv names and shades as the energy-preserving one: 4 % apart here.)"""
     mat = node_material(CASES[case])
     sphere._use(mat)
     found, notes = closures.terms(mat)
-    assert found and not notes, notes
+    classic = case == "rough diffuse" and compat.DIFFUSE_OREN_NAYAR_CLASSIC
+    assert found and (any("uses the classic one" in n for n in notes) if classic else not notes), notes
     env = sphere.environment()
     ref = sum(np.float64(t.colour) * wenv.reference(env, engine.principled(t.inputs), sphere.normals, sphere.views)
               for t in found)
@@ -98,4 +101,4 @@ def test_shader_nodes_match_cycles_within_its_noise(sphere, case):
     noise_of_mean = math.sqrt(float(np.mean((a - b) ** 2)) / 2) / scale / math.sqrt(2)
     error = math.sqrt(float(np.mean(((a + b) / 2 - ref) ** 2))) / scale
     # the mean's own noise, with room for its spread and the sphere's facets
-    assert error < 1.5 * noise_of_mean + 0.01, (error, noise_of_mean)
+    assert error < (0.05 if classic else 1.5 * noise_of_mean + 0.01), (error, noise_of_mean)
