@@ -151,14 +151,15 @@ def other_geometry(depsgraph, skip=(), room=None):
     renders as meshes -- each where its object casts shadows (Object > Visibility > Shadow, and
     wenv's Casts Shadows) -- and how many were left out: past `room` (bytes, engine.occluder_bytes;
     None: no limit), the rest are counted, not read.  `name` is the original object's, which light
-    linking names; objects named in `skip` are left out."""
+    linking names; objects named in `skip` are left out, but not their instances."""
     out, left = [], 0
     for inst in depsgraph.object_instances:
         ob = inst.object
         if ob.type not in ("MESH",) + CONVERTED_TYPES or not (inst.is_instance or ob.type != "MESH"):
             continue
         original = ob.original
-        if original.name in skip or not getattr(ob, "visible_shadow", True):
+        # (an instance is never the object's own mesh: a scatter's instances shadow the mesh they lie on)
+        if (not inst.is_instance and original.name in skip) or not getattr(ob, "visible_shadow", True):
             continue
         if not original.wenv.casts_shadows or (not inst.is_instance and not original.visible_get()):
             continue

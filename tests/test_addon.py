@@ -3693,6 +3693,30 @@ def test_instances_and_curves_cast_shadows_as_meshes_do(scene):
     assert np.abs(under_text - under_nothing).max() > 0.01
 
 
+def test_an_instance_of_the_shaded_object_shadows_it(scene):
+    """The start-up cube shaded while a collection instance puts a copy of it right above it (as a
+    Geometry Nodes scatter's instances lie on their own mesh): its top is darker than alone."""
+    env_world(scene, "sunset")
+    scene.wenv.shadows, scene.wenv.bounce_light = True, False
+    cube = bpy.data.objects["Cube"]
+    select_only(cube)
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    p, _ = world_arrays(cube, corner=False)
+    top = p[:, 2] > 0.99
+    alone = attribute(cube)[1].copy()
+    copies = bpy.data.collections.new("copies")
+    copies.objects.link(cube)  # (also in the scene's own collection)
+    instance = bpy.data.objects.new("above", None)
+    instance.instance_type, instance.instance_collection = "COLLECTION", copies
+    instance.location = (0.0, 0.0, 2.5)
+    scene.collection.objects.link(instance)
+    bpy.context.view_layer.update()
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    domain, shaded = attribute(cube)
+    rows = top if domain == "POINT" else top[meshes.corner_vertices(cube.data)]
+    assert rows.any() and shaded[rows].mean() < 0.9 * alone[rows].mean()
+
+
 def test_a_blocker_not_shaded_sends_its_light_back(scene):
     """The plane shaded alone under the start-up cube (smooth, an orange Lambert): with Bounce Light,
     what the cube blocks shows the cube's own diffuse light (its shadows included), as the core
