@@ -16,12 +16,13 @@ import bpy  # noqa: E402  (installed by scripts/setup.sh; missing, the tests fai
 import mathutils  # noqa: E402  (ships with bpy)
 
 import addon  # noqa: E402
-from addon import bake, engine, gloss, live, materials, meshes, nodes, shading, views, world  # noqa: E402
+from addon import bake, compat, engine, gloss, live, materials, meshes, nodes, shading, views, world  # noqa: E402
 
 from conftest import hdri_path, readme_block  # noqa: E402
 from tests.helpers.blender_versions import has_diffuse_roughness, has_light_temperature, node_material
 
 ATTR = meshes.ATTRIBUTE
+BUMP = compat.BUMP_MAP_CORRECTION  # (the bump terminator of the Blender running)
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -1605,7 +1606,8 @@ def test_a_normal_map_bends_the_shading_normals(scene):
     shader = core_shader(wenv.load_environment(hdri_path("sunset")),
                          wenv.Principled(base_color=(0.8, 0.2, 0.1), roughness=0.4, ior=ior))
     np.testing.assert_allclose(attribute(plane)[1],
-                               shader.shade_mesh(p, np.tile(bent, (len(p), 1)), eye, smooth_normals=n), rtol=1e-4,
+                               shader.shade_mesh(p, np.tile(bent, (len(p), 1)), eye, smooth_normals=n,
+                                                 bump_map_correction=BUMP), rtol=1e-4,
                                atol=1e-5)
     assert shader.shade_mesh(p, np.tile(bent, (len(p), 1)), eye).mean() > attribute(plane)[1].mean() * 1.005
     assert any("'Normal' from a normal map is read at the vertices" in note for note in
@@ -1625,7 +1627,8 @@ def test_a_normal_map_bends_the_shading_normals(scene):
     value.outputs[0].default_value = 2.0  # (a Strength of 1)
     assert shade_op(view="CAMERA") == {"FINISHED"}
     np.testing.assert_allclose(attribute(plane)[1],
-                               shader.shade_mesh(p, np.tile(bent, (len(p), 1)), eye, smooth_normals=n), rtol=1e-4,
+                               shader.shade_mesh(p, np.tile(bent, (len(p), 1)), eye, smooth_normals=n,
+                                                 bump_map_correction=BUMP), rtol=1e-4,
                                atol=1e-5)
     split = tree.nodes.new("ShaderNodeSeparateXYZ")
     tree.links.new(tree.nodes.new("ShaderNodeNewGeometry").outputs["Position"], split.inputs[0])
@@ -1671,7 +1674,8 @@ def test_a_normal_map_on_a_face_of_many_corners(scene):
     shader = core_shader(wenv.load_environment(hdri_path("sunset")),
                          wenv.Principled(base_color=(0.8, 0.2, 0.1), roughness=0.4, ior=ior))
     np.testing.assert_allclose(attribute(disc)[1], shader.shade_mesh(p, np.tile(want.astype(np.float32), (len(p), 1)),
-                                                                     eye, smooth_normals=n), rtol=1e-4, atol=1e-5)
+                                                                     eye, smooth_normals=n, bump_map_correction=BUMP),
+                               rtol=1e-4, atol=1e-5)
     assert not np.allclose(attribute(disc)[1], shader.shade_mesh(p, n, eye), rtol=0.01)
 
 

@@ -12,13 +12,14 @@ import wenv
 
 import bpy  # noqa: E402  (installed by scripts/setup.sh; missing, the tests fail rather than skip)
 
-from addon import bake, bevel, engine, materials, meshes, textures, views  # noqa: E402
+from addon import bake, bevel, compat, engine, materials, meshes, textures, views  # noqa: E402
 
 from conftest import hdri_path  # noqa: E402
 from test_addon import (as_the_interface_runs, animate_camera, attribute, env_world, image_sequence,  # noqa: E402,F401
                         principled_material, registered, scene, select_only)
 
 SENTINEL = np.float32([0.123, 0.456, 0.789, 0.5])
+BUMP = compat.BUMP_MAP_CORRECTION  # (the bump terminator of the Blender running)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -371,7 +372,8 @@ def test_textures_and_normal_maps_are_read_at_each_texel(scene):
     points = np.column_stack([(c - 0.5) * 4.0, np.zeros(len(c))]).astype(np.float32)
     eye = tuple(scene.camera.matrix_world.translation)
     up = np.tile(np.float32([0, 0, 1]), (len(c), 1))  # the plane's own, which the map bends
-    want = draft_shader(principled_of(mat)).shade_mesh(points, normal, eye, base_color=base, smooth_normals=up)
+    want = draft_shader(principled_of(mat)).shade_mesh(points, normal, eye, base_color=base, smooth_normals=up,
+                                                       bump_map_correction=BUMP)
     np.testing.assert_allclose(pixels(image)[:, :3], want, rtol=2e-4, atol=1e-5)
 
 
@@ -402,7 +404,8 @@ def test_a_bump_node_is_read_at_each_texel(scene):
     points = np.column_stack([(c - 0.5) * 4.0, np.zeros(len(c))]).astype(np.float32)
     eye = tuple(scene.camera.matrix_world.translation)
     up = np.tile(np.float32([0, 0, 1]), (len(c), 1))  # the plane's own, which the Bump node bends
-    want = draft_shader(principled_of(mat)).shade_mesh(points, normal.astype(np.float32), eye, smooth_normals=up)
+    want = draft_shader(principled_of(mat)).shade_mesh(points, normal.astype(np.float32), eye, smooth_normals=up,
+                                                       bump_map_correction=BUMP)
     np.testing.assert_allclose(pixels(image)[inside, :3], want[inside], rtol=1e-3, atol=1e-5)
 
 
@@ -438,7 +441,7 @@ def test_a_bevel_node_rounds_a_fold_at_each_texel(scene):
     bent = wenv.Occluders(co, triangles).bevel(points, corner_normals.astype(np.float32), 0.5)
     eye = tuple(scene.camera.matrix_world.translation)
     shader = draft_shader(principled_of(mat))
-    want = shader.shade_mesh(points, bent, eye, smooth_normals=own)
+    want = shader.shade_mesh(points, bent, eye, smooth_normals=own, bump_map_correction=BUMP)
     np.testing.assert_allclose(pixels(image)[:, :3], want, rtol=1e-3, atol=1e-5)
     unbent = shader.shade_mesh(points, own, eye)
     near = np.abs(x) < 0.3
@@ -454,7 +457,8 @@ def test_a_bevel_node_rounds_a_fold_at_each_texel(scene):
     at_corners = wenv.Occluders(co, triangles).bevel(co[corner], corner_normals.astype(np.float32), 0.5)
     domain, shaded = attribute(plane)
     assert domain == "CORNER"
-    np.testing.assert_allclose(shaded, shader.shade_mesh(co[corner], at_corners, eye, smooth_normals=face_normal),
+    np.testing.assert_allclose(shaded, shader.shade_mesh(co[corner], at_corners, eye, smooth_normals=face_normal,
+                                                         bump_map_correction=BUMP),
                                rtol=1e-3, atol=1e-5)
     assert any("'Normal' from a Bevel node is read at the vertices" in n for n in materials.principled_notes(mat))
     # a Radius from the nodes, 0.5 + 0.1 y: each texel bevelled at its own
@@ -467,7 +471,8 @@ def test_a_bevel_node_rounds_a_fold_at_each_texel(scene):
     bake_now(scene, plane, image)
     varied = wenv.Occluders(co, triangles).bevel(points, corner_normals.astype(np.float32),
                                                  (0.5 + 0.1 * points[:, 1]).astype(np.float32))
-    np.testing.assert_allclose(pixels(image)[:, :3], shader.shade_mesh(points, varied, eye, smooth_normals=own),
+    np.testing.assert_allclose(pixels(image)[:, :3], shader.shade_mesh(points, varied, eye, smooth_normals=own,
+                                                                       bump_map_correction=BUMP),
                                rtol=1e-3, atol=1e-5)
     assert np.abs(varied - bent).max() > 0.01
     assert not any("Bevel" in n and "Radius" in n for n in materials.principled_notes(mat))
