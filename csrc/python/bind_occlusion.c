@@ -210,6 +210,29 @@ done:
     return result;
 }
 
+/* The core's ambient shares or bevelled normals, as wenv_py_run_released runs them. */
+typedef struct {
+    const wenv_occluders *occ;
+    const float *points, *normals, *radii;
+    size_t n, rays;
+    double distance_or_radius;
+    int inside;
+    float *out;
+} surface_work;
+
+static wenv_status run_ambient(void *ctx, const wenv_progress *p, wenv_error *err)
+{
+    const surface_work *w = ctx;
+    return wenv_ambient_shares(w->occ, w->points, w->normals, w->n, w->rays, w->distance_or_radius, w->inside, w->out,
+                               p, err);
+}
+
+static wenv_status run_bevel(void *ctx, const wenv_progress *p, wenv_error *err)
+{
+    const surface_work *w = ctx;
+    return wenv_bevel_normals(w->occ, w->normals, w->points, w->n, w->distance_or_radius, w->radii, w->out, p, err);
+}
+
 /* ambient(points, normals, distance, rays, inside=False, progress=None): the Ambient Occlusion
  * node's unoccluded share per point. */
 static PyObject *occluders_ambient(OccludersObject *self, PyObject *args, PyObject *kwargs)
@@ -236,18 +259,9 @@ static PyObject *occluders_ambient(OccludersObject *self, PyObject *args, PyObje
     float *out;
     if (!(result = wenv_py_new_float_array(1, shape, &out)))
         goto done;
-    wenv_py_progress_bridge bridge = {.callback = progress_obj};
-    wenv_progress progress = wenv_py_progress(&bridge);
-    wenv_error err = {0};
-    wenv_status st;
-    WENV_BEGIN_WORK
-    st = wenv_ambient_shares(self->occ, pb.buf, nb.buf, np, (size_t)rays, distance, inside, out, &progress, &err);
-    WENV_END_WORK
-    if (st) {
+    surface_work work = {self->occ, pb.buf, nb.buf, NULL, np, (size_t)rays, distance, inside, out};
+    if (wenv_py_run_released(run_ambient, &work, progress_obj) < 0)
         Py_CLEAR(result);
-        if (!(bridge.raised && PyErr_Occurred()))
-            wenv_py_raise(&err);
-    }
 done:
     PyBuffer_Release(&pb);
     PyBuffer_Release(&nb);
@@ -299,18 +313,9 @@ static PyObject *occluders_bevel(OccludersObject *self, PyObject *args, PyObject
     float *out;
     if (!(result = wenv_py_new_float_array(2, shape, &out)))
         goto done;
-    wenv_py_progress_bridge bridge = {.callback = progress_obj};
-    wenv_progress progress = wenv_py_progress(&bridge);
-    wenv_error err = {0};
-    wenv_status st;
-    WENV_BEGIN_WORK
-    st = wenv_bevel_normals(self->occ, nb.buf, pb.buf, np, radius, per_point ? rb.buf : NULL, out, &progress, &err);
-    WENV_END_WORK
-    if (st) {
+    surface_work work = {self->occ, pb.buf, nb.buf, per_point ? rb.buf : NULL, np, 0, radius, 0, out};
+    if (wenv_py_run_released(run_bevel, &work, progress_obj) < 0)
         Py_CLEAR(result);
-        if (!(bridge.raised && PyErr_Occurred()))
-            wenv_py_raise(&err);
-    }
 done:
     PyBuffer_Release(&pb);
     PyBuffer_Release(&nb);

@@ -83,26 +83,7 @@ static wenv_status white_noise_adapter(const void *settings, const float *vector
     return wenv_white_noise_texture(*(const int *)settings, vectors, w, w0, n, value, colour, progress, err);
 }
 
-/* Runs work(ctx, progress, err) with the GIL released, `progress_obj` (None or a callable, checked
- * by the caller) told the fractions; -1 with the Python error set when it fails or is cancelled. */
-static int run_released(wenv_status (*work)(void *ctx, const wenv_progress *p, wenv_error *err), void *ctx,
-                        PyObject *progress_obj)
-{
-    wenv_py_progress_bridge bridge = {.callback = progress_obj};
-    wenv_progress progress = wenv_py_progress(&bridge);
-    wenv_error err = {0};
-    wenv_status st;
-    WENV_BEGIN_WORK
-    st = work(ctx, &progress, &err);
-    WENV_END_WORK
-    if (!st)
-        return 0;
-    if (!(bridge.raised && PyErr_Occurred()))
-        wenv_py_raise(&err);
-    return -1;
-}
-
-/* A texture call of a value and a colour per point, as run_released runs it. */
+/* A texture call of a value and a colour per point, as wenv_py_run_released runs it. */
 typedef struct {
     texture_call call;
     const void *settings;
@@ -139,7 +120,7 @@ static PyObject *run_texture(texture_call call, const void *settings, PyObject *
         goto fail;
     texture_work work = {call, settings, vb.buf, w_array ? wb.buf : NULL, (float)w0, (size_t)n, value_out,
                          colour_out, position_out};
-    if (run_released(run_texture_work, &work, progress_obj) < 0)
+    if (wenv_py_run_released(run_texture_work, &work, progress_obj) < 0)
         goto fail;
     wenv_py_release_array(&vb, &v_held);
     if (w_held)
@@ -236,7 +217,7 @@ static PyObject *wave_texture(PyObject *self, PyObject *args, PyObject *kwargs)
         return NULL;
     }
     wave_work work = {&s, vb.buf, (size_t)n, out};
-    int failed = run_released(run_wave_work, &work, progress_obj) < 0;
+    int failed = wenv_py_run_released(run_wave_work, &work, progress_obj) < 0;
     wenv_py_release_array(&vb, &v_held);
     if (failed) {
         Py_DECREF(fac);
@@ -335,7 +316,7 @@ static PyObject *gabor_texture(PyObject *self, PyObject *args, PyObject *kwargs)
         if (!(out[k] = wenv_py_new_float_array(1, &n, &arrays[k])))
             goto fail;
     gabor_work work = {&s, vb.buf, (size_t)n, {arrays[0], arrays[1], arrays[2]}};
-    if (run_released(run_gabor_work, &work, progress_obj) < 0)
+    if (wenv_py_run_released(run_gabor_work, &work, progress_obj) < 0)
         goto fail;
     wenv_py_release_array(&vb, &v_held);
     return Py_BuildValue("(NNN)", out[0], out[1], out[2]);

@@ -391,6 +391,23 @@ wenv_progress wenv_py_progress(wenv_py_progress_bridge *bridge)
     return p;
 }
 
+int wenv_py_run_released(wenv_status (*work)(void *ctx, const wenv_progress *p, wenv_error *err), void *ctx,
+                         PyObject *progress_obj)
+{
+    wenv_py_progress_bridge bridge = {.callback = progress_obj};
+    wenv_progress progress = wenv_py_progress(&bridge);
+    wenv_error err = {0};
+    wenv_status st;
+    WENV_BEGIN_WORK
+    st = work(ctx, &progress, &err);
+    WENV_END_WORK
+    if (!st)
+        return 0;
+    if (!(bridge.raised && PyErr_Occurred()))
+        wenv_py_raise(&err);
+    return -1;
+}
+
 int wenv_py_check_progress(PyObject *progress)
 {
     if (progress != Py_None && !PyCallable_Check(progress)) {

@@ -90,6 +90,10 @@ typedef struct {
 wenv_progress wenv_py_progress(wenv_py_progress_bridge *bridge);
 /* 0 when `progress` is None or callable; else -1 with TypeError naming the argument. */
 int wenv_py_check_progress(PyObject *progress);
+/* Runs work(ctx, progress, err) with the GIL released, `progress_obj` (None or a callable, checked
+ * by the caller) told the fractions; -1 with the Python error set when it fails or is cancelled. */
+int wenv_py_run_released(wenv_status (*work)(void *ctx, const wenv_progress *p, wenv_error *err), void *ctx,
+                         PyObject *progress_obj);
 
 /* base_color: one linear RGB colour per vertex (n rows), finite and non-negative, copied clamped to
  * [0, 1] as a material clamps its own (PyMem_Free it).  NULL with a ValueError or TypeError naming
