@@ -93,11 +93,9 @@ def _unread_note(node, sockets):
 def _diffuse(node):
     inputs = _defaults() | {"base_color": _value(node.inputs["Color"]), "specular_ior_level": 0.0,
                             "diffuse_roughness": _value(node.inputs["Roughness"])}
-    notes = _unread_note(node, ("Color", "Roughness", "Normal"))
-    if compat.DIFFUSE_OREN_NAYAR_CLASSIC and (inputs["diffuse_roughness"] > 0.0 or node.inputs["Roughness"].is_linked):
-        notes.append(f"'{node.name}': its Roughness is shaded by the energy-preserving Oren-Nayar of Blender 4.3 on; "
-                     "this Blender's Cycles uses the classic one (4 % apart at Roughness 0.6)")
-    return inputs, WHITE, notes
+    if compat.DIFFUSE_OREN_NAYAR_CLASSIC:
+        inputs["oren_nayar"] = "classic"
+    return inputs, WHITE, _unread_note(node, ("Color", "Roughness", "Normal"))
 
 
 def _distribution(node, allowed=("GGX", "MULTI_GGX")):

@@ -9,8 +9,8 @@ place: the rest of the add-on asks here rather than testing versions or attribut
   default in the versions that have it (materials.principled_inputs).
 - The Voronoi Texture hashes its 2D to 4D cells by PCG from 5.0, by lookup3 before: each version's
   pattern is its own (`VORONOI_CELL_HASH`).
-- A Diffuse BSDF's Roughness is the classic Oren-Nayar model in Cycles before 4.3, which wenv
-  does not shade (named; the energy-preserving one since, which it does).
+- A Diffuse BSDF's Roughness is the classic Oren-Nayar model in Cycles before 4.3, the
+  energy-preserving one since (`DIFFUSE_OREN_NAYAR_CLASSIC`; the core shades both).
 - Bump Map Correction masks a bent diffuse closure's grazing light by a microfacet shadowing term
   from 4.5, by Chiang et al.'s before (`BUMP_MAP_CORRECTION`).
 - Custom normals: from 5.0 a mesh keeps them as a corner attribute of vectors, `custom_normal`,
@@ -25,8 +25,8 @@ import bpy
 
 NODES_ALWAYS_ON = bpy.app.version >= (5, 0, 0)
 VORONOI_CELL_HASH = "PCG" if bpy.app.version >= (5, 0, 0) else "LOOKUP3"
-# a Diffuse BSDF's Roughness: the classic Oren-Nayar in Cycles before 4.3, the energy-preserving one
-# (the core's) since
+# a Diffuse BSDF's Roughness: the classic Oren-Nayar in Cycles before 4.3 (wenv.Principled's
+# oren_nayar="classic"), the energy-preserving one since
 DIFFUSE_OREN_NAYAR_CLASSIC = bpy.app.version < (4, 3, 0)
 # the bump terminator of a material's Bump Map Correction: Cycles' microfacet shadowing from 4.5,
 # Chiang et al.'s term before

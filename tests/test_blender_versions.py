@@ -17,7 +17,8 @@ from tests.helpers.extension_zip import build_extension_zip
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 # and what differs from release to release against each one's Cycles (the Voronoi's cells hashed
 # otherwise before 5.0, the bump terminator before 4.5).  (tests/test_closures_cycles.py, a minute a
-# release, passes on each too -- a rough Diffuse BSDF named before 4.3 --, run by hand to keep CI short.)
+# release, passes on each too -- a rough Diffuse BSDF is the classic Oren-Nayar before 4.3 --, run by hand
+# to keep CI short.)
 ADDON_TESTS = ["tests/test_addon.py", "tests/test_addon_install.py", "tests/test_procedural_textures.py",
                "tests/test_attributes.py", "tests/test_ngons_cycles.py", "tests/test_bump_cycles.py"]
 SERIES = ["4.2", "4.5"]

@@ -52,10 +52,11 @@ def test_defaults_are_the_nodes():
     node = next(n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled")
     inputs = wenv.Principled().inputs
     assert node.distribution == "MULTI_GGX" and inputs["distribution"] == "multiscatter_ggx"
+    assert inputs["oren_nayar"] == "energy_preserving"  # Blender 4.3 on (this suite's Blender)
     rows = wenv.Principled.INPUTS
     sockets = {s.name: s for s in node.inputs if s.name not in NOT_INPUTS}  # (by name: a lookup skips hidden ones)
     assert sorted(r["socket"] for r in rows) == sorted(sockets)
-    assert [r["name"] for r in rows] + ["distribution"] == list(inputs)
+    assert [r["name"] for r in rows] + ["distribution", "oren_nayar"] == list(inputs)
     for row in rows:
         want = sockets[row["socket"]].default_value
         want = tuple(want)[:3] if hasattr(want, "__len__") else want
@@ -193,6 +194,39 @@ def test_rough_diffuse_conserves_energy(sigma):
     # retro-reflection: light from the view itself returns more than Lambert's 1/pi
     assert rough.eval(wo, wo)[0] > (1.2 if sigma < 0.5 else 1.5) * lambert.eval(wo, wo)[0]
     assert lambert.eval(wo, wo)[0] == pytest.approx(0.5 / math.pi, rel=1e-5)
+
+
+@pytest.mark.parametrize("sigma", [0.3, 1.0])
+def test_classic_oren_nayar_is_cycles_before_4_3(sigma):
+    """oren_nayar="classic": a rough Diffuse BSDF as Cycles shaded it before Blender 4.3
+    (bsdf_oren_nayar: nl (a + b t), a = 1 / (pi + (3 pi - 4) / 6 sigma), b = sigma a, t = l.v - nl nv
+    divided by max(nl, nv) where positive), written out here; the energy-preserving model adds a
+    multiple scattering that only brightens, and which a black base does not have."""
+    colour = np.array([0.6, 0.4, 0.2])
+    classic = wenv.Principled(base_color=tuple(colour), specular_ior_level=0.0, diffuse_roughness=sigma,
+                              oren_nayar="classic")
+    eon = wenv.Principled(base_color=tuple(colour), specular_ior_level=0.0, diffuse_roughness=sigma)
+    assert classic.inputs["oren_nayar"] == "classic" and eon.inputs["oren_nayar"] == "energy_preserving"
+    assert "oren_nayar" in repr(classic) and "oren_nayar" not in repr(eon)
+    assert pickle.loads(pickle.dumps(classic)) == classic and classic != eon
+    rng = np.random.default_rng(7)
+    wi, wo = (unit(rng.normal(size=(2000, 3))) for _ in range(2))
+    wi[:, 2], wo[:, 2] = np.abs(wi[:, 2]) + 1e-3, np.abs(wo[:, 2]) + 1e-3
+    wi, wo = unit(wi), unit(wo)
+    nl, nv = wi[:, 2], wo[:, 2]
+    t = np.sum(wi * wo, 1) - nl * nv
+    t = np.where(t > 0, t / np.maximum(nl, nv), t)
+    a = 1.0 / (math.pi + (3 * math.pi - 4) / 6 * sigma)
+    want = (nl * (a + sigma * a * t))[:, None] * colour
+    got = classic.eval(np.float32(wi), np.float32(wo)).astype(np.float64)
+    np.testing.assert_allclose(got, want, rtol=2e-5, atol=1e-7)
+    extra = eon.eval(np.float32(wi), np.float32(wo)).astype(np.float64) - got
+    assert extra.min() > 0.0 and extra.max() < 0.2 * got.max()
+    black = dict(base_color=0.0, specular_ior_level=0.0, diffuse_roughness=sigma)
+    np.testing.assert_array_equal(wenv.Principled(**black, oren_nayar="classic").eval(np.float32(wi), np.float32(wo)),
+                                  wenv.Principled(**black).eval(np.float32(wi), np.float32(wo)))
+    with pytest.raises(ValueError, match="oren_nayar"):
+        wenv.Principled(diffuse_roughness=sigma, oren_nayar="fujii")
 
 
 def test_smooth_dielectric_reflects_its_fresnel():

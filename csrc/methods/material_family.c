@@ -447,6 +447,7 @@ static uint64_t family_key(const wenv_principled_inputs *in, const wenv_vertex_i
         key = wenv_fingerprint_doubles(key, wenv_principled_field_c(in, row), (size_t)row->n);
     }
     key = wenv_fingerprint_word(key, (uint64_t)in->multiscatter);
+    key = wenv_fingerprint_word(key, (uint64_t)in->oren_nayar_classic);
     for (int k = 0; vi && k < WENV_VERTEX_INPUT_COUNT; k++)
         if (vi->value[k])
             key = wenv_fingerprint_floats(wenv_fingerprint_word(key, (uint64_t)k + 1), vi->value[k],

@@ -10,6 +10,21 @@
 #include "scene/material.h"
 
 static const char *const DISTRIBUTIONS[] = {"ggx", "multiscatter_ggx"}; /* index = multiscatter */
+/* index = oren_nayar_classic: Cycles' Diffuse Roughness from Blender 4.3 on, and before it */
+static const char *const OREN_NAYAR[] = {"energy_preserving", "classic"};
+
+/* One of two names into *index; a ValueError naming both otherwise. */
+static int set_choice(int *index, const char *keyword, const char *const names[2], PyObject *value)
+{
+    const char *d = PyUnicode_Check(value) ? PyUnicode_AsUTF8(value) : NULL;
+    for (int i = 0; d && i < 2; i++)
+        if (strcmp(d, names[i]) == 0) {
+            *index = i;
+            return 0;
+        }
+    PyErr_Format(PyExc_ValueError, "%s must be '%s' or '%s', got %R", keyword, names[1], names[0], value);
+    return -1;
+}
 
 static PyTypeObject PrincipledType;
 
@@ -33,16 +48,10 @@ static int set_input(wenv_principled_inputs *in, PyObject *key, PyObject *value)
             PyErr_SetString(PyExc_TypeError, "Principled keywords must be strings");
         return -1;
     }
-    if (strcmp(name, "distribution") == 0) {
-        const char *d = PyUnicode_Check(value) ? PyUnicode_AsUTF8(value) : NULL;
-        for (int i = 0; d && i < 2; i++)
-            if (strcmp(d, DISTRIBUTIONS[i]) == 0) {
-                in->multiscatter = i;
-                return 0;
-            }
-        PyErr_Format(PyExc_ValueError, "distribution must be 'multiscatter_ggx' or 'ggx', got %R", value);
-        return -1;
-    }
+    if (strcmp(name, "distribution") == 0)
+        return set_choice(&in->multiscatter, name, DISTRIBUTIONS, value);
+    if (strcmp(name, "oren_nayar") == 0)
+        return set_choice(&in->oren_nayar_classic, name, OREN_NAYAR, value);
     for (size_t r = 0; r < wenv_principled_input_count; r++) {
         const wenv_principled_input *row = &wenv_principled_input_list[r];
         if (strcmp(name, row->name) != 0)
@@ -52,7 +61,7 @@ static int set_input(wenv_principled_inputs *in, PyObject *key, PyObject *value)
     }
     PyErr_Format(PyExc_TypeError,
                  "Principled got an unexpected keyword argument '%s' (the Principled BSDF node's inputs in snake "
-                 "case, as wenv.Principled.INPUTS lists them, or distribution)",
+                 "case, as wenv.Principled.INPUTS lists them, distribution or oren_nayar)",
                  name);
     return -1;
 }
@@ -73,9 +82,17 @@ static PyObject *inputs_dict(const wenv_principled_inputs *in, int only_changed)
             Py_CLEAR(d);
         Py_XDECREF(value);
     }
-    if (d && (!only_changed || in->multiscatter != defaults.multiscatter)) {
-        PyObject *name = PyUnicode_FromString(DISTRIBUTIONS[in->multiscatter ? 1 : 0]);
-        if (!name || PyDict_SetItemString(d, "distribution", name) < 0)
+    const struct {
+        const char *keyword;
+        int value, fallback;
+        const char *const *names;
+    } choices[] = {{"distribution", in->multiscatter, defaults.multiscatter, DISTRIBUTIONS},
+                   {"oren_nayar", in->oren_nayar_classic, defaults.oren_nayar_classic, OREN_NAYAR}};
+    for (size_t c = 0; d && c < sizeof choices / sizeof *choices; c++) {
+        if (only_changed && choices[c].value == choices[c].fallback)
+            continue;
+        PyObject *name = PyUnicode_FromString(choices[c].names[choices[c].value ? 1 : 0]);
+        if (!name || PyDict_SetItemString(d, choices[c].keyword, name) < 0)
             Py_CLEAR(d);
         Py_XDECREF(name);
     }
@@ -237,7 +254,8 @@ static PyGetSetDef principled_getset[] = {
      "The Lambertian part's albedo seen head-on (the upper layers let through less towards grazing: "
      "diffuse_at).", NULL},
     {"inputs", principled_inputs, NULL,
-     "{name: value} of every input as evaluated (clamped as Cycles clamps them), and 'distribution'.", NULL},
+     "{name: value} of every input as evaluated (clamped as Cycles clamps them), 'distribution' and "
+     "'oren_nayar'.", NULL},
     {"unhonoured", principled_unhonoured, NULL,
      "Names of the inputs set to something wenv does not shade, or shades in part (subsurface scattering as "
      "diffuse, Alpha's see-through part left out, a Coat Tint above 1 as 1); wenv.Principled.INPUTS gives each "
@@ -263,7 +281,8 @@ static PyTypeObject PrincipledType = {
               "evaluates it: the node's inputs by name in snake case (wenv.Principled.INPUTS lists each with its "
               "socket, size, default and whether wenv shades it) with Blender's defaults for the rest, and "
               "distribution='multiscatter_ggx' (Blender's "
-              "default) or 'ggx'.  Colours are a grey number, (r, g, b) or Blender's (r, g, b, a).  Roughness is "
+              "default) or 'ggx'.  oren_nayar='energy_preserving' (Cycles from Blender 4.3 on) or 'classic' (before "
+              "it: a Diffuse BSDF's Roughness) is the model of Diffuse Roughness.  Colours are a grey number, (r, g, b) or Blender's (r, g, b, a).  Roughness is "
               "Blender's (alpha = roughness^2).  Values are clamped as Cycles' kernel clamps them; non-finite ones, "
               "and inputs that scale the reflection past 1e6, are a ValueError.  Reflection only: `unhonoured` "
               "names what is set but not shaded.  Immutable.",

@@ -16,7 +16,8 @@
  *            W *= 1 - its albedo;
  *   diffuse  Lambert, Base Color W; with Diffuse Roughness (Blender 4.3+) the energy-preserving
  *            Oren-Nayar of OpenPBR ("EON": Fujii's improved Oren-Nayar and a multiple-scattering term),
- *            which depends on the light as well, so it is one more lobe.
+ *            which depends on the light as well, so it is one more lobe; with oren_nayar_classic,
+ *            Fujii's term alone, as Cycles shades a rough Diffuse BSDF before 4.3.
  * "Multiscatter GGX" (the default) compensates the metal and specular lobes for the energy single
  * scattering loses (Kulla & Conty): the lobe is divided by its albedo E(mu) with F = 1 and darkened
  * to 1 + Fms (1 - E) / E, Fms = Fss Eavg / (1 - Fss (1 - Eavg)) with Fss the Fresnel's cosine-weighted
@@ -712,7 +713,7 @@ static uint64_t inputs_fingerprint(const wenv_principled_inputs *in)
         const wenv_principled_input *row = &wenv_principled_input_list[r];
         h = wenv_fingerprint_doubles(h, wenv_principled_field_c(in, row), (size_t)row->n);
     }
-    return wenv_fingerprint_word(h, (uint64_t)in->multiscatter);
+    return wenv_fingerprint_word(wenv_fingerprint_word(h, (uint64_t)in->multiscatter), (uint64_t)in->oren_nayar_classic);
 }
 
 wenv_status wenv_principled_create(wenv_material **out, const wenv_principled_inputs *inputs, wenv_error *err)
@@ -817,7 +818,10 @@ wenv_status wenv_principled_create(wenv_material **out, const wenv_principled_in
         double eavg = p->eon_a * M_PI + ((2.0 * M_PI - 5.6) / 3.0) * p->eon_b;
         for (int k = 0; k < 3; k++) {
             double rho = p->base[k];
-            p->eon_ems[k] = rho * rho / M_PI * (eavg / (1.0 - eavg)) / (1.0 - rho * (1.0 - eavg));
+            /* Cycles before 4.3 (bsdf_oren_nayar) has the same single scattering and no more */
+            p->eon_ems[k] = in->oren_nayar_classic
+                                ? 0.0
+                                : rho * rho / M_PI * (eavg / (1.0 - eavg)) / (1.0 - rho * (1.0 - eavg));
         }
         lobe_model *l = &p->lobe[p->n];
         l->role = LOBE_DIFFUSE;

@@ -89,10 +89,13 @@ typedef enum { WENV_NEVER, WENV_ABOVE, WENV_BELOW, WENV_NONZERO } wenv_principle
 
 /* The node's inputs (Blender 4.x/5.x names in snake case), as Cycles reads them; the node's
  * distribution, "Multiscatter GGX" (multiscatter 1, Blender's default) or "GGX", is a property of
- * the node rather than a socket. */
+ * the node rather than a socket.  oren_nayar_classic picks the Diffuse Roughness model of Cycles
+ * before Blender 4.3 (a Diffuse BSDF's Roughness there): Fujii's Oren-Nayar alone, without the
+ * multiple scattering that the energy-preserving model of 4.3 on adds. */
 typedef struct {
     WENV_PRINCIPLED_INPUTS(WENV_PRINCIPLED_FIELD)
     int multiscatter;
+    int oren_nayar_classic;
 } wenv_principled_inputs;
 
 /* One row of the list, for loops over the inputs. */

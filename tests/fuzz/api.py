@@ -148,7 +148,7 @@ class Fuzzer(Draws):
                      "anisotropic", "anisotropic_rotation", "coat_weight", "coat_roughness", "coat_ior", "coat_tint",
                      "sheen_weight", "sheen_roughness", "sheen_tint", "subsurface_weight", "transmission_weight",
                      "diffuse_roughness", "emission_color", "emission_strength", "thin_film_thickness",
-                     "thin_film_ior", "bogus", "distribution"]
+                     "thin_film_ior", "bogus", "distribution", "oren_nayar"]
             chosen = self.r.choice(len(names), size=int(self.r.integers(5)), replace=False)
             # finite extremes too: 1e6 is the most an input that scales the reflection may be, 3.4e38 the
             # most a Blender socket holds
