@@ -35,7 +35,7 @@ def blockers(depsgraph, obj, only_local):
             out.append((o.name, data.positions, engine.shadow_triangles(data.positions, data.triangles)[0]))
     if not only_local:  # what else Cycles' rays meet: instances, curves, text
         out += [(name, p, engine.shadow_triangles(p, t)[0])
-                for name, p, t in meshes.other_geometry(depsgraph, skip={o.name for o in objs})[0]]
+                for name, p, t, _ in meshes.other_geometry(depsgraph, skip={o.name for o in objs})[0]]
     return out
 
 

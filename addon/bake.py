@@ -462,9 +462,16 @@ def _surroundings_key(scene, depsgraph, obj):
                 looks = _key(str(exc))
         others.append((other.name, _mesh_key(other, depsgraph), other.wenv.casts_shadows,
                        getattr(other, "visible_shadow", True), looks))
-    if depsgraph is not None:  # instances, curves and text: where they are
-        others += [(name, engine.fingerprint(p, t).hex()) for name, p, t in
-                   meshes.other_geometry(depsgraph, skip={obj.name})[0]]
+    if depsgraph is not None:  # instances, curves and text: where they are, and with Bounce Light their materials
+        bounce = st.shadows and st.bounce_light
+        for name, p, t, sender in meshes.other_geometry(depsgraph, skip={obj.name}, senders=bounce)[0]:
+            looks = None
+            if sender is not None:
+                try:
+                    looks = _key(materials.material_keys(sender[1]))
+                except SetupError as exc:
+                    looks = _key(str(exc))
+            others.append((name, engine.fingerprint(p, t).hex(), looks))
     return _key(others)
 
 

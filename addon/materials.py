@@ -294,9 +294,13 @@ def slot_material_keys(obj):
     Each is made here, on the main thread, so a missing or broken measured BRDF file, or lobes
     the core refuses (reflecting more than they receive), are a SetupError naming the material
     before any shading starts."""
+    return material_keys([slot.material for slot in obj.material_slots])
+
+
+def material_keys(mats):
+    """slot_material_keys of the materials of an object's slots (None: an empty slot)."""
     keys = []
-    for slot in obj.material_slots:
-        mat = slot.material
+    for mat in mats:
         ensure_material_settings(mat)
         key = material_key(mat.wenv if mat is not None else None)
         if key[0] != "default":

@@ -81,8 +81,14 @@ def corner_vertices(mesh):
 
 def read_mesh(obj, depsgraph):
     """MeshData of an object's mesh as shaded_mesh picks it."""
-    ob_eval = obj.evaluated_get(depsgraph)
     mesh, notes = shaded_mesh(obj, depsgraph)
+    return mesh_data(obj.name, mesh, obj.evaluated_get(depsgraph).matrix_world, len(obj.material_slots), notes)
+
+
+def mesh_data(name, mesh, matrix_world, slot_count, notes=()):
+    """MeshData of `mesh` placed by `matrix_world` (a mathutils.Matrix), whose object has
+    `slot_count` material slots; `name` is the object's, for the notes."""
+    notes = list(notes)
     nv, nl, npoly = len(mesh.vertices), len(mesh.loops), len(mesh.polygons)
     if nv == 0:
         return MeshData("POINT", np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32),
@@ -95,7 +101,7 @@ def read_mesh(obj, depsgraph):
         slots_face = _read(mat_attr.data, "value", npoly, 1, np.int32)
     else:
         slots_face = np.zeros(npoly, np.int32)
-    multi = npoly > 0 and len(obj.material_slots) > 1 and slots_face.min() != slots_face.max()
+    multi = npoly > 0 and slot_count > 1 and slots_face.min() != slots_face.max()
     if mesh.normals_domain == "POINT" and not multi:
         nrm = _read(mesh.vertex_normals, "vector", nv, 3)
         domain = "POINT"
@@ -111,7 +117,7 @@ def read_mesh(obj, depsgraph):
         else:
             slots = np.full(nl, slots_face[0] if npoly else 0, np.int32)
         domain = "CORNER"
-    mw = ob_eval.matrix_world
+    mw = matrix_world
     m = np.array(mw, np.float32)
     with np.errstate(invalid="ignore", over="ignore"):  # positions not finite: found below
         world_pos = np.matmul(pos, m[:3, :3].T)
@@ -132,7 +138,7 @@ def read_mesh(obj, depsgraph):
         world_pos[unplaced] = 0.0
         world_nrm[unplaced] = (0.0, 0.0, 1.0)
         what = "vertices" if domain == "POINT" else "face corners"
-        notes.append(f"'{obj.name}': {int(unplaced.sum())} {what} at no finite position (NaN or infinite) "
+        notes.append(f"'{name}': {int(unplaced.sum())} {what} at no finite position (NaN or infinite) "
                      "left black")
     # the triangles, indexing the points or the corners shaded: what the mesh blocks its sky with
     tris = mesh.loop_triangles
@@ -140,19 +146,36 @@ def read_mesh(obj, depsgraph):
     return MeshData(domain, world_pos, world_nrm, slots, notes, unplaced, triangles.reshape(-1, 3))
 
 
+def joined(parts):
+    """One MeshData of several of the same domain (each part's triangles moved past the rows before
+    it): what many instances of one object send back, shaded as one part."""
+    if len(parts) == 1:
+        return parts[0]
+    starts = np.cumsum([0] + [d.count for d in parts[:-1]])
+    unplaced = (None if all(d.unplaced is None for d in parts) else
+                np.concatenate([np.zeros(d.count, bool) if d.unplaced is None else d.unplaced for d in parts]))
+    return MeshData(parts[0].domain, np.concatenate([d.positions for d in parts]),
+                    np.concatenate([d.normals for d in parts]), np.concatenate([d.slots for d in parts]),
+                    [n for d in parts for n in d.notes], unplaced,
+                    np.concatenate([d.triangles + np.int32(k) for d, k in zip(parts, starts)]))
+
+
 # Objects Cycles renders as meshes though they are not: their evaluated geometry
 CONVERTED_TYPES = ("CURVE", "FONT", "SURFACE", "META")
 
 
-def other_geometry(depsgraph, skip=(), room=None):
-    """[(name, world positions (float32), triangles)] of what blocks light in Cycles besides the
-    scene's mesh objects: every instance of a mesh or of such an object (a collection instance's,
-    particles', a Geometry Nodes tree's), and the curves, text, surfaces and metaballs, which Cycles
-    renders as meshes -- each where its object casts shadows (Object > Visibility > Shadow, and
-    wenv's Casts Shadows) -- and how many were left out: past `room` (bytes, engine.occluder_bytes;
-    None: no limit), the rest are counted, not read.  `name` is the original object's, which light
-    linking names; objects named in `skip` are left out, but not their instances."""
-    out, left = [], 0
+def other_geometry(depsgraph, skip=(), room=None, senders=False):
+    """[(name, world positions (float32), triangles, sender)] of what blocks light in Cycles besides
+    the scene's mesh objects: every instance of a mesh or of such an object (a collection
+    instance's, particles', a Geometry Nodes tree's), and the curves, text, surfaces and metaballs,
+    which Cycles renders as meshes -- each where its object casts shadows (Object > Visibility >
+    Shadow, and wenv's Casts Shadows) -- and how many were left out: past `room` (bytes,
+    engine.occluder_bytes; None: no limit), the rest are counted, not read.  `name` is the original
+    object's, which light linking names; objects named in `skip` are left out, but not their
+    instances.  With `senders`, what sends light back: instances of one object with the same
+    materials are one entry, whose sender is (MeshData, [its material slots' materials]) and whose
+    positions and triangles are the MeshData's (else sender is None)."""
+    out, left, groups = [], 0, {}
     for inst in depsgraph.object_instances:
         ob = inst.object
         if ob.type not in ("MESH",) + CONVERTED_TYPES or not (inst.is_instance or ob.type != "MESH"):
@@ -175,13 +198,27 @@ def other_geometry(depsgraph, skip=(), room=None):
                 if room < 0:
                     left = 1
                     continue
+            if senders:
+                materials = [slot.material.original if slot.material is not None else None
+                             for slot in ob.material_slots]
+                data = mesh_data(original.name, mesh, inst.matrix_world, len(materials))
+                group = (original.name, data.domain, tuple(m.name if m else None for m in materials))
+                if group not in groups:
+                    groups[group] = len(out)
+                    out.append((original.name, None, None, ([], materials)))
+                out[groups[group]][3][0].append(data)
+                continue
             co = _read(mesh.attributes["position"].data, "vector", len(mesh.vertices), 3)
             triangles = _read(mesh.loop_triangles, "vertices", len(mesh.loop_triangles), 3, np.int32)
         finally:
             if ob.type != "MESH":
                 ob.to_mesh_clear()
         m = np.array(inst.matrix_world, np.float32)
-        out.append((original.name, (co @ m[:3, :3].T + m[:3, 3]).astype(np.float32), triangles.reshape(-1, 3)))
+        out.append((original.name, (co @ m[:3, :3].T + m[:3, 3]).astype(np.float32), triangles.reshape(-1, 3), None))
+    for k, (name, _, _, sender) in enumerate(out):
+        if sender is not None:
+            data = joined(sender[0])
+            out[k] = (name, data.positions, data.triangles, (data, sender[1]))
     return out, left
 
 

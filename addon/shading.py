@@ -488,15 +488,28 @@ def _other_blockers(plan, depsgraph, shaded, st):
     curves, text), within the memory budget; returns notes."""
     used = sum(engine.occluder_bytes(data.positions, data.triangles) for _, data, _ in plan.items)
     used += sum(engine.occluder_bytes(p, t) for _, p, t in plan.blockers)
-    others, left = meshes.other_geometry(depsgraph, skip=shaded, room=st.memory_budget * 1048576.0 - used)
-    plan.blockers += [(name, p, engine.shadow_triangles(p, t)[0]) for name, p, t in others]
+    # with Bounce Light they send their light back too, each kind (an object's instances with the same
+    # materials) as one part; plan.senders stays in step with plan.blockers
+    others, left = meshes.other_geometry(depsgraph, skip=shaded, room=st.memory_budget * 1048576.0 - used,
+                                         senders=st.bounce_light)
     notes = []
+    for name, p, t, sender in others:
+        plan.blockers.append((name, p, engine.shadow_triangles(p, t)[0]))
+        if sender is None:
+            continue
+        data, mats = sender
+        notes += [n for n in data.notes if n not in notes]
+        textures.unlinked_term_weights(mats, data)
+        plan.senders.append((name, data, materials.material_keys(mats)))
+        read = [f"'{m.name}'" for m in mats if textures.reads_per_point(m)]
+        if read:
+            note = (f"'{name}' (instanced, or a curve or text) sends back the light of its materials' unlinked values: "
+                    f"wenv reads the textures and normal maps of {', '.join(read)} on mesh objects only")
+            if note not in notes:
+                notes.append(note)
     if left:
         notes.append(f"{left} instance(s) or curve object(s) cast no shadow: over the memory budget "
                      f"({st.memory_budget} MB) with the rest of the scene")
-    if st.bounce_light and others:
-        notes.append(f"{len(others)} instance(s) or curve object(s) block light but send none back "
-                     "(Bounce Light reads the light of mesh objects)")
     return notes
 
 

@@ -816,6 +816,20 @@ def _bevel(node, chain):
     return None
 
 
+def reads_per_point(mat):
+    """Whether read_inputs, read_term_weights or read_shading_normals read something of `mat` at each
+    row: a linked input of its lone Principled BSDF that wenv reads, a Normal from a normal map, bump
+    or bevel, or a mixture's textured factor, weight or input."""
+    if mat is None or mat.wenv.model != "PRINCIPLED" or mat.node_tree is None:
+        return False
+    if closures.is_one_principled(mat):
+        node = materials.principled_node(mat)
+        return node is not None and (_textured(node)[0] is not None or normal_source(node)[0] is not None)
+    found, _ = closures.terms(mat)
+    return bool(found) and not closures.one_principled(found) and any(
+        t.factors or t.weight_socket is not None or t.linked for t in found)
+
+
 def normal_source(principled):
     """(NormalChain, None) when a Principled BSDF's Normal comes from a Normal Map node (any of
     NORMAL_MAP_SPACES, its Color an Image Texture), a Bump node (its Height from nodes wenv
@@ -1540,6 +1554,22 @@ def read_term_weights(obj, depsgraph, data, progress=None):
         data.term_weights[s] = weights
         data.term_inputs[s] = term_inputs
     return notes
+
+
+def unlinked_term_weights(mats, data):
+    """Sets data.term_weights as read_term_weights does for the material slots `mats` (materials or
+    None), each term's weight at its nodes' unlinked values (a Mix Shader's Fac too): what sends the
+    light of an instance, whose rows wenv reads no textures at."""
+    for s, mat in enumerate(mats):
+        if mat is None or mat.wenv.model != "PRINCIPLED" or mat.node_tree is None:
+            continue
+        found, _ = closures.terms(mat)
+        if found is None or closures.one_principled(found):
+            continue
+        unlinked = nodes.one_point(lambda node: np.zeros((1, 3), np.float32))
+        data.term_weights[s] = [np.float32(term.colour) * (np.float32(closures._factor_values(unlinked, term.factors)[0])
+                                                           if term.factors else np.float32(1.0)) for term in found]
+        data.term_inputs[s] = [{} for _ in found]
 
 
 def _check_finite(values, mat, what, obj):

@@ -2702,8 +2702,8 @@ def test_camera_and_window_coordinates_follow_the_camera(scene):
 
 def test_live_session_reshades_when_what_shadows_it_changes(scene):
     """With Shadows, live mode shades the plane again when the cube above it moves, its mesh is
-    edited or an instance of it is placed, and not for its own colours; with Shadows off, another
-    object's move changes nothing it shades."""
+    edited, an instance of it is placed or its material changes (the light it sends back), and not
+    for its own colours; with Shadows off, another object's move changes nothing it shades."""
     env_world(scene, "sunset")
     plane = add_plane_under_cube()
     scene.wenv.shadows, scene.wenv.view_source = True, "CAMERA"
@@ -2719,7 +2719,9 @@ def test_live_session_reshades_when_what_shadows_it_changes(scene):
         before = attribute(plane)[1].copy()
         for change in (lambda: setattr(cube, "location", (0.5, 0.5, 0.0)),
                        lambda: (cube.data.vertices[0].co.__setitem__(2, 2.0), cube.data.update()),
-                       lambda: scene.collection.objects.link(bpy.data.objects.new("copy", cube.data))):
+                       lambda: scene.collection.objects.link(bpy.data.objects.new("copy", cube.data)),
+                       lambda: setattr(cube.active_material.node_tree.nodes["Principled BSDF"].inputs["Base Color"],
+                                       "default_value", (0.9, 0.1, 0.1, 1.0))):
             change()
             bpy.context.view_layer.update()
             assert settle() == (False, True)
@@ -3636,11 +3638,10 @@ def test_another_mesh_casts_shadows_unless_told_not_to(scene):
 def test_instances_and_curves_cast_shadows_as_meshes_do(scene):
     """The start-up cube moved into a collection shown only through a collection instance, then a
     text object (which Cycles renders as a mesh), above the plane: the plane is shaded as under an
-    ordinary mesh object of the same shape in the same place (Bounce Light off: an instance sends
-    no light back, and the report says so with it on); with the instanced object's Casts Shadows
-    off, as under nothing.  (The mesh object's flat faces are cast from their corners, the instance's
-    from its vertices: a ray along an edge of the cube may pass one and meet the other, so a few
-    vertices differ, by under 1 %.)"""
+    ordinary mesh object of the same shape in the same place, with Bounce Light off and on (the
+    instance sends its light back as the mesh object does); with the instanced object's Casts
+    Shadows off, as under nothing.  (The text's mesh object and the text are cast from other rows:
+    a ray along an edge may pass one and meet the other, so a few vertices differ, by under 1 %.)"""
     def same_as(got, want):
         off = np.abs(got - want) > 1e-5 + 1e-5 * np.abs(want)
         assert off.any(axis=1).mean() < 0.03 and np.abs(got - want).max() < 0.01 * np.abs(want).max()
@@ -3652,6 +3653,11 @@ def test_instances_and_curves_cast_shadows_as_meshes_do(scene):
     bpy.context.view_layer.update()
     assert shade_op(view="CAMERA") == {"FINISHED"}
     _, under_mesh = attribute(plane)
+    scene.wenv.bounce_light = True
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    _, lit_by_mesh = attribute(plane)
+    assert np.abs(lit_by_mesh - under_mesh).max() > 0.01 * np.abs(under_mesh).max()
+    scene.wenv.bounce_light = False
     blocks = bpy.data.collections.new("blocks")
     for holder in list(cube.users_collection):
         holder.objects.unlink(cube)
@@ -3671,8 +3677,17 @@ def test_instances_and_curves_cast_shadows_as_meshes_do(scene):
     assert got == [] and left == 1
     assert len(meshes.other_geometry(bpy.context.evaluated_depsgraph_get())[0]) == 1
     scene.wenv.bounce_light = True
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    same_as(attribute(plane)[1], lit_by_mesh)
+    assert not [n for n in plan_of(scene, plane).notes if "instance" in n]
+    # (a texture of the instance's material is not read there: its unlinked value sends, said)
+    tree = cube.active_material.node_tree
+    checker = tree.nodes.new("ShaderNodeTexChecker")
+    tree.links.new(checker.outputs["Color"], tree.nodes["Principled BSDF"].inputs["Base Color"])
     notes = plan_of(scene, plane).notes
-    assert any("1 instance(s) or curve object(s) block light but send none back" in n for n in notes), notes
+    assert any("'Cube' (instanced, or a curve or text) sends back the light of its materials' unlinked values" in n
+               for n in notes), notes
+    tree.nodes.remove(checker)
     scene.wenv.bounce_light = False
     cube.wenv.casts_shadows = False
     assert shade_op(view="CAMERA") == {"FINISHED"}

@@ -675,8 +675,9 @@ def test_a_bake_is_marked_stale_by_what_changes_it(scene):
 
 def test_a_bake_that_read_other_meshes_is_stale_when_they_change(scene):
     """A bake with Shadows, or with an Ambient Occlusion node that reaches the scene, is stale when
-    another mesh moves, hides or is added, or an instance is placed or moved; one that read only its
-    own mesh is not, nor is one whose node is Only Local."""
+    another mesh moves, hides or is added, or an instance is placed or moved, or with Bounce Light
+    when an instanced material changes (its light); one that read only its own mesh is not, nor is
+    one whose node is Only Local."""
     env_world(scene, "sunset")
     plane = grid(cuts=2)
     bpy.ops.mesh.primitive_cube_add(size=0.5, location=(0.0, 0.0, 1.0))
@@ -703,7 +704,10 @@ def test_a_bake_that_read_other_meshes_is_stale_when_they_change(scene):
         bake_again()
     # an instance of a collection, placed and then moved
     blocks = bpy.data.collections.new("blocks")
-    blocks.objects.link(bpy.data.objects.new("block", cube.data))
+    look = principled_material("look", roughness=0.4)
+    block = bpy.data.objects.new("block", cube.data.copy())
+    block.data.materials.append(look)
+    blocks.objects.link(block)
     instancer = bpy.data.objects.new("instancer", None)
     instancer.instance_type, instancer.instance_collection = "COLLECTION", blocks
     instancer.location = (-0.5, 0.5, 1.0)
@@ -711,6 +715,10 @@ def test_a_bake_that_read_other_meshes_is_stale_when_they_change(scene):
     assert settle() == words
     bake_again()
     instancer.location = (-0.5, -0.5, 1.0)
+    assert settle() == words
+    bake_again()
+    assert scene.wenv.bounce_light
+    look.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = (0.1, 0.5, 0.1, 1.0)
     assert settle() == words
     bake_again()
     bpy.data.materials.new("other").diffuse_color = (1.0, 0.0, 0.0, 1.0)  # a material no mesh uses
