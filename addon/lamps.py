@@ -3,7 +3,7 @@
 wenv does not.  Reads Blender data only; engine.make_lamps makes the core's lamps from the result."""
 import math
 
-from . import compat
+from . import compat, nodes, world
 
 # Cycles' emission shader when a light has no node tree: Emission of Color 1 and Strength 1
 _PLAIN_EMISSION = ((1.0, 1.0, 1.0), 1.0)
@@ -15,21 +15,27 @@ def _matrix(obj):
 
 def _emission(light, name):
     """The light's node tree's Emission colour and strength, as Cycles multiplies them into the
-    light's, and a note when the tree does more than one Emission node with unlinked inputs."""
+    light's, and a note when the tree is more than an Emission node whose Color and Strength are
+    the same over the light (unlinked, or from nodes of constants: a Blackbody, Value, Math, RGB,
+    Mix)."""
     if not getattr(light, "use_nodes", False) or light.node_tree is None:
         return _PLAIN_EMISSION, None
     tree = light.node_tree
     output = next((n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputLight" and n.is_active_output), None)
     surface = output.inputs.get("Surface") if output else None
-    if surface is None or not surface.is_linked:
+    node = world.source_node(surface) if surface is not None else None
+    if node is None:
         return ((0.0, 0.0, 0.0), 0.0), None  # nothing into its output: Cycles emits nothing
-    node = surface.links[0].from_node
+    why = "more than an Emission node"
     if node.bl_idname == "ShaderNodeEmission":
-        color, strength = node.inputs["Color"], node.inputs["Strength"]
-        if not color.is_linked and not strength.is_linked:
-            return (tuple(color.default_value[:3]), float(strength.default_value)), None
-    return _PLAIN_EMISSION, (f"Light '{name}': its node tree is not read (a plain Emission node of unlinked inputs "
-                             "is): shaded as its colour and power alone")
+        # (a light's emission is read along the rays that reach it, not a camera's: no Light Path)
+        color = nodes.constant_colour(node.inputs["Color"], camera_ray=False)
+        strength = nodes.constant_value(node.inputs["Strength"], camera_ray=False)
+        if color is not None and strength is not None:
+            return (color, strength), None
+        why = "what varies over the light or nodes wenv does not evaluate into its Emission node"
+    return _PLAIN_EMISSION, (f"Light '{name}': its node tree is not read ({why}): shaded as its colour and power "
+                             "alone")
 
 
 def lamp_settings(obj):

@@ -194,6 +194,7 @@ class Evaluator:
         # averaged (one_point)
         self._points = points
         self.spaces = set()  # the coordinates read
+        self.read_light_path = False  # a Light Path node read (as a camera ray's hit)
         # progress(fraction) while a procedural texture is evaluated (a bake's million texels), which
         # may cancel (CancelledError, raised by it or by the core when it returns True)
         self.progress = progress
@@ -741,6 +742,7 @@ class Evaluator:
         """What a camera ray's hit reads (wenv shades what the camera or viewport sees): Is Camera Ray
         1, every other kind and depth 0, and Ray Length the distance from a perspective view's eye."""
         which = output.identifier
+        self.read_light_path = True
         if which == "Is Camera Ray":
             return np.ones(self.count, np.float32)
         if which != "Ray Length" or (self._points is None and self.checking):
@@ -1635,18 +1637,35 @@ def one_point(texture, checking=False):
                      lambda node, uv, footprint, rows: texture(node), checking)
 
 
-def constant_value(socket):
+def constant_value(socket, camera_ray=True):
     """The value of `socket` where it is the same at every point: its unlinked value, or what nodes
     that read nothing varying over a mesh give it (a Value node, Math on such values); None where they
-    read a texture, coordinates or the mesh, or wenv does not evaluate them."""
+    read a texture, coordinates or the mesh, or wenv does not evaluate them.  Without `camera_ray`,
+    None where a Light Path node is read too (elsewhere read as a camera ray's hit)."""
     if not socket.is_linked:
         return float(socket.default_value)
+    got = _constant(socket, False, camera_ray)
+    return None if got is None else float(got[0])
+
+
+def constant_colour(socket, camera_ray=True):
+    """constant_value of a colour socket: (r, g, b) (a Blackbody of a constant temperature, RGB and Mix
+    nodes of constants), or None."""
+    if not socket.is_linked:
+        return tuple(float(c) for c in socket.default_value[:3])
+    got = _constant(socket, True, camera_ray)
+    return None if got is None else tuple(float(c) for c in got[0])
+
+
+def _constant(socket, colour, camera_ray):
     ev = one_point(lambda node: np.zeros((1, 3), np.float32))
     try:
-        got = ev.value(socket)
+        got = ev.colour(socket) if colour else ev.value(socket)
     except (Unsupported, NeedsMesh):
         return None
-    return None if ev.textures or ev.spaces or not np.isfinite(got[0]) else float(got[0])
+    if ev.textures or ev.spaces or (ev.read_light_path and not camera_ray) or not np.isfinite(got).all():
+        return None
+    return got
 
 
 def check(principled_socket, groups=()):
