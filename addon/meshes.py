@@ -13,7 +13,7 @@ class MeshData:
 
     __slots__ = ("domain", "positions", "normals", "slots", "count", "notes", "unplaced", "triangles", "inputs",
                  "textured", "shading_normals", "bump_map_correction", "term_weights", "term_inputs", "sites",
-                 "mask_blocks", "view", "reads_camera")
+                 "mask_blocks", "view", "reads_camera", "reads_placement")
 
     def __init__(self, domain, positions, normals, slots, notes=(), unplaced=None, triangles=None, inputs=None):
         self.domain = domain
@@ -50,6 +50,9 @@ class MeshData:
         # Window), which a turn of the camera then changes
         self.view = None
         self.reads_camera = False
+        # whether an input read depends on where the rows lie rather than on the mesh alone (world
+        # positions, the view, the object's transform or Object Info: nodes.Evaluator.placed)
+        self.reads_placement = False
 
 
 def _read(collection, attr, count, width, dtype=np.float32):
@@ -173,7 +176,8 @@ def other_geometry(depsgraph, skip=(), room=None, senders=False):
     engine.occluder_bytes; None: no limit), the rest are counted, not read.  `name` is the original
     object's, which light linking names; objects named in `skip` are left out, but not their
     instances.  With `senders`, what sends light back: instances of one object with the same
-    materials are one entry, whose sender is (MeshData, [its material slots' materials]) and whose
+    materials are one entry, whose sender is (MeshData, [its material slots' materials], the
+    instanced mesh object or None (a curve, text...), the rows of each instance in turn) and whose
     positions and triangles are the MeshData's (else sender is None)."""
     out, left, groups = [], 0, {}
     for inst in depsgraph.object_instances:
@@ -205,7 +209,8 @@ def other_geometry(depsgraph, skip=(), room=None, senders=False):
                 group = (original.name, data.domain, tuple(m.name if m else None for m in materials))
                 if group not in groups:
                     groups[group] = len(out)
-                    out.append((original.name, None, None, ([], materials)))
+                    out.append((original.name, None, None, ([], materials, original if inst.is_instance and
+                                                            original.type == "MESH" else None)))
                 out[groups[group]][3][0].append(data)
                 continue
             co = _read(mesh.attributes["position"].data, "vector", len(mesh.vertices), 3)
@@ -217,8 +222,9 @@ def other_geometry(depsgraph, skip=(), room=None, senders=False):
         out.append((original.name, (co @ m[:3, :3].T + m[:3, 3]).astype(np.float32), triangles.reshape(-1, 3), None))
     for k, (name, _, _, sender) in enumerate(out):
         if sender is not None:
-            data = joined(sender[0])
-            out[k] = (name, data.positions, data.triangles, (data, sender[1]))
+            parts, materials, original = sender
+            data = joined(parts)
+            out[k] = (name, data.positions, data.triangles, (data, materials, original, [d.count for d in parts]))
     return out, left
 
 

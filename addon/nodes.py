@@ -195,6 +195,10 @@ class Evaluator:
         self._points = points
         self.spaces = set()  # the coordinates read
         self.read_light_path = False  # a Light Path node read (as a camera ray's hit)
+        # something read that depends on where the rows lie, not on the mesh alone: world positions or
+        # directions, the view, the object (Object Info, its attributes, its transform): what an
+        # instance of the mesh elsewhere would read otherwise
+        self.placed = False
         # progress(fraction) while a procedural texture is evaluated (a bake's million texels), which
         # may cancel (CancelledError, raised by it or by the core when it returns True)
         self.progress = progress
@@ -554,6 +558,7 @@ class Evaluator:
         else:
             obj = self._owner[0]
             owners = (obj, obj.data)
+            self.placed = True
         for owner in owners:
             found = property_rgba(owner, name) if owner is not None else None
             if found is not None:
@@ -563,6 +568,7 @@ class Evaluator:
     # -- the object's and the geometry's, as Cycles' svm_node_object_info and svm_node_geometry give them
     def _ShaderNodeObjectInfo(self, node, output, depth):
         which = output.identifier
+        self.placed = True
         if self._owner is None:
             if not self.checking:
                 raise NeedsMesh(f"'{node.name}', an object's {output.name}, which has no value without an object")
@@ -622,6 +628,7 @@ class Evaluator:
     def _surface_tangent(self, node, t):
         """An object-space tangent `t` at each row carried into the world as a normal is, and made
         perpendicular to the shading normal (svm_node_tangent)."""
+        self.placed = True
         to_world = np.array(self._owner[0].matrix_world.to_3x3().inverted_safe(), np.float64)
         t = t @ to_world  # (the inverse transpose, as a row vector)
         n = self._coordinates("NORMAL", node=node)[0].astype(np.float64)
@@ -726,6 +733,7 @@ class Evaluator:
         """(unit directions towards the viewer (count, 3), unit shading normals facing it, whether the
         row's face looks away) at the rows, as Cycles' sd->wi, sd->N (flipped on a back face) and
         SD_BACKFACING are."""
+        self.placed = True
         if self._points is None:
             if self.checking:
                 zeros = np.zeros((self.count, 3), np.float32)
@@ -742,7 +750,7 @@ class Evaluator:
         """What a camera ray's hit reads (wenv shades what the camera or viewport sees): Is Camera Ray
         1, every other kind and depth 0, and Ray Length the distance from a perspective view's eye."""
         which = output.identifier
-        self.read_light_path = True
+        self.read_light_path = self.placed = True
         if which == "Is Camera Ray":
             return np.ones(self.count, np.float32)
         if which != "Ray Length" or (self._points is None and self.checking):
@@ -1053,6 +1061,8 @@ class Evaluator:
 
     def _coordinates(self, space, other=None, node=None):
         self.spaces.add(space)
+        # (the mesh's own texture spaces are the same wherever it lies)
+        self.placed |= space not in ("GENERATED", "OBJECT", "OBJECT_NORMAL") or other is not None
         if self._points is not None:
             return self._points(space, other), _same
         if space in ("GENERATED", "OBJECT"):

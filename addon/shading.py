@@ -497,16 +497,24 @@ def _other_blockers(plan, depsgraph, shaded, st):
         plan.blockers.append((name, p, engine.shadow_triangles(p, t)[0]))
         if sender is None:
             continue
-        data, mats = sender
+        data, mats, instanced, rows = sender
+        data.view = plan.view
         notes += [n for n in data.notes if n not in notes]
-        textures.unlinked_term_weights(mats, data)
         plan.senders.append((name, data, materials.material_keys(mats)))
         read = [f"'{m.name}'" for m in mats if textures.reads_per_point(m)]
-        if read:
-            note = (f"'{name}' (instanced, or a curve or text) sends back the light of its materials' unlinked values: "
-                    f"wenv reads the textures and normal maps of {', '.join(read)} on mesh objects only")
-            if note not in notes:
-                notes.append(note)
+        if not read:
+            textures.unlinked_term_weights(mats, data)
+            continue
+        got = textures.read_instanced(instanced, depsgraph, data, rows)
+        if got is not None:  # each instance reads what its object reads at the same row
+            notes += [n for n in got if n not in notes]
+            continue
+        textures.unlinked_term_weights(mats, data)
+        note = (f"'{name}' (instanced, or a curve or text) sends back the light of its materials' unlinked values: "
+                f"{', '.join(read)} read where each instance lies (the world, the view, the object) or bend its "
+                "normals, which wenv reads on mesh objects only")
+        if note not in notes:
+            notes.append(note)
     if left:
         notes.append(f"{left} instance(s) or curve object(s) cast no shadow: over the memory budget "
                      f"({st.memory_budget} MB) with the rest of the scene")

@@ -638,6 +638,7 @@ def read_inputs(obj, depsgraph, data, progress=None):
             except nodes.Unsupported:
                 continue  # named by materials.principled_notes, the unlinked value used
             data.reads_camera |= bool(ev.spaces & CAMERA_SPACES)
+            data.reads_placement |= ev.placed
             if "GENERATED" in ev.spaces and deformed(obj):
                 note = (f"'{obj.name}': '{socket}' ('{mat.name}') reads Generated coordinates on the deformed mesh "
                         "(Cycles reads them undeformed: its shape keys or deforming modifiers move the texture)")
@@ -1549,11 +1550,53 @@ def read_term_weights(obj, depsgraph, data, progress=None):
                     inputs[keyword] = got
             if ev is not None:
                 data.reads_camera |= bool(ev.spaces & CAMERA_SPACES)
+                data.reads_placement |= ev.placed
             notes += _within_family_limits(inputs, np.ones(data.count, bool), f"'{term.label}' in '{mat.name}'")
             term_inputs.append(inputs)
         data.term_weights[s] = weights
         data.term_inputs[s] = term_inputs
     return notes
+
+
+def read_instanced(obj, depsgraph, data, rows):
+    """Sets data's inputs and term weights (read_inputs', read_term_weights') for instances of mesh
+    object `obj` whose rows lie one after another in data (`rows`: each instance's count) from
+    obj's own rows, read once: an instance reads at each row what the object reads there when
+    nothing read depends on where it lies (a UV map, the mesh's attributes, its Generated or Object
+    coordinates, nodes of these).  Returns notes, or None where that does not hold (reads of the
+    world, the view or the object; a normal map, which bends the rows with the instance; other
+    rows than the object's)."""
+    if obj is None or not rows or any(r != rows[0] for r in rows) or any(bends_normals(m) for m in _materials(obj)):
+        return None
+    own = meshes.read_mesh(obj, depsgraph)
+    if own.domain != data.domain or own.count != rows[0]:
+        return None
+    own.view = data.view
+    notes = read_inputs(obj, depsgraph, own) + read_term_weights(obj, depsgraph, own)
+    if own.reads_placement:
+        return None
+    copies = len(rows)
+
+    def tiled(a):
+        return np.tile(a, (copies,) + (1,) * (a.ndim - 1)) if a.ndim and len(a) == own.count else a
+    data.inputs = {k: tiled(a) for k, a in own.inputs.items()}
+    data.textured = {k: set(v) for k, v in own.textured.items()}
+    data.term_weights = {s: [tiled(w) if w.ndim == 2 else w for w in ws] for s, ws in own.term_weights.items()}
+    data.term_inputs = {s: [{k: tiled(a) for k, a in t.items()} for t in ts] for s, ts in own.term_inputs.items()}
+    return notes
+
+
+def _materials(obj):
+    return [slot.material for slot in obj.material_slots]
+
+
+def bends_normals(mat):
+    """Whether read_shading_normals bends the rows of `mat`: its lone Principled BSDF's Normal from a
+    normal map, a Bump or a Bevel node."""
+    if mat is None or mat.wenv.model != "PRINCIPLED" or mat.node_tree is None or not closures.is_one_principled(mat):
+        return False
+    node = materials.principled_node(mat)
+    return node is not None and normal_source(node)[0] is not None
 
 
 def unlinked_term_weights(mats, data):

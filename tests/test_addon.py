@@ -3680,14 +3680,6 @@ def test_instances_and_curves_cast_shadows_as_meshes_do(scene):
     assert shade_op(view="CAMERA") == {"FINISHED"}
     same_as(attribute(plane)[1], lit_by_mesh)
     assert not [n for n in plan_of(scene, plane).notes if "instance" in n]
-    # (a texture of the instance's material is not read there: its unlinked value sends, said)
-    tree = cube.active_material.node_tree
-    checker = tree.nodes.new("ShaderNodeTexChecker")
-    tree.links.new(checker.outputs["Color"], tree.nodes["Principled BSDF"].inputs["Base Color"])
-    notes = plan_of(scene, plane).notes
-    assert any("'Cube' (instanced, or a curve or text) sends back the light of its materials' unlinked values" in n
-               for n in notes), notes
-    tree.nodes.remove(checker)
     scene.wenv.bounce_light = False
     cube.wenv.casts_shadows = False
     assert shade_op(view="CAMERA") == {"FINISHED"}
@@ -3710,6 +3702,49 @@ def test_instances_and_curves_cast_shadows_as_meshes_do(scene):
     assert shade_op(view="CAMERA") == {"FINISHED"}
     same_as(attribute(plane)[1], under_text)
     assert np.abs(under_text - under_nothing).max() > 0.01
+
+
+def test_an_instance_sends_the_light_of_its_textures(scene):
+    """With Bounce Light, a collection instance of a cube whose Base Color is a checker (through its
+    Generated coordinates, the same wherever the mesh lies) lights the plane below as the cube itself
+    does in the same place, its texture read at each row; one read through world positions (which
+    differ from instance to instance) sends its unlinked value, and the report says so."""
+    env_world(scene, "sunset")
+    plane = add_plane_under_cube()
+    scene.wenv.shadows = scene.wenv.bounce_light = True
+    cube = bpy.data.objects["Cube"]
+    cube.location = (0.3, -0.2, 0.0)
+    tree = cube.active_material.node_tree
+    checker = tree.nodes.new("ShaderNodeTexChecker")
+    checker.inputs["Color1"].default_value, checker.inputs["Color2"].default_value = (1, 0, 0, 1), (0, 0, 1, 1)
+    checker.inputs["Scale"].default_value = 2.0
+    textured = tree.links.new(checker.outputs["Color"], tree.nodes["Principled BSDF"].inputs["Base Color"])
+    bpy.context.view_layer.update()
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    _, lit_by_mesh = attribute(plane)
+    blocks = bpy.data.collections.new("blocks")
+    for holder in list(cube.users_collection):
+        holder.objects.unlink(cube)
+    blocks.objects.link(cube)
+    instance = bpy.data.objects.new("instancer", None)
+    instance.instance_type, instance.instance_collection = "COLLECTION", blocks
+    scene.collection.objects.link(instance)
+    bpy.context.view_layer.update()
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    _, lit_by_instance = attribute(plane)
+    np.testing.assert_allclose(lit_by_instance, lit_by_mesh, rtol=1e-5, atol=1e-6)
+    assert not [n for n in plan_of(scene, plane).notes if "instance" in n]
+    tree.links.remove(textured)
+    bpy.context.view_layer.update()
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+    _, grey = attribute(plane)
+    assert np.abs(grey - lit_by_instance).max() > 0.01 * np.abs(grey).max()  # (the texture's light mattered)
+    where = tree.nodes.new("ShaderNodeNewGeometry")
+    tree.links.new(where.outputs["Position"], checker.inputs["Vector"])
+    tree.links.new(checker.outputs["Color"], tree.nodes["Principled BSDF"].inputs["Base Color"])
+    notes = plan_of(scene, plane).notes
+    assert any("'Cube' (instanced, or a curve or text) sends back the light of its materials' unlinked values: "
+               "'Material' read where each instance lies" in n for n in notes), notes
 
 
 def test_an_instance_of_the_shaded_object_shadows_it(scene):
