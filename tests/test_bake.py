@@ -12,7 +12,7 @@ import wenv
 
 import bpy  # noqa: E402  (installed by scripts/setup.sh; missing, the tests fail rather than skip)
 
-from addon import bake, bevel, compat, engine, materials, meshes, textures, views  # noqa: E402
+from addon import bake, bevel, compat, engine, lamps, materials, meshes, textures, views  # noqa: E402
 
 from conftest import hdri_path  # noqa: E402
 from test_addon import (as_the_interface_runs, animate_camera, attribute, env_world, image_sequence,  # noqa: E402,F401
@@ -231,14 +231,15 @@ def independent_texels(uv, tris, width, height):
     return texels, np.array([found[k][0] for k in texels]), np.array([found[k][1] for k in texels])
 
 
-def expected_radiance(obj, width, height, shader, eye):
-    """The core's shading of the texel centres independent_texels finds: (texels, radiance)."""
+def expected_radiance(obj, width, height, shader, eye, lit=()):
+    """The core's shading of the texel centres independent_texels finds (with the lamps `lit`):
+    (texels, radiance)."""
     p, n, uv, tris = mesh_corners(obj)
     texels, corners, w = independent_texels(uv, tris, width, height)
     points = np.einsum("kc,kcd->kd", w, p[corners]).astype(np.float32)
     normals = np.einsum("kc,kcd->kd", w, n[corners])
     normals = (normals / np.linalg.norm(normals, axis=1, keepdims=True)).astype(np.float32)
-    return texels, shader.shade_mesh(points, normals, eye), (points, normals, uv, corners, w)
+    return texels, shader.shade_mesh(points, normals, eye, lamps=list(lit)), (points, normals, uv, corners, w)
 
 
 def filled_image(name, width, height, float_buffer=True):
@@ -284,14 +285,24 @@ def principled_of(mat, **changes):
 # The add-on: what a bake writes
 
 
-@pytest.mark.parametrize("shape", ["plane", "sphere"])
+@pytest.mark.parametrize("shape", ["plane", "sphere", "plane under lamps"])
 def test_a_bake_equals_the_core_at_the_texel_centres(scene, shape):
     """Every texel of a plane's and a UV sphere's islands is the core's shading at the point of the
-    mesh under its centre (position and smooth normal interpolated over its triangle); the texels
-    outside the islands keep what they held (margin 0)."""
+    mesh under its centre (position and smooth normal interpolated over its triangle), the scene's
+    lamps too (a point lamp near the plane: each texel's own distance to it); the texels outside the
+    islands keep what they held (margin 0)."""
     env_world(scene, "sunset")
     bpy.data.objects.remove(bpy.data.objects["Cube"])
-    if shape == "plane":
+    lit = []
+    if shape == "plane under lamps":
+        light = bpy.data.objects["Light"]
+        light.hide_render, light.location = False, (0.5, -0.4, 0.8)
+        light.data.type, light.data.energy, light.data.shadow_soft_size = "POINT", 300.0, 0.1
+        bpy.context.view_layer.update()
+        settings, notes = lamps.read_lamps(scene)
+        assert len(settings) == 1 and not notes
+        lit = engine.make_lamps(settings)
+    if shape.startswith("plane"):
         obj = grid()
         width, height = 32, 32
     else:
@@ -304,11 +315,15 @@ def test_a_bake_equals_the_core_at_the_texel_centres(scene, shape):
     count, notes = bake_now(scene, obj, image)
     assert not notes
     eye = tuple(scene.camera.matrix_world.translation)
-    texels, want, _ = expected_radiance(obj, width, height, draft_shader(principled_of(obj.active_material)), eye)
+    texels, want, _ = expected_radiance(obj, width, height, draft_shader(principled_of(obj.active_material)), eye,
+                                        lit)
+    if lit:  # (the lamp near the plane: most of its light, and far from even over it)
+        world_only = expected_radiance(obj, width, height, draft_shader(principled_of(obj.active_material)), eye)[1]
+        assert np.mean(want) > 2 * np.mean(world_only) and np.ptp(want[:, 0]) > np.mean(want[:, 0])
     got = pixels(image)
     baked = ~np.all(got == SENTINEL, axis=1)
     assert np.array_equal(np.flatnonzero(baked), texels) and count == len(texels)
-    if shape == "plane":
+    if shape.startswith("plane"):
         assert count == width * height
     np.testing.assert_allclose(got[texels, :3], want, rtol=2e-4, atol=1e-5)
     assert (got[texels, 3] == 1.0).all()

@@ -46,8 +46,25 @@ def yard():
     return merged(square(3.0, 0.0), box((-0.5, -0.5, 0.0), (0.5, 0.5, 1.2)), square(0.6, 1.5, 1.5, 1.5))
 
 
-def test_masks_match_a_ray_cast_written_apart(yard):
-    positions, triangles = yard
+def non_manifold(scene):
+    """`scene` (yard) with two fins hung from an edge of its roof, one below and one above: that edge
+    is then shared by three triangles (besides the open squares' boundary edges)."""
+    p, t = scene
+    roof, n = len(p) - 4, len(p)
+    a, b = p[roof], p[roof + 1]
+    fins = np.float32([a - [0, 0, 0.6], b - [0, 0, 0.6], a + [0, 0, 0.6], b + [0, 0, 0.6]])
+    tris = [(roof, roof + 1, n + 1), (roof, n + 1, n), (roof, roof + 1, n + 3), (roof, n + 3, n + 2)]
+    return np.vstack([p, fins]), np.vstack([t, tris])
+
+
+@pytest.mark.parametrize("shape", ["yard", "non-manifold"])
+def test_masks_match_a_ray_cast_written_apart(yard, shape):
+    """Each texel of each point's mask is what a ray cast written here in numpy finds; a mesh that is
+    open, in pieces or non-manifold (an edge of three triangles) is cast as the triangles it is."""
+    positions, triangles = yard if shape == "yard" else non_manifold(yard)
+    if shape == "non-manifold":
+        edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), axis=1)
+        assert np.unique(edges, axis=0, return_counts=True)[1].max() == 3
     occ = wenv.Occluders(positions, triangles)
     rng = np.random.default_rng(4)
     pts = np.column_stack([rng.uniform(-2.5, 2.5, 40), rng.uniform(-2.5, 2.5, 40), np.zeros(40)]).astype(np.float32)

@@ -204,6 +204,12 @@ class AddonFuzzer(Draws):
             if obj is None:
                 bpy.ops.object.text_add()
                 return bpy.context.object
+            sources = [o for o in scene.objects if o.type in ("MESH", "FONT")]
+            if sources and self.chance(0.5):  # a collection instance of another object's data
+                held = bpy.data.collections.new("held")
+                src = self.pick(sources)
+                held.objects.link(bpy.data.objects.new("held", src.data))
+                obj.instance_type, obj.instance_collection = "COLLECTION", held
             scene.collection.objects.link(obj)
             return obj
         if self.chance(0.2):
