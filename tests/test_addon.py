@@ -1932,6 +1932,21 @@ def test_a_textured_emission_color_is_read_at_each_vertex(scene):
     assert rgb.max() > 1.5  # the emission shows
 
 
+def test_the_glossmeter_says_when_it_reads_a_stand_in(scene):
+    """A material of a lone Glass BSDF (a node wenv does not shade): the panel's note names it, and the
+    glossmeter's reading says it is of the Lambertian stand-in."""
+    from addon import gloss
+    mat = principled_material("glass only", roughness=0.1)
+    tree = mat.node_tree
+    glass = tree.nodes.new("ShaderNodeBsdfGlass")
+    tree.links.new(glass.outputs[0], tree.nodes["Material Output"].inputs["Surface"])
+    assert any("'Glass BSDF'" in n and "not shaded" in n for n in materials.principled_notes(mat))
+    key, note = gloss.reading_key(mat)
+    assert key[0] == "LAMBERT" and "the reading is of a stand-in" in note, (key, note)
+    _key, plain = gloss.reading_key(principled_material("plain", roughness=0.1))
+    assert plain is None
+
+
 def test_a_mix_of_shader_nodes_with_a_textured_factor(scene):
     """A Mix Shader of a Diffuse BSDF and a coloured Glossy BSDF whose Fac is an image of two halves
     (0.2 and 0.9), inside a node group, added to a Glass BSDF: each vertex is the core's shading of
