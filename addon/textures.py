@@ -745,8 +745,8 @@ class NormalChain:
     """What bends a Principled BSDF's Normal, as wenv reads it: a Normal Map node (`map`, a Source,
     with `map_strength`) and/or a Bump node over it (`bump`, the node, with its Strength and
     Distance, Distance negated when inverted: unlinked, or the same at every point,
-    nodes.constant_value); or a Bevel node (`bevel`, with its unlinked
-    Radius, or its Radius socket where linked: read at the rows)."""
+    nodes.constant_value); and/or a Bevel node over them (`bevel`, with its unlinked Radius, or its
+    Radius socket where linked: read at the rows)."""
 
     __slots__ = ("map", "map_strength", "bump", "bump_strength", "distance", "bevel", "bevel_radius")
 
@@ -802,9 +802,16 @@ def _bump(node, chain):
 
 
 def _bevel(node, chain):
-    """Reads a Bevel node into chain; None, or why not."""
+    """Reads a Bevel node (and a Normal Map or Bump node feeding its Normal) into chain; None, or why
+    not."""
     if node.inputs["Normal"].is_linked:
-        return f"'{node.name}', whose Normal is linked"
+        inner = world.source_node(node.inputs["Normal"])
+        kind = inner.bl_idname if inner is not None else None
+        if kind not in ("ShaderNodeNormalMap", "ShaderNodeBump"):
+            return f"'{node.name}', whose Normal is not a Normal Map or Bump node"
+        why = (_normal_map if kind == "ShaderNodeNormalMap" else _bump)(inner, chain)
+        if why is not None:
+            return why
     radius = node.inputs["Radius"]
     if radius.is_linked:
         read, why = nodes.check(radius)
@@ -1411,6 +1418,41 @@ def _bump_gradients(obj, s, mat, chain, mesh, corner_vert, m, sites, notes, prog
     return (hu - h)[:, None] * sites.width * grad_u + (hv - h)[:, None] * sites.height * grad_v
 
 
+def _mapped_rows(obj, s, mat, chain, mesh, corner_vert, m, data, notes, progress):
+    """The world normals (per row of data) a chain's normal map and Bump node bend slot s's rows to,
+    or None where they bend nothing (no UV map, an unlinked Height)."""
+    nl = len(mesh.loops)
+    normal = np.empty(nl * 3, np.float32)
+    mesh.corner_normals.foreach_get("vector", normal)
+    normal = normal.reshape(nl, 3)
+    sites = data.sites
+    if sites is not None:
+        normal = _unit_rows(sites.at(normal))
+    # into the world by the inverse transpose, as read_mesh turns the normals
+    to_world = np.array(m.to_3x3().inverted_safe(), np.float32)
+    world_n = _unit_rows(normal @ to_world)
+    bent = False
+    if chain.map is not None:
+        mapped = _mapped_normals(mesh, corner_vert, chain.map, chain.map_strength, normal, world_n, to_world, sites)
+        if mapped is None:
+            notes.append(_no_uv_map(obj, chain.map.uv_map, f"the normal map of '{mat.name}'",
+                                    "the mesh's normals are used"))
+        else:
+            world_n, bent = mapped, True
+    if chain.bump is not None and chain.bump.inputs["Height"].is_linked:
+        gradient = _bump_gradients(obj, s, mat, chain, mesh, corner_vert, m, sites, notes, progress)
+        if gradient is not None:
+            world_n = bumped_normals(world_n, gradient, chain.distance, chain.bump_strength)
+            bent = True
+    if not bent:
+        return None
+    if sites is None:
+        rows = corner_vert if data.domain == "POINT" else np.arange(nl)
+        world_n = _unit_rows(np.stack([np.bincount(rows, weights=world_n[:, k], minlength=data.count)
+                                       for k in range(3)], axis=1))
+    return world_n
+
+
 def read_shading_normals(obj, depsgraph, data, progress=None):
     """Sets data.shading_normals (world space, per shaded row) for the material slots whose
     Principled BSDF's Normal comes from a normal map or a Bump node, as Cycles makes them: a Normal
@@ -1423,10 +1465,12 @@ def read_shading_normals(obj, depsgraph, data, progress=None):
     the bent rows' Lambertian part).  Returns notes."""
     notes = []
     ob_eval = obj.evaluated_get(depsgraph)
-    sites = data.sites
     corrections = {}  # bent material -> its Bump Map Correction
     for s, mat, (chain, _), mesh, corner_vert in _principled_slots(obj, depsgraph, normal_source):
         mine = _slot_rows(obj, data, s)
+        # a normal map's or Bump node's normals at the rows, or None where they bend nothing
+        bent = (_mapped_rows(obj, s, mat, chain, mesh, corner_vert, ob_eval.matrix_world, data, notes, progress)
+                if chain.map is not None or chain.bump is not None else None)
         if chain.bevel is not None:  # read where the rows are: their own positions and normals
             radius = chain.bevel_radius
             if not isinstance(radius, float):  # (linked: each row's, from the nodes)
@@ -1442,45 +1486,15 @@ def read_shading_normals(obj, depsgraph, data, progress=None):
                                  if isinstance(exc, nodes.MissingUV) else
                                  f"'{obj.name}': the Bevel node's Radius ('{mat.name}') reads {exc}: {instead}")
                 _check_finite(radius, mat, "its Bevel node's Radius", obj)
-            if data.shading_normals is None:
-                data.shading_normals = data.normals.copy()
-            data.shading_normals[mine] = bevel.normals(obj, depsgraph, data.positions, data.normals, radius,
-                                                       progress, data.sites)[mine]
-            corrections[mat.name] = bool(getattr(getattr(mat, "cycles", None), "use_bump_map_correction", True))
+            rounded = bevel.normals(obj, depsgraph, data.positions, data.normals, radius, progress, data.sites)
+            if bent is not None:  # (svm_node_bevel keeps its Normal: what the bevel turns, added to it)
+                rounded = _unit_rows(bent + (rounded - _unit_rows(data.normals)))
+            bent = rounded
+        if bent is None:
             continue
-        nl = len(mesh.loops)
-        normal = np.empty(nl * 3, np.float32)
-        mesh.corner_normals.foreach_get("vector", normal)
-        normal = normal.reshape(nl, 3)
-        if sites is not None:
-            normal = _unit_rows(sites.at(normal))
-        # into the world by the inverse transpose, as read_mesh turns the normals
-        m = ob_eval.matrix_world
-        to_world = np.array(m.to_3x3().inverted_safe(), np.float32)
-        world_n = _unit_rows(normal @ to_world)
-        bent = False
-        if chain.map is not None:
-            mapped = _mapped_normals(mesh, corner_vert, chain.map, chain.map_strength, normal, world_n, to_world,
-                                     sites)
-            if mapped is None:
-                notes.append(_no_uv_map(obj, chain.map.uv_map, f"the normal map of '{mat.name}'",
-                                        "the mesh's normals are used"))
-            else:
-                world_n, bent = mapped, True
-        if chain.bump is not None and chain.bump.inputs["Height"].is_linked:
-            gradient = _bump_gradients(obj, s, mat, chain, mesh, corner_vert, m, sites, notes, progress)
-            if gradient is not None:
-                world_n = bumped_normals(world_n, gradient, chain.distance, chain.bump_strength)
-                bent = True
-        if not bent:
-            continue
-        if sites is None:
-            rows = corner_vert if data.domain == "POINT" else np.arange(nl)
-            world_n = _unit_rows(np.stack([np.bincount(rows, weights=world_n[:, k], minlength=data.count)
-                                           for k in range(3)], axis=1))
         if data.shading_normals is None:
             data.shading_normals = data.normals.copy()
-        data.shading_normals[mine] = world_n[mine]
+        data.shading_normals[mine] = bent[mine]
         # Cycles' own setting (on by default, and where Cycles is not loaded)
         corrections[mat.name] = bool(getattr(getattr(mat, "cycles", None), "use_bump_map_correction", True))
     # one call shades the object's bent rows: a mixture of settings is read as on, and named

@@ -1862,6 +1862,54 @@ def test_a_bump_node_over_a_normal_map_and_what_it_does_not_read(scene):
         assert shade_op(view="CAMERA") == {"FINISHED"}
 
 
+def test_a_bevel_over_a_normal_map_keeps_the_mapped_normal(scene):
+    """A Bevel node whose Normal is a Normal Map's (or a Bump node's), into the Principled's Normal,
+    on Suzanne: each vertex's normal is the mapped one turned as the bevel turns the mesh's,
+    normalize(mapped + (bevelled - mesh)), as Cycles' svm_node_bevel composes them; the report
+    names the chain as read at the vertices."""
+    env_world(scene, "sunset")
+    obj = add_monkey(subdivisions=1)
+    tilt = bpy.data.images.new("tilt", 4, 4, float_buffer=True)
+    tilt.pixels.foreach_set(np.tile(np.float32([0.65, 0.5, 0.95, 1.0]), 16))
+    mat = principled_material("bevelled", roughness=0.4)
+    obj.data.materials.append(mat)
+    select_only(obj)
+    tree = mat.node_tree
+    bsdf = tree.nodes["Principled BSDF"]
+    tex = tree.nodes.new("ShaderNodeTexImage")
+    tex.image = tilt
+    normal_map = tree.nodes.new("ShaderNodeNormalMap")
+    tree.links.new(tex.outputs["Color"], normal_map.inputs["Color"])
+    bevel_node = tree.nodes.new("ShaderNodeBevel")
+    bevel_node.inputs["Radius"].default_value = 0.15
+
+    def normals_with(source):
+        tree.links.new(source, bsdf.inputs["Normal"])
+        data = plan_of(scene, obj).items[0][1]
+        return data.shading_normals, data.normals / np.linalg.norm(data.normals, axis=1, keepdims=True)
+    mapped, mesh_n = normals_with(normal_map.outputs["Normal"])
+    rounded, _ = normals_with(bevel_node.outputs["Normal"])
+    tree.links.new(normal_map.outputs["Normal"], bevel_node.inputs["Normal"])
+    both, _ = normals_with(bevel_node.outputs["Normal"])
+    want = mapped + (rounded - mesh_n)
+    want /= np.linalg.norm(want, axis=1, keepdims=True)
+    np.testing.assert_allclose(both, want, atol=1e-5)
+    for got, other in ((both, mapped), (both, rounded), (mapped, mesh_n), (rounded, mesh_n)):
+        assert np.abs(got - other).max() > 0.05  # each bends the normals its own way
+    notes = materials.principled_notes(mat)
+    assert "'Normal' from a Bevel node over a normal map is read at the vertices: detail finer than the mesh " \
+        "is lost" in notes, notes
+    bump = tree.nodes.new("ShaderNodeBump")
+    tree.links.new(tex.outputs["Color"], bump.inputs["Height"])
+    tree.links.new(bump.outputs["Normal"], bevel_node.inputs["Normal"])
+    assert "'Normal' from a Bevel node over a Bump node is read at the vertices: detail finer than the mesh " \
+        "is lost" in materials.principled_notes(mat)
+    combine = tree.nodes.new("ShaderNodeCombineXYZ")
+    tree.links.new(combine.outputs[0], bevel_node.inputs["Normal"])
+    assert any("whose Normal is not a Normal Map or Bump node" in n for n in materials.principled_notes(mat))
+    assert shade_op(view="CAMERA") == {"FINISHED"}
+
+
 def test_the_glossmeter_reads_a_textured_base_color_at_its_mean(scene):
     """Base Color from a texture of two halves: the glossmeter panel reads the material at the
     texture's mean colour and says so; the reading is the core's at that colour."""
