@@ -635,8 +635,8 @@ class Evaluator:
         return np.cross(n, unit_rows(np.cross(t, n))).astype(np.float32)
 
     def _ShaderNodeAmbientOcclusion(self, node, output, depth):
-        if node.inputs["Normal"].is_linked:
-            raise Unsupported(f"'{node.name}''s Normal, linked")
+        # a linked Normal is the axis of the rays' hemisphere (svm_node_ao), the point's normal otherwise
+        given = self.colour(node.inputs["Normal"], depth) if node.inputs["Normal"].is_linked else None
         distance = constant_value(node.inputs["Distance"])
         if distance is None:
             raise Unsupported(f"'{node.name}''s Distance, linked to values that vary from point to point")
@@ -646,8 +646,12 @@ class Evaluator:
                                   "not here")
             share = np.ones(self.count, np.float32)
         else:
-            share = self._ambient(self._coordinates("WORLD", node=node)[0], self._coordinates("NORMAL", node=node)[0],
-                                  distance, node.inside, node.only_local, node.samples)
+            normal = self._coordinates("NORMAL", node=node)[0]
+            if given is not None:  # (one of no length keeps the point's)
+                length = np.linalg.norm(given, axis=1, keepdims=True)
+                normal = np.where(length > 1e-12, given / np.maximum(length, 1e-30), normal).astype(np.float32)
+            share = self._ambient(self._coordinates("WORLD", node=node)[0], normal, distance, node.inside,
+                                  node.only_local, node.samples)
         if output.identifier == "AO":
             return share
         return self.colour(node.inputs["Color"], depth) * share[:, None]

@@ -504,12 +504,14 @@ def lid(grid):
     bpy.data.objects.remove(box)
 
 
-@pytest.mark.parametrize("distance, inside, only_local, output", [
-    (1.0, False, False, "AO"), (0.5, False, False, "AO"), (2.5, False, True, "AO"), (2.0, True, False, "Color")])
-def test_ambient_occlusion_reads_as_cycles_renders_it(grid, lid, distance, inside, only_local, output):
+@pytest.mark.parametrize("distance, inside, only_local, output, tilted", [
+    (1.0, False, False, "AO", False), (0.5, False, False, "AO", False), (2.5, False, True, "AO", False),
+    (2.0, True, False, "Color", False), (1.0, False, False, "AO", True)])
+def test_ambient_occlusion_reads_as_cycles_renders_it(grid, lid, distance, inside, only_local, output, tilted):
     """The Ambient Occlusion node over the rolling grid, a box hovering over one corner: the share of a
     cosine-weighted hemisphere whose rays run the Distance free of the scene's meshes (the grid's
-    alone with Only Local; the hemisphere below with Inside), against Cycles converged (256 samples a
+    alone with Only Local; the hemisphere below with Inside; about a Normal fed to it, tilted 50
+    degrees towards the box, instead of the point's), against Cycles converged (256 samples a
     pixel of 64 rays each): within its noise and wenv's own (256 rays a point here) -- the mean within
     0.003, the RMS difference within 0.015 (both about 0.001 and 0.008 here), where uniform rays are
     off by 0.06-0.12 and the distance ignored by 0.02-0.2."""
@@ -517,6 +519,11 @@ def test_ambient_occlusion_reads_as_cycles_renders_it(grid, lid, distance, insid
         node.samples, node.inside, node.only_local = 64, inside, only_local
         node.inputs["Distance"].default_value = distance
         node.inputs["Color"].default_value = (0.9, 0.5, 0.2, 1.0)
+        if tilted:
+            axis = node.id_data.nodes.new("ShaderNodeCombineXYZ")
+            axis.inputs["X"].default_value, axis.inputs["Y"].default_value = -0.85, -0.85
+            axis.inputs["Z"].default_value = 1.0
+            node.id_data.links.new(axis.outputs[0], node.inputs["Normal"])
     grid.scene.cycles.samples, grid.rays = 256, 256
     try:
         cycles, ours, _ = grid("ShaderNodeAmbientOcclusion", output, configure)
