@@ -483,21 +483,32 @@ def plan_shading(scene, depsgraph, objects, view, images, progress=None, preview
     return plan
 
 
+# The most rows (vertices or corners, each instance's own) that instances, curves and text send Bounce
+# Light from: each costs its rays and its shading as a mesh's vertex does, and a scatter of
+# instances multiplies them (a million take about as long as a 1M-vertex mesh's bounce)
+SENDER_ROWS = 1_000_000
+
+
 def _other_blockers(plan, depsgraph, shaded, st):
     """Adds to plan.blockers what else blocks light in Cycles (meshes.other_geometry: instances,
     curves, text), within the memory budget; returns notes."""
     used = sum(engine.occluder_bytes(data.positions, data.triangles) for _, data, _ in plan.items)
     used += sum(engine.occluder_bytes(p, t) for _, p, t in plan.blockers)
     # with Bounce Light they send their light back too, each kind (an object's instances with the same
-    # materials) as one part; plan.senders stays in step with plan.blockers
+    # materials) as one part, up to SENDER_ROWS rows in all; plan.senders stays in step with
+    # plan.blockers, so those that send come first
     others, left = meshes.other_geometry(depsgraph, skip=shaded, room=st.memory_budget * 1048576.0 - used,
                                          senders=st.bounce_light)
-    notes = []
-    for name, p, t, sender in others:
+    notes, sending, silent, rows_sent = [], [], [], 0
+    for entry in others:
+        sender = entry[3]
+        if sender is not None and rows_sent + sender[0].count <= SENDER_ROWS:
+            rows_sent += sender[0].count
+            sending.append(entry)
+        else:
+            silent.append(entry)
+    for name, p, t, (data, mats, instanced, rows) in sending:
         plan.blockers.append((name, p, engine.shadow_triangles(p, t)[0]))
-        if sender is None:
-            continue
-        data, mats, instanced, rows = sender
         data.view = plan.view
         notes += [n for n in data.notes if n not in notes]
         plan.senders.append((name, data, materials.material_keys(mats)))
@@ -515,6 +526,12 @@ def _other_blockers(plan, depsgraph, shaded, st):
                 "normals, which wenv reads on mesh objects only")
         if note not in notes:
             notes.append(note)
+    for name, p, t, _ in silent:
+        plan.blockers.append((name, p, engine.shadow_triangles(p, t)[0]))
+    unsent = sum(entry[3] is not None for entry in silent)
+    if unsent:
+        notes.append(f"{unsent} instanced object(s), curve(s) or text(s) block light but send none back: past "
+                     f"{SENDER_ROWS:,} vertices of such light in all (Bounce Light)")
     if left:
         notes.append(f"{left} instance(s) or curve object(s) cast no shadow: over the memory budget "
                      f"({st.memory_budget} MB) with the rest of the scene")

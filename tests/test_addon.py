@@ -3779,6 +3779,18 @@ def test_instances_and_curves_cast_shadows_as_meshes_do(scene):
     assert shade_op(view="CAMERA") == {"FINISHED"}
     same_as(attribute(plane)[1], lit_by_mesh)
     assert not [n for n in plan_of(scene, plane).notes if "instance" in n]
+    # past the rows instances may send light from, they block it but send none, said
+    from addon import shading
+    rows, shading.SENDER_ROWS = shading.SENDER_ROWS, 10
+    try:
+        plan = plan_of(scene, plane)
+        assert not plan.senders and len(plan.blockers) == 1
+        assert any("1 instanced object(s), curve(s) or text(s) block light but send none back: past 10 vertices"
+                   in n for n in plan.notes), plan.notes
+        assert shade_op(view="CAMERA") == {"FINISHED"}
+        same_as(attribute(plane)[1], under_mesh)  # (black where it blocks, as without Bounce Light)
+    finally:
+        shading.SENDER_ROWS = rows
     scene.wenv.bounce_light = False
     cube.wenv.casts_shadows = False
     assert shade_op(view="CAMERA") == {"FINISHED"}
