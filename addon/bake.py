@@ -451,28 +451,25 @@ def _surroundings_key(scene, depsgraph, obj):
     """What the other meshes that may shadow or light `obj` are: each visible one's place and shape,
     whether it casts shadows, and with Bounce Light its materials (their light)."""
     st, others = scene.wenv, []
+    bounce = st.shadows and st.bounce_light
     for other in scene.objects:
         if other.type != "MESH" or other.name == obj.name or other.mode == "EDIT" or not other.visible_get():
             continue
-        looks = None
-        if st.shadows and st.bounce_light:
-            try:
-                looks = _key(materials.slot_material_keys(other))
-            except SetupError as exc:
-                looks = _key(str(exc))
+        looks = _looks([slot.material for slot in other.material_slots]) if bounce else None
         others.append((other.name, _mesh_key(other, depsgraph), other.wenv.casts_shadows,
                        getattr(other, "visible_shadow", True), looks))
     if depsgraph is not None:  # instances, curves and text: where they are, and with Bounce Light their materials
-        bounce = st.shadows and st.bounce_light
         for name, p, t, sender in meshes.other_geometry(depsgraph, skip={obj.name}, senders=bounce)[0]:
-            looks = None
-            if sender is not None:
-                try:
-                    looks = _key(materials.material_keys(sender[1]))
-                except SetupError as exc:
-                    looks = _key(str(exc))
-            others.append((name, engine.fingerprint(p, t).hex(), looks))
+            others.append((name, engine.fingerprint(p, t).hex(), _looks(sender[1]) if sender is not None else None))
     return _key(others)
+
+
+def _looks(mats):
+    """What the light of a blocker with these materials' slots is made of (or why it cannot be)."""
+    try:
+        return _key(materials.material_keys(mats))
+    except SetupError as exc:
+        return _key(str(exc))
 
 
 def state_of(scene, depsgraph, obj, parts=tuple(CHANGES)):

@@ -648,8 +648,8 @@ class Evaluator:
         else:
             normal = self._coordinates("NORMAL", node=node)[0]
             if given is not None:  # (one of no length keeps the point's)
-                length = np.linalg.norm(given, axis=1, keepdims=True)
-                normal = np.where(length > 1e-12, given / np.maximum(length, 1e-30), normal).astype(np.float32)
+                given = unit_rows(given)
+                normal = np.where(given.any(axis=1, keepdims=True), given, normal).astype(np.float32)
             share = self._ambient(self._coordinates("WORLD", node=node)[0], normal, distance, node.inside,
                                   node.only_local, node.samples)
         if output.identifier == "AO":

@@ -832,7 +832,7 @@ def reads_per_point(mat):
         return False
     if closures.is_one_principled(mat):
         node = materials.principled_node(mat)
-        return node is not None and (_textured(node)[0] is not None or normal_source(node)[0] is not None)
+        return node is not None and (_textured(node)[0] is not None or bends_normals(mat))
     found, _ = closures.terms(mat)
     return bool(found) and not closures.one_principled(found) and any(
         t.factors or t.weight_socket is not None or t.linked for t in found)
@@ -1547,8 +1547,7 @@ def read_term_weights(obj, depsgraph, data, progress=None):
                                             "its unlinked value is used") if isinstance(exc, nodes.MissingUV) else
                                  f"'{obj.name}': a Mix Shader's Fac ('{mat.name}') reads {exc}: its unlinked value "
                                  "is used")
-                    fac = closures._factor_values(nodes.one_point(lambda node: np.zeros((1, 3), np.float32)),
-                                                  term.factors)[0] * np.ones(data.count, np.float32)
+                    fac = _unlinked_factor(term) * np.ones(data.count, np.float32)
                 _check_finite(fac, mat, "a Mix Shader's Fac", obj)
                 fac = fac[:, None]
                 weight = fac * colour[None, :]
@@ -1580,7 +1579,8 @@ def read_instanced(obj, depsgraph, data, rows):
     coordinates, nodes of these).  Returns notes, or None where that does not hold (reads of the
     world, the view or the object; a normal map, which bends the rows with the instance; other
     rows than the object's)."""
-    if obj is None or not rows or any(r != rows[0] for r in rows) or any(bends_normals(m) for m in _materials(obj)):
+    if (obj is None or not rows or any(r != rows[0] for r in rows)
+            or any(bends_normals(slot.material) for slot in obj.material_slots)):
         return None
     own = meshes.read_mesh(obj, depsgraph)
     if own.domain != data.domain or own.count != rows[0]:
@@ -1598,10 +1598,6 @@ def read_instanced(obj, depsgraph, data, rows):
     data.term_weights = {s: [tiled(w) if w.ndim == 2 else w for w in ws] for s, ws in own.term_weights.items()}
     data.term_inputs = {s: [{k: tiled(a) for k, a in t.items()} for t in ts] for s, ts in own.term_inputs.items()}
     return notes
-
-
-def _materials(obj):
-    return [slot.material for slot in obj.material_slots]
 
 
 def bends_normals(mat):
@@ -1623,10 +1619,15 @@ def unlinked_term_weights(mats, data):
         found, _ = closures.terms(mat)
         if found is None or closures.one_principled(found):
             continue
-        unlinked = nodes.one_point(lambda node: np.zeros((1, 3), np.float32))
-        data.term_weights[s] = [np.float32(term.colour) * (np.float32(closures._factor_values(unlinked, term.factors)[0])
-                                                           if term.factors else np.float32(1.0)) for term in found]
+        data.term_weights[s] = [np.float32(term.colour) * (_unlinked_factor(term) if term.factors else np.float32(1.0))
+                                for term in found]
         data.term_inputs[s] = [{} for _ in found]
+
+
+def _unlinked_factor(term):
+    """A mixture term's Mix Shader factors at their nodes' unlinked values (float32)."""
+    unlinked = nodes.one_point(lambda node: np.zeros((1, 3), np.float32))
+    return np.float32(closures._factor_values(unlinked, term.factors)[0])
 
 
 def _check_finite(values, mat, what, obj):
